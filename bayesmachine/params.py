@@ -1,0 +1,184 @@
+"""The one parameter object shared by the RTL, the NumPy machine model and the host.
+
+Every width in the design derives from these numbers; every consumer validates
+nothing on its own but takes a :class:`MachineParams`, which checks everything up
+front and raises :class:`ParameterError` naming the offending parameter.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import asdict, dataclass
+
+__all__ = ["MachineParams", "ParameterError", "RNG_KINDS", "PRIORS", "TIE_BREAKS"]
+
+RNG_KINDS = ("lfsr", "external")
+PRIORS = ("uniform", "loaded")
+TIE_BREAKS = ("nomatch-first", "lowest-index")
+
+# Default word width: 10 bits of comparator resolution. The paper's smallest
+# probability is p_nm0 = 0.01; at 8 bits it quantizes to 3/256 = 0.0117 (+17 %),
+# at 10 bits to 10/1024 = 0.0098 (-2.3 %), and p0 = 0.02 to 20/1024 (-2.3 %).
+DEFAULT_WORD_BITS = 10
+DEFAULT_LFSR_BITS = 31
+DEFAULT_MAX_CYCLES = (1 << 20) - 1
+DEFAULT_LANES = 16
+
+
+class ParameterError(ValueError):
+    """An impossible or unsupported machine parameter."""
+
+
+def _check_int(name: str, value: object, lo: int, hi: int | None = None) -> None:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ParameterError(f"{name} must be an integer, not {value!r}")
+    if value < lo or (hi is not None and value > hi):
+        rng = f"[{lo}, {hi}]" if hi is not None else f">= {lo}"
+        raise ParameterError(f"{name} must be in {rng}, got {value}")
+
+
+@dataclass(frozen=True)
+class MachineParams:
+    """Parameters of one stochastic Bayesian machine.
+
+    rows
+        M, the number of rows of the operator matrix (hypotheses of the searched
+        variable). For disparity, ``Dmax + 2``: rows 0..Dmax and the no-match row.
+    columns
+        N, the number of data-term operator columns (3 for disparity).
+    word_bits
+        W, the comparator resolution. A likelihood memory word holds an integer
+        q in [0, 2**W] (so it is W+1 bits wide: 1.0 is exact) and encodes p = q / 2**W.
+    counter_max
+        n_max. A row's overflow counter overflows on the (n_max+1)-th 1.
+    rng
+        ``"lfsr"``: one maximal-length leap-forward LFSR per operator, inside the
+        design. ``"external"``: the W-bit random numbers come in on a port (e.g. an
+        SMTJ model or a TRNG outside the module).
+    lfsr_bits
+        L, the length of each operator's LFSR (period 2**L - 1).
+    seed
+        The machine seed; every operator's LFSR polynomial and start state derive from it.
+    max_cycles
+        Watchdog: a pixel whose run reaches this many cycles without an overflow
+        stops and is flagged as a timeout.
+    prior
+        ``"uniform"``: column 0 of the stochastic bus is always-on 1s.
+        ``"loaded"``: an extra operator column 0 holds a loaded prior word per row.
+    nomatch_row
+        The last row is the "no match" hypothesis: the result's no-match flag is
+        set when it wins, and ``tie_break`` can favour it.
+    tie_break
+        When several rows overflow in the same cycle: ``"nomatch-first"`` (the
+        no-match row wins any tie it is part of, otherwise the lowest index) or
+        ``"lowest-index"``.
+    lanes
+        Likelihood-memory words carried per beat of the load stream.
+    """
+
+    rows: int
+    columns: int = 3
+    word_bits: int = DEFAULT_WORD_BITS
+    counter_max: int = 16
+    rng: str = "lfsr"
+    lfsr_bits: int = DEFAULT_LFSR_BITS
+    seed: int = 1
+    max_cycles: int = DEFAULT_MAX_CYCLES
+    prior: str = "uniform"
+    nomatch_row: bool = False
+    tie_break: str = "nomatch-first"
+    lanes: int = DEFAULT_LANES
+
+    def __post_init__(self) -> None:
+        _check_int("rows", self.rows, 1, 4096)
+        _check_int("columns", self.columns, 1, 64)
+        _check_int("word_bits", self.word_bits, 1, 16)
+        _check_int("counter_max", self.counter_max, 1, (1 << 24) - 1)
+        if self.rng not in RNG_KINDS:
+            raise ParameterError(f"rng must be one of {RNG_KINDS}, got {self.rng!r}")
+        _check_int("lfsr_bits", self.lfsr_bits, 3, 63)
+        if self.lfsr_bits < self.word_bits + 2:
+            raise ParameterError(
+                f"lfsr_bits ({self.lfsr_bits}) must be at least word_bits + 2 "
+                f"({self.word_bits + 2}): each LFSR delivers word_bits fresh bits per cycle"
+            )
+        _check_int("seed", self.seed, 0, (1 << 64) - 1)
+        _check_int("max_cycles", self.max_cycles, 1, (1 << 32) - 1)
+        if self.max_cycles <= self.counter_max:
+            raise ParameterError(
+                f"max_cycles ({self.max_cycles}) must exceed counter_max ({self.counter_max}): "
+                f"no counter can overflow in fewer than counter_max + 1 cycles"
+            )
+        if self.prior not in PRIORS:
+            raise ParameterError(f"prior must be one of {PRIORS}, got {self.prior!r}")
+        if not isinstance(self.nomatch_row, bool):
+            raise ParameterError(f"nomatch_row must be a bool, not {self.nomatch_row!r}")
+        if self.nomatch_row and self.rows < 2:
+            raise ParameterError("a machine with a no-match row needs at least 2 rows")
+        if self.tie_break not in TIE_BREAKS:
+            raise ParameterError(f"tie_break must be one of {TIE_BREAKS}, got {self.tie_break!r}")
+        _check_int("lanes", self.lanes, 1)
+        if self.lanes > self.words_per_pixel:
+            raise ParameterError(
+                f"lanes ({self.lanes}) exceeds the words per pixel ({self.words_per_pixel})"
+            )
+
+    @classmethod
+    def for_disparity(cls, dmax: int = 80, **kwargs: object) -> MachineParams:
+        """The disparity machine of the paper: M = Dmax + 2 rows, the last one no-match."""
+        _check_int("dmax", dmax, 0, 4094)
+        kwargs.setdefault("columns", 3)
+        return cls(rows=dmax + 2, nomatch_row=True, **kwargs)  # type: ignore[arg-type]
+
+    # Derived quantities: every width in the RTL, the model and the host comes from here.
+    @property
+    def operator_columns(self) -> int:
+        """Operator columns in the matrix: the data terms, plus one for a loaded prior."""
+        return self.columns + (1 if self.prior == "loaded" else 0)
+
+    @property
+    def operators(self) -> int:
+        return self.rows * self.operator_columns
+
+    @property
+    def words_per_pixel(self) -> int:
+        return self.rows * self.operator_columns
+
+    @property
+    def beats_per_pixel(self) -> int:
+        return -(-self.words_per_pixel // self.lanes)
+
+    @property
+    def word_one(self) -> int:
+        """The memory word that encodes probability 1.0 (2**W)."""
+        return 1 << self.word_bits
+
+    @property
+    def memory_word_width(self) -> int:
+        """Stored likelihood-memory word width, W + 1 bits (0 ... 2**W)."""
+        return self.word_bits + 1
+
+    @property
+    def counter_width(self) -> int:
+        return self.counter_max.bit_length()
+
+    @property
+    def cycle_width(self) -> int:
+        return self.max_cycles.bit_length()
+
+    @property
+    def map_width(self) -> int:
+        return max(1, (self.rows - 1).bit_length())
+
+    @property
+    def nomatch_index(self) -> int | None:
+        return self.rows - 1 if self.nomatch_row else None
+
+    def to_dict(self) -> dict[str, object]:
+        return asdict(self)
+
+    def fingerprint(self) -> str:
+        """A short stable hash of the parameters (build caches key on it)."""
+        blob = json.dumps(self.to_dict(), sort_keys=True).encode()
+        return hashlib.sha256(blob).hexdigest()[:16]

@@ -1,0 +1,1 @@
+"""Host: images, features, likelihoods, reference, runs, metrics, plots."""

@@ -1,0 +1,1 @@
+"""Simulation: the NumPy machine model, the engines, testbench helpers."""
