@@ -1,0 +1,5 @@
+import sys
+
+from bayesmachine.cli import main
+
+sys.exit(main())
