@@ -234,8 +234,8 @@ class MachineModel:
         if p.rng == "lfsr":
             if numbers is not None:
                 raise ValueError("random numbers are only taken with rng = 'external'")
-            _run_lfsr(q.astype(np.uint64), self._states, self._shifts, p.rows, p.operator_columns, p.word_bits,
-                      p.lfsr_bits, p.counter_max, p.max_cycles, self._nm_index,
+            _run_lfsr(q.astype(np.uint64), self._states, self._shifts, p.rows, p.operator_columns,
+                      p.word_bits, p.lfsr_bits, p.counter_max, p.max_cycles, self._nm_index,
                       out.counts, out.map, out.timeout, out.cycles)
         else:
             if numbers is None:
