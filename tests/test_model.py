@@ -1,0 +1,139 @@
+"""The NumPy machine model against its parts' twins and against cases with known answers."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from bayesmachine import MachineParams, ParameterError
+from bayesmachine.hdl.rng import lfsr_numbers, lfsr_specs
+from bayesmachine.sim.model import MachineModel, MachineResult
+
+
+def _random_words(params: MachineParams, pixels: int, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    one = params.word_one
+    words = rng.integers(0, one + 1, size=(pixels, params.rows, params.operator_columns))
+    # Edge words: exact 0 and exact 1 must appear.
+    words[rng.random(words.shape) < 0.1] = 0
+    words[rng.random(words.shape) < 0.2] = one
+    return words.astype(np.uint16)
+
+
+def test_lfsr_kernel_equals_twin_via_external_numbers() -> None:
+    """The compiled LFSR path and the external-number path agree when fed the twin's numbers."""
+    params = MachineParams(rows=5, columns=2, word_bits=6, lfsr_bits=17, counter_max=3, lanes=2, seed=7)
+    words = _random_words(params, 60, 1)
+    internal = MachineModel(params).run(words)
+    total = int(internal.cycles.sum())
+    numbers = np.array([list(lfsr_numbers(s, total)) for s in lfsr_specs(params)]).T
+    external = MachineModel(
+        MachineParams(**{**params.to_dict(), "rng": "external"})
+    ).run(words, numbers=numbers)
+    assert internal.equal(external)
+
+
+def test_chunked_runs_equal_one_run() -> None:
+    params = MachineParams.for_disparity(6, counter_max=4, lanes=4)
+    words = _random_words(params, 50, 2)
+    whole = MachineModel(params).run(words)
+    model = MachineModel(params)
+    parts = [model.run(words[i : i + 7]) for i in range(0, 50, 7)]
+    assert MachineResult.concatenate(parts, params.rows).equal(whole)
+    model.reset()
+    assert model.run(words).equal(whole)
+
+
+@pytest.mark.parametrize("tie_break", ["nomatch-first", "lowest-index"])
+def test_all_ones_overflow_together(tie_break: str) -> None:
+    """p = 1 everywhere: every row overflows on cycle n_max + 1, the tie rule picks the row."""
+    params = MachineParams.for_disparity(3, counter_max=5, lanes=1, tie_break=tie_break)
+    words = np.full((3, params.rows, 3), params.word_one, np.uint16)
+    r = MachineModel(params).run(words)
+    assert (r.cycles == 6).all()
+    assert (r.counts == 5).all()
+    expected = params.rows - 1 if tie_break == "nomatch-first" else 0
+    assert (r.map == expected).all()
+    assert r.nomatch.all() == (tie_break == "nomatch-first")
+    assert not r.timeout.any()
+
+
+def test_all_zero_words_time_out() -> None:
+    params = MachineParams(rows=4, columns=3, counter_max=2, max_cycles=500, lanes=4)
+    words = np.zeros((2, 4, 3), np.uint16)
+    r = MachineModel(params).run(words)
+    assert r.timeout.all() and (r.cycles == 500).all() and (r.counts == 0).all() and (r.map == 0).all()
+
+
+def test_single_certain_row_wins_and_others_never_count() -> None:
+    params = MachineParams.for_disparity(8, counter_max=16, lanes=8)
+    words = np.zeros((4, params.rows, 3), np.uint16)
+    for p, d in enumerate([0, 3, 8, 9]):
+        words[p, d] = params.word_one
+    r = MachineModel(params).run(words)
+    assert list(r.map) == [0, 3, 8, 9]
+    assert list(r.nomatch) == [False, False, False, True]
+    assert (r.cycles == 17).all()
+    assert (r.counts.sum(axis=1) == 16).all()
+
+
+def test_loaded_prior_column_gates_rows() -> None:
+    """A loaded prior of 0 silences a row even when its likelihoods are 1."""
+    params = MachineParams(rows=3, columns=2, prior="loaded", counter_max=3, lanes=3)
+    words = np.full((1, 3, 3), params.word_one, np.uint16)
+    words[0, 0, 0] = 0  # prior of row 0
+    r = MachineModel(params).run(words)
+    assert r.map[0] == 1 and r.counts[0, 0] == 0
+
+
+def test_counts_track_probabilities() -> None:
+    """Over many pixels the counters of a two-row race follow the word ratio (p_j = n_j / n_max)."""
+    params = MachineParams(rows=2, columns=1, counter_max=64, lanes=2, word_bits=10)
+    words = np.array([[[1024], [512]]] * 400, np.uint16)
+    r = MachineModel(params).run(words)
+    assert (r.map == 0).mean() > 0.99
+    ratio = r.counts[:, 1].mean() / 64
+    # Row 1 gathers about half of row 0's 64 ones in the same cycles.
+    assert abs(ratio - 0.5) < 0.02
+
+
+@pytest.mark.parametrize(
+    "words, message",
+    [
+        (np.zeros((2, 3, 3), np.uint16), "expects"),
+        (np.full((2, 4, 3), 1025, np.int32), r"\[0, 1024\]"),
+        (np.full((2, 4, 3), -1, np.int32), r"\[0, 1024\]"),
+        (np.full((2, 4, 3), 0.5), "integers"),
+    ],
+)
+def test_bad_words_are_clear_errors(words: np.ndarray, message: str) -> None:
+    model = MachineModel(MachineParams(rows=4, columns=3, lanes=4))
+    with pytest.raises(ValueError, match=message):
+        model.run(words)
+
+
+def test_external_numbers_must_cover_the_run() -> None:
+    params = MachineParams(rows=2, columns=1, rng="external", counter_max=2, lanes=1)
+    words = np.zeros((1, 2, 1), np.uint16)
+    with pytest.raises(ValueError, match="ran out"):
+        MachineModel(params).run(words, numbers=np.zeros((10, 2), np.uint16))
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"rows": 0}, "rows"),
+        ({"rows": 4, "word_bits": 0}, "word_bits"),
+        ({"rows": 4, "counter_max": 0}, "counter_max"),
+        ({"rows": 4, "rng": "smtj"}, "rng"),
+        ({"rows": 4, "word_bits": 10, "lfsr_bits": 11}, "lfsr_bits"),
+        ({"rows": 4, "counter_max": 100, "max_cycles": 100}, "max_cycles"),
+        ({"rows": 4, "lanes": 13}, "lanes"),
+        ({"rows": 1, "nomatch_row": True}, "no-match"),
+        ({"rows": 4, "tie_break": "random"}, "tie_break"),
+        ({"rows": 4.0}, "integer"),
+    ],
+)
+def test_impossible_parameters_name_the_problem(kwargs: dict, message: str) -> None:
+    with pytest.raises(ParameterError, match=message):
+        MachineParams(**kwargs)
