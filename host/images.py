@@ -1,0 +1,195 @@
+"""Stereo images: loading, gray conversion, crops, the bundled pair, random-dot stereograms.
+
+Every image the host processes is a rectified 8-bit grayscale array (H, W) uint8.
+Colour inputs are converted with OpenCV (``cv2.cvtColor``, BGR order as ``cv2.imread``
+returns it; the bundled pair is RGB and converted as such). Ground-truth disparity maps
+are float arrays of the same shape with non-finite values for "unknown".
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+__all__ = [
+    "FILTER_SIZE",
+    "MARGIN",
+    "Crop",
+    "parse_crop",
+    "crop_image",
+    "to_gray",
+    "load_image",
+    "load_gt",
+    "bundled_pair",
+    "validate_pair",
+    "random_dot_stereogram",
+]
+
+# The paper's three features are 5x5 correlations: maps lose 2 pixels on every side.
+FILTER_SIZE = 5
+MARGIN = FILTER_SIZE // 2
+
+
+@dataclass(frozen=True)
+class Crop:
+    """A rectangle in input-image pixel coordinates (x, y of the top-left corner)."""
+
+    x: int
+    y: int
+    width: int
+    height: int
+
+    def __str__(self) -> str:
+        return f"{self.x},{self.y},{self.width},{self.height}"
+
+
+def parse_crop(text: str) -> Crop:
+    """Parse ``X,Y,W,H`` (the ``--crop`` option)."""
+    parts = text.split(",")
+    if len(parts) != 4:
+        raise ValueError(f"crop must be X,Y,W,H (four integers), got {text!r}")
+    try:
+        x, y, w, h = (int(p) for p in parts)
+    except ValueError:
+        raise ValueError(f"crop must be X,Y,W,H (four integers), got {text!r}") from None
+    if x < 0 or y < 0 or w <= 0 or h <= 0:
+        raise ValueError(f"crop {text!r}: X and Y must be >= 0, W and H > 0")
+    return Crop(x, y, w, h)
+
+
+def crop_image(image: np.ndarray, crop: Crop | None) -> np.ndarray:
+    """Cut ``crop`` out of ``image``; a crop that leaves the image is an error, not clipped."""
+    if crop is None:
+        return image
+    h, w = image.shape[:2]
+    if crop.x + crop.width > w or crop.y + crop.height > h:
+        raise ValueError(
+            f"crop {crop} (x={crop.x}..{crop.x + crop.width - 1}, y={crop.y}..{crop.y + crop.height - 1}) "
+            f"lies outside the {w}x{h} image"
+        )
+    return image[crop.y : crop.y + crop.height, crop.x : crop.x + crop.width]
+
+
+def to_gray(image: np.ndarray, rgb: bool = False) -> np.ndarray:
+    """An 8-bit image as (H, W) uint8 luminance; colour converted with OpenCV.
+
+    ``rgb`` says the channel order is RGB (scikit-image) rather than OpenCV's BGR.
+    """
+    image = np.asarray(image)
+    if image.dtype != np.uint8:
+        raise ValueError(f"images must be 8-bit (uint8), got {image.dtype}")
+    if image.ndim == 2:
+        return image
+    if image.ndim == 3 and image.shape[2] == 1:
+        return image[:, :, 0]
+    if image.ndim == 3 and image.shape[2] == 3:
+        return cv2.cvtColor(image, cv2.COLOR_RGB2GRAY if rgb else cv2.COLOR_BGR2GRAY)
+    if image.ndim == 3 and image.shape[2] == 4:
+        return cv2.cvtColor(image, cv2.COLOR_RGBA2GRAY if rgb else cv2.COLOR_BGRA2GRAY)
+    raise ValueError(f"unsupported image shape {image.shape}: expected gray, BGR or BGRA")
+
+
+def load_image(path: str | Path) -> np.ndarray:
+    """Read an 8-bit image file with OpenCV and return it as gray (H, W) uint8."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"image file not found: {path}")
+    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if image is None:
+        raise ValueError(f"cannot read {path} as an image (unknown or corrupt format)")
+    if image.dtype != np.uint8:
+        raise ValueError(f"{path}: images must be 8-bit, got {image.dtype}")
+    return to_gray(image)
+
+
+def load_gt(path: str | Path) -> np.ndarray:
+    """Read a ground-truth disparity map as float32, non-finite = unknown.
+
+    ``.npy``: the array as stored. ``.pfm`` (Middlebury): floats, inf = unknown.
+    Any other image format: pixel values are disparities and 0 means unknown.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"ground-truth file not found: {path}")
+    if path.suffix.lower() == ".npy":
+        gt = np.load(path)
+    else:
+        gt = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+        if gt is None:
+            raise ValueError(f"cannot read {path} as a disparity map")
+        if gt.ndim == 3:
+            gt = gt[:, :, 0]
+        if not np.issubdtype(gt.dtype, np.floating):
+            gt = np.where(gt == 0, np.inf, gt)
+    gt = np.asarray(gt, dtype=np.float32)
+    if gt.ndim != 2:
+        raise ValueError(f"{path}: a disparity map must be 2-D, got shape {gt.shape}")
+    return gt
+
+
+def bundled_pair() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Middlebury 2014 Motorcycle (500x741), shipped inside scikit-image: left, right, gt.
+
+    Loads offline. gt is float32 with +inf where unknown.
+    """
+    from skimage import data
+
+    left, right, gt = data.stereo_motorcycle()
+    return to_gray(left, rgb=True), to_gray(right, rgb=True), np.asarray(gt, dtype=np.float32)
+
+
+def validate_pair(left: np.ndarray, right: np.ndarray, dmax: int) -> None:
+    """Raise ValueError naming the problem if the pair cannot be processed with ``dmax``."""
+    for name, image in (("left", left), ("right", right)):
+        if image.ndim != 2 or image.dtype != np.uint8:
+            raise ValueError(f"{name} image must be 2-D uint8 gray, got {image.dtype} {image.shape}")
+    if left.shape != right.shape:
+        raise ValueError(f"left and right images differ in shape: {left.shape} vs {right.shape}")
+    h, w = left.shape
+    if h < FILTER_SIZE or w < FILTER_SIZE:
+        raise ValueError(
+            f"images of {w}x{h} are too small for the {FILTER_SIZE}x{FILTER_SIZE} filters "
+            f"(need at least {FILTER_SIZE}x{FILTER_SIZE})"
+        )
+    usable = w - 2 * MARGIN
+    if dmax >= usable:
+        raise ValueError(
+            f"dmax ({dmax}) must be below the usable width ({usable} = image width {w} - {2 * MARGIN}): "
+            f"no pixel would have all {dmax + 1} disparities; use a wider image or a smaller --dmax"
+        )
+
+
+def random_dot_stereogram(
+    height: int = 64,
+    width: int = 96,
+    background: int = 4,
+    square: int = 12,
+    square_box: tuple[int, int, int, int] | None = None,
+    dot: int = 1,
+    seed: int = 0,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A textured random right image and a left image with known disparity.
+
+    The left image is the right one seen at disparity ``background`` except inside the
+    square ``square_box`` = (x, y, w, h) (left-image coordinates, default centred),
+    which is at disparity ``square``: left(y, x) = right(y, x - d(y, x)). ``dot`` is the
+    side of the random dots. Returns (left, right, gt) with gt float32 = d, and +inf
+    where x - d falls outside the right image (no match exists).
+    """
+    rng = np.random.default_rng(seed)
+    dots = rng.integers(0, 256, size=(-(-height // dot), -(-width // dot)), dtype=np.uint8)
+    right = np.repeat(np.repeat(dots, dot, axis=0), dot, axis=1)[:height, :width]
+    if square_box is None:
+        square_box = (width // 3, height // 4, width // 3, height // 2)
+    sx, sy, sw, sh = square_box
+    disp = np.full((height, width), background, dtype=np.int64)
+    disp[sy : sy + sh, sx : sx + sw] = square
+    xs = np.arange(width)[None, :] - disp
+    valid = xs >= 0
+    fill = rng.integers(0, 256, size=(height, width), dtype=np.uint8)
+    left = np.where(valid, right[np.arange(height)[:, None], np.clip(xs, 0, width - 1)], fill)
+    gt = np.where(valid, disp, np.inf).astype(np.float32)
+    return left.astype(np.uint8), right, gt

@@ -1,0 +1,217 @@
+"""Figures comparing the machine with the reference and the ground truth (paper Fig 6).
+
+* cycles per pixel: mean, std, p99 (timeouts included, at their watchdog count);
+* RMS error between counts / n_max and the reference posterior normalized to max 1,
+  over the pixels the reference calls matched, all M rows;
+* F1 of no-match detection, positive class = no match (a timeout counts as no match);
+* MAP agreement with the reference (no match = -1 on both sides);
+* bad-1 / bad-2 against ground truth over pixels with finite gt, both excluding the
+  pixels a method calls no match and counting them as bad; OpenCV StereoSGBM alongside.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import cv2
+import numpy as np
+
+from .images import MARGIN
+
+if TYPE_CHECKING:
+    from .run import MachineRun, Prepared
+
+__all__ = [
+    "RunMetrics",
+    "cycle_stats",
+    "rms_error",
+    "f1_score",
+    "map_agreement",
+    "bad_rates",
+    "gt_region",
+    "image_region",
+    "sgbm_disparity",
+    "evaluate",
+]
+
+
+def image_region(array: np.ndarray, dmax: int) -> np.ndarray:
+    """Cut an image-coordinate array to the output region (map rows all, map columns >= dmax)."""
+    h, w = array.shape[:2]
+    return array[MARGIN : h - MARGIN, MARGIN + dmax : w - MARGIN]
+
+
+def gt_region(gt: np.ndarray, dmax: int) -> np.ndarray:
+    """Ground truth (image coordinates) over the output region, float, non-finite = unknown."""
+    return np.asarray(image_region(gt, dmax), dtype=np.float64)
+
+
+def cycle_stats(cycles: np.ndarray) -> dict[str, float]:
+    c = np.asarray(cycles, dtype=np.float64).ravel()
+    if c.size == 0:
+        return {"mean": math.nan, "std": math.nan, "p99": math.nan}
+    return {"mean": float(c.mean()), "std": float(c.std()), "p99": float(np.percentile(c, 99))}
+
+
+def rms_error(counts: np.ndarray, counter_max: int, posterior: np.ndarray, matched: np.ndarray) -> float:
+    """RMS of counts/n_max - posterior/max(posterior) over ``matched`` pixels and all rows.
+
+    ``counts`` and ``posterior`` are (..., M); ``matched`` is the leading shape (bool).
+    NaN when no pixel is matched.
+    """
+    m = counts.shape[-1]
+    c = np.asarray(counts).reshape(-1, m)
+    p = np.asarray(posterior).reshape(-1, m)
+    sel = np.asarray(matched, dtype=bool).reshape(-1)
+    if c.shape != p.shape or sel.shape[0] != c.shape[0]:
+        raise ValueError(
+            f"shapes differ: counts {counts.shape}, posterior {posterior.shape}, matched {matched.shape}"
+        )
+    if not sel.any():
+        return math.nan
+    total = 0.0
+    n = 0
+    block = 1 << 15  # blocks of pixels keep the float temporaries small on full frames
+    for i in range(0, c.shape[0], block):
+        s = sel[i : i + block]
+        if not s.any():
+            continue
+        pm = p[i : i + block][s]
+        est = c[i : i + block][s].astype(np.float64) / counter_max
+        diff = est - pm / pm.max(axis=-1, keepdims=True)
+        total += float(np.square(diff).sum())
+        n += diff.size
+    return math.sqrt(total / n)
+
+
+def f1_score(predicted: np.ndarray, actual: np.ndarray) -> float:
+    """F1 of a boolean detection (positive = True). NaN when neither side has a positive."""
+    pred = np.asarray(predicted, dtype=bool)
+    act = np.asarray(actual, dtype=bool)
+    tp = int(np.sum(pred & act))
+    fp = int(np.sum(pred & ~act))
+    fn = int(np.sum(~pred & act))
+    if tp + fp + fn == 0:
+        return math.nan
+    return 2 * tp / (2 * tp + fp + fn)
+
+
+def map_agreement(a: np.ndarray, b: np.ndarray) -> float:
+    """Fraction of pixels where two disparity maps (-1 = no match) agree exactly."""
+    a = np.asarray(a)
+    return float(np.mean(a == np.asarray(b))) if a.size else math.nan
+
+
+def bad_rates(disp: np.ndarray, gt: np.ndarray, n: float) -> dict[str, float]:
+    """bad-n = |d - gt| > n over pixels with finite gt; ``disp`` < 0 is no match.
+
+    Returns ``matched`` (no-match pixels excluded), ``nomatch_bad`` (no-match counted as
+    bad) and ``coverage`` (the fraction of finite-gt pixels the method matched).
+    """
+    d = np.asarray(disp, dtype=np.float64)
+    g = np.asarray(gt, dtype=np.float64)
+    known = np.isfinite(g)
+    matched = known & (d >= 0)
+    bad = matched & (np.abs(d - np.where(known, g, 0.0)) > n)
+    n_known = int(known.sum())
+    n_matched = int(matched.sum())
+    return {
+        "matched": float(bad.sum() / n_matched) if n_matched else math.nan,
+        "nomatch_bad": float((bad.sum() + (known & ~matched).sum()) / n_known) if n_known else math.nan,
+        "coverage": float(n_matched / n_known) if n_known else math.nan,
+    }
+
+
+def sgbm_numdisparities(dmax: int) -> int:
+    """numDisparities = Dmax + 1 rounded up to a multiple of 16 (OpenCV's requirement)."""
+    return -(-(dmax + 1) // 16) * 16
+
+
+def sgbm_disparity(left: np.ndarray, right: np.ndarray, dmax: int) -> np.ndarray:
+    """OpenCV StereoSGBM (blockSize 5) on the full pair, cut to the output region; -1 = invalid."""
+    sgbm = cv2.StereoSGBM_create(minDisparity=0, numDisparities=sgbm_numdisparities(dmax), blockSize=5)
+    raw = sgbm.compute(left, right)  # int16, 4 fractional bits, negative = invalid
+    disp = raw.astype(np.float64) / 16.0
+    disp[raw < 0] = -1.0
+    return image_region(disp, dmax)
+
+
+def _clean(v: object) -> object:
+    """JSON-safe: NaN -> None, numpy scalars -> Python."""
+    if isinstance(v, (float, np.floating)):
+        v = float(v)
+        return None if math.isnan(v) else v
+    if isinstance(v, np.integer):
+        return int(v)
+    if isinstance(v, dict):
+        return {k: _clean(x) for k, x in v.items()}
+    return v
+
+
+@dataclass
+class RunMetrics:
+    pixels: int
+    cycles: dict[str, float]
+    rms_error: float
+    nomatch_f1: float
+    map_agreement: float
+    timeouts: int
+    machine_nomatch: int
+    reference_nomatch: int
+    bad: dict[str, dict[str, float]] | None = None  # {"machine": {...}, "reference": ..., "sgbm": ...}
+
+    def to_report(self) -> dict[str, object]:
+        out: dict[str, object] = {
+            "pixels": self.pixels,
+            "cycles_per_pixel_mean": self.cycles["mean"],
+            "cycles_per_pixel_std": self.cycles["std"],
+            "cycles_per_pixel_p99": self.cycles["p99"],
+            "rms_error": self.rms_error,
+            "nomatch_f1": self.nomatch_f1,
+            "map_agreement": self.map_agreement,
+            "timeouts": self.timeouts,
+            "machine_nomatch_pixels": self.machine_nomatch,
+            "reference_nomatch_pixels": self.reference_nomatch,
+        }
+        if self.bad is not None:
+            for method, figs in self.bad.items():
+                for k, v in figs.items():
+                    out[f"{method}_{k}"] = v
+        return _clean(out)  # type: ignore[return-value]
+
+
+def evaluate(prepared: Prepared, run: MachineRun, sgbm: bool | None = None) -> RunMetrics:
+    """All figures of one machine run against the prepared reference (and gt)."""
+    ref = prepared.reference
+    n_max = run.machine.counter_max
+    machine_nm = run.map < 0  # no-match row won, or watchdog timeout
+    ref_nm = ref.map < 0
+    bad = None
+    if prepared.gt is not None:
+        methods = {"machine": run.map, "reference": ref.map}
+        if sgbm is None or sgbm:
+            methods["sgbm"] = sgbm_disparity(prepared.left, prepared.right, prepared.model.dmax)
+        bad = {}
+        for name, disp in methods.items():
+            b1 = bad_rates(disp, prepared.gt, 1)
+            b2 = bad_rates(disp, prepared.gt, 2)
+            bad[name] = {
+                "bad1": b1["matched"],
+                "bad2": b2["matched"],
+                "bad1_nomatch_bad": b1["nomatch_bad"],
+                "bad2_nomatch_bad": b2["nomatch_bad"],
+                "coverage": b1["coverage"],
+            }
+    return RunMetrics(
+        pixels=int(run.map.size),
+        cycles=cycle_stats(run.cycles),
+        rms_error=rms_error(run.counts, n_max, ref.posterior, ~ref_nm),
+        nomatch_f1=f1_score(machine_nm, ref_nm),
+        map_agreement=map_agreement(run.map, ref.map),
+        timeouts=int(run.timeout.sum()),
+        machine_nomatch=int(machine_nm.sum()),
+        reference_nomatch=int(ref_nm.sum()),
+        bad=bad,
+    )

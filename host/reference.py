@@ -1,0 +1,116 @@
+"""Exact (float64) inference: the reference the machine is measured against.
+
+Posterior over Dmax+2 hypotheses per output pixel: disparity d gets the product of the
+three likelihoods, the no-match hypothesis its probability alone (uniform prior over all
+Dmax+2), normalized to sum 1. MAP = argmax of the unnormalized products (the same order
+as the posterior's, without a division that could round two close values into a tie);
+exact ties go to the lowest index, so no match wins only when strictly more probable.
+
+``reference_fast`` is a numba loop with one lookup table per feature instead of exp;
+``reference_plain`` is the vectorized float64 formula, kept as its test oracle.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from .features import FeatureSums, feature_sums
+from .images import validate_pair
+from .likelihoods import LikelihoodTables, ModelParams, likelihood_tables, likelihoods_plain
+
+__all__ = ["Reference", "reference", "reference_fast", "reference_plain", "map_from_index"]
+
+
+@dataclass
+class Reference:
+    """posterior (Ho, Wo, Dmax+2) float64, last index = no match; map (Ho, Wo) int16, -1 = no match."""
+
+    posterior: np.ndarray
+    map: np.ndarray
+
+    @property
+    def nomatch(self) -> np.ndarray:
+        return self.map < 0
+
+
+def map_from_index(index: np.ndarray, dmax: int) -> np.ndarray:
+    """Hypothesis index (0..Dmax+1) -> disparity map int16 with -1 for no match."""
+    out = np.asarray(index).astype(np.int16)
+    out[out == dmax + 1] = -1
+    return out
+
+
+@numba.njit(parallel=True, cache=True, fastmath=False, boundscheck=False)
+def _reference_kernel(ml, mr, ghl, ghr, gvl, gvr, tm, tgh, tgv, tnm, dmax, post, idx):  # pragma: no cover
+    h, w4 = ml.shape
+    wo = w4 - dmax
+    nm_index = dmax + 1
+    for y in numba.prange(h):
+        for i in range(wo):
+            x = i + dmax
+            a = ml[y, x]
+            b = ghl[y, x]
+            c = gvl[y, x]
+            out = post[y, i]
+            best = -1.0
+            arg = 0
+            total = 0.0
+            for d in range(dmax + 1):
+                v = tm[abs(a - mr[y, x - d])] * tgh[abs(b - ghr[y, x - d])] * tgv[abs(c - gvr[y, x - d])]
+                out[d] = v
+                total += v
+                if v > best:  # strict: the lowest index wins exact ties
+                    best = v
+                    arg = d
+            v = tnm[abs(c)]
+            out[nm_index] = v
+            total += v
+            if v > best:
+                arg = nm_index
+            for d in range(dmax + 2):
+                out[d] = out[d] / total
+            idx[y, i] = arg
+
+
+def reference_fast(
+    left: FeatureSums,
+    right: FeatureSums,
+    model: ModelParams,
+    tables: LikelihoodTables | None = None,
+    out: np.ndarray | None = None,
+) -> Reference:
+    """The reference by a compiled loop over pixels and disparities (2 threads here)."""
+    tables = tables if tables is not None else likelihood_tables(model)
+    h4, w4 = left.shape
+    wo = w4 - model.dmax
+    shape = (h4, wo, model.hypotheses)
+    if out is None:
+        out = np.empty(shape)
+    elif out.shape != shape or out.dtype != np.float64:
+        raise ValueError(f"out must be float64 of shape {shape}, got {out.dtype} {out.shape}")
+    idx = np.empty((h4, wo), dtype=np.int16)
+    _reference_kernel(
+        left.m25, right.m25, left.gh20, right.gh20, left.gv20, right.gv20,
+        tables.m, tables.gh, tables.gv, tables.nomatch, model.dmax, out, idx,
+    )  # fmt: skip
+    idx[idx == model.dmax + 1] = -1
+    return Reference(out, idx)
+
+
+def reference_plain(left: FeatureSums, right: FeatureSums, model: ModelParams) -> Reference:
+    """The reference by the plain vectorized float64 formula (memory-hungry: test oracle)."""
+    lik, nm = likelihoods_plain(left, right, model)
+    # Same product order as the fast kernel (m * gH * gV) so the unnormalized values are bit-identical.
+    unnorm = np.concatenate([lik[..., 0] * lik[..., 1] * lik[..., 2], nm[..., None]], axis=-1)
+    # np.argmax returns the first maximum: lowest index wins exact ties.
+    index = np.argmax(unnorm, axis=-1)
+    return Reference(unnorm / unnorm.sum(axis=-1, keepdims=True), map_from_index(index, model.dmax))
+
+
+def reference(left: np.ndarray, right: np.ndarray, model: ModelParams) -> Reference:
+    """Validate a gray pair and run the fast reference on it."""
+    validate_pair(left, right, model.dmax)
+    return reference_fast(feature_sums(left), feature_sums(right), model)
