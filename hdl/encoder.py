@@ -1,0 +1,106 @@
+"""The MAP encoder: which overflowing row wins.
+
+Several overflow counters can overflow in the same cycle; the encoder picks one:
+
+- ``lowest-index``: the lowest overflowing row;
+- ``nomatch-first``: the no-match row (the last one) if it overflowed, else the lowest
+  overflowing row (a pixel that cannot be told apart from "no match" is reported as such).
+
+The lowest-index choice is a balanced binary tree (depth ceil(log2 M)), not a priority chain
+whose depth grows with M: each node keeps its left child's index if the left child has an
+overflowing row, else its right child's, and prepends one index bit saying which side won.
+The no-match preference is one 2:1 multiplexer after the tree.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from amaranth.hdl import Cat, Const, Module, Mux, Value
+from amaranth.lib import wiring
+from amaranth.lib.wiring import In, Out
+
+from bayesmachine.params import TIE_BREAKS, MachineParams, ParameterError
+
+__all__ = ["MAPEncoder", "map_encoder", "map_encoder_twin"]
+
+
+def _index_width(rows: int) -> int:
+    return max(1, (rows - 1).bit_length())
+
+
+def map_encoder(over: Value, nomatch_row: bool, tie_break: str) -> tuple[Value, Value]:
+    """The encoder's logic on an M-bit vector ``over``: returns ``(valid, index)``.
+
+    ``valid`` is 1 when any row overflowed; ``index`` (``max(1, bit_length(M - 1))`` bits) is
+    the winning row, meaningless when ``valid`` is 0.
+    """
+    rows = len(over)
+    width = _index_width(rows)
+    if rows == 1:
+        return over[0], Const(0, width)
+    # Leaves padded to a power of two with never-valid entries; each level halves the list.
+    nodes: list[tuple[Value, Value | None]] = [(over[i], None) for i in range(rows)]
+    nodes += [(Const(0, 1), None)] * ((1 << width) - rows)
+    while len(nodes) > 1:
+        nxt = []
+        for (lv, li), (rv, ri) in zip(nodes[0::2], nodes[1::2], strict=True):
+            low = Cat() if li is None else Mux(lv, li, ri)
+            # Bit `level` of the index is 1 when the right (higher) half won.
+            nxt.append((lv | rv, Cat(low, ~lv)))
+        nodes = nxt
+    valid, index = nodes[0]
+    assert index is not None and len(index) == width
+    if nomatch_row and tie_break == "nomatch-first":
+        index = Mux(over[rows - 1], Const(rows - 1, width), index)
+    return valid, index
+
+
+def map_encoder_twin(over: Sequence[int | bool], nomatch_row: bool, tie_break: str) -> int | None:
+    """Python twin of the MAP encoder: the winning row, or None if no row overflowed."""
+    if not any(over):
+        return None
+    if nomatch_row and tie_break == "nomatch-first" and over[-1]:
+        return len(over) - 1
+    return next(i for i, v in enumerate(over) if v)
+
+
+class MAPEncoder(wiring.Component):
+    """The MAP encoder as a component (for unit tests; the machine calls :func:`map_encoder`).
+
+    Ports: ``over`` (M bits in), ``valid`` (any row overflowed), ``index`` (the winning row).
+    """
+
+    def __init__(self, rows: int, *, nomatch_row: bool = False, tie_break: str = "nomatch-first") -> None:
+        if isinstance(rows, bool) or not isinstance(rows, int) or rows < 1:
+            raise ParameterError(f"rows must be a positive integer, got {rows!r}")
+        if tie_break not in TIE_BREAKS:
+            raise ParameterError(f"tie_break must be one of {TIE_BREAKS}, got {tie_break!r}")
+        if nomatch_row and rows < 2:
+            raise ParameterError("an encoder with a no-match row needs at least 2 rows")
+        self._rows = rows
+        self._nomatch_row = bool(nomatch_row)
+        self._tie_break = tie_break
+        super().__init__({"over": In(rows), "valid": Out(1), "index": Out(_index_width(rows))})
+
+    @classmethod
+    def for_params(cls, params: MachineParams) -> MAPEncoder:
+        return cls(params.rows, nomatch_row=params.nomatch_row, tie_break=params.tie_break)
+
+    @property
+    def rows(self) -> int:
+        return self._rows
+
+    @property
+    def nomatch_row(self) -> bool:
+        return self._nomatch_row
+
+    @property
+    def tie_break(self) -> str:
+        return self._tie_break
+
+    def elaborate(self, platform: object) -> Module:
+        m = Module()
+        valid, index = map_encoder(self.over, self._nomatch_row, self._tie_break)
+        m.d.comb += [self.valid.eq(valid), self.index.eq(index)]
+        return m

@@ -1,0 +1,156 @@
+"""The ``pysim`` engine: the RTL (``BayesianMachine``) in Amaranth's Python simulator.
+
+``PysimEngine(params).run(words)`` streams the pixels' likelihood memories into the load
+stream and collects the result stream, with loads overlapping runs (the shadow memory fills
+while the active one computes), exactly as a host would drive the hardware. One simulator
+lives as long as the engine: the LFSR states (and the cycle count) carry over from one
+``run`` call to the next, like :class:`~bayesmachine.sim.model.MachineModel`, so a frame can
+be run in chunks. Between calls the simulation just stops advancing; the machine is idle
+(no compute cycles), so nothing changes.
+
+Throughput is a few hundred to a few thousand cycles per second depending on the machine size
+(about 700/s for the full Dmax = 80 machine): crops and tests, not whole frames.
+"""
+
+from __future__ import annotations
+
+import random
+from collections import deque
+
+import numpy as np
+from amaranth.sim import Simulator, SimulatorContext
+
+from bayesmachine.hdl.machine import BayesianMachine
+from bayesmachine.params import MachineParams
+from bayesmachine.sim.model import MachineResult, check_words
+from bayesmachine.sim.testbench import pack_beats, pack_numbers, unpack_result
+
+__all__ = ["PysimEngine"]
+
+
+class PysimEngine:
+    """Run the RTL in Amaranth's simulator; same interface as ``MachineModel``.
+
+    ``load_stall`` / ``result_stall``: probability that the testbench drops ``load.valid`` /
+    ``result.ready`` in a given cycle (random back-pressure from ``stall_seed``), to exercise
+    the handshakes; results do not depend on them. ``vcd``: write a waveform file.
+    """
+
+    def __init__(
+        self,
+        params: MachineParams,
+        *,
+        load_stall: float = 0.0,
+        result_stall: float = 0.0,
+        stall_seed: int = 0,
+        vcd: str | None = None,
+    ) -> None:
+        for name, v in (("load_stall", load_stall), ("result_stall", result_stall)):
+            if not 0.0 <= v < 1.0:
+                raise ValueError(f"{name} must be in [0, 1), got {v}")
+        self.params = params
+        self._load_stall = load_stall
+        self._result_stall = result_stall
+        self._rnd = random.Random(stall_seed)
+        self.dut = BayesianMachine(params)
+        self._beats: deque[int] = deque()
+        self._raw_results: list[int] = []
+        self._numbers: np.ndarray | None = None
+        self._t = 0  # next row of self._numbers
+        self._starved = False
+        self.clock_cycles = 0  # clock cycles simulated so far (idle, load and compute)
+        self.compute_cycles = 0  # compute cycles of the pixels returned so far
+        self._sim = Simulator(self.dut)
+        self._sim.add_clock(1e-8)
+        self._sim.add_testbench(self._feeder, background=True)
+        self._sim.add_testbench(self._collector, background=True)
+        if params.rng == "external":
+            self._sim.add_testbench(self._entropy_source, background=True)
+        self._vcd_ctx = None
+        if vcd is not None:
+            self._vcd_ctx = self._sim.write_vcd(vcd)
+            self._vcd_ctx.__enter__()
+
+    def close(self) -> None:
+        if self._vcd_ctx is not None:
+            self._vcd_ctx.__exit__(None, None, None)
+            self._vcd_ctx = None
+
+    # --- Testbench processes (they run forever; run() advances the simulation) ---
+
+    async def _feeder(self, ctx: SimulatorContext) -> None:
+        load = self.dut.load
+        raw_payload = load.payload.as_value()
+        while True:
+            if not self._beats or (self._load_stall and self._rnd.random() < self._load_stall):
+                ctx.set(load.valid, 0)
+                await ctx.tick()
+                continue
+            ctx.set(load.valid, 1)
+            ctx.set(raw_payload, self._beats[0])
+            _, _, ready = await ctx.tick().sample(load.ready)
+            if ready:
+                self._beats.popleft()
+
+    async def _collector(self, ctx: SimulatorContext) -> None:
+        res = self.dut.result
+        raw_payload = res.payload.as_value()
+        while True:
+            ready = not (self._result_stall and self._rnd.random() < self._result_stall)
+            ctx.set(res.ready, ready)
+            _, _, valid, payload = await ctx.tick().sample(res.valid, raw_payload)
+            self.clock_cycles += 1
+            if valid and ready:
+                self._raw_results.append(payload)
+
+    async def _entropy_source(self, ctx: SimulatorContext) -> None:
+        dut = self.dut
+        raw_entropy = dut.entropy.as_value()
+        while True:
+            nums = self._numbers
+            if nums is not None and self._t < len(nums):
+                ctx.set(raw_entropy, pack_numbers(self.params, nums[self._t]))
+            _, _, taken = await ctx.tick().sample(dut.entropy_ready)
+            if taken:  # a compute cycle consumed numbers[t]
+                if nums is None or self._t >= len(nums):
+                    self._starved = True
+                self._t += 1
+
+    # --- Engine interface ---
+
+    def run(self, words: np.ndarray, numbers: np.ndarray | None = None) -> MachineResult:
+        """Run pixels through the RTL; same arguments and result as ``MachineModel.run``."""
+        p = self.params
+        q = check_words(p, words)
+        if p.rng == "external":
+            if numbers is None:
+                raise ValueError("rng = 'external': pass the random numbers of every compute cycle")
+            nums = np.asarray(numbers)
+            if nums.ndim != 2 or nums.shape[1] != p.operators:
+                raise ValueError(f"random numbers must have shape (cycles, {p.operators}), got {nums.shape}")
+            self._numbers, self._t, self._starved = nums, 0, False
+        elif numbers is not None:
+            raise ValueError("random numbers are only taken with rng = 'external'")
+        first = len(self._raw_results)
+        for pixel in q:
+            self._beats.extend(pack_beats(p, pixel))
+        target = first + len(q)
+        while len(self._raw_results) < target:
+            self._sim.advance()
+            if self._starved:
+                raise ValueError(
+                    f"the {len(self._numbers)} cycles of random numbers ran out before the run ended"
+                )
+        raws = self._raw_results[first:target]
+        out = MachineResult.empty(p.rows)
+        if raws:
+            fields = [unpack_result(p, r) for r in raws]
+            out = MachineResult(
+                np.array([f[4] for f in fields], np.uint32).reshape(len(raws), p.rows),
+                np.array([f[0] for f in fields], np.int32),
+                np.array([f[1] for f in fields], bool),
+                np.array([f[2] for f in fields], bool),
+                np.array([f[3] for f in fields], np.int64),
+            )
+            self.compute_cycles += int(out.cycles.sum())
+        return out
