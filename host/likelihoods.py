@@ -136,8 +136,9 @@ def likelihoods_plain(
 def quantize(p: np.ndarray | float, word_bits: int) -> np.ndarray:
     """Probability -> likelihood-memory word: q = round(p * 2^W), round half up, in [0, 2^W].
 
-    ``p * 2^W`` is exact in float64 (a power-of-two scaling), so "half up" is decided
-    exactly: floor(p * 2^W + 0.5). 0 maps to 0 and 1 to 2^W. Values outside [0, 1]
+    ``p * 2^W`` is exact in float64 (a power-of-two scaling) and so is its fractional part,
+    so "half up" is decided exactly (``floor(x + 0.5)`` would not be: 0.5 - 2^-54 + 0.5 rounds
+    to 1.0). 0 maps to 0 and 1 to 2^W. Values outside [0, 1]
     or NaN are errors (they mean a bug upstream, not something to clip silently).
     """
     arr = np.asarray(p, dtype=np.float64)
@@ -146,7 +147,9 @@ def quantize(p: np.ndarray | float, word_bits: int) -> np.ndarray:
         first = arr[bad].flat[0]
         raise ValueError(f"probabilities must be in [0, 1] to quantize, got {first!r} ({int(bad.sum())} bad)")
     one = 1 << word_bits
-    q = np.floor(arr * one + 0.5)
+    scaled = arr * one
+    q = np.floor(scaled)
+    q += (scaled - q) >= 0.5
     return np.clip(q, 0, one).astype(np.uint16 if word_bits < 16 else np.uint32)
 
 

@@ -21,7 +21,7 @@ from .features import FeatureSums, feature_sums
 from .images import validate_pair
 from .likelihoods import ModelParams, QuantizedTables, likelihood_tables, memory_words
 from .metrics import RunMetrics, evaluate, gt_region
-from .reference import Reference, reference_fast
+from .reference import Reference, reference_fast, warm_up
 
 __all__ = ["Prepared", "MachineRun", "RunOutcome", "get_engine", "prepare", "run_machine", "run_pair"]
 
@@ -41,7 +41,12 @@ def get_engine(name: str, params: MachineParams) -> object:
         from bayesmachine.sim.model import MachineModel
 
         return MachineModel(params)
-    return sim_get_engine(name, params)
+    try:
+        return sim_get_engine(name, params)
+    except ModuleNotFoundError as exc:
+        if not (exc.name or "").startswith("bayesmachine.sim"):
+            raise
+        raise ValueError(f"engine {name!r} is not available yet ({exc.name} is missing)") from None
 
 
 @dataclass
@@ -92,6 +97,7 @@ def prepare(
     validate_pair(left, right, model.dmax)
     if gt is not None and gt.shape != left.shape:
         raise ValueError(f"ground truth shape {gt.shape} differs from the images' {left.shape}")
+    warm_up()  # keep numba's cache load / compilation out of reference_seconds
     t0 = time.perf_counter()
     feats = (feature_sums(left), feature_sums(right))
     ref = reference_fast(*feats, model)

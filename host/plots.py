@@ -1,0 +1,79 @@
+"""Figures: disparity images in the paper's Fig 7 convention and the Fig 6 sweep plots."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")  # files only, never a display
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+__all__ = ["disparity_gray", "save_disparity_figure", "save_sweep_figure"]
+
+
+def disparity_gray(disp: np.ndarray, dmax: int) -> np.ndarray:
+    """Fig 7 convention as uint8: black = no match (< 0), gray proportional to d, white = Dmax.
+
+    Non-finite values (unknown ground truth) are black too; d > Dmax saturates to white.
+    """
+    d = np.asarray(disp, dtype=np.float64)
+    valid = np.isfinite(d) & (d >= 0)
+    gray = np.zeros(d.shape, dtype=np.uint8)
+    scale = 255.0 / max(dmax, 1)
+    gray[valid] = np.round(np.clip(d[valid], 0, dmax) * scale).astype(np.uint8)
+    return gray
+
+
+def save_disparity_figure(
+    path: str | Path,
+    left: np.ndarray,
+    panels: Sequence[tuple[str, np.ndarray]],
+    dmax: int,
+) -> None:
+    """The left image, then each (title, disparity map) panel, side by side, saved as PNG."""
+    n = 1 + len(panels)
+    cols = 2 if n == 4 else min(n, 3)
+    rows = -(-n // cols)
+    h, w = left.shape
+    size = (4.5 * cols, (4.5 * h / w + 0.4) * rows + 0.4)
+    fig, axes = plt.subplots(rows, cols, figsize=size, squeeze=False, layout="constrained")
+    items = [("Left image", left)] + [(t, disparity_gray(d, dmax)) for t, d in panels]
+    for ax, (title, img) in zip(axes.flat, items, strict=False):
+        ax.imshow(img, cmap="gray", vmin=0, vmax=255, interpolation="nearest")
+        ax.set_title(title, fontsize=9)
+        ax.set_axis_off()
+    for ax in list(axes.flat)[n:]:
+        ax.set_axis_off()
+    fig.suptitle(f"Disparity (black = no match, white = Dmax = {dmax})", fontsize=10)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def save_sweep_figure(path: str | Path, sweep: Sequence[dict[str, object]]) -> None:
+    """Fig 6: (a) RMS error and no-match F1 vs counter max; (b) cycles/pixel (mean +- std)."""
+    cm = np.array([float(s["counter_max"]) for s in sweep])  # type: ignore[arg-type]
+
+    def col(key: str) -> np.ndarray:
+        return np.array([np.nan if s.get(key) is None else float(s[key]) for s in sweep])  # type: ignore[arg-type]
+
+    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4))
+    a.plot(cm, col("rms_error"), "o-", label="RMS error (matched pixels)")
+    a.plot(cm, col("nomatch_f1"), "s-", label="F1 (no-match detection)")
+    a.plot(cm, col("map_agreement"), "^--", label="MAP agreement", alpha=0.7)
+    a.set_xscale("log", base=2)
+    a.set_xlabel("counter max")
+    a.set_ylim(0, 1.02)
+    a.grid(True, alpha=0.3)
+    a.legend(fontsize=8)
+    a.set_title("(a) accuracy vs the float64 reference")
+    b.errorbar(cm, col("cycles_per_pixel_mean"), yerr=col("cycles_per_pixel_std"), fmt="o-", capsize=3)
+    b.set_xlabel("counter max")
+    b.set_ylabel("cycles per pixel (mean +- std)")
+    b.grid(True, alpha=0.3)
+    b.set_title("(b) run time per pixel")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
