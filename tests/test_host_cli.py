@@ -1,0 +1,109 @@
+"""CLI smoke tests: run/reference/sweep on small crops with the model engine; clear errors."""
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+
+from bayesmachine.cli import main
+from bayesmachine.host.images import random_dot_stereogram
+
+REPORT_KEYS = set(
+    "engine counter_max pixels cycles_per_pixel_mean cycles_per_pixel_std cycles_per_pixel_p99 rms_error "
+    "nomatch_f1 map_agreement seconds reference_seconds timeouts machine model "
+    "machine_bad1 machine_bad2 sgbm_bad1 sgbm_bad2".split()
+)
+
+
+def test_run_on_bundled_crop(tmp_path):
+    out = tmp_path / "out"
+    # A 140x40 crop of Motorcycle with Dmax 40: (40-4) x (140-4-40) output pixels.
+    rc = main(
+        ["run", "--crop", "300,200,140,40", "--dmax", "40", "--counter-max", "8", "--quiet", "-o", str(out)]
+    )
+    assert rc == 0
+    report = json.loads((out / "report.json").read_text())
+    assert REPORT_KEYS <= report.keys()
+    assert report["engine"] == "model" and report["counter_max"] == 8 and report["pixels"] == 36 * 96
+    assert report["machine"]["rows"] == 42 and report["model"]["dmax"] == 40
+    res = np.load(out / "result.npz")
+    assert res["map"].shape == (36, 96) and res["map"].dtype == np.int16
+    assert res["counts"].shape == (36, 96, 42) and res["cycles"].shape == (36, 96)
+    assert res["map"].min() >= -1 and res["map"].max() <= 40
+    assert (out / "disparity.png").stat().st_size > 0
+
+
+def _write_pair(tmp_path, width=50):
+    left, right, gt = random_dot_stereogram(height=20, width=width, seed=4)
+    cv2.imwrite(str(tmp_path / "l.png"), left)
+    cv2.imwrite(str(tmp_path / "r.png"), cv2.cvtColor(right, cv2.COLOR_GRAY2BGR))  # colour is converted
+    np.save(tmp_path / "gt.npy", gt)
+    return tmp_path / "l.png", tmp_path / "r.png", tmp_path / "gt.npy"
+
+
+def test_reference_command(tmp_path):
+    left, right, _ = _write_pair(tmp_path)
+    out = tmp_path / "ref.npz"
+    assert (
+        main(["reference", str(left), str(right), "--dmax", "16", "--sigma", "12", "-o", str(out), "--quiet"])
+        == 0
+    )
+    ref = np.load(out)
+    assert ref["posterior"].shape == (16, 50 - 4 - 16, 18) and ref["posterior"].dtype == np.float64
+    np.testing.assert_allclose(ref["posterior"].sum(axis=-1), 1.0)
+    assert ref["map"].dtype == np.int16 and ref["map"].shape == (16, 30)
+
+
+def test_sweep_command(tmp_path):
+    left, right, gt = _write_pair(tmp_path)
+    out = tmp_path / "sweep"
+    args = [
+        "sweep",
+        str(left),
+        str(right),
+        "--gt",
+        str(gt),
+        "--dmax",
+        "16",
+        "--counter-max",
+        "1,4",
+        "--quiet",
+    ]
+    assert main([*args, "-o", str(out)]) == 0
+    sweep = json.loads((out / "sweep.json").read_text())
+    assert [p["counter_max"] for p in sweep["points"]] == [1, 4]
+    assert all(
+        "rms_error" in p and "nomatch_f1" in p and "cycles_per_pixel_std" in p for p in sweep["points"]
+    )
+    assert (out / "sweep.png").stat().st_size > 0
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["reference", "{l}", "{missing}"], "not found"),
+        (["reference", "{l}", "{junk}"], "cannot read"),
+        (["reference", "{l}", "{narrow}"], "differ in shape"),
+        (["reference", "{l}", "{r}", "--dmax", "46"], "usable width"),
+        (["run", "{l}", "{r}", "--crop", "40,0,20,10"], "outside"),
+        (["run", "{l}"], "both LEFT and RIGHT"),
+        (["run", "{l}", "{r}", "--counter-max", "0"], "counter_max"),
+        (["reference", "{l}", "{r}", "--p0", "2"], "p0"),
+    ],
+)
+def test_errors_are_one_clear_line(tmp_path, capsys, argv, message):
+    left, right, _ = _write_pair(tmp_path)
+    cv2.imwrite(str(tmp_path / "narrow.png"), np.zeros((20, 49), np.uint8))
+    (tmp_path / "junk.png").write_bytes(b"junk")
+    names = {
+        "l": left,
+        "r": right,
+        "missing": tmp_path / "nope.png",
+        "junk": tmp_path / "junk.png",
+        "narrow": tmp_path / "narrow.png",
+    }
+    argv = [a.format(**{k: str(v) for k, v in names.items()}) for a in argv]
+    assert main([*argv, "-o", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0]

@@ -1,0 +1,73 @@
+"""The run API with the machine model: layout, chunking, timeouts, agreement with the reference."""
+
+import numpy as np
+import pytest
+
+from bayesmachine.host.images import random_dot_stereogram
+from bayesmachine.host.likelihoods import ModelParams
+from bayesmachine.host.run import prepare, run_machine, run_pair
+from bayesmachine.params import MachineParams
+
+DMAX = 12
+
+
+@pytest.fixture(scope="module")
+def pair():
+    return random_dot_stereogram(height=24, width=60, background=2, square=9, seed=7)
+
+
+@pytest.fixture(scope="module")
+def prepared(pair):
+    left, right, gt = pair
+    return prepare(left, right, ModelParams(dmax=DMAX), gt)
+
+
+def test_outcome_layout_and_metrics(pair, prepared):
+    left, right, gt = pair
+    machine = MachineParams.for_disparity(DMAX, counter_max=16)
+    out = run_pair(left, right, prepared.model, machine, gt=gt, progress=False)
+    ho, wo = 20, 60 - 4 - DMAX
+    assert out.run.map.shape == (ho, wo) and out.run.map.dtype == np.int16
+    assert out.run.counts.shape == (ho, wo, DMAX + 2) and out.run.cycles.shape == (ho, wo)
+    # The winner's counter holds n_max on every pixel that did not time out.
+    assert (out.run.counts.max(axis=-1) == 16).all()
+    rep = out.metrics.to_report()
+    assert rep["pixels"] == ho * wo and rep["timeouts"] == 0
+    # Textured random dots: the machine should mostly agree with exact inference.
+    assert rep["map_agreement"] > 0.7
+    assert rep["rms_error"] < 0.2
+    assert rep["cycles_per_pixel_mean"] > 16  # at least n_max + 1 cycles per pixel
+    assert {"machine_bad2", "reference_bad2", "sgbm_bad2"} <= rep.keys()
+
+
+def test_chunking_does_not_change_results(prepared):
+    machine = MachineParams.for_disparity(DMAX, counter_max=4, seed=3)
+    one = run_machine(prepared, machine, progress=False, chunk_rows=1)
+    many = run_machine(prepared, machine, progress=False, chunk_rows=7)
+    for field in ("map", "counts", "cycles", "timeout"):
+        np.testing.assert_array_equal(getattr(one, field), getattr(many, field))
+
+
+def test_timeouts_count_as_no_match(pair, prepared):
+    left, right, _ = pair
+    machine = MachineParams.for_disparity(DMAX, counter_max=16, max_cycles=17)
+    out = run_pair(left, right, prepared.model, machine, prepared=prepared, progress=False)
+    t = out.run.timeout
+    assert t.any() and not t.all()
+    assert (out.run.map[t] == -1).all()
+    assert (out.run.cycles[t] == 17).all()
+    assert out.metrics.timeouts == int(t.sum())
+    assert out.metrics.machine_nomatch >= int(t.sum())
+
+
+def test_bad_machine_or_engine(prepared):
+    with pytest.raises(ValueError, match="dmax \\+ 2"):
+        run_machine(prepared, MachineParams.for_disparity(DMAX + 1), progress=False)
+    with pytest.raises(ValueError, match="unknown engine"):
+        run_machine(prepared, MachineParams.for_disparity(DMAX), engine="fpga", progress=False)
+
+
+def test_prepare_rejects_mismatched_gt(pair):
+    left, right, gt = pair
+    with pytest.raises(ValueError, match="ground truth shape"):
+        prepare(left, right, ModelParams(dmax=DMAX), gt[:, :-1])
