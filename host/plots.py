@@ -71,7 +71,7 @@ def save_sweep_figure(path: str | Path, sweep: Sequence[dict[str, object]]) -> N
     a.set_title("(a) accuracy vs the float64 reference")
     b.errorbar(cm, col("cycles_per_pixel_mean"), yerr=col("cycles_per_pixel_std"), fmt="o-", capsize=3)
     b.set_xlabel("counter max")
-    b.set_ylabel("cycles per pixel (mean +- std)")
+    b.set_ylabel("cycles per pixel (mean +- std over pixels)")
     b.grid(True, alpha=0.3)
     b.set_title("(b) run time per pixel")
     fig.tight_layout()
