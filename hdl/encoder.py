@@ -39,18 +39,22 @@ def map_encoder(over: Value, nomatch_row: bool, tie_break: str) -> tuple[Value, 
     width = _index_width(rows)
     if rows == 1:
         return over[0], Const(0, width)
-    # Leaves padded to a power of two with never-valid entries; each level halves the list.
-    nodes: list[tuple[Value, Value | None]] = [(over[i], None) for i in range(rows)]
-    nodes += [(Const(0, 1), None)] * ((1 << width) - rows)
+    # Each level pairs up neighbours and halves the list; node j of level l covers rows
+    # j * 2**l ... (j + 1) * 2**l - 1, and its index holds the low l bits of the winner.
+    nodes: list[tuple[Value, Value]] = [(over[i], Cat()) for i in range(rows)]
     while len(nodes) > 1:
         nxt = []
-        for (lv, li), (rv, ri) in zip(nodes[0::2], nodes[1::2], strict=True):
-            low = Cat() if li is None else Mux(lv, li, ri)
-            # Bit `level` of the index is 1 when the right (higher) half won.
+        for j in range(0, len(nodes) - 1, 2):
+            (lv, li), (rv, ri) = nodes[j], nodes[j + 1]
+            low = Mux(lv, li, ri) if len(li) else Cat()
+            # The new top bit is 1 when the right (higher) half won.
             nxt.append((lv | rv, Cat(low, ~lv)))
+        if len(nodes) % 2:  # an odd node out has no right neighbour: it wins its pair if valid
+            v, i = nodes[-1]
+            nxt.append((v, Cat(i, Const(0, 1))))
         nodes = nxt
     valid, index = nodes[0]
-    assert index is not None and len(index) == width
+    assert len(index) == width
     if nomatch_row and tie_break == "nomatch-first":
         index = Mux(over[rows - 1], Const(rows - 1, width), index)
     return valid, index

@@ -90,8 +90,11 @@ class BayesianMachine(wiring.Component):
         ops = p.operators
 
         # --- Likelihood memories (registers: every operator reads its word every cycle) ---
-        shadow = [Signal(p.memory_word_width, name=f"shadow_{o // cols}_{o % cols}") for o in range(ops)]
-        active = [Signal(p.memory_word_width, name=f"word_{o // cols}_{o % cols}") for o in range(ops)]
+        # No reset: a run always starts by copying a complete shadow into the active memory.
+        shadow = [Signal(p.memory_word_width, name=f"shadow_{o // cols}_{o % cols}", reset_less=True)
+                  for o in range(ops)]
+        active = [Signal(p.memory_word_width, name=f"word_{o // cols}_{o % cols}", reset_less=True)
+                  for o in range(ops)]
         shadow_full = Signal()
         beat = Signal(range(max(2, p.beats_per_pixel)))
 
@@ -173,14 +176,16 @@ class BayesianMachine(wiring.Component):
 
         # --- Load stream: one beat per handshake into the shadow memory ---
         m.d.comb += self.load.ready.eq(~shadow_full)
-        with m.If(self.load.valid & self.load.ready):
-            with m.Switch(beat):
-                for b in range(p.beats_per_pixel):
-                    with m.Case(b):
-                        for lane in range(p.lanes):
-                            o = b * p.lanes + lane
-                            if o < ops:  # unused lanes of the last beat are ignored
-                                m.d.sync += shadow[o].eq(self.load.payload[lane])
+        accept = self.load.valid & self.load.ready
+        write_beat = Signal(p.beats_per_pixel)  # one-hot: which words this beat writes
+        m.d.comb += write_beat.eq(Cat(accept & (beat == b) for b in range(p.beats_per_pixel)))
+        for b in range(p.beats_per_pixel):
+            with m.If(write_beat[b]):
+                for lane in range(p.lanes):
+                    o = b * p.lanes + lane
+                    if o < ops:  # unused lanes of the last beat are ignored
+                        m.d.sync += shadow[o].eq(self.load.payload[lane])
+        with m.If(accept):
             with m.If(beat == p.beats_per_pixel - 1):
                 m.d.sync += [beat.eq(0), shadow_full.eq(1)]
             with m.Else():

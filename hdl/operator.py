@@ -25,6 +25,7 @@ def stochastic_operator(bus_in: Value | ValueCastable | int, number: Value, word
 
     ``number`` is W bits, ``word`` W + 1 bits, so the comparator covers p = 0 and p = 1 exactly.
     """
+    # Amaranth compares unsigned values of different widths by zero-extension: exact.
     return Value.cast(bus_in) & (number < word)
 
 

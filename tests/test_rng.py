@@ -1,0 +1,149 @@
+"""Leap-forward LFSRs: RTL against the twin, maximal period, serial and cross correlation."""
+
+from __future__ import annotations
+
+import math
+import random
+
+import numpy as np
+import pytest
+from conftest import run_sim
+
+from bayesmachine.hdl.rng import (
+    LeapForwardLFSR,
+    LFSRSpec,
+    lfsr_bit_sequence,
+    lfsr_numbers,
+    lfsr_specs,
+    lfsr_step,
+)
+from bayesmachine.params import MachineParams
+
+
+def _specs(length: int, w: int, n: int = 2, seed: int = 1) -> list[LFSRSpec]:
+    params = MachineParams(rows=n, columns=1, word_bits=w, lfsr_bits=length, counter_max=1, max_cycles=2,
+                           lanes=1, seed=seed)
+    return lfsr_specs(params)
+
+
+def _rtl_numbers(spec: LFSRSpec, enables: list[int]) -> list[int]:
+    """The RTL's ``number`` in each cycle, with ``enable`` driven from ``enables``."""
+    dut = LeapForwardLFSR(spec)
+    seen: list[int] = []
+
+    async def bench(ctx):
+        for en in enables:
+            ctx.set(dut.enable, en)
+            seen.append(ctx.get(dut.number))
+            await ctx.tick()
+
+    run_sim(dut, bench)
+    return seen
+
+
+def _twin_numbers(spec: LFSRSpec, enables: list[int]) -> list[int]:
+    state, out = spec.init, []
+    for en in enables:
+        number, nxt = lfsr_step(state, spec)
+        out.append(number)
+        if en:
+            state = nxt
+    return out
+
+
+@pytest.mark.parametrize(("length", "w"), [(9, 3), (10, 4), (12, 4)])
+def test_rtl_lfsr_matches_twin_over_whole_period(length: int, w: int) -> None:
+    spec = _specs(length, w)[0]
+    assert math.gcd(w, spec.period) == 1  # so the leap-forward state also has the full period
+    enables = [1] * (spec.period + 3)  # one whole period and a wrap
+    got = _rtl_numbers(spec, enables)
+    assert got == _twin_numbers(spec, enables)
+    assert got[spec.period : spec.period + 3] == got[:3]
+
+
+@pytest.mark.parametrize(("length", "w"), [(12, 4), (31, 10)])
+def test_rtl_lfsr_advances_only_when_enabled(length: int, w: int) -> None:
+    spec = _specs(length, w)[1]
+    rnd = random.Random(5)
+    enables = [int(rnd.random() < 0.6) for _ in range(400)]
+    assert _rtl_numbers(spec, enables) == _twin_numbers(spec, enables)
+
+
+@pytest.mark.parametrize(("length", "w"), [(9, 3), (10, 4), (12, 4), (13, 5)])
+def test_twin_is_the_bit_serial_m_sequence_and_maximal(length: int, w: int) -> None:
+    for spec in _specs(length, w, n=3):
+        period = (1 << length) - 1
+        bits = lfsr_bit_sequence(spec, period + length)
+        # Leap-forward numbers are consecutive W-bit chunks of the sequence, bit j = s[kW + j].
+        count = (period + length) // w
+        chunks = [sum(bits[k * w + j] << j for j in range(w)) for k in range(count)]
+        assert list(lfsr_numbers(spec, count)) == chunks
+        # Maximal length: the L-bit windows run through all 2^L - 1 non-zero states once.
+        windows = {sum(bits[t + i] << i for i in range(length)) for t in range(period)}
+        assert len(windows) == period and 0 not in windows
+        assert bits[period : period + length] == bits[:length]
+
+
+# --- Correlation: why the leap-forward (W bits per clock) matters ---
+
+N_CORR = 100_000
+SIGMA = 1 / math.sqrt(N_CORR)  # standard error of a correlation estimate for independent streams
+
+
+def _corr(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.corrcoef(a.astype(float), b.astype(float))[0, 1])
+
+
+@pytest.fixture(scope="module")
+def streams() -> dict[str, np.ndarray]:
+    """Random numbers of the full-size machine's first two operators (L = 31, W = 10)."""
+    specs = _specs(31, 10)
+    w = 10
+    leap0 = np.fromiter(lfsr_numbers(specs[0], N_CORR), dtype=np.int64)
+    leap1 = np.fromiter(lfsr_numbers(specs[1], N_CORR), dtype=np.int64)
+    # The naive alternative: the same m-sequence in a register that shifts ONE bit per clock, the
+    # comparator reading its W low bits (number_t = s[t] ... s[t + W - 1]).
+    bits = np.array(lfsr_bit_sequence(specs[0], N_CORR + w), dtype=np.int64)
+    shift1 = sum(bits[j : j + N_CORR] << j for j in range(w))
+    return {"leap0": leap0, "leap1": leap1, "shift1": shift1}
+
+
+@pytest.mark.parametrize("q", [256, 307, 512, 768])  # p = 0.25, 0.3, 0.5, 0.75 at W = 10
+def test_leap_forward_stream_has_no_lag1_correlation(streams: dict[str, np.ndarray], q: int) -> None:
+    b = streams["leap0"] < q
+    assert abs(b.mean() - q / 1024) < 5 * math.sqrt(q / 1024 * (1 - q / 1024) / N_CORR)
+    for lag in (1, 2, 3):
+        assert abs(_corr(b[:-lag], b[lag:])) < 5 * SIGMA
+
+
+@pytest.mark.parametrize(("q", "expected"), [(256, 1 / 3), (768, 1 / 3), (307, None)])
+def test_one_bit_shift_stream_is_serially_correlated(
+    streams: dict[str, np.ndarray], q: int, expected: float | None
+) -> None:
+    # number_t < q with q = 2^(W-2) is "the two top bits are 0"; number_{t+1} shares one of
+    # them, so P(b_t & b_{t+1}) = 1/8 instead of 1/16: correlation (1/16) / (3/16) = 1/3.
+    b = streams["shift1"] < q
+    c = _corr(b[:-1], b[1:])
+    assert c > 40 * SIGMA  # > 0.12: clearly correlated
+    if expected is not None:
+        assert abs(c - expected) < 5 * SIGMA
+
+
+def test_one_bit_shift_at_p_half_depends_on_one_bit(streams: dict[str, np.ndarray]) -> None:
+    # The exception: at p = 1/2 the comparator reads only the newest bit, and consecutive
+    # m-sequence bits are uncorrelated, so the lag-1 correlation of the comparator stream is ~0
+    # even for the one-bit shift; the numbers themselves are still strongly correlated.
+    b = streams["shift1"] < 512
+    assert abs(_corr(b[:-1], b[1:])) < 5 * SIGMA
+    n = streams["shift1"]
+    assert _corr(n[:-1], n[1:]) > 0.45  # number_{t+1} ~ number_t / 2 + new bit * 2^(W-1)
+    leap = streams["leap0"]
+    assert abs(_corr(leap[:-1], leap[1:])) < 5 * SIGMA
+
+
+@pytest.mark.parametrize("q", [256, 512])
+def test_two_operators_streams_are_uncorrelated(streams: dict[str, np.ndarray], q: int) -> None:
+    a, b = streams["leap0"] < q, streams["leap1"] < q
+    for lag in (0, 1, 2):
+        assert abs(_corr(a[: N_CORR - lag], b[lag:])) < 5 * SIGMA
+        assert abs(_corr(b[: N_CORR - lag], a[lag:])) < 5 * SIGMA
