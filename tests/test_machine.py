@@ -1,0 +1,176 @@
+# amaranth: UnusedElaboratable=no
+"""The whole machine RTL (in Amaranth's simulator) against the NumPy machine model, bit for bit.
+
+Counters, MAP, flags and cycle counts must be identical, whatever the load/result stream
+timing (random valid/ready stalls), the split of pixels into calls, and the machine variant.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from amaranth.hdl import Shape
+from conftest import assert_same_results, small_params
+
+from bayesmachine.hdl.machine import BayesianMachine, load_layout, result_layout
+from bayesmachine.params import MachineParams
+from bayesmachine.sim.model import MachineModel
+from bayesmachine.sim.pysim import PysimEngine
+from bayesmachine.sim.testbench import synthetic_disparity_words
+
+
+def _mixed_words(params: MachineParams, pixels: int, seed: int) -> np.ndarray:
+    """Random words with many exact 0 and 2^W words, plus all-zero (timeout) and all-one (tie) pixels."""
+    rng = np.random.default_rng(seed)
+    one = params.word_one
+    shape = (pixels, params.rows, params.operator_columns)
+    words = rng.integers(0, one + 1, size=shape)
+    pick = rng.random(shape)
+    words[pick < 0.15] = 0
+    words[pick > 0.75] = one
+    words[1] = 0  # nothing ever fires: watchdog timeout
+    words[2] = one  # every row fires every cycle: all overflow together (a tie of all rows)
+    words[3] = 0
+    words[3, -1] = one  # only the last row (no-match row if any) fires
+    return words.astype(np.int32)
+
+
+def _check(params: MachineParams, words: np.ndarray, *, chunks: int = 1, **engine_opts: float) -> PysimEngine:
+    engine = PysimEngine(params, **engine_opts)
+    model = MachineModel(params)
+    for part in np.array_split(words, chunks):
+        assert_same_results(engine.run(part), model.run(part))
+    return engine
+
+
+@pytest.mark.parametrize("tie_break", ["nomatch-first", "lowest-index"])
+def test_small_machine_matches_model_with_stalls(tie_break: str) -> None:
+    params = small_params(tie_break=tie_break)
+    words = _mixed_words(params, 40, seed=1)
+    _check(params, words, load_stall=0.3, result_stall=0.3, stall_seed=2)
+
+
+def test_tie_of_all_rows_follows_the_tie_rule() -> None:
+    for tie_break, winner in (("nomatch-first", 4), ("lowest-index", 0)):
+        params = small_params(tie_break=tie_break)
+        words = np.full((2, params.rows, params.operator_columns), params.word_one, np.int32)
+        res = PysimEngine(params).run(words)
+        assert res.map.tolist() == [winner] * 2
+        assert res.cycles.tolist() == [params.counter_max + 1] * 2
+        assert res.nomatch.tolist() == [winner == params.rows - 1] * 2
+        assert (res.counts == params.counter_max).all()
+
+
+def test_timeout_pixels() -> None:
+    params = small_params(max_cycles=25)
+    words = np.zeros((3, params.rows, params.operator_columns), np.int32)
+    words[1, 0, :] = 1  # p = 1/16 on row 0 only: rarely 4 ones in 25 cycles
+    res = PysimEngine(params).run(words)
+    assert_same_results(res, MachineModel(params).run(words))
+    assert res.timeout[0] and res.timeout[2] and res.cycles[0] == 25 and res.map[0] == 0
+    assert not (res.nomatch & res.timeout).any()
+
+
+@pytest.mark.parametrize(
+    "variant",
+    [
+        dict(prior="loaded"),
+        dict(lanes=1),
+        dict(lanes=10),  # exactly one beat per pixel
+        dict(lanes=4),  # the last beat has unused lanes
+        dict(nomatch_row=False),
+        dict(rows=2, columns=1, lanes=1),
+        dict(rows=1, columns=3, nomatch_row=False, lanes=2),
+        dict(counter_max=1, max_cycles=8),
+        dict(word_bits=1, lfsr_bits=5, counter_max=2),
+        dict(columns=4, lanes=7, seed=12345),
+    ],
+    ids=lambda v: ",".join(f"{k}={x}" for k, x in v.items()),
+)
+def test_machine_variants_match_model(variant: dict[str, object]) -> None:
+    params = small_params(**variant)
+    words = _mixed_words(params, 25, seed=len(str(variant)))
+    _check(params, words, load_stall=0.2, result_stall=0.2, stall_seed=7)
+
+
+def test_external_rng_matches_model() -> None:
+    params = small_params(rng="external", max_cycles=40)
+    words = _mixed_words(params, 20, seed=4)
+    rng = np.random.default_rng(9)
+    engine, model = PysimEngine(params, load_stall=0.3, result_stall=0.4, stall_seed=3), MachineModel(params)
+    for part in np.array_split(words, 2):
+        numbers = rng.integers(0, 1 << params.word_bits, size=(40 * len(part), params.operators))
+        assert_same_results(engine.run(part, numbers), model.run(part, numbers))
+
+
+def test_external_rng_runs_out() -> None:
+    params = small_params(rng="external")
+    words = np.zeros((1, params.rows, params.operator_columns), np.int32)
+    with pytest.raises(ValueError, match="ran out"):
+        PysimEngine(params).run(words, np.zeros((10, params.operators), np.int32))
+
+
+def test_state_carries_over_between_calls() -> None:
+    params = small_params()
+    words = _mixed_words(params, 30, seed=5)
+    engine = PysimEngine(params)
+    parts = [engine.run(words[:7]), engine.run(words[7:8]), engine.run(words[8:])]
+    whole = MachineModel(params).run(words)
+    for field in ("counts", "map", "cycles", "timeout", "nomatch"):
+        assert np.array_equal(np.concatenate([getattr(p, field) for p in parts]), getattr(whole, field))
+
+
+def test_runs_are_back_to_back() -> None:
+    # Without stalls: the first pixel's beats_per_pixel load cycles, then one compute cycle after
+    # another with no idle cycle between runs (each run lasts >= counter_max + 1 >= beats + 1
+    # cycles, so the next pixel is always in the shadow memory in time), then the last result
+    # is handed over the cycle after its last compute cycle.
+    params = small_params(lanes=3, counter_max=4)  # 10 words: 4 beats per pixel
+    words = _mixed_words(params, 12, seed=6)
+    engine = _check(params, words)
+    assert engine.clock_cycles == params.beats_per_pixel + engine.compute_cycles + 2
+
+
+def test_heavy_result_backpressure() -> None:
+    params = small_params()
+    words = _mixed_words(params, 15, seed=8)
+    engine = _check(params, words, result_stall=0.9, stall_seed=11)
+    # Each result waits ~10 cycles for ready, and the next run cannot compute meanwhile.
+    assert engine.clock_cycles > engine.compute_cycles + 5 * len(words)
+
+
+def test_ports_and_layouts() -> None:
+    params = MachineParams.for_disparity(80)
+    dut = BayesianMachine(params)
+    assert Shape.cast(load_layout(params)).width == 16 * 11
+    layout = result_layout(params)
+    names = ["map", "nomatch", "timeout", "cycles", "counts"]
+    assert [name for name, _ in layout] == names
+    assert [layout[name].offset for name in names] == [0, 7, 8, 9, 29]
+    assert Shape.cast(layout).width == 7 + 1 + 1 + 20 + 82 * 5
+    assert not hasattr(dut, "entropy")
+    ext = BayesianMachine(MachineParams.for_disparity(80, rng="external"))
+    assert Shape.cast(ext.entropy.shape()).width == 246 * 10
+    with pytest.raises(TypeError):
+        BayesianMachine({"rows": 3})  # type: ignore[arg-type]
+
+
+# --- The full-size machine of the paper: Dmax = 80 (82 rows), N = 3, n_max = 16 ---
+
+def test_full_size_machine_matches_model() -> None:
+    params = MachineParams.for_disparity(80)
+    rng = np.random.default_rng(2017)
+    words = synthetic_disparity_words(params, 6, rng, occluded=0.2)
+    words[2, :, :] = params.word_one  # a tie of all 82 rows: the no-match row wins
+    engine = _check(params, words, chunks=2, load_stall=0.3, result_stall=0.3, stall_seed=1)
+    assert engine.compute_cycles > 6 * 17
+
+
+def test_full_size_machine_timeout_and_lowest_index() -> None:
+    params = MachineParams.for_disparity(80, max_cycles=120, tie_break="lowest-index", seed=99)
+    rng = np.random.default_rng(80)
+    words = synthetic_disparity_words(params, 4, rng)
+    words[1] = 0  # timeout after 120 cycles
+    words[3] = params.word_one  # all rows tie: lowest index wins
+    res = _check(params, words, load_stall=0.2, result_stall=0.2, stall_seed=4).run(words[:0])
+    assert len(res) == 0
