@@ -16,6 +16,7 @@ import numpy as np
 from tqdm import tqdm
 
 from bayesmachine.params import MachineParams
+from bayesmachine.sim.engines import ENGINES, get_engine
 
 from .features import FeatureSums, feature_sums
 from .images import validate_pair
@@ -23,31 +24,7 @@ from .likelihoods import ModelParams, QuantizedTables, likelihood_tables, memory
 from .metrics import RunMetrics, evaluate, gt_region
 from .reference import Reference, reference_fast, warm_up
 
-__all__ = ["Prepared", "MachineRun", "RunOutcome", "get_engine", "prepare", "run_machine", "run_pair"]
-
-ENGINES = ("model", "pysim", "verilator")
-
-
-def get_engine(name: str, params: MachineParams) -> object:
-    """An engine object with ``.run(words) -> MachineResult`` (from ``bayesmachine.sim.engines``)."""
-    if name not in ENGINES:
-        raise ValueError(f"unknown engine {name!r}: choose one of {', '.join(ENGINES)}")
-    try:
-        from bayesmachine.sim.engines import get_engine as sim_get_engine
-    except ImportError:
-        # The engine registry is not there yet: the NumPy model is the only engine we can reach.
-        if name != "model":
-            raise ValueError(f"engine {name!r} is not available (no bayesmachine.sim.engines)") from None
-        from bayesmachine.sim.model import MachineModel
-
-        return MachineModel(params)
-    try:
-        return sim_get_engine(name, params)
-    except ModuleNotFoundError as exc:
-        if not (exc.name or "").startswith("bayesmachine.sim"):
-            raise
-        raise ValueError(f"engine {name!r} is not available yet ({exc.name} is missing)") from None
-
+__all__ = ["ENGINES", "Prepared", "MachineRun", "RunOutcome", "prepare", "run_machine", "run_pair"]
 
 @dataclass
 class Prepared:
