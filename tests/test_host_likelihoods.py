@@ -120,3 +120,12 @@ def test_words_reject_wrong_machine():
     fl, fr, model = _pair(dmax=5)
     with pytest.raises(ValueError, match="for_disparity"):
         memory_words(fl, fr, model, MachineParams.for_disparity(6))
+
+
+def test_words_at_16_bits_hold_one_exactly():
+    """2**16 does not fit uint16: the 16-bit machine's words widen instead of wrapping."""
+    fl, fr, model = _pair(dmax=5)
+    machine = MachineParams.for_disparity(5, word_bits=16)
+    words = memory_words(fl, fr, model, machine)
+    assert words.max() == 1 << 16
+    np.testing.assert_array_equal(words, memory_words_plain(fl, fr, model, machine))
