@@ -17,6 +17,7 @@ from amaranth.sim import SimulatorContext
 from bayesmachine.params import MachineParams
 
 __all__ = [
+    "measure_ties",
     "pack_beats",
     "pack_numbers",
     "stream_get",
@@ -127,3 +128,62 @@ def synthetic_disparity_words(
     if params.prior == "loaded":
         words = np.concatenate([np.full((pixels, rows, 1), one, np.int32), words], axis=2)
     return words
+
+
+def measure_ties(
+    params: MachineParams, words: np.ndarray, rng: np.random.Generator, *, chunk: int = 100
+) -> dict[str, float]:
+    """How often several rows overflow in the same cycle, and what the tie rule changes.
+
+    Runs the model with ideal random numbers (``rng = "external"``) three ways on the same
+    numbers: lowest-index, nomatch-first, and lowest-index on the row-reversed machine (which
+    picks the *highest* overflowing row). A tie is a pixel where lowest and highest differ; a
+    no-match tie is one where the two rules differ (the no-match row overflowed together with a
+    lower row). Returns counts and fractions over the pixels.
+    """
+    from bayesmachine.sim.model import MachineModel, check_words
+
+    base = dict(params.to_dict(), rng="external")
+    rows, cols = params.rows, params.operator_columns
+    low = MachineModel(MachineParams(**{**base, "tie_break": "lowest-index"}))
+    nmf = MachineModel(MachineParams(**{**base, "tie_break": "nomatch-first"}))
+    rev = MachineModel(MachineParams(**{**base, "tie_break": "lowest-index", "nomatch_row": False}))
+    q = check_words(params, words).reshape(-1, rows, cols)
+    ties = nm_ties = nomatch_low = nomatch_nmf = timeouts = 0
+    for start in range(0, len(q), chunk):
+        part = q[start : start + chunk]
+        numbers = np.zeros((0, params.operators), np.int32)
+        while True:
+            # Too few numbers: append more and rerun (the consumed prefix, hence the result, of a
+            # run that fits is the same, so this does not bias towards short runs).
+            more = max(len(numbers), 300 * len(part))
+            fresh = rng.integers(0, 1 << params.word_bits, size=(more, params.operators), dtype=np.int32)
+            numbers = np.concatenate([numbers, fresh])
+            try:
+                r_low = low.run(part, numbers)
+                break
+            except ValueError:
+                continue
+        used = int(r_low.cycles.sum())
+        numbers = numbers[:used]
+        r_nmf = nmf.run(part, numbers)
+        rev_numbers = numbers.reshape(used, rows, cols)[:, ::-1, :].reshape(used, -1)
+        r_rev = rev.run(part[:, ::-1, :], rev_numbers)
+        ok = ~r_low.timeout
+        highest = rows - 1 - r_rev.map
+        ties += int((ok & (highest != r_low.map)).sum())
+        nm_ties += int((ok & (r_nmf.map != r_low.map)).sum())
+        nomatch_low += int(r_low.nomatch.sum())
+        nomatch_nmf += int(r_nmf.nomatch.sum())
+        timeouts += int(r_low.timeout.sum())
+    n = len(q)
+    return {
+        "pixels": n,
+        "ties": ties,
+        "tie_fraction": ties / n,
+        "nomatch_ties": nm_ties,
+        "nomatch_tie_fraction": nm_ties / n,
+        "nomatch_lowest_index": nomatch_low,
+        "nomatch_nomatch_first": nomatch_nmf,
+        "timeouts": timeouts,
+    }

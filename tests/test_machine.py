@@ -174,3 +174,11 @@ def test_full_size_machine_timeout_and_lowest_index() -> None:
     words[3] = params.word_one  # all rows tie: lowest index wins
     res = _check(params, words, load_stall=0.2, result_stall=0.2, stall_seed=4).run(words[:0])
     assert len(res) == 0
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("tie_break", ["nomatch-first", "lowest-index"])
+def test_full_size_machine_many_pixels(tie_break: str) -> None:
+    params = MachineParams.for_disparity(80, tie_break=tie_break, seed=7)
+    words = synthetic_disparity_words(params, 60, np.random.default_rng(60))
+    _check(params, words, chunks=3, load_stall=0.1, result_stall=0.1, stall_seed=9)
