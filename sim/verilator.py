@@ -369,6 +369,9 @@ def build_harness(
         return VerilatorBuild(final, exe, key, False, float(info.get("seconds", 0.0)))
 
     tmp = Path(tempfile.mkdtemp(prefix=f".build-{key}-", dir=root))
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes it private; the cache entry should not be
     try:
         (tmp / f"{TOP_NAME}.v").write_text(verilog_text)
         verilog_files = [f"{TOP_NAME}.v"]
@@ -388,7 +391,9 @@ def build_harness(
             log.write(" ".join(cmd) + "\n")
             log.flush()
             if verbose:
-                print(f"verilator: compiling the {params.rows}-row machine into {final} ...", file=sys.stderr)
+                # A first build takes tens of seconds: say why the command is quiet.
+                print(f"verilator: compiling the {params.rows}-row machine (once; cached in {final})",
+                      file=sys.stderr)
             proc = subprocess.run(cmd, cwd=tmp, stdout=log, stderr=subprocess.STDOUT)
         seconds = time.perf_counter() - t0
         if proc.returncode != 0 or not (tmp / "harness").exists():
@@ -441,7 +446,7 @@ class VerilatorEngine:
         *,
         design: Callable[[MachineParams], Any] | None = None,
         jobs: int = 2,
-        verbose: bool = False,
+        verbose: bool = True,
         register_reset: bool = True,
     ) -> None:
         if params.rng != "lfsr":

@@ -172,6 +172,23 @@ def test_dmax80_crop(cache: Path) -> None:
 
 
 @needs_tools
+def test_concurrent_builds(tmp_path: Path) -> None:
+    """Two processes' worth of builds of the same design race; both end with the same build."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    p = MachineParams.for_disparity(dmax=1, lanes=3)
+    with ThreadPoolExecutor(2) as pool:
+        builds = list(pool.map(lambda _: vl.build_harness(p, build_dir=tmp_path, jobs=1, verbose=False),
+                               range(2)))
+    assert builds[0].directory == builds[1].directory and builds[0].executable.exists()
+    assert not list(tmp_path.glob(".build-*"))  # the loser's temporary directory is gone
+    with VerilatorEngine(p, build_dir=tmp_path) as eng:
+        assert not eng.compiled
+        words = _words(p, 50, 12)
+        assert eng.run(words).equal(MachineModel(p).run(words))
+
+
+@needs_tools
 def test_harness_failure_is_reported(cache: Path) -> None:
     eng = VerilatorEngine(SMALL, build_dir=cache)
     eng.run(_words(SMALL, 2, 10))
