@@ -9,9 +9,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from amaranth.hdl import Shape
-from conftest import assert_same_results, small_params
+from amaranth.hdl import Module, Shape, Signal
+from conftest import assert_same_results, run_sim, small_params
 
+from bayesmachine.hdl.counters import overflow_counter, overflow_counter_twin
 from bayesmachine.hdl.machine import BayesianMachine, load_layout, result_layout
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.model import MachineModel
@@ -33,6 +34,29 @@ def _mixed_words(params: MachineParams, pixels: int, seed: int) -> np.ndarray:
     words[3] = 0
     words[3, -1] = one  # only the last row (no-match row if any) fires
     return words.astype(np.int32)
+
+
+def test_overflow_counter_matches_twin() -> None:
+    n_max = 5
+    m = Module()
+    row, count, over = Signal(), Signal(3), Signal()
+    ov, nxt = overflow_counter(row, count, n_max)
+    m.d.comb += over.eq(ov)
+    m.d.sync += count.eq(nxt)
+    rnd = np.random.default_rng(0)
+    rows = (rnd.random(300) < 0.4).astype(int).tolist()
+
+    async def bench(ctx):
+        c = 0
+        for r in rows:
+            ctx.set(row, r)
+            want_over, want_next = overflow_counter_twin(r, c, n_max)
+            assert (ctx.get(count), ctx.get(over)) == (c, want_over)
+            await ctx.tick()
+            c = want_next
+            assert c <= n_max
+
+    run_sim(m, bench)
 
 
 def _check(params: MachineParams, words: np.ndarray, *, chunks: int = 1, **engine_opts: float) -> PysimEngine:
@@ -180,5 +204,5 @@ def test_full_size_machine_timeout_and_lowest_index() -> None:
 @pytest.mark.parametrize("tie_break", ["nomatch-first", "lowest-index"])
 def test_full_size_machine_many_pixels(tie_break: str) -> None:
     params = MachineParams.for_disparity(80, tie_break=tie_break, seed=7)
-    words = synthetic_disparity_words(params, 60, np.random.default_rng(60))
-    _check(params, words, chunks=3, load_stall=0.1, result_stall=0.1, stall_seed=9)
+    words = synthetic_disparity_words(params, 400, np.random.default_rng(60))
+    _check(params, words, chunks=4, load_stall=0.1, result_stall=0.1, stall_seed=9)
