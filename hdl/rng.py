@@ -129,7 +129,7 @@ def _pollard_rho(n: int) -> int:
     raise AssertionError("unreachable")
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _prime_factors(n: int) -> tuple[int, ...]:
     if n == 1:
         return ()
