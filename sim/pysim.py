@@ -34,6 +34,9 @@ class PysimEngine:
     ``load_stall`` / ``result_stall``: probability that the testbench drops ``load.valid`` /
     ``result.ready`` in a given cycle (random back-pressure from ``stall_seed``), to exercise
     the handshakes; results do not depend on them. ``vcd``: write a waveform file.
+    ``patience``: clock cycles to wait for the next result before giving up with an error
+    (a run of up to ``max_cycles`` cycles would otherwise look like a hang: the simulator takes
+    minutes per 100 000 cycles of the full machine).
     """
 
     def __init__(
@@ -44,6 +47,7 @@ class PysimEngine:
         result_stall: float = 0.0,
         stall_seed: int = 0,
         vcd: str | None = None,
+        patience: int = 200_000,
     ) -> None:
         for name, v in (("load_stall", load_stall), ("result_stall", result_stall)):
             if not 0.0 <= v < 1.0:
@@ -51,6 +55,9 @@ class PysimEngine:
         self.params = params
         self._load_stall = load_stall
         self._result_stall = result_stall
+        if patience < 1:
+            raise ValueError(f"patience must be a positive number of cycles, got {patience}")
+        self._patience = patience
         self._rnd = random.Random(stall_seed)
         self.dut = BayesianMachine(params)
         self._beats: deque[int] = deque()
@@ -135,8 +142,17 @@ class PysimEngine:
         for pixel in q:
             self._beats.extend(pack_beats(p, pixel))
         target = first + len(q)
+        last_count, last_clock = len(self._raw_results), self.clock_cycles
         while len(self._raw_results) < target:
             self._sim.advance()
+            if len(self._raw_results) != last_count:
+                last_count, last_clock = len(self._raw_results), self.clock_cycles
+            elif self.clock_cycles - last_clock > self._patience:
+                raise RuntimeError(
+                    f"pysim: no result for {self._patience} clock cycles (this machine's watchdog "
+                    f"allows runs of up to max_cycles = {p.max_cycles}); lower max_cycles, raise "
+                    f"patience, or use the model or verilator engine for long runs"
+                )
             if self._starved:
                 raise ValueError(
                     f"the {len(self._numbers)} cycles of random numbers ran out before the run ended"

@@ -206,3 +206,11 @@ def test_full_size_machine_many_pixels(tie_break: str) -> None:
     params = MachineParams.for_disparity(80, tie_break=tie_break, seed=7)
     words = synthetic_disparity_words(params, 400, np.random.default_rng(60))
     _check(params, words, chunks=4, load_stall=0.1, result_stall=0.1, stall_seed=9)
+
+
+def test_pysim_gives_up_with_a_clear_error_instead_of_hanging() -> None:
+    """All-zero words never overflow; with a huge watchdog the engine stops on its patience."""
+    params = MachineParams(rows=2, columns=1, counter_max=1, max_cycles=10_000_000, lanes=2)
+    engine = PysimEngine(params, patience=300)
+    with pytest.raises(RuntimeError, match="no result for 300 clock cycles"):
+        engine.run(np.zeros((1, 2, 1), np.uint16))
