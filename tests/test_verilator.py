@@ -33,7 +33,8 @@ ODD = MachineParams.for_disparity(dmax=4, lanes=5, counter_max=6, max_cycles=40,
 
 @pytest.fixture(scope="session")
 def cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return tmp_path_factory.mktemp("verilator-cache")
+    # Laid out like the default cache (<root>/verilator) so BAYESMACHINE_CACHE_DIR can point at it.
+    return tmp_path_factory.mktemp("bm-cache") / "verilator"
 
 
 @pytest.fixture(scope="module")
@@ -169,6 +170,25 @@ def test_dmax80_crop(cache: Path) -> None:
         wall, compute = eng.last_wall_cycles, eng.last_compute_cycles
     assert compute / len(res) > p.beats_per_pixel  # runs outlast loads: loading can hide
     assert 0 <= wall - compute <= len(res)  # within 1 cycle per pixel (in fact a few per call)
+
+
+@needs_tools
+def test_host_run_through_registry(cache: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``bayesmachine run --engine verilator``'s path: the host streams rows through the registry."""
+    host_run = pytest.importorskip("bayesmachine.host.run")
+    from bayesmachine.host.images import random_dot_stereogram
+    from bayesmachine.host.likelihoods import ModelParams
+
+    monkeypatch.setenv("BAYESMACHINE_CACHE_DIR", str(cache.parent))  # reuse this session's builds
+    left, right, gt = random_dot_stereogram(height=10, width=24, background=1, square=3, seed=5)
+    prep = host_run.prepare(left, right, ModelParams(dmax=6), gt)
+    machine = MachineParams.for_disparity(6, lanes=4)  # = SMALL: built already
+    before = vl.builds_done
+    a = host_run.run_machine(prep, machine, "model", progress=False)
+    b = host_run.run_machine(prep, machine, "verilator", progress=False)
+    assert vl.builds_done == before
+    for field in ("map", "counts", "cycles", "timeout", "nomatch"):
+        np.testing.assert_array_equal(getattr(a, field), getattr(b, field))
 
 
 @needs_tools
