@@ -51,8 +51,10 @@ def gt_region(gt: np.ndarray, dmax: int) -> np.ndarray:
 def cycle_stats(cycles: np.ndarray) -> dict[str, float]:
     c = np.asarray(cycles, dtype=np.float64).ravel()
     if c.size == 0:
-        return {"mean": math.nan, "std": math.nan, "p99": math.nan}
-    return {"mean": float(c.mean()), "std": float(c.std()), "p99": float(np.percentile(c, 99))}
+        return {k: math.nan for k in ("mean", "std", "p10", "median", "p90", "p99")}
+    p10, median, p90, p99 = (float(v) for v in np.percentile(c, [10, 50, 90, 99]))
+    mean, std = float(c.mean()), float(c.std())
+    return {"mean": mean, "std": std, "p10": p10, "median": median, "p90": p90, "p99": p99}
 
 
 def rms_error(counts: np.ndarray, counter_max: int, posterior: np.ndarray, matched: np.ndarray) -> float:
@@ -168,6 +170,10 @@ class RunMetrics:
             "cycles_per_pixel_mean": self.cycles["mean"],
             "cycles_per_pixel_std": self.cycles["std"],
             "cycles_per_pixel_p99": self.cycles["p99"],
+            # The per-pixel distribution is heavy-tailed (no-match pixels run long): quantiles say more.
+            "cycles_per_pixel_p10": self.cycles["p10"],
+            "cycles_per_pixel_median": self.cycles["median"],
+            "cycles_per_pixel_p90": self.cycles["p90"],
             "rms_error": self.rms_error,
             "nomatch_f1": self.nomatch_f1,
             "map_agreement": self.map_agreement,

@@ -56,6 +56,7 @@ def test_cycle_stats_and_agreement():
     s = cycle_stats(np.array([1, 2, 3, 4]))
     assert s["mean"] == 2.5 and s["std"] == pytest.approx(math.sqrt(1.25))
     assert s["p99"] == pytest.approx(np.percentile([1, 2, 3, 4], 99))
+    assert s["median"] == 2.5 and s["p10"] == pytest.approx(1.3) and s["p90"] == pytest.approx(3.7)
     assert map_agreement(np.array([1, -1, 3, 4]), np.array([1, -1, 2, 4])) == 0.75
 
 
