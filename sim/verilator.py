@@ -14,7 +14,8 @@ How it works:
   header and the build flags: the C++ is recompiled only when one of them changes. A build
   happens in a temporary directory renamed into place, so concurrent builds are safe.
 - The harness is a persistent process: each ``run`` writes the pixels' words to its stdin
-  (uint16, operator order) and reads the results from its stdout. The simulation (and so the
+  (uint16, operator order; with ``rng = "external"`` the random numbers first) and reads the
+  results from its stdout. The simulation (and so the
   LFSR state) lives as long as the engine, so chunked runs equal one long run, like the model.
   No Python runs per cycle; the harness keeps the shadow memory filled so loads overlap runs.
 
@@ -241,6 +242,20 @@ def design_header(params: MachineParams, component: Any, trace_kind: int, wrappe
     words32 = lambda bits: (bits + 31) // 32  # noqa: E731
     lane_offsets = ", ".join(str(lanes[f"[{i}]"][0]) for i in range(params.lanes))
     count_offsets = ", ".join(str(res[f"counts[{r}]"][0]) for r in range(params.rows))
+    external = ""
+    if params.rng == "external":
+        if ("entropy",) not in ports or ("entropy_ready",) not in ports:
+            raise VerilatorError("rng = 'external' but the design has no entropy / entropy_ready ports")
+        ent = _flat_fields(component.entropy.shape())
+        if len(ent) != params.operators or {w for _, w in ent.values()} != {params.word_bits}:
+            raise VerilatorError("the entropy port's layout does not match the parameters")
+        ent_offsets = ", ".join(str(ent[f"[{o}]"][0]) for o in range(params.operators))
+        external = f"""#define BM_PORT_ENTROPY {ports[("entropy",)]}
+#define BM_PORT_ENTROPY_READY {ports[("entropy_ready",)]}
+static const unsigned ENTROPY_BITS = {params.word_bits};
+static const unsigned ENTROPY_WORDS = {words32(component.entropy.shape().size)};
+static const unsigned ENTROPY_OFFSET[{params.operators}] = {{{ent_offsets}}};
+"""
     # A hung design: nothing loaded nor returned for longer than a whole timed-out run.
     hang = params.max_cycles + 4 * params.beats_per_pixel + 64
     top = HARNESS_TOP if wrapped else TOP_NAME
@@ -249,6 +264,7 @@ def design_header(params: MachineParams, component: Any, trace_kind: int, wrappe
 #include "V{top}.h"
 #define BM_TOP V{top}
 #define BM_TRACE {trace_kind}
+#define BM_EXTERNAL {int(params.rng == "external")}
 #define BM_PORT_CLK clk
 #define BM_PORT_RST rst
 #define BM_PORT_LOAD_PAYLOAD {ports[("load", "payload")]}
@@ -276,7 +292,8 @@ static const unsigned COUNT_WIDTH = {count_widths.pop()};
 static const unsigned COUNT_OFFSET[ROWS] = {{{count_offsets}}};
 static const unsigned RECORD_WORDS = 4 + ROWS;
 static const unsigned long long HANG_CYCLES = {hang}ull;
-"""
+static const unsigned OPERATORS = {params.operators};
+{external}"""
 
 
 def _sources_digest(factory: Callable[[MachineParams], Any]) -> str:
@@ -454,8 +471,6 @@ class VerilatorEngine:
         verbose: bool = True,
         register_reset: bool = True,
     ) -> None:
-        if params.rng != "lfsr":
-            raise ValueError("the verilator engine runs rng = 'lfsr' machines only; use pysim for 'external'")
         self.params = params
         self._trace_args: list[str] = []
         trace_kind = 0
@@ -517,11 +532,17 @@ class VerilatorEngine:
         self._proc = None
         return VerilatorError(f"{what}: {msg or 'the harness exited without a message'}")
 
-    def run(self, words: np.ndarray) -> MachineResult:
-        """Run the pixels (P, rows, operator_columns) through the RTL; state carries over between calls."""
+    def run(self, words: np.ndarray, numbers: np.ndarray | None = None) -> MachineResult:
+        """Run the pixels (P, rows, operator_columns) through the RTL; state carries over between calls.
+
+        ``numbers``: only with ``rng = "external"``, as for ``MachineModel.run``: (T, operators)
+        W-bit random numbers, one row per compute cycle, consumed from the first; a run that
+        needs more raises ValueError (and, as in the model, this call's pixels are lost).
+        """
         p = self.params
         q = check_words(p, words)
         n = q.shape[0]
+        nums = self._check_numbers(numbers)
         if n == 0:
             return MachineResult.empty(p.rows)
         if self._broken:
@@ -534,7 +555,9 @@ class VerilatorEngine:
         t0 = time.perf_counter()
         self._broken = True  # until the whole batch is back (an interrupt leaves the pipes mid-batch)
         try:
-            proc.stdin.write(struct.pack("<IIQ", _MAGIC_RUN, 0, n))
+            proc.stdin.write(struct.pack("<IIQQ", _MAGIC_RUN, 0, n, len(nums)))
+            if len(nums):
+                proc.stdin.write(memoryview(nums).cast("B"))
             proc.stdin.write(memoryview(q.astype("<u2", copy=False)).cast("B"))
         except OSError as exc:
             raise self._failure(f"the Verilator harness stopped ({exc})") from None
@@ -544,12 +567,18 @@ class VerilatorEngine:
         view = memoryview(buf)
         got = 0
         try:
+            status = self._read_status(proc)
+            if status == 1:  # the harness gave up: the supply of random numbers ran out
+                self._proc = None
+                proc.wait()
+                self._broken = False  # no LFSR state: a fresh simulation is the model's state too
+                raise ValueError(f"the {len(nums)} cycles of random numbers ran out before the run ended")
             while got < len(buf):
                 k = proc.stdout.readinto(view[got:])
                 if not k:
                     raise self._failure("the Verilator harness stopped before returning all results")
                 got += k
-        except VerilatorError:
+        except (VerilatorError, ValueError):
             raise
         except BaseException:
             self._kill()
@@ -572,6 +601,33 @@ class VerilatorEngine:
         self.total_wall_cycles += self.last_wall_cycles
         return out
 
+    def _check_numbers(self, numbers: np.ndarray | None) -> np.ndarray:
+        """The random numbers as a little-endian uint16 (T, operators) array (empty for LFSRs)."""
+        p = self.params
+        if p.rng == "lfsr":
+            if numbers is not None:
+                raise ValueError("random numbers are only taken with rng = 'external'")
+            return np.zeros((0, p.operators), "<u2")
+        if numbers is None:
+            raise ValueError("rng = 'external': pass the random numbers of every compute cycle")
+        nums = np.asarray(numbers)
+        if nums.ndim != 2 or nums.shape[1] != p.operators:
+            raise ValueError(f"random numbers must have shape (cycles, {p.operators}), got {nums.shape}")
+        if nums.size and (nums.dtype.kind not in "iu" or nums.min() < 0 or nums.max() >= (1 << p.word_bits)):
+            raise ValueError(f"random numbers must be {p.word_bits}-bit unsigned integers")
+        return np.ascontiguousarray(nums, dtype="<u2")
+
+    def _read_status(self, proc: subprocess.Popen[bytes]) -> int:
+        assert proc.stdout is not None
+        head = bytearray(8)
+        got = 0
+        while got < 8:
+            k = proc.stdout.readinto(memoryview(head)[got:])
+            if not k:
+                raise self._failure("the Verilator harness stopped before returning its results")
+            got += k
+        return int.from_bytes(head, "little")
+
     def _kill(self) -> None:
         proc, self._proc = self._proc, None
         if proc is not None:
@@ -591,7 +647,7 @@ class VerilatorEngine:
             return
         try:
             assert proc.stdin is not None
-            proc.stdin.write(struct.pack("<IIQ", _MAGIC_QUIT, 0, 0))
+            proc.stdin.write(struct.pack("<IIQQ", _MAGIC_QUIT, 0, 0, 0))
             proc.stdin.close()
         except OSError:
             pass

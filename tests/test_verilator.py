@@ -232,9 +232,24 @@ def test_bad_words_rejected(cache: Path) -> None:
     eng.close()
 
 
-def test_external_rng_rejected() -> None:
-    with pytest.raises(ValueError, match="rng"):
-        VerilatorEngine(MachineParams.for_disparity(dmax=2, rng="external", lanes=4))
+@needs_tools
+def test_external_random_numbers(cache: Path, small: VerilatorEngine) -> None:
+    """rng = "external": the numbers drive the ``entropy`` port on compute cycles, as in the model."""
+    p = MachineParams.for_disparity(dmax=6, lanes=4, rng="external", max_cycles=60)
+    rng = np.random.default_rng(13)
+    words = _words(p, 60, 14)
+    nums = rng.integers(0, 1 << p.word_bits, size=(4000, p.operators))
+    model = MachineModel(p)
+    with VerilatorEngine(p, build_dir=cache) as eng:
+        for a, b, start in ((0, 25, 0), (25, 60, 11)):  # each call consumes its own supply from row 0
+            assert eng.run(words[a:b], nums[start:]).equal(model.run(words[a:b], nums[start:]))
+        with pytest.raises(ValueError, match="ran out"):
+            eng.run(words, nums[:50])
+        assert eng.run(words[:5], nums).equal(model.run(words[:5], nums))  # usable again
+        with pytest.raises(ValueError, match="every compute cycle"):
+            eng.run(words[:1])
+    with pytest.raises(ValueError, match="only taken"):
+        small.run(_words(SMALL, 1, 15), nums)
 
 
 @pytest.mark.parametrize("hide", ["verilator", "g++", "make"])

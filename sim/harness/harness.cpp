@@ -4,10 +4,13 @@
 // "design.h", which sim/verilator.py generates from the Amaranth layouts next to this file.
 //
 // Protocol (little-endian, binary), one batch per request, repeated until EOF or QUIT:
-//   in : uint32 magic 'BMRN', uint32 reserved, uint64 pixels, then pixels * WORDS_PER_PIXEL
-//        uint16 likelihood words in operator order.
-//   out: pixels records of uint32[RECORD_WORDS] = {map, nomatch, timeout, cycles, counts[ROWS]},
-//        then uint64 wall cycles of this batch, uint64 wall cycles since reset.
+//   in : uint32 magic 'BMRN', uint32 reserved, uint64 pixels, uint64 numbers; then (rng =
+//        "external" only) numbers * OPERATORS uint16 random numbers, one row per compute cycle;
+//        then pixels * WORDS_PER_PIXEL uint16 likelihood words in operator order.
+//   out: uint64 status (0 ok, 1 the random numbers ran out: no records follow, the simulation
+//        is abandoned and the process exits), then pixels records of uint32[RECORD_WORDS] =
+//        {map, nomatch, timeout, cycles, counts[ROWS]}, then uint64 wall cycles of this batch,
+//        uint64 wall cycles since reset.
 // Input is read lazily while the design runs; output is written once the batch is done, so a
 // client that writes the whole batch before reading cannot deadlock on full pipes.
 //
@@ -139,12 +142,28 @@ int main(int argc, char** argv) {
     uint64_t pixel_base = 0;  // global index of the batch's first pixel
 
     for (;;) {
-        uint32_t head[4];
+        uint32_t head[6];
         if (std::fread(head, 1, sizeof head, stdin) != sizeof head) break;  // EOF: client gone
         if (head[0] == MAGIC_QUIT) break;
         if (head[0] != MAGIC_RUN) fail("bad request header");
         const uint64_t pixels = head[2] | (static_cast<uint64_t>(head[3]) << 32);
+        const uint64_t n_numbers = head[4] | (static_cast<uint64_t>(head[5]) << 32);
         records.assign(pixels * RECORD_WORDS, 0);
+#if BM_EXTERNAL
+        // The whole supply up front (words are then read lazily): one packed port value per row.
+        std::vector<uint32_t> entropy(n_numbers * (ENTROPY_WORDS + 1), 0u);
+        {
+            std::vector<uint16_t> row(OPERATORS);
+            for (uint64_t t = 0; t < n_numbers; ++t) {
+                read_exact(row.data(), OPERATORS * sizeof(uint16_t));
+                for (unsigned o = 0; o < OPERATORS; ++o)
+                    put_bits(&entropy[t * (ENTROPY_WORDS + 1)], ENTROPY_OFFSET[o], ENTROPY_BITS, row[o]);
+            }
+        }
+        uint64_t taken = 0;  // rows of random numbers consumed by compute cycles
+#else
+        if (n_numbers) fail("this machine has LFSRs: it takes no random numbers");
+#endif
 
         uint64_t loaded = 0, collected = 0, cycles = 0, idle = 0;
         unsigned beat = 0;
@@ -163,10 +182,26 @@ int main(int argc, char** argv) {
             top->BM_PORT_LOAD_VALID = valid;
             if (valid) set_port(top->BM_PORT_LOAD_PAYLOAD, &beats[beat * (LOAD_WORDS + 1)]);
             top->BM_PORT_RESULT_READY = 1;
+#if BM_EXTERNAL
+            if (taken < n_numbers) set_port(top->BM_PORT_ENTROPY, &entropy[taken * (ENTROPY_WORDS + 1)]);
+#endif
             top->BM_PORT_CLK = 0;
             top->eval();
             const bool load_fire = valid && top->BM_PORT_LOAD_READY;
             const bool result_fire = top->BM_PORT_RESULT_VALID;
+#if BM_EXTERNAL
+            if (top->BM_PORT_ENTROPY_READY) {
+                if (taken == n_numbers) {
+                    // A compute cycle with no number left: as the model, give up on the batch.
+                    const uint64_t status = 1;
+                    std::fwrite(&status, sizeof status, 1, stdout);
+                    std::fflush(stdout);
+                    std::fprintf(stderr, "bayesmachine harness: the random numbers ran out\n");
+                    return 3;
+                }
+                ++taken;
+            }
+#endif
 #if BM_TRACE
             if (tfp) {
                 // In flight: from the first beat of pixel FIRST to the result of pixel LAST.
@@ -209,6 +244,8 @@ int main(int argc, char** argv) {
         if (tfp) tfp->flush();
 #endif
         pixel_base += pixels;
+        const uint64_t status = 0;
+        std::fwrite(&status, sizeof status, 1, stdout);
         std::fwrite(records.data(), sizeof(uint32_t), records.size(), stdout);
         const uint64_t tail[2] = {cycles, wall_total};
         std::fwrite(tail, sizeof tail, 1, stdout);
