@@ -18,12 +18,12 @@ def _ports(params: MachineParams) -> list[tuple[str, str, int]]:
     from .machine import load_layout, result_layout
 
     ports = [
-        ("in", "load_payload", Shape.cast(load_layout(params)).width),
-        ("in", "load_valid", 1),
-        ("out", "load_ready", 1),
-        ("out", "result_payload", Shape.cast(result_layout(params)).width),
-        ("out", "result_valid", 1),
-        ("in", "result_ready", 1),
+        ("in", "load__payload", Shape.cast(load_layout(params)).width),
+        ("in", "load__valid", 1),
+        ("out", "load__ready", 1),
+        ("out", "result__payload", Shape.cast(result_layout(params)).width),
+        ("out", "result__valid", 1),
+        ("in", "result__ready", 1),
     ]
     if params.rng == "external":
         ports += [("in", "entropy", params.word_bits * params.operators), ("out", "entropy_ready", 1)]
@@ -43,7 +43,7 @@ def summary(params: MachineParams) -> str:
         + (f" (leap-forward LFSRs, L = {params.lfsr_bits}, seed {params.seed})"
            if params.rng == "lfsr" else " (W-bit numbers per operator on the 'entropy' port)"),
         f"load: {params.lanes} words per beat, {params.beats_per_pixel} beats per pixel",
-        "ports (clk, rst implicit):",
+        "ports (Verilog names; clk and rst as well):",
     ]
     lines += [f"  {d:3} {name:15} {width:6} bits" for d, name, width in _ports(params)]
     return "\n".join(lines)

@@ -166,6 +166,9 @@ def _report(outcome: RunOutcome, source: str, crop: Crop | None) -> dict[str, ob
         "counter_max": run.machine.counter_max,
         **outcome.metrics.to_report(),
         "frame_cycles": int(run.cycles.sum()),
+        # Compute cycles count the machine's runs only; wall cycles (RTL engines) add loading.
+        "wall_cycles": run.wall_cycles,
+        "wall_cycles_per_pixel": None if run.wall_cycles is None else run.wall_cycles / run.cycles.size,
         "seconds": run.seconds,
         "words_seconds": run.words_seconds,
         "reference_seconds": prep.reference_seconds,
@@ -195,6 +198,9 @@ def _summary(r: dict[str, object]) -> str:
         f"RMS {f('rms_error')}, no-match F1 {f('nomatch_f1')}, MAP agreement {f('map_agreement')}, "
         f"timeouts {r['timeouts']}, engine {f('seconds', '.2f')} s"
     )
+    if r.get("wall_cycles_per_pixel") is not None:
+        line += f"\n  wall cycles per pixel, loading included: {f('wall_cycles_per_pixel', '.2f')}"
+
     if r.get("machine_bad2") is not None or r.get("ground_truth"):
         line += (
             f"\n  bad-2 (matched / no-match bad): "

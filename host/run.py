@@ -58,6 +58,7 @@ class MachineRun:
     timeout: np.ndarray  # (Ho, Wo) bool, the watchdog stopped the run
     seconds: float  # time inside the engine's run calls
     words_seconds: float  # time building likelihood memories
+    wall_cycles: int | None = None  # RTL engines: clock cycles including loading (None: model)
 
 
 @dataclass
@@ -112,26 +113,32 @@ def run_machine(
     cycles = np.zeros((ho, wo), np.int64)
     engine_s = words_s = 0.0
     left_f, right_f = prepared.features
-    with tqdm(total=ho * wo, unit="px", disable=not _want_progress(progress), desc=f"{engine}") as bar:
-        for y0 in range(0, ho, chunk_rows):
-            rows = slice(y0, min(ho, y0 + chunk_rows))
-            t0 = time.perf_counter()
-            words = memory_words(left_f, right_f, model, machine, rows=rows, qtables=qtables)
-            t1 = time.perf_counter()
-            res = eng.run(words)  # type: ignore[attr-defined]
-            t2 = time.perf_counter()
-            words_s += t1 - t0
-            engine_s += t2 - t1
-            n = rows.stop - rows.start
-            counts[rows] = np.asarray(res.counts).reshape(n, wo, m)
-            flat_map[rows] = np.asarray(res.map).reshape(n, wo)
-            nomatch[rows] = np.asarray(res.nomatch).reshape(n, wo)
-            timeout[rows] = np.asarray(res.timeout).reshape(n, wo)
-            cycles[rows] = np.asarray(res.cycles).reshape(n, wo)
-            bar.update(n * wo)
+    try:
+        with tqdm(total=ho * wo, unit="px", disable=not _want_progress(progress), desc=f"{engine}") as bar:
+            for y0 in range(0, ho, chunk_rows):
+                rows = slice(y0, min(ho, y0 + chunk_rows))
+                t0 = time.perf_counter()
+                words = memory_words(left_f, right_f, model, machine, rows=rows, qtables=qtables)
+                t1 = time.perf_counter()
+                res = eng.run(words)  # type: ignore[attr-defined]
+                t2 = time.perf_counter()
+                words_s += t1 - t0
+                engine_s += t2 - t1
+                n = rows.stop - rows.start
+                counts[rows] = np.asarray(res.counts).reshape(n, wo, m)
+                flat_map[rows] = np.asarray(res.map).reshape(n, wo)
+                nomatch[rows] = np.asarray(res.nomatch).reshape(n, wo)
+                timeout[rows] = np.asarray(res.timeout).reshape(n, wo)
+                cycles[rows] = np.asarray(res.cycles).reshape(n, wo)
+                bar.update(n * wo)
+        wall = getattr(eng, "wall_cycles", None)
+    finally:
+        close = getattr(eng, "close", None)
+        if close is not None:
+            close()  # the Verilator harness is a process: end it now, not at garbage collection
     # Timeouts count as no match: the machine gave no answer within its watchdog.
     disp = np.where(nomatch | timeout, -1, flat_map).astype(np.int16)
-    return MachineRun(engine, machine, disp, counts, cycles, nomatch, timeout, engine_s, words_s)
+    return MachineRun(engine, machine, disp, counts, cycles, nomatch, timeout, engine_s, words_s, wall)
 
 
 def run_pair(

@@ -3,7 +3,8 @@
 Every engine takes a :class:`~bayesmachine.params.MachineParams` and offers
 ``run(words) -> MachineResult`` with the same meaning as :class:`MachineModel.run`: pixels
 are processed in order, and the machine's state (the LFSRs) carries over from one call to
-the next, so a frame can be run in chunks.
+the next, so a frame can be run in chunks. The RTL engines also count ``wall_cycles`` (clock
+cycles including loading, which the model does not time) and hold resources until ``close()``.
 
 - ``model``: the NumPy/numba machine model (the definition; whole frames in seconds).
 - ``pysim``: the RTL in Amaranth's Python simulator (hundreds of cycles per second: crops).

@@ -83,6 +83,11 @@ class PysimEngine:
             self._vcd_ctx.__exit__(None, None, None)
             self._vcd_ctx = None
 
+    @property
+    def wall_cycles(self) -> int:
+        """Clock cycles simulated so far: loading, computing and idle cycles alike."""
+        return self.clock_cycles
+
     # --- Testbench processes (they run forever; run() advances the simulation) ---
 
     async def _feeder(self, ctx: SimulatorContext) -> None:

@@ -499,6 +499,11 @@ class VerilatorEngine:
         return self.build.compiled
 
     @property
+    def wall_cycles(self) -> int:
+        """Clock cycles simulated so far, loading included (the engines' common name)."""
+        return self.total_wall_cycles
+
+    @property
     def stats(self) -> dict[str, float]:
         return {
             "pixels": self.total_pixels,

@@ -116,7 +116,15 @@ def test_emit_cli_writes_verilog_and_rtlil(tmp_path: Path, capsys: pytest.Captur
         assert marker in out.read_text()
     text = capsys.readouterr().out
     assert "6 rows x 3 operator columns = 18 operators" in text
-    assert "entropy" in text and "result_payload" in text
+    # Every port the summary lists is a port of the Verilog module, with that width.
+    verilog = (tmp_path / "bm.v").read_text()
+    listed = re.findall(r"^\s+(in|out)\s+(\S+)\s+(\d+) bits$", text, re.M)
+    assert {name for _, name, _ in listed} >= {"load__payload", "result__payload", "entropy", "entropy_ready"}
+    for direction, name, width in listed:
+        kind = "input" if direction == "in" else "output"
+        decl = rf"{kind}\s+(?:wire\s+|reg\s+)?(?:\[{int(width) - 1}:0\]\s+)?{name};" if int(width) > 1 else \
+            rf"{kind}\s+(?:wire\s+|reg\s+)?{name};"
+        assert re.search(decl, verilog), (name, width)
 
 
 def test_emit_rejects_unknown_suffix(tmp_path: Path) -> None:
