@@ -9,7 +9,8 @@ be run in chunks. Between calls the simulation just stops advancing; the machine
 (no compute cycles), so nothing changes.
 
 Throughput is a few hundred to a few thousand cycles per second depending on the machine size
-(about 1,000-1,500/s for the full Dmax = 80 machine on this 2-core machine): crops and tests, not whole frames.
+(about 1,000-1,500/s for the full Dmax = 80 machine on a 2-core machine): crops and tests,
+not whole frames.
 """
 
 from __future__ import annotations
