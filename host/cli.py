@@ -362,7 +362,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         help="paper Fig 6: accuracy and cycles per pixel against counter max",
         description="Run the machine for several counter max values on one pair; write OUT/sweep.json "
         "and OUT/sweep.png (RMS error and no-match F1 vs counter max; cycles per pixel: mean, median, "
-        "10-90 %% band).",
+        "10-90 % band).",
     )
     _add_input_options(p, optional=True)
     _add_model_options(p)
