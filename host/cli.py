@@ -256,7 +256,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         timeout=run.timeout,
         reference_map=ref.map,
     )
-    from .metrics import image_region, sgbm_disparity
+    from .metrics import image_region
     from .plots import save_disparity_figure
 
     panels = [
@@ -265,8 +265,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
     ]
     if gt is not None:
         panels.append(("Ground truth", image_region(gt, model.dmax)))
-        if not args.no_sgbm:
-            panels.append(("OpenCV StereoSGBM", sgbm_disparity(left, right, model.dmax)))
+        if outcome.metrics.sgbm_map is not None:  # computed once, for the report's bad-pixel rates
+            panels.append(("OpenCV StereoSGBM", outcome.metrics.sgbm_map))
     save_disparity_figure(out / "disparity.png", image_region(left, model.dmax), panels, model.dmax)
     if not args.quiet:
         print(_summary(report))

@@ -12,7 +12,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import cv2
@@ -163,6 +163,7 @@ class RunMetrics:
     machine_nomatch: int
     reference_nomatch: int
     bad: dict[str, dict[str, float]] | None = None  # {"machine": {...}, "reference": ..., "sgbm": ...}
+    sgbm_map: np.ndarray | None = field(default=None, repr=False)  # SGBM's disparity, when computed
 
     def to_report(self) -> dict[str, object]:
         out: dict[str, object] = {
@@ -170,7 +171,7 @@ class RunMetrics:
             "cycles_per_pixel_mean": self.cycles["mean"],
             "cycles_per_pixel_std": self.cycles["std"],
             "cycles_per_pixel_p99": self.cycles["p99"],
-            # The per-pixel distribution is heavy-tailed (no-match pixels run long): quantiles say more.
+            # The per-pixel distribution is heavy-tailed (a few pixels run 100x longer): quantiles say more.
             "cycles_per_pixel_p10": self.cycles["p10"],
             "cycles_per_pixel_median": self.cycles["median"],
             "cycles_per_pixel_p90": self.cycles["p90"],
@@ -220,4 +221,5 @@ def evaluate(prepared: Prepared, run: MachineRun, sgbm: bool | None = None) -> R
         machine_nomatch=int(machine_nm.sum()),
         reference_nomatch=int(ref_nm.sum()),
         bad=bad,
+        sgbm_map=methods.get("sgbm") if prepared.gt is not None else None,
     )
