@@ -140,6 +140,14 @@ def _add_machine_options(p: argparse.ArgumentParser, sweep: bool) -> None:
         default="nomatch-first",
         help="MAP encoder rule when rows overflow together (default nomatch-first)",
     )
+    if not sweep:
+        g.add_argument(
+            "--waves",
+            metavar="FIRST:LAST",
+            default=None,
+            help="with --engine verilator: write OUT/waves.vcd while output pixels FIRST..LAST "
+            "(row-major over the output region, from 0) are in the machine",
+        )
     p.add_argument(
         "--gt", default=None, help="ground-truth disparity (.pfm, .npy, or an image with 0 = unknown)"
     )
@@ -229,11 +237,27 @@ def _cmd_reference(args: argparse.Namespace) -> int:
     return 0
 
 
+def _waves_option(text: str | None, engine: str, out: Path) -> dict[str, object]:
+    """``--waves FIRST:LAST`` as the Verilator engine's ``trace`` option."""
+    if text is None:
+        return {}
+    if engine != "verilator":
+        raise ValueError(f"--waves needs --engine verilator (got --engine {engine})")
+    try:
+        first, last = (int(v) for v in text.split(":"))
+    except ValueError:
+        raise ValueError(f"--waves takes FIRST:LAST pixel indices, e.g. 0:9; got {text!r}") from None
+    if not 0 <= first <= last:
+        raise ValueError(f"--waves: need 0 <= FIRST <= LAST, got {first}:{last}")
+    return {"trace": (first, last, str(out / "waves.vcd"))}
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
     model = _model_params(args)
     machine = _machine_params(args, model, args.counter_max)
     left, right, gt, source = _load_inputs(args, with_gt=True)
     out: Path = args.output
+    engine_options = _waves_option(args.waves, args.engine, out)
     out.mkdir(parents=True, exist_ok=True)
     outcome = run_pair(
         left,
@@ -244,6 +268,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         gt=gt,
         progress=False if args.quiet else None,
         sgbm=not args.no_sgbm,
+        engine_options=engine_options,
     )
     report = _report(outcome, source, args.crop)
     _write_json(out / "report.json", report)

@@ -94,15 +94,19 @@ def run_machine(
     engine: str = "model",
     progress: bool | None = None,
     chunk_rows: int = 1,
+    engine_options: dict[str, object] | None = None,
 ) -> MachineRun:
-    """Stream the output pixels (row-major) through ``engine``, ``chunk_rows`` map rows per call."""
+    """Stream the output pixels (row-major) through ``engine``, ``chunk_rows`` map rows per call.
+
+    ``engine_options`` go to the engine's constructor (e.g. ``trace`` for ``verilator``).
+    """
     model = prepared.model
     if machine.rows != model.hypotheses:
         raise ValueError(
             f"machine rows ({machine.rows}) must be dmax + 2 = {model.hypotheses}; "
             f"build it with MachineParams.for_disparity({model.dmax}, ...)"
         )
-    eng = get_engine(engine, machine)
+    eng = get_engine(engine, machine, **(engine_options or {}))
     qtables = QuantizedTables(likelihood_tables(model), machine.word_bits)
     ho, wo = prepared.shape
     m = model.hypotheses
@@ -151,6 +155,7 @@ def run_pair(
     progress: bool | None = None,
     prepared: Prepared | None = None,
     sgbm: bool | None = None,
+    engine_options: dict[str, object] | None = None,
 ) -> RunOutcome:
     """Run the machine on a gray pair and compare it with the reference (and gt, if given).
 
@@ -159,6 +164,6 @@ def run_pair(
     """
     if prepared is None:
         prepared = prepare(left, right, model_params, gt)
-    run = run_machine(prepared, machine_params, engine, progress)
+    run = run_machine(prepared, machine_params, engine, progress, engine_options=engine_options)
     metrics = evaluate(prepared, run, sgbm=sgbm)
     return RunOutcome(prepared, run, metrics)

