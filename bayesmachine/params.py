@@ -34,8 +34,8 @@ def _check_int(name: str, value: object, lo: int, hi: int | None = None) -> None
     if isinstance(value, bool) or not isinstance(value, int):
         raise ParameterError(f"{name} must be an integer, not {value!r}")
     if value < lo or (hi is not None and value > hi):
-        rng = f"[{lo}, {hi}]" if hi is not None else f">= {lo}"
-        raise ParameterError(f"{name} must be in {rng}, got {value}")
+        bound = f"in [{lo}, {hi}]" if hi is not None else f">= {lo}"
+        raise ParameterError(f"{name} must be {bound}, got {value}")
 
 
 @dataclass(frozen=True)
