@@ -107,6 +107,15 @@ def _finish_cycle(bits, counts, over, rows, opcols, n_max, nm_index):
     return -1
 
 
+@numba.njit(cache=True, inline="always")
+def _store(p, counts, k, winner, out_counts, out_map, out_timeout, out_cycles):
+    """Pixel p's result: counters at the stop, MAP (0 on timeout), timeout flag, cycles."""
+    out_counts[p, :] = counts
+    out_cycles[p] = k
+    out_timeout[p] = winner < 0
+    out_map[p] = max(winner, 0)
+
+
 @numba.njit(cache=True)
 def _run_lfsr(q, states, shifts, rows, opcols, word_bits, lfsr_bits, n_max, max_cycles, nm_index,
               out_counts, out_map, out_timeout, out_cycles):
@@ -138,10 +147,7 @@ def _run_lfsr(q, states, shifts, rows, opcols, word_bits, lfsr_bits, n_max, max_
             winner = _finish_cycle(bits, counts, over, rows, opcols, n_max, nm_index)
             if winner >= 0 or k == max_cycles:
                 break
-        out_counts[p, :] = counts
-        out_cycles[p] = k
-        out_timeout[p] = winner < 0
-        out_map[p] = max(winner, 0)
+        _store(p, counts, k, winner, out_counts, out_map, out_timeout, out_cycles)
 
 
 @numba.njit(cache=True)
@@ -169,10 +175,7 @@ def _run_external(q, numbers, start, rows, opcols, n_max, max_cycles, nm_index,
             winner = _finish_cycle(bits, counts, over, rows, opcols, n_max, nm_index)
             if winner >= 0 or k == max_cycles:
                 break
-        out_counts[p, :] = counts
-        out_cycles[p] = k
-        out_timeout[p] = winner < 0
-        out_map[p] = max(winner, 0)
+        _store(p, counts, k, winner, out_counts, out_map, out_timeout, out_cycles)
     return t - start
 
 
