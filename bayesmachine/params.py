@@ -48,7 +48,7 @@ class MachineParams:
     columns
         N, the number of data-term operator columns (3 for disparity).
     word_bits
-        W, the comparator resolution. A likelihood memory word holds an integer
+        W, the comparator resolution (1..15). A likelihood memory word holds an integer
         q in [0, 2**W] (so it is W+1 bits wide: 1.0 is exact) and encodes p = q / 2**W.
     counter_max
         n_max. A row's overflow counter overflows on the (n_max+1)-th 1.
@@ -93,7 +93,8 @@ class MachineParams:
     def __post_init__(self) -> None:
         _check_int("rows", self.rows, 1, 4096)
         _check_int("columns", self.columns, 1, 64)
-        _check_int("word_bits", self.word_bits, 1, 16)
+        # <= 15: every word, up to 2**15 = 1.0, fits the 16-bit words of the host and the engines.
+        _check_int("word_bits", self.word_bits, 1, 15)
         _check_int("counter_max", self.counter_max, 1, (1 << 24) - 1)
         if self.rng not in RNG_KINDS:
             raise ParameterError(f"rng must be one of {RNG_KINDS}, got {self.rng!r}")
@@ -129,6 +130,10 @@ class MachineParams:
         """The disparity machine of the paper: M = Dmax + 2 rows, the last one no-match."""
         _check_int("dmax", dmax, 0, 4094)
         kwargs.setdefault("columns", 3)
+        if "lanes" not in kwargs:
+            # Small machines get a load stream no wider than one pixel's words.
+            columns = int(kwargs["columns"]) + (1 if kwargs.get("prior") == "loaded" else 0)  # type: ignore[call-overload]
+            kwargs["lanes"] = min(DEFAULT_LANES, (dmax + 2) * columns)
         return cls(rows=dmax + 2, nomatch_row=True, **kwargs)  # type: ignore[arg-type]
 
     # Derived quantities: every width in the RTL, the model and the host comes from here.

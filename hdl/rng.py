@@ -242,13 +242,16 @@ def _primitive_tap_sets(length: int, max_tap: int, count: int, seed: int) -> tup
         iterator: Iterator[tuple[int, ...]] = iter(candidates)
     else:
         def draw() -> Iterator[tuple[int, ...]]:
-            seen: set[tuple[int, ...]] = set()
+            # Heptanomials at random (without repetition), then, if they run out, the rest.
             big = sizes[-1]
-            while True:
+            seen: set[tuple[int, ...]] = set()
+            while len(seen) < math.comb(max_tap, big):
                 c = tuple(sorted(rnd.sample(middles, big)))
                 if c not in seen:
                     seen.add(c)
                     yield c
+            for k in sizes[:-1]:
+                yield from itertools.combinations(middles, k)
         iterator = draw()
     for middle in iterator:
         taps = (0, *middle)

@@ -133,11 +133,6 @@ def likelihoods_plain(
     return lik, nomatch
 
 
-def word_dtype(word_bits: int) -> np.dtype:
-    """The smallest unsigned dtype holding a memory word q in [0, 2**word_bits]."""
-    return np.dtype(np.uint16 if word_bits < 16 else np.uint32)
-
-
 def quantize(p: np.ndarray | float, word_bits: int) -> np.ndarray:
     """Probability -> likelihood-memory word: q = round(p * 2^W), round half up, in [0, 2^W].
 
@@ -146,6 +141,8 @@ def quantize(p: np.ndarray | float, word_bits: int) -> np.ndarray:
     to 1.0). 0 maps to 0 and 1 to 2^W. Values outside [0, 1]
     or NaN are errors (they mean a bug upstream, not something to clip silently).
     """
+    if not 1 <= word_bits <= 15:
+        raise ValueError(f"word_bits must be in [1, 15] (words up to 2^15 fit uint16), got {word_bits}")
     arr = np.asarray(p, dtype=np.float64)
     bad = ~((arr >= 0.0) & (arr <= 1.0))  # NaN compares false, so it lands here too
     if bad.any():
@@ -155,7 +152,7 @@ def quantize(p: np.ndarray | float, word_bits: int) -> np.ndarray:
     scaled = arr * one
     q = np.floor(scaled)
     q += (scaled - q) >= 0.5
-    return np.clip(q, 0, one).astype(word_dtype(word_bits))
+    return np.clip(q, 0, one).astype(np.uint16)
 
 
 def _check_machine(model: ModelParams, machine: MachineParams) -> int:
@@ -207,7 +204,7 @@ def memory_words(
     rm, rgh, rgv = (a[rows] for a in right.as_tuple())
     n_rows = lm.shape[0]
     p = n_rows * (w4 - dmax)
-    words = np.empty((p, model.hypotheses, machine.operator_columns), dtype=word_dtype(machine.word_bits))
+    words = np.empty((p, model.hypotheses, machine.operator_columns), dtype=np.uint16)
     for k, (fl, fr, tab) in enumerate(((lm, rm, qtables.m), (lgh, rgh, qtables.gh), (lgv, rgv, qtables.gv))):
         delta = np.abs(fl[:, dmax:, None] - fr[:, xr])
         words[:, : dmax + 1, off + k] = tab[delta].reshape(p, dmax + 1)
@@ -226,7 +223,7 @@ def memory_words_plain(
     lik, nm = likelihoods_plain(left, right, model)
     p = lik.shape[0] * lik.shape[1]
     one = 1 << machine.word_bits
-    words = np.full((p, model.hypotheses, machine.operator_columns), one, dtype=word_dtype(machine.word_bits))
+    words = np.full((p, model.hypotheses, machine.operator_columns), one, dtype=np.uint16)
     words[:, : model.dmax + 1, off:] = quantize(lik, machine.word_bits).reshape(p, model.dmax + 1, 3)
     words[:, model.dmax + 1, off] = quantize(nm, machine.word_bits).reshape(p)
     return words

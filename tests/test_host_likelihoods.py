@@ -73,7 +73,9 @@ def test_quantize_edges():
     assert quantize(np.nextafter(0.5, 0) / 1024, w) == 0
     assert quantize(0.02, w) == round(0.02 * 1024)
     assert quantize(np.array([0.25, 0.75]), 1).tolist() == [1, 2]  # 0.5 -> 1, 1.5 -> 2 = 2^W
-    assert quantize(np.array([0.0, 1.0]), 16).tolist() == [0, 1 << 16]  # W+1 bits: wider dtype
+    assert quantize(np.array([0.0, 1.0]), 15).tolist() == [0, 1 << 15]  # the widest word, 1.0 exact
+    with pytest.raises(ValueError, match="word_bits"):
+        quantize(0.5, 16)
 
 
 @pytest.mark.parametrize("bad", [-1e-12, 1 + 1e-12, math.nan, math.inf])
@@ -121,11 +123,3 @@ def test_words_reject_wrong_machine():
     with pytest.raises(ValueError, match="for_disparity"):
         memory_words(fl, fr, model, MachineParams.for_disparity(6))
 
-
-def test_words_at_16_bits_hold_one_exactly():
-    """2**16 does not fit uint16: the 16-bit machine's words widen instead of wrapping."""
-    fl, fr, model = _pair(dmax=5)
-    machine = MachineParams.for_disparity(5, word_bits=16)
-    words = memory_words(fl, fr, model, machine)
-    assert words.max() == 1 << 16
-    np.testing.assert_array_equal(words, memory_words_plain(fl, fr, model, machine))

@@ -119,11 +119,20 @@ def test_external_numbers_must_cover_the_run() -> None:
         MachineModel(params).run(words, numbers=np.zeros((10, 2), np.uint16))
 
 
+def test_small_disparity_machines_get_a_load_stream_no_wider_than_a_pixel() -> None:
+    assert MachineParams.for_disparity(0).lanes == 6
+    assert MachineParams.for_disparity(3, prior="loaded").lanes == 16
+    assert MachineParams.for_disparity(2, prior="loaded").lanes == 16
+    assert MachineParams.for_disparity(1, prior="loaded").lanes == 12
+    assert MachineParams.for_disparity(80).lanes == 16
+
+
 @pytest.mark.parametrize(
     "kwargs, message",
     [
         ({"rows": 0}, "rows"),
         ({"rows": 4, "word_bits": 0}, "word_bits"),
+        ({"rows": 4, "word_bits": 16}, r"word_bits must be in \[1, 15\]"),
         ({"rows": 4, "counter_max": 0}, "counter_max"),
         ({"rows": 4, "rng": "smtj"}, "rng"),
         ({"rows": 4, "word_bits": 10, "lfsr_bits": 11}, "lfsr_bits"),

@@ -12,6 +12,7 @@ from conftest import run_sim
 from bayesmachine.hdl.rng import (
     LeapForwardLFSR,
     LFSRSpec,
+    is_primitive,
     lfsr_bit_sequence,
     lfsr_numbers,
     lfsr_specs,
@@ -147,3 +148,17 @@ def test_two_operators_streams_are_uncorrelated(streams: dict[str, np.ndarray], 
     for lag in (0, 1, 2):
         assert abs(_corr(a[: N_CORR - lag], b[lag:])) < 5 * SIGMA
         assert abs(_corr(b[: N_CORR - lag], a[lag:])) < 5 * SIGMA
+
+
+@pytest.mark.slow
+def test_polynomial_search_ends_when_heptanomials_run_out() -> None:
+    """L = 34, taps <= 24: only ~3,200 primitive heptanomials exist; asking for more must fall
+    back to pentanomials and trinomials, not draw forever."""
+    from bayesmachine.hdl.rng import _primitive_tap_sets
+
+    sets = _primitive_tap_sets(34, 24, 3300, 1)
+    assert len(sets) == 3300 and len(set(sets)) == 3300
+    assert any(len(t) < 6 for t in sets)
+    assert all(is_primitive(34, t) for t in sets[-5:])
+    # All there are (3,365 of weight <= 7): a machine with more operators reuses them.
+    assert len(_primitive_tap_sets(34, 24, 4000, 1)) == 3365
