@@ -59,25 +59,37 @@ class PysimEngine:
         if patience < 1:
             raise ValueError(f"patience must be a positive number of cycles, got {patience}")
         self._patience = patience
-        self._rnd = random.Random(stall_seed)
+        self._stall_seed = stall_seed
+        self._vcd = vcd
         self.dut = BayesianMachine(params)
+        self._vcd_ctx = None
+        self._build()
+
+    def _build(self) -> None:
+        """A fresh simulator: the machine as after a hardware reset."""
+        self._rnd = random.Random(self._stall_seed)
         self._beats: deque[int] = deque()
         self._raw_results: list[int] = []
         self._numbers: np.ndarray | None = None
         self._t = 0  # next row of self._numbers
         self._starved = False
+        self._broken = False  # a run was cut short: pixels in flight would shift later results
         self.clock_cycles = 0  # clock cycles simulated so far (idle, load and compute)
         self.compute_cycles = 0  # compute cycles of the pixels returned so far
         self._sim = Simulator(self.dut)
         self._sim.add_clock(1e-8)
         self._sim.add_testbench(self._feeder, background=True)
         self._sim.add_testbench(self._collector, background=True)
-        if params.rng == "external":
+        if self.params.rng == "external":
             self._sim.add_testbench(self._entropy_source, background=True)
-        self._vcd_ctx = None
-        if vcd is not None:
-            self._vcd_ctx = self._sim.write_vcd(vcd)
+        if self._vcd is not None:
+            self._vcd_ctx = self._sim.write_vcd(self._vcd)
             self._vcd_ctx.__enter__()
+
+    def reset(self) -> None:
+        """Start again from a hardware reset (after a failed run, for instance)."""
+        self.close()
+        self._build()
 
     def close(self) -> None:
         if self._vcd_ctx is not None:
@@ -99,11 +111,14 @@ class PysimEngine:
                 ctx.set(load.valid, 0)
                 await ctx.tick()
                 continue
+            # Once offered, a beat stays valid until the machine takes it (stream rules).
             ctx.set(load.valid, 1)
             ctx.set(raw_payload, self._beats[0])
-            _, _, ready = await ctx.tick().sample(load.ready)
-            if ready:
-                self._beats.popleft()
+            while True:
+                _, _, ready = await ctx.tick().sample(load.ready)
+                if ready:
+                    self._beats.popleft()
+                    break
 
     async def _collector(self, ctx: SimulatorContext) -> None:
         res = self.dut.result
@@ -135,6 +150,9 @@ class PysimEngine:
         """Run pixels through the RTL; same arguments and result as ``MachineModel.run``."""
         p = self.params
         q = check_words(p, words)
+        if self._broken:
+            raise RuntimeError("pysim: an earlier run failed, so pixels are still in flight and later "
+                               "results would not match; call reset() to start again from a hardware reset")
         if p.rng == "external":
             if numbers is None:
                 raise ValueError("rng = 'external': pass the random numbers of every compute cycle")
@@ -149,6 +167,7 @@ class PysimEngine:
             self._beats.extend(pack_beats(p, pixel))
         target = first + len(q)
         last_count, last_clock = len(self._raw_results), self.clock_cycles
+        self._broken = True  # until every pixel of this call is back
         while len(self._raw_results) < target:
             self._sim.advance()
             if len(self._raw_results) != last_count:
@@ -163,6 +182,7 @@ class PysimEngine:
                 raise ValueError(
                     f"the {len(self._numbers)} cycles of random numbers ran out before the run ended"
                 )
+        self._broken = False
         raws = self._raw_results[first:target]
         out = MachineResult.empty(p.rows)
         if raws:

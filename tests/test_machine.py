@@ -130,8 +130,17 @@ def test_external_rng_matches_model() -> None:
 def test_external_rng_runs_out() -> None:
     params = small_params(rng="external")
     words = np.zeros((1, params.rows, params.operator_columns), np.int32)
+    engine = PysimEngine(params)
     with pytest.raises(ValueError, match="ran out"):
-        PysimEngine(params).run(words, np.zeros((10, params.operators), np.int32))
+        engine.run(words, np.zeros((10, params.operators), np.int32))
+    # The cut-short pixel is still in the machine: the engine refuses to go on until a reset...
+    good = _mixed_words(params, 5, seed=9)
+    nums = np.random.default_rng(3).integers(0, 1 << params.word_bits, (5000, params.operators))
+    with pytest.raises(RuntimeError, match="reset"):
+        engine.run(good, nums)
+    # ...after which it matches the model again.
+    engine.reset()
+    assert engine.run(good, nums).equal(MachineModel(params).run(good, numbers=nums))
 
 
 def test_state_carries_over_between_calls() -> None:
