@@ -225,6 +225,8 @@ def _cmd_reference(args: argparse.Namespace) -> int:
     left, right, _, _ = _load_inputs(args, with_gt=False)
     prep = prepare(left, right, model)
     out = Path(args.output)
+    if out.suffix != ".npz":
+        out = out.with_name(out.name + ".npz")  # what np.savez would write: say the real name
     if out.parent and not out.parent.exists():
         raise ValueError(f"output directory {out.parent} does not exist")
     np.savez(out, posterior=prep.reference.posterior, map=prep.reference.map)
@@ -252,13 +254,19 @@ def _waves_option(text: str | None, engine: str, out: Path) -> dict[str, object]
     return {"trace": (first, last, str(out / "waves.vcd"))}
 
 
+def _make_output_dir(out: Path) -> None:
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"output {out} exists and is not a directory")
+    out.mkdir(parents=True, exist_ok=True)
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
     model = _model_params(args)
     machine = _machine_params(args, model, args.counter_max)
     left, right, gt, source = _load_inputs(args, with_gt=True)
     out: Path = args.output
     engine_options = _waves_option(args.waves, args.engine, out)
-    out.mkdir(parents=True, exist_ok=True)
+    _make_output_dir(out)
     outcome = run_pair(
         left,
         right,
@@ -315,7 +323,7 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     machines = [_machine_params(args, model, n) for n in counters]  # validate all before running
     left, right, gt, source = _load_inputs(args, with_gt=True)
     out: Path = args.output
-    out.mkdir(parents=True, exist_ok=True)
+    _make_output_dir(out)
     prep = prepare(left, right, model, gt)
     points = []
     t0 = time.perf_counter()

@@ -4,8 +4,8 @@ Maps cover the valid region: (H-4, W-4), map pixel (y, x) centred on image pixel
 (y+2, x+2). We keep integer multiples of the features so that costs are exact:
 
 * ``m25``  = 25 * m  = sum of the 5x5 window                      (0 .. 6375)
-* ``gh20`` = 20 * gH = two rightmost columns - two leftmost columns (-5100 .. 5100)
-* ``gv20`` = 20 * gV = two bottom rows - two top rows               (-5100 .. 5100)
+* ``gh20`` = 20 * gH = two rightmost columns - two leftmost columns (-2550 .. 2550)
+* ``gv20`` = 20 * gV = two bottom rows - two top rows               (-2550 .. 2550)
 """
 
 from __future__ import annotations

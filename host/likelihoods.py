@@ -54,6 +54,10 @@ class ModelParams:
             v = getattr(self, name)
             if not isinstance(v, (int, float)) or not 0.0 <= float(v) <= 1.0:
                 raise ValueError(f"{name} must be a probability in [0, 1], got {v!r}")
+        if not self.p_nm0 > 0:
+            # The floor of the no-match hypothesis keeps every pixel's posterior defined: without
+            # it, a pixel whose likelihoods all underflow to 0 would have 0/0.
+            raise ValueError("p_nm0 must be > 0: it keeps every pixel's posterior defined")
         for name in ("sigma_m", "sigma_gh", "sigma_gv", "sigma_nm"):
             v = getattr(self, name)
             if not isinstance(v, (int, float)) or not (math.isfinite(v) and v > 0):

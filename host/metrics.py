@@ -131,10 +131,16 @@ def sgbm_numdisparities(dmax: int) -> int:
     return -(-(dmax + 1) // 16) * 16
 
 
-def sgbm_disparity(left: np.ndarray, right: np.ndarray, dmax: int) -> np.ndarray:
-    """OpenCV StereoSGBM (blockSize 5) on the full pair, cut to the output region; -1 = invalid."""
+def sgbm_disparity(left: np.ndarray, right: np.ndarray, dmax: int) -> np.ndarray | None:
+    """OpenCV StereoSGBM (blockSize 5) on the full pair, cut to the output region; -1 = invalid.
+
+    None when OpenCV cannot run it: an image barely wider than numDisparities (a narrow crop).
+    """
     sgbm = cv2.StereoSGBM_create(minDisparity=0, numDisparities=sgbm_numdisparities(dmax), blockSize=5)
-    raw = sgbm.compute(left, right)  # int16, 4 fractional bits, negative = invalid
+    try:
+        raw = sgbm.compute(left, right)  # int16, 4 fractional bits, negative = invalid
+    except cv2.error:
+        return None
     disp = raw.astype(np.float64) / 16.0
     disp[raw < 0] = -1.0
     return image_region(disp, dmax)
@@ -199,7 +205,9 @@ def evaluate(prepared: Prepared, run: MachineRun, sgbm: bool | None = None) -> R
     if prepared.gt is not None:
         methods = {"machine": run.map, "reference": ref.map}
         if sgbm is None or sgbm:
-            methods["sgbm"] = sgbm_disparity(prepared.left, prepared.right, prepared.model.dmax)
+            sgbm_map = sgbm_disparity(prepared.left, prepared.right, prepared.model.dmax)
+            if sgbm_map is not None:  # too narrow for SGBM: the report simply has no SGBM figures
+                methods["sgbm"] = sgbm_map
         bad = {}
         for name, disp in methods.items():
             b1 = bad_rates(disp, prepared.gt, 1)

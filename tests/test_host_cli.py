@@ -55,6 +55,32 @@ def test_reference_command(tmp_path):
     assert ref["map"].dtype == np.int16 and ref["map"].shape == (16, 30)
 
 
+def test_reference_output_name_gets_npz(tmp_path, capsys):
+    left, right, _ = _write_pair(tmp_path)
+    assert main(["reference", str(left), str(right), "--dmax", "8", "-o", str(tmp_path / "ref")]) == 0
+    assert (tmp_path / "ref.npz").exists()
+    assert str(tmp_path / "ref.npz") in capsys.readouterr().out
+
+
+def test_run_on_a_crop_too_narrow_for_sgbm(tmp_path):
+    """Width 98 leaves the machine 14 columns with Dmax 80, but OpenCV's SGBM (96 disparities)
+    cannot run: the report goes without SGBM figures instead of failing."""
+    out = tmp_path / "narrow"
+    assert main(["run", "--crop", "300,200,98,10", "--quiet", "-o", str(out)]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["pixels"] == 6 * 14 and "machine_bad2" in report
+    assert not any(k.startswith("sgbm_") for k in report)
+
+
+def test_small_dmax_runs(tmp_path):
+    """Dmax 0 and 3: 6 and 15 words per pixel, less than the default 16 lanes."""
+    left, right, _ = _write_pair(tmp_path)
+    for dmax in (0, 3):
+        out = tmp_path / f"d{dmax}"
+        assert main(["run", str(left), str(right), "--dmax", str(dmax), "--quiet", "-o", str(out)]) == 0
+        assert json.loads((out / "report.json").read_text())["machine"]["rows"] == dmax + 2
+
+
 def test_sweep_command(tmp_path):
     left, right, gt = _write_pair(tmp_path)
     out = tmp_path / "sweep"
@@ -90,6 +116,9 @@ def test_sweep_command(tmp_path):
         (["run", "{l}"], "both LEFT and RIGHT"),
         (["run", "{l}", "{r}", "--counter-max", "0"], "counter_max"),
         (["reference", "{l}", "{r}", "--p0", "2"], "p0"),
+        (["reference", "{l}", "{r}", "--p-nm0", "0"], "p_nm0 must be > 0"),
+        (["run", "{l}", "{r}", "--dmax", "8", "-o", "{l}"], "not a directory"),
+        (["run", "{l}", "{r}", "--engine", "model", "--waves", "1:2"], "--waves needs --engine verilator"),
     ],
 )
 def test_errors_are_one_clear_line(tmp_path, capsys, argv, message):
@@ -104,6 +133,8 @@ def test_errors_are_one_clear_line(tmp_path, capsys, argv, message):
         "narrow": tmp_path / "narrow.png",
     }
     argv = [a.format(**{k: str(v) for k, v in names.items()}) for a in argv]
-    assert main([*argv, "-o", str(tmp_path / "o")]) == 2
+    if "-o" not in argv:
+        argv += ["-o", str(tmp_path / "o")]
+    assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0]

@@ -161,7 +161,7 @@ def test_tie_rule_measurement() -> None:
     print(f"\nties: {m['ties']}/{m['pixels']} pixels ({100 * m['tie_fraction']:.1f} %), with the no-match "
           f"row: {m['nomatch_ties']} ({100 * m['nomatch_tie_fraction']:.1f} %); no-match decisions "
           f"lowest-index {m['nomatch_lowest_index']}, nomatch-first {m['nomatch_nomatch_first']}")
-    assert m["nomatch_ties"] <= m["ties"]
+    assert 0 < m["nomatch_ties"] <= m["ties"] < m["pixels"]  # ties do happen on paper-like pixels
     # Only no-match ties change a decision, always towards no match.
     assert m["nomatch_nomatch_first"] - m["nomatch_lowest_index"] == m["nomatch_ties"]
 
