@@ -168,6 +168,13 @@ def _check_machine(model: ModelParams, machine: MachineParams) -> int:
         )
     if machine.columns != 3:
         raise ValueError(f"the disparity model has 3 data terms, the machine has columns={machine.columns}")
+    if quantize(model.p_nm0, machine.word_bits) == 0:
+        # Then an occluded pixel (every row ~0) could only stop at the watchdog, max_cycles later.
+        raise ValueError(
+            f"p_nm0 = {model.p_nm0} quantizes to 0 with {machine.word_bits}-bit words, so a pixel with "
+            f"no match could not stop before the watchdog; raise --word-bits or --p-nm0 "
+            f"(p_nm0 >= 2^-{machine.word_bits + 1})"
+        )
     return machine.operator_columns - machine.columns  # 1 with a loaded prior (column 0)
 
 

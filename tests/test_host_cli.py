@@ -117,6 +117,7 @@ def test_sweep_command(tmp_path):
         (["run", "{l}", "{r}", "--counter-max", "0"], "counter_max"),
         (["reference", "{l}", "{r}", "--p0", "2"], "p0"),
         (["reference", "{l}", "{r}", "--p-nm0", "0"], "p_nm0 must be > 0"),
+        (["run", "{l}", "{r}", "--dmax", "8", "--p-nm0", "0.0001"], "quantizes to 0"),
         (["run", "{l}", "{r}", "--dmax", "8", "-o", "{l}"], "not a directory"),
         (["run", "{l}", "{r}", "--engine", "model", "--waves", "1:2"], "--waves needs --engine verilator"),
     ],
