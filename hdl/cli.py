@@ -93,8 +93,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="random numbers from on-chip LFSRs or an 'entropy' input port (default lfsr)")
     p.add_argument("--seed", type=_int, default=1,
                    help="machine seed for LFSR polynomials and states (default 1)")
-    p.add_argument("--lanes", type=int, default=DEFAULT_LANES,
-                   help=f"likelihood-memory words per load beat (default {DEFAULT_LANES})")
+    p.add_argument("--lanes", type=int, default=None,
+                   help=f"likelihood-memory words per load beat (default {DEFAULT_LANES}, or one "
+                   "pixel's words if fewer)")
     p.add_argument("--max-cycles", type=_int, default=DEFAULT_MAX_CYCLES,
                    help=f"watchdog: cycles before a run stops with timeout (default {DEFAULT_MAX_CYCLES})")
     p.add_argument("--tie-break", choices=("nomatch-first", "lowest-index"), default="nomatch-first",
@@ -108,14 +109,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
+    lanes = {} if args.lanes is None else {"lanes": args.lanes}
     params = MachineParams.for_disparity(
         args.dmax,
+        **lanes,
         columns=args.columns,
         word_bits=args.word_bits,
         counter_max=args.counter_max,
         rng=args.rng,
         seed=args.seed,
-        lanes=args.lanes,
         max_cycles=args.max_cycles,
         tie_break=args.tie_break,
         prior=args.prior,

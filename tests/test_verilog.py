@@ -130,3 +130,13 @@ def test_emit_cli_writes_verilog_and_rtlil(tmp_path: Path, capsys: pytest.Captur
 def test_emit_rejects_unknown_suffix(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="suffix|format"):
         hdl_cli.emit(MachineParams.for_disparity(2, lanes=3), tmp_path / "bm.txt")
+
+
+def test_emit_small_machine_defaults_to_one_beat_per_pixel(tmp_path: Path,
+                                                            capsys: pytest.CaptureFixture[str]) -> None:
+    """Dmax 1 has 9 words per pixel, fewer than the default 16 lanes: the load stream narrows."""
+    parser = argparse.ArgumentParser()
+    hdl_cli.register(parser.add_subparsers())
+    args = parser.parse_args(["emit", "--dmax", "1", "-o", str(tmp_path / "bm.v")])
+    assert args.func(args) == 0
+    assert "load: 9 words per beat, 1 beats per pixel" in capsys.readouterr().out
