@@ -7,7 +7,7 @@ from pathlib import Path
 
 from bayesmachine.params import DEFAULT_LANES, DEFAULT_MAX_CYCLES, DEFAULT_WORD_BITS, MachineParams
 
-__all__ = ["emit", "register", "summary"]
+__all__ = ["TOP_NAME", "emit", "register", "summary", "verilog_text"]
 
 TOP_NAME = "bayesmachine"
 
@@ -49,9 +49,16 @@ def summary(params: MachineParams) -> str:
     return "\n".join(lines)
 
 
+def verilog_text(top: object) -> str:
+    """Verilog of a component as the project emits it: top module ``bayesmachine``, no src attributes."""
+    from amaranth.back import verilog
+
+    return verilog.convert(top, name=TOP_NAME, emit_src=False)
+
+
 def emit(params: MachineParams, path: str | Path) -> Path:
     """Write the machine as Verilog (``.v``/``.sv``) or RTLIL (``.il``), top module ``bayesmachine``."""
-    from amaranth.back import rtlil, verilog
+    from amaranth.back import rtlil
 
     from .machine import BayesianMachine
 
@@ -65,7 +72,7 @@ def emit(params: MachineParams, path: str | Path) -> Path:
     if suffix == ".il":
         text = rtlil.convert(top, name=TOP_NAME)
     else:
-        text = verilog.convert(top, name=TOP_NAME, emit_src=False)
+        text = verilog_text(top)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(text)
     return path

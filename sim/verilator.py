@@ -42,6 +42,7 @@ from typing import Any
 
 import numpy as np
 
+from bayesmachine.hdl.cli import TOP_NAME, verilog_text
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.model import MachineResult, check_words
 
@@ -57,7 +58,6 @@ __all__ = [
 
 HARNESS_DIR = Path(__file__).resolve().parent / "harness"
 HARNESS_SOURCES = ("harness.cpp",)
-TOP_NAME = "bayesmachine"
 HARNESS_TOP = "bayesmachine_harness_top"
 TIE_HIGH = {("result", "ready"): "1'b1"}
 
@@ -323,14 +323,12 @@ def _sources_digest(factory: Callable[[MachineParams], Any]) -> str:
 def emit_verilog(params: MachineParams, component: Any, cache: Path | None,
                  factory: Callable[[MachineParams], Any]) -> str:
     """Verilog of the design, cached by (parameters, design sources): emission takes seconds."""
-    from amaranth.back import verilog
-
     path = None
     if cache is not None:
         path = cache / "verilog" / f"{params.fingerprint()}-{_sources_digest(factory)}.v"
         if path.exists():
             return path.read_text()
-    text = verilog.convert(component, name=TOP_NAME, emit_src=False)
+    text = verilog_text(component)
     if path is not None:
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_suffix(f".{os.getpid()}.tmp")
