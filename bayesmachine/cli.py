@@ -1,16 +1,30 @@
-"""The ``bayesmachine`` command. Each package registers its own subcommands."""
+"""The ``bayesmachine`` command. Each package registers its own subcommands.
+
+Every failure ends as one line on stderr: bad arguments and bad input (ValueError),
+impossible runs (RuntimeError), file-system problems (any OSError, naming the path) and
+exhausted memory give exit code 2; Ctrl-C gives exit code 130. Commands write their
+files through :mod:`bayesmachine.outputs`, so none of these leaves a partial output.
+"""
 
 from __future__ import annotations
 
 import argparse
 import sys
+from typing import NoReturn
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with its errors on one line (the usage is one ``--help`` away)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message}\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
     from bayesmachine.hdl.cli import register as register_hdl
     from bayesmachine.host.cli import register as register_host
 
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="bayesmachine",
         description="Stochastic Bayesian machine for stereo disparity: emit its RTL, "
         "run it (model, Amaranth simulator, Verilator) on stereo pairs, compare with exact inference.",
@@ -21,14 +35,40 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def describe_os_error(exc: OSError) -> str:
+    """``path: problem`` for an OSError (both paths of a failed rename)."""
+    problem = exc.strerror or str(exc)
+    if exc.filename is not None:
+        where = str(exc.filename)
+        if exc.filename2 is not None:
+            where += f" -> {exc.filename2}"
+        return f"{where}: {problem}"
+    return str(exc) if str(exc) else problem
+
+
+def _one_line(text: str) -> str:
+    return " ".join(text.split()) if "\n" in text else text
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    prefix = f"bayesmachine {args.command}"
     try:
         return int(args.func(args) or 0)
-    except (ValueError, FileNotFoundError, RuntimeError) as exc:
+    except KeyboardInterrupt:
+        print(f"{prefix}: interrupted; no output was left half-written", file=sys.stderr)
+        return 130
+    except OSError as exc:
+        print(f"{prefix}: error: {_one_line(describe_os_error(exc))}", file=sys.stderr)
+        return 2
+    except MemoryError as exc:
+        detail = f" ({exc})" if str(exc) else ""
+        print(f"{prefix}: error: out of memory{detail}; try --crop or a smaller --dmax", file=sys.stderr)
+        return 2
+    except (ValueError, RuntimeError) as exc:
         # Bad input and impossible parameters end with one clear line, not a traceback.
-        print(f"bayesmachine {args.command}: error: {exc}", file=sys.stderr)
+        print(f"{prefix}: error: {_one_line(str(exc))}", file=sys.stderr)
         return 2
 
 

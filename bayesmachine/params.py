@@ -11,7 +11,24 @@ import hashlib
 import json
 from dataclasses import asdict, dataclass
 
-__all__ = ["MachineParams", "ParameterError", "RNG_KINDS", "PRIORS", "TIE_BREAKS"]
+__all__ = [
+    "MachineParams",
+    "ParameterError",
+    "RNG_KINDS",
+    "PRIORS",
+    "TIE_BREAKS",
+    "DEFAULT_DMAX",
+    "DEFAULT_COLUMNS",
+    "DEFAULT_WORD_BITS",
+    "DEFAULT_COUNTER_MAX",
+    "DEFAULT_RNG",
+    "DEFAULT_LFSR_BITS",
+    "DEFAULT_SEED",
+    "DEFAULT_MAX_CYCLES",
+    "DEFAULT_PRIOR",
+    "DEFAULT_TIE_BREAK",
+    "DEFAULT_LANES",
+]
 
 RNG_KINDS = ("lfsr", "external")
 PRIORS = ("uniform", "loaded")
@@ -24,6 +41,14 @@ DEFAULT_WORD_BITS = 10
 DEFAULT_LFSR_BITS = 31
 DEFAULT_MAX_CYCLES = (1 << 20) - 1
 DEFAULT_LANES = 16
+# The paper's machine: Dmax 80 (82 rows), three data terms, counter max 16.
+DEFAULT_DMAX = 80
+DEFAULT_COLUMNS = 3
+DEFAULT_COUNTER_MAX = 16
+DEFAULT_RNG = "lfsr"
+DEFAULT_SEED = 1
+DEFAULT_PRIOR = "uniform"
+DEFAULT_TIE_BREAK = "nomatch-first"
 
 
 class ParameterError(ValueError):
@@ -78,16 +103,16 @@ class MachineParams:
     """
 
     rows: int
-    columns: int = 3
+    columns: int = DEFAULT_COLUMNS
     word_bits: int = DEFAULT_WORD_BITS
-    counter_max: int = 16
-    rng: str = "lfsr"
+    counter_max: int = DEFAULT_COUNTER_MAX
+    rng: str = DEFAULT_RNG
     lfsr_bits: int = DEFAULT_LFSR_BITS
-    seed: int = 1
+    seed: int = DEFAULT_SEED
     max_cycles: int = DEFAULT_MAX_CYCLES
-    prior: str = "uniform"
+    prior: str = DEFAULT_PRIOR
     nomatch_row: bool = False
-    tie_break: str = "nomatch-first"
+    tie_break: str = DEFAULT_TIE_BREAK
     lanes: int = DEFAULT_LANES
 
     def __post_init__(self) -> None:
@@ -126,10 +151,10 @@ class MachineParams:
             )
 
     @classmethod
-    def for_disparity(cls, dmax: int = 80, **kwargs: object) -> MachineParams:
+    def for_disparity(cls, dmax: int = DEFAULT_DMAX, **kwargs: object) -> MachineParams:
         """The disparity machine of the paper: M = Dmax + 2 rows, the last one no-match."""
         _check_int("dmax", dmax, 0, 4094)
-        kwargs.setdefault("columns", 3)
+        kwargs.setdefault("columns", DEFAULT_COLUMNS)
         if "lanes" not in kwargs:
             # Small machines get a load stream no wider than one pixel's words.
             columns = int(kwargs["columns"]) + (1 if kwargs.get("prior") == "loaded" else 0)  # type: ignore[call-overload]

@@ -1,7 +1,9 @@
 """Host subcommands of ``bayesmachine``: reference, run, sweep.
 
-``bayesmachine/cli.py`` calls :func:`register`; every ValueError raised here (bad input,
-impossible parameters) ends as one error line there.
+``bayesmachine/cli.py`` calls :func:`register`; every ValueError or OSError raised here
+(bad input, impossible parameters, file-system problems) ends as one error line there.
+Machine options come from the shared helper :mod:`bayesmachine.cliargs`; outputs are
+written through :mod:`bayesmachine.outputs` (complete or absent, the report last).
 """
 
 from __future__ import annotations
@@ -14,26 +16,49 @@ from pathlib import Path
 
 import numpy as np
 
+from bayesmachine.cliargs import (
+    add_dmax_option,
+    add_machine_options,
+    argument_type,
+    counter_max_list,
+    machine_params_from_args,
+    source_kinds,
+)
+from bayesmachine.outputs import (
+    NpzWriter,
+    OutputDir,
+    atomic_file,
+    format_bytes,
+    require_disk,
+    require_memory,
+)
 from bayesmachine.params import MachineParams
 
 from .images import Crop, bundled_pair, crop_image, load_gt, load_image, parse_crop
 from .likelihoods import ModelParams
-from .run import ENGINES, RunOutcome, prepare, run_pair
+from .region import OutputRegion
+from .run import ENGINES, RunOutcome, prepare, result_bytes, run_pair
 
-__all__ = ["register"]
+__all__ = ["register", "RUN_OUTPUTS", "SWEEP_OUTPUTS"]
 
 DEFAULTS = ModelParams()
+# Every file each command can write into OUT/, the report first (it is removed first and
+# committed last: its presence means the rest is complete and from the same run).
+RUN_OUTPUTS = ("report.json", "result.npz", "disparity.png", "waves.vcd")
+SWEEP_OUTPUTS = ("sweep.json", "sweep.png")
+SWEEP_COUNTER_MAX = [1, 2, 4, 8, 16, 32]
 
 
 def _add_model_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("model (paper table 1 defaults)")
-    g.add_argument(
-        "--dmax", type=int, default=DEFAULTS.dmax, help="largest disparity Dmax (default %(default)s)"
-    )
+    add_dmax_option(g)
     g.add_argument(
         "--p0", type=float, default=DEFAULTS.p0, help="base match likelihood p0 (default %(default)s)"
     )
-    g.add_argument("--sigma", type=float, default=None, help="sigma of all three features (default 10)")
+    g.add_argument(
+        "--sigma", type=float, default=None,
+        help=f"sigma of all three features (default {DEFAULTS.sigma_m:g})",
+    )
     for f, name in (("m", "mean"), ("gh", "horizontal gradient"), ("gv", "vertical gradient")):
         g.add_argument(f"--sigma-{f}", type=float, default=None, help=f"sigma of the {name} feature")
     g.add_argument(
@@ -46,8 +71,8 @@ def _model_params(args: argparse.Namespace) -> ModelParams:
     def sigma(f: str) -> float:
         v = getattr(args, f"sigma_{f}")
         if v is not None:
-            return v
-        return args.sigma if args.sigma is not None else getattr(DEFAULTS, f"sigma_{f}")
+            return float(v)
+        return float(args.sigma) if args.sigma is not None else DEFAULTS.sigma(f)
 
     return ModelParams(
         dmax=args.dmax,
@@ -67,7 +92,7 @@ def _add_input_options(p: argparse.ArgumentParser, optional: bool) -> None:
     p.add_argument("right", nargs=nargs, help="rectified right image")
     p.add_argument(
         "--crop",
-        type=parse_crop,
+        type=argument_type(parse_crop, "crop"),
         default=None,
         metavar="X,Y,W,H",
         help="cut this rectangle (input-image pixels) out of both images (and gt) first",
@@ -102,43 +127,53 @@ def _load_inputs(
     return np.ascontiguousarray(left), np.ascontiguousarray(right), gt, source
 
 
+def _host_rng_help() -> str:
+    kinds = source_kinds()
+    if kinds is None:
+        runnable = [k for k in _RNG_HOST_ALWAYS]
+    else:
+        runnable = [k for k, kind in kinds.items() if kind.on_chip or kind.numbers is not None]
+    return f"random source; the host runs the kinds it can drive: {', '.join(runnable)} (default %(default)s)"
+
+
+_RNG_HOST_ALWAYS = ("lfsr",)
+
+
+def _check_host_rng(machine: MachineParams) -> None:
+    """The host drives on-chip sources and off-chip ones with a device model; not bare ``external``."""
+    kinds = source_kinds()
+    if kinds is None:
+        ok = machine.rng in _RNG_HOST_ALWAYS
+    else:
+        kind = kinds.get(machine.rng)
+        ok = kind is not None and (kind.on_chip or kind.numbers is not None)
+    if not ok:
+        raise ValueError(
+            f"--rng {machine.rng}: the machine takes its random numbers on the entropy port and "
+            f"this source has no model the host can run; use it with 'bayesmachine emit'"
+        )
+
+
 def _add_machine_options(p: argparse.ArgumentParser, sweep: bool) -> None:
-    g = p.add_argument_group("machine")
+    changes: dict[str, dict[str, object]] = {}
+    helps = {
+        "rng": _host_rng_help(),
+        "prior": "uniform: always-on 1s enter each row; loaded: an extra operator column 0 holds a prior "
+        "word per row, which the host fills with a uniform prior (1.0) (default %(default)s)",
+    }
+    if sweep:
+        changes["counter_max"] = {
+            "type": counter_max_list,
+            "default": SWEEP_COUNTER_MAX,
+            "metavar": "N,N,...",
+        }
+        helps["counter_max"] = (
+            "comma-separated counter max values, run in ascending order with repeats removed "
+            f"(default {','.join(map(str, SWEEP_COUNTER_MAX))})"
+        )
+    g = add_machine_options(p, skip=("columns",), help=helps, **changes)
     g.add_argument(
         "--engine", choices=ENGINES, default="model", help="how to run the machine (default model)"
-    )
-    if sweep:
-        g.add_argument(
-            "--counter-max",
-            default="1,2,4,8,16,32",
-            metavar="N,N,...",
-            help="comma-separated counter max values (default %(default)s)",
-        )
-    else:
-        g.add_argument(
-            "--counter-max",
-            type=int,
-            default=16,
-            metavar="N",
-            help="counter max n_max: a counter overflows on its (n_max+1)-th 1 (default 16)",
-        )
-    g.add_argument(
-        "--word-bits", type=int, default=10, metavar="W", help="comparator resolution (default 10)"
-    )
-    g.add_argument(
-        "--seed", type=int, default=1, help="machine seed: LFSR polynomials and states (default 1)"
-    )
-    g.add_argument(
-        "--max-cycles",
-        type=int,
-        default=(1 << 20) - 1,
-        help="watchdog: a pixel stops as a timeout after this many cycles (default 2^20-1)",
-    )
-    g.add_argument(
-        "--tie-break",
-        choices=("nomatch-first", "lowest-index"),
-        default="nomatch-first",
-        help="MAP encoder rule when rows overflow together (default nomatch-first)",
     )
     if not sweep:
         g.add_argument(
@@ -156,14 +191,21 @@ def _add_machine_options(p: argparse.ArgumentParser, sweep: bool) -> None:
     p.add_argument("-o", "--output", required=True, type=Path, metavar="OUT/", help="output directory")
 
 
-def _machine_params(args: argparse.Namespace, model: ModelParams, counter_max: int) -> MachineParams:
-    return MachineParams.for_disparity(
-        model.dmax,
-        counter_max=counter_max,
-        word_bits=args.word_bits,
-        seed=args.seed,
-        max_cycles=args.max_cycles,
-        tie_break=args.tie_break,
+def _machine_params(
+    args: argparse.Namespace, model: ModelParams, counter_max: int | None = None
+) -> MachineParams:
+    overrides = {} if counter_max is None else {"counter_max": counter_max}
+    machine = machine_params_from_args(args, model.dmax, **overrides)
+    _check_host_rng(machine)
+    return machine
+
+
+def _check_fits(region: OutputRegion, machine: MachineParams) -> None:
+    """Refuse up front when the per-pixel results cannot be held (they are what result.npz holds)."""
+    require_memory(
+        result_bytes(region, machine),
+        f"the results of {region.shape[0]}x{region.shape[1]} output pixels x {machine.rows} counters",
+        "use --crop or a smaller --dmax",
     )
 
 
@@ -223,26 +265,43 @@ def _summary(r: dict[str, object]) -> str:
 def _cmd_reference(args: argparse.Namespace) -> int:
     model = _model_params(args)
     left, right, _, _ = _load_inputs(args, with_gt=False)
-    prep = prepare(left, right, model)
+    region = OutputRegion.of_image(left.shape, model.dmax)
     out = Path(args.output)
     if out.suffix != ".npz":
         out = out.with_name(out.name + ".npz")  # what np.savez would write: say the real name
-    if out.parent and not out.parent.exists():
-        raise ValueError(f"output directory {out.parent} does not exist")
-    np.savez(out, posterior=prep.reference.posterior, map=prep.reference.map)
+    shape = (*region.shape, model.hypotheses)
+    volume = int(np.prod(shape)) * 8
+    # The posterior goes to disk band by band: memory holds one band, the disk the whole volume.
+    require_disk(
+        out, volume + region.pixels * 2 + 4096,
+        f"the posterior volume ({shape[0]}x{shape[1]}x{shape[2]} float64)",
+        "use --crop or a smaller --dmax",
+    )
+    t0 = time.perf_counter()
+    prep = prepare(left, right, model)
+    ref_map = np.empty(region.shape, np.int16)
+
+    def bands():  # the posterior of each band, in order; the MAP is kept on the way
+        for rows, band in prep.reference_bands():
+            ref_map[rows] = band.map
+            yield band.posterior
+
+    with atomic_file(out) as tmp, NpzWriter(tmp) as npz:
+        npz.add_stream("posterior", shape, np.float64, bands())
+        npz.add("map", ref_map)
     if not args.quiet:
-        ref = prep.reference
         print(
-            f"reference: {ref.map.shape[0]}x{ref.map.shape[1]} px x {model.hypotheses} hypotheses in "
-            f"{prep.reference_seconds:.3f} s, {int(ref.nomatch.sum())} no match -> {out}"
+            f"reference: {shape[0]}x{shape[1]} px x {model.hypotheses} hypotheses "
+            f"({format_bytes(volume)} of posterior) in {time.perf_counter() - t0:.3f} s, "
+            f"{int((ref_map < 0).sum())} no match -> {out}"
         )
     return 0
 
 
-def _waves_option(text: str | None, engine: str, out: Path) -> dict[str, object]:
-    """``--waves FIRST:LAST`` as the Verilator engine's ``trace`` option."""
+def _parse_waves(text: str | None, engine: str) -> tuple[int, int] | None:
+    """``--waves FIRST:LAST`` (output pixel indices), checked before any input is read."""
     if text is None:
-        return {}
+        return None
     if engine != "verilator":
         raise ValueError(f"--waves needs --engine verilator (got --engine {engine})")
     try:
@@ -251,117 +310,123 @@ def _waves_option(text: str | None, engine: str, out: Path) -> dict[str, object]
         raise ValueError(f"--waves takes FIRST:LAST pixel indices, e.g. 0:9; got {text!r}") from None
     if not 0 <= first <= last:
         raise ValueError(f"--waves: need 0 <= FIRST <= LAST, got {first}:{last}")
-    return {"trace": (first, last, str(out / "waves.vcd"))}
+    return first, last
 
 
-def _make_output_dir(out: Path) -> None:
-    if out.exists() and not out.is_dir():
-        raise ValueError(f"output {out} exists and is not a directory")
-    out.mkdir(parents=True, exist_ok=True)
+def _check_waves(waves: tuple[int, int] | None, pixels: int) -> None:
+    """A range past the last output pixel would trace nothing: say so before any work."""
+    if waves is not None and waves[1] >= pixels:
+        raise ValueError(
+            f"--waves {waves[0]}:{waves[1]}: the output region has {pixels} pixels (0..{pixels - 1}); "
+            f"LAST must be below {pixels}"
+        )
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
     model = _model_params(args)
-    machine = _machine_params(args, model, args.counter_max)
+    machine = _machine_params(args, model)
+    waves = _parse_waves(args.waves, args.engine)
     left, right, gt, source = _load_inputs(args, with_gt=True)
-    out: Path = args.output
-    engine_options = _waves_option(args.waves, args.engine, out)
-    _make_output_dir(out)
-    outcome = run_pair(
-        left,
-        right,
-        model,
-        machine,
-        engine=args.engine,
-        gt=gt,
-        progress=False if args.quiet else None,
-        sgbm=not args.no_sgbm,
-        engine_options=engine_options,
-    )
-    report = _report(outcome, source, args.crop)
-    _write_json(out / "report.json", report)
-    run, ref = outcome.run, outcome.prepared.reference
-    np.savez_compressed(
-        out / "result.npz",
-        map=run.map,
-        counts=run.counts,
-        cycles=run.cycles,
-        timeout=run.timeout,
-        reference_map=ref.map,
-    )
-    from .metrics import image_region
-    from .plots import save_disparity_figure
-
-    panels = [
-        ("Reference (float64)", ref.map),
-        (f"Machine ({run.engine}, counter max {machine.counter_max})", run.map),
-    ]
-    if gt is not None:
-        panels.append(("Ground truth", image_region(gt, model.dmax)))
-        if outcome.metrics.sgbm_map is not None:  # computed once, for the report's bad-pixel rates
-            panels.append(("OpenCV StereoSGBM", outcome.metrics.sgbm_map))
-    save_disparity_figure(out / "disparity.png", image_region(left, model.dmax), panels, model.dmax)
-    if not args.quiet:
-        print(_summary(report))
-        print(f"wrote {out / 'report.json'}, {out / 'result.npz'}, {out / 'disparity.png'}")
-    return 0
-
-
-def _parse_counter_list(text: str) -> list[int]:
-    try:
-        values = [int(v) for v in text.split(",") if v.strip()]
-    except ValueError:
-        raise ValueError(f"--counter-max must be comma-separated integers, got {text!r}") from None
-    if not values:
-        raise ValueError("--counter-max needs at least one value")
-    return values
-
-
-def _cmd_sweep(args: argparse.Namespace) -> int:
-    model = _model_params(args)
-    counters = _parse_counter_list(args.counter_max)
-    machines = [_machine_params(args, model, n) for n in counters]  # validate all before running
-    left, right, gt, source = _load_inputs(args, with_gt=True)
-    out: Path = args.output
-    _make_output_dir(out)
-    prep = prepare(left, right, model, gt)
-    points = []
-    t0 = time.perf_counter()
-    for i, machine in enumerate(machines):
+    region = OutputRegion.of_image(left.shape, model.dmax)
+    _check_waves(waves, region.pixels)
+    _check_fits(region, machine)
+    with OutputDir(args.output, RUN_OUTPUTS, last="report.json") as out:
+        # The harness writes the trace under its temporary name; commit() renames it with the rest.
+        engine_options = {} if waves is None else {"trace": (*waves, str(out.path("waves.vcd")))}
         outcome = run_pair(
             left,
             right,
             model,
             machine,
             engine=args.engine,
-            prepared=prep,
+            gt=gt,
             progress=False if args.quiet else None,
-            sgbm=(not args.no_sgbm) and i == 0,
+            sgbm=not args.no_sgbm,
+            engine_options=engine_options,
         )
         report = _report(outcome, source, args.crop)
-        for key in ("input", "crop", "image_shape", "output_shape", "ground_truth", "model", "machine"):
-            report.pop(key)
-        points.append(report)
-        if not args.quiet:
-            print(_summary(report), flush=True)
-    sweep = {
-        "engine": args.engine,
-        "input": source,
-        "crop": str(args.crop) if args.crop is not None else None,
-        "output_shape": list(prep.shape),
-        "ground_truth": gt is not None,
-        "reference_seconds": prep.reference_seconds,
-        "total_seconds": time.perf_counter() - t0,
-        "model": model.to_dict(),
-        "machine": {k: v for k, v in machines[0].to_dict().items() if k != "counter_max"},
-        "points": points,
-    }
-    _write_json(out / "sweep.json", sweep)
-    from .plots import save_sweep_figure
+        run, prep = outcome.run, outcome.prepared
+        out.write(
+            "result.npz",
+            lambda path: np.savez_compressed(
+                path,
+                map=run.map,
+                counts=run.counts,
+                cycles=run.cycles,
+                timeout=run.timeout,
+                reference_map=prep.reference_map,
+            ),
+        )
+        from .plots import save_disparity_figure
 
-    save_sweep_figure(out / "sweep.png", points)
+        panels = [
+            ("Reference (float64)", prep.reference_map),
+            (f"Machine ({run.engine}, counter max {machine.counter_max})", run.map),
+        ]
+        if gt is not None:
+            panels.append(("Ground truth", region.cut(gt)))
+            if outcome.metrics.sgbm_map is not None:  # computed once, for the report's bad-pixel rates
+                panels.append(("OpenCV StereoSGBM", outcome.metrics.sgbm_map))
+        out.write(
+            "disparity.png",
+            lambda path: save_disparity_figure(path, region.cut(left), panels, model.dmax),
+        )
+        out.write("report.json", lambda path: _write_json(path, report))
+        written = out.commit()
     if not args.quiet:
-        print(f"wrote {out / 'sweep.json'}, {out / 'sweep.png'}")
+        print(_summary(report))
+        print("wrote " + ", ".join(str(p) for p in written))
+    return 0
+
+
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    model = _model_params(args)
+    counters: list[int] = args.counter_max  # sorted, no repeats (counter_max_list)
+    machines = [_machine_params(args, model, n) for n in counters]  # validate all before running
+    left, right, gt, source = _load_inputs(args, with_gt=True)
+    region = OutputRegion.of_image(left.shape, model.dmax)
+    _check_fits(region, machines[-1])
+    with OutputDir(args.output, SWEEP_OUTPUTS, last="sweep.json") as out:
+        prep = prepare(left, right, model, gt)
+        points = []
+        t0 = time.perf_counter()
+        for i, machine in enumerate(machines):
+            outcome = run_pair(
+                left,
+                right,
+                model,
+                machine,
+                engine=args.engine,
+                prepared=prep,
+                progress=False if args.quiet else None,
+                sgbm=(not args.no_sgbm) and i == 0,
+            )
+            report = _report(outcome, source, args.crop)
+            for key in ("input", "crop", "image_shape", "output_shape", "ground_truth", "model", "machine"):
+                report.pop(key)
+            points.append(report)
+            del outcome  # one run's per-pixel results at a time
+            if not args.quiet:
+                print(_summary(report), flush=True)
+        sweep = {
+            "engine": args.engine,
+            "input": source,
+            "crop": str(args.crop) if args.crop is not None else None,
+            "output_shape": list(prep.shape),
+            "ground_truth": gt is not None,
+            "reference_seconds": prep.reference_seconds,
+            "total_seconds": time.perf_counter() - t0,
+            "model": model.to_dict(),
+            "machine": {k: v for k, v in machines[0].to_dict().items() if k != "counter_max"},
+            "points": points,
+        }
+        from .plots import save_sweep_figure
+
+        out.write("sweep.png", lambda path: save_sweep_figure(path, points))
+        out.write("sweep.json", lambda path: _write_json(path, sweep))
+        written = out.commit()
+    if not args.quiet:
+        print("wrote " + ", ".join(str(p) for p in written))
     return 0
 
 
@@ -371,7 +436,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         "reference",
         help="exact float64 posterior and MAP of every pixel",
         description="Compute the exact (float64) disparity posterior of a rectified pair: "
-        "posterior (H-4)x(W-4-Dmax)x(Dmax+2), last index = no match, and the MAP (int16, -1 = no match).",
+        "posterior (H-4)x(W-4-Dmax)x(Dmax+2), last index = no match, and the MAP (int16, -1 = no match). "
+        "The posterior is written band by band (memory holds one band); the command refuses up front "
+        "when the disk cannot hold it.",
     )
     _add_input_options(p, optional=False)
     _add_model_options(p)
@@ -383,7 +450,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         "run",
         help="run the machine on a stereo pair and compare it with the reference",
         description="Run the stochastic machine on a rectified pair (default: the bundled Motorcycle pair "
-        "with its ground truth); write OUT/report.json, OUT/result.npz and OUT/disparity.png.",
+        "with its ground truth); write OUT/report.json, OUT/result.npz and OUT/disparity.png "
+        "(and OUT/waves.vcd with --waves). Files from an earlier run into OUT are removed first; "
+        "report.json is written last, so its presence means the run is complete.",
     )
     _add_input_options(p, optional=True)
     _add_model_options(p)
@@ -395,7 +464,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         help="paper Fig 6: accuracy and cycles per pixel against counter max",
         description="Run the machine for several counter max values on one pair; write OUT/sweep.json "
         "and OUT/sweep.png (RMS error and no-match F1 vs counter max; cycles per pixel: mean, median, "
-        "10-90 % band).",
+        "10-90 % band). sweep.json is written last.",
     )
     _add_input_options(p, optional=True)
     _add_model_options(p)

@@ -14,14 +14,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .images import FILTER_SIZE
+from bayesmachine.likelihood import MAX_ABS, SCALES
 
-__all__ = ["FeatureSums", "SCALES", "feature_sums", "feature_sums_plain"]
+from .region import FILTER_SIZE
 
-# Integer scale of each stored feature: f = sum / scale.
-SCALES = {"m": 25, "gh": 20, "gv": 20}
-# Largest |sum| each feature can reach for 8-bit input (sizes the lookup tables).
-MAX_ABS = {"m": 25 * 255, "gh": 10 * 255, "gv": 10 * 255}
+__all__ = ["FeatureSums", "SCALES", "MAX_ABS", "feature_sums", "feature_sums_plain"]
 
 
 @dataclass(frozen=True)
@@ -39,9 +36,9 @@ class FeatureSums:
     def as_tuple(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return self.m25, self.gh20, self.gv20
 
-    def floats(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """m, gH, gV in the paper's units (for display; costs use the integer sums)."""
-        return self.m25 / 25.0, self.gh20 / 20.0, self.gv20 / 20.0
+    def band(self, rows: slice) -> FeatureSums:
+        """The maps of map rows ``rows`` (views: a band costs no copy)."""
+        return FeatureSums(self.m25[rows], self.gh20[rows], self.gv20[rows])
 
 
 def feature_sums(image: np.ndarray) -> FeatureSums:

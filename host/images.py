@@ -8,11 +8,14 @@ are float arrays of the same shape with non-finite values for "unknown".
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
 import numpy as np
+
+from .region import FILTER_SIZE, MARGIN, OutputRegion
 
 __all__ = [
     "FILTER_SIZE",
@@ -27,10 +30,6 @@ __all__ = [
     "validate_pair",
     "random_dot_stereogram",
 ]
-
-# The paper's three features are 5x5 correlations: maps lose 2 pixels on every side.
-FILTER_SIZE = 5
-MARGIN = FILTER_SIZE // 2
 
 
 @dataclass(frozen=True)
@@ -92,17 +91,40 @@ def to_gray(image: np.ndarray, rgb: bool = False) -> np.ndarray:
     raise ValueError(f"unsupported image shape {image.shape}: expected gray, BGR or BGRA")
 
 
+def _check_readable(path: Path, what: str) -> None:
+    """A clear error for a path that is not a readable file (before a reader says something vaguer)."""
+    if not path.exists():
+        raise FileNotFoundError(f"{what} not found: {path}")
+    if path.is_dir():
+        raise ValueError(f"{what} {path} is a directory, not a file")
+    if not path.is_file():
+        raise ValueError(f"{what} {path} is not a regular file")
+    if not os.access(path, os.R_OK):
+        raise PermissionError(13, "permission denied (cannot read it)", str(path))
+
+
 def load_image(path: str | Path) -> np.ndarray:
     """Read an 8-bit image file with OpenCV and return it as gray (H, W) uint8."""
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"image file not found: {path}")
+    _check_readable(path, "image file")
     image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if image is None:
-        raise ValueError(f"cannot read {path} as an image (unknown or corrupt format)")
+        raise ValueError(f"cannot read {path} as an image (not an image, or an unknown or corrupt format)")
     if image.dtype != np.uint8:
         raise ValueError(f"{path}: images must be 8-bit, got {image.dtype}")
     return to_gray(image)
+
+
+def _load_npy(path: Path) -> np.ndarray:
+    try:
+        gt = np.load(path, allow_pickle=False)
+    except (ValueError, EOFError, OSError) as exc:  # no NPY header, truncated, or pickled objects
+        raise ValueError(f"{path} is not a NumPy array file (.npy): {exc}") from None
+    if not isinstance(gt, np.ndarray):
+        raise ValueError(f"{path} is not a NumPy array file (.npy): it holds several arrays (.npz)")
+    if not (np.issubdtype(gt.dtype, np.integer) or np.issubdtype(gt.dtype, np.floating)):
+        raise ValueError(f"{path}: a disparity map must hold integers or floats, got {gt.dtype}")
+    return gt
 
 
 def load_gt(path: str | Path) -> np.ndarray:
@@ -112,14 +134,13 @@ def load_gt(path: str | Path) -> np.ndarray:
     Any other image format: pixel values are disparities and 0 means unknown.
     """
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"ground-truth file not found: {path}")
+    _check_readable(path, "ground-truth file")
     if path.suffix.lower() == ".npy":
-        gt = np.load(path)
+        gt = _load_npy(path)
     else:
         gt = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
         if gt is None:
-            raise ValueError(f"cannot read {path} as a disparity map")
+            raise ValueError(f"cannot read {path} as a disparity map (not an image, .pfm or .npy)")
         if gt.ndim == 3:
             gt = gt[:, :, 0]
         if not np.issubdtype(gt.dtype, np.floating):
@@ -148,18 +169,7 @@ def validate_pair(left: np.ndarray, right: np.ndarray, dmax: int) -> None:
             raise ValueError(f"{name} image must be 2-D uint8 gray, got {image.dtype} {image.shape}")
     if left.shape != right.shape:
         raise ValueError(f"left and right images differ in shape: {left.shape} vs {right.shape}")
-    h, w = left.shape
-    if h < FILTER_SIZE or w < FILTER_SIZE:
-        raise ValueError(
-            f"images of {w}x{h} are too small for the {FILTER_SIZE}x{FILTER_SIZE} filters "
-            f"(need at least {FILTER_SIZE}x{FILTER_SIZE})"
-        )
-    usable = w - 2 * MARGIN
-    if dmax >= usable:
-        raise ValueError(
-            f"dmax ({dmax}) must be below the usable width ({usable} = image width {w} - {2 * MARGIN}): "
-            f"no pixel would have all {dmax + 1} disparities; use a wider image or a smaller --dmax"
-        )
+    OutputRegion.of_image(left.shape, dmax)  # raises naming the size problem
 
 
 def random_dot_stereogram(

@@ -13,39 +13,30 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
 
-from .images import MARGIN
-
-if TYPE_CHECKING:
-    from .run import MachineRun, Prepared
+from .records import MachineRun, Prepared
+from .region import OutputRegion
 
 __all__ = [
     "RunMetrics",
     "cycle_stats",
     "rms_error",
+    "RmsAccumulator",
     "f1_score",
     "map_agreement",
     "bad_rates",
     "gt_region",
-    "image_region",
     "sgbm_disparity",
     "evaluate",
 ]
 
 
-def image_region(array: np.ndarray, dmax: int) -> np.ndarray:
-    """Cut an image-coordinate array to the output region (map rows all, map columns >= dmax)."""
-    h, w = array.shape[:2]
-    return array[MARGIN : h - MARGIN, MARGIN + dmax : w - MARGIN]
-
-
 def gt_region(gt: np.ndarray, dmax: int) -> np.ndarray:
     """Ground truth (image coordinates) over the output region, float, non-finite = unknown."""
-    return np.asarray(image_region(gt, dmax), dtype=np.float64)
+    return np.asarray(OutputRegion.of_image(gt.shape, dmax).cut(gt), dtype=np.float64)
 
 
 def cycle_stats(cycles: np.ndarray) -> dict[str, float]:
@@ -57,35 +48,52 @@ def cycle_stats(cycles: np.ndarray) -> dict[str, float]:
     return {"mean": mean, "std": std, "p10": p10, "median": median, "p90": p90, "p99": p99}
 
 
+class RmsAccumulator:
+    """RMS of counts/n_max - posterior/max(posterior), accumulated over blocks of pixels.
+
+    ``add`` takes ``counts`` and ``posterior`` of shape (..., M) and ``matched`` of the leading
+    shape; only matched pixels enter, all M rows of each. ``value`` is NaN when none did.
+    """
+
+    def __init__(self, counter_max: int) -> None:
+        self.counter_max = counter_max
+        self.total = 0.0
+        self.values = 0
+
+    def add(self, counts: np.ndarray, posterior: np.ndarray, matched: np.ndarray) -> None:
+        m = counts.shape[-1]
+        c = np.asarray(counts).reshape(-1, m)
+        p = np.asarray(posterior).reshape(-1, m)
+        sel = np.asarray(matched, dtype=bool).reshape(-1)
+        if c.shape != p.shape or sel.shape[0] != c.shape[0]:
+            raise ValueError(
+                f"shapes differ: counts {counts.shape}, posterior {posterior.shape}, matched {matched.shape}"
+            )
+        block = 1 << 15  # blocks of pixels keep the float temporaries small
+        for i in range(0, c.shape[0], block):
+            s = sel[i : i + block]
+            if not s.any():
+                continue
+            pm = p[i : i + block][s]
+            est = c[i : i + block][s].astype(np.float64) / self.counter_max
+            diff = est - pm / pm.max(axis=-1, keepdims=True)
+            self.total += float(np.square(diff).sum())
+            self.values += diff.size
+
+    @property
+    def value(self) -> float:
+        return math.sqrt(self.total / self.values) if self.values else math.nan
+
+
 def rms_error(counts: np.ndarray, counter_max: int, posterior: np.ndarray, matched: np.ndarray) -> float:
     """RMS of counts/n_max - posterior/max(posterior) over ``matched`` pixels and all rows.
 
     ``counts`` and ``posterior`` are (..., M); ``matched`` is the leading shape (bool).
     NaN when no pixel is matched.
     """
-    m = counts.shape[-1]
-    c = np.asarray(counts).reshape(-1, m)
-    p = np.asarray(posterior).reshape(-1, m)
-    sel = np.asarray(matched, dtype=bool).reshape(-1)
-    if c.shape != p.shape or sel.shape[0] != c.shape[0]:
-        raise ValueError(
-            f"shapes differ: counts {counts.shape}, posterior {posterior.shape}, matched {matched.shape}"
-        )
-    if not sel.any():
-        return math.nan
-    total = 0.0
-    n = 0
-    block = 1 << 15  # blocks of pixels keep the float temporaries small on full frames
-    for i in range(0, c.shape[0], block):
-        s = sel[i : i + block]
-        if not s.any():
-            continue
-        pm = p[i : i + block][s]
-        est = c[i : i + block][s].astype(np.float64) / counter_max
-        diff = est - pm / pm.max(axis=-1, keepdims=True)
-        total += float(np.square(diff).sum())
-        n += diff.size
-    return math.sqrt(total / n)
+    acc = RmsAccumulator(counter_max)
+    acc.add(counts, posterior, matched)
+    return acc.value
 
 
 def f1_score(predicted: np.ndarray, actual: np.ndarray) -> float:
@@ -143,7 +151,7 @@ def sgbm_disparity(left: np.ndarray, right: np.ndarray, dmax: int) -> np.ndarray
         return None
     disp = raw.astype(np.float64) / 16.0
     disp[raw < 0] = -1.0
-    return image_region(disp, dmax)
+    return OutputRegion.of_image(disp.shape, dmax).cut(disp)
 
 
 def _clean(v: object) -> object:
@@ -196,14 +204,21 @@ class RunMetrics:
 
 
 def evaluate(prepared: Prepared, run: MachineRun, sgbm: bool | None = None) -> RunMetrics:
-    """All figures of one machine run against the prepared reference (and gt)."""
-    ref = prepared.reference
-    n_max = run.machine.counter_max
+    """All figures of one machine run against the prepared reference (and gt).
+
+    The RMS error needs the float64 posterior: it is recomputed band by band and
+    accumulated, so memory stays at one band whatever the frame size.
+    """
+    ref_map = prepared.reference_map
     machine_nm = run.map < 0  # no-match row won, or watchdog timeout
-    ref_nm = ref.map < 0
+    ref_nm = ref_map < 0
+    rms = RmsAccumulator(run.machine.counter_max)
+    for rows, band in prepared.reference_bands():
+        rms.add(run.counts[rows], band.posterior, band.map >= 0)
     bad = None
+    sgbm_map = None
     if prepared.gt is not None:
-        methods = {"machine": run.map, "reference": ref.map}
+        methods = {"machine": run.map, "reference": ref_map}
         if sgbm is None or sgbm:
             sgbm_map = sgbm_disparity(prepared.left, prepared.right, prepared.model.dmax)
             if sgbm_map is not None:  # too narrow for SGBM: the report simply has no SGBM figures
@@ -222,12 +237,12 @@ def evaluate(prepared: Prepared, run: MachineRun, sgbm: bool | None = None) -> R
     return RunMetrics(
         pixels=int(run.map.size),
         cycles=cycle_stats(run.cycles),
-        rms_error=rms_error(run.counts, n_max, ref.posterior, ~ref_nm),
+        rms_error=rms.value,
         nomatch_f1=f1_score(machine_nm, ref_nm),
-        map_agreement=map_agreement(run.map, ref.map),
+        map_agreement=map_agreement(run.map, ref_map),
         timeouts=int(run.timeout.sum()),
         machine_nomatch=int(machine_nm.sum()),
         reference_nomatch=int(ref_nm.sum()),
         bad=bad,
-        sgbm_map=methods.get("sgbm") if prepared.gt is not None else None,
+        sgbm_map=sgbm_map,
     )

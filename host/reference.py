@@ -8,10 +8,13 @@ exact ties go to the lowest index, so no match wins only when strictly more prob
 
 ``reference_fast`` is a numba loop with one lookup table per feature instead of exp;
 ``reference_plain`` is the vectorized float64 formula, kept as its test oracle.
+Large frames go band by band (:func:`reference_bands`, :func:`reference_map`), so the
+float64 posterior volume (H x W x (Dmax+2) x 8 bytes) is never held whole.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numba
@@ -20,8 +23,18 @@ import numpy as np
 from .features import FeatureSums, feature_sums
 from .images import validate_pair
 from .likelihoods import LikelihoodTables, ModelParams, likelihood_tables, likelihoods_plain
+from .region import OutputRegion
 
-__all__ = ["Reference", "reference", "reference_fast", "reference_plain", "map_from_index", "warm_up"]
+__all__ = [
+    "Reference",
+    "reference",
+    "reference_fast",
+    "reference_bands",
+    "reference_map",
+    "reference_plain",
+    "map_from_index",
+    "warm_up",
+]
 
 
 @dataclass
@@ -81,17 +94,22 @@ def reference_fast(
     model: ModelParams,
     tables: LikelihoodTables | None = None,
     out: np.ndarray | None = None,
+    rows: slice | None = None,
 ) -> Reference:
-    """The reference by a compiled loop over pixels and disparities (2 threads here)."""
+    """The reference of output rows ``rows`` (default all) by a compiled loop (2 threads here).
+
+    ``out``, if given, receives the posterior: float64 of shape (rows, Wo, Dmax+2).
+    """
     tables = tables if tables is not None else likelihood_tables(model)
-    h4, w4 = left.shape
-    wo = w4 - model.dmax
-    shape = (h4, wo, model.hypotheses)
+    region = OutputRegion.of_features(left.shape, model.dmax)
+    if rows is not None:
+        left, right = left.band(rows), right.band(rows)
+    shape = (left.shape[0], region.shape[1], model.hypotheses)
     if out is None:
         out = np.empty(shape)
     elif out.shape != shape or out.dtype != np.float64:
         raise ValueError(f"out must be float64 of shape {shape}, got {out.dtype} {out.shape}")
-    idx = np.empty((h4, wo), dtype=np.int16)
+    idx = np.empty(shape[:2], dtype=np.int16)
     _reference_kernel(
         left.m25,
         right.m25,
@@ -109,6 +127,39 @@ def reference_fast(
     )
     idx[idx == model.dmax + 1] = -1
     return Reference(out, idx)
+
+
+def reference_bands(
+    left: FeatureSums,
+    right: FeatureSums,
+    model: ModelParams,
+    band_rows: int | None = None,
+    tables: LikelihoodTables | None = None,
+) -> Iterator[tuple[slice, Reference]]:
+    """The reference band by band: (output rows, their Reference), top to bottom.
+
+    One posterior buffer is reused: a band's posterior is overwritten by the next band
+    (copy it to keep it). Memory: one band, about ``BAND_PIXELS`` x (Dmax+2) x 8 bytes.
+    """
+    tables = tables if tables is not None else likelihood_tables(model)
+    region = OutputRegion.of_features(left.shape, model.dmax)
+    buffer: np.ndarray | None = None
+    for rows in region.bands(band_rows):
+        n = rows.stop - rows.start
+        if buffer is None or buffer.shape[0] < n:
+            buffer = np.empty((n, region.shape[1], model.hypotheses))
+        yield rows, reference_fast(left, right, model, tables, out=buffer[:n], rows=rows)
+
+
+def reference_map(
+    left: FeatureSums, right: FeatureSums, model: ModelParams, band_rows: int | None = None
+) -> np.ndarray:
+    """The MAP (Ho, Wo) int16 (-1 = no match) of every output pixel, band by band."""
+    region = OutputRegion.of_features(left.shape, model.dmax)
+    out = np.empty(region.shape, dtype=np.int16)
+    for rows, band in reference_bands(left, right, model, band_rows):
+        out[rows] = band.map
+    return out
 
 
 _warm = False

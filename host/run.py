@@ -1,9 +1,11 @@
 """The run API: a rectified pair -> likelihood memories -> the machine -> a compared result.
 
-``prepare`` computes what does not depend on the machine (features, the float64 reference,
-ground truth cut to the output region); ``run_machine`` streams the likelihood memories
+``prepare`` computes what does not depend on the machine (features, the float64 reference
+MAP, ground truth cut to the output region); ``run_machine`` streams the likelihood memories
 through an engine one chunk of map rows at a time (engines keep their LFSR state across
 calls, so chunking does not change results); ``run_pair`` does both and the metrics.
+Memory grows with the outputs (per-pixel maps and counts), not with frame x Dmax: the
+float64 posterior is only ever computed one band of rows at a time.
 """
 
 from __future__ import annotations
@@ -15,50 +17,28 @@ from dataclasses import dataclass, field
 import numpy as np
 from tqdm import tqdm
 
+from bayesmachine.outputs import require_memory
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.engines import ENGINES, get_engine
 
-from .features import FeatureSums, feature_sums
+from .features import feature_sums
 from .images import validate_pair
 from .likelihoods import ModelParams, QuantizedTables, likelihood_tables, memory_words
 from .metrics import RunMetrics, evaluate, gt_region
-from .reference import Reference, reference_fast, warm_up
+from .records import MachineRun, Prepared, counts_dtype
+from .reference import reference_map, warm_up
+from .region import OutputRegion
 
-__all__ = ["ENGINES", "Prepared", "MachineRun", "RunOutcome", "prepare", "run_machine", "run_pair"]
-
-@dataclass
-class Prepared:
-    """Everything about a pair that does not depend on the machine."""
-
-    left: np.ndarray
-    right: np.ndarray
-    model: ModelParams
-    features: tuple[FeatureSums, FeatureSums]
-    reference: Reference
-    reference_seconds: float
-    gt: np.ndarray | None = None  # ground truth cut to the output region (map coordinates)
-    gt_image: np.ndarray | None = None  # ground truth in image coordinates (for SGBM)
-
-    @property
-    def shape(self) -> tuple[int, int]:
-        """Output region (rows, columns) in map pixels."""
-        return self.reference.map.shape  # type: ignore[return-value]
-
-
-@dataclass
-class MachineRun:
-    """Per-pixel machine results laid out over the output region."""
-
-    engine: str
-    machine: MachineParams
-    map: np.ndarray  # (Ho, Wo) int16, -1 = no match (timeouts included)
-    counts: np.ndarray  # (Ho, Wo, M) uint32
-    cycles: np.ndarray  # (Ho, Wo) int64
-    nomatch: np.ndarray  # (Ho, Wo) bool, the no-match row won
-    timeout: np.ndarray  # (Ho, Wo) bool, the watchdog stopped the run
-    seconds: float  # time inside the engine's run calls
-    words_seconds: float  # time building likelihood memories
-    wall_cycles: int | None = None  # RTL engines: clock cycles including loading (None: model)
+__all__ = [
+    "ENGINES",
+    "Prepared",
+    "MachineRun",
+    "RunOutcome",
+    "prepare",
+    "run_machine",
+    "run_pair",
+    "result_bytes",
+]
 
 
 @dataclass
@@ -68,20 +48,26 @@ class RunOutcome:
     metrics: RunMetrics = field(repr=False)
 
 
+def result_bytes(region: OutputRegion, machine: MachineParams) -> int:
+    """Bytes of a run's per-pixel results: counts, map, cycles, no-match and timeout flags."""
+    per_pixel = machine.rows * counts_dtype(machine.counter_max).itemsize + 2 + 8 + 1 + 1
+    return region.pixels * per_pixel
+
+
 def prepare(
     left: np.ndarray, right: np.ndarray, model: ModelParams, gt: np.ndarray | None = None
 ) -> Prepared:
-    """Validate the pair, compute the features and the float64 reference."""
+    """Validate the pair, compute the features and the float64 reference MAP (band by band)."""
     validate_pair(left, right, model.dmax)
     if gt is not None and gt.shape != left.shape:
         raise ValueError(f"ground truth shape {gt.shape} differs from the images' {left.shape}")
     warm_up()  # keep numba's cache load / compilation out of reference_seconds
     t0 = time.perf_counter()
     feats = (feature_sums(left), feature_sums(right))
-    ref = reference_fast(*feats, model)
+    ref_map = reference_map(*feats, model)
     seconds = time.perf_counter() - t0
     cut = gt_region(gt, model.dmax) if gt is not None else None
-    return Prepared(left, right, model, feats, ref, seconds, cut, gt)
+    return Prepared(left, right, model, feats, ref_map, seconds, cut, gt)
 
 
 def _want_progress(progress: bool | None) -> bool:
@@ -106,12 +92,17 @@ def run_machine(
             f"machine rows ({machine.rows}) must be dmax + 2 = {model.hypotheses}; "
             f"build it with MachineParams.for_disparity({model.dmax}, ...)"
         )
-    eng = get_engine(engine, machine, **(engine_options or {}))
-    qtables = QuantizedTables(likelihood_tables(model), machine.word_bits)
     ho, wo = prepared.shape
     m = model.hypotheses
-    counts = np.zeros((ho, wo, m), np.uint32)
-    flat_map = np.zeros((ho, wo), np.int32)
+    require_memory(
+        result_bytes(prepared.region, machine),
+        f"the per-pixel results of {ho}x{wo} pixels x {m} counters",
+        "use --crop or a smaller --dmax",
+    )
+    eng = get_engine(engine, machine, **(engine_options or {}))
+    qtables = QuantizedTables(likelihood_tables(model), machine.word_bits)
+    counts = np.zeros((ho, wo, m), counts_dtype(machine.counter_max))
+    flat_map = np.zeros((ho, wo), np.int16)  # row indices < 4096
     nomatch = np.zeros((ho, wo), bool)
     timeout = np.zeros((ho, wo), bool)
     cycles = np.zeros((ho, wo), np.int64)
@@ -141,7 +132,7 @@ def run_machine(
         if close is not None:
             close()  # the Verilator harness is a process: end it now, not at garbage collection
     # Timeouts count as no match: the machine gave no answer within its watchdog.
-    disp = np.where(nomatch | timeout, -1, flat_map).astype(np.int16)
+    disp = np.where(nomatch | timeout, np.int16(-1), flat_map)
     return MachineRun(engine, machine, disp, counts, cycles, nomatch, timeout, engine_s, words_s, wall)
 
 

@@ -10,12 +10,12 @@ from bayesmachine.host.metrics import (
     bad_rates,
     cycle_stats,
     f1_score,
-    image_region,
     map_agreement,
     rms_error,
     sgbm_disparity,
     sgbm_numdisparities,
 )
+from bayesmachine.host.region import OutputRegion
 
 
 def test_f1():
@@ -64,6 +64,7 @@ def test_sgbm_on_random_dots():
     assert sgbm_numdisparities(80) == 96 and sgbm_numdisparities(15) == 16 and sgbm_numdisparities(16) == 32
     left, right, gt = random_dot_stereogram(height=60, width=120, background=6, square=6, seed=2)
     d = sgbm_disparity(left, right, dmax=15)
-    assert d.shape == image_region(gt, 15).shape == (56, 120 - 4 - 15)
+    region = OutputRegion.of_image(gt.shape, 15)
+    assert d.shape == region.cut(gt).shape == region.shape == (56, 120 - 4 - 15)
     # A fronto-parallel textured plane: SGBM should find it nearly everywhere.
-    assert bad_rates(d, image_region(gt, 15), 1)["matched"] < 0.1
+    assert bad_rates(d, region.cut(gt), 1)["matched"] < 0.1

@@ -1,0 +1,245 @@
+"""The one argument helper of every ``bayesmachine`` command that builds a machine.
+
+Each machine option is declared once, in :data:`MACHINE_OPTIONS`: its ``MachineParams``
+field, flag, type, choices and default all come from ``bayesmachine.params``, so ``emit``,
+``run``, ``sweep`` (and ``synth``) accept the same spellings (``--seed 0x10`` everywhere)
+and show the same defaults. A new machine option (e.g. a random source's own parameter)
+is one :func:`add_option` call; commands pick it up through :func:`add_machine_options`
+and :func:`machine_params_from_args`.
+
+Type functions raise :class:`argparse.ArgumentTypeError` carrying the project's own
+message, so argparse prints it instead of "invalid value".
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass
+from typing import Any, TypeVar
+
+from bayesmachine.params import (
+    DEFAULT_COLUMNS,
+    DEFAULT_COUNTER_MAX,
+    DEFAULT_DMAX,
+    DEFAULT_LANES,
+    DEFAULT_LFSR_BITS,
+    DEFAULT_MAX_CYCLES,
+    DEFAULT_PRIOR,
+    DEFAULT_RNG,
+    DEFAULT_SEED,
+    DEFAULT_TIE_BREAK,
+    DEFAULT_WORD_BITS,
+    PRIORS,
+    RNG_KINDS,
+    TIE_BREAKS,
+    MachineParams,
+    ParameterError,
+)
+
+__all__ = [
+    "MachineOption",
+    "MACHINE_OPTIONS",
+    "add_option",
+    "add_dmax_option",
+    "add_machine_options",
+    "machine_params_from_args",
+    "argument_type",
+    "int_arg",
+    "counter_max_list",
+    "source_kinds",
+    "rng_help",
+]
+
+T = TypeVar("T")
+
+
+def int_arg(text: str) -> int:
+    """An integer in any Python spelling: ``16``, ``0x10``, ``0b10000``, ``0o20`` (and ``010`` = 10)."""
+    s = text.strip().replace("_", "")
+    try:
+        return int(s, 0)
+    except ValueError:
+        pass
+    try:
+        return int(s, 10)  # base 0 refuses leading zeros ("010"); read them as decimal
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer (e.g. 16 or 0x10), got {text!r}") from None
+
+
+def argument_type(parse: Callable[[str], T], name: str | None = None) -> Callable[[str], T]:
+    """Wrap ``parse`` (raising ValueError with a message) as an argparse type keeping that message."""
+
+    def convert(text: str) -> T:
+        try:
+            return parse(text)
+        except argparse.ArgumentTypeError:
+            raise
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+
+    convert.__name__ = name or getattr(parse, "__name__", "value")
+    return convert
+
+
+def counter_max_list(text: str) -> list[int]:
+    """``N,N,...`` counter max values, sorted ascending with repeats removed."""
+    values = []
+    for part in text.split(","):
+        if part.strip():
+            try:
+                values.append(int_arg(part))
+            except argparse.ArgumentTypeError:
+                raise argparse.ArgumentTypeError(
+                    f"counter max values must be comma-separated integers, got {text!r}"
+                ) from None
+    if not values:
+        raise argparse.ArgumentTypeError("give at least one counter max value")
+    return sorted(set(values))
+
+
+def source_kinds() -> Mapping[str, Any] | None:
+    """The random-source registry ``bayesmachine.sources.SOURCE_KINDS``, or None where it is absent."""
+    try:
+        from bayesmachine.sources import SOURCE_KINDS  # type: ignore[import-not-found, unused-ignore]
+    except ImportError:
+        return None
+    return SOURCE_KINDS  # type: ignore[no-any-return, unused-ignore]
+
+
+def rng_help() -> str:
+    kinds = source_kinds()
+    if kinds:
+        described = "; ".join(f"{name}: {kinds[name].description}" for name in RNG_KINDS if name in kinds)
+    else:
+        described = ", ".join(RNG_KINDS)
+    return f"random source ({described}) (default {DEFAULT_RNG})"
+
+
+@dataclass(frozen=True)
+class MachineOption:
+    """One command-line option that sets one :class:`MachineParams` field."""
+
+    field: str  # the MachineParams keyword it sets (and the argparse dest)
+    flag: str
+    help: str  # may use %(default)s
+    type: Callable[[str], Any] = int_arg
+    default: Any = None  # None: leave the field to MachineParams.for_disparity
+    choices: tuple[str, ...] | None = None
+    metavar: str | None = None
+
+    def add_to(self, group: argparse._ActionsContainer, **changes: Any) -> argparse.Action:
+        kwargs: dict[str, Any] = {
+            "dest": self.field,
+            "type": self.type,
+            "default": self.default,
+            "help": self.help,
+            "metavar": self.metavar,
+        }
+        if self.choices is not None:
+            kwargs["choices"] = self.choices
+            kwargs.pop("metavar")
+            kwargs["type"] = str
+        kwargs.update(changes)
+        return group.add_argument(self.flag, **kwargs)
+
+
+MACHINE_OPTIONS: dict[str, MachineOption] = {}
+
+
+def add_option(option: MachineOption) -> MachineOption:
+    """Declare a machine option (once, at import) for every command that builds machines."""
+    if option.field in MACHINE_OPTIONS:
+        raise ValueError(f"machine option {option.field!r} is declared twice")
+    MACHINE_OPTIONS[option.field] = option
+    return option
+
+
+add_option(MachineOption("columns", "--columns", "data-term operator columns N (default %(default)s)",
+                         default=DEFAULT_COLUMNS, metavar="N"))
+add_option(MachineOption("word_bits", "--word-bits",
+                         "comparator resolution W; likelihood-memory words are W+1 bits "
+                         "(default %(default)s)",
+                         default=DEFAULT_WORD_BITS, metavar="W"))
+add_option(MachineOption("counter_max", "--counter-max",
+                         "counter max n_max: a counter overflows on its (n_max+1)-th 1 (default %(default)s)",
+                         default=DEFAULT_COUNTER_MAX, metavar="N"))
+add_option(MachineOption("rng", "--rng", rng_help(), default=DEFAULT_RNG, choices=RNG_KINDS))
+add_option(MachineOption("lfsr_bits", "--lfsr-bits",
+                         "length L of each operator's LFSR, period 2^L-1 (default %(default)s)",
+                         default=DEFAULT_LFSR_BITS, metavar="L"))
+add_option(MachineOption("seed", "--seed",
+                         "machine seed: LFSR polynomials and start states; 0x.. accepted "
+                         "(default %(default)s)",
+                         default=DEFAULT_SEED))
+add_option(MachineOption("max_cycles", "--max-cycles",
+                         "watchdog: a pixel stops as a timeout after this many cycles (default %(default)s)",
+                         default=DEFAULT_MAX_CYCLES, metavar="N"))
+add_option(MachineOption("tie_break", "--tie-break",
+                         "MAP encoder rule when several counters overflow in one cycle (default %(default)s)",
+                         default=DEFAULT_TIE_BREAK, choices=TIE_BREAKS))
+add_option(MachineOption("prior", "--prior",
+                         "uniform: always-on 1s enter each row; loaded: an extra operator column 0 holds a "
+                         "prior word per row (default %(default)s)",
+                         default=DEFAULT_PRIOR, choices=PRIORS))
+add_option(MachineOption("lanes", "--lanes",
+                         f"likelihood-memory words per load beat (default {DEFAULT_LANES}, or one pixel's "
+                         "words if fewer)", metavar="N"))
+
+
+def add_dmax_option(group: argparse._ActionsContainer) -> argparse.Action:
+    """``--dmax``: rows = Dmax + 2 (disparities 0..Dmax and no match)."""
+    return group.add_argument("--dmax", type=int_arg, default=DEFAULT_DMAX, metavar="DMAX",
+                              help="largest disparity Dmax: the machine has Dmax+2 rows "
+                              "(default %(default)s)")
+
+
+def add_machine_options(
+    parser: argparse._ActionsContainer,
+    skip: Iterable[str] = (),
+    title: str | None = "machine",
+    help: Mapping[str, str] | None = None,
+    **changes: Mapping[str, Any],
+) -> argparse._ActionsContainer:
+    """Add every declared machine option except the fields in ``skip``; returns the group.
+
+    ``help`` replaces an option's help text; ``changes`` maps a field to argparse keyword
+    overrides (e.g. ``counter_max={"type": counter_max_list, "default": [1, 2]}`` for a sweep).
+    """
+    skip = set(skip)
+    unknown = (skip | set(changes) | set(help or {})) - set(MACHINE_OPTIONS)
+    if unknown:
+        raise ValueError(f"no machine option named {sorted(unknown)}")
+    group = parser.add_argument_group(title) if title else parser
+    for field, option in MACHINE_OPTIONS.items():
+        if field in skip:
+            continue
+        extra = dict(changes.get(field, {}))
+        if help and field in help:
+            extra["help"] = help[field]
+        option.add_to(group, **extra)
+    return group
+
+
+def machine_params_from_args(args: argparse.Namespace, dmax: int, **overrides: Any) -> MachineParams:
+    """``MachineParams.for_disparity(dmax, ...)`` from the declared options present in ``args``.
+
+    ``overrides`` win over ``args`` (a sweep passes each ``counter_max``). Options left at
+    None are left to ``for_disparity``'s defaults. A ParameterError names the option's flag.
+    """
+    kwargs: dict[str, Any] = {}
+    for field in MACHINE_OPTIONS:
+        value = getattr(args, field, None)
+        if value is not None and not isinstance(value, list):
+            kwargs[field] = value
+    kwargs.update(overrides)
+    try:
+        return MachineParams.for_disparity(dmax, **kwargs)
+    except ParameterError as exc:
+        message = str(exc)
+        for field, option in MACHINE_OPTIONS.items():
+            if message.startswith(field) and hasattr(args, field):
+                raise ParameterError(f"{option.flag}: {message}") from None
+        if message.startswith("dmax"):
+            raise ParameterError(f"--dmax: {message}") from None
+        raise

@@ -1,0 +1,283 @@
+"""Files a command writes are complete or absent.
+
+* :func:`atomic_file`: write one file under a temporary name in the same directory, fsync,
+  then ``os.replace`` it onto the final name (``emit -o``, ``reference -o``).
+* :class:`OutputDir`: a transaction over a command's output directory (``run``, ``sweep``).
+  It first removes every file name the command can write that an earlier run left
+  (the final report first, so an interrupted rerun never shows an old report beside new
+  files), stages each new file under a temporary name, and on :meth:`OutputDir.commit`
+  renames them into place with the report last: a report's presence means the run is
+  complete. On any exception (KeyboardInterrupt included) the staged files are removed.
+* :class:`NpzWriter`: an ``.npz`` written array by array, one array possibly streamed in
+  chunks along its first axis, so a volume larger than memory never has to be held.
+* :func:`require_memory`, :func:`require_disk`: refuse up front, with the size needed.
+
+An OSError while writing names the final path, not the temporary one.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import os
+import shutil
+import zipfile
+from collections.abc import Callable, Iterable, Iterator
+from pathlib import Path
+from types import TracebackType
+
+import numpy as np
+
+__all__ = [
+    "atomic_file",
+    "OutputDir",
+    "NpzWriter",
+    "available_memory",
+    "require_memory",
+    "require_disk",
+    "format_bytes",
+]
+
+_TMP_MARK = ".partial-"
+
+
+def _temp_name(path: Path) -> Path:
+    # Hidden, same directory (so os.replace is a rename), same suffix (writers infer formats from it).
+    return path.with_name(f".{path.stem}{_TMP_MARK}{os.getpid()}{path.suffix}")
+
+
+def _fsync_file(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def _fsync_dir(directory: Path) -> None:
+    with contextlib.suppress(OSError):  # not every filesystem lets a directory be fsynced
+        fd = os.open(directory, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+
+def _named(exc: OSError, path: Path) -> OSError:
+    """The same error, naming the file the user asked for."""
+    return type(exc)(exc.errno, exc.strerror or str(exc), str(path))
+
+
+def _remove(path: Path) -> None:
+    with contextlib.suppress(FileNotFoundError):
+        path.unlink()
+
+
+def _check_target(path: Path) -> None:
+    if path.is_dir():
+        raise IsADirectoryError(errno.EISDIR, "is a directory, not a file", str(path))
+    parent = path.parent
+    if not parent.exists():
+        raise FileNotFoundError(errno.ENOENT, "directory does not exist", str(parent))
+    if not parent.is_dir():
+        raise NotADirectoryError(errno.ENOTDIR, "is not a directory", str(parent))
+
+
+@contextlib.contextmanager
+def atomic_file(path: str | Path) -> Iterator[Path]:
+    """Yield a temporary path to write; on success it replaces ``path``, on failure it is removed."""
+    path = Path(path)
+    _check_target(path)
+    tmp = _temp_name(path)
+    try:
+        yield tmp
+        if not tmp.exists():
+            raise FileNotFoundError(errno.ENOENT, "the writer produced no file", str(path))
+        _fsync_file(tmp)
+        os.replace(tmp, path)
+    except OSError as exc:
+        _remove(tmp)
+        raise _named(exc, path) from exc
+    except BaseException:
+        _remove(tmp)
+        raise
+    _fsync_dir(path.parent)
+
+
+def atomic_write_text(path: str | Path, text: str) -> Path:
+    """Write ``text`` to ``path`` atomically."""
+    path = Path(path)
+    with atomic_file(path) as tmp:
+        tmp.write_text(text)
+    return path
+
+
+class OutputDir:
+    """A transaction over the files one command writes into a directory.
+
+    ``names``: every file name the command can write there (stale ones are removed);
+    ``last``: the name committed last (the report).
+    """
+
+    def __init__(self, directory: str | Path, names: Iterable[str], last: str) -> None:
+        self.directory = Path(directory)
+        self.names = tuple(dict.fromkeys([last, *names]))  # the report first when clearing
+        self.last = last
+        self._staged: dict[str, Path] = {}
+        self._committed = False
+
+    def __enter__(self) -> OutputDir:
+        d = self.directory
+        if d.exists() and not d.is_dir():
+            raise NotADirectoryError(errno.ENOTDIR, "exists and is not a directory", str(d))
+        try:
+            d.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise _named(exc, d) from exc
+        for name in self.names:
+            target = d / name
+            try:
+                if target.is_dir():
+                    raise IsADirectoryError(errno.EISDIR, "is a directory (an output file name)", str(target))
+                _remove(target)
+                # Temporary files a killed earlier run left behind.
+                for old in d.glob(f".{Path(name).stem}{_TMP_MARK}*{Path(name).suffix}"):
+                    _remove(old)
+            except OSError as exc:
+                raise _named(exc, target) from exc
+        return self
+
+    def path(self, name: str) -> Path:
+        """The temporary path to write ``name`` to (committed under ``name``)."""
+        if name not in self.names:
+            raise ValueError(f"{name!r} is not one of this command's outputs {self.names}")
+        tmp = self._staged.get(name)
+        if tmp is None:
+            tmp = self._staged[name] = _temp_name(self.directory / name)
+        return tmp
+
+    def write(self, name: str, writer: Callable[[Path], object]) -> Path:
+        """Stage ``name`` by calling ``writer(temporary_path)``; an OSError names ``name``'s path."""
+        tmp = self.path(name)
+        try:
+            writer(tmp)
+        except OSError as exc:
+            raise _named(exc, self.directory / name) from exc
+        return self.directory / name
+
+    def commit(self) -> list[Path]:
+        """Rename the staged files into place, ``last`` at the very end; returns the final paths."""
+        order = [n for n in self._staged if n != self.last]
+        if self.last in self._staged:
+            order.append(self.last)
+        done = []
+        for name in order:
+            tmp, final = self._staged[name], self.directory / name
+            try:
+                if not tmp.exists():
+                    raise FileNotFoundError(errno.ENOENT, "was never written", str(final))
+                _fsync_file(tmp)
+                if name == self.last:
+                    _fsync_dir(self.directory)  # everything else is in place before the report appears
+                os.replace(tmp, final)
+            except OSError as exc:
+                raise _named(exc, final) from exc
+            done.append(final)
+        _fsync_dir(self.directory)
+        self._committed = True
+        return done
+
+    def __exit__(
+        self, kind: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        # Whatever was not committed goes: never a half-written file under any name.
+        for tmp in self._staged.values():
+            _remove(tmp)
+        if kind is None and not self._committed:
+            raise RuntimeError("OutputDir left without commit()")
+
+
+class NpzWriter:
+    """Write an uncompressed ``.npz`` (what ``np.savez`` writes) array by array.
+
+    :meth:`add_stream` writes an array from chunks along axis 0, so only one chunk is in
+    memory. ``np.load`` reads the file as usual.
+    """
+
+    def __init__(self, path: str | Path) -> None:
+        self._zip = zipfile.ZipFile(path, "w", compression=zipfile.ZIP_STORED, allowZip64=True)
+
+    def __enter__(self) -> NpzWriter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._zip.close()
+
+    def add(self, name: str, array: np.ndarray) -> None:
+        with self._zip.open(f"{name}.npy", "w", force_zip64=True) as f:
+            np.lib.format.write_array(f, np.asanyarray(array), allow_pickle=False)
+
+    def add_stream(
+        self, name: str, shape: tuple[int, ...], dtype: np.dtype | type, chunks: Iterable[np.ndarray]
+    ) -> None:
+        dtype = np.dtype(dtype)
+        header = {"descr": np.lib.format.dtype_to_descr(dtype), "fortran_order": False, "shape": tuple(shape)}
+        rows = 0
+        with self._zip.open(f"{name}.npy", "w", force_zip64=True) as f:
+            np.lib.format.write_array_header_2_0(f, header)
+            for chunk in chunks:
+                c = np.ascontiguousarray(chunk, dtype=dtype)
+                if c.shape[1:] != tuple(shape[1:]):
+                    raise ValueError(f"{name}: chunk of shape {c.shape} does not fit {tuple(shape)}")
+                f.write(c.data)
+                rows += c.shape[0]
+        if rows != shape[0]:
+            raise ValueError(f"{name}: chunks gave {rows} rows, the header says {shape[0]}")
+
+
+def format_bytes(n: float) -> str:
+    for unit in ("B", "KiB", "MiB", "GiB"):
+        if n < 1024 or unit == "GiB":
+            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
+        n /= 1024
+    raise AssertionError("unreachable")
+
+
+def available_memory() -> int | None:
+    """Bytes of memory available to a new allocation (Linux MemAvailable), None if unknown."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def require_memory(nbytes: int, what: str, hint: str = "") -> None:
+    """Refuse up front (ValueError) when ``nbytes`` exceeds the memory available now."""
+    avail = available_memory()
+    if avail is not None and nbytes > avail:
+        raise ValueError(
+            f"{what} needs {format_bytes(nbytes)} of memory, only {format_bytes(avail)} is available"
+            + (f"; {hint}" if hint else "")
+        )
+
+
+def require_disk(path: str | Path, nbytes: int, what: str, hint: str = "") -> None:
+    """Refuse up front (ValueError) when the filesystem of ``path`` has less than ``nbytes`` free."""
+    directory = Path(path)
+    directory = directory if directory.is_dir() else directory.parent
+    try:
+        free = shutil.disk_usage(directory).free
+    except OSError:
+        return  # the write itself will say what is wrong with the directory
+    if nbytes > free:
+        raise ValueError(
+            f"{what} needs {format_bytes(nbytes)} on disk, {directory} has {format_bytes(free)} free"
+            + (f"; {hint}" if hint else "")
+        )

@@ -1,0 +1,72 @@
+"""What a run produces, shared by ``run`` (which fills it) and ``metrics`` (which reads it)."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import numpy as np
+
+from bayesmachine.params import MachineParams
+
+from .features import FeatureSums
+from .likelihoods import ModelParams
+from .reference import Reference, reference_bands
+from .region import OutputRegion
+
+__all__ = ["Prepared", "MachineRun", "counts_dtype"]
+
+
+def counts_dtype(counter_max: int) -> np.dtype:
+    """The smallest unsigned dtype holding every counter value (0 .. n_max) of a machine."""
+    for dtype in (np.uint8, np.uint16, np.uint32):
+        if counter_max <= np.iinfo(dtype).max:
+            return np.dtype(dtype)
+    raise ValueError(f"counter max {counter_max} does not fit 32 bits")
+
+
+@dataclass
+class Prepared:
+    """Everything about a pair that does not depend on the machine.
+
+    The reference is kept as its MAP only; its posterior is recomputed band by band where
+    a figure needs it (:meth:`reference_bands`), so no H x W x (Dmax+2) volume is held.
+    """
+
+    left: np.ndarray
+    right: np.ndarray
+    model: ModelParams
+    features: tuple[FeatureSums, FeatureSums]
+    reference_map: np.ndarray  # (Ho, Wo) int16, -1 = no match
+    reference_seconds: float
+    gt: np.ndarray | None = None  # ground truth cut to the output region (map coordinates)
+    gt_image: np.ndarray | None = None  # ground truth in image coordinates (for SGBM)
+
+    @property
+    def region(self) -> OutputRegion:
+        return OutputRegion.of_image(self.left.shape, self.model.dmax)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """Output region (rows, columns) in map pixels."""
+        return self.region.shape
+
+    def reference_bands(self, band_rows: int | None = None) -> Iterator[tuple[slice, Reference]]:
+        """The float64 reference (posterior and MAP) band by band; see ``reference.reference_bands``."""
+        return reference_bands(*self.features, self.model, band_rows)
+
+
+@dataclass
+class MachineRun:
+    """Per-pixel machine results laid out over the output region."""
+
+    engine: str
+    machine: MachineParams
+    map: np.ndarray  # (Ho, Wo) int16, -1 = no match (timeouts included)
+    counts: np.ndarray  # (Ho, Wo, M), the smallest unsigned dtype holding n_max (counts_dtype)
+    cycles: np.ndarray  # (Ho, Wo) int64
+    nomatch: np.ndarray  # (Ho, Wo) bool, the no-match row won
+    timeout: np.ndarray  # (Ho, Wo) bool, the watchdog stopped the run
+    seconds: float  # time inside the engine's run calls
+    words_seconds: float  # time building likelihood memories
+    wall_cycles: int | None = None  # RTL engines: clock cycles including loading (None: model)
