@@ -125,15 +125,19 @@ class OutputDir:
         self.last = last
         self._staged: dict[str, Path] = {}
         self._committed = False
+        self._created: list[Path] = []
 
     def __enter__(self) -> OutputDir:
         d = self.directory
         if d.exists() and not d.is_dir():
             raise NotADirectoryError(errno.ENOTDIR, "exists and is not a directory", str(d))
+        # The directories this transaction creates go again if it fails while they are empty.
+        missing = [p for p in (d, *d.parents) if not p.exists()]
         try:
             d.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise _named(exc, d) from exc
+        self._created = missing
         for name in self.names:
             target = d / name
             try:
@@ -193,6 +197,10 @@ class OutputDir:
         # Whatever was not committed goes: never a half-written file under any name.
         for tmp in self._staged.values():
             _remove(tmp)
+        if not self._committed:
+            for created in self._created:  # innermost first
+                with contextlib.suppress(OSError):
+                    created.rmdir()  # only if still empty
         if kind is None and not self._committed:
             raise RuntimeError("OutputDir left without commit()")
 
@@ -263,7 +271,7 @@ def require_memory(nbytes: int, what: str, hint: str = "") -> None:
     avail = available_memory()
     if avail is not None and nbytes > avail:
         raise ValueError(
-            f"{what} needs {format_bytes(nbytes)} of memory, only {format_bytes(avail)} is available"
+            f"{what}: {format_bytes(nbytes)} of memory needed, {format_bytes(avail)} available"
             + (f"; {hint}" if hint else "")
         )
 
@@ -278,6 +286,6 @@ def require_disk(path: str | Path, nbytes: int, what: str, hint: str = "") -> No
         return  # the write itself will say what is wrong with the directory
     if nbytes > free:
         raise ValueError(
-            f"{what} needs {format_bytes(nbytes)} on disk, {directory} has {format_bytes(free)} free"
+            f"{what}: {format_bytes(nbytes)} on disk needed, {directory} has {format_bytes(free)} free"
             + (f"; {hint}" if hint else "")
         )

@@ -75,7 +75,8 @@ def emit(params: MachineParams, path: str | Path) -> Path:
         text = rtlil.convert(top, name=TOP_NAME)
     else:
         text = verilog_text(top)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    if not path.parent.exists():
+        path.parent.mkdir(parents=True)
     return atomic_write_text(path, text)  # complete or absent, never a truncated file
 
 

@@ -274,7 +274,7 @@ def _cmd_reference(args: argparse.Namespace) -> int:
     # The posterior goes to disk band by band: memory holds one band, the disk the whole volume.
     require_disk(
         out, volume + region.pixels * 2 + 4096,
-        f"the posterior volume ({shape[0]}x{shape[1]}x{shape[2]} float64)",
+        f"the posterior volume ({shape[0]}x{shape[1]}x{shape[2]} float64, {format_bytes(volume)})",
         "use --crop or a smaller --dmax",
     )
     t0 = time.perf_counter()

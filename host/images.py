@@ -116,12 +116,16 @@ def load_image(path: str | Path) -> np.ndarray:
 
 
 def _load_npy(path: Path) -> np.ndarray:
+    with open(path, "rb") as f:
+        magic = f.read(len(np.lib.format.MAGIC_PREFIX))
+    if magic != np.lib.format.MAGIC_PREFIX:
+        raise ValueError(f"{path} is not a NumPy array file (.npy): it does not start with the NPY header")
     try:
         gt = np.load(path, allow_pickle=False)
-    except (ValueError, EOFError, OSError) as exc:  # no NPY header, truncated, or pickled objects
-        raise ValueError(f"{path} is not a NumPy array file (.npy): {exc}") from None
-    if not isinstance(gt, np.ndarray):
-        raise ValueError(f"{path} is not a NumPy array file (.npy): it holds several arrays (.npz)")
+    except ValueError as exc:  # e.g. an array of Python objects
+        raise ValueError(f"{path} is not a NumPy array of numbers: {exc}") from None
+    except (EOFError, OSError) as exc:
+        raise ValueError(f"{path} is not a readable NumPy array file (truncated or corrupt: {exc})") from None
     if not (np.issubdtype(gt.dtype, np.integer) or np.issubdtype(gt.dtype, np.floating)):
         raise ValueError(f"{path}: a disparity map must hold integers or floats, got {gt.dtype}")
     return gt

@@ -1,6 +1,14 @@
-"""Model parameters, quantization to memory words, and the likelihood-memory layout."""
+"""Model parameters, quantization to memory words, and the likelihood-memory layout.
+
+The expected words come from the paper's formulas computed directly in floats on a small
+hand-made pair (window means and gradients, exp, exact round-half-up), not from the
+lookup tables the code under test uses.
+"""
 
 import math
+import subprocess
+import sys
+from fractions import Fraction
 
 import numpy as np
 import pytest
@@ -41,11 +49,42 @@ def test_defaults_are_the_paper_table():
         ({"sigma_nm": math.inf}, "sigma_nm"),
         ({"dmax": -1}, "dmax"),
         ({"dmax": 2.5}, "dmax"),
+        ({"p0": math.nan}, "p0"),
+        ({"sigma_gh": 1e-300}, "sigma_gh"),  # 2 sigma^2 underflows to 0: NaN likelihoods
+        ({"sigma_gv": 1e200}, "sigma_gv"),  # 2 sigma^2 overflows to inf
+        ({"sigma_nm": -3.0}, "sigma_nm"),
+        ({"p_nm0": True}, "p_nm0"),
     ],
 )
 def test_bad_model_params_name_the_parameter(kwargs, name):
     with pytest.raises(ValueError, match=name):
         ModelParams(**kwargs)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "option"),
+    [({"sigma_m": 1e-300}, "--sigma-m/--sigma"), ({"p_nm0": 0.0}, "--p-nm0"), ({"p0": 2.0}, "--p0"),
+     ({"sigma_nm": 0.0}, "--sigma-nm"), ({"dmax": -2}, "--dmax")],
+)
+def test_model_errors_name_the_command_line_option(kwargs, option):
+    with pytest.raises(ValueError, match=f"^{option}: "):
+        ModelParams(**kwargs)
+
+
+def test_tiny_and_huge_sigmas_that_fit_float64_give_tables_in_0_1():
+    for sigma in (1e-150, 1e150):
+        t = likelihood_tables(ModelParams(sigma_m=sigma, sigma_gh=sigma, sigma_gv=sigma, sigma_nm=sigma))
+        for tab in (t.m, t.gh, t.gv, t.nomatch):
+            assert np.isfinite(tab).all() and tab.min() >= 0 and tab.max() <= 1
+
+
+def test_core_likelihood_module_imports_no_host_and_no_amaranth():
+    code = (
+        "import sys, bayesmachine.likelihood as l; l.likelihood_tables(l.ModelParams()); "
+        "bad = [m for m in sys.modules if m.startswith(('bayesmachine.host', 'amaranth', 'cv2'))]; "
+        "assert not bad, bad"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True)
 
 
 def test_likelihood_formula_values():
@@ -102,12 +141,51 @@ def test_words_match_plain_formula_and_layout(prior):
     one = 1 << 8
     # The no-match row: P(nomatch) then 1.0 in the other data columns.
     assert (words[:, 10, off + 1 :] == one).all()
-    # Row d, pixel (y, x): the quantized mean likelihood of |m_l(y, x+dmax) - m_r(y, x+dmax-d)|.
-    y, x, d = 2, 5, 4
-    q_m = quantize(likelihood_tables(model).m[abs(fl.m25[y, x + 9] - fr.m25[y, x + 9 - d])], 8)
-    assert words[y * wo + x, d, off] == q_m
     if off:
         assert (words[:, :, 0] == one).all()
+
+
+def _round_half_up(p: float, word_bits: int) -> int:
+    """q = round(p * 2^W), halves up, in exact rational arithmetic."""
+    x = Fraction(p) * (1 << word_bits)
+    q = math.floor(x)
+    return q + (1 if x - q >= Fraction(1, 2) else 0)
+
+
+def _features_at(img: np.ndarray, y: int, x: int) -> tuple[float, float, float]:
+    """The paper's m, gH, gV of the 5x5 window centred on image pixel (y, x), in floats."""
+    w = img[y - 2 : y + 3, x - 2 : x + 3].astype(np.float64)
+    mean = float(w.mean())
+    g_h = float((w[:, 3:].sum() - w[:, :2].sum()) / 20.0)  # right two columns - left two, per pixel pair
+    g_v = float((w[3:, :].sum() - w[:2, :].sum()) / 20.0)  # bottom two rows - top two
+    return mean, g_h, g_v
+
+
+def test_words_equal_the_paper_formula_computed_directly():
+    """Eq. 2 and 4 by hand on a 9x17 pair: L = p0 + (1-p0) exp(-(f_l - f_r)^2 / (2 sigma^2))."""
+    rng = np.random.default_rng(12)
+    left = rng.integers(0, 256, size=(9, 17), dtype=np.uint8)
+    right = np.roll(left, -2, axis=1) // 2 + rng.integers(0, 40, size=(9, 17), dtype=np.uint8)
+    model = ModelParams(dmax=3, p0=0.05, sigma_m=7.0, sigma_gh=9.0, sigma_gv=11.0, p_nm0=0.03, sigma_nm=5.0)
+    w = 10
+    machine = MachineParams.for_disparity(3, word_bits=w)
+    words = memory_words(feature_sums(left), feature_sums(right), model, machine)
+    sigmas = (model.sigma_m, model.sigma_gh, model.sigma_gv)
+    ho, wo = 9 - 4, 17 - 4 - 3
+    assert words.shape == (ho * wo, 5, 3)
+    for i in range(ho):
+        for j in range(wo):
+            y, x = i + 2, j + 3 + 2  # image pixel at the centre of output pixel (i, j)
+            f_left = _features_at(left, y, x)
+            for d in range(4):
+                f_right = _features_at(right, y, x - d)
+                for k in range(3):
+                    lik = model.p0 + (1 - model.p0) * math.exp(
+                        -((f_left[k] - f_right[k]) ** 2) / (2 * sigmas[k] ** 2)
+                    )
+                    assert words[i * wo + j, d, k] == _round_half_up(lik, w), (i, j, d, k)
+            p_nm = model.p_nm0 + (1 - model.p_nm0) * math.exp(-(f_left[2] ** 2) / (2 * model.sigma_nm**2))
+            assert words[i * wo + j, 4].tolist() == [_round_half_up(p_nm, w), 1 << w, 1 << w]
 
 
 def test_words_by_row_chunks_equal_whole():

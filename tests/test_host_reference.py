@@ -7,7 +7,13 @@ from bayesmachine.host.features import feature_sums
 from bayesmachine.host.images import random_dot_stereogram
 from bayesmachine.host.likelihoods import ModelParams
 from bayesmachine.host.metrics import gt_region
-from bayesmachine.host.reference import reference, reference_fast, reference_plain
+from bayesmachine.host.reference import (
+    reference,
+    reference_bands,
+    reference_fast,
+    reference_map,
+    reference_plain,
+)
 
 
 @pytest.fixture(scope="module")
@@ -78,3 +84,21 @@ def test_out_buffer_is_checked(rds):
     model = ModelParams(dmax=4)
     with pytest.raises(ValueError, match="out must be float64"):
         reference_fast(fl, fr, model, out=np.empty((1, 2, 3)))
+
+
+@pytest.mark.parametrize("band_rows", [1, 5, 100])
+def test_bands_equal_the_whole_frame(rds, band_rows):
+    left, right, _ = rds
+    fl, fr = feature_sums(left), feature_sums(right)
+    model = ModelParams(dmax=9)
+    whole = reference_fast(fl, fr, model)
+    posts, maps, rows_seen = [], [], []
+    for rows, band in reference_bands(fl, fr, model, band_rows):
+        rows_seen.append(rows)
+        posts.append(band.posterior.copy())  # the buffer is reused by the next band
+        maps.append(band.map)
+    assert rows_seen[0].start == 0 and rows_seen[-1].stop == 44
+    assert all(a.stop == b.start for a, b in zip(rows_seen, rows_seen[1:], strict=False))
+    np.testing.assert_array_equal(np.concatenate(posts), whole.posterior)
+    np.testing.assert_array_equal(np.concatenate(maps), whole.map)
+    np.testing.assert_array_equal(reference_map(fl, fr, model, band_rows), whole.map)

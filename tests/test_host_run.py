@@ -5,6 +5,9 @@ import pytest
 
 from bayesmachine.host.images import random_dot_stereogram
 from bayesmachine.host.likelihoods import ModelParams
+from bayesmachine.host.metrics import RmsAccumulator, evaluate, rms_error
+from bayesmachine.host.records import counts_dtype
+from bayesmachine.host.reference import reference_fast
 from bayesmachine.host.run import prepare, run_machine, run_pair
 from bayesmachine.params import MachineParams
 
@@ -83,3 +86,25 @@ def test_pysim_engine_matches_model_through_the_host():
     assert a.map.size == 4 * 12
     for field in ("map", "counts", "cycles", "timeout", "nomatch"):
         np.testing.assert_array_equal(getattr(a, field), getattr(b, field))
+
+
+def test_counts_use_the_smallest_dtype_that_holds_counter_max(prepared):
+    assert counts_dtype(255) == np.uint8 and counts_dtype(256) == np.uint16
+    assert counts_dtype(70000) == np.uint32
+    run = run_machine(prepared, MachineParams.for_disparity(DMAX, counter_max=300), progress=False)
+    assert run.counts.dtype == np.uint16 and run.counts.max() == 300
+
+
+def test_banded_rms_equals_the_whole_posterior(pair, prepared):
+    """evaluate() recomputes the posterior band by band; the figure is the one of the whole volume."""
+    left, right, _ = pair
+    run = run_machine(prepared, MachineParams.for_disparity(DMAX, counter_max=8), progress=False)
+    whole = reference_fast(*prepared.features, prepared.model)
+    np.testing.assert_array_equal(whole.map, prepared.reference_map)
+    expected = rms_error(run.counts, 8, whole.posterior, whole.map >= 0)
+    assert evaluate(prepared, run).rms_error == pytest.approx(expected, rel=1e-12)
+    # One-row bands: the same figure.
+    acc = RmsAccumulator(8)
+    for rows, band in prepared.reference_bands(1):
+        acc.add(run.counts[rows], band.posterior, band.map >= 0)
+    assert acc.value == pytest.approx(expected, rel=1e-12)

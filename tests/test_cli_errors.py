@@ -1,0 +1,232 @@
+"""Every reproduction of the hardening audit: a one-line error (exit code 2) or a correct result.
+
+Each test runs the CLI in-process on a tiny pair (or a small crop of the bundled one),
+except the file-size limit, which needs a child process with RLIMIT_FSIZE.
+"""
+
+import json
+import resource
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+import bayesmachine.host.cli as host_cli
+from bayesmachine import outputs
+from bayesmachine.cli import build_parser, main
+from bayesmachine.host.images import random_dot_stereogram
+
+SMALL = ["--dmax", "8", "--quiet"]
+
+
+@pytest.fixture
+def pair(tmp_path: Path) -> tuple[str, str]:
+    left, right, _ = random_dot_stereogram(height=16, width=40, seed=3)
+    cv2.imwrite(str(tmp_path / "l.png"), left)
+    cv2.imwrite(str(tmp_path / "r.png"), right)
+    return str(tmp_path / "l.png"), str(tmp_path / "r.png")
+
+
+def one_error_line(capsys: pytest.CaptureFixture[str], argv: list[str], code: int = 2) -> str:
+    assert main(argv) == code
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    return err[0]
+
+
+def files(d: Path) -> list[str]:
+    return sorted(p.name for p in d.iterdir()) if d.exists() else []
+
+
+def test_run_under_a_file_size_limit_leaves_nothing(tmp_path: Path) -> None:
+    """``(ulimit -f ...; bayesmachine run ...)``: the write fails, and neither a report nor a part remains."""
+    out = tmp_path / "out"
+    limit = 16 * 1024  # below result.npz of this crop, above nothing else that matters
+
+    def limit_size() -> None:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+    proc = subprocess.run(
+        [sys.executable, "-m", "bayesmachine", "run", "--crop", "300,200,140,40", "--dmax", "40",
+         "--no-sgbm", "--quiet", "-o", str(out)],
+        capture_output=True, text=True, preexec_fn=limit_size, timeout=300,
+    )
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "File too large" in lines[0] and str(out) in lines[0]
+    assert not out.exists()  # the directory it created is gone too: nothing half-written
+
+
+def test_failure_mid_write_keeps_no_report(tmp_path: Path, pair, capsys, monkeypatch) -> None:
+    def broken_figure(path, *args, **kwargs):
+        Path(path).write_bytes(b"\x89PNG half")
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr("bayesmachine.host.plots.save_disparity_figure", broken_figure)
+    out = tmp_path / "out"
+    line = one_error_line(capsys, ["run", *pair, *SMALL, "-o", str(out)])
+    assert line.endswith(f"{out / 'disparity.png'}: No space left on device")
+    assert files(out) == []
+
+
+def test_interrupt_leaves_no_partial_output(tmp_path: Path, pair, capsys, monkeypatch) -> None:
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "report.json").write_text("{}")  # an earlier run's report
+    (out / "keep.txt").write_text("not ours")
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(host_cli, "run_pair", interrupted)
+    line = one_error_line(capsys, ["run", *pair, *SMALL, "-o", str(out)], code=130)
+    assert "interrupted" in line
+    # The old report went first: nothing claims a complete run. Files that are not ours stay.
+    assert files(out) == ["keep.txt"]
+
+
+def test_rerun_never_mixes_old_and_new_files(tmp_path: Path, pair) -> None:
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "waves.vcd").write_text("$date stale $end\n")  # from an earlier --waves run
+    (out / ".result.partial-1.npz").write_bytes(b"PK")  # a killed run's temporary file
+    (out / "report.json").write_text('{"engine": "old"}')
+    assert main(["run", *pair, *SMALL, "-o", str(out)]) == 0
+    assert files(out) == ["disparity.png", "report.json", "result.npz"]
+    assert json.loads((out / "report.json").read_text())["engine"] == "model"
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["run", "{l}", "{r}", *SMALL, "-o", "/dev/null/x"], "/dev/null/x: Not a directory"),
+        (["reference", "{l}", "{r}", *SMALL, "-o", "{tmp}/x.npz"], "x.npz: is a directory"),
+        (["run", "{l}", "{r}", *SMALL, "-o", "{tmp}/x.npz"], "x.npz/report.json: is a directory"),
+        (["emit", "--dmax", "1", "-o", "{tmp}/x.v"], "x.v: is a directory"),
+        (["emit", "--dmax", "1", "-o", "/dev/null/x.v"], "/dev/null: is not a directory"),
+    ],
+)
+def test_file_system_errors_name_the_path(tmp_path, pair, capsys, argv, message) -> None:
+    (tmp_path / "x.npz").mkdir()
+    (tmp_path / "x.npz" / "report.json").mkdir()
+    (tmp_path / "x.v").mkdir()
+    names = {"l": pair[0], "r": pair[1], "tmp": str(tmp_path)}
+    line = one_error_line(capsys, [a.format(**names) for a in argv])
+    assert message in line and "Traceback" not in line
+
+
+def test_read_only_output(tmp_path, pair, capsys, monkeypatch) -> None:
+    # As root a chmod would not stop the write: make the directory refuse it instead.
+    def refuse(self, *args, **kwargs):
+        raise PermissionError(13, "Permission denied", str(self))
+
+    monkeypatch.setattr(Path, "mkdir", refuse)
+    line = one_error_line(capsys, ["run", *pair, *SMALL, "-o", str(tmp_path / "ro" / "out")])
+    assert line.endswith(f"{tmp_path / 'ro' / 'out'}: Permission denied")
+
+
+def test_cache_dir_that_is_a_file(tmp_path, pair, capsys, monkeypatch) -> None:
+    pytest.importorskip("bayesmachine.sim.verilator")
+    cache = tmp_path / "cachefile"
+    cache.write_text("")
+    monkeypatch.setenv("BAYESMACHINE_CACHE_DIR", str(cache))
+    out = tmp_path / "v"
+    line = one_error_line(capsys, ["run", *pair, *SMALL, "--engine", "verilator", "-o", str(out)])
+    assert str(cache) in line
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("command", ["reference", "run"])
+def test_sigma_that_squares_to_zero(tmp_path, pair, capsys, command) -> None:
+    out = tmp_path / ("s.npz" if command == "reference" else "s")
+    line = one_error_line(capsys, [command, *pair, *SMALL, "--sigma", "1e-300", "-o", str(out)])
+    assert "--sigma" in line and "2 sigma^2" in line
+    assert not out.exists()
+
+
+def test_sweep_sorts_and_deduplicates_counter_max(tmp_path, pair) -> None:
+    out = tmp_path / "sw"
+    assert main(["sweep", *pair, *SMALL, "--counter-max", "8,1,4,2,4", "-o", str(out)]) == 0
+    sweep = json.loads((out / "sweep.json").read_text())
+    assert [p["counter_max"] for p in sweep["points"]] == [1, 2, 4, 8]
+
+
+def test_waves_past_the_last_pixel(tmp_path, pair, capsys) -> None:
+    # 16x40 images, Dmax 8: (16-4) x (40-4-8) = 336 output pixels.
+    out = tmp_path / "w"
+    argv = ["run", *pair, *SMALL, "--engine", "verilator", "--waves", "300:336", "-o", str(out)]
+    line = one_error_line(capsys, argv)
+    assert "336 pixels" in line and "--waves" in line
+    assert not out.exists()  # checked before any work
+
+
+@pytest.mark.parametrize(
+    ("crop", "message"),
+    [("0,0,6", "crop must be X,Y,W,H"), ("0,0,-5,5", "W and H > 0"), ("a,b,c,d", "four integers")],
+)
+def test_crop_errors_keep_the_message(pair, capsys, crop, message) -> None:
+    line = one_error_line(capsys, ["run", *pair, "--crop", crop, "-o", "unused"])
+    assert "argument --crop" in line and message in line
+
+
+def test_directory_as_image(tmp_path, pair, capsys) -> None:
+    line = one_error_line(capsys, ["run", str(tmp_path), pair[1], *SMALL, "-o", str(tmp_path / "o")])
+    assert f"{tmp_path} is a directory" in line
+
+
+@pytest.mark.parametrize(
+    ("content", "message"),
+    [(b"0 1 2\n3 4 5\n", "not a NumPy array file"), (None, "not a NumPy array of numbers")],
+)
+def test_gt_that_is_not_a_numpy_array(tmp_path, pair, capsys, content, message) -> None:
+    gt = tmp_path / "gt.npy"
+    if content is None:
+        np.save(gt, np.array([{"d": 1}], dtype=object), allow_pickle=True)
+    else:
+        gt.write_bytes(content)
+    line = one_error_line(capsys, ["run", *pair, *SMALL, "--gt", str(gt), "-o", str(tmp_path / "o")])
+    assert message in line and "pickle" not in line.split(":")[1]
+
+
+@pytest.mark.parametrize("command", ["emit", "run", "sweep"])
+def test_seed_in_hex_everywhere(command) -> None:
+    args = build_parser().parse_args([command, "--seed", "0x10", "-o", "x"])
+    assert args.seed == 16
+
+
+def test_run_refuses_results_that_cannot_fit(tmp_path, pair, capsys, monkeypatch) -> None:
+    monkeypatch.setattr(outputs, "available_memory", lambda: 1000)
+    out = tmp_path / "big"
+    line = one_error_line(capsys, ["run", *pair, *SMALL, "-o", str(out)])
+    # 12 x 28 pixels x (10 uint8 counters + 12 bytes of maps and flags) = 7392 bytes.
+    assert "12x28 output pixels x 10 counters: 7.2 KiB of memory needed, 1000 B available" in line
+    assert not out.exists()
+
+
+def test_reference_refuses_a_volume_the_disk_cannot_hold(tmp_path, pair, capsys, monkeypatch) -> None:
+    monkeypatch.setattr(outputs.shutil, "disk_usage", lambda p: _Usage())
+    out = tmp_path / "ref.npz"
+    line = one_error_line(capsys, ["reference", *pair, *SMALL, "-o", str(out)])
+    # 12 x 28 x 10 float64 = 26.2 KiB, plus the MAP and the archive's headers.
+    assert "posterior volume (12x28x10 float64, 26.2 KiB): 30.9 KiB on disk needed" in line
+    assert not out.exists()
+
+
+class _Usage:
+    total = used = free = 1000  # bytes: too small for any posterior
+
+
+def test_rng_the_host_cannot_drive(tmp_path, pair, capsys) -> None:
+    line = one_error_line(capsys, ["run", *pair, *SMALL, "--rng", "external", "-o", str(tmp_path / "o")])
+    assert "--rng external" in line and "emit" in line
+
+
+def test_loaded_prior_is_filled_by_the_host(tmp_path, pair) -> None:
+    out = tmp_path / "o"
+    assert main(["run", *pair, *SMALL, "--prior", "loaded", "--seed", "0x10", "-o", str(out)]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["machine"]["prior"] == "loaded" and report["machine"]["seed"] == 16
+    assert report["timeouts"] == 0 and report["pixels"] == 12 * 28

@@ -1,0 +1,111 @@
+"""Atomic outputs: a file is complete or absent; an output directory never mixes two runs."""
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bayesmachine import outputs
+from bayesmachine.outputs import NpzWriter, OutputDir, atomic_file, atomic_write_text, format_bytes
+
+
+def names(d: Path) -> list[str]:
+    return sorted(p.name for p in d.iterdir())
+
+
+def test_atomic_file_replaces_only_on_success(tmp_path: Path) -> None:
+    target = tmp_path / "a.txt"
+    atomic_write_text(target, "old")
+    with pytest.raises(RuntimeError), atomic_file(target) as tmp:
+        tmp.write_text("new but half")
+        raise RuntimeError("writer failed")
+    assert target.read_text() == "old" and names(tmp_path) == ["a.txt"]
+    with atomic_file(target) as tmp:
+        assert tmp.parent == tmp_path and tmp.suffix == ".txt" and tmp.name.startswith(".")
+        tmp.write_text("new")
+    assert target.read_text() == "new" and names(tmp_path) == ["a.txt"]
+
+
+def test_atomic_file_os_error_names_the_target(tmp_path: Path) -> None:
+    target = tmp_path / "b.bin"
+    with pytest.raises(OSError) as info, atomic_file(target) as tmp:
+        tmp.write_bytes(b"x")
+        raise OSError(27, "File too large")
+    assert info.value.filename == str(target) and info.value.strerror == "File too large"
+    assert names(tmp_path) == []
+    with pytest.raises(IsADirectoryError), atomic_file(tmp_path):
+        pass
+    with pytest.raises(FileNotFoundError, match="does not exist"), atomic_file(tmp_path / "no" / "c"):
+        pass
+
+
+def test_output_dir_commits_report_last_and_clears_stale_files(tmp_path: Path, monkeypatch) -> None:
+    out = tmp_path / "out"
+    out.mkdir()
+    for stale in ("report.json", "waves.vcd", ".data.partial-99.npz"):
+        (out / stale).write_text("stale")
+    (out / "notes.txt").write_text("the user's")
+    renamed = []
+    real_replace = os.replace
+
+    def spy(src, dst):
+        renamed.append(Path(dst).name)
+        real_replace(src, dst)
+
+    monkeypatch.setattr(outputs.os, "replace", spy)
+    with OutputDir(out, ["report.json", "data.npz", "waves.vcd"], last="report.json") as od:
+        assert names(out) == ["notes.txt"]  # every stale output of ours is gone before any work
+        od.write("report.json", lambda p: p.write_text("{}"))  # staged first, still committed last
+        od.write("data.npz", lambda p: np.savez(p, a=np.arange(3)))
+        staged = [n for n in names(out) if n != "notes.txt"]
+        assert len(staged) == 2 and all(n.startswith(".") and ".partial-" in n for n in staged)
+        written = od.commit()
+    assert renamed == ["data.npz", "report.json"] and [p.name for p in written] == renamed
+    assert names(out) == ["data.npz", "notes.txt", "report.json"]
+    np.testing.assert_array_equal(np.load(out / "data.npz")["a"], np.arange(3))
+
+
+def _disk_full(path: Path) -> None:
+    path.write_text("{")
+    raise OSError(28, "No space left on device")
+
+
+def test_output_dir_failure_removes_staged_files_and_new_directories(tmp_path: Path) -> None:
+    out = tmp_path / "new" / "out"
+    with pytest.raises(OSError) as info, OutputDir(out, ["r.json", "big.npz"], last="r.json") as od:
+        od.write("big.npz", lambda p: p.write_bytes(b"PK partial"))
+        od.write("r.json", _disk_full)
+    assert info.value.filename == str(out / "r.json")
+    assert not (tmp_path / "new").exists()  # created by this transaction, empty again: removed
+
+
+def test_output_dir_rejects_unknown_names_and_uncommitted_exit(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="not one of"), OutputDir(tmp_path, ["a"], last="a") as od:
+        od.path("b")
+    with pytest.raises(RuntimeError, match="without commit"), OutputDir(tmp_path, ["a"], last="a") as od:
+        od.write("a", lambda p: p.write_text("x"))
+    assert names(tmp_path) == []
+    f = tmp_path / "file"
+    f.write_text("")
+    with pytest.raises(NotADirectoryError), OutputDir(f, ["a"], last="a"):
+        pass
+
+
+def test_npz_writer_streams_chunks(tmp_path: Path) -> None:
+    vol = np.random.default_rng(0).random((7, 5, 3))
+    with NpzWriter(tmp_path / "v.npz") as npz:
+        npz.add_stream("posterior", vol.shape, np.float64, (vol[i : i + 3] for i in range(0, 7, 3)))
+        npz.add("map", np.arange(4, dtype=np.int16))
+    z = np.load(tmp_path / "v.npz")
+    np.testing.assert_array_equal(z["posterior"], vol)
+    assert z["map"].dtype == np.int16 and z["map"].tolist() == [0, 1, 2, 3]
+    with pytest.raises(ValueError, match="chunks gave 3 rows"), NpzWriter(tmp_path / "w.npz") as npz:
+        npz.add_stream("p", (4, 2), np.float64, [np.zeros((3, 2))])
+    with pytest.raises(ValueError, match="does not fit"), NpzWriter(tmp_path / "w.npz") as npz:
+        npz.add_stream("p", (4, 2), np.float64, [np.zeros((4, 3))])
+
+
+def test_format_bytes() -> None:
+    assert format_bytes(512) == "512 B" and format_bytes(1536) == "1.5 KiB"
+    assert format_bytes(3 * 1024**3) == "3.0 GiB" and format_bytes(5000 * 1024**3) == "5000.0 GiB"
