@@ -16,7 +16,7 @@ import numpy as np
 
 from bayesmachine.host.features import feature_sums
 from bayesmachine.host.likelihoods import ModelParams, likelihood_tables
-from bayesmachine.host.reference import reference_fast, reference_plain, warm_up
+from bayesmachine.host.reference import reference_fast, reference_map, reference_plain, warm_up
 
 
 def vga_pair(seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -68,6 +68,15 @@ def main() -> None:
     print(f"reference median {statistics.median(kern) * 1e3:6.1f} ms (output buffer reused)")
     print(f"total     median {statistics.median(total) * ms:6.1f} ms, min {min(total) * ms:.1f} (goal 100)")
     print(f"total with a new output array each frame: median {statistics.median(fresh) * ms:.1f} ms")
+    banded = []
+    for _ in range(args.repeats):
+        t0 = time.perf_counter()
+        band_map = reference_map(feature_sums(left), feature_sums(right), model)
+        banded.append(time.perf_counter() - t0)
+    print(
+        f"MAP only, band by band (what run/sweep hold): median {statistics.median(banded) * ms:.1f} ms; "
+        f"same MAP: {np.array_equal(band_map, ref.map)}"
+    )
     if not args.no_plain:
         fl, fr = feature_sums(left), feature_sums(right)
         t0 = time.perf_counter()

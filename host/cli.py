@@ -130,7 +130,7 @@ def _load_inputs(
 def _host_rng_help() -> str:
     kinds = source_kinds()
     if kinds is None:
-        runnable = [k for k in _RNG_HOST_ALWAYS]
+        runnable = list(_RNG_HOST_ALWAYS)
     else:
         runnable = [k for k, kind in kinds.items() if kind.on_chip or kind.numbers is not None]
     return f"random source; the host runs the kinds it can drive: {', '.join(runnable)} (default %(default)s)"
