@@ -230,3 +230,19 @@ def test_loaded_prior_is_filled_by_the_host(tmp_path, pair) -> None:
     report = json.loads((out / "report.json").read_text())
     assert report["machine"]["prior"] == "loaded" and report["machine"]["seed"] == 16
     assert report["timeouts"] == 0 and report["pixels"] == 12 * 28
+
+
+@pytest.mark.slow  # compiles a small machine with Verilator (cached after the first run)
+def test_waves_are_committed_with_the_run_and_dropped_by_a_rerun(tmp_path, pair) -> None:
+    verilator = pytest.importorskip("bayesmachine.sim.verilator")
+    try:
+        verilator.find_toolchain()
+    except Exception as exc:  # the engine's own "toolchain missing" error
+        pytest.skip(str(exc))
+    out = tmp_path / "w"
+    argv = ["run", *pair, "--dmax", "6", "--lanes", "4", "--quiet", "--engine", "verilator", "-o", str(out)]
+    assert main([*argv, "--waves", "0:1"]) == 0
+    assert files(out) == ["disparity.png", "report.json", "result.npz", "waves.vcd"]
+    assert (out / "waves.vcd").read_text().startswith("$version")
+    assert main(argv) == 0  # the same OUT without --waves: the old trace must not stay
+    assert files(out) == ["disparity.png", "report.json", "result.npz"]
