@@ -95,8 +95,9 @@ class OutputRegion:
             )
         return array[MARGIN : h - MARGIN, MARGIN + self.dmax : w - MARGIN]
 
-    def band_rows(self, pixels: int = BAND_PIXELS) -> int:
-        """Output rows per band so that a band holds about ``pixels`` output pixels (at least one row)."""
+    def band_rows(self, pixels: int | None = None) -> int:
+        """Output rows per band: about ``pixels`` (default BAND_PIXELS) output pixels, at least one row."""
+        pixels = BAND_PIXELS if pixels is None else pixels
         return max(1, pixels // max(1, self.shape[1]))
 
     def bands(self, rows: int | None = None) -> Iterator[slice]:

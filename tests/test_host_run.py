@@ -108,3 +108,32 @@ def test_banded_rms_equals_the_whole_posterior(pair, prepared):
     for rows, band in prepared.reference_bands(1):
         acc.add(run.counts[rows], band.posterior, band.map >= 0)
     assert acc.value == pytest.approx(expected, rel=1e-12)
+
+
+def test_run_never_holds_more_than_a_band_of_posterior(pair, monkeypatch):
+    """With bands of ~100 pixels, every posterior the host computes is one band, and the figures
+    equal those of one big band."""
+    import bayesmachine.host.reference as reference_module
+    import bayesmachine.host.region as region_module
+
+    left, right, gt = pair
+    model = ModelParams(dmax=DMAX)
+    machine = MachineParams.for_disparity(DMAX, counter_max=4)
+    big = run_pair(left, right, model, machine, gt=gt, progress=False, sgbm=False)
+    seen = []
+    real = reference_module.reference_fast
+
+    def spy(*args, **kwargs):
+        ref = real(*args, **kwargs)
+        seen.append(ref.posterior.shape[0])
+        return ref
+
+    monkeypatch.setattr(reference_module, "reference_fast", spy)
+    monkeypatch.setattr(region_module, "BAND_PIXELS", 100)
+    small = run_pair(left, right, model, machine, gt=gt, progress=False, sgbm=False)
+    wo = 60 - 4 - DMAX
+    assert seen and max(seen) == 100 // wo and sum(seen) == 2 * 20  # prepare's MAP pass + the RMS pass
+    np.testing.assert_array_equal(small.prepared.reference_map, big.prepared.reference_map)
+    a, b = small.metrics.to_report(), big.metrics.to_report()
+    assert a.pop("rms_error") == pytest.approx(b.pop("rms_error"), rel=1e-12)  # summed in another order
+    assert a == b
