@@ -17,7 +17,7 @@ from bayesmachine.hdl.machine import BayesianMachine, load_layout, result_layout
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.model import MachineModel
 from bayesmachine.sim.pysim import PysimEngine
-from bayesmachine.sim.testbench import synthetic_disparity_words
+from bayesmachine.sim.synthetic import synthetic_disparity_words
 
 
 def _mixed_words(params: MachineParams, pixels: int, seed: int) -> np.ndarray:
