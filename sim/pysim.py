@@ -67,7 +67,6 @@ class PysimEngine(EngineBase):
         self._patience = patience
         self._stall_seed = stall_seed
         self._vcd = vcd
-        self.dut = BayesianMachine(params)
         self._vcd_ctx = None
         self._build()
 
@@ -81,15 +80,21 @@ class PysimEngine(EngineBase):
         self._starved = False
         self.clock_cycles = 0  # clock cycles simulated so far (idle, load and compute)
         self.compute_cycles = 0  # compute cycles of the pixels returned so far
-        self._sim = Simulator(self.dut)
-        self._sim.add_clock(1e-8)
-        self._sim.add_testbench(self._feeder, background=True)
-        self._sim.add_testbench(self._collector, background=True)
-        if hasattr(self.dut, "entropy"):
-            self._sim.add_testbench(self._entropy_source, background=True)
-        if self._vcd is not None:
-            self._vcd_ctx = self._sim.write_vcd(self._vcd)
-            self._vcd_ctx.__enter__()
+        self._sim: Simulator | None = None  # made by the first run (an engine never run makes none)
+
+    def _simulator(self) -> Simulator:
+        if self._sim is None:
+            self.dut = BayesianMachine(self.params)
+            self._sim = Simulator(self.dut)
+            self._sim.add_clock(1e-8)
+            self._sim.add_testbench(self._feeder, background=True)
+            self._sim.add_testbench(self._collector, background=True)
+            if hasattr(self.dut, "entropy"):
+                self._sim.add_testbench(self._entropy_source, background=True)
+            if self._vcd is not None:
+                self._vcd_ctx = self._sim.write_vcd(self._vcd)
+                self._vcd_ctx.__enter__()
+        return self._sim
 
     def _reset(self) -> None:
         self._close()
@@ -166,8 +171,9 @@ class PysimEngine(EngineBase):
         self._beats.extend(pack_beats(p, q))
         target = first + len(q)
         last_count, last_clock = len(self._raw_results), self.clock_cycles
+        sim = self._simulator()
         while len(self._raw_results) < target:
-            self._sim.advance()
+            sim.advance()
             if len(self._raw_results) != last_count:
                 last_count, last_clock = len(self._raw_results), self.clock_cycles
             elif self.clock_cycles - last_clock > self._patience:
