@@ -54,7 +54,8 @@ BROKEN_MESSAGE = ("an earlier run was cut short, so pixels are still in flight a
 
 
 class Engine(Protocol):
-    params: MachineParams
+    @property
+    def params(self) -> MachineParams: ...
 
     def run(self, words: np.ndarray, numbers: np.ndarray | None = None) -> MachineResult: ...
 
