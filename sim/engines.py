@@ -84,7 +84,7 @@ class EngineBase:
         self._kind = SOURCE_KINDS[params.rng]
         self._closed = False
         self._broken = False
-        self._feed = NumberFeed(params.operators)
+        self._feed = NumberFeed(params)
         self._device: NumberSource | None = None
         self._new_supply = False  # this run's numbers come from another source than the last run's
 
@@ -124,9 +124,9 @@ class EngineBase:
             if self._device is None:
                 self._device = self._kind.numbers(p)
             return self._device
-        if hasattr(numbers, "take") and not isinstance(numbers, np.ndarray):
+        if not isinstance(numbers, np.ndarray) and hasattr(numbers, "take"):
             return numbers  # a NumberSource: the caller's stream
-        return ArrayNumbers(p, numbers)  # type: ignore[arg-type]
+        return ArrayNumbers(p, np.asarray(numbers))
 
     def _run(self, words: np.ndarray, feed: NumberFeed | None) -> MachineResult:
         raise NotImplementedError

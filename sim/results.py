@@ -159,10 +159,11 @@ class NumberFeed:
     of numbers to the same compute cycles in every engine. Switching to another source drops them.
     """
 
-    def __init__(self, operators: int) -> None:
+    def __init__(self, params: MachineParams) -> None:
         self.source: NumberSource | None = None
-        self._operators = operators
-        self._pending = np.zeros((0, operators), np.uint16)
+        self._params = params
+        self._operators = params.operators
+        self._pending = np.zeros((0, params.operators), np.uint16)
 
     def use(self, source: NumberSource | None) -> bool:
         """Feed from ``source`` from now on; True if it is a different source (pending rows dropped)."""
@@ -177,7 +178,8 @@ class NumberFeed:
         out = self._pending[:count]
         self._pending = self._pending[len(out):]
         if len(out) < count and self.source is not None:
-            more = np.asarray(self.source.take(count - len(out)), dtype=np.uint16)
+            # A device model's rows get the checks of a caller's array: no engine packs a bad number.
+            more = check_numbers(self._params, self.source.take(count - len(out)))
             out = np.concatenate([out, more]) if len(out) else more
         return out
 

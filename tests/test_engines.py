@@ -181,6 +181,24 @@ def test_caller_source_object(make: Callable[..., EngineBase]) -> None:
     assert_same_results(got, MachineModel(EXTERNAL).run(words, _Counter(EXTERNAL).take(used)))
 
 
+class _Faulty(_Counter):
+    """A device model with a bug: its 100th row holds 2**W, one more than a W-bit number."""
+
+    def take(self, count: int) -> np.ndarray:
+        first = self.next
+        rows = super().take(count)
+        if first <= 99 < first + count:
+            rows[99 - first, 0] = self._top
+        return rows
+
+
+def test_a_device_models_bad_number_is_refused(make: Callable[..., EngineBase]) -> None:
+    engine = make(EXTERNAL)
+    words = np.zeros((3, EXTERNAL.rows, EXTERNAL.operator_columns), np.uint16)  # 3 timeouts: 120 rows
+    assert _error(lambda: engine.run(words, _Faulty(EXTERNAL))) == (
+        ValueError, "random numbers must lie in [0, 16) (W = 4 bits); got [0, 16]")
+
+
 def test_unknown_option_is_a_clear_error() -> None:
     refused = r"engine '{}' does not take option\(s\) {}; it takes {}"
     with pytest.raises(ValueError, match=refused.format("model", "trace", "no options")):
