@@ -44,7 +44,7 @@ class VerilatorEngine(EngineBase):
     ``load_stall`` / ``result_stall``: probability that the harness drops ``load.valid`` /
     ``result.ready`` in a cycle (a pseudo-random pattern from ``stall_seed``), as in ``pysim``;
     results do not depend on them. ``result_stall > 0`` uses a build whose top keeps
-    ``result.ready`` a port (about three times slower than the default, which ties it high).
+    ``result.ready`` a port (about half the cycles per second of the default, which ties it high).
     ``jobs``: parallel C++ compiles; ``verbose``: one line on stderr when it compiles.
 
     After each ``run``: ``last_compute_cycles`` (sum of the pixels' ``cycles``),
