@@ -122,15 +122,18 @@ def test_cache_reuse(small: VerilatorEngine, cache: Path) -> None:
 
 
 @needs_tools
-def test_timeouts_lowest_index_loaded_prior(cache: Path) -> None:
+def test_timeouts_lowest_index_loaded_prior_heavy_back_pressure(cache: Path) -> None:
     p = ODD
     words = _words(p, 300, 6, special=0.5)
     words[::7] //= 16  # low likelihoods everywhere: many runs hit the 40-cycle watchdog
     words[1, :, 1:] = p.word_one  # a full tie among rows whose prior is high
     words[1, :, 0] = 0
     words[1, [1, 3, p.rows - 1], 0] = p.word_one
-    with VerilatorEngine(p, build_dir=cache) as eng:
+    # Heavy back-pressure: results wait ~20 cycles for ready, longer than the 40-cycle watchdog's
+    # runs at times, and the harness must not take that for a hang.
+    with VerilatorEngine(p, build_dir=cache, load_stall=0.3, result_stall=0.95, stall_seed=2) as eng:
         res = _check(eng, MachineModel(p), words)
+        assert eng.last_wall_cycles > eng.last_compute_cycles + 10 * len(words)
     assert res.timeout.sum() > 10 and (res.cycles[res.timeout] == p.max_cycles).all()
     assert res.map[1] == 1 and not res.nomatch[1]  # lowest-index: row 1 beats the no-match row
 

@@ -142,6 +142,10 @@ int main(int argc, char** argv) {
 #else
     if (trace_path) fail("this build has no waveform support (build with a trace)");
 #endif
+    // Random stalls lengthen the quiet stretches: allow 64 / (1 - p) cycles more than the watchdog,
+    // as p^(64 / (1 - p)) < e^-64 makes that many stalls in a row a false alarm that never happens.
+    const unsigned worst = stalls.load > stalls.result ? stalls.load : stalls.result;
+    const uint64_t hang_cycles = HANG_CYCLES + (worst ? 64ull * 1000 / (1000 - worst) : 0);
     bool tracing = false;
     uint64_t wall_total = 0;  // clock cycles since reset
 
@@ -281,7 +285,7 @@ int main(int argc, char** argv) {
             // A design that neither takes a beat nor hands out a result for longer than the
             // watchdog allows is hung: stop with an error instead of spinning forever.
             idle = (load_fire || result_fire) ? 0 : idle + 1;
-            if (idle > HANG_CYCLES) fail("the design made no progress (no load beat, no result)");
+            if (idle > hang_cycles) fail("the design made no progress (no load beat, no result)");
         }
 #if BM_TRACE
         if (tfp) tfp->flush();

@@ -80,8 +80,8 @@ class VerilatorEngine(EngineBase):
             if not 0.0 <= v < 1.0:
                 raise ValueError(f"{name} must be in [0, 1), got {v}")
         if load_stall or result_stall:
-            self._args += ["--stall", str(round(load_stall * 1000)), str(round(result_stall * 1000)),
-                           str(int(stall_seed))]
+            permille = [str(min(999, round(v * 1000))) for v in (load_stall, result_stall)]
+            self._args += ["--stall", *permille, str(int(stall_seed))]
         self.build = build_harness(params, build_dir=build_dir, trace_kind=trace_kind,
                                    tie_ready=not result_stall, jobs=jobs, verbose=verbose)
         self._proc: subprocess.Popen[bytes] | None = None
