@@ -26,7 +26,7 @@ run (:class:`EngineStateError`) until ``reset()``.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, ClassVar, Protocol
+from typing import TYPE_CHECKING, ClassVar, Protocol, TypeVar
 
 import numpy as np
 
@@ -47,6 +47,8 @@ if TYPE_CHECKING:
 __all__ = ["ENGINES", "Engine", "EngineBase", "EngineClosedError", "EngineStateError", "get_engine"]
 
 ENGINES = ("model", "pysim", "verilator")
+
+_E = TypeVar("_E", bound="EngineBase")
 
 CLOSED_MESSAGE = "this engine is closed (close() was called): create a new one to run more pixels"
 BROKEN_MESSAGE = ("an earlier run was cut short, so pixels are still in flight and later results would "
@@ -152,7 +154,7 @@ class EngineBase:
     def _close(self) -> None:
         pass
 
-    def __enter__(self) -> EngineBase:
+    def __enter__(self: _E) -> _E:
         return self
 
     def __exit__(self, *exc: object) -> None:

@@ -369,3 +369,16 @@ def test_sigterm_during_compile_ends_the_compiler_and_cleans_up(tmp_path: Path) 
     time.sleep(0.5)
     assert _processes_in(root) == []
     assert list(root.glob(".build-*")) == []
+
+
+def test_orphaned_build_directories_are_removed(tmp_path: Path) -> None:
+    """A build directory whose process is gone (killed outright) goes; a live process's stays."""
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    orphan = tmp_path / f".build-0123abcd-{dead.pid}-x1y2"
+    live = tmp_path / f".build-0123abcd-{os.getpid()}-z3w4"
+    other = tmp_path / ".build-0123abcd-q5r6"  # no pid in the name (an older layout): left alone
+    for d in (orphan, live, other):
+        (d / "obj").mkdir(parents=True)
+    vb._remove_orphans(tmp_path)
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([live.name, other.name])
