@@ -20,7 +20,8 @@ import time
 import numpy as np
 
 from bayesmachine.params import MachineParams
-from bayesmachine.sim.testbench import measure_ties, synthetic_disparity_words
+from bayesmachine.sim.synthetic import synthetic_disparity_words
+from bayesmachine.sim.ties import measure_ties
 
 
 def real_words(params: MachineParams, rows: int) -> np.ndarray | None:

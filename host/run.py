@@ -115,7 +115,7 @@ def run_machine(
                 t0 = time.perf_counter()
                 words = memory_words(left_f, right_f, model, machine, rows=rows, qtables=qtables)
                 t1 = time.perf_counter()
-                res = eng.run(words)  # type: ignore[attr-defined]
+                res = eng.run(words)
                 t2 = time.perf_counter()
                 words_s += t1 - t0
                 engine_s += t2 - t1
@@ -126,11 +126,9 @@ def run_machine(
                 timeout[rows] = np.asarray(res.timeout).reshape(n, wo)
                 cycles[rows] = np.asarray(res.cycles).reshape(n, wo)
                 bar.update(n * wo)
-        wall = getattr(eng, "wall_cycles", None)
+        wall = eng.wall_cycles
     finally:
-        close = getattr(eng, "close", None)
-        if close is not None:
-            close()  # the Verilator harness is a process: end it now, not at garbage collection
+        eng.close()  # the Verilator harness is a process: end it now, not at garbage collection
     # Timeouts count as no match: the machine gave no answer within its watchdog.
     disp = np.where(nomatch | timeout, np.int16(-1), flat_map)
     return MachineRun(engine, machine, disp, counts, cycles, nomatch, timeout, engine_s, words_s, wall)

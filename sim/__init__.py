@@ -1,1 +1,1 @@
-"""Simulation: the NumPy machine model, the engines, testbench helpers."""
+"""Simulation: the NumPy machine model, the engines, results, packing, synthetic data, ties."""

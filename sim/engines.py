@@ -1,10 +1,23 @@
 """Engines: interchangeable ways to run the machine on pixels' likelihood memories.
 
-Every engine takes a :class:`~bayesmachine.params.MachineParams` and offers
-``run(words) -> MachineResult`` with the same meaning as :class:`MachineModel.run`: pixels
-are processed in order, and the machine's state (the LFSRs) carries over from one call to
-the next, so a frame can be run in chunks. The RTL engines also count ``wall_cycles`` (clock
-cycles including loading, which the model does not time) and hold resources until ``close()``.
+The contract (:class:`Engine`), which ``model``, ``pysim`` and ``verilator`` implement through
+:class:`EngineBase`, so that they validate their input once, the same way, with the same errors:
+
+- ``run(words, numbers=None) -> MachineResult``: pixels in order; the machine's state (LFSRs,
+  or the position in an off-chip source's stream) carries over from one call to the next, so
+  a frame can be run in chunks. ``numbers``: only for an off-chip random source (``rng``
+  whose :class:`~bayesmachine.sources.SourceKind` has ``on_chip = False``): a (T, operators)
+  array of W-bit numbers, one row per compute cycle, consumed from its first row by this call
+  (running out is a ``ValueError``), or a :class:`~bayesmachine.sources.NumberSource`. With
+  ``numbers=None`` the kind's own device model is used (one stream from reset on); the kind
+  ``external`` has none, so it needs ``numbers``.
+- ``reset()``: back to the state after a hardware reset. ``close()``: release resources;
+  ``run()`` or ``reset()`` afterwards raise :class:`EngineClosedError`.
+- ``wall_cycles``: clock cycles since reset, loading included (``None`` for the model,
+  which does not time loading).
+
+A run cut short (its numbers ran out) leaves pixels in flight: every engine then refuses to
+run (:class:`EngineStateError`) until ``reset()``.
 
 - ``model``: the NumPy/numba machine model (the definition; whole frames in seconds).
 - ``pysim``: the RTL in Amaranth's Python simulator (hundreds of cycles per second: crops).
@@ -13,34 +26,165 @@ cycles including loading, which the model does not time) and hold resources unti
 
 from __future__ import annotations
 
-from typing import Protocol
+from typing import TYPE_CHECKING, ClassVar, Protocol, TypeVar
 
 import numpy as np
 
 from bayesmachine.params import MachineParams
-from bayesmachine.sim.model import MachineModel, MachineResult
+from bayesmachine.sim.results import (
+    ArrayNumbers,
+    EngineClosedError,
+    EngineStateError,
+    MachineResult,
+    NumberFeed,
+    check_words,
+)
+from bayesmachine.sources import SOURCE_KINDS
 
-__all__ = ["ENGINES", "Engine", "get_engine"]
+if TYPE_CHECKING:
+    from bayesmachine.sources import NumberSource
+
+__all__ = ["ENGINES", "Engine", "EngineBase", "EngineClosedError", "EngineStateError", "get_engine"]
 
 ENGINES = ("model", "pysim", "verilator")
 
+_E = TypeVar("_E", bound="EngineBase")
+
+CLOSED_MESSAGE = "this engine is closed (close() was called): create a new one to run more pixels"
+BROKEN_MESSAGE = ("an earlier run was cut short, so pixels are still in flight and later results would "
+                  "not match; call reset() to start again from a hardware reset")
+
 
 class Engine(Protocol):
-    params: MachineParams
+    @property
+    def params(self) -> MachineParams: ...
 
-    def run(self, words: np.ndarray) -> MachineResult: ...
+    def run(self, words: np.ndarray, numbers: np.ndarray | None = None) -> MachineResult: ...
+
+    def reset(self) -> None: ...
+
+    def close(self) -> None: ...
+
+    @property
+    def wall_cycles(self) -> int | None: ...
 
 
-def get_engine(name: str, params: MachineParams, **options: object) -> Engine:
-    """A fresh engine (machine state as after reset) by name: one of :data:`ENGINES`."""
+class EngineBase:
+    """What the engines share: input checks, the random-number supply, reset/close, the error rules.
+
+    A subclass implements ``_run(words, feed)`` (``words`` checked, (P, operators) int32;
+    ``feed`` None for an on-chip source) and may override ``_reset()`` and ``_close()``.
+    """
+
+    name: ClassVar[str] = ""
+    OPTIONS: ClassVar[tuple[str, ...]] = ()  # keyword options of the constructor (get_engine checks them)
+
+    def __init__(self, params: MachineParams) -> None:
+        if not isinstance(params, MachineParams):
+            raise TypeError(f"an engine takes a MachineParams, not {type(params).__name__}")
+        self._params = params
+        self._kind = SOURCE_KINDS[params.rng]
+        self._closed = False
+        self._broken = False
+        self._feed = NumberFeed(params)
+        self._device: NumberSource | None = None
+        self._new_supply = False  # this run's numbers come from another source than the last run's
+
+    @property
+    def params(self) -> MachineParams:
+        return self._params
+
+    @property
+    def wall_cycles(self) -> int | None:
+        return None
+
+    def run(self, words: np.ndarray, numbers: np.ndarray | NumberSource | None = None) -> MachineResult:
+        """Run pixels through the machine (see the module docstring)."""
+        if self._closed:
+            raise EngineClosedError(CLOSED_MESSAGE)
+        q = check_words(self._params, words)
+        source = self._source(numbers)
+        if self._broken:
+            raise EngineStateError(BROKEN_MESSAGE)
+        self._new_supply = self._feed.use(source)
+        self._broken = True  # until every pixel of this call is back
+        out = self._run(q, None if source is None else self._feed)
+        self._broken = False
+        return out
+
+    def _source(self, numbers: np.ndarray | NumberSource | None) -> NumberSource | None:
+        p = self._params
+        if self._kind.on_chip:
+            if numbers is not None:
+                raise ValueError(f"random numbers are only taken by an off-chip source; rng = {p.rng!r} "
+                                 "generates them on chip")
+            return None
+        if numbers is None:
+            if self._kind.numbers is None:
+                raise ValueError(f"rng = {p.rng!r}: pass the random numbers of every compute cycle "
+                                 "(numbers=, shape (cycles, operators))")
+            if self._device is None:
+                self._device = self._kind.numbers(p)
+            return self._device
+        if not isinstance(numbers, np.ndarray) and hasattr(numbers, "take"):
+            return numbers  # a NumberSource: the caller's stream
+        return ArrayNumbers(p, np.asarray(numbers))
+
+    def _run(self, words: np.ndarray, feed: NumberFeed | None) -> MachineResult:
+        raise NotImplementedError
+
+    def reset(self) -> None:
+        """Back to the state after a hardware reset (an off-chip device model starts a fresh stream)."""
+        if self._closed:
+            raise EngineClosedError(CLOSED_MESSAGE)
+        self._broken = False
+        self._device = None
+        self._feed.use(None)
+        self._reset()
+
+    def _reset(self) -> None:
+        pass
+
+    def close(self) -> None:
+        """Release the engine's resources; later ``run()``/``reset()`` raise :class:`EngineClosedError`."""
+        if not self._closed:
+            self._closed = True
+            self._close()
+
+    def _close(self) -> None:
+        pass
+
+    def __enter__(self: _E) -> _E:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _engine_class(name: str) -> type[EngineBase]:
     if name == "model":
-        return MachineModel(params)
+        from bayesmachine.sim.model import MachineModel
+
+        return MachineModel
     if name == "pysim":
         from bayesmachine.sim.pysim import PysimEngine
 
-        return PysimEngine(params, **options)
+        return PysimEngine
     if name == "verilator":
         from bayesmachine.sim.verilator import VerilatorEngine
 
-        return VerilatorEngine(params, **options)
+        return VerilatorEngine
     raise ValueError(f"unknown engine {name!r}: choose one of {', '.join(ENGINES)}")
+
+
+def get_engine(name: str, params: MachineParams, **options: object) -> Engine:
+    """A fresh engine (machine state as after reset) by name: one of :data:`ENGINES`.
+
+    ``options`` go to the engine's constructor; one it does not take is a ``ValueError``.
+    """
+    cls = _engine_class(name)
+    unknown = sorted(set(options) - set(cls.OPTIONS))
+    if unknown:
+        takes = ", ".join(cls.OPTIONS) if cls.OPTIONS else "no options"
+        raise ValueError(f"engine {name!r} does not take option(s) {', '.join(unknown)}; it takes {takes}")
+    return cls(params, **options)

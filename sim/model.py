@@ -9,80 +9,18 @@ frames run in seconds.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numba
 import numpy as np
 
 from bayesmachine.hdl.rng import lfsr_specs
 from bayesmachine.params import MachineParams
+from bayesmachine.sim.engines import EngineBase
+from bayesmachine.sim.results import MachineResult, NumberFeed, check_words, ran_out_error
 
 __all__ = ["MachineModel", "MachineResult", "check_words"]
 
 _MAX_TAPS = 6  # taps per polynomial, the constant tap 0 included (heptanomials)
-
-
-@dataclass
-class MachineResult:
-    """Per-pixel results, in load order."""
-
-    counts: np.ndarray  # (P, rows) uint32: overflow counters at the stop (winner = n_max)
-    map: np.ndarray  # (P,) int32: MAP row index (0 on timeout)
-    nomatch: np.ndarray  # (P,) bool: the no-match row won
-    timeout: np.ndarray  # (P,) bool: the watchdog stopped the run
-    cycles: np.ndarray  # (P,) int64: compute cycles of the run
-
-    def __len__(self) -> int:
-        return len(self.map)
-
-    @classmethod
-    def concatenate(cls, parts: list[MachineResult], rows: int) -> MachineResult:
-        if not parts:
-            return cls.empty(rows)
-        return cls(*(np.concatenate([getattr(p, f) for p in parts]) for f in cls.__dataclass_fields__))
-
-    @classmethod
-    def empty(cls, rows: int) -> MachineResult:
-        return cls(
-            np.zeros((0, rows), np.uint32),
-            np.zeros(0, np.int32),
-            np.zeros(0, bool),
-            np.zeros(0, bool),
-            np.zeros(0, np.int64),
-        )
-
-    def equal(self, other: MachineResult) -> bool:
-        return all(np.array_equal(getattr(self, f), getattr(other, f)) for f in self.__dataclass_fields__)
-
-
-def check_words(params: MachineParams, words: np.ndarray) -> np.ndarray:
-    """Validate a block of pixels' likelihood-memory words; returns them as (P, operators) int32.
-
-    Accepts shape (P, rows, operator_columns) or (P, operators); values must be integers in
-    [0, 2**word_bits].
-    """
-    w = np.asarray(words)
-    ops = params.operators
-    if w.ndim == 3:
-        if w.shape[1:] != (params.rows, params.operator_columns):
-            raise ValueError(
-                f"likelihood memories have shape {w.shape}; this machine expects "
-                f"(pixels, {params.rows}, {params.operator_columns})"
-            )
-        w = w.reshape(w.shape[0], ops)
-    elif w.ndim != 2 or w.shape[1] != ops:
-        raise ValueError(
-            f"likelihood memories have shape {w.shape}; this machine expects "
-            f"(pixels, {params.rows}, {params.operator_columns}) or (pixels, {ops})"
-        )
-    if w.dtype.kind not in "iu":
-        raise ValueError(f"likelihood memory words must be integers, got dtype {w.dtype}")
-    if w.size and (w.min() < 0 or w.max() > params.word_one):
-        raise ValueError(
-            f"likelihood memory words must lie in [0, {params.word_one}] (p = q / 2**{params.word_bits}); "
-            f"got [{w.min()}, {w.max()}]"
-        )
-    return np.ascontiguousarray(w, dtype=np.int32)
+_BLOCK = 4096  # rows of random numbers fetched at a time from an off-chip source
 
 
 @numba.njit(cache=True, inline="always")
@@ -151,23 +89,22 @@ def _run_lfsr(q, states, shifts, rows, opcols, word_bits, lfsr_bits, n_max, max_
 
 
 @numba.njit(cache=True)
-def _run_external(q, numbers, start, rows, opcols, n_max, max_cycles, nm_index,
-                  out_counts, out_map, out_timeout, out_cycles):
-    """Same machine, random numbers taken from ``numbers[t, o]``; returns cycles used, or -1 if
-    the supply ran out (the pixel being run is then not reported)."""
+def _run_numbers(q, numbers, first, counts, done, rows, opcols, n_max, max_cycles, nm_index,
+                 out_counts, out_map, out_timeout, out_cycles):
+    """Same machine, random numbers from ``numbers[t, o]``, resumable: pixel ``first`` has run
+    ``done[0]`` cycles (its counters in ``counts``). Stops at the end of the pixels or of the
+    numbers, saving the pixel in progress; returns (next pixel, rows of numbers used)."""
     pixels, ops = q.shape
-    t = start
+    t = 0
+    k = done[0]
     bits = np.zeros(ops, np.uint8)
-    counts = np.zeros(rows, np.uint32)
     over = np.zeros(rows, np.uint8)
-    for p in range(pixels):
+    for p in range(first, pixels):
         qp = q[p]
-        counts[:] = 0
-        k = 0
-        winner = -1
         while True:
             if t >= numbers.shape[0]:
-                return -1
+                done[0] = k
+                return p, t
             k += 1
             for o in range(ops):
                 bits[o] = np.int64(numbers[t, o]) < qp[o]
@@ -176,18 +113,25 @@ def _run_external(q, numbers, start, rows, opcols, n_max, max_cycles, nm_index,
             if winner >= 0 or k == max_cycles:
                 break
         _store(p, counts, k, winner, out_counts, out_map, out_timeout, out_cycles)
-    return t - start
+        counts[:] = 0
+        k = 0
+    done[0] = 0
+    return pixels, t
 
 
-class MachineModel:
-    """The whole machine, cycle-accurate and bit-exact with the RTL.
+class MachineModel(EngineBase):
+    """The whole machine, cycle-accurate and bit-exact with the RTL: the ``model`` engine.
 
     The model keeps the LFSR states between calls, so running pixels in several chunks
-    gives the same results as one call (as the hardware runs a stream of pixels).
+    gives the same results as one call (as the hardware runs a stream of pixels). It has the
+    engines' contract (:mod:`bayesmachine.sim.engines`): ``run``, ``reset``, ``close`` and
+    ``wall_cycles`` (None: the model does not time loading).
     """
 
+    name = "model"
+
     def __init__(self, params: MachineParams) -> None:
-        self._params = params
+        super().__init__(params)
         self._nm_index = (
             params.rows - 1 if params.nomatch_row and params.tie_break == "nomatch-first" else -1
         )
@@ -199,60 +143,33 @@ class MachineModel:
                 taps = list(spec.taps) + [0] * (_MAX_TAPS - len(spec.taps))  # pairs of 0 cancel
                 shifts[:, o] = taps
             self._shifts = shifts
-        self.reset()
+        self._reset()
 
-    @property
-    def params(self) -> MachineParams:
-        return self._params
-
-    def reset(self) -> None:
-        """Back to the state after a hardware reset."""
+    def _reset(self) -> None:
         if self._params.rng == "lfsr":
             self._states = self._init_states.copy()
 
-    @property
-    def lfsr_states(self) -> np.ndarray:
-        """The current LFSR state of every operator (a copy)."""
-        if self._params.rng != "lfsr":
-            raise ValueError("this machine has no LFSRs (rng = 'external')")
-        return self._states.copy()
-
-    def run(self, words: np.ndarray, numbers: np.ndarray | None = None) -> MachineResult:
-        """Run the machine on a sequence of pixels.
-
-        ``words``: (P, rows, operator_columns) or (P, operators) integers in [0, 2**W].
-        ``numbers``: only with ``rng = "external"``: (T, operators) W-bit random numbers, one
-        row per compute cycle, consumed in order from the first; it must cover the whole run.
-        """
+    def _run(self, q: np.ndarray, feed: NumberFeed | None) -> MachineResult:
+        """``q``: checked (P, operators) words; ``feed``: the random numbers of an off-chip source."""
         p = self._params
-        q = check_words(p, words)
         n = q.shape[0]
-        out = MachineResult(
-            np.zeros((n, p.rows), np.uint32),
-            np.zeros(n, np.int32),
-            np.zeros(n, bool),
-            np.zeros(n, bool),
-            np.zeros(n, np.int64),
-        )
-        if p.rng == "lfsr":
-            if numbers is not None:
-                raise ValueError("random numbers are only taken with rng = 'external'")
+        out = MachineResult.zeros(n, p.rows)
+        if feed is None:
             _run_lfsr(q.astype(np.uint64), self._states, self._shifts, p.rows, p.operator_columns,
                       p.word_bits, p.lfsr_bits, p.counter_max, p.max_cycles, self._nm_index,
                       out.counts, out.map, out.timeout, out.cycles)
         else:
-            if numbers is None:
-                raise ValueError("rng = 'external': pass the random numbers of every compute cycle")
-            nums = np.asarray(numbers)
-            if nums.ndim != 2 or nums.shape[1] != p.operators:
-                raise ValueError(f"random numbers must have shape (cycles, {p.operators}), got {nums.shape}")
-            if nums.size and (nums.min() < 0 or nums.max() >= (1 << p.word_bits)):
-                raise ValueError(f"random numbers must be {p.word_bits}-bit unsigned integers")
-            used = _run_external(q, np.ascontiguousarray(nums, dtype=np.int32), 0, p.rows,
-                                 p.operator_columns, p.counter_max, p.max_cycles, self._nm_index,
-                                 out.counts, out.map, out.timeout, out.cycles)
-            if used < 0:
-                raise ValueError(f"the {nums.shape[0]} cycles of random numbers ran out before the run ended")
+            counts = np.zeros(p.rows, np.uint32)
+            done = np.zeros(1, np.int64)
+            first = 0
+            while first < n:
+                nums = feed.take(_BLOCK)
+                if not len(nums):
+                    raise ran_out_error(feed.source)
+                first, used = _run_numbers(q, nums, first, counts, done, p.rows, p.operator_columns,
+                                           p.counter_max, p.max_cycles, self._nm_index,
+                                           out.counts, out.map, out.timeout, out.cycles)
+                feed.unread(nums[used:])
         if p.nomatch_row:
             out.nomatch[:] = (~out.timeout) & (out.map == p.rows - 1)
         return out

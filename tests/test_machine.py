@@ -17,7 +17,7 @@ from bayesmachine.hdl.machine import BayesianMachine, load_layout, result_layout
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.model import MachineModel
 from bayesmachine.sim.pysim import PysimEngine
-from bayesmachine.sim.testbench import synthetic_disparity_words
+from bayesmachine.sim.synthetic import synthetic_disparity_words
 
 
 def _mixed_words(params: MachineParams, pixels: int, seed: int) -> np.ndarray:
@@ -205,8 +205,19 @@ def test_full_size_machine_timeout_and_lowest_index() -> None:
     words = synthetic_disparity_words(params, 4, rng)
     words[1] = 0  # timeout after 120 cycles
     words[3] = params.word_one  # all rows tie: lowest index wins
-    res = _check(params, words, load_stall=0.2, result_stall=0.2, stall_seed=4).run(words[:0])
-    assert len(res) == 0
+    engine = PysimEngine(params, load_stall=0.2, result_stall=0.2, stall_seed=4)
+    res = engine.run(words)
+    assert_same_results(res, MachineModel(params).run(words))
+    # Expected from the rules alone: words of 0 never give a 1, so the watchdog stops the run at
+    # max_cycles with every counter at 0 and map 0...
+    assert (res.timeout[1], res.cycles[1], res.map[1], res.nomatch[1]) == (True, 120, 0, False)
+    assert not res.counts[1].any()
+    # ...and words of 1.0 give every row a 1 each cycle: all 82 overflow together in cycle n_max + 1,
+    # and lowest-index picks row 0 over the no-match row.
+    sure = params.counter_max + 1
+    assert (res.timeout[3], res.cycles[3], res.map[3], res.nomatch[3]) == (False, sure, 0, False)
+    assert (res.counts[3] == params.counter_max).all()
+    assert len(engine.run(words[:0])) == 0  # an empty batch: nothing in, nothing out
 
 
 @pytest.mark.slow

@@ -20,7 +20,8 @@ from scipy import stats
 from bayesmachine.hdl.encoder import map_encoder_twin
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.model import MachineModel
-from bayesmachine.sim.testbench import measure_ties, synthetic_disparity_words
+from bayesmachine.sim.synthetic import synthetic_disparity_words
+from bayesmachine.sim.ties import measure_ties
 
 W = 10
 ONE = 1 << W

