@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from bayesmachine.params import DEFAULT_LANES, DEFAULT_MAX_CYCLES, DEFAULT_WORD_BITS, MachineParams
+from bayesmachine.params import DEFAULT_LANES, DEFAULT_MAX_CYCLES, DEFAULT_WORD_BITS, RNG_KINDS, MachineParams
+from bayesmachine.sources import source_kind
 
 __all__ = ["TOP_NAME", "emit", "register", "summary", "verilog_text"]
 
@@ -25,7 +26,7 @@ def _ports(params: MachineParams) -> list[tuple[str, str, int]]:
         ("out", "result__valid", 1),
         ("in", "result__ready", 1),
     ]
-    if params.rng == "external":
+    if not source_kind(params.rng).on_chip:
         ports += [("in", "entropy", params.word_bits * params.operators), ("out", "entropy_ready", 1)]
     return ports
 
@@ -39,9 +40,8 @@ def summary(params: MachineParams) -> str:
         f"words: {params.word_bits}-bit comparators, {params.memory_word_width}-bit likelihood-memory words; "
         f"counter max {params.counter_max} ({params.counter_width}-bit overflow counters); "
         f"watchdog {params.max_cycles} cycles",
-        f"random source: {params.rng}"
-        + (f" (leap-forward LFSRs, L = {params.lfsr_bits}, seed {params.seed})"
-           if params.rng == "lfsr" else " (W-bit numbers per operator on the 'entropy' port)"),
+        f"random source: {params.rng}: {source_kind(params.rng).description}"
+        + (f" (L = {params.lfsr_bits}, seed {params.seed})" if source_kind(params.rng).on_chip else ""),
         f"load: {params.lanes} words per beat, {params.beats_per_pixel} beats per pixel",
         "ports (Verilog names; clk and rst as well):",
     ]
@@ -96,8 +96,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help=f"comparator resolution W; memory words are W+1 bits (default {DEFAULT_WORD_BITS})")
     p.add_argument("--counter-max", type=int, default=16,
                    help="n_max: a counter overflows on its (n_max+1)-th 1 (default 16)")
-    p.add_argument("--rng", choices=("lfsr", "external"), default="lfsr",
-                   help="random numbers from on-chip LFSRs or an 'entropy' input port (default lfsr)")
+    p.add_argument("--rng", choices=RNG_KINDS, default=MachineParams.rng,
+                   help="random source: "
+                   + "; ".join(f"{k.name}: {k.description}" for k in map(source_kind, RNG_KINDS))
+                   + f" (default {MachineParams.rng})")
     p.add_argument("--seed", type=_int, default=1,
                    help="machine seed for LFSR polynomials and states (default 1)")
     p.add_argument("--lanes", type=int, default=None,

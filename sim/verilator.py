@@ -45,6 +45,7 @@ import numpy as np
 from bayesmachine.hdl.cli import TOP_NAME, verilog_text
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.model import MachineResult, check_words
+from bayesmachine.sources import source_kind
 
 __all__ = [
     "HARNESS_DIR",
@@ -307,8 +308,10 @@ def _sources_digest(factory: Callable[[MachineParams], Any]) -> str:
 
     import bayesmachine.hdl
     import bayesmachine.params
+    import bayesmachine.sources
 
     files = sorted(Path(bayesmachine.hdl.__file__).parent.glob("*.py"))
+    files += sorted(Path(bayesmachine.sources.__file__).parent.glob("*.py"))  # LFSR specs, Sobol table
     files.append(Path(bayesmachine.params.__file__))
     mod_file = inspect.getsourcefile(factory)
     if mod_file:
@@ -612,7 +615,7 @@ class VerilatorEngine:
     def _check_numbers(self, numbers: np.ndarray | None) -> np.ndarray:
         """The random numbers as a little-endian uint16 (T, operators) array (empty for LFSRs)."""
         p = self.params
-        if p.rng == "lfsr":
+        if source_kind(p.rng).on_chip:
             if numbers is not None:
                 raise ValueError("random numbers are only taken with rng = 'external'")
             return np.zeros((0, p.operators), "<u2")

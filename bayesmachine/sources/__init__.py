@@ -1,0 +1,73 @@
+"""Random sources of the stochastic operators: one registry, pure Python (no Amaranth).
+
+A source kind is a name in :data:`bayesmachine.params.RNG_KINDS` and an entry in
+:data:`SOURCE_KINDS`. On-chip kinds generate their numbers inside the design: an RTL generator
+in ``bayesmachine.hdl.sources`` and a twin kernel in ``bayesmachine.sim.model``, both built on
+the definitions of this package (``lfsr``: LFSR specs and polynomial search; ``sobol``:
+direction numbers and the per-cycle twin). Off-chip kinds take one W-bit number per operator
+per compute cycle on the machine's ``entropy`` port; ``numbers`` builds the seeded device
+model that engines use when a run gets no numbers (``external``: none, the caller passes them).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from bayesmachine.params import MachineParams, ParameterError
+
+__all__ = ["SOURCE_KINDS", "NumberSource", "SourceKind", "source_kind"]
+
+
+class NumberSource(Protocol):
+    """A stream of random numbers for the ``entropy`` port of an off-chip source."""
+
+    operators: int
+
+    def take(self, count: int) -> np.ndarray:
+        """The next ``count`` compute cycles' numbers: shape (count, operators), uint16, in
+        [0, 2**W). Successive calls continue the stream; a finite source returns fewer rows when
+        it runs out (0 rows: exhausted)."""
+        ...
+
+
+@dataclass(frozen=True)
+class SourceKind:
+    """One kind of random source (see the module docstring)."""
+
+    name: str
+    on_chip: bool
+    description: str
+    numbers: Callable[[MachineParams], NumberSource] | None = None
+
+
+SOURCE_KINDS: dict[str, SourceKind] = {
+    kind.name: kind
+    for kind in (
+        SourceKind("lfsr", True, "one leap-forward LFSR per operator (L = lfsr_bits, W bits per cycle)"),
+        SourceKind(
+            "lfsr-shared", True,
+            "one leap-forward LFSR per operator column, its number shared by every row",
+        ),
+        SourceKind(
+            "sobol", True,
+            "one Sobol generator per operator column, shared by every row; restarts each pixel, "
+            "a random digital shift per block of 2^W cycles",
+        ),
+        SourceKind(
+            "external", False,
+            "W-bit numbers per operator on the 'entropy' port, one set per compute cycle (caller-supplied)",
+        ),
+    )
+}
+
+
+def source_kind(name: str) -> SourceKind:
+    """The registry entry of a source kind; a clear error for an unknown name."""
+    try:
+        return SOURCE_KINDS[name]
+    except KeyError:
+        raise ParameterError(f"rng must be one of {', '.join(SOURCE_KINDS)}, got {name!r}") from None
