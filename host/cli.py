@@ -14,7 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from bayesmachine.params import MachineParams
+from bayesmachine.params import RNG_KINDS, MachineParams
+from bayesmachine.sources import source_kind
 
 from .images import Crop, bundled_pair, crop_image, load_gt, load_image, parse_crop
 from .likelihoods import ModelParams
@@ -23,6 +24,8 @@ from .run import ENGINES, RunOutcome, prepare, run_pair
 __all__ = ["register"]
 
 DEFAULTS = ModelParams()
+# Sources a run can use on its own: on-chip ones, and off-chip ones with a device model.
+RUNNABLE_RNG = tuple(k for k in RNG_KINDS if source_kind(k).on_chip or source_kind(k).numbers is not None)
 
 
 def _add_model_options(p: argparse.ArgumentParser) -> None:
@@ -125,6 +128,23 @@ def _add_machine_options(p: argparse.ArgumentParser, sweep: bool) -> None:
     g.add_argument(
         "--word-bits", type=int, default=10, metavar="W", help="comparator resolution (default 10)"
     )
+    if sweep:
+        g.add_argument(
+            "--rng",
+            default=MachineParams.rng,
+            metavar="KIND,KIND,...",
+            help=f"comma-separated random sources to compare, of {', '.join(RUNNABLE_RNG)} "
+            "(default %(default)s)",
+        )
+    else:
+        g.add_argument(
+            "--rng",
+            choices=RUNNABLE_RNG,
+            default=MachineParams.rng,
+            help="random source: "
+            + "; ".join(f"{k}: {source_kind(k).description}" for k in RUNNABLE_RNG)
+            + " (default %(default)s)",
+        )
     g.add_argument(
         "--seed", type=int, default=1, help="machine seed: LFSR polynomials and states (default 1)"
     )
@@ -156,10 +176,13 @@ def _add_machine_options(p: argparse.ArgumentParser, sweep: bool) -> None:
     p.add_argument("-o", "--output", required=True, type=Path, metavar="OUT/", help="output directory")
 
 
-def _machine_params(args: argparse.Namespace, model: ModelParams, counter_max: int) -> MachineParams:
+def _machine_params(
+    args: argparse.Namespace, model: ModelParams, counter_max: int, rng: str | None = None
+) -> MachineParams:
     return MachineParams.for_disparity(
         model.dmax,
         counter_max=counter_max,
+        rng=args.rng if rng is None else rng,
         word_bits=args.word_bits,
         seed=args.seed,
         max_cycles=args.max_cycles,
@@ -171,6 +194,7 @@ def _report(outcome: RunOutcome, source: str, crop: Crop | None) -> dict[str, ob
     prep, run = outcome.prepared, outcome.run
     report: dict[str, object] = {
         "engine": run.engine,
+        "rng": run.machine.rng,
         "counter_max": run.machine.counter_max,
         **outcome.metrics.to_report(),
         "frame_cycles": int(run.cycles.sum()),
@@ -201,7 +225,7 @@ def _summary(r: dict[str, object]) -> str:
         return "n/a" if v is None else format(v, fmt)
 
     line = (
-        f"{r['engine']} counter_max={r['counter_max']}: {r['pixels']} px, "
+        f"{r['engine']} rng={r['rng']} counter_max={r['counter_max']}: {r['pixels']} px, "
         f"{f('cycles_per_pixel_mean', '.2f')} +- {f('cycles_per_pixel_std', '.2f')} cycles/px, "
         f"RMS {f('rms_error')}, no-match F1 {f('nomatch_f1')}, MAP agreement {f('map_agreement')}, "
         f"timeouts {r['timeouts']}, engine {f('seconds', '.2f')} s"
@@ -317,10 +341,25 @@ def _parse_counter_list(text: str) -> list[int]:
     return values
 
 
+def _parse_rng_list(text: str) -> list[str]:
+    kinds = [v.strip() for v in text.split(",") if v.strip()]
+    if not kinds:
+        raise ValueError("--rng needs at least one random source")
+    for k in kinds:
+        if k not in RUNNABLE_RNG:
+            raise ValueError(f"--rng: unknown or not runnable random source {k!r}; choose from "
+                             f"{', '.join(RUNNABLE_RNG)}")
+    if len(set(kinds)) != len(kinds):
+        raise ValueError(f"--rng lists a source twice: {text!r}")
+    return kinds
+
+
 def _cmd_sweep(args: argparse.Namespace) -> int:
     model = _model_params(args)
     counters = _parse_counter_list(args.counter_max)
-    machines = [_machine_params(args, model, n) for n in counters]  # validate all before running
+    kinds = _parse_rng_list(args.rng)
+    # validate all before running; the sources side by side, each over every counter max
+    machines = [_machine_params(args, model, n, k) for k in kinds for n in counters]
     left, right, gt, source = _load_inputs(args, with_gt=True)
     out: Path = args.output
     _make_output_dir(out)
@@ -353,7 +392,8 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         "reference_seconds": prep.reference_seconds,
         "total_seconds": time.perf_counter() - t0,
         "model": model.to_dict(),
-        "machine": {k: v for k, v in machines[0].to_dict().items() if k != "counter_max"},
+        "rng": kinds,
+        "machine": {k: v for k, v in machines[0].to_dict().items() if k not in ("counter_max", "rng")},
         "points": points,
     }
     _write_json(out / "sweep.json", sweep)
@@ -392,10 +432,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
 
     p = subparsers.add_parser(
         "sweep",
-        help="paper Fig 6: accuracy and cycles per pixel against counter max",
-        description="Run the machine for several counter max values on one pair; write OUT/sweep.json "
-        "and OUT/sweep.png (RMS error and no-match F1 vs counter max; cycles per pixel: mean, median, "
-        "10-90 % band).",
+        help="paper Fig 6: accuracy and cycles per pixel against counter max (and random source)",
+        description="Run the machine for several counter max values (and, with --rng, several random "
+        "sources side by side) on one pair; write OUT/sweep.json and OUT/sweep.png (RMS error, no-match "
+        "F1 and MAP agreement vs counter max; cycles per pixel: mean, median, 10-90 % band).",
     )
     _add_input_options(p, optional=True)
     _add_model_options(p)

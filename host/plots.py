@@ -53,31 +53,38 @@ def save_disparity_figure(
 
 
 def save_sweep_figure(path: str | Path, sweep: Sequence[dict[str, object]]) -> None:
-    """Fig 6: (a) RMS error and no-match F1 vs counter max; (b) cycles/pixel (mean, median, 10-90 % band)."""
-    cm = np.array([float(s["counter_max"]) for s in sweep])  # type: ignore[arg-type]
+    """Fig 6: (a) RMS error, no-match F1 and MAP agreement vs counter max; (b) cycles/pixel (mean,
+    median, 10-90 % band). Points with several random sources (key ``rng``) get one colour each."""
+    kinds = list(dict.fromkeys(str(s.get("rng", "")) for s in sweep))
+    fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4.5))
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for i, kind in enumerate(kinds):
+        pts = [s for s in sweep if str(s.get("rng", "")) == kind]
+        cm = np.array([float(s["counter_max"]) for s in pts])  # type: ignore[arg-type]
 
-    def col(key: str) -> np.ndarray:
-        return np.array([np.nan if s.get(key) is None else float(s[key]) for s in sweep])  # type: ignore[arg-type]
+        def col(key: str, pts: list[dict[str, object]] = pts) -> np.ndarray:
+            return np.array([np.nan if s.get(key) is None else float(s[key]) for s in pts])  # type: ignore[arg-type]
 
-    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4))
-    a.plot(cm, col("rms_error"), "o-", label="RMS error (matched pixels)")
-    a.plot(cm, col("nomatch_f1"), "s-", label="F1 (no-match detection)")
-    a.plot(cm, col("map_agreement"), "^--", label="MAP agreement", alpha=0.7)
+        colour = colours[i % len(colours)] if len(kinds) > 1 else None
+        tag = f"{kind}: " if len(kinds) > 1 else ""
+        a.plot(cm, col("rms_error"), "o-", color=colour, label=f"{tag}RMS error (matched pixels)")
+        a.plot(cm, col("nomatch_f1"), "s-", color=colour, label=f"{tag}F1 (no-match detection)", alpha=0.8)
+        a.plot(cm, col("map_agreement"), "^--", color=colour, label=f"{tag}MAP agreement", alpha=0.6)
+        # The per-pixel distribution is heavy-tailed, so mean +- std would dip below zero: show the
+        # mean, the median and the 10-90 % band instead (std over pixels is in the JSON).
+        b.plot(cm, col("cycles_per_pixel_mean"), "o-", color=colour, label=f"{tag}mean")
+        b.plot(cm, col("cycles_per_pixel_median"), "s--", color=colour, label=f"{tag}median", alpha=0.8)
+        b.fill_between(cm, col("cycles_per_pixel_p10"), col("cycles_per_pixel_p90"), color=colour,
+                       alpha=0.12 if len(kinds) > 1 else 0.2, label=f"{tag}10-90 % of pixels")
     a.set_xscale("log", base=2)
     a.set_xlabel("counter max")
     a.set_ylim(0, 1.02)
     a.grid(True, alpha=0.3)
-    a.legend(fontsize=8)
+    a.legend(fontsize=7, ncol=1 if len(kinds) < 2 else 2)
     a.set_title("(a) accuracy vs the float64 reference")
-    # The per-pixel distribution is heavy-tailed, so mean +- std would dip below zero: show the
-    # mean, the median and the 10-90 % band instead (std over pixels is in the JSON).
-    b.plot(cm, col("cycles_per_pixel_mean"), "o-", label="mean")
-    b.plot(cm, col("cycles_per_pixel_median"), "s--", label="median", alpha=0.8)
-    b.fill_between(cm, col("cycles_per_pixel_p10"), col("cycles_per_pixel_p90"), alpha=0.2,
-                   label="10-90 % of pixels")
     b.set_xlabel("counter max")
     b.set_ylabel("cycles per pixel")
-    b.legend(fontsize=8)
+    b.legend(fontsize=7)
     b.grid(True, alpha=0.3)
     b.set_title("(b) run time per pixel")
     fig.tight_layout()
