@@ -174,6 +174,26 @@ def test_dmax80_crop(cache: Path) -> None:
 
 
 @needs_tools
+@pytest.mark.parametrize("rng", ["lfsr-shared", "sobol"])
+def test_shared_sources_on_a_bundled_pair_crop(cache: Path, monkeypatch: pytest.MonkeyPatch,
+                                               rng: str) -> None:
+    """The column-shared sources through the RTL at Dmax 80: a crop of the bundled pair, bit exact."""
+    host_run = pytest.importorskip("bayesmachine.host.run")
+    from bayesmachine.host.images import Crop, bundled_pair, crop_image
+    from bayesmachine.host.likelihoods import ModelParams
+
+    monkeypatch.setenv("BAYESMACHINE_CACHE_DIR", str(cache.parent))
+    left, right, gt = (crop_image(a, Crop(300, 200, 124, 12)) for a in bundled_pair())
+    prep = host_run.prepare(left, right, ModelParams(), gt)
+    machine = MachineParams.for_disparity(80, rng=rng)
+    a = host_run.run_machine(prep, machine, "model", progress=False)
+    b = host_run.run_machine(prep, machine, "verilator", progress=False)
+    assert a.map.size == 8 * 40
+    for field in ("map", "counts", "cycles", "timeout", "nomatch"):
+        np.testing.assert_array_equal(getattr(a, field), getattr(b, field))
+
+
+@needs_tools
 def test_host_run_through_registry(cache: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """``bayesmachine run --engine verilator``'s path: the host streams rows through the registry."""
     host_run = pytest.importorskip("bayesmachine.host.run")

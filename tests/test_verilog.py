@@ -29,6 +29,8 @@ FULL = MachineParams.for_disparity(80)  # the paper's machine: 82 rows, 3 column
 VARIANTS = {
     "full": FULL,
     "full-external": MachineParams.for_disparity(80, rng="external"),
+    "full-lfsr-shared": MachineParams.for_disparity(80, rng="lfsr-shared"),
+    "full-sobol": MachineParams.for_disparity(80, rng="sobol"),
     "small-loaded-prior": MachineParams.for_disparity(
         6, prior="loaded", lanes=5, counter_max=3, max_cycles=100
     ),
@@ -60,8 +62,16 @@ def test_verilator_lint_wall(emitted: dict[str, Path], name: str) -> None:
     assert proc.returncode == 0 and "%Warning" not in proc.stderr, proc.stderr[:3000]
 
 
+def _source_flip_flops(p: MachineParams) -> int:
+    """Registers of the random source: LFSRs of L bits; Sobol: a y register per column, the shared
+    block index and its 'fresh' flag."""
+    cols, w, length = p.operator_columns, p.word_bits, p.lfsr_bits
+    return {"lfsr": p.operators * length, "lfsr-shared": cols * length,
+            "sobol": cols * (length + w) + w + 1, "external": 0}[p.rng]
+
+
 def _expected_flip_flops(p: MachineParams) -> int:
-    lfsrs = p.operators * p.lfsr_bits if p.rng == "lfsr" else 0
+    lfsrs = _source_flip_flops(p)
     memories = 2 * p.words_per_pixel * p.memory_word_width  # shadow + active likelihood memories
     counters = p.rows * p.counter_width
     result = 1 + p.map_width + 2 + p.cycle_width + p.rows * p.counter_width  # valid + payload
@@ -70,7 +80,7 @@ def _expected_flip_flops(p: MachineParams) -> int:
 
 
 @needs_yosys
-@pytest.mark.parametrize("name", ["full", "small-loaded-prior"])
+@pytest.mark.parametrize("name", ["full", "full-lfsr-shared", "full-sobol", "small-loaded-prior"])
 def test_yosys_synthesizes_without_latches(emitted: dict[str, Path], name: str) -> None:
     path = emitted[name]
     _yosys(
@@ -85,6 +95,8 @@ def test_yosys_synthesizes_without_latches(emitted: dict[str, Path], name: str) 
     # Every register is accounted for: nothing unexpected, nothing optimized away.
     assert ffs == _expected_flip_flops(VARIANTS[name])
     assert cells > ffs
+    if name == "full-sobol":  # the shared low-discrepancy source's goal: half the LFSR design's registers
+        assert ffs <= 0.5 * _expected_flip_flops(FULL)
 
 
 @needs_yosys
