@@ -3,8 +3,10 @@
 Prints, per source and counter max: cycles per pixel, RMS error, no-match F1, MAP agreement,
 and where a shared source could be worse than independent LFSRs: how often another row also
 holds n_max at the stop (a tie or a photo finish), how often the no-match row ties with a
-disparity row (exactly: the pixels whose MAP changes under the lowest-index tie rule), and MAP
-agreement on the pixels whose two best reference hypotheses are nearly equal. Asserts nothing. Run:
+disparity row (exactly: the pixels whose MAP changes under the lowest-index tie rule), MAP
+agreement on the pixels whose two best reference hypotheses are nearly equal, and on the pixels
+whose two best rows have equal quantized rates (products of their words): rows a shared source
+makes fire in the same cycles. Asserts nothing. Run:
     python benchmarks/bench_sources.py [--counter-max 16] [--rng lfsr,lfsr-shared,sobol]
 """
 
@@ -15,7 +17,7 @@ import argparse
 import numpy as np
 
 from bayesmachine.host.images import bundled_pair
-from bayesmachine.host.likelihoods import ModelParams
+from bayesmachine.host.likelihoods import ModelParams, QuantizedTables, likelihood_tables, memory_words
 from bayesmachine.host.metrics import evaluate
 from bayesmachine.host.run import prepare, run_machine
 from bayesmachine.params import MachineParams
@@ -40,6 +42,16 @@ def main() -> None:
     print(f"bundled Motorcycle pair, Dmax {model.dmax}: {post.shape[0]} pixels; {near.sum()} "
           f"({100 * near.mean():.1f} %) have a runner-up hypothesis within {args.near:g}x of the best, "
           f"{(top2[:, 0] == top2[:, 1]).sum()} an exact tie")
+    base = MachineParams.for_disparity(model.dmax)
+    qt = QuantizedTables(likelihood_tables(model), base.word_bits)
+    ho, wo = prep.shape
+    equal_best = np.zeros(ho * wo, bool)
+    for y in range(ho):  # a row of pixels at a time: the words of a frame are large
+        q = memory_words(*prep.features, model, base, rows=slice(y, y + 1), qtables=qt).astype(np.int64)
+        rates = q.prod(axis=2)
+        top = np.sort(rates, axis=1)[:, -2:]
+        equal_best[y * wo : (y + 1) * wo] = top[:, 0] == top[:, 1]
+    print(f"{equal_best.sum()} pixels ({100 * equal_best.mean():.1f} %) have two best rows of equal rate")
     for n in (int(v) for v in args.counter_max.split(",")):
         for kind in args.rng.split(","):
             machine = MachineParams.for_disparity(model.dmax, counter_max=n, rng=kind)
@@ -58,7 +70,9 @@ def main() -> None:
                 f"{r['map_agreement']:.3f}; another row at n_max {100 * photo.mean():.1f} % of pixels, "
                 f"no-match ties {100 * nm_ties.mean():.1f} %; near-equal pixels: MAP agreement "
                 f"{(got[near] == ref_map[near]).mean():.3f}, no match {100 * (got[near] < 0).mean():.1f} % "
-                f"(reference {100 * (ref_map[near] < 0).mean():.1f} %)"
+                f"(reference {100 * (ref_map[near] < 0).mean():.1f} %); MAP agreement on equal-rate best "
+                f"rows {(got[equal_best] == ref_map[equal_best]).mean():.3f}, on the others "
+                f"{(got[~equal_best] == ref_map[~equal_best]).mean():.3f}"
             )
 
 
