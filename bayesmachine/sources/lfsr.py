@@ -5,7 +5,7 @@ An LFSR is a Fibonacci LFSR of length L whose bit sequence obeys
 ``x^L + sum(x^i for i in taps)``, primitive, so the period is 2**L - 1). The state holds
 ``s[t] ... s[t+L-1]`` (bit i = s[t+i]). One clock advances the sequence by W bits at once
 (leap-forward), which is cheap because every tap is at most L - W: each new bit is the XOR
-of at most 6 state bits, one LUT6. The operator's W-bit random number is the W oldest bits,
+of at most 6 state bits, one LUT6. The LFSR's W-bit random number is its W oldest bits,
 so consecutive numbers are disjoint chunks of the m-sequence: a comparator never re-reads a
 bit, unlike a register that shifts by one bit per cycle (see ``tests/test_rng.py``, which
 measures both).
