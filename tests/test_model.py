@@ -28,7 +28,8 @@ def _random_words(params: MachineParams, pixels: int, seed: int) -> np.ndarray:
 
 def test_lfsr_kernel_equals_twin_via_external_numbers() -> None:
     """The compiled LFSR path and the external-number path agree when fed the twin's numbers."""
-    params = MachineParams(rows=5, columns=2, word_bits=6, lfsr_bits=17, counter_max=3, lanes=2, seed=7)
+    params = MachineParams(rows=5, columns=2, word_bits=6, lfsr_bits=17, counter_max=3, lanes=2, seed=7,
+                           rng="lfsr")
     words = _random_words(params, 60, 1)
     internal = MachineModel(params).run(words)
     total = int(internal.cycles.sum())
