@@ -15,12 +15,13 @@ Timing:
   into the *active* memory and the next run starts: runs go back to back with no idle cycle.
   ``load.ready`` is low only while the shadow holds a complete pixel not yet started.
 - A compute cycle is a cycle of a run in which the result register can take a result
-  (empty, or being read this cycle). Only compute cycles advance the LFSRs, counters and cycle
+  (empty, or being read this cycle). Only compute cycles advance the random source, counters and cycle
   count, so back-pressure on ``result`` stalls the machine without changing any result.
 
-The random source, the operator matrix and the MAP encoder are direct submodules (depth 1),
-the very components their unit tests drive; Amaranth's Python simulator slows down with
-hierarchy depth, so nothing is nested deeper.
+The random source and the MAP encoder are direct submodules (depth 1), the very components
+their unit tests drive; the operator matrix is built by ``operator.operator_rows``, the
+function the operator test's component wraps (as a submodule its port copies of 246 words and
+numbers would slow Amaranth's Python simulator, which also slows with hierarchy depth).
 """
 
 from __future__ import annotations
