@@ -199,6 +199,20 @@ def test_degree_31_trinomials_match_the_published_table() -> None:
     assert primitive == {3, 6, 7, 13, 18, 24, 25, 28}
 
 
+# OEIS A132449: the first primitive polynomial over GF(2) of degree n with at most 5 terms, as
+# an integer (bit i = coefficient of x^i), n = 2 ... 31 (2147483657 = x^31 + x^3 + 1).
+A132449 = [7, 11, 19, 37, 67, 131, 285, 529, 1033, 2053, 4179, 8219, 16427, 32771, 65581, 131081, 262183,
+           524327, 1048585, 2097157, 4194307, 8388641, 16777243, 33554441, 67108935, 134217767, 268435465,
+           536870917, 1073741907, 2147483657]
+
+
+@pytest.mark.parametrize("degree", range(2, 32))
+def test_first_primitive_polynomial_with_at_most_5_terms(degree: int) -> None:
+    first = next(poly for poly in range((1 << degree) + 1, 1 << (degree + 1), 2)
+                 if poly.bit_count() <= 5 and is_primitive(degree, _taps_of(poly)))
+    assert first == A132449[degree - 2]
+
+
 @pytest.mark.parametrize("degree", [2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12])
 def test_number_of_primitive_polynomials_is_phi_over_n(degree: int) -> None:
     # There are phi(2^n - 1) / n primitive polynomials of degree n over GF(2) (Lidl & Niederreiter,
