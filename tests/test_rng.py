@@ -226,8 +226,9 @@ def test_number_of_primitive_polynomials_is_phi_over_n(degree: int) -> None:
 @pytest.mark.parametrize(
     ("poly", "order"),
     [
-        # Irreducible but not primitive (x has order < 2^n - 1): tables of Peterson & Weldon,
-        # Error-Correcting Codes (1972), appendix C.
+        # Irreducible but not primitive (x has order < 2^n - 1), as listed in tables of irreducible
+        # polynomials (e.g. Peterson & Weldon, Error-Correcting Codes, 1972, appendix C); the
+        # orders are recomputed by brute force below.
         (0b11111, 5),  # x^4 + x^3 + x^2 + x + 1
         (0b1001001, 9),  # x^6 + x^3 + 1
         (0b1110101, 21),  # x^6 + x^5 + x^4 + x^2 + 1
