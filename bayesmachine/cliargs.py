@@ -98,21 +98,37 @@ def counter_max_list(text: str) -> list[int]:
     return sorted(set(values))
 
 
-def source_kinds() -> Mapping[str, Any] | None:
-    """The random-source registry ``bayesmachine.sources.SOURCE_KINDS``, or None where it is absent."""
-    try:
-        from bayesmachine.sources import SOURCE_KINDS  # type: ignore[import-not-found, unused-ignore]
-    except ImportError:
-        return None
-    return SOURCE_KINDS  # type: ignore[no-any-return, unused-ignore]
+def source_kinds() -> Mapping[str, Any]:
+    """The random-source registry ``bayesmachine.sources.SOURCE_KINDS``."""
+    from bayesmachine.sources import SOURCE_KINDS
+
+    return SOURCE_KINDS
+
+
+def runnable_sources() -> tuple[str, ...]:
+    """Source kinds a run can drive by itself: on-chip ones, and off-chip ones with a device model."""
+    return tuple(k for k, kind in source_kinds().items() if kind.on_chip or kind.numbers is not None)
+
+
+def rng_list(text: str) -> list[str]:
+    """``KIND,KIND,...`` random sources (for sweeps), each runnable, no repeats."""
+    kinds = [v.strip() for v in text.split(",") if v.strip()]
+    if not kinds:
+        raise argparse.ArgumentTypeError("give at least one random source")
+    runnable = runnable_sources()
+    for k in kinds:
+        if k not in runnable:
+            raise argparse.ArgumentTypeError(
+                f"unknown or not runnable random source {k!r}; choose from {', '.join(runnable)}"
+            )
+    if len(set(kinds)) != len(kinds):
+        raise argparse.ArgumentTypeError(f"a random source is listed twice: {text!r}")
+    return kinds
 
 
 def rng_help() -> str:
     kinds = source_kinds()
-    if kinds:
-        described = "; ".join(f"{name}: {kinds[name].description}" for name in RNG_KINDS if name in kinds)
-    else:
-        described = ", ".join(RNG_KINDS)
+    described = "; ".join(f"{name}: {kinds[name].description}" for name in RNG_KINDS)
     return f"random source ({described}) (default {DEFAULT_RNG})"
 
 

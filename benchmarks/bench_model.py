@@ -2,7 +2,7 @@
 
 Prints, per counter max: model (engine) seconds per frame, likelihood-memory build time,
 cycles per pixel and the comparison figures. Asserts nothing. Run:
-    python benchmarks/bench_model.py [--counter-max 1,16] [--engine model]
+    python benchmarks/bench_model.py [--counter-max 1,16] [--engine model] [--rng lfsr,sobol]
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--counter-max", default="1,16")
     ap.add_argument("--engine", default="model")
+    ap.add_argument("--rng", default=MachineParams.rng, help="comma-separated random sources")
     args = ap.parse_args()
     crop = Crop(50, 10, 640, 480)
     left, right, gt = (crop_image(a, crop) for a in bundled_pair())
@@ -31,16 +32,16 @@ def main() -> None:
         f"Motorcycle crop {crop} (640x480), Dmax {model.dmax}: {ho}x{wo} = {ho * wo} output pixels; "
         f"reference {prep.reference_seconds:.3f} s"
     )
-    for n in (int(v) for v in args.counter_max.split(",")):
-        machine = MachineParams.for_disparity(model.dmax, counter_max=n)
+    for kind, n in ((k, int(v)) for k in args.rng.split(",") for v in args.counter_max.split(",")):
+        machine = MachineParams.for_disparity(model.dmax, counter_max=n, rng=kind)
         t0 = time.perf_counter()
         run = run_machine(prep, machine, args.engine, progress=False)
         wall = time.perf_counter() - t0
         r = evaluate(prep, run, sgbm=False).to_report()
         cycles = int(run.cycles.sum())
         print(
-            f"counter max {n:3d}: engine {run.seconds:6.2f} s/frame, words {run.words_seconds:5.2f} s, "
-            f"wall {wall:6.2f} s"
+            f"{kind} counter max {n:3d}: engine {run.seconds:6.2f} s/frame, "
+            f"words {run.words_seconds:5.2f} s, wall {wall:6.2f} s"
         )
         print(
             f"    cycles/px {r['cycles_per_pixel_mean']:.2f} +- {r['cycles_per_pixel_std']:.2f} "

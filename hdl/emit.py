@@ -6,6 +6,7 @@ from pathlib import Path
 
 from bayesmachine.outputs import atomic_write_text
 from bayesmachine.params import MachineParams
+from bayesmachine.sources import source_kind
 
 __all__ = ["TOP_NAME", "emit", "rtlil_text", "summary", "verilog_text"]
 
@@ -38,9 +39,8 @@ def summary(params: MachineParams) -> str:
         f"words: {params.word_bits}-bit comparators, {params.memory_word_width}-bit likelihood-memory words; "
         f"counter max {params.counter_max} ({params.counter_width}-bit overflow counters); "
         f"watchdog {params.max_cycles} cycles",
-        f"random source: {params.rng}"
-        + (f" (leap-forward LFSRs, L = {params.lfsr_bits}, seed {params.seed})"
-           if params.rng == "lfsr" else " (W-bit numbers per operator on the 'entropy' port)"),
+        f"random source: {params.rng}: {source_kind(params.rng).description}"
+        + (f" (L = {params.lfsr_bits}, seed {params.seed})" if source_kind(params.rng).on_chip else ""),
         f"load: {params.lanes} words per beat, {params.beats_per_pixel} beats per pixel",
         "ports (Verilog names; clk and rst as well):",
     ]

@@ -20,7 +20,7 @@ from amaranth.hdl import Cat, Const, Module, Mux, Value
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
-from bayesmachine.params import TIE_BREAKS, MachineParams, ParameterError
+from bayesmachine.params import TIE_BREAKS, ParameterError
 
 __all__ = ["MAPEncoder", "map_encoder", "map_encoder_twin"]
 
@@ -70,7 +70,7 @@ def map_encoder_twin(over: Sequence[int | bool], nomatch_row: bool, tie_break: s
 
 
 class MAPEncoder(wiring.Component):
-    """The MAP encoder as a component (for unit tests; the machine calls :func:`map_encoder`).
+    """The MAP encoder (the machine's submodule, and the component ``tests/test_encoder.py`` drives).
 
     Ports: ``over`` (M bits in), ``valid`` (any row overflowed), ``index`` (the winning row).
     """
@@ -86,10 +86,6 @@ class MAPEncoder(wiring.Component):
         self._nomatch_row = bool(nomatch_row)
         self._tie_break = tie_break
         super().__init__({"over": In(rows), "valid": Out(1), "index": Out(_index_width(rows))})
-
-    @classmethod
-    def for_params(cls, params: MachineParams) -> MAPEncoder:
-        return cls(params.rows, nomatch_row=params.nomatch_row, tie_break=params.tie_break)
 
     @property
     def rows(self) -> int:

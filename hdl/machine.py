@@ -1,7 +1,8 @@
 """The top level: ``BayesianMachine(params)``, the stochastic Bayesian machine of the paper.
 
-An M x N matrix of stochastic operators (``operator.py``) with one leap-forward LFSR each
-(``rng.py``), fed by double-buffered likelihood memories; the AND of a row's operators is the
+An M x N matrix of stochastic operators (``operator.py``) fed by a random source
+(``sources.py``: LFSRs, shared LFSRs or Sobol generators, or numbers on a port) and by
+double-buffered likelihood memories; the AND of a row's operators is the
 row's stochastic bus signal, counted by its overflow counter (``counters.py``); the first
 overflow(s) stop the run and the MAP encoder (``encoder.py``) names the winner. The exact
 per-cycle semantics, ports and word order are in ``docs/architecture.md``; the NumPy model
@@ -14,25 +15,28 @@ Timing:
   into the *active* memory and the next run starts: runs go back to back with no idle cycle.
   ``load.ready`` is low only while the shadow holds a complete pixel not yet started.
 - A compute cycle is a cycle of a run in which the result register can take a result
-  (empty, or being read this cycle). Only compute cycles advance the LFSRs, counters and cycle
+  (empty, or being read this cycle). Only compute cycles advance the random source, counters and cycle
   count, so back-pressure on ``result`` stalls the machine without changing any result.
 
-Everything (246 operators for Dmax = 80) is generated inline in one module: Amaranth's Python
-simulator slows down with hierarchy depth, and the netlist is the same.
+The random source and the MAP encoder are direct submodules (depth 1), the very components
+their unit tests drive; the operator matrix is built by ``operator.operator_rows``, the
+function the operator test's component wraps (as a submodule its port copies of 246 words and
+numbers would slow Amaranth's Python simulator, which also slows with hierarchy depth).
 """
 
 from __future__ import annotations
 
-from amaranth.hdl import Cat, Const, Module, Signal, unsigned
+from amaranth.hdl import Cat, Module, Signal, unsigned
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from bayesmachine.params import MachineParams
+from bayesmachine.sources import source_kind
 
 from .counters import overflow_counter
-from .encoder import map_encoder
-from .operator import stochastic_operator
-from .rng import lfsr_next_state_expr, lfsr_specs
+from .encoder import MAPEncoder
+from .operator import operator_rows
+from .sources import random_source
 
 __all__ = ["BayesianMachine", "load_layout", "result_layout"]
 
@@ -61,8 +65,9 @@ class BayesianMachine(wiring.Component):
     - ``load``: ``In(stream.Signature(load_layout(params)))``, a pixel's words in operator
       order, ``lanes`` per beat, ``beats_per_pixel`` beats per pixel.
     - ``result``: ``Out(stream.Signature(result_layout(params)))``, one per pixel, in order.
-    - with ``rng = "external"``: ``entropy`` (``In(ArrayLayout(unsigned(W), operators))``, one
-      random number per operator, sampled on compute cycles) and ``entropy_ready`` (``Out(1)``,
+    - with an off-chip source (``rng = "external"``): ``entropy``
+      (``In(ArrayLayout(unsigned(W), operators))``, one random number per operator, sampled on
+      compute cycles) and ``entropy_ready`` (``Out(1)``,
       high on compute cycles: the numbers on ``entropy`` are consumed at the clock edge).
     """
 
@@ -74,7 +79,7 @@ class BayesianMachine(wiring.Component):
             "load": In(stream.Signature(load_layout(params))),
             "result": Out(stream.Signature(result_layout(params))),
         }
-        if params.rng == "external":
+        if not source_kind(params.rng).on_chip:
             members["entropy"] = In(data.ArrayLayout(unsigned(params.word_bits), params.operators))
             members["entropy_ready"] = Out(1)
         super().__init__(members)
@@ -86,7 +91,7 @@ class BayesianMachine(wiring.Component):
     def elaborate(self, platform: object) -> Module:
         m = Module()
         p = self._params
-        w, rows, cols = p.word_bits, p.rows, p.operator_columns
+        rows, cols = p.rows, p.operator_columns
         ops = p.operators
 
         # --- Likelihood memories (registers: every operator reads its word every cycle) ---
@@ -106,26 +111,19 @@ class BayesianMachine(wiring.Component):
         compute = Signal()
         m.d.comb += compute.eq(running & (~self.result.valid | self.result.ready))
 
-        # --- Random numbers ---
-        if p.rng == "lfsr":
-            numbers = []
-            for o, spec in enumerate(lfsr_specs(p)):
-                state = Signal(spec.length, init=spec.init, name=f"lfsr_{o // cols}_{o % cols}")
-                numbers.append(state[:w])
-                with m.If(compute):  # LFSRs advance on compute cycles only
-                    m.d.sync += state.eq(lfsr_next_state_expr(state, spec))
+        # --- Random numbers: advance on compute cycles only; a Sobol block restarts per pixel ---
+        source, sources = random_source(p)
+        if source is not None:
+            m.submodules.source = source
+            m.d.comb += source.enable.eq(compute)
+            numbers = source.numbers
         else:
             numbers = [self.entropy[o] for o in range(ops)]
             m.d.comb += self.entropy_ready.eq(compute)
 
         # --- Operator matrix: the stochastic bus ---
         row = Signal(rows)
-        for r in range(rows):
-            bus = Const(1, 1)  # uniform prior: always-on 1s (a loaded prior is operator column 0)
-            for c in range(cols):
-                o = r * cols + c
-                bus = stochastic_operator(bus, numbers[o], active[o])
-            m.d.comb += row[r].eq(bus)
+        m.d.comb += row.eq(operator_rows(numbers, active, rows, cols, sources))
 
         # --- Overflow counters ---
         over = Signal(rows)
@@ -136,12 +134,16 @@ class BayesianMachine(wiring.Component):
             next_counts.append(nxt)
 
         # --- MAP encoder and end of run ---
-        any_over, winner = map_encoder(over, p.nomatch_row, p.tie_break)
+        m.submodules.encoder = encoder = MAPEncoder(rows, nomatch_row=p.nomatch_row, tie_break=p.tie_break)
+        m.d.comb += encoder.over.eq(over)
+        any_over, winner = encoder.valid, encoder.index
         last_cycle = cycles_done == p.max_cycles - 1  # this cycle is k == max_cycles
         finish = Signal()
         m.d.comb += finish.eq(compute & (any_over | last_cycle))
         start = Signal()
         m.d.comb += start.eq(shadow_full & (~running | finish))
+        if source is not None and "restart" in source.signature.members:
+            m.d.comb += source.restart.eq(start)
 
         with m.If(compute):
             m.d.sync += cycles_done.eq(cycles_done + 1)

@@ -1,23 +1,31 @@
-"""The stochastic operator: a comparator against a random number, ANDed into the row's bus.
+"""The stochastic operators: comparators against random numbers, ANDed along each row's bus.
 
 Operator (r, c) turns its likelihood-memory word q (a probability q / 2**W) into a
-stochastic bitstream by comparing a fresh W-bit random number with q each cycle
-(``number < q`` is 1 with probability exactly q / 2**W for uniform numbers; q = 0 is never
-1 and q = 2**W always is), and multiplies it into the stochastic bus signal of its row by an
-AND gate. :func:`stochastic_operator` is that logic; the machine instantiates it for every
-operator, so it exists once. :class:`StochasticOperator` wraps it with its LFSR for unit tests
-against :func:`stochastic_operator_twin`.
+stochastic bitstream by comparing a W-bit random number with q each cycle (``number < q``
+is 1 with probability exactly q / 2**W for uniform numbers; q = 0 is never 1 and q = 2**W
+always is), and multiplies it into the stochastic bus signal of its row by an AND gate.
+:func:`operator_rows` builds the whole M x N matrix: the machine calls it on its registers,
+and :class:`OperatorMatrix`, the component ``tests/test_operator.py`` holds to
+:func:`operator_matrix_twin`, wraps that same function.
 """
 
 from __future__ import annotations
 
-from amaranth.hdl import Module, Signal, Value, ValueCastable, unsigned
+from collections.abc import Sequence
+
+from amaranth.hdl import Cat, Const, Module, Value, ValueCastable, unsigned
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
-from .rng import LFSRSpec, lfsr_next_state_expr, lfsr_step
+from bayesmachine.params import ParameterError
 
-__all__ = ["StochasticOperator", "stochastic_operator", "stochastic_operator_twin", "operator_stream"]
+__all__ = [
+    "OperatorMatrix",
+    "operator_matrix_twin",
+    "operator_rows",
+    "stochastic_operator",
+    "stochastic_operator_twin",
+]
 
 
 def stochastic_operator(bus_in: Value | ValueCastable | int, number: Value, word: Value) -> Value:
@@ -34,47 +42,75 @@ def stochastic_operator_twin(bus_in: int, number: int, word: int) -> int:
     return int(bool(bus_in) and number < word)
 
 
-def operator_stream(spec: LFSRSpec, word: int, cycles: int, state: int | None = None) -> list[int]:
-    """The output bits of one operator with ``bus_in = 1`` over ``cycles`` compute cycles."""
-    s = spec.init if state is None else state
-    out = []
-    for _ in range(cycles):
-        number, s = lfsr_step(s, spec)
-        out.append(stochastic_operator_twin(1, number, word))
-    return out
+def _check_sources(rows: int, columns: int, sources: Sequence[int]) -> tuple[int, ...]:
+    sources = tuple(int(s) for s in sources)
+    if len(sources) != rows * columns:
+        raise ParameterError(f"sources must name one random number per operator ({rows * columns}), "
+                             f"got {len(sources)}")
+    if min(sources) < 0:
+        raise ParameterError("sources must be indices of the random numbers (>= 0)")
+    return sources
 
 
-class StochasticOperator(wiring.Component):
-    """A single operator with its own leap-forward LFSR (for unit tests; the machine inlines it).
+class OperatorMatrix(wiring.Component):
+    """:func:`operator_rows` as a component: the stochastic bus of every row of the matrix.
 
-    Ports: ``word`` (W + 1 bits, the likelihood-memory word), ``bus_in`` (the stochastic bus
-    from the left), ``enable`` (a compute cycle: the LFSR advances), ``number`` (this cycle's
-    random number), ``bus_out`` (``bus_in & (number < word)``).
+    Ports: ``words`` (M * N ports of W + 1 bits, operator order ``o = r * N + c``),
+    ``numbers`` (S ports of W bits, the random source's numbers), ``row`` (M bits out:
+    ``row[r] = AND_c (numbers[sources[o]] < words[o])``, a uniform prior being the always-on 1
+    the bus starts from). ``sources[o]`` is the number operator o
+    reads: ``o`` for one number per operator, ``o % N`` for numbers shared by a column's rows.
     """
 
-    def __init__(self, spec: LFSRSpec) -> None:
-        self._spec = spec
-        w = spec.step
+    def __init__(self, rows: int, columns: int, word_bits: int, sources: Sequence[int]) -> None:
+        for name, v in (("rows", rows), ("columns", columns), ("word_bits", word_bits)):
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ParameterError(f"{name} must be a positive integer, got {v!r}")
+        self._rows, self._columns, self._word_bits = rows, columns, word_bits
+        self._sources = _check_sources(rows, columns, sources)
         super().__init__({
-            "word": In(unsigned(w + 1)),
-            "bus_in": In(1),
-            "enable": In(1),
-            "number": Out(unsigned(w)),
-            "bus_out": Out(1),
+            "words": In(unsigned(word_bits + 1)).array(rows * columns),
+            "numbers": In(unsigned(word_bits)).array(max(self._sources) + 1),
+            "row": Out(rows),
         })
 
     @property
-    def spec(self) -> LFSRSpec:
-        return self._spec
+    def sources(self) -> tuple[int, ...]:
+        return self._sources
 
     def elaborate(self, platform: object) -> Module:
         m = Module()
-        spec = self._spec
-        state = Signal(spec.length, init=spec.init)
-        m.d.comb += [
-            self.number.eq(state[: spec.step]),
-            self.bus_out.eq(stochastic_operator(self.bus_in, self.number, self.word)),
-        ]
-        with m.If(self.enable):
-            m.d.sync += state.eq(lfsr_next_state_expr(state, spec))
+        m.d.comb += self.row.eq(operator_rows(self.numbers, self.words, self._rows, self._columns,
+                                              self._sources))
         return m
+
+
+def operator_rows(numbers: Sequence[Value], words: Sequence[Value], rows: int, columns: int,
+                  sources: Sequence[int]) -> Value:
+    """The matrix's logic: the M row bits of the stochastic bus (bit r = row r).
+
+    The machine builds its matrix with this function on its own likelihood-memory registers and
+    source outputs (a submodule's port copies would slow the simulator by a quarter), and
+    :class:`OperatorMatrix` wraps the same function for ``tests/test_operator.py``.
+    """
+    bits = []
+    for r in range(rows):
+        bus: Value = Const(1, 1)  # uniform prior: always-on 1s (a loaded prior is operator column 0)
+        for c in range(columns):
+            o = r * columns + c
+            bus = stochastic_operator(bus, numbers[sources[o]], words[o])
+        bits.append(bus)
+    return Cat(*bits)
+
+
+def operator_matrix_twin(words: Sequence[int], numbers: Sequence[int], rows: int, columns: int,
+                         sources: Sequence[int]) -> list[int]:
+    """Python twin of :class:`OperatorMatrix`: the row bits of one cycle."""
+    out = []
+    for r in range(rows):
+        bus = 1
+        for c in range(columns):
+            o = r * columns + c
+            bus = stochastic_operator_twin(bus, numbers[sources[o]], words[o])
+        out.append(bus)
+    return out

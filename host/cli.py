@@ -22,7 +22,8 @@ from bayesmachine.cliargs import (
     argument_type,
     counter_max_list,
     machine_params_from_args,
-    source_kinds,
+    rng_list,
+    runnable_sources,
 )
 from bayesmachine.outputs import (
     NpzWriter,
@@ -32,7 +33,7 @@ from bayesmachine.outputs import (
     require_disk,
     require_memory,
 )
-from bayesmachine.params import MachineParams
+from bayesmachine.params import DEFAULT_RNG, MachineParams
 
 from .features import feature_sums
 from .images import Crop, bundled_pair, crop_image, load_gt, load_image, parse_crop, validate_pair
@@ -130,26 +131,12 @@ def _load_inputs(
 
 
 def _host_rng_help() -> str:
-    kinds = source_kinds()
-    if kinds is None:
-        runnable = list(_RNG_HOST_ALWAYS)
-    else:
-        runnable = [k for k, kind in kinds.items() if kind.on_chip or kind.numbers is not None]
-    return f"random source; the host runs the kinds it can drive: {', '.join(runnable)} (default %(default)s)"
-
-
-_RNG_HOST_ALWAYS = ("lfsr",)
+    return f"random source; the host runs the kinds it can drive: {', '.join(runnable_sources())}"
 
 
 def _check_host_rng(machine: MachineParams) -> None:
     """The host drives on-chip sources and off-chip ones with a device model; not bare ``external``."""
-    kinds = source_kinds()
-    if kinds is None:
-        ok = machine.rng in _RNG_HOST_ALWAYS
-    else:
-        kind = kinds.get(machine.rng)
-        ok = kind is not None and (kind.on_chip or kind.numbers is not None)
-    if not ok:
+    if machine.rng not in runnable_sources():
         raise ValueError(
             f"--rng {machine.rng}: the machine takes its random numbers on the entropy port and "
             f"this source has no model the host can run; use it with 'bayesmachine emit'"
@@ -159,11 +146,18 @@ def _check_host_rng(machine: MachineParams) -> None:
 def _add_machine_options(p: argparse.ArgumentParser, sweep: bool) -> None:
     changes: dict[str, dict[str, object]] = {}
     helps = {
-        "rng": _host_rng_help(),
+        "rng": _host_rng_help() + " (default %(default)s)",
         "prior": "uniform: always-on 1s enter each row; loaded: an extra operator column 0 holds a prior "
         "word per row, which the host fills with a uniform prior (1.0) (default %(default)s)",
     }
     if sweep:
+        changes["rng"] = {
+            "type": rng_list, "default": [DEFAULT_RNG], "choices": None, "metavar": "KIND,KIND,...",
+        }
+        helps["rng"] = (
+            "comma-separated random sources to compare side by side, each over every counter max; "
+            + _host_rng_help() + f" (default {DEFAULT_RNG})"
+        )
         changes["counter_max"] = {
             "type": counter_max_list,
             "default": SWEEP_COUNTER_MAX,
@@ -194,9 +188,11 @@ def _add_machine_options(p: argparse.ArgumentParser, sweep: bool) -> None:
 
 
 def _machine_params(
-    args: argparse.Namespace, model: ModelParams, counter_max: int | None = None
+    args: argparse.Namespace, model: ModelParams, counter_max: int | None = None, rng: str | None = None
 ) -> MachineParams:
-    overrides = {} if counter_max is None else {"counter_max": counter_max}
+    overrides: dict[str, object] = {} if counter_max is None else {"counter_max": counter_max}
+    if rng is not None:
+        overrides["rng"] = rng
     machine = machine_params_from_args(args, model.dmax, **overrides)
     _check_host_rng(machine)
     return machine
@@ -215,6 +211,7 @@ def _report(outcome: RunOutcome, source: str, crop: Crop | None) -> dict[str, ob
     prep, run = outcome.prepared, outcome.run
     report: dict[str, object] = {
         "engine": run.engine,
+        "rng": run.machine.rng,
         "counter_max": run.machine.counter_max,
         **outcome.metrics.to_report(),
         "frame_cycles": int(run.cycles.sum()),
@@ -245,7 +242,7 @@ def _summary(r: dict[str, object]) -> str:
         return "n/a" if v is None else format(v, fmt)
 
     line = (
-        f"{r['engine']} counter_max={r['counter_max']}: {r['pixels']} px, "
+        f"{r['engine']} rng={r['rng']} counter_max={r['counter_max']}: {r['pixels']} px, "
         f"{f('cycles_per_pixel_mean', '.2f')} +- {f('cycles_per_pixel_std', '.2f')} cycles/px, "
         f"RMS {f('rms_error')}, no-match F1 {f('nomatch_f1')}, MAP agreement {f('map_agreement')}, "
         f"timeouts {r['timeouts']}, engine {f('seconds', '.2f')} s"
@@ -386,7 +383,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
 def _cmd_sweep(args: argparse.Namespace) -> int:
     model = _model_params(args)
     counters: list[int] = args.counter_max  # sorted, no repeats (counter_max_list)
-    machines = [_machine_params(args, model, n) for n in counters]  # validate all before running
+    kinds: list[str] = args.rng  # rng_list: no repeats
+    # Validate all before running; the sources side by side, each over every counter max.
+    machines = [_machine_params(args, model, n, k) for k in kinds for n in counters]
     left, right, gt, source = _load_inputs(args, with_gt=True)
     region = OutputRegion.of_image(left.shape, model.dmax)
     _check_fits(region, machines[-1])
@@ -421,7 +420,8 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
             "reference_seconds": prep.reference_seconds,
             "total_seconds": time.perf_counter() - t0,
             "model": model.to_dict(),
-            "machine": {k: v for k, v in machines[0].to_dict().items() if k != "counter_max"},
+            "rng": kinds,
+            "machine": {k: v for k, v in machines[0].to_dict().items() if k not in ("counter_max", "rng")},
             "points": points,
         }
         from .plots import save_sweep_figure
@@ -465,10 +465,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
 
     p = subparsers.add_parser(
         "sweep",
-        help="paper Fig 6: accuracy and cycles per pixel against counter max",
-        description="Run the machine for several counter max values on one pair; write OUT/sweep.json "
-        "and OUT/sweep.png (RMS error and no-match F1 vs counter max; cycles per pixel: mean, median, "
-        "10-90 % band). sweep.json is written last.",
+        help="paper Fig 6: accuracy and cycles per pixel against counter max (and random source)",
+        description="Run the machine for several counter max values (and, with --rng, several random "
+        "sources side by side) on one pair; write OUT/sweep.json and OUT/sweep.png (RMS error, no-match "
+        "F1 and MAP agreement vs counter max; cycles per pixel: mean, median, 10-90 % band). "
+        "sweep.json is written last.",
     )
     _add_input_options(p, optional=True)
     _add_model_options(p)

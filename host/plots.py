@@ -53,31 +53,51 @@ def save_disparity_figure(
 
 
 def save_sweep_figure(path: str | Path, sweep: Sequence[dict[str, object]]) -> None:
-    """Fig 6: (a) RMS error and no-match F1 vs counter max; (b) cycles/pixel (mean, median, 10-90 % band)."""
-    cm = np.array([float(s["counter_max"]) for s in sweep])  # type: ignore[arg-type]
+    """Fig 6: (a) RMS error, no-match F1 and MAP agreement vs counter max; (b) cycles/pixel (mean,
+    median, 10-90 % band). Points with several random sources (key ``rng``) get one colour each."""
+    from matplotlib.lines import Line2D
 
-    def col(key: str) -> np.ndarray:
-        return np.array([np.nan if s.get(key) is None else float(s[key]) for s in sweep])  # type: ignore[arg-type]
+    kinds = list(dict.fromkeys(str(s.get("rng", "")) for s in sweep))
+    several = len(kinds) > 1
+    fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4.5))
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    metrics = [("rms_error", "o-", "RMS error (matched pixels)", 1.0),
+               ("nomatch_f1", "s-", "F1 (no-match detection)", 0.8),
+               ("map_agreement", "^--", "MAP agreement", 0.6)]
+    for i, kind in enumerate(kinds):
+        pts = [s for s in sweep if str(s.get("rng", "")) == kind]
+        cm = np.array([float(s["counter_max"]) for s in pts])  # type: ignore[arg-type]
 
-    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 4))
-    a.plot(cm, col("rms_error"), "o-", label="RMS error (matched pixels)")
-    a.plot(cm, col("nomatch_f1"), "s-", label="F1 (no-match detection)")
-    a.plot(cm, col("map_agreement"), "^--", label="MAP agreement", alpha=0.7)
+        def col(key: str, pts: list[dict[str, object]] = pts) -> np.ndarray:
+            return np.array([np.nan if s.get(key) is None else float(s[key]) for s in pts])  # type: ignore[arg-type]
+
+        colour = colours[i % len(colours)]
+        for key, style, label, alpha in metrics:
+            a.plot(cm, col(key), style, color=colour, alpha=alpha, label=None if several else label)
+        # The per-pixel distribution is heavy-tailed, so mean +- std would dip below zero: show the
+        # mean, the median and the 10-90 % band instead (std over pixels is in the JSON).
+        b.plot(cm, col("cycles_per_pixel_mean"), "o-", color=colour, label=None if several else "mean")
+        b.plot(cm, col("cycles_per_pixel_median"), "s--", color=colour, alpha=0.8,
+               label=None if several else "median")
+        b.fill_between(cm, col("cycles_per_pixel_p10"), col("cycles_per_pixel_p90"), color=colour,
+                       alpha=0.1 if several else 0.2, label=None if several else "10-90 % of pixels")
+    if several:  # colours name the sources, markers the quantities
+        sources = [Line2D([], [], color=colours[i % len(colours)], label=k) for i, k in enumerate(kinds)]
+        a.legend(handles=sources + [Line2D([], [], color="gray", marker=st[0], linestyle=st[1:], label=lb)
+                                    for _, st, lb, _ in metrics], fontsize=7, ncol=2)
+        b.legend(handles=sources + [Line2D([], [], color="gray", marker="o", label="mean"),
+                                    Line2D([], [], color="gray", marker="s", linestyle="--", label="median")],
+                 fontsize=7, title="10-90 % of pixels shaded", title_fontsize=7)
+    else:
+        a.legend(fontsize=8)
+        b.legend(fontsize=8)
     a.set_xscale("log", base=2)
     a.set_xlabel("counter max")
     a.set_ylim(0, 1.02)
     a.grid(True, alpha=0.3)
-    a.legend(fontsize=8)
     a.set_title("(a) accuracy vs the float64 reference")
-    # The per-pixel distribution is heavy-tailed, so mean +- std would dip below zero: show the
-    # mean, the median and the 10-90 % band instead (std over pixels is in the JSON).
-    b.plot(cm, col("cycles_per_pixel_mean"), "o-", label="mean")
-    b.plot(cm, col("cycles_per_pixel_median"), "s--", label="median", alpha=0.8)
-    b.fill_between(cm, col("cycles_per_pixel_p10"), col("cycles_per_pixel_p90"), alpha=0.2,
-                   label="10-90 % of pixels")
     b.set_xlabel("counter max")
     b.set_ylabel("cycles per pixel")
-    b.legend(fontsize=8)
     b.grid(True, alpha=0.3)
     b.set_title("(b) run time per pixel")
     fig.tight_layout()

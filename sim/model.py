@@ -1,10 +1,11 @@
 """The NumPy machine model: the project's definition of what the hardware computes.
 
-One model of the whole machine, bit for bit: given the parameters (hence every operator's
-LFSR), and the likelihood-memory words of a sequence of pixels, it returns per pixel the
+One model of the whole machine, bit for bit: given the parameters (hence the random source),
+and the likelihood-memory words of a sequence of pixels, it returns per pixel the
 same counters, MAP, flags and cycle count as the RTL streams out after reset. The per-cycle
 rules are in ``docs/architecture.md``; the inner loop is compiled with numba so that whole
-frames run in seconds.
+frames run in seconds. Each on-chip random source has one kernel here (its twin), sharing the
+per-cycle bus/counter/encoder helpers; they build on ``bayesmachine.sources`` (no Amaranth).
 """
 
 from __future__ import annotations
@@ -12,14 +13,14 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from bayesmachine.hdl.rng import lfsr_specs
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.engines import EngineBase
 from bayesmachine.sim.results import MachineResult, NumberFeed, check_words, ran_out_error
+from bayesmachine.sources.lfsr import MAX_TAPS, LFSRSpec, column_lfsr_specs, lfsr_specs
+from bayesmachine.sources.sobol import sobol_points
 
 __all__ = ["MachineModel", "MachineResult", "check_words"]
 
-_MAX_TAPS = 6  # taps per polynomial, the constant tap 0 included (heptanomials)
 _BLOCK = 4096  # rows of random numbers fetched at a time from an off-chip source
 
 
@@ -88,6 +89,148 @@ def _run_lfsr(q, states, shifts, rows, opcols, word_bits, lfsr_bits, n_max, max_
         _store(p, counts, k, winner, out_counts, out_map, out_timeout, out_cycles)
 
 
+@numba.njit(cache=True, inline="always")
+def _step_lfsrs(states, t1, t2, t3, t4, t5, mask, w, top, nums):
+    """Leap-forward step of every LFSR of ``states``; ``nums`` gets their numbers before the step."""
+    for i in range(states.shape[0]):
+        s = states[i]
+        new = s ^ (s >> t1[i]) ^ (s >> t2[i]) ^ (s >> t3[i]) ^ (s >> t4[i]) ^ (s >> t5[i])
+        states[i] = (s >> w) | ((new & mask) << top)
+        nums[i] = s & mask
+
+
+@numba.njit(cache=True)
+def _run_lfsr_shared(q, states, shifts, rows, opcols, word_bits, lfsr_bits, n_max, max_cycles, nm_index,
+                     out_counts, out_map, out_timeout, out_cycles):
+    """``lfsr-shared``: one LFSR per operator column; every row of column c reads its number."""
+    pixels, ops = q.shape
+    mask = np.uint64((1 << word_bits) - 1)
+    w = np.uint64(word_bits)
+    top = np.uint64(lfsr_bits - word_bits)
+    t1, t2, t3 = shifts[1].copy(), shifts[2].copy(), shifts[3].copy()
+    t4, t5 = shifts[4].copy(), shifts[5].copy()
+    nums = np.zeros(opcols, np.uint64)
+    bits = np.zeros(ops, np.uint8)
+    counts = np.zeros(rows, np.uint32)
+    over = np.zeros(rows, np.uint8)
+    for p in range(pixels):
+        qp = q[p]
+        counts[:] = 0
+        k = 0
+        winner = -1
+        while True:
+            k += 1
+            _step_lfsrs(states, t1, t2, t3, t4, t5, mask, w, top, nums)
+            for r in range(rows):
+                for c in range(opcols):
+                    bits[r * opcols + c] = nums[c] < qp[r * opcols + c]
+            winner = _finish_cycle(bits, counts, over, rows, opcols, n_max, nm_index)
+            if winner >= 0 or k == max_cycles:
+                break
+        _store(p, counts, k, winner, out_counts, out_map, out_timeout, out_cycles)
+
+
+@numba.njit(cache=True)
+def _run_sobol(q, states, shifts, points, rows, opcols, word_bits, lfsr_bits, n_max, max_cycles, nm_index,
+               out_counts, out_map, out_timeout, out_cycles):
+    """``sobol``: cycle k of a pixel gives column c ``points[j, c] ^ shift[c]``, j = (k - 1) mod 2^W;
+    the column LFSRs advance once per block (j = 0) to give the block's shifts."""
+    pixels, ops = q.shape
+    mask = np.uint64((1 << word_bits) - 1)
+    w = np.uint64(word_bits)
+    top = np.uint64(lfsr_bits - word_bits)
+    block = 1 << word_bits
+    t1, t2, t3 = shifts[1].copy(), shifts[2].copy(), shifts[3].copy()
+    t4, t5 = shifts[4].copy(), shifts[5].copy()
+    shift = np.zeros(opcols, np.uint64)
+    nums = np.zeros(opcols, np.uint64)
+    bits = np.zeros(ops, np.uint8)
+    counts = np.zeros(rows, np.uint32)
+    over = np.zeros(rows, np.uint8)
+    for p in range(pixels):
+        qp = q[p]
+        counts[:] = 0
+        k = 0
+        winner = -1
+        while True:
+            j = k % block
+            k += 1
+            if j == 0:  # a block starts (every pixel starts one): fresh shifts
+                _step_lfsrs(states, t1, t2, t3, t4, t5, mask, w, top, shift)
+            for c in range(opcols):
+                nums[c] = points[j, c] ^ shift[c]
+            for r in range(rows):
+                for c in range(opcols):
+                    bits[r * opcols + c] = nums[c] < qp[r * opcols + c]
+            winner = _finish_cycle(bits, counts, over, rows, opcols, n_max, nm_index)
+            if winner >= 0 or k == max_cycles:
+                break
+        _store(p, counts, k, winner, out_counts, out_map, out_timeout, out_cycles)
+
+
+def _lfsr_arrays(specs: list[LFSRSpec]) -> tuple[np.ndarray, np.ndarray]:
+    """Start states and the kernels' tap shifts (MAX_TAPS rows; padding pairs of 0 cancel)."""
+    init = np.array([s.init for s in specs], dtype=np.uint64)
+    shifts = np.zeros((MAX_TAPS, len(specs)), dtype=np.uint64)
+    for i, spec in enumerate(specs):
+        shifts[: len(spec.taps), i] = spec.taps
+    return init, shifts
+
+
+class _LFSRSource:
+    """Model state of ``lfsr`` (one LFSR per operator) and ``lfsr-shared`` (one per column)."""
+
+    def __init__(self, params: MachineParams, shared: bool) -> None:
+        self._params = params
+        self._shared = shared
+        self._init, self._shifts = _lfsr_arrays(column_lfsr_specs(params) if shared else lfsr_specs(params))
+        self.reset()
+
+    def reset(self) -> None:
+        self.states = self._init.copy()
+
+    def run(self, q: np.ndarray, out: MachineResult) -> None:
+        p = self._params
+        kernel = _run_lfsr_shared if self._shared else _run_lfsr
+        kernel(q.astype(np.uint64), self.states, self._shifts, p.rows, p.operator_columns, p.word_bits,
+               p.lfsr_bits, p.counter_max, p.max_cycles, _nm_index(p),
+               out.counts, out.map, out.timeout, out.cycles)
+
+
+class _SobolSource:
+    """Model state of ``sobol``: the column shift LFSRs (the Sobol block restarts every pixel)."""
+
+    def __init__(self, params: MachineParams) -> None:
+        self._params = params
+        self._init, self._shifts = _lfsr_arrays(column_lfsr_specs(params))
+        self._points = np.ascontiguousarray(
+            np.array([sobol_points(c, params.word_bits) for c in range(params.operator_columns)],
+                     dtype=np.uint64).T
+        )
+        self.reset()
+
+    def reset(self) -> None:
+        self.states = self._init.copy()
+
+    def run(self, q: np.ndarray, out: MachineResult) -> None:
+        p = self._params
+        _run_sobol(q.astype(np.uint64), self.states, self._shifts, self._points, p.rows, p.operator_columns,
+                   p.word_bits, p.lfsr_bits, p.counter_max, p.max_cycles, _nm_index(p),
+                   out.counts, out.map, out.timeout, out.cycles)
+
+
+# The model twin of every on-chip source kind (bayesmachine.sources.SOURCE_KINDS).
+_ON_CHIP_SOURCES = {
+    "lfsr": lambda params: _LFSRSource(params, shared=False),
+    "lfsr-shared": lambda params: _LFSRSource(params, shared=True),
+    "sobol": _SobolSource,
+}
+
+
+def _nm_index(params: MachineParams) -> int:
+    return params.rows - 1 if params.nomatch_row and params.tie_break == "nomatch-first" else -1
+
+
 @numba.njit(cache=True)
 def _run_numbers(q, numbers, first, counts, done, rows, opcols, n_max, max_cycles, nm_index,
                  out_counts, out_map, out_timeout, out_cycles):
@@ -122,9 +265,9 @@ def _run_numbers(q, numbers, first, counts, done, rows, opcols, n_max, max_cycle
 class MachineModel(EngineBase):
     """The whole machine, cycle-accurate and bit-exact with the RTL: the ``model`` engine.
 
-    The model keeps the LFSR states between calls, so running pixels in several chunks
-    gives the same results as one call (as the hardware runs a stream of pixels). It has the
-    engines' contract (:mod:`bayesmachine.sim.engines`): ``run``, ``reset``, ``close`` and
+    The model keeps its random source's state between calls, so running pixels in several
+    chunks gives the same results as one call (as the hardware runs a stream of pixels). It has
+    the engines' contract (:mod:`bayesmachine.sim.engines`): ``run``, ``reset``, ``close`` and
     ``wall_cycles`` (None: the model does not time loading).
     """
 
@@ -132,22 +275,13 @@ class MachineModel(EngineBase):
 
     def __init__(self, params: MachineParams) -> None:
         super().__init__(params)
-        self._nm_index = (
-            params.rows - 1 if params.nomatch_row and params.tie_break == "nomatch-first" else -1
-        )
-        if params.rng == "lfsr":
-            specs = lfsr_specs(params)
-            self._init_states = np.array([s.init for s in specs], dtype=np.uint64)
-            shifts = np.zeros((_MAX_TAPS, params.operators), dtype=np.uint64)
-            for o, spec in enumerate(specs):
-                taps = list(spec.taps) + [0] * (_MAX_TAPS - len(spec.taps))  # pairs of 0 cancel
-                shifts[:, o] = taps
-            self._shifts = shifts
+        self._nm_index = _nm_index(params)
+        self._source = _ON_CHIP_SOURCES[params.rng](params) if self._kind.on_chip else None
         self._reset()
 
     def _reset(self) -> None:
-        if self._params.rng == "lfsr":
-            self._states = self._init_states.copy()
+        if self._source is not None:
+            self._source.reset()
 
     def _run(self, q: np.ndarray, feed: NumberFeed | None) -> MachineResult:
         """``q``: checked (P, operators) words; ``feed``: the random numbers of an off-chip source."""
@@ -155,9 +289,7 @@ class MachineModel(EngineBase):
         n = q.shape[0]
         out = MachineResult.zeros(n, p.rows)
         if feed is None:
-            _run_lfsr(q.astype(np.uint64), self._states, self._shifts, p.rows, p.operator_columns,
-                      p.word_bits, p.lfsr_bits, p.counter_max, p.max_cycles, self._nm_index,
-                      out.counts, out.map, out.timeout, out.cycles)
+            self._source.run(q, out)
         else:
             counts = np.zeros(p.rows, np.uint32)
             done = np.zeros(1, np.int64)

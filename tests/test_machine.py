@@ -108,6 +108,12 @@ def test_timeout_pixels() -> None:
         dict(counter_max=1, max_cycles=8),
         dict(word_bits=1, lfsr_bits=5, counter_max=2),
         dict(columns=4, lanes=7, seed=12345),
+        dict(rng="lfsr-shared"),
+        dict(rng="lfsr-shared", prior="loaded", tie_break="lowest-index"),
+        dict(rng="sobol"),
+        dict(rng="sobol", prior="loaded", lanes=4),
+        # 2-bit words: Sobol blocks of 4 cycles, so runs span several blocks and shifts.
+        dict(rng="sobol", word_bits=2, lfsr_bits=7, counter_max=5, max_cycles=50),
     ],
     ids=lambda v: ",".join(f"{k}={x}" for k, x in v.items()),
 )
@@ -196,6 +202,15 @@ def test_full_size_machine_matches_model() -> None:
     words = synthetic_disparity_words(params, 6, rng, occluded=0.2)
     words[2, :, :] = params.word_one  # a tie of all 82 rows: the no-match row wins
     engine = _check(params, words, chunks=2, load_stall=0.3, result_stall=0.3, stall_seed=1)
+    assert engine.compute_cycles > 6 * 17
+
+
+@pytest.mark.parametrize("rng", ["lfsr-shared", "sobol"])
+def test_full_size_shared_sources_match_model(rng: str) -> None:
+    params = MachineParams.for_disparity(80, rng=rng)
+    words = synthetic_disparity_words(params, 6, np.random.default_rng(2026), occluded=0.2)
+    words[3, :, :] = params.word_one  # a tie of all 82 rows
+    engine = _check(params, words, chunks=2, load_stall=0.3, result_stall=0.3, stall_seed=5)
     assert engine.compute_cycles > 6 * 17
 
 

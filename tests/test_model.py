@@ -2,12 +2,18 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
 from bayesmachine import MachineParams, ParameterError
-from bayesmachine.hdl.rng import lfsr_numbers, lfsr_specs
+from bayesmachine.params import RNG_KINDS
 from bayesmachine.sim.model import MachineModel, MachineResult
+from bayesmachine.sources import SOURCE_KINDS, source_kind
+from bayesmachine.sources.lfsr import column_lfsr_specs, lfsr_numbers, lfsr_specs
+from bayesmachine.sources.sobol import SobolTwin
 
 
 def _random_words(params: MachineParams, pixels: int, seed: int) -> np.ndarray:
@@ -22,7 +28,8 @@ def _random_words(params: MachineParams, pixels: int, seed: int) -> np.ndarray:
 
 def test_lfsr_kernel_equals_twin_via_external_numbers() -> None:
     """The compiled LFSR path and the external-number path agree when fed the twin's numbers."""
-    params = MachineParams(rows=5, columns=2, word_bits=6, lfsr_bits=17, counter_max=3, lanes=2, seed=7)
+    params = MachineParams(rows=5, columns=2, word_bits=6, lfsr_bits=17, counter_max=3, lanes=2, seed=7,
+                           rng="lfsr")
     words = _random_words(params, 60, 1)
     internal = MachineModel(params).run(words)
     total = int(internal.cycles.sum())
@@ -33,8 +40,56 @@ def test_lfsr_kernel_equals_twin_via_external_numbers() -> None:
     assert internal.equal(external)
 
 
-def test_chunked_runs_equal_one_run() -> None:
-    params = MachineParams.for_disparity(6, counter_max=4, lanes=4)
+def _twin_numbers(params: MachineParams, cycles_per_pixel: np.ndarray) -> np.ndarray:
+    """Every operator's number on every compute cycle, from the source's Python twin."""
+    cols = params.operator_columns
+    if params.rng == "lfsr":
+        return np.array([list(lfsr_numbers(s, int(cycles_per_pixel.sum()))) for s in lfsr_specs(params)]).T
+    if params.rng == "lfsr-shared":
+        total = int(cycles_per_pixel.sum())
+        per_col = np.array([list(lfsr_numbers(s, total)) for s in column_lfsr_specs(params)]).T
+    else:
+        twin, rows = SobolTwin(params), []
+        for k in cycles_per_pixel:
+            for i in range(int(k)):
+                rows.append(twin.numbers)
+                twin.clock(True, i == k - 1)  # the next pixel starts as this one ends
+        per_col = np.array(rows)
+    return np.tile(per_col, (1, params.rows))[:, : params.rows * cols]
+
+
+@pytest.mark.parametrize("rng", ["lfsr", "lfsr-shared", "sobol"])
+def test_on_chip_kernels_equal_their_twins_via_external_numbers(rng: str) -> None:
+    """Each compiled on-chip kernel equals the external-number path fed its source's Python twin."""
+    params = MachineParams(rows=5, columns=2, word_bits=4, lfsr_bits=12, counter_max=3, lanes=2, seed=7,
+                           rng=rng, prior="loaded")
+    words = _random_words(params, 80, 3)
+    internal = MachineModel(params).run(words)
+    assert internal.cycles.max() > 16  # some pixels span several Sobol blocks of 2^W cycles
+    numbers = _twin_numbers(params, internal.cycles)
+    external = MachineModel(MachineParams(**{**params.to_dict(), "rng": "external"}))
+    assert internal.equal(external.run(words, numbers=numbers))
+
+
+def test_source_registry_matches_params() -> None:
+    assert tuple(SOURCE_KINDS) == RNG_KINDS
+    assert all(SOURCE_KINDS[k].name == k and SOURCE_KINDS[k].description for k in RNG_KINDS)
+    assert source_kind("external").numbers is None and not source_kind("external").on_chip
+    with pytest.raises(ParameterError, match="rng must be one of"):
+        source_kind("smtj-typo")
+
+
+def test_model_imports_no_amaranth() -> None:
+    """The model (the definition of the machine) and the source definitions need no Amaranth."""
+    code = ("import sys, bayesmachine.sim.model, bayesmachine.sources.sobol; "
+            "assert not any(m == 'amaranth' or m.startswith('amaranth.') for m in sys.modules), "
+            "sorted(m for m in sys.modules if m.startswith('amaranth'))")
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
+@pytest.mark.parametrize("rng", ["lfsr", "lfsr-shared", "sobol"])
+def test_chunked_runs_equal_one_run(rng: str) -> None:
+    params = MachineParams.for_disparity(6, counter_max=4, lanes=4, rng=rng)
     words = _random_words(params, 50, 2)
     whole = MachineModel(params).run(words)
     model = MachineModel(params)

@@ -1,4 +1,5 @@
-"""The stochastic operator: RTL against its twin, exact p = 0 and p = 1, rate = p."""
+# amaranth: UnusedElaboratable=no
+"""The stochastic operators: the matrix RTL against its twin, exact p = 0 and p = 1, rate = p."""
 
 from __future__ import annotations
 
@@ -8,9 +9,9 @@ import random
 import pytest
 from conftest import run_sim
 
-from bayesmachine.hdl.operator import StochasticOperator, operator_stream, stochastic_operator_twin
-from bayesmachine.hdl.rng import LFSRSpec, lfsr_specs, lfsr_step
-from bayesmachine.params import MachineParams
+from bayesmachine.hdl.operator import OperatorMatrix, operator_matrix_twin, stochastic_operator_twin
+from bayesmachine.params import MachineParams, ParameterError
+from bayesmachine.sources.lfsr import LFSRSpec, lfsr_numbers, lfsr_specs
 
 
 def _spec(length: int, w: int, index: int = 0) -> LFSRSpec:
@@ -19,53 +20,70 @@ def _spec(length: int, w: int, index: int = 0) -> LFSRSpec:
     return lfsr_specs(params)[index]
 
 
-def _rtl_outputs(spec: LFSRSpec, drive: list[tuple[int, int, int]]) -> list[tuple[int, int]]:
-    """(number, bus_out) per cycle for a list of (word, bus_in, enable)."""
-    dut = StochasticOperator(spec)
-    seen: list[tuple[int, int]] = []
+def _rtl_rows(dut: OperatorMatrix, drive: list[tuple[list[int], list[int]]]) -> list[int]:
+    """The ``row`` output for each (words, numbers) of ``drive`` (combinational)."""
+    seen: list[int] = []
 
     async def bench(ctx):
-        for word, bus_in, enable in drive:
-            ctx.set(dut.word, word)
-            ctx.set(dut.bus_in, bus_in)
-            ctx.set(dut.enable, enable)
-            seen.append((ctx.get(dut.number), ctx.get(dut.bus_out)))
-            await ctx.tick()
+        for words, numbers in drive:
+            for port, v in zip(dut.words, words, strict=True):
+                ctx.set(port, v)
+            for port, v in zip(dut.numbers, numbers, strict=True):
+                ctx.set(port, v)
+            seen.append(ctx.get(dut.row))
 
-    run_sim(dut, bench)
+    run_sim(dut, bench, clock=False)
     return seen
 
 
-@pytest.mark.parametrize(("length", "w"), [(12, 4), (31, 10)])
-def test_rtl_operator_matches_twin(length: int, w: int) -> None:
-    spec = _spec(length, w)
-    rnd = random.Random(length)
+@pytest.mark.parametrize(("rows", "columns", "w", "shared"),
+                         [(3, 2, 4, False), (4, 3, 4, True), (82, 3, 10, False), (82, 4, 10, True)])
+def test_rtl_matrix_matches_twin(rows: int, columns: int, w: int, shared: bool) -> None:
+    """The component wraps the machine's own matrix function; per-operator and per-column numbers."""
+    ops = rows * columns
+    sources = [o % columns for o in range(ops)] if shared else list(range(ops))
+    dut = OperatorMatrix(rows, columns, w, sources)
+    rnd = random.Random(rows * columns)
     one = 1 << w
-    words = [0, one, 1, one - 1, one // 2] + [rnd.randint(0, one) for _ in range(5)]
-    drive = [(rnd.choice(words), int(rnd.random() < 0.8), int(rnd.random() < 0.7)) for _ in range(600)]
-    got = _rtl_outputs(spec, drive)
-    state = spec.init
-    for (word, bus_in, enable), (number, bit) in zip(drive, got, strict=True):
-        n, nxt = lfsr_step(state, spec)
-        assert number == n
-        assert bit == stochastic_operator_twin(bus_in, n, word)
-        if enable:
-            state = nxt
+    edge = [0, one, 1, one - 1, one // 2]
+    drive = []
+    for _ in range(300 if ops < 100 else 80):
+        words = [rnd.choice(edge) if rnd.random() < 0.4 else rnd.randint(0, one) for _ in range(ops)]
+        if rnd.random() < 0.5:  # rows of likely words, so that row bits of 1 are common
+            words = [rnd.randint(one - 2, one) for _ in range(ops)]
+        numbers = [rnd.randrange(one) for _ in range(max(sources) + 1)]
+        drive.append((words, numbers))
+    got = _rtl_rows(dut, drive)
+    ones = 0
+    for (words, numbers), row in zip(drive, got, strict=True):
+        want = operator_matrix_twin(words, numbers, rows, columns, sources)
+        assert [(row >> r) & 1 for r in range(rows)] == want
+        ones += sum(want)
+    assert ones > 20
 
 
-def test_rtl_operator_p0_and_p1_exact() -> None:
-    spec = _spec(31, 10, 2)
-    for word, expected in ((0, 0), (1 << 10, 1)):
-        got = _rtl_outputs(spec, [(word, 1, 1)] * 300)
-        assert {bit for _, bit in got} == {expected}
-    # bus_in = 0 blocks even p = 1
-    assert {bit for _, bit in _rtl_outputs(spec, [(1 << 10, 0, 1)] * 50)} == {0}
+def test_rtl_matrix_p0_and_p1_exact() -> None:
+    w = 10
+    dut = OperatorMatrix(2, 1, w, [0, 1])
+    drive = [([1 << w, 0], [n, n]) for n in (0, 1, 511, 1022, 1023)]
+    assert _rtl_rows(dut, drive) == [0b01] * 5  # 1.0 always fires, 0 never does
+
+
+def test_matrix_rejects_bad_parameters() -> None:
+    with pytest.raises(ParameterError, match="one random number per operator"):
+        OperatorMatrix(2, 2, 4, [0, 1, 2])
+    with pytest.raises(ParameterError, match="word_bits"):
+        OperatorMatrix(2, 2, 0, [0, 1, 2, 3])
+
+
+def _stream(spec: LFSRSpec, word: int, cycles: int) -> list[int]:
+    return [stochastic_operator_twin(1, n, word) for n in lfsr_numbers(spec, cycles)]
 
 
 def test_twin_p0_and_p1_exact_long() -> None:
     spec = _spec(31, 10, 3)
-    assert sum(operator_stream(spec, 0, 100_000)) == 0
-    assert sum(operator_stream(spec, 1 << 10, 100_000)) == 100_000
+    assert sum(_stream(spec, 0, 100_000)) == 0
+    assert sum(_stream(spec, 1 << 10, 100_000)) == 100_000
 
 
 @pytest.mark.parametrize("q", [1, 3, 8, 13, 15])
@@ -75,7 +93,7 @@ def test_rate_is_exact_over_a_whole_period(q: int) -> None:
     # exactly q * 2^(L-W) - 1 numbers fall below q >= 1.
     length, w = 12, 4
     spec = _spec(length, w, 1)
-    ones = sum(operator_stream(spec, q, spec.period))
+    ones = sum(_stream(spec, q, spec.period))
     assert ones == q * (1 << (length - w)) - 1
 
 
@@ -85,13 +103,5 @@ def test_rate_equals_p_full_size(q: int) -> None:
     n = 200_000
     p = q / 1024
     for index in (0, 5):
-        ones = sum(operator_stream(_spec(31, 10, index), q, n))
+        ones = sum(_stream(_spec(31, 10, index), q, n))
         assert abs(ones - n * p) < 5 * math.sqrt(n * p * (1 - p))
-
-
-def test_rtl_rate_equals_p_short() -> None:
-    spec = _spec(31, 10, 1)
-    n, q = 2000, 300
-    ones = sum(bit for _, bit in _rtl_outputs(spec, [(q, 1, 1)] * n))
-    p = q / 1024
-    assert abs(ones - n * p) < 5 * math.sqrt(n * p * (1 - p))

@@ -1,24 +1,27 @@
-"""Leap-forward LFSRs: RTL against the twin, maximal period, serial and cross correlation."""
+"""Leap-forward LFSRs: RTL against the twin, primitivity against published tables, maximal period,
+serial and cross correlation."""
 
 from __future__ import annotations
 
 import math
 import random
 
+import numba
 import numpy as np
 import pytest
 from conftest import run_sim
 
-from bayesmachine.hdl.rng import (
-    LeapForwardLFSR,
+from bayesmachine.hdl.sources import LFSRBank
+from bayesmachine.params import MachineParams, ParameterError
+from bayesmachine.sources.lfsr import (
     LFSRSpec,
+    column_lfsr_specs,
     is_primitive,
     lfsr_bit_sequence,
     lfsr_numbers,
     lfsr_specs,
     lfsr_step,
 )
-from bayesmachine.params import MachineParams
 
 
 def _specs(length: int, w: int, n: int = 2, seed: int = 1) -> list[LFSRSpec]:
@@ -28,14 +31,18 @@ def _specs(length: int, w: int, n: int = 2, seed: int = 1) -> list[LFSRSpec]:
 
 
 def _rtl_numbers(spec: LFSRSpec, enables: list[int]) -> list[int]:
-    """The RTL's ``number`` in each cycle, with ``enable`` driven from ``enables``."""
-    dut = LeapForwardLFSR(spec)
-    seen: list[int] = []
+    """The number of a one-LFSR bank (the machine's component) each cycle, ``enable`` from ``enables``."""
+    return [n[0] for n in _rtl_bank_numbers([spec], enables)]
+
+
+def _rtl_bank_numbers(specs: list[LFSRSpec], enables: list[int]) -> list[list[int]]:
+    dut = LFSRBank(specs)
+    seen: list[list[int]] = []
 
     async def bench(ctx):
         for en in enables:
             ctx.set(dut.enable, en)
-            seen.append(ctx.get(dut.number))
+            seen.append([ctx.get(n) for n in dut.numbers])
             await ctx.tick()
 
     run_sim(dut, bench)
@@ -154,7 +161,7 @@ def test_two_operators_streams_are_uncorrelated(streams: dict[str, np.ndarray], 
 def test_polynomial_search_ends_when_heptanomials_run_out() -> None:
     """L = 34, taps <= 24: only ~3,200 primitive heptanomials exist; asking for more must fall
     back to pentanomials and trinomials, not draw forever."""
-    from bayesmachine.hdl.rng import _primitive_tap_sets
+    from bayesmachine.sources.lfsr import _primitive_tap_sets
 
     sets = _primitive_tap_sets(34, 24, 3300, 1)
     assert len(sets) == 3300 and len(set(sets)) == 3300
@@ -162,3 +169,133 @@ def test_polynomial_search_ends_when_heptanomials_run_out() -> None:
     assert all(is_primitive(34, t) for t in sets[-5:])
     # All there are (3,365 of weight <= 7): a machine with more operators reuses them.
     assert len(_primitive_tap_sets(34, 24, 4000, 1)) == 3365
+
+
+def test_rtl_bank_of_column_lfsrs_matches_twins() -> None:
+    """lfsr-shared's bank: one LFSR per operator column, distinct polynomials and start states."""
+    params = MachineParams(rows=4, columns=3, prior="loaded", word_bits=4, lfsr_bits=12, counter_max=1,
+                           max_cycles=2, lanes=1, rng="lfsr-shared", seed=9)
+    specs = column_lfsr_specs(params)
+    assert len(specs) == 4 and len({s.taps for s in specs}) == 4 and len({s.init for s in specs}) == 4
+    assert {s.init for s in specs}.isdisjoint(s.init for s in lfsr_specs(params))
+    rnd = random.Random(3)
+    enables = [int(rnd.random() < 0.7) for _ in range(300)]
+    got = _rtl_bank_numbers(specs, enables)
+    for i, spec in enumerate(specs):
+        assert [n[i] for n in got] == _twin_numbers(spec, enables)
+
+
+# --- Primitivity against published tables ---
+
+def _taps_of(poly: int) -> tuple[int, ...]:
+    return tuple(i for i in range(poly.bit_length() - 1) if (poly >> i) & 1)
+
+
+def test_degree_31_trinomials_match_the_published_table() -> None:
+    # Zierler & Brillhart, "On primitive trinomials (mod 2)", Inform. Control 13 (1968): the
+    # irreducible trinomials x^31 + x^k + 1 are k = 3, 6, 7, 13 and their reciprocals 18, 24, 25,
+    # 28; 2^31 - 1 is prime, so they are all primitive (XAPP052 lists taps 31, 28 for n = 31).
+    primitive = {k for k in range(1, 31) if is_primitive(31, (0, k))}
+    assert primitive == {3, 6, 7, 13, 18, 24, 25, 28}
+
+
+# OEIS A132449: the first primitive polynomial over GF(2) of degree n with at most 5 terms, as
+# an integer (bit i = coefficient of x^i), n = 2 ... 31 (2147483657 = x^31 + x^3 + 1).
+A132449 = [7, 11, 19, 37, 67, 131, 285, 529, 1033, 2053, 4179, 8219, 16427, 32771, 65581, 131081, 262183,
+           524327, 1048585, 2097157, 4194307, 8388641, 16777243, 33554441, 67108935, 134217767, 268435465,
+           536870917, 1073741907, 2147483657]
+
+
+@pytest.mark.parametrize("degree", range(2, 32))
+def test_first_primitive_polynomial_with_at_most_5_terms(degree: int) -> None:
+    first = next(poly for poly in range((1 << degree) + 1, 1 << (degree + 1), 2)
+                 if poly.bit_count() <= 5 and is_primitive(degree, _taps_of(poly)))
+    assert first == A132449[degree - 2]
+
+
+@pytest.mark.parametrize("degree", [2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12])
+def test_number_of_primitive_polynomials_is_phi_over_n(degree: int) -> None:
+    # There are phi(2^n - 1) / n primitive polynomials of degree n over GF(2) (Lidl & Niederreiter,
+    # Finite Fields, Thm 3.5): 1, 2, 2, 6, 6, 18, 16, 48, 60, 176, 144 for n = 2 ... 12.
+    order = (1 << degree) - 1
+    phi = sum(1 for k in range(1, order + 1) if math.gcd(k, order) == 1)
+    count = sum(is_primitive(degree, _taps_of(poly)) for poly in range(1 << degree, 1 << (degree + 1)))
+    assert count == phi // degree
+
+
+@pytest.mark.parametrize(
+    ("poly", "order"),
+    [
+        # Irreducible but not primitive (x has order < 2^n - 1), as listed in tables of irreducible
+        # polynomials (e.g. Peterson & Weldon, Error-Correcting Codes, 1972, appendix C); the
+        # orders are recomputed by brute force below.
+        (0b11111, 5),  # x^4 + x^3 + x^2 + x + 1
+        (0b1001001, 9),  # x^6 + x^3 + 1
+        (0b1110101, 21),  # x^6 + x^5 + x^4 + x^2 + 1
+        (0b1010111, 21),  # x^6 + x^4 + x^2 + x + 1
+        (0b100011011, 51),  # x^8 + x^4 + x^3 + x + 1 (the AES polynomial, FIPS 197)
+    ],
+)
+def test_irreducible_but_not_primitive_polynomials_are_rejected(poly: int, order: int) -> None:
+    degree = poly.bit_length() - 1
+    assert not is_primitive(degree, _taps_of(poly))
+    # The order of x, by brute force (independent of is_primitive's arithmetic).
+    x, k = 1, 0
+    while True:
+        x <<= 1
+        if x >> degree:
+            x ^= poly
+        k += 1
+        if x == 1:
+            break
+    assert k == order
+
+
+def test_lfsr_spec_enforces_what_the_model_kernel_assumes() -> None:
+    LFSRSpec(31, (0, 3), 10, 1)
+    LFSRSpec(31, (0, 1, 2, 3, 4, 5), 10, 1)
+    for taps, message in [
+        ((3, 0), "increasing"),
+        ((0, 3, 3, 5), "increasing"),
+        ((1, 3), "starting at 0"),
+        ((0, 22), "L - W"),
+        ((0, 3, 5), "even number"),
+        ((0, 1, 2, 3, 4, 5, 6, 7), "even number"),
+    ]:
+        with pytest.raises(ParameterError, match=message):
+            LFSRSpec(31, taps, 10, 1)
+    with pytest.raises(ParameterError, match="non-zero"):
+        LFSRSpec(31, (0, 3), 10, 0)
+
+
+@numba.njit(cache=True)
+def _period(init: int, taps: np.ndarray, length: int, w: int, limit: int) -> int:
+    """Leap-forward steps until the state returns to ``init`` (0 if not within ``limit``)."""
+    mask = np.uint64((1 << w) - 1)
+    top = np.uint64(length - w)
+    s = np.uint64(init)
+    start = np.uint64(init)
+    for k in range(1, limit + 1):
+        new = np.uint64(0)
+        for t in taps:
+            new ^= s >> np.uint64(t)
+        s = (s >> np.uint64(w)) | ((new & mask) << top)
+        if s == start:
+            return k
+    return 0
+
+
+def test_numba_period_helper_on_a_small_lfsr() -> None:
+    spec = _specs(12, 4)[0]
+    taps = np.array(spec.taps, np.int64)
+    assert _period(spec.init, taps, 12, 4, 1 << 13) == spec.period
+
+
+@pytest.mark.slow
+def test_full_period_of_the_machines_first_lfsr() -> None:
+    """One whole period, 2^31 - 1 leap-forward steps, of the default machine's operator 0 (L = 31,
+    W = 10: gcd(10, 2^31 - 1) = 1, so the leap-forward state has the full period too)."""
+    spec = lfsr_specs(MachineParams.for_disparity(80))[0]
+    assert (spec.length, spec.step) == (31, 10)
+    taps = np.array(spec.taps, np.int64)
+    assert _period(spec.init, taps, 31, 10, 1 << 31) == (1 << 31) - 1

@@ -1,8 +1,10 @@
 """Statistics of the machine (on the model, which the RTL matches bit for bit; fixed seeds).
 
-- the AND of operators in a row fires at the product of their probabilities;
-- which row overflows first follows the exact race probability of independent Bernoulli rows;
-- cycles per pixel on realistic likelihoods match an ideal machine of independent streams;
+- the AND of operators in a row fires at the product of their probabilities (every source);
+- with independent LFSRs per operator (``rng = "lfsr"``), which row overflows first follows the
+  exact race probability of independent Bernoulli rows, and cycles per pixel on realistic
+  likelihoods match an ideal machine of independent streams (column-shared sources correlate
+  the rows on purpose: ``tests/test_sobol.py`` and docs/sources.md);
 - how often ties happen, and what the tie rule changes.
 """
 
@@ -27,15 +29,16 @@ W = 10
 ONE = 1 << W
 
 
+@pytest.mark.parametrize("rng", ["lfsr", "lfsr-shared", "sobol"])
 @pytest.mark.parametrize(
     "qs",
     [(512, 512), (100, 900), (ONE, 300), (700, 600, 800), (20, ONE), (1000, 1000, 1000)],
 )
-def test_and_of_operators_fires_at_the_product(qs: tuple[int, ...]) -> None:
+def test_and_of_operators_fires_at_the_product(qs: tuple[int, ...], rng: str) -> None:
     # Overflow needs n ones in n cycles (impossible for p < 1): the run times out after n cycles
     # and the counter holds the number of 1s of the row's stochastic bus.
     n = 200_000
-    params = MachineParams(rows=2, columns=len(qs), counter_max=n - 1, max_cycles=n, lanes=1, seed=3)
+    params = MachineParams(rows=2, columns=len(qs), counter_max=n - 1, max_cycles=n, lanes=1, seed=3, rng=rng)
     words = np.array([[qs, [0] * len(qs)]], np.int32)
     res = MachineModel(params).run(words)
     assert res.timeout[0] and res.counts[0, 1] == 0
@@ -92,7 +95,7 @@ def test_first_overflow_follows_exact_race_probability(
 ) -> None:
     pixels = 20_000
     params = MachineParams(rows=len(rows), columns=len(rows[0]), counter_max=n_max, nomatch_row=nomatch_row,
-                           tie_break=tie_break, lanes=1, seed=11)
+                           tie_break=tie_break, lanes=1, seed=11, rng="lfsr")
     words = np.repeat(np.array([rows], np.int32), pixels, axis=0)
     res = MachineModel(params).run(words)
     assert not res.timeout.any()
@@ -134,7 +137,7 @@ def _ideal_machine(rates: np.ndarray, n_max: int, max_cycles: int, nomatch_first
 
 
 def test_cycles_per_pixel_match_an_ideal_machine() -> None:
-    params = MachineParams.for_disparity(80)
+    params = MachineParams.for_disparity(80, rng="lfsr")
     pixels = 3000
     words = synthetic_disparity_words(params, pixels, np.random.default_rng(31))
     res = MachineModel(params).run(words)

@@ -161,7 +161,7 @@ def test_trace_pixel_range(cache: Path, tmp_path: Path) -> None:
 
 @needs_tools
 def test_dmax80_crop(cache: Path) -> None:
-    p = MachineParams.for_disparity(dmax=80)
+    p = MachineParams.for_disparity(dmax=80, rng="lfsr")
     rng = np.random.default_rng(9)
     # Disparity-like memories: a few good hypotheses per pixel, the rest low.
     words = rng.integers(0, 200, size=(1500, p.rows, p.operator_columns)).astype(np.uint16)
@@ -174,6 +174,38 @@ def test_dmax80_crop(cache: Path) -> None:
         wall, compute = eng.last_wall_cycles, eng.last_compute_cycles
     assert compute / len(res) > p.beats_per_pixel  # runs outlast loads: loading can hide
     assert 0 <= wall - compute <= len(res)  # within 1 cycle per pixel (in fact a few per call)
+
+
+@needs_tools
+@pytest.mark.parametrize("rng", ["lfsr-shared", "sobol"])
+def test_shared_sources_small_machine(cache: Path, rng: str) -> None:
+    p = MachineParams.for_disparity(dmax=6, lanes=4, rng=rng, word_bits=3, lfsr_bits=12, counter_max=5)
+    words = _words(p, 300, seed=11)  # 3-bit words: Sobol blocks of 8 cycles, runs span several
+    with VerilatorEngine(p, build_dir=cache) as eng:
+        model = MachineModel(p)
+        _check(eng, model, words[:120])
+        res = _check(eng, model, words[120:])
+    assert res.cycles.max() > 8
+
+
+@needs_tools
+@pytest.mark.parametrize("rng", [pytest.param("lfsr-shared", marks=pytest.mark.slow), "sobol"])
+def test_shared_sources_on_a_bundled_pair_crop(cache: Path, monkeypatch: pytest.MonkeyPatch,
+                                               rng: str) -> None:
+    """The column-shared sources through the RTL at Dmax 80: a crop of the bundled pair, bit exact."""
+    host_run = pytest.importorskip("bayesmachine.host.run")
+    from bayesmachine.host.images import Crop, bundled_pair, crop_image
+    from bayesmachine.host.likelihoods import ModelParams
+
+    monkeypatch.setenv("BAYESMACHINE_CACHE_DIR", str(cache.parent))
+    left, right, gt = (crop_image(a, Crop(300, 200, 124, 12)) for a in bundled_pair())
+    prep = host_run.prepare(left, right, ModelParams(), gt)
+    machine = MachineParams.for_disparity(80, rng=rng)
+    a = host_run.run_machine(prep, machine, "model", progress=False)
+    b = host_run.run_machine(prep, machine, "verilator", progress=False)
+    assert a.map.size == 8 * 40
+    for field in ("map", "counts", "cycles", "timeout", "nomatch"):
+        np.testing.assert_array_equal(getattr(a, field), getattr(b, field))
 
 
 @needs_tools

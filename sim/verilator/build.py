@@ -69,8 +69,10 @@ def _sources_digest() -> str:
 
     import bayesmachine.hdl
     import bayesmachine.params
+    import bayesmachine.sources
 
-    files = sorted(Path(bayesmachine.hdl.__file__).parent.glob("*.py"))
+    files = sorted(Path(bayesmachine.hdl.__file__).parent.rglob("*.py"))
+    files += sorted(Path(bayesmachine.sources.__file__).parent.glob("*.py"))  # LFSR specs, Sobol table
     files.append(Path(bayesmachine.params.__file__))
     h = hashlib.sha256(amaranth.__version__.encode())
     for f in files:

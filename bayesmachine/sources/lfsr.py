@@ -1,17 +1,20 @@
-"""Random sources of the stochastic operators: leap-forward maximal-length LFSRs.
+"""Leap-forward maximal-length LFSRs: the definition shared by the RTL and the model (no Amaranth).
 
-Each operator owns a Fibonacci LFSR of length L whose bit sequence obeys
+An LFSR is a Fibonacci LFSR of length L whose bit sequence obeys
 ``s[t+L] = XOR(s[t+i] for i in taps)`` (``0 in taps``; characteristic polynomial
 ``x^L + sum(x^i for i in taps)``, primitive, so the period is 2**L - 1). The state holds
 ``s[t] ... s[t+L-1]`` (bit i = s[t+i]). One clock advances the sequence by W bits at once
 (leap-forward), which is cheap because every tap is at most L - W: each new bit is the XOR
-of at most 6 state bits, one LUT6. The operator's W-bit random number is the W oldest bits,
+of at most 6 state bits, one LUT6. The LFSR's W-bit random number is its W oldest bits,
 so consecutive numbers are disjoint chunks of the m-sequence: a comparator never re-reads a
 bit, unlike a register that shifts by one bit per cycle (see ``tests/test_rng.py``, which
 measures both).
 
-This module holds the polynomial search, the bit-serial reference sequence, the per-cycle
-Python twin of the leap-forward step, and the Amaranth component.
+The ``lfsr`` source gives every operator its own LFSR (:func:`lfsr_specs`); ``lfsr-shared``
+one per operator column (:func:`column_lfsr_specs`), and the ``sobol`` source draws its
+per-block random digital shifts from the same column LFSRs. This module holds the polynomial
+search, the bit-serial reference sequence and the per-cycle twin :func:`lfsr_step`; the RTL
+(``bayesmachine.hdl.sources``) and the model's kernels (``bayesmachine.sim.model``) build on it.
 """
 
 from __future__ import annotations
@@ -23,21 +26,17 @@ import random
 from collections.abc import Iterator
 from dataclasses import dataclass
 
-from amaranth.hdl import Cat, Module, Signal, Value, unsigned
-from amaranth.lib import wiring
-from amaranth.lib.wiring import In, Out
-
 from bayesmachine.params import MachineParams, ParameterError
 
 __all__ = [
+    "MAX_TAPS",
     "LFSRSpec",
-    "LeapForwardLFSR",
+    "column_lfsr_specs",
     "is_primitive",
     "lfsr_bit_sequence",
     "lfsr_specs",
     "lfsr_step",
     "lfsr_numbers",
-    "lfsr_next_state_expr",
     "splitmix64",
 ]
 
@@ -166,9 +165,17 @@ def splitmix64(seed: int, index: int) -> int:
 
 # --- LFSR specification, reference sequence and per-cycle twin ---
 
+MAX_TAPS = 6  # XOR inputs per new bit, the constant term included: one LUT6 (heptanomials)
+
+
 @dataclass(frozen=True)
 class LFSRSpec:
-    """One operator's LFSR: length L, taps (0 included), W bits per clock, start state."""
+    """One LFSR: length L, taps (0 first, increasing), W bits per clock, start state.
+
+    The tap set has an even size of at most :data:`MAX_TAPS`: the polynomial has odd weight (3, 5
+    or 7 terms, so x + 1 never divides it), and the model's kernel XORs exactly MAX_TAPS shifted
+    copies of the state, padding with pairs of 0 shifts that cancel.
+    """
 
     length: int
     taps: tuple[int, ...]
@@ -178,16 +185,21 @@ class LFSRSpec:
     def __post_init__(self) -> None:
         if not 0 < self.step <= self.length:
             raise ParameterError(f"LFSR step {self.step} must be in [1, {self.length}]")
-        if 0 not in self.taps or max(self.taps) > self.length - self.step:
+        taps = self.taps
+        increasing = all(a < b for a, b in zip(taps, taps[1:], strict=False))
+        if (not isinstance(taps, tuple) or not taps or taps[0] != 0 or not increasing
+                or max(taps) > self.length - self.step):
             raise ParameterError(
-                f"LFSR taps {self.taps} must include 0 and be <= L - W = {self.length - self.step}"
+                f"LFSR taps {taps!r} must be a tuple starting at 0, strictly increasing, "
+                f"each <= L - W = {self.length - self.step}"
+            )
+        if len(taps) % 2 or len(taps) > MAX_TAPS:
+            raise ParameterError(
+                f"LFSR taps {taps!r}: need an even number of taps, at most {MAX_TAPS} "
+                f"(a polynomial of weight 3, 5 or 7)"
             )
         if not 0 < self.init < (1 << self.length):
             raise ParameterError(f"LFSR start state must be a non-zero {self.length}-bit value")
-
-    @property
-    def tap_mask(self) -> int:
-        return sum(1 << t for t in self.taps)
 
     @property
     def period(self) -> int:
@@ -262,23 +274,17 @@ def _primitive_tap_sets(length: int, max_tap: int, count: int, seed: int) -> tup
     return tuple(found)
 
 
-def lfsr_specs(params: MachineParams) -> list[LFSRSpec]:
-    """The LFSR of every operator of the machine, in operator order (r * operator_columns + c).
-
-    Polynomials are distinct per operator wherever the polynomial space allows; start states
-    are distinct non-zero values derived from the machine seed.
-    """
-    n = params.operators
+def _specs(params: MachineParams, count: int, salt: int) -> list[LFSRSpec]:
     length, w = params.lfsr_bits, params.word_bits
-    tap_sets = _primitive_tap_sets(length, length - w, n, params.seed)
+    tap_sets = _primitive_tap_sets(length, length - w, count, params.seed)
     if not tap_sets:
         raise ParameterError(f"no primitive LFSR polynomial of length {length} with taps <= {length - w}")
     specs = []
     used: set[int] = set()
-    for o in range(n):
+    for o in range(count):
         k = 0
         while True:
-            init = splitmix64(params.seed, (o << 8) + k) & ((1 << length) - 1)
+            init = splitmix64(params.seed ^ salt, (o << 8) + k) & ((1 << length) - 1)
             if init and init not in used:
                 break
             k += 1
@@ -287,37 +293,24 @@ def lfsr_specs(params: MachineParams) -> list[LFSRSpec]:
     return specs
 
 
-# --- RTL ---
+def lfsr_specs(params: MachineParams) -> list[LFSRSpec]:
+    """The LFSR of every operator of the machine (``rng = "lfsr"``), in operator order
+    (r * operator_columns + c).
 
-def lfsr_next_state_expr(state: Value, spec: LFSRSpec) -> Value:
-    """The leap-forward next-state expression (the RTL form of :func:`lfsr_step`)."""
-    w, length = spec.step, spec.length
-    new = state[0:w]
-    for t in spec.taps:
-        if t:
-            new = new ^ state[t : t + w]
-    return Cat(state[w:length], new)
-
-
-class LeapForwardLFSR(wiring.Component):
-    """One operator's random source: a leap-forward LFSR.
-
-    ``number`` is this cycle's W-bit random number; the LFSR advances W bits on each
-    clock where ``enable`` is high (compute cycles only).
+    Polynomials are distinct per operator wherever the polynomial space allows; start states
+    are distinct non-zero values derived from the machine seed.
     """
+    return _specs(params, params.operators, 0)
 
-    def __init__(self, spec: LFSRSpec) -> None:
-        self._spec = spec
-        super().__init__({"enable": In(1), "number": Out(unsigned(spec.step))})
 
-    @property
-    def spec(self) -> LFSRSpec:
-        return self._spec
+# Column LFSRs draw other start states than the per-operator ones of the same seed.
+_COLUMN_SALT = 0x5C0_1A55
 
-    def elaborate(self, platform: object) -> Module:
-        m = Module()
-        state = Signal(self._spec.length, init=self._spec.init)
-        m.d.comb += self.number.eq(state[0 : self._spec.step])
-        with m.If(self.enable):
-            m.d.sync += state.eq(lfsr_next_state_expr(state, self._spec))
-        return m
+
+def column_lfsr_specs(params: MachineParams) -> list[LFSRSpec]:
+    """One LFSR per operator column (``lfsr-shared`` numbers, ``sobol`` shifts), column order.
+
+    The polynomials are the first ``operator_columns`` of the same draw as :func:`lfsr_specs`
+    (distinct); the start states come from SplitMix64 of the seed XOR a fixed salt.
+    """
+    return _specs(params, params.operator_columns, _COLUMN_SALT)
