@@ -28,6 +28,7 @@ from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from bayesmachine.params import MachineParams
+from bayesmachine.sources import SOURCE_KINDS
 
 from .counters import overflow_counter
 from .encoder import map_encoder
@@ -61,9 +62,10 @@ class BayesianMachine(wiring.Component):
     - ``load``: ``In(stream.Signature(load_layout(params)))``, a pixel's words in operator
       order, ``lanes`` per beat, ``beats_per_pixel`` beats per pixel.
     - ``result``: ``Out(stream.Signature(result_layout(params)))``, one per pixel, in order.
-    - with ``rng = "external"``: ``entropy`` (``In(ArrayLayout(unsigned(W), operators))``, one
-      random number per operator, sampled on compute cycles) and ``entropy_ready`` (``Out(1)``,
-      high on compute cycles: the numbers on ``entropy`` are consumed at the clock edge).
+    - with an off-chip ``rng`` ("external", "smtj"): ``entropy``
+      (``In(ArrayLayout(unsigned(W), operators))``, one random number per operator, sampled on
+      compute cycles) and ``entropy_ready`` (``Out(1)``, high on compute cycles: the numbers on
+      ``entropy`` are consumed at the clock edge).
     """
 
     def __init__(self, params: MachineParams) -> None:
@@ -74,7 +76,7 @@ class BayesianMachine(wiring.Component):
             "load": In(stream.Signature(load_layout(params))),
             "result": Out(stream.Signature(result_layout(params))),
         }
-        if params.rng == "external":
+        if not SOURCE_KINDS[params.rng].on_chip:
             members["entropy"] = In(data.ArrayLayout(unsigned(params.word_bits), params.operators))
             members["entropy_ready"] = Out(1)
         super().__init__(members)

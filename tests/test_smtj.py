@@ -1,0 +1,218 @@
+# amaranth: UnusedElaboratable=no
+"""The SMTJ device model (``bayesmachine.sources.smtj``) and the ``"smtj"`` random source.
+
+- the sampled telegraph process: geometric run lengths of the right mean per state (chi-square),
+  stationary probability, lag-1 autocorrelation, per-device spread statistics;
+- the number source: seeded, continuable, W-bit numbers, per-operator or per-column devices;
+- the machine with ``rng = "smtj"``: the same RTL as ``"external"``; the model and the RTL in
+  Amaranth's simulator agree bit for bit when fed the SMTJ numbers.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from conftest import assert_same_results, small_params
+from scipy import stats
+
+from bayesmachine.params import RNG_KINDS, MachineParams, ParameterError
+from bayesmachine.sim.model import MachineModel
+from bayesmachine.sim.testbench import synthetic_disparity_words
+from bayesmachine.sources import SOURCE_KINDS
+from bayesmachine.sources.smtj import (
+    SMTJSource,
+    TelegraphBank,
+    dwells,
+    flip_probabilities,
+    smtj_device_count,
+)
+
+
+def _runs(states: np.ndarray) -> dict[int, np.ndarray]:
+    """Complete run lengths of each state, per device column (first and last runs cut off)."""
+    out: dict[int, list[np.ndarray]] = {0: [], 1: []}
+    for col in states.T:
+        edges = np.flatnonzero(np.diff(col)) + 1
+        lengths = np.diff(edges)
+        first_state = col[edges[0]] if len(edges) else 0
+        for s in (0, 1):
+            out[s].append(lengths[(np.arange(len(lengths)) % 2 == 0) == (first_state == s)])
+    return {s: np.concatenate(v) for s, v in out.items()}
+
+
+@pytest.mark.parametrize("tau, bias", [(1.0, 0.5), (8.0, 0.3), (30.0, 0.5)])
+def test_dwell_times_are_geometric_with_the_exact_mean(tau: float, bias: float) -> None:
+    bank = TelegraphBank(200, tau, bias, seed=11)
+    runs = _runs(bank.take(30_000))
+    tau0, tau1 = dwells(tau, bias)
+    flips = flip_probabilities(tau0, tau1)  # P(0 -> 1), P(1 -> 0)
+    for s in (0, 1):
+        q = float(flips[s])
+        lengths = runs[s]
+        assert len(lengths) > 5000
+        mean = lengths.mean()
+        # Geometric on {1, 2, ...}: mean 1/q, sd sqrt(1-q)/q.
+        assert abs(mean - 1 / q) < 5 * math.sqrt(1 - q) / q / math.sqrt(len(lengths)), (s, mean, 1 / q)
+        # Chi-square goodness of fit: bins 1..K-1 and a tail bin holding >= K.
+        k = max(3, int(3 / q))
+        observed = np.bincount(np.minimum(lengths, k), minlength=k + 1)[1:]
+        pmf = q * (1 - q) ** np.arange(k - 1)
+        expected = len(lengths) * np.append(pmf, (1 - q) ** (k - 1))
+        keep = expected > 5
+        obs, exp = observed[keep], expected[keep]
+        exp = exp * obs.sum() / exp.sum()
+        _, pval = stats.chisquare(obs, exp)
+        assert pval > 1e-4, (s, pval)
+    if tau >= 30:  # long dwells: run lengths tend to the continuous mean dwells (+3.4 % here)
+        assert abs(runs[0].mean() / tau0 - 1) < 0.06 and abs(runs[1].mean() / tau1 - 1) < 0.06
+
+
+@pytest.mark.parametrize("tau", [0.2, 1.0, 20.0])
+@pytest.mark.parametrize("bias", [0.15, 0.5, 0.8])
+def test_stationary_probability_and_autocorrelation(tau: float, bias: float) -> None:
+    bank = TelegraphBank(400, tau, bias, seed=5)
+    x = bank.take(5_000).astype(np.float64)
+    tau0, tau1 = dwells(tau, bias)
+    rho = math.exp(-(1 / tau0 + 1 / tau1))  # lag-1 autocorrelation of the sampled process
+    n_eff = x.size * (1 - rho) / (1 + rho)
+    assert abs(x.mean() - bias) < 5 * math.sqrt(bias * (1 - bias) / n_eff), (x.mean(), bias)
+    c = x - bias
+    lag1 = float((c[1:] * c[:-1]).mean() / (c * c).mean())
+    assert abs(lag1 - rho) < 0.02, (lag1, rho)
+
+
+def test_device_spread_statistics() -> None:
+    s, n = 0.1, 20_000
+    bank = TelegraphBank(n, 10.0, 0.5, spread=s, seed=2)
+    z0 = np.log(bank.tau0 / 10.0) / s
+    z1 = np.log(bank.tau1 / 10.0) / s
+    for z in (z0, z1):
+        assert abs(z.mean()) < 5 / math.sqrt(n) and abs(z.std() - 1) < 0.03
+    logit = np.log(bank.bias / (1 - bank.bias))
+    assert abs(logit.std() - s * math.sqrt(2)) < 0.01 * s * 10
+    assert abs(np.log(bank.tau).std() - s / math.sqrt(2)) < 0.005
+    assert abs(np.corrcoef(z0, z1)[0, 1]) < 0.05  # the two barriers scatter independently
+    same = TelegraphBank(100, 10.0, 0.5, spread=0.0, seed=2)
+    assert np.all(same.tau0 == 10.0) and np.all(same.bias == 0.5)
+
+
+def test_per_device_bias_is_what_each_device_emits() -> None:
+    bank = TelegraphBank(50, 2.0, 0.5, spread=0.3, seed=9)
+    x = bank.take(40_000)
+    got = x.mean(axis=0)
+    assert np.abs(got - bank.bias).max() < 0.02
+    assert bank.bias.std() > 0.05  # the spread is visible device by device
+
+
+def _smtj(**kwargs: object) -> MachineParams:
+    return MachineParams.for_disparity(6, rng="smtj", word_bits=6, **kwargs)  # type: ignore[arg-type]
+
+
+def test_source_is_seeded_and_continuable() -> None:
+    p = _smtj(smtj_dwell=3.0, smtj_spread=0.05, seed=7)
+    whole = SMTJSource(p).take(500)
+    src = SMTJSource(p)
+    parts = np.concatenate([src.take(0), src.take(137), src.take(1), src.take(362)])
+    assert np.array_equal(parts, whole)
+    src.reset()
+    assert np.array_equal(src.take(500), whole)
+    other = SMTJSource(MachineParams(**{**p.to_dict(), "seed": 8})).take(500)  # type: ignore[arg-type]
+    assert not np.array_equal(other, whole)
+    with pytest.raises(ValueError, match="count"):
+        src.take(-1)
+
+
+@pytest.mark.parametrize("dwell", [0.5, 1.0, 20.0])
+def test_numbers_are_w_bit_and_uniform_in_the_long_run(dwell: float) -> None:
+    p = _smtj(smtj_dwell=dwell)
+    src = SMTJSource(p)
+    nums = src.take(4_000)
+    assert nums.dtype == np.uint16 and nums.shape == (4_000, p.operators)
+    assert nums.min() >= 0 and nums.max() < (1 << p.word_bits)
+    assert src.devices == smtj_device_count(p) == p.word_bits * p.operators
+    bits = (nums[..., None] >> np.arange(p.word_bits)) & 1
+    # Each bit is one unbiased device; its mean over time and operators is 1/2.
+    rho = math.exp(-2 / dwell)
+    n_eff = 4_000 * p.operators * (1 - rho) / (1 + rho)
+    assert np.all(np.abs(bits.mean(axis=(0, 1)) - 0.5) < 5 * 0.5 / math.sqrt(n_eff))
+
+
+def test_column_sharing_gives_every_row_its_column_number() -> None:
+    p = _smtj(smtj_dwell=2.0, smtj_share="column")
+    nums = SMTJSource(p).take(300).reshape(300, p.rows, p.operator_columns)
+    assert np.all(nums == nums[:, :1, :])
+    assert not np.array_equal(nums[:, 0, 0], nums[:, 0, 1])
+    assert smtj_device_count(p) == p.word_bits * p.operator_columns
+    per_op = SMTJSource(_smtj(smtj_dwell=2.0)).take(300).reshape(300, p.rows, p.operator_columns)
+    assert not np.array_equal(per_op[:, 0, :], per_op[:, 1, :])
+
+
+def test_registry_and_parameters() -> None:
+    assert tuple(SOURCE_KINDS) == RNG_KINDS
+    kind = SOURCE_KINDS["smtj"]
+    assert not kind.on_chip and kind.numbers is not None
+    p = _smtj(smtj_dwell=20)
+    assert isinstance(kind.numbers(p), SMTJSource)
+    assert p.smtj_dwell == 20.0 and p.fingerprint() == _smtj(smtj_dwell=20.0).fingerprint()
+    assert p.fingerprint() != _smtj(smtj_dwell=21).fingerprint()
+    assert "smtj_dwell" in p.to_dict()
+    lfsr = MachineParams.for_disparity(6)
+    assert "smtj_dwell" not in lfsr.to_dict()  # meaningless to other sources: not in reports or caches
+    with pytest.raises(ParameterError, match="rng = 'smtj'"):
+        SMTJSource(lfsr)
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"smtj_dwell": 0}, "smtj_dwell"),
+        ({"smtj_dwell": -1.0}, "smtj_dwell"),
+        ({"smtj_dwell": float("inf")}, "smtj_dwell"),
+        ({"smtj_dwell": "5"}, "smtj_dwell"),
+        ({"smtj_spread": 1.5}, "smtj_spread"),
+        ({"smtj_spread": -0.1}, "smtj_spread"),
+        ({"smtj_share": "row"}, "smtj_share"),
+    ],
+)
+def test_bad_device_parameters_name_the_problem(kwargs: dict, message: str) -> None:
+    with pytest.raises(ParameterError, match=message):
+        _smtj(**kwargs)
+
+
+def test_bank_rejects_bad_device_values() -> None:
+    with pytest.raises(ParameterError, match="bias"):
+        TelegraphBank(4, 2.0, 1.0)
+    with pytest.raises(ParameterError, match="tau"):
+        TelegraphBank(4, 0.0)
+    with pytest.raises(ParameterError, match="devices"):
+        TelegraphBank(0, 2.0)
+
+
+def test_smtj_machine_is_the_external_rtl() -> None:
+    from bayesmachine.hdl.cli import verilog_text
+    from bayesmachine.hdl.machine import BayesianMachine
+
+    smtj = small_params(rng="smtj", smtj_dwell=4.0)
+    ext = small_params(rng="external")
+    assert "entropy" in BayesianMachine(smtj).signature.members
+    assert verilog_text(BayesianMachine(smtj)) == verilog_text(BayesianMachine(ext))
+
+
+@pytest.mark.parametrize("dwell, share", [(1.0, "operator"), (20.0, "column")])
+def test_model_and_rtl_agree_on_smtj_numbers(dwell: float, share: str) -> None:
+    from bayesmachine.sim.pysim import PysimEngine
+
+    params = small_params(rng="smtj", smtj_dwell=dwell, smtj_share=share, seed=4)
+    rng = np.random.default_rng(3)
+    words = synthetic_disparity_words(params, 12, rng)
+    numbers = SMTJSource(params).take(12 * params.max_cycles)
+    want = MachineModel(params).run(words, numbers)
+    used = int(want.cycles.sum())
+    assert used > 12 * (params.counter_max + 1) - 1
+    # The engines drive the entropy port of an off-chip machine alike: the RTL is that of
+    # rng = "external" (test above), fed the same numbers.
+    rtl = PysimEngine(MachineParams(**{**params.to_dict(), "rng": "external"}))
+    got = rtl.run(words, numbers[:used])
+    assert_same_results(got, want)
