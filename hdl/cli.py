@@ -5,7 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from bayesmachine.params import DEFAULT_LANES, DEFAULT_MAX_CYCLES, DEFAULT_WORD_BITS, MachineParams
+from bayesmachine.params import DEFAULT_LANES, DEFAULT_MAX_CYCLES, DEFAULT_WORD_BITS, RNG_KINDS, MachineParams
+from bayesmachine.sources import SOURCE_KINDS
+from bayesmachine.sources.options import add_rng_options, rng_kwargs
 
 __all__ = ["TOP_NAME", "emit", "register", "summary", "verilog_text"]
 
@@ -25,7 +27,7 @@ def _ports(params: MachineParams) -> list[tuple[str, str, int]]:
         ("out", "result__valid", 1),
         ("in", "result__ready", 1),
     ]
-    if params.rng == "external":
+    if not SOURCE_KINDS[params.rng].on_chip:
         ports += [("in", "entropy", params.word_bits * params.operators), ("out", "entropy_ready", 1)]
     return ports
 
@@ -39,14 +41,25 @@ def summary(params: MachineParams) -> str:
         f"words: {params.word_bits}-bit comparators, {params.memory_word_width}-bit likelihood-memory words; "
         f"counter max {params.counter_max} ({params.counter_width}-bit overflow counters); "
         f"watchdog {params.max_cycles} cycles",
-        f"random source: {params.rng}"
-        + (f" (leap-forward LFSRs, L = {params.lfsr_bits}, seed {params.seed})"
-           if params.rng == "lfsr" else " (W-bit numbers per operator on the 'entropy' port)"),
+        f"random source: {params.rng} ({_source_summary(params)})",
         f"load: {params.lanes} words per beat, {params.beats_per_pixel} beats per pixel",
         "ports (Verilog names; clk and rst as well):",
     ]
     lines += [f"  {d:3} {name:15} {width:6} bits" for d, name, width in _ports(params)]
     return "\n".join(lines)
+
+
+def _source_summary(params: MachineParams) -> str:
+    if params.rng == "lfsr":
+        return f"leap-forward LFSRs, L = {params.lfsr_bits}, seed {params.seed}"
+    text = "W-bit numbers per operator on the 'entropy' port"
+    if params.rng == "smtj":
+        from bayesmachine.sources.smtj import smtj_device_count
+
+        text += (f"; simulated by {smtj_device_count(params)} SMTJ devices, {params.word_bits} per "
+                 f"{params.smtj_share}: dwell {params.smtj_dwell:g} cycles, spread {params.smtj_spread:g}, "
+                 f"seed {params.seed}")
+    return text
 
 
 def verilog_text(top: object) -> str:
@@ -96,8 +109,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help=f"comparator resolution W; memory words are W+1 bits (default {DEFAULT_WORD_BITS})")
     p.add_argument("--counter-max", type=int, default=16,
                    help="n_max: a counter overflows on its (n_max+1)-th 1 (default 16)")
-    p.add_argument("--rng", choices=("lfsr", "external"), default="lfsr",
-                   help="random numbers from on-chip LFSRs or an 'entropy' input port (default lfsr)")
+    add_rng_options(p, RNG_KINDS)
     p.add_argument("--seed", type=_int, default=1,
                    help="machine seed for LFSR polynomials and states (default 1)")
     p.add_argument("--lanes", type=int, default=None,
@@ -123,7 +135,7 @@ def _run(args: argparse.Namespace) -> int:
         columns=args.columns,
         word_bits=args.word_bits,
         counter_max=args.counter_max,
-        rng=args.rng,
+        **rng_kwargs(args),
         seed=args.seed,
         max_cycles=args.max_cycles,
         tie_break=args.tie_break,

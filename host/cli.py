@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from bayesmachine.params import MachineParams
+from bayesmachine.sources.options import add_rng_options, rng_kwargs
 
 from .images import Crop, bundled_pair, crop_image, load_gt, load_image, parse_crop
 from .likelihoods import ModelParams
@@ -126,8 +127,9 @@ def _add_machine_options(p: argparse.ArgumentParser, sweep: bool) -> None:
         "--word-bits", type=int, default=10, metavar="W", help="comparator resolution (default 10)"
     )
     g.add_argument(
-        "--seed", type=int, default=1, help="machine seed: LFSR polynomials and states (default 1)"
+        "--seed", type=int, default=1, help="machine seed: LFSRs or SMTJ devices (default 1)"
     )
+    add_rng_options(g, ("lfsr", "smtj"))
     g.add_argument(
         "--max-cycles",
         type=int,
@@ -164,6 +166,7 @@ def _machine_params(args: argparse.Namespace, model: ModelParams, counter_max: i
         seed=args.seed,
         max_cycles=args.max_cycles,
         tie_break=args.tie_break,
+        **rng_kwargs(args),
     )
 
 

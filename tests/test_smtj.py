@@ -216,3 +216,18 @@ def test_model_and_rtl_agree_on_smtj_numbers(dwell: float, share: str) -> None:
     rtl = PysimEngine(MachineParams(**{**params.to_dict(), "rng": "external"}))
     got = rtl.run(words, numbers[:used])
     assert_same_results(got, want)
+
+
+def test_emit_cli_smtj_machine(tmp_path, capsys: pytest.CaptureFixture[str]) -> None:
+    from bayesmachine.cli import main
+
+    out = tmp_path / "smtj.v"
+    assert main(["emit", "--dmax", "2", "--rng", "smtj", "--smtj-dwell", "20", "--smtj-share", "column",
+                 "-o", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "simulated by 30 SMTJ devices, 10 per column: dwell 20 cycles" in text
+    assert "entropy" in text and "input [119:0] entropy" in out.read_text()
+    # Device options without the SMTJ source are a one-line error, not silently ignored.
+    assert main(["emit", "--dmax", "2", "--smtj-spread", "0.05", "-o", str(tmp_path / "x.v")]) == 2
+    assert "--smtj-spread: device options of --rng smtj" in capsys.readouterr().err
+    assert not (tmp_path / "x.v").exists()
