@@ -104,10 +104,9 @@ def _sample(state, counter, thr, index, count, out):
             for k in range(nbits):
                 v |= np.int64(state[index[j, k]]) << k
             out[t, j] = v
-        for d in range(ndev):
+        for d in range(ndev):  # branch-free: flips are unpredictable at short dwells
             counter[d] += _GAMMA
-            if _splitmix64(counter[d]) < thr[d, state[d]]:
-                state[d] ^= 1
+            state[d] ^= np.uint8(_splitmix64(counter[d]) < thr[d, state[d]])
 
 
 class TelegraphBank:
