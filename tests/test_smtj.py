@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import assert_same_results, small_params
+from conftest import assert_same_results, run_sim, small_params
 from scipy import stats
 
 from bayesmachine.params import RNG_KINDS, MachineParams, ParameterError
@@ -231,3 +231,104 @@ def test_emit_cli_smtj_machine(tmp_path, capsys: pytest.CaptureFixture[str]) -> 
     assert main(["emit", "--dmax", "2", "--smtj-spread", "0.05", "-o", str(tmp_path / "x.v")]) == 2
     assert "--smtj-spread: device options of --rng smtj" in capsys.readouterr().err
     assert not (tmp_path / "x.v").exists()
+
+
+def test_xor_of_devices_decorrelates_like_a_shorter_dwell() -> None:
+    # The docs' advice for long dwells: the XOR of m unbiased devices of dwell tau has the
+    # autocorrelation of one device of dwell tau / m, exp(-2 m k / tau).
+    tau, m = 12.0, 3
+    x = TelegraphBank(m * 300, tau, seed=21).take(6_000).reshape(6_000, m, 300)
+    xor = np.bitwise_xor.reduce(x, axis=1).astype(np.float64)
+    c = xor - 0.5
+    for lag in (1, 4):
+        got = float((c[lag:] * c[:-lag]).mean() / (c * c).mean())
+        assert abs(got - math.exp(-2 * m * lag / tau)) < 0.02, (lag, got)
+    assert abs(xor.mean() - 0.5) < 0.01
+
+
+# --- The synthesizable SMTJ emulator (hdl/smtj.py) and its twin ---
+
+
+def test_emulator_twin_statistics_follow_the_device_model() -> None:
+    from bayesmachine.sources.smtj import SMTJEmulatorTwin
+
+    p = _smtj(smtj_dwell=5.0)
+    nums = SMTJEmulatorTwin(p).take(20_000)
+    bits = ((nums[..., None] >> np.arange(p.word_bits)) & 1).reshape(20_000, -1).astype(np.float64)
+    rho = math.exp(-2 / 5.0)
+    n_eff = bits.size * (1 - rho) / (1 + rho)
+    assert abs(bits.mean() - 0.5) < 5 * 0.5 / math.sqrt(n_eff)
+    c = bits - 0.5
+    assert abs(float((c[1:] * c[:-1]).mean() / (c * c).mean()) - rho) < 0.02
+    twin = SMTJEmulatorTwin(p)
+    assert np.array_equal(np.concatenate([twin.take(11), twin.take(89)]), nums[:100])
+
+
+def test_emulator_rtl_matches_its_twin() -> None:
+    from bayesmachine.hdl.smtj import SMTJEmulator
+    from bayesmachine.sources.smtj import SMTJEmulatorTwin
+
+    p = small_params(rng="smtj", smtj_dwell=2.0, smtj_spread=0.1, seed=6)
+    dut = SMTJEmulator(p)
+    want = SMTJEmulatorTwin(p).take(120)
+    advance = np.random.default_rng(1).random(200) < 0.6
+    raw = dut.numbers.as_value()
+    w = p.word_bits
+
+    async def bench(ctx):
+        row = 0
+        for adv in advance:
+            got = ctx.get(raw)
+            assert [(got >> (o * w)) & ((1 << w) - 1) for o in range(p.operators)] == want[row].tolist(), row
+            ctx.set(dut.advance, int(adv))
+            await ctx.tick()
+            row += int(adv)
+            if row == len(want):
+                break
+
+    run_sim(dut, bench)
+
+
+def test_emulated_machine_equals_the_model_on_the_twin_numbers() -> None:
+    from amaranth.sim import Simulator
+
+    from bayesmachine.hdl.smtj import SMTJEmulatedMachine
+    from bayesmachine.sim.model import MachineResult
+    from bayesmachine.sim.testbench import pack_beats, unpack_result
+    from bayesmachine.sources.smtj import SMTJEmulatorTwin
+
+    p = small_params(rng="smtj", smtj_dwell=3.0, smtj_share="column", seed=2)
+    words = synthetic_disparity_words(p, 10, np.random.default_rng(4))
+    want = MachineModel(p).run(words, SMTJEmulatorTwin(p).take(10 * p.max_cycles))
+    dut = SMTJEmulatedMachine(p)
+    beats = [b for pixel in words for b in pack_beats(p, pixel)]
+    raws: list[int] = []
+
+    async def feeder(ctx):
+        for b in beats:
+            ctx.set(dut.load.valid, 1)
+            ctx.set(dut.load.payload.as_value(), b)
+            await ctx.tick().until(dut.load.ready)
+        ctx.set(dut.load.valid, 0)
+
+    async def collector(ctx):
+        ctx.set(dut.result.ready, 1)
+        while len(raws) < len(words):
+            _, _, valid, payload = await ctx.tick().sample(dut.result.valid, dut.result.payload.as_value())
+            if valid:
+                raws.append(payload)
+
+    sim = Simulator(dut)
+    sim.add_clock(1e-8)
+    sim.add_testbench(feeder, background=True)
+    sim.add_testbench(collector)
+    sim.run()
+    fields = [unpack_result(p, r) for r in raws]
+    got = MachineResult(
+        np.array([f[4] for f in fields], np.uint32).reshape(len(raws), p.rows),
+        np.array([f[0] for f in fields], np.int32),
+        np.array([f[1] for f in fields], bool),
+        np.array([f[2] for f in fields], bool),
+        np.array([f[3] for f in fields], np.int64),
+    )
+    assert_same_results(got, want)

@@ -221,3 +221,82 @@ class SMTJSource:
         out = np.empty((int(count), self.operators), np.uint16)
         self.bank.read(int(count), self._index, out)
         return out
+
+
+# --- The SMTJ emulator: the same devices as digital logic (its RTL is hdl/smtj.py) ---
+
+EMULATOR_RANDOM_BITS = 16  # flip-probability resolution of the emulator: thresholds in 1/65536
+
+
+@numba.njit(cache=True, inline="always")
+def _xorshift32(x):
+    x ^= (x << np.uint32(13)) & np.uint32(0xFFFFFFFF)
+    x ^= x >> np.uint32(17)
+    x ^= (x << np.uint32(5)) & np.uint32(0xFFFFFFFF)
+    return x
+
+
+@numba.njit(cache=True)
+def _emulate(state, x, thr, index, count, out):
+    """``count`` cycles of the emulator: outputs read the states, then every device steps its
+    xorshift32 generator and flips if the new value's top 16 bits are below its state's threshold."""
+    ndev = state.shape[0]
+    nout, nbits = index.shape
+    for t in range(count):
+        for j in range(nout):
+            v = 0
+            for k in range(nbits):
+                v |= np.int64(state[index[j, k]]) << k
+            out[t, j] = v
+        for d in range(ndev):
+            nx = _xorshift32(x[d])
+            x[d] = nx
+            state[d] ^= np.uint8((nx >> np.uint32(16)) < thr[d, state[d]])
+
+
+class SMTJEmulatorSpec:
+    """What the synthesizable SMTJ emulator holds, per device (from an ``rng = "smtj"`` machine):
+
+    - ``thresholds`` (devices, 2): P(0 -> 1) and P(1 -> 0) of the device (``TelegraphBank`` of
+      the same parameters and seed, spread included), rounded to 16 bits;
+    - ``init_state``: its initial state (as the bank's); ``init_x``: its xorshift32 seed (non-zero);
+    - ``index`` (operators, W): the device of each bit of each operator's number (as ``SMTJSource``).
+    """
+
+    def __init__(self, params: MachineParams) -> None:
+        source = SMTJSource(params)
+        bank = source.bank
+        p01, p10 = flip_probabilities(bank.tau0, bank.tau1)
+        scale = 1 << EMULATOR_RANDOM_BITS
+        thr = np.rint(np.stack([p01, p10], axis=1) * scale)
+        # A flip probability that rounds to 0 would freeze the device: keep 1/65536 at least.
+        self.thresholds = np.clip(thr, 1, scale - 1).astype(np.uint32)
+        self.init_state = bank._init_state.copy()
+        gen = np.random.Generator(np.random.PCG64(np.random.SeedSequence([params.seed, _TAG_SMTJ, 1])))
+        self.init_x = gen.integers(1, 1 << 32, size=bank.devices, dtype=np.uint64).astype(np.uint32)
+        self.index = source._index.copy()
+        self.params = params
+
+    @property
+    def devices(self) -> int:
+        return len(self.init_state)
+
+
+class SMTJEmulatorTwin:
+    """Per-cycle Python twin of ``hdl.smtj.SMTJEmulator``: the same numbers, bit for bit, one row
+    per cycle its ``advance`` input is high. A ``NumberSource`` (two takes equal one)."""
+
+    def __init__(self, params: MachineParams) -> None:
+        self.spec = SMTJEmulatorSpec(params)
+        self.operators = params.operators
+        self.reset()
+
+    def reset(self) -> None:
+        self._state = self.spec.init_state.copy()
+        self._x = self.spec.init_x.copy()
+
+    def take(self, count: int) -> np.ndarray:
+        out = np.empty((int(count), self.operators), np.uint16)
+        if count:
+            _emulate(self._state, self._x, self.spec.thresholds, self.spec.index, int(count), out)
+        return out
