@@ -332,3 +332,43 @@ def test_emulated_machine_equals_the_model_on_the_twin_numbers() -> None:
         np.array([f[3] for f in fields], np.int64),
     )
     assert_same_results(got, want)
+
+
+def test_run_and_sweep_options_build_smtj_machines() -> None:
+    from bayesmachine.cli import build_parser
+    from bayesmachine.host.cli import _machine_params, _model_params
+
+    parser = build_parser()
+    for cmd in (["run"], ["sweep"]):
+        args = parser.parse_args(cmd + ["--rng", "smtj", "--smtj-dwell", "20", "--smtj-spread", "0.05",
+                                        "--smtj-share", "column", "-o", "out"])
+        p = _machine_params(args, _model_params(args), 16)
+        assert (p.rng, p.smtj_dwell, p.smtj_spread, p.smtj_share) == ("smtj", 20.0, 0.05, "column")
+        args = parser.parse_args(cmd + ["--smtj-dwell", "20", "-o", "out"])
+        with pytest.raises(ValueError, match="--smtj-dwell: device options of --rng smtj"):
+            _machine_params(args, _model_params(args), 16)
+
+
+def test_study_script_runs_and_writes_complete_outputs(tmp_path) -> None:
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = Path(__file__).resolve().parent.parent / "benchmarks" / "study_smtj.py"
+    plot, out = tmp_path / "study.png", tmp_path / "study.json"
+    proc = subprocess.run(
+        [sys.executable, str(script), "--row-step", "400", "--dwells", "0.5,20", "--spreads", "0,0.1",
+         "--spread-dwells", "1", "--noise-seeds", "2", "--plot", str(plot), "--json", str(out)],
+        capture_output=True, text=True, timeout=600,
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    summary = json.loads(out.read_text())
+    groups = {r["group"] for r in summary["results"]}
+    assert groups == {"baseline", "comparator-operator", "comparator-column", "spread", "biased"}
+    assert all(math.isfinite(r["rms"]) and 0 <= r["f1"] <= 1 for r in summary["results"])
+    by = {r["name"]: r for r in summary["results"]}
+    # Long dwells are much worse than the ideal machine, even on one map row.
+    assert by["smtj per operator, tau 20"]["rms"] > 1.5 * by["ideal (independent uniform)"]["rms"]
+    assert [d["devices"] for d in summary["devices"]] == [2460, 30, 246]
+    assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
