@@ -111,7 +111,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="n_max: a counter overflows on its (n_max+1)-th 1 (default 16)")
     add_rng_options(p, RNG_KINDS)
     p.add_argument("--seed", type=_int, default=1,
-                   help="machine seed for LFSR polynomials and states (default 1)")
+                   help="machine seed for LFSR polynomials and states, or the SMTJ devices (default 1)")
     p.add_argument("--lanes", type=int, default=None,
                    help=f"likelihood-memory words per load beat (default {DEFAULT_LANES}, or one "
                    "pixel's words if fewer)")
