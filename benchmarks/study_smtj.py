@@ -39,7 +39,7 @@ from bayesmachine.host.images import bundled_pair
 from bayesmachine.host.likelihoods import ModelParams, QuantizedTables, likelihood_tables, memory_words
 from bayesmachine.host.metrics import cycle_stats, f1_score, map_agreement, rms_error
 from bayesmachine.host.reference import reference_fast
-from bayesmachine.params import MachineParams
+from bayesmachine.params import MachineParams, ParameterError
 from bayesmachine.sim.model import MachineModel, MachineResult, _finish_cycle, _store
 from bayesmachine.sources import SOURCE_KINDS, NumberSource
 from bayesmachine.sources.smtj import _GAMMA, _splitmix64, smtj_device_count
@@ -168,30 +168,48 @@ def figures(res: MachineResult, params: MachineParams, posterior: np.ndarray, re
 
 
 def _floats(text: str) -> list[float]:
-    return [float(v) for v in text.split(",") if v.strip()]
+    try:
+        values = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {text!r}") from None
+    if not values or not all(math.isfinite(v) for v in values):
+        raise argparse.ArgumentTypeError(f"expected comma-separated finite numbers, got {text!r}")
+    return values
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--row-step", type=int, default=8, help="every N-th map row of the frame (default 8)")
-    ap.add_argument("--counter-max", type=int, default=16)
-    ap.add_argument("--dwells", default="0.5,1,2,5,10,20,50", help="SMTJ dwell tau values, clock cycles")
-    ap.add_argument("--spreads", default="0,0.05,0.1,0.2", help="device spreads (log-sd), at --spread-dwells")
-    ap.add_argument("--spread-dwells", default="1,5", help="dwells at which the spreads are measured")
+    ap.add_argument("--counter-max", type=int, default=16, help="counter max n_max (default 16)")
+    ap.add_argument("--dwells", type=_floats, default="0.5,1,2,5,10,20,50",
+                    help="SMTJ dwell tau values, clock cycles (default %(default)s)")
+    ap.add_argument("--spreads", type=_floats, default="0,0.05,0.1,0.2",
+                    help="device spreads (log-sd), at --spread-dwells (default %(default)s)")
+    ap.add_argument("--spread-dwells", type=_floats, default="1,5",
+                    help="dwells at which the spreads are measured (default %(default)s)")
     ap.add_argument("--baselines", default="lfsr,external",
                     help="registry kinds to compare with (external = ideal uniform numbers)")
-    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--seed", type=int, default=1, help="machine seed: LFSRs, SMTJ devices (default 1)")
     ap.add_argument("--noise-seeds", type=int, default=4,
                     help="also run the ideal machine with this many other seeds: seed-to-seed noise")
-    ap.add_argument("--plot", type=Path, default=Path("docs/figures/smtj-study.png"))
-    ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--plot", type=Path, default=Path("docs/figures/smtj-study.png"),
+                    help="figure to write (default %(default)s)")
+    ap.add_argument("--json", type=Path, default=None, help="also write every figure as JSON here")
     args = ap.parse_args()
-    dwell_list, spreads = _floats(args.dwells), _floats(args.spreads)
-    spread_dwells = _floats(args.spread_dwells)
+    dwell_list, spreads, spread_dwells = args.dwells, args.spreads, args.spread_dwells
     baselines = [k for k in args.baselines.split(",") if k]
     for k in baselines:
         if k not in SOURCE_KINDS:
-            raise SystemExit(f"unknown baseline {k!r}: known kinds {', '.join(SOURCE_KINDS)}")
+            ap.error(f"unknown baseline {k!r}: known kinds {', '.join(SOURCE_KINDS)}")
+    if args.row_step < 1:
+        ap.error(f"--row-step must be >= 1, got {args.row_step}")
+    try:  # every machine of the study, validated before the first run
+        for tau in {*dwell_list, *spread_dwells}:
+            for s in spreads:
+                MachineParams.for_disparity(80, rng="smtj", smtj_dwell=tau, smtj_spread=s,
+                                            counter_max=args.counter_max, seed=args.seed)
+    except ParameterError as exc:
+        ap.error(str(exc))
 
     t0 = time.perf_counter()
     model = ModelParams()
