@@ -14,6 +14,7 @@ message, so argparse prints it instead of "invalid value".
 from __future__ import annotations
 
 import argparse
+import math
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any, TypeVar
@@ -32,6 +33,7 @@ from bayesmachine.params import (
     DEFAULT_WORD_BITS,
     PRIORS,
     RNG_KINDS,
+    SMTJ_SHARES,
     TIE_BREAKS,
     MachineParams,
     ParameterError,
@@ -80,6 +82,20 @@ def argument_type(parse: Callable[[str], T], name: str | None = None) -> Callabl
 
     convert.__name__ = name or getattr(parse, "__name__", "value")
     return convert
+
+
+def float_arg(text: str) -> float:
+    """A finite float (``nan`` and ``inf`` are refused here, with the option's name)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return value
+
+
+_SMTJ_FIELDS = ("smtj_dwell", "smtj_spread", "smtj_share")
 
 
 def counter_max_list(text: str) -> list[int]:
@@ -198,6 +214,15 @@ add_option(MachineOption("prior", "--prior",
                          "uniform: always-on 1s enter each row; loaded: an extra operator column 0 holds a "
                          "prior word per row (default %(default)s)",
                          default=DEFAULT_PRIOR, choices=PRIORS))
+add_option(MachineOption("smtj_dwell", "--smtj-dwell",
+                         "--rng smtj: mean dwell time of a device state, in clock cycles (default 1)",
+                         type=float_arg, metavar="TAU"))
+add_option(MachineOption("smtj_spread", "--smtj-spread",
+                         "--rng smtj: device-to-device spread, log-sd of each dwell time (default 0; "
+                         "0.05 ~ 5 %%)", type=float_arg, metavar="S"))
+add_option(MachineOption("smtj_share", "--smtj-share",
+                         "--rng smtj: W devices per operator, or per column shared by its rows "
+                         "(default operator)", type=str, choices=SMTJ_SHARES))
 add_option(MachineOption("lanes", "--lanes",
                          f"likelihood-memory words per load beat (default {DEFAULT_LANES}, or one pixel's "
                          "words if fewer)", metavar="N"))
@@ -249,6 +274,11 @@ def machine_params_from_args(args: argparse.Namespace, dmax: int, **overrides: A
         if value is not None and not isinstance(value, list):
             kwargs[field] = value
     kwargs.update(overrides)
+    device = [f for f in _SMTJ_FIELDS if kwargs.get(f) is not None]
+    if device and kwargs.get("rng", DEFAULT_RNG) != "smtj":
+        flags = ", ".join(MACHINE_OPTIONS[f].flag for f in device)
+        rng = kwargs.get("rng", DEFAULT_RNG)
+        raise ParameterError(f"{flags}: device options of --rng smtj (got --rng {rng})")
     try:
         return MachineParams.for_disparity(dmax, **kwargs)
     except ParameterError as exc:

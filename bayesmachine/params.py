@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 from dataclasses import asdict, dataclass
 
 __all__ = [
@@ -17,6 +18,7 @@ __all__ = [
     "RNG_KINDS",
     "PRIORS",
     "TIE_BREAKS",
+    "SMTJ_SHARES",
     "DEFAULT_DMAX",
     "DEFAULT_COLUMNS",
     "DEFAULT_WORD_BITS",
@@ -31,7 +33,8 @@ __all__ = [
 ]
 
 # Random source kinds; each has an entry in bayesmachine.sources.SOURCE_KINDS (same order).
-RNG_KINDS = ("lfsr", "lfsr-shared", "sobol", "external")
+RNG_KINDS = ("lfsr", "lfsr-shared", "sobol", "external", "smtj")
+SMTJ_SHARES = ("operator", "column")
 PRIORS = ("uniform", "loaded")
 TIE_BREAKS = ("nomatch-first", "lowest-index")
 
@@ -83,8 +86,10 @@ class MachineParams:
         maximal-length leap-forward LFSR per operator, inside the design.
         ``"lfsr-shared"``: one LFSR per operator column, shared by all rows. ``"sobol"``:
         one randomized Sobol generator per operator column, shared by all rows.
-        ``"external"``: the W-bit random numbers come in on a port (e.g. an SMTJ model or
-        a TRNG outside the module).
+        ``"external"``: the W-bit random numbers come in on a port (e.g. a TRNG outside the
+        module). ``"smtj"``: the same port, driven by the SMTJ device model
+        (``bayesmachine.sources.smtj``): W unbiased superparamagnetic tunnel junctions per
+        operator (or per column), read once per compute cycle.
     lfsr_bits
         L, the length of each LFSR (period 2**L - 1).
     seed
@@ -104,6 +109,18 @@ class MachineParams:
         ``"lowest-index"``.
     lanes
         Likelihood-memory words carried per beat of the load stream.
+    smtj_dwell
+        ``rng = "smtj"`` only: tau, the mean dwell time of each SMTJ state, in clock cycles
+        (the geometric mean of the two states' mean dwells; see ``docs/smtj.md``).
+    smtj_spread
+        ``rng = "smtj"`` only: per-device variability, the log-sd of the lognormal factor that
+        scatters each device's two mean dwell times (0: identical devices; 0.05: about 5 %).
+    smtj_share
+        ``rng = "smtj"`` only: ``"operator"`` (W devices per operator) or ``"column"`` (W
+        devices per operator column, their number shared by all rows).
+
+    The ``smtj_*`` fields are ignored by the other kinds and left out of their ``to_dict``
+    (and fingerprint).
     """
 
     rows: int
@@ -118,6 +135,9 @@ class MachineParams:
     nomatch_row: bool = False
     tie_break: str = DEFAULT_TIE_BREAK
     lanes: int = DEFAULT_LANES
+    smtj_dwell: float = 1.0
+    smtj_spread: float = 0.0
+    smtj_share: str = "operator"
 
     def __post_init__(self) -> None:
         _check_int("rows", self.rows, 1, 4096)
@@ -157,6 +177,17 @@ class MachineParams:
             from bayesmachine.sources.sobol import check_params  # the Sobol table's size
 
             check_params(self)
+        for name in ("smtj_dwell", "smtj_spread"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ParameterError(f"{name} must be a finite number, not {v!r}")
+            object.__setattr__(self, name, float(v))  # 20 and 20.0: one machine, one fingerprint
+        if not 0 < self.smtj_dwell <= 1e12:
+            raise ParameterError(f"smtj_dwell (clock cycles) must be in (0, 1e12], got {self.smtj_dwell}")
+        if not 0 <= self.smtj_spread <= 1:
+            raise ParameterError(f"smtj_spread (log-sd) must be in [0, 1], got {self.smtj_spread}")
+        if self.smtj_share not in SMTJ_SHARES:
+            raise ParameterError(f"smtj_share must be one of {SMTJ_SHARES}, got {self.smtj_share!r}")
 
     @classmethod
     def for_disparity(cls, dmax: int = DEFAULT_DMAX, **kwargs: object) -> MachineParams:
@@ -214,7 +245,11 @@ class MachineParams:
         return self.rows - 1 if self.nomatch_row else None
 
     def to_dict(self) -> dict[str, object]:
-        return asdict(self)
+        d = asdict(self)
+        if self.rng != "smtj":  # device parameters mean nothing to the other sources
+            for name in ("smtj_dwell", "smtj_spread", "smtj_share"):
+                del d[name]
+        return d
 
     def fingerprint(self) -> str:
         """A short stable hash of the parameters (build caches key on it)."""

@@ -30,6 +30,18 @@ def _ports(params: MachineParams) -> list[tuple[str, str, int]]:
     return ports
 
 
+def _source_detail(params: MachineParams) -> str:
+    if source_kind(params.rng).on_chip:
+        return f" (L = {params.lfsr_bits}, seed {params.seed})"
+    if params.rng == "smtj":
+        from bayesmachine.sources.smtj import smtj_device_count
+
+        return (f"; simulated by {smtj_device_count(params)} SMTJ devices, {params.word_bits} per "
+                f"{params.smtj_share}: dwell {params.smtj_dwell:g} cycles, spread {params.smtj_spread:g}, "
+                f"seed {params.seed}")
+    return ""
+
+
 def summary(params: MachineParams) -> str:
     """A human-readable summary of the machine and its ports."""
     lines = [
@@ -39,8 +51,7 @@ def summary(params: MachineParams) -> str:
         f"words: {params.word_bits}-bit comparators, {params.memory_word_width}-bit likelihood-memory words; "
         f"counter max {params.counter_max} ({params.counter_width}-bit overflow counters); "
         f"watchdog {params.max_cycles} cycles",
-        f"random source: {params.rng}: {source_kind(params.rng).description}"
-        + (f" (L = {params.lfsr_bits}, seed {params.seed})" if source_kind(params.rng).on_chip else ""),
+        f"random source: {params.rng}: {source_kind(params.rng).description}{_source_detail(params)}",
         f"load: {params.lanes} words per beat, {params.beats_per_pixel} beats per pixel",
         "ports (Verilog names; clk and rst as well):",
     ]

@@ -65,10 +65,10 @@ class BayesianMachine(wiring.Component):
     - ``load``: ``In(stream.Signature(load_layout(params)))``, a pixel's words in operator
       order, ``lanes`` per beat, ``beats_per_pixel`` beats per pixel.
     - ``result``: ``Out(stream.Signature(result_layout(params)))``, one per pixel, in order.
-    - with an off-chip source (``rng = "external"``): ``entropy``
+    - with an off-chip ``rng`` ("external", "smtj"): ``entropy``
       (``In(ArrayLayout(unsigned(W), operators))``, one random number per operator, sampled on
-      compute cycles) and ``entropy_ready`` (``Out(1)``,
-      high on compute cycles: the numbers on ``entropy`` are consumed at the clock edge).
+      compute cycles) and ``entropy_ready`` (``Out(1)``, high on compute cycles: the numbers on
+      ``entropy`` are consumed at the clock edge).
     """
 
     def __init__(self, params: MachineParams) -> None:

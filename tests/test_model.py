@@ -189,7 +189,7 @@ def test_small_disparity_machines_get_a_load_stream_no_wider_than_a_pixel() -> N
         ({"rows": 4, "word_bits": 0}, "word_bits"),
         ({"rows": 4, "word_bits": 16}, r"word_bits must be in \[1, 15\]"),
         ({"rows": 4, "counter_max": 0}, "counter_max"),
-        ({"rows": 4, "rng": "smtj"}, "rng"),
+        ({"rows": 4, "rng": "trng"}, "rng"),
         ({"rows": 4, "word_bits": 10, "lfsr_bits": 11}, "lfsr_bits"),
         ({"rows": 4, "counter_max": 100, "max_cycles": 100}, "max_cycles"),
         ({"rows": 4, "lanes": 13}, "lanes"),

@@ -44,6 +44,12 @@ class SourceKind:
     numbers: Callable[[MachineParams], NumberSource] | None = None
 
 
+def _smtj_numbers(params: MachineParams) -> NumberSource:
+    from .smtj import SMTJSource  # numba: imported only when an SMTJ machine runs
+
+    return SMTJSource(params)
+
+
 SOURCE_KINDS: dict[str, SourceKind] = {
     kind.name: kind
     for kind in (
@@ -60,6 +66,11 @@ SOURCE_KINDS: dict[str, SourceKind] = {
         SourceKind(
             "external", False,
             "W-bit numbers per operator on the 'entropy' port, one set per compute cycle (caller-supplied)",
+        ),
+        SourceKind(
+            "smtj", False,
+            "superparamagnetic tunnel junctions (telegraph-noise device model) on the 'entropy' port",
+            _smtj_numbers,
         ),
     )
 }
