@@ -276,12 +276,12 @@ class MachineModel(EngineBase):
     def __init__(self, params: MachineParams) -> None:
         super().__init__(params)
         self._nm_index = _nm_index(params)
-        self._source = _ON_CHIP_SOURCES[params.rng](params) if self._kind.on_chip else None
+        self._twin = _ON_CHIP_SOURCES[params.rng](params) if self._kind.on_chip else None
         self._reset()
 
     def _reset(self) -> None:
-        if self._source is not None:
-            self._source.reset()
+        if self._twin is not None:
+            self._twin.reset()
 
     def _run(self, q: np.ndarray, feed: NumberFeed | None) -> MachineResult:
         """``q``: checked (P, operators) words; ``feed``: the random numbers of an off-chip source."""
@@ -289,7 +289,7 @@ class MachineModel(EngineBase):
         n = q.shape[0]
         out = MachineResult.zeros(n, p.rows)
         if feed is None:
-            self._source.run(q, out)
+            self._twin.run(q, out)
         else:
             counts = np.zeros(p.rows, np.uint32)
             done = np.zeros(1, np.int64)

@@ -19,7 +19,7 @@ from bayesmachine.sim.results import ArrayNumbers, MachineResult, check_numbers,
 from bayesmachine.sources import SOURCE_KINDS, SourceKind
 
 EXTERNAL = small_params(rng="external", max_cycles=40)  # W = 4: numbers in [0, 16)
-LFSR = small_params()
+LFSR = small_params(rng="lfsr")
 
 
 def _words(params: MachineParams, pixels: int, seed: int) -> np.ndarray:

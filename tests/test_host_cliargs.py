@@ -57,7 +57,8 @@ def test_commands_share_spellings_and_defaults(command):
     assert args.seed == 16 and args.max_cycles == 1024 and args.dmax == 80
     machine = cliargs.machine_params_from_args(args, args.dmax, counter_max=4)
     assert machine == MachineParams.for_disparity(80, seed=16, max_cycles=1024, counter_max=4)
-    assert args.tie_break == "nomatch-first" and args.prior == "uniform" and args.rng == "lfsr"
+    assert args.tie_break == "nomatch-first" and args.prior == "uniform"
+    assert args.rng == (["sobol"] if command == "sweep" else "sobol")  # a sweep compares a list of sources
 
 
 def test_sweep_counter_max_default_and_run_counter_max():

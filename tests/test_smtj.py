@@ -18,8 +18,8 @@ from conftest import assert_same_results, run_sim, small_params
 from scipy import stats
 
 from bayesmachine.params import RNG_KINDS, MachineParams, ParameterError
-from bayesmachine.sim.model import MachineModel
-from bayesmachine.sim.testbench import synthetic_disparity_words
+from bayesmachine.sim.model import MachineModel, MachineResult
+from bayesmachine.sim.synthetic import synthetic_disparity_words
 from bayesmachine.sources import SOURCE_KINDS
 from bayesmachine.sources.smtj import (
     SMTJSource,
@@ -191,7 +191,7 @@ def test_bank_rejects_bad_device_values() -> None:
 
 
 def test_smtj_machine_is_the_external_rtl() -> None:
-    from bayesmachine.hdl.cli import verilog_text
+    from bayesmachine.hdl.emit import verilog_text
     from bayesmachine.hdl.machine import BayesianMachine
 
     smtj = small_params(rng="smtj", smtj_dwell=4.0)
@@ -205,16 +205,25 @@ def test_model_and_rtl_agree_on_smtj_numbers(dwell: float, share: str) -> None:
     from bayesmachine.sim.pysim import PysimEngine
 
     params = small_params(rng="smtj", smtj_dwell=dwell, smtj_share=share, seed=4)
-    rng = np.random.default_rng(3)
-    words = synthetic_disparity_words(params, 12, rng)
-    numbers = SMTJSource(params).take(12 * params.max_cycles)
-    want = MachineModel(params).run(words, numbers)
-    used = int(want.cycles.sum())
-    assert used > 12 * (params.counter_max + 1) - 1
-    # The engines drive the entropy port of an off-chip machine alike: the RTL is that of
-    # rng = "external" (test above), fed the same numbers.
-    rtl = PysimEngine(MachineParams(**{**params.to_dict(), "rng": "external"}))
-    got = rtl.run(words, numbers[:used])
+    words = synthetic_disparity_words(params, 12, np.random.default_rng(3))
+    # No numbers given: each engine drives the entropy port from its own seeded device model.
+    want = MachineModel(params).run(words)
+    assert int(want.cycles.sum()) > 12 * (params.counter_max + 1) - 1
+    assert_same_results(PysimEngine(params).run(words), want)
+    # ... and those are exactly the device model's numbers, as a caller could pass them.
+    numbers = SMTJSource(params).take(int(want.cycles.sum()))
+    assert_same_results(MachineModel(params).run(words, numbers), want)
+
+
+def test_verilator_agrees_on_smtj_numbers(verilator_toolchain: object, verilator_cache: object) -> None:
+    from bayesmachine.sim.verilator import VerilatorEngine
+
+    params = small_params(rng="smtj", smtj_dwell=20.0, seed=5)
+    words = synthetic_disparity_words(params, 40, np.random.default_rng(8))
+    want = MachineModel(params).run(words)
+    with VerilatorEngine(params, build_dir=verilator_cache) as eng:
+        got = eng.run(words[:15])
+        got = MachineResult.concatenate([got, eng.run(words[15:])], params.rows)
     assert_same_results(got, want)
 
 
@@ -293,8 +302,8 @@ def test_emulated_machine_equals_the_model_on_the_twin_numbers() -> None:
     from amaranth.sim import Simulator
 
     from bayesmachine.hdl.smtj import SMTJEmulatedMachine
-    from bayesmachine.sim.model import MachineResult
-    from bayesmachine.sim.testbench import pack_beats, unpack_result
+    from bayesmachine.sim.packing import pack_beats
+    from bayesmachine.sim.results import decode_results
     from bayesmachine.sources.smtj import SMTJEmulatorTwin
 
     p = small_params(rng="smtj", smtj_dwell=3.0, smtj_share="column", seed=2)
@@ -323,14 +332,7 @@ def test_emulated_machine_equals_the_model_on_the_twin_numbers() -> None:
     sim.add_testbench(feeder, background=True)
     sim.add_testbench(collector)
     sim.run()
-    fields = [unpack_result(p, r) for r in raws]
-    got = MachineResult(
-        np.array([f[4] for f in fields], np.uint32).reshape(len(raws), p.rows),
-        np.array([f[0] for f in fields], np.int32),
-        np.array([f[1] for f in fields], bool),
-        np.array([f[2] for f in fields], bool),
-        np.array([f[3] for f in fields], np.int64),
-    )
+    got = decode_results(p, raws)
     assert_same_results(got, want)
 
 
@@ -342,7 +344,8 @@ def test_run_and_sweep_options_build_smtj_machines() -> None:
     for cmd in (["run"], ["sweep"]):
         args = parser.parse_args(cmd + ["--rng", "smtj", "--smtj-dwell", "20", "--smtj-spread", "0.05",
                                         "--smtj-share", "column", "-o", "out"])
-        p = _machine_params(args, _model_params(args), 16)
+        rng = args.rng[0] if cmd == ["sweep"] else None  # sweep takes a list of sources
+        p = _machine_params(args, _model_params(args), 16, rng)
         assert (p.rng, p.smtj_dwell, p.smtj_spread, p.smtj_share) == ("smtj", 20.0, 0.05, "column")
         args = parser.parse_args(cmd + ["--smtj-dwell", "20", "-o", "out"])
         with pytest.raises(ValueError, match="--smtj-dwell: device options of --rng smtj"):
