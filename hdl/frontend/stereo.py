@@ -79,7 +79,6 @@ class FrontEnd(wiring.Component):
         self._width = _check_width(width, model.dmax)
         self._params = params
         self._model = model
-        self.generator = WordGenerator(params, model)
         super().__init__({
             "pixels": In(stream.Signature(pixel_in_layout())),
             "beats": Out(stream.Signature(load_layout(params))),
@@ -103,7 +102,7 @@ class FrontEnd(wiring.Component):
         m.submodules.linebuffer = lines = LineBuffer(width)
         m.submodules.filter_left = fl = FeatureFilter()
         m.submodules.filter_right = fr = FeatureFilter()
-        m.submodules.generator = gen = self.generator
+        m.submodules.generator = gen = WordGenerator(self._params, self._model)
         wiring.connect(m, gen.beats, wiring.flipped(self.beats))
 
         # The pipeline advances as a whole whenever its last stage is empty or taken.
@@ -182,8 +181,6 @@ class StereoMachine(wiring.Component):
         self._model = model
         self._width = width
         self._fifo_pixels = fifo_pixels
-        self.frontend = FrontEnd(params, model, width)
-        self.machine = BayesianMachine(params)
         members = {
             "pixels": In(stream.Signature(pixel_in_layout())),
             "result": Out(stream.Signature(result_layout(params))),
@@ -212,8 +209,8 @@ class StereoMachine(wiring.Component):
     def elaborate(self, platform: object) -> Module:
         m = Module()
         p = self._params
-        m.submodules.frontend = front = self.frontend
-        m.submodules.machine = machine = self.machine
+        m.submodules.frontend = front = FrontEnd(p, self._model, self._width)
+        m.submodules.machine = machine = BayesianMachine(p)
         beat_bits = Shape.cast(load_layout(p)).width
         depth = self._fifo_pixels * p.beats_per_pixel
         m.submodules.fifo = buf = fifo.SyncFIFOBuffered(width=beat_bits, depth=depth)
