@@ -56,8 +56,9 @@ def verilog_text(top: object) -> str:
     return verilog.convert(top, name=TOP_NAME, emit_src=False)
 
 
-def emit(params: MachineParams, path: str | Path) -> Path:
-    """Write the machine as Verilog (``.v``/``.sv``) or RTLIL (``.il``), top module ``bayesmachine``."""
+def emit(params: MachineParams, path: str | Path, top: object | None = None) -> Path:
+    """Write the machine (or ``top``, e.g. a ``StereoMachine``) as Verilog (``.v``/``.sv``) or RTLIL
+    (``.il``), top module ``bayesmachine``."""
     from amaranth.back import rtlil
 
     from .machine import BayesianMachine
@@ -68,7 +69,8 @@ def emit(params: MachineParams, path: str | Path) -> Path:
         raise ValueError(
             f"cannot tell the output format from {path.name!r}: use a .v (Verilog) or .il (RTLIL) name"
         )
-    top = BayesianMachine(params)
+    if top is None:
+        top = BayesianMachine(params)
     if suffix == ".il":
         text = rtlil.convert(top, name=TOP_NAME)
     else:
@@ -110,6 +112,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    "(default nomatch-first)")
     p.add_argument("--prior", choices=("uniform", "loaded"), default="uniform",
                    help="uniform prior (always-on 1s) or a loaded prior operator column (default uniform)")
+    p.add_argument("--top", choices=("machine", "stereo"), default="machine",
+                   help="machine: likelihood words in (default); stereo: pixel pairs in, the front end on "
+                   "chip (docs/frontend.md)")
+    from .frontend.cli import add_options as add_stereo_options
+
+    add_stereo_options(p)
     p.add_argument("-o", "--output", default="build/bayesmachine.v",
                    help="output file; .v for Verilog, .il for RTLIL (default build/bayesmachine.v)")
     p.set_defaults(func=_run)
@@ -117,9 +125,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def _run(args: argparse.Namespace) -> int:
     lanes = {} if args.lanes is None else {"lanes": args.lanes}
-    params = MachineParams.for_disparity(
-        args.dmax,
-        **lanes,
+    options = dict(
         columns=args.columns,
         word_bits=args.word_bits,
         counter_max=args.counter_max,
@@ -129,6 +135,17 @@ def _run(args: argparse.Namespace) -> int:
         tie_break=args.tie_break,
         prior=args.prior,
     )
+    if args.top == "stereo":
+        from .frontend.cli import build
+        from .frontend.cli import summary as stereo_summary
+
+        top = build(args, {**lanes, **options})
+        path = emit(top.params, args.output, top)
+        print(summary(top.params).split("\nports")[0])
+        print(stereo_summary(top))
+        print(f"wrote {path}")
+        return 0
+    params = MachineParams.for_disparity(args.dmax, **lanes, **options)
     path = emit(params, args.output)
     print(summary(params))
     print(f"wrote {path}")

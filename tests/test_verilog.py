@@ -140,3 +140,25 @@ def test_emit_small_machine_defaults_to_one_beat_per_pixel(tmp_path: Path,
     args = parser.parse_args(["emit", "--dmax", "1", "-o", str(tmp_path / "bm.v")])
     assert args.func(args) == 0
     assert "load: 9 words per beat, 1 beats per pixel" in capsys.readouterr().out
+
+
+@needs_verilator
+@needs_yosys
+def test_stereo_top_is_lint_clean_and_latch_free(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``emit --top stereo``: the front end + FIFO + machine pass -Wall and synthesize without latches."""
+    parser = argparse.ArgumentParser()
+    hdl_cli.register(parser.add_subparsers())
+    out = tmp_path / "bayesmachine.v"
+    args = parser.parse_args(["emit", "--top", "stereo", "--dmax", "6", "--width", "23", "--counter-max", "4",
+                              "--sigma", "12", "-o", str(out)])
+    assert args.func(args) == 0
+    text = capsys.readouterr().out
+    assert "stereo top: 23-pixel lines, Dmax 6" in text
+    assert "load: 18 words per beat, 2 beats per pixel" in text
+    assert re.search(r"in\s+pixels__payload\s+17 bits", text)
+    stereo_waivers = Path(hdl_cli.__file__).with_name("frontend") / "stereo.vlt"
+    proc = subprocess.run([VERILATOR, "--lint-only", "-Wall", str(WAIVERS), str(stereo_waivers), str(out)],
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0 and "%Warning" not in proc.stderr, proc.stderr[:3000]
+    _yosys("read_verilog bayesmachine.v; synth -top bayesmachine; check -assert; "
+           "select -assert-none t:$dlatch t:$_DLATCH*", tmp_path)

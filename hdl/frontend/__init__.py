@@ -12,3 +12,7 @@ Blocks (each a ``wiring.Component`` with a Python twin its tests hold it to):
 - ``stereo``: ``FrontEnd`` (pixels in, load beats out) and ``StereoMachine`` (pixels in, the
   machine's results out). Timing and protocol: ``docs/frontend.md``.
 """
+
+# Limits shared by the RTL and the command line (importing them needs no Amaranth).
+MAX_WIDTH = 4096  # the line buffers hold `width` pixel pairs: 4 lines x 16 bits each
+DEFAULT_FIFO_PIXELS = 8  # pixels' worth of load beats between the front end and the machine

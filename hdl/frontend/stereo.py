@@ -32,14 +32,13 @@ from bayesmachine.hdl.machine import BayesianMachine, load_layout, result_layout
 from bayesmachine.host.likelihoods import ModelParams
 from bayesmachine.params import MachineParams, ParameterError
 
+from . import DEFAULT_FIFO_PIXELS, MAX_WIDTH
 from .costs import WordGenerator, check_frontend_params
 from .filters import FeatureFilter
 from .linebuffer import WINDOW, LineBuffer
 
 __all__ = ["MAX_WIDTH", "FrontEnd", "StereoMachine", "pixel_in_layout", "stereo_machine_params"]
 
-MAX_WIDTH = 4096  # the line buffers hold `width` pixel pairs: 4 lines x 16 bits each
-DEFAULT_FIFO_PIXELS = 8
 
 
 def pixel_in_layout() -> data.StructLayout:
