@@ -18,7 +18,7 @@ from bayesmachine.params import MachineParams
 
 from .images import Crop, bundled_pair, crop_image, load_gt, load_image, parse_crop
 from .likelihoods import ModelParams
-from .run import ENGINES, RunOutcome, prepare, run_pair
+from .run import ENGINES, FEEDS, RunOutcome, prepare, run_pair
 
 __all__ = ["register"]
 
@@ -142,6 +142,13 @@ def _add_machine_options(p: argparse.ArgumentParser, sweep: bool) -> None:
     )
     if not sweep:
         g.add_argument(
+            "--feed",
+            choices=FEEDS,
+            default="words",
+            help="words: the host computes each pixel's likelihood words (default); pixels: the pair "
+            "goes into the on-chip front end + machine (StereoMachine RTL, --engine verilator)",
+        )
+        g.add_argument(
             "--waves",
             metavar="FIRST:LAST",
             default=None,
@@ -157,6 +164,18 @@ def _add_machine_options(p: argparse.ArgumentParser, sweep: bool) -> None:
 
 
 def _machine_params(args: argparse.Namespace, model: ModelParams, counter_max: int) -> MachineParams:
+    if getattr(args, "feed", "words") == "pixels":
+        # The front end needs lanes that are a multiple of the operator columns (one feature per lane).
+        from bayesmachine.hdl.frontend.stereo import stereo_machine_params
+
+        return stereo_machine_params(
+            model.dmax,
+            counter_max=counter_max,
+            word_bits=args.word_bits,
+            seed=args.seed,
+            max_cycles=args.max_cycles,
+            tie_break=args.tie_break,
+        )
     return MachineParams.for_disparity(
         model.dmax,
         counter_max=counter_max,
@@ -266,6 +285,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
     left, right, gt, source = _load_inputs(args, with_gt=True)
     out: Path = args.output
     engine_options = _waves_option(args.waves, args.engine, out)
+    if args.feed == "pixels" and engine_options:
+        raise ValueError("--waves is not available with --feed pixels")
     _make_output_dir(out)
     outcome = run_pair(
         left,
@@ -277,8 +298,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
         progress=False if args.quiet else None,
         sgbm=not args.no_sgbm,
         engine_options=engine_options,
+        feed=args.feed,
     )
     report = _report(outcome, source, args.crop)
+    report["feed"] = args.feed
     _write_json(out / "report.json", report)
     run, ref = outcome.run, outcome.prepared.reference
     np.savez_compressed(

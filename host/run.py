@@ -24,7 +24,12 @@ from .likelihoods import ModelParams, QuantizedTables, likelihood_tables, memory
 from .metrics import RunMetrics, evaluate, gt_region
 from .reference import Reference, reference_fast, warm_up
 
-__all__ = ["ENGINES", "Prepared", "MachineRun", "RunOutcome", "prepare", "run_machine", "run_pair"]
+__all__ = ["ENGINES", "FEEDS", "Prepared", "MachineRun", "RunOutcome", "prepare", "run_machine", "run_pair"]
+
+# How the machine is fed: the host's likelihood words (any engine), or the pixel pairs through the
+# on-chip front end (the StereoMachine RTL, Verilator only).
+FEEDS = ("words", "pixels")
+
 
 @dataclass
 class Prepared:
@@ -95,10 +100,12 @@ def run_machine(
     progress: bool | None = None,
     chunk_rows: int = 1,
     engine_options: dict[str, object] | None = None,
+    feed: str = "words",
 ) -> MachineRun:
     """Stream the output pixels (row-major) through ``engine``, ``chunk_rows`` map rows per call.
 
     ``engine_options`` go to the engine's constructor (e.g. ``trace`` for ``verilator``).
+    ``feed="pixels"``: the pair itself goes into the StereoMachine (front end on chip; Verilator).
     """
     model = prepared.model
     if machine.rows != model.hypotheses:
@@ -106,6 +113,10 @@ def run_machine(
             f"machine rows ({machine.rows}) must be dmax + 2 = {model.hypotheses}; "
             f"build it with MachineParams.for_disparity({model.dmax}, ...)"
         )
+    if feed not in FEEDS:
+        raise ValueError(f"unknown feed {feed!r}: choose one of {', '.join(FEEDS)}")
+    if feed == "pixels":
+        return _run_pixels(prepared, machine, engine, engine_options)
     eng = get_engine(engine, machine, **(engine_options or {}))
     qtables = QuantizedTables(likelihood_tables(model), machine.word_bits)
     ho, wo = prepared.shape
@@ -145,6 +156,33 @@ def run_machine(
     return MachineRun(engine, machine, disp, counts, cycles, nomatch, timeout, engine_s, words_s, wall)
 
 
+def _run_pixels(
+    prepared: Prepared, machine: MachineParams, engine: str, engine_options: dict[str, object] | None
+) -> MachineRun:
+    """The whole pair through the StereoMachine RTL: pixels in, one result per output pixel out."""
+    if engine != "verilator":
+        raise ValueError(f"--feed pixels runs the StereoMachine RTL under Verilator: use --engine verilator "
+                         f"(got --engine {engine})")
+    from bayesmachine.sim.stereo_engine import StereoVerilatorEngine
+
+    model = prepared.model
+    eng = StereoVerilatorEngine(machine, model, prepared.left.shape[1], **(engine_options or {}))
+    try:
+        t0 = time.perf_counter()
+        res = eng.run(prepared.left, prepared.right)
+        seconds = time.perf_counter() - t0
+        wall = eng.wall_cycles
+    finally:
+        eng.close()
+    ho, wo = prepared.shape
+    m = model.hypotheses
+    timeout = res.timeout.reshape(ho, wo)
+    nomatch = res.nomatch.reshape(ho, wo)
+    disp = np.where(nomatch | timeout, -1, res.map.reshape(ho, wo)).astype(np.int16)
+    return MachineRun("verilator", machine, disp, res.counts.reshape(ho, wo, m), res.cycles.reshape(ho, wo),
+                      nomatch, timeout, seconds, 0.0, wall)
+
+
 def run_pair(
     left: np.ndarray,
     right: np.ndarray,
@@ -156,6 +194,7 @@ def run_pair(
     prepared: Prepared | None = None,
     sgbm: bool | None = None,
     engine_options: dict[str, object] | None = None,
+    feed: str = "words",
 ) -> RunOutcome:
     """Run the machine on a gray pair and compare it with the reference (and gt, if given).
 
@@ -164,6 +203,6 @@ def run_pair(
     """
     if prepared is None:
         prepared = prepare(left, right, model_params, gt)
-    run = run_machine(prepared, machine_params, engine, progress, engine_options=engine_options)
+    run = run_machine(prepared, machine_params, engine, progress, engine_options=engine_options, feed=feed)
     metrics = evaluate(prepared, run, sgbm=sgbm)
     return RunOutcome(prepared, run, metrics)
