@@ -211,3 +211,57 @@ def test_parameters_are_validated_up_front() -> None:
         StereoMachine(ok, {"dmax": 4}, 20)  # type: ignore[arg-type]
     top = StereoMachine(ok, model, 9)
     assert (top.params, top.model, top.width, top.fifo_pixels) == (ok, model, 9, 8)
+
+
+def test_back_pressure_reaches_the_pixel_input() -> None:
+    """With the result stream blocked, the machine, the FIFO and then the pixel input stop; once it
+    is released every result arrives, equal to the model's."""
+    from amaranth.sim import Simulator
+
+    from bayesmachine.sim.stereo_testbench import frame_beats
+    from bayesmachine.sim.testbench import unpack_result
+
+    dmax, width, height = 2, 12, 7
+    model = ModelParams(dmax=dmax)
+    params = stereo_machine_params(dmax, counter_max=2, max_cycles=500)
+    left, right = _noisy_pair(height, width, seed=12)
+    top = StereoMachine(params, model, width, fifo_pixels=1)
+    beats = frame_beats(left, right)
+    taken: list[int] = []
+    results: list[int] = []
+
+    async def feeder(ctx):
+        raw = top.pixels.payload.as_value()
+        for i, beat in enumerate(beats):
+            ctx.set(top.pixels.valid, 1)
+            ctx.set(raw, beat)
+            await ctx.tick().until(top.pixels.ready)
+            taken.append(i)
+        ctx.set(top.pixels.valid, 0)
+
+    async def collector(ctx):
+        ctx.set(top.result.ready, 0)
+        await ctx.tick().repeat(400)  # blocked long enough for everything upstream to fill
+        stalled_at = len(taken)
+        await ctx.tick().repeat(100)
+        assert len(taken) == stalled_at < len(beats)  # the input has stopped
+        # Held from the first output pixel (index 4 * width + dmax + 4) on: the result register, the
+        # running pixel, the shadow memory, the FIFO (one pixel and its output register), the word
+        # generator's pixel, and the two pipeline stages behind it.
+        first_output = 4 * width + dmax + 4
+        assert first_output + 3 <= stalled_at <= first_output + 8
+        raw = top.result.payload.as_value()
+        ctx.set(top.result.ready, 1)
+        while len(results) < (height - 4) * (width - 4 - dmax):
+            _, _, valid, payload = await ctx.tick().sample(top.result.valid, raw)
+            if valid:
+                results.append(payload)
+
+    sim = Simulator(top)
+    sim.add_clock(1e-8)
+    sim.add_testbench(feeder, background=True)
+    sim.add_testbench(collector)
+    sim.run()
+    want = MachineModel(params).run(_host_words([(left, right)], model, params))
+    assert [unpack_result(params, r)[3] for r in results] == want.cycles.tolist()
+    assert [unpack_result(params, r)[0] for r in results] == want.map.tolist()
