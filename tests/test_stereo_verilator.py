@@ -72,3 +72,20 @@ def test_cli_feed_pixels_needs_verilator(tmp_path: Path, capsys: pytest.CaptureF
     args = ["run", "--feed", "pixels", "--crop", "250,200,40,12", "--dmax", "8", "-o", str(tmp_path)]
     assert main(args) == 2
     assert "use --engine verilator" in capsys.readouterr().err
+
+
+@needs_verilator
+@pytest.mark.slow
+def test_whole_bundled_pair_through_the_front_end_equals_the_model() -> None:
+    """The full Motorcycle pair (741 x 500, Dmax 80, counter max 16): the front end's words are the
+    host's for every output pixel, so every result equals the model's, with loading hidden."""
+    from bayesmachine.sim.stereo_engine import StereoVerilatorEngine
+
+    left, right, _ = bundled_pair()
+    model = ModelParams(dmax=80)
+    params = stereo_machine_params(80, counter_max=16)
+    want = MachineModel(params).run(memory_words(feature_sums(left), feature_sums(right), model, params))
+    with StereoVerilatorEngine(params, model, left.shape[1], verbose=False) as engine:
+        got = engine.run(left, right)
+        assert_same_results(got, want)
+        assert engine.last_wall_cycles < 1.02 * engine.last_compute_cycles
