@@ -265,3 +265,55 @@ def test_back_pressure_reaches_the_pixel_input() -> None:
     want = MachineModel(params).run(_host_words([(left, right)], model, params))
     assert [unpack_result(params, r)[3] for r in results] == want.cycles.tolist()
     assert [unpack_result(params, r)[0] for r in results] == want.map.tolist()
+
+
+def test_stereo_machine_with_external_random_numbers() -> None:
+    """``rng = "external"``: the machine's entropy port is the StereoMachine's, sampled on compute cycles."""
+    from amaranth.sim import Simulator
+
+    from bayesmachine.sim.stereo_testbench import frame_beats
+    from bayesmachine.sim.testbench import pack_numbers, unpack_result
+
+    dmax, width, height = 3, 11, 6
+    model = ModelParams(dmax=dmax)
+    params = stereo_machine_params(dmax, counter_max=3, rng="external", max_cycles=400)
+    left, right = _noisy_pair(height, width, seed=13)
+    numbers = np.random.default_rng(14).integers(0, params.word_one, size=(4000, params.operators))
+    top = StereoMachine(params, model, width)
+    n_out = (height - 4) * (width - 4 - dmax)
+    results: list[int] = []
+
+    async def feeder(ctx):
+        raw = top.pixels.payload.as_value()
+        for beat in frame_beats(left, right):
+            ctx.set(top.pixels.valid, 1)
+            ctx.set(raw, beat)
+            await ctx.tick().until(top.pixels.ready)
+        ctx.set(top.pixels.valid, 0)
+
+    async def entropy(ctx):
+        t = 0
+        while True:
+            ctx.set(top.entropy.as_value(), pack_numbers(params, numbers[t]))
+            _, _, taken = await ctx.tick().sample(top.entropy_ready)
+            t += int(taken)
+
+    async def collector(ctx):
+        ctx.set(top.result.ready, 1)
+        raw = top.result.payload.as_value()
+        while len(results) < n_out:
+            _, _, valid, payload = await ctx.tick().sample(top.result.valid, raw)
+            if valid:
+                results.append(payload)
+
+    sim = Simulator(top)
+    sim.add_clock(1e-8)
+    sim.add_testbench(feeder, background=True)
+    sim.add_testbench(entropy, background=True)
+    sim.add_testbench(collector)
+    sim.run()
+    want = MachineModel(params).run(_host_words([(left, right)], model, params), numbers)
+    got = [unpack_result(params, r) for r in results]
+    assert [g[3] for g in got] == want.cycles.tolist()
+    assert [g[0] for g in got] == want.map.tolist()
+    assert [g[4] for g in got] == want.counts.tolist()
