@@ -19,7 +19,7 @@ from bayesmachine.params import MachineParams
 from bayesmachine.sim.model import MachineResult
 from bayesmachine.sim.testbench import unpack_result
 
-__all__ = ["frame_beats", "run_frontend", "run_stereo", "words_from_beats"]
+__all__ = ["frame_beats", "run_frontend", "run_frontend_beats", "run_stereo", "words_from_beats"]
 
 
 def frame_beats(left: np.ndarray, right: np.ndarray) -> list[int]:
@@ -95,7 +95,14 @@ def run_frontend(front: FrontEnd, frames: Sequence[tuple[np.ndarray, np.ndarray]
     """The words the front end writes for ``frames`` (pairs of (H, width) uint8 images), all frames'
     output pixels in order: (P, rows, operator_columns)."""
     beats = [b for lf, rf in frames for b in frame_beats(lf, rf)]
-    expected = _output_pixels(frames, front.model.dmax) * front.params.beats_per_pixel
+    return run_frontend_beats(front, beats, _output_pixels(frames, front.model.dmax), in_stall=in_stall,
+                              out_stall=out_stall, seed=seed, max_cycles=max_cycles)
+
+
+def run_frontend_beats(front: FrontEnd, beats: list[int], pixels: int, *, in_stall: float = 0.0,
+                       out_stall: float = 0.0, seed: int = 0, max_cycles: int = 1_000_000) -> np.ndarray:
+    """The words of the first ``pixels`` output pixels the front end writes for raw pixel ``beats``."""
+    expected = pixels * front.params.beats_per_pixel
     got, _ = _simulate(front, front.pixels, front.beats, beats, expected, in_stall, out_stall, seed,
                        max_cycles)
     return words_from_beats(front.params, got)

@@ -317,3 +317,22 @@ def test_stereo_machine_with_external_random_numbers() -> None:
     assert [g[3] for g in got] == want.cycles.tolist()
     assert [g[0] for g in got] == want.map.tolist()
     assert [g[4] for g in got] == want.counts.tolist()
+
+
+def test_a_truncated_frame_leaves_nothing_behind() -> None:
+    """A frame cut off in the middle of a line, then a whole frame: the cut frame's output pixels so
+    far are the host's, and the next frame's words are as if it came first (the ``first`` marker)."""
+    from bayesmachine.sim.stereo_testbench import frame_beats, run_frontend_beats
+
+    dmax, width = 2, 10
+    model = ModelParams(dmax=dmax)
+    params = stereo_machine_params(dmax, lanes=6)
+    cut_left, cut_right = _noisy_pair(7, width, seed=15)
+    whole = _noisy_pair(6, width, seed=16)
+    keep = 6 * width + 8  # line 6 (map row 2) stops after image column 7: map columns 2..3 done
+    beats = frame_beats(cut_left, cut_right)[:keep] + frame_beats(*whole)
+    cut_words = _host_words([(cut_left, cut_right)], model, params)
+    per_line = width - 4 - dmax
+    want = np.concatenate([cut_words[: 2 * per_line + 2], _host_words([whole], model, params)])
+    got = run_frontend_beats(FrontEnd(params, model, width), beats, len(want), in_stall=0.2, out_stall=0.2)
+    assert np.array_equal(got, want)
