@@ -155,6 +155,8 @@ class WordGenerator(wiring.Component):
             m.submodules[f"table_{name}"] = mem
             for j in range(rows_per_beat):
                 entries = [getattr(right[min(b * rows_per_beat + j, dmax)], name) for b in range(n_beats)]
+                # Padded to every value of `beat` (the extra ones never occur): a complete case.
+                entries += entries[-1:] * ((1 << len(beat)) - n_beats)
                 sel = entries[0] if n_beats == 1 else Array(entries)[beat]
                 port = mem.read_port()
                 m.d.comb += [port.en.eq(read_en),
@@ -185,4 +187,6 @@ class WordGenerator(wiring.Component):
                         else:
                             word = one
                         m.d.comb += out.payload[lane].eq(word)
+            with m.Default():  # beat_q never gets here; a complete case for the Verilog
+                m.d.comb += out.payload.eq(0)
         return m
