@@ -18,7 +18,7 @@ a look-up (block RAM read) in the cycle of the beat's issue, the beat on the str
 
 from __future__ import annotations
 
-from amaranth.hdl import Array, Module, Mux, Signal, unsigned
+from amaranth.hdl import Module, Mux, Signal, unsigned
 from amaranth.lib import data, memory, stream, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -155,9 +155,13 @@ class WordGenerator(wiring.Component):
             m.submodules[f"table_{name}"] = mem
             for j in range(rows_per_beat):
                 entries = [getattr(right[min(b * rows_per_beat + j, dmax)], name) for b in range(n_beats)]
-                # Padded to every value of `beat` (the extra ones never occur): a complete case.
-                entries += entries[-1:] * ((1 << len(beat)) - n_beats)
-                sel = entries[0] if n_beats == 1 else Array(entries)[beat]
+                sel = Signal(entries[0].shape(), name=f"right_{name}_{j}")
+                with m.Switch(beat):
+                    for b, entry in enumerate(entries):
+                        with m.Case(b):
+                            m.d.comb += sel.eq(entry)
+                    with m.Default():  # `beat` never gets here; a complete case for the Verilog
+                        m.d.comb += sel.eq(0)
                 port = mem.read_port()
                 m.d.comb += [port.en.eq(read_en),
                              port.addr.eq(clamped(getattr(left, name) - sel, len(table)))]
@@ -170,9 +174,10 @@ class WordGenerator(wiring.Component):
         m.d.comb += [nm_port.en.eq(read_en), nm_port.addr.eq(clamped(left.gv20, len(nm_table)))]
 
         # The beat on the stream: each lane's word by its operator (row, column).
+        unused = range(n_beats, 1 << len(beat_q))  # never occur; in the last case for a complete case
         with m.Switch(beat_q):
             for b in range(n_beats):
-                with m.Case(b):
+                with m.Case(b, *(unused if b == n_beats - 1 else ())):
                     for lane in range(p.lanes):
                         row = b * rows_per_beat + lane // cols
                         col = lane % cols
@@ -187,6 +192,4 @@ class WordGenerator(wiring.Component):
                         else:
                             word = one
                         m.d.comb += out.payload[lane].eq(word)
-            with m.Default():  # beat_q never gets here; a complete case for the Verilog
-                m.d.comb += out.payload.eq(0)
         return m
