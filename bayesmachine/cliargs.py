@@ -19,6 +19,7 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any, TypeVar
 
+from bayesmachine.likelihood import ModelParams
 from bayesmachine.params import (
     DEFAULT_COLUMNS,
     DEFAULT_COUNTER_MAX,
@@ -45,7 +46,12 @@ __all__ = [
     "add_option",
     "add_dmax_option",
     "add_machine_options",
+    "add_model_options",
     "machine_params_from_args",
+    "model_params_from_args",
+    "float_arg",
+    "rng_list",
+    "runnable_sources",
     "argument_type",
     "int_arg",
     "counter_max_list",
@@ -289,3 +295,37 @@ def machine_params_from_args(args: argparse.Namespace, dmax: int, **overrides: A
         if message.startswith("dmax"):
             raise ParameterError(f"--dmax: {message}") from None
         raise
+
+
+def add_model_options(parser: argparse.ArgumentParser, dmax: bool = True) -> argparse._ActionsContainer:
+    """The disparity model's options (paper table 1 defaults): ``--dmax`` unless ``dmax=False``,
+    ``--p0``, ``--sigma`` / ``--sigma-m|gh|gv``, ``--p-nm0``, ``--sigma-nm``."""
+    defaults = ModelParams()
+    g = parser.add_argument_group("model (paper table 1 defaults)")
+    if dmax:
+        add_dmax_option(g)
+    g.add_argument("--p0", type=float_arg, default=defaults.p0,
+                   help="base match likelihood p0 (default %(default)s)")
+    g.add_argument("--sigma", type=float_arg, default=None,
+                   help=f"sigma of all three features (default {defaults.sigma_m:g})")
+    for f, name in (("m", "mean"), ("gh", "horizontal gradient"), ("gv", "vertical gradient")):
+        g.add_argument(f"--sigma-{f}", type=float_arg, default=None, help=f"sigma of the {name} feature")
+    g.add_argument("--p-nm0", type=float_arg, default=defaults.p_nm0,
+                   help="base no-match probability (%(default)s)")
+    g.add_argument("--sigma-nm", type=float_arg, default=defaults.sigma_nm,
+                   help="no-match sigma (%(default)s)")
+    return g
+
+
+def model_params_from_args(args: argparse.Namespace) -> ModelParams:
+    """``ModelParams`` from :func:`add_model_options`' options (``--sigma-X`` wins over ``--sigma``)."""
+    defaults = ModelParams()
+
+    def sigma(f: str) -> float:
+        v = getattr(args, f"sigma_{f}")
+        if v is not None:
+            return float(v)
+        return float(args.sigma) if args.sigma is not None else defaults.sigma(f)
+
+    return ModelParams(dmax=args.dmax, p0=args.p0, sigma_m=sigma("m"), sigma_gh=sigma("gh"),
+                       sigma_gv=sigma("gv"), p_nm0=args.p_nm0, sigma_nm=args.sigma_nm)

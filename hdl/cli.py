@@ -22,6 +22,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     g = p.add_argument_group("machine")
     add_dmax_option(g)
     add_machine_options(g, title=None)
+    p.add_argument("--top", choices=("machine", "stereo"), default="machine",
+                   help="machine: likelihood words in (default); stereo: pixel pairs in, the front end on "
+                   "chip (docs/frontend.md)")
+    from .frontend.cli import add_options as add_stereo_options
+
+    add_stereo_options(p)
     p.add_argument("-o", "--output", default="build/bayesmachine.v",
                    help="output file; .v for Verilog, .il for RTLIL (default build/bayesmachine.v)")
     p.set_defaults(func=_run)
@@ -29,6 +35,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def _run(args: argparse.Namespace) -> int:
     params = machine_params_from_args(args, args.dmax)
+    if args.top == "stereo":
+        from .frontend.cli import build
+        from .frontend.cli import summary as stereo_summary
+
+        top = build(args, params)
+        path = emit(top.params, args.output, top)
+        print(summary(top.params).split("\nports")[0])
+        print(stereo_summary(top))
+        print(f"wrote {path}")
+        return 0
     path = emit(params, args.output)
     print(summary(params))
     print(f"wrote {path}")

@@ -73,8 +73,9 @@ def rtlil_text(top: object) -> str:
     return rtlil.convert(top, name=TOP_NAME)
 
 
-def emit(params: MachineParams, path: str | Path) -> Path:
-    """Write the machine as Verilog (``.v``/``.sv``) or RTLIL (``.il``), top module ``bayesmachine``."""
+def emit(params: MachineParams, path: str | Path, top: object | None = None) -> Path:
+    """Write the machine (or ``top``, e.g. a ``StereoMachine``) as Verilog (``.v``/``.sv``) or RTLIL
+    (``.il``), top module ``bayesmachine``."""
     from .machine import BayesianMachine
 
     path = Path(path)
@@ -83,7 +84,8 @@ def emit(params: MachineParams, path: str | Path) -> Path:
         raise ValueError(
             f"cannot tell the output format from {path.name!r}: use a .v (Verilog) or .il (RTLIL) name"
         )
-    top = BayesianMachine(params)
+    if top is None:
+        top = BayesianMachine(params)
     if not path.parent.exists():
         path.parent.mkdir(parents=True)
     # Complete or absent, never a truncated file.

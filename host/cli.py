@@ -9,6 +9,7 @@ written through :mod:`bayesmachine.outputs` (complete or absent, the report last
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 import time
@@ -17,11 +18,12 @@ from pathlib import Path
 import numpy as np
 
 from bayesmachine.cliargs import (
-    add_dmax_option,
     add_machine_options,
+    add_model_options,
     argument_type,
     counter_max_list,
     machine_params_from_args,
+    model_params_from_args,
     rng_list,
     runnable_sources,
 )
@@ -40,7 +42,7 @@ from .images import Crop, bundled_pair, crop_image, load_gt, load_image, parse_c
 from .likelihoods import ModelParams
 from .reference import reference_bands, warm_up
 from .region import OutputRegion
-from .run import ENGINES, RunOutcome, prepare, result_bytes, run_pair
+from .run import ENGINES, FEEDS, RunOutcome, prepare, result_bytes, run_pair
 
 __all__ = ["register", "RUN_OUTPUTS", "SWEEP_OUTPUTS"]
 
@@ -50,42 +52,6 @@ DEFAULTS = ModelParams()
 RUN_OUTPUTS = ("report.json", "result.npz", "disparity.png", "waves.vcd")
 SWEEP_OUTPUTS = ("sweep.json", "sweep.png")
 SWEEP_COUNTER_MAX = [1, 2, 4, 8, 16, 32]
-
-
-def _add_model_options(p: argparse.ArgumentParser) -> None:
-    g = p.add_argument_group("model (paper table 1 defaults)")
-    add_dmax_option(g)
-    g.add_argument(
-        "--p0", type=float, default=DEFAULTS.p0, help="base match likelihood p0 (default %(default)s)"
-    )
-    g.add_argument(
-        "--sigma", type=float, default=None,
-        help=f"sigma of all three features (default {DEFAULTS.sigma_m:g})",
-    )
-    for f, name in (("m", "mean"), ("gh", "horizontal gradient"), ("gv", "vertical gradient")):
-        g.add_argument(f"--sigma-{f}", type=float, default=None, help=f"sigma of the {name} feature")
-    g.add_argument(
-        "--p-nm0", type=float, default=DEFAULTS.p_nm0, help="base no-match probability (%(default)s)"
-    )
-    g.add_argument("--sigma-nm", type=float, default=DEFAULTS.sigma_nm, help="no-match sigma (%(default)s)")
-
-
-def _model_params(args: argparse.Namespace) -> ModelParams:
-    def sigma(f: str) -> float:
-        v = getattr(args, f"sigma_{f}")
-        if v is not None:
-            return float(v)
-        return float(args.sigma) if args.sigma is not None else DEFAULTS.sigma(f)
-
-    return ModelParams(
-        dmax=args.dmax,
-        p0=args.p0,
-        sigma_m=sigma("m"),
-        sigma_gh=sigma("gh"),
-        sigma_gv=sigma("gv"),
-        p_nm0=args.p_nm0,
-        sigma_nm=args.sigma_nm,
-    )
 
 
 def _add_input_options(p: argparse.ArgumentParser, optional: bool) -> None:
@@ -173,6 +139,13 @@ def _add_machine_options(p: argparse.ArgumentParser, sweep: bool) -> None:
     )
     if not sweep:
         g.add_argument(
+            "--feed",
+            choices=FEEDS,
+            default="words",
+            help="words: the host computes each pixel's likelihood words (default); pixels: the pair "
+            "goes into the on-chip front end + machine (StereoMachine RTL, --engine verilator)",
+        )
+        g.add_argument(
             "--waves",
             metavar="FIRST:LAST",
             default=None,
@@ -194,6 +167,11 @@ def _machine_params(
     if rng is not None:
         overrides["rng"] = rng
     machine = machine_params_from_args(args, model.dmax, **overrides)
+    if getattr(args, "feed", "words") == "pixels" and args.lanes is None:
+        # The front end writes one feature per lane: lanes a multiple of the operator columns.
+        from bayesmachine.hdl.frontend.stereo import stereo_lanes
+
+        machine = dataclasses.replace(machine, lanes=stereo_lanes(machine))
     _check_host_rng(machine)
     return machine
 
@@ -262,7 +240,7 @@ def _summary(r: dict[str, object]) -> str:
 
 
 def _cmd_reference(args: argparse.Namespace) -> int:
-    model = _model_params(args)
+    model = model_params_from_args(args)
     left, right, _, _ = _load_inputs(args, with_gt=False)
     region = OutputRegion.of_image(left.shape, model.dmax)
     out = Path(args.output)
@@ -324,9 +302,11 @@ def _check_waves(waves: tuple[int, int] | None, pixels: int) -> None:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    model = _model_params(args)
+    model = model_params_from_args(args)
     machine = _machine_params(args, model)
     waves = _parse_waves(args.waves, args.engine)
+    if args.feed == "pixels" and waves is not None:
+        raise ValueError("--waves is not available with --feed pixels")
     left, right, gt, source = _load_inputs(args, with_gt=True)
     region = OutputRegion.of_image(left.shape, model.dmax)
     _check_waves(waves, region.pixels)
@@ -344,8 +324,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
             progress=False if args.quiet else None,
             sgbm=not args.no_sgbm,
             engine_options=engine_options,
+            feed=args.feed,
         )
         report = _report(outcome, source, args.crop)
+        report["feed"] = args.feed
         run, prep = outcome.run, outcome.prepared
         out.write(
             "result.npz",
@@ -381,7 +363,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
-    model = _model_params(args)
+    model = model_params_from_args(args)
     counters: list[int] = args.counter_max  # sorted, no repeats (counter_max_list)
     kinds: list[str] = args.rng  # rng_list: no repeats
     # Validate all before running; the sources side by side, each over every counter max.
@@ -445,7 +427,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         "when the disk cannot hold it.",
     )
     _add_input_options(p, optional=False)
-    _add_model_options(p)
+    add_model_options(p)
     p.add_argument("-o", "--output", required=True, type=Path, metavar="REF.npz", help="output .npz file")
     p.add_argument("--quiet", action="store_true", help="no summary line")
     p.set_defaults(func=_cmd_reference)
@@ -459,7 +441,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         "report.json is written last, so its presence means the run is complete.",
     )
     _add_input_options(p, optional=True)
-    _add_model_options(p)
+    add_model_options(p)
     _add_machine_options(p, sweep=False)
     p.set_defaults(func=_cmd_run)
 
@@ -472,7 +454,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         "sweep.json is written last.",
     )
     _add_input_options(p, optional=True)
-    _add_model_options(p)
+    add_model_options(p)
     _add_machine_options(p, sweep=True)
     p.set_defaults(func=_cmd_sweep)
 

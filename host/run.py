@@ -31,6 +31,7 @@ from .region import OutputRegion
 
 __all__ = [
     "ENGINES",
+    "FEEDS",
     "Prepared",
     "MachineRun",
     "RunOutcome",
@@ -39,6 +40,10 @@ __all__ = [
     "run_pair",
     "result_bytes",
 ]
+
+# How the machine is fed: the host's likelihood words (any engine), or the pixel pairs through the
+# on-chip front end (the StereoMachine RTL, Verilator only).
+FEEDS = ("words", "pixels")
 
 
 @dataclass
@@ -81,10 +86,12 @@ def run_machine(
     progress: bool | None = None,
     chunk_rows: int = 1,
     engine_options: dict[str, object] | None = None,
+    feed: str = "words",
 ) -> MachineRun:
     """Stream the output pixels (row-major) through ``engine``, ``chunk_rows`` map rows per call.
 
     ``engine_options`` go to the engine's constructor (e.g. ``trace`` for ``verilator``).
+    ``feed="pixels"``: the pair itself goes into the StereoMachine (front end on chip; Verilator).
     """
     model = prepared.model
     if machine.rows != model.hypotheses:
@@ -92,6 +99,8 @@ def run_machine(
             f"machine rows ({machine.rows}) must be dmax + 2 = {model.hypotheses}; "
             f"build it with MachineParams.for_disparity({model.dmax}, ...)"
         )
+    if feed not in FEEDS:
+        raise ValueError(f"unknown feed {feed!r}: choose one of {', '.join(FEEDS)}")
     ho, wo = prepared.shape
     m = model.hypotheses
     require_memory(
@@ -99,6 +108,8 @@ def run_machine(
         f"the per-pixel results of {ho}x{wo} pixels x {m} counters",
         "use --crop or a smaller --dmax",
     )
+    if feed == "pixels":
+        return _run_pixels(prepared, machine, engine, engine_options)
     eng = get_engine(engine, machine, **(engine_options or {}))
     qtables = QuantizedTables(likelihood_tables(model), machine.word_bits)
     counts = np.zeros((ho, wo, m), counts_dtype(machine.counter_max))
@@ -134,6 +145,34 @@ def run_machine(
     return MachineRun(engine, machine, disp, counts, cycles, nomatch, timeout, engine_s, words_s, wall)
 
 
+def _run_pixels(
+    prepared: Prepared, machine: MachineParams, engine: str, engine_options: dict[str, object] | None
+) -> MachineRun:
+    """The whole pair through the StereoMachine RTL: pixels in, one result per output pixel out."""
+    if engine != "verilator":
+        raise ValueError(f"--feed pixels runs the StereoMachine RTL under Verilator: use --engine verilator "
+                         f"(got --engine {engine})")
+    from bayesmachine.sim.stereo_engine import StereoVerilatorEngine
+
+    model = prepared.model
+    eng = StereoVerilatorEngine(machine, model, prepared.left.shape[1], **(engine_options or {}))
+    try:
+        t0 = time.perf_counter()
+        res = eng.run(prepared.left, prepared.right)
+        seconds = time.perf_counter() - t0
+        wall = eng.wall_cycles
+    finally:
+        eng.close()
+    ho, wo = prepared.shape
+    m = model.hypotheses
+    timeout = res.timeout.reshape(ho, wo)
+    nomatch = res.nomatch.reshape(ho, wo)
+    disp = np.where(nomatch | timeout, -1, res.map.reshape(ho, wo)).astype(np.int16)
+    counts = res.counts.reshape(ho, wo, m).astype(counts_dtype(machine.counter_max))
+    return MachineRun("verilator", machine, disp, counts, res.cycles.reshape(ho, wo),
+                      nomatch, timeout, seconds, 0.0, wall)
+
+
 def run_pair(
     left: np.ndarray,
     right: np.ndarray,
@@ -145,6 +184,7 @@ def run_pair(
     prepared: Prepared | None = None,
     sgbm: bool | None = None,
     engine_options: dict[str, object] | None = None,
+    feed: str = "words",
 ) -> RunOutcome:
     """Run the machine on a gray pair and compare it with the reference (and gt, if given).
 
@@ -153,6 +193,6 @@ def run_pair(
     """
     if prepared is None:
         prepared = prepare(left, right, model_params, gt)
-    run = run_machine(prepared, machine_params, engine, progress, engine_options=engine_options)
+    run = run_machine(prepared, machine_params, engine, progress, engine_options=engine_options, feed=feed)
     metrics = evaluate(prepared, run, sgbm=sgbm)
     return RunOutcome(prepared, run, metrics)

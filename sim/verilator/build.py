@@ -63,17 +63,19 @@ def cache_dir() -> Path:
     return Path(xdg) / "bayesmachine" / "verilator"
 
 
-def _sources_digest() -> str:
+def sources_digest() -> str:
     """Hash of the Python sources that define the design: the Verilog cache keys on it."""
     import amaranth
 
     import bayesmachine.hdl
+    import bayesmachine.likelihood
     import bayesmachine.params
     import bayesmachine.sources
 
     files = sorted(Path(bayesmachine.hdl.__file__).parent.rglob("*.py"))
     files += sorted(Path(bayesmachine.sources.__file__).parent.glob("*.py"))  # LFSR specs, Sobol table
     files.append(Path(bayesmachine.params.__file__))
+    files.append(Path(bayesmachine.likelihood.__file__))  # the front end's likelihood tables
     h = hashlib.sha256(amaranth.__version__.encode())
     for f in files:
         h.update(f.name.encode())
@@ -83,7 +85,7 @@ def _sources_digest() -> str:
 
 def cached_verilog(params: MachineParams, component: Any, cache: Path) -> str:
     """Verilog of the design, cached by (parameters, design sources): emission takes seconds."""
-    path = cache / "verilog" / f"{params.fingerprint()}-{_sources_digest()}.v"
+    path = cache / "verilog" / f"{params.fingerprint()}-{sources_digest()}.v"
     if path.exists():
         return path.read_text()
     text = verilog_text(component)

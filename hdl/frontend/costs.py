@@ -1,0 +1,195 @@
+"""Costs and likelihood-memory words: the right features' delay line and the table look-ups.
+
+``WordGenerator`` takes every pixel's features (left and right sums, and whether the pixel is
+in the output region). Each pixel's right features enter a delay line of Dmax + 1 pixels, so
+that when an output pixel at map column x arrives, entry d holds the right features at x - d.
+For an output pixel it then writes the pixel's ``words_per_pixel`` words, ``lanes`` per beat,
+in operator order (word o in lane o % lanes of beat o // lanes), exactly the words
+``host.likelihoods.memory_words`` computes (its twin):
+
+- row d <= Dmax, feature column f: the table of f at min(|left_f - right_f[d]|, last entry);
+- the no-match row: the no-match table at min(|left gV|, last entry), then words of 1.0;
+- with a loaded prior, operator column 0 is 1.0 (a uniform prior), as the host writes it.
+
+``lanes`` must be a multiple of the operator columns, so each lane always holds the same
+operator column: a lane of feature f reads its own port of f's table. One beat per cycle:
+a look-up (block RAM read) in the cycle of the beat's issue, the beat on the stream the next.
+"""
+
+from __future__ import annotations
+
+from amaranth.hdl import Module, Mux, Signal, unsigned
+from amaranth.lib import data, memory, stream, wiring
+from amaranth.lib.wiring import In, Out
+
+from bayesmachine.hdl.machine import load_layout
+from bayesmachine.likelihood import ModelParams, quantize
+from bayesmachine.params import MachineParams, ParameterError
+
+from .filters import feature_layout
+from .tables import FrontEndTables, frontend_tables
+
+__all__ = ["FEATURES", "WordGenerator", "check_frontend_params", "pixel_features_layout"]
+
+FEATURES = ("m25", "gh20", "gv20")  # feature sum fields, in the operator columns' order
+
+
+def pixel_features_layout() -> data.StructLayout:
+    """One pixel for the word generator: both images' feature sums and the output-region flag."""
+    return data.StructLayout({"left": feature_layout(), "right": feature_layout(), "output": unsigned(1)})
+
+
+def check_frontend_params(params: MachineParams, model: ModelParams) -> None:
+    """``ParameterError`` naming the parameter unless the front end can feed this machine this model."""
+    if not isinstance(params, MachineParams):
+        raise ParameterError(f"params must be a MachineParams, not {type(params).__name__}")
+    if not isinstance(model, ModelParams):
+        raise ParameterError(f"model must be a host.likelihoods.ModelParams, not {type(model).__name__}")
+    if params.rows != model.hypotheses or not params.nomatch_row:
+        raise ParameterError(
+            f"rows: the machine has {params.rows} rows (no-match row: {params.nomatch_row}); the model's "
+            f"dmax {model.dmax} needs {model.hypotheses} with a no-match row (MachineParams.for_disparity)")
+    if params.columns != 3:
+        raise ParameterError(
+            f"columns: the disparity model has 3 data terms, the machine has {params.columns}")
+    if params.lanes % params.operator_columns:
+        raise ParameterError(
+            f"lanes ({params.lanes}) must be a multiple of the operator columns ({params.operator_columns}) "
+            f"for the front end, so that each lane holds one feature (e.g. lanes="
+            f"{min(params.words_per_pixel, 6 * params.operator_columns)})")
+    if quantize(model.p_nm0, params.word_bits) == 0:
+        raise ParameterError(
+            f"p_nm0: {model.p_nm0} quantizes to 0 with {params.word_bits}-bit words, so a pixel with no "
+            f"match could only stop at the watchdog")
+
+
+class WordGenerator(wiring.Component):
+    """Pixel features in, the output pixels' likelihood-memory words out (the machine's load beats).
+
+    Ports:
+
+    - ``pixel``: ``In(stream.Signature(pixel_features_layout()))``, every pixel of the frame in
+      raster order (the right features of all of them enter the delay line).
+    - ``beats``: ``Out(stream.Signature(load_layout(params)))``, ``beats_per_pixel`` beats per
+      pixel whose ``output`` flag is set.
+
+    ``pixel.ready`` is high when no output pixel is being written, and in the cycle of its last
+    beat's issue: a pixel outside the output region passes in one cycle, an output pixel holds
+    the stream for ``beats_per_pixel`` cycles (more if ``beats`` is not ready).
+    """
+
+    def __init__(self, params: MachineParams, model: ModelParams,
+                 tables: FrontEndTables | None = None) -> None:
+        check_frontend_params(params, model)
+        self._params = params
+        self._model = model
+        self._tables = tables if tables is not None else frontend_tables(model, params.word_bits)
+        super().__init__({
+            "pixel": In(stream.Signature(pixel_features_layout())),
+            "beats": Out(stream.Signature(load_layout(params))),
+        })
+
+    @property
+    def params(self) -> MachineParams:
+        return self._params
+
+    @property
+    def model(self) -> ModelParams:
+        return self._model
+
+    @property
+    def tables(self) -> FrontEndTables:
+        return self._tables
+
+    def elaborate(self, platform: object) -> Module:
+        m = Module()
+        p, dmax = self._params, self._model.dmax
+        cols = p.operator_columns
+        off = cols - p.columns  # 1 with a loaded prior (operator column 0)
+        rows_per_beat = p.lanes // cols
+        n_beats = p.beats_per_pixel
+        one = p.word_one
+
+        # Delay line: right[d] = right features d pixels back (reset-less: no output reads a
+        # stale entry, since an output pixel is at least Dmax pixels into its line).
+        right = [Signal(feature_layout(), name=f"right_{d}", reset_less=True) for d in range(dmax + 1)]
+        left = Signal(feature_layout(), reset_less=True)
+        active = Signal()  # writing the words of an output pixel
+        beat = Signal(range(max(2, n_beats)))
+        beat_q = Signal(range(max(2, n_beats)))  # the beat on the stream
+
+        out = self.beats
+        issue = Signal()
+        m.d.comb += issue.eq(active & (~out.valid | out.ready))
+        last = beat == n_beats - 1
+        m.d.comb += self.pixel.ready.eq(~active | (issue & last))
+        take = self.pixel.valid & self.pixel.ready
+
+        with m.If(out.ready):
+            m.d.sync += out.valid.eq(0)
+        with m.If(issue):
+            m.d.sync += [out.valid.eq(1), beat_q.eq(beat)]
+            with m.If(last):
+                m.d.sync += [beat.eq(0), active.eq(0)]
+            with m.Else():
+                m.d.sync += beat.eq(beat + 1)
+        with m.If(take):
+            m.d.sync += [right[0].eq(self.pixel.payload.right), left.eq(self.pixel.payload.left)]
+            m.d.sync += [right[d + 1].eq(right[d]) for d in range(dmax)]
+            with m.If(self.pixel.payload.output):
+                m.d.sync += [active.eq(1), beat.eq(0)]
+
+        # Table reads: addresses from this cycle's beat, data with the beat on the stream; the
+        # read registers hold while the stream is stalled.
+        read_en = ~out.valid | out.ready
+
+        def clamped(value: object, depth: int) -> object:
+            a = Signal(unsigned(14))
+            m.d.comb += a.eq(abs(value))
+            return Mux(a >= depth - 1, depth - 1, a)
+
+        lane_data: dict[int, object] = {}
+        for f, name in enumerate(FEATURES):
+            table = self._tables.feature(f)
+            mem = memory.Memory(shape=unsigned(p.memory_word_width), depth=len(table), init=table.tolist())
+            m.submodules[f"table_{name}"] = mem
+            for j in range(rows_per_beat):
+                entries = [getattr(right[min(b * rows_per_beat + j, dmax)], name) for b in range(n_beats)]
+                sel = Signal(entries[0].shape(), name=f"right_{name}_{j}")
+                with m.Switch(beat):
+                    for b, entry in enumerate(entries):
+                        with m.Case(b):
+                            m.d.comb += sel.eq(entry)
+                    with m.Default():  # `beat` never gets here; a complete case for the Verilog
+                        m.d.comb += sel.eq(0)
+                port = mem.read_port()
+                m.d.comb += [port.en.eq(read_en),
+                             port.addr.eq(clamped(getattr(left, name) - sel, len(table)))]
+                lane_data[j * cols + off + f] = port.data
+        nm_table = self._tables.nomatch
+        nm_mem = memory.Memory(shape=unsigned(p.memory_word_width), depth=len(nm_table),
+                               init=nm_table.tolist())
+        m.submodules.table_nomatch = nm_mem
+        nm_port = nm_mem.read_port()
+        m.d.comb += [nm_port.en.eq(read_en), nm_port.addr.eq(clamped(left.gv20, len(nm_table)))]
+
+        # The beat on the stream: each lane's word by its operator (row, column).
+        unused = range(n_beats, 1 << len(beat_q))  # never occur; in the last case for a complete case
+        with m.Switch(beat_q):
+            for b in range(n_beats):
+                with m.Case(b, *(unused if b == n_beats - 1 else ())):
+                    for lane in range(p.lanes):
+                        row = b * rows_per_beat + lane // cols
+                        col = lane % cols
+                        if row > dmax + 1:
+                            word: object = 0  # past the last operator: the machine ignores it
+                        elif col < off:
+                            word = one  # loaded prior: uniform
+                        elif row <= dmax:
+                            word = lane_data[lane]
+                        elif col == off:
+                            word = nm_port.data
+                        else:
+                            word = one
+                        m.d.comb += out.payload[lane].eq(word)
+        return m

@@ -1,0 +1,83 @@
+"""Line buffers for the 5x5 windows: the four previous lines of both images in one ``Memory``.
+
+For each incoming pixel pair at column ``col`` the block outputs, one cycle later, its 5-high
+column: the pixels of the four lines above it at that column (from the memory) and the pixel
+itself. The memory word at ``col`` holds the pair's last four lines at that column; it is read
+when the pixel comes in and written back, shifted by one line, in the next cycle. A read port
+with an enable and a write port on one address space: block RAM on an FPGA.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from amaranth.hdl import Module, Signal, unsigned
+from amaranth.lib import data, memory, wiring
+from amaranth.lib.wiring import In, Out
+
+__all__ = ["WINDOW", "LineBuffer", "column_windows", "pair_layout"]
+
+WINDOW = 5  # the paper's 5x5 filters
+
+
+def pair_layout() -> data.StructLayout:
+    """A rectified pixel pair: 8-bit left and right gray levels."""
+    return data.StructLayout({"left": unsigned(8), "right": unsigned(8)})
+
+
+class LineBuffer(wiring.Component):
+    """``WINDOW - 1`` lines of pixel pairs, ``width`` pixels each.
+
+    Ports:
+
+    - ``en`` (In 1), ``col`` (In, the column), ``pixel`` (In, ``pair_layout()``): take a pixel.
+    - ``column`` (Out, ``ArrayLayout(pair_layout(), WINDOW)``): from the cycle after ``en`` until
+      the next ``en``, the 5-high column of the last pixel taken (index 0 = four lines up,
+      index 4 = the pixel). Columns of the first four lines of a frame hold older data.
+
+    Two pixels taken at the same column must be at least two cycles apart: guaranteed for
+    raster order and width >= 2.
+    """
+
+    def __init__(self, width: int) -> None:
+        if isinstance(width, bool) or not isinstance(width, int) or width < 2:
+            raise ValueError(f"width must be an integer >= 2, got {width!r}")
+        self._width = width
+        super().__init__({
+            "en": In(1),
+            "col": In(range(width)),
+            "pixel": In(pair_layout()),
+            "column": Out(data.ArrayLayout(pair_layout(), WINDOW)),
+        })
+
+    @property
+    def width(self) -> int:
+        return self._width
+
+    def elaborate(self, platform: object) -> Module:
+        m = Module()
+        lines = data.ArrayLayout(pair_layout(), WINDOW - 1)
+        m.submodules.mem = mem = memory.Memory(shape=lines, depth=self._width, init=[])
+        rd = mem.read_port()
+        wr = mem.write_port()
+        pixel_q = Signal(pair_layout())
+        col_q = Signal(range(self._width))
+        write = Signal()
+        m.d.comb += [rd.en.eq(self.en), rd.addr.eq(self.col)]
+        m.d.sync += write.eq(self.en)
+        with m.If(self.en):
+            m.d.sync += [pixel_q.eq(self.pixel), col_q.eq(self.col)]
+        # Write back the column shifted up by one line, the new pixel at the bottom.
+        m.d.comb += [wr.en.eq(write), wr.addr.eq(col_q)]
+        for i in range(WINDOW - 2):
+            m.d.comb += wr.data[i].eq(rd.data[i + 1])
+        m.d.comb += wr.data[WINDOW - 2].eq(pixel_q)
+        for i in range(WINDOW - 1):
+            m.d.comb += self.column[i].eq(rd.data[i])
+        m.d.comb += self.column[WINDOW - 1].eq(pixel_q)
+        return m
+
+
+def column_windows(image: np.ndarray) -> np.ndarray:
+    """Twin: the 5-high column of every pixel at or below line 4, shape (H - 4, W, 5), index 0 oldest."""
+    img = np.asarray(image)
+    return np.lib.stride_tricks.sliding_window_view(img, WINDOW, axis=0)

@@ -1,0 +1,233 @@
+"""``FrontEnd`` (pixel pairs in, the machine's load beats out) and ``StereoMachine`` (pixels in,
+disparity results out): the pipeline from a camera to the MAP, on chip.
+
+Pixel stream: one ``pixel_in_layout()`` beat per pixel pair (``left``, ``right``: 8-bit gray;
+``first``: set on the first pixel of a frame), frames in raster order, ``width`` pixels per line,
+any number of lines (at least 5). The front end's position counters restart at every ``first``
+(and at reset), so a frame may follow another immediately: nothing computed for a frame depends
+on pixels of an earlier one. The output region is the host's: map rows 0..H-5 (image lines
+4..H-1, a window's bottom line) and map columns Dmax..W-5 (image columns Dmax+4..W-1, a
+window's right column); every other pixel passes in one cycle and starts no machine run.
+
+Pipeline (one pixel per cycle when no output pixel holds it):
+
+1. the pixel is taken and its column read from the line buffer;
+2. both images' 5-high columns enter the feature filters;
+3. the word generator takes the features (right ones into the delay line); for an output pixel
+   it writes ``beats_per_pixel`` beats into a FIFO in front of the machine's load stream.
+
+The FIFO (``fifo_pixels`` pixels of beats, block RAM) lets the front end run ahead while the
+machine's runs are long and the line ends' non-output pixels stream in; when it is full,
+back-pressure reaches the pixel input. Results leave in raster order of the output region, on
+the machine's own result stream.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+from amaranth.hdl import Module, Mux, Shape, Signal, unsigned
+from amaranth.lib import data, fifo, stream, wiring
+from amaranth.lib.wiring import In, Out
+
+from bayesmachine.hdl.machine import BayesianMachine, load_layout, result_layout
+from bayesmachine.likelihood import ModelParams
+from bayesmachine.params import MachineParams, ParameterError
+
+from . import DEFAULT_FIFO_PIXELS, MAX_WIDTH
+from .costs import WordGenerator, check_frontend_params
+from .filters import FeatureFilter
+from .linebuffer import WINDOW, LineBuffer
+
+__all__ = ["MAX_WIDTH", "FrontEnd", "StereoMachine", "pixel_in_layout", "stereo_machine_params"]
+
+
+
+def pixel_in_layout() -> data.StructLayout:
+    """One beat of the pixel stream: a rectified pair and the frame-start marker."""
+    return data.StructLayout({"left": unsigned(8), "right": unsigned(8), "first": unsigned(1)})
+
+
+def stereo_lanes(params: MachineParams) -> int:
+    """The front end's default lane count: 6 rows per beat (a multiple of the operator columns; 18
+    words: 14 beats per pixel at Dmax 80, below the 17 cycles of the shortest run at counter max 16)."""
+    return min(6, params.rows) * params.operator_columns
+
+
+def stereo_machine_params(dmax: int = 80, **kwargs: object) -> MachineParams:
+    """``MachineParams.for_disparity`` with the front end's lane count (:func:`stereo_lanes`) unless
+    ``lanes`` is given."""
+    params = MachineParams.for_disparity(dmax, **kwargs)
+    return params if "lanes" in kwargs else dataclasses.replace(params, lanes=stereo_lanes(params))
+
+
+def _check_width(width: object, dmax: int) -> int:
+    if isinstance(width, bool) or not isinstance(width, int):
+        raise ParameterError(f"width must be an integer, not {width!r}")
+    if not dmax + WINDOW <= width <= MAX_WIDTH:
+        raise ParameterError(
+            f"width must be in [dmax + 5, {MAX_WIDTH}] = [{dmax + WINDOW}, {MAX_WIDTH}] (a line needs one "
+            f"output pixel with all {dmax + 1} disparities), got {width}")
+    return width
+
+
+class FrontEnd(wiring.Component):
+    """Pixel pairs in, the output pixels' likelihood-memory words out (the machine's load beats).
+
+    Ports: ``pixels`` (``In(stream.Signature(pixel_in_layout()))``), ``beats``
+    (``Out(stream.Signature(load_layout(params)))``). ``width``: pixels per image line.
+    """
+
+    def __init__(self, params: MachineParams, model: ModelParams, width: int) -> None:
+        check_frontend_params(params, model)
+        self._width = _check_width(width, model.dmax)
+        self._params = params
+        self._model = model
+        super().__init__({
+            "pixels": In(stream.Signature(pixel_in_layout())),
+            "beats": Out(stream.Signature(load_layout(params))),
+        })
+
+    @property
+    def params(self) -> MachineParams:
+        return self._params
+
+    @property
+    def model(self) -> ModelParams:
+        return self._model
+
+    @property
+    def width(self) -> int:
+        return self._width
+
+    def elaborate(self, platform: object) -> Module:
+        m = Module()
+        width, dmax = self._width, self._model.dmax
+        m.submodules.linebuffer = lines = LineBuffer(width)
+        m.submodules.filter_left = fl = FeatureFilter()
+        m.submodules.filter_right = fr = FeatureFilter()
+        m.submodules.generator = gen = WordGenerator(self._params, self._model)
+        wiring.connect(m, gen.beats, wiring.flipped(self.beats))
+
+        # The pipeline advances as a whole whenever its last stage is empty or taken.
+        valid1 = Signal()  # stage 1: the line buffer shows the pixel's column
+        valid2 = Signal()  # stage 2: the filters hold the pixel's window
+        advance = Signal()
+        m.d.comb += advance.eq(~valid2 | gen.pixel.ready)
+
+        # Stage 0: position of the incoming pixel (restarts at a frame's first pixel).
+        col = Signal(range(width))
+        line = Signal(range(WINDOW))  # image line, saturating at 4 (a window's bottom line)
+        pin = self.pixels.payload
+        cur_col = Signal(range(width))
+        cur_line = Signal(range(WINDOW))
+        with m.If(pin.first):
+            m.d.comb += [cur_col.eq(0), cur_line.eq(0)]
+        with m.Else():
+            m.d.comb += [cur_col.eq(col), cur_line.eq(line)]
+        take = self.pixels.valid & advance
+        m.d.comb += [
+            self.pixels.ready.eq(advance),
+            lines.en.eq(take),
+            lines.col.eq(cur_col),
+            lines.pixel.left.eq(pin.left),
+            lines.pixel.right.eq(pin.right),
+        ]
+        col1 = Signal(range(width))
+        line1 = Signal(range(WINDOW))
+        with m.If(take):
+            with m.If(cur_col == width - 1):
+                m.d.sync += [col.eq(0), line.eq(Mux(cur_line == WINDOW - 1, cur_line, cur_line + 1))]
+            with m.Else():
+                m.d.sync += [col.eq(cur_col + 1), line.eq(cur_line)]
+        with m.If(advance):
+            m.d.sync += [valid1.eq(self.pixels.valid), col1.eq(cur_col), line1.eq(cur_line)]
+
+        # Stage 1 -> 2: the columns enter the filters.
+        output2 = Signal()
+        shift = advance & valid1
+        m.d.comb += [fl.en.eq(shift), fr.en.eq(shift)]
+        for i in range(WINDOW):
+            m.d.comb += [fl.column[i].eq(lines.column[i].left), fr.column[i].eq(lines.column[i].right)]
+        with m.If(advance):
+            m.d.sync += [valid2.eq(valid1),
+                         output2.eq((line1 == WINDOW - 1) & (col1 >= dmax + WINDOW - 1))]
+
+        # Stage 2 -> the word generator.
+        m.d.comb += [
+            gen.pixel.valid.eq(valid2),
+            gen.pixel.payload.left.eq(fl.features),
+            gen.pixel.payload.right.eq(fr.features),
+            gen.pixel.payload.output.eq(output2),
+        ]
+        return m
+
+
+class StereoMachine(wiring.Component):
+    """Pixel pairs in, one result per output pixel out: the front end, a FIFO and the machine.
+
+    Ports: ``pixels`` (``In(stream.Signature(pixel_in_layout()))``) and ``result``
+    (``Out(stream.Signature(result_layout(params)))``, the machine's results, in raster order
+    of the output region). Constructor: the machine's ``params`` (lanes a multiple of the
+    operator columns: see :func:`stereo_machine_params`), the ``model`` (Dmax, p0, sigmas,
+    p_nm0, sigma_nm), the image ``width`` (dmax + 5 .. ``MAX_WIDTH``), and ``fifo_pixels``,
+    the pixels' worth of beats the FIFO holds. With ``rng = "external"`` the machine's
+    ``entropy`` / ``entropy_ready`` ports are exposed too.
+    """
+
+    def __init__(self, params: MachineParams, model: ModelParams, width: int,
+                 fifo_pixels: int = DEFAULT_FIFO_PIXELS) -> None:
+        check_frontend_params(params, model)
+        _check_width(width, model.dmax)
+        if isinstance(fifo_pixels, bool) or not isinstance(fifo_pixels, int) or not 1 <= fifo_pixels <= 64:
+            raise ParameterError(f"fifo_pixels must be an integer in [1, 64], got {fifo_pixels!r}")
+        self._params = params
+        self._model = model
+        self._width = width
+        self._fifo_pixels = fifo_pixels
+        members = {
+            "pixels": In(stream.Signature(pixel_in_layout())),
+            "result": Out(stream.Signature(result_layout(params))),
+        }
+        if params.rng == "external":
+            members["entropy"] = In(data.ArrayLayout(unsigned(params.word_bits), params.operators))
+            members["entropy_ready"] = Out(1)
+        super().__init__(members)
+
+    @property
+    def params(self) -> MachineParams:
+        return self._params
+
+    @property
+    def model(self) -> ModelParams:
+        return self._model
+
+    @property
+    def width(self) -> int:
+        return self._width
+
+    @property
+    def fifo_pixels(self) -> int:
+        return self._fifo_pixels
+
+    def elaborate(self, platform: object) -> Module:
+        m = Module()
+        p = self._params
+        m.submodules.frontend = front = FrontEnd(p, self._model, self._width)
+        m.submodules.machine = machine = BayesianMachine(p)
+        beat_bits = Shape.cast(load_layout(p)).width
+        depth = self._fifo_pixels * p.beats_per_pixel
+        m.submodules.fifo = buf = fifo.SyncFIFOBuffered(width=beat_bits, depth=depth)
+        wiring.connect(m, wiring.flipped(self.pixels), front.pixels)
+        m.d.comb += [
+            buf.w_stream.payload.eq(front.beats.payload),
+            buf.w_stream.valid.eq(front.beats.valid),
+            front.beats.ready.eq(buf.w_stream.ready),
+            machine.load.payload.eq(buf.r_stream.payload),
+            machine.load.valid.eq(buf.r_stream.valid),
+            buf.r_stream.ready.eq(machine.load.ready),
+        ]
+        wiring.connect(m, machine.result, wiring.flipped(self.result))
+        if p.rng == "external":
+            m.d.comb += [machine.entropy.eq(self.entropy), self.entropy_ready.eq(machine.entropy_ready)]
+        return m

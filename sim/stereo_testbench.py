@@ -1,0 +1,120 @@
+"""Driving the front end and ``StereoMachine`` in Amaranth's simulator (tests, debugging).
+
+Frames go in as pixel beats packed from ``pixel_in_layout()``; the front end's load beats and
+the machine's results come out decoded from their layouts. Random ``valid`` / ``ready`` stalls on
+both streams exercise the handshakes (results must not depend on them).
+"""
+
+from __future__ import annotations
+
+import random
+from collections.abc import Sequence
+
+import numpy as np
+from amaranth.sim import Simulator, SimulatorContext
+
+from bayesmachine.hdl.frontend.stereo import FrontEnd, StereoMachine, pixel_in_layout
+from bayesmachine.hdl.machine import load_layout
+from bayesmachine.params import MachineParams
+from bayesmachine.sim.results import MachineResult, decode_results
+
+__all__ = ["frame_beats", "run_frontend", "run_frontend_beats", "run_stereo", "words_from_beats"]
+
+
+def frame_beats(left: np.ndarray, right: np.ndarray) -> list[int]:
+    """A pair as raw pixel-stream beats in raster order, ``first`` set on the first pixel."""
+    if left.shape != right.shape or left.ndim != 2:
+        raise ValueError(f"a frame is two 2-D images of one shape, got {left.shape} and {right.shape}")
+    layout = pixel_in_layout()
+    beats = []
+    for i, (lv, rv) in enumerate(zip(left.reshape(-1).tolist(), right.reshape(-1).tolist(), strict=True)):
+        beats.append(layout.const({"left": lv, "right": rv, "first": int(i == 0)}).as_bits())
+    return beats
+
+
+def words_from_beats(params: MachineParams, beats: Sequence[int]) -> np.ndarray:
+    """Load beats (raw) back into pixels' words, (P, rows, operator_columns), decoded from the layout."""
+    layout = load_layout(params)
+    b = params.beats_per_pixel
+    if len(beats) % b:
+        raise ValueError(f"{len(beats)} beats is not a whole number of pixels ({b} beats each)")
+    flat = []
+    for raw in beats:
+        view = layout.from_bits(raw)
+        flat.extend(int(view[lane]) for lane in range(params.lanes))
+    per_pixel = np.array(flat, np.int64).reshape(-1, b * params.lanes)[:, : params.words_per_pixel]
+    return per_pixel.reshape(-1, params.rows, params.operator_columns)
+
+
+def _simulate(dut: object, source: object, sink_stream: object, beats: list[int], expected: int,
+              in_stall: float, out_stall: float, seed: int, max_cycles: int) -> tuple[list[int], int]:
+    rnd = random.Random(seed)
+    got: list[int] = []
+    cycles = 0
+
+    async def feeder(ctx: SimulatorContext) -> None:
+        raw = source.payload.as_value()
+        for beat in beats:
+            while in_stall and rnd.random() < in_stall:
+                ctx.set(source.valid, 0)
+                await ctx.tick()
+            ctx.set(source.valid, 1)
+            ctx.set(raw, beat)
+            await ctx.tick().until(source.ready)
+        ctx.set(source.valid, 0)
+
+    async def collector(ctx: SimulatorContext) -> None:
+        nonlocal cycles
+        raw = sink_stream.payload.as_value()
+        while len(got) < expected:
+            ready = not (out_stall and rnd.random() < out_stall)
+            ctx.set(sink_stream.ready, ready)
+            _, _, valid, payload = await ctx.tick().sample(sink_stream.valid, raw)
+            cycles += 1
+            if valid and ready:
+                got.append(payload)
+            if cycles > max_cycles:
+                raise RuntimeError(f"no complete output after {max_cycles} cycles ({len(got)}/{expected})")
+
+    sim = Simulator(dut)
+    sim.add_clock(1e-8)
+    sim.add_testbench(feeder, background=True)
+    sim.add_testbench(collector)
+    sim.run()
+    return got, cycles
+
+
+def _output_pixels(frames: Sequence[tuple[np.ndarray, np.ndarray]], dmax: int) -> int:
+    return sum((lf.shape[0] - 4) * (lf.shape[1] - 4 - dmax) for lf, _ in frames)
+
+
+def run_frontend(front: FrontEnd, frames: Sequence[tuple[np.ndarray, np.ndarray]], *,
+                 in_stall: float = 0.0, out_stall: float = 0.0, seed: int = 0,
+                 max_cycles: int = 1_000_000) -> np.ndarray:
+    """The words the front end writes for ``frames`` (pairs of (H, width) uint8 images), all frames'
+    output pixels in order: (P, rows, operator_columns)."""
+    beats = [b for lf, rf in frames for b in frame_beats(lf, rf)]
+    return run_frontend_beats(front, beats, _output_pixels(frames, front.model.dmax), in_stall=in_stall,
+                              out_stall=out_stall, seed=seed, max_cycles=max_cycles)
+
+
+def run_frontend_beats(front: FrontEnd, beats: list[int], pixels: int, *, in_stall: float = 0.0,
+                       out_stall: float = 0.0, seed: int = 0, max_cycles: int = 1_000_000) -> np.ndarray:
+    """The words of the first ``pixels`` output pixels the front end writes for raw pixel ``beats``."""
+    expected = pixels * front.params.beats_per_pixel
+    got, _ = _simulate(front, front.pixels, front.beats, beats, expected, in_stall, out_stall, seed,
+                       max_cycles)
+    return words_from_beats(front.params, got)
+
+
+def run_stereo(top: StereoMachine, frames: Sequence[tuple[np.ndarray, np.ndarray]], *,
+               in_stall: float = 0.0, out_stall: float = 0.0, seed: int = 0,
+               max_cycles: int = 1_000_000) -> tuple[MachineResult, int]:
+    """The machine's results for ``frames`` through ``StereoMachine`` and the clock cycles it took."""
+    p = top.params
+    beats = [b for lf, rf in frames for b in frame_beats(lf, rf)]
+    expected = _output_pixels(frames, top.model.dmax)
+    got, cycles = _simulate(top, top.pixels, top.result, beats, expected, in_stall, out_stall, seed,
+                            max_cycles)
+    res = decode_results(p, got) if got else MachineResult.empty(p.rows)
+    return res, cycles

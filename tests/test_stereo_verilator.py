@@ -1,0 +1,91 @@
+"""``--feed pixels``: the StereoMachine under Verilator gives the model's results on the host's words."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import assert_same_results
+
+from bayesmachine.cli import main
+from bayesmachine.hdl.frontend.stereo import stereo_machine_params
+from bayesmachine.host.features import feature_sums
+from bayesmachine.host.images import bundled_pair
+from bayesmachine.host.likelihoods import ModelParams, memory_words
+from bayesmachine.sim.model import MachineModel
+from bayesmachine.sim.verilator import VerilatorError, find_toolchain
+
+try:
+    find_toolchain()
+    MISSING = None
+except VerilatorError as exc:
+    MISSING = str(exc)
+
+needs_verilator = pytest.mark.skipif(MISSING is not None, reason=MISSING or "")
+
+DMAX, WIDTH = 8, 40
+
+
+def _crops() -> list[tuple[np.ndarray, np.ndarray]]:
+    left, right, _ = bundled_pair()
+    return [(left[y : y + h, x : x + WIDTH].copy(), right[y : y + h, x : x + WIDTH].copy())
+            for x, y, h in ((250, 200, 12), (400, 300, 7))]
+
+
+@needs_verilator
+@pytest.mark.parametrize("counter_max", [1, 16])
+def test_pixels_through_the_stereo_machine_equal_the_model(counter_max: int, tmp_path: Path) -> None:
+    from bayesmachine.sim.stereo_engine import StereoVerilatorEngine
+
+    model = ModelParams(dmax=DMAX)
+    params = stereo_machine_params(DMAX, counter_max=counter_max)
+    frames = _crops()
+    reference = MachineModel(params)
+    with StereoVerilatorEngine(params, model, WIDTH, verbose=False) as engine:
+        for left, right in frames:  # back to back: the front end restarts, the LFSRs carry over
+            want = reference.run(memory_words(feature_sums(left), feature_sums(right), model, params))
+            got = engine.run(left, right)
+            assert_same_results(got, want)
+            assert engine.last_wall_cycles > engine.last_compute_cycles == int(want.cycles.sum())
+        with pytest.raises(ValueError, match="40-pixel lines"):
+            engine.run(frames[0][0][:, :30], frames[0][1][:, :30])
+        with pytest.raises(ValueError, match="at least 5 lines"):
+            engine.run(frames[0][0][:4], frames[0][1][:4])
+
+
+@needs_verilator
+def test_cli_run_feed_pixels_gives_the_models_result(tmp_path: Path) -> None:
+    crop = ["--crop", f"250,200,{WIDTH},12", "--dmax", str(DMAX), "--quiet", "--no-sgbm"]
+    assert main(["run", "--engine", "verilator", "--feed", "pixels", *crop, "-o", str(tmp_path / "px")]) == 0
+    assert main(["run", "--engine", "model", *crop, "-o", str(tmp_path / "model")]) == 0
+    got, want = np.load(tmp_path / "px" / "result.npz"), np.load(tmp_path / "model" / "result.npz")
+    for key in ("map", "counts", "cycles", "timeout"):
+        assert np.array_equal(got[key], want[key]), key
+    report = json.loads((tmp_path / "px" / "report.json").read_text())
+    assert report["feed"] == "pixels"
+    assert report["wall_cycles_per_pixel"] > report["cycles_per_pixel_mean"]
+
+
+def test_cli_feed_pixels_needs_verilator(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    args = ["run", "--feed", "pixels", "--crop", "250,200,40,12", "--dmax", "8", "-o", str(tmp_path)]
+    assert main(args) == 2
+    assert "use --engine verilator" in capsys.readouterr().err
+
+
+@needs_verilator
+@pytest.mark.slow
+def test_whole_bundled_pair_through_the_front_end_equals_the_model() -> None:
+    """The full Motorcycle pair (741 x 500, Dmax 80, counter max 16): the front end's words are the
+    host's for every output pixel, so every result equals the model's, with loading hidden."""
+    from bayesmachine.sim.stereo_engine import StereoVerilatorEngine
+
+    left, right, _ = bundled_pair()
+    model = ModelParams(dmax=80)
+    params = stereo_machine_params(80, counter_max=16)
+    want = MachineModel(params).run(memory_words(feature_sums(left), feature_sums(right), model, params))
+    with StereoVerilatorEngine(params, model, left.shape[1], verbose=False) as engine:
+        got = engine.run(left, right)
+        assert_same_results(got, want)
+        assert engine.last_wall_cycles < 1.02 * engine.last_compute_cycles
