@@ -100,45 +100,18 @@ def _step_lfsrs(states, t1, t2, t3, t4, t5, mask, w, top, nums):
 
 
 @numba.njit(cache=True)
-def _run_lfsr_shared(q, states, shifts, rows, opcols, word_bits, lfsr_bits, n_max, max_cycles, nm_index,
-                     out_counts, out_map, out_timeout, out_cycles):
-    """``lfsr-shared``: one LFSR per operator column; every row of column c reads its number."""
+def _run_columns(q, states, shifts, points, rows, opcols, word_bits, lfsr_bits, n_max, max_cycles, nm_index,
+                 out_counts, out_map, out_timeout, out_cycles):
+    """The shared sources: one number per operator column, read by every row of that column.
+
+    ``lfsr-shared`` (``points`` empty): column c's LFSR steps every compute cycle. ``sobol``: cycle k
+    of a pixel gives column c ``points[j, c] ^ shift[c]``, j = (k - 1) mod 2^W; the column LFSRs
+    step once per block (j = 0) to give the block's shifts (every pixel starts a block)."""
     pixels, ops = q.shape
     mask = np.uint64((1 << word_bits) - 1)
     w = np.uint64(word_bits)
     top = np.uint64(lfsr_bits - word_bits)
-    t1, t2, t3 = shifts[1].copy(), shifts[2].copy(), shifts[3].copy()
-    t4, t5 = shifts[4].copy(), shifts[5].copy()
-    nums = np.zeros(opcols, np.uint64)
-    bits = np.zeros(ops, np.uint8)
-    counts = np.zeros(rows, np.uint32)
-    over = np.zeros(rows, np.uint8)
-    for p in range(pixels):
-        qp = q[p]
-        counts[:] = 0
-        k = 0
-        winner = -1
-        while True:
-            k += 1
-            _step_lfsrs(states, t1, t2, t3, t4, t5, mask, w, top, nums)
-            for r in range(rows):
-                for c in range(opcols):
-                    bits[r * opcols + c] = nums[c] < qp[r * opcols + c]
-            winner = _finish_cycle(bits, counts, over, rows, opcols, n_max, nm_index)
-            if winner >= 0 or k == max_cycles:
-                break
-        _store(p, counts, k, winner, out_counts, out_map, out_timeout, out_cycles)
-
-
-@numba.njit(cache=True)
-def _run_sobol(q, states, shifts, points, rows, opcols, word_bits, lfsr_bits, n_max, max_cycles, nm_index,
-               out_counts, out_map, out_timeout, out_cycles):
-    """``sobol``: cycle k of a pixel gives column c ``points[j, c] ^ shift[c]``, j = (k - 1) mod 2^W;
-    the column LFSRs advance once per block (j = 0) to give the block's shifts."""
-    pixels, ops = q.shape
-    mask = np.uint64((1 << word_bits) - 1)
-    w = np.uint64(word_bits)
-    top = np.uint64(lfsr_bits - word_bits)
+    sobol = points.shape[0] > 0
     block = 1 << word_bits
     t1, t2, t3 = shifts[1].copy(), shifts[2].copy(), shifts[3].copy()
     t4, t5 = shifts[4].copy(), shifts[5].copy()
@@ -155,10 +128,13 @@ def _run_sobol(q, states, shifts, points, rows, opcols, word_bits, lfsr_bits, n_
         while True:
             j = k % block
             k += 1
-            if j == 0:  # a block starts (every pixel starts one): fresh shifts
-                _step_lfsrs(states, t1, t2, t3, t4, t5, mask, w, top, shift)
-            for c in range(opcols):
-                nums[c] = points[j, c] ^ shift[c]
+            if not sobol:
+                _step_lfsrs(states, t1, t2, t3, t4, t5, mask, w, top, nums)
+            else:
+                if j == 0:  # a block starts: fresh shifts
+                    _step_lfsrs(states, t1, t2, t3, t4, t5, mask, w, top, shift)
+                for c in range(opcols):
+                    nums[c] = points[j, c] ^ shift[c]
             for r in range(rows):
                 for c in range(opcols):
                     bits[r * opcols + c] = nums[c] < qp[r * opcols + c]
@@ -177,36 +153,18 @@ def _lfsr_arrays(specs: list[LFSRSpec]) -> tuple[np.ndarray, np.ndarray]:
     return init, shifts
 
 
-class _LFSRSource:
-    """Model state of ``lfsr`` (one LFSR per operator) and ``lfsr-shared`` (one per column)."""
-
-    def __init__(self, params: MachineParams, shared: bool) -> None:
-        self._params = params
-        self._shared = shared
-        self._init, self._shifts = _lfsr_arrays(column_lfsr_specs(params) if shared else lfsr_specs(params))
-        self.reset()
-
-    def reset(self) -> None:
-        self.states = self._init.copy()
-
-    def run(self, q: np.ndarray, out: MachineResult) -> None:
-        p = self._params
-        kernel = _run_lfsr_shared if self._shared else _run_lfsr
-        kernel(q.astype(np.uint64), self.states, self._shifts, p.rows, p.operator_columns, p.word_bits,
-               p.lfsr_bits, p.counter_max, p.max_cycles, _nm_index(p),
-               out.counts, out.map, out.timeout, out.cycles)
-
-
-class _SobolSource:
-    """Model state of ``sobol``: the column shift LFSRs (the Sobol block restarts every pixel)."""
+class _OnChipSource:
+    """Model state of an on-chip source: its LFSRs (per operator for ``lfsr``, per column for
+    ``lfsr-shared``, the per-column shift LFSRs of ``sobol``) and, for ``sobol``, its points."""
 
     def __init__(self, params: MachineParams) -> None:
         self._params = params
-        self._init, self._shifts = _lfsr_arrays(column_lfsr_specs(params))
-        self._points = np.ascontiguousarray(
-            np.array([sobol_points(c, params.word_bits) for c in range(params.operator_columns)],
-                     dtype=np.uint64).T
-        )
+        specs = lfsr_specs(params) if params.rng == "lfsr" else column_lfsr_specs(params)
+        self._init, self._shifts = _lfsr_arrays(specs)
+        self._points = np.zeros((0, params.operator_columns), np.uint64)  # lfsr-shared: none
+        if params.rng == "sobol":
+            points = [sobol_points(c, params.word_bits) for c in range(params.operator_columns)]
+            self._points = np.ascontiguousarray(np.array(points, dtype=np.uint64).T)
         self.reset()
 
     def reset(self) -> None:
@@ -214,17 +172,16 @@ class _SobolSource:
 
     def run(self, q: np.ndarray, out: MachineResult) -> None:
         p = self._params
-        _run_sobol(q.astype(np.uint64), self.states, self._shifts, self._points, p.rows, p.operator_columns,
-                   p.word_bits, p.lfsr_bits, p.counter_max, p.max_cycles, _nm_index(p),
-                   out.counts, out.map, out.timeout, out.cycles)
+        args = (p.rows, p.operator_columns, p.word_bits, p.lfsr_bits, p.counter_max, p.max_cycles,
+                _nm_index(p), out.counts, out.map, out.timeout, out.cycles)
+        if p.rng == "lfsr":
+            _run_lfsr(q.astype(np.uint64), self.states, self._shifts, *args)
+        else:
+            _run_columns(q.astype(np.uint64), self.states, self._shifts, self._points, *args)
 
 
 # The model twin of every on-chip source kind (bayesmachine.sources.SOURCE_KINDS).
-_ON_CHIP_SOURCES = {
-    "lfsr": lambda params: _LFSRSource(params, shared=False),
-    "lfsr-shared": lambda params: _LFSRSource(params, shared=True),
-    "sobol": _SobolSource,
-}
+_ON_CHIP_SOURCES = {"lfsr": _OnChipSource, "lfsr-shared": _OnChipSource, "sobol": _OnChipSource}
 
 
 def _nm_index(params: MachineParams) -> int:

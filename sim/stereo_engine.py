@@ -36,6 +36,7 @@ from bayesmachine.sim.results import MachineResult
 from bayesmachine.sim.verilator import VerilatorError, cache_dir, find_toolchain
 from bayesmachine.sim.verilator.build import MAKE_FLAGS, VERILATOR_FLAGS, sources_digest
 from bayesmachine.sim.verilator.codegen import verilator_name
+from bayesmachine.sources import source_kind
 
 __all__ = ["StereoVerilatorEngine", "build_stereo_harness"]
 
@@ -244,8 +245,9 @@ class StereoVerilatorEngine:
         jobs: int = 2,
         verbose: bool = True,
     ) -> None:
-        if params.rng != "lfsr":
-            raise ValueError(f"--feed pixels runs machines with on-chip LFSRs, not rng = {params.rng!r}")
+        if not source_kind(params.rng).on_chip:
+            raise ValueError(f"--feed pixels runs machines with an on-chip random source, "
+                             f"not rng = {params.rng!r}")
         self.params = params
         self.model = model
         self.width = width

@@ -338,18 +338,19 @@ def test_emulated_machine_equals_the_model_on_the_twin_numbers() -> None:
 
 def test_run_and_sweep_options_build_smtj_machines() -> None:
     from bayesmachine.cli import build_parser
-    from bayesmachine.host.cli import _machine_params, _model_params
+    from bayesmachine.cliargs import model_params_from_args
+    from bayesmachine.host.cli import _machine_params
 
     parser = build_parser()
     for cmd in (["run"], ["sweep"]):
         args = parser.parse_args(cmd + ["--rng", "smtj", "--smtj-dwell", "20", "--smtj-spread", "0.05",
                                         "--smtj-share", "column", "-o", "out"])
         rng = args.rng[0] if cmd == ["sweep"] else None  # sweep takes a list of sources
-        p = _machine_params(args, _model_params(args), 16, rng)
+        p = _machine_params(args, model_params_from_args(args), 16, rng)
         assert (p.rng, p.smtj_dwell, p.smtj_spread, p.smtj_share) == ("smtj", 20.0, 0.05, "column")
         args = parser.parse_args(cmd + ["--smtj-dwell", "20", "-o", "out"])
         with pytest.raises(ValueError, match="--smtj-dwell: device options of --rng smtj"):
-            _machine_params(args, _model_params(args), 16)
+            _machine_params(args, model_params_from_args(args), 16)
 
 
 def test_study_script_runs_and_writes_complete_outputs(tmp_path) -> None:

@@ -176,27 +176,15 @@ def test_emit_small_machine_defaults_to_one_beat_per_pixel(tmp_path: Path,
 def test_emit_writes_complete_files_or_none(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A failure while writing (a full disk: half the text written) leaves the earlier file as it
     was and no temporary file behind."""
-    import os
-
     out = tmp_path / "bayesmachine.v"
     out.write_text("// an earlier emission\n")
-    real_fdopen = os.fdopen
+    real_write_text = Path.write_text
 
-    class HalfWriter:
-        def __init__(self, fd: int, mode: str) -> None:
-            self._f = real_fdopen(fd, mode)
+    def half_writer(self: Path, text: str, *args: object, **kwargs: object) -> int:
+        real_write_text(self, text[: len(text) // 2])
+        raise OSError(28, "No space left on device")
 
-        def __enter__(self) -> HalfWriter:
-            return self
-
-        def __exit__(self, *exc: object) -> None:
-            self._f.close()
-
-        def write(self, text: str) -> int:
-            self._f.write(text[: len(text) // 2])
-            raise OSError(28, "No space left on device")
-
-    monkeypatch.setattr(hdl_emit.os, "fdopen", HalfWriter)
+    monkeypatch.setattr(Path, "write_text", half_writer)
     with pytest.raises(OSError, match="No space left"):
         hdl_emit.emit(MachineParams.for_disparity(2, lanes=3), out)
     monkeypatch.undo()
