@@ -7,6 +7,7 @@ import sys
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from bayesmachine.fpga.cli import register as register_fpga
     from bayesmachine.hdl.cli import register as register_hdl
     from bayesmachine.host.cli import register as register_host
 
@@ -18,6 +19,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     register_hdl(sub)
     register_host(sub)
+    register_fpga(sub)
     return parser
 
 

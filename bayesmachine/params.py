@@ -11,7 +11,7 @@ import hashlib
 import json
 from dataclasses import asdict, dataclass
 
-__all__ = ["MachineParams", "ParameterError", "RNG_KINDS", "PRIORS", "TIE_BREAKS"]
+__all__ = ["MachineParams", "ParameterError", "RNG_KINDS", "PRIORS", "TIE_BREAKS", "lane_params"]
 
 RNG_KINDS = ("lfsr", "external")
 PRIORS = ("uniform", "loaded")
@@ -187,3 +187,18 @@ class MachineParams:
         """A short stable hash of the parameters (build caches key on it)."""
         blob = json.dumps(self.to_dict(), sort_keys=True).encode()
         return hashlib.sha256(blob).hexdigest()[:16]
+
+
+_LANE_SEED_STEP = 0x9E3779B97F4A7C15  # odd (2**64 / golden ratio): distinct seeds for 2**64 lanes
+
+
+def lane_params(params: MachineParams, lane: int) -> MachineParams:
+    """The parameters of machine ``lane`` of a row of lanes (``hdl.lanes.MachineLanes``).
+
+    Lane 0 is the machine itself; lane i has seed ``(seed + i * 0x9E3779B97F4A7C15) mod 2**64``,
+    so every lane draws its own LFSR polynomials and start states.
+    """
+    _check_int("lane", lane, 0)
+    from dataclasses import replace
+
+    return replace(params, seed=(params.seed + lane * _LANE_SEED_STEP) % (1 << 64))

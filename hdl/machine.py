@@ -23,18 +23,31 @@ simulator slows down with hierarchy depth, and the netlist is the same.
 
 from __future__ import annotations
 
+import numpy as np
 from amaranth.hdl import Cat, Const, Module, Signal, unsigned
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from bayesmachine.params import MachineParams
 
-from .counters import overflow_counter
+from .counters import overflow_counter_full
 from .encoder import map_encoder
 from .operator import stochastic_operator
 from .rng import lfsr_next_state_expr, lfsr_specs
 
-__all__ = ["BayesianMachine", "load_layout", "result_layout"]
+__all__ = ["BUBBLE_CYCLES", "BayesianMachine", "load_layout", "pixel_wall_cycles", "result_layout"]
+
+BUBBLE_CYCLES = 1  # clock cycles per run after its last compute cycle (the registered stop)
+
+
+def pixel_wall_cycles(params: MachineParams, cycles: np.ndarray) -> np.ndarray:
+    """Clock cycles per pixel in steady state (loads keep coming, results are taken at once).
+
+    A run of k compute cycles is followed by its bubble, in which the next pixel is swapped in if
+    its ``beats_per_pixel`` load beats have arrived (they start the cycle after the previous
+    swap): ``max(k, beats_per_pixel) + BUBBLE_CYCLES``.
+    """
+    return np.maximum(np.asarray(cycles, dtype=np.int64), params.beats_per_pixel) + BUBBLE_CYCLES
 
 
 def load_layout(params: MachineParams) -> data.ArrayLayout:
@@ -100,11 +113,16 @@ class BayesianMachine(wiring.Component):
 
         # --- Run state ---
         running = Signal()
-        cycles_done = Signal(p.cycle_width)  # compute cycles of this run so far (k - 1)
+        cycles_done = Signal(p.cycle_width)  # compute cycles of this run so far
         counts = [Signal(p.counter_width, name=f"count_{r}") for r in range(rows)]
 
+        # --- Control path (registered stop; see "Timing" in docs/architecture.md) ---
+        # ``stop`` is the registered end-of-run decision: high in the bubble cycle that follows a
+        # run's last compute cycle. Nothing advances in a bubble, so results do not depend on it;
+        # every wide enable below is a function of registers only, never of the matrix.
+        stop = Signal()
         compute = Signal()
-        m.d.comb += compute.eq(running & (~self.result.valid | self.result.ready))
+        m.d.comb += compute.eq(running & ~stop)
 
         # --- Random numbers ---
         if p.rng == "lfsr":
@@ -127,51 +145,64 @@ class BayesianMachine(wiring.Component):
                 bus = stochastic_operator(bus, numbers[o], active[o])
             m.d.comb += row[r].eq(bus)
 
-        # --- Overflow counters ---
+        # --- Overflow counters, with registered "full" flags (count == n_max) ---
+        full = Signal(rows)
         over = Signal(rows)
-        next_counts = []
+        next_counts, next_full = [], []
         for r in range(rows):
-            ov, nxt = overflow_counter(row[r], counts[r], p.counter_max)
+            ov, nxt, nfull = overflow_counter_full(row[r], counts[r], full[r], p.counter_max)
             m.d.comb += over[r].eq(ov)
             next_counts.append(nxt)
+            next_full.append(nfull)
 
-        # --- MAP encoder and end of run ---
-        any_over, winner = map_encoder(over, p.nomatch_row, p.tie_break)
-        last_cycle = cycles_done == p.max_cycles - 1  # this cycle is k == max_cycles
+        # The watchdog, registered too: ``at_last`` is high in compute cycle k == max_cycles.
+        at_last = Signal()
+        any_over = over.any()  # a bare OR over the rows: the encoder works in the bubble
         finish = Signal()
-        m.d.comb += finish.eq(compute & (any_over | last_cycle))
-        start = Signal()
-        m.d.comb += start.eq(shadow_full & (~running | finish))
+        m.d.comb += finish.eq(compute & (any_over | at_last))
+        over_q = Signal(rows)  # the overflow flags of the last compute cycle, for the encoder
 
         with m.If(compute):
-            m.d.sync += cycles_done.eq(cycles_done + 1)
+            m.d.sync += [
+                cycles_done.eq(cycles_done + 1),
+                at_last.eq(cycles_done == p.max_cycles - 2),  # max_cycles >= 2: never at start
+                over_q.eq(over),
+                stop.eq(finish),
+            ]
             m.d.sync += [cnt.eq(nxt) for cnt, nxt in zip(counts, next_counts, strict=True)]
+            m.d.sync += full.eq(Cat(next_full))
 
-        # --- Result register (the result stream's payload) ---
+        # --- Bubble: hand the result over (the result register is empty: a register, no ready) ---
         res = self.result.payload
+        leave = Signal()
+        m.d.comb += leave.eq(stop & ~self.result.valid)
         with m.If(self.result.ready):
             m.d.sync += self.result.valid.eq(0)
-        with m.If(finish):
-            # compute implies the register is free (or being read now), so nothing is lost.
+        valid_q, winner = map_encoder(over_q, p.nomatch_row, p.tie_break)
+        with m.If(leave):
             map_value = Signal(p.map_width)
             m.d.comb += map_value.eq(winner)
             m.d.sync += [
                 self.result.valid.eq(1),
-                res.map.eq(any_over.replicate(p.map_width) & map_value),
-                res.timeout.eq(~any_over),
-                res.cycles.eq(cycles_done + 1),
-                res.counts.eq(Cat(next_counts)),
+                res.map.eq(valid_q.replicate(p.map_width) & map_value),
+                res.timeout.eq(~valid_q),
+                res.cycles.eq(cycles_done),
+                res.counts.eq(Cat(counts)),
                 running.eq(0),
+                stop.eq(0),
             ]
             if p.nomatch_row:
-                m.d.sync += res.nomatch.eq(any_over & (map_value == rows - 1))
+                m.d.sync += res.nomatch.eq(valid_q & (map_value == rows - 1))
             else:
                 m.d.sync += res.nomatch.eq(0)
 
-        # --- Start: swap in the shadow memory (overrides the end-of-run updates above) ---
+        # --- Start: swap in the shadow memory, in a bubble or when idle (overrides the above) ---
+        start = Signal()
+        m.d.comb += start.eq(shadow_full & (leave | ~running))
         with m.If(start):
             m.d.sync += [a.eq(s) for a, s in zip(active, shadow, strict=True)]
             m.d.sync += [cnt.eq(0) for cnt in counts]
+            m.d.sync += [full.eq(0), at_last.eq(0)]
             m.d.sync += [cycles_done.eq(0), running.eq(1), shadow_full.eq(0)]
 
         # --- Load stream: one beat per handshake into the shadow memory ---

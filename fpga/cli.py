@@ -1,0 +1,197 @@
+"""``bayesmachine synth``: the machine through Yosys and nextpnr, with a report of what it costs and
+how fast it runs (see docs/fpga.md)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from bayesmachine.params import DEFAULT_LANES, DEFAULT_MAX_CYCLES, DEFAULT_WORD_BITS, MachineParams
+
+from .targets import TARGETS, get_target
+
+__all__ = ["register", "measure_cycles", "synth"]
+
+
+def measure_cycles(params: MachineParams, progress: bool = True) -> dict[str, object]:
+    """Compute and wall cycles per pixel of ``params`` on the bundled pair (the model's cycles, and the
+    RTL's per-pixel timing ``pixel_wall_cycles`` on top: loading included)."""
+    from bayesmachine.hdl.machine import pixel_wall_cycles
+    from bayesmachine.host.features import feature_sums
+    from bayesmachine.host.images import bundled_pair
+    from bayesmachine.host.likelihoods import ModelParams, QuantizedTables, likelihood_tables, memory_words
+    from bayesmachine.sim.model import MachineModel
+
+    if not (params.nomatch_row and params.columns == 3):
+        raise ValueError("throughput is measured on a stereo pair: it needs a disparity machine "
+                         "(3 columns and a no-match row); pass --no-throughput")
+    left, right, _ = bundled_pair()
+    model = ModelParams(dmax=params.rows - 2)
+    fl, fr = feature_sums(left), feature_sums(right)
+    qt = QuantizedTables(likelihood_tables(model), params.word_bits)
+    machine = MachineModel(params)
+    cycles = []
+    h = fl.shape[0]
+    step = 32
+    for y in range(0, h, step):
+        if progress:
+            print(f"throughput: model on the bundled pair, map rows {y}-{min(h, y + step)} of {h}",
+                  file=sys.stderr, end="\r")
+        words = memory_words(fl, fr, model, params, rows=slice(y, y + step), qtables=qt)
+        cycles.append(machine.run(words).cycles)
+    if progress:
+        print(file=sys.stderr)
+    c = np.concatenate(cycles)
+    return {
+        "pair": f"bundled Middlebury Motorcycle {left.shape[1]}x{left.shape[0]}, model engine",
+        "pixels": int(c.size),
+        "compute_cycles_per_pixel": round(float(c.mean()), 3),
+        "wall_cycles_per_pixel": round(float(pixel_wall_cycles(params, c).mean()), 3),
+    }
+
+
+def _int(text: str) -> int:
+    return int(text, 0)
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``synth`` subcommand."""
+    p = subparsers.add_parser(
+        "synth",
+        help="synthesize, place and route the machine for an FPGA (Yosys + nextpnr) and report",
+        description="Put the machine (or several, --machines) behind the pin-saving wrapper, run "
+        "Yosys and nextpnr (PyPI WebAssembly wheels: pip install 'bayesmachine[fpga]'), and write "
+        "OUT/report.json and OUT/report.md: resources, fmax, critical path, lanes that fit and the "
+        "throughput measured on the bundled pair. The first call of each tool compiles it (about a "
+        "minute); nextpnr takes minutes on a full machine.",
+    )
+    p.add_argument("--target", required=True, choices=sorted(TARGETS), help="FPGA device")
+    p.add_argument("--dmax", type=int, default=80, help="largest disparity: rows = dmax + 2 (default 80)")
+    p.add_argument("--columns", type=int, default=3, help="data-term operator columns N (default 3)")
+    p.add_argument("--word-bits", type=int, default=DEFAULT_WORD_BITS,
+                   help=f"comparator resolution W (default {DEFAULT_WORD_BITS})")
+    p.add_argument("--counter-max", type=int, default=16, help="n_max (default 16)")
+    p.add_argument("--seed", type=_int, default=1, help="machine seed (default 1)")
+    p.add_argument("--lanes", type=int, default=None,
+                   help=f"likelihood-memory words per load beat (default {DEFAULT_LANES}, or one "
+                   "pixel's words if fewer)")
+    p.add_argument("--max-cycles", type=_int, default=DEFAULT_MAX_CYCLES,
+                   help=f"watchdog (default {DEFAULT_MAX_CYCLES})")
+    p.add_argument("--tie-break", choices=("nomatch-first", "lowest-index"), default="nomatch-first",
+                   help="MAP encoder tie rule (default nomatch-first)")
+    p.add_argument("--prior", choices=("uniform", "loaded"), default="uniform",
+                   help="prior (default uniform)")
+    p.add_argument("--machines", type=int, default=1,
+                   help="machines side by side behind one load and one result stream (default 1)")
+    p.add_argument("--pin-width", type=int, default=8, help="wrapper chunk width in pins (default 8)")
+    p.add_argument("--freq", type=float, default=150.0, help="nextpnr clock target in MHz (default 150)")
+    p.add_argument("--pnr-seed", type=int, default=1, help="nextpnr placement seed (default 1)")
+    p.add_argument("--synth-only", action="store_true",
+                   help="stop after Yosys: resources only, no fmax (for designs too big to route here)")
+    p.add_argument("--no-throughput", action="store_true",
+                   help="skip the model run on the bundled pair (no pixels/s in the report)")
+    p.add_argument("-o", "--output", default=None, help="output directory (default build/synth-TARGET)")
+    p.set_defaults(func=_run)
+
+
+def _run(args: argparse.Namespace) -> int:
+    lanes = {} if args.lanes is None else {"lanes": args.lanes}
+    params = MachineParams.for_disparity(
+        args.dmax, **lanes, columns=args.columns, word_bits=args.word_bits, counter_max=args.counter_max,
+        seed=args.seed, max_cycles=args.max_cycles, tie_break=args.tie_break, prior=args.prior,
+    )
+    out = Path(args.output or f"build/synth-{args.target}")
+    synth(params, args.target, out, machines=args.machines, pin_width=args.pin_width, freq_mhz=args.freq,
+          pnr_seed=args.pnr_seed, place=not args.synth_only, measure=not args.no_throughput)
+    return 0
+
+
+def synth(params: MachineParams, target_name: str, out: Path, *, machines: int = 1, pin_width: int = 8,
+          freq_mhz: float = 150.0, pnr_seed: int = 1, place: bool = True, measure: bool = True,
+          progress: bool = True) -> dict:
+    """The whole flow; returns the report (also written to ``out/report.json`` and ``out/report.md``)."""
+    from amaranth.back import rtlil
+
+    from bayesmachine.hdl.cli import summary
+    from bayesmachine.hdl.lanes import MachineLanes
+    from bayesmachine.hdl.machine import BayesianMachine
+
+    from . import report as rep
+    from .flow import parse_nextpnr, place_and_route, synthesize
+    from .wrapper import PinWrapper
+
+    target = get_target(target_name)
+    if isinstance(machines, bool) or not isinstance(machines, int) or machines < 1:
+        raise ValueError(f"machines must be a positive integer, got {machines!r}")
+    if not freq_mhz > 0:
+        raise ValueError(f"freq must be > 0 MHz, got {freq_mhz}")
+    if params.rng != "lfsr":
+        raise ValueError("synth needs an on-chip random source (rng 'lfsr')")
+    t0 = time.monotonic()
+
+    def say(msg: str) -> None:
+        if progress:
+            print(f"[{time.monotonic() - t0:6.0f} s] {msg}", file=sys.stderr, flush=True)
+
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "report.json").unlink(missing_ok=True)  # never leave a stale report beside new work files
+    core = BayesianMachine(params) if machines == 1 else MachineLanes(params, machines)
+    top = PinWrapper(core, pin_width=pin_width)
+    say(f"elaborating {machines} machine(s) of {params.operators} operators for {target.device}")
+    text = rtlil.convert(top, name="top")
+    cells = synthesize(text, target, out, say)
+    res = rep.resources(target, cells)
+    report: dict = {
+        "target": target.name,
+        "device": target.device,
+        "machine": params.to_dict(),
+        "machine_summary": f"Dmax {params.rows - 2}, N {params.columns}, counter max {params.counter_max}, "
+        f"W {params.word_bits}, {params.lanes} words per load beat",
+        "lanes": machines,
+        "pin_width": pin_width,
+        "cells": cells,
+        "resources": res,
+        "utilization": rep.utilization(target, res),
+    }
+    logic = rep.logic_cells(target, res)
+    report["per_lane"] = {"lut4": logic / machines, "ff": res["ff"] / machines,
+                          "bram": res["bram"] / machines, "dsp": res["dsp"] / machines}
+    report["per_operator"] = {"lut4": round(logic / (machines * params.operators), 2),
+                              "ff": round(res["ff"] / (machines * params.operators), 2)}
+    report["lanes_fit"] = rep.lanes_that_fit(target, report["per_lane"], {})
+    if place:
+        pnr = parse_nextpnr(place_and_route(target, out, freq_mhz, pnr_seed, say))
+        report.update(pnr)
+        report["measured"] = (f"Yosys {target.yosys_synth} and nextpnr place and route of {machines} "
+                              f"machine(s); lanes that fit from synthesis utilization (at most 90 % of "
+                              f"each resource)")
+    else:
+        report.update({"fmax_mhz": None, "critical_path": {}})
+        report["measured"] = f"Yosys {target.yosys_synth} only (no place and route: no fmax)"
+    if measure:
+        say("throughput: running the model on the bundled pair")
+        cyc = measure_cycles(params, progress)
+        tp: dict = dict(cyc)
+        if report["fmax_mhz"]:
+            beat_bits = params.lanes * params.memory_word_width
+            tp.update(rep.throughput(report["fmax_mhz"], machines, cyc["wall_cycles_per_pixel"],
+                                     params.beats_per_pixel, beat_bits))
+            # The lanes that fit, each fed a pixel per beat (the load stream widened to keep up).
+            fit = rep.throughput(report["fmax_mhz"], max(1, report["lanes_fit"]),
+                                 cyc["wall_cycles_per_pixel"], 1,
+                                 params.words_per_pixel * params.memory_word_width)
+            tp["vga_fps_fit"] = fit["vga_fps"]
+            tp["load_bits_per_second_fit"] = fit["load_bits_per_second"]
+        report["throughput"] = tp
+    report["seconds"] = round(time.monotonic() - t0, 1)
+    rep.write_atomic(out / "report.md", rep.markdown(report))
+    rep.write_atomic(out / "report.json", rep.dumps(report))  # last: its presence means a complete run
+    say(f"wrote {out / 'report.json'} and {out / 'report.md'}")
+    if progress:
+        print(summary(params).splitlines()[0])
+        print(rep.markdown(report))
+    return report

@@ -1,0 +1,121 @@
+# amaranth: UnusedElaboratable=no
+"""The FPGA flow: the pin-saving wrapper's protocol (simulated), targets, and a small synthesis run."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import run_sim, small_params
+
+from bayesmachine.fpga.wrapper import PinWrapper
+from bayesmachine.hdl.machine import BayesianMachine
+from bayesmachine.params import MachineParams, ParameterError
+from bayesmachine.sim.model import MachineModel
+from bayesmachine.sim.testbench import pack_beats, unpack_result
+
+
+def _words(params: MachineParams, pixels: int, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    words = rng.integers(0, params.word_one + 1, size=(pixels, params.rows, params.operator_columns))
+    words[rng.random(words.shape) < 0.3] = params.word_one
+    return words.astype(np.int32)
+
+
+def _through_wrapper(core: object, beats: list[int], results: int, result_width: int,
+                     pin_width: int, idle: float, seed: int) -> list[int]:
+    """Drive the wrapper's pins as a host would; return the raw result payloads."""
+    dut = PinWrapper(core, pin_width=pin_width)
+    chunks = [(beat >> (i * pin_width)) & ((1 << pin_width) - 1)
+              for beat in beats for i in range(dut.chunks_in)]
+    got: list[int] = []
+    rng = np.random.default_rng(seed)
+
+    async def bench(ctx):
+        sent, parts = 0, []
+        for _ in range(200_000):
+            send = sent < len(chunks) and ctx.get(dut.din_ready) and rng.random() >= idle
+            ctx.set(dut.din_valid, int(send))
+            if send:
+                ctx.set(dut.din, chunks[sent])
+                sent += 1
+            if ctx.get(dut.dout_valid):
+                parts.append(ctx.get(dut.dout))
+                if len(parts) == dut.chunks_out:
+                    raw = sum(c << (i * pin_width) for i, c in enumerate(parts))
+                    got.append(raw & ((1 << result_width) - 1))
+                    parts = []
+            await ctx.tick()
+            if len(got) == results:
+                return
+        raise AssertionError(f"only {len(got)} of {results} results came out")
+
+    run_sim(dut, bench)
+    return got
+
+
+@pytest.mark.parametrize(("pin_width", "idle"), [(8, 0.0), (3, 0.4), (64, 0.1)])
+def test_wrapper_protocol_matches_model(pin_width: int, idle: float) -> None:
+    params = small_params()
+    words = _words(params, 12, seed=pin_width)
+    core = BayesianMachine(params)
+    beats = [b for pixel in words for b in pack_beats(params, pixel)]
+    raw = _through_wrapper(core, beats, len(words), _result_width(params), pin_width, idle, seed=1)
+    want = MachineModel(params).run(words)
+    for i, r in enumerate(raw):
+        map_, nomatch, timeout, cycles, counts = unpack_result(params, r)
+        assert (map_, bool(nomatch), bool(timeout), cycles) == (
+            want.map[i], want.nomatch[i], want.timeout[i], want.cycles[i]), f"pixel {i}"
+        assert counts == want.counts[i].tolist(), f"pixel {i}"
+
+
+def _result_width(params: MachineParams) -> int:
+    from amaranth.hdl import Shape
+
+    from bayesmachine.hdl.machine import result_layout
+
+    return Shape.cast(result_layout(params)).width
+
+
+def test_wrapper_rejects_bad_parameters() -> None:
+    with pytest.raises(ParameterError, match="pin_width"):
+        PinWrapper(BayesianMachine(small_params()), pin_width=0)
+    with pytest.raises(ParameterError, match="on-chip random source"):
+        PinWrapper(BayesianMachine(small_params(rng="external")))
+
+
+@pytest.mark.parametrize("machines", [1, 3])
+def test_lanes_through_wrapper_match_lanes_model(machines: int) -> None:
+    from bayesmachine.hdl.lanes import MachineLanes
+    from bayesmachine.sim.lanes import LanesModel
+
+    params = small_params()
+    words = _words(params, 14, seed=5)
+    beats = [b for pixel in words for b in pack_beats(params, pixel)]
+    raw = _through_wrapper(MachineLanes(params, machines), beats, len(words), _result_width(params),
+                           8, 0.2, seed=2)
+    model = LanesModel(params, machines)
+    want = model.run(words[:5])  # two calls: the round-robin deal carries over
+    rest = model.run(words[5:])
+    for i, r in enumerate(raw):
+        w = want if i < 5 else rest
+        j = i if i < 5 else i - 5
+        map_, nomatch, timeout, cycles, counts = unpack_result(params, r)
+        assert (map_, bool(nomatch), bool(timeout), cycles) == (
+            w.map[j], w.nomatch[j], w.timeout[j], w.cycles[j]), f"pixel {i}"
+        assert counts == w.counts[j].tolist(), f"pixel {i}"
+    if machines == 1:  # one lane is the machine itself
+        assert MachineModel(params).run(words).equal(LanesModel(params, 1).run(words))
+    else:  # lanes have their own seeds: lane 1's pixels differ from one machine's
+        one = MachineModel(params).run(words)
+        assert not np.array_equal(one.counts, LanesModel(params, machines).run(words).counts)
+
+
+def test_lane_params() -> None:
+    from bayesmachine.params import lane_params
+
+    params = small_params(seed=7)
+    assert lane_params(params, 0) == params
+    seeds = {lane_params(params, i).seed for i in range(50)}
+    assert len(seeds) == 50
+    with pytest.raises(ParameterError, match="lane"):
+        lane_params(params, -1)
