@@ -90,6 +90,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--pin-width", type=int, default=8, help="wrapper chunk width in pins (default 8)")
     p.add_argument("--freq", type=float, default=150.0, help="nextpnr clock target in MHz (default 150)")
     p.add_argument("--pnr-seed", type=int, default=1, help="nextpnr placement seed (default 1)")
+    p.add_argument("--router", choices=("router1", "router2"), default="router2",
+                   help="nextpnr router (default router2: much faster than router1 on a full machine)")
     p.add_argument("--synth-only", action="store_true",
                    help="stop after Yosys: resources only, no fmax (for designs too big to route here)")
     p.add_argument("--no-throughput", action="store_true",
@@ -106,13 +108,14 @@ def _run(args: argparse.Namespace) -> int:
     )
     out = Path(args.output or f"build/synth-{args.target}")
     synth(params, args.target, out, machines=args.machines, pin_width=args.pin_width, freq_mhz=args.freq,
-          pnr_seed=args.pnr_seed, place=not args.synth_only, measure=not args.no_throughput)
+          pnr_seed=args.pnr_seed, place=not args.synth_only, measure=not args.no_throughput,
+          router=args.router)
     return 0
 
 
 def synth(params: MachineParams, target_name: str, out: Path, *, machines: int = 1, pin_width: int = 8,
           freq_mhz: float = 150.0, pnr_seed: int = 1, place: bool = True, measure: bool = True,
-          progress: bool = True) -> dict:
+          progress: bool = True, router: str = "router2") -> dict:
     """The whole flow; returns the report (also written to ``out/report.json`` and ``out/report.md``)."""
     from amaranth.back import rtlil
 
@@ -164,11 +167,11 @@ def synth(params: MachineParams, target_name: str, out: Path, *, machines: int =
                               "ff": round(res["ff"] / (machines * params.operators), 2)}
     report["lanes_fit"] = rep.lanes_that_fit(target, report["per_lane"], {})
     if place:
-        pnr = parse_nextpnr(place_and_route(target, out, freq_mhz, pnr_seed, say))
+        pnr = parse_nextpnr(place_and_route(target, out, freq_mhz, pnr_seed, say, router))
         report.update(pnr)
-        report["measured"] = (f"Yosys {target.yosys_synth} and nextpnr place and route of {machines} "
-                              f"machine(s); lanes that fit from synthesis utilization (at most 90 % of "
-                              f"each resource)")
+        report["measured"] = (f"Yosys {target.yosys_synth} and nextpnr ({router}) place and route of "
+                              f"{machines} machine(s); lanes that fit from synthesis utilization "
+                              f"(at most 90 % of each resource)")
     else:
         report.update({"fmax_mhz": None, "critical_path": {}})
         report["measured"] = f"Yosys {target.yosys_synth} only (no place and route: no fmax)"

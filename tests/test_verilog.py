@@ -63,9 +63,10 @@ def test_verilator_lint_wall(emitted: dict[str, Path], name: str) -> None:
 def _expected_flip_flops(p: MachineParams) -> int:
     lfsrs = p.operators * p.lfsr_bits if p.rng == "lfsr" else 0
     memories = 2 * p.words_per_pixel * p.memory_word_width  # shadow + active likelihood memories
-    counters = p.rows * p.counter_width
+    counters = p.rows * (p.counter_width + 2)  # counts, full flags, overflow flags of the last cycle
     result = 1 + p.map_width + 2 + p.cycle_width + p.rows * p.counter_width  # valid + payload
-    control = p.cycle_width + (max(2, p.beats_per_pixel) - 1).bit_length() + 2  # cycle count, beat, flags
+    # cycle count, beat, flags (running, shadow full, stop, watchdog)
+    control = p.cycle_width + (max(2, p.beats_per_pixel) - 1).bit_length() + 4
     return lfsrs + memories + counters + result + control
 
 
