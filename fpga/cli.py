@@ -169,6 +169,13 @@ def synth(params: MachineParams, target_name: str, out: Path, *, machines: int =
     if place:
         pnr = parse_nextpnr(place_and_route(target, out, freq_mhz, pnr_seed, say, router))
         report.update(pnr)
+        # Placed logic cells (a slice half or an iCE40 logic cell holds a LUT and a flip-flop) can
+        # bind before LUTs or flip-flops alone do: count lanes against them too.
+        for key in ("TRELLIS_COMB", "TRELLIS_FF", "ICESTORM_LC"):
+            u = pnr["pnr_utilization"].get(key)
+            if u and u["used"]:
+                fit = int(0.9 * u["available"] // (u["used"] / machines))
+                report["lanes_fit"] = min(report["lanes_fit"], fit)
         report["measured"] = (f"Yosys {target.yosys_synth} and nextpnr ({router}) place and route of "
                               f"{machines} machine(s); lanes that fit from synthesis utilization "
                               f"(at most 90 % of each resource)")

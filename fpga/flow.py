@@ -120,6 +120,8 @@ def parse_nextpnr(report: dict) -> dict:
         crit = {
             "start": steps[0]["from"]["cell"],
             "end": steps[-1]["to"]["cell"],
+            "start_net": nets[0] if nets else "",
+            "end_net": nets[-1] if nets else "",
             "nets": nets,
             "delay_ns": round(logic + routing, 3),
             "logic_ns": round(logic, 3),
@@ -129,4 +131,4 @@ def parse_nextpnr(report: dict) -> dict:
     util = {k: {"used": v["used"], "available": v["available"]}
             for k, v in report.get("utilization", {}).items() if v.get("used")}
     return {"clock": clock, "fmax_mhz": round(float(f["achieved"]), 2),
-            "constraint_mhz": f.get("constraint"), "critical_path": crit, "utilization": util}
+            "constraint_mhz": f.get("constraint"), "critical_path": crit, "pnr_utilization": util}

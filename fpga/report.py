@@ -128,7 +128,8 @@ def markdown(report: dict) -> str:
                  f"Per lane: {pl['lut4']:,.0f} LUT4 sites, {pl['ff']:,.0f} FF.")
     cp = report.get("critical_path") or {}
     if cp:
-        lines += ["", f"Critical path: {cp['start']} -> {cp['end']}: {cp['delay_ns']:.2f} ns "
+        lines += ["", f"Critical path: {cp['start']} (net {cp['start_net']}) -> {cp['end']} "
+                  f"(net {cp['end_net']}): {cp['delay_ns']:.2f} ns "
                   f"({cp['logic_ns']:.2f} ns logic, {cp['routing_ns']:.2f} ns routing, "
                   f"{cp['levels']} logic steps)."]
     if tp:

