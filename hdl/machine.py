@@ -158,12 +158,14 @@ class BayesianMachine(wiring.Component):
         # flip-flop starts at a register instead of a carry chain. With numbers from a port
         # (rng = "external") they arrive in their cycle and are compared then.
         bits: list[Value] = []
+        next_bits: list[Value] = []  # the next compute cycle's bits, seen from a compute cycle
         if next_numbers:
             for o in range(ops):
                 g = o // cols // rows_per_group
                 bit_q = Signal(name=f"bit_{o // cols}_{o % cols}")
+                next_bits.append(stochastic_operator(1, next_numbers[o], active[o]))
                 with m.If(compute_rep[g]):
-                    m.d.sync += bit_q.eq(stochastic_operator(1, next_numbers[o], active[o]))
+                    m.d.sync += bit_q.eq(next_bits[o])
                 with m.Elif(start_rep[g]):
                     m.d.sync += bit_q.eq(stochastic_operator(1, numbers[o], shadow[o]))
                 bits.append(bit_q)
@@ -186,9 +188,30 @@ class BayesianMachine(wiring.Component):
             next_counts.append(nxt)
             next_full.append(nfull)
 
+        # The stop decision needs only whether any row overflows (the encoder works in the bubble).
+        # With prefetched comparators that too is known a cycle early, per group of rows: the
+        # next cycle's ``row & full`` from the next bits and the next full flags, ORed over the
+        # group's rows into one flip-flop (0 after a swap: the counters restart empty). The
+        # stop is then an OR of one flip-flop per group.
+        if next_bits:
+            over_group = [Signal(name=f"over_group_{g}") for g in range(groups)]
+            for g in range(groups):
+                terms = []
+                for r in range(g * rows_per_group, min(rows, (g + 1) * rows_per_group)):
+                    row_next = Const(1, 1)
+                    for c in range(cols):
+                        row_next = row_next & next_bits[r * cols + c]
+                    terms.append(row_next & next_full[r])
+                with m.If(compute_rep[g]):
+                    m.d.sync += over_group[g].eq(Cat(terms).any())
+                with m.Elif(start_rep[g]):
+                    m.d.sync += over_group[g].eq(0)
+            any_over = Cat(over_group).any()
+        else:
+            any_over = over.any()
+
         # The watchdog, registered too: ``at_last`` is high in compute cycle k == max_cycles.
         at_last = Signal()
-        any_over = over.any()  # a bare OR over the rows: the encoder works in the bubble
         finish = Signal()
         m.d.comb += finish.eq(compute & (any_over | at_last))
         over_q = Signal(rows)  # the overflow flags of the last compute cycle, for the encoder
