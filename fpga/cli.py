@@ -176,6 +176,7 @@ def synth(params: MachineParams, target_name: str, out: Path, *, machines: int =
             if u and u["used"]:
                 fit = int(0.9 * u["available"] // (u["used"] / machines))
                 report["lanes_fit"] = min(report["lanes_fit"], fit)
+        report["lanes_fit"] = max(report["lanes_fit"], machines)  # these just placed and routed
         report["measured"] = (f"Yosys {target.yosys_synth} and nextpnr ({router}) place and route of "
                               f"{machines} machine(s); lanes that fit from synthesis utilization "
                               f"(at most 90 % of each resource)")

@@ -65,9 +65,13 @@ def _expected_flip_flops(p: MachineParams) -> int:
     memories = 2 * p.words_per_pixel * p.memory_word_width  # shadow + active likelihood memories
     counters = p.rows * (p.counter_width + 2)  # counts, full flags, overflow flags of the last cycle
     result = 1 + p.map_width + 2 + p.cycle_width + p.rows * p.counter_width  # valid + payload
-    # cycle count, beat, flags (running, shadow full, stop, watchdog)
-    control = p.cycle_width + (max(2, p.beats_per_pixel) - 1).bit_length() + 4
-    return lfsrs + memories + counters + result + control
+    # cycle count, beat, flags (running, shadow full, stop, watchdog), the compute and start enables'
+    # registered copies (identical, so plain `synth` merges them into one each)
+    control = p.cycle_width + (max(2, p.beats_per_pixel) - 1).bit_length() + 4 + 2
+    # With LFSRs: the prefetched comparators and each group of rows' prefetched overflow.
+    groups = -(-p.rows // max(1, 32 // p.operator_columns))
+    prefetch = p.operators + groups if p.rng == "lfsr" else 0
+    return lfsrs + memories + counters + result + control + prefetch
 
 
 @needs_yosys
