@@ -38,7 +38,7 @@ from .rng import lfsr_next_state_expr, lfsr_specs
 __all__ = ["BUBBLE_CYCLES", "BayesianMachine", "load_layout", "pixel_wall_cycles", "result_layout"]
 
 BUBBLE_CYCLES = 1  # clock cycles per run after its last compute cycle (the registered stop)
-_GROUP_OPERATORS = 32  # operators per registered copy of the compute and start enables
+_GROUP_OPERATORS = 12  # operators per registered copy of the compute and start enables
 
 
 def pixel_wall_cycles(params: MachineParams, cycles: np.ndarray) -> np.ndarray:
@@ -265,15 +265,19 @@ class BayesianMachine(wiring.Component):
         accept = self.load.valid & self.load.ready
 
         # --- Next values of the replicated enables (the registers' updates above, one cycle early) ---
+        # Written as a last 2:1 choice on ``compute`` so that the OR over the rows (``fin``), the
+        # late signal, enters the last gate only: in a compute cycle there is no start or leave,
+        # running stays 1 and stop becomes ``fin``.
         fin = any_over | at_last
         shadow_full_n = ~start & (shadow_full | (accept & (beat == p.beats_per_pixel - 1)))
         valid_n = leave | (self.result.valid & ~self.result.ready)
-        stop_n = Mux(compute, fin, stop & ~leave)
+        stop_idle = stop & ~leave  # stop's next value outside compute cycles
         running_n = start | (running & ~leave)
         compute_n, start_n = Signal(), Signal()
         m.d.comb += [
-            compute_n.eq(running_n & ~stop_n),
-            start_n.eq(shadow_full_n & ((stop_n & ~valid_n) | ~running_n)),
+            compute_n.eq(Mux(compute, ~fin, running_n & ~stop_idle)),
+            start_n.eq(Mux(compute, fin & shadow_full_n & ~valid_n,
+                           shadow_full_n & ((stop_idle & ~valid_n) | ~running_n))),
         ]
         m.d.sync += [c.eq(compute_n) for c in compute_rep] + [s.eq(start_n) for s in start_rep]
         write_beat = Signal(p.beats_per_pixel)  # one-hot: which words this beat writes
