@@ -35,20 +35,26 @@ from .encoder import map_encoder
 from .operator import stochastic_operator
 from .rng import lfsr_next_state_expr, lfsr_specs
 
-__all__ = ["BUBBLE_CYCLES", "BayesianMachine", "load_layout", "pixel_wall_cycles", "result_layout"]
+__all__ = [
+    "BUBBLE_CYCLES", "GROUP_OPERATORS", "LOAD_LATENCY", "BayesianMachine", "load_layout", "pixel_wall_cycles",
+    "result_layout",
+]
 
 BUBBLE_CYCLES = 1  # clock cycles per run after its last compute cycle (the registered stop)
-_GROUP_OPERATORS = 12  # operators per registered copy of the compute and start enables
+LOAD_LATENCY = 1  # a load beat is written into the shadow memory the cycle after its handshake
+GROUP_OPERATORS = 12  # operators per registered copy of the compute and start enables
 
 
 def pixel_wall_cycles(params: MachineParams, cycles: np.ndarray) -> np.ndarray:
     """Clock cycles per pixel in steady state (loads keep coming, results are taken at once).
 
     A run of k compute cycles is followed by its bubble, in which the next pixel is swapped in if
-    its ``beats_per_pixel`` load beats have arrived (they start the cycle after the previous
-    swap): ``max(k, beats_per_pixel) + BUBBLE_CYCLES``.
+    its ``beats_per_pixel`` load beats have been written (they start the cycle after the previous
+    swap, and each is written the cycle after its handshake):
+    ``max(k, beats_per_pixel + LOAD_LATENCY) + BUBBLE_CYCLES``.
     """
-    return np.maximum(np.asarray(cycles, dtype=np.int64), params.beats_per_pixel) + BUBBLE_CYCLES
+    cycles = np.asarray(cycles, dtype=np.int64)
+    return np.maximum(cycles, params.beats_per_pixel + LOAD_LATENCY) + BUBBLE_CYCLES
 
 
 def load_layout(params: MachineParams) -> data.ArrayLayout:
@@ -110,7 +116,13 @@ class BayesianMachine(wiring.Component):
         active = [Signal(p.memory_word_width, name=f"word_{o // cols}_{o % cols}", reset_less=True)
                   for o in range(ops)]
         shadow_full = Signal()
-        beat = Signal(range(max(2, p.beats_per_pixel)))
+        nbeats = p.beats_per_pixel
+        beat = Signal(nbeats, init=1)  # one-hot: the beat the next handshake carries
+        # Registered load: a beat is taken into ``load_q`` and written into the shadow memory the
+        # cycle after, under a registered one-hot enable (no logic between a flip-flop and the
+        # enables of a beat's words, which are spread over the whole matrix).
+        load_q = Signal.like(self.load.payload)
+        write_q = Signal(nbeats)
 
         # --- Run state ---
         running = Signal()
@@ -128,7 +140,7 @@ class BayesianMachine(wiring.Component):
         # thousands of flip-flops: each group of rows gets its own registered copy, loaded with
         # the enable's next value (``compute_n``/``start_n`` below), so no net fans out further
         # than a group. The flow keeps these ``_rep`` registers apart (docs/fpga.md).
-        rows_per_group = max(1, _GROUP_OPERATORS // cols)
+        rows_per_group = max(1, GROUP_OPERATORS // cols)
         groups = -(-rows // rows_per_group)
         compute_rep = [Signal(name=f"compute_rep{g}") for g in range(groups)]
         start_rep = [Signal(name=f"start_rep{g}") for g in range(groups)]
@@ -261,7 +273,8 @@ class BayesianMachine(wiring.Component):
                 m.d.sync += [counts[r].eq(0), full[r].eq(0)]
 
         # --- Load stream: one beat per handshake into the shadow memory ---
-        m.d.comb += self.load.ready.eq(~shadow_full)
+        # Not ready while the shadow is full or its last beat is being written.
+        m.d.comb += self.load.ready.eq(~shadow_full & ~write_q[nbeats - 1])
         accept = self.load.valid & self.load.ready
 
         # --- Next values of the replicated enables (the registers' updates above, one cycle early) ---
@@ -269,7 +282,7 @@ class BayesianMachine(wiring.Component):
         # late signal, enters the last gate only: in a compute cycle there is no start or leave,
         # running stays 1 and stop becomes ``fin``.
         fin = any_over | at_last
-        shadow_full_n = ~start & (shadow_full | (accept & (beat == p.beats_per_pixel - 1)))
+        shadow_full_n = ~start & (shadow_full | write_q[nbeats - 1])
         valid_n = leave | (self.result.valid & ~self.result.ready)
         stop_idle = stop & ~leave  # stop's next value outside compute cycles
         running_n = start | (running & ~leave)
@@ -280,18 +293,16 @@ class BayesianMachine(wiring.Component):
                            shadow_full_n & ((stop_idle & ~valid_n) | ~running_n))),
         ]
         m.d.sync += [c.eq(compute_n) for c in compute_rep] + [s.eq(start_n) for s in start_rep]
-        write_beat = Signal(p.beats_per_pixel)  # one-hot: which words this beat writes
-        m.d.comb += write_beat.eq(Cat(accept & (beat == b) for b in range(p.beats_per_pixel)))
-        for b in range(p.beats_per_pixel):
-            with m.If(write_beat[b]):
+        m.d.sync += write_q.eq(Mux(accept, beat, 0))
+        with m.If(accept):
+            m.d.sync += [load_q.eq(self.load.payload), beat.eq(beat.rotate_left(1))]
+        for b in range(nbeats):
+            with m.If(write_q[b]):
                 for lane in range(p.lanes):
                     o = b * p.lanes + lane
                     if o < ops:  # unused lanes of the last beat are ignored
-                        m.d.sync += shadow[o].eq(self.load.payload[lane])
-        with m.If(accept):
-            with m.If(beat == p.beats_per_pixel - 1):
-                m.d.sync += [beat.eq(0), shadow_full.eq(1)]
-            with m.Else():
-                m.d.sync += beat.eq(beat + 1)
+                        m.d.sync += shadow[o].eq(load_q[lane])
+        with m.If(write_q[nbeats - 1]):
+            m.d.sync += shadow_full.eq(1)
 
         return m

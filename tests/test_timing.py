@@ -10,7 +10,7 @@ from amaranth.hdl import Module, Signal
 from conftest import run_sim, small_params
 
 from bayesmachine.hdl.counters import overflow_counter_full, overflow_counter_full_twin, overflow_counter_twin
-from bayesmachine.hdl.machine import pixel_wall_cycles
+from bayesmachine.hdl.machine import LOAD_LATENCY, pixel_wall_cycles
 from bayesmachine.sim.model import MachineModel
 from bayesmachine.sim.pysim import PysimEngine
 
@@ -42,7 +42,8 @@ def test_counter_with_full_flag_matches_twins(n_max: int) -> None:
 @pytest.mark.parametrize(("lanes", "counter_max"), [(3, 4), (1, 1), (1, 3)])
 def test_pixel_wall_cycles_match_the_rtl(lanes: int, counter_max: int) -> None:
     # Loads always offered and results always taken: from one swap to the next, a pixel takes its
-    # per-pixel figure; before the first swap come the first pixel's load beats, and the last
+    # per-pixel figure; before the first swap come the first pixel's load beats (written a cycle
+    # after their handshakes), and the last
     # pixel (no load after it) takes its compute cycles, its bubble and the hand-over.
     params = small_params(lanes=lanes, counter_max=counter_max, max_cycles=60)
     rng = np.random.default_rng(lanes * 10 + counter_max)
@@ -54,4 +55,5 @@ def test_pixel_wall_cycles_match_the_rtl(lanes: int, counter_max: int) -> None:
     if counter_max == 1:
         assert (got.cycles < params.beats_per_pixel).any()  # the load-bound case is covered
     last = int(got.cycles[-1]) + 1
-    assert engine.clock_cycles == params.beats_per_pixel + int(per_pixel[:-1].sum()) + last + 2
+    first = params.beats_per_pixel + LOAD_LATENCY
+    assert engine.clock_cycles == first + int(per_pixel[:-1].sum()) + last + 2

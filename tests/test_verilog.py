@@ -11,6 +11,7 @@ import pytest
 
 from bayesmachine.hdl import cli as hdl_cli
 from bayesmachine.hdl.encoder import MAPEncoder
+from bayesmachine.hdl.machine import GROUP_OPERATORS
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.verilator import which
 
@@ -65,11 +66,12 @@ def _expected_flip_flops(p: MachineParams) -> int:
     memories = 2 * p.words_per_pixel * p.memory_word_width  # shadow + active likelihood memories
     counters = p.rows * (p.counter_width + 2)  # counts, full flags, overflow flags of the last cycle
     result = 1 + p.map_width + 2 + p.cycle_width + p.rows * p.counter_width  # valid + payload
-    # cycle count, beat, flags (running, shadow full, stop, watchdog), the compute and start enables'
+    # cycle count, flags (running, shadow full, stop, watchdog), the compute and start enables'
     # registered copies (identical, so plain `synth` merges them into one each)
-    control = p.cycle_width + (max(2, p.beats_per_pixel) - 1).bit_length() + 4 + 2
+    # the registered load (one-hot beat, one-hot write enables, the beat's words)
+    control = p.cycle_width + 4 + 2 + 2 * p.beats_per_pixel + p.lanes * p.memory_word_width
     # With LFSRs: the prefetched comparators and each group of rows' prefetched overflow.
-    groups = -(-p.rows // max(1, 32 // p.operator_columns))
+    groups = -(-p.rows // max(1, GROUP_OPERATORS // p.operator_columns))
     prefetch = p.operators + groups if p.rng == "lfsr" else 0
     return lfsrs + memories + counters + result + control + prefetch
 
