@@ -9,8 +9,9 @@ per-cycle semantics, ports and word order are in ``docs/architecture.md``; the N
 
 Timing (``docs/architecture.md``, "Timing"):
 
-- ``load`` writes one beat per handshake into the *shadow* likelihood memory;
-  ``load.ready`` is low only while the shadow holds a complete pixel not yet started.
+- ``load`` takes one beat per handshake and writes it into the *shadow* likelihood memory the
+  cycle after; ``load.ready`` is low while the shadow holds a complete pixel not yet started
+  (or its last beat is being written).
 - A run's compute cycles advance the LFSRs, counters and cycle count. The cycle after the last
   one is the run's *bubble* (the stop decision is registered): the result register takes the
   result, and a complete shadow is swapped into the *active* memory, so runs go back to back
