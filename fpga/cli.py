@@ -134,6 +134,9 @@ def synth(params: MachineParams, target_name: str, out: Path, *, machines: int =
         raise ValueError(f"freq must be > 0 MHz, got {freq_mhz}")
     if params.rng != "lfsr":
         raise ValueError("synth needs an on-chip random source (rng 'lfsr')")
+    if measure and not (params.nomatch_row and params.columns == 3):
+        raise ValueError("throughput is measured on a stereo pair: it needs a disparity machine "
+                         "(3 columns and a no-match row); pass --no-throughput")
     t0 = time.monotonic()
 
     def say(msg: str) -> None:

@@ -180,3 +180,26 @@ def test_synth_command_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]
     with pytest.raises(SystemExit):
         main(["synth", "--target", "virtex-7"])
     assert "invalid choice" in capsys.readouterr().err
+    from bayesmachine.fpga.cli import synth
+
+    out = tmp_path / "never"
+    with pytest.raises(ValueError, match="disparity machine"):  # refused before any tool runs
+        synth(small_params(nomatch_row=False), "ice40-hx8k", out, progress=False)
+    assert not out.exists()
+
+
+@needs_fpga_tools
+@pytest.mark.slow
+def test_full_lane_on_ecp5_85k(tmp_path: Path) -> None:
+    # One full lane (Dmax 80, N 3, counter max 16) through Yosys and nextpnr: minutes.
+    from bayesmachine.fpga.cli import synth
+
+    params = MachineParams.for_disparity(80)
+    report = synth(params, "ecp5-85k", tmp_path / "out", measure=True, progress=False)
+    assert report["resources"]["ff"] >= params.operators * (params.lfsr_bits + 2 * params.memory_word_width)
+    assert report["fmax_mhz"] > 50
+    assert report["lanes_fit"] >= 1
+    tp = report["throughput"]
+    assert tp["wall_cycles_per_pixel"] == pytest.approx(tp["compute_cycles_per_pixel"] + 1, abs=0.01)
+    assert tp["pixels_per_second"] == pytest.approx(report["fmax_mhz"] * 1e6 / tp["wall_cycles_per_pixel"],
+                                                    rel=1e-3)
