@@ -21,6 +21,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from bayesmachine.fpga.cli import register as register_fpga
     from bayesmachine.hdl.cli import register as register_hdl
     from bayesmachine.host.cli import register as register_host
 
@@ -32,6 +33,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     register_hdl(sub)
     register_host(sub)
+    register_fpga(sub)
     return parser
 
 

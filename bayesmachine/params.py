@@ -30,6 +30,7 @@ __all__ = [
     "DEFAULT_PRIOR",
     "DEFAULT_TIE_BREAK",
     "DEFAULT_LANES",
+    "lane_params",
 ]
 
 # Random source kinds; each has an entry in bayesmachine.sources.SOURCE_KINDS (same order).
@@ -255,3 +256,18 @@ class MachineParams:
         """A short stable hash of the parameters (build caches key on it)."""
         blob = json.dumps(self.to_dict(), sort_keys=True).encode()
         return hashlib.sha256(blob).hexdigest()[:16]
+
+
+_LANE_SEED_STEP = 0x9E3779B97F4A7C15  # odd (2**64 / golden ratio): distinct seeds for 2**64 lanes
+
+
+def lane_params(params: MachineParams, lane: int) -> MachineParams:
+    """The parameters of machine ``lane`` of a row of lanes (``hdl.lanes.MachineLanes``).
+
+    Lane 0 is the machine itself; lane i has seed ``(seed + i * 0x9E3779B97F4A7C15) mod 2**64``,
+    so every lane draws its own LFSR polynomials and start states.
+    """
+    _check_int("lane", lane, 0)
+    from dataclasses import replace
+
+    return replace(params, seed=(params.seed + lane * _LANE_SEED_STEP) % (1 << 64))

@@ -8,37 +8,59 @@ overflow(s) stop the run and the MAP encoder (``encoder.py``) names the winner. 
 per-cycle semantics, ports and word order are in ``docs/architecture.md``; the NumPy model
 ``bayesmachine.sim.model`` computes the same thing bit for bit.
 
-Timing:
+Timing (``docs/architecture.md``, "Timing"):
 
-- ``load`` writes one beat per handshake into the *shadow* likelihood memory. When it holds a
-  complete pixel and the machine is idle or ending a run in this cycle, the shadow is copied
-  into the *active* memory and the next run starts: runs go back to back with no idle cycle.
-  ``load.ready`` is low only while the shadow holds a complete pixel not yet started.
-- A compute cycle is a cycle of a run in which the result register can take a result
-  (empty, or being read this cycle). Only compute cycles advance the random source, counters and cycle
-  count, so back-pressure on ``result`` stalls the machine without changing any result.
+- ``load`` takes one beat per handshake and writes it into the *shadow* likelihood memory the
+  cycle after; ``load.ready`` is low while the shadow holds a complete pixel not yet started
+  (or its last beat is being written).
+- A run's compute cycles advance the random source, counters and cycle count. The cycle after
+  the last one is the run's *bubble* (the stop decision is registered): the result register
+  takes the result, and a complete shadow is swapped into the *active* memory, so runs go back
+  to back with one bubble between them. Back-pressure on ``result`` holds the bubble, never a
+  compute cycle, so it changes no result.
 
 The random source and the MAP encoder are direct submodules (depth 1), the very components
-their unit tests drive; the operator matrix is built by ``operator.operator_rows``, the
-function the operator test's component wraps (as a submodule its port copies of 246 words and
-numbers would slow Amaranth's Python simulator, which also slows with hierarchy depth).
+their unit tests drive; the operator matrix is built by ``operator.operator_bits`` and
+``operator.bus_rows`` (``operator_rows`` is their composition, the function the operator test's
+component wraps; as a submodule its port copies of 246 words and numbers would slow Amaranth's
+Python simulator, which also slows with hierarchy depth).
 """
 
 from __future__ import annotations
 
-from amaranth.hdl import Cat, Module, Signal, unsigned
+import numpy as np
+from amaranth.hdl import Cat, Module, Mux, Signal, Value, unsigned
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from bayesmachine.params import MachineParams
 from bayesmachine.sources import source_kind
 
-from .counters import overflow_counter
+from .counters import overflow_counter_full
 from .encoder import MAPEncoder
-from .operator import operator_rows
+from .operator import bus_rows, operator_bits, operator_rows
 from .sources import random_source
 
-__all__ = ["BayesianMachine", "load_layout", "result_layout"]
+__all__ = [
+    "BUBBLE_CYCLES", "GROUP_OPERATORS", "LOAD_LATENCY", "BayesianMachine", "load_layout", "pixel_wall_cycles",
+    "result_layout",
+]
+
+BUBBLE_CYCLES = 1  # clock cycles per run after its last compute cycle (the registered stop)
+LOAD_LATENCY = 1  # a load beat is written into the shadow memory the cycle after its handshake
+GROUP_OPERATORS = 12  # operators per registered copy of the compute and start enables
+
+
+def pixel_wall_cycles(params: MachineParams, cycles: np.ndarray) -> np.ndarray:
+    """Clock cycles per pixel in steady state (loads keep coming, results are taken at once).
+
+    A run of k compute cycles is followed by its bubble, in which the next pixel is swapped in if
+    its ``beats_per_pixel`` load beats have been written (they start the cycle after the previous
+    swap, and each is written the cycle after its handshake):
+    ``max(k, beats_per_pixel + LOAD_LATENCY) + BUBBLE_CYCLES``.
+    """
+    cycles = np.asarray(cycles, dtype=np.int64)
+    return np.maximum(cycles, params.beats_per_pixel + LOAD_LATENCY) + BUBBLE_CYCLES
 
 
 def load_layout(params: MachineParams) -> data.ArrayLayout:
@@ -101,96 +123,193 @@ class BayesianMachine(wiring.Component):
         active = [Signal(p.memory_word_width, name=f"word_{o // cols}_{o % cols}", reset_less=True)
                   for o in range(ops)]
         shadow_full = Signal()
-        beat = Signal(range(max(2, p.beats_per_pixel)))
+        nbeats = p.beats_per_pixel
+        beat = Signal(nbeats, init=1)  # one-hot: the beat the next handshake carries
+        # Registered load: a beat is taken into ``load_q`` and written into the shadow memory the
+        # cycle after, under a registered one-hot enable (no logic between a flip-flop and the
+        # enables of a beat's words, which are spread over the whole matrix).
+        load_q = Signal.like(self.load.payload)
+        write_q = Signal(nbeats)
 
         # --- Run state ---
         running = Signal()
-        cycles_done = Signal(p.cycle_width)  # compute cycles of this run so far (k - 1)
+        cycles_done = Signal(p.cycle_width)  # compute cycles of this run so far
         counts = [Signal(p.counter_width, name=f"count_{r}") for r in range(rows)]
 
+        # --- Control path (registered stop; see "Timing" in docs/architecture.md) ---
+        # ``stop`` is the registered end-of-run decision: high in the bubble cycle that follows a
+        # run's last compute cycle. Nothing advances in a bubble, so results do not depend on it;
+        # every wide enable below is a function of registers only, never of the matrix.
+        stop = Signal()
         compute = Signal()
-        m.d.comb += compute.eq(running & (~self.result.valid | self.result.ready))
+        m.d.comb += compute.eq(running & ~stop)
+        # The matrix's enables (compute: LFSRs, counters; start: the shadow-to-active copy) reach
+        # thousands of flip-flops: each group of rows gets its own registered copy, loaded with
+        # the enable's next value (``compute_n``/``start_n`` below), so no net fans out further
+        # than a group. The flow keeps these ``_rep`` registers apart (docs/fpga.md).
+        rows_per_group = max(1, GROUP_OPERATORS // cols)
+        groups = -(-rows // rows_per_group)
+        compute_rep = [Signal(name=f"compute_rep{g}") for g in range(groups)]
+        start_rep = [Signal(name=f"start_rep{g}") for g in range(groups)]
 
         # --- Random numbers: advance on compute cycles only; a Sobol block restarts per pixel ---
-        source, sources = random_source(p)
+        # An on-chip source also gives the next compute cycle's numbers a cycle early
+        # (``next_numbers`` after a compute cycle, ``restart_numbers`` after a run's start), so
+        # each operator's comparator is registered ("prefetched", below).
+        source, sources = random_source(p, [o // cols // rows_per_group for o in range(ops)])
         if source is not None:
             m.submodules.source = source
-            m.d.comb += source.enable.eq(compute)
+            if len(source.enable) == groups:  # per-operator LFSRs: one enable per group of rows
+                m.d.comb += source.enable.eq(Cat(compute_rep))
+            else:
+                m.d.comb += source.enable.eq(compute)
             numbers = source.numbers
         else:
             numbers = [self.entropy[o] for o in range(ops)]
             m.d.comb += self.entropy_ready.eq(compute)
 
         # --- Operator matrix: the stochastic bus ---
+        # Prefetched comparators (on-chip sources): ``bit_q[o]`` holds this compute cycle's
+        # ``number < word``. It is loaded in the cycle before: in a compute cycle from the next
+        # numbers and the same word, in a swap from the numbers the source gives after the
+        # start (a Sobol block restarts) and the incoming (shadow) word. Same bits as comparing
+        # in the cycle itself, but the matrix's path to the stop flip-flop starts at a register
+        # instead of a carry chain. With numbers from a port (off-chip sources) they arrive in
+        # their cycle and are compared then.
+        next_bits: list[Value] = []  # the next compute cycle's bits, seen from a compute cycle
+        if source is not None:
+            next_bits = operator_bits(source.next_numbers, active, sources)
+            start_bits = operator_bits(source.restart_numbers, shadow, sources)
+            bits = []
+            for o in range(ops):
+                g = o // cols // rows_per_group
+                bit_q = Signal(name=f"bit_{o // cols}_{o % cols}")
+                with m.If(compute_rep[g]):
+                    m.d.sync += bit_q.eq(next_bits[o])
+                with m.Elif(start_rep[g]):
+                    m.d.sync += bit_q.eq(start_bits[o])
+                bits.append(bit_q)
+            row_bits = bus_rows(bits, rows, cols)
+        else:
+            row_bits = operator_rows(numbers, active, rows, cols, sources)
         row = Signal(rows)
-        m.d.comb += row.eq(operator_rows(numbers, active, rows, cols, sources))
+        m.d.comb += row.eq(row_bits)
 
-        # --- Overflow counters ---
+        # --- Overflow counters, with registered "full" flags (count == n_max) ---
+        full = Signal(rows)
         over = Signal(rows)
-        next_counts = []
+        next_counts, next_full = [], []
         for r in range(rows):
-            ov, nxt = overflow_counter(row[r], counts[r], p.counter_max)
+            ov, nxt, nfull = overflow_counter_full(row[r], counts[r], full[r], p.counter_max)
             m.d.comb += over[r].eq(ov)
             next_counts.append(nxt)
+            next_full.append(nfull)
 
-        # --- MAP encoder and end of run ---
-        m.submodules.encoder = encoder = MAPEncoder(rows, nomatch_row=p.nomatch_row, tie_break=p.tie_break)
-        m.d.comb += encoder.over.eq(over)
-        any_over, winner = encoder.valid, encoder.index
-        last_cycle = cycles_done == p.max_cycles - 1  # this cycle is k == max_cycles
+        # The stop decision needs only whether any row overflows (the encoder works in the bubble).
+        # With prefetched comparators that too is known a cycle early, per group of rows: the
+        # next cycle's ``row & full`` from the next bits and the next full flags, ORed over the
+        # group's rows into one flip-flop (0 after a swap: the counters restart empty). The
+        # stop is then an OR of one flip-flop per group.
+        if next_bits:
+            over_group = [Signal(name=f"over_group_{g}") for g in range(groups)]
+            for g in range(groups):
+                terms = []
+                for r in range(g * rows_per_group, min(rows, (g + 1) * rows_per_group)):
+                    row_next = bus_rows(next_bits[r * cols:(r + 1) * cols], 1, cols)
+                    terms.append(row_next & next_full[r])
+                with m.If(compute_rep[g]):
+                    m.d.sync += over_group[g].eq(Cat(terms).any())
+                with m.Elif(start_rep[g]):
+                    m.d.sync += over_group[g].eq(0)
+            any_over = Cat(over_group).any()
+        else:
+            any_over = over.any()
+
+        # The watchdog, registered too: ``at_last`` is high in compute cycle k == max_cycles.
+        at_last = Signal()
         finish = Signal()
-        m.d.comb += finish.eq(compute & (any_over | last_cycle))
-        start = Signal()
-        m.d.comb += start.eq(shadow_full & (~running | finish))
-        if source is not None and "restart" in source.signature.members:
-            m.d.comb += source.restart.eq(start)
+        m.d.comb += finish.eq(compute & (any_over | at_last))
+        over_q = Signal(rows)  # the overflow flags of the last compute cycle, for the encoder
 
         with m.If(compute):
-            m.d.sync += cycles_done.eq(cycles_done + 1)
-            m.d.sync += [cnt.eq(nxt) for cnt, nxt in zip(counts, next_counts, strict=True)]
+            m.d.sync += [
+                cycles_done.eq(cycles_done + 1),
+                at_last.eq(cycles_done == p.max_cycles - 2),  # max_cycles >= 2: never at start
+                stop.eq(finish),
+            ]
+        for r in range(rows):
+            with m.If(compute_rep[r // rows_per_group]):
+                m.d.sync += [counts[r].eq(next_counts[r]), full[r].eq(next_full[r]), over_q[r].eq(over[r])]
 
-        # --- Result register (the result stream's payload) ---
+        # --- Bubble: hand the result over (the result register is empty: a register, no ready) ---
         res = self.result.payload
+        leave = Signal()
+        m.d.comb += leave.eq(stop & ~self.result.valid)
         with m.If(self.result.ready):
             m.d.sync += self.result.valid.eq(0)
-        with m.If(finish):
-            # compute implies the register is free (or being read now), so nothing is lost.
+        m.submodules.encoder = encoder = MAPEncoder(rows, nomatch_row=p.nomatch_row, tie_break=p.tie_break)
+        m.d.comb += encoder.over.eq(over_q)
+        valid_q, winner = encoder.valid, encoder.index
+        with m.If(leave):
             map_value = Signal(p.map_width)
             m.d.comb += map_value.eq(winner)
             m.d.sync += [
                 self.result.valid.eq(1),
-                res.map.eq(any_over.replicate(p.map_width) & map_value),
-                res.timeout.eq(~any_over),
-                res.cycles.eq(cycles_done + 1),
-                res.counts.eq(Cat(next_counts)),
+                res.map.eq(valid_q.replicate(p.map_width) & map_value),
+                res.timeout.eq(~valid_q),
+                res.cycles.eq(cycles_done),
+                res.counts.eq(Cat(counts)),
                 running.eq(0),
+                stop.eq(0),
             ]
             if p.nomatch_row:
-                m.d.sync += res.nomatch.eq(any_over & (map_value == rows - 1))
+                m.d.sync += res.nomatch.eq(valid_q & (map_value == rows - 1))
             else:
                 m.d.sync += res.nomatch.eq(0)
 
-        # --- Start: swap in the shadow memory (overrides the end-of-run updates above) ---
+        # --- Start: swap in the shadow memory, in a bubble or when idle (overrides the above) ---
+        start = Signal()
+        m.d.comb += start.eq(shadow_full & (leave | ~running))
+        if source is not None and "restart" in source.signature.members:
+            m.d.comb += source.restart.eq(start)
         with m.If(start):
-            m.d.sync += [a.eq(s) for a, s in zip(active, shadow, strict=True)]
-            m.d.sync += [cnt.eq(0) for cnt in counts]
-            m.d.sync += [cycles_done.eq(0), running.eq(1), shadow_full.eq(0)]
+            m.d.sync += [at_last.eq(0), cycles_done.eq(0), running.eq(1), shadow_full.eq(0)]
+        for r in range(rows):
+            with m.If(start_rep[r // rows_per_group]):
+                m.d.sync += [active[o].eq(shadow[o]) for o in range(r * cols, (r + 1) * cols)]
+                m.d.sync += [counts[r].eq(0), full[r].eq(0)]
 
         # --- Load stream: one beat per handshake into the shadow memory ---
-        m.d.comb += self.load.ready.eq(~shadow_full)
+        # Not ready while the shadow is full or its last beat is being written.
+        m.d.comb += self.load.ready.eq(~shadow_full & ~write_q[nbeats - 1])
         accept = self.load.valid & self.load.ready
-        write_beat = Signal(p.beats_per_pixel)  # one-hot: which words this beat writes
-        m.d.comb += write_beat.eq(Cat(accept & (beat == b) for b in range(p.beats_per_pixel)))
-        for b in range(p.beats_per_pixel):
-            with m.If(write_beat[b]):
+
+        # --- Next values of the replicated enables (the registers' updates above, one cycle early) ---
+        # Written as a last 2:1 choice on ``compute`` so that the OR over the rows (``fin``), the
+        # late signal, enters the last gate only: in a compute cycle there is no start or leave,
+        # running stays 1 and stop becomes ``fin``.
+        fin = any_over | at_last
+        shadow_full_n = ~start & (shadow_full | write_q[nbeats - 1])
+        valid_n = leave | (self.result.valid & ~self.result.ready)
+        stop_idle = stop & ~leave  # stop's next value outside compute cycles
+        running_n = start | (running & ~leave)
+        compute_n, start_n = Signal(), Signal()
+        m.d.comb += [
+            compute_n.eq(Mux(compute, ~fin, running_n & ~stop_idle)),
+            start_n.eq(Mux(compute, fin & shadow_full_n & ~valid_n,
+                           shadow_full_n & ((stop_idle & ~valid_n) | ~running_n))),
+        ]
+        m.d.sync += [c.eq(compute_n) for c in compute_rep] + [s.eq(start_n) for s in start_rep]
+        m.d.sync += write_q.eq(Mux(accept, beat, 0))
+        with m.If(accept):
+            m.d.sync += [load_q.eq(self.load.payload), beat.eq(beat.rotate_left(1))]
+        for b in range(nbeats):
+            with m.If(write_q[b]):
                 for lane in range(p.lanes):
                     o = b * p.lanes + lane
                     if o < ops:  # unused lanes of the last beat are ignored
-                        m.d.sync += shadow[o].eq(self.load.payload[lane])
-        with m.If(accept):
-            with m.If(beat == p.beats_per_pixel - 1):
-                m.d.sync += [beat.eq(0), shadow_full.eq(1)]
-            with m.Else():
-                m.d.sync += beat.eq(beat + 1)
+                        m.d.sync += shadow[o].eq(load_q[lane])
+        with m.If(write_q[nbeats - 1]):
+            m.d.sync += shadow_full.eq(1)
 
         return m

@@ -21,6 +21,8 @@ from bayesmachine.params import ParameterError
 
 __all__ = [
     "OperatorMatrix",
+    "bus_rows",
+    "operator_bits",
     "operator_matrix_twin",
     "operator_rows",
     "stochastic_operator",
@@ -85,22 +87,33 @@ class OperatorMatrix(wiring.Component):
         return m
 
 
+def operator_bits(numbers: Sequence[Value], words: Sequence[Value], sources: Sequence[int]) -> list[Value]:
+    """Every operator's comparator bit ``numbers[sources[o]] < words[o]``, in operator order."""
+    return [stochastic_operator(1, numbers[s], word) for s, word in zip(sources, words, strict=True)]
+
+
+def bus_rows(bits: Sequence[Value], rows: int, columns: int) -> Value:
+    """The stochastic bus from the comparator bits: bit r is the AND of row r's operator bits."""
+    out = []
+    for r in range(rows):
+        bus: Value = Const(1, 1)  # uniform prior: always-on 1s (a loaded prior is operator column 0)
+        for c in range(columns):
+            bus = bus & bits[r * columns + c]
+        out.append(bus)
+    return Cat(*out)
+
+
 def operator_rows(numbers: Sequence[Value], words: Sequence[Value], rows: int, columns: int,
                   sources: Sequence[int]) -> Value:
     """The matrix's logic: the M row bits of the stochastic bus (bit r = row r).
 
-    The machine builds its matrix with this function on its own likelihood-memory registers and
-    source outputs (a submodule's port copies would slow the simulator by a quarter), and
-    :class:`OperatorMatrix` wraps the same function for ``tests/test_operator.py``.
+    ``bus_rows(operator_bits(...))``. The machine builds its matrix from these two functions on
+    its own likelihood-memory registers and source outputs (a submodule's port copies would slow
+    the simulator by a quarter; with an on-chip source it registers the comparator bits between
+    them, ``hdl/machine.py``), and :class:`OperatorMatrix` wraps this function for
+    ``tests/test_operator.py``.
     """
-    bits = []
-    for r in range(rows):
-        bus: Value = Const(1, 1)  # uniform prior: always-on 1s (a loaded prior is operator column 0)
-        for c in range(columns):
-            o = r * columns + c
-            bus = stochastic_operator(bus, numbers[sources[o]], words[o])
-        bits.append(bus)
-    return Cat(*bits)
+    return bus_rows(operator_bits(numbers, words, sources), rows, columns)
 
 
 def operator_matrix_twin(words: Sequence[int], numbers: Sequence[int], rows: int, columns: int,

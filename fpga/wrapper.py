@@ -1,0 +1,121 @@
+"""The pin-saving wrapper: the machine behind a few registered pins, so that synthesis keeps it whole.
+
+A machine's ports are hundreds of bits wide (a 16-word load beat is 176 bits, a Dmax = 80 result
+440 bits): more than any package has pins, and a design whose ports were left undriven would
+be trimmed to nothing. ``PinWrapper`` puts any component with a ``load`` input stream and a
+``result`` output stream (``BayesianMachine``, ``MachineLanes``) behind ``2 * pin_width + 3``
+pins, all registered at the boundary, so every payload bit stays observable and the timing
+report measures the machine, not the pads.
+
+Protocol (one clock, ``pin_width`` = P bits per chunk):
+
+- **In**: ``din`` / ``din_valid`` (inputs, registered on entry) and ``din_ready`` (a registered
+  output). In each cycle in which ``din_ready`` is high, the host may drive one chunk
+  (``din_valid = 1``). Chunks fill one load beat lowest bits first, ``ceil(load_width / P)``
+  chunks per beat; a complete beat goes to the core's ``load`` stream. ``din_ready`` already
+  accounts for the chunk in flight, so a host that obeys it never loses a chunk.
+- **Out**: ``dout`` / ``dout_valid`` (registered outputs). Each result is shifted out lowest
+  bits first, ``ceil(result_width / P)`` consecutive chunks marked by ``dout_valid``, one per
+  cycle; the host takes every chunk (a FIFO or a logic analyser). The core's ``result`` stream
+  waits while the shifter is busy, so the machine stalls rather than losing a result.
+"""
+
+from __future__ import annotations
+
+from amaranth.hdl import Cat, Const, Module, Mux, Shape, Signal
+from amaranth.lib import wiring
+from amaranth.lib.wiring import In, Out
+
+from bayesmachine.params import ParameterError
+
+__all__ = ["PinWrapper", "stream_widths"]
+
+
+def stream_widths(core: wiring.Component) -> tuple[int, int]:
+    """(load payload width, result payload width) of a component with ``load``/``result`` streams."""
+    members = core.signature.members
+    for name in ("load", "result"):
+        if name not in members or not members[name].is_signature:
+            raise ParameterError(f"the wrapped core must have a '{name}' stream port")
+    load = Shape.cast(members["load"].signature.members["payload"].shape).width
+    result = Shape.cast(members["result"].signature.members["payload"].shape).width
+    return load, result
+
+
+class PinWrapper(wiring.Component):
+    """``core`` behind ``2 * pin_width + 3`` registered pins (see the module docstring)."""
+
+    def __init__(self, core: wiring.Component, pin_width: int = 8) -> None:
+        if isinstance(pin_width, bool) or not isinstance(pin_width, int) or not 1 <= pin_width <= 64:
+            raise ParameterError(f"pin_width must be an integer in [1, 64], got {pin_width!r}")
+        if "entropy" in core.signature.members:
+            raise ParameterError("the wrapper needs an on-chip random source (rng = 'external' has an "
+                                 "entropy port as wide as the matrix)")
+        self._core = core
+        self._pin_width = pin_width
+        self._load_width, self._result_width = stream_widths(core)
+        super().__init__({
+            "din": In(pin_width),
+            "din_valid": In(1),
+            "din_ready": Out(1),
+            "dout": Out(pin_width),
+            "dout_valid": Out(1),
+        })
+
+    @property
+    def core(self) -> wiring.Component:
+        return self._core
+
+    @property
+    def pin_width(self) -> int:
+        return self._pin_width
+
+    @property
+    def chunks_in(self) -> int:
+        """Chunks per load beat."""
+        return -(-self._load_width // self._pin_width)
+
+    @property
+    def chunks_out(self) -> int:
+        """Chunks per result."""
+        return -(-self._result_width // self._pin_width)
+
+    def elaborate(self, platform: object) -> Module:
+        m = Module()
+        m.submodules.core = core = self._core
+        pw, n_in, n_out = self._pin_width, self.chunks_in, self.chunks_out
+
+        # --- In: registered pins -> shift register -> one load beat ---
+        # Chunk counts are kept as shift registers of marks (no adder, no compare): the
+        # wrapper must never be the critical path of the design it measures.
+        din_q = Signal(pw)
+        din_valid_q = Signal()
+        m.d.sync += [din_q.eq(self.din), din_valid_q.eq(self.din_valid)]
+        beat = Signal(n_in * pw)
+        # After j chunks the top j bits of ``mark`` are ones: mark[k] = 1 iff j >= n_in - k.
+        mark = Signal(n_in)
+        m.d.comb += [core.load.payload.eq(beat[: self._load_width]), core.load.valid.eq(mark[0])]
+        with m.If(din_valid_q):
+            m.d.sync += beat.eq(Cat(beat[pw:], din_q))  # the first chunk ends lowest
+        kept = Signal.like(mark)
+        m.d.comb += kept.eq(Mux(core.load.valid & core.load.ready, 0, mark))
+        mark_next = Signal.like(mark)
+        m.d.comb += mark_next.eq(Mux(din_valid_q, Cat(kept[1:], Const(1, 1)), kept))
+        m.d.sync += mark.eq(mark_next)
+
+        def fits(k: int) -> object:  # j + k < n_in after this cycle
+            return ~mark_next[k] if k < n_in else Const(0, 1)
+
+        # A chunk driven now lands next cycle: allow another only if both still fit.
+        m.d.sync += self.din_ready.eq(Mux(self.din_valid, fits(1), fits(0)))
+
+        # --- Out: one result -> shift register -> registered pins ---
+        out = Signal(n_out * pw)
+        busy = Signal(n_out)  # ones for the chunks still to send
+        m.d.comb += core.result.ready.eq(~busy[0])
+        with m.If(core.result.valid & core.result.ready):
+            m.d.sync += [out.eq(core.result.payload.as_value()), busy.eq(-1)]
+        with m.Else():
+            m.d.sync += [out.eq(out >> pw), busy.eq(busy >> 1)]
+        m.d.sync += [self.dout.eq(out[:pw]), self.dout_valid.eq(busy[0])]
+        return m

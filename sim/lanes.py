@@ -1,0 +1,45 @@
+"""The model twin of ``hdl.lanes.MachineLanes``: pixel i to lane ``i % k``, each lane a machine model."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from bayesmachine.params import MachineParams, ParameterError, lane_params
+
+from .model import MachineModel, MachineResult, check_words
+
+__all__ = ["LanesModel"]
+
+
+class LanesModel:
+    """k machine models of ``lane_params(params, i)``; the round-robin deal carries over between calls."""
+
+    def __init__(self, params: MachineParams, machines: int) -> None:
+        if isinstance(machines, bool) or not isinstance(machines, int) or not 1 <= machines <= 256:
+            raise ParameterError(f"machines must be an integer in [1, 256], got {machines!r}")
+        self._params = params
+        self._lanes = [MachineModel(lane_params(params, i)) for i in range(machines)]
+        self._next = 0  # the lane of the next pixel
+
+    @property
+    def params(self) -> MachineParams:
+        return self._params
+
+    def reset(self) -> None:
+        for lane in self._lanes:
+            lane.reset()
+        self._next = 0
+
+    def run(self, words: np.ndarray) -> MachineResult:
+        q = check_words(self._params, words)
+        k, n = len(self._lanes), q.shape[0]
+        lane_of = (self._next + np.arange(n)) % k
+        parts = {i: self._lanes[i].run(q[lane_of == i]) for i in range(k) if (lane_of == i).any()}
+        empty = MachineResult.empty(self._params.rows)
+        out = MachineResult(*(np.zeros((n, *getattr(empty, f).shape[1:]), getattr(empty, f).dtype)
+                              for f in MachineResult.__dataclass_fields__))
+        for i, res in parts.items():
+            for f in MachineResult.__dataclass_fields__:
+                getattr(out, f)[lane_of == i] = getattr(res, f)
+        self._next = (self._next + n) % k
+        return out

