@@ -119,6 +119,9 @@ class SobolGenerators(wiring.Component):
                    i, fresh = (0, 1) if i == 2^W - 1 else (i + 1, 0)
         on restart (wins over enable for i and fresh): i, fresh = 0, 1
 
+    ``last`` (i == 2^W - 1) and each column's direction number V_c[lowest 0 bit of i] are
+    registers loaded with the next index's values (the same numbers, a shorter path to them).
+
     For the machine's prefetched comparators it also gives the next compute cycle's numbers:
     ``next_numbers[c]`` if this cycle is a compute cycle without restart (the block's last cycle
     hands over to the shift LFSR's number, which has not stepped since the block began:
@@ -151,22 +154,32 @@ class SobolGenerators(wiring.Component):
     def elaborate(self, platform: object) -> Module:
         m = Module()
         w = self._params.word_bits
+        top = (1 << w) - 1
         index = Signal(w)
         fresh = Signal(init=1)
-        # One-hot of the index's lowest 0 bit (all zeros when i = 2^W - 1, the block's last cycle).
-        lowest_zero = Signal(w)
-        m.d.comb += lowest_zero.eq(~index & (index + 1)[:w])
+        # Registered functions of the index, loaded with its next value (so the numbers of the
+        # next cycle are a LUT away from flip-flops): ``last`` = (i == 2^W - 1), and per column the
+        # direction number of i's lowest 0 bit (0 when i = 2^W - 1, the block's last cycle).
+        last = Signal()
+        index_n = Signal(w)
+        m.d.comb += index_n.eq(Mux(self.restart, 0, Mux(self.enable, Mux(last, 0, index + 1), index)))
+        lowest_zero_n = Signal(w)  # one-hot of the next index's lowest 0 bit
+        m.d.comb += lowest_zero_n.eq(~index_n & (index_n + 1)[:w])
+        m.d.sync += [index.eq(index_n), last.eq(index_n == top)]
         for c, spec in enumerate(self._specs):
             state = Signal(spec.length, init=spec.init, name=f"shift_lfsr_{c}")
             y = Signal(w, name=f"sobol_{c}")
+            vs = direction_numbers(c, w)
+            direction = Signal(w, init=vs[0], name=f"direction_{c}")  # for i = 0 after reset
+            direction_n = 0
+            for k, v in enumerate(vs):
+                direction_n = direction_n | Mux(lowest_zero_n[k], v, 0)
+            m.d.sync += direction.eq(direction_n)
             number = Mux(fresh, state[:w], y)
             m.d.comb += self.numbers[c].eq(number)
-            direction = 0
-            for k, v in enumerate(direction_numbers(c, w)):
-                direction = direction | Mux(lowest_zero[k], v, 0)
             # i == 2^W - 1 implies fresh == 0 (fresh is set with i = 0): the LFSR keeps its state.
             m.d.comb += [
-                self.next_numbers[c].eq(Mux(index == (1 << w) - 1, state[:w], self.numbers[c] ^ direction)),
+                self.next_numbers[c].eq(Mux(last, state[:w], self.numbers[c] ^ direction)),
                 self.restart_numbers[c].eq(state[:w]),
             ]
             with m.If(self.enable):
@@ -174,12 +187,9 @@ class SobolGenerators(wiring.Component):
                 with m.If(fresh):
                     m.d.sync += state.eq(lfsr_next_state_expr(state, spec))
         with m.If(self.enable):
-            with m.If(index == (1 << w) - 1):
-                m.d.sync += [index.eq(0), fresh.eq(1)]
-            with m.Else():
-                m.d.sync += [index.eq(index + 1), fresh.eq(0)]
+            m.d.sync += fresh.eq(last)
         with m.If(self.restart):
-            m.d.sync += [index.eq(0), fresh.eq(1)]
+            m.d.sync += fresh.eq(1)
         return m
 
 

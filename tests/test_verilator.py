@@ -135,7 +135,9 @@ def test_timeouts_lowest_index_loaded_prior_heavy_back_pressure(cache: Path) -> 
     # runs at times, and the harness must not take that for a hang.
     with VerilatorEngine(p, build_dir=cache, load_stall=0.3, result_stall=0.95, stall_seed=2) as eng:
         res = _check(eng, MachineModel(p), words)
-        assert eng.last_wall_cycles > eng.last_compute_cycles + 10 * len(words)
+        # The next run computes while a result waits; its bubble (one cycle with no back-pressure)
+        # waits for the result register to empty: several cycles per pixel here.
+        assert eng.last_wall_cycles > eng.last_compute_cycles + 5 * len(words)
     assert res.timeout.sum() > 10 and (res.cycles[res.timeout] == p.max_cycles).all()
     assert res.map[1] == 1 and not res.nomatch[1]  # lowest-index: row 1 beats the no-match row
 

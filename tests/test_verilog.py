@@ -16,6 +16,7 @@ from bayesmachine.hdl.encoder import MAPEncoder
 from bayesmachine.hdl.machine import GROUP_OPERATORS
 from bayesmachine.params import MachineParams
 from bayesmachine.sources import source_kind
+from bayesmachine.sources.sobol import direction_numbers
 
 WAIVERS = Path(hdl_emit.__file__).with_name("bayesmachine.vlt")
 
@@ -81,12 +82,22 @@ def test_waivers_apply_to_the_generated_file_only(verilator: str, tmp_path: Path
         assert ("WIDTHTRUNC" not in proc.stderr) == waived, (name, proc.stderr[:2000])
 
 
+def _direction_flip_flops(p: MachineParams) -> int:
+    """The Sobol generators' registered direction numbers (``direction_<c>``): bit b of column c is
+    the OR of the next index's lowest-0 one-hot over the k with bit b set in V_{c,k}; Yosys merges
+    the bits with the same set of k (same input, same reset value) and drops those never set."""
+    sets = {frozenset(k for k, v in enumerate(direction_numbers(c, p.word_bits)) if v >> b & 1)
+            for c in range(p.operator_columns) for b in range(p.word_bits)}
+    return len(sets - {frozenset()})
+
+
 def _source_flip_flops(p: MachineParams) -> int:
     """Registers of the random source: LFSRs of L bits; Sobol: a y register per column, the shared
-    block index and its 'fresh' flag."""
+    block index, its 'fresh' and 'last' flags, and the registered direction numbers."""
     cols, w, length = p.operator_columns, p.word_bits, p.lfsr_bits
-    return {"lfsr": p.operators * length, "lfsr-shared": cols * length,
-            "sobol": cols * (length + w) + w + 1, "external": 0}[p.rng]
+    if p.rng == "sobol":
+        return cols * (length + w) + w + 2 + _direction_flip_flops(p)
+    return {"lfsr": p.operators * length, "lfsr-shared": cols * length, "external": 0}[p.rng]
 
 
 def _expected_flip_flops(p: MachineParams) -> int:
