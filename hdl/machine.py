@@ -178,7 +178,21 @@ class BayesianMachine(wiring.Component):
         # their cycle and are compared then.
         next_bits: list[Value] = []  # the next compute cycle's bits, seen from a compute cycle
         if source is not None:
-            next_bits = operator_bits(source.next_numbers, active, sources)
+            if len(source.numbers) < ops:
+                # A number shared by a column's rows would reach all its comparators from one
+                # net: each group of rows gets a registered copy of the column's next numbers,
+                # loaded every clock from ``following_numbers`` (so equal to ``next_numbers``
+                # in every cycle). The flow keeps these ``_rep`` registers apart too.
+                copies = []
+                for g in range(groups):
+                    copy = [Signal(len(n), name=f"next_number_rep{g}_{i}")
+                            for i, n in enumerate(source.following_numbers)]
+                    m.d.sync += [c.eq(n) for c, n in zip(copy, source.following_numbers, strict=True)]
+                    copies.append(copy)
+                next_bits = [operator_bits(copies[o // cols // rows_per_group], [active[o]], [sources[o]])[0]
+                             for o in range(ops)]
+            else:
+                next_bits = operator_bits(source.next_numbers, active, sources)
             start_bits = operator_bits(source.restart_numbers, shadow, sources)
             bits = []
             for o in range(ops):

@@ -96,6 +96,19 @@ class LFSRBank(wiring.Component):
         return self.numbers
 
     @property
+    def following_numbers(self) -> list[Value]:
+        """``next_numbers`` of the next cycle, from this cycle's state and ``enable``: a register
+        loaded with it every clock equals ``next_numbers`` in every cycle (the machine keeps such
+        copies per group of rows for numbers shared by many comparators)."""
+        out = []
+        for i, s in enumerate(self._specs):
+            state = getattr(self, f"state_{i}")
+            step1 = lfsr_next_state_expr(state, s)
+            step2 = lfsr_next_state_expr(step1, s)
+            out.append(Mux(self.enable[self._groups[i]], step2[: s.step], step1[: s.step]))
+        return out
+
+    @property
     def specs(self) -> tuple[LFSRSpec, ...]:
         return self._specs
 
@@ -126,7 +139,9 @@ class SobolGenerators(wiring.Component):
     ``next_numbers[c]`` if this cycle is a compute cycle without restart (the block's last cycle
     hands over to the shift LFSR's number, which has not stepped since the block began:
     ``i == 2^W - 1 ? lfsr_c.number : numbers[c] ^ V_c[...]``) and ``restart_numbers[c]`` if
-    this cycle restarts without computing (a new block: ``lfsr_c.number``).
+    this cycle restarts without computing (a new block: ``lfsr_c.number``);
+    ``following_numbers[c]`` is ``next_numbers[c]`` of the next cycle, from this cycle's state,
+    ``enable`` and ``restart`` (a register loaded with it every clock equals ``next_numbers``).
     """
 
     def __init__(self, params: MachineParams) -> None:
@@ -141,6 +156,7 @@ class SobolGenerators(wiring.Component):
             "numbers": Out(unsigned(params.word_bits)).array(params.operator_columns),
             "next_numbers": Out(unsigned(params.word_bits)).array(params.operator_columns),
             "restart_numbers": Out(unsigned(params.word_bits)).array(params.operator_columns),
+            "following_numbers": Out(unsigned(params.word_bits)).array(params.operator_columns),
         })
 
     @property
@@ -165,7 +181,11 @@ class SobolGenerators(wiring.Component):
         m.d.comb += index_n.eq(Mux(self.restart, 0, Mux(self.enable, Mux(last, 0, index + 1), index)))
         lowest_zero_n = Signal(w)  # one-hot of the next index's lowest 0 bit
         m.d.comb += lowest_zero_n.eq(~index_n & (index_n + 1)[:w])
-        m.d.sync += [index.eq(index_n), last.eq(index_n == top)]
+        last_n = Signal()
+        m.d.comb += last_n.eq(index_n == top)
+        fresh_n = Signal()
+        m.d.comb += fresh_n.eq(self.restart | Mux(self.enable, last, fresh))
+        m.d.sync += [index.eq(index_n), last.eq(last_n)]
         for c, spec in enumerate(self._specs):
             state = Signal(spec.length, init=spec.init, name=f"shift_lfsr_{c}")
             y = Signal(w, name=f"sobol_{c}")
@@ -186,6 +206,11 @@ class SobolGenerators(wiring.Component):
                 m.d.sync += y.eq(self.numbers[c] ^ direction)
                 with m.If(fresh):
                     m.d.sync += state.eq(lfsr_next_state_expr(state, spec))
+            # The same rules on the next cycle's registers (y, the LFSR, fresh, last, direction).
+            y_n = Mux(self.enable, self.numbers[c] ^ direction, y)
+            state_n = Mux(self.enable & fresh, lfsr_next_state_expr(state, spec), state)[:w]
+            number_n = Mux(fresh_n, state_n, y_n)
+            m.d.comb += self.following_numbers[c].eq(Mux(last_n, state_n, number_n ^ direction_n))
         with m.If(self.enable):
             m.d.sync += fresh.eq(last)
         with m.If(self.restart):

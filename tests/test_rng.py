@@ -303,7 +303,8 @@ def test_full_period_of_the_machines_first_lfsr() -> None:
 
 def test_rtl_lfsr_next_numbers_and_enable_groups() -> None:
     """``next_numbers`` (the machine's prefetched comparators) is the number after an enabled
-    clock; with ``enable_groups`` each LFSR advances on its own group's enable bit."""
+    clock, ``following_numbers`` the next cycle's ``next_numbers``; with ``enable_groups`` each
+    LFSR advances on its own group's enable bit."""
     specs = _specs(12, 4, n=3)
     dut = LFSRBank(specs, enable_groups=[0, 1, 0])
     rnd = random.Random(8)
@@ -313,7 +314,8 @@ def test_rtl_lfsr_next_numbers_and_enable_groups() -> None:
     async def bench(ctx):
         for e0, e1 in enables:
             ctx.set(dut.enable, e0 | (e1 << 1))
-            seen.append(([ctx.get(n) for n in dut.numbers], [ctx.get(n) for n in dut.next_numbers]))
+            seen.append(([ctx.get(n) for n in dut.numbers], [ctx.get(n) for n in dut.next_numbers],
+                         [ctx.get(n) for n in dut.following_numbers]))
             await ctx.tick()
 
     run_sim(dut, bench)
@@ -321,5 +323,6 @@ def test_rtl_lfsr_next_numbers_and_enable_groups() -> None:
         mine = [e1 if i == 1 else e0 for e0, e1 in enables]
         assert [s[0][i] for s in seen] == _twin_numbers(spec, mine)
         for t in range(len(seen) - 1):
+            assert seen[t][2][i] == seen[t + 1][1][i]  # following_numbers: next_numbers a cycle early
             if mine[t]:
                 assert seen[t][1][i] == seen[t + 1][0][i]

@@ -171,7 +171,8 @@ def test_sobol_needs_a_dimension_per_column() -> None:
 def test_next_and_restart_numbers_predict_the_next_cycle(w: int, columns: int) -> None:
     """The machine's prefetched comparators read ``next_numbers`` in a compute cycle and
     ``restart_numbers`` in a run's start (never both in one cycle): each must be the number of the
-    following cycle, across block ends (the shift LFSR's turn) and restarts mid-block."""
+    following cycle, across block ends (the shift LFSR's turn) and restarts mid-block; and
+    ``following_numbers`` (its per-group copies' input) must be the next cycle's ``next_numbers``."""
     params = _params(w, columns)
     rnd = random.Random(100 + w)
     drive = [(1, 0)] * (2 << w) + [(0, 1), (1, 0), (1, 0), (0, 0), (1, 0)]
@@ -179,20 +180,21 @@ def test_next_and_restart_numbers_predict_the_next_cycle(w: int, columns: int) -
         x = rnd.random()
         drive.append((1, 0) if x < 0.75 else (0, 1) if x < 0.9 else (0, 0))
     dut = SobolGenerators(params)
-    seen: list[tuple[list[int], list[int], list[int]]] = []
+    seen: list[tuple[list[int], ...]] = []
 
     async def bench(ctx):
         for enable, restart in drive:
             ctx.set(dut.enable, enable)
             ctx.set(dut.restart, restart)
-            seen.append(([ctx.get(n) for n in dut.numbers], [ctx.get(n) for n in dut.next_numbers],
-                         [ctx.get(n) for n in dut.restart_numbers]))
+            seen.append(tuple([ctx.get(n) for n in ports] for ports in (
+                dut.numbers, dut.next_numbers, dut.restart_numbers, dut.following_numbers)))
             await ctx.tick()
 
     run_sim(dut, bench)
     assert [s[0] for s in seen] == _twin_numbers(params, drive)
     checked = {(1, 0): 0, (0, 1): 0}
     for t, (enable, restart) in enumerate(drive[:-1]):
+        assert seen[t][3] == seen[t + 1][1], t  # following_numbers: next_numbers a cycle early
         following = seen[t + 1][0]
         if (enable, restart) == (1, 0):
             assert seen[t][1] == following, t
