@@ -132,8 +132,9 @@ class SobolGenerators(wiring.Component):
                    i, fresh = (0, 1) if i == 2^W - 1 else (i + 1, 0)
         on restart (wins over enable for i and fresh): i, fresh = 0, 1
 
-    ``last`` (i == 2^W - 1) and each column's direction number V_c[lowest 0 bit of i] are
-    registers loaded with the next index's values (the same numbers, a shorter path to them).
+    ``last`` (i == 2^W - 1), ``penult`` (i == 2^W - 2) and each column's direction numbers
+    V_c[lowest 0 bit of i] and of i + 1 are registers loaded with the next index's values (the
+    same numbers, a shorter path to them).
 
     For the machine's prefetched comparators it also gives the next compute cycle's numbers:
     ``next_numbers[c]`` if this cycle is a compute cycle without restart (the block's last cycle
@@ -173,28 +174,47 @@ class SobolGenerators(wiring.Component):
         top = (1 << w) - 1
         index = Signal(w)
         fresh = Signal(init=1)
-        # Registered functions of the index, loaded with its next value (so the numbers of the
-        # next cycle are a LUT away from flip-flops): ``last`` = (i == 2^W - 1), and per column the
-        # direction number of i's lowest 0 bit (0 when i = 2^W - 1, the block's last cycle).
-        last = Signal()
+        # Registered functions of the index, loaded with its next value, so that the numbers of
+        # the next cycle, and of the one after (``following_numbers``), are a few LUTs from
+        # flip-flops: ``last`` (i == 2^W - 1), ``penult`` (i == 2^W - 2), and per column the
+        # direction numbers of i's and of i + 1's lowest 0 bit (0 for 2^W - 1, a block's last cycle).
+        def lowest_zero_direction(vs: Sequence[int], j: int) -> int:
+            return 0 if j == top else vs[((~j & (j + 1)).bit_length() - 1)]
+
+        last, penult = Signal(), Signal(init=int(top == 1))
         index_n = Signal(w)
         m.d.comb += index_n.eq(Mux(self.restart, 0, Mux(self.enable, Mux(last, 0, index + 1), index)))
-        lowest_zero_n = Signal(w)  # one-hot of the next index's lowest 0 bit
-        m.d.comb += lowest_zero_n.eq(~index_n & (index_n + 1)[:w])
-        last_n = Signal()
-        m.d.comb += last_n.eq(index_n == top)
-        fresh_n = Signal()
-        m.d.comb += fresh_n.eq(self.restart | Mux(self.enable, last, fresh))
-        m.d.sync += [index.eq(index_n), last.eq(last_n)]
+        successor_n = Signal(w)  # index_n + 1 (mod 2^W)
+        m.d.comb += successor_n.eq(index_n + 1)
+        lowest_zero_n = Signal(w)  # one-hot of the lowest 0 bit of index_n
+        lowest_zero_succ_n = Signal(w)  # and of index_n + 1
+        m.d.comb += [
+            lowest_zero_n.eq(~index_n & successor_n),
+            lowest_zero_succ_n.eq(~successor_n & (successor_n + 1)[:w]),
+        ]
+        last_n, fresh_n = Signal(), Signal()
+        m.d.comb += [
+            last_n.eq(~self.restart & Mux(self.enable, ~last & penult, last)),
+            fresh_n.eq(self.restart | Mux(self.enable, last, fresh)),
+        ]
+        m.d.sync += [index.eq(index_n), last.eq(last_n), penult.eq(index_n == top - 1)]
         for c, spec in enumerate(self._specs):
             state = Signal(spec.length, init=spec.init, name=f"shift_lfsr_{c}")
             y = Signal(w, name=f"sobol_{c}")
             vs = direction_numbers(c, w)
-            direction = Signal(w, init=vs[0], name=f"direction_{c}")  # for i = 0 after reset
-            direction_n = 0
+            direction = Signal(w, init=lowest_zero_direction(vs, 0), name=f"direction_{c}")
+            direction_succ = Signal(w, init=lowest_zero_direction(vs, 1), name=f"direction_succ_{c}")
+            # The direction of index_n: of 0 after a restart or a block's end, of i + 1 after a step.
+            direction_n = Signal(w, name=f"direction_n_{c}")
+            m.d.comb += direction_n.eq(Mux(self.restart, vs[0],
+                                           Mux(self.enable, Mux(last, vs[0], direction_succ), direction)))
+            # The registers themselves are loaded from the one-hots (the same values as
+            # direction_n; the one-hots' carry chains stay off the following_numbers path).
+            direction_reg_n, direction_succ_n = 0, 0
             for k, v in enumerate(vs):
-                direction_n = direction_n | Mux(lowest_zero_n[k], v, 0)
-            m.d.sync += direction.eq(direction_n)
+                direction_reg_n = direction_reg_n | Mux(lowest_zero_n[k], v, 0)
+                direction_succ_n = direction_succ_n | Mux(lowest_zero_succ_n[k], v, 0)
+            m.d.sync += [direction.eq(direction_reg_n), direction_succ.eq(direction_succ_n)]
             number = Mux(fresh, state[:w], y)
             m.d.comb += self.numbers[c].eq(number)
             # i == 2^W - 1 implies fresh == 0 (fresh is set with i = 0): the LFSR keeps its state.

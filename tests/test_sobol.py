@@ -167,7 +167,7 @@ def test_sobol_needs_a_dimension_per_column() -> None:
     MachineParams(rows=2, columns=MAX_DIMENSIONS, rng="sobol", lanes=1)
 
 
-@pytest.mark.parametrize(("w", "columns"), [(2, 3), (3, 3), (5, 2)])
+@pytest.mark.parametrize(("w", "columns"), [(1, 2), (2, 3), (3, 3), (5, 2)])
 def test_next_and_restart_numbers_predict_the_next_cycle(w: int, columns: int) -> None:
     """The machine's prefetched comparators read ``next_numbers`` in a compute cycle and
     ``restart_numbers`` in a run's start (never both in one cycle): each must be the number of the

@@ -83,20 +83,24 @@ def test_waivers_apply_to_the_generated_file_only(verilator: str, tmp_path: Path
 
 
 def _direction_flip_flops(p: MachineParams) -> int:
-    """The Sobol generators' registered direction numbers (``direction_<c>``): bit b of column c is
-    the OR of the next index's lowest-0 one-hot over the k with bit b set in V_{c,k}; Yosys merges
-    the bits with the same set of k (same input, same reset value) and drops those never set."""
+    """The Sobol generators' registered direction numbers (``direction_<c>`` and
+    ``direction_succ_<c>``): bit b of column c is the OR of a lowest-0 one-hot over the k with bit b
+    set in V_{c,k}; Yosys merges the bits with the same set of k (same input, same reset value) and
+    drops those never set."""
     sets = {frozenset(k for k, v in enumerate(direction_numbers(c, p.word_bits)) if v >> b & 1)
             for c in range(p.operator_columns) for b in range(p.word_bits)}
-    return len(sets - {frozenset()})
+    distinct = len(sets - {frozenset()})
+    # A bit set only by k = 0 is the next index's bit 0 in ``direction_succ`` (the lowest 0 bit of
+    # i + 1 is bit 0 when i is odd): the same flip-flop as the index's bit 0, merged with it.
+    return 2 * distinct - (frozenset({0}) in sets)
 
 
 def _source_flip_flops(p: MachineParams) -> int:
     """Registers of the random source: LFSRs of L bits; Sobol: a y register per column, the shared
-    block index, its 'fresh' and 'last' flags, and the registered direction numbers."""
+    block index, its 'fresh', 'last' and 'penult' flags, and the registered direction numbers."""
     cols, w, length = p.operator_columns, p.word_bits, p.lfsr_bits
-    if p.rng == "sobol":
-        return cols * (length + w) + w + 2 + _direction_flip_flops(p)
+    if p.rng == "sobol":  # + fresh, last, penult; the direction numbers of i and of i + 1
+        return cols * (length + w) + w + 3 + _direction_flip_flops(p)
     return {"lfsr": p.operators * length, "lfsr-shared": cols * length, "external": 0}[p.rng]
 
 
