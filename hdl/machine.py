@@ -151,6 +151,9 @@ class BayesianMachine(wiring.Component):
         groups = -(-rows // rows_per_group)
         compute_rep = [Signal(name=f"compute_rep{g}") for g in range(groups)]
         start_rep = [Signal(name=f"start_rep{g}") for g in range(groups)]
+        # and one copy each for a shared source's enable and restart (its next-number logic feeds
+        # every group's copy of the numbers, so its inputs come straight from flip-flops).
+        compute_rep_src, start_rep_src = Signal(name="compute_rep_src"), Signal(name="start_rep_src")
 
         # --- Random numbers: advance on compute cycles only; a Sobol block restarts per pixel ---
         # An on-chip source also gives the next compute cycle's numbers a cycle early
@@ -162,7 +165,7 @@ class BayesianMachine(wiring.Component):
             if len(source.enable) == groups:  # per-operator LFSRs: one enable per group of rows
                 m.d.comb += source.enable.eq(Cat(compute_rep))
             else:
-                m.d.comb += source.enable.eq(compute)
+                m.d.comb += source.enable.eq(compute_rep_src)
             numbers = source.numbers
         else:
             numbers = [self.entropy[o] for o in range(ops)]
@@ -285,7 +288,7 @@ class BayesianMachine(wiring.Component):
         start = Signal()
         m.d.comb += start.eq(shadow_full & (leave | ~running))
         if source is not None and "restart" in source.signature.members:
-            m.d.comb += source.restart.eq(start)
+            m.d.comb += source.restart.eq(start_rep_src)
         with m.If(start):
             m.d.sync += [at_last.eq(0), cycles_done.eq(0), running.eq(1), shadow_full.eq(0)]
         for r in range(rows):
@@ -313,7 +316,8 @@ class BayesianMachine(wiring.Component):
             start_n.eq(Mux(compute, fin & shadow_full_n & ~valid_n,
                            shadow_full_n & ((stop_idle & ~valid_n) | ~running_n))),
         ]
-        m.d.sync += [c.eq(compute_n) for c in compute_rep] + [s.eq(start_n) for s in start_rep]
+        m.d.sync += [c.eq(compute_n) for c in [*compute_rep, compute_rep_src]]
+        m.d.sync += [s.eq(start_n) for s in [*start_rep, start_rep_src]]
         m.d.sync += write_q.eq(Mux(accept, beat, 0))
         with m.If(accept):
             m.d.sync += [load_q.eq(self.load.payload), beat.eq(beat.rotate_left(1))]
