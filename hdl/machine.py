@@ -153,7 +153,7 @@ class BayesianMachine(wiring.Component):
         start_rep = [Signal(name=f"start_rep{g}") for g in range(groups)]
         # and one copy each for a shared source's enable and restart (its next-number logic feeds
         # every group's copy of the numbers, so its inputs come straight from flip-flops).
-        compute_rep_src, start_rep_src = Signal(name="compute_rep_src"), Signal(name="start_rep_src")
+        src_reps: list[tuple[Signal, Signal]] = []
 
         # --- Random numbers: advance on compute cycles only; a Sobol block restarts per pixel ---
         # An on-chip source also gives the next compute cycle's numbers a cycle early
@@ -162,10 +162,12 @@ class BayesianMachine(wiring.Component):
         source, sources = random_source(p, [o // cols // rows_per_group for o in range(ops)])
         if source is not None:
             m.submodules.source = source
-            if len(source.enable) == groups:  # per-operator LFSRs: one enable per group of rows
+            per_operator = p.rng == "lfsr"  # random_source splits only its enable by group
+            if per_operator:  # per-operator LFSRs: one enable per group of rows
                 m.d.comb += source.enable.eq(Cat(compute_rep))
             else:
-                m.d.comb += source.enable.eq(compute_rep_src)
+                src_reps.append((Signal(name="compute_rep_src"), Signal(name="start_rep_src")))
+                m.d.comb += source.enable.eq(src_reps[0][0])
             numbers = source.numbers
         else:
             numbers = [self.entropy[o] for o in range(ops)]
@@ -181,7 +183,7 @@ class BayesianMachine(wiring.Component):
         # their cycle and are compared then.
         next_bits: list[Value] = []  # the next compute cycle's bits, seen from a compute cycle
         if source is not None:
-            if len(source.numbers) < ops:
+            if not per_operator:
                 # A number shared by a column's rows would reach all its comparators from one
                 # net: each group of rows gets a registered copy of the column's next numbers,
                 # loaded every clock from ``following_numbers`` (so equal to ``next_numbers``
@@ -288,7 +290,7 @@ class BayesianMachine(wiring.Component):
         start = Signal()
         m.d.comb += start.eq(shadow_full & (leave | ~running))
         if source is not None and "restart" in source.signature.members:
-            m.d.comb += source.restart.eq(start_rep_src)
+            m.d.comb += source.restart.eq(src_reps[0][1])
         with m.If(start):
             m.d.sync += [at_last.eq(0), cycles_done.eq(0), running.eq(1), shadow_full.eq(0)]
         for r in range(rows):
@@ -316,8 +318,8 @@ class BayesianMachine(wiring.Component):
             start_n.eq(Mux(compute, fin & shadow_full_n & ~valid_n,
                            shadow_full_n & ((stop_idle & ~valid_n) | ~running_n))),
         ]
-        m.d.sync += [c.eq(compute_n) for c in [*compute_rep, compute_rep_src]]
-        m.d.sync += [s.eq(start_n) for s in [*start_rep, start_rep_src]]
+        m.d.sync += [c.eq(compute_n) for c in compute_rep + [c for c, _ in src_reps]]
+        m.d.sync += [s.eq(start_n) for s in start_rep + [s for _, s in src_reps]]
         m.d.sync += write_q.eq(Mux(accept, beat, 0))
         with m.If(accept):
             m.d.sync += [load_q.eq(self.load.payload), beat.eq(beat.rotate_left(1))]
