@@ -152,7 +152,9 @@ class BayesianMachine(wiring.Component):
         compute_rep = [Signal(name=f"compute_rep{g}") for g in range(groups)]
         start_rep = [Signal(name=f"start_rep{g}") for g in range(groups)]
         # and one copy each for a shared source's enable and restart (its next-number logic feeds
-        # every group's copy of the numbers, so its inputs come straight from flip-flops).
+        # every group's copy of the numbers, so its inputs come straight from flip-flops). Amaranth
+        # aliases these with the source's ports, so the flow's keep selection misses them and
+        # Yosys merges them with compute_rep0 / start_rep0 (docs/fpga.md).
         src_reps: list[tuple[Signal, Signal]] = []
 
         # --- Random numbers: advance on compute cycles only; a Sobol block restarts per pixel ---
