@@ -83,7 +83,7 @@ def build_stereo_harness(
         wrapper=wrapper_verilog(top),
         header=stereo_header(params, model, width, top),
         sources=("stereo.cpp",),
-        label=f"the stereo machine (Dmax {model.dmax}, width {width})",
+        label=f"the stereo machine, Dmax {model.dmax}, width {width},",
         header_name=HEADER,
         info={"params": params.to_dict(), "model": model.to_dict(), "width": width,
               "fifo_pixels": fifo_pixels},
