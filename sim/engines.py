@@ -26,6 +26,8 @@ run (:class:`EngineStateError`) until ``reset()``.
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
 from typing import TYPE_CHECKING, ClassVar, Protocol, TypeVar
 
 import numpy as np
@@ -44,11 +46,12 @@ from bayesmachine.sources import SOURCE_KINDS
 if TYPE_CHECKING:
     from bayesmachine.sources import NumberSource
 
-__all__ = ["ENGINES", "Engine", "EngineBase", "EngineClosedError", "EngineStateError", "get_engine"]
+__all__ = ["ENGINES", "Engine", "EngineBase", "EngineClosedError", "EngineLifecycle", "EngineStateError",
+           "get_engine"]
 
 ENGINES = ("model", "pysim", "verilator")
 
-_E = TypeVar("_E", bound="EngineBase")
+_E = TypeVar("_E", bound="EngineLifecycle")
 
 CLOSED_MESSAGE = "this engine is closed (close() was called): create a new one to run more pixels"
 BROKEN_MESSAGE = ("an earlier run was cut short, so pixels are still in flight and later results would "
@@ -69,7 +72,62 @@ class Engine(Protocol):
     def wall_cycles(self) -> int | None: ...
 
 
-class EngineBase:
+class EngineLifecycle:
+    """The contract's life cycle, shared with engines that take other input than words (the
+    StereoMachine's pixel pairs): ``reset()``, ``close()``, ``EngineClosedError`` after it, and
+    ``EngineStateError`` after a run cut short, until ``reset()``.
+
+    A subclass runs each request inside ``with self._in_flight():`` after :meth:`_check_open` and its
+    input checks, and may override ``_reset()`` and ``_close()``.
+    """
+
+    def __init__(self) -> None:
+        self._closed = False
+        self._broken = False
+
+    @property
+    def wall_cycles(self) -> int | None:
+        return None
+
+    def _check_open(self) -> None:
+        if self._closed:
+            raise EngineClosedError(CLOSED_MESSAGE)
+
+    @contextlib.contextmanager
+    def _in_flight(self) -> Iterator[None]:
+        """Around a run: refused after a run cut short; a run that raises leaves the engine broken."""
+        if self._broken:
+            raise EngineStateError(BROKEN_MESSAGE)
+        self._broken = True  # until every pixel of this call is back
+        yield
+        self._broken = False
+
+    def reset(self) -> None:
+        """Back to the state after a hardware reset."""
+        self._check_open()
+        self._broken = False
+        self._reset()
+
+    def _reset(self) -> None:
+        pass
+
+    def close(self) -> None:
+        """Release the engine's resources; later ``run()``/``reset()`` raise :class:`EngineClosedError`."""
+        if not self._closed:
+            self._closed = True
+            self._close()
+
+    def _close(self) -> None:
+        pass
+
+    def __enter__(self: _E) -> _E:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class EngineBase(EngineLifecycle):
     """What the engines share: input checks, the random-number supply, reset/close, the error rules.
 
     A subclass implements ``_run(words, feed)`` (``words`` checked, (P, operators) int32;
@@ -82,10 +140,9 @@ class EngineBase:
     def __init__(self, params: MachineParams) -> None:
         if not isinstance(params, MachineParams):
             raise TypeError(f"an engine takes a MachineParams, not {type(params).__name__}")
+        super().__init__()
         self._params = params
         self._kind = SOURCE_KINDS[params.rng]
-        self._closed = False
-        self._broken = False
         self._feed = NumberFeed(params)
         self._device: NumberSource | None = None
         self._new_supply = False  # this run's numbers come from another source than the last run's
@@ -94,23 +151,14 @@ class EngineBase:
     def params(self) -> MachineParams:
         return self._params
 
-    @property
-    def wall_cycles(self) -> int | None:
-        return None
-
     def run(self, words: np.ndarray, numbers: np.ndarray | NumberSource | None = None) -> MachineResult:
         """Run pixels through the machine (see the module docstring)."""
-        if self._closed:
-            raise EngineClosedError(CLOSED_MESSAGE)
+        self._check_open()
         q = check_words(self._params, words)
         source = self._source(numbers)
-        if self._broken:
-            raise EngineStateError(BROKEN_MESSAGE)
-        self._new_supply = self._feed.use(source)
-        self._broken = True  # until every pixel of this call is back
-        out = self._run(q, None if source is None else self._feed)
-        self._broken = False
-        return out
+        with self._in_flight():
+            self._new_supply = self._feed.use(source)
+            return self._run(q, None if source is None else self._feed)
 
     def _source(self, numbers: np.ndarray | NumberSource | None) -> NumberSource | None:
         p = self._params
@@ -135,30 +183,10 @@ class EngineBase:
 
     def reset(self) -> None:
         """Back to the state after a hardware reset (an off-chip device model starts a fresh stream)."""
-        if self._closed:
-            raise EngineClosedError(CLOSED_MESSAGE)
-        self._broken = False
+        self._check_open()
         self._device = None
         self._feed.use(None)
-        self._reset()
-
-    def _reset(self) -> None:
-        pass
-
-    def close(self) -> None:
-        """Release the engine's resources; later ``run()``/``reset()`` raise :class:`EngineClosedError`."""
-        if not self._closed:
-            self._closed = True
-            self._close()
-
-    def _close(self) -> None:
-        pass
-
-    def __enter__(self: _E) -> _E:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
+        super().reset()
 
 
 def _engine_class(name: str) -> type[EngineBase]:

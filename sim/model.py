@@ -55,40 +55,6 @@ def _store(p, counts, k, winner, out_counts, out_map, out_timeout, out_cycles):
     out_map[p] = max(winner, 0)
 
 
-@numba.njit(cache=True)
-def _run_lfsr(q, states, shifts, rows, opcols, word_bits, lfsr_bits, n_max, max_cycles, nm_index,
-              out_counts, out_map, out_timeout, out_cycles):
-    pixels, ops = q.shape
-    mask = np.uint64((1 << word_bits) - 1)
-    w = np.uint64(word_bits)
-    top = np.uint64(lfsr_bits - word_bits)
-    # Tap shifts as separate contiguous vectors so the operator loop vectorizes (SIMD).
-    t1 = shifts[1].copy()
-    t2 = shifts[2].copy()
-    t3 = shifts[3].copy()
-    t4 = shifts[4].copy()
-    t5 = shifts[5].copy()
-    bits = np.zeros(ops, np.uint8)
-    counts = np.zeros(rows, np.uint32)
-    over = np.zeros(rows, np.uint8)
-    for p in range(pixels):
-        qp = q[p]
-        counts[:] = 0
-        k = 0
-        winner = -1
-        while True:
-            k += 1
-            for o in range(ops):
-                s = states[o]
-                new = s ^ (s >> t1[o]) ^ (s >> t2[o]) ^ (s >> t3[o]) ^ (s >> t4[o]) ^ (s >> t5[o])
-                states[o] = (s >> w) | ((new & mask) << top)
-                bits[o] = (s & mask) < qp[o]
-            winner = _finish_cycle(bits, counts, over, rows, opcols, n_max, nm_index)
-            if winner >= 0 or k == max_cycles:
-                break
-        _store(p, counts, k, winner, out_counts, out_map, out_timeout, out_cycles)
-
-
 @numba.njit(cache=True, inline="always")
 def _step_lfsrs(states, t1, t2, t3, t4, t5, mask, w, top, nums):
     """Leap-forward step of every LFSR of ``states``; ``nums`` gets their numbers before the step."""
@@ -100,23 +66,26 @@ def _step_lfsrs(states, t1, t2, t3, t4, t5, mask, w, top, nums):
 
 
 @numba.njit(cache=True)
-def _run_columns(q, states, shifts, points, rows, opcols, word_bits, lfsr_bits, n_max, max_cycles, nm_index,
-                 out_counts, out_map, out_timeout, out_cycles):
-    """The shared sources: one number per operator column, read by every row of that column.
+def _run_on_chip(q, states, shifts, points, per_operator, rows, opcols, word_bits, lfsr_bits, n_max,
+                 max_cycles, nm_index, out_counts, out_map, out_timeout, out_cycles):
+    """The on-chip sources, cycle by cycle.
 
-    ``lfsr-shared`` (``points`` empty): column c's LFSR steps every compute cycle. ``sobol``: cycle k
-    of a pixel gives column c ``points[j, c] ^ shift[c]``, j = (k - 1) mod 2^W; the column LFSRs
-    step once per block (j = 0) to give the block's shifts (every pixel starts a block)."""
+    ``lfsr`` (``per_operator``): operator o reads its own LFSR, which steps every compute cycle.
+    ``lfsr-shared`` (``points`` empty): one LFSR per operator column, stepping every compute cycle,
+    read by every row of that column. ``sobol``: cycle k of a pixel gives column c
+    ``points[j, c] ^ shift[c]``, j = (k - 1) mod 2^W; the column LFSRs step once per block (j = 0)
+    to give the block's shifts (every pixel starts a block)."""
     pixels, ops = q.shape
     mask = np.uint64((1 << word_bits) - 1)
     w = np.uint64(word_bits)
     top = np.uint64(lfsr_bits - word_bits)
     sobol = points.shape[0] > 0
     block = 1 << word_bits
+    # Tap shifts as separate contiguous vectors so the LFSR loop vectorizes (SIMD).
     t1, t2, t3 = shifts[1].copy(), shifts[2].copy(), shifts[3].copy()
     t4, t5 = shifts[4].copy(), shifts[5].copy()
     shift = np.zeros(opcols, np.uint64)
-    nums = np.zeros(opcols, np.uint64)
+    nums = np.zeros(states.shape[0], np.uint64)
     bits = np.zeros(ops, np.uint8)
     counts = np.zeros(rows, np.uint32)
     over = np.zeros(rows, np.uint8)
@@ -128,16 +97,21 @@ def _run_columns(q, states, shifts, points, rows, opcols, word_bits, lfsr_bits, 
         while True:
             j = k % block
             k += 1
-            if not sobol:
+            if per_operator:
                 _step_lfsrs(states, t1, t2, t3, t4, t5, mask, w, top, nums)
+                for o in range(ops):
+                    bits[o] = nums[o] < qp[o]
             else:
-                if j == 0:  # a block starts: fresh shifts
-                    _step_lfsrs(states, t1, t2, t3, t4, t5, mask, w, top, shift)
-                for c in range(opcols):
-                    nums[c] = points[j, c] ^ shift[c]
-            for r in range(rows):
-                for c in range(opcols):
-                    bits[r * opcols + c] = nums[c] < qp[r * opcols + c]
+                if not sobol:
+                    _step_lfsrs(states, t1, t2, t3, t4, t5, mask, w, top, nums)
+                else:
+                    if j == 0:  # a block starts: fresh shifts
+                        _step_lfsrs(states, t1, t2, t3, t4, t5, mask, w, top, shift)
+                    for c in range(opcols):
+                        nums[c] = points[j, c] ^ shift[c]
+                for r in range(rows):
+                    for c in range(opcols):
+                        bits[r * opcols + c] = nums[c] < qp[r * opcols + c]
             winner = _finish_cycle(bits, counts, over, rows, opcols, n_max, nm_index)
             if winner >= 0 or k == max_cycles:
                 break
@@ -174,10 +148,7 @@ class _OnChipSource:
         p = self._params
         args = (p.rows, p.operator_columns, p.word_bits, p.lfsr_bits, p.counter_max, p.max_cycles,
                 _nm_index(p), out.counts, out.map, out.timeout, out.cycles)
-        if p.rng == "lfsr":
-            _run_lfsr(q.astype(np.uint64), self.states, self._shifts, *args)
-        else:
-            _run_columns(q.astype(np.uint64), self.states, self._shifts, self._points, *args)
+        _run_on_chip(q.astype(np.uint64), self.states, self._shifts, self._points, p.rng == "lfsr", *args)
 
 
 # The model twin of every on-chip source kind (bayesmachine.sources.SOURCE_KINDS).

@@ -15,6 +15,7 @@ from bayesmachine.host.features import feature_sums
 from bayesmachine.host.images import bundled_pair
 from bayesmachine.host.likelihoods import ModelParams, memory_words
 from bayesmachine.sim.model import MachineModel
+from bayesmachine.sim.results import EngineClosedError, EngineStateError
 from bayesmachine.sim.verilator import VerilatorError, find_toolchain
 
 try:
@@ -53,6 +54,50 @@ def test_pixels_through_the_stereo_machine_equal_the_model(counter_max: int, tmp
             engine.run(frames[0][0][:, :30], frames[0][1][:, :30])
         with pytest.raises(ValueError, match="at least 5 lines"):
             engine.run(frames[0][0][:4], frames[0][1][:4])
+
+
+@needs_verilator
+def test_stereo_engine_follows_the_engine_life_cycle() -> None:
+    """reset() restarts from a hardware reset, a frame cut short refuses later frames until reset(),
+    close() makes run() and reset() raise EngineClosedError; wall_cycles counts since reset."""
+    from bayesmachine.sim.stereo_engine import StereoVerilatorEngine
+
+    model = ModelParams(dmax=DMAX)
+    params = stereo_machine_params(DMAX, counter_max=16)
+    left, right = _crops()[1]
+    want = MachineModel(params).run(memory_words(feature_sums(left), feature_sums(right), model, params))
+    engine = StereoVerilatorEngine(params, model, WIDTH, verbose=False)
+    assert_same_results(engine.run(left, right), want)
+    first_wall = engine.wall_cycles
+    assert first_wall == engine.last_wall_cycles == engine.stats["wall_cycles"]
+    engine.run(left, right)
+    assert engine.wall_cycles > first_wall
+    engine.reset()
+    assert engine.wall_cycles == 0
+    assert_same_results(engine.run(left, right), want)  # as from a hardware reset
+    assert engine.wall_cycles == first_wall
+    engine._proc.kill()  # type: ignore[union-attr]
+    engine._proc.wait()  # type: ignore[union-attr]
+    with pytest.raises(VerilatorError, match="harness"):
+        engine.run(left, right)
+    with pytest.raises(EngineStateError, match="reset"):  # the machine's state is gone: no silent restart
+        engine.run(left, right)
+    engine.reset()
+    assert_same_results(engine.run(left, right), want)
+    engine.close()
+    engine.close()  # harmless
+    with pytest.raises(EngineClosedError):
+        engine.run(left, right)
+    with pytest.raises(EngineClosedError):
+        engine.reset()
+
+
+def test_stereo_engine_refuses_an_off_chip_source() -> None:
+    from bayesmachine.sim.stereo_engine import StereoVerilatorEngine
+
+    params = stereo_machine_params(DMAX, counter_max=16, rng="external")
+    with pytest.raises(ValueError, match="on-chip random source"):
+        StereoVerilatorEngine(params, ModelParams(dmax=DMAX), WIDTH, verbose=False)
 
 
 @needs_verilator

@@ -1,7 +1,8 @@
 // Verilator harness of the Bayesian machine: streams pixels in on stdin, results out on stdout.
 //
 // Everything that depends on the design (widths, port names, lane and entropy offsets) comes
-// from "design.h", which bayesmachine.sim.verilator.codegen generates from the Amaranth layouts.
+// from "design.h", which bayesmachine.sim.verilator.codegen generates from the Amaranth layouts;
+// the code shared with the StereoMachine's harness (stereo.cpp) is in "common.h".
 // Results go back as raw payloads: Python decodes them with the result layout (one decoder).
 //
 // Protocol (little-endian, binary), one batch per request, repeated until EOF or QUIT:
@@ -36,7 +37,7 @@
 #include <vector>
 
 #include "design.h"
-#include "verilated.h"
+#include "common.h"
 #if BM_TRACE == 1
 #include "verilated_vcd_c.h"
 typedef VerilatedVcdC TraceFile;
@@ -45,52 +46,7 @@ typedef VerilatedVcdC TraceFile;
 typedef VerilatedFstC TraceFile;
 #endif
 
-static const uint32_t MAGIC_RUN = 0x4e524d42;   // "BMRN"
-static const uint32_t MAGIC_QUIT = 0x54514d42;  // "BMQT"
-
-[[noreturn]] static void fail(const char* what) {
-    std::fprintf(stderr, "bayesmachine harness: %s\n", what);
-    std::exit(1);
-}
-
-// Ports narrower than 65 bits are plain integers in Verilator, wider ones VlWide<N>: overloads
-// copy between either and a little-endian uint32 buffer.
-static inline void set_port(CData& p, const uint32_t* w) { p = static_cast<CData>(w[0]); }
-static inline void set_port(SData& p, const uint32_t* w) { p = static_cast<SData>(w[0]); }
-static inline void set_port(IData& p, const uint32_t* w) { p = w[0]; }
-static inline void set_port(QData& p, const uint32_t* w) { p = w[0] | (static_cast<QData>(w[1]) << 32); }
-template <std::size_t N>
-static inline void set_port(VlWide<N>& p, const uint32_t* w) {
-    for (std::size_t i = 0; i < N; ++i) p[i] = w[i];
-}
-static inline void get_port(CData p, uint32_t* w) { w[0] = p; }
-static inline void get_port(SData p, uint32_t* w) { w[0] = p; }
-static inline void get_port(IData p, uint32_t* w) { w[0] = p; }
-static inline void get_port(QData p, uint32_t* w) {
-    w[0] = static_cast<uint32_t>(p);
-    w[1] = static_cast<uint32_t>(p >> 32);
-}
-template <std::size_t N>
-static inline void get_port(const VlWide<N>& p, uint32_t* w) {
-    for (std::size_t i = 0; i < N; ++i) w[i] = p[i];
-}
-
-// Sets bits [offset, offset + width) of a little-endian uint32 buffer (width <= 32; the buffer has
-// a spare word at the end so the two-word write never runs off it).
-static inline void put_bits(uint32_t* w, unsigned offset, unsigned width, uint32_t value) {
-    const unsigned i = offset >> 5, s = offset & 31;
-    const uint64_t v = static_cast<uint64_t>(value) << s;
-    w[i] |= static_cast<uint32_t>(v);
-    if (s + width > 32) w[i + 1] |= static_cast<uint32_t>(v >> 32);
-}
-
-static void read_exact(void* buf, std::size_t bytes) {
-    if (std::fread(buf, 1, bytes, stdin) != bytes) fail("input ended in the middle of a batch");
-}
-
-static void put_u64(uint64_t v) {
-    if (std::fwrite(&v, sizeof v, 1, stdout) != 1) fail("cannot write to the client");
-}
+static const uint32_t MAGIC_RUN = 0x4e524d42;  // "BMRN"
 
 // Pseudo-random stalls: xorshift64, one draw per stream per cycle.
 struct Stalls {
@@ -125,9 +81,7 @@ int main(int argc, char** argv) {
             fail("usage: harness [--trace PATH FIRST_PIXEL LAST_PIXEL] [--stall LOAD RESULT SEED]");
         }
     }
-    static char inbuf[1 << 20], outbuf[1 << 20];
-    std::setvbuf(stdin, inbuf, _IOFBF, sizeof inbuf);
-    std::setvbuf(stdout, outbuf, _IOFBF, sizeof outbuf);
+    buffer_stdio();
 
     auto ctx = std::make_unique<VerilatedContext>();
     auto top = std::make_unique<BM_TOP>(ctx.get());
@@ -149,23 +103,9 @@ int main(int argc, char** argv) {
     bool tracing = false;
     uint64_t wall_total = 0;  // clock cycles since reset
 
-    // Sync reset, held for a few cycles so registered resets inside the design settle too.
     top->BM_PORT_RESULT_READY = 0;
     top->BM_PORT_LOAD_VALID = 0;
-    top->BM_PORT_RST = 1;
-    for (int i = 0; i < 4; ++i) {
-        top->BM_PORT_CLK = 0;
-        top->eval();
-        top->BM_PORT_CLK = 1;
-        top->eval();
-    }
-    top->BM_PORT_RST = 0;
-    for (int i = 0; i < 2; ++i) {  // the wrapper's registered reset is still high for a cycle
-        top->BM_PORT_CLK = 0;
-        top->eval();
-        top->BM_PORT_CLK = 1;
-        top->eval();
-    }
+    reset_design(*top);
 
     std::vector<uint16_t> words;
     std::vector<uint32_t> beats(static_cast<std::size_t>(BEATS_PER_PIXEL) * (LOAD_WORDS + 1));
@@ -198,9 +138,7 @@ int main(int argc, char** argv) {
 
     for (;;) {
         uint32_t head[4];
-        if (std::fread(head, 1, sizeof head, stdin) != sizeof head) break;  // EOF: client gone
-        if (head[0] == MAGIC_QUIT) break;
-        if (head[0] != MAGIC_RUN) fail("bad request header");
+        if (!read_request(head, MAGIC_RUN)) break;
         const uint32_t flags = head[1];
         const uint64_t pixels = head[2] | (static_cast<uint64_t>(head[3]) << 32);
         words.resize(pixels * WORDS_PER_PIXEL);
@@ -263,12 +201,7 @@ int main(int argc, char** argv) {
                 if (tracing) tfp->dump(2 * wall_total);
             }
 #endif
-            if (result_fire) {
-                uint32_t result_buf[RESULT_WORDS + 2] = {0};
-                get_port(top->BM_PORT_RESULT_PAYLOAD, result_buf);
-                std::memcpy(&records[collected * RESULT_WORDS], result_buf, RESULT_WORDS * sizeof(uint32_t));
-                ++collected;
-            }
+            if (result_fire) take_result(top->BM_PORT_RESULT_PAYLOAD, &records[collected++ * RESULT_WORDS]);
             top->BM_PORT_CLK = 1;
             top->eval();
 #if BM_TRACE
@@ -291,11 +224,7 @@ int main(int argc, char** argv) {
         if (tfp) tfp->flush();
 #endif
         pixel_base += pixels;
-        put_u64(0);
-        std::fwrite(records.data(), sizeof(uint32_t), records.size(), stdout);
-        put_u64(cycles);
-        put_u64(wall_total);
-        std::fflush(stdout);
+        send_results(records, cycles, wall_total);
     }
 #if BM_TRACE
     if (tfp) tfp->close();

@@ -1,4 +1,7 @@
-"""Build cache of the Verilator harness: key, compile, reuse, and recovery from broken entries.
+"""Build cache of the Verilator harnesses: key, compile, reuse, and recovery from broken entries.
+
+``build_design`` builds any harness (the design's Verilog, its wrapper, the generated header, the
+harness's C++ sources); ``build_harness`` is the machine's, ``sim.stereo_engine`` the StereoMachine's.
 
 Builds live in ``<cache>/<key>/`` (``harness``, the Verilog, ``design.h``, ``build.log``,
 ``build.json``); the key hashes everything the executable depends on. A build runs in
@@ -23,7 +26,7 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -35,7 +38,7 @@ from bayesmachine.params import MachineParams
 from .codegen import HARNESS_TOP, design_header, wrapper_verilog
 from .tools import VerilatorError, find_toolchain
 
-__all__ = ["HARNESS_DIR", "VerilatorBuild", "build_harness", "cache_dir"]
+__all__ = ["HARNESS_DIR", "HarnessSources", "VerilatorBuild", "build_design", "build_harness", "cache_dir"]
 
 HARNESS_DIR = Path(__file__).resolve().parent.parent / "harness"
 HARNESS_SOURCES = ("harness.cpp",)
@@ -83,10 +86,12 @@ def sources_digest() -> str:
     return h.hexdigest()[:16]
 
 
-def cached_verilog(params: MachineParams, component: Any, cache: Path) -> str:
-    """Verilog of the design, cached by (parameters, design sources): emission takes seconds."""
-    path = cache / "verilog" / f"{params.fingerprint()}-{sources_digest()}.v"
+def cached_verilog(name: str, component: Any, cache: Path) -> str:
+    """Verilog of the design, cached by ``name`` (the parameters' fingerprint) and the design's
+    sources: emission takes seconds."""
+    path = cache / "verilog" / f"{name}-{sources_digest()}.v"
     if path.exists():
+        component._MustUse__used = True  # only its layouts are needed
         return path.read_text()
     text = verilog_text(component)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -149,8 +154,8 @@ def _pid_alive(pid: int) -> bool:
 def _remove_orphans(root: Path) -> None:
     """Temporary build directories of processes that no longer exist (killed mid-build)."""
     for tmp in root.glob(".build-*"):
-        parts = tmp.name.split("-")
-        if len(parts) >= 4 and parts[2].isdigit() and not _pid_alive(int(parts[2])):
+        parts = tmp.name.split("-")  # .build-<key>-<pid>-<random>; a key may hold dashes
+        if len(parts) >= 4 and parts[-2].isdigit() and not _pid_alive(int(parts[-2])):
             shutil.rmtree(tmp, ignore_errors=True)
 
 
@@ -196,39 +201,53 @@ def _compile(cmd: list[str], cwd: Path, log: Any) -> int:
         raise
 
 
-def build_harness(
-    params: MachineParams,
+@dataclass(frozen=True)
+class HarnessSources:
+    """What one harness executable is built from; :func:`build_design` compiles and caches it.
+
+    ``verilog``: the design (top module ``TOP_NAME``); ``wrapper``: the top module ``HARNESS_TOP``
+    around it; ``header``: the generated header, written as ``header_name``; ``sources``: the
+    harness's C++ files (names in ``HARNESS_DIR``); ``label``: what the build message calls it;
+    ``info``: extra entries for ``build.json``; ``prefix``: of the cache entry's name.
+    """
+
+    verilog: str
+    wrapper: str
+    header: str
+    sources: tuple[str, ...]
+    label: str
+    header_name: str = "design.h"
+    extra_flags: tuple[str, ...] = ()
+    info: dict[str, Any] | None = None
+    prefix: str = ""
+
+
+def build_design(
+    design: HarnessSources,
     *,
     build_dir: str | os.PathLike[str] | None = None,
-    trace_kind: int = 0,
-    tie_ready: bool = True,
     jobs: int = 2,
     verbose: bool = False,
+    error_hint: Callable[[str], str | None] | None = None,
 ) -> VerilatorBuild:
-    """Compile (or find in the cache) the harness for ``params``.
+    """Compile (or find in the cache) a harness: the cache key hashes every input and the tools.
 
-    ``trace_kind``: 0 none, 1 VCD, 2 FST. ``tie_ready=False``: the back-pressure flavour (the
-    harness drives ``result.ready``; slower, see ``wrapper_verilog``).
+    ``error_hint(build_log)``: a clearer message for a known kind of compile failure, or None.
     """
     global builds_done
-    from bayesmachine.hdl.machine import BayesianMachine
-
     tools = find_toolchain()
     root = Path(build_dir) if build_dir is not None else cache_dir()
     root.mkdir(parents=True, exist_ok=True)
-    component = BayesianMachine(params)
-    component._MustUse__used = True  # only its layouts are needed when the Verilog is cached
-    verilog = cached_verilog(params, component, root)
-    header = design_header(params, component, trace_kind, tie_ready=tie_ready)
-    wrapper = wrapper_verilog(component, tie_ready=tie_ready)
-    sources = {name: (HARNESS_DIR / name).read_text() for name in HARNESS_SOURCES}
-    flags = list(VERILATOR_FLAGS) + [[], ["--trace"], ["--trace-fst"]][trace_kind]
+    # The harness's own headers (common.h) are inputs too.
+    texts = {name: (HARNESS_DIR / name).read_text()
+             for name in (*design.sources, *sorted(p.name for p in HARNESS_DIR.glob("*.h")))}
+    flags = [*VERILATOR_FLAGS, *design.extra_flags]
     h = hashlib.sha256()
-    for part in (verilog, wrapper, header, *sources.values(), " ".join(flags), MAKE_FLAGS,
+    for part in (design.verilog, design.wrapper, design.header, *texts.values(), " ".join(flags), MAKE_FLAGS,
                  _verilator_version(tools["verilator"])):
         h.update(part.encode())
         h.update(b"\0")
-    key = h.hexdigest()[:20]
+    key = design.prefix + h.hexdigest()[:20]
     final = root / key
     if final.exists():
         problem = _entry_problem(final)
@@ -244,39 +263,36 @@ def build_harness(
     os.umask(umask)
     os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes it private; the cache entry should not be
     try:
-        (tmp / f"{TOP_NAME}.v").write_text(verilog)
-        (tmp / f"{HARNESS_TOP}.v").write_text(wrapper)
-        (tmp / "design.h").write_text(header)
-        for name, text in sources.items():
+        (tmp / f"{TOP_NAME}.v").write_text(design.verilog)
+        (tmp / f"{HARNESS_TOP}.v").write_text(design.wrapper)
+        (tmp / design.header_name).write_text(design.header)
+        for name, text in texts.items():
             (tmp / name).write_text(text)
         cmd = [tools["verilator"], *flags, "-j", str(max(1, jobs)), "--top-module", HARNESS_TOP,
                "-Mdir", str(tmp / "obj"), "-o", str(tmp / "harness"), "-MAKEFLAGS", MAKE_FLAGS,
-               f"{TOP_NAME}.v", f"{HARNESS_TOP}.v", *HARNESS_SOURCES]
+               f"{TOP_NAME}.v", f"{HARNESS_TOP}.v", *design.sources]
         t0 = time.perf_counter()
         with open(tmp / "build.log", "w") as log:
             log.write(" ".join(cmd) + "\n")
             log.flush()
             if verbose:
                 # A first build takes tens of seconds: say why the command is quiet.
-                print(f"verilator: compiling the {params.rows}-row machine (once; cached in {final})",
-                      file=sys.stderr)
+                print(f"verilator: compiling {design.label} (once; cached in {final})", file=sys.stderr)
             returncode = _compile(cmd, tmp, log)
         seconds = time.perf_counter() - t0
         exe = tmp / "harness"
         if returncode != 0 or not exe.exists():
             log_text = (tmp / "build.log").read_text()
-            if trace_kind == 2 and ("lz4.h" in log_text or "zlib.h" in log_text):
-                raise VerilatorError(
-                    "FST waveforms need the lz4 and zlib C headers (e.g. `apt-get install liblz4-dev "
-                    "zlib1g-dev`); or ask for a VCD file (a path ending in .vcd)")
-            raise VerilatorError(f"Verilator build failed (exit {returncode}); end of the log:\n"
-                                 f"{log_text[-3000:]}")
+            hint = error_hint(log_text) if error_hint is not None else None
+            if hint:
+                raise VerilatorError(hint)
+            raise VerilatorError(f"Verilator build of {design.label} failed (exit {returncode}); "
+                                 f"end of the log:\n{log_text[-3000:]}")
         shutil.rmtree(tmp / "obj", ignore_errors=True)  # objects: hundreds of MB for big designs
         (tmp / "build.json").write_text(json.dumps(
-            {"key": key, "params": params.to_dict(), "seconds": seconds, "flags": flags,
-             "make_flags": MAKE_FLAGS, "trace_kind": trace_kind, "tie_ready": tie_ready,
-             "harness_bytes": exe.stat().st_size, "harness_sha256": _file_digest(exe),
-             "built": time.time()}, indent=1))
+            {"key": key, **(design.info or {}), "seconds": seconds, "flags": flags,
+             "make_flags": MAKE_FLAGS, "harness_bytes": exe.stat().st_size,
+             "harness_sha256": _file_digest(exe), "built": time.time()}, indent=1))
         builds_done += 1
         try:
             os.rename(tmp, final)
@@ -289,3 +305,43 @@ def build_harness(
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+
+
+def _fst_hint(log_text: str) -> str | None:
+    if "lz4.h" in log_text or "zlib.h" in log_text:
+        return ("FST waveforms need the lz4 and zlib C headers (e.g. `apt-get install liblz4-dev "
+                "zlib1g-dev`); or ask for a VCD file (a path ending in .vcd)")
+    return None
+
+
+def build_harness(
+    params: MachineParams,
+    *,
+    build_dir: str | os.PathLike[str] | None = None,
+    trace_kind: int = 0,
+    tie_ready: bool = True,
+    jobs: int = 2,
+    verbose: bool = False,
+) -> VerilatorBuild:
+    """Compile (or find in the cache) the machine's harness for ``params``.
+
+    ``trace_kind``: 0 none, 1 VCD, 2 FST. ``tie_ready=False``: the back-pressure flavour (the
+    harness drives ``result.ready``; slower, see ``wrapper_verilog``).
+    """
+    from bayesmachine.hdl.machine import BayesianMachine
+
+    find_toolchain()  # a missing tool is reported before the seconds of emitting the Verilog
+    root = Path(build_dir) if build_dir is not None else cache_dir()
+    root.mkdir(parents=True, exist_ok=True)
+    component = BayesianMachine(params)
+    design = HarnessSources(
+        verilog=cached_verilog(params.fingerprint(), component, root),
+        wrapper=wrapper_verilog(component, tie_ready=tie_ready),
+        header=design_header(params, component, trace_kind, tie_ready=tie_ready),
+        sources=HARNESS_SOURCES,
+        label=f"the {params.rows}-row machine",
+        extra_flags=((), ("--trace",), ("--trace-fst",))[trace_kind],
+        info={"params": params.to_dict(), "trace_kind": trace_kind, "tie_ready": tie_ready},
+    )
+    return build_design(design, build_dir=root, jobs=jobs, verbose=verbose,
+                        error_hint=_fst_hint if trace_kind == 2 else None)

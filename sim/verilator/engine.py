@@ -22,10 +22,10 @@ from bayesmachine.params import MachineParams
 from bayesmachine.sim.engines import EngineBase
 from bayesmachine.sim.results import MachineResult, NumberFeed, decode_results, ran_out_error, result_words
 
-from .build import build_harness
+from .build import VerilatorBuild, build_harness
 from .tools import VerilatorError
 
-__all__ = ["VerilatorEngine"]
+__all__ = ["HarnessProcess", "VerilatorEngine"]
 
 _MAGIC_RUN = 0x4E524D42  # "BMRN", see harness.cpp
 _MAGIC_QUIT = 0x54514D42  # "BMQT"
@@ -34,7 +34,158 @@ _DROP_NUMBERS = 1  # header flag: drop the rows of random numbers left from earl
 _TRACE_KINDS = {".vcd": 1, ".fst": 2}
 
 
-class VerilatorEngine(EngineBase):
+class HarnessProcess:
+    """A persistent harness process and what every harness's client shares: starting it, writing
+    requests, reading replies, the raw result payloads (decoded by ``decode_results``), failure
+    messages from its stderr, ending it; and the cycle statistics.
+
+    A subclass sets ``params``, ``build`` (a :class:`~.build.VerilatorBuild`) and ``_args`` (the
+    harness's command line) and calls :meth:`_init_process`.
+    """
+
+    params: MachineParams
+    build: VerilatorBuild
+    _args: list[str]
+
+    def _init_process(self) -> None:
+        self._proc: subprocess.Popen[bytes] | None = None
+        self._stderr: Any = None
+        self._reset_stats()
+
+    def _reset_stats(self) -> None:
+        self.last_compute_cycles = 0
+        self.last_wall_cycles = 0
+        self.last_seconds = 0.0
+        self.total_pixels = 0
+        self.total_compute_cycles = 0
+        self.total_wall_cycles = 0
+
+    @property
+    def compiled(self) -> bool:
+        """Whether constructing this engine compiled the harness (False: reused from the cache)."""
+        return self.build.compiled
+
+    @property
+    def wall_cycles(self) -> int:
+        """Clock cycles simulated since reset, loading included."""
+        return self.total_wall_cycles
+
+    @property
+    def stats(self) -> dict[str, float]:
+        return {
+            "pixels": self.total_pixels,
+            "compute_cycles": self.total_compute_cycles,
+            "wall_cycles": self.total_wall_cycles,
+            "last_compute_cycles": self.last_compute_cycles,
+            "last_wall_cycles": self.last_wall_cycles,
+            "last_seconds": self.last_seconds,
+            "build_seconds": self.build.seconds,
+        }
+
+    def _start(self) -> subprocess.Popen[bytes]:
+        if self._proc is None:
+            self._stderr = tempfile.TemporaryFile()
+            try:
+                self._proc = subprocess.Popen(
+                    [str(self.build.executable), *self._args],
+                    stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._stderr, bufsize=0,
+                )
+            except OSError as exc:
+                raise VerilatorError(f"cannot start the Verilator harness {self.build.executable} ({exc}); "
+                                     f"delete {self.build.directory} to rebuild it") from None
+        return self._proc
+
+    def _failure(self, what: str) -> VerilatorError:
+        msg = ""
+        if self._proc is not None:
+            try:
+                self._proc.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                self._proc.kill()
+            if self._stderr is not None:
+                self._stderr.seek(0)
+                msg = self._stderr.read().decode(errors="replace").strip()
+        self._proc = None
+        return VerilatorError(f"{what}: {msg or 'the harness exited without a message'}")
+
+    def _read(self, proc: subprocess.Popen[bytes], nbytes: int) -> bytearray:
+        assert proc.stdout is not None
+        buf = bytearray(nbytes)
+        view, got = memoryview(buf), 0
+        while got < nbytes:
+            k = proc.stdout.readinto(view[got:])
+            if not k:
+                raise self._failure("the Verilator harness stopped before returning all results")
+            got += k
+        return buf
+
+    def _write(self, proc: subprocess.Popen[bytes], *parts: bytes | memoryview) -> None:
+        assert proc.stdin is not None
+        try:
+            for part in parts:
+                proc.stdin.write(part)
+        except OSError as exc:
+            raise self._failure(f"the Verilator harness stopped ({exc})") from None
+
+    def _read_results(self, proc: subprocess.Popen[bytes], n: int, t0: float) -> MachineResult:
+        """The rest of a DONE reply (after its message word): ``n`` raw payloads and the wall
+        cycles; decoded, and counted in the statistics (``t0``: when the request began)."""
+        p = self.params
+        nwords = result_words(p)
+        raw = self._read(proc, n * nwords * 4 + 16)
+        self.last_seconds = time.perf_counter() - t0
+        out = decode_results(p, np.frombuffer(raw, dtype="<u4", count=n * nwords).reshape(n, nwords))
+        wall, _ = struct.unpack_from("<QQ", raw, n * nwords * 4)
+        self.last_compute_cycles = int(out.cycles.sum())
+        self.last_wall_cycles = int(wall)
+        self.total_pixels += n
+        self.total_compute_cycles += self.last_compute_cycles
+        self.total_wall_cycles += self.last_wall_cycles
+        return out
+
+    def _kill(self) -> None:
+        proc, self._proc = self._proc, None
+        if proc is not None:
+            proc.kill()
+            proc.wait()
+
+    def _reset(self) -> None:
+        self._stop()
+        self._reset_stats()
+
+    def _close(self) -> None:
+        self._stop()
+
+    def _stop(self) -> None:
+        """End the harness (flushes and closes a waveform file); the next run starts a fresh one."""
+        proc, self._proc = self._proc, None
+        if proc is None:
+            return
+        try:
+            assert proc.stdin is not None
+            proc.stdin.write(struct.pack("<IIQ", _MAGIC_QUIT, 0, 0))
+            proc.stdin.close()
+        except OSError:
+            pass
+        try:
+            proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+        if proc.stdout is not None:
+            proc.stdout.close()
+        if self._stderr is not None:
+            self._stderr.close()
+            self._stderr = None
+
+    def __del__(self) -> None:
+        try:
+            self.close()  # type: ignore[attr-defined]
+        except Exception:
+            pass
+
+
+class VerilatorEngine(HarnessProcess, EngineBase):
     """The RTL compiled with Verilator; the engines' contract (see :mod:`bayesmachine.sim.engines`).
 
     ``build_dir``: cache directory for builds (default: see :func:`~.build.cache_dir`).
@@ -84,88 +235,13 @@ class VerilatorEngine(EngineBase):
             self._args += ["--stall", *permille, str(int(stall_seed))]
         self.build = build_harness(params, build_dir=build_dir, trace_kind=trace_kind,
                                    tie_ready=not result_stall, jobs=jobs, verbose=verbose)
-        self._proc: subprocess.Popen[bytes] | None = None
-        self._stderr: Any = None
         self._held: object = None  # the number source whose unused rows the harness holds
-        self._reset_stats()
-
-    def _reset_stats(self) -> None:
-        self.last_compute_cycles = 0
-        self.last_wall_cycles = 0
-        self.last_seconds = 0.0
-        self.total_pixels = 0
-        self.total_compute_cycles = 0
-        self.total_wall_cycles = 0
-
-    @property
-    def compiled(self) -> bool:
-        """Whether constructing this engine compiled the harness (False: reused from the cache)."""
-        return self.build.compiled
-
-    @property
-    def wall_cycles(self) -> int:
-        """Clock cycles simulated since reset, loading included."""
-        return self.total_wall_cycles
-
-    @property
-    def stats(self) -> dict[str, float]:
-        return {
-            "pixels": self.total_pixels,
-            "compute_cycles": self.total_compute_cycles,
-            "wall_cycles": self.total_wall_cycles,
-            "last_compute_cycles": self.last_compute_cycles,
-            "last_wall_cycles": self.last_wall_cycles,
-            "last_seconds": self.last_seconds,
-            "build_seconds": self.build.seconds,
-        }
-
-    # --- The harness process ---
+        self._init_process()
 
     def _start(self) -> subprocess.Popen[bytes]:
         if self._proc is None:
-            self._stderr = tempfile.TemporaryFile()
-            try:
-                self._proc = subprocess.Popen(
-                    [str(self.build.executable), *self._args],
-                    stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._stderr, bufsize=0,
-                )
-            except OSError as exc:
-                raise VerilatorError(f"cannot start the Verilator harness {self.build.executable} ({exc}); "
-                                     f"delete {self.build.directory} to rebuild it") from None
-            self._held = None
-        return self._proc
-
-    def _failure(self, what: str) -> VerilatorError:
-        msg = ""
-        if self._proc is not None:
-            try:
-                self._proc.wait(timeout=5)
-            except subprocess.TimeoutExpired:
-                self._proc.kill()
-            if self._stderr is not None:
-                self._stderr.seek(0)
-                msg = self._stderr.read().decode(errors="replace").strip()
-        self._proc = None
-        return VerilatorError(f"{what}: {msg or 'the harness exited without a message'}")
-
-    def _read(self, proc: subprocess.Popen[bytes], nbytes: int) -> bytearray:
-        assert proc.stdout is not None
-        buf = bytearray(nbytes)
-        view, got = memoryview(buf), 0
-        while got < nbytes:
-            k = proc.stdout.readinto(view[got:])
-            if not k:
-                raise self._failure("the Verilator harness stopped before returning all results")
-            got += k
-        return buf
-
-    def _write(self, proc: subprocess.Popen[bytes], *parts: bytes | memoryview) -> None:
-        assert proc.stdin is not None
-        try:
-            for part in parts:
-                proc.stdin.write(part)
-        except OSError as exc:
-            raise self._failure(f"the Verilator harness stopped ({exc})") from None
+            self._held = None  # a fresh harness holds no rows
+        return super()._start()
 
     def _run(self, q: np.ndarray, feed: NumberFeed | None) -> MachineResult:
         p = self.params
@@ -195,60 +271,9 @@ class VerilatorEngine(EngineBase):
                     break
                 else:
                     raise self._failure(f"the Verilator harness sent an unknown message {message}")
-            nwords = result_words(p)
-            raw = self._read(proc, n * nwords * 4 + 16)
+            return self._read_results(proc, n, t0)
         except (VerilatorError, ValueError):
             raise
         except BaseException:
             self._kill()  # an interrupt leaves the pipes mid-batch
             raise
-        self.last_seconds = time.perf_counter() - t0
-        out = decode_results(p, np.frombuffer(raw, dtype="<u4", count=n * nwords).reshape(n, nwords))
-        wall, _ = struct.unpack_from("<QQ", raw, n * nwords * 4)
-        self.last_compute_cycles = int(out.cycles.sum())
-        self.last_wall_cycles = int(wall)
-        self.total_pixels += n
-        self.total_compute_cycles += self.last_compute_cycles
-        self.total_wall_cycles += self.last_wall_cycles
-        return out
-
-    def _kill(self) -> None:
-        proc, self._proc = self._proc, None
-        if proc is not None:
-            proc.kill()
-            proc.wait()
-
-    def _reset(self) -> None:
-        self._stop()
-        self._reset_stats()
-
-    def _close(self) -> None:
-        self._stop()
-
-    def _stop(self) -> None:
-        """End the harness (flushes and closes a waveform file); the next run starts a fresh one."""
-        proc, self._proc = self._proc, None
-        if proc is None:
-            return
-        try:
-            assert proc.stdin is not None
-            proc.stdin.write(struct.pack("<IIQ", _MAGIC_QUIT, 0, 0))
-            proc.stdin.close()
-        except OSError:
-            pass
-        try:
-            proc.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-        if proc.stdout is not None:
-            proc.stdout.close()
-        if self._stderr is not None:
-            self._stderr.close()
-            self._stderr = None
-
-    def __del__(self) -> None:
-        try:
-            self.close()
-        except Exception:
-            pass
