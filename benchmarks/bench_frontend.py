@@ -26,6 +26,7 @@ import numpy as np
 
 from bayesmachine.hdl.emit import emit
 from bayesmachine.hdl.frontend.stereo import StereoMachine, stereo_machine_params
+from bayesmachine.hdl.machine import pixel_wall_cycles
 from bayesmachine.host.features import feature_sums
 from bayesmachine.host.images import Crop, bundled_pair, crop_image
 from bayesmachine.host.likelihoods import ModelParams, memory_words
@@ -61,8 +62,14 @@ def run_verilator(params: MachineParams, model: ModelParams, left: np.ndarray, r
     n = len(res)
     wall, compute = engine.last_wall_cycles, engine.last_compute_cycles
     print(f"frame: {n} output pixels in {seconds:.2f} s, {wall / seconds / 1e6:.2f} M cycles/s")
+    # The machine alone, fed words as fast as it takes them, would need pixel_wall_cycles per
+    # run (its compute cycles plus the registered stop's bubble): what exceeds that is the
+    # front end's own cost (the first 4 lines, the line ends, a FIFO run dry).
+    alone = int(pixel_wall_cycles(params, res.cycles).sum())
     print(f"cycles per output pixel: compute {compute / n:.3f}, wall {wall / n:.3f} "
           f"(+{100 * (wall - compute) / compute:.2f} %; the first 4 lines and the line ends included)")
+    print(f"the machine alone fed words at full rate: {alone / n:.3f} per pixel (compute + bubble); "
+          f"the front end adds {100 * (wall - alone) / alone:.2f} %")
     if check:
         words = memory_words(feature_sums(left), feature_sums(right), model, params)
         same = res.equal(MachineModel(params).run(words))
