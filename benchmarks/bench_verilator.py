@@ -18,6 +18,7 @@ from collections.abc import Callable, Iterator
 
 import numpy as np
 
+from bayesmachine.hdl.machine import pixel_wall_cycles
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.model import MachineModel
 from bayesmachine.sim.verilator import VerilatorEngine
@@ -106,7 +107,7 @@ def main() -> int:
     model = None if args.no_model else MachineModel(machine)
     engine_s = words_s = model_s = 0.0
     equal = True
-    n = 0
+    n = alone = 0
     t_words = time.perf_counter()
     for words in chunks():
         t1 = time.perf_counter()
@@ -118,6 +119,7 @@ def main() -> int:
             equal &= res.equal(model.run(words))
             model_s += time.perf_counter() - t2
         n += len(words)
+        alone += int(pixel_wall_cycles(machine, res.cycles).sum())
         t_words = time.perf_counter()
     engine.close()
     st = engine.stats
@@ -128,11 +130,15 @@ def main() -> int:
           f"{engine_s / n * 1e6:.1f} us per pixel")
     print(f"cycles per pixel: compute {compute / n:.3f}, wall {wall / n:.3f} (loading included; "
           f"difference {(wall - compute) / n:.3f})")
+    # A run costs its compute cycles plus the registered stop's bubble, and the load stream must
+    # keep up: pixel_wall_cycles is that per pixel with loads and results never waiting.
+    print(f"the machine at full rate (compute + bubble, pixel_wall_cycles): {alone / n:.3f} per pixel; "
+          f"the engine's feeding adds {100 * (wall - alone) / alone:.2f} %")
     if model is not None:
         print(f"results equal to the model: {'yes' if equal else 'NO'} (model {model_s:.2f} s)")
-    goal = engine_s + words_s <= 60 and (wall - compute <= n or bool(args.result_stall or args.load_stall))
+    goal = engine_s + words_s <= 60 and (wall <= 1.01 * alone or bool(args.result_stall or args.load_stall))
     verdict = "met" if goal else "NOT met"
-    print(f"goal (<= 60 s per VGA frame, wall within 1 cycle/pixel of compute): {verdict}")
+    print(f"goal (<= 60 s per VGA frame, wall within 1 % of the machine at full rate): {verdict}")
     return 0 if equal else 1
 
 
