@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import require_tool, run_sim, small_params
+from conftest import assert_same_results, require_tool, run_sim, small_params
 
 from bayesmachine.fpga.wrapper import PinWrapper
 from bayesmachine.hdl.machine import BayesianMachine
@@ -75,11 +75,62 @@ def _result_width(params: MachineParams) -> int:
     return Shape.cast(result_layout(params)).width
 
 
+@pytest.mark.parametrize(("pin_width", "idle"), [(8, 0.3), (5, 0.0)])
+def test_stereo_machine_through_wrapper_matches_model(pin_width: int, idle: float) -> None:
+    """The camera-fed top behind the same wrapper: its input stream is ``pixels`` (17-bit beats),
+    taken from its signature; two frames back to back, results equal the model on the host's words."""
+    from bayesmachine.hdl.frontend.stereo import StereoMachine, stereo_machine_params
+    from bayesmachine.host.features import feature_sums
+    from bayesmachine.host.likelihoods import ModelParams, memory_words
+    from bayesmachine.sim.stereo_testbench import frame_beats
+
+    dmax, width = 3, 12
+    model = ModelParams(dmax=dmax, sigma_m=4.0)
+    params = stereo_machine_params(dmax, counter_max=4, max_cycles=500)
+    rng = np.random.default_rng(pin_width)
+    frames = []
+    for height in (6, 5):
+        left = rng.integers(0, 256, (height, width), dtype=np.uint8)
+        right = np.roll(left, -1, axis=1).astype(np.int64) + rng.integers(-3, 4, (height, width))
+        frames.append((left, right.clip(0, 255).astype(np.uint8)))
+    beats = [b for lf, rf in frames for b in frame_beats(lf, rf)]
+    words = np.concatenate([memory_words(feature_sums(lf), feature_sums(rf), model, params)
+                            for lf, rf in frames])
+    core = StereoMachine(params, model, width, fifo_pixels=2)
+    wrapper = PinWrapper(StereoMachine(params, model, width), pin_width=pin_width)
+    assert wrapper.input_name == "pixels" and wrapper.chunks_in == -(-17 // pin_width)
+    assert len(words) == 15  # (6 - 4) (12 - 4 - 3) + (5 - 4) (12 - 4 - 3)
+    raw = _through_wrapper(core, beats, len(words), _result_width(params), pin_width, idle, seed=3)
+    assert_same_results(decode_results(params, raw), MachineModel(params).run(words))
+
+
 def test_wrapper_rejects_bad_parameters() -> None:
     with pytest.raises(ParameterError, match="pin_width"):
         PinWrapper(BayesianMachine(small_params()), pin_width=0)
     with pytest.raises(ParameterError, match="on-chip random source"):
         PinWrapper(BayesianMachine(small_params(rng="external")))
+    assert PinWrapper(BayesianMachine(small_params())).input_name == "load"
+
+
+def test_wrapper_needs_one_input_stream_and_a_result_stream() -> None:
+    from amaranth.hdl import Module
+    from amaranth.lib import stream, wiring
+    from amaranth.lib.wiring import In, Out
+
+    class Core(wiring.Component):
+        def elaborate(self, platform: object) -> Module:
+            return Module()
+
+    s4 = stream.Signature(4)
+    two_in = Core({"a": In(s4), "b": In(s4), "result": Out(s4)})
+    with pytest.raises(ParameterError, match=r"exactly one input stream port \(found 'a', 'b'\)"):
+        PinWrapper(two_in)
+    with pytest.raises(ParameterError, match=r"exactly one input stream port \(found none\)"):
+        PinWrapper(Core({"result": Out(s4)}))
+    with pytest.raises(ParameterError, match="'result' output stream"):
+        PinWrapper(Core({"a": In(s4), "result": Out(4)}))  # a plain port, not a stream
+    with pytest.raises(ParameterError, match="'result' output stream"):
+        PinWrapper(Core({"a": In(s4), "out": Out(s4)}))
 
 
 @pytest.mark.parametrize("machines", [1, 3])
