@@ -39,6 +39,7 @@ from bayesmachine.params import (
     MachineParams,
     ParameterError,
 )
+from bayesmachine.sources import check_source
 
 __all__ = [
     "MachineOption",
@@ -286,7 +287,9 @@ def machine_params_from_args(args: argparse.Namespace, dmax: int, **overrides: A
         rng = kwargs.get("rng", DEFAULT_RNG)
         raise ParameterError(f"{flags}: device options of --rng smtj (got --rng {rng})")
     try:
-        return MachineParams.for_disparity(dmax, **kwargs)
+        params = MachineParams.for_disparity(dmax, **kwargs)
+        check_source(params)  # e.g. no LFSR polynomial of that length: refused before any work
+        return params
     except ParameterError as exc:
         message = str(exc)
         for field, option in MACHINE_OPTIONS.items():

@@ -34,7 +34,7 @@ from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from bayesmachine.params import MachineParams
-from bayesmachine.sources import source_kind
+from bayesmachine.sources import check_source, source_kind
 
 from .counters import overflow_counter_full
 from .encoder import MAPEncoder
@@ -96,6 +96,7 @@ class BayesianMachine(wiring.Component):
     def __init__(self, params: MachineParams) -> None:
         if not isinstance(params, MachineParams):
             raise TypeError(f"BayesianMachine takes a MachineParams, not {type(params).__name__}")
+        check_source(params)  # before elaboration: a clear error, not one from deep inside
         self._params = params
         members = {
             "load": In(stream.Signature(load_layout(params))),

@@ -4,10 +4,12 @@ Each test runs the CLI in-process on a tiny pair (or a small crop of the bundled
 except the file-size limit, which needs a child process with RLIMIT_FSIZE.
 """
 
+import gc
 import json
 import resource
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import cv2
@@ -249,3 +251,35 @@ def test_waves_are_committed_with_the_run_and_dropped_by_a_rerun(tmp_path, pair)
     assert (out / "waves.vcd").read_text().startswith("$version")
     assert main(argv) == 0  # the same OUT without --waves: the old trace must not stay
     assert files(out) == ["disparity.png", "report.json", "result.npz"]
+
+
+@pytest.mark.parametrize("command", ["emit", "emit-stereo", "run", "synth"])
+def test_lfsr_length_without_a_polynomial_is_refused_up_front(tmp_path, pair, capsys, command) -> None:
+    # L = 12, W = 10: taps <= 2 leave no primitive polynomial; every command says so before any
+    # work (no output directory, no elaboration warnings), the source's own check.
+    out = tmp_path / "o"
+    argv = {
+        "emit": ["emit", "--dmax", "4", "-o", str(out)],
+        "emit-stereo": ["emit", "--top", "stereo", "--width", "40", "--dmax", "4", "-o", str(out)],
+        "run": ["run", *pair, *SMALL, "--rng", "lfsr", "-o", str(out)],
+        "synth": ["synth", "--target", "ecp5-25k", "--dmax", "4", "-o", str(out)],
+    }[command]
+    line = one_error_line(capsys, [*argv, "--lfsr-bits", "12"])
+    assert "--lfsr-bits" in line and "no primitive LFSR polynomial" in line, line
+    assert not out.exists()
+
+
+def test_model_and_machine_refuse_an_lfsr_length_without_a_polynomial() -> None:
+    from bayesmachine.hdl.machine import BayesianMachine
+    from bayesmachine.params import MachineParams, ParameterError
+    from bayesmachine.sim.model import MachineModel
+
+    with warnings.catch_warnings():
+        # A component whose constructor raised is reported unused when collected: not here.
+        warnings.simplefilter("ignore")
+        for rng in ("lfsr", "lfsr-shared", "sobol"):
+            params = MachineParams.for_disparity(4, rng=rng, lfsr_bits=12)
+            for build in (BayesianMachine, MachineModel):
+                with pytest.raises(ParameterError, match="no primitive LFSR polynomial"):
+                    build(params)
+        gc.collect()

@@ -42,6 +42,22 @@ class SourceKind:
     on_chip: bool
     description: str
     numbers: Callable[[MachineParams], NumberSource] | None = None
+    # What only the source knows about a machine's parameters (e.g. that LFSR polynomials of
+    # this length exist); raises ParameterError. Run by check_source before anything is built.
+    check: Callable[[MachineParams], None] | None = None
+
+
+def _check_lfsr(params: MachineParams) -> None:
+    from .lfsr import check_lfsr_params
+
+    check_lfsr_params(params)
+
+
+def _check_sobol(params: MachineParams) -> None:
+    from .sobol import check_params
+
+    check_params(params)
+    _check_lfsr(params)  # the random digital shifts come from column LFSRs
 
 
 def _smtj_numbers(params: MachineParams) -> NumberSource:
@@ -53,15 +69,18 @@ def _smtj_numbers(params: MachineParams) -> NumberSource:
 SOURCE_KINDS: dict[str, SourceKind] = {
     kind.name: kind
     for kind in (
-        SourceKind("lfsr", True, "one leap-forward LFSR per operator (L = lfsr_bits, W bits per cycle)"),
+        SourceKind("lfsr", True, "one leap-forward LFSR per operator (L = lfsr_bits, W bits per cycle)",
+                   check=_check_lfsr),
         SourceKind(
             "lfsr-shared", True,
             "one leap-forward LFSR per operator column, its number shared by every row",
+            check=_check_lfsr,
         ),
         SourceKind(
             "sobol", True,
             "one Sobol generator per operator column, shared by every row; restarts each pixel, "
             "a random digital shift per block of 2^W cycles",
+            check=_check_sobol,
         ),
         SourceKind(
             "external", False,
@@ -82,3 +101,10 @@ def source_kind(name: str) -> SourceKind:
         return SOURCE_KINDS[name]
     except KeyError:
         raise ParameterError(f"rng must be one of {', '.join(SOURCE_KINDS)}, got {name!r}") from None
+
+
+def check_source(params: MachineParams) -> None:
+    """Raise ParameterError if the machine's random source cannot be built for ``params``."""
+    kind = source_kind(params.rng)
+    if kind.check is not None:
+        kind.check(params)

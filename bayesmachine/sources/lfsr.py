@@ -26,7 +26,7 @@ import random
 from collections.abc import Iterator
 from dataclasses import dataclass
 
-from bayesmachine.params import MachineParams, ParameterError
+from bayesmachine.params import DEFAULT_LFSR_BITS, MachineParams, ParameterError
 
 __all__ = [
     "MAX_TAPS",
@@ -274,11 +274,29 @@ def _primitive_tap_sets(length: int, max_tap: int, count: int, seed: int) -> tup
     return tuple(found)
 
 
+@functools.lru_cache(maxsize=64)
+def _has_primitive(length: int, max_tap: int) -> bool:
+    return bool(_primitive_tap_sets(length, max_tap, 1, 0))
+
+
+def _no_polynomial(length: int, w: int) -> ParameterError:
+    return ParameterError(
+        f"lfsr_bits = {length}: no primitive LFSR polynomial of that length has taps <= {length - w} "
+        f"(lfsr_bits - word_bits) and at most 6 XOR inputs; choose another lfsr_bits "
+        f"(the default {DEFAULT_LFSR_BITS} works for every word_bits)")
+
+
+def check_lfsr_params(params: MachineParams) -> None:
+    """Raise ParameterError if no LFSR of ``params.lfsr_bits`` bits can step W bits per cycle."""
+    if not _has_primitive(params.lfsr_bits, params.lfsr_bits - params.word_bits):
+        raise _no_polynomial(params.lfsr_bits, params.word_bits)
+
+
 def _specs(params: MachineParams, count: int, salt: int) -> list[LFSRSpec]:
     length, w = params.lfsr_bits, params.word_bits
     tap_sets = _primitive_tap_sets(length, length - w, count, params.seed)
     if not tap_sets:
-        raise ParameterError(f"no primitive LFSR polynomial of length {length} with taps <= {length - w}")
+        raise _no_polynomial(length, w)
     specs = []
     used: set[int] = set()
     for o in range(count):
