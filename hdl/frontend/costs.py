@@ -14,6 +14,9 @@ in operator order (word o in lane o % lanes of beat o // lanes), exactly the wor
 ``lanes`` must be a multiple of the operator columns, so each lane always holds the same
 operator column: a lane of feature f reads its own port of f's table. One beat per cycle:
 a look-up (block RAM read) in the cycle of the beat's issue, the beat on the stream the next.
+The look-up's operands are registers: the left sums, and per row of a beat the delay-line entry,
+from a shift register loaded with the pixel's entries when it is taken and moved a beat at each
+issue: no multiplexer over the delay line, and no path from the beat counter to a table address.
 """
 
 from __future__ import annotations
@@ -145,8 +148,27 @@ class WordGenerator(wiring.Component):
 
         def clamped(value: object, depth: int) -> object:
             a = Signal(unsigned(14))
-            m.d.comb += a.eq(abs(value))
+            m.d.comb += a.eq(value)
             return Mux(a >= depth - 1, depth - 1, a)
+
+        def distance(a: object, b: object) -> object:
+            # |a - b| as two differences side by side: one carry chain deep, not two in a row.
+            return Mux(a >= b, a - b, b - a)
+
+        # Each row of a beat reads its entry from a shift register, not through a multiplexer
+        # over the delay line: view[j][b] = the entry of row j of beat b, loaded from the delay
+        # line when a pixel is taken (as the line is after its shift), moved up a beat at each
+        # issue, so view[j][0] holds the issuing beat's entry and every path stays short.
+        view = [[Signal(feature_layout(), name=f"view_{j}_{b}", reset_less=True) for b in range(n_beats)]
+                for j in range(rows_per_beat)]
+        for j, chain in enumerate(view):
+            for b, reg in enumerate(chain):
+                d = min(b * rows_per_beat + j, dmax)  # entry d after the shift is entry d - 1 now
+                with m.If(take):
+                    m.d.sync += reg.eq(self.pixel.payload.right if d == 0 else right[d - 1])
+                if b + 1 < n_beats:
+                    with m.Elif(issue):
+                        m.d.sync += reg.eq(chain[b + 1])
 
         lane_data: dict[int, object] = {}
         for f, name in enumerate(FEATURES):
@@ -154,24 +176,17 @@ class WordGenerator(wiring.Component):
             mem = memory.Memory(shape=unsigned(p.memory_word_width), depth=len(table), init=table.tolist())
             m.submodules[f"table_{name}"] = mem
             for j in range(rows_per_beat):
-                entries = [getattr(right[min(b * rows_per_beat + j, dmax)], name) for b in range(n_beats)]
-                sel = Signal(entries[0].shape(), name=f"right_{name}_{j}")
-                with m.Switch(beat):
-                    for b, entry in enumerate(entries):
-                        with m.Case(b):
-                            m.d.comb += sel.eq(entry)
-                    with m.Default():  # `beat` never gets here; a complete case for the Verilog
-                        m.d.comb += sel.eq(0)
                 port = mem.read_port()
+                entry = getattr(view[j][0], name)
                 m.d.comb += [port.en.eq(read_en),
-                             port.addr.eq(clamped(getattr(left, name) - sel, len(table)))]
+                             port.addr.eq(clamped(distance(getattr(left, name), entry), len(table)))]
                 lane_data[j * cols + off + f] = port.data
         nm_table = self._tables.nomatch
         nm_mem = memory.Memory(shape=unsigned(p.memory_word_width), depth=len(nm_table),
                                init=nm_table.tolist())
         m.submodules.table_nomatch = nm_mem
         nm_port = nm_mem.read_port()
-        m.d.comb += [nm_port.en.eq(read_en), nm_port.addr.eq(clamped(left.gv20, len(nm_table)))]
+        m.d.comb += [nm_port.en.eq(read_en), nm_port.addr.eq(clamped(abs(left.gv20), len(nm_table)))]
 
         # The beat on the stream: each lane's word by its operator (row, column).
         unused = range(n_beats, 1 << len(beat_q))  # never occur; in the last case for a complete case
