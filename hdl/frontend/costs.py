@@ -148,12 +148,8 @@ class WordGenerator(wiring.Component):
 
         def clamped(value: object, depth: int) -> object:
             a = Signal(unsigned(14))
-            m.d.comb += a.eq(value)
+            m.d.comb += a.eq(abs(value))
             return Mux(a >= depth - 1, depth - 1, a)
-
-        def distance(a: object, b: object) -> object:
-            # |a - b| as two differences side by side: one carry chain deep, not two in a row.
-            return Mux(a >= b, a - b, b - a)
 
         # Each row of a beat reads its entry from a shift register, not through a multiplexer
         # over the delay line: view[j][b] = the entry of row j of beat b, loaded from the delay
@@ -179,14 +175,14 @@ class WordGenerator(wiring.Component):
                 port = mem.read_port()
                 entry = getattr(view[j][0], name)
                 m.d.comb += [port.en.eq(read_en),
-                             port.addr.eq(clamped(distance(getattr(left, name), entry), len(table)))]
+                             port.addr.eq(clamped(getattr(left, name) - entry, len(table)))]
                 lane_data[j * cols + off + f] = port.data
         nm_table = self._tables.nomatch
         nm_mem = memory.Memory(shape=unsigned(p.memory_word_width), depth=len(nm_table),
                                init=nm_table.tolist())
         m.submodules.table_nomatch = nm_mem
         nm_port = nm_mem.read_port()
-        m.d.comb += [nm_port.en.eq(read_en), nm_port.addr.eq(clamped(abs(left.gv20), len(nm_table)))]
+        m.d.comb += [nm_port.en.eq(read_en), nm_port.addr.eq(clamped(left.gv20, len(nm_table)))]
 
         # The beat on the stream: each lane's word by its operator (row, column).
         unused = range(n_beats, 1 << len(beat_q))  # never occur; in the last case for a complete case
