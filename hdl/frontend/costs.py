@@ -14,6 +14,9 @@ in operator order (word o in lane o % lanes of beat o // lanes), exactly the wor
 ``lanes`` must be a multiple of the operator columns, so each lane always holds the same
 operator column: a lane of feature f reads its own port of f's table. One beat per cycle:
 a look-up (block RAM read) in the cycle of the beat's issue, the beat on the stream the next.
+The look-up's operands are registers: the left sums, and per lane the delay-line entry of the
+beat, chosen a cycle ahead (beat 0's when the pixel is taken, the next beat's at each issue), so
+no path runs from the beat counter through the entry multiplexer into a table address.
 """
 
 from __future__ import annotations
@@ -148,6 +151,9 @@ class WordGenerator(wiring.Component):
             m.d.comb += a.eq(abs(value))
             return Mux(a >= depth - 1, depth - 1, a)
 
+        # Each lane's delay-line entry comes from a register loaded a cycle ahead (the beat
+        # counter's multiplexer ends there, not at the table address): with beat 0's entry when
+        # a pixel is taken (the line as it is after the shift), with the next beat's on an issue.
         lane_data: dict[int, object] = {}
         for f, name in enumerate(FEATURES):
             table = self._tables.feature(f)
@@ -155,13 +161,17 @@ class WordGenerator(wiring.Component):
             m.submodules[f"table_{name}"] = mem
             for j in range(rows_per_beat):
                 entries = [getattr(right[min(b * rows_per_beat + j, dmax)], name) for b in range(n_beats)]
-                sel = Signal(entries[0].shape(), name=f"right_{name}_{j}")
-                with m.Switch(beat):
-                    for b, entry in enumerate(entries):
-                        with m.Case(b):
-                            m.d.comb += sel.eq(entry)
-                    with m.Default():  # `beat` never gets here; a complete case for the Verilog
-                        m.d.comb += sel.eq(0)
+                sel = Signal(entries[0].shape(), name=f"right_{name}_{j}", reset_less=True)
+                with m.If(take):
+                    d = min(j, dmax)  # entry d after the shift is entry d - 1 now
+                    m.d.sync += sel.eq(getattr(self.pixel.payload.right if d == 0 else right[d - 1], name))
+                with m.Elif(issue):
+                    with m.Switch(beat):
+                        for b in range(n_beats - 1):
+                            with m.Case(b):
+                                m.d.sync += sel.eq(entries[b + 1])
+                        with m.Default():  # the last beat: the next take reloads it; a complete case
+                            m.d.sync += sel.eq(entries[-1])
                 port = mem.read_port()
                 m.d.comb += [port.en.eq(read_en),
                              port.addr.eq(clamped(getattr(left, name) - sel, len(table)))]
