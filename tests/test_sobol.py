@@ -9,6 +9,7 @@ import random
 
 import numpy as np
 import pytest
+from amaranth.hdl import Module, Signal
 from conftest import run_sim
 
 from bayesmachine.hdl.sources import SobolGenerators
@@ -204,3 +205,34 @@ def test_next_and_restart_numbers_predict_the_next_cycle(w: int, columns: int) -
             continue
         checked[(enable, restart)] += 1
     assert min(checked.values()) > 10
+
+
+
+@pytest.mark.parametrize(("w", "columns"), [(1, 2), (2, 3), (3, 3)])
+def test_following_restart_numbers_is_the_next_cycles_restart_numbers(w: int, columns: int) -> None:
+    """A register loaded with ``following_restart_numbers`` every clock (reset to the shift LFSR's
+    first number) equals ``restart_numbers`` in every cycle, for random enable and restart
+    patterns (all four combinations, so blocks end, restart mid-block and the LFSRs step)."""
+    params = _params(w, columns)
+    dut = SobolGenerators(params)
+    m = Module()
+    m.submodules.dut = dut
+    mask = (1 << w) - 1
+    copies = [Signal(w, init=s.init & mask) for s in column_lfsr_specs(params)]
+    m.d.sync += [c.eq(n) for c, n in zip(copies, dut.following_restart_numbers, strict=True)]
+    rnd = random.Random(200 + w)
+    seen: list[tuple[list[int], list[int]]] = []
+
+    async def bench(ctx):
+        for _ in range(max(300, 8 << w)):
+            x = rnd.random()
+            enable, restart = (1, 0) if x < 0.6 else (0, 1) if x < 0.75 else (1, 1) if x < 0.85 else (0, 0)
+            ctx.set(dut.enable, enable)
+            ctx.set(dut.restart, restart)
+            seen.append(([ctx.get(n) for n in dut.restart_numbers], [ctx.get(c) for c in copies]))
+            await ctx.tick()
+
+    run_sim(m, bench)
+    for t, (restart, copy) in enumerate(seen):
+        assert copy == restart, t
+    assert sum(a[0] != b[0] for a, b in zip(seen[:-1], seen[1:], strict=True)) > 20  # the shift LFSRs do step

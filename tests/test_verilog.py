@@ -117,9 +117,10 @@ def _expected_flip_flops(p: MachineParams) -> int:
     # of rows' prefetched overflow; off-chip numbers are compared in their cycle.
     groups = -(-p.rows // max(1, GROUP_OPERATORS // p.operator_columns))
     prefetch = p.operators + groups if source_kind(p.rng).on_chip else 0
-    # Shared sources: the per-group copies of the columns' next numbers (identical: merged into one).
+    # Shared sources: the per-group copies of the columns' next numbers and of their restart
+    # numbers, W bits per column each (identical per group: merged into one of each).
     if p.rng in ("lfsr-shared", "sobol"):
-        prefetch += p.operator_columns * p.word_bits
+        prefetch += 2 * p.operator_columns * p.word_bits
     return lfsrs + memories + counters + result + control + prefetch
 
 
