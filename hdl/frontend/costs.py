@@ -16,7 +16,10 @@ operator column: a lane of feature f reads its own port of f's table. One beat p
 a look-up (block RAM read) in the cycle of the beat's issue, the beat on the stream the next.
 The look-up's operands are registers: the left sums, and per lane the delay-line entry of the
 beat, chosen a cycle ahead (beat 0's when the pixel is taken, the next beat's at each issue), so
-no path runs from the beat counter through the entry multiplexer into a table address.
+no path runs from the beat counter through the entry multiplexer into a table address. The delay
+line shifts a cycle after the take (from a register holding the taken right features), its
+enables on registered copies of the take, so the take (which depends on the stream's ready)
+drives only the entry registers and the left sums, not the delay line's thousands of enables.
 """
 
 from __future__ import annotations
@@ -136,9 +139,20 @@ class WordGenerator(wiring.Component):
                 m.d.sync += [beat.eq(0), active.eq(0)]
             with m.Else():
                 m.d.sync += beat.eq(beat + 1)
+        # The delay line shifts a cycle after the take, from a register holding the taken
+        # pixel's right features: its thousands of enables hang on registered copies of the
+        # take (groups of entries), not on the take itself (FIFO ready -> issue -> take). While
+        # a shift is pending (``shift_q``) the line as the words see it is [right_in, right...].
+        right_in = Signal(feature_layout(), reset_less=True)
+        shift_q = Signal()
+        group = 9  # delay-line entries per copy of the shift enable
+        shift_rep = [Signal(name=f"shift_rep{g}") for g in range((dmax + group) // group)]
+        m.d.sync += [shift_q.eq(take), *(r.eq(take) for r in shift_rep)]
+        for d in range(dmax + 1):
+            with m.If(shift_rep[d // group]):
+                m.d.sync += right[d].eq(right_in if d == 0 else right[d - 1])
         with m.If(take):
-            m.d.sync += [right[0].eq(self.pixel.payload.right), left.eq(self.pixel.payload.left)]
-            m.d.sync += [right[d + 1].eq(right[d]) for d in range(dmax)]
+            m.d.sync += [right_in.eq(self.pixel.payload.right), left.eq(self.pixel.payload.left)]
             with m.If(self.pixel.payload.output):
                 m.d.sync += [active.eq(1), beat.eq(0)]
 
@@ -160,14 +174,22 @@ class WordGenerator(wiring.Component):
             mem = memory.Memory(shape=unsigned(p.memory_word_width), depth=len(table), init=table.tolist())
             m.submodules[f"table_{name}"] = mem
             for j in range(rows_per_beat):
+                def entry(d: int, name: str = name) -> object:
+                    # Entry d of the line as the words see it (a pending shift included).
+                    seen = right_in if d == 0 else right[d - 1]
+                    return Mux(shift_q, getattr(seen, name), getattr(right[d], name))
+
                 entries = [getattr(right[min(b * rows_per_beat + j, dmax)], name) for b in range(n_beats)]
                 sel = Signal(entries[0].shape(), name=f"right_{name}_{j}", reset_less=True)
                 with m.If(take):
-                    d = min(j, dmax)  # entry d after the shift is entry d - 1 now
-                    m.d.sync += sel.eq(getattr(self.pixel.payload.right if d == 0 else right[d - 1], name))
+                    d = min(j, dmax)  # entry d after the take is entry d - 1 now
+                    m.d.sync += sel.eq(getattr(self.pixel.payload.right, name) if d == 0 else entry(d - 1))
                 with m.Elif(issue):
                     with m.Switch(beat):
-                        for b in range(n_beats - 1):
+                        if n_beats > 1:  # beat 0: the only one issued with a shift pending
+                            with m.Case(0):
+                                m.d.sync += sel.eq(entry(min(rows_per_beat + j, dmax)))
+                        for b in range(1, n_beats - 1):
                             with m.Case(b):
                                 m.d.sync += sel.eq(entries[b + 1])
                         with m.Default():  # the last beat: the next take reloads it; a complete case

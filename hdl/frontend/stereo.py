@@ -18,7 +18,9 @@ Pipeline (one pixel per cycle when no output pixel holds it):
 
 The FIFO (``fifo_pixels`` pixels of beats, block RAM) lets the front end run ahead while the
 machine's runs are long and the line ends' non-output pixels stream in; when it is full,
-back-pressure reaches the pixel input. Results leave in raster order of the output region, on
+back-pressure reaches the pixel input. Its ready toward the word generator is a register (set
+while at most all but one entry is used; the FIFO has one entry more than the pixels' beats), so
+no path runs from its level through the pixel take. Results leave in raster order of the output region, on
 the machine's own result stream.
 """
 
@@ -225,13 +227,31 @@ class StereoMachine(wiring.Component):
         m.submodules.frontend = front = FrontEnd(p, self._model, self._width)
         m.submodules.machine = machine = BayesianMachine(p)
         beat_bits = Shape.cast(load_layout(p)).width
-        depth = self._fifo_pixels * p.beats_per_pixel
+        # One entry more than the pixels' beats: the registered ready below keeps one free.
+        depth = self._fifo_pixels * p.beats_per_pixel + 1
         m.submodules.fifo = buf = fifo.SyncFIFOBuffered(width=beat_bits, depth=depth)
         wiring.connect(m, wiring.flipped(self.pixels), front.pixels)
+        # The front end sees a registered ready (``room``), so no path runs from the FIFO's
+        # level through the pixel take into the front end's thousands of enables. ``used``
+        # counts the beats in the FIFO (its level); room is set while at most depth - 2 are in:
+        # the inner FIFO (depth - 1 entries, holding at most ``used``) then takes the next
+        # beat, and the FIFO fills to depth - 1 = fifo_pixels * beats_per_pixel beats.
+        # (Our own count, not ``buf.level``: the forms from the level failed synth_ecp5's ABC9 step.)
+        used = Signal(range(depth + 1))
+        used_next = Signal(range(depth + 1))
+        room = Signal()
+        write = Signal()
+        read = Signal()
+        m.d.comb += [
+            write.eq(front.beats.valid & room),
+            read.eq(buf.r_stream.valid & buf.r_stream.ready),
+            used_next.eq(used + write - read),
+        ]
+        m.d.sync += [used.eq(used_next), room.eq(used_next <= depth - 2)]
         m.d.comb += [
             buf.w_stream.payload.eq(front.beats.payload),
-            buf.w_stream.valid.eq(front.beats.valid),
-            front.beats.ready.eq(buf.w_stream.ready),
+            buf.w_stream.valid.eq(write),
+            front.beats.ready.eq(room),
             machine.load.payload.eq(buf.r_stream.payload),
             machine.load.valid.eq(buf.r_stream.valid),
             buf.r_stream.ready.eq(machine.load.ready),
