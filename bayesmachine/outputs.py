@@ -19,8 +19,10 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import itertools
 import os
 import shutil
+import threading
 import zipfile
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
@@ -39,11 +41,15 @@ __all__ = [
 ]
 
 _TMP_MARK = ".partial-"
+_TMP_SERIAL = itertools.count()
 
 
 def _temp_name(path: Path) -> Path:
-    # Hidden, same directory (so os.replace is a rename), same suffix (writers infer formats from it).
-    return path.with_name(f".{path.stem}{_TMP_MARK}{os.getpid()}{path.suffix}")
+    # Hidden, same directory (so os.replace is a rename), same suffix (writers infer formats from
+    # it). Unique per call, not per process: two threads writing the same file (two engines
+    # building one cached design) must not share, and then lose, one temporary file.
+    token = f"{os.getpid()}-{threading.get_ident()}-{next(_TMP_SERIAL)}"
+    return path.with_name(f".{path.stem}{_TMP_MARK}{token}{path.suffix}")
 
 
 def _fsync_file(path: Path) -> None:

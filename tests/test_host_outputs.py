@@ -27,6 +27,38 @@ def test_atomic_file_replaces_only_on_success(tmp_path: Path) -> None:
     assert target.read_text() == "new" and names(tmp_path) == ["a.txt"]
 
 
+def test_atomic_file_overlapping_writers_of_one_file(tmp_path: Path) -> None:
+    """Two writers of the same file in one process (two threads building one cached design) each
+    get their own temporary file; both commit, the last one wins, nothing is left behind."""
+    import threading
+
+    target = tmp_path / "shared.v"
+    with atomic_file(target) as first, atomic_file(target) as second:
+        assert first != second
+        first.write_text("first")
+        second.write_text("second")
+    assert target.read_text() == "first" and names(tmp_path) == ["shared.v"]
+
+    barrier = threading.Barrier(4)
+    errors: list[BaseException] = []
+
+    def write(text: str) -> None:
+        try:
+            with atomic_file(target) as tmp:
+                tmp.write_text(text)
+                barrier.wait(timeout=10)  # every thread holds its temporary file at once
+        except BaseException as exc:  # noqa: BLE001 - reported below
+            errors.append(exc)
+
+    threads = [threading.Thread(target=write, args=(f"t{i}",)) for i in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert errors == []
+    assert target.read_text() in {"t0", "t1", "t2", "t3"} and names(tmp_path) == ["shared.v"]
+
+
 def test_atomic_file_os_error_names_the_target(tmp_path: Path) -> None:
     target = tmp_path / "b.bin"
     with pytest.raises(OSError) as info, atomic_file(target) as tmp:
