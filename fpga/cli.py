@@ -10,8 +10,6 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
-
 from bayesmachine.cliargs import add_dmax_option, add_machine_options, machine_params_from_args
 from bayesmachine.hdl.frontend import DEFAULT_FIFO_PIXELS
 from bayesmachine.likelihood import ModelParams
@@ -29,10 +27,8 @@ def measure_cycles(params: MachineParams, progress: bool = True,
     RTL's per-pixel timing ``pixel_wall_cycles`` on top: loading included). ``model``: the disparity
     model whose words the machine runs on (default: the paper's, Dmax = rows - 2)."""
     from bayesmachine.hdl.machine import pixel_wall_cycles
-    from bayesmachine.host.features import feature_sums
     from bayesmachine.host.images import bundled_pair
-    from bayesmachine.host.likelihoods import QuantizedTables, likelihood_tables, memory_words
-    from bayesmachine.sim.model import MachineModel
+    from bayesmachine.host.run import prepare, run_machine
 
     if not (params.nomatch_row and params.columns == 3):
         raise ValueError("throughput is measured on a stereo pair: it needs a disparity machine "
@@ -42,21 +38,9 @@ def measure_cycles(params: MachineParams, progress: bool = True,
         model = ModelParams(dmax=params.rows - 2)
     elif model.dmax != params.rows - 2:
         raise ValueError(f"model dmax {model.dmax} does not match the machine's {params.rows - 2}")
-    fl, fr = feature_sums(left), feature_sums(right)
-    qt = QuantizedTables(likelihood_tables(model), params.word_bits)
-    machine = MachineModel(params)
-    cycles = []
-    h = fl.shape[0]
-    step = 32
-    for y in range(0, h, step):
-        if progress:
-            print(f"throughput: model on the bundled pair, map rows {y}-{min(h, y + step)} of {h}",
-                  file=sys.stderr, end="\r")
-        words = memory_words(fl, fr, model, params, rows=slice(y, y + step), qtables=qt)
-        cycles.append(machine.run(words).cycles)
-    if progress:
-        print(file=sys.stderr)
-    c = np.concatenate(cycles)
+    # The cycles need the machine only: no float64 reference.
+    prepared = prepare(left, right, model, reference=False)
+    c = run_machine(prepared, params, "model", progress=progress, chunk_rows=32).cycles.reshape(-1)
     return {
         "pair": f"bundled Middlebury Motorcycle {left.shape[1]}x{left.shape[0]}, model engine",
         "pixels": int(c.size),

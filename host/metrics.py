@@ -210,6 +210,9 @@ def evaluate(prepared: Prepared, run: MachineRun, sgbm: bool | None = None) -> R
     accumulated, so memory stays at one band whatever the frame size.
     """
     ref_map = prepared.reference_map
+    if ref_map is None:
+        raise ValueError("the pair was prepared without its reference (prepare(..., reference=False)): "
+                         "nothing to evaluate the run against")
     machine_nm = run.map < 0  # no-match row won, or watchdog timeout
     ref_nm = ref_map < 0
     rms = RmsAccumulator(run.machine.counter_max)

@@ -37,7 +37,7 @@ class Prepared:
     right: np.ndarray
     model: ModelParams
     features: tuple[FeatureSums, FeatureSums]
-    reference_map: np.ndarray  # (Ho, Wo) int16, -1 = no match
+    reference_map: np.ndarray | None  # (Ho, Wo) int16, -1 = no match; None: prepared without it
     reference_seconds: float
     gt: np.ndarray | None = None  # ground truth cut to the output region (map coordinates)
     gt_image: np.ndarray | None = None  # ground truth in image coordinates (for SGBM)

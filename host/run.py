@@ -60,16 +60,21 @@ def result_bytes(region: OutputRegion, machine: MachineParams) -> int:
 
 
 def prepare(
-    left: np.ndarray, right: np.ndarray, model: ModelParams, gt: np.ndarray | None = None
+    left: np.ndarray, right: np.ndarray, model: ModelParams, gt: np.ndarray | None = None,
+    reference: bool = True,
 ) -> Prepared:
-    """Validate the pair, compute the features and the float64 reference MAP (band by band)."""
+    """Validate the pair, compute the features and the float64 reference MAP (band by band).
+
+    ``reference=False`` skips the reference (``reference_map`` is None): enough to run the
+    machine (``run_machine``, e.g. to measure its cycles), not to evaluate it."""
     validate_pair(left, right, model.dmax)
     if gt is not None and gt.shape != left.shape:
         raise ValueError(f"ground truth shape {gt.shape} differs from the images' {left.shape}")
-    warm_up()  # keep numba's cache load / compilation out of reference_seconds
+    if reference:
+        warm_up()  # keep numba's cache load / compilation out of reference_seconds
     t0 = time.perf_counter()
     feats = (feature_sums(left), feature_sums(right))
-    ref_map = reference_map(*feats, model)
+    ref_map = reference_map(*feats, model) if reference else None
     seconds = time.perf_counter() - t0
     cut = gt_region(gt, model.dmax) if gt is not None else None
     return Prepared(left, right, model, feats, ref_map, seconds, cut, gt)

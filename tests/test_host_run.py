@@ -63,6 +63,20 @@ def test_timeouts_count_as_no_match(pair, prepared):
     assert out.metrics.machine_nomatch >= int(t.sum())
 
 
+def test_prepare_without_reference_runs_the_machine_but_not_the_evaluation(pair, prepared):
+    # What measuring a machine's cycles needs (synth's throughput): the same run, no reference.
+    left, right, gt = pair
+    bare = prepare(left, right, ModelParams(dmax=DMAX), gt, reference=False)
+    assert bare.reference_map is None
+    machine = MachineParams.for_disparity(DMAX, counter_max=4, seed=5)
+    a = run_machine(bare, machine, progress=False, chunk_rows=5)
+    b = run_machine(prepared, machine, progress=False)
+    for field in ("map", "counts", "cycles", "timeout"):
+        np.testing.assert_array_equal(getattr(a, field), getattr(b, field))
+    with pytest.raises(ValueError, match="without its reference"):
+        evaluate(bare, a)
+
+
 def test_bad_machine_or_engine(prepared):
     with pytest.raises(ValueError, match="dmax \\+ 2"):
         run_machine(prepared, MachineParams.for_disparity(DMAX + 1), progress=False)
