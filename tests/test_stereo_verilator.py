@@ -11,6 +11,7 @@ from conftest import assert_same_results
 
 from bayesmachine.cli import main
 from bayesmachine.hdl.frontend.stereo import stereo_machine_params
+from bayesmachine.hdl.machine import BUBBLE_CYCLES, pixel_wall_cycles
 from bayesmachine.host.features import feature_sums
 from bayesmachine.host.images import bundled_pair
 from bayesmachine.host.likelihoods import ModelParams, memory_words
@@ -133,4 +134,9 @@ def test_whole_bundled_pair_through_the_front_end_equals_the_model() -> None:
     with StereoVerilatorEngine(params, model, left.shape[1], verbose=False) as engine:
         got = engine.run(left, right)
         assert_same_results(got, want)
-        assert engine.last_wall_cycles < 1.02 * engine.last_compute_cycles
+        # Loading hidden: the pair through the front end takes what the machine alone takes when
+        # fed words at full rate (compute + the registered stop's bubble per run), within 0.5 %
+        # (measured +0.04 %: the first lines and the line ends).
+        alone = int(pixel_wall_cycles(params, got.cycles).sum())
+        assert alone == int(want.cycles.sum()) + BUBBLE_CYCLES * len(want)  # compute-bound here
+        assert alone <= engine.last_wall_cycles < 1.005 * alone
