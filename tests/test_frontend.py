@@ -189,7 +189,7 @@ def test_stereo_machine_hides_loading_and_filtering() -> None:
     # Lines 0-3 (4 x width pixels) and the first dmax + 4 pixels of a line run no machine; plus
     # the pipeline's latency to the first result (the machine writes a beat the cycle after its
     # handshake). Everything else must overlap the runs.
-    startup = 4 * width + dmax + 4 + 3 + params.beats_per_pixel + LOAD_LATENCY + 2
+    startup = 4 * width + dmax + 4 + 4 + params.beats_per_pixel + LOAD_LATENCY + 2
     print(f"\nwall {wall}, compute {compute}, per pixel {per_pixel}, startup bound {startup}")
     assert compute + len(got) <= wall <= per_pixel + startup + (height - 4) * (dmax + 4)
 
@@ -251,9 +251,9 @@ def test_back_pressure_reaches_the_pixel_input() -> None:
         assert len(taken) == stalled_at < len(beats)  # the input has stopped
         # Held from the first output pixel (index 4 * width + dmax + 4) on: the result register, the
         # running pixel, the shadow memory, the FIFO (one pixel and its output register), the word
-        # generator's pixel, and the two pipeline stages behind it.
+        # generator's pixel, and the three pipeline stages behind it.
         first_output = 4 * width + dmax + 4
-        assert first_output + 3 <= stalled_at <= first_output + 8
+        assert first_output + 3 <= stalled_at <= first_output + 9
         raw = top.result.payload.as_value()
         ctx.set(top.result.ready, 1)
         while len(results) < (height - 4) * (width - 4 - dmax):
