@@ -102,17 +102,27 @@ def test_feature_filter_equals_host_feature_sums() -> None:
     want = feature_sums(image)
     cols = column_windows(image)
     dut = FeatureFilter()
+    rnd = random.Random(4)
 
     async def bench(ctx):
-        for y in range(cols.shape[0]):
-            for x in range(cols.shape[1]):
-                ctx.set(dut.en, 1)
+        # As in a pipeline: each column is loaded, then shifted in while the next is loaded, with
+        # random idle cycles (neither load nor shift) that must change nothing.
+        order = [(y, x) for y in range(cols.shape[0]) for x in range(cols.shape[1])]
+        for k in range(len(order) + 1):
+            ctx.set(dut.load, k < len(order))
+            if k < len(order):
                 for i in range(5):
-                    ctx.set(dut.column[i], int(cols[y, x, i]))
+                    ctx.set(dut.column[i], int(cols[order[k]][i]))
+            ctx.set(dut.en, k > 0)
+            await ctx.tick()
+            ctx.set(dut.load, 0)
+            ctx.set(dut.en, 0)
+            for _ in range(rnd.choice([0, 0, 1, 2])):
                 await ctx.tick()
-                if x >= 4:
-                    got = (ctx.get(dut.features.m25), ctx.get(dut.features.gh20), ctx.get(dut.features.gv20))
-                    assert got == (want.m25[y, x - 4], want.gh20[y, x - 4], want.gv20[y, x - 4]), (y, x)
+            if k > 0 and order[k - 1][1] >= 4:
+                y, x = order[k - 1]
+                got = (ctx.get(dut.features.m25), ctx.get(dut.features.gh20), ctx.get(dut.features.gv20))
+                assert got == (want.m25[y, x - 4], want.gh20[y, x - 4], want.gv20[y, x - 4]), (y, x)
 
     run_sim(dut, bench)
 

@@ -12,8 +12,8 @@ window's right column); every other pixel passes in one cycle and starts no mach
 Pipeline (one pixel per cycle when no output pixel holds it):
 
 1. the pixel is taken and its column read from the line buffer;
-2. both images' 5-high columns enter registers (the block RAM's output ends there);
-3. the columns enter the feature filters;
+2. both images' 5-high columns' partial sums enter the feature filters' first registers;
+3. the columns' sums enter the filters' windows;
 4. the word generator takes the features (right ones into the delay line); for an output pixel
    it writes ``beats_per_pixel`` beats into a FIFO in front of the machine's load stream.
 
@@ -40,7 +40,7 @@ from bayesmachine.params import MachineParams, ParameterError
 from . import DEFAULT_FIFO_PIXELS, MAX_WIDTH
 from .costs import WordGenerator, check_frontend_params
 from .filters import FeatureFilter
-from .linebuffer import WINDOW, LineBuffer, pair_layout
+from .linebuffer import WINDOW, LineBuffer
 
 __all__ = ["MAX_WIDTH", "FrontEnd", "StereoMachine", "check_stereo_machine", "pixel_in_layout",
            "stereo_machine_params"]
@@ -126,7 +126,7 @@ class FrontEnd(wiring.Component):
 
         # The pipeline advances as a whole whenever its last stage is empty or taken.
         valid1 = Signal()  # stage 1: the line buffer shows the pixel's column
-        valid2 = Signal()  # stage 2: the column is in registers (the block RAM's slow output ends there)
+        valid2 = Signal()  # stage 2: the filters hold the column's partial sums
         valid3 = Signal()  # stage 3: the filters hold the pixel's window
         advance = Signal()
         m.d.comb += advance.eq(~valid3 | gen.pixel.ready)
@@ -159,20 +159,20 @@ class FrontEnd(wiring.Component):
         with m.If(advance):
             m.d.sync += [valid1.eq(self.pixels.valid), col1.eq(cur_col), line1.eq(cur_line)]
 
-        # Stage 1 -> 2: the columns into registers. The block RAM's clock-to-output (5.8 ns on
-        # ECP5) followed by the filters' 5-high sums was the critical path.
-        columns = Signal(data.ArrayLayout(pair_layout(), WINDOW))
+        # Stage 1 -> 2: the columns' partial sums into the filters' first registers (the block
+        # RAM's clock-to-output, 5.8 ns on ECP5, then the whole column sum was the critical path).
         output2 = Signal()
+        m.d.comb += [fl.load.eq(advance), fr.load.eq(advance)]
+        for i in range(WINDOW):
+            m.d.comb += [fl.column[i].eq(lines.column[i].left), fr.column[i].eq(lines.column[i].right)]
         with m.If(advance):
-            m.d.sync += [columns.eq(lines.column), valid2.eq(valid1),
+            m.d.sync += [valid2.eq(valid1),
                          output2.eq((line1 == WINDOW - 1) & (col1 >= dmax + WINDOW - 1))]
 
-        # Stage 2 -> 3: the columns enter the filters.
+        # Stage 2 -> 3: the columns' sums enter the filters' windows.
         output3 = Signal()
         shift = advance & valid2
         m.d.comb += [fl.en.eq(shift), fr.en.eq(shift)]
-        for i in range(WINDOW):
-            m.d.comb += [fl.column[i].eq(columns[i].left), fr.column[i].eq(columns[i].right)]
         with m.If(advance):
             m.d.sync += [valid3.eq(valid2), output3.eq(output2)]
 
