@@ -197,10 +197,10 @@ def test_stereo_machine_hides_loading_and_filtering() -> None:
     compute = int(got.cycles.sum())
     per_pixel = int(pixel_wall_cycles(params, got.cycles).sum())
     # Lines 0-3 (4 x width pixels) and the first dmax + 4 pixels of a line run no machine; plus
-    # the pipeline's latency to the first result (4 front-end stages, the word generator's address
-    # register; the machine writes a beat the cycle after its handshake). Everything else must
-    # overlap the runs.
-    startup = 4 * width + dmax + 4 + 4 + 1 + params.beats_per_pixel + LOAD_LATENCY + 2
+    # the pipeline's latency to the first result (4 front-end stages, the word generator's
+    # difference and address registers; the machine writes a beat the cycle after its
+    # handshake). Everything else must overlap the runs.
+    startup = 4 * width + dmax + 4 + 4 + 2 + params.beats_per_pixel + LOAD_LATENCY + 2
     print(f"\nwall {wall}, compute {compute}, per pixel {per_pixel}, startup bound {startup}")
     assert compute + len(got) <= wall <= per_pixel + startup + (height - 4) * (dmax + 4)
 
@@ -260,15 +260,15 @@ def test_back_pressure_reaches_the_pixel_input() -> None:
         stalled_at = len(taken)
         await ctx.tick().repeat(100)
         assert len(taken) == stalled_at < len(beats)  # the input has stopped
-        # Held from the first output pixel (index 4 * width + dmax + 4) on, at most: 8 output pixels
+        # Held from the first output pixel (index 4 * width + dmax + 4) on, at most: 9 output pixels
         # (one beat each here) in the result register, the running pixel, the shadow memory, the
-        # FIFO (one pixel and its output register), the word generator's stream and address
-        # registers and its pixel; past the line's 6 output pixels, the next line's non-output
+        # FIFO (one pixel and its output register), the word generator's stream, address and
+        # difference registers and its pixel; past the line's 6 output pixels, the next line's non-output
         # start; then the front end's three pipeline stages.
         first_output = 4 * width + dmax + 4
         per_line = width - 4 - dmax
-        assert params.beats_per_pixel == 1 and per_line < 8
-        assert first_output + 3 <= stalled_at <= first_output + 8 + (width - per_line) + 3
+        assert params.beats_per_pixel == 1 and per_line < 9
+        assert first_output + 3 <= stalled_at <= first_output + 9 + (width - per_line) + 3
         raw = top.result.payload.as_value()
         ctx.set(top.result.ready, 1)
         while len(results) < (height - 4) * (width - 4 - dmax):
