@@ -102,17 +102,27 @@ def test_feature_filter_equals_host_feature_sums() -> None:
     want = feature_sums(image)
     cols = column_windows(image)
     dut = FeatureFilter()
+    rnd = random.Random(4)
 
     async def bench(ctx):
-        for y in range(cols.shape[0]):
-            for x in range(cols.shape[1]):
-                ctx.set(dut.en, 1)
+        # As in a pipeline: each column is loaded, then shifted in while the next is loaded, with
+        # random idle cycles (neither load nor shift) that must change nothing.
+        order = [(y, x) for y in range(cols.shape[0]) for x in range(cols.shape[1])]
+        for k in range(len(order) + 1):
+            ctx.set(dut.load, k < len(order))
+            if k < len(order):
                 for i in range(5):
-                    ctx.set(dut.column[i], int(cols[y, x, i]))
+                    ctx.set(dut.column[i], int(cols[order[k]][i]))
+            ctx.set(dut.en, k > 0)
+            await ctx.tick()
+            ctx.set(dut.load, 0)
+            ctx.set(dut.en, 0)
+            for _ in range(rnd.choice([0, 0, 1, 2])):
                 await ctx.tick()
-                if x >= 4:
-                    got = (ctx.get(dut.features.m25), ctx.get(dut.features.gh20), ctx.get(dut.features.gv20))
-                    assert got == (want.m25[y, x - 4], want.gh20[y, x - 4], want.gv20[y, x - 4]), (y, x)
+            if k > 0 and order[k - 1][1] >= 4:
+                y, x = order[k - 1]
+                got = (ctx.get(dut.features.m25), ctx.get(dut.features.gh20), ctx.get(dut.features.gv20))
+                assert got == (want.m25[y, x - 4], want.gh20[y, x - 4], want.gv20[y, x - 4]), (y, x)
 
     run_sim(dut, bench)
 
@@ -187,9 +197,10 @@ def test_stereo_machine_hides_loading_and_filtering() -> None:
     compute = int(got.cycles.sum())
     per_pixel = int(pixel_wall_cycles(params, got.cycles).sum())
     # Lines 0-3 (4 x width pixels) and the first dmax + 4 pixels of a line run no machine; plus
-    # the pipeline's latency to the first result (the machine writes a beat the cycle after its
+    # the pipeline's latency to the first result (4 front-end stages, the word generator's
+    # difference and address registers; the machine writes a beat the cycle after its
     # handshake). Everything else must overlap the runs.
-    startup = 4 * width + dmax + 4 + 3 + params.beats_per_pixel + LOAD_LATENCY + 2
+    startup = 4 * width + dmax + 4 + 4 + 2 + params.beats_per_pixel + LOAD_LATENCY + 2
     print(f"\nwall {wall}, compute {compute}, per pixel {per_pixel}, startup bound {startup}")
     assert compute + len(got) <= wall <= per_pixel + startup + (height - 4) * (dmax + 4)
 
@@ -249,11 +260,15 @@ def test_back_pressure_reaches_the_pixel_input() -> None:
         stalled_at = len(taken)
         await ctx.tick().repeat(100)
         assert len(taken) == stalled_at < len(beats)  # the input has stopped
-        # Held from the first output pixel (index 4 * width + dmax + 4) on: the result register, the
-        # running pixel, the shadow memory, the FIFO (one pixel and its output register), the word
-        # generator's pixel, and the two pipeline stages behind it.
+        # Held from the first output pixel (index 4 * width + dmax + 4) on, at most: 9 output pixels
+        # (one beat each here) in the result register, the running pixel, the shadow memory, the
+        # FIFO (one pixel and its output register), the word generator's stream, address and
+        # difference registers and its pixel; past the line's 6 output pixels, the next line's non-output
+        # start; then the front end's three pipeline stages.
         first_output = 4 * width + dmax + 4
-        assert first_output + 3 <= stalled_at <= first_output + 8
+        per_line = width - 4 - dmax
+        assert params.beats_per_pixel == 1 and per_line < 9
+        assert first_output + 3 <= stalled_at <= first_output + 9 + (width - per_line) + 3
         raw = top.result.payload.as_value()
         ctx.set(top.result.ready, 1)
         while len(results) < (height - 4) * (width - 4 - dmax):

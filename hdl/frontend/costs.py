@@ -12,9 +12,13 @@ in operator order (word o in lane o % lanes of beat o // lanes), exactly the wor
 - with a loaded prior, operator column 0 is 1.0 (a uniform prior), as the host writes it.
 
 ``lanes`` must be a multiple of the operator columns, so each lane always holds the same
-operator column: a lane of feature f reads its own port of f's table. One beat per cycle:
-a look-up (block RAM read) in the cycle of the beat's issue, the beat on the stream the next.
-The look-up's operands are registers: the left sums, and per lane the delay-line entry of the
+operator column: a lane of feature f reads its own port of f's table. One beat per cycle, in
+a four-step pipeline that stalls as a whole while the stream does: in the cycle of the beat's
+issue each lane's difference goes into a register; its absolute value, clamped, into the
+address register in the next; the look-up (block RAM read) in the next; the beat on the stream
+the one after. The registers keep the subtraction (on the left sums' wide fan-out), the
+absolute value and clamp, and the long route to the block RAM apart. The difference's operands
+are registers: the left sums, and per lane the delay-line entry of the
 beat, chosen a cycle ahead (beat 0's when the pixel is taken, the next beat's at each issue), so
 no path runs from the beat counter through the entry multiplexer into a table address. The delay
 line shifts a cycle after the take (from a register holding the taken right features), its
@@ -24,7 +28,7 @@ drives only the entry registers and the left sums, not the delay line's thousand
 
 from __future__ import annotations
 
-from amaranth.hdl import Module, Mux, Signal, unsigned
+from amaranth.hdl import Module, Mux, Signal, signed, unsigned
 from amaranth.lib import data, memory, stream, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -122,19 +126,24 @@ class WordGenerator(wiring.Component):
         left = Signal(feature_layout(), reset_less=True)
         active = Signal()  # writing the words of an output pixel
         beat = Signal(range(max(2, n_beats)))
+        beat_d = Signal(range(max(2, n_beats)))  # the beat in the difference registers
+        diff_valid = Signal()
+        beat_a = Signal(range(max(2, n_beats)))  # the beat in the address registers
+        addr_valid = Signal()
         beat_q = Signal(range(max(2, n_beats)))  # the beat on the stream
 
         out = self.beats
+        advance = Signal()  # the look-up pipeline (address registers, table reads, stream) moves
         issue = Signal()
-        m.d.comb += issue.eq(active & (~out.valid | out.ready))
+        m.d.comb += [advance.eq(~out.valid | out.ready), issue.eq(active & advance)]
         last = beat == n_beats - 1
         m.d.comb += self.pixel.ready.eq(~active | (issue & last))
         take = self.pixel.valid & self.pixel.ready
 
-        with m.If(out.ready):
-            m.d.sync += out.valid.eq(0)
+        with m.If(advance):
+            m.d.sync += [diff_valid.eq(issue), beat_d.eq(beat), addr_valid.eq(diff_valid), beat_a.eq(beat_d),
+                         out.valid.eq(addr_valid), beat_q.eq(beat_a)]
         with m.If(issue):
-            m.d.sync += [out.valid.eq(1), beat_q.eq(beat)]
             with m.If(last):
                 m.d.sync += [beat.eq(0), active.eq(0)]
             with m.Else():
@@ -156,14 +165,19 @@ class WordGenerator(wiring.Component):
             with m.If(self.pixel.payload.output):
                 m.d.sync += [active.eq(1), beat.eq(0)]
 
-        # Table reads: addresses from this cycle's beat, data with the beat on the stream; the
-        # read registers hold while the stream is stalled.
-        read_en = ~out.valid | out.ready
-
-        def clamped(value: object, depth: int) -> object:
+        # Table reads: the issued beat's differences into registers, then their clamped absolute
+        # values (the addresses), read a cycle later, data with the beat on the stream; every
+        # register holds while the stream is stalled.
+        def address(value: object, depth: int, name: str) -> Signal:
+            diff = Signal(signed(14), name=f"diff_{name}", reset_less=True)  # guarded by diff_valid
             a = Signal(unsigned(14))
-            m.d.comb += a.eq(abs(value))
-            return Mux(a >= depth - 1, depth - 1, a)
+            # The clamp's test on the difference itself, beside the absolute value, not after it.
+            far = (diff >= depth - 1) | (diff <= -(depth - 1))
+            m.d.comb += a.eq(abs(diff))
+            reg = Signal(range(depth), name=f"addr_{name}", reset_less=True)  # guarded by addr_valid
+            with m.If(advance):
+                m.d.sync += [diff.eq(value), reg.eq(Mux(far, depth - 1, a))]
+            return reg
 
         # Each lane's delay-line entry comes from a register loaded a cycle ahead (the beat
         # counter's multiplexer ends there, not at the table address): with beat 0's entry when
@@ -195,15 +209,16 @@ class WordGenerator(wiring.Component):
                         with m.Default():  # the last beat: the next take reloads it; a complete case
                             m.d.sync += sel.eq(entries[-1])
                 port = mem.read_port()
-                m.d.comb += [port.en.eq(read_en),
-                             port.addr.eq(clamped(getattr(left, name) - sel, len(table)))]
+                m.d.comb += [port.en.eq(advance),
+                             port.addr.eq(address(getattr(left, name) - sel, len(table), f"{name}_{j}"))]
                 lane_data[j * cols + off + f] = port.data
         nm_table = self._tables.nomatch
         nm_mem = memory.Memory(shape=unsigned(p.memory_word_width), depth=len(nm_table),
                                init=nm_table.tolist())
         m.submodules.table_nomatch = nm_mem
         nm_port = nm_mem.read_port()
-        m.d.comb += [nm_port.en.eq(read_en), nm_port.addr.eq(clamped(left.gv20, len(nm_table)))]
+        m.d.comb += [nm_port.en.eq(advance),
+                     nm_port.addr.eq(address(left.gv20, len(nm_table), "nomatch"))]
 
         # The beat on the stream: each lane's word by its operator (row, column).
         unused = range(n_beats, 1 << len(beat_q))  # never occur; in the last case for a complete case

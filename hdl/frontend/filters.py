@@ -2,8 +2,11 @@
 
 For each 5-high column of 8-bit pixels the filter keeps two per-column values in a 5-deep
 shift register: ``s`` = the column's sum and ``v`` = its two bottom pixels minus its two top
-ones. The window ending at the last column taken then gives, as ``host.features`` computes
-them (its ``feature_sums`` is this block's twin):
+ones. A column is summed in two registered steps: its two top pixels, its middle one and its
+two bottom ones into registers (``load``), then ``s`` and ``v`` from those into the shift
+register (``en``), so a block RAM's slow output feeds one adder, not the whole column sum. The
+window ending at the last column shifted in then gives, as ``host.features`` computes them (its
+``feature_sums`` is this block's twin):
 
 * ``m25``  = Σ s over the 5 columns                        (0 .. 6375)
 * ``gh20`` = s[3] + s[4] - s[0] - s[1]  (columns, 0 oldest) (-2550 .. 2550)
@@ -29,28 +32,39 @@ def feature_layout() -> data.StructLayout:
 class FeatureFilter(wiring.Component):
     """Feature sums of one image's 5x5 windows.
 
-    Ports: ``en`` (In 1) and ``column`` (In, ``ArrayLayout(unsigned(8), 5)``, index 0 the top
-    line): take a column; ``features`` (Out, ``feature_layout()``): the sums of the window of
-    the last five columns taken (combinational from the shift register, valid from the cycle
-    after ``en``).
+    Ports:
+
+    - ``load`` (In 1) and ``column`` (In, ``ArrayLayout(unsigned(8), 5)``, index 0 the top
+      line): take a column into the partial-sum registers.
+    - ``en`` (In 1): shift the column last loaded (in an earlier cycle) into the window.
+    - ``features`` (Out, ``feature_layout()``): the sums of the window of the last five columns
+      shifted in (combinational from the shift register, valid from the cycle after ``en``).
+
+    A pipeline loads a column in the cycle it advances into the stage before the filter, and
+    shifts it in when it advances out of that stage; ``load`` and ``en`` in the same cycle shift
+    the earlier column in while loading the next.
     """
 
     def __init__(self) -> None:
         super().__init__({
-            "en": In(1),
+            "load": In(1),
             "column": In(data.ArrayLayout(unsigned(8), WINDOW)),
+            "en": In(1),
             "features": Out(feature_layout()),
         })
 
     def elaborate(self, platform: object) -> Module:
         m = Module()
         col = self.column
+        # Partial sums (reset-less: a column is loaded before it is shifted in).
+        top = Signal(unsigned(9), reset_less=True)  # lines 0 + 1
+        mid = Signal(unsigned(8), reset_less=True)  # line 2
+        bottom = Signal(unsigned(9), reset_less=True)  # lines 3 + 4
+        with m.If(self.load):
+            m.d.sync += [top.eq(col[0] + col[1]), mid.eq(col[2]), bottom.eq(col[3] + col[4])]
         s_in = Signal(unsigned(11))
         v_in = Signal(signed(11))
-        m.d.comb += [
-            s_in.eq(col[0] + col[1] + col[2] + col[3] + col[4]),
-            v_in.eq((col[3] + col[4]) - (col[0] + col[1])),
-        ]
+        m.d.comb += [s_in.eq(top + mid + bottom), v_in.eq(bottom - top)]
         s = [Signal(unsigned(11), name=f"s{i}") for i in range(WINDOW)]  # s[0]: oldest column
         v = [Signal(signed(11), name=f"v{i}") for i in range(WINDOW)]
         with m.If(self.en):

@@ -12,8 +12,9 @@ window's right column); every other pixel passes in one cycle and starts no mach
 Pipeline (one pixel per cycle when no output pixel holds it):
 
 1. the pixel is taken and its column read from the line buffer;
-2. both images' 5-high columns enter the feature filters;
-3. the word generator takes the features (right ones into the delay line); for an output pixel
+2. both images' 5-high columns' partial sums enter the feature filters' first registers;
+3. the columns' sums enter the filters' windows;
+4. the word generator takes the features (right ones into the delay line); for an output pixel
    it writes ``beats_per_pixel`` beats into a FIFO in front of the machine's load stream.
 
 The FIFO (``fifo_pixels`` pixels of beats, block RAM) lets the front end run ahead while the
@@ -125,9 +126,10 @@ class FrontEnd(wiring.Component):
 
         # The pipeline advances as a whole whenever its last stage is empty or taken.
         valid1 = Signal()  # stage 1: the line buffer shows the pixel's column
-        valid2 = Signal()  # stage 2: the filters hold the pixel's window
+        valid2 = Signal()  # stage 2: the filters hold the column's partial sums
+        valid3 = Signal()  # stage 3: the filters hold the pixel's window
         advance = Signal()
-        m.d.comb += advance.eq(~valid2 | gen.pixel.ready)
+        m.d.comb += advance.eq(~valid3 | gen.pixel.ready)
 
         # Stage 0: position of the incoming pixel (restarts at a frame's first pixel).
         col = Signal(range(width))
@@ -157,22 +159,29 @@ class FrontEnd(wiring.Component):
         with m.If(advance):
             m.d.sync += [valid1.eq(self.pixels.valid), col1.eq(cur_col), line1.eq(cur_line)]
 
-        # Stage 1 -> 2: the columns enter the filters.
+        # Stage 1 -> 2: the columns' partial sums into the filters' first registers (the block
+        # RAM's clock-to-output, 5.8 ns on ECP5, then the whole column sum was the critical path).
         output2 = Signal()
-        shift = advance & valid1
-        m.d.comb += [fl.en.eq(shift), fr.en.eq(shift)]
+        m.d.comb += [fl.load.eq(advance), fr.load.eq(advance)]
         for i in range(WINDOW):
             m.d.comb += [fl.column[i].eq(lines.column[i].left), fr.column[i].eq(lines.column[i].right)]
         with m.If(advance):
             m.d.sync += [valid2.eq(valid1),
                          output2.eq((line1 == WINDOW - 1) & (col1 >= dmax + WINDOW - 1))]
 
-        # Stage 2 -> the word generator.
+        # Stage 2 -> 3: the columns' sums enter the filters' windows.
+        output3 = Signal()
+        shift = advance & valid2
+        m.d.comb += [fl.en.eq(shift), fr.en.eq(shift)]
+        with m.If(advance):
+            m.d.sync += [valid3.eq(valid2), output3.eq(output2)]
+
+        # Stage 3 -> the word generator.
         m.d.comb += [
-            gen.pixel.valid.eq(valid2),
+            gen.pixel.valid.eq(valid3),
             gen.pixel.payload.left.eq(fl.features),
             gen.pixel.payload.right.eq(fr.features),
-            gen.pixel.payload.output.eq(output2),
+            gen.pixel.payload.output.eq(output3),
         ]
         return m
 
