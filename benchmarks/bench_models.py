@@ -60,7 +60,7 @@ def main() -> None:
     dmax = args.dmax
     gt = gt_region(gt_full, dmax)
     occluded = gt_region(occluded_mask(gt_full), dmax).astype(bool)
-    warm_up()
+    warm_up(ModelParams(name="census"))
     models = {
         "paper": ModelParams(dmax=dmax),
         "+ census 7x7, no-match uncalibrated": ModelParams(dmax=dmax, name="census", census_nomatch_h=0,

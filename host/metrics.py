@@ -169,12 +169,13 @@ def bm_disparity(left: np.ndarray, right: np.ndarray, dmax: int, block: int = 15
     return OutputRegion.of_image(disp.shape, dmax).cut(disp)
 
 
-def occluded_mask(gt: np.ndarray, tolerance: float = 1.0) -> np.ndarray:
+def occluded_mask(gt: np.ndarray, tolerance: float = 0.0) -> np.ndarray:
     """Left pixels the right camera cannot see, from the left ground truth (image coordinates).
 
     Pixel x of a row (disparity g, finite) lands on x - g in the right image; a pixel x' > x of
-    the same row landing more than ``tolerance`` further left (x' - g(x') < x - g(x) - tolerance)
-    is a nearer surface hiding it. Unknown gt (non-finite) hides nothing and is not occluded.
+    the same row landing there or further left (x' - g(x') <= x - g(x) - ``tolerance``) is a
+    nearer surface hiding it (a jump of k in disparity hides k pixels). Unknown gt (non-finite)
+    hides nothing and is not occluded.
     """
     g = np.asarray(gt, dtype=np.float64)
     known = np.isfinite(g)
@@ -183,7 +184,7 @@ def occluded_mask(gt: np.ndarray, tolerance: float = 1.0) -> np.ndarray:
     # Running minimum of x' - g(x') over x' > x, from the right.
     right_min = np.minimum.accumulate(land[:, ::-1], axis=1)[:, ::-1]
     after = np.concatenate([right_min[:, 1:], np.full((g.shape[0], 1), np.inf)], axis=1)
-    return known & (after < land - tolerance)
+    return known & (after <= land - tolerance)
 
 
 def nomatch_occluded_share(disp: np.ndarray, occluded: np.ndarray) -> float:

@@ -369,20 +369,26 @@ def reference_map(
 
 
 _warm = False
+_warm_census = False
 
 
-def warm_up() -> None:
-    """Load (or compile) the numba kernel once, so timings measure the computation only."""
-    global _warm
+def warm_up(model: ModelParams | None = None) -> None:
+    """Load (or compile) the numba kernels once, so timings measure the computation only.
+
+    The census model's kernels (float and words) too when ``model`` is a census model.
+    """
+    global _warm, _warm_census
+    img = np.zeros((6, 7), np.uint8)
     if not _warm:
-        img = np.zeros((6, 7), np.uint8)
         f = feature_sums(img)
         reference_fast(f, f, ModelParams(dmax=1))
+        _warm = True
+    if model is not None and model.census and not _warm_census:
         census = ModelParams(dmax=1, name="census")
         fc = model_features(img, census)
         reference_fast(fc, fc, census)
         reference_quantized(fc, fc, census, 10)
-        _warm = True
+        _warm_census = True
 
 
 def reference_plain(left: FeatureSums, right: FeatureSums, model: ModelParams) -> Reference:

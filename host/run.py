@@ -71,7 +71,7 @@ def prepare(
     if gt is not None and gt.shape != left.shape:
         raise ValueError(f"ground truth shape {gt.shape} differs from the images' {left.shape}")
     if reference:
-        warm_up()  # keep numba's cache load / compilation out of reference_seconds
+        warm_up(model)  # keep numba's cache load / compilation out of reference_seconds
     t0 = time.perf_counter()
     feats = (model_features(left, model), model_features(right, model))
     ref_map = reference_map(*feats, model) if reference else None
