@@ -5,9 +5,10 @@ uncalibrated (h_nm = 0: its census entry is L_c(0) = 1); + the no-match row cali
 (h_nm = bits / 8); + the raster-order neighbour prior; the 5x5 census option (calibrated, with
 the prior). Each model also on 10-bit words (``reference_quantized``): the share of pixels whose
 MAP changes. OpenCV StereoSGBM (block 5) and StereoBM (block 15) on the same pixels. Then the
-machine (model engine, sobol, counter max 16) on the census model without the prior, beside
-its float and quantized references. All bad-n figures come from ``host.metrics.bad_rates``
-(report.json's). Prints figures; asserts nothing; tunes nothing (the issue's defaults).
+machine (model engine, sobol, counter max 16) on the paper model and on the census model
+without the prior, each beside its float and quantized references. All bad-n figures come
+from ``host.metrics.bad_rates`` (report.json's). Prints figures; asserts nothing; tunes
+nothing (the issue's defaults).
 Run: python benchmarks/bench_models.py [--dmax 80] [--no-machine]
 """
 
@@ -97,23 +98,24 @@ def main() -> None:
             line(name, figures(disp, gt, occluded))
     if args.no_machine:
         return
-    name = "+ census 7x7, no-match calibrated"
-    model = models[name]
-    machine = MachineParams.for_disparity(dmax, columns=4, rng="sobol", counter_max=16, seed=1)
-    fl, fr = feats_cache[7]
-    ref, q = refs[name]
-    prepared = Prepared(left, right, model, (fl, fr), ref, 0.0, gt, gt_full)
-    t0 = time.perf_counter()
-    run = run_machine(prepared, machine, "model", progress=False)
-    t1 = time.perf_counter()
-    print(f"\nmachine ({machine.rng}, counter max {machine.counter_max}, {machine.columns} columns, "
-          f"word bits {machine.word_bits}) on the census 7x7 model without the prior ({t1 - t0:.1f} s):")
-    line("machine", figures(run.map, gt, occluded),
-         f"cycles/pixel {run.cycles.mean():.2f}, timeouts {int(run.timeout.sum())}")
-    line("its float64 reference", figures(ref, gt, occluded))
-    line(f"its {machine.word_bits}-bit quantized reference", figures(q, gt, occluded))
-    print(f"MAP agreement machine/float reference {np.mean(run.map == ref):.3f}, "
-          f"machine/quantized {np.mean(run.map == q):.3f}")
+    for name, columns, key in (("paper", 3, None), ("+ census 7x7, no-match calibrated", 4, 7)):
+        model = models[name]
+        machine = MachineParams.for_disparity(dmax, columns=columns, rng="sobol", counter_max=16, seed=1)
+        fl, fr = feats_cache[key]
+        ref, q = refs[name]
+        prepared = Prepared(left, right, model, (fl, fr), ref, 0.0, gt, gt_full)
+        t0 = time.perf_counter()
+        run = run_machine(prepared, machine, "model", progress=False)
+        t1 = time.perf_counter()
+        print(f"\nmachine ({machine.rng}, counter max {machine.counter_max}, {machine.columns} columns, "
+              f"word bits {machine.word_bits}) on the model '{name}' ({t1 - t0:.1f} s):")
+        line("machine", figures(run.map, gt, occluded),
+             f"cycles/pixel {run.cycles.mean():.2f} (median {np.median(run.cycles):.0f}), "
+             f"timeouts {int(run.timeout.sum())}")
+        line("its float64 reference", figures(ref, gt, occluded))
+        line(f"its {machine.word_bits}-bit quantized reference", figures(q, gt, occluded))
+        print(f"MAP agreement machine/float reference {np.mean(run.map == ref):.3f}, "
+              f"machine/quantized {np.mean(run.map == q):.3f}")
 
 
 if __name__ == "__main__":
