@@ -56,6 +56,8 @@ def main() -> None:
     ap.add_argument("--dmax", type=int, default=80)
     ap.add_argument("--word-bits", type=int, default=10)
     ap.add_argument("--no-machine", action="store_true", help="skip the machine run")
+    ap.add_argument("--counter-max", default="16",
+                    help="the machine's counter max, or a comma-separated list (Fig 6 for each model)")
     args = ap.parse_args()
     left, right, gt_full = bundled_pair()
     dmax = args.dmax
@@ -98,9 +100,12 @@ def main() -> None:
             line(name, figures(disp, gt, occluded))
     if args.no_machine:
         return
-    for name, columns, key in (("paper", 3, None), ("+ census 7x7, no-match calibrated", 4, 7)):
+    runs = [(name, columns, key, int(cm)) for cm in args.counter_max.split(",")
+            for name, columns, key in (("paper", 3, None), ("+ census 7x7, no-match calibrated", 4, 7))]
+    for name, columns, key, counter_max in runs:
         model = models[name]
-        machine = MachineParams.for_disparity(dmax, columns=columns, rng="sobol", counter_max=16, seed=1)
+        machine = MachineParams.for_disparity(dmax, columns=columns, rng="sobol", counter_max=counter_max,
+                                              seed=1)
         fl, fr = feats_cache[key]
         ref, q = refs[name]
         prepared = Prepared(left, right, model, (fl, fr), ref, 0.0, gt, gt_full)
