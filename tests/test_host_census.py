@@ -333,3 +333,24 @@ def test_quantized_reference_of_the_paper_model():
     np.testing.assert_array_equal(got.map, _quantized_plain(fl, fr, paper, 6))
     with pytest.raises(ParameterError, match="--word-bits"):
         reference_quantized(fl, fr, ModelParams(dmax=8, name="census"), 13)
+
+
+# --- The machine on the census model ---
+
+def test_machine_runs_the_census_model_without_the_prior():
+    from bayesmachine.host.run import run_pair
+
+    left, right, gt = random_dot_stereogram(height=30, width=70, background=3, square=9, seed=4)
+    model = ModelParams(dmax=10, name="census", neighbour_prior=False)
+    machine = MachineParams.for_disparity(10, columns=4, rng="sobol", counter_max=16)
+    out = run_pair(left, right, model, machine, engine="model", gt=gt, sgbm=False)
+    assert out.prepared.features[0].census is not None  # prepare() computed the model's features
+    assert out.metrics.map_agreement > 0.9
+    assert out.metrics.bad["machine"]["bad2"] < 0.1
+    # With the neighbour prior the machine needs a loaded prior column, and its words the machine's
+    # own results: refused, never run with a silently uniform prior.
+    with pytest.raises(ParameterError, match="--neighbour-prior"):
+        run_pair(left, right, ModelParams(dmax=10, name="census"), machine)
+    loaded = MachineParams.for_disparity(10, columns=4, prior="loaded")
+    with pytest.raises(ParameterError, match="--neighbour-prior"):
+        run_pair(left, right, ModelParams(dmax=10, name="census"), loaded)
