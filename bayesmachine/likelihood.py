@@ -157,7 +157,7 @@ class ModelParams:
         if self.name not in MODELS:
             raise _error("name", f"must be one of {', '.join(MODELS)}, got {self.name!r}")
         w = self.census_window
-        if isinstance(w, bool) or w not in CENSUS_WINDOWS:
+        if isinstance(w, bool) or not isinstance(w, int) or w not in CENSUS_WINDOWS:
             raise _error("census_window", f"must be 5 or 7 (a 5x5 or 7x7 census window), got {w!r}")
         _check_probability("census_p0", self.census_p0)
         if self.census_sigma is not None:

@@ -74,6 +74,7 @@ def test_paper_model_dict_is_unchanged_and_census_dict_round_trips():
     ({"name": "sgbm"}, "--model"),
     ({"census_window": 9}, "--census-window"),
     ({"census_window": True}, "--census-window"),
+    ({"census_window": 7.0}, "--census-window"),
     ({"census_p0": 1.5}, "--census-p0"),
     ({"census_sigma": 0.0}, "--census-sigma"),
     ({"census_sigma": math.nan}, "--census-sigma"),
