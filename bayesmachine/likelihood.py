@@ -24,7 +24,8 @@ Two models (``ModelParams.name``):
   ``pi(d) = prod_n f(|d - d_n|)`` over its left (y, x-1) and upper (y-1, x) neighbours'
   MAPs d_n, ``f(k) = eps + (1-eps) exp(-k^2 / (2 s^2))`` (a table indexed by k = 0..Dmax),
   a factor 1 for a neighbour called no match or outside the output region; the no-match
-  row's prior is ``prior_nomatch`` per matched neighbour.
+  row's prior is ``prior_nomatch`` per matched neighbour. On W-bit words the prior column's
+  word is ``combine_prior_words`` of the two neighbours' factor words (round(a b / 2^W)).
 """
 
 from __future__ import annotations
