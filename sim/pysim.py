@@ -84,7 +84,7 @@ class PysimEngine(EngineBase):
 
     def _simulator(self) -> Simulator:
         if self._sim is None:
-            self.dut = BayesianMachine(self.params)
+            self.dut = BayesianMachine(params=self.params)
             self._sim = Simulator(self.dut)
             self._sim.add_clock(1e-8)
             self._sim.add_testbench(self._feeder, background=True)

@@ -25,11 +25,11 @@ from bayesmachine.sim.results import MachineResult, NumberFeed, decode_results, 
 from .build import VerilatorBuild, build_harness
 from .tools import VerilatorError
 
-__all__ = ["HarnessProcess", "VerilatorEngine"]
+__all__ = ["DONE", "NEED_NUMBERS", "RAN_OUT", "HarnessProcess", "VerilatorEngine"]
 
 _MAGIC_RUN = 0x4E524D42  # "BMRN", see harness.cpp
 _MAGIC_QUIT = 0x54514D42  # "BMQT"
-_DONE, _RAN_OUT, _NEED_NUMBERS = 0, 1, 2  # the harness's messages
+DONE, RAN_OUT, NEED_NUMBERS = 0, 1, 2  # the harnesses' messages (common.h)
 _DROP_NUMBERS = 1  # header flag: drop the rows of random numbers left from earlier batches
 _TRACE_KINDS = {".vcd": 1, ".fst": 2}
 
@@ -258,16 +258,16 @@ class VerilatorEngine(HarnessProcess, EngineBase):
             self._held = source
             while True:
                 (message,) = struct.unpack("<Q", self._read(proc, 8))
-                if message == _NEED_NUMBERS:
+                if message == NEED_NUMBERS:
                     (want,) = struct.unpack("<Q", self._read(proc, 8))
                     rows = feed.take(int(want)) if feed is not None else np.zeros((0, p.operators), np.uint16)
                     self._write(proc, struct.pack("<Q", len(rows)),
                                 np.ascontiguousarray(rows, dtype="<u2").tobytes())
-                elif message == _RAN_OUT:
+                elif message == RAN_OUT:
                     self._proc = None
                     proc.wait()
                     raise ran_out_error(source)
-                elif message == _DONE:
+                elif message == DONE:
                     break
                 else:
                     raise self._failure(f"the Verilator harness sent an unknown message {message}")
