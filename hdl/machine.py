@@ -1,4 +1,4 @@
-"""The top level: ``BayesianMachine(params)``, the stochastic Bayesian machine of the paper.
+"""The top level: ``BayesianMachine(params=params)``, the stochastic Bayesian machine of the paper.
 
 An M x N matrix of stochastic operators (``operator.py``) fed by a random source
 (``sources.py``: LFSRs, shared LFSRs or Sobol generators, or numbers on a port) and by

@@ -2,7 +2,8 @@
 
 - :func:`load_layout`, :func:`result_layout`, :func:`entropy_layout`: the payloads (the
   contract's field order; ``sim.packing`` and ``sim.results`` pack and decode from them);
-- :func:`load_stream`, :func:`result_stream`: the streams of those payloads;
+- :func:`load_stream`, :func:`result_stream`, :func:`pixel_stream`: the streams of those payloads
+  (and of the stereo top's pixel pairs, :func:`pixel_in_layout`);
 - :func:`entropy_members`: ``entropy`` / ``entropy_ready``, present exactly when the random source
   is off chip (``source_kind(rng).on_chip`` is false: ``external``, ``smtj``), the one place
   that decides it;
@@ -24,7 +25,7 @@ from bayesmachine.sources import source_kind
 
 __all__ = [
     "ENTROPY_PORTS", "MachineSignature", "StereoSignature", "entropy_layout", "entropy_members",
-    "load_layout", "load_stream", "pixel_in_layout", "result_layout", "result_stream",
+    "load_layout", "load_stream", "pixel_in_layout", "pixel_stream", "result_layout", "result_stream",
 ]
 
 ENTROPY_PORTS = ("entropy", "entropy_ready")  # the members of an off-chip source, see entropy_members
@@ -60,6 +61,11 @@ def entropy_layout(params: MachineParams) -> data.ArrayLayout:
 def pixel_in_layout() -> data.StructLayout:
     """One beat of the stereo top's pixel stream: a rectified pair and the frame-start marker."""
     return data.StructLayout({"left": unsigned(8), "right": unsigned(8), "first": unsigned(1)})
+
+
+def pixel_stream() -> stream.Signature:
+    """The stereo top's pixel stream (seen from its source): one :func:`pixel_in_layout` beat per pair."""
+    return stream.Signature(pixel_in_layout())
 
 
 def load_stream(params: MachineParams) -> stream.Signature:
@@ -137,7 +143,7 @@ class StereoSignature(wiring.Signature):
 
     Members
     -------
-    pixels : ``In(stream.Signature(pixel_in_layout()))``
+    pixels : ``In(pixel_stream())``
         Pixel pairs in raster order, ``first`` set on a frame's first pixel.
     result : ``Out(result_stream(params))``
         One result per output pixel, in raster order of the output region.
@@ -147,11 +153,8 @@ class StereoSignature(wiring.Signature):
 
     def __init__(self, params: MachineParams) -> None:
         self._params = _check_params(params, "StereoSignature")
-        super().__init__({
-            "pixels": In(stream.Signature(pixel_in_layout())),
-            "result": Out(result_stream(params)),
-            **entropy_members(params),
-        })
+        members = {"pixels": In(pixel_stream()), "result": Out(result_stream(params))}
+        super().__init__(members | entropy_members(params))
 
     @property
     def params(self) -> MachineParams:

@@ -20,6 +20,7 @@ from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
 from bayesmachine.params import MachineParams, ParameterError
+from bayesmachine.sources import check_source
 from bayesmachine.sources.smtj import EMULATOR_RANDOM_BITS, SMTJEmulatorSpec
 
 from .machine import BayesianMachine
@@ -105,13 +106,14 @@ class SMTJEmulatedMachine(wiring.Component):
     load, result
         As ``BayesianMachine``'s (``MachineSignature(params, entropy=False)``: the numbers are
         made on chip).
-    machine : BayesianMachine
-    emulator : SMTJEmulator
     """
 
     def __init__(self, *, params: MachineParams) -> None:
-        self._machine = BayesianMachine(params=params)  # validates params
-        self._emulator = SMTJEmulator(params=params)
+        if not isinstance(params, MachineParams):
+            raise TypeError(f"SMTJEmulatedMachine takes a MachineParams, not {type(params).__name__}")
+        if params.rng != "smtj":
+            raise ParameterError(f"SMTJEmulatedMachine needs rng = 'smtj', got {params.rng!r}")
+        check_source(params)  # as BayesianMachine's constructor; both are built at elaboration
         self._params = params
         super().__init__(MachineSignature(params, entropy=False))
 
@@ -119,22 +121,11 @@ class SMTJEmulatedMachine(wiring.Component):
     def params(self) -> MachineParams:
         return self._params
 
-    @property
-    def machine(self) -> BayesianMachine:
-        return self._machine
-
-    @property
-    def emulator(self) -> SMTJEmulator:
-        return self._emulator
-
     def elaborate(self, platform: object) -> Module:
         m = Module()
-        m.submodules.machine = self.machine
-        m.submodules.emulator = self.emulator
-        wiring.connect(m, wiring.flipped(self.load), self.machine.load)
-        wiring.connect(m, self.machine.result, wiring.flipped(self.result))
-        m.d.comb += [
-            self.machine.entropy.eq(self.emulator.numbers),
-            self.emulator.advance.eq(self.machine.entropy_ready),
-        ]
+        m.submodules.machine = machine = BayesianMachine(params=self._params)
+        m.submodules.emulator = emulator = SMTJEmulator(params=self._params)
+        wiring.connect(m, wiring.flipped(self.load), machine.load)
+        wiring.connect(m, machine.result, wiring.flipped(self.result))
+        m.d.comb += [machine.entropy.eq(emulator.numbers), emulator.advance.eq(machine.entropy_ready)]
         return m

@@ -30,7 +30,7 @@ from __future__ import annotations
 import dataclasses
 
 from amaranth.hdl import Module, Mux, Shape, Signal
-from amaranth.lib import fifo, stream, wiring
+from amaranth.lib import fifo, wiring
 from amaranth.lib.wiring import In, Out
 
 from bayesmachine.hdl.machine import BayesianMachine
@@ -40,6 +40,7 @@ from bayesmachine.hdl.signatures import (
     load_layout,
     load_stream,
     pixel_in_layout,
+    pixel_stream,
 )
 from bayesmachine.likelihood import ModelParams
 from bayesmachine.params import MachineParams, ParameterError
@@ -103,7 +104,7 @@ class FrontEnd(wiring.Component):
 
     Attributes
     ----------
-    pixels : ``In(stream.Signature(pixel_in_layout()))``
+    pixels : ``In(pixel_stream())``
         Pixel pairs in raster order.
     beats : ``Out(load_stream(params))``
         The output pixels' load beats.
@@ -115,10 +116,7 @@ class FrontEnd(wiring.Component):
         self._width = _check_width(width, model.dmax)
         self._params = params
         self._model = model
-        super().__init__({
-            "pixels": In(stream.Signature(pixel_in_layout())),
-            "beats": Out(load_stream(params)),
-        })
+        super().__init__({"pixels": In(pixel_stream()), "beats": Out(load_stream(params))})
 
     @property
     def params(self) -> MachineParams:
@@ -222,7 +220,7 @@ class StereoMachine(wiring.Component):
     ----------
     The ports are :class:`~bayesmachine.hdl.signatures.StereoSignature` ``(params)``:
 
-    pixels : ``In(stream.Signature(pixel_in_layout()))``
+    pixels : ``In(pixel_stream())``
         Pixel pairs in raster order, ``first`` on a frame's first pixel.
     result : ``Out(result_stream(params))``
         The machine's results, in raster order of the output region.

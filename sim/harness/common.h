@@ -125,6 +125,8 @@ struct EntropySupply {
     std::deque<std::vector<uint32_t>> rows;  // packed entropy port values
     std::vector<uint16_t> row = std::vector<uint16_t>(OPERATORS);
 
+    void clear() { rows.clear(); }
+
     // Asks the client for more rows; false if it has none left.
     bool refill() {
         put_u64(2);
@@ -151,8 +153,7 @@ struct EntropySupply {
     }
 
     // After it: a compute cycle (entropy_ready) consumes one row, asked for if none is left.
-    // False when the client has no more: as in the model, the request is abandoned (the caller
-    // sends message 1 RAN OUT and exits).
+    // False when the client has no more.
     bool consume(BM_TOP& top) {
         if (!top.BM_PORT_ENTROPY_READY) return true;
         if (rows.empty()) {
@@ -165,10 +166,28 @@ struct EntropySupply {
     }
 };
 
+#else
+// An on-chip source: no numbers to supply.
+struct EntropySupply {
+    void clear() {}
+    void present(BM_TOP&) {}
+    bool consume(BM_TOP&) { return true; }
+};
+#endif
+
 // The RAN OUT reply: the client had no more numbers; the process ends.
 [[noreturn]] static void ran_out() {
     put_u64(1);
     std::fflush(stdout);
     std::exit(3);
 }
-#endif
+
+// The clock's low half, as every harness runs it (inputs already set): with an off-chip source
+// the next row of numbers on the entropy port first, and after the evaluation a row consumed by
+// a compute cycle; no number left: as in the model, the request is abandoned (RAN OUT).
+static void clock_low(BM_TOP& top, EntropySupply& supply) {
+    supply.present(top);
+    top.BM_PORT_CLK = 0;
+    top.eval();
+    if (!supply.consume(top)) ran_out();
+}

@@ -110,9 +110,7 @@ int main(int argc, char** argv) {
     std::vector<uint32_t> beats(static_cast<std::size_t>(BEATS_PER_PIXEL) * (LOAD_WORDS + 1));
     std::vector<uint32_t> records;
     uint64_t pixel_base = 0;  // global index of the batch's first pixel
-#if BM_EXTERNAL
-    EntropySupply supply;  // rows of random numbers received and not yet used
-#endif
+    EntropySupply supply;  // rows of random numbers received and not yet used (off-chip sources)
 
     for (;;) {
         uint32_t head[4];
@@ -122,11 +120,7 @@ int main(int argc, char** argv) {
         words.resize(pixels * WORDS_PER_PIXEL);
         read_exact(words.data(), words.size() * sizeof(uint16_t));
         records.assign(pixels * RESULT_WORDS, 0);
-#if BM_EXTERNAL
-        if (flags & 1) supply.rows.clear();
-#else
-        (void)flags;
-#endif
+        if (flags & 1) supply.clear();
 
         uint64_t loaded = 0, collected = 0, cycles = 0, idle = 0;
         unsigned beat = 0;
@@ -149,14 +143,7 @@ int main(int argc, char** argv) {
             const bool ready = !stalls.draw(stalls.result);
 #endif
             top->BM_PORT_RESULT_READY = ready;
-#if BM_EXTERNAL
-            supply.present(*top);
-#endif
-            top->BM_PORT_CLK = 0;
-            top->eval();
-#if BM_EXTERNAL
-            if (!supply.consume(*top)) ran_out();  // no number left: the batch is abandoned
-#endif
+            clock_low(*top, supply);
             const bool load_fire = valid && top->BM_PORT_LOAD_READY;
             const bool result_fire = ready && top->BM_PORT_RESULT_VALID;
 #if BM_TRACE

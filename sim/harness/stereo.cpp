@@ -37,9 +37,7 @@ int main(int argc, char**) {
     reset_design(*top);
 
     uint64_t wall_total = 0;
-#if BM_EXTERNAL
-    EntropySupply supply;  // rows of random numbers received and not yet used
-#endif
+    EntropySupply supply;  // rows of random numbers received and not yet used (off-chip sources)
     std::vector<uint8_t> pixels;
     std::vector<uint32_t> records;
     for (;;) {
@@ -63,14 +61,7 @@ int main(int argc, char**) {
                                 (static_cast<uint32_t>(sent == 0) << FIRST_OFFSET);
                 set_port(top->BM_PORT_PIXELS_PAYLOAD, &beat);
             }
-#if BM_EXTERNAL
-            supply.present(*top);
-#endif
-            top->BM_PORT_CLK = 0;
-            top->eval();
-#if BM_EXTERNAL
-            if (!supply.consume(*top)) ran_out();  // no number left: the frame is abandoned
-#endif
+            clock_low(*top, supply);
             const bool take = valid && top->BM_PORT_PIXELS_READY;
             const bool result = top->BM_PORT_RESULT_VALID;  // the wrapper ties result.ready high
             if (result) take_result(top->BM_PORT_RESULT_PAYLOAD, &records[collected++ * RESULT_WORDS]);
