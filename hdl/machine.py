@@ -181,9 +181,6 @@ class BayesianMachine(wiring.Component):
         """The random source: advances on compute cycles only, restarts with each pixel's run."""
         p = self._params
         cols = p.operator_columns
-        # Registered stop (see "Timing" in docs/architecture.md): every wide enable is a
-        # function of registers only, never of the matrix.
-        m.d.comb += n.compute.eq(n.running & ~n.stop)
         source = random_source(p, [o // cols // n.rows_per_group for o in range(p.operators)])
         n.source = source
         if source is None:  # off chip: the numbers arrive on the entropy port
@@ -268,6 +265,10 @@ class BayesianMachine(wiring.Component):
         """The registered stop: a row overflows or the watchdog expires; counters advance."""
         p = self._params
         cols = p.operator_columns
+        # A compute cycle: running and not yet stopped. The stop is registered (see "Timing" in
+        # docs/architecture.md), so every wide enable is a function of registers only, never of
+        # the matrix.
+        m.d.comb += n.compute.eq(n.running & ~n.stop)
         # The stop decision needs only whether any row overflows (the encoder works in the bubble).
         # With prefetched comparators that too is known a cycle early, per group of rows: the
         # next cycle's ``row & full`` from the next bits and the next full flags, ORed over the

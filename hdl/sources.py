@@ -83,7 +83,7 @@ class OnChipSource(wiring.Component):
         registered per-group copies of the numbers, and the source has one enable group.
     """
 
-    def __init__(self, signature: dict[str, wiring.Member], operator_numbers: Sequence[int]) -> None:
+    def __init__(self, signature: dict[str, wiring.Member], *, operator_numbers: Sequence[int]) -> None:
         self._operator_numbers = tuple(int(i) for i in operator_numbers)
         super().__init__(signature)
         for name in ("enable", "restart"):
@@ -159,7 +159,8 @@ class LFSRBank(OnChipSource):
         members = {"enable": In(width), "restart": In(width)}
         for i, spec in enumerate(specs):
             members[f"state_{i}"] = Out(unsigned(spec.length), init=spec.init)
-        super().__init__(members, range(len(specs)) if operator_numbers is None else operator_numbers)
+        super().__init__(members, operator_numbers=range(len(specs)) if operator_numbers is None
+                         else operator_numbers)
 
     @property
     def enable_groups(self) -> tuple[int, ...]:
@@ -270,7 +271,7 @@ class SobolGenerators(OnChipSource):
             "restart_numbers": Out(unsigned(params.word_bits)).array(params.operator_columns),
             "following_numbers": Out(unsigned(params.word_bits)).array(params.operator_columns),
             "following_restart_numbers": Out(unsigned(params.word_bits)).array(params.operator_columns),
-        }, [o % cols for o in range(params.operators)])
+        }, operator_numbers=[o % cols for o in range(params.operators)])
 
     @property
     def params(self) -> MachineParams:

@@ -37,11 +37,11 @@ from bayesmachine.hdl.signatures import pixel_in_layout
 from bayesmachine.likelihood import ModelParams
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.engines import EngineLifecycle
-from bayesmachine.sim.results import MachineResult, NumberFeed, layout_fields, ran_out_error
+from bayesmachine.sim.results import MachineResult, NumberFeed, layout_fields
 from bayesmachine.sim.verilator import VerilatorError, cache_dir, find_toolchain
 from bayesmachine.sim.verilator.build import HarnessSources, VerilatorBuild, build_design, cached_verilog
 from bayesmachine.sim.verilator.codegen import entropy_header, header_prologue, wrapper_verilog
-from bayesmachine.sim.verilator.engine import DONE, NEED_NUMBERS, RAN_OUT, HarnessProcess
+from bayesmachine.sim.verilator.engine import HarnessProcess
 from bayesmachine.sources import source_kind
 
 __all__ = ["StereoVerilatorEngine", "build_stereo_harness"]
@@ -172,21 +172,8 @@ class StereoVerilatorEngine(HarnessProcess, EngineLifecycle):
             t0 = time.perf_counter()
             try:
                 self._write(proc, struct.pack("<IIII", _MAGIC_FRAME, 0, height, width), pairs.tobytes())
-                while True:
-                    (message,) = struct.unpack("<Q", self._read(proc, 8))
-                    if message == NEED_NUMBERS:
-                        (want,) = struct.unpack("<Q", self._read(proc, 8))
-                        rows = self._numbers().take(int(want))
-                        self._write(proc, struct.pack("<Q", len(rows)),
-                                    np.ascontiguousarray(rows, dtype="<u2").tobytes())
-                    elif message == RAN_OUT:
-                        self._proc = None
-                        proc.wait()
-                        raise ran_out_error(self._feed.source)
-                    elif message == DONE:
-                        return self._read_results(proc, n, t0)
-                    else:
-                        raise self._failure(f"the stereo harness sent an unknown message {message}")
+                self._serve_numbers(proc, None if self._kind.on_chip else self._numbers())
+                return self._read_results(proc, n, t0)
             except (VerilatorError, ValueError):
                 raise
             except BaseException:

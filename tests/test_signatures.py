@@ -8,6 +8,7 @@ The components built here are only inspected, never elaborated (hence the linter
 from __future__ import annotations
 
 import pytest
+from amaranth.hdl import Fragment
 from amaranth.lib import wiring
 
 from bayesmachine.hdl.encoder import MAPEncoder
@@ -92,13 +93,14 @@ def test_on_chip_sources_implement_one_interface(rng: str) -> None:
         assert len(getattr(source, name)) == max(source.operator_numbers) + 1
     width = p.operators if rng == "lfsr" else 1
     assert len(source.enable) == len(source.restart) == width
+    Fragment.get(source, None)  # it elaborates on its own (and is not left unused)
     assert random_source(_params("smtj")) is None
 
 
 def test_an_on_chip_source_must_declare_the_interface() -> None:
     class NoRestart(OnChipSource):
         def __init__(self) -> None:
-            super().__init__({"enable": wiring.In(1)}, [0])
+            super().__init__({"enable": wiring.In(1)}, operator_numbers=[0])
 
     with pytest.raises(TypeError, match="restart"):
         NoRestart()
