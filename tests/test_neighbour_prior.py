@@ -123,7 +123,8 @@ def test_params_and_contract_errors() -> None:
     with pytest.raises(ParameterError, match="feedback_nomatch_word"):
         MachineParams.for_disparity(3, prior="neighbour", feedback_words=(1024,))
     with pytest.raises(ParameterError, match=r"feedback_words\[1\]"):
-        MachineParams.for_disparity(3, prior="neighbour", feedback_words=(1024, 1025), feedback_nomatch_word=1)
+        MachineParams.for_disparity(3, prior="neighbour", feedback_words=(1024, 1025),
+                                    feedback_nomatch_word=1)
     with pytest.raises(ParameterError, match="belong to prior"):
         MachineParams.for_disparity(3, feedback_words=(1024,))
     p = neighbour_params()
@@ -141,3 +142,40 @@ def test_params_and_contract_errors() -> None:
     with pytest.raises(ValueError, match="only taken by a machine with prior = 'neighbour'"):
         get_engine("model", MachineParams.for_disparity(3)).run(
             np.zeros((1, 5, 3), np.int64), line_start=np.zeros(1, bool))
+
+
+@pytest.mark.parametrize("rng", ["sobol", "lfsr", "external"])
+def test_rtl_equals_the_model_under_pysim(rng: str) -> None:
+    """The RTL forms the feedback column as the model does: pysim equals the model bit for bit,
+    with back-pressure on both streams (a swap waits for the bubble's registered result)."""
+    from bayesmachine.sim.pysim import PysimEngine
+
+    p = neighbour_params(rng=rng, lanes=5, max_cycles=40)
+    words, starts = words_and_starts(p, 24, 7, seed=6)
+    words[9] = 0  # a timeout
+    numbers = (np.random.default_rng(8).integers(0, p.word_one, size=(24 * 40, p.operators))
+               if rng == "external" else None)
+    want = get_engine("model", p).run(words, numbers, line_start=starts)
+    eng = PysimEngine(p, load_stall=0.3, result_stall=0.3, stall_seed=2)
+    got = eng.run(words[:10], numbers, line_start=starts[:10])
+    used = int(got.cycles.sum())
+    rest = eng.run(words[10:], None if numbers is None else numbers[used:], line_start=starts[10:])
+    for name in ("map", "nomatch", "timeout", "cycles", "counts"):
+        np.testing.assert_array_equal(np.concatenate([getattr(got, name), getattr(rest, name)]),
+                                      getattr(want, name), err_msg=name)
+
+
+def test_rtl_wall_cycles_follow_the_timing_rule() -> None:
+    """Back to back with loads keeping up, each pixel takes max(k + 1, beats + 1) + 1 cycles."""
+    from bayesmachine.hdl.machine import pixel_wall_cycles
+    from bayesmachine.sim.pysim import PysimEngine
+
+    p = neighbour_params(lanes=27)  # one beat per pixel: compute-bound
+    words, starts = words_and_starts(p, 20, 5, seed=9)
+    eng = PysimEngine(p)
+    res = eng.run(words, line_start=starts)
+    per_pixel = pixel_wall_cycles(p, res.cycles)
+    assert (per_pixel == np.maximum(res.cycles + 1, p.beats_per_pixel + 1) + 1).all()
+    # The first pixel waits for its load (beat + write + swap); the results leave a cycle after.
+    total = eng.wall_cycles
+    assert abs(total - int(per_pixel.sum())) <= 4, (total, int(per_pixel.sum()))
