@@ -14,6 +14,8 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from bayesmachine.tools import tool_process, which
+
 from .targets import Target
 
 __all__ = ["KEEP_REGISTER_COPIES", "ROUTERS", "ToolError", "cell_counts", "parse_nextpnr", "place_and_route",
@@ -35,8 +37,6 @@ class ToolError(RuntimeError):
 
 def _tool(name: str) -> str:
     """``name``'s path by the project's one tool lookup (PATH, then beside this Python)."""
-    from bayesmachine.sim.verilator.tools import which
-
     path = which(name)
     if path is None:
         raise ToolError(f"{name} not found: install the FPGA tools with pip install 'bayesmachine[fpga]'")
@@ -45,22 +45,21 @@ def _tool(name: str) -> str:
 
 def _run(cmd: list[str], cwd: Path, log: str, what: str, progress: Progress) -> None:
     """Run a tool, printing a progress line every 30 s (the first call of a WebAssembly tool
-    compiles it for about a minute; nextpnr on a full machine takes minutes)."""
+    compiles it for about a minute; nextpnr on a full machine takes minutes).
+
+    The tool runs in its own process group, ended whenever this returns or raises (Ctrl-C, or
+    SIGTERM raised by the CLI as an exception): no tool outlives the command or writes into
+    ``cwd`` after it has gone."""
     progress(f"{what}: {' '.join(Path(cmd[0]).name if i == 0 else c for i, c in enumerate(cmd))}")
     t0 = time.monotonic()
-    with open(cwd / f"{log}.out", "w") as out:
-        proc = subprocess.Popen(cmd, cwd=cwd, stdout=out, stderr=subprocess.STDOUT)
-        try:
-            while True:
-                try:
-                    rc = proc.wait(timeout=30)
-                    break
-                except subprocess.TimeoutExpired:
-                    progress(f"{what}: still running ({time.monotonic() - t0:.0f} s)")
-        except BaseException:
-            proc.kill()  # Ctrl-C: don't leave the tool running
-            proc.wait()
-            raise
+    with open(cwd / f"{log}.out", "w") as out, tool_process(cmd, cwd=cwd, stdout=out,
+                                                             stderr=subprocess.STDOUT) as proc:
+        while True:
+            try:
+                rc = proc.wait(timeout=30)
+                break
+            except subprocess.TimeoutExpired:
+                progress(f"{what}: still running ({time.monotonic() - t0:.0f} s)")
     if rc != 0:
         tail = (cwd / f"{log}.out").read_text(errors="replace").strip().splitlines()[-3:]
         raise ToolError(f"{what} failed (exit {rc}); see {cwd / log}.out: " + " | ".join(tail))

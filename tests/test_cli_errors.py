@@ -20,6 +20,7 @@ import bayesmachine.host.cli as host_cli
 from bayesmachine import outputs
 from bayesmachine.cli import build_parser, main
 from bayesmachine.host.images import random_dot_stereogram
+from bayesmachine.outputs import MANIFEST, read_manifest
 
 SMALL = ["--dmax", "8", "--quiet"]
 
@@ -40,7 +41,8 @@ def one_error_line(capsys: pytest.CaptureFixture[str], argv: list[str], code: in
 
 
 def files(d: Path) -> list[str]:
-    return sorted(p.name for p in d.iterdir()) if d.exists() else []
+    """The files in ``d``, but the manifest of the files our runs wrote there."""
+    return sorted(p.name for p in d.iterdir() if p.name != MANIFEST) if d.exists() else []
 
 
 def test_run_under_a_file_size_limit_leaves_nothing(tmp_path: Path) -> None:
@@ -79,8 +81,7 @@ def test_failure_mid_write_keeps_no_report(tmp_path: Path, pair, capsys, monkeyp
 
 def test_interrupt_leaves_no_partial_output(tmp_path: Path, pair, capsys, monkeypatch) -> None:
     out = tmp_path / "out"
-    out.mkdir()
-    (out / "report.json").write_text("{}")  # an earlier run's report
+    assert main(["run", *pair, *SMALL, "-o", str(out)]) == 0  # an earlier run's outputs
     (out / "keep.txt").write_text("not ours")
 
     def interrupted(*args, **kwargs):
@@ -89,19 +90,57 @@ def test_interrupt_leaves_no_partial_output(tmp_path: Path, pair, capsys, monkey
     monkeypatch.setattr(host_cli, "run_pair", interrupted)
     line = one_error_line(capsys, ["run", *pair, *SMALL, "-o", str(out)], code=130)
     assert "interrupted" in line
-    # The old report went first: nothing claims a complete run. Files that are not ours stay.
+    # The old run went first: nothing claims a complete run. Files that are not ours stay.
     assert files(out) == ["keep.txt"]
 
 
 def test_rerun_never_mixes_old_and_new_files(tmp_path: Path, pair) -> None:
     out = tmp_path / "out"
-    out.mkdir()
-    (out / "waves.vcd").write_text("$date stale $end\n")  # from an earlier --waves run
+    assert main(["run", *pair, *SMALL, "--seed", "7", "-o", str(out)]) == 0
+    # As if that run had had --waves: its manifest lists a trace (the slow test below runs Verilator).
+    manifest = json.loads((out / MANIFEST).read_text())
+    manifest["files"].insert(0, "waves.vcd")
+    (out / MANIFEST).write_text(json.dumps(manifest))
+    (out / "waves.vcd").write_text("$date stale $end\n")
     (out / ".result.partial-1.npz").write_bytes(b"PK")  # a killed run's temporary file
-    (out / "report.json").write_text('{"engine": "old"}')
     assert main(["run", *pair, *SMALL, "-o", str(out)]) == 0
     assert files(out) == ["disparity.png", "report.json", "result.npz"]
-    assert json.loads((out / "report.json").read_text())["engine"] == "model"
+    assert json.loads((out / "report.json").read_text())["machine"]["seed"] == 1
+
+
+@pytest.mark.parametrize("output", ["", " ", "\t"])
+def test_an_empty_output_path_touches_nothing(tmp_path: Path, pair, capsys, monkeypatch, output) -> None:
+    """``-o "$OUT"`` with OUT unset: refused, never the current directory (whose files stay)."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "waves.vcd").write_text("the user's")
+    before = files(tmp_path)
+    for argv in (["run", *pair, *SMALL], ["sweep", *pair, *SMALL], ["reference", *pair, *SMALL],
+                 ["emit", "--dmax", "2"], ["synth", "--target", "ecp5-25k", "--dmax", "2"]):
+        line = one_error_line(capsys, [*argv, "-o", output])
+        assert line.endswith(f"argument -o/--output: the output path is {'empty' if not output else 'blank'} "
+                             '(an unset variable in -o "$OUT"?); name the output'), line
+    assert files(tmp_path) == before and (tmp_path / "waves.vcd").read_text() == "the user's"
+
+
+def test_a_foreign_file_in_the_output_directory_survives_a_rerun(tmp_path: Path, pair) -> None:
+    out = tmp_path
+    (out / "waves.vcd").write_text("the user's")  # not written by any run of ours
+    (out / "notes.txt").write_text("the user's")
+    for _ in range(2):
+        assert main(["run", *pair, *SMALL, "-o", str(out)]) == 0
+    assert (out / "waves.vcd").read_text() == "the user's" and (out / "notes.txt").read_text() == "the user's"
+    assert read_manifest(out) == ["result.npz", "disparity.png", "report.json"]
+
+
+def test_a_second_run_into_a_held_output_is_refused_at_once(tmp_path: Path, pair, capsys) -> None:
+    out = tmp_path / "out"
+    with outputs.OutputDir(out, host_cli.RUN_OUTPUTS, last="report.json") as held:  # the first run
+        line = one_error_line(capsys, ["run", *pair, *SMALL, "-o", str(out)])
+        assert line == (f"bayesmachine run: error: {out}: another run holds this output directory (it is "
+                        "writing there now); wait for it to finish or choose another -o")
+        held.write("report.json", lambda p: p.write_text("{}"))
+        held.commit()
+    assert files(out) == ["report.json"]  # the first run's output, untouched by the second
 
 
 @pytest.mark.parametrize(
