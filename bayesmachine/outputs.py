@@ -4,12 +4,13 @@
   then ``os.replace`` it onto the final name (``emit -o``, ``reference -o``).
 * :class:`OutputDir`: a transaction over a command's output directory (``run``, ``sweep``,
   ``synth``). It locks the directory (a second run into it is refused at once), removes the
-  files of the previous run there, as the directory's manifest (``.bayesmachine-manifest.json``)
-  lists them, the final report first (an interrupted rerun never shows an old report beside new
-  files); anything else in the directory is left alone. It stages each new file under a
-  temporary name, and on :meth:`OutputDir.commit` records them in the manifest and renames them
-  into place with the report last: a report's presence means the run is complete. On any
-  exception (KeyboardInterrupt and SIGTERM included) the staged files are removed.
+  command's files of the previous run there, as the directory's manifest
+  (``.bayesmachine-manifest.json``) lists them, the final report first (an interrupted rerun
+  never shows an old report beside new files); anything else in the directory is left alone.
+  It stages each new file under a temporary name, and on :meth:`OutputDir.commit` records them
+  in the manifest and renames them into place with the report last: a report's presence means
+  the run is complete. On any exception (KeyboardInterrupt and SIGTERM included) the staged
+  files are removed.
 * :class:`NpzWriter`: an ``.npz`` written array by array, one array possibly streamed in
   chunks along its first axis, so a volume larger than memory never has to be held.
 * :func:`require_memory`, :func:`require_disk`: refuse up front, with the size needed.
@@ -194,8 +195,9 @@ class OutputDir:
 
     ``names``: every file name the command can write there; ``last``: the name committed last
     (the report). Entering locks the directory (:class:`OutputBusyError` while another run holds
-    it) and removes the files of the previous run there, as its manifest (``MANIFEST``) lists
-    them, the report first: only files the project wrote, never anything else in the directory.
+    it) and removes this command's files of the previous run there, as its manifest
+    (``MANIFEST``) lists them, the report first: only files the project wrote, never anything
+    else in the directory (another command's outputs listed there stay, and stay listed).
     :meth:`commit` records the new files in the manifest, then renames them into place.
     """
 
@@ -210,6 +212,7 @@ class OutputDir:
         self._committed = False
         self._created: list[Path] = []
         self._lock: int | None = None
+        self._kept: list[str] = []
 
     def __enter__(self) -> OutputDir:
         d = self.directory
@@ -238,9 +241,13 @@ class OutputDir:
             if (d / name).is_dir():
                 raise IsADirectoryError(errno.EISDIR, "is a directory (an output file name)", str(d / name))
         previous = read_manifest(d)
-        # The manifest lists the previous run's files in commit order, its report last: that goes
-        # first, so an interrupted clear never leaves the report beside a part of its files.
-        for name in reversed(previous):
+        # This command's files of the previous run go; another command's files listed there (a
+        # sweep's in a run's OUT/) are complete outputs of their own: they stay, and stay listed.
+        stale = [n for n in previous if n in self.names]
+        self._kept = [n for n in previous if n not in self.names and (d / n).is_file()]
+        # The manifest lists them in commit order, the report last: that goes first, so an
+        # interrupted clear never leaves the report beside a part of its files.
+        for name in reversed(stale):
             target = d / name
             try:
                 if not target.is_dir():
@@ -248,17 +255,20 @@ class OutputDir:
             except OSError as exc:
                 raise _named(exc, target) from exc
         # Temporary files a killed earlier run left behind (named by _temp_name: ours by their name).
-        for name in (*self.names, *previous, MANIFEST):
+        for name in (*self.names, MANIFEST):
             stem, suffix = Path(name).stem, Path(name).suffix
             for old in d.glob(f".{glob.escape(stem)}{_TMP_MARK}*{glob.escape(suffix)}"):
                 try:
                     _remove(old)
                 except OSError as exc:
                     raise _named(exc, old) from exc
-        try:
-            _remove(d / MANIFEST)
-        except OSError as exc:
-            raise _named(exc, d / MANIFEST) from exc
+        if self._kept:
+            _write_manifest(d, self._kept)
+        else:
+            try:
+                _remove(d / MANIFEST)
+            except OSError as exc:
+                raise _named(exc, d / MANIFEST) from exc
 
     def _release(self) -> None:
         if not self._committed:
@@ -298,7 +308,7 @@ class OutputDir:
         for name in order:
             if not self._staged[name].exists():
                 raise FileNotFoundError(errno.ENOENT, "was never written", str(self.directory / name))
-        _write_manifest(self.directory, order)
+        _write_manifest(self.directory, [*self._kept, *order])
         done = []
         for name in order:
             tmp, final = self._staged[name], self.directory / name

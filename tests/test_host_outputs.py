@@ -138,6 +138,18 @@ def test_output_dir_never_removes_files_it_did_not_write(tmp_path: Path) -> None
     assert (out / "report.json").read_text() == "new"
     _transaction(out, {"report.json": "newer"})
     assert (out / "waves.vcd").read_text() == "the user's" and (out / "data.npz").read_text() == "the user's"
+    # Another command's outputs listed in the manifest (a sweep's, in a run's OUT/) stay, and stay listed.
+    with OutputDir(out, ["sweep.json"], last="sweep.json") as od:
+        od.write("sweep.json", lambda p: p.write_text("sweep"))
+        od.commit()
+    _transaction(out, {"report.json": "again"})
+    assert (out / "sweep.json").read_text() == "sweep"
+    assert read_manifest(out) == ["sweep.json", "report.json"]
+    with OutputDir(out, ["sweep.json"], last="sweep.json") as od:  # the sweep's rerun removes its own
+        assert not (out / "sweep.json").exists() and (out / "report.json").read_text() == "again"
+        od.write("sweep.json", lambda p: p.write_text("sweep 2"))
+        od.commit()
+    assert read_manifest(out) == ["report.json", "sweep.json"]
     # A manifest that is not ours, or names outside the directory, removes nothing.
     (out / MANIFEST).write_text('{"files": ["../x", "/etc/passwd", "waves.vcd/..", ".", 3]}')
     (tmp_path.parent / "x").write_text("outside")
