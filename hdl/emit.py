@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import signal
 from pathlib import Path
 
 from bayesmachine.outputs import atomic_write_text
@@ -95,10 +96,41 @@ def verilog_text(top: object) -> str:
     from amaranth._toolchain.yosys import YosysError
     from amaranth.back import verilog
 
+    before = _children()
     try:
         return verilog.convert(top, name=TOP_NAME, emit_src=False)
     except YosysError as exc:
         raise yosys_failure(str(exc)) from None
+    except BaseException:  # Ctrl-C, SIGTERM: Amaranth leaves its Yosys process running
+        _end_children(_children() - before)
+        raise
+
+
+def _children() -> set[int]:
+    """This process's child processes (Linux ``/proc``; an empty set elsewhere)."""
+    me, found = os.getpid(), set()
+    try:
+        entries = [e.name for e in os.scandir("/proc") if e.name.isdigit()]
+    except OSError:
+        return found
+    for name in entries:
+        try:
+            with open(f"/proc/{name}/stat") as f:
+                if int(f.read().rsplit(")", 1)[1].split()[1]) == me:
+                    found.add(int(name))
+        except (OSError, ValueError, IndexError):  # gone meanwhile
+            continue
+    return found
+
+
+def _end_children(pids: set[int]) -> None:
+    """Kill and reap the child processes ``pids``."""
+    for pid in pids:
+        try:
+            os.kill(pid, signal.SIGKILL)
+            os.waitpid(pid, 0)
+        except (OSError, ChildProcessError):  # already gone, or reaped by its Popen
+            continue
 
 
 def rtlil_text(top: object) -> str:

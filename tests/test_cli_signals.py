@@ -119,3 +119,23 @@ def test_signal_to_run_leaves_no_partial_file(tmp_path: Path, sig: int, code: in
     assert proc.returncode == code, err
     assert len(err.strip().splitlines()) == 1, err
     assert not partial.exists() and not out.exists()
+
+
+def test_sigterm_to_emit_stops_amaranths_yosys(tmp_path: Path) -> None:
+    """Amaranth runs Yosys as a child and does not end it when interrupted; emit does. A stand-in
+    Yosys (Amaranth's ``AMARANTH_USE_YOSYS=system`` path) that never finishes is gone after SIGTERM."""
+    pids = tmp_path / "pids"
+    fake = tmp_path / "yosys"
+    fake.write_text('#!/bin/sh\ncase "$1" in -V) echo "Yosys 0.40 (stand-in)"; exit 0;; esac\n'
+                    'echo "$$" > "$BM_TEST_PIDS"\nexec sleep 600\n')
+    fake.chmod(0o755)
+    env = {**os.environ, "BM_TEST_PIDS": str(pids), "AMARANTH_USE_YOSYS": "system", "YOSYS": str(fake)}
+    out = tmp_path / "e.v"
+    proc = subprocess.Popen([sys.executable, "-m", "bayesmachine", "emit", "--dmax", "2", "-o", str(out)],
+                            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    yosys = int(_wait_for(pids, proc, 120))
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 143, err
+    assert len(err.strip().splitlines()) == 1, err
+    assert _gone(yosys) and not out.exists()
