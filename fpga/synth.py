@@ -75,7 +75,7 @@ def synth(params: MachineParams, target_name: str, out: Path, *, machines: int =
     from bayesmachine.outputs import OutputDir
 
     from . import report as rep
-    from .flow import parse_nextpnr, place_and_route, synthesize
+    from .flow import parse_nextpnr, place_and_route, require_tools, synthesize
     from .wrapper import PinWrapper
 
     target = get_target(target_name)
@@ -105,6 +105,7 @@ def synth(params: MachineParams, target_name: str, out: Path, *, machines: int =
         if progress:
             print(f"[{time.monotonic() - t0:6.0f} s] {msg}", file=sys.stderr, flush=True)
 
+    require_tools(target, place)  # a missing tool or an unusable tool cache: said before any work
     # The directory is held by this run alone; the previous run's report goes before any new work.
     with OutputDir(out, SYNTH_OUTPUTS, last="report.json") as od:
         # Every parameter is valid and the directory is ours: build (a component built but never

