@@ -9,8 +9,16 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from bayesmachine.cliargs import add_dmax_option, add_machine_options, machine_params_from_args, output_path
+from bayesmachine.cliargs import (
+    add_dmax_option,
+    add_machine_options,
+    float_arg,
+    int_arg,
+    machine_params_from_args,
+    output_path,
+)
 
+from .flow import ROUTERS
 from .targets import TARGETS
 
 __all__ = ["register"]
@@ -39,13 +47,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     from bayesmachine.hdl.frontend.cli import add_options as add_stereo_options
 
     add_stereo_options(p)
-    p.add_argument("--machines", type=int, default=1,
+    p.add_argument("--machines", type=int_arg, default=1,
                    help="machines side by side behind one load and one result stream (default 1; "
                    "--top machine only)")
-    p.add_argument("--pin-width", type=int, default=8, help="wrapper chunk width in pins (default 8)")
-    p.add_argument("--freq", type=float, default=150.0, help="nextpnr clock target in MHz (default 150)")
-    p.add_argument("--pnr-seed", type=int, default=1, help="nextpnr placement seed (default 1)")
-    p.add_argument("--router", choices=("router1", "router2"), default="router2",
+    p.add_argument("--pin-width", type=int_arg, default=8, help="wrapper chunk width in pins (default 8)")
+    # The place-and-route options stay None unless given: --synth-only refuses them (they would do nothing).
+    p.add_argument("--freq", type=float_arg, default=None, help="nextpnr clock target in MHz (default 150)")
+    p.add_argument("--pnr-seed", type=int_arg, default=None, help="nextpnr placement seed (default 1)")
+    p.add_argument("--router", choices=ROUTERS, default=None,
                    help="nextpnr router (default router2: much faster than router1 on a full machine)")
     p.add_argument("--synth-only", action="store_true",
                    help="stop after Yosys: resources only, no fmax (for designs too big to route here)")
@@ -63,6 +72,10 @@ def _run(args: argparse.Namespace) -> int:
     from .synth import synth
 
     check_top(args)  # stereo options with --top machine would do nothing: refused
+    pnr = [flag for flag, value in (("--freq", args.freq), ("--pnr-seed", args.pnr_seed),
+                                    ("--router", args.router)) if value is not None]
+    if args.synth_only and pnr:
+        raise ValueError(f"{', '.join(pnr)}: options of place and route, which --synth-only skips")
     params = machine_params_from_args(args, args.dmax)
     stereo: dict[str, object] = {}
     if args.top == "stereo":
@@ -74,7 +87,8 @@ def _run(args: argparse.Namespace) -> int:
                   "fifo_pixels": fifo_pixels(args)}
     name = f"synth-stereo-{args.target}" if stereo else f"synth-{args.target}"
     out = Path(args.output or f"build/{name}")
-    synth(params, args.target, out, machines=args.machines, pin_width=args.pin_width, freq_mhz=args.freq,
-          pnr_seed=args.pnr_seed, place=not args.synth_only, measure=not args.no_throughput,
-          router=args.router, **stereo)  # type: ignore[arg-type]
+    synth(params, args.target, out, machines=args.machines, pin_width=args.pin_width,
+          freq_mhz=150.0 if args.freq is None else args.freq,
+          pnr_seed=1 if args.pnr_seed is None else args.pnr_seed, place=not args.synth_only,
+          measure=not args.no_throughput, router=args.router or "router2", **stereo)  # type: ignore[arg-type]
     return 0

@@ -435,3 +435,20 @@ def test_synth_with_an_unusable_tool_cache_is_refused_before_any_work(tmp_path, 
                     f"and {cache} is not a directory: set YOWASP_CACHE_DIR (or XDG_CACHE_HOME) to a "
                     "writable directory")
     assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--synth-only", "--freq", "200"], "--freq: options of place and route, which --synth-only skips"),
+        (["--synth-only", "--router", "router1", "--pnr-seed", "3"],
+         "--pnr-seed, --router: options of place and route, which --synth-only skips"),
+        (["--freq", "inf"], "argument --freq: expected a finite number, got 'inf'"),
+    ],
+)
+def test_synth_refuses_place_and_route_options_it_would_ignore(tmp_path, capsys, extra, message) -> None:
+    out = tmp_path / "syn"
+    line = one_error_line(capsys, ["synth", "--target", "ecp5-25k", "--dmax", "2", "--no-throughput", *extra,
+                                   "-o", str(out)])
+    assert line.endswith(message), line
+    assert not out.exists()
