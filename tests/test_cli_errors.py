@@ -415,10 +415,15 @@ def test_emit_under_a_file_size_limit_is_one_line(tmp_path) -> None:
     out = tmp_path / "e.v"
     proc = subprocess.run([sys.executable, "-m", "bayesmachine", "emit", "--dmax", "2", "-o", str(out)],
                           capture_output=True, text=True, preexec_fn=limit_size, timeout=300)
-    assert proc.returncode == 2, proc.stderr
-    lines = proc.stderr.strip().splitlines()
-    assert len(lines) == 1 and "File too large" in lines[0] and "ulimit -f" in lines[0], lines
-    assert not out.exists()
+    # Today's wasmtime cannot start Yosys under the limit: one line naming it. (A runtime that could
+    # would give a complete file: never a traceback, exit 1, as before.)
+    assert proc.returncode in (0, 2), proc.stderr
+    if proc.returncode == 2:
+        lines = proc.stderr.strip().splitlines()
+        assert len(lines) == 1 and "File too large" in lines[0] and "ulimit -f" in lines[0], lines
+        assert not out.exists()
+    else:
+        assert out.read_text().rstrip().endswith("endmodule")
 
 
 def test_synth_with_an_unusable_tool_cache_is_refused_before_any_work(tmp_path, capsys, monkeypatch) -> None:
