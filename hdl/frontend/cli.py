@@ -6,7 +6,7 @@ import argparse
 import dataclasses
 from typing import TYPE_CHECKING
 
-from bayesmachine.cliargs import add_model_options, int_arg, model_params_from_args
+from bayesmachine.cliargs import MODEL_OPTION_FLAGS, add_model_options, int_arg, model_params_from_args
 from bayesmachine.params import MachineParams
 
 from . import DEFAULT_FIFO_PIXELS, MAX_WIDTH
@@ -14,18 +14,45 @@ from . import DEFAULT_FIFO_PIXELS, MAX_WIDTH
 if TYPE_CHECKING:
     from .stereo import StereoMachine
 
-__all__ = ["add_options", "build", "stereo_params", "summary"]
+__all__ = ["DEFAULT_WIDTH", "add_options", "build", "check_top", "fifo_pixels", "stereo_params", "summary",
+           "width"]
+
+DEFAULT_WIDTH = 640
+
+# Every option of the stereo top (dest, flag): left at None unless given, so that one given with
+# --top machine, where it would do nothing, is refused (check_top).
+_STEREO_OPTIONS = (("width", "--width"), ("fifo_pixels", "--fifo-pixels"), *MODEL_OPTION_FLAGS)
 
 
 def add_options(p: argparse.ArgumentParser) -> None:
     """The ``--top stereo`` options: the model's parameters (shared with run/sweep), the image width,
     the FIFO."""
-    add_model_options(p, dmax=False)
+    add_model_options(p, dmax=False, given_only=True, title="model (--top stereo; paper table 1 defaults)")
     g = p.add_argument_group("stereo top (--top stereo): pixels in, results out")
-    g.add_argument("--width", type=int_arg, default=640,
-                   help=f"image width in pixels, dmax + 5 .. {MAX_WIDTH} (default 640)")
-    g.add_argument("--fifo-pixels", type=int_arg, default=DEFAULT_FIFO_PIXELS,
+    g.add_argument("--width", type=int_arg, default=None,
+                   help=f"image width in pixels, dmax + 5 .. {MAX_WIDTH} (default {DEFAULT_WIDTH})")
+    g.add_argument("--fifo-pixels", type=int_arg, default=None,
                    help=f"pixels' worth of load beats the FIFO holds (default {DEFAULT_FIFO_PIXELS})")
+
+
+def check_top(args: argparse.Namespace) -> None:
+    """Refuse (ValueError) options of the stereo top given with ``--top machine``: they would be ignored."""
+    if args.top == "stereo":
+        return
+    given = [flag for dest, flag in _STEREO_OPTIONS if getattr(args, dest, None) is not None]
+    if given:
+        raise ValueError(f"{', '.join(given)}: only with --top stereo (got --top {args.top}, the machine "
+                         "alone, which takes likelihood words, not pixels)")
+
+
+def width(args: argparse.Namespace) -> int:
+    """``--width``, or its default."""
+    return DEFAULT_WIDTH if args.width is None else int(args.width)
+
+
+def fifo_pixels(args: argparse.Namespace) -> int:
+    """``--fifo-pixels``, or its default."""
+    return DEFAULT_FIFO_PIXELS if args.fifo_pixels is None else int(args.fifo_pixels)
 
 
 def stereo_params(args: argparse.Namespace, params: MachineParams) -> MachineParams:
@@ -41,8 +68,8 @@ def build(args: argparse.Namespace, params: MachineParams) -> StereoMachine:
     to the front end's, :func:`stereo_params`)."""
     from .stereo import StereoMachine
 
-    return StereoMachine(stereo_params(args, params), model_params_from_args(args), args.width,
-                         fifo_pixels=args.fifo_pixels)
+    return StereoMachine(stereo_params(args, params), model_params_from_args(args), width(args),
+                         fifo_pixels=fifo_pixels(args))
 
 
 def summary(top: StereoMachine) -> str:
