@@ -23,7 +23,9 @@ from bayesmachine.sim.results import ArrayNumbers, MachineResult, check_numbers,
 from bayesmachine.sources import SOURCE_KINDS, SourceKind
 from bayesmachine.sources.lfsr import lfsr_numbers, lfsr_specs
 
-EXTERNAL = small_params(rng="external", max_cycles=40)  # W = 4: numbers in [0, 16)
+# W = 10: numbers in [0, 1024); 8 rows x 3 columns. The machine of test_verilator's external test and
+# test_smtj's Verilator check (the same RTL): one Verilator build per session serves all three.
+EXTERNAL = MachineParams.for_disparity(6, lanes=4, rng="external", max_cycles=60)
 LFSR = small_params(rng="lfsr")
 
 
@@ -118,8 +120,8 @@ def _error(fn: Callable[[], object]) -> tuple[type, str]:
 
 # The bad inputs of the contract, with the error every engine must give for them.
 BAD_NUMBERS = {
-    "W=4 number 16": (np.full((50, EXTERNAL.operators), 16), ValueError,
-                      "random numbers must lie in [0, 16) (W = 4 bits); got [16, 16]"),
+    "W=10 number 1024": (np.full((50, EXTERNAL.operators), 1024), ValueError,
+                         "random numbers must lie in [0, 1024) (W = 10 bits); got [1024, 1024]"),
     "float 3.7": (np.full((50, EXTERNAL.operators), 3.7), ValueError,
                   "random numbers must be integers, got dtype float64"),
     "NaN": (np.full((50, EXTERNAL.operators), np.nan), ValueError,
@@ -127,7 +129,7 @@ BAD_NUMBERS = {
     "bool": (np.ones((50, EXTERNAL.operators), bool), ValueError,
              "random numbers must be integers, got dtype bool"),
     "wrong shape": (np.zeros((50, EXTERNAL.operators + 1), np.uint16), ValueError,
-                    f"random numbers must have shape (cycles, {EXTERNAL.operators}), got (50, 11)"),
+                    "random numbers must have shape (cycles, 24), got (50, 25)"),
 }
 
 
@@ -171,7 +173,7 @@ def test_run_after_close_is_refused(make: Callable[..., EngineBase]) -> None:
 def test_numbers_running_out_then_reset(make: Callable[..., EngineBase]) -> None:
     engine = make(EXTERNAL)
     words = _words(EXTERNAL, 6, 4)
-    words[0] = 0  # a timeout: 40 cycles, more than the 30 rows given
+    words[0] = 0  # a timeout: 60 cycles, more than the 30 rows given
     assert _error(lambda: engine.run(words, _numbers(EXTERNAL, 30, 5))) == (
         ValueError, "the 30 cycles of random numbers ran out before the run ended")
     good = _numbers(EXTERNAL, 3000, 6)
@@ -245,15 +247,17 @@ class _Faulty(_Counter):
         first = self.next
         rows = super().take(count)
         if first <= 99 < first + count:
-            rows[99 - first, 0] = self._top
+            # The error names the range of the block taken, and engines take blocks of different
+            # sizes: a 0 beside the bad number makes that range [0, 2**W] in every engine.
+            rows[99 - first, :2] = (self._top, 0)
         return rows
 
 
 def test_a_device_models_bad_number_is_refused(make: Callable[..., EngineBase]) -> None:
     engine = make(EXTERNAL)
-    words = np.zeros((3, EXTERNAL.rows, EXTERNAL.operator_columns), np.uint16)  # 3 timeouts: 120 rows
+    words = np.zeros((3, EXTERNAL.rows, EXTERNAL.operator_columns), np.uint16)  # 3 timeouts: 180 rows
     assert _error(lambda: engine.run(words, _Faulty(EXTERNAL))) == (
-        ValueError, "random numbers must lie in [0, 16) (W = 4 bits); got [0, 16]")
+        ValueError, "random numbers must lie in [0, 1024) (W = 10 bits); got [0, 1024]")
 
 
 def test_unknown_option_is_a_clear_error() -> None:

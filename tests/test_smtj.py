@@ -224,8 +224,8 @@ def test_model_and_rtl_agree_on_smtj_numbers(dwell: float, share: str) -> None:
 def test_verilator_agrees_on_smtj_numbers(verilator_toolchain: object, verilator_cache: object) -> None:
     from bayesmachine.sim.verilator import VerilatorEngine
 
-    # max_cycles 40: the RTL (hence the build) of test_engines' external machine, shared in a session.
-    params = small_params(rng="smtj", smtj_dwell=20.0, seed=5, max_cycles=40)
+    # The RTL (hence the Verilator build, shared in a session) of test_engines' external machine.
+    params = MachineParams.for_disparity(6, lanes=4, rng="smtj", smtj_dwell=20.0, seed=5, max_cycles=60)
     words = synthetic_disparity_words(params, 40, np.random.default_rng(8))
     want = MachineModel(params).run(words)
     with VerilatorEngine(params, build_dir=verilator_cache) as eng:
