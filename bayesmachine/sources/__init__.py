@@ -12,8 +12,8 @@ kinds take one W-bit number per operator per compute cycle on the machine's ``en
 Each kind's ``check`` holds what only the source knows about a machine's parameters (the Sobol
 table's size, the LFSR polynomials of a length); ``MachineParams`` runs it (:func:`check_source`)
 as the last step of its validation, so a built ``MachineParams`` is a machine whose source can be
-built. This package never imports ``bayesmachine.params`` at run time (``params`` imports it):
-its functions take the parameter object and read its fields.
+built. ``params`` imports this package; its modules never import ``bayesmachine.params`` at module
+level (for type checking only): their functions take the parameter object and read its fields.
 """
 
 from __future__ import annotations
