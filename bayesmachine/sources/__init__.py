@@ -22,11 +22,11 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
 
-import numpy as np
-
 from bayesmachine.errors import ParameterError
 
-if TYPE_CHECKING:
+if TYPE_CHECKING:  # params imports this package: no import of params (or numpy) when it does
+    import numpy as np
+
     from bayesmachine.params import MachineParams
 
 __all__ = ["SMTJ_SHARES", "SOURCE_KINDS", "NumberSource", "SourceKind", "check_source", "source_kind"]
