@@ -36,11 +36,11 @@ from bayesmachine.params import (
     PRIORS,
     RNG_KINDS,
     SMTJ_SHARES,
+    STEREO_ROWS_PER_BEAT,
     TIE_BREAKS,
     MachineParams,
     ParameterError,
 )
-from bayesmachine.sources import check_source
 
 __all__ = [
     "MachineOption",
@@ -255,7 +255,8 @@ add_option(MachineOption("smtj_share", "--smtj-share",
                          "(default operator)", type=str, choices=SMTJ_SHARES))
 add_option(MachineOption("lanes", "--lanes",
                          f"likelihood-memory words per load beat (default {DEFAULT_LANES}, or one pixel's "
-                         "words if fewer)", metavar="N"))
+                         f"words if fewer; {STEREO_ROWS_PER_BEAT} rows' words with the front end: "
+                         "--feed pixels, --top stereo)", metavar="N"))
 
 
 def add_dmax_option(group: argparse._ActionsContainer) -> argparse.Action:
@@ -318,7 +319,6 @@ def machine_params_from_args(args: argparse.Namespace, dmax: int, **overrides: A
             raise ParameterError(f"{flags}: device options of --rng smtj (got --rng {got})")
     try:
         params = MachineParams.for_disparity(dmax, **kwargs)
-        check_source(params)  # e.g. no LFSR polynomial of that length: refused before any work
         return params
     except ParameterError as exc:
         message = str(exc)

@@ -186,7 +186,7 @@ def _machine_params(
     machine = machine_params_from_args(args, model.dmax, **overrides)
     if getattr(args, "feed", "words") == "pixels" and args.lanes is None:
         # The front end writes one feature per lane: lanes a multiple of the operator columns.
-        from bayesmachine.hdl.frontend.stereo import stereo_lanes
+        from bayesmachine.params import stereo_lanes
 
         machine = dataclasses.replace(machine, lanes=stereo_lanes(machine))
     _check_host_rng(machine)

@@ -7,7 +7,7 @@ import dataclasses
 from typing import TYPE_CHECKING
 
 from bayesmachine.cliargs import MODEL_OPTION_FLAGS, add_model_options, int_arg, model_params_from_args
-from bayesmachine.params import MachineParams
+from bayesmachine.params import MachineParams, stereo_lanes
 
 from . import DEFAULT_FIFO_PIXELS, MAX_WIDTH
 
@@ -56,10 +56,8 @@ def fifo_pixels(args: argparse.Namespace) -> int:
 
 
 def stereo_params(args: argparse.Namespace, params: MachineParams) -> MachineParams:
-    """The machine ``params`` with the front end's lanes (:func:`~.stereo.stereo_lanes`) unless
-    ``--lanes`` was given."""
-    from .stereo import stereo_lanes
-
+    """The machine ``params`` with the front end's lanes (:func:`~bayesmachine.params.stereo_lanes`)
+    unless ``--lanes`` was given."""
     return dataclasses.replace(params, lanes=stereo_lanes(params)) if args.lanes is None else params
 
 

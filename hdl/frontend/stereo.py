@@ -35,7 +35,7 @@ from amaranth.lib.wiring import In, Out
 
 from bayesmachine.hdl.machine import BayesianMachine, load_layout, result_layout
 from bayesmachine.likelihood import ModelParams
-from bayesmachine.params import MachineParams, ParameterError
+from bayesmachine.params import MachineParams, ParameterError, stereo_lanes
 
 from . import DEFAULT_FIFO_PIXELS, MAX_WIDTH
 from .costs import WordGenerator, check_frontend_params
@@ -50,12 +50,6 @@ __all__ = ["MAX_WIDTH", "FrontEnd", "StereoMachine", "check_stereo_machine", "pi
 def pixel_in_layout() -> data.StructLayout:
     """One beat of the pixel stream: a rectified pair and the frame-start marker."""
     return data.StructLayout({"left": unsigned(8), "right": unsigned(8), "first": unsigned(1)})
-
-
-def stereo_lanes(params: MachineParams) -> int:
-    """The front end's default lane count: 6 rows per beat (a multiple of the operator columns; 18
-    words: 14 beats per pixel at Dmax 80, below the 17 cycles of the shortest run at counter max 16)."""
-    return min(6, params.rows) * params.operator_columns
 
 
 def stereo_machine_params(dmax: int = 80, **kwargs: object) -> MachineParams:
