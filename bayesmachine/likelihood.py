@@ -10,6 +10,22 @@ and the likelihood depends only on |delta|: one lookup table per feature, indexe
 |delta|, gives exactly the value the formula gives (same float operations on the same
 operands). The no-match probability ``p_nm0 + (1-p_nm0) exp(-gV_l^2 / (2 sigma_nm^2))`` is a
 table indexed by |gv20|.
+
+Two models (``ModelParams.name``):
+
+* ``"paper"``: the paper's columns m, gH, gV and its no-match row [P_nm(gV), 1, 1], a
+  uniform prior. Bit for bit what the project computed before the census model existed.
+* ``"census"``: the paper's three columns, a census column, a calibrated no-match row and a
+  raster-order neighbour prior (issue 17). The census column's likelihood is
+  ``L_c(h) = census_p0 + (1-census_p0) exp(-h^2 / (2 census_sigma^2))`` of the Hamming
+  distance h between the left and right census codes (a table indexed by h = 0..bits, the
+  same formula with scale 1). The no-match row is [P_nm(gV), 1, 1, L_c(h_nm)]: the census
+  table read at the constant address h_nm. The neighbour prior of pixel (y, x) is
+  ``pi(d) = prod_n f(|d - d_n|)`` over its left (y, x-1) and upper (y-1, x) neighbours'
+  MAPs d_n, ``f(k) = eps + (1-eps) exp(-k^2 / (2 s^2))`` (a table indexed by k = 0..Dmax),
+  a factor 1 for a neighbour called no match or outside the output region; the no-match
+  row's prior is ``prior_nomatch`` per matched neighbour. On W-bit words the prior column's
+  word is ``combine_prior_words`` of the two neighbours' factor words (round(a b / 2^W)).
 """
 
 from __future__ import annotations
@@ -20,9 +36,11 @@ from numbers import Real
 
 import numpy as np
 
-from bayesmachine.params import DEFAULT_DMAX, ParameterError
+from bayesmachine.params import DEFAULT_DMAX, MachineParams, ParameterError
 
 __all__ = [
+    "MODELS",
+    "CENSUS_WINDOWS",
     "FEATURES",
     "SCALES",
     "MAX_ABS",
@@ -32,7 +50,16 @@ __all__ = [
     "likelihood_formula",
     "quantize",
     "QuantizedTables",
+    "check_disparity_machine",
+    "combine_prior_words",
+    "prior_words",
 ]
+
+MODELS = ("paper", "census")
+# Census windows the model takes: 7x7 (48 bits, codes fit a uint64) or the cheaper 5x5 (24 bits).
+CENSUS_WINDOWS = (5, 7)
+# Default census sigma per window (issue 17: 6 for 7x7, 3 for 5x5).
+CENSUS_SIGMA = {7: 6.0, 5: 3.0}
 
 FEATURES = ("m", "gh", "gv")
 # Integer scale of each stored feature: f = sum / scale (5x5 mean: 25; gradients: 2 x 2 x 5 = 20).
@@ -49,20 +76,55 @@ OPTION_NAMES = {
     "sigma_gv": "--sigma-gv/--sigma",
     "p_nm0": "--p-nm0",
     "sigma_nm": "--sigma-nm",
+    "name": "--model",
+    "census_window": "--census-window",
+    "census_p0": "--census-p0",
+    "census_sigma": "--census-sigma",
+    "census_nomatch_h": "--census-nomatch-h",
+    "neighbour_prior": "--neighbour-prior",
+    "prior_eps": "--prior-eps",
+    "prior_s": "--prior-s",
+    "prior_nomatch": "--prior-nomatch",
 }
+# The census model's own fields: left out of a paper model's to_dict(), so its reports and the
+# Verilator design keys (sim/stereo_engine.py hashes model.to_dict()) stay what they were.
+CENSUS_FIELDS = ("name", "census_window", "census_p0", "census_sigma", "census_nomatch_h",
+                 "neighbour_prior", "prior_eps", "prior_s", "prior_nomatch")
 
 
 def _error(name: str, text: str) -> ParameterError:
     return ParameterError(f"{OPTION_NAMES[name]}: {name} {text}")
 
 
+def _check_sigma(name: str, v: object) -> None:
+    if isinstance(v, bool) or not isinstance(v, Real) or not (math.isfinite(v) and v > 0):
+        raise _error(name, f"must be a finite number > 0, got {v!r}")
+    two_s2 = 2.0 * float(v) * float(v)
+    if not (math.isfinite(two_s2) and two_s2 > 0.0):
+        raise _error(
+            name, f"= {v!r}: 2 sigma^2 = {two_s2!r} is not a finite positive float64 "
+            "(use a sigma between about 1e-150 and 1e150)"
+        )
+
+
+def _check_probability(name: str, v: object) -> None:
+    if isinstance(v, bool) or not isinstance(v, Real) or not 0.0 <= float(v) <= 1.0:
+        raise _error(name, f"must be a probability in [0, 1], got {v!r}")
+
+
 @dataclass(frozen=True)
 class ModelParams:
-    """The Bayesian disparity model of the paper (table 1 defaults), validated up front.
+    """The Bayesian disparity model (paper table 1 defaults; ``name="census"``: issue 17), validated up front.
 
     Each check is what the computation needs: probabilities in [0, 1] (p_nm0 > 0, the
     floor that keeps every posterior defined) and sigmas whose ``2 sigma^2`` is a finite
     positive float64 (a sigma of 1e-300 would square to 0 and give NaN likelihoods).
+
+    The census fields are validated for every model but used by ``"census"`` only; ``None``
+    means "the default for this window": ``census_sigma`` 6 (7x7) or 3 (5x5), ``census_nomatch_h``
+    bits / 8 (0 gives L_c(0) = 1: a no-match row left uncalibrated), ``prior_nomatch`` the
+    prior's value at one s, ``f(s) = eps + (1-eps) exp(-1/2)`` (0.626 by default). The resolved
+    values are the properties ``sigma_c``, ``h_nm`` and ``prior_nm``.
     """
 
     dmax: int = DEFAULT_DMAX
@@ -72,39 +134,106 @@ class ModelParams:
     sigma_gv: float = 10.0
     p_nm0: float = 0.01
     sigma_nm: float = 8.0
+    name: str = "paper"
+    census_window: int = 7
+    census_p0: float = 0.02
+    census_sigma: float | None = None
+    census_nomatch_h: int | None = None
+    neighbour_prior: bool = True
+    prior_eps: float = 0.05
+    prior_s: float = 4.0
+    prior_nomatch: float | None = None
 
     def __post_init__(self) -> None:
         if isinstance(self.dmax, bool) or not isinstance(self.dmax, int) or not 0 <= self.dmax <= 4094:
             raise _error("dmax", f"must be an integer in [0, 4094], got {self.dmax!r}")
         for name in ("p0", "p_nm0"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, Real) or not 0.0 <= float(v) <= 1.0:
-                raise _error(name, f"must be a probability in [0, 1], got {v!r}")
+            _check_probability(name, getattr(self, name))
         if not self.p_nm0 > 0:
             # The floor of the no-match hypothesis keeps every pixel's posterior defined: without
             # it, a pixel whose likelihoods all underflow to 0 would have 0/0.
             raise _error("p_nm0", "must be > 0: it keeps every pixel's posterior defined")
         for name in ("sigma_m", "sigma_gh", "sigma_gv", "sigma_nm"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, Real) or not (math.isfinite(v) and v > 0):
-                raise _error(name, f"must be a finite number > 0, got {v!r}")
-            two_s2 = 2.0 * float(v) * float(v)
-            if not (math.isfinite(two_s2) and two_s2 > 0.0):
-                raise _error(
-                    name, f"= {v!r}: 2 sigma^2 = {two_s2!r} is not a finite positive float64 "
-                    "(use a sigma between about 1e-150 and 1e150)"
-                )
+            _check_sigma(name, getattr(self, name))
+        if self.name not in MODELS:
+            raise _error("name", f"must be one of {', '.join(MODELS)}, got {self.name!r}")
+        w = self.census_window
+        if isinstance(w, bool) or not isinstance(w, int) or w not in CENSUS_WINDOWS:
+            raise _error("census_window", f"must be 5 or 7 (a 5x5 or 7x7 census window), got {w!r}")
+        _check_probability("census_p0", self.census_p0)
+        if self.census_sigma is not None:
+            _check_sigma("census_sigma", self.census_sigma)
+        h, bits = self.census_nomatch_h, self.census_bits
+        if h is not None and (isinstance(h, bool) or not isinstance(h, int) or not 0 <= h <= bits):
+            raise _error("census_nomatch_h", f"must be an integer Hamming distance in [0, {bits}] "
+                         f"(the {w}x{w} census has {bits} bits), got {h!r}")
+        if not isinstance(self.neighbour_prior, bool):
+            raise _error("neighbour_prior", f"must be True or False, got {self.neighbour_prior!r}")
+        _check_probability("prior_eps", self.prior_eps)
+        _check_sigma("prior_s", self.prior_s)
+        if self.prior_nomatch is not None:
+            _check_probability("prior_nomatch", self.prior_nomatch)
+            if not self.prior_nomatch > 0:
+                # With both neighbours matched and every disparity's likelihood ~0, a no-match prior
+                # of 0 would leave the pixel 0/0.
+                raise _error("prior_nomatch", "must be > 0: it keeps every pixel's posterior defined")
 
     @property
     def hypotheses(self) -> int:
         """Dmax + 2: disparities 0..Dmax and no match (the machine's rows M)."""
         return self.dmax + 2
 
+    @property
+    def census(self) -> bool:
+        """Whether the model has a census column."""
+        return self.name == "census"
+
+    @property
+    def has_prior(self) -> bool:
+        """Whether the model has the raster-order neighbour prior (census model only)."""
+        return self.census and self.neighbour_prior
+
+    @property
+    def columns(self) -> int:
+        """Data columns of the machine (the prior column aside): 3 (paper) or 4 (+ census)."""
+        return 4 if self.census else 3
+
+    @property
+    def census_bits(self) -> int:
+        """Bits of a census code: the window's neighbours (48 for 7x7, 24 for 5x5)."""
+        return self.census_window * self.census_window - 1
+
+    @property
+    def sigma_c(self) -> float:
+        """The census sigma in use (``census_sigma`` or the window's default)."""
+        return float(self.census_sigma) if self.census_sigma is not None else CENSUS_SIGMA[self.census_window]
+
+    @property
+    def h_nm(self) -> int:
+        """The no-match row's Hamming distance in use (``census_nomatch_h`` or bits / 8)."""
+        return self.census_nomatch_h if self.census_nomatch_h is not None else self.census_bits // 8
+
+    @property
+    def prior_nm(self) -> float:
+        """The no-match row's prior factor per matched neighbour in use (default: f(s))."""
+        if self.prior_nomatch is not None:
+            return float(self.prior_nomatch)
+        return float(likelihood_formula(np.int64(1), 1, self.prior_eps, 1.0))
+
     def sigma(self, feature: str) -> float:
         return float(getattr(self, f"sigma_{feature}"))
 
     def to_dict(self) -> dict[str, object]:
-        return asdict(self)
+        """The fields; a paper model's without the census ones (its reports and cache keys unchanged).
+
+        A census model's dict holds the resolved ``census_sigma``, ``census_nomatch_h`` and
+        ``prior_nomatch`` (what ran), so ``ModelParams(**to_dict())`` is the same model.
+        """
+        out = asdict(self)
+        if not self.census:
+            return {k: v for k, v in out.items() if k not in CENSUS_FIELDS}
+        out.update(census_sigma=self.sigma_c, census_nomatch_h=self.h_nm, prior_nomatch=self.prior_nm)
+        return out
 
 
 def likelihood_formula(delta: np.ndarray, scale: int, p0: float, sigma: float) -> np.ndarray:
@@ -120,12 +249,22 @@ def likelihood_formula(delta: np.ndarray, scale: int, p0: float, sigma: float) -
 
 @dataclass(frozen=True)
 class LikelihoodTables:
-    """float64 tables indexed by |delta| (features) and |gv20| (no match)."""
+    """float64 tables indexed by |delta| (features) and |gv20| (no match).
+
+    Census model only (None otherwise): ``census`` indexed by the Hamming distance h = 0..bits,
+    ``census_nomatch`` = L_c(h_nm) (the no-match row's census entry); with the neighbour prior,
+    ``prior`` indexed by |d - d_n| = 0..Dmax and ``prior_nomatch`` (the no-match row's factor
+    per matched neighbour).
+    """
 
     m: np.ndarray
     gh: np.ndarray
     gv: np.ndarray
     nomatch: np.ndarray
+    census: np.ndarray | None = None
+    census_nomatch: float | None = None
+    prior: np.ndarray | None = None
+    prior_nomatch: float | None = None
 
 
 def likelihood_tables(model: ModelParams) -> LikelihoodTables:
@@ -137,12 +276,20 @@ def likelihood_tables(model: ModelParams) -> LikelihoodTables:
         n = MAX_ABS[f] + 1 if f == "m" else 2 * MAX_ABS[f] + 1
         tabs[f] = likelihood_formula(np.arange(n), SCALES[f], model.p0, model.sigma(f))
     nm = likelihood_formula(np.arange(MAX_ABS["gv"] + 1), SCALES["gv"], model.p_nm0, model.sigma_nm)
-    tables = LikelihoodTables(tabs["m"], tabs["gh"], tabs["gv"], nm)
-    for name, tab in (("sigma_m", tables.m), ("sigma_gh", tables.gh), ("sigma_gv", tables.gv),
-                      ("sigma_nm", tables.nomatch)):
+    census = census_nm = prior = prior_nm = None
+    checks = [("sigma_m", tabs["m"]), ("sigma_gh", tabs["gh"]), ("sigma_gv", tabs["gv"]), ("sigma_nm", nm)]
+    if model.census:
+        census = likelihood_formula(np.arange(model.census_bits + 1), 1, model.census_p0, model.sigma_c)
+        census_nm = float(census[model.h_nm])
+        checks.append(("census_sigma", census))
+        if model.neighbour_prior:
+            prior = likelihood_formula(np.arange(model.dmax + 1), 1, model.prior_eps, model.prior_s)
+            prior_nm = model.prior_nm
+            checks.append(("prior_s", prior))
+    for name, tab in checks:
         if not ((tab >= 0.0) & (tab <= 1.0)).all():  # NaN fails both comparisons
             raise _error(name, f"= {getattr(model, name)!r} gives likelihoods outside [0, 1]")
-    return tables
+    return LikelihoodTables(tabs["m"], tabs["gh"], tabs["gv"], nm, census, census_nm, prior, prior_nm)
 
 
 def quantize(p: np.ndarray | float, word_bits: int) -> np.ndarray:
@@ -168,11 +315,98 @@ def quantize(p: np.ndarray | float, word_bits: int) -> np.ndarray:
 
 
 class QuantizedTables:
-    """The likelihood tables quantized once to the machine's word (the fast word path)."""
+    """The likelihood tables quantized once to the machine's word (the fast word path).
+
+    Census model: ``census`` (by h) and ``census_nomatch`` = ``census[h_nm]``; with the
+    neighbour prior, ``prior`` (by |d - d_n|), ``prior_nomatch`` and ``prior_last``, the
+    first |d - d_n| from which the quantized prior no longer changes (a table clamped there
+    gives the same words).
+    """
 
     def __init__(self, tables: LikelihoodTables, word_bits: int) -> None:
+        self.word_bits = word_bits
         self.m = quantize(tables.m, word_bits)
         self.gh = quantize(tables.gh, word_bits)
         self.gv = quantize(tables.gv, word_bits)
         self.nomatch = quantize(tables.nomatch, word_bits)
         self.one = 1 << word_bits
+        self.census = self.census_nomatch = self.prior = self.prior_nomatch = self.prior_last = None
+        if tables.census is not None:
+            self.census = quantize(tables.census, word_bits)
+            self.census_nomatch = int(quantize(tables.census_nomatch, word_bits))
+        if tables.prior is not None:
+            self.prior = quantize(tables.prior, word_bits)
+            self.prior_nomatch = int(quantize(tables.prior_nomatch, word_bits))
+            changes = np.flatnonzero(self.prior[1:] != self.prior[:-1])
+            self.prior_last = int(changes[-1]) + 1 if changes.size else 0
+
+
+def combine_prior_words(a: np.ndarray | int, b: np.ndarray | int, word_bits: int) -> np.ndarray:
+    """One prior word from two neighbours' factor words: round(a * b / 2^W), half up, in integers.
+
+    A factor of 1.0 (2^W) leaves the other word unchanged, so a pixel with one matched neighbour
+    gets that neighbour's table word exactly. This is the prior column's word rule (a W x W
+    multiplier and a rounding in hardware).
+    """
+    prod = np.asarray(a, dtype=np.int64) * np.asarray(b, dtype=np.int64)
+    return ((prod + (1 << (word_bits - 1))) >> word_bits).astype(np.uint16)
+
+
+def prior_words(qtables: QuantizedTables, dmax: int, left: np.ndarray, above: np.ndarray) -> np.ndarray:
+    """The prior column's words (P, Dmax+2) of P pixels from their neighbours' MAPs.
+
+    ``left`` and ``above`` are the MAPs (P,) of each pixel's left and upper neighbour, -1 for no
+    match or outside the output region (factor 1.0). Row d gets the combined factor words
+    ``prior[|d - d_n|]``; the no-match row ``prior_nomatch`` per matched neighbour, combined
+    the same way.
+    """
+    if qtables.prior is None:
+        raise ValueError("these tables have no neighbour prior (a census model with neighbour_prior has one)")
+    one = qtables.one
+    d = np.arange(dmax + 1)
+    factors = []
+    for hat in (np.asarray(left), np.asarray(above)):
+        f = np.full((hat.shape[0], dmax + 2), one, dtype=np.int64)
+        matched = hat >= 0
+        f[matched, : dmax + 1] = qtables.prior[np.abs(d[None, :] - hat[matched, None])]
+        f[matched, dmax + 1] = qtables.prior_nomatch
+        factors.append(f)
+    return combine_prior_words(factors[0], factors[1], qtables.word_bits)
+
+
+def check_disparity_machine(model: ModelParams, machine: MachineParams) -> int:
+    """``ParameterError`` naming the parameter unless ``machine`` can run ``model``'s disparity pixels.
+
+    Returns the operator column of the first data column: 1 with a loaded prior (column 0), else 0.
+    """
+    if machine.rows != model.hypotheses or not machine.nomatch_row:
+        raise ParameterError(
+            f"rows: the machine has {machine.rows} rows (no-match row: {machine.nomatch_row}); the model's "
+            f"dmax {model.dmax} needs {model.hypotheses} = dmax + 2 with a no-match row: "
+            f"use MachineParams.for_disparity({model.dmax}, columns={model.columns})"
+        )
+    if machine.columns != model.columns:
+        raise ParameterError(
+            f"columns: the {model.name} model has {model.columns} data terms, the machine has "
+            f"columns={machine.columns}")
+    w = machine.word_bits
+    if quantize(model.p_nm0, w) == 0:
+        # Then an occluded pixel (every row ~0) could only stop at the watchdog, max_cycles later.
+        raise ParameterError(
+            f"p_nm0: {model.p_nm0} quantizes to 0 with {w}-bit words, so a pixel with no match could "
+            f"not stop before the watchdog; raise --word-bits or --p-nm0 (p_nm0 >= 2^-{w + 1})"
+        )
+    if model.census:
+        l_nm = likelihood_formula(np.int64(model.h_nm), 1, model.census_p0, model.sigma_c)
+        if quantize(l_nm, w) == 0:
+            raise _error("census_nomatch_h", f"= {model.h_nm}: the no-match row's census likelihood "
+                         f"{float(l_nm):.3g} quantizes to 0 with {w}-bit words (no match could never win)")
+    if model.has_prior:
+        if machine.prior != "loaded":
+            raise _error("neighbour_prior", "needs the machine's prior column: use --prior loaded "
+                         "(or turn the neighbour prior off)")
+        q = int(quantize(model.prior_nm, w))
+        if int(combine_prior_words(q, q, w)) == 0:
+            raise _error("prior_nomatch", f"= {model.prior_nm:.3g} quantizes to 0 over two neighbours "
+                         f"with {w}-bit words (the no-match row could never win)")
+    return machine.operator_columns - machine.columns

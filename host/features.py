@@ -6,6 +6,17 @@ Maps cover the valid region: (H-4, W-4), map pixel (y, x) centred on image pixel
 * ``m25``  = 25 * m  = sum of the 5x5 window                      (0 .. 6375)
 * ``gh20`` = 20 * gH = two rightmost columns - two leftmost columns (-2550 .. 2550)
 * ``gv20`` = 20 * gV = two bottom rows - two top rows               (-2550 .. 2550)
+
+With the census model (:func:`model_features`), ``census`` holds each map pixel's census code
+(uint64) on the same (H-4, W-4) grid, so the output region is the paper's for both models.
+The code of the w x w window (w = 7 or 5, r = w // 2) centred on image pixel (y+2, x+2):
+bit k (k = 0 is the least significant) is 1 when the k-th neighbour is darker than the centre
+(``neighbour < centre``), the neighbours taken in raster order of the window (offsets
+(dy, dx) = (-r, -r), (-r, -r+1), ..., (r, r), the centre skipped): 48 bits for 7x7, 24 for
+5x5. A neighbour outside the image gives bit 0 (only 7x7 windows reach outside: the region's
+outermost row and column on each side, and the right image's first map columns): the same
+bit in both images of a row near the top or bottom, so those bits add nothing to a Hamming
+distance there.
 """
 
 from __future__ import annotations
@@ -14,20 +25,31 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bayesmachine.likelihood import MAX_ABS, SCALES
+from bayesmachine.likelihood import CENSUS_WINDOWS, MAX_ABS, SCALES, ModelParams
 
-from .region import FILTER_SIZE
+from .region import FILTER_SIZE, MARGIN
 
-__all__ = ["FeatureSums", "SCALES", "MAX_ABS", "feature_sums", "feature_sums_plain"]
+__all__ = [
+    "FeatureSums",
+    "SCALES",
+    "MAX_ABS",
+    "feature_sums",
+    "feature_sums_plain",
+    "census_offsets",
+    "census_codes",
+    "census_codes_plain",
+    "model_features",
+]
 
 
 @dataclass(frozen=True)
 class FeatureSums:
-    """Integer feature maps of one image, each (H-4, W-4) int32."""
+    """Integer feature maps of one image, each (H-4, W-4) int32; ``census`` (H-4, W-4) uint64 or None."""
 
     m25: np.ndarray
     gh20: np.ndarray
     gv20: np.ndarray
+    census: np.ndarray | None = None
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -38,11 +60,12 @@ class FeatureSums:
 
     def band(self, rows: slice) -> FeatureSums:
         """The maps of map rows ``rows`` (views: a band costs no copy)."""
-        return FeatureSums(self.m25[rows], self.gh20[rows], self.gv20[rows])
+        census = self.census[rows] if self.census is not None else None
+        return FeatureSums(self.m25[rows], self.gh20[rows], self.gv20[rows], census)
 
 
-def feature_sums(image: np.ndarray) -> FeatureSums:
-    """m, gH, gV sums of an (H, W) uint8 image with separable running sums."""
+def feature_sums(image: np.ndarray, census_window: int | None = None) -> FeatureSums:
+    """m, gH, gV sums of an (H, W) uint8 image with separable running sums (+ census codes if asked)."""
     img = np.asarray(image, dtype=np.int32)
     if img.ndim != 2 or img.shape[0] < FILTER_SIZE or img.shape[1] < FILTER_SIZE:
         raise ValueError(f"image of shape {img.shape} is too small for the 5x5 filters")
@@ -64,7 +87,58 @@ def feature_sums(image: np.ndarray) -> FeatureSums:
         np.ascontiguousarray(m25, dtype=np.int32),
         np.ascontiguousarray(gh20, dtype=np.int32),
         np.ascontiguousarray(gv20, dtype=np.int32),
+        census_codes(image, census_window) if census_window is not None else None,
     )
+
+
+def model_features(image: np.ndarray, model: ModelParams) -> FeatureSums:
+    """The features ``model`` reads: the paper's three sums, and the census codes for a census model."""
+    return feature_sums(image, model.census_window if model.census else None)
+
+
+def census_offsets(window: int) -> list[tuple[int, int]]:
+    """The neighbours (dy, dx) of a ``window`` x ``window`` census, in bit order (bit k = entry k)."""
+    if window not in CENSUS_WINDOWS:
+        raise ValueError(f"census window must be one of {CENSUS_WINDOWS}, got {window!r}")
+    r = window // 2
+    return [(dy, dx) for dy in range(-r, r + 1) for dx in range(-r, r + 1) if (dy, dx) != (0, 0)]
+
+
+def census_codes(image: np.ndarray, window: int) -> np.ndarray:
+    """Census codes (H-4, W-4) uint64 of the map pixels of an (H, W) image (see the module's text)."""
+    offsets = census_offsets(window)
+    img = np.asarray(image)
+    if img.ndim != 2 or img.shape[0] < FILTER_SIZE or img.shape[1] < FILTER_SIZE:
+        raise ValueError(f"image of shape {img.shape} is too small for the 5x5 filters")
+    r = window // 2
+    pad = r - MARGIN  # how far the window reaches past the 5x5 filters' valid region
+    # 256 is never below an 8-bit centre: a neighbour outside the image gives bit 0.
+    padded = np.pad(img.astype(np.int16), pad, constant_values=256) if pad else img.astype(np.int16)
+    h4, w4 = img.shape[0] - 2 * MARGIN, img.shape[1] - 2 * MARGIN
+    centre = padded[r : r + h4, r : r + w4]
+    codes = np.zeros((h4, w4), dtype=np.uint64)
+    for k, (dy, dx) in enumerate(offsets):
+        nb = padded[r + dy : r + dy + h4, r + dx : r + dx + w4]
+        codes |= (nb < centre).astype(np.uint64) << np.uint64(k)
+    return codes
+
+
+def census_codes_plain(image: np.ndarray, window: int) -> np.ndarray:
+    """The same codes pixel by pixel in plain Python (a test oracle)."""
+    img = np.asarray(image)
+    h, w = img.shape
+    offsets = census_offsets(window)
+    out = np.zeros((h - 2 * MARGIN, w - 2 * MARGIN), dtype=np.uint64)
+    for y in range(out.shape[0]):
+        for x in range(out.shape[1]):
+            cy, cx = y + MARGIN, x + MARGIN
+            code = 0
+            for k, (dy, dx) in enumerate(offsets):
+                ny, nx = cy + dy, cx + dx
+                if 0 <= ny < h and 0 <= nx < w and int(img[ny, nx]) < int(img[cy, cx]):
+                    code |= 1 << k
+            out[y, x] = code
+    return out
 
 
 # The 5x5 kernels, as correlation weights (row = y, column = x), times the feature scale.

@@ -4,6 +4,13 @@ The model (``ModelParams``), the likelihood formula and tables (paper eq. 2 and 
 quantization live in :mod:`bayesmachine.likelihood`, shared with the on-chip front end;
 they are re-exported here. This module gathers them per output pixel from the features
 of a pair.
+
+The census model (``ModelParams(name="census")``) adds a fourth data column, the census
+likelihood at the Hamming distance h = popcount(C_l(x) xor C_r(x - d)) of the pixels' census
+codes (``FeatureSums.census``, from :func:`host.features.model_features`), and the no-match
+row's census entry L_c(h_nm). Its neighbour prior goes into the loaded prior column (operator
+column 0): the words come from the neighbours' MAPs (:func:`bayesmachine.likelihood.prior_words`),
+which only the machine's own results give, so ``memory_words`` takes them as an argument.
 """
 
 from __future__ import annotations
@@ -15,11 +22,12 @@ from bayesmachine.likelihood import (
     LikelihoodTables,
     ModelParams,
     QuantizedTables,
+    check_disparity_machine,
     likelihood_formula,
     likelihood_tables,
     quantize,
 )
-from bayesmachine.params import MachineParams
+from bayesmachine.params import MachineParams, ParameterError
 
 from .features import SCALES, FeatureSums
 from .region import OutputRegion
@@ -34,7 +42,27 @@ __all__ = [
     "quantize",
     "memory_words",
     "memory_words_plain",
+    "hamming",
+    "hamming_plain",
 ]
+
+
+def hamming(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamming distances popcount(a xor b) of uint64 census codes (broadcast), int64."""
+    return np.bitwise_count(np.bitwise_xor(a, b)).astype(np.int64)
+
+
+def hamming_plain(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The same by unpacking the bytes (a test oracle independent of ``np.bitwise_count``)."""
+    x = np.ascontiguousarray(np.bitwise_xor(a, b), dtype=np.uint64)
+    return np.unpackbits(x.view(np.uint8).reshape(*x.shape, 8), axis=-1).sum(axis=-1).astype(np.int64)
+
+
+def _need_census(left: FeatureSums, right: FeatureSums, model: ModelParams) -> None:
+    if model.census and (left.census is None or right.census is None):
+        raise ParameterError(
+            "--model: the census model needs the census codes of both images "
+            "(features from host.features.model_features(image, model))")
 
 
 def likelihoods_plain(
@@ -42,37 +70,24 @@ def likelihoods_plain(
 ) -> tuple[np.ndarray, np.ndarray]:
     """All likelihoods by the plain vectorized formula (the test oracle).
 
-    Returns ``lik`` (Ho, Wo, Dmax+1, 3) float64 (features m, gH, gV) and ``nomatch`` (Ho, Wo).
+    Returns ``lik`` (Ho, Wo, Dmax+1, columns) float64 (features m, gH, gV; census with the
+    census model, from :func:`hamming_plain`) and ``nomatch`` (Ho, Wo), P_nm(gV) (the no-match
+    row's census entry is the constant L_c(h_nm)).
     """
+    _need_census(left, right, model)
     region = OutputRegion.of_features(left.shape, model.dmax)
     x, xr = region.map_slice, region.match_columns
-    lik = np.empty((*region.shape, model.dmax + 1, 3))
+    lik = np.empty((*region.shape, model.dmax + 1, model.columns))
     for k, f in enumerate(FEATURES):
         fl = getattr(left, f"{f}{SCALES[f]}")
         fr = getattr(right, f"{f}{SCALES[f]}")
         delta = fl[:, x, None].astype(np.int64) - fr[:, xr].astype(np.int64)
         lik[..., k] = likelihood_formula(delta, SCALES[f], model.p0, model.sigma(f))
+    if model.census:
+        h = hamming_plain(left.census[:, x, None], right.census[:, xr])
+        lik[..., 3] = likelihood_formula(h, 1, model.census_p0, model.sigma_c)
     nomatch = likelihood_formula(left.gv20[:, x], SCALES["gv"], model.p_nm0, model.sigma_nm)
     return lik, nomatch
-
-
-def _check_machine(model: ModelParams, machine: MachineParams) -> int:
-    if machine.rows != model.hypotheses or not machine.nomatch_row:
-        raise ValueError(
-            f"machine has {machine.rows} rows (no-match row: {machine.nomatch_row}); the model needs "
-            f"{model.hypotheses} = dmax + 2 with a no-match row: "
-            f"use MachineParams.for_disparity({model.dmax})"
-        )
-    if machine.columns != 3:
-        raise ValueError(f"the disparity model has 3 data terms, the machine has columns={machine.columns}")
-    if quantize(model.p_nm0, machine.word_bits) == 0:
-        # Then an occluded pixel (every row ~0) could only stop at the watchdog, max_cycles later.
-        raise ValueError(
-            f"p_nm0 = {model.p_nm0} quantizes to 0 with {machine.word_bits}-bit words, so a pixel with "
-            f"no match could not stop before the watchdog; raise --word-bits or --p-nm0 "
-            f"(p_nm0 >= 2^-{machine.word_bits + 1})"
-        )
-    return machine.operator_columns - machine.columns  # 1 with a loaded prior (column 0)
 
 
 def memory_words(
@@ -82,14 +97,25 @@ def memory_words(
     machine: MachineParams,
     rows: slice | None = None,
     qtables: QuantizedTables | None = None,
+    prior: np.ndarray | None = None,
 ) -> np.ndarray:
     """Likelihood-memory words of the output pixels of map rows ``rows`` (default: all).
 
-    Shape (P, M, operator_columns), row-major pixel order. Rows 0..Dmax hold the three
-    quantized likelihoods (columns m, gH, gV); the no-match row holds [P(nomatch), 1, 1]
-    (1 = 2^W). With a loaded prior, column 0 is a uniform prior (2^W everywhere).
+    Shape (P, M, operator_columns), row-major pixel order. Rows 0..Dmax hold the quantized
+    likelihoods (columns m, gH, gV, and census for the census model); the no-match row holds
+    [P(nomatch), 1, 1] (1 = 2^W), [P(nomatch), 1, 1, L_c(h_nm)] for the census model. With a
+    loaded prior, column 0 is ``prior`` ((P, M) words), else a uniform prior (2^W everywhere).
+    A model with the neighbour prior needs ``prior`` (from ``prior_words`` of the neighbours'
+    MAPs): the machine's own results, which the words of a whole band cannot wait for.
     """
-    off = _check_machine(model, machine)
+    off = check_disparity_machine(model, machine)
+    _need_census(left, right, model)
+    if model.has_prior and prior is None:
+        raise ParameterError(
+            "--neighbour-prior: the neighbour prior's words come from the machine's own results "
+            "(prior_words of each pixel's neighbours): pass prior=, or turn the neighbour prior off")
+    if prior is not None and not off:
+        raise ParameterError("--prior: prior words given but the machine has no loaded prior column")
     if qtables is None:
         qtables = QuantizedTables(likelihood_tables(model), machine.word_bits)
     dmax = model.dmax
@@ -103,22 +129,39 @@ def memory_words(
     for k, (fl, fr, tab) in enumerate(zip(band_l.as_tuple(), band_r.as_tuple(), tabs, strict=True)):
         delta = np.abs(fl[:, x, None] - fr[:, xr])
         words[:, : dmax + 1, off + k] = tab[delta].reshape(p, dmax + 1)
+    if model.census:
+        if qtables.census is None:
+            raise ValueError("qtables lack the census table: build them from the census model")
+        h = hamming(band_l.census[:, x, None], band_r.census[:, xr])
+        words[:, : dmax + 1, off + 3] = qtables.census[h].reshape(p, dmax + 1)
     words[:, dmax + 1, off] = qtables.nomatch[np.abs(band_l.gv20[:, x])].reshape(p)
     words[:, dmax + 1, off + 1 :] = qtables.one
+    if model.census:
+        words[:, dmax + 1, off + 3] = qtables.census_nomatch
     if off:
-        words[:, :, 0] = qtables.one
+        if prior is None:
+            words[:, :, 0] = qtables.one
+        else:
+            pw = np.asarray(prior)
+            if pw.shape != (p, model.hypotheses):
+                raise ValueError(f"prior words must have shape {(p, model.hypotheses)}, got {pw.shape}")
+            words[:, :, 0] = pw
     return words
 
 
 def memory_words_plain(
     left: FeatureSums, right: FeatureSums, model: ModelParams, machine: MachineParams
 ) -> np.ndarray:
-    """The same words from the plain formula (a test oracle for ``memory_words``)."""
-    off = _check_machine(model, machine)
+    """The same words from the plain formula (a test oracle for ``memory_words``; uniform prior)."""
+    off = check_disparity_machine(model, machine)
     lik, nm = likelihoods_plain(left, right, model)
     p = lik.shape[0] * lik.shape[1]
     one = 1 << machine.word_bits
     words = np.full((p, model.hypotheses, machine.operator_columns), one, dtype=np.uint16)
-    words[:, : model.dmax + 1, off:] = quantize(lik, machine.word_bits).reshape(p, model.dmax + 1, 3)
+    cols = model.columns
+    words[:, : model.dmax + 1, off:] = quantize(lik, machine.word_bits).reshape(p, model.dmax + 1, cols)
     words[:, model.dmax + 1, off] = quantize(nm, machine.word_bits).reshape(p)
+    if model.census:
+        l_nm = likelihood_formula(np.int64(model.h_nm), 1, model.census_p0, model.sigma_c)
+        words[:, model.dmax + 1, off + 3] = quantize(l_nm, machine.word_bits)
     return words

@@ -30,6 +30,9 @@ __all__ = [
     "bad_rates",
     "gt_region",
     "sgbm_disparity",
+    "bm_disparity",
+    "occluded_mask",
+    "nomatch_occluded_share",
     "evaluate",
 ]
 
@@ -152,6 +155,43 @@ def sgbm_disparity(left: np.ndarray, right: np.ndarray, dmax: int) -> np.ndarray
     disp = raw.astype(np.float64) / 16.0
     disp[raw < 0] = -1.0
     return OutputRegion.of_image(disp.shape, dmax).cut(disp)
+
+
+def bm_disparity(left: np.ndarray, right: np.ndarray, dmax: int, block: int = 15) -> np.ndarray | None:
+    """OpenCV StereoBM (``block`` x ``block``), like :func:`sgbm_disparity`: output region, -1 = invalid."""
+    bm = cv2.StereoBM_create(numDisparities=sgbm_numdisparities(dmax), blockSize=block)
+    try:
+        raw = bm.compute(left, right)
+    except cv2.error:
+        return None
+    disp = raw.astype(np.float64) / 16.0
+    disp[raw < 0] = -1.0
+    return OutputRegion.of_image(disp.shape, dmax).cut(disp)
+
+
+def occluded_mask(gt: np.ndarray, tolerance: float = 0.0) -> np.ndarray:
+    """Left pixels the right camera cannot see, from the left ground truth (image coordinates).
+
+    Pixel x of a row (disparity g, finite) lands on x - g in the right image; a pixel x' > x of
+    the same row landing there or further left (x' - g(x') <= x - g(x) - ``tolerance``) is a
+    nearer surface hiding it (a jump of k in disparity hides k pixels). Unknown gt (non-finite)
+    hides nothing and is not occluded.
+    """
+    g = np.asarray(gt, dtype=np.float64)
+    known = np.isfinite(g)
+    x = np.arange(g.shape[1], dtype=np.float64)[None, :]
+    land = np.where(known, x - np.where(known, g, 0.0), np.inf)
+    # Running minimum of x' - g(x') over x' > x, from the right.
+    right_min = np.minimum.accumulate(land[:, ::-1], axis=1)[:, ::-1]
+    after = np.concatenate([right_min[:, 1:], np.full((g.shape[0], 1), np.inf)], axis=1)
+    return known & (after <= land - tolerance)
+
+
+def nomatch_occluded_share(disp: np.ndarray, occluded: np.ndarray) -> float:
+    """The share of a method's no-match calls (``disp`` < 0) that fall on occluded pixels; NaN if none."""
+    nm = np.asarray(disp) < 0
+    n = int(nm.sum())
+    return float((nm & np.asarray(occluded, dtype=bool)).sum() / n) if n else math.nan
 
 
 def _clean(v: object) -> object:

@@ -10,6 +10,21 @@ exact ties go to the lowest index, so no match wins only when strictly more prob
 ``reference_plain`` is the vectorized float64 formula, kept as its test oracle.
 Large frames go band by band (:func:`reference_bands`, :func:`reference_map`), so the
 float64 posterior volume (H x W x (Dmax+2) x 8 bytes) is never held whole.
+
+The census model (``ModelParams(name="census")``) multiplies in the census column (and the
+no-match row's L_c(h_nm)), and, with the neighbour prior, pixel (y, x)'s prior from the
+reference's OWN MAP of its left neighbour (y, x-1) and upper neighbour (y-1, x): row d gets
+``p = 1.0; p *= f(|d - d_left|); p *= f(|d - d_above|)`` (a factor skipped for a neighbour called
+no match or outside the output region), the no-match row ``prior_nomatch`` per matched
+neighbour; the unnormalized value is (((m * gH) * gV) * census) * p. Raster order makes it
+sequential: a parallel kernel forms every pixel's data products, a sequential pass over the
+band applies the prior and takes the MAPs; bands go top to bottom, the last MAP row of a band
+carried into the next (``above``).
+
+``reference_quantized`` is the same inference on the W-bit quantized tables: each data column
+a word q/2^W, the prior column ``combine_prior_words`` of the two neighbours' factor words, the
+products exact in int64 (so a MAP is decided exactly, ties to the lowest index as above). It is
+what the machine samples from: the distribution an ideal machine's counters approach.
 """
 
 from __future__ import annotations
@@ -20,7 +35,10 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from .features import FeatureSums, feature_sums
+from bayesmachine.likelihood import QuantizedTables, likelihood_formula
+from bayesmachine.params import ParameterError
+
+from .features import FeatureSums, feature_sums, model_features
 from .images import validate_pair
 from .likelihoods import LikelihoodTables, ModelParams, likelihood_tables, likelihoods_plain
 from .region import OutputRegion
@@ -32,6 +50,9 @@ __all__ = [
     "reference_bands",
     "reference_map",
     "reference_plain",
+    "reference_quantized",
+    "reference_quantized_map",
+    "reference_prior_plain",
     "map_from_index",
     "warm_up",
 ]
@@ -88,6 +109,182 @@ def _reference_kernel(ml, mr, ghl, ghr, gvl, gvr, tm, tgh, tgv, tnm, dmax, post,
             idx[y, i] = arg
 
 
+_M1 = np.uint64(0x5555555555555555)
+_M2 = np.uint64(0x3333333333333333)
+_M4 = np.uint64(0x0F0F0F0F0F0F0F0F)
+_H01 = np.uint64(0x0101010101010101)
+
+
+@numba.njit(cache=True)
+def _popcount(x):  # pragma: no cover
+    """Bits set in a uint64 (SWAR; all constants uint64 so numba never goes through float)."""
+    x = x - ((x >> np.uint64(1)) & _M1)
+    x = (x & _M2) + ((x >> np.uint64(2)) & _M2)
+    x = (x + (x >> np.uint64(4))) & _M4
+    return np.int64((x * _H01) >> np.uint64(56))
+
+
+@numba.njit(parallel=True, cache=True, fastmath=False, boundscheck=False)
+def _data_kernel(ml, mr, ghl, ghr, gvl, gvr, cl, cr,  # pragma: no cover
+                 tm, tgh, tgv, tnm, tc, h_nm, census, one, dmax, data):
+    """data[y, i, d] = the product of the data columns of output pixel (y, i): float64 or int64 tables.
+
+    ``one`` is the word of 1.0 (1.0, or 2^W for words): the no-match row's gH and gV words.
+    """
+    h, w4 = ml.shape
+    wo = w4 - dmax
+    for y in numba.prange(h):
+        for i in range(wo):
+            x = i + dmax
+            a = ml[y, x]
+            b = ghl[y, x]
+            c = gvl[y, x]
+            out = data[y, i]
+            for d in range(dmax + 1):
+                v = tm[abs(a - mr[y, x - d])] * tgh[abs(b - ghr[y, x - d])] * tgv[abs(c - gvr[y, x - d])]
+                if census:
+                    v = v * tc[_popcount(cl[y, x] ^ cr[y, x - d])]
+                out[d] = v
+            v = tnm[abs(c)] * one * one
+            if census:
+                v = v * tc[h_nm]
+            out[dmax + 1] = v
+
+
+@numba.njit(cache=True, fastmath=False, boundscheck=False)
+def _prior_pass_float(data, tp, p_nm, has_prior, above, post, idx):  # pragma: no cover
+    """Raster order: prior from the MAPs already taken (``above``: the MAP row above the band)."""
+    n, wo, m = data.shape
+    dmax = m - 2
+    for y in range(n):
+        for i in range(wo):
+            hl = idx[y, i - 1] if i > 0 else -1
+            ha = above[i] if y == 0 else idx[y - 1, i]
+            if not has_prior:
+                hl = -1
+                ha = -1
+            src = data[y, i]
+            out = post[y, i]
+            best = -1.0
+            arg = 0
+            total = 0.0
+            for d in range(dmax + 1):
+                p = 1.0
+                if hl >= 0:
+                    p = p * tp[abs(d - hl)]
+                if ha >= 0:
+                    p = p * tp[abs(d - ha)]
+                v = src[d] * p
+                out[d] = v
+                total += v
+                if v > best:  # strict: the lowest index wins exact ties
+                    best = v
+                    arg = d
+            p = 1.0
+            if hl >= 0:
+                p = p * p_nm
+            if ha >= 0:
+                p = p * p_nm
+            v = src[dmax + 1] * p
+            out[dmax + 1] = v
+            total += v
+            if v > best:
+                arg = -1
+            for d in range(m):
+                out[d] = out[d] / total
+            idx[y, i] = arg
+
+
+@numba.njit(cache=True, fastmath=False, boundscheck=False)
+def _prior_pass_words(data, tp, q_nm, has_prior, word_bits, above, post, idx):  # pragma: no cover
+    """The same on words: the prior word round(fL * fA / 2^W) (combine_prior_words), int64 products."""
+    n, wo, m = data.shape
+    dmax = m - 2
+    one = np.int64(1) << word_bits
+    half = np.int64(1) << (word_bits - 1)
+    for y in range(n):
+        for i in range(wo):
+            hl = idx[y, i - 1] if i > 0 else -1
+            ha = above[i] if y == 0 else idx[y - 1, i]
+            if not has_prior:
+                hl = -1
+                ha = -1
+            src = data[y, i]
+            out = post[y, i]
+            best = np.int64(-1)
+            arg = 0
+            total = 0.0
+            for d in range(m):
+                if d <= dmax:
+                    fl = tp[abs(d - hl)] if hl >= 0 else one
+                    fa = tp[abs(d - ha)] if ha >= 0 else one
+                else:
+                    fl = q_nm if hl >= 0 else one
+                    fa = q_nm if ha >= 0 else one
+                v = src[d] * ((fl * fa + half) >> word_bits)
+                out[d] = float(v)
+                total += float(v)
+                if v > best:  # strict: the lowest index wins exact ties
+                    best = v
+                    arg = d if d <= dmax else -1
+            for d in range(m):
+                out[d] = out[d] / total
+            idx[y, i] = arg
+
+
+def _band_features(left: FeatureSums, right: FeatureSums, model: ModelParams, rows: slice | None):
+    if model.census and (left.census is None or right.census is None):
+        raise ParameterError("--model: the census model needs the census codes of both images "
+                             "(features from host.features.model_features(image, model))")
+    if rows is not None:
+        left, right = left.band(rows), right.band(rows)
+    return left, right
+
+
+def _above(above: np.ndarray | None, rows: slice | None, model: ModelParams, wo: int) -> np.ndarray:
+    """The MAP row above the band (-1 = none): required when a band with the prior starts below row 0."""
+    if above is None:
+        if model.has_prior and rows is not None and (rows.start or 0) > 0:
+            raise ValueError("the neighbour prior needs the MAP of the row above the band: pass above=")
+        return np.full(wo, -1, np.int16)
+    above = np.asarray(above, dtype=np.int16)
+    if above.shape != (wo,):
+        raise ValueError(f"above must be the MAP row above the band, shape ({wo},), got {above.shape}")
+    return above
+
+
+def _run_model(left, right, model, tabs, prior, p_nm, words_bits, out, rows, above) -> Reference:
+    """Census/quantized path: the data kernel (parallel) then the raster-order pass (sequential)."""
+    region = OutputRegion.of_features(left.shape, model.dmax)
+    left, right = _band_features(left, right, model, rows)
+    shape = (left.shape[0], region.shape[1], model.hypotheses)
+    if out is None:
+        out = np.empty(shape)
+    elif out.shape != shape or out.dtype != np.float64:
+        raise ValueError(f"out must be float64 of shape {shape}, got {out.dtype} {out.shape}")
+    top = _above(above, rows, model, shape[1])
+    tm, tgh, tgv, tnm, tc = tabs
+    census = model.census
+    if census:
+        cl, cr, h_nm = left.census, right.census, model.h_nm
+    else:
+        cl = cr = np.zeros((1, 1), np.uint64)
+        tc, h_nm = tm[:1], 0
+    data = out if words_bits is None else np.empty(shape, np.int64)
+    one = tm[0] * 0 + (1.0 if words_bits is None else 1 << words_bits)  # 1.0 in the tables' type
+    _data_kernel(left.m25, right.m25, left.gh20, right.gh20, left.gv20, right.gv20, cl, cr,
+                 tm, tgh, tgv, tnm, tc, h_nm, census, one, model.dmax, data)
+    idx = np.empty(shape[:2], dtype=np.int16)
+    has_prior = model.has_prior
+    if prior is None:
+        prior = tm[:1]
+    if words_bits is None:
+        _prior_pass_float(data, prior, float(p_nm or 1.0), has_prior, top, out, idx)
+    else:
+        _prior_pass_words(data, prior, np.int64(p_nm or 0), has_prior, words_bits, top, out, idx)
+    return Reference(out, idx)
+
+
 def reference_fast(
     left: FeatureSums,
     right: FeatureSums,
@@ -95,12 +292,18 @@ def reference_fast(
     tables: LikelihoodTables | None = None,
     out: np.ndarray | None = None,
     rows: slice | None = None,
+    above: np.ndarray | None = None,
 ) -> Reference:
     """The reference of output rows ``rows`` (default all) by a compiled loop (2 threads here).
 
-    ``out``, if given, receives the posterior: float64 of shape (rows, Wo, Dmax+2).
+    ``out``, if given, receives the posterior: float64 of shape (rows, Wo, Dmax+2). With the
+    neighbour prior, ``above`` is the MAP row (Wo,) above ``rows`` (needed unless rows start at 0).
     """
     tables = tables if tables is not None else likelihood_tables(model)
+    if model.census:
+        tabs = (tables.m, tables.gh, tables.gv, tables.nomatch, tables.census)
+        prior, p_nm = tables.prior, tables.prior_nomatch
+        return _run_model(left, right, model, tabs, prior, p_nm, None, out, rows, above)
     region = OutputRegion.of_features(left.shape, model.dmax)
     if rows is not None:
         left, right = left.band(rows), right.band(rows)
@@ -144,11 +347,14 @@ def reference_bands(
     tables = tables if tables is not None else likelihood_tables(model)
     region = OutputRegion.of_features(left.shape, model.dmax)
     buffer: np.ndarray | None = None
+    above = None  # the neighbour prior's row above the band: the previous band's last MAP row
     for rows in region.bands(band_rows):
         n = rows.stop - rows.start
         if buffer is None or buffer.shape[0] < n:
             buffer = np.empty((n, region.shape[1], model.hypotheses))
-        yield rows, reference_fast(left, right, model, tables, out=buffer[:n], rows=rows)
+        band = reference_fast(left, right, model, tables, out=buffer[:n], rows=rows, above=above)
+        above = band.map[-1].copy()
+        yield rows, band
 
 
 def reference_map(
@@ -163,16 +369,26 @@ def reference_map(
 
 
 _warm = False
+_warm_census = False
 
 
-def warm_up() -> None:
-    """Load (or compile) the numba kernel once, so timings measure the computation only."""
-    global _warm
+def warm_up(model: ModelParams | None = None) -> None:
+    """Load (or compile) the numba kernels once, so timings measure the computation only.
+
+    The census model's kernels (float and words) too when ``model`` is a census model.
+    """
+    global _warm, _warm_census
+    img = np.zeros((6, 7), np.uint8)
     if not _warm:
-        img = np.zeros((6, 7), np.uint8)
         f = feature_sums(img)
         reference_fast(f, f, ModelParams(dmax=1))
         _warm = True
+    if model is not None and model.census and not _warm_census:
+        census = ModelParams(dmax=1, name="census")
+        fc = model_features(img, census)
+        reference_fast(fc, fc, census)
+        reference_quantized(fc, fc, census, 10)
+        _warm_census = True
 
 
 def reference_plain(left: FeatureSums, right: FeatureSums, model: ModelParams) -> Reference:
@@ -185,7 +401,91 @@ def reference_plain(left: FeatureSums, right: FeatureSums, model: ModelParams) -
     return Reference(unnorm / unnorm.sum(axis=-1, keepdims=True), map_from_index(index, model.dmax))
 
 
+def reference_prior_plain(left: FeatureSums, right: FeatureSums, model: ModelParams) -> Reference:
+    """The census model's reference pixel by pixel in plain Python over ``likelihoods_plain`` (test oracle).
+
+    Slow and direct: the raster-order prior from the formula (no tables) and the MAPs so far.
+    """
+    lik, nm = likelihoods_plain(left, right, model)
+    ho, wo, _, _ = lik.shape
+    dmax, m = model.dmax, model.hypotheses
+    l_nm = 1.0
+    if model.census:
+        l_nm = float(likelihood_formula(np.int64(model.h_nm), 1, model.census_p0, model.sigma_c))
+    post = np.empty((ho, wo, m))
+    disp = np.full((ho, wo), -1, np.int16)
+    for y in range(ho):
+        for x in range(wo):
+            hats = []
+            if model.has_prior:
+                neighbours = (disp[y, x - 1] if x > 0 else -1, disp[y - 1, x] if y > 0 else -1)
+                hats = [int(h) for h in neighbours if h >= 0]
+            vals = []
+            for d in range(dmax + 1):
+                v = 1.0  # ((m * gH) * gV) * census, as the kernel multiplies
+                for f in lik[y, x, d]:
+                    v = v * float(f)
+                p = 1.0
+                for h in hats:
+                    p = p * float(likelihood_formula(np.int64(abs(d - h)), 1, model.prior_eps, model.prior_s))
+                vals.append(v * p)
+            p = 1.0
+            for _ in hats:
+                p = p * model.prior_nm
+            vals.append(float(nm[y, x]) * l_nm * p)
+            best = max(range(m), key=lambda j: (vals[j], -j))  # the lowest index wins exact ties
+            disp[y, x] = best if best <= dmax else -1
+            post[y, x] = np.array(vals) / sum(vals)
+    return Reference(post, disp)
+
+
+def reference_quantized(
+    left: FeatureSums,
+    right: FeatureSums,
+    model: ModelParams,
+    word_bits: int,
+    qtables: QuantizedTables | None = None,
+    out: np.ndarray | None = None,
+    rows: slice | None = None,
+    above: np.ndarray | None = None,
+) -> Reference:
+    """The exact inference on the ``word_bits``-bit quantized tables (either model), rows ``rows``.
+
+    Each hypothesis's value is the exact integer product of its words (the prior word from
+    ``combine_prior_words``); the posterior is those products normalized (float64).
+    """
+    factors = model.columns + (1 if model.has_prior else 0)
+    if not 1 <= word_bits <= 15 or factors * word_bits > 62:
+        raise ParameterError(f"--word-bits: {word_bits}-bit words: the exact product of {factors} words "
+                             f"must fit 62 bits (word bits at most {62 // factors})")
+    q = qtables if qtables is not None else QuantizedTables(likelihood_tables(model), word_bits)
+    as64 = [None if t is None else np.asarray(t, np.int64) for t in (q.m, q.gh, q.gv, q.nomatch, q.census)]
+    if as64[4] is None:
+        as64[4] = as64[0][:1]
+    prior = None if q.prior is None else np.asarray(q.prior, np.int64)
+    return _run_model(left, right, model, tuple(as64), prior, q.prior_nomatch, word_bits, out, rows, above)
+
+
+def reference_quantized_map(
+    left: FeatureSums, right: FeatureSums, model: ModelParams, word_bits: int, band_rows: int | None = None
+) -> np.ndarray:
+    """The quantized reference's MAP (Ho, Wo) int16 (-1 = no match), band by band."""
+    region = OutputRegion.of_features(left.shape, model.dmax)
+    q = QuantizedTables(likelihood_tables(model), word_bits)
+    out = np.empty(region.shape, dtype=np.int16)
+    buffer: np.ndarray | None = None
+    above = None
+    for rows in region.bands(band_rows):
+        n = rows.stop - rows.start
+        if buffer is None or buffer.shape[0] < n:
+            buffer = np.empty((n, region.shape[1], model.hypotheses))
+        band = reference_quantized(left, right, model, word_bits, q, out=buffer[:n], rows=rows, above=above)
+        out[rows] = band.map
+        above = band.map[-1].copy()
+    return out
+
+
 def reference(left: np.ndarray, right: np.ndarray, model: ModelParams) -> Reference:
     """Validate a gray pair and run the fast reference on it."""
     validate_pair(left, right, model.dmax)
-    return reference_fast(feature_sums(left), feature_sums(right), model)
+    return reference_fast(model_features(left, model), model_features(right, model), model)

@@ -21,7 +21,7 @@ from bayesmachine.outputs import require_memory
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.engines import ENGINES, get_engine
 
-from .features import feature_sums
+from .features import model_features
 from .images import validate_pair
 from .likelihoods import ModelParams, QuantizedTables, likelihood_tables, memory_words
 from .metrics import RunMetrics, evaluate, gt_region
@@ -71,9 +71,9 @@ def prepare(
     if gt is not None and gt.shape != left.shape:
         raise ValueError(f"ground truth shape {gt.shape} differs from the images' {left.shape}")
     if reference:
-        warm_up()  # keep numba's cache load / compilation out of reference_seconds
+        warm_up(model)  # keep numba's cache load / compilation out of reference_seconds
     t0 = time.perf_counter()
-    feats = (feature_sums(left), feature_sums(right))
+    feats = (model_features(left, model), model_features(right, model))
     ref_map = reference_map(*feats, model) if reference else None
     seconds = time.perf_counter() - t0
     cut = gt_region(gt, model.dmax) if gt is not None else None

@@ -33,7 +33,7 @@ from amaranth.lib import data, memory, stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from bayesmachine.hdl.signatures import load_stream
-from bayesmachine.likelihood import ModelParams, quantize
+from bayesmachine.likelihood import ModelParams, check_disparity_machine
 from bayesmachine.params import MachineParams, ParameterError
 
 from .filters import feature_layout
@@ -64,22 +64,14 @@ def check_frontend_params(params: MachineParams, model: ModelParams) -> None:
         raise ParameterError(f"params must be a MachineParams, not {type(params).__name__}")
     if not isinstance(model, ModelParams):
         raise ParameterError(f"model must be a host.likelihoods.ModelParams, not {type(model).__name__}")
-    if params.rows != model.hypotheses or not params.nomatch_row:
-        raise ParameterError(
-            f"rows: the machine has {params.rows} rows (no-match row: {params.nomatch_row}); the model's "
-            f"dmax {model.dmax} needs {model.hypotheses} with a no-match row (MachineParams.for_disparity)")
-    if params.columns != 3:
-        raise ParameterError(
-            f"columns: the disparity model has 3 data terms, the machine has {params.columns}")
+    if model.census:
+        raise ParameterError("--model: the on-chip front end computes the paper model only (census: not yet)")
+    check_disparity_machine(model, params)
     if params.lanes % params.operator_columns:
         raise ParameterError(
             f"lanes ({params.lanes}) must be a multiple of the operator columns ({params.operator_columns}) "
             f"for the front end, so that each lane holds one feature (e.g. lanes="
             f"{min(params.words_per_pixel, 6 * params.operator_columns)})")
-    if quantize(model.p_nm0, params.word_bits) == 0:
-        raise ParameterError(
-            f"p_nm0: {model.p_nm0} quantizes to 0 with {params.word_bits}-bit words, so a pixel with no "
-            f"match could only stop at the watchdog")
 
 
 class WordGenerator(wiring.Component):

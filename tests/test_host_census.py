@@ -1,0 +1,357 @@
+"""The census model (issue 17): parameters, tables, census codes, words, float and word references.
+
+Oracles are independent of the code under test: census codes pixel by pixel in Python,
+Hamming distances by unpacking bytes, likelihoods and priors from the formula (no tables),
+the raster-order prior in a plain Python loop, and the quantized inference as exact Python
+integer products of the machine's own words.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from bayesmachine.host.features import (
+    FeatureSums,
+    census_codes,
+    census_codes_plain,
+    census_offsets,
+    model_features,
+)
+from bayesmachine.host.images import random_dot_stereogram
+from bayesmachine.host.likelihoods import (
+    hamming,
+    hamming_plain,
+    memory_words,
+    memory_words_plain,
+)
+from bayesmachine.host.reference import (
+    reference_fast,
+    reference_map,
+    reference_prior_plain,
+    reference_quantized,
+    reference_quantized_map,
+)
+from bayesmachine.likelihood import (
+    ModelParams,
+    QuantizedTables,
+    check_disparity_machine,
+    combine_prior_words,
+    likelihood_tables,
+    prior_words,
+    quantize,
+)
+from bayesmachine.params import MachineParams, ParameterError
+
+PAPER_KEYS = ["dmax", "p0", "sigma_m", "sigma_gh", "sigma_gv", "p_nm0", "sigma_nm"]
+
+
+# --- Parameters ---
+
+def test_census_defaults_follow_the_issue():
+    m = ModelParams(name="census")
+    assert (m.census_window, m.census_bits, m.sigma_c, m.h_nm, m.census_p0) == (7, 48, 6.0, 6, 0.02)
+    assert (m.prior_eps, m.prior_s, m.has_prior, m.columns) == (0.05, 4.0, True, 4)
+    assert m.prior_nm == pytest.approx(0.05 + 0.95 * math.exp(-0.5)) and round(m.prior_nm, 3) == 0.626
+    five = ModelParams(name="census", census_window=5)
+    assert (five.census_bits, five.sigma_c, five.h_nm) == (24, 3.0, 3)
+    assert ModelParams(name="census", census_window=5, census_sigma=2.5).sigma_c == 2.5
+    assert ModelParams(name="census", prior_eps=0.2).prior_nm == pytest.approx(0.2 + 0.8 * math.exp(-0.5))
+
+
+def test_paper_model_dict_is_unchanged_and_census_dict_round_trips():
+    paper = ModelParams()
+    assert list(paper.to_dict()) == PAPER_KEYS  # reports and Verilator design keys unchanged
+    assert (paper.census, paper.has_prior, paper.columns) == (False, False, 3)
+    census = ModelParams(name="census", census_window=5)
+    d = census.to_dict()
+    assert d["name"] == "census" and d["census_sigma"] == 3.0 and d["census_nomatch_h"] == 3
+    again = ModelParams(**d)
+    assert (again.sigma_c, again.h_nm, again.prior_nm) == (census.sigma_c, census.h_nm, census.prior_nm)
+
+
+@pytest.mark.parametrize(("kwargs", "option"), [
+    ({"name": "sgbm"}, "--model"),
+    ({"census_window": 9}, "--census-window"),
+    ({"census_window": True}, "--census-window"),
+    ({"census_window": 7.0}, "--census-window"),
+    ({"census_p0": 1.5}, "--census-p0"),
+    ({"census_sigma": 0.0}, "--census-sigma"),
+    ({"census_sigma": math.nan}, "--census-sigma"),
+    ({"census_sigma": 1e-300}, "--census-sigma"),
+    ({"census_nomatch_h": 49}, "--census-nomatch-h"),
+    ({"census_window": 5, "census_nomatch_h": 25}, "--census-nomatch-h"),
+    ({"census_nomatch_h": 2.5}, "--census-nomatch-h"),
+    ({"neighbour_prior": 1}, "--neighbour-prior"),
+    ({"prior_eps": -0.1}, "--prior-eps"),
+    ({"prior_s": -4.0}, "--prior-s"),
+    ({"prior_s": math.inf}, "--prior-s"),
+    ({"prior_nomatch": 0.0}, "--prior-nomatch"),
+    ({"prior_nomatch": 1.2}, "--prior-nomatch"),
+])
+def test_bad_census_params_name_the_option(kwargs, option):
+    with pytest.raises(ParameterError, match=f"^{option}: "):
+        ModelParams(**{"name": "census", **kwargs})
+
+
+# --- Tables ---
+
+def test_tables_at_known_points():
+    model = ModelParams(dmax=80, name="census")
+    t = likelihood_tables(model)
+    assert t.census.shape == (49,) and t.census[0] == 1.0
+    assert t.census[6] == pytest.approx(0.02 + 0.98 * math.exp(-0.5))
+    assert t.census[48] == pytest.approx(0.02 + 0.98 * math.exp(-48 * 48 / 72))
+    assert t.census_nomatch == t.census[6]
+    assert t.prior.shape == (81,) and t.prior[0] == 1.0
+    assert t.prior[4] == pytest.approx(model.prior_nm) and t.prior_nomatch == model.prior_nm
+    assert t.prior[80] == pytest.approx(0.05)
+    q = QuantizedTables(t, 10)
+    assert (q.census[0], q.census_nomatch, q.prior[0], q.prior_nomatch) == (1024, 629, 1024, 641)
+    assert q.census_nomatch == quantize(t.census[6], 10)
+    # prior_last: the quantized prior changes up to it and is constant from it on.
+    assert q.prior[q.prior_last - 1] != q.prior[q.prior_last]
+    assert (q.prior[q.prior_last:] == quantize(0.05, 10)).all()
+    # The paper model has none of them.
+    p = likelihood_tables(ModelParams(dmax=8))
+    assert p.census is None and p.prior is None
+    # Without the prior, no prior table.
+    assert likelihood_tables(ModelParams(dmax=8, name="census", neighbour_prior=False)).prior is None
+    # h_nm = 0 leaves the no-match row uncalibrated: its census entry is exactly 1.0.
+    assert likelihood_tables(ModelParams(dmax=8, name="census", census_nomatch_h=0)).census_nomatch == 1.0
+
+
+def test_combine_prior_words_rounds_half_up_and_keeps_one():
+    assert int(combine_prior_words(1024, 641, 10)) == 641
+    assert int(combine_prior_words(641, 641, 10)) == round(641 * 641 / 1024)  # 401.25 -> 401
+    assert int(combine_prior_words(3, 512, 10)) == 2  # 1.5 -> 2 (half up)
+    assert int(combine_prior_words(1, 512, 10)) == 1  # 0.5 -> 1
+
+
+def test_prior_words_from_neighbours():
+    model = ModelParams(dmax=6, name="census")
+    q = QuantizedTables(likelihood_tables(model), 10)
+    left = np.array([-1, 2, -1, 5])
+    above = np.array([-1, -1, 3, 1])
+    w = prior_words(q, 6, left, above)
+    assert w.shape == (4, 8)
+    assert (w[0] == 1024).all()  # no matched neighbour: uniform, no-match factor 1
+    d = np.arange(7)
+    eps = model.prior_eps
+    f = [quantize(eps + (1 - eps) * np.exp(-(k * k) / (2 * 16.0)), 10) for k in range(7)]
+    np.testing.assert_array_equal(w[1, :7], [f[abs(k - 2)] for k in d])
+    np.testing.assert_array_equal(w[2, :7], [f[abs(k - 3)] for k in d])
+    assert w[1, 7] == w[2, 7] == q.prior_nomatch
+    exp = [(int(f[abs(k - 5)]) * int(f[abs(k - 1)]) + 512) >> 10 for k in d]
+    np.testing.assert_array_equal(w[3, :7], exp)
+    assert w[3, 7] == (q.prior_nomatch * q.prior_nomatch + 512) >> 10
+
+
+# --- Census codes ---
+
+@pytest.mark.parametrize("window", [5, 7])
+@pytest.mark.parametrize("seed", [0, 1])
+def test_census_codes_equal_plain(window, seed):
+    rng = np.random.default_rng(seed)
+    img = rng.integers(0, 256, (15, 19), dtype=np.uint8)
+    img[4:9, 3:10] = 77  # flat patch: equal neighbours give 0 bits
+    img[0, :] = 255  # a bright border row (7x7 windows reach it and beyond)
+    codes = census_codes(img, window)
+    assert codes.dtype == np.uint64 and codes.shape == (11, 15)
+    np.testing.assert_array_equal(codes, census_codes_plain(img, window))
+    bits = window * window - 1
+    assert int(codes.max()) < (1 << bits) and int(codes.max()).bit_length() == bits
+
+
+def test_census_bit_order_is_raster():
+    offs = census_offsets(7)
+    assert len(offs) == 48 and offs[0] == (-3, -3) and offs[23] == (0, -1) and offs[24] == (0, 1)
+    img = np.full((9, 9), 100, np.uint8)
+    img[4 - 3, 4 - 3] = 10  # darker top-left neighbour of map pixel (2, 2): bit 0
+    img[4, 5] = 10  # darker right neighbour: bit 24
+    assert int(census_codes(img, 7)[2, 2]) == (1 << 0) | (1 << 24)
+    # A 7x7 window reaching outside the image: those neighbours give bit 0.
+    dark = np.full((9, 9), 50, np.uint8)
+    dark[2, 2] = 200
+    code = int(census_codes(dark, 7)[0, 0])
+    outside = [k for k, (dy, dx) in enumerate(offs) if dy == -3 or dx == -3]
+    assert all(not code >> k & 1 for k in outside) and bin(code).count("1") == 48 - len(outside)
+
+
+def test_hamming_equals_plain():
+    rng = np.random.default_rng(3)
+    a = rng.integers(0, 1 << 48, (7, 5), dtype=np.uint64)
+    b = rng.integers(0, 1 << 48, (7, 5), dtype=np.uint64)
+    np.testing.assert_array_equal(hamming(a, b), hamming_plain(a, b))
+    assert hamming(np.uint64((1 << 48) - 1), np.uint64(0)) == 48
+
+
+# --- Words ---
+
+def _pair(dmax: int, window: int = 7, seed: int = 5, **kw):
+    left, right, _ = random_dot_stereogram(height=18, width=34 + dmax, background=3, square=7, seed=seed)
+    left = left.copy()
+    left[4:10, 20:28] = 128  # flat: no-match and tie pixels
+    right = right.copy()
+    right[4:10, 16:24] = 128
+    model = ModelParams(**{"dmax": dmax, "name": "census", "census_window": window, **kw})
+    return model_features(left, model), model_features(right, model), model
+
+
+@pytest.mark.parametrize("window", [5, 7])
+def test_census_words_equal_plain_formula(window):
+    fl, fr, model = _pair(6, window, neighbour_prior=False)
+    machine = MachineParams.for_disparity(6, columns=4)
+    words = memory_words(fl, fr, model, machine)
+    np.testing.assert_array_equal(words, memory_words_plain(fl, fr, model, machine))
+    assert words.shape[1:] == (8, 4)
+    h_nm_word = quantize(0.02 + 0.98 * math.exp(-(model.h_nm**2) / (2 * model.sigma_c**2)), 10)
+    assert (words[:, 7, 1:3] == 1024).all() and (words[:, 7, 3] == h_nm_word).all()
+    # The census column varies (it is not a column of ones).
+    assert len(np.unique(words[:, :7, 3])) > 5
+    # Row chunks equal the whole.
+    part = memory_words(fl, fr, model, machine, rows=slice(3, 6))
+    wo = words.shape[0] // fl.shape[0]
+    np.testing.assert_array_equal(part, words[3 * wo : 6 * wo])
+
+
+def test_words_with_a_loaded_prior():
+    fl, fr, model = _pair(6)
+    machine = MachineParams.for_disparity(6, columns=4, prior="loaded")
+    with pytest.raises(ParameterError, match="--neighbour-prior"):
+        memory_words(fl, fr, model, machine)  # the prior words must come from the machine's results
+    p = fl.shape[0] * (fl.shape[1] - 6)
+    q = QuantizedTables(likelihood_tables(model), 10)
+    rng = np.random.default_rng(0)
+    pw = prior_words(q, 6, rng.integers(-1, 7, p), rng.integers(-1, 7, p))
+    words = memory_words(fl, fr, model, machine, prior=pw)
+    np.testing.assert_array_equal(words[:, :, 0], pw)
+    no_prior = ModelParams(dmax=6, name="census", neighbour_prior=False)
+    np.testing.assert_array_equal(words[:, :, 1:], memory_words(fl, fr, no_prior, machine)[:, :, 1:])
+
+
+def test_machine_checks_are_one_function():
+    census = ModelParams(dmax=6, name="census")
+    no_prior = ModelParams(dmax=6, name="census", neighbour_prior=False)
+    with pytest.raises(ParameterError, match="^columns: .*4 data terms"):
+        check_disparity_machine(no_prior, MachineParams.for_disparity(6))
+    with pytest.raises(ParameterError, match="^rows: .*for_disparity"):
+        check_disparity_machine(no_prior, MachineParams.for_disparity(7, columns=4))
+    with pytest.raises(ParameterError, match="^--neighbour-prior: .*--prior loaded"):
+        check_disparity_machine(census, MachineParams.for_disparity(6, columns=4))
+    with pytest.raises(ParameterError, match="^p_nm0: .*quantizes to 0"):
+        check_disparity_machine(ModelParams(dmax=6, p_nm0=1e-4), MachineParams.for_disparity(6, word_bits=4))
+    with pytest.raises(ParameterError, match="^--census-nomatch-h: "):
+        far = ModelParams(dmax=6, name="census", census_nomatch_h=48, neighbour_prior=False, p_nm0=0.5)
+        check_disparity_machine(far, MachineParams.for_disparity(6, columns=4, word_bits=4))
+    assert check_disparity_machine(census, MachineParams.for_disparity(6, columns=4, prior="loaded")) == 1
+    fl, fr, _ = _pair(6)
+    with pytest.raises(ParameterError, match="census codes"):
+        bare = FeatureSums(fl.m25, fl.gh20, fl.gv20)  # no census codes
+        memory_words(bare, fr, no_prior, MachineParams.for_disparity(6, columns=4))
+
+
+def test_front_end_refuses_the_census_model():
+    from bayesmachine.hdl.frontend.costs import check_frontend_params
+
+    with pytest.raises(ParameterError, match="paper model only"):
+        check_frontend_params(MachineParams.for_disparity(6, columns=4, lanes=8),
+                              ModelParams(dmax=6, name="census", neighbour_prior=False))
+
+
+# --- References ---
+
+@pytest.mark.parametrize("kw", [
+    {},
+    {"census_window": 5},
+    {"neighbour_prior": False},
+    {"prior_eps": 0.2, "prior_s": 1.5, "prior_nomatch": 0.3},
+    {"census_nomatch_h": 0},
+])
+def test_reference_equals_plain_raster_prior(kw):
+    fl, fr, model = _pair(8, **kw)
+    fast = reference_fast(fl, fr, model)
+    plain = reference_prior_plain(fl, fr, model)
+    np.testing.assert_array_equal(fast.map, plain.map)
+    np.testing.assert_allclose(fast.posterior, plain.posterior, rtol=1e-13, atol=1e-300)
+    assert (fast.map < 0).any() and (fast.map >= 0).any()
+    # Band by band (the last MAP row carried into the next band) gives the same MAP.
+    for rows in (1, 4):
+        np.testing.assert_array_equal(reference_map(fl, fr, model, band_rows=rows), fast.map)
+
+
+def test_prior_changes_the_map_and_needs_the_row_above():
+    fl, fr, model = _pair(8)
+    with_prior = reference_fast(fl, fr, model).map
+    without = reference_fast(fl, fr, ModelParams(dmax=8, name="census", neighbour_prior=False)).map
+    assert (with_prior != without).any()
+    with pytest.raises(ValueError, match="above"):
+        reference_fast(fl, fr, model, rows=slice(2, 5))
+    whole = reference_fast(fl, fr, model)
+    part = reference_fast(fl, fr, model, rows=slice(2, 5), above=whole.map[1])
+    np.testing.assert_array_equal(part.map, whole.map[2:5])
+
+
+def _quantized_plain(fl, fr, model, word_bits):
+    """The exact inference on the machine's words: Python-int products, raster-order prior words."""
+    cols = model.columns
+    machine = MachineParams.for_disparity(model.dmax, columns=cols, word_bits=word_bits, prior="loaded")
+    one = 1 << word_bits
+    ho, wo = fl.shape[0], fl.shape[1] - model.dmax
+    m = model.hypotheses
+    uniform = np.full((ho * wo, m), one, np.uint16)
+    words = memory_words(fl, fr, model, machine, prior=uniform if model.has_prior else None)
+    q = QuantizedTables(likelihood_tables(model), word_bits) if model.has_prior else None
+    disp = np.full((ho, wo), -1, np.int64)
+    for y in range(ho):
+        for x in range(wo):
+            w = words[y * wo + x].astype(object)
+            if model.has_prior:
+                left = disp[y, x - 1] if x > 0 else -1
+                above = disp[y - 1, x] if y > 0 else -1
+                w[:, 0] = prior_words(q, model.dmax, np.array([left]), np.array([above]))[0]
+            vals = [math.prod(int(v) for v in w[j]) for j in range(m)]
+            best = max(range(m), key=lambda j: (vals[j], -j))
+            disp[y, x] = best if best <= model.dmax else -1
+    return disp
+
+
+@pytest.mark.parametrize("kw", [{}, {"neighbour_prior": False}, {"census_window": 5}])
+def test_quantized_reference_is_the_words_inference(kw):
+    fl, fr, model = _pair(8, **kw)
+    got = reference_quantized(fl, fr, model, 10)
+    np.testing.assert_array_equal(got.map, _quantized_plain(fl, fr, model, 10))
+    np.testing.assert_allclose(got.posterior.sum(axis=-1), 1.0, rtol=1e-12)
+    np.testing.assert_array_equal(reference_quantized_map(fl, fr, model, 10, band_rows=3), got.map)
+    # Coarse words change some MAPs; the float reference is close to 10-bit words here.
+    assert np.mean(got.map == reference_fast(fl, fr, model).map) > 0.9
+
+
+def test_quantized_reference_of_the_paper_model():
+    fl, fr, _ = _pair(8)
+    paper = ModelParams(dmax=8)
+    got = reference_quantized(fl, fr, paper, 6)
+    np.testing.assert_array_equal(got.map, _quantized_plain(fl, fr, paper, 6))
+    with pytest.raises(ParameterError, match="--word-bits"):
+        reference_quantized(fl, fr, ModelParams(dmax=8, name="census"), 13)
+
+
+# --- The machine on the census model ---
+
+def test_machine_runs_the_census_model_without_the_prior():
+    from bayesmachine.host.run import run_pair
+
+    left, right, gt = random_dot_stereogram(height=30, width=70, background=3, square=9, seed=4)
+    model = ModelParams(dmax=10, name="census", neighbour_prior=False)
+    machine = MachineParams.for_disparity(10, columns=4, rng="sobol", counter_max=16)
+    out = run_pair(left, right, model, machine, engine="model", gt=gt, sgbm=False)
+    assert out.prepared.features[0].census is not None  # prepare() computed the model's features
+    assert out.metrics.map_agreement > 0.9
+    assert out.metrics.bad["machine"]["bad2"] < 0.1
+    # With the neighbour prior the machine needs a loaded prior column, and its words the machine's
+    # own results: refused, never run with a silently uniform prior.
+    with pytest.raises(ParameterError, match="--neighbour-prior"):
+        run_pair(left, right, ModelParams(dmax=10, name="census"), machine)
+    loaded = MachineParams.for_disparity(10, columns=4, prior="loaded")
+    with pytest.raises(ParameterError, match="--neighbour-prior"):
+        run_pair(left, right, ModelParams(dmax=10, name="census"), loaded)
