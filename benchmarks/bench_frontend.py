@@ -152,7 +152,7 @@ def main() -> None:
         link_rates(params, model, w, h, wall, args.clock_mhz * 1e6)
     if not args.no_synth:
         with tempfile.TemporaryDirectory(dir=Path.home()) as tmp:  # YoWASP sees the home directory
-            synth_costs(StereoMachine(params, model, w), Path(tmp), not args.no_generic)
+            synth_costs(StereoMachine(params=params, model=model, width=w), Path(tmp), not args.no_generic)
 
 
 if __name__ == "__main__":

@@ -112,9 +112,10 @@ def synth(params: MachineParams, target_name: str, out: Path, *, machines: int =
         # elaborated, e.g. before a refused directory, would warn as unused).
         core: wiring.Component
         if width is not None:
-            core = StereoMachine(params, model, width, fifo_pixels=fifo_pixels)
+            core = StereoMachine(params=params, model=model, width=width, fifo_pixels=fifo_pixels)
         else:
-            core = BayesianMachine(params) if machines == 1 else MachineLanes(params, machines)
+            core = (BayesianMachine(params=params) if machines == 1
+                    else MachineLanes(params=params, machines=machines))
         top = PinWrapper(core, pin_width=pin_width)
         if width is not None:
             say(f"elaborating the StereoMachine ({width}-pixel lines, {params.operators} operators) for "

@@ -30,6 +30,7 @@ from amaranth.hdl import Cat, Const, Module, Mux, Shape, Signal
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
+from bayesmachine.hdl.signatures import ENTROPY_PORTS
 from bayesmachine.params import ParameterError
 
 __all__ = ["PinWrapper", "input_stream", "stream_widths"]
@@ -66,8 +67,8 @@ class PinWrapper(wiring.Component):
     def __init__(self, core: wiring.Component, pin_width: int = 8) -> None:
         if isinstance(pin_width, bool) or not isinstance(pin_width, int) or not 1 <= pin_width <= 64:
             raise ParameterError(f"pin_width must be an integer in [1, 64], got {pin_width!r}")
-        if "entropy" in core.signature.members:
-            raise ParameterError("the wrapper needs an on-chip random source (rng = 'external' has an "
+        if any(name in core.signature.members for name in ENTROPY_PORTS):
+            raise ParameterError("the wrapper needs an on-chip random source (an off-chip one has an "
                                  "entropy port as wide as the matrix)")
         self._core = core
         self._pin_width = pin_width

@@ -10,26 +10,30 @@ from bayesmachine.outputs import atomic_write_text
 from bayesmachine.params import MachineParams
 from bayesmachine.sources import source_kind
 
-__all__ = ["TOP_NAME", "emit", "rtlil_text", "summary", "verilog_text", "yosys_failure"]
+__all__ = ["TOP_NAME", "emit", "rtlil_text", "signature_ports", "summary", "verilog_text", "yosys_failure"]
 
 TOP_NAME = "bayesmachine"
 
 
-def _ports(params: MachineParams) -> list[tuple[str, str, int]]:
-    """(direction, Verilog name, width) of every port but clk and rst, from the component's signature."""
+def signature_ports(signature: object) -> list[tuple[str, str, int]]:
+    """(direction, Verilog name, width) of every port but clk and rst of a top with this
+    ``wiring.Signature`` (Amaranth joins a member's path with ``__``)."""
     from amaranth.hdl import Shape
-    from amaranth.lib import data, wiring
+    from amaranth.lib import wiring
 
-    from .machine import BayesianMachine
-
-    top = BayesianMachine(params)
-    top._MustUse__used = True  # only its signature is read
     ports = []
-    for path, member, _ in top.signature.flatten(top):
-        shape = member.shape
-        width = shape.size if isinstance(shape, data.Layout) else Shape.cast(shape).width
-        ports.append(("in" if member.flow == wiring.In else "out", "__".join(map(str, path)), width))
+    for path, member in signature.members.flatten():
+        if member.is_port:
+            ports.append(("in" if member.flow == wiring.In else "out", "__".join(map(str, path)),
+                          Shape.cast(member.shape).width))
     return ports
+
+
+def _ports(params: MachineParams) -> list[tuple[str, str, int]]:
+    """The machine's ports, from its signature (no component is built)."""
+    from .signatures import MachineSignature
+
+    return signature_ports(MachineSignature(params))
 
 
 def _source_detail(params: MachineParams) -> str:
@@ -152,7 +156,7 @@ def emit(params: MachineParams, path: str | Path, top: object | None = None) -> 
             f"cannot tell the output format from {path.name!r}: use a .v (Verilog) or .il (RTLIL) name"
         )
     if top is None:
-        top = BayesianMachine(params)
+        top = BayesianMachine(params=params)
     if not path.parent.exists():
         path.parent.mkdir(parents=True)
     # Complete or absent, never a truncated file.

@@ -72,12 +72,34 @@ def map_encoder_twin(over: Sequence[int | bool], nomatch_row: bool, tie_break: s
 class MAPEncoder(wiring.Component):
     """The MAP encoder (the machine's submodule, and the component ``tests/test_encoder.py`` drives).
 
-    Ports: ``over`` (M bits in), ``valid`` (any row overflowed), ``index`` (the winning row).
+    Parameters
+    ----------
+    rows : int
+        M, the overflow counters' rows (>= 1; >= 2 with a no-match row).
+    nomatch_row : bool
+        Whether the last row is the no-match row.
+    tie_break : str
+        One of ``TIE_BREAKS``: ``"lowest-index"`` or ``"nomatch-first"`` (see the module docstring).
+
+    Attributes
+    ----------
+    over : ``In(rows)``
+        The rows that overflowed.
+    valid : ``Out(1)``
+        Some row overflowed.
+    index : ``Out(max(1, bit_length(rows - 1)))``
+        The winning row (meaningless when ``valid`` is 0).
     """
 
-    def __init__(self, rows: int, *, nomatch_row: bool = False, tie_break: str = "nomatch-first") -> None:
-        if isinstance(rows, bool) or not isinstance(rows, int) or rows < 1:
+    def __init__(self, *, rows: int, nomatch_row: bool = False, tie_break: str = "nomatch-first") -> None:
+        if isinstance(rows, bool) or not isinstance(rows, int):
+            raise TypeError(f"rows must be an integer, not {type(rows).__name__}")
+        if rows < 1:
             raise ParameterError(f"rows must be a positive integer, got {rows!r}")
+        if not isinstance(nomatch_row, bool):
+            raise TypeError(f"nomatch_row must be a bool, not {type(nomatch_row).__name__}")
+        if not isinstance(tie_break, str):
+            raise TypeError(f"tie_break must be a str, not {type(tie_break).__name__}")
         if tie_break not in TIE_BREAKS:
             raise ParameterError(f"tie_break must be one of {TIE_BREAKS}, got {tie_break!r}")
         if nomatch_row and rows < 2:

@@ -13,33 +13,46 @@ about R cycles, k lanes need ``beats_per_pixel <= R / k``.
 from __future__ import annotations
 
 from amaranth.hdl import Cat, Const, Module, Signal
-from amaranth.lib import stream, wiring
-from amaranth.lib.wiring import In, Out
+from amaranth.lib import wiring
 
 from bayesmachine.params import MachineParams, ParameterError, lane_params
 from bayesmachine.sources import source_kind
 
-from .machine import BayesianMachine, load_layout, result_layout
+from .machine import BayesianMachine
+from .signatures import MachineSignature
 
 __all__ = ["MachineLanes"]
 
 
 class MachineLanes(wiring.Component):
-    """``machines`` machines of ``params`` (seeds per :func:`lane_params`), pixels dealt round-robin."""
+    """``machines`` machines of ``params`` (seeds per :func:`lane_params`), pixels dealt round-robin.
 
-    def __init__(self, params: MachineParams, machines: int) -> None:
+    Parameters
+    ----------
+    params : MachineParams
+        The machines' parameters (lane i's seed from :func:`lane_params`); an on-chip source.
+    machines : int
+        k, the machines side by side (1 .. 256).
+
+    Attributes
+    ----------
+    load, result
+        As ``BayesianMachine``'s (:class:`~.signatures.MachineSignature`): pixel i's words go to
+        lane ``i % k``, results come out in pixel order.
+    """
+
+    def __init__(self, *, params: MachineParams, machines: int) -> None:
         if not isinstance(params, MachineParams):
             raise TypeError(f"MachineLanes takes a MachineParams, not {type(params).__name__}")
-        if isinstance(machines, bool) or not isinstance(machines, int) or not 1 <= machines <= 256:
+        if isinstance(machines, bool) or not isinstance(machines, int):
+            raise TypeError(f"machines must be an integer, not {type(machines).__name__}")
+        if not 1 <= machines <= 256:
             raise ParameterError(f"machines must be an integer in [1, 256], got {machines!r}")
         if not source_kind(params.rng).on_chip:
             raise ParameterError(f"lanes of machines need an on-chip random source, not {params.rng!r}")
         self._params = params
         self._machines = machines
-        super().__init__({
-            "load": In(stream.Signature(load_layout(params))),
-            "result": Out(stream.Signature(result_layout(params))),
-        })
+        super().__init__(MachineSignature(params))
 
     @property
     def params(self) -> MachineParams:
@@ -52,7 +65,7 @@ class MachineLanes(wiring.Component):
     def elaborate(self, platform: object) -> Module:
         m = Module()
         p, k = self._params, self._machines
-        lanes = [BayesianMachine(lane_params(p, i)) for i in range(k)]
+        lanes = [BayesianMachine(params=lane_params(p, i)) for i in range(k)]
         for i, lane in enumerate(lanes):
             m.submodules[f"machine_{i}"] = lane
 

@@ -57,17 +57,35 @@ def _check_sources(rows: int, columns: int, sources: Sequence[int]) -> tuple[int
 class OperatorMatrix(wiring.Component):
     """:func:`operator_rows` as a component: the stochastic bus of every row of the matrix.
 
-    Ports: ``words`` (M * N ports of W + 1 bits, operator order ``o = r * N + c``),
-    ``numbers`` (S ports of W bits, the random source's numbers), ``row`` (M bits out:
-    ``row[r] = AND_c (numbers[sources[o]] < words[o])``, a uniform prior being the always-on 1
-    the bus starts from). ``sources[o]`` is the number operator o
-    reads: ``o`` for one number per operator, ``o % N`` for numbers shared by a column's rows.
+    Parameters
+    ----------
+    rows, columns : int
+        M and N, the matrix's rows and (operator) columns.
+    word_bits : int
+        W, the bits of a random number (likelihood-memory words have W + 1).
+    sources : sequence of int
+        Per operator, the number it reads: ``o`` for one number per operator, ``o % N`` for
+        numbers shared by a column's rows.
+
+    Attributes
+    ----------
+    words : ``In(unsigned(W + 1)).array(M * N)``
+        The likelihood-memory words, operator order ``o = r * N + c``.
+    numbers : ``In(unsigned(W)).array(max(sources) + 1)``
+        The random source's numbers.
+    row : ``Out(M)``
+        ``row[r] = AND_c (numbers[sources[o]] < words[o])``, a uniform prior being the always-on
+        1 the bus starts from.
     """
 
-    def __init__(self, rows: int, columns: int, word_bits: int, sources: Sequence[int]) -> None:
+    def __init__(self, *, rows: int, columns: int, word_bits: int, sources: Sequence[int]) -> None:
         for name, v in (("rows", rows), ("columns", columns), ("word_bits", word_bits)):
-            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+            if isinstance(v, bool) or not isinstance(v, int):
+                raise TypeError(f"{name} must be an integer, not {type(v).__name__}")
+            if v < 1:
                 raise ParameterError(f"{name} must be a positive integer, got {v!r}")
+        if isinstance(sources, (str, bytes)) or not isinstance(sources, Sequence):
+            raise TypeError(f"sources must be a sequence of integers, not {type(sources).__name__}")
         self._rows, self._columns, self._word_bits = rows, columns, word_bits
         self._sources = _check_sources(rows, columns, sources)
         super().__init__({
@@ -75,6 +93,18 @@ class OperatorMatrix(wiring.Component):
             "numbers": In(unsigned(word_bits)).array(max(self._sources) + 1),
             "row": Out(rows),
         })
+
+    @property
+    def rows(self) -> int:
+        return self._rows
+
+    @property
+    def columns(self) -> int:
+        return self._columns
+
+    @property
+    def word_bits(self) -> int:
+        return self._word_bits
 
     @property
     def sources(self) -> tuple[int, ...]:

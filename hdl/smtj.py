@@ -15,14 +15,16 @@ flip-flops for Dmax = 80; W per operator, 2,460 x 33.
 
 from __future__ import annotations
 
-from amaranth.hdl import Cat, Module, Mux, Signal, unsigned
-from amaranth.lib import data, stream, wiring
+from amaranth.hdl import Cat, Module, Mux, Signal
+from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
 from bayesmachine.params import MachineParams, ParameterError
+from bayesmachine.sources import check_source
 from bayesmachine.sources.smtj import EMULATOR_RANDOM_BITS, SMTJEmulatorSpec
 
-from .machine import BayesianMachine, load_layout, result_layout
+from .machine import BayesianMachine
+from .signatures import MachineSignature, entropy_layout
 
 __all__ = ["SMTJEmulatedMachine", "SMTJEmulator"]
 
@@ -36,11 +38,20 @@ def _xorshift32_expr(x: Signal) -> object:
 class SMTJEmulator(wiring.Component):
     """The SMTJ devices of ``params`` (``rng = "smtj"``) emulated on chip.
 
-    Ports: ``numbers`` (``Out(ArrayLayout(unsigned(W), operators))``, this cycle's number of
-    every operator) and ``advance`` (``In(1)``: the devices step at the clock edge).
+    Parameters
+    ----------
+    params : MachineParams
+        The machine's parameters (``rng = "smtj"``: dwell, spread, sharing, seed).
+
+    Attributes
+    ----------
+    numbers : ``Out(entropy_layout(params))``
+        This cycle's number of every operator.
+    advance : ``In(1)``
+        The devices step at the clock edge.
     """
 
-    def __init__(self, params: MachineParams) -> None:
+    def __init__(self, *, params: MachineParams) -> None:
         if not isinstance(params, MachineParams):
             raise TypeError(f"SMTJEmulator takes a MachineParams, not {type(params).__name__}")
         if params.rng != "smtj":
@@ -48,7 +59,7 @@ class SMTJEmulator(wiring.Component):
         self._params = params
         self._spec = SMTJEmulatorSpec(params)
         super().__init__({
-            "numbers": Out(data.ArrayLayout(unsigned(params.word_bits), params.operators)),
+            "numbers": Out(entropy_layout(params)),
             "advance": In(1),
         })
 
@@ -80,29 +91,41 @@ class SMTJEmulator(wiring.Component):
 
 
 class SMTJEmulatedMachine(wiring.Component):
-    """``BayesianMachine(params)`` (``rng = "smtj"``) with its entropy port driven by the emulator.
+    """``BayesianMachine(params=params)`` (``rng = "smtj"``) with its entropy port driven by the emulator.
 
-    Ports: ``load`` and ``result`` as ``BayesianMachine``'s. The emulator advances on the
-    machine's compute cycles (``entropy_ready``), so it gives the numbers of
-    ``SMTJEmulatorTwin(params)``, row by row, to the machine model.
+    The emulator advances on the machine's compute cycles (``entropy_ready``), so it gives the
+    numbers of ``SMTJEmulatorTwin(params)``, row by row, to the machine model.
+
+    Parameters
+    ----------
+    params : MachineParams
+        The machine's parameters (``rng = "smtj"``).
+
+    Attributes
+    ----------
+    load, result
+        As ``BayesianMachine``'s (``MachineSignature(params, entropy=False)``: the numbers are
+        made on chip).
     """
 
-    def __init__(self, params: MachineParams) -> None:
-        self.machine = BayesianMachine(params)  # validates params
-        self.emulator = SMTJEmulator(params)
-        super().__init__({
-            "load": In(stream.Signature(load_layout(params))),
-            "result": Out(stream.Signature(result_layout(params))),
-        })
+    def __init__(self, *, params: MachineParams) -> None:
+        if not isinstance(params, MachineParams):
+            raise TypeError(f"SMTJEmulatedMachine takes a MachineParams, not {type(params).__name__}")
+        if params.rng != "smtj":
+            raise ParameterError(f"SMTJEmulatedMachine needs rng = 'smtj', got {params.rng!r}")
+        check_source(params)  # as BayesianMachine's constructor; both are built at elaboration
+        self._params = params
+        super().__init__(MachineSignature(params, entropy=False))
+
+    @property
+    def params(self) -> MachineParams:
+        return self._params
 
     def elaborate(self, platform: object) -> Module:
         m = Module()
-        m.submodules.machine = self.machine
-        m.submodules.emulator = self.emulator
-        wiring.connect(m, wiring.flipped(self.load), self.machine.load)
-        wiring.connect(m, self.machine.result, wiring.flipped(self.result))
-        m.d.comb += [
-            self.machine.entropy.eq(self.emulator.numbers),
-            self.emulator.advance.eq(self.machine.entropy_ready),
-        ]
+        m.submodules.machine = machine = BayesianMachine(params=self._params)
+        m.submodules.emulator = emulator = SMTJEmulator(params=self._params)
+        wiring.connect(m, wiring.flipped(self.load), machine.load)
+        wiring.connect(m, machine.result, wiring.flipped(self.result))
+        m.d.comb += [machine.entropy.eq(emulator.numbers), emulator.advance.eq(machine.entropy_ready)]
         return m

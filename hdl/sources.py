@@ -9,13 +9,16 @@ the pure-Python definitions in ``bayesmachine.sources`` (the same ones the model
 - ``sobol``: :class:`SobolGenerators`, one Sobol generator per operator column sharing a block
   index counter, each with a shift LFSR.
 
-Every generator has ``enable`` (a compute cycle: the source advances) and ``numbers``, a
-list of this cycle's W-bit numbers (separate signals: Amaranth's simulator updates them far
-faster than slices of one wide signal). ``LFSRBank`` exposes its LFSR registers themselves as
+Both implement one interface, :class:`OnChipSource`, the only thing the machine knows of them:
+``enable`` and ``restart`` ports (a compute cycle: the source advances; a pixel's run starts),
+the numbers of this cycle and, for the machine's prefetched comparators, of the next one
+(``numbers``, ``next_numbers``, ``restart_numbers``, ``following_numbers``,
+``following_restart_numbers``: lists of W-bit values, separate signals, since Amaranth's
+simulator updates them far faster than slices of one wide signal), and ``operator_numbers``,
+the entry each operator compares against. ``LFSRBank`` exposes its LFSR registers themselves as
 ports ``state_<i>`` (``numbers[i]`` is the W low bits of ``state_<i>``): a copy of 246 numbers
 into an output port would cost the full machine's simulation a quarter of its speed.
-``SobolGenerators`` also has ``restart`` (a pixel's run starts). :func:`random_source` builds
-the component of a machine and says which number each operator reads. The unit tests (``tests/test_rng.py``,
+:func:`random_source` builds the component of a machine. The unit tests (``tests/test_rng.py``,
 ``tests/test_sobol.py``) drive the very components the machine instantiates.
 """
 
@@ -32,7 +35,12 @@ from bayesmachine.sources import source_kind
 from bayesmachine.sources.lfsr import LFSRSpec, column_lfsr_specs, lfsr_specs
 from bayesmachine.sources.sobol import check_params, direction_numbers
 
-__all__ = ["LFSRBank", "SobolGenerators", "lfsr_next_state_expr", "random_source"]
+__all__ = ["SOURCE_NUMBERS", "LFSRBank", "OnChipSource", "SobolGenerators", "lfsr_next_state_expr",
+           "random_source"]
+
+# The per-cycle number lists every on-chip source gives (see OnChipSource).
+SOURCE_NUMBERS = ("numbers", "next_numbers", "restart_numbers", "following_numbers",
+                  "following_restart_numbers")
 
 
 def lfsr_next_state_expr(state: Value, spec: LFSRSpec) -> Value:
@@ -45,9 +53,62 @@ def lfsr_next_state_expr(state: Value, spec: LFSRSpec) -> Value:
     return Cat(state[w:length], new)
 
 
-class LFSRBank(wiring.Component):
-    """Leap-forward LFSRs, one per spec: port ``state_<i>`` is LFSR i's register (L bits, reset to
-    the spec's start state) and ``numbers[i]`` its W oldest bits, this cycle's number.
+class OnChipSource(wiring.Component):
+    """The interface of an on-chip random source, as the machine uses it.
+
+    A subclass declares the ports ``enable`` and ``restart`` (``In(enable_groups)`` each) in its
+    signature and gives the lists :data:`SOURCE_NUMBERS` (checked when it is built).
+
+    Attributes
+    ----------
+    enable : ``In(enable_groups)``
+        A compute cycle: the numbers of bit g's group advance at the clock edge.
+    restart : ``In(enable_groups)``
+        A pixel's run starts (the machine's swap): a source with per-pixel state (a Sobol block)
+        begins anew; a no-op for LFSRs, which have nothing to restart.
+    numbers : list of Value
+        This cycle's W-bit numbers.
+    next_numbers : list of Value
+        The next compute cycle's numbers when this cycle is a compute cycle (``enable``).
+    restart_numbers : list of Value
+        The next compute cycle's numbers when this cycle restarts without computing.
+    following_numbers, following_restart_numbers : list of Value
+        ``next_numbers`` / ``restart_numbers`` of the next cycle, from this cycle's state and
+        inputs: a register loaded with one every clock equals the other in every cycle (the
+        machine keeps such copies per group of rows for numbers shared by many comparators).
+    operator_numbers : tuple of int
+        Per operator, the index of the entry of ``numbers`` it compares against.
+    shared : bool
+        Whether an entry is read by several operators (a column's rows): the machine then keeps
+        registered per-group copies of the numbers, and the source has one enable group.
+    """
+
+    def __init__(self, signature: dict[str, wiring.Member], *, operator_numbers: Sequence[int]) -> None:
+        self._operator_numbers = tuple(int(i) for i in operator_numbers)
+        super().__init__(signature)
+        for name in ("enable", "restart"):
+            if name not in self.signature.members:
+                raise TypeError(f"{type(self).__name__} must declare the port {name!r} of an on-chip source")
+        count = len(self.numbers)
+        if any(len(getattr(self, name)) != count for name in SOURCE_NUMBERS):
+            raise TypeError(f"{type(self).__name__} must give {count} entries in each of {SOURCE_NUMBERS}")
+        if not self._operator_numbers or not all(0 <= i < count for i in self._operator_numbers):
+            raise ParameterError(f"operator_numbers must index the {count} numbers, one entry per operator")
+        if self.shared and len(self.enable) != 1:
+            raise ParameterError("a source whose numbers are shared by several operators has one enable")
+
+    @property
+    def operator_numbers(self) -> tuple[int, ...]:
+        return self._operator_numbers
+
+    @property
+    def shared(self) -> bool:
+        return len(set(self._operator_numbers)) < len(self._operator_numbers)
+
+
+class LFSRBank(OnChipSource):
+    """Leap-forward LFSRs, one per spec: an :class:`OnChipSource` (the interface's lists are Python
+    properties over the LFSR registers).
 
     All LFSRs advance W bits on each clock where ``enable`` is high (compute cycles only).
     With ``enable_groups`` (one group index per LFSR), ``enable`` has one bit per group and
@@ -57,31 +118,53 @@ class LFSRBank(wiring.Component):
     ``next_numbers[i]`` is the number LFSR i gives in the next compute cycle if this cycle is a
     compute cycle (the low W bits of its next state: wires when L >= 2W); outside a compute
     cycle the next compute cycle's number is ``numbers[i]`` (``restart_numbers``, the same
-    list: an LFSR has nothing to restart). The machine's prefetched comparators use them.
-    ``following_numbers`` and ``following_restart_numbers`` are the same two a cycle early (a
-    register loaded with one every clock equals ``next_numbers`` / ``restart_numbers``): the
-    machine's per-group copies of a shared source's numbers.
+    list: an LFSR has nothing to restart, ``restart`` is ignored).
+
+    Parameters
+    ----------
+    specs : sequence of LFSRSpec
+        One per LFSR, all with the same ``step`` (W).
+    enable_groups : sequence of int, optional
+        The enable bit of each LFSR (default: one enable for all).
+    operator_numbers : sequence of int, optional
+        Per operator, the LFSR it reads (default: operator i reads LFSR i).
+
+    Attributes
+    ----------
+    enable, restart : ``In(max(enable_groups) + 1)``
+        See :class:`OnChipSource` (``restart`` is a no-op).
+    state_<i> : ``Out(unsigned(specs[i].length))``
+        LFSR i's register, reset to the spec's start state; ``numbers[i]`` is its W oldest bits.
     """
 
-    def __init__(self, specs: Sequence[LFSRSpec], enable_groups: Sequence[int] | None = None) -> None:
+    def __init__(self, *, specs: Sequence[LFSRSpec], enable_groups: Sequence[int] | None = None,
+                 operator_numbers: Sequence[int] | None = None) -> None:
+        if isinstance(specs, LFSRSpec) or not isinstance(specs, Sequence):
+            raise TypeError(f"specs must be a sequence of LFSRSpec, not {type(specs).__name__}")
         specs = tuple(specs)
-        if not specs or any(not isinstance(s, LFSRSpec) for s in specs):
+        if any(not isinstance(s, LFSRSpec) for s in specs):
+            raise TypeError("specs must be a sequence of LFSRSpec")
+        if not specs:
             raise ParameterError("specs must be a non-empty sequence of LFSRSpec")
         if len({s.step for s in specs}) != 1:
             raise ParameterError("specs must all deliver the same number of bits per clock (step)")
         self._specs = specs
         if enable_groups is None:
             self._groups = (0,) * len(specs)
-            width = 1
         else:
             self._groups = tuple(int(g) for g in enable_groups)
             if len(self._groups) != len(specs) or min(self._groups) < 0:
                 raise ParameterError("enable_groups must give one group index (>= 0) per LFSR")
-            width = max(self._groups) + 1
-        members = {"enable": In(width)}
+        width = max(self._groups) + 1
+        members = {"enable": In(width), "restart": In(width)}
         for i, spec in enumerate(specs):
             members[f"state_{i}"] = Out(unsigned(spec.length), init=spec.init)
-        super().__init__(members)
+        super().__init__(members, operator_numbers=range(len(specs)) if operator_numbers is None
+                         else operator_numbers)
+
+    @property
+    def enable_groups(self) -> tuple[int, ...]:
+        return self._groups
 
     @property
     def numbers(self) -> list[Value]:
@@ -133,7 +216,7 @@ class LFSRBank(wiring.Component):
         return m
 
 
-class SobolGenerators(wiring.Component):
+class SobolGenerators(OnChipSource):
     """One randomized W-bit Sobol generator per operator column (twin: ``sources.sobol.SobolTwin``).
 
     Shared: the block index ``i`` (W bits) and ``fresh`` (the next compute cycle starts a block,
@@ -159,14 +242,27 @@ class SobolGenerators(wiring.Component):
     low W bits of the shift LFSR's next state: it steps on ``enable`` when ``fresh``; a register
     loaded with it every clock equals ``restart_numbers``). The machine keeps such registered
     copies per group of rows, since each column's number reaches all the column's comparators.
+
+    Parameters
+    ----------
+    params : MachineParams
+        The machine's parameters (``rng = "sobol"``; W, the operator columns, the seed).
+
+    Attributes
+    ----------
+    enable, restart : ``In(1)``
+        See :class:`OnChipSource`.
+    numbers, next_numbers, restart_numbers, following_numbers, following_restart_numbers :
+        ``Out(unsigned(W)).array(operator_columns)``, see above; operator o reads column o % columns.
     """
 
-    def __init__(self, params: MachineParams) -> None:
+    def __init__(self, *, params: MachineParams) -> None:
         if not isinstance(params, MachineParams):
             raise TypeError(f"SobolGenerators takes a MachineParams, not {type(params).__name__}")
         check_params(params)
         self._params = params
         self._specs = tuple(column_lfsr_specs(params))
+        cols = params.operator_columns
         super().__init__({
             "enable": In(1),
             "restart": In(1),
@@ -175,7 +271,7 @@ class SobolGenerators(wiring.Component):
             "restart_numbers": Out(unsigned(params.word_bits)).array(params.operator_columns),
             "following_numbers": Out(unsigned(params.word_bits)).array(params.operator_columns),
             "following_restart_numbers": Out(unsigned(params.word_bits)).array(params.operator_columns),
-        })
+        }, operator_numbers=[o % cols for o in range(params.operators)])
 
     @property
     def params(self) -> MachineParams:
@@ -258,21 +354,19 @@ class SobolGenerators(wiring.Component):
         return m
 
 
-def random_source(params: MachineParams, operator_groups: Sequence[int] | None = None,
-                  ) -> tuple[wiring.Component | None, list[int]]:
-    """The generator component of a machine's on-chip source (None for an off-chip kind) and,
-    per operator, the index of the ``numbers`` entry it compares against.
+def random_source(params: MachineParams, operator_groups: Sequence[int] | None = None) -> OnChipSource | None:
+    """The generator component of a machine's on-chip source (None for an off-chip kind).
 
-    ``operator_groups`` (one group index per operator) splits the enable of a per-operator
-    ``LFSRBank`` (``rng = "lfsr"``) into one bit per group; the shared sources keep one enable."""
+    ``operator_groups`` (one group index per operator) splits the enable of a source with a
+    number per operator (``rng = "lfsr"``) into one bit per group; a shared source keeps one enable."""
     kind = source_kind(params.rng)
     ops, cols = params.operators, params.operator_columns
     if not kind.on_chip:
-        return None, list(range(ops))
+        return None
     if params.rng == "lfsr":
-        return LFSRBank(lfsr_specs(params), operator_groups), list(range(ops))
+        return LFSRBank(specs=lfsr_specs(params), enable_groups=operator_groups)
     if params.rng == "lfsr-shared":
-        return LFSRBank(column_lfsr_specs(params)), [o % cols for o in range(ops)]
+        return LFSRBank(specs=column_lfsr_specs(params), operator_numbers=[o % cols for o in range(ops)])
     if params.rng == "sobol":
-        return SobolGenerators(params), [o % cols for o in range(ops)]
+        return SobolGenerators(params=params)
     raise ParameterError(f"no RTL generator for the on-chip random source {params.rng!r}")

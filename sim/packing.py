@@ -25,7 +25,7 @@ def element_offsets(layout: Any) -> list[int]:
 
 @functools.lru_cache(maxsize=32)
 def _lane_offsets(params: MachineParams) -> tuple[int, ...]:
-    from bayesmachine.hdl.machine import load_layout
+    from bayesmachine.hdl.signatures import load_layout
 
     return tuple(element_offsets(load_layout(params)))
 

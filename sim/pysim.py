@@ -84,12 +84,12 @@ class PysimEngine(EngineBase):
 
     def _simulator(self) -> Simulator:
         if self._sim is None:
-            self.dut = BayesianMachine(self.params)
+            self.dut = BayesianMachine(params=self.params)
             self._sim = Simulator(self.dut)
             self._sim.add_clock(1e-8)
             self._sim.add_testbench(self._feeder, background=True)
             self._sim.add_testbench(self._collector, background=True)
-            if hasattr(self.dut, "entropy"):
+            if "entropy" in self.dut.signature.members:
                 self._sim.add_testbench(self._entropy_source, background=True)
             if self._vcd is not None:
                 self._vcd_ctx = self._sim.write_vcd(self._vcd)

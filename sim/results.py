@@ -1,7 +1,7 @@
 """What every engine returns and what it accepts: results, validation, number sources, decoding.
 
 Amaranth-free at import (the model needs none of it): the result decoder reads the field
-offsets from :func:`bayesmachine.hdl.machine.result_layout`, imported when first needed and
+offsets from :func:`bayesmachine.hdl.signatures.result_layout`, imported when first needed and
 cached per parameters, so that one place, the layout, decides the field order.
 """
 
@@ -210,7 +210,7 @@ def _result_plan(params: MachineParams) -> tuple[int, dict[str, tuple[np.ndarray
     """(payload bits, {field: (bit offsets, widths)}) of ``result_layout(params)``, per result field."""
     from amaranth.hdl import Shape
 
-    from bayesmachine.hdl.machine import result_layout
+    from bayesmachine.hdl.signatures import result_layout
 
     layout = result_layout(params)
     leaves = layout_fields(layout)

@@ -8,6 +8,12 @@ bit for bit. Frames run back to back in one simulation (the machine's random sou
 as in the model); the front end restarts at each frame's first pixel. ``wall_cycles`` counts
 every clock cycle since reset, filtering and loading included.
 
+With an off-chip random source (``rng = "smtj"``) the design's ``entropy`` port is fed, one row
+per compute cycle, from the kind's device model, one stream from reset on, exactly as the word
+engines feed the machine's (``MachineModel(params).run(words)`` without ``numbers``): the
+harness asks for rows as the machine consumes them. ``external`` has no device model, so it
+cannot run here.
+
 Everything but the design and the harness's protocol is the Verilator engine's
 (:mod:`bayesmachine.sim.verilator`): the wrapper and header helpers (``codegen``), the build
 cache (``build.build_design``: builds under ``<cache>/stereo-<key>/``), the harness process
@@ -27,15 +33,16 @@ from typing import Any
 
 import numpy as np
 
+from bayesmachine.hdl.signatures import pixel_in_layout
 from bayesmachine.likelihood import ModelParams
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.engines import EngineLifecycle
-from bayesmachine.sim.results import MachineResult, layout_fields
+from bayesmachine.sim.results import MachineResult, NumberFeed, layout_fields
 from bayesmachine.sim.verilator import VerilatorError, cache_dir, find_toolchain
 from bayesmachine.sim.verilator.build import HarnessSources, VerilatorBuild, build_design, cached_verilog
-from bayesmachine.sim.verilator.codegen import header_prologue, wrapper_verilog
+from bayesmachine.sim.verilator.codegen import entropy_header, header_prologue, wrapper_verilog
 from bayesmachine.sim.verilator.engine import HarnessProcess
-from bayesmachine.sources import SOURCE_KINDS
+from bayesmachine.sources import source_kind
 
 __all__ = ["StereoVerilatorEngine", "build_stereo_harness"]
 
@@ -43,21 +50,23 @@ HEADER = "stereo_design.h"
 _MAGIC_FRAME = 0x46534D42  # "BMSF", see harness/stereo.cpp
 
 
-def stereo_header(params: MachineParams, model: ModelParams, width: int, component: Any) -> str:
-    """``stereo_design.h``: the shared prologue (ports, result size) and the pixel beat's offsets."""
+def stereo_header(params: MachineParams, model: ModelParams, width: int, signature: Any) -> str:
+    """``stereo_design.h``: the shared prologue (ports, result size), the pixel beat's offsets and,
+    with an off-chip source, the entropy port's (fed as in the machine's harness)."""
     ports = {"PIXELS_PAYLOAD": ("pixels", "payload"), "PIXELS_VALID": ("pixels", "valid"),
              "PIXELS_READY": ("pixels", "ready"), "RESULT_PAYLOAD": ("result", "payload"),
              "RESULT_VALID": ("result", "valid")}
-    pix = layout_fields(component.pixels.payload.shape())
+    entropy_ports, external = entropy_header(params, signature)
+    pix = layout_fields(pixel_in_layout())
     # A hung design: no pixel taken and no result for longer than a timed-out run and a line.
     hang = params.max_cycles + 8 * params.words_per_pixel + 4 * width + 64
-    prologue = header_prologue(component, params, ports, hang_cycles=hang,
+    prologue = header_prologue(signature, params, ports | entropy_ports, hang_cycles=hang,
                                generator="bayesmachine.sim.stereo_engine")
     return prologue + f"""static const unsigned WIDTH = {width};
 static const unsigned DMAX = {model.dmax};
 static const unsigned LEFT_OFFSET = {pix["left"][0]}, RIGHT_OFFSET = {pix["right"][0]};
 static const unsigned FIRST_OFFSET = {pix["first"][0]};
-"""
+{external}"""
 
 
 def build_stereo_harness(
@@ -70,18 +79,26 @@ def build_stereo_harness(
 ) -> VerilatorBuild:
     """Compile (or find in the cache) the stereo harness, through the Verilator engine's build cache
     (``options``: ``jobs``, ``verbose``, as :func:`~bayesmachine.sim.verilator.build.build_design`)."""
-    from bayesmachine.hdl.frontend.stereo import StereoMachine
+    from bayesmachine.hdl.frontend.stereo import StereoMachine, check_stereo_machine
+    from bayesmachine.hdl.signatures import StereoSignature
+    from bayesmachine.sources import check_source
 
     find_toolchain()  # a missing tool is reported before the seconds of emitting the Verilog
-    top = StereoMachine(params, model, width, fifo_pixels=fifo_pixels)  # validates everything
+    check_stereo_machine(params, model, width, fifo_pixels)  # as StereoMachine's constructor
+    check_source(params)
+    signature = StereoSignature(params)
     root = Path(build_dir) if build_dir is not None else cache_dir()
     root.mkdir(parents=True, exist_ok=True)
     design_key = json.dumps([params.to_dict(), model.to_dict(), width, fifo_pixels])
     name = f"stereo-{hashlib.sha256(design_key.encode()).hexdigest()[:20]}"
+
+    def build_top() -> StereoMachine:
+        return StereoMachine(params=params, model=model, width=width, fifo_pixels=fifo_pixels)
+
     design = HarnessSources(
-        verilog=cached_verilog(name, top, root),
-        wrapper=wrapper_verilog(top),
-        header=stereo_header(params, model, width, top),
+        verilog=cached_verilog(name, build_top, root),
+        wrapper=wrapper_verilog(signature),
+        header=stereo_header(params, model, width, signature),
         sources=("stereo.cpp",),
         label=f"the stereo machine, Dmax {model.dmax}, width {width},",
         header_name=HEADER,
@@ -118,10 +135,13 @@ class StereoVerilatorEngine(HarnessProcess, EngineLifecycle):
         jobs: int = 2,
         verbose: bool = True,
     ) -> None:
-        if not SOURCE_KINDS[params.rng].on_chip:
-            raise ValueError(f"--feed pixels runs machines with an on-chip random source, "
-                             f"not rng = {params.rng!r}")
+        kind = source_kind(params.rng)
+        if not kind.on_chip and kind.numbers is None:
+            raise ValueError(f"--feed pixels feeds an off-chip source from its device model; rng = "
+                             f"{params.rng!r} has none (its numbers come from the caller)")
         super().__init__()
+        self._kind = kind
+        self._feed = NumberFeed(params)
         self.params = params
         self.model = model
         self.width = width
@@ -152,12 +172,21 @@ class StereoVerilatorEngine(HarnessProcess, EngineLifecycle):
             t0 = time.perf_counter()
             try:
                 self._write(proc, struct.pack("<IIII", _MAGIC_FRAME, 0, height, width), pairs.tobytes())
-                (message,) = struct.unpack("<Q", self._read(proc, 8))
-                if message != 0:
-                    raise self._failure(f"the stereo harness sent an unknown message {message}")
+                self._serve_numbers(proc, None if self._kind.on_chip else self._numbers())
                 return self._read_results(proc, n, t0)
-            except VerilatorError:
+            except (VerilatorError, ValueError):
                 raise
             except BaseException:
                 self._kill()  # an interrupt leaves the pipes mid-frame
                 raise
+
+    def _numbers(self) -> NumberFeed:
+        """The device model's stream (one from reset on: a fresh harness holds no rows)."""
+        if self._feed.source is None:
+            assert self._kind.numbers is not None
+            self._feed.use(self._kind.numbers(self.params))
+        return self._feed
+
+    def _reset(self) -> None:
+        super()._reset()
+        self._feed.use(None)  # a hardware reset: the device model starts a fresh stream

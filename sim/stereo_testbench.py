@@ -13,8 +13,8 @@ from collections.abc import Sequence
 import numpy as np
 from amaranth.sim import Simulator, SimulatorContext
 
-from bayesmachine.hdl.frontend.stereo import FrontEnd, StereoMachine, pixel_in_layout
-from bayesmachine.hdl.machine import load_layout
+from bayesmachine.hdl.frontend.stereo import FrontEnd, StereoMachine
+from bayesmachine.hdl.signatures import load_layout, pixel_in_layout
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.results import MachineResult, decode_results
 

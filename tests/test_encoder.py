@@ -15,7 +15,7 @@ CONFIGS = [(False, "lowest-index"), (True, "lowest-index"), (True, "nomatch-firs
 
 
 def _check_patterns(rows: int, nomatch_row: bool, tie_break: str, patterns: list[int]) -> None:
-    dut = MAPEncoder(rows, nomatch_row=nomatch_row, tie_break=tie_break)
+    dut = MAPEncoder(rows=rows, nomatch_row=nomatch_row, tie_break=tie_break)
 
     async def bench(ctx):
         for pat in patterns:
@@ -66,8 +66,8 @@ def test_twin_tie_rules() -> None:
 
 def test_encoder_rejects_bad_parameters() -> None:
     with pytest.raises(ParameterError, match="tie_break"):
-        MAPEncoder(4, tie_break="random")
+        MAPEncoder(rows=4, tie_break="random")
     with pytest.raises(ParameterError, match="rows"):
-        MAPEncoder(0)
+        MAPEncoder(rows=0)
     with pytest.raises(ParameterError, match="no-match"):
-        MAPEncoder(1, nomatch_row=True)
+        MAPEncoder(rows=1, nomatch_row=True)

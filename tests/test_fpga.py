@@ -60,7 +60,7 @@ def _through_wrapper(core: object, beats: list[int], results: int, result_width:
 def test_wrapper_protocol_matches_model(pin_width: int, idle: float) -> None:
     params = small_params()
     words = _words(params, 12, seed=pin_width)
-    core = BayesianMachine(params)
+    core = BayesianMachine(params=params)
     beats = [b for pixel in words for b in pack_beats(params, pixel)]
     raw = _through_wrapper(core, beats, len(words), _result_width(params), pin_width, idle, seed=1)
     want = MachineModel(params).run(words)
@@ -96,8 +96,8 @@ def test_stereo_machine_through_wrapper_matches_model(pin_width: int, idle: floa
     beats = [b for lf, rf in frames for b in frame_beats(lf, rf)]
     words = np.concatenate([memory_words(feature_sums(lf), feature_sums(rf), model, params)
                             for lf, rf in frames])
-    core = StereoMachine(params, model, width, fifo_pixels=2)
-    wrapper = PinWrapper(StereoMachine(params, model, width), pin_width=pin_width)
+    core = StereoMachine(params=params, model=model, width=width, fifo_pixels=2)
+    wrapper = PinWrapper(StereoMachine(params=params, model=model, width=width), pin_width=pin_width)
     assert wrapper.input_name == "pixels" and wrapper.chunks_in == -(-17 // pin_width)
     assert len(words) == 15  # (6 - 4) (12 - 4 - 3) + (5 - 4) (12 - 4 - 3)
     raw = _through_wrapper(core, beats, len(words), _result_width(params), pin_width, idle, seed=3)
@@ -106,10 +106,10 @@ def test_stereo_machine_through_wrapper_matches_model(pin_width: int, idle: floa
 
 def test_wrapper_rejects_bad_parameters() -> None:
     with pytest.raises(ParameterError, match="pin_width"):
-        PinWrapper(BayesianMachine(small_params()), pin_width=0)
+        PinWrapper(BayesianMachine(params=small_params()), pin_width=0)
     with pytest.raises(ParameterError, match="on-chip random source"):
-        PinWrapper(BayesianMachine(small_params(rng="external")))
-    assert PinWrapper(BayesianMachine(small_params())).input_name == "load"
+        PinWrapper(BayesianMachine(params=small_params(rng="external")))
+    assert PinWrapper(BayesianMachine(params=small_params())).input_name == "load"
 
 
 def test_wrapper_needs_one_input_stream_and_a_result_stream() -> None:
@@ -141,7 +141,8 @@ def test_lanes_through_wrapper_match_lanes_model(machines: int) -> None:
     params = small_params()
     words = _words(params, 14, seed=5)
     beats = [b for pixel in words for b in pack_beats(params, pixel)]
-    raw = _through_wrapper(MachineLanes(params, machines), beats, len(words), _result_width(params),
+    raw = _through_wrapper(MachineLanes(params=params, machines=machines),
+                           beats, len(words), _result_width(params),
                            8, 0.2, seed=2)
     model = LanesModel(params, machines)
     want = model.run(words[:5])  # two calls: the round-robin deal carries over
@@ -189,7 +190,7 @@ def test_flow_keeps_every_register_copy(rng: str, tmp_path: Path) -> None:
     # One $dff cell per Amaranth signal: compute_repG, start_repG; next_number_repG_C,
     # restart_number_repG_C; compute_rep_src, start_rep_src.
     copies = 2 * groups + (2 * groups * params.operator_columns + 2 if shared else 0)
-    (tmp_path / "top.il").write_text(rtlil.convert(PinWrapper(BayesianMachine(params)), name="top"))
+    (tmp_path / "top.il").write_text(rtlil.convert(PinWrapper(BayesianMachine(params=params)), name="top"))
     import subprocess
 
     proc = subprocess.run([yosys, "-q", "-p", f"read_rtlil top.il; hierarchy -top top; flatten; "

@@ -72,7 +72,7 @@ def test_line_buffer_gives_each_pixels_column() -> None:
     left = rng.integers(0, 256, (height, width), dtype=np.uint8)
     right = rng.integers(0, 256, (height, width), dtype=np.uint8)
     want_l, want_r = column_windows(left), column_windows(right)
-    dut = LineBuffer(width)
+    dut = LineBuffer(width=width)
     rnd = random.Random(2)
 
     async def bench(ctx):
@@ -147,7 +147,7 @@ def test_frontend_words_equal_host_memory_words(name: str) -> None:
     model = ModelParams(dmax=dmax)
     params = stereo_machine_params(dmax, counter_max=2, **options)
     frames = [_noisy_pair(h, w, seed=i) for i, (h, w) in enumerate(shapes)]
-    got = run_frontend(FrontEnd(params, model, shapes[0][1]), frames)
+    got = run_frontend(FrontEnd(params=params, model=model, width=shapes[0][1]), frames)
     want = _host_words(frames, model, params)
     assert got.shape == want.shape
     assert np.array_equal(got, want), np.argwhere(got != want)[:5]
@@ -159,7 +159,8 @@ def test_frontend_words_on_a_crop_of_the_bundled_pair_with_back_pressure() -> No
     frames = [(left[y : y + h, x : x + w], right[y : y + h, x : x + w])]
     model = ModelParams(dmax=10)
     params = stereo_machine_params(10, counter_max=4)
-    got = run_frontend(FrontEnd(params, model, w), frames, in_stall=0.3, out_stall=0.4, seed=5)
+    got = run_frontend(FrontEnd(params=params, model=model, width=w),
+                       frames, in_stall=0.3, out_stall=0.4, seed=5)
     assert np.array_equal(got, _host_words(frames, model, params))
 
 
@@ -168,7 +169,8 @@ def test_frontend_frame_start_marker_restarts_position() -> None:
     model = ModelParams(dmax=3, sigma_m=4.0, p_nm0=0.05)
     params = stereo_machine_params(3, lanes=6)
     frames = [_noisy_pair(9, 10, seed=7), _noisy_pair(5, 10, seed=8), _noisy_pair(6, 10, seed=9)]
-    got = run_frontend(FrontEnd(params, model, 10), frames, in_stall=0.2, out_stall=0.2, seed=1)
+    got = run_frontend(FrontEnd(params=params, model=model, width=10),
+                       frames, in_stall=0.2, out_stall=0.2, seed=1)
     assert np.array_equal(got, _host_words(frames, model, params))
 
 
@@ -180,7 +182,7 @@ def test_stereo_machine_results_equal_the_model(counter_max: int) -> None:
     frames = [(left, right), _noisy_pair(6, 20, seed=4)]
     model = ModelParams(dmax=5)
     params = stereo_machine_params(5, counter_max=counter_max, max_cycles=3000)
-    got, _ = run_stereo(StereoMachine(params, model, 20, fifo_pixels=2), frames,
+    got, _ = run_stereo(StereoMachine(params=params, model=model, width=20, fifo_pixels=2), frames,
                         in_stall=0.2, out_stall=0.3, seed=6)
     assert_same_results(got, MachineModel(params).run(_host_words(frames, model, params)))
 
@@ -193,7 +195,7 @@ def test_stereo_machine_hides_loading_and_filtering() -> None:
     frames = [_noisy_pair(height, width, seed=11)]
     model = ModelParams(dmax=dmax)
     params = stereo_machine_params(dmax, counter_max=16, max_cycles=3000)
-    got, wall = run_stereo(StereoMachine(params, model, width), frames)
+    got, wall = run_stereo(StereoMachine(params=params, model=model, width=width), frames)
     compute = int(got.cycles.sum())
     per_pixel = int(pixel_wall_cycles(params, got.cycles).sum())
     # Lines 0-3 (4 x width pixels) and the first dmax + 4 pixels of a line run no machine; plus
@@ -211,20 +213,21 @@ def test_parameters_are_validated_up_front() -> None:
     model = ModelParams(dmax=4)
     ok = stereo_machine_params(4)
     with pytest.raises(ParameterError, match="lanes"):
-        FrontEnd(MachineParams.for_disparity(4, lanes=16), model, 20)
+        FrontEnd(params=MachineParams.for_disparity(4, lanes=16), model=model, width=20)
     with pytest.raises(ParameterError, match="width"):
-        StereoMachine(ok, model, 8)
+        StereoMachine(params=ok, model=model, width=8)
     with pytest.raises(ParameterError, match="width"):
-        StereoMachine(ok, model, MAX_WIDTH + 1)
+        StereoMachine(params=ok, model=model, width=MAX_WIDTH + 1)
     with pytest.raises(ParameterError, match="rows"):
-        StereoMachine(stereo_machine_params(5), model, 20)
+        StereoMachine(params=stereo_machine_params(5), model=model, width=20)
     with pytest.raises(ParameterError, match="fifo_pixels"):
-        StereoMachine(ok, model, 20, fifo_pixels=0)
+        StereoMachine(params=ok, model=model, width=20, fifo_pixels=0)
     with pytest.raises(ParameterError, match="p_nm0"):
-        StereoMachine(stereo_machine_params(4, word_bits=3), ModelParams(dmax=4, p_nm0=0.01), 20)
-    with pytest.raises(ParameterError, match="model"):
-        StereoMachine(ok, {"dmax": 4}, 20)  # type: ignore[arg-type]
-    top = StereoMachine(ok, model, 9)
+        StereoMachine(params=stereo_machine_params(4, word_bits=3), model=ModelParams(dmax=4, p_nm0=0.01),
+                      width=20)
+    with pytest.raises(TypeError, match="model"):
+        StereoMachine(params=ok, model={"dmax": 4}, width=20)  # type: ignore[arg-type]
+    top = StereoMachine(params=ok, model=model, width=9)
     assert (top.params, top.model, top.width, top.fifo_pixels) == (ok, model, 9, 8)
 
 
@@ -240,7 +243,7 @@ def test_back_pressure_reaches_the_pixel_input() -> None:
     model = ModelParams(dmax=dmax)
     params = stereo_machine_params(dmax, counter_max=2, max_cycles=500)
     left, right = _noisy_pair(height, width, seed=12)
-    top = StereoMachine(params, model, width, fifo_pixels=1)
+    top = StereoMachine(params=params, model=model, width=width, fifo_pixels=1)
     beats = frame_beats(left, right)
     taken: list[int] = []
     results: list[int] = []
@@ -285,8 +288,10 @@ def test_back_pressure_reaches_the_pixel_input() -> None:
     assert_same_results(decode_results(params, results), want)
 
 
-def test_stereo_machine_with_external_random_numbers() -> None:
-    """``rng = "external"``: the machine's entropy port is the StereoMachine's, sampled on compute cycles."""
+@pytest.mark.parametrize("rng", ["external", "smtj"])
+def test_stereo_machine_with_external_random_numbers(rng: str) -> None:
+    """An off-chip source (``external``, and ``smtj``, whose inner port was once left undriven): the
+    machine's entropy port is the StereoMachine's, sampled on compute cycles."""
     from amaranth.sim import Simulator
 
     from bayesmachine.sim.packing import pack_numbers
@@ -295,10 +300,10 @@ def test_stereo_machine_with_external_random_numbers() -> None:
 
     dmax, width, height = 3, 11, 6
     model = ModelParams(dmax=dmax)
-    params = stereo_machine_params(dmax, counter_max=3, rng="external", max_cycles=400)
+    params = stereo_machine_params(dmax, counter_max=3, rng=rng, max_cycles=400)
     left, right = _noisy_pair(height, width, seed=13)
     numbers = np.random.default_rng(14).integers(0, params.word_one, size=(4000, params.operators))
-    top = StereoMachine(params, model, width)
+    top = StereoMachine(params=params, model=model, width=width)
     n_out = (height - 4) * (width - 4 - dmax)
     results: list[int] = []
 
@@ -352,5 +357,6 @@ def test_a_truncated_frame_leaves_nothing_behind() -> None:
     cut_words = _host_words([(cut_left, cut_right)], model, params)
     per_line = width - 4 - dmax
     want = np.concatenate([cut_words[: 2 * per_line + 2], _host_words([whole], model, params)])
-    got = run_frontend_beats(FrontEnd(params, model, width), beats, len(want), in_stall=0.2, out_stall=0.2)
+    got = run_frontend_beats(FrontEnd(params=params, model=model, width=width), beats, len(want),
+                              in_stall=0.2, out_stall=0.2)
     assert np.array_equal(got, want)

@@ -182,7 +182,7 @@ def test_heavy_result_backpressure() -> None:
 
 def test_ports_and_layouts() -> None:
     params = MachineParams.for_disparity(80)
-    dut = BayesianMachine(params)
+    dut = BayesianMachine(params=params)
     assert Shape.cast(load_layout(params)).width == 16 * 11
     layout = result_layout(params)
     names = ["map", "nomatch", "timeout", "cycles", "counts"]
@@ -190,10 +190,10 @@ def test_ports_and_layouts() -> None:
     assert [layout[name].offset for name in names] == [0, 7, 8, 9, 29]
     assert Shape.cast(layout).width == 7 + 1 + 1 + 20 + 82 * 5
     assert not hasattr(dut, "entropy")
-    ext = BayesianMachine(MachineParams.for_disparity(80, rng="external"))
+    ext = BayesianMachine(params=MachineParams.for_disparity(80, rng="external"))
     assert Shape.cast(ext.entropy.shape()).width == 246 * 10
     with pytest.raises(TypeError):
-        BayesianMachine({"rows": 3})  # type: ignore[arg-type]
+        BayesianMachine(params={"rows": 3})  # type: ignore[arg-type]
 
 
 # --- The full-size machine of the paper: Dmax = 80 (82 rows), N = 3, n_max = 16 ---

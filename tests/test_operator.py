@@ -42,7 +42,7 @@ def test_rtl_matrix_matches_twin(rows: int, columns: int, w: int, shared: bool) 
     """The component wraps the machine's own matrix function; per-operator and per-column numbers."""
     ops = rows * columns
     sources = [o % columns for o in range(ops)] if shared else list(range(ops))
-    dut = OperatorMatrix(rows, columns, w, sources)
+    dut = OperatorMatrix(rows=rows, columns=columns, word_bits=w, sources=sources)
     rnd = random.Random(rows * columns)
     one = 1 << w
     edge = [0, one, 1, one - 1, one // 2]
@@ -64,16 +64,16 @@ def test_rtl_matrix_matches_twin(rows: int, columns: int, w: int, shared: bool) 
 
 def test_rtl_matrix_p0_and_p1_exact() -> None:
     w = 10
-    dut = OperatorMatrix(2, 1, w, [0, 1])
+    dut = OperatorMatrix(rows=2, columns=1, word_bits=w, sources=[0, 1])
     drive = [([1 << w, 0], [n, n]) for n in (0, 1, 511, 1022, 1023)]
     assert _rtl_rows(dut, drive) == [0b01] * 5  # 1.0 always fires, 0 never does
 
 
 def test_matrix_rejects_bad_parameters() -> None:
     with pytest.raises(ParameterError, match="one random number per operator"):
-        OperatorMatrix(2, 2, 4, [0, 1, 2])
+        OperatorMatrix(rows=2, columns=2, word_bits=4, sources=[0, 1, 2])
     with pytest.raises(ParameterError, match="word_bits"):
-        OperatorMatrix(2, 2, 0, [0, 1, 2, 3])
+        OperatorMatrix(rows=2, columns=2, word_bits=0, sources=[0, 1, 2, 3])
 
 
 def _stream(spec: LFSRSpec, word: int, cycles: int) -> list[int]:

@@ -37,7 +37,7 @@ def _rtl_numbers(spec: LFSRSpec, enables: list[int]) -> list[int]:
 
 
 def _rtl_bank_numbers(specs: list[LFSRSpec], enables: list[int]) -> list[list[int]]:
-    dut = LFSRBank(specs)
+    dut = LFSRBank(specs=specs)
     seen: list[list[int]] = []
 
     async def bench(ctx):
@@ -307,7 +307,7 @@ def test_rtl_lfsr_next_numbers_and_enable_groups() -> None:
     clock, ``following_numbers`` the next cycle's ``next_numbers``; with ``enable_groups`` each
     LFSR advances on its own group's enable bit."""
     specs = _specs(12, 4, n=3)
-    dut = LFSRBank(specs, enable_groups=[0, 1, 0])
+    dut = LFSRBank(specs=specs, enable_groups=[0, 1, 0])
     rnd = random.Random(8)
     enables = [(int(rnd.random() < 0.6), int(rnd.random() < 0.6)) for _ in range(200)]
     seen: list[tuple[list[int], list[int]]] = []
@@ -335,7 +335,7 @@ def test_rtl_lfsr_following_restart_numbers() -> None:
     loaded with it every clock (reset to the start state's number) equals ``restart_numbers`` in
     every cycle, each LFSR on its own group's random enable."""
     specs = _specs(12, 4, n=3)
-    dut = LFSRBank(specs, enable_groups=[0, 1, 0])
+    dut = LFSRBank(specs=specs, enable_groups=[0, 1, 0])
     m = Module()
     m.submodules.dut = dut
     copies = [Signal(s.step, init=s.init & ((1 << s.step) - 1)) for s in specs]

@@ -196,8 +196,8 @@ def test_smtj_machine_is_the_external_rtl() -> None:
 
     smtj = small_params(rng="smtj", smtj_dwell=4.0)
     ext = small_params(rng="external")
-    assert "entropy" in BayesianMachine(smtj).signature.members
-    assert verilog_text(BayesianMachine(smtj)) == verilog_text(BayesianMachine(ext))
+    assert "entropy" in BayesianMachine(params=smtj).signature.members
+    assert verilog_text(BayesianMachine(params=smtj)) == verilog_text(BayesianMachine(params=ext))
 
 
 @pytest.mark.parametrize("dwell, share", [(1.0, "operator"), (20.0, "column")])
@@ -285,7 +285,7 @@ def test_emulator_rtl_matches_its_twin() -> None:
     from bayesmachine.sources.smtj import SMTJEmulatorTwin
 
     p = small_params(rng="smtj", smtj_dwell=2.0, smtj_spread=0.1, seed=6)
-    dut = SMTJEmulator(p)
+    dut = SMTJEmulator(params=p)
     want = SMTJEmulatorTwin(p).take(120)
     advance = np.random.default_rng(1).random(200) < 0.6
     raw = dut.numbers.as_value()
@@ -316,7 +316,7 @@ def test_emulated_machine_equals_the_model_on_the_twin_numbers() -> None:
     p = small_params(rng="smtj", smtj_dwell=3.0, smtj_share="column", seed=2)
     words = synthetic_disparity_words(p, 10, np.random.default_rng(4))
     want = MachineModel(p).run(words, SMTJEmulatorTwin(p).take(10 * p.max_cycles))
-    dut = SMTJEmulatedMachine(p)
+    dut = SMTJEmulatedMachine(params=p)
     beats = [b for pixel in words for b in pack_beats(p, pixel)]
     raws: list[int] = []
 

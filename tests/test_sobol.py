@@ -28,7 +28,7 @@ def _params(w: int, columns: int = 3, **kwargs: object) -> MachineParams:
 
 def _rtl_numbers(params: MachineParams, drive: list[tuple[int, int]]) -> list[list[int]]:
     """The generators' numbers each cycle for a list of (enable, restart)."""
-    dut = SobolGenerators(params)
+    dut = SobolGenerators(params=params)
     seen: list[list[int]] = []
 
     async def bench(ctx):
@@ -180,7 +180,7 @@ def test_next_and_restart_numbers_predict_the_next_cycle(w: int, columns: int) -
     for _ in range(max(200, 6 << w)):
         x = rnd.random()
         drive.append((1, 0) if x < 0.75 else (0, 1) if x < 0.9 else (0, 0))
-    dut = SobolGenerators(params)
+    dut = SobolGenerators(params=params)
     seen: list[tuple[list[int], ...]] = []
 
     async def bench(ctx):
@@ -214,7 +214,7 @@ def test_following_restart_numbers_is_the_next_cycles_restart_numbers(w: int, co
     first number) equals ``restart_numbers`` in every cycle, for random enable and restart
     patterns (all four combinations, so blocks end, restart mid-block and the LFSRs step)."""
     params = _params(w, columns)
-    dut = SobolGenerators(params)
+    dut = SobolGenerators(params=params)
     m = Module()
     m.submodules.dut = dut
     mask = (1 << w) - 1

@@ -93,12 +93,33 @@ def test_stereo_engine_follows_the_engine_life_cycle() -> None:
         engine.reset()
 
 
-def test_stereo_engine_refuses_an_off_chip_source() -> None:
+def test_stereo_engine_refuses_an_off_chip_source_without_a_device_model() -> None:
     from bayesmachine.sim.stereo_engine import StereoVerilatorEngine
 
     params = stereo_machine_params(DMAX, counter_max=16, rng="external")
-    with pytest.raises(ValueError, match="on-chip random source"):
+    with pytest.raises(ValueError, match="device model"):
         StereoVerilatorEngine(params, ModelParams(dmax=DMAX), WIDTH, verbose=False)
+
+
+@needs_verilator
+def test_smtj_pixels_through_the_stereo_machine_equal_the_model() -> None:
+    """An off-chip source (SMTJ devices) on the stereo top: its entropy port is the top's, fed from
+    the device model as the word engines feed the machine's; frames back to back continue the
+    device stream, and a reset starts it again."""
+    from bayesmachine.sim.stereo_engine import StereoVerilatorEngine
+
+    model = ModelParams(dmax=DMAX)
+    params = stereo_machine_params(DMAX, counter_max=4, rng="smtj", smtj_dwell=3.0)
+    frames = _crops()
+    reference = MachineModel(params)  # numbers=None: the kind's device model, one stream from reset
+    wants = [reference.run(memory_words(feature_sums(left), feature_sums(right), model, params))
+             for left, right in frames]
+    with StereoVerilatorEngine(params, model, WIDTH, verbose=False) as engine:
+        for (left, right), want in zip(frames, wants, strict=True):
+            assert_same_results(engine.run(left, right), want)
+        engine.reset()
+        assert_same_results(engine.run(*frames[0]), wants[0])
+    assert not wants[0].timeout.all() and len(set(wants[0].map.tolist())) > 2  # not a degenerate answer
 
 
 @needs_verilator
@@ -112,6 +133,17 @@ def test_cli_run_feed_pixels_gives_the_models_result(tmp_path: Path) -> None:
     report = json.loads((tmp_path / "px" / "report.json").read_text())
     assert report["feed"] == "pixels"
     assert report["wall_cycles_per_pixel"] > report["cycles_per_pixel_mean"]
+
+
+@needs_verilator
+def test_cli_run_feed_pixels_with_smtj_gives_the_models_result(tmp_path: Path) -> None:
+    crop = ["--crop", f"250,200,{WIDTH},7", "--dmax", str(DMAX), "--quiet", "--no-sgbm", "--rng", "smtj",
+            "--counter-max", "4"]
+    assert main(["run", "--engine", "verilator", "--feed", "pixels", *crop, "-o", str(tmp_path / "px")]) == 0
+    assert main(["run", "--engine", "model", *crop, "-o", str(tmp_path / "model")]) == 0
+    got, want = np.load(tmp_path / "px" / "result.npz"), np.load(tmp_path / "model" / "result.npz")
+    for key in ("map", "counts", "cycles", "timeout"):
+        assert np.array_equal(got[key], want[key]), key
 
 
 def test_cli_feed_pixels_needs_verilator(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -66,14 +66,13 @@ def build(args: argparse.Namespace, params: MachineParams) -> StereoMachine:
     to the front end's, :func:`stereo_params`)."""
     from .stereo import StereoMachine
 
-    return StereoMachine(stereo_params(args, params), model_params_from_args(args), width(args),
-                         fifo_pixels=fifo_pixels(args))
+    return StereoMachine(params=stereo_params(args, params), model=model_params_from_args(args),
+                         width=width(args), fifo_pixels=fifo_pixels(args))
 
 
 def summary(top: StereoMachine) -> str:
     """What the stereo top is and its ports, for ``emit``'s output."""
-    from amaranth.hdl import Shape
-    from amaranth.lib import wiring
+    from ..emit import signature_ports
 
     m, p = top.model, top.params
     lines = [
@@ -82,8 +81,5 @@ def summary(top: StereoMachine) -> str:
         f"FIFO of {top.fifo_pixels} pixels ({top.fifo_pixels * p.beats_per_pixel} beats)",
         "ports (Verilog names; clk and rst as well):",
     ]
-    for path, member, _ in top.signature.flatten(top):
-        width = Shape.cast(member.shape).width
-        lines.append(f"  {'in' if member.flow == wiring.In else 'out':3} {'__'.join(map(str, path)):15} "
-                     f"{width:6} bits")
+    lines += [f"  {d:3} {name:15} {bits:6} bits" for d, name, bits in signature_ports(top.signature)]
     return "\n".join(lines)

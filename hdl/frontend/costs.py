@@ -32,14 +32,15 @@ from amaranth.hdl import Module, Mux, Signal, signed, unsigned
 from amaranth.lib import data, memory, stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from bayesmachine.hdl.machine import load_layout
+from bayesmachine.hdl.signatures import load_stream
 from bayesmachine.likelihood import ModelParams, check_disparity_machine
 from bayesmachine.params import MachineParams, ParameterError
 
 from .filters import feature_layout
 from .tables import FrontEndTables, frontend_tables
 
-__all__ = ["FEATURES", "WordGenerator", "check_frontend_params", "pixel_features_layout"]
+__all__ = ["FEATURES", "WordGenerator", "check_frontend_params", "check_frontend_types",
+           "pixel_features_layout"]
 
 FEATURES = ("m25", "gh20", "gv20")  # feature sum fields, in the operator columns' order
 
@@ -47,6 +48,14 @@ FEATURES = ("m25", "gh20", "gv20")  # feature sum fields, in the operator column
 def pixel_features_layout() -> data.StructLayout:
     """One pixel for the word generator: both images' feature sums and the output-region flag."""
     return data.StructLayout({"left": feature_layout(), "right": feature_layout(), "output": unsigned(1)})
+
+
+def check_frontend_types(params: object, model: object) -> None:
+    """``TypeError`` unless ``params`` is a ``MachineParams`` and ``model`` a ``ModelParams``."""
+    if not isinstance(params, MachineParams):
+        raise TypeError(f"params must be a MachineParams, not {type(params).__name__}")
+    if not isinstance(model, ModelParams):
+        raise TypeError(f"model must be a host.likelihoods.ModelParams, not {type(model).__name__}")
 
 
 def check_frontend_params(params: MachineParams, model: ModelParams) -> None:
@@ -68,27 +77,40 @@ def check_frontend_params(params: MachineParams, model: ModelParams) -> None:
 class WordGenerator(wiring.Component):
     """Pixel features in, the output pixels' likelihood-memory words out (the machine's load beats).
 
-    Ports:
-
-    - ``pixel``: ``In(stream.Signature(pixel_features_layout()))``, every pixel of the frame in
-      raster order (the right features of all of them enter the delay line).
-    - ``beats``: ``Out(stream.Signature(load_layout(params)))``, ``beats_per_pixel`` beats per
-      pixel whose ``output`` flag is set.
-
     ``pixel.ready`` is high when no output pixel is being written, and in the cycle of its last
     beat's issue: a pixel outside the output region passes in one cycle, an output pixel holds
     the stream for ``beats_per_pixel`` cycles (more if ``beats`` is not ready).
+
+    Parameters
+    ----------
+    params : MachineParams
+        The machine fed (``lanes`` a multiple of the operator columns: :func:`check_frontend_params`).
+    model : ModelParams
+        The disparity model (Dmax, p0, sigmas, p_nm0, sigma_nm).
+    tables : FrontEndTables, optional
+        The likelihood tables (default: ``frontend_tables(model, params.word_bits)``).
+
+    Attributes
+    ----------
+    pixel : ``In(stream.Signature(pixel_features_layout()))``
+        Every pixel of the frame in raster order (the right features of all of them enter the
+        delay line).
+    beats : ``Out(load_stream(params))``
+        ``beats_per_pixel`` beats per pixel whose ``output`` flag is set.
     """
 
-    def __init__(self, params: MachineParams, model: ModelParams,
+    def __init__(self, *, params: MachineParams, model: ModelParams,
                  tables: FrontEndTables | None = None) -> None:
+        check_frontend_types(params, model)
         check_frontend_params(params, model)
+        if tables is not None and not isinstance(tables, FrontEndTables):
+            raise TypeError(f"tables must be a FrontEndTables, not {type(tables).__name__}")
         self._params = params
         self._model = model
         self._tables = tables if tables is not None else frontend_tables(model, params.word_bits)
         super().__init__({
             "pixel": In(stream.Signature(pixel_features_layout())),
-            "beats": Out(stream.Signature(load_layout(params))),
+            "beats": Out(load_stream(params)),
         })
 
     @property

@@ -30,15 +30,19 @@ def feature_layout() -> data.StructLayout:
 
 
 class FeatureFilter(wiring.Component):
-    """Feature sums of one image's 5x5 windows.
+    """Feature sums of one image's 5x5 windows. No parameters.
 
-    Ports:
-
-    - ``load`` (In 1) and ``column`` (In, ``ArrayLayout(unsigned(8), 5)``, index 0 the top
-      line): take a column into the partial-sum registers.
-    - ``en`` (In 1): shift the column last loaded (in an earlier cycle) into the window.
-    - ``features`` (Out, ``feature_layout()``): the sums of the window of the last five columns
-      shifted in (combinational from the shift register, valid from the cycle after ``en``).
+    Attributes
+    ----------
+    load : ``In(1)``
+        Take ``column`` into the partial-sum registers.
+    column : ``In(ArrayLayout(unsigned(8), 5))``
+        A 5-high column of gray levels, index 0 the top line.
+    en : ``In(1)``
+        Shift the column last loaded (in an earlier cycle) into the window.
+    features : ``Out(feature_layout())``
+        The sums of the window of the last five columns shifted in (combinational from the
+        shift register, valid from the cycle after ``en``).
 
     A pipeline loads a column in the cycle it advances into the stage before the filter, and
     shifts it in when it advances out of that stage; ``load`` and ``en`` in the same cycle shift

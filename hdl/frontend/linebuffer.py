@@ -27,19 +27,32 @@ def pair_layout() -> data.StructLayout:
 class LineBuffer(wiring.Component):
     """``WINDOW - 1`` lines of pixel pairs, ``width`` pixels each.
 
-    Ports:
-
-    - ``en`` (In 1), ``col`` (In, the column), ``pixel`` (In, ``pair_layout()``): take a pixel.
-    - ``column`` (Out, ``ArrayLayout(pair_layout(), WINDOW)``): from the cycle after ``en`` until
-      the next ``en``, the 5-high column of the last pixel taken (index 0 = four lines up,
-      index 4 = the pixel). Columns of the first four lines of a frame hold older data.
-
     Two pixels taken at the same column must be at least two cycles apart: guaranteed for
     raster order and width >= 2.
+
+    Parameters
+    ----------
+    width : int
+        Pixels per line (>= 2).
+
+    Attributes
+    ----------
+    en : ``In(1)``
+        Take ``pixel`` at column ``col``.
+    col : ``In(range(width))``
+        The column of the pixel taken.
+    pixel : ``In(pair_layout())``
+        The pixel pair taken.
+    column : ``Out(ArrayLayout(pair_layout(), WINDOW))``
+        From the cycle after ``en`` until the next ``en``, the 5-high column of the last pixel
+        taken (index 0 = four lines up, index 4 = the pixel). Columns of the first four lines of
+        a frame hold older data.
     """
 
-    def __init__(self, width: int) -> None:
-        if isinstance(width, bool) or not isinstance(width, int) or width < 2:
+    def __init__(self, *, width: int) -> None:
+        if isinstance(width, bool) or not isinstance(width, int):
+            raise TypeError(f"width must be an integer, not {type(width).__name__}")
+        if width < 2:
             raise ValueError(f"width must be an integer >= 2, got {width!r}")
         self._width = width
         super().__init__({

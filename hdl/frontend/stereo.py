@@ -29,27 +29,29 @@ from __future__ import annotations
 
 import dataclasses
 
-from amaranth.hdl import Module, Mux, Shape, Signal, unsigned
-from amaranth.lib import data, fifo, stream, wiring
+from amaranth.hdl import Module, Mux, Shape, Signal
+from amaranth.lib import fifo, wiring
 from amaranth.lib.wiring import In, Out
 
-from bayesmachine.hdl.machine import BayesianMachine, load_layout, result_layout
+from bayesmachine.hdl.machine import BayesianMachine
+from bayesmachine.hdl.signatures import (
+    ENTROPY_PORTS,
+    StereoSignature,
+    load_layout,
+    load_stream,
+    pixel_in_layout,
+    pixel_stream,
+)
 from bayesmachine.likelihood import ModelParams
 from bayesmachine.params import MachineParams, ParameterError, stereo_lanes
 
 from . import DEFAULT_FIFO_PIXELS, MAX_WIDTH
-from .costs import WordGenerator, check_frontend_params
+from .costs import WordGenerator, check_frontend_params, check_frontend_types
 from .filters import FeatureFilter
 from .linebuffer import WINDOW, LineBuffer
 
 __all__ = ["MAX_WIDTH", "FrontEnd", "StereoMachine", "check_stereo_machine", "pixel_in_layout",
            "stereo_machine_params"]
-
-
-
-def pixel_in_layout() -> data.StructLayout:
-    """One beat of the pixel stream: a rectified pair and the frame-start marker."""
-    return data.StructLayout({"left": unsigned(8), "right": unsigned(8), "first": unsigned(1)})
 
 
 def stereo_machine_params(dmax: int = 80, **kwargs: object) -> MachineParams:
@@ -71,9 +73,11 @@ def _check_width(width: object, dmax: int) -> int:
 
 def check_stereo_machine(params: MachineParams, model: ModelParams, width: int,
                          fifo_pixels: int = DEFAULT_FIFO_PIXELS) -> None:
-    """``ParameterError`` naming the parameter unless ``StereoMachine(params, model, width,
-    fifo_pixels)`` can be built (callers check before building anything: a component whose
-    constructor fails would be reported as never elaborated)."""
+    """``ParameterError`` naming the parameter unless ``StereoMachine(params=params, model=model,
+    width=width, fifo_pixels=fifo_pixels)`` can be built (callers check before building anything: a
+    component whose constructor fails would be reported as never elaborated); ``TypeError`` for a
+    ``params`` or ``model`` of the wrong type."""
+    check_frontend_types(params, model)
     check_frontend_params(params, model)
     _check_width(width, model.dmax)
     if isinstance(fifo_pixels, bool) or not isinstance(fifo_pixels, int) or not 1 <= fifo_pixels <= 64:
@@ -83,19 +87,30 @@ def check_stereo_machine(params: MachineParams, model: ModelParams, width: int,
 class FrontEnd(wiring.Component):
     """Pixel pairs in, the output pixels' likelihood-memory words out (the machine's load beats).
 
-    Ports: ``pixels`` (``In(stream.Signature(pixel_in_layout()))``), ``beats``
-    (``Out(stream.Signature(load_layout(params)))``). ``width``: pixels per image line.
+    Parameters
+    ----------
+    params : MachineParams
+        The machine fed (see :func:`~.costs.check_frontend_params`).
+    model : ModelParams
+        The disparity model.
+    width : int
+        Pixels per image line (dmax + 5 .. ``MAX_WIDTH``).
+
+    Attributes
+    ----------
+    pixels : ``In(pixel_stream())``
+        Pixel pairs in raster order.
+    beats : ``Out(load_stream(params))``
+        The output pixels' load beats.
     """
 
-    def __init__(self, params: MachineParams, model: ModelParams, width: int) -> None:
+    def __init__(self, *, params: MachineParams, model: ModelParams, width: int) -> None:
+        check_frontend_types(params, model)
         check_frontend_params(params, model)
         self._width = _check_width(width, model.dmax)
         self._params = params
         self._model = model
-        super().__init__({
-            "pixels": In(stream.Signature(pixel_in_layout())),
-            "beats": Out(stream.Signature(load_layout(params))),
-        })
+        super().__init__({"pixels": In(pixel_stream()), "beats": Out(load_stream(params))})
 
     @property
     def params(self) -> MachineParams:
@@ -112,10 +127,10 @@ class FrontEnd(wiring.Component):
     def elaborate(self, platform: object) -> Module:
         m = Module()
         width, dmax = self._width, self._model.dmax
-        m.submodules.linebuffer = lines = LineBuffer(width)
+        m.submodules.linebuffer = lines = LineBuffer(width=width)
         m.submodules.filter_left = fl = FeatureFilter()
         m.submodules.filter_right = fr = FeatureFilter()
-        m.submodules.generator = gen = WordGenerator(self._params, self._model)
+        m.submodules.generator = gen = WordGenerator(params=self._params, model=self._model)
         wiring.connect(m, gen.beats, wiring.flipped(self.beats))
 
         # The pipeline advances as a whole whenever its last stage is empty or taken.
@@ -154,7 +169,7 @@ class FrontEnd(wiring.Component):
             m.d.sync += [valid1.eq(self.pixels.valid), col1.eq(cur_col), line1.eq(cur_line)]
 
         # Stage 1 -> 2: the columns' partial sums into the filters' first registers (the block
-        # RAM's clock-to-output, 5.8 ns on ECP5, then the whole column sum was the critical path).
+        # RAM's slow clock-to-output leaves no room for the whole column sum in one cycle).
         output2 = Signal()
         m.d.comb += [fl.load.eq(advance), fr.load.eq(advance)]
         for i in range(WINDOW):
@@ -183,30 +198,39 @@ class FrontEnd(wiring.Component):
 class StereoMachine(wiring.Component):
     """Pixel pairs in, one result per output pixel out: the front end, a FIFO and the machine.
 
-    Ports: ``pixels`` (``In(stream.Signature(pixel_in_layout()))``) and ``result``
-    (``Out(stream.Signature(result_layout(params)))``, the machine's results, in raster order
-    of the output region). Constructor: the machine's ``params`` (lanes a multiple of the
-    operator columns: see :func:`stereo_machine_params`), the ``model`` (Dmax, p0, sigmas,
-    p_nm0, sigma_nm), the image ``width`` (dmax + 5 .. ``MAX_WIDTH``), and ``fifo_pixels``,
-    the pixels' worth of beats the FIFO holds. With ``rng = "external"`` the machine's
-    ``entropy`` / ``entropy_ready`` ports are exposed too.
+    Parameters
+    ----------
+    params : MachineParams
+        The machine's parameters (lanes a multiple of the operator columns: see
+        :func:`stereo_machine_params`).
+    model : ModelParams
+        The disparity model (Dmax, p0, sigmas, p_nm0, sigma_nm).
+    width : int
+        Pixels per image line (dmax + 5 .. ``MAX_WIDTH``).
+    fifo_pixels : int
+        The pixels' worth of load beats the FIFO holds (1 .. 64).
+
+    Attributes
+    ----------
+    The ports are :class:`~bayesmachine.hdl.signatures.StereoSignature` ``(params)``:
+
+    pixels : ``In(pixel_stream())``
+        Pixel pairs in raster order, ``first`` on a frame's first pixel.
+    result : ``Out(result_stream(params))``
+        The machine's results, in raster order of the output region.
+    entropy, entropy_ready
+        With an off-chip ``rng`` ("external", "smtj"): the machine's own ports, passed through
+        (the numbers of every compute cycle come from outside, as for the machine alone).
     """
 
-    def __init__(self, params: MachineParams, model: ModelParams, width: int,
+    def __init__(self, *, params: MachineParams, model: ModelParams, width: int,
                  fifo_pixels: int = DEFAULT_FIFO_PIXELS) -> None:
         check_stereo_machine(params, model, width, fifo_pixels)
         self._params = params
         self._model = model
         self._width = width
         self._fifo_pixels = fifo_pixels
-        members = {
-            "pixels": In(stream.Signature(pixel_in_layout())),
-            "result": Out(stream.Signature(result_layout(params))),
-        }
-        if params.rng == "external":
-            members["entropy"] = In(data.ArrayLayout(unsigned(params.word_bits), params.operators))
-            members["entropy_ready"] = Out(1)
-        super().__init__(members)
+        super().__init__(StereoSignature(params))
 
     @property
     def params(self) -> MachineParams:
@@ -227,8 +251,8 @@ class StereoMachine(wiring.Component):
     def elaborate(self, platform: object) -> Module:
         m = Module()
         p = self._params
-        m.submodules.frontend = front = FrontEnd(p, self._model, self._width)
-        m.submodules.machine = machine = BayesianMachine(p)
+        m.submodules.frontend = front = FrontEnd(params=p, model=self._model, width=self._width)
+        m.submodules.machine = machine = BayesianMachine(params=p)
         beat_bits = Shape.cast(load_layout(p)).width
         # One entry more than the pixels' beats: the registered ready below keeps one free.
         depth = self._fifo_pixels * p.beats_per_pixel + 1
@@ -239,7 +263,7 @@ class StereoMachine(wiring.Component):
         # counts the beats in the FIFO (its level); room is set while at most depth - 2 are in:
         # the inner FIFO (depth - 1 entries, holding at most ``used``) then takes the next
         # beat, and the FIFO fills to depth - 1 = fifo_pixels * beats_per_pixel beats.
-        # (Our own count, not ``buf.level``: the forms from the level failed synth_ecp5's ABC9 step.)
+        # (Our own count, not ``buf.level``: see "Back-pressure" in docs/frontend.md.)
         used = Signal(range(depth + 1))
         used_next = Signal(range(depth + 1))
         room = Signal()
@@ -260,6 +284,11 @@ class StereoMachine(wiring.Component):
             buf.r_stream.ready.eq(machine.load.ready),
         ]
         wiring.connect(m, machine.result, wiring.flipped(self.result))
-        if p.rng == "external":
-            m.d.comb += [machine.entropy.eq(self.entropy), self.entropy_ready.eq(machine.entropy_ready)]
+        # An off-chip source's ports: the machine's and this top's come from the same
+        # entropy_members(params), so they exist together.
+        for name in ENTROPY_PORTS:
+            if name in self.signature.members:
+                inner, outer = getattr(machine, name), getattr(self, name)
+                flow = self.signature.members[name].flow
+                m.d.comb += inner.eq(outer) if flow == In else outer.eq(inner)
         return m

@@ -4,13 +4,18 @@
 // result layout: one decoder).
 //
 // Include it after the generated header, which defines BM_TOP, BM_PORT_CLK, BM_PORT_RST,
-// RESULT_WORDS and HANG_CYCLES.
+// RESULT_WORDS, HANG_CYCLES and BM_EXTERNAL (with an off-chip random source, 1, and the entropy
+// port's BM_PORT_ENTROPY, BM_PORT_ENTROPY_READY, OPERATORS, ENTROPY_BITS, ENTROPY_WORDS,
+// ENTROPY_OFFSET: the design's entropy port is fed by EntropySupply below, the same way in
+// every harness).
 #pragma once
 
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <deque>
+#include <utility>
 #include <vector>
 
 #include "verilated.h"
@@ -109,4 +114,80 @@ static void send_results(const std::vector<uint32_t>& records, uint64_t cycles, 
     put_u64(cycles);
     put_u64(wall_total);
     std::fflush(stdout);
+}
+
+#if BM_EXTERNAL
+// The random numbers of an off-chip source, one row (a number per operator) per compute cycle,
+// asked from the client in blocks (message 2 NEED NUMBERS: uint64 2, uint64 rows wanted; the
+// client replies uint64 rows n (0 < n <= wanted, or 0: no more), then n * OPERATORS uint16).
+// Rows received and not yet used stay for the next request.
+struct EntropySupply {
+    std::deque<std::vector<uint32_t>> rows;  // packed entropy port values
+    std::vector<uint16_t> row = std::vector<uint16_t>(OPERATORS);
+
+    void clear() { rows.clear(); }
+
+    // Asks the client for more rows; false if it has none left.
+    bool refill() {
+        put_u64(2);
+        put_u64(4096);
+        std::fflush(stdout);
+        uint64_t n = 0;
+        read_exact(&n, sizeof n);
+        if (n > 4096) fail("the client sent more rows of random numbers than asked for");
+        for (uint64_t t = 0; t < n; ++t) {
+            read_exact(row.data(), OPERATORS * sizeof(uint16_t));
+            std::vector<uint32_t> packed(ENTROPY_WORDS + 1, 0u);
+            for (unsigned o = 0; o < OPERATORS; ++o) {
+                if (row[o] >> ENTROPY_BITS) fail("random number out of range");
+                put_bits(packed.data(), ENTROPY_OFFSET[o], ENTROPY_BITS, row[o]);
+            }
+            rows.push_back(std::move(packed));
+        }
+        return n > 0;
+    }
+
+    // Before the clock's first eval: the next row on the port.
+    void present(BM_TOP& top) {
+        if (!rows.empty()) set_port(top.BM_PORT_ENTROPY, rows.front().data());
+    }
+
+    // After it: a compute cycle (entropy_ready) consumes one row, asked for if none is left.
+    // False when the client has no more.
+    bool consume(BM_TOP& top) {
+        if (!top.BM_PORT_ENTROPY_READY) return true;
+        if (rows.empty()) {
+            if (!refill()) return false;
+            set_port(top.BM_PORT_ENTROPY, rows.front().data());
+            top.eval();
+        }
+        rows.pop_front();
+        return true;
+    }
+};
+
+#else
+// An on-chip source: no numbers to supply.
+struct EntropySupply {
+    void clear() {}
+    void present(BM_TOP&) {}
+    bool consume(BM_TOP&) { return true; }
+};
+#endif
+
+// The RAN OUT reply: the client had no more numbers; the process ends.
+[[noreturn]] static void ran_out() {
+    put_u64(1);
+    std::fflush(stdout);
+    std::exit(3);
+}
+
+// The clock's low half, as every harness runs it (inputs already set): with an off-chip source
+// the next row of numbers on the entropy port first, and after the evaluation a row consumed by
+// a compute cycle; no number left: as in the model, the request is abandoned (RAN OUT).
+static void clock_low(BM_TOP& top, EntropySupply& supply) {
+    supply.present(top);
+    top.BM_PORT_CLK = 0;
+    top.eval();
+    if (!supply.consume(top)) ran_out();
 }

@@ -31,7 +31,6 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
-#include <deque>
 #include <memory>
 #include <string>
 #include <vector>
@@ -111,30 +110,7 @@ int main(int argc, char** argv) {
     std::vector<uint32_t> beats(static_cast<std::size_t>(BEATS_PER_PIXEL) * (LOAD_WORDS + 1));
     std::vector<uint32_t> records;
     uint64_t pixel_base = 0;  // global index of the batch's first pixel
-#if BM_EXTERNAL
-    // Random numbers received and not yet used, one packed entropy port value each.
-    std::deque<std::vector<uint32_t>> supply;
-    std::vector<uint16_t> row(OPERATORS);
-    // Asks the client for more rows; false if it has none left.
-    auto refill = [&]() -> bool {
-        put_u64(2);
-        put_u64(4096);
-        std::fflush(stdout);
-        uint64_t n = 0;
-        read_exact(&n, sizeof n);
-        if (n > 4096) fail("the client sent more rows of random numbers than asked for");
-        for (uint64_t t = 0; t < n; ++t) {
-            read_exact(row.data(), OPERATORS * sizeof(uint16_t));
-            std::vector<uint32_t> packed(ENTROPY_WORDS + 1, 0u);
-            for (unsigned o = 0; o < OPERATORS; ++o) {
-                if (row[o] >> ENTROPY_BITS) fail("random number out of range");
-                put_bits(packed.data(), ENTROPY_OFFSET[o], ENTROPY_BITS, row[o]);
-            }
-            supply.push_back(std::move(packed));
-        }
-        return n > 0;
-    };
-#endif
+    EntropySupply supply;  // rows of random numbers received and not yet used (off-chip sources)
 
     for (;;) {
         uint32_t head[4];
@@ -144,11 +120,7 @@ int main(int argc, char** argv) {
         words.resize(pixels * WORDS_PER_PIXEL);
         read_exact(words.data(), words.size() * sizeof(uint16_t));
         records.assign(pixels * RESULT_WORDS, 0);
-#if BM_EXTERNAL
         if (flags & 1) supply.clear();
-#else
-        (void)flags;
-#endif
 
         uint64_t loaded = 0, collected = 0, cycles = 0, idle = 0;
         unsigned beat = 0;
@@ -171,26 +143,7 @@ int main(int argc, char** argv) {
             const bool ready = !stalls.draw(stalls.result);
 #endif
             top->BM_PORT_RESULT_READY = ready;
-#if BM_EXTERNAL
-            if (!supply.empty()) set_port(top->BM_PORT_ENTROPY, supply.front().data());
-#endif
-            top->BM_PORT_CLK = 0;
-            top->eval();
-#if BM_EXTERNAL
-            if (top->BM_PORT_ENTROPY_READY) {  // a compute cycle: it consumes one row
-                if (supply.empty()) {
-                    if (!refill()) {
-                        // No number left: as in the model, the batch is abandoned.
-                        put_u64(1);
-                        std::fflush(stdout);
-                        return 3;
-                    }
-                    set_port(top->BM_PORT_ENTROPY, supply.front().data());
-                    top->eval();
-                }
-                supply.pop_front();
-            }
-#endif
+            clock_low(*top, supply);
             const bool load_fire = valid && top->BM_PORT_LOAD_READY;
             const bool result_fire = ready && top->BM_PORT_RESULT_VALID;
 #if BM_TRACE

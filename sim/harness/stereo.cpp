@@ -9,9 +9,12 @@
 // Protocol (little-endian, binary), one frame per request, repeated until EOF or QUIT:
 //   in : uint32 magic 'BMSF', uint32 reserved, uint32 height, uint32 width (== WIDTH); then
 //        height * width pixel pairs, uint8 left then uint8 right, raster order.
-//   out: uint64 0, then (height - 4) * (width - 4 - DMAX) raw result payloads of RESULT_WORDS
-//        uint32 each, in raster order of the output region, then uint64 wall cycles of this frame
-//        (first pixel presented to last result taken), uint64 wall cycles since reset.
+//   out: uint64 message, one of
+//        0 DONE: (height - 4) * (width - 4 - DMAX) raw result payloads of RESULT_WORDS uint32
+//          each, in raster order of the output region, then uint64 wall cycles of this frame
+//          (first pixel presented to last result taken), uint64 wall cycles since reset;
+//        2 NEED NUMBERS, 1 RAN OUT (rng off chip only): as in harness.cpp (EntropySupply in
+//          common.h); rows not used by this frame stay for the next one.
 // The frame's first pixel carries the frame-start marker. The simulation persists between frames
 // (the machine's random sources carry over, as in the model); QUIT ends it.
 
@@ -34,6 +37,7 @@ int main(int argc, char**) {
     reset_design(*top);
 
     uint64_t wall_total = 0;
+    EntropySupply supply;  // rows of random numbers received and not yet used (off-chip sources)
     std::vector<uint8_t> pixels;
     std::vector<uint32_t> records;
     for (;;) {
@@ -57,8 +61,7 @@ int main(int argc, char**) {
                                 (static_cast<uint32_t>(sent == 0) << FIRST_OFFSET);
                 set_port(top->BM_PORT_PIXELS_PAYLOAD, &beat);
             }
-            top->BM_PORT_CLK = 0;
-            top->eval();
+            clock_low(*top, supply);
             const bool take = valid && top->BM_PORT_PIXELS_READY;
             const bool result = top->BM_PORT_RESULT_VALID;  // the wrapper ties result.ready high
             if (result) take_result(top->BM_PORT_RESULT_PAYLOAD, &records[collected++ * RESULT_WORDS]);

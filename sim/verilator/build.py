@@ -86,14 +86,14 @@ def sources_digest() -> str:
     return h.hexdigest()[:16]
 
 
-def cached_verilog(name: str, component: Any, cache: Path) -> str:
+def cached_verilog(name: str, build_top: Callable[[], Any], cache: Path) -> str:
     """Verilog of the design, cached by ``name`` (the parameters' fingerprint) and the design's
-    sources: emission takes seconds."""
+    sources: emission takes seconds. ``build_top()`` makes the component, only on a miss (the
+    harness's own code needs only its signature)."""
     path = cache / "verilog" / f"{name}-{sources_digest()}.v"
     if path.exists():
-        component._MustUse__used = True  # only its layouts are needed
         return path.read_text()
-    text = verilog_text(component)
+    text = verilog_text(build_top())
     path.parent.mkdir(parents=True, exist_ok=True)
     atomic_write_text(path, text)
     return text
@@ -329,15 +329,18 @@ def build_harness(
     harness drives ``result.ready``; slower, see ``wrapper_verilog``).
     """
     from bayesmachine.hdl.machine import BayesianMachine
+    from bayesmachine.hdl.signatures import MachineSignature
+    from bayesmachine.sources import check_source
 
     find_toolchain()  # a missing tool is reported before the seconds of emitting the Verilog
     root = Path(build_dir) if build_dir is not None else cache_dir()
     root.mkdir(parents=True, exist_ok=True)
-    component = BayesianMachine(params)
+    signature = MachineSignature(params)  # the ports; the component is built only to emit Verilog
+    check_source(params)  # as BayesianMachine's constructor does, before any work
     design = HarnessSources(
-        verilog=cached_verilog(params.fingerprint(), component, root),
-        wrapper=wrapper_verilog(component, tie_ready=tie_ready),
-        header=design_header(params, component, trace_kind, tie_ready=tie_ready),
+        verilog=cached_verilog(params.fingerprint(), lambda: BayesianMachine(params=params), root),
+        wrapper=wrapper_verilog(signature, tie_ready=tie_ready),
+        header=design_header(params, signature, trace_kind, tie_ready=tie_ready),
         sources=HARNESS_SOURCES,
         label=f"the {params.rows}-row machine",
         extra_flags=((), ("--trace",), ("--trace-fst",))[trace_kind],

@@ -29,7 +29,7 @@ __all__ = ["HarnessProcess", "VerilatorEngine"]
 
 _MAGIC_RUN = 0x4E524D42  # "BMRN", see harness.cpp
 _MAGIC_QUIT = 0x54514D42  # "BMQT"
-_DONE, _RAN_OUT, _NEED_NUMBERS = 0, 1, 2  # the harness's messages
+_DONE, _RAN_OUT, _NEED_NUMBERS = 0, 1, 2  # the harnesses' messages (common.h)
 _DROP_NUMBERS = 1  # header flag: drop the rows of random numbers left from earlier batches
 _TRACE_KINDS = {".vcd": 1, ".fst": 2}
 
@@ -142,6 +142,28 @@ class HarnessProcess:
         self.total_compute_cycles += self.last_compute_cycles
         self.total_wall_cycles += self.last_wall_cycles
         return out
+
+    def _serve_numbers(self, proc: subprocess.Popen[bytes], feed: NumberFeed | None) -> None:
+        """Answer the harness's requests for random numbers (an off-chip source: rows from ``feed``)
+        until its DONE message; RAN OUT (the feed had no more) ends the process and raises."""
+        while True:
+            (message,) = struct.unpack("<Q", self._read(proc, 8))
+            if message == _NEED_NUMBERS:
+                (want,) = struct.unpack("<Q", self._read(proc, 8))
+                if feed is not None:
+                    rows = feed.take(int(want))
+                else:
+                    rows = np.zeros((0, self.params.operators), np.uint16)
+                self._write(proc, struct.pack("<Q", len(rows)),
+                            np.ascontiguousarray(rows, dtype="<u2").tobytes())
+            elif message == _RAN_OUT:
+                self._proc = None
+                proc.wait()
+                raise ran_out_error(feed.source if feed is not None else None)
+            elif message == _DONE:
+                return
+            else:
+                raise self._failure(f"the Verilator harness sent an unknown message {message}")
 
     def _kill(self) -> None:
         proc, self._proc = self._proc, None
@@ -256,21 +278,7 @@ class VerilatorEngine(HarnessProcess, EngineBase):
             self._write(proc, struct.pack("<IIQ", _MAGIC_RUN, flags, n),
                         memoryview(q.astype("<u2")).cast("B"))
             self._held = source
-            while True:
-                (message,) = struct.unpack("<Q", self._read(proc, 8))
-                if message == _NEED_NUMBERS:
-                    (want,) = struct.unpack("<Q", self._read(proc, 8))
-                    rows = feed.take(int(want)) if feed is not None else np.zeros((0, p.operators), np.uint16)
-                    self._write(proc, struct.pack("<Q", len(rows)),
-                                np.ascontiguousarray(rows, dtype="<u2").tobytes())
-                elif message == _RAN_OUT:
-                    self._proc = None
-                    proc.wait()
-                    raise ran_out_error(source)
-                elif message == _DONE:
-                    break
-                else:
-                    raise self._failure(f"the Verilator harness sent an unknown message {message}")
+            self._serve_numbers(proc, feed)
             return self._read_results(proc, n, t0)
         except (VerilatorError, ValueError):
             raise

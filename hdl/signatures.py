@@ -1,0 +1,170 @@
+"""The machine's ports, declared once: payload layouts and the signatures of every top that carries them.
+
+- :func:`load_layout`, :func:`result_layout`, :func:`entropy_layout`: the payloads (the
+  contract's field order; ``sim.packing`` and ``sim.results`` pack and decode from them);
+- :func:`load_stream`, :func:`result_stream`, :func:`pixel_stream`: the streams of those payloads
+  (and of the stereo top's pixel pairs, :func:`pixel_in_layout`);
+- :func:`entropy_members`: ``entropy`` / ``entropy_ready``, present exactly when the random source
+  is off chip (``source_kind(rng).on_chip`` is false: ``external``, ``smtj``), the one place
+  that decides it;
+- :class:`MachineSignature`: ``load``, ``result`` and the entropy members (``BayesianMachine``,
+  ``MachineLanes``, ``SMTJEmulatedMachine``);
+- :class:`StereoSignature`: ``pixels``, ``result`` and the entropy members (``StereoMachine``).
+
+Ports and word order: ``docs/architecture.md``.
+"""
+
+from __future__ import annotations
+
+from amaranth.hdl import unsigned
+from amaranth.lib import data, stream, wiring
+from amaranth.lib.wiring import In, Out
+
+from bayesmachine.params import MachineParams
+from bayesmachine.sources import source_kind
+
+__all__ = [
+    "ENTROPY_PORTS", "MachineSignature", "StereoSignature", "entropy_layout", "entropy_members",
+    "load_layout", "load_stream", "pixel_in_layout", "pixel_stream", "result_layout", "result_stream",
+]
+
+ENTROPY_PORTS = ("entropy", "entropy_ready")  # the members of an off-chip source, see entropy_members
+
+
+def _check_params(params: object, who: str) -> MachineParams:
+    if not isinstance(params, MachineParams):
+        raise TypeError(f"{who} takes a MachineParams, not {type(params).__name__}")
+    return params
+
+
+def load_layout(params: MachineParams) -> data.ArrayLayout:
+    """One beat of the load stream: ``lanes`` likelihood-memory words of W + 1 bits."""
+    return data.ArrayLayout(unsigned(params.memory_word_width), params.lanes)
+
+
+def result_layout(params: MachineParams) -> data.StructLayout:
+    """One pixel's result; fields in this order from bit 0 (the contract's order)."""
+    return data.StructLayout({
+        "map": unsigned(params.map_width),
+        "nomatch": unsigned(1),
+        "timeout": unsigned(1),
+        "cycles": unsigned(params.cycle_width),
+        "counts": data.ArrayLayout(unsigned(params.counter_width), params.rows),
+    })
+
+
+def entropy_layout(params: MachineParams) -> data.ArrayLayout:
+    """One compute cycle's random numbers of an off-chip source: a W-bit number per operator."""
+    return data.ArrayLayout(unsigned(params.word_bits), params.operators)
+
+
+def pixel_in_layout() -> data.StructLayout:
+    """One beat of the stereo top's pixel stream: a rectified pair and the frame-start marker."""
+    return data.StructLayout({"left": unsigned(8), "right": unsigned(8), "first": unsigned(1)})
+
+
+def pixel_stream() -> stream.Signature:
+    """The stereo top's pixel stream (seen from its source): one :func:`pixel_in_layout` beat per pair."""
+    return stream.Signature(pixel_in_layout())
+
+
+def load_stream(params: MachineParams) -> stream.Signature:
+    """The load stream (seen from its source): one :func:`load_layout` beat per handshake."""
+    return stream.Signature(load_layout(params))
+
+
+def result_stream(params: MachineParams) -> stream.Signature:
+    """The result stream (seen from its source): one :func:`result_layout` payload per pixel."""
+    return stream.Signature(result_layout(params))
+
+
+def entropy_members(params: MachineParams) -> dict[str, wiring.Member]:
+    """``entropy`` (``In(entropy_layout(params))``, sampled on compute cycles) and ``entropy_ready``
+    (``Out(1)``, high on compute cycles: the numbers are consumed at the clock edge) for an
+    off-chip random source; nothing for an on-chip one."""
+    if source_kind(params.rng).on_chip:
+        return {}
+    return {"entropy": In(entropy_layout(params)), "entropy_ready": Out(1)}
+
+
+class MachineSignature(wiring.Signature):
+    """The machine's ports, as a component that computes disparities from likelihood words has them.
+
+    Parameters
+    ----------
+    params : MachineParams
+        The machine's parameters.
+    entropy : bool
+        Whether an off-chip source's numbers come in on ports (:func:`entropy_members`); False for
+        a component that makes them itself (``SMTJEmulatedMachine``).
+
+    Members
+    -------
+    load : ``In(load_stream(params))``
+        A pixel's words in operator order, ``lanes`` per beat, ``beats_per_pixel`` beats per pixel.
+    result : ``Out(result_stream(params))``
+        One result per pixel, in order.
+    entropy, entropy_ready
+        With an off-chip ``rng`` and ``entropy``: see :func:`entropy_members`.
+    """
+
+    def __init__(self, params: MachineParams, *, entropy: bool = True) -> None:
+        self._params = _check_params(params, "MachineSignature")
+        if not isinstance(entropy, bool):
+            raise TypeError(f"entropy must be a bool, not {type(entropy).__name__}")
+        self._entropy = entropy
+        members = {"load": In(load_stream(params)), "result": Out(result_stream(params))}
+        if entropy:
+            members |= entropy_members(params)
+        super().__init__(members)
+
+    @property
+    def params(self) -> MachineParams:
+        return self._params
+
+    def __eq__(self, other: object) -> bool:
+        return (type(other) is type(self) and other._params == self._params
+                and other._entropy == self._entropy)
+
+    def __hash__(self) -> int:
+        return hash((type(self), self._params, self._entropy))
+
+    def __repr__(self) -> str:
+        return f"MachineSignature({self._params.fingerprint()}, entropy={self._entropy})"
+
+
+class StereoSignature(wiring.Signature):
+    """The stereo top's ports: pixel pairs in, the machine's results out.
+
+    Parameters
+    ----------
+    params : MachineParams
+        The machine's parameters.
+
+    Members
+    -------
+    pixels : ``In(pixel_stream())``
+        Pixel pairs in raster order, ``first`` set on a frame's first pixel.
+    result : ``Out(result_stream(params))``
+        One result per output pixel, in raster order of the output region.
+    entropy, entropy_ready
+        With an off-chip ``rng``: see :func:`entropy_members`.
+    """
+
+    def __init__(self, params: MachineParams) -> None:
+        self._params = _check_params(params, "StereoSignature")
+        members = {"pixels": In(pixel_stream()), "result": Out(result_stream(params))}
+        super().__init__(members | entropy_members(params))
+
+    @property
+    def params(self) -> MachineParams:
+        return self._params
+
+    def __eq__(self, other: object) -> bool:
+        return type(other) is type(self) and other._params == self._params
+
+    def __hash__(self) -> int:
+        return hash((type(self), self._params))
+
+    def __repr__(self) -> str:
+        return f"StereoSignature({self._params.fingerprint()})"
