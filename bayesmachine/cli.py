@@ -2,19 +2,37 @@
 
 Every failure ends as one line on stderr: bad arguments and bad input (ValueError),
 impossible runs (RuntimeError), file-system problems (any OSError, naming the path) and
-exhausted memory give exit code 2; Ctrl-C gives exit code 130. Commands write their
-files through :mod:`bayesmachine.outputs`, so none of these leaves a partial output.
+exhausted memory give exit code 2; Ctrl-C gives exit code 130 and SIGTERM 143, after the
+same cleanup (SIGTERM is raised as :class:`Terminated`, a KeyboardInterrupt). Commands write
+their files through :mod:`bayesmachine.outputs` and run tools through
+:mod:`bayesmachine.tools`, so none of these leaves a partial output or a tool running.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import re
+import signal
 import sys
-from typing import NoReturn
+import threading
+from collections.abc import Iterator
+from typing import Any, NoReturn
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the command is so that it cleans up as after Ctrl-C."""
 
 
 class _Parser(argparse.ArgumentParser):
     """argparse with its errors on one line (the usage is one ``--help`` away)."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        # An argument starting with "-" and a digit is a value, not an option (as in Python 3.13's
+        # argparse): ``--crop -1,0,20,20`` reaches the crop's own check instead of "expected one
+        # argument". No option of the project's is spelled like a number.
+        self._negative_number_matcher = re.compile(r"-\.?\d")
 
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message}\n")
@@ -52,6 +70,25 @@ def _one_line(text: str) -> str:
     return " ".join(text.split()) if "\n" in text else text
 
 
+@contextlib.contextmanager
+def _sigterm_raises() -> Iterator[None]:
+    """While a command runs, SIGTERM raises :class:`Terminated` (once: a second one does not
+    interrupt the cleanup)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum: int, frame: object) -> None:
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        raise Terminated
+
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     try:
@@ -60,7 +97,12 @@ def main(argv: list[str] | None = None) -> int:
         return exc.code if isinstance(exc.code, int) else 2
     prefix = f"bayesmachine {args.command}"
     try:
-        return int(args.func(args) or 0)
+        with _sigterm_raises():
+            return int(args.func(args) or 0)
+    except Terminated:
+        print(f"{prefix}: terminated (SIGTERM); no output was left half-written, no tool left running",
+              file=sys.stderr)
+        return 143
     except KeyboardInterrupt:
         print(f"{prefix}: interrupted; no output was left half-written", file=sys.stderr)
         return 130

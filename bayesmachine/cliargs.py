@@ -17,6 +17,7 @@ import argparse
 import math
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, TypeVar
 
 from bayesmachine.likelihood import ModelParams
@@ -35,11 +36,11 @@ from bayesmachine.params import (
     PRIORS,
     RNG_KINDS,
     SMTJ_SHARES,
+    STEREO_ROWS_PER_BEAT,
     TIE_BREAKS,
     MachineParams,
     ParameterError,
 )
-from bayesmachine.sources import check_source
 
 __all__ = [
     "MachineOption",
@@ -48,9 +49,12 @@ __all__ = [
     "add_dmax_option",
     "add_machine_options",
     "add_model_options",
+    "MODEL_OPTION_FLAGS",
+    "output_path",
     "machine_params_from_args",
     "model_params_from_args",
     "float_arg",
+    "positive_float_arg",
     "rng_list",
     "runnable_sources",
     "argument_type",
@@ -91,6 +95,17 @@ def argument_type(parse: Callable[[str], T], name: str | None = None) -> Callabl
     return convert
 
 
+def output_path(text: str) -> Path:
+    """``-o``: a path, never empty or blank (an unset shell variable in ``-o "$OUT"`` would otherwise
+    mean the current directory)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError(
+            f"the output path is {'empty' if not text else 'blank'} (an unset variable in -o \"$OUT\"?); "
+            "name the output"
+        )
+    return Path(text)
+
+
 def float_arg(text: str) -> float:
     """A finite float (``nan`` and ``inf`` are refused here, with the option's name)."""
     try:
@@ -99,6 +114,14 @@ def float_arg(text: str) -> float:
         raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
     if not math.isfinite(value):
         raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return value
+
+
+def positive_float_arg(text: str) -> float:
+    """A finite float > 0 (a scale, a divisor)."""
+    value = float_arg(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"expected a number > 0, got {text!r}")
     return value
 
 
@@ -232,7 +255,8 @@ add_option(MachineOption("smtj_share", "--smtj-share",
                          "(default operator)", type=str, choices=SMTJ_SHARES))
 add_option(MachineOption("lanes", "--lanes",
                          f"likelihood-memory words per load beat (default {DEFAULT_LANES}, or one pixel's "
-                         "words if fewer)", metavar="N"))
+                         f"words if fewer; {STEREO_ROWS_PER_BEAT} rows' words with the front end: "
+                         "--feed pixels, --top stereo)", metavar="N"))
 
 
 def add_dmax_option(group: argparse._ActionsContainer) -> argparse.Action:
@@ -282,13 +306,19 @@ def machine_params_from_args(args: argparse.Namespace, dmax: int, **overrides: A
             kwargs[field] = value
     kwargs.update(overrides)
     device = [f for f in _SMTJ_FIELDS if kwargs.get(f) is not None]
-    if device and kwargs.get("rng", DEFAULT_RNG) != "smtj":
-        flags = ", ".join(MACHINE_OPTIONS[f].flag for f in device)
-        rng = kwargs.get("rng", DEFAULT_RNG)
-        raise ParameterError(f"{flags}: device options of --rng smtj (got --rng {rng})")
+    rng = kwargs.get("rng", DEFAULT_RNG)
+    if device and rng != "smtj":
+        listed = getattr(args, "rng", None)
+        if isinstance(listed, list) and "smtj" in listed:
+            # A list of sources (sweep): the device options are for its smtj points only.
+            for f in device:
+                del kwargs[f]
+        else:
+            flags = ", ".join(MACHINE_OPTIONS[f].flag for f in device)
+            got = ",".join(listed) if isinstance(listed, list) else rng
+            raise ParameterError(f"{flags}: device options of --rng smtj (got --rng {got})")
     try:
         params = MachineParams.for_disparity(dmax, **kwargs)
-        check_source(params)  # e.g. no LFSR polynomial of that length: refused before any work
         return params
     except ParameterError as exc:
         message = str(exc)
@@ -300,28 +330,46 @@ def machine_params_from_args(args: argparse.Namespace, dmax: int, **overrides: A
         raise
 
 
-def add_model_options(parser: argparse.ArgumentParser, dmax: bool = True) -> argparse._ActionsContainer:
+# The model's options after --dmax (dest, flag), as add_model_options declares them.
+MODEL_OPTION_FLAGS: tuple[tuple[str, str], ...] = (
+    ("p0", "--p0"), ("sigma", "--sigma"), ("sigma_m", "--sigma-m"), ("sigma_gh", "--sigma-gh"),
+    ("sigma_gv", "--sigma-gv"), ("p_nm0", "--p-nm0"), ("sigma_nm", "--sigma-nm"),
+)
+
+
+def add_model_options(
+    parser: argparse.ArgumentParser, dmax: bool = True, given_only: bool = False,
+    title: str = "model (paper table 1 defaults)",
+) -> argparse._ActionsContainer:
     """The disparity model's options (paper table 1 defaults): ``--dmax`` unless ``dmax=False``,
-    ``--p0``, ``--sigma`` / ``--sigma-m|gh|gv``, ``--p-nm0``, ``--sigma-nm``."""
+    ``--p0``, ``--sigma`` / ``--sigma-m|gh|gv``, ``--p-nm0``, ``--sigma-nm``.
+
+    ``given_only``: every option but ``--dmax`` stays None unless given (the defaults are filled in
+    by :func:`model_params_from_args`), so that a command can refuse them where they do not apply."""
     defaults = ModelParams()
-    g = parser.add_argument_group("model (paper table 1 defaults)")
+    g = parser.add_argument_group(title)
     if dmax:
         add_dmax_option(g)
-    g.add_argument("--p0", type=float_arg, default=defaults.p0,
-                   help="base match likelihood p0 (default %(default)s)")
+
+    def default(value: float) -> float | None:
+        return None if given_only else value
+
+    g.add_argument("--p0", type=float_arg, default=default(defaults.p0),
+                   help=f"base match likelihood p0 (default {defaults.p0:g})")
     g.add_argument("--sigma", type=float_arg, default=None,
                    help=f"sigma of all three features (default {defaults.sigma_m:g})")
     for f, name in (("m", "mean"), ("gh", "horizontal gradient"), ("gv", "vertical gradient")):
         g.add_argument(f"--sigma-{f}", type=float_arg, default=None, help=f"sigma of the {name} feature")
-    g.add_argument("--p-nm0", type=float_arg, default=defaults.p_nm0,
-                   help="base no-match probability (%(default)s)")
-    g.add_argument("--sigma-nm", type=float_arg, default=defaults.sigma_nm,
-                   help="no-match sigma (%(default)s)")
+    g.add_argument("--p-nm0", type=float_arg, default=default(defaults.p_nm0),
+                   help=f"base no-match probability ({defaults.p_nm0:g})")
+    g.add_argument("--sigma-nm", type=float_arg, default=default(defaults.sigma_nm),
+                   help=f"no-match sigma ({defaults.sigma_nm:g})")
     return g
 
 
 def model_params_from_args(args: argparse.Namespace) -> ModelParams:
-    """``ModelParams`` from :func:`add_model_options`' options (``--sigma-X`` wins over ``--sigma``)."""
+    """``ModelParams`` from :func:`add_model_options`' options (``--sigma-X`` wins over ``--sigma``;
+    an option left at None takes the paper's default)."""
     defaults = ModelParams()
 
     def sigma(f: str) -> float:
@@ -330,5 +378,9 @@ def model_params_from_args(args: argparse.Namespace) -> ModelParams:
             return float(v)
         return float(args.sigma) if args.sigma is not None else defaults.sigma(f)
 
-    return ModelParams(dmax=args.dmax, p0=args.p0, sigma_m=sigma("m"), sigma_gh=sigma("gh"),
-                       sigma_gv=sigma("gv"), p_nm0=args.p_nm0, sigma_nm=args.sigma_nm)
+    def given(name: str) -> float:
+        v = getattr(args, name)
+        return getattr(defaults, name) if v is None else float(v)
+
+    return ModelParams(dmax=args.dmax, p0=given("p0"), sigma_m=sigma("m"), sigma_gh=sigma("gh"),
+                       sigma_gv=sigma("gv"), p_nm0=given("p_nm0"), sigma_nm=given("sigma_nm"))

@@ -2,12 +2,15 @@
 
 * :func:`atomic_file`: write one file under a temporary name in the same directory, fsync,
   then ``os.replace`` it onto the final name (``emit -o``, ``reference -o``).
-* :class:`OutputDir`: a transaction over a command's output directory (``run``, ``sweep``).
-  It first removes every file name the command can write that an earlier run left
-  (the final report first, so an interrupted rerun never shows an old report beside new
-  files), stages each new file under a temporary name, and on :meth:`OutputDir.commit`
-  renames them into place with the report last: a report's presence means the run is
-  complete. On any exception (KeyboardInterrupt included) the staged files are removed.
+* :class:`OutputDir`: a transaction over a command's output directory (``run``, ``sweep``,
+  ``synth``). It locks the directory (a second run into it is refused at once), removes the
+  command's files of the previous run there, as the directory's manifest
+  (``.bayesmachine-manifest.json``) lists them, the final report first (an interrupted rerun
+  never shows an old report beside new files); anything else in the directory is left alone.
+  It stages each new file under a temporary name, and on :meth:`OutputDir.commit` records them
+  in the manifest and renames them into place with the report last: a report's presence means
+  the run is complete. On any exception (KeyboardInterrupt and SIGTERM included) the staged
+  files are removed.
 * :class:`NpzWriter`: an ``.npz`` written array by array, one array possibly streamed in
   chunks along its first axis, so a volume larger than memory never has to be held.
 * :func:`require_memory`, :func:`require_disk`: refuse up front, with the size needed.
@@ -19,7 +22,10 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import fcntl
+import glob
 import itertools
+import json
 import os
 import shutil
 import threading
@@ -32,7 +38,10 @@ import numpy as np
 
 __all__ = [
     "atomic_file",
+    "MANIFEST",
+    "OutputBusyError",
     "OutputDir",
+    "read_manifest",
     "NpzWriter",
     "available_memory",
     "require_memory",
@@ -118,25 +127,99 @@ def atomic_write_text(path: str | Path, text: str) -> Path:
     return path
 
 
+MANIFEST = ".bayesmachine-manifest.json"
+
+
+class OutputBusyError(RuntimeError):
+    """Another process holds the output directory (a run is writing there now)."""
+
+
+def _lock(directory: Path) -> int | None:
+    """An exclusive lock on ``directory`` itself (flock on its descriptor: no lock file to leave
+    behind), held until the descriptor is closed; OutputBusyError if another process holds it."""
+    try:
+        fd = os.open(directory, os.O_RDONLY | os.O_DIRECTORY)
+    except OSError as exc:
+        raise _named(exc, directory) from exc
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(fd)
+        raise OutputBusyError(
+            f"{directory}: another run holds this output directory (it is writing there now); "
+            "wait for it to finish or choose another -o"
+        ) from None
+    except OSError:  # a filesystem without locks: go on unlocked rather than refuse to work
+        os.close(fd)
+        return None
+    return fd
+
+
+def _plain_name(name: object) -> bool:
+    return isinstance(name, str) and name not in ("", ".", "..", MANIFEST) and Path(name).name == name
+
+
+def read_manifest(directory: str | Path) -> list[str]:
+    """The file names ``directory``'s manifest says the project wrote there (none if it has none).
+
+    An unreadable or foreign manifest counts as none: then nothing is known to be ours and
+    nothing is removed."""
+    try:
+        data = json.loads((Path(directory) / MANIFEST).read_text())
+    except (OSError, ValueError):
+        return []
+    files = data.get("files") if isinstance(data, dict) else None
+    if not isinstance(files, list):
+        return []
+    return [f for f in files if _plain_name(f)]
+
+
+def _write_manifest(directory: Path, names: Iterable[str]) -> None:
+    record = {
+        "about": "files bayesmachine wrote into this directory; its next run here removes them first",
+        "files": list(names),
+    }
+    path = directory / MANIFEST
+    tmp = _temp_name(path)
+    try:
+        tmp.write_text(json.dumps(record, indent=1) + "\n")
+        _fsync_file(tmp)
+        os.replace(tmp, path)
+    except OSError as exc:
+        _remove(tmp)
+        raise _named(exc, path) from exc
+
+
 class OutputDir:
     """A transaction over the files one command writes into a directory.
 
-    ``names``: every file name the command can write there (stale ones are removed);
-    ``last``: the name committed last (the report).
+    ``names``: every file name the command can write there; ``last``: the name committed last
+    (the report). Entering locks the directory (:class:`OutputBusyError` while another run holds
+    it) and removes this command's files of the previous run there, as its manifest
+    (``MANIFEST``) lists them, the report first: only files the project wrote, never anything
+    else in the directory (another command's outputs listed there stay, and stay listed).
+    :meth:`commit` records the new files in the manifest, then renames them into place.
     """
 
     def __init__(self, directory: str | Path, names: Iterable[str], last: str) -> None:
         self.directory = Path(directory)
         self.names = tuple(dict.fromkeys([last, *names]))  # the report first when clearing
         self.last = last
+        bad = [n for n in self.names if not _plain_name(n)]
+        if bad:
+            raise ValueError(f"output names must be plain file names, got {bad}")
         self._staged: dict[str, Path] = {}
         self._committed = False
         self._created: list[Path] = []
+        self._lock: int | None = None
+        self._kept: list[str] = []
 
     def __enter__(self) -> OutputDir:
         d = self.directory
         if d.exists() and not d.is_dir():
-            raise NotADirectoryError(errno.ENOTDIR, "exists and is not a directory", str(d))
+            what = "is a file" if d.is_file() else "exists"
+            problem = f"{what}, not a directory (the outputs go into a directory)"
+            raise NotADirectoryError(errno.ENOTDIR, problem, str(d))
         # The directories this transaction creates go again if it fails while they are empty.
         missing = [p for p in (d, *d.parents) if not p.exists()]
         try:
@@ -144,18 +227,57 @@ class OutputDir:
         except OSError as exc:
             raise _named(exc, d) from exc
         self._created = missing
+        try:
+            self._lock = _lock(d)
+            self._clear()
+        except BaseException:
+            self._release()
+            raise
+        return self
+
+    def _clear(self) -> None:
+        d = self.directory
         for name in self.names:
+            if (d / name).is_dir():
+                raise IsADirectoryError(errno.EISDIR, "is a directory (an output file name)", str(d / name))
+        previous = read_manifest(d)
+        # This command's files of the previous run go; another command's files listed there (a
+        # sweep's in a run's OUT/) are complete outputs of their own: they stay, and stay listed.
+        stale = [n for n in previous if n in self.names]
+        self._kept = [n for n in previous if n not in self.names and (d / n).is_file()]
+        # The manifest lists them in commit order, the report last: that goes first, so an
+        # interrupted clear never leaves the report beside a part of its files.
+        for name in reversed(stale):
             target = d / name
             try:
-                if target.is_dir():
-                    raise IsADirectoryError(errno.EISDIR, "is a directory (an output file name)", str(target))
-                _remove(target)
-                # Temporary files a killed earlier run left behind.
-                for old in d.glob(f".{Path(name).stem}{_TMP_MARK}*{Path(name).suffix}"):
-                    _remove(old)
+                if not target.is_dir():
+                    _remove(target)
             except OSError as exc:
                 raise _named(exc, target) from exc
-        return self
+        # Temporary files a killed earlier run left behind (named by _temp_name: ours by their name).
+        for name in (*self.names, MANIFEST):
+            stem, suffix = Path(name).stem, Path(name).suffix
+            for old in d.glob(f".{glob.escape(stem)}{_TMP_MARK}*{glob.escape(suffix)}"):
+                try:
+                    _remove(old)
+                except OSError as exc:
+                    raise _named(exc, old) from exc
+        if self._kept:
+            _write_manifest(d, self._kept)
+        else:
+            try:
+                _remove(d / MANIFEST)
+            except OSError as exc:
+                raise _named(exc, d / MANIFEST) from exc
+
+    def _release(self) -> None:
+        if not self._committed:
+            for created in self._created:  # innermost first
+                with contextlib.suppress(OSError):
+                    created.rmdir()  # only if still empty
+        if self._lock is not None:
+            os.close(self._lock)
+            self._lock = None
 
     def path(self, name: str) -> Path:
         """The temporary path to write ``name`` to (committed under ``name``)."""
@@ -176,10 +298,17 @@ class OutputDir:
         return self.directory / name
 
     def commit(self) -> list[Path]:
-        """Rename the staged files into place, ``last`` at the very end; returns the final paths."""
+        """Rename the staged files into place, ``last`` at the very end; returns the final paths.
+
+        The manifest lists them before the first rename, so even a commit cut short leaves
+        nothing of this run that the next one would not remove."""
         order = [n for n in self._staged if n != self.last]
         if self.last in self._staged:
             order.append(self.last)
+        for name in order:
+            if not self._staged[name].exists():
+                raise FileNotFoundError(errno.ENOENT, "was never written", str(self.directory / name))
+        _write_manifest(self.directory, [*self._kept, *order])
         done = []
         for name in order:
             tmp, final = self._staged[name], self.directory / name
@@ -203,10 +332,7 @@ class OutputDir:
         # Whatever was not committed goes: never a half-written file under any name.
         for tmp in self._staged.values():
             _remove(tmp)
-        if not self._committed:
-            for created in self._created:  # innermost first
-                with contextlib.suppress(OSError):
-                    created.rmdir()  # only if still empty
+        self._release()
         if kind is None and not self._committed:
             raise RuntimeError("OutputDir left without commit()")
 

@@ -10,7 +10,10 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
+
+from bayesmachine.errors import ParameterError
+from bayesmachine.sources import SMTJ_SHARES, SOURCE_KINDS, check_source, source_kind
 
 __all__ = [
     "MachineParams",
@@ -30,12 +33,13 @@ __all__ = [
     "DEFAULT_PRIOR",
     "DEFAULT_TIE_BREAK",
     "DEFAULT_LANES",
+    "STEREO_ROWS_PER_BEAT",
     "lane_params",
+    "stereo_lanes",
 ]
 
-# Random source kinds; each has an entry in bayesmachine.sources.SOURCE_KINDS (same order).
-RNG_KINDS = ("lfsr", "lfsr-shared", "sobol", "external", "smtj")
-SMTJ_SHARES = ("operator", "column")
+# The random source kinds: the names of the one registry, bayesmachine.sources.SOURCE_KINDS.
+RNG_KINDS = tuple(SOURCE_KINDS)
 PRIORS = ("uniform", "loaded", "neighbour")
 TIE_BREAKS = ("nomatch-first", "lowest-index")
 
@@ -46,6 +50,8 @@ DEFAULT_WORD_BITS = 10
 DEFAULT_LFSR_BITS = 31
 DEFAULT_MAX_CYCLES = (1 << 20) - 1
 DEFAULT_LANES = 16
+# The on-chip front end (hdl.frontend) writes 6 rows' words per load beat: see stereo_lanes.
+STEREO_ROWS_PER_BEAT = 6
 # The paper's machine: Dmax 80 (82 rows), three data terms, counter max 16.
 DEFAULT_DMAX = 80
 DEFAULT_COLUMNS = 3
@@ -59,10 +65,6 @@ DEFAULT_TIE_BREAK = "nomatch-first"
 # Prior columns in the operator matrix per prior kind, and how many of them are loaded.
 _PRIOR_COLUMNS = {"uniform": 0, "loaded": 1, "neighbour": 2}
 _LOADED_PRIOR_COLUMNS = {"uniform": 0, "loaded": 1, "neighbour": 1}
-
-
-class ParameterError(ValueError):
-    """An impossible or unsupported machine parameter."""
 
 
 def _check_int(name: str, value: object, lo: int, hi: int | None = None) -> None:
@@ -160,8 +162,7 @@ class MachineParams:
         # <= 15: every word, up to 2**15 = 1.0, fits the 16-bit words of the host and the engines.
         _check_int("word_bits", self.word_bits, 1, 15)
         _check_int("counter_max", self.counter_max, 1, (1 << 24) - 1)
-        if self.rng not in RNG_KINDS:
-            raise ParameterError(f"rng must be one of {RNG_KINDS}, got {self.rng!r}")
+        source_kind(self.rng)  # a known kind; what the kind needs is checked last (check_source)
         _check_int("lfsr_bits", self.lfsr_bits, 3, 63)
         if self.lfsr_bits < self.word_bits + 2:
             raise ParameterError(
@@ -189,10 +190,6 @@ class MachineParams:
             raise ParameterError(
                 f"lanes ({self.lanes}) exceeds the words per pixel ({self.words_per_pixel})"
             )
-        if self.rng == "sobol":
-            from bayesmachine.sources.sobol import check_params  # the Sobol table's size
-
-            check_params(self)
         for name in ("smtj_dwell", "smtj_spread"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
@@ -204,6 +201,9 @@ class MachineParams:
             raise ParameterError(f"smtj_spread (log-sd) must be in [0, 1], got {self.smtj_spread}")
         if self.smtj_share not in SMTJ_SHARES:
             raise ParameterError(f"smtj_share must be one of {SMTJ_SHARES}, got {self.smtj_share!r}")
+        # Last, what only the random source knows (the Sobol table's size, the LFSR polynomials):
+        # the one place it is checked, so every holder of a MachineParams can build its source.
+        check_source(self)
 
     def _check_feedback(self) -> None:
         words = self.feedback_words
@@ -323,6 +323,12 @@ def lane_params(params: MachineParams, lane: int) -> MachineParams:
     so every lane draws its own LFSR polynomials and start states.
     """
     _check_int("lane", lane, 0)
-    from dataclasses import replace
-
     return replace(params, seed=(params.seed + lane * _LANE_SEED_STEP) % (1 << 64))
+
+
+def stereo_lanes(params: MachineParams) -> int:
+    """The on-chip front end's default lane count (``hdl.frontend``, ``--top stereo``, ``--feed
+    pixels``): the words of :data:`STEREO_ROWS_PER_BEAT` rows per beat, a multiple of the operator
+    columns since the front end writes one feature per lane (18 words: 14 beats per pixel at Dmax 80,
+    below the 17 cycles of the shortest run at counter max 16)."""
+    return min(STEREO_ROWS_PER_BEAT, params.rows) * params.operator_columns

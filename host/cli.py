@@ -24,6 +24,8 @@ from bayesmachine.cliargs import (
     counter_max_list,
     machine_params_from_args,
     model_params_from_args,
+    output_path,
+    positive_float_arg,
     rng_list,
     runnable_sources,
 )
@@ -52,6 +54,9 @@ DEFAULTS = ModelParams()
 RUN_OUTPUTS = ("report.json", "result.npz", "disparity.png", "waves.vcd")
 SWEEP_OUTPUTS = ("sweep.json", "sweep.png")
 SWEEP_COUNTER_MAX = [1, 2, 4, 8, 16, 32]
+# A random source's device options (MachineParams.to_dict keys): per point in sweep.json, as they
+# apply to the points of that source only.
+_DEVICE_FIELDS = ("smtj_dwell", "smtj_spread", "smtj_share")
 
 
 def _add_input_options(p: argparse.ArgumentParser, optional: bool) -> None:
@@ -83,8 +88,10 @@ def _load_inputs(
     else:
         left, right = load_image(args.left), load_image(args.right)
         source = f"{args.left} {args.right}"
+    if getattr(args, "gt_scale", None) is not None and not getattr(args, "gt", None):
+        raise ValueError("--gt-scale: it scales the --gt file; give --gt too")
     if with_gt and getattr(args, "gt", None):
-        gt = load_gt(args.gt)
+        gt = load_gt(args.gt, scale=args.gt_scale)
     if left.shape != right.shape:
         raise ValueError(f"left and right images differ in shape: {left.shape} vs {right.shape}")
     if gt is not None and gt.shape != left.shape:
@@ -153,11 +160,21 @@ def _add_machine_options(p: argparse.ArgumentParser, sweep: bool) -> None:
             "(row-major over the output region, from 0) are in the machine",
         )
     p.add_argument(
-        "--gt", default=None, help="ground-truth disparity (.pfm, .npy, or an image with 0 = unknown)"
+        "--gt", default=None,
+        help="ground-truth disparity: .pfm (floats, inf = unknown), .npy (numbers, non-finite = unknown) "
+        "or a one-channel image (0 = unknown; 8-bit at face value, 16-bit only with --gt-scale); "
+        "negative disparities are refused",
+    )
+    p.add_argument(
+        "--gt-scale", type=positive_float_arg, default=None, metavar="S",
+        help="the --gt file stores disparity x S: divide by S (256 for KITTI's 16-bit PNGs; 4 for "
+        "Middlebury 2003's quarter-size disp*.png); default 1, required for 16-bit images",
     )
     p.add_argument("--no-sgbm", action="store_true", help="skip the OpenCV StereoSGBM comparison")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
-    p.add_argument("-o", "--output", required=True, type=Path, metavar="OUT/", help="output directory")
+    p.add_argument("-o", "--output", required=True, type=output_path, metavar="OUT/",
+                   help="output directory; only files bayesmachine wrote there are ever replaced or removed, "
+                   "and one run at a time may write into it")
 
 
 def _machine_params(
@@ -169,7 +186,7 @@ def _machine_params(
     machine = machine_params_from_args(args, model.dmax, **overrides)
     if getattr(args, "feed", "words") == "pixels" and args.lanes is None:
         # The front end writes one feature per lane: lanes a multiple of the operator columns.
-        from bayesmachine.hdl.frontend.stereo import stereo_lanes
+        from bayesmachine.params import stereo_lanes
 
         machine = dataclasses.replace(machine, lanes=stereo_lanes(machine))
     _check_host_rng(machine)
@@ -389,6 +406,9 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
             report = _report(outcome, source, args.crop)
             for key in ("input", "crop", "image_shape", "output_shape", "ground_truth", "model", "machine"):
                 report.pop(key)
+            device = {k: v for k, v in machine.to_dict().items() if k in _DEVICE_FIELDS}
+            if device:  # the device options are the smtj points' own (--rng smtj,sobol --smtj-dwell 2)
+                report["device"] = device
             points.append(report)
             del outcome  # one run's per-pixel results at a time
             if not args.quiet:
@@ -403,7 +423,8 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
             "total_seconds": time.perf_counter() - t0,
             "model": model.to_dict(),
             "rng": kinds,
-            "machine": {k: v for k, v in machines[0].to_dict().items() if k not in ("counter_max", "rng")},
+            "machine": {k: v for k, v in machines[0].to_dict().items()
+                        if k not in ("counter_max", "rng", *_DEVICE_FIELDS)},
             "points": points,
         }
         from .plots import save_sweep_figure
@@ -428,7 +449,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     )
     _add_input_options(p, optional=False)
     add_model_options(p)
-    p.add_argument("-o", "--output", required=True, type=Path, metavar="REF.npz", help="output .npz file")
+    p.add_argument("-o", "--output", required=True, type=output_path, metavar="REF.npz",
+                   help="output .npz file")
     p.add_argument("--quiet", action="store_true", help="no summary line")
     p.set_defaults(func=_cmd_reference)
 
@@ -437,8 +459,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         help="run the machine on a stereo pair and compare it with the reference",
         description="Run the stochastic machine on a rectified pair (default: the bundled Motorcycle pair "
         "with its ground truth); write OUT/report.json, OUT/result.npz and OUT/disparity.png "
-        "(and OUT/waves.vcd with --waves). Files from an earlier run into OUT are removed first; "
-        "report.json is written last, so its presence means the run is complete.",
+        "(and OUT/waves.vcd with --waves). The files of an earlier run into OUT (as "
+        "OUT/.bayesmachine-manifest.json lists them) are removed first, nothing else there; report.json is "
+        "written last, so its presence means the run is complete. A second run into the same OUT is refused "
+        "while the first is writing.",
     )
     _add_input_options(p, optional=True)
     add_model_options(p)

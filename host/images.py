@@ -3,7 +3,10 @@
 Every image the host processes is a rectified 8-bit grayscale array (H, W) uint8.
 Colour inputs are converted with OpenCV (``cv2.cvtColor``, BGR order as ``cv2.imread``
 returns it; the bundled pair is RGB and converted as such). Ground-truth disparity maps
-are float arrays of the same shape with non-finite values for "unknown".
+are float32 arrays of the same shape with ``inf`` for "unknown", decoded from what a file
+stores by one function, :func:`decode_disparity` (formats: :data:`GT_FORMATS`).
+OpenCV's own log is silenced while it reads a file: a file it cannot read gives our one
+error line, not its ``[ WARN ]``/``[ERROR]`` lines first.
 """
 
 from __future__ import annotations
@@ -26,6 +29,8 @@ __all__ = [
     "to_gray",
     "load_image",
     "load_gt",
+    "decode_disparity",
+    "GT_FORMATS",
     "bundled_pair",
     "validate_pair",
     "random_dot_stereogram",
@@ -103,11 +108,24 @@ def _check_readable(path: Path, what: str) -> None:
         raise PermissionError(13, "permission denied (cannot read it)", str(path))
 
 
+def _imread(path: Path) -> np.ndarray | None:
+    """``cv2.imread(path, IMREAD_UNCHANGED)`` with OpenCV's log silenced (None if it cannot read it)."""
+    log = getattr(getattr(cv2, "utils", None), "logging", None)
+    if log is None:  # an OpenCV without the logging module: read as is
+        return cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    previous = log.getLogLevel()
+    log.setLogLevel(log.LOG_LEVEL_SILENT)
+    try:
+        return cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    finally:
+        log.setLogLevel(previous)
+
+
 def load_image(path: str | Path) -> np.ndarray:
     """Read an 8-bit image file with OpenCV and return it as gray (H, W) uint8."""
     path = Path(path)
     _check_readable(path, "image file")
-    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    image = _imread(path)
     if image is None:
         raise ValueError(f"cannot read {path} as an image (not an image, or an unknown or corrupt format)")
     if image.dtype != np.uint8:
@@ -126,33 +144,78 @@ def _load_npy(path: Path) -> np.ndarray:
         raise ValueError(f"{path} is not a NumPy array of numbers: {exc}") from None
     except (EOFError, OSError) as exc:
         raise ValueError(f"{path} is not a readable NumPy array file (truncated or corrupt: {exc})") from None
-    if not (np.issubdtype(gt.dtype, np.integer) or np.issubdtype(gt.dtype, np.floating)):
-        raise ValueError(f"{path}: a disparity map must hold integers or floats, got {gt.dtype}")
     return gt
 
 
-def load_gt(path: str | Path) -> np.ndarray:
-    """Read a ground-truth disparity map as float32, non-finite = unknown.
+GT_FORMATS = (
+    "accepted: .pfm (floats, inf = unknown), .npy (numbers, non-finite = unknown), a one-channel "
+    "image (integers, 0 = unknown; 8-bit at face value, 16-bit with --gt-scale, e.g. 256 for KITTI)"
+)
 
-    ``.npy``: the array as stored. ``.pfm`` (Middlebury): floats, inf = unknown.
-    Any other image format: pixel values are disparities and 0 means unknown.
+
+def decode_disparity(
+    raw: np.ndarray, name: str, *, image: bool, scale: float | None = None
+) -> np.ndarray:
+    """The one decoding of a stored disparity map: float32 disparities, ``inf`` = unknown.
+
+    ``image``: ``raw`` is an image file's pixels: integer pixels are disparities with 0 =
+    unknown, and wider than 8 bits they are stored scaled (KITTI: disparity x 256), so a
+    ``scale`` must be given. Otherwise (``.npy``, the bundled map) the numbers as stored.
+    Floats of either kind: non-finite = unknown (Middlebury's ``.pfm``: inf). ``scale``
+    divides every value (default 1). Refused, with what is accepted: several channels
+    that differ (a colour image, not a map), any other shape or type, negative disparities.
+    """
+    a = np.asarray(raw)
+    if a.ndim == 3 and a.shape[2] > 1:
+        if not all(np.array_equal(a[:, :, c], a[:, :, 0], equal_nan=a.dtype.kind == "f")
+                   for c in range(1, a.shape[2])):
+            raise ValueError(f"{name}: a colour image ({a.shape[2]} channels that differ), not a disparity "
+                             f"map of one channel; {GT_FORMATS}")
+    if a.ndim == 3:
+        a = a[:, :, 0]  # one channel, or several equal ones
+    if a.ndim != 2:
+        raise ValueError(f"{name}: a disparity map must be 2-D, got shape {a.shape}")
+    if not (np.issubdtype(a.dtype, np.integer) or np.issubdtype(a.dtype, np.floating)):
+        raise ValueError(f"{name}: a disparity map must hold integers or floats, got {a.dtype}; {GT_FORMATS}")
+    if scale is not None and not (np.isfinite(scale) and scale > 0):
+        raise ValueError(f"{name}: the ground-truth scale must be a finite number > 0, got {scale}")
+    integers = np.issubdtype(a.dtype, np.integer)
+    if image and integers and a.dtype.itemsize > 1 and scale is None:
+        raise ValueError(
+            f"{name}: a {8 * a.dtype.itemsize}-bit image stores its disparities scaled; say by how much "
+            "with --gt-scale (--gt-scale 256 for KITTI, whose PNGs hold disparity x 256, 0 = unknown)"
+        )
+    unknown = (a == 0) if image and integers else ~np.isfinite(a)
+    negative = (a < 0) & ~unknown
+    if negative.any():
+        raise ValueError(
+            f"{name}: {int(negative.sum())} negative disparities (the smallest {a[negative].min():g}); "
+            "disparities are >= 0, unknown ones "
+            + ("0 in an image" if image and integers else "inf or nan")
+        )
+    d = a.astype(np.float64)
+    if scale is not None:
+        d = d / scale
+    return np.where(unknown, np.inf, d).astype(np.float32)
+
+
+def load_gt(path: str | Path, scale: float | None = None) -> np.ndarray:
+    """Read a ground-truth disparity map as float32, inf = unknown (:func:`decode_disparity`).
+
+    ``.npy``: the numbers as stored, non-finite = unknown. ``.pfm`` (Middlebury): floats,
+    inf = unknown. Any other image format: one channel (or equal ones) of integer
+    disparities with 0 = unknown, 16-bit ones only with a ``scale``. ``scale``: the file
+    stores disparity x ``scale`` (``--gt-scale``).
     """
     path = Path(path)
     _check_readable(path, "ground-truth file")
     if path.suffix.lower() == ".npy":
-        gt = _load_npy(path)
-    else:
-        gt = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-        if gt is None:
-            raise ValueError(f"cannot read {path} as a disparity map (not an image, .pfm or .npy)")
-        if gt.ndim == 3:
-            gt = gt[:, :, 0]
-        if not np.issubdtype(gt.dtype, np.floating):
-            gt = np.where(gt == 0, np.inf, gt)
-    gt = np.asarray(gt, dtype=np.float32)
-    if gt.ndim != 2:
-        raise ValueError(f"{path}: a disparity map must be 2-D, got shape {gt.shape}")
-    return gt
+        return decode_disparity(_load_npy(path), str(path), image=False, scale=scale)
+    raw = _imread(path)
+    if raw is None:
+        raise ValueError(f"cannot read {path} as a disparity map (not an image, or a corrupt .pfm); "
+                         f"{GT_FORMATS}")
+    return decode_disparity(raw, str(path), image=True, scale=scale)
 
 
 def bundled_pair() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -163,7 +226,8 @@ def bundled_pair() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     from skimage import data
 
     left, right, gt = data.stereo_motorcycle()
-    return to_gray(left, rgb=True), to_gray(right, rgb=True), np.asarray(gt, dtype=np.float32)
+    gt = decode_disparity(gt, "the bundled Motorcycle ground truth", image=False)
+    return to_gray(left, rgb=True), to_gray(right, rgb=True), gt
 
 
 def validate_pair(left: np.ndarray, right: np.ndarray, dmax: int) -> None:

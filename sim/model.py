@@ -4,8 +4,10 @@ One model of the whole machine, bit for bit: given the parameters (hence the ran
 and the likelihood-memory words of a sequence of pixels, it returns per pixel the
 same counters, MAP, flags and cycle count as the RTL streams out after reset. The per-cycle
 rules are in ``docs/architecture.md``; the inner loop is compiled with numba so that whole
-frames run in seconds. Each on-chip random source has one kernel here (its twin), sharing the
-per-cycle bus/counter/encoder helpers; they build on ``bayesmachine.sources`` (no Amaranth).
+frames run in seconds. Two compiled kernels share the per-cycle bus/counter/encoder helpers:
+``_run_on_chip`` runs every on-chip random source (``lfsr``, ``lfsr-shared``, ``sobol``: their
+twins, from the definitions of ``bayesmachine.sources``, no Amaranth) and ``_run_numbers`` takes
+an off-chip source's numbers (``external``, ``smtj``).
 """
 
 from __future__ import annotations

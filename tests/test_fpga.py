@@ -203,7 +203,8 @@ def test_flow_keeps_every_register_copy(rng: str, tmp_path: Path) -> None:
 def test_small_machine_through_the_flow(target: str, rng: str, tmp_path: Path) -> None:
     import json
 
-    from bayesmachine.fpga.cli import synth
+    from bayesmachine.fpga.synth import synth
+    from bayesmachine.outputs import MANIFEST, read_manifest
 
     _require_fpga_tools(target)
     params = MachineParams.for_disparity(2, counter_max=3, word_bits=6, lfsr_bits=12, rng=rng)
@@ -211,7 +212,9 @@ def test_small_machine_through_the_flow(target: str, rng: str, tmp_path: Path) -
     report = synth(params, target, out, measure=False, progress=False)
     assert json.loads((out / "report.json").read_text()) == report
     assert (out / "report.md").read_text().startswith(f"# bayesmachine synth: {target}")
-    assert not [f for f in out.iterdir() if f.name.startswith(".")]  # no temporary files left
+    # No temporary files left; the manifest lists what synth committed (a rerun removes only those).
+    assert [f.name for f in out.iterdir() if f.name.startswith(".")] == [MANIFEST]
+    assert read_manifest(out) == ["report.md", "report.json"]
     res = report["resources"]
     # Nothing trimmed: at least both memories, the prefetched comparator bits and (lfsr) the LFSRs.
     per_operator = 2 * params.memory_word_width + 1 + (params.lfsr_bits if rng == "lfsr" else 0)
@@ -229,8 +232,8 @@ def test_small_stereo_machine_through_yosys(tmp_path: Path) -> None:
     memories in block RAM, and the report's stereo fields (throughput from the model on the pair)."""
     import json
 
-    from bayesmachine.fpga.cli import synth
     from bayesmachine.fpga.report import markdown, stereo_throughput
+    from bayesmachine.fpga.synth import synth
     from bayesmachine.hdl.frontend.stereo import stereo_machine_params
     from bayesmachine.likelihood import ModelParams
 
@@ -303,7 +306,7 @@ def test_synth_command_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]
     assert not out.exists()
     assert main(["synth", "--target", "ecp5-85k", "--counter-max", "0", "-o", str(out)]) == 2
     assert "counter" in capsys.readouterr().err
-    from bayesmachine.fpga.cli import synth
+    from bayesmachine.fpga.synth import synth
 
     out = tmp_path / "never"
     with pytest.raises(ValueError, match="disparity machine"):  # refused before any tool runs
@@ -347,7 +350,7 @@ def test_synth_help_describes_the_stereo_top(capsys: pytest.CaptureFixture[str])
 @pytest.mark.slow
 def test_full_lane_on_ecp5_85k(tmp_path: Path) -> None:
     # One full lane (Dmax 80, N 3, counter max 16, the default source) through Yosys and nextpnr: minutes.
-    from bayesmachine.fpga.cli import synth
+    from bayesmachine.fpga.synth import synth
 
     _require_fpga_tools("ecp5-85k")
     params = MachineParams.for_disparity(80)

@@ -7,7 +7,16 @@ import numpy as np
 import pytest
 
 from bayesmachine import outputs
-from bayesmachine.outputs import NpzWriter, OutputDir, atomic_file, atomic_write_text, format_bytes
+from bayesmachine.outputs import (
+    MANIFEST,
+    NpzWriter,
+    OutputBusyError,
+    OutputDir,
+    atomic_file,
+    atomic_write_text,
+    format_bytes,
+    read_manifest,
+)
 
 
 def names(d: Path) -> list[str]:
@@ -72,30 +81,91 @@ def test_atomic_file_os_error_names_the_target(tmp_path: Path) -> None:
         pass
 
 
-def test_output_dir_commits_report_last_and_clears_stale_files(tmp_path: Path, monkeypatch) -> None:
+def _transaction(out: Path, files: dict[str, str]) -> list[Path]:
+    with OutputDir(out, ("report.json", "data.npz", "waves.vcd"), last="report.json") as od:
+        for name, text in files.items():
+            od.write(name, lambda p, text=text: p.write_text(text))
+        return od.commit()
+
+
+def test_output_dir_commits_report_last_and_clears_its_own_stale_files(tmp_path: Path, monkeypatch) -> None:
     out = tmp_path / "out"
-    out.mkdir()
-    for stale in ("report.json", "waves.vcd", ".data.partial-99.npz"):
-        (out / stale).write_text("stale")
+    # An earlier run of ours wrote three files (a trace among them); a killed one left a temporary file.
+    _transaction(out, {"report.json": "old", "data.npz": "old", "waves.vcd": "old"})
+    assert names(out) == [MANIFEST, "data.npz", "report.json", "waves.vcd"]
+    assert read_manifest(out) == ["data.npz", "waves.vcd", "report.json"]  # commit order, report last
+    (out / ".data.partial-99.npz").write_text("stale")
     (out / "notes.txt").write_text("the user's")
     renamed = []
-    real_replace = os.replace
+    removed = []
+    real_replace, real_unlink = os.replace, Path.unlink
 
     def spy(src, dst):
         renamed.append(Path(dst).name)
         real_replace(src, dst)
 
+    def spy_unlink(self, *args, **kwargs):
+        removed.append(self.name)
+        real_unlink(self, *args, **kwargs)
+
     monkeypatch.setattr(outputs.os, "replace", spy)
+    monkeypatch.setattr(Path, "unlink", spy_unlink)
     with OutputDir(out, ["report.json", "data.npz", "waves.vcd"], last="report.json") as od:
         assert names(out) == ["notes.txt"]  # every stale output of ours is gone before any work
+        assert removed[0] == "report.json"  # the old report first: never beside a part of its run
         od.write("report.json", lambda p: p.write_text("{}"))  # staged first, still committed last
         od.write("data.npz", lambda p: np.savez(p, a=np.arange(3)))
         staged = [n for n in names(out) if n != "notes.txt"]
         assert len(staged) == 2 and all(n.startswith(".") and ".partial-" in n for n in staged)
         written = od.commit()
-    assert renamed == ["data.npz", "report.json"] and [p.name for p in written] == renamed
-    assert names(out) == ["data.npz", "notes.txt", "report.json"]
+    assert renamed[-2:] == ["data.npz", "report.json"] and [p.name for p in written] == renamed[-2:]
+    assert names(out) == [MANIFEST, "data.npz", "notes.txt", "report.json"]  # no trace of the old run
+    assert read_manifest(out) == ["data.npz", "report.json"]
     np.testing.assert_array_equal(np.load(out / "data.npz")["a"], np.arange(3))
+
+
+def test_output_dir_never_removes_files_it_did_not_write(tmp_path: Path) -> None:
+    """Files under an output's name that no run of ours wrote there (no manifest lists them) stay;
+    one that this run writes is replaced, and from then on it is ours."""
+    out = tmp_path
+    for name in ("waves.vcd", "report.json", "data.npz"):
+        (out / name).write_text("the user's")
+    with OutputDir(out, ["report.json", "data.npz", "waves.vcd"], last="report.json") as od:
+        assert names(out) == ["data.npz", "report.json", "waves.vcd"]
+        od.write("report.json", lambda p: p.write_text("new"))
+        od.commit()
+    assert (out / "waves.vcd").read_text() == "the user's" and (out / "data.npz").read_text() == "the user's"
+    assert (out / "report.json").read_text() == "new"
+    _transaction(out, {"report.json": "newer"})
+    assert (out / "waves.vcd").read_text() == "the user's" and (out / "data.npz").read_text() == "the user's"
+    # Another command's outputs listed in the manifest (a sweep's, in a run's OUT/) stay, and stay listed.
+    with OutputDir(out, ["sweep.json"], last="sweep.json") as od:
+        od.write("sweep.json", lambda p: p.write_text("sweep"))
+        od.commit()
+    _transaction(out, {"report.json": "again"})
+    assert (out / "sweep.json").read_text() == "sweep"
+    assert read_manifest(out) == ["sweep.json", "report.json"]
+    with OutputDir(out, ["sweep.json"], last="sweep.json") as od:  # the sweep's rerun removes its own
+        assert not (out / "sweep.json").exists() and (out / "report.json").read_text() == "again"
+        od.write("sweep.json", lambda p: p.write_text("sweep 2"))
+        od.commit()
+    assert read_manifest(out) == ["report.json", "sweep.json"]
+    # A manifest that is not ours, or names outside the directory, removes nothing.
+    (out / MANIFEST).write_text('{"files": ["../x", "/etc/passwd", "waves.vcd/..", ".", 3]}')
+    (tmp_path.parent / "x").write_text("outside")
+    _transaction(out, {"report.json": "newest"})
+    assert (tmp_path.parent / "x").exists() and (out / "waves.vcd").exists()
+
+
+def test_output_dir_is_held_by_one_run(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    with OutputDir(out, ["r.json"], last="r.json") as od:
+        with pytest.raises(OutputBusyError, match="another run holds this output directory"):
+            with OutputDir(out, ["r.json"], last="r.json"):
+                pass
+        od.write("r.json", lambda p: p.write_text("{}"))
+        od.commit()
+    _transaction(out, {"report.json": "{}"})  # released: the next run goes ahead
 
 
 def _disk_full(path: Path) -> None:
@@ -120,8 +190,9 @@ def test_output_dir_rejects_unknown_names_and_uncommitted_exit(tmp_path: Path) -
     assert names(tmp_path) == []
     f = tmp_path / "file"
     f.write_text("")
-    with pytest.raises(NotADirectoryError), OutputDir(f, ["a"], last="a"):
-        pass
+    with pytest.raises(NotADirectoryError, match="is a file, not a directory"):
+        with OutputDir(f, ["a"], last="a"):
+            pass
 
 
 def test_npz_writer_streams_chunks(tmp_path: Path) -> None:

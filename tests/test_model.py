@@ -201,3 +201,52 @@ def test_small_disparity_machines_get_a_load_stream_no_wider_than_a_pixel() -> N
 def test_impossible_parameters_name_the_problem(kwargs: dict, message: str) -> None:
     with pytest.raises(ParameterError, match=message):
         MachineParams(**kwargs)
+
+
+def test_params_run_the_sources_own_checks() -> None:
+    """One validation path: a MachineParams is a machine whose random source can be built (the
+    source registry's check runs as the last step of MachineParams validation)."""
+    # L = 12, W = 10: taps <= 2 leave no primitive polynomial; only on-chip kinds need one.
+    for rng in ("lfsr", "lfsr-shared", "sobol"):  # sobol's digital shifts come from column LFSRs
+        with pytest.raises(ParameterError, match="lfsr_bits = 12: no primitive LFSR polynomial"):
+            MachineParams.for_disparity(4, rng=rng, lfsr_bits=12)
+    for rng in ("external", "smtj"):
+        assert MachineParams.for_disparity(4, rng=rng, lfsr_bits=12).lfsr_bits == 12
+    # The Sobol table holds 16 dimensions: one per operator column, a loaded prior's included.
+    with pytest.raises(ParameterError, match="at most 16 operator columns .* has 17"):
+        MachineParams(rows=2, columns=16, rng="sobol", prior="loaded", lanes=2)
+    assert MachineParams(rows=2, columns=16, rng="lfsr", prior="loaded", lanes=2).operator_columns == 17
+    with pytest.raises(ParameterError, match="rng must be one of lfsr, lfsr-shared, sobol, external, smtj"):
+        MachineParams(rows=4, rng=["sobol"])  # type: ignore[arg-type]
+
+
+def test_sources_do_not_import_params_at_run_time() -> None:
+    """params imports the source registry at module level; a source module imports params only for
+    type checking (or inside a function), so there is no import cycle between them."""
+    import ast
+    from pathlib import Path
+
+    import bayesmachine.sources as sources
+
+    for path in sorted(Path(sources.__file__).parent.glob("*.py")):
+        for node in ast.parse(path.read_text()).body:  # module level; `if TYPE_CHECKING:` is an If
+            names = ([node.module or ""] if isinstance(node, ast.ImportFrom)
+                     else [a.name for a in node.names] if isinstance(node, ast.Import) else [])
+            assert "bayesmachine.params" not in names, f"{path.name} imports bayesmachine.params"
+    code = "import bayesmachine.sources.sobol, bayesmachine.sources.lfsr, bayesmachine.sources.smtj"
+    subprocess.run([sys.executable, "-c", code], check=True)
+    # The parameters stay light: the registry they validate through needs no NumPy.
+    code = "import sys, bayesmachine.params; assert 'numpy' not in sys.modules"
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_front_end_lanes_are_defined_once() -> None:
+    from bayesmachine.hdl.frontend import stereo
+    from bayesmachine.params import stereo_lanes
+
+    assert stereo.stereo_lanes is stereo_lanes
+    # 6 rows of the operator columns per beat: 18 words, 14 beats per pixel at Dmax 80.
+    p = stereo.stereo_machine_params(80)
+    assert (p.lanes, p.beats_per_pixel) == (18, 14)
+    assert stereo_lanes(MachineParams.for_disparity(80, prior="loaded")) == 24
+    assert stereo_lanes(MachineParams.for_disparity(2)) == 4 * 3  # fewer rows than 6: all of them

@@ -210,15 +210,22 @@ def test_model_and_rtl_agree_on_smtj_numbers(dwell: float, share: str) -> None:
     want = MachineModel(params).run(words)
     assert int(want.cycles.sum()) > 12 * (params.counter_max + 1) - 1
     assert_same_results(PysimEngine(params).run(words), want)
-    # ... and those are exactly the device model's numbers, as a caller could pass them.
-    numbers = SMTJSource(params).take(int(want.cycles.sum()))
+    # ... and those numbers are the devices' states, read once per compute cycle and packed as
+    # docs/smtj.md says: bit k of operator o = r * C + c from device o * W + k ("operator") or
+    # c * W + k ("column"). Packed here from the bank's own per-device samples, not by SMTJSource.
+    w, cols = params.word_bits, params.operator_columns
+    devices = w * (params.operators if share == "operator" else cols)
+    states = TelegraphBank(devices, dwell, 0.5, params.smtj_spread, params.seed).take(int(want.cycles.sum()))
+    first = [(o if share == "operator" else o % cols) * w for o in range(params.operators)]
+    numbers = np.stack([sum(states[:, f + k].astype(np.int64) << k for k in range(w)) for f in first], axis=1)
     assert_same_results(MachineModel(params).run(words, numbers), want)
 
 
 def test_verilator_agrees_on_smtj_numbers(verilator_toolchain: object, verilator_cache: object) -> None:
     from bayesmachine.sim.verilator import VerilatorEngine
 
-    params = small_params(rng="smtj", smtj_dwell=20.0, seed=5)
+    # The RTL (hence the Verilator build, shared in a session) of test_engines' external machine.
+    params = MachineParams.for_disparity(6, lanes=4, rng="smtj", smtj_dwell=20.0, seed=5, max_cycles=60)
     words = synthetic_disparity_words(params, 40, np.random.default_rng(8))
     want = MachineModel(params).run(words)
     with VerilatorEngine(params, build_dir=verilator_cache) as eng:
@@ -353,6 +360,7 @@ def test_run_and_sweep_options_build_smtj_machines() -> None:
             _machine_params(args, model_params_from_args(args), 16)
 
 
+@pytest.mark.slow  # a benchmark script end to end (20 s)
 def test_study_script_runs_and_writes_complete_outputs(tmp_path) -> None:
     import json
     import subprocess

@@ -4,29 +4,73 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
 from bayesmachine.cli import main
+from bayesmachine.host.features import feature_sums
+from bayesmachine.host.images import bundled_pair, crop_image, parse_crop
+from bayesmachine.host.likelihoods import memory_words
+from bayesmachine.likelihood import ModelParams
 from bayesmachine.params import MachineParams
+from bayesmachine.sim.model import MachineModel
 
 CROP = ["--crop", "300,200,60,16", "--dmax", "16", "--no-sgbm", "--quiet"]  # 12 x 40 output pixels
+ON_CHIP = ("lfsr", "lfsr-shared", "sobol")
 
 
-@pytest.mark.parametrize("rng", ["lfsr", "lfsr-shared", "sobol"])
-def test_run_with_each_on_chip_source(tmp_path, rng: str) -> None:
-    out = tmp_path / rng
-    assert main(["run", *CROP, "--counter-max", "8", "--rng", rng, "-o", str(out)]) == 0
-    report = json.loads((out / "report.json").read_text())
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[dict, dict[str, np.ndarray]]]:
+    """``run`` with each on-chip source, and with no ``--rng`` ("default"): (report, result.npz)."""
+    out: dict[str, tuple[dict, dict[str, np.ndarray]]] = {}
+    for name in (*ON_CHIP, "default"):
+        path = tmp_path_factory.mktemp(name)
+        rng = [] if name == "default" else ["--rng", name]
+        assert main(["run", *CROP, "--counter-max", "8", *rng, "-o", str(path)]) == 0
+        with np.load(path / "result.npz") as npz:
+            out[name] = json.loads((path / "report.json").read_text()), dict(npz)
+    return out
+
+
+def _model_result(rng: str) -> dict[str, np.ndarray]:
+    """What the model gives for the same crop and machine, computed without the command line."""
+    left, right, _ = bundled_pair()
+    crop = parse_crop("300,200,60,16")
+    model = ModelParams(dmax=16)
+    machine = MachineParams.for_disparity(16, counter_max=8, rng=rng)
+    words = memory_words(feature_sums(crop_image(left, crop)), feature_sums(crop_image(right, crop)),
+                         model, machine)
+    res = MachineModel(machine).run(words)
+    shape = (12, 40)
+    disp = np.where(res.nomatch | res.timeout, -1, res.map).reshape(shape)
+    return {"map": disp, "cycles": res.cycles.reshape(shape), "counts": res.counts.reshape(*shape, -1)}
+
+
+@pytest.mark.parametrize("rng", ON_CHIP)
+def test_run_with_each_on_chip_source(runs, rng: str) -> None:
+    report, result = runs[rng]
     assert report["rng"] == rng and report["machine"]["rng"] == rng and report["pixels"] == 12 * 40
+    want = _model_result(rng)
+    for field in ("map", "cycles", "counts"):
+        assert np.array_equal(result[field], want[field]), f"{rng}: {field} differs from the model's"
 
 
-def test_run_defaults_to_the_default_source(tmp_path) -> None:
-    out = tmp_path / "default"
-    assert main(["run", *CROP, "--counter-max", "2", "-o", str(out)]) == 0
-    assert json.loads((out / "report.json").read_text())["rng"] == MachineParams.rng
+def test_sources_give_different_results(runs) -> None:
+    """--rng is not ignored: each source's stream gives its own runs (cycles of 480 pixels)."""
+    cycles = {rng: runs[rng][1]["cycles"] for rng in ON_CHIP}
+    for a in ON_CHIP:
+        for b in ON_CHIP:
+            assert a == b or not np.array_equal(cycles[a], cycles[b]), (a, b)
 
 
-def test_sweep_compares_sources_side_by_side(tmp_path) -> None:
+def test_run_defaults_to_the_default_source(runs) -> None:
+    report, result = runs["default"]
+    assert report["rng"] == MachineParams.rng
+    for field in ("map", "cycles", "counts"):
+        assert np.array_equal(result[field], runs[MachineParams.rng][1][field]), field
+
+
+def test_sweep_compares_sources_side_by_side(tmp_path, runs) -> None:
     out = tmp_path / "sweep"
     assert main(["sweep", *CROP, "--counter-max", "2,8", "--rng", "lfsr,sobol", "-o", str(out)]) == 0
     sweep = json.loads((out / "sweep.json").read_text())
@@ -35,6 +79,11 @@ def test_sweep_compares_sources_side_by_side(tmp_path) -> None:
         ("lfsr", 2), ("lfsr", 8), ("sobol", 2), ("sobol", 8)
     ]
     assert (out / "sweep.png").stat().st_size > 0
+    # Each point ran its own source: at counter max 8, the same cycles as `run --rng` (which the
+    # model holds), and the two sources' frames differ.
+    frame = {p["rng"]: p["frame_cycles"] for p in sweep["points"] if p["counter_max"] == 8}
+    assert frame == {rng: int(runs[rng][1]["cycles"].sum()) for rng in ("lfsr", "sobol")}
+    assert frame["lfsr"] != frame["sobol"]
 
 
 @pytest.mark.parametrize(

@@ -164,6 +164,7 @@ def test_trace_pixel_range(cache: Path, tmp_path: Path) -> None:
 
 
 @needs_tools
+@pytest.mark.slow  # a full-size build; the default suite runs Dmax 80 through sobol's crop test
 def test_dmax80_crop(cache: Path) -> None:
     p = MachineParams.for_disparity(dmax=80, rng="lfsr")
     rng = np.random.default_rng(9)
@@ -320,6 +321,7 @@ def test_run_command_with_verilator_and_waves(cache: Path, tmp_path: Path,
 
 
 @needs_tools
+@pytest.mark.slow  # a full-size build; back-pressure in the default suite: the ODD machine's test
 def test_full_size_machine_with_random_back_pressure(cache: Path) -> None:
     """The Dmax = 80 machine with ``result.ready`` (and ``load.valid``) driven by a pseudo-random
     pattern: the stalls of the full-size design, held to the model pixel by pixel."""

@@ -242,3 +242,28 @@ def test_stereo_top_is_lint_clean_and_latch_free(
     assert proc.returncode == 0 and "%Warning" not in proc.stderr, proc.stderr[:3000]
     _yosys(yosys, "read_verilog bayesmachine.v; synth -flatten -top bayesmachine; check -assert; "
            "select -assert-none t:$dlatch t:$_DLATCH*", tmp_path)
+
+
+@pytest.mark.parametrize("rng", ["external", "smtj"])
+def test_stereo_top_exposes_an_off_chip_sources_entropy_port(
+    rng: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``emit --top stereo`` with an off-chip source: the top has the machine's entropy ports and
+    drives the machine's own (with ``smtj`` they were once missing and the machine's input tied to 0,
+    so every number was 0)."""
+    parser = argparse.ArgumentParser()
+    hdl_cli.register(parser.add_subparsers())
+    out = tmp_path / "bayesmachine.v"
+    args = parser.parse_args(["emit", "--top", "stereo", "--dmax", "3", "--width", "12", "--counter-max", "2",
+                              "--rng", rng, "-o", str(out)])
+    assert args.func(args) == 0
+    text = capsys.readouterr().out
+    operators, word_bits = 5 * 3, 10
+    assert re.search(rf"in\s+entropy\s+{operators * word_bits} bits", text)
+    assert re.search(r"out\s+entropy_ready\s+1 bits", text)
+    verilog = out.read_text()
+    top = verilog[: verilog.index("endmodule")]
+    assert f"input [{operators * word_bits - 1}:0] entropy;" in top
+    assert "output entropy_ready;" in top
+    # The machine instance's entropy input is the top's port, not a constant.
+    assert re.search(r"\.entropy\(entropy\)", top), re.findall(r"\.entropy\([^)]*\)", top)

@@ -1,25 +1,38 @@
 """Random sources of the stochastic operators: one registry, pure Python (no Amaranth).
 
-A source kind is a name in :data:`bayesmachine.params.RNG_KINDS` and an entry in
-:data:`SOURCE_KINDS`. On-chip kinds generate their numbers inside the design: an RTL generator
-in ``bayesmachine.hdl.sources`` and a twin kernel in ``bayesmachine.sim.model``, both built on
-the definitions of this package (``lfsr``: LFSR specs and polynomial search; ``sobol``:
-direction numbers and the per-cycle twin). Off-chip kinds take one W-bit number per operator
-per compute cycle on the machine's ``entropy`` port; ``numbers`` builds the seeded device
-model that engines use when a run gets no numbers (``external``: none, the caller passes them).
+A source kind is an entry in :data:`SOURCE_KINDS`, the one list of kinds
+(``bayesmachine.params.RNG_KINDS`` is its names). On-chip kinds generate their numbers inside
+the design: an RTL generator in ``bayesmachine.hdl.sources`` and a twin kernel in
+``bayesmachine.sim.model``, both built on the definitions of this package (``lfsr``: LFSR
+specs and polynomial search; ``sobol``: direction numbers and the per-cycle twin). Off-chip
+kinds take one W-bit number per operator per compute cycle on the machine's ``entropy`` port;
+``numbers`` builds the seeded device model that engines use when a run gets no numbers
+(``external``: none, the caller passes them).
+
+Each kind's ``check`` holds what only the source knows about a machine's parameters (the Sobol
+table's size, the LFSR polynomials of a length); ``MachineParams`` runs it (:func:`check_source`)
+as the last step of its validation, so a built ``MachineParams`` is a machine whose source can be
+built. ``params`` imports this package; its modules never import ``bayesmachine.params`` at module
+level (for type checking only): their functions take the parameter object and read its fields.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
-import numpy as np
+from bayesmachine.errors import ParameterError
 
-from bayesmachine.params import MachineParams, ParameterError
+if TYPE_CHECKING:  # params imports this package: no import of params (or numpy) when it does
+    import numpy as np
 
-__all__ = ["SOURCE_KINDS", "NumberSource", "SourceKind", "source_kind"]
+    from bayesmachine.params import MachineParams
+
+__all__ = ["SMTJ_SHARES", "SOURCE_KINDS", "NumberSource", "SourceKind", "check_source", "source_kind"]
+
+# ``rng = "smtj"``: W devices per operator, or W per operator column shared by its rows.
+SMTJ_SHARES = ("operator", "column")
 
 
 class NumberSource(Protocol):
@@ -43,7 +56,7 @@ class SourceKind:
     description: str
     numbers: Callable[[MachineParams], NumberSource] | None = None
     # What only the source knows about a machine's parameters (e.g. that LFSR polynomials of
-    # this length exist); raises ParameterError. Run by check_source before anything is built.
+    # this length exist); raises ParameterError. MachineParams runs it (check_source) when built.
     check: Callable[[MachineParams], None] | None = None
 
 
@@ -97,14 +110,17 @@ SOURCE_KINDS: dict[str, SourceKind] = {
 
 def source_kind(name: str) -> SourceKind:
     """The registry entry of a source kind; a clear error for an unknown name."""
-    try:
-        return SOURCE_KINDS[name]
-    except KeyError:
-        raise ParameterError(f"rng must be one of {', '.join(SOURCE_KINDS)}, got {name!r}") from None
+    kind = SOURCE_KINDS.get(name) if isinstance(name, str) else None
+    if kind is None:
+        raise ParameterError(f"rng must be one of {', '.join(SOURCE_KINDS)}, got {name!r}")
+    return kind
 
 
 def check_source(params: MachineParams) -> None:
-    """Raise ParameterError if the machine's random source cannot be built for ``params``."""
+    """Raise ParameterError if the machine's random source cannot be built for ``params``.
+
+    Part of ``MachineParams`` validation (its last step): callers holding a ``MachineParams`` need
+    not call it again."""
     kind = source_kind(params.rng)
     if kind.check is not None:
         kind.check(params)

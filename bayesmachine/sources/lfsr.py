@@ -25,8 +25,12 @@ import math
 import random
 from collections.abc import Iterator
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-from bayesmachine.params import DEFAULT_LFSR_BITS, MachineParams, ParameterError
+from bayesmachine.errors import ParameterError
+
+if TYPE_CHECKING:  # sources never import params at run time: params validates through them
+    from bayesmachine.params import MachineParams
 
 __all__ = [
     "MAX_TAPS",
@@ -280,6 +284,8 @@ def _has_primitive(length: int, max_tap: int) -> bool:
 
 
 def _no_polynomial(length: int, w: int) -> ParameterError:
+    from bayesmachine.params import DEFAULT_LFSR_BITS  # only for the message (no import cycle)
+
     return ParameterError(
         f"lfsr_bits = {length}: no primitive LFSR polynomial of that length has taps <= {length - w} "
         f"(lfsr_bits - word_bits) and at most 6 XOR inputs; choose another lfsr_bits "

@@ -38,11 +38,15 @@ that column (W per column instead of W per operator), like the shared pseudo-ran
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numba
 import numpy as np
 
-from bayesmachine.params import SMTJ_SHARES, MachineParams, ParameterError
+from bayesmachine.errors import ParameterError
+
+if TYPE_CHECKING:
+    from bayesmachine.params import MachineParams
 
 __all__ = ["SMTJSource", "TelegraphBank", "dwells", "flip_probabilities", "smtj_device_count"]
 
@@ -195,8 +199,6 @@ class SMTJSource:
     def __init__(self, params: MachineParams) -> None:
         if params.rng != "smtj":
             raise ParameterError(f"SMTJSource needs rng = 'smtj', got {params.rng!r}")
-        if params.smtj_share not in SMTJ_SHARES:  # MachineParams checks it; guard hand-made objects
-            raise ParameterError(f"smtj_share must be one of {SMTJ_SHARES}, got {params.smtj_share!r}")
         self.params = params
         self.operators = params.operators
         w, cols = params.word_bits, params.operator_columns

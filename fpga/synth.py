@@ -1,0 +1,206 @@
+"""The synthesis flow behind ``bayesmachine synth``: the machine (or the camera-fed StereoMachine)
+behind the pin-saving wrapper, through Yosys and nextpnr, and its report (see docs/fpga.md).
+
+:func:`synth` is the API (tests and benchmarks call it); ``fpga/cli.py`` only parses options and
+calls it. The output directory is an :class:`~bayesmachine.outputs.OutputDir`: held by one run at a
+time, the report committed last (its presence means a complete run), the tools' work files beside it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+import time
+from pathlib import Path
+
+from bayesmachine.hdl.frontend import DEFAULT_FIFO_PIXELS
+from bayesmachine.likelihood import ModelParams
+from bayesmachine.params import MachineParams
+from bayesmachine.sources import source_kind
+
+from .targets import get_target
+
+__all__ = ["measure_cycles", "synth", "SYNTH_OUTPUTS"]
+
+# The files synth commits into OUT (the report last); the tools' work files (top.il, synth.json,
+# pnr.json, logs) are written there as they run, synth.json reused while the RTL is unchanged.
+SYNTH_OUTPUTS = ("report.md", "report.json")
+
+
+def measure_cycles(params: MachineParams, progress: bool = True,
+                   model: ModelParams | None = None) -> dict[str, object]:
+    """Compute and wall cycles per pixel of ``params`` on the bundled pair (the model's cycles, and the
+    RTL's per-pixel timing ``pixel_wall_cycles`` on top: loading included). ``model``: the disparity
+    model whose words the machine runs on (default: the paper's, Dmax = rows - 2)."""
+    from bayesmachine.hdl.machine import pixel_wall_cycles
+    from bayesmachine.host.images import bundled_pair
+    from bayesmachine.host.run import prepare, run_machine
+
+    if not (params.nomatch_row and params.columns == 3):
+        raise ValueError("throughput is measured on a stereo pair: it needs a disparity machine "
+                         "(3 columns and a no-match row); pass --no-throughput")
+    left, right, _ = bundled_pair()
+    if model is None:
+        model = ModelParams(dmax=params.rows - 2)
+    elif model.dmax != params.rows - 2:
+        raise ValueError(f"model dmax {model.dmax} does not match the machine's {params.rows - 2}")
+    # The cycles need the machine only: no float64 reference.
+    prepared = prepare(left, right, model, reference=False)
+    c = run_machine(prepared, params, "model", progress=progress, chunk_rows=32).cycles.reshape(-1)
+    return {
+        "pair": f"bundled Middlebury Motorcycle {left.shape[1]}x{left.shape[0]}, model engine",
+        "pixels": int(c.size),
+        "compute_cycles_per_pixel": round(float(c.mean()), 3),
+        "wall_cycles_per_pixel": round(float(pixel_wall_cycles(params, c).mean()), 3),
+    }
+
+
+def synth(params: MachineParams, target_name: str, out: Path, *, machines: int = 1, pin_width: int = 8,
+          freq_mhz: float = 150.0, pnr_seed: int = 1, place: bool = True, measure: bool = True,
+          progress: bool = True, router: str = "router2", width: int | None = None,
+          model: ModelParams | None = None, fifo_pixels: int = DEFAULT_FIFO_PIXELS) -> dict:
+    """The whole flow; returns the report (also written to ``out/report.json`` and ``out/report.md``).
+
+    With ``width`` (pixels per image line) the design is the camera-fed ``StereoMachine`` of the
+    machine ``params``, the disparity ``model`` (default: the paper's, Dmax = rows - 2) and a FIFO
+    of ``fifo_pixels``, instead of the machine alone; one StereoMachine (``machines`` = 1).
+    Every parameter is checked before any file is written."""
+    from amaranth.back import rtlil
+    from amaranth.lib import wiring
+
+    from bayesmachine.hdl.emit import summary
+    from bayesmachine.hdl.frontend.stereo import StereoMachine, check_stereo_machine
+    from bayesmachine.hdl.lanes import MachineLanes
+    from bayesmachine.hdl.machine import BayesianMachine
+    from bayesmachine.outputs import OutputDir
+
+    from . import report as rep
+    from .flow import parse_nextpnr, place_and_route, require_tools, synthesize
+    from .wrapper import PinWrapper
+
+    target = get_target(target_name)
+    if isinstance(machines, bool) or not isinstance(machines, int) or machines < 1:
+        raise ValueError(f"machines must be a positive integer, got {machines!r}")
+    if not freq_mhz > 0:
+        raise ValueError(f"freq must be > 0 MHz, got {freq_mhz}")
+    if not source_kind(params.rng).on_chip:
+        raise ValueError(f"synth needs an on-chip random source, not {params.rng!r} (numbers on a port "
+                         "as wide as the matrix): --rng lfsr, lfsr-shared or sobol")
+    if measure and not (params.nomatch_row and params.columns == 3):
+        raise ValueError("throughput is measured on a stereo pair: it needs a disparity machine "
+                         "(3 columns and a no-match row); pass --no-throughput")
+    if width is None and model is not None:
+        raise ValueError("a disparity model is for the stereo top: give the image width too")
+    if width is not None and machines != 1:
+        raise ValueError(f"--top stereo is one StereoMachine (its front end feeds one machine), not "
+                         f"--machines {machines}")
+    if width is not None:
+        model = model if model is not None else ModelParams(dmax=params.rows - 2)
+        check_stereo_machine(params, model, width, fifo_pixels)
+    if isinstance(pin_width, bool) or not isinstance(pin_width, int) or not 1 <= pin_width <= 64:
+        raise ValueError(f"pin_width must be an integer in [1, 64], got {pin_width!r}")
+    t0 = time.monotonic()
+
+    def say(msg: str) -> None:
+        if progress:
+            print(f"[{time.monotonic() - t0:6.0f} s] {msg}", file=sys.stderr, flush=True)
+
+    require_tools(target, place)  # a missing tool or an unusable tool cache: said before any work
+    # The directory is held by this run alone; the previous run's report goes before any new work.
+    with OutputDir(out, SYNTH_OUTPUTS, last="report.json") as od:
+        # Every parameter is valid and the directory is ours: build (a component built but never
+        # elaborated, e.g. before a refused directory, would warn as unused).
+        core: wiring.Component
+        if width is not None:
+            core = StereoMachine(params=params, model=model, width=width, fifo_pixels=fifo_pixels)
+        else:
+            core = (BayesianMachine(params=params) if machines == 1
+                    else MachineLanes(params=params, machines=machines))
+        top = PinWrapper(core, pin_width=pin_width)
+        if width is not None:
+            say(f"elaborating the StereoMachine ({width}-pixel lines, {params.operators} operators) for "
+                f"{target.device}")
+        else:
+            say(f"elaborating {machines} machine(s) of {params.operators} operators for {target.device}")
+        text = rtlil.convert(top, name="top")
+        cells = synthesize(text, target, out, say)
+        res = rep.resources(target, cells)
+        report: dict = {
+            "target": target.name,
+            "device": target.device,
+            "machine": params.to_dict(),
+            "machine_summary": f"Dmax {params.rows - 2}, N {params.columns}, "
+            f"counter max {params.counter_max}, W {params.word_bits}, rng {params.rng}, "
+            f"{params.lanes} words per load beat",
+            "top": "stereo" if width is not None else "machine",
+            "stereo": None,
+            "lanes": machines,
+            "pin_width": pin_width,
+            "cells": cells,
+            "resources": res,
+            "utilization": rep.utilization(target, res),
+        }
+        if width is not None:
+            assert model is not None
+            report["stereo"] = {
+                "width": width,
+                "fifo_pixels": fifo_pixels,
+                "fifo_beats": fifo_pixels * params.beats_per_pixel,
+                "beats_per_pixel": params.beats_per_pixel,
+                "beat_bits": params.lanes * params.memory_word_width,
+                "model": dataclasses.asdict(model),
+                "input_bits": rep.PIXEL_BITS,
+            }
+        logic = rep.logic_cells(target, res)
+        report["per_lane"] = {"lut4": logic / machines, "ff": res["ff"] / machines,
+                              "bram": res["bram"] / machines, "dsp": res["dsp"] / machines}
+        report["per_operator"] = {"lut4": round(logic / (machines * params.operators), 2),
+                                  "ff": round(res["ff"] / (machines * params.operators), 2)}
+        report["lanes_fit"] = rep.lanes_that_fit(target, report["per_lane"], {})
+        if place:
+            pnr = parse_nextpnr(place_and_route(target, out, freq_mhz, pnr_seed, say, router))
+            report.update(pnr)
+            # Placed logic cells (a slice half or an iCE40 logic cell holds a LUT and a flip-flop) can
+            # bind before LUTs or flip-flops alone do: count lanes against them too.
+            for key in ("TRELLIS_COMB", "TRELLIS_FF", "ICESTORM_LC"):
+                u = pnr["pnr_utilization"].get(key)
+                if u and u["used"]:
+                    fit = int(0.9 * u["available"] // (u["used"] / machines))
+                    report["lanes_fit"] = min(report["lanes_fit"], fit)
+            report["lanes_fit"] = max(report["lanes_fit"], machines)  # these just placed and routed
+            what = "one StereoMachine" if width is not None else f"{machines} machine(s)"
+            report["measured"] = (f"Yosys {target.yosys_synth} and nextpnr ({router}) place and route of "
+                                  f"{what}; lanes that fit from synthesis utilization "
+                                  f"(at most 90 % of each resource)")
+        else:
+            report.update({"fmax_mhz": None, "critical_path": {}})
+            report["measured"] = f"Yosys {target.yosys_synth} only (no place and route: no fmax)"
+        if measure:
+            say("throughput: running the model on the bundled pair")
+            cyc = measure_cycles(params, progress, model)
+            tp: dict = dict(cyc)
+            if width is not None:
+                # Pixels in, results out: the front end hides loading (benchmarks/bench_frontend.py), so a
+                # pixel takes the machine's own wall cycles; the input is every pixel pair of the frame.
+                tp.update(rep.stereo_throughput(report["fmax_mhz"], cyc["wall_cycles_per_pixel"], width,
+                                                params.rows - 2))
+            elif report["fmax_mhz"]:
+                beat_bits = params.lanes * params.memory_word_width
+                tp.update(rep.throughput(report["fmax_mhz"], machines, cyc["wall_cycles_per_pixel"],
+                                         params.beats_per_pixel, beat_bits))
+                # The lanes that fit, each fed a pixel per beat (the load stream widened to keep up).
+                fit = rep.throughput(report["fmax_mhz"], max(1, report["lanes_fit"]),
+                                     cyc["wall_cycles_per_pixel"], 1,
+                                     params.words_per_pixel * params.memory_word_width)
+                tp["vga_fps_fit"] = fit["vga_fps"]
+                tp["load_bits_per_second_fit"] = fit["load_bits_per_second"]
+            report["throughput"] = tp
+        report["seconds"] = round(time.monotonic() - t0, 1)
+        od.write("report.md", lambda path: path.write_text(rep.markdown(report)))
+        od.write("report.json", lambda path: path.write_text(rep.dumps(report)))
+        od.commit()  # the report last: its presence means a complete run
+    say(f"wrote {out / 'report.json'} and {out / 'report.md'}")
+    if progress:
+        print(summary(params).splitlines()[0])
+        print(rep.markdown(report))
+    return report
