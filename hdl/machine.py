@@ -35,7 +35,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from amaranth.hdl import Cat, Module, Mux, Signal, Value
+from amaranth.hdl import Array, Cat, Const, Module, Mux, Signal, Value
 from amaranth.lib import wiring
 
 from bayesmachine.params import MachineParams
@@ -44,7 +44,7 @@ from bayesmachine.sources import check_source
 from .counters import overflow_counter_full
 from .encoder import MAPEncoder
 from .operator import bus_rows, operator_bits, operator_rows
-from .signatures import MachineSignature, entropy_layout, load_layout, result_layout
+from .signatures import MachineSignature, beat_words, entropy_layout, load_layout, result_layout
 from .sources import OnChipSource, random_source
 
 __all__ = [
@@ -66,16 +66,20 @@ def pixel_wall_cycles(params: MachineParams, cycles: np.ndarray) -> np.ndarray:
     ``max(k, beats_per_pixel + LOAD_LATENCY) + BUBBLE_CYCLES``.
     """
     cycles = np.asarray(cycles, dtype=np.int64)
-    return np.maximum(cycles, params.beats_per_pixel + LOAD_LATENCY) + BUBBLE_CYCLES
+    # A neighbour prior's swap waits a cycle more: it forms the feedback column from the result
+    # registered in the bubble (see ``BayesianMachine._feedback_prior``).
+    return np.maximum(cycles + params.feedback_columns, params.beats_per_pixel + LOAD_LATENCY) + BUBBLE_CYCLES
 
 
 @dataclass
 class _Nets:
     """The nets the builders of ``BayesianMachine.elaborate`` share (each documented where it is driven)."""
 
-    shadow: list[Signal]  # the shadow likelihood memory, one word per operator
+    shadow: list[Signal]  # the shadow likelihood memory, one word per loaded word of a pixel
+    incoming: list[Value]  # per operator, the word a swap puts into the active memory
     active: list[Signal]  # the active likelihood memory
     shadow_full: Signal  # the shadow holds a complete pixel not yet started
+    shadow_line_start: Signal  # neighbour prior: the shadow's pixel starts a line
     write_q: Signal  # one-hot: the beat written into the shadow this cycle
     running: Signal
     stop: Signal  # the registered end-of-run decision: high in the bubble
@@ -99,6 +103,8 @@ class _Nets:
     at_last: Signal | None = None  # compute cycle k == max_cycles (the watchdog)
     over_q: Signal | None = None  # the overflow flags of the last compute cycle, for the encoder
     leave: Signal | None = None  # the bubble hands its result over
+    valid_q: Value | None = None  # the encoder: some row overflowed (not a timeout)
+    winner: Value | None = None  # the encoder: the winning row
     start: Signal | None = None  # the shadow is swapped in (in a bubble or when idle)
 
 
@@ -145,6 +151,7 @@ class BayesianMachine(wiring.Component):
         self._overflow_counters(m, n)
         self._stop_decision(m, n)
         self._result(m, n)
+        self._feedback_prior(m, n)
         self._start(m, n)
         self._enables(m, n)
         self._load(m, n)
@@ -156,8 +163,17 @@ class BayesianMachine(wiring.Component):
         rows, cols, ops = p.rows, p.operator_columns, p.operators
         # Likelihood memories (registers: every operator reads its word every cycle). No reset: a
         # run always starts by copying a complete shadow into the active memory.
-        shadow = [Signal(p.memory_word_width, name=f"shadow_{o // cols}_{o % cols}", reset_less=True)
-                  for o in range(ops)]
+        # The shadow holds the loaded words (a neighbour prior's feedback column 0 is formed at the
+        # swap instead, by _feedback_prior).
+        fb, loaded = p.feedback_columns, p.loaded_columns
+        shadow = [Signal(p.memory_word_width, name=f"shadow_{w // loaded}_{fb + w % loaded}", reset_less=True)
+                  for w in range(p.words_per_pixel)]
+        # A feedback word is driven by _feedback_prior (the result it follows comes later).
+        incoming: list[Value] = []
+        for o in range(ops):
+            r, c = divmod(o, cols)
+            incoming.append(Signal(p.memory_word_width, name=f"feedback_{r}") if c < fb
+                            else shadow[r * loaded + c - fb])
         active = [Signal(p.memory_word_width, name=f"word_{o // cols}_{o % cols}", reset_less=True)
                   for o in range(ops)]
         # The matrix's enables (compute: random source, counters; start: the shadow-to-active copy)
@@ -167,7 +183,8 @@ class BayesianMachine(wiring.Component):
         rows_per_group = max(1, GROUP_OPERATORS // cols)
         groups = -(-rows // rows_per_group)
         return _Nets(
-            shadow=shadow, active=active, shadow_full=Signal(name="shadow_full"),
+            shadow=shadow, incoming=incoming, active=active, shadow_full=Signal(name="shadow_full"),
+            shadow_line_start=Signal(name="shadow_line_start"),
             write_q=Signal(p.beats_per_pixel, name="write_q"), running=Signal(name="running"),
             stop=Signal(name="stop"), compute=Signal(name="compute"),
             cycles_done=Signal(p.cycle_width, name="cycles_done"),
@@ -236,10 +253,10 @@ class BayesianMachine(wiring.Component):
 
             n.next_bits = group_bits(group_copies("next_number", list(source.following_numbers)), n.active)
             restart_copies = group_copies("restart_number", list(source.following_restart_numbers))
-            start_bits = group_bits(restart_copies, n.shadow)
+            start_bits = group_bits(restart_copies, n.incoming)
         else:
             n.next_bits = operator_bits(list(source.next_numbers), n.active, index)
-            start_bits = operator_bits(list(source.restart_numbers), n.shadow, index)
+            start_bits = operator_bits(list(source.restart_numbers), n.incoming, index)
         bits = []
         for o in range(ops):
             g = o // cols // n.rows_per_group
@@ -317,6 +334,7 @@ class BayesianMachine(wiring.Component):
                                                     tie_break=p.tie_break)
         m.d.comb += encoder.over.eq(n.over_q)
         valid_q, winner = encoder.valid, encoder.index
+        n.valid_q, n.winner = valid_q, winner
         with m.If(leave):
             map_value = Signal(p.map_width)
             m.d.comb += map_value.eq(winner)
@@ -334,17 +352,57 @@ class BayesianMachine(wiring.Component):
             else:
                 m.d.sync += res.nomatch.eq(0)
 
+    def _feedback_prior(self, m: Module, n: _Nets) -> None:
+        """A neighbour prior's feedback column 0: formed at each swap from the previous result.
+
+        The bubble registers the winning row (``prev_row``) and whether it is a hypothesis row
+        (``prev_valid``: not the no-match row, not a timeout); the swap, a cycle later, gives row r
+        the word ``feedback_words[min(|r - prev_row|, last)]`` (the no-match row
+        ``feedback_nomatch_word``), or 1.0 everywhere when the pixel starts a line or there is no
+        previous hypothesis (after reset too). A function of registers only: the swap's path is
+        a subtraction, a clamp and a small table per row.
+        """
+        p = self._params
+        if not p.feedback_columns:
+            return
+        prev_row = Signal(p.map_width, name="prev_row")
+        prev_valid = Signal(name="prev_valid")
+        with m.If(n.leave):
+            hypothesis = n.valid_q
+            if p.nomatch_row:
+                hypothesis = hypothesis & (n.winner != p.rows - 1)
+            m.d.sync += [prev_row.eq(n.winner), prev_valid.eq(hypothesis)]
+        flat = Signal(name="feedback_flat")
+        m.d.comb += flat.eq(n.shadow_line_start | ~prev_valid)
+        one = Const(p.word_one, p.memory_word_width)
+        table = p.feedback_words
+        last = len(table) - 1
+        cols = p.operator_columns
+        for r in range(p.rows):
+            word = n.incoming[r * cols]
+            if p.nomatch_row and r == p.rows - 1:
+                m.d.comb += word.eq(Mux(flat, one, p.feedback_nomatch_word))
+            else:
+                dist = Signal(p.map_width, name=f"feedback_dist_{r}")
+                m.d.comb += dist.eq(Mux(prev_row > r, prev_row - r, r - prev_row))
+                entries = Array(Const(w, p.memory_word_width) for w in table)
+                clamped = Mux(dist > last, last, dist) if last < (1 << p.map_width) - 1 else dist
+                m.d.comb += word.eq(Mux(flat, one, entries[clamped]))
+
     def _start(self, m: Module, n: _Nets) -> None:
         """Start: swap in the shadow memory, in a bubble or when idle (overrides the above)."""
         p = self._params
         cols = p.operator_columns
         n.start = start = Signal()
-        m.d.comb += start.eq(n.shadow_full & (n.leave | ~n.running))
+        if p.feedback_columns:  # the swap reads the result registered in the bubble: a cycle later
+            m.d.comb += start.eq(n.shadow_full & ~n.running)
+        else:
+            m.d.comb += start.eq(n.shadow_full & (n.leave | ~n.running))
         with m.If(start):
             m.d.sync += [n.at_last.eq(0), n.cycles_done.eq(0), n.running.eq(1), n.shadow_full.eq(0)]
         for r in range(p.rows):
             with m.If(n.start_rep[r // n.rows_per_group]):
-                m.d.sync += [n.active[o].eq(n.shadow[o]) for o in range(r * cols, (r + 1) * cols)]
+                m.d.sync += [n.active[o].eq(n.incoming[o]) for o in range(r * cols, (r + 1) * cols)]
                 m.d.sync += [n.counts[r].eq(0), n.full[r].eq(0)]
 
     def _load(self, m: Module, n: _Nets) -> None:
@@ -362,14 +420,17 @@ class BayesianMachine(wiring.Component):
         m.d.sync += n.write_q.eq(Mux(accept, beat, 0))
         with m.If(accept):
             m.d.sync += [load_q.eq(self.load.payload), beat.eq(beat.rotate_left(1))]
+        words = beat_words(p, load_q)
         for b in range(nbeats):
             with m.If(n.write_q[b]):
                 for lane in range(p.lanes):
-                    o = b * p.lanes + lane
-                    if o < p.operators:  # unused lanes of the last beat are ignored
-                        m.d.sync += n.shadow[o].eq(load_q[lane])
+                    w = b * p.lanes + lane
+                    if w < p.words_per_pixel:  # unused lanes of the last beat are ignored
+                        m.d.sync += n.shadow[w].eq(words[lane])
         with m.If(n.write_q[nbeats - 1]):
             m.d.sync += n.shadow_full.eq(1)
+            if p.feedback_columns:
+                m.d.sync += n.shadow_line_start.eq(load_q.line_start)
 
     def _enables(self, m: Module, n: _Nets) -> None:
         """The next values of the replicated enables: the registers' updates, one cycle early."""
@@ -383,10 +444,11 @@ class BayesianMachine(wiring.Component):
         stop_idle = n.stop & ~n.leave  # stop's next value outside compute cycles
         running_n = n.start | (n.running & ~n.leave)
         compute_n, start_n = Signal(), Signal()
-        m.d.comb += [
-            compute_n.eq(Mux(n.compute, ~fin, running_n & ~stop_idle)),
-            start_n.eq(Mux(n.compute, fin & shadow_full_n & ~valid_n,
-                           shadow_full_n & ((stop_idle & ~valid_n) | ~running_n))),
-        ]
+        m.d.comb += compute_n.eq(Mux(n.compute, ~fin, running_n & ~stop_idle))
+        if self._params.feedback_columns:  # no swap in a bubble (see _start): only when idle
+            m.d.comb += start_n.eq(shadow_full_n & ~running_n)
+        else:
+            m.d.comb += start_n.eq(Mux(n.compute, fin & shadow_full_n & ~valid_n,
+                                       shadow_full_n & ((stop_idle & ~valid_n) | ~running_n)))
         m.d.sync += [c.eq(compute_n) for c in n.compute_rep + [c for c, _ in n.src_reps]]
         m.d.sync += [s.eq(start_n) for s in n.start_rep + [s for _, s in n.src_reps]]

@@ -24,7 +24,7 @@ from bayesmachine.params import MachineParams
 from bayesmachine.sources import source_kind
 
 __all__ = [
-    "ENTROPY_PORTS", "MachineSignature", "StereoSignature", "entropy_layout", "entropy_members",
+    "ENTROPY_PORTS", "MachineSignature", "StereoSignature", "beat_words", "entropy_layout", "entropy_members",
     "load_layout", "load_stream", "pixel_in_layout", "pixel_stream", "result_layout", "result_stream",
 ]
 
@@ -37,9 +37,21 @@ def _check_params(params: object, who: str) -> MachineParams:
     return params
 
 
-def load_layout(params: MachineParams) -> data.ArrayLayout:
-    """One beat of the load stream: ``lanes`` likelihood-memory words of W + 1 bits."""
-    return data.ArrayLayout(unsigned(params.memory_word_width), params.lanes)
+def load_layout(params: MachineParams) -> data.ArrayLayout | data.StructLayout:
+    """One beat of the load stream: ``lanes`` likelihood-memory words of W + 1 bits.
+
+    With a neighbour prior (``prior = "neighbour"``) the beat is a struct: ``words`` (those lanes,
+    from bit 0, so the words sit where they sit in every other machine) and ``line_start`` (the
+    pixel has no left neighbour; the machine reads it with the pixel's last beat)."""
+    words = data.ArrayLayout(unsigned(params.memory_word_width), params.lanes)
+    if not params.feedback_columns:
+        return words
+    return data.StructLayout({"words": words, "line_start": unsigned(1)})
+
+
+def beat_words(params: MachineParams, payload: data.View) -> data.View:
+    """The likelihood words of a load beat ``payload`` (a :func:`load_layout` view)."""
+    return payload.words if params.feedback_columns else payload
 
 
 def result_layout(params: MachineParams) -> data.StructLayout:

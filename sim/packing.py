@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from bayesmachine.params import MachineParams
-from bayesmachine.sim.results import check_numbers, check_words, layout_fields
+from bayesmachine.sim.results import check_line_start, check_numbers, check_words, layout_fields
 
 __all__ = ["element_offsets", "pack_beats", "pack_numbers"]
 
@@ -24,10 +24,13 @@ def element_offsets(layout: Any) -> list[int]:
 
 
 @functools.lru_cache(maxsize=32)
-def _lane_offsets(params: MachineParams) -> tuple[int, ...]:
+def _lane_offsets(params: MachineParams) -> tuple[tuple[int, ...], int | None]:
+    """The bit offsets of a load beat's word lanes and of its ``line_start`` flag (None: no flag)."""
     from bayesmachine.hdl.signatures import load_layout
 
-    return tuple(element_offsets(load_layout(params)))
+    fields = layout_fields(load_layout(params))
+    flag = fields.pop("line_start", (None, 0))[0]
+    return tuple(offset for offset, _ in fields.values()), flag
 
 
 def _pack(offsets: list[int] | tuple[int, ...], values: np.ndarray) -> int:
@@ -37,16 +40,22 @@ def _pack(offsets: list[int] | tuple[int, ...], values: np.ndarray) -> int:
     return raw
 
 
-def pack_beats(params: MachineParams, words: np.ndarray) -> list[int]:
+def pack_beats(params: MachineParams, words: np.ndarray, line_start: np.ndarray | None = None) -> list[int]:
     """Pixels' words (operator order) as raw load-stream beats, ``beats_per_pixel`` per pixel.
 
     ``words``: one pixel's ``words_per_pixel`` words, or (P, ...) pixels. Word o of a pixel goes
-    to lane ``o % lanes`` of its beat ``o // lanes``; unused lanes of the last beat are 0.
+    to lane ``o % lanes`` of its beat ``o // lanes``; unused lanes of the last beat are 0. With a
+    neighbour prior, ``line_start`` (one flag per pixel) goes into every beat of its pixel.
     """
     q = check_words(params, np.asarray(words).reshape(-1, params.words_per_pixel))
-    lanes, offsets = params.lanes, _lane_offsets(params)
-    return [_pack(offsets, pixel[b * lanes : (b + 1) * lanes]) for pixel in q
-            for b in range(params.beats_per_pixel)]
+    flags = check_line_start(params, line_start, q.shape[0])
+    lanes, (offsets, flag_offset) = params.lanes, _lane_offsets(params)
+    beats = []
+    for i, pixel in enumerate(q):
+        flag = int(flags[i]) << flag_offset if flags is not None else 0
+        beats += [_pack(offsets, pixel[b * lanes : (b + 1) * lanes]) | flag
+                  for b in range(params.beats_per_pixel)]
+    return beats
 
 
 def pack_numbers(params: MachineParams, layout: Any, numbers: np.ndarray) -> list[int]:

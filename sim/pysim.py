@@ -44,6 +44,7 @@ class PysimEngine(EngineBase):
     """
 
     name = "pysim"
+    FEEDBACK = True
     OPTIONS = ("load_stall", "result_stall", "stall_seed", "vcd", "patience")
 
     def __init__(
@@ -160,7 +161,11 @@ class PysimEngine(EngineBase):
 
     # --- Engine interface ---
 
-    def _run(self, q: np.ndarray, feed: NumberFeed | None) -> MachineResult:
+    def _run_feedback(self, q: np.ndarray, feed: NumberFeed | None, line_start: np.ndarray) -> MachineResult:
+        return self._run(q, feed, line_start)
+
+    def _run(self, q: np.ndarray, feed: NumberFeed | None,
+             line_start: np.ndarray | None = None) -> MachineResult:
         p = self.params
         if self._new_supply:
             # Rows prefetched from another source are dropped; the machine is idle between
@@ -168,7 +173,7 @@ class PysimEngine(EngineBase):
             self._entropy_raw.clear()
         self._entropy_feed = feed
         first = len(self._raw_results)
-        self._beats.extend(pack_beats(p, q))
+        self._beats.extend(pack_beats(p, q, line_start))
         target = first + len(q)
         last_count, last_clock = len(self._raw_results), self.clock_cycles
         sim = self._simulator()
