@@ -40,7 +40,7 @@ __all__ = [
 
 # The random source kinds: the names of the one registry, bayesmachine.sources.SOURCE_KINDS.
 RNG_KINDS = tuple(SOURCE_KINDS)
-PRIORS = ("uniform", "loaded")
+PRIORS = ("uniform", "loaded", "neighbour")
 TIE_BREAKS = ("nomatch-first", "lowest-index")
 
 # Default word width: 10 bits of comparator resolution. The paper's smallest
@@ -60,6 +60,11 @@ DEFAULT_RNG = "sobol"  # measured best on the bundled pair: README "Random sourc
 DEFAULT_SEED = 1
 DEFAULT_PRIOR = "uniform"
 DEFAULT_TIE_BREAK = "nomatch-first"
+
+
+# Prior columns in the operator matrix per prior kind, and how many of them are loaded.
+_PRIOR_COLUMNS = {"uniform": 0, "loaded": 1, "neighbour": 2}
+_LOADED_PRIOR_COLUMNS = {"uniform": 0, "loaded": 1, "neighbour": 1}
 
 
 def _check_int(name: str, value: object, lo: int, hi: int | None = None) -> None:
@@ -103,6 +108,13 @@ class MachineParams:
     prior
         ``"uniform"``: column 0 of the stochastic bus is always-on 1s.
         ``"loaded"``: an extra operator column 0 holds a loaded prior word per row.
+        ``"neighbour"``: two extra operator columns. Column 0 is the *feedback prior*, formed by the
+        machine itself at each pixel's start from its own previous result through
+        ``feedback_words`` (the raster-order left neighbour's factor); column 1 is a loaded prior
+        word per row (e.g. the above neighbour's factor, which the host or the front end forms
+        from the results of the previous line). Each pixel comes with a ``line_start`` flag: its
+        feedback prior is flat (every word 1.0) when it starts a line, when the previous result was
+        no match or a timeout, and for the first pixel after reset.
     nomatch_row
         The last row is the "no match" hypothesis: the result's no-match flag is
         set when it wins, and ``tie_break`` can favour it.
@@ -123,7 +135,7 @@ class MachineParams:
         devices per operator column, their number shared by all rows).
 
     The ``smtj_*`` fields are ignored by the other kinds and left out of their ``to_dict``
-    (and fingerprint).
+    (and fingerprint); so are the ``feedback_*`` fields by the other priors.
     """
 
     rows: int
@@ -141,6 +153,8 @@ class MachineParams:
     smtj_dwell: float = 1.0
     smtj_spread: float = 0.0
     smtj_share: str = "operator"
+    feedback_words: tuple[int, ...] = ()
+    feedback_nomatch_word: int | None = None
 
     def __post_init__(self) -> None:
         _check_int("rows", self.rows, 1, 4096)
@@ -164,6 +178,7 @@ class MachineParams:
             )
         if self.prior not in PRIORS:
             raise ParameterError(f"prior must be one of {PRIORS}, got {self.prior!r}")
+        self._check_feedback()
         if not isinstance(self.nomatch_row, bool):
             raise ParameterError(f"nomatch_row must be a bool, not {self.nomatch_row!r}")
         if self.nomatch_row and self.rows < 2:
@@ -190,6 +205,30 @@ class MachineParams:
         # the one place it is checked, so every holder of a MachineParams can build its source.
         check_source(self)
 
+    def _check_feedback(self) -> None:
+        words = self.feedback_words
+        if isinstance(words, list):
+            words = tuple(words)
+            object.__setattr__(self, "feedback_words", words)  # a list and a tuple: one machine
+        if not isinstance(words, tuple):
+            raise ParameterError(f"feedback_words must be a tuple of words, not {words!r}")
+        if self.prior != "neighbour":
+            if words or self.feedback_nomatch_word is not None:
+                raise ParameterError("feedback_words and feedback_nomatch_word belong to prior = "
+                                     f"'neighbour', not {self.prior!r}")
+            return
+        if not 1 <= len(words) <= self.rows:
+            raise ParameterError(f"prior = 'neighbour' needs 1 to rows ({self.rows}) feedback_words, "
+                                 f"got {len(words)}")
+        for i, w in enumerate(words):
+            _check_int(f"feedback_words[{i}]", w, 0, 1 << self.word_bits)
+        if self.nomatch_row:
+            if self.feedback_nomatch_word is None:
+                raise ParameterError("prior = 'neighbour' with a no-match row needs feedback_nomatch_word")
+            _check_int("feedback_nomatch_word", self.feedback_nomatch_word, 0, 1 << self.word_bits)
+        elif self.feedback_nomatch_word is not None:
+            raise ParameterError("feedback_nomatch_word needs a no-match row (nomatch_row=True)")
+
     @classmethod
     def for_disparity(cls, dmax: int = DEFAULT_DMAX, **kwargs: object) -> MachineParams:
         """The disparity machine of the paper: M = Dmax + 2 rows, the last one no-match."""
@@ -197,15 +236,26 @@ class MachineParams:
         kwargs.setdefault("columns", DEFAULT_COLUMNS)
         if "lanes" not in kwargs:
             # Small machines get a load stream no wider than one pixel's words.
-            columns = int(kwargs["columns"]) + (1 if kwargs.get("prior") == "loaded" else 0)  # type: ignore[call-overload]
+            columns = int(kwargs["columns"]) + _LOADED_PRIOR_COLUMNS.get(kwargs.get("prior"), 0)  # type: ignore[call-overload, arg-type]
             kwargs["lanes"] = min(DEFAULT_LANES, (dmax + 2) * columns)
         return cls(rows=dmax + 2, nomatch_row=True, **kwargs)  # type: ignore[arg-type]
 
     # Derived quantities: every width in the RTL, the model and the host comes from here.
     @property
     def operator_columns(self) -> int:
-        """Operator columns in the matrix: the data terms, plus one for a loaded prior."""
-        return self.columns + (1 if self.prior == "loaded" else 0)
+        """Operator columns in the matrix: the data terms, plus the prior columns (one loaded prior
+        column; the feedback and the loaded prior column of a neighbour prior)."""
+        return self.columns + _PRIOR_COLUMNS[self.prior]
+
+    @property
+    def feedback_columns(self) -> int:
+        """Operator columns the machine forms itself (1: column 0 of a neighbour prior), not loaded."""
+        return 1 if self.prior == "neighbour" else 0
+
+    @property
+    def loaded_columns(self) -> int:
+        """Operator columns whose words are loaded: all but the feedback column."""
+        return self.operator_columns - self.feedback_columns
 
     @property
     def operators(self) -> int:
@@ -213,7 +263,8 @@ class MachineParams:
 
     @property
     def words_per_pixel(self) -> int:
-        return self.rows * self.operator_columns
+        """Words loaded per pixel: every row's loaded columns."""
+        return self.rows * self.loaded_columns
 
     @property
     def beats_per_pixel(self) -> int:
@@ -250,6 +301,10 @@ class MachineParams:
         if self.rng != "smtj":  # device parameters mean nothing to the other sources
             for name in ("smtj_dwell", "smtj_spread", "smtj_share"):
                 del d[name]
+        if self.prior != "neighbour":  # nor the feedback table to the other priors
+            del d["feedback_words"], d["feedback_nomatch_word"]
+        else:
+            d["feedback_words"] = list(self.feedback_words)
         return d
 
     def fingerprint(self) -> str:

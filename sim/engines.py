@@ -3,14 +3,16 @@
 The contract (:class:`Engine`), which ``model``, ``pysim`` and ``verilator`` implement through
 :class:`EngineBase`, so that they validate their input once, the same way, with the same errors:
 
-- ``run(words, numbers=None) -> MachineResult``: pixels in order; the machine's state (LFSRs,
+- ``run(words, numbers=None, line_start=None) -> MachineResult``: pixels in order; the machine's state (LFSRs,
   or the position in an off-chip source's stream) carries over from one call to the next, so
   a frame can be run in chunks. ``numbers``: only for an off-chip random source (``rng``
   whose :class:`~bayesmachine.sources.SourceKind` has ``on_chip = False``): a (T, operators)
   array of W-bit numbers, one row per compute cycle, consumed from its first row by this call
   (running out is a ``ValueError``), or a :class:`~bayesmachine.sources.NumberSource`. With
   ``numbers=None`` the kind's own device model is used (one stream from reset on); the kind
-  ``external`` has none, so it needs ``numbers``.
+  ``external`` has none, so it needs ``numbers``. ``line_start``: only for a machine with a
+  neighbour prior (``prior = "neighbour"``): one flag per pixel, set where the pixel has no left
+  neighbour (its feedback prior is flat); the machine's previous result carries over between calls.
 - ``reset()``: back to the state after a hardware reset. ``close()``: release resources;
   ``run()`` or ``reset()`` afterwards raise :class:`EngineClosedError`.
 - ``wall_cycles``: clock cycles since reset, loading included (``None`` for the model,
@@ -39,6 +41,7 @@ from bayesmachine.sim.results import (
     EngineStateError,
     MachineResult,
     NumberFeed,
+    check_line_start,
     check_words,
 )
 from bayesmachine.sources import SOURCE_KINDS
@@ -62,7 +65,8 @@ class Engine(Protocol):
     @property
     def params(self) -> MachineParams: ...
 
-    def run(self, words: np.ndarray, numbers: np.ndarray | None = None) -> MachineResult: ...
+    def run(self, words: np.ndarray, numbers: np.ndarray | None = None,
+            line_start: np.ndarray | None = None) -> MachineResult: ...
 
     def reset(self) -> None: ...
 
@@ -136,10 +140,13 @@ class EngineBase(EngineLifecycle):
 
     name: ClassVar[str] = ""
     OPTIONS: ClassVar[tuple[str, ...]] = ()  # keyword options of the constructor (get_engine checks them)
+    FEEDBACK: ClassVar[bool] = False  # runs a neighbour prior (``_run_feedback``)
 
     def __init__(self, params: MachineParams) -> None:
         if not isinstance(params, MachineParams):
             raise TypeError(f"an engine takes a MachineParams, not {type(params).__name__}")
+        if params.feedback_columns and not self.FEEDBACK:
+            raise ValueError(f"the {self.name} engine does not run a machine with prior = 'neighbour' yet")
         super().__init__()
         self._params = params
         self._kind = SOURCE_KINDS[params.rng]
@@ -151,14 +158,21 @@ class EngineBase(EngineLifecycle):
     def params(self) -> MachineParams:
         return self._params
 
-    def run(self, words: np.ndarray, numbers: np.ndarray | NumberSource | None = None) -> MachineResult:
+    def run(self, words: np.ndarray, numbers: np.ndarray | NumberSource | None = None,
+            line_start: np.ndarray | None = None) -> MachineResult:
         """Run pixels through the machine (see the module docstring)."""
         self._check_open()
         q = check_words(self._params, words)
+        flags = check_line_start(self._params, line_start, q.shape[0])
         source = self._source(numbers)
         with self._in_flight():
             self._new_supply = self._feed.use(source)
-            return self._run(q, None if source is None else self._feed)
+            feed = None if source is None else self._feed
+            return self._run(q, feed) if flags is None else self._run_feedback(q, feed, flags)
+
+    def _run_feedback(self, words: np.ndarray, feed: NumberFeed | None,
+                      line_start: np.ndarray) -> MachineResult:
+        raise NotImplementedError
 
     def _source(self, numbers: np.ndarray | NumberSource | None) -> NumberSource | None:
         p = self._params

@@ -58,6 +58,27 @@ def _store(p, counts, k, winner, out_counts, out_map, out_timeout, out_cycles):
 
 
 @numba.njit(cache=True, inline="always")
+def _fill_feedback(qp, prev, start, fb, fb_nm, rows, opcols, nm_row, one):
+    """A neighbour prior's feedback column (operator column 0) of a pixel from the previous result
+    ``prev`` (a hypothesis row, or -1: no match, timeout, none yet): flat (every word 1.0) when the
+    pixel starts a line or there is no previous hypothesis."""
+    last = fb.shape[0] - 1
+    for r in range(rows):
+        if start or prev < 0:
+            qp[r * opcols] = one
+        elif r == nm_row:
+            qp[r * opcols] = fb_nm
+        else:
+            qp[r * opcols] = fb[min(abs(r - prev), last)]
+
+
+@numba.njit(cache=True, inline="always")
+def _feedback_result(winner, nm_row):
+    """The result a next pixel's feedback prior follows: the winning hypothesis row, else -1."""
+    return winner if winner >= 0 and winner != nm_row else -1
+
+
+@numba.njit(cache=True, inline="always")
 def _step_lfsrs(states, t1, t2, t3, t4, t5, mask, w, top, nums):
     """Leap-forward step of every LFSR of ``states``; ``nums`` gets their numbers before the step."""
     for i in range(states.shape[0]):
@@ -69,14 +90,17 @@ def _step_lfsrs(states, t1, t2, t3, t4, t5, mask, w, top, nums):
 
 @numba.njit(cache=True)
 def _run_on_chip(q, states, shifts, points, per_operator, rows, opcols, word_bits, lfsr_bits, n_max,
-                 max_cycles, nm_index, out_counts, out_map, out_timeout, out_cycles):
+                 max_cycles, nm_index, out_counts, out_map, out_timeout, out_cycles,
+                 line_start, fb, fb_nm, nm_row, prev):
     """The on-chip sources, cycle by cycle.
 
     ``lfsr`` (``per_operator``): operator o reads its own LFSR, which steps every compute cycle.
     ``lfsr-shared`` (``points`` empty): one LFSR per operator column, stepping every compute cycle,
     read by every row of that column. ``sobol``: cycle k of a pixel gives column c
     ``points[j, c] ^ shift[c]``, j = (k - 1) mod 2^W; the column LFSRs step once per block (j = 0)
-    to give the block's shifts (every pixel starts a block)."""
+    to give the block's shifts (every pixel starts a block). With a neighbour prior (``line_start``
+    not empty) each pixel's feedback column is formed first from ``prev[0]``, which carries the
+    previous result over calls."""
     pixels, ops = q.shape
     mask = np.uint64((1 << word_bits) - 1)
     w = np.uint64(word_bits)
@@ -91,8 +115,11 @@ def _run_on_chip(q, states, shifts, points, per_operator, rows, opcols, word_bit
     bits = np.zeros(ops, np.uint8)
     counts = np.zeros(rows, np.uint32)
     over = np.zeros(rows, np.uint8)
+    feedback = line_start.shape[0] > 0
     for p in range(pixels):
         qp = q[p]
+        if feedback:
+            _fill_feedback(qp, prev[0], line_start[p], fb, fb_nm, rows, opcols, nm_row, 1 << word_bits)
         counts[:] = 0
         k = 0
         winner = -1
@@ -118,6 +145,7 @@ def _run_on_chip(q, states, shifts, points, per_operator, rows, opcols, word_bit
             if winner >= 0 or k == max_cycles:
                 break
         _store(p, counts, k, winner, out_counts, out_map, out_timeout, out_cycles)
+        prev[0] = _feedback_result(winner, nm_row)
 
 
 def _lfsr_arrays(specs: list[LFSRSpec]) -> tuple[np.ndarray, np.ndarray]:
@@ -146,11 +174,12 @@ class _OnChipSource:
     def reset(self) -> None:
         self.states = self._init.copy()
 
-    def run(self, q: np.ndarray, out: MachineResult) -> None:
+    def run(self, q: np.ndarray, out: MachineResult, feedback: _Feedback) -> None:
         p = self._params
         args = (p.rows, p.operator_columns, p.word_bits, p.lfsr_bits, p.counter_max, p.max_cycles,
                 _nm_index(p), out.counts, out.map, out.timeout, out.cycles)
-        _run_on_chip(q.astype(np.uint64), self.states, self._shifts, self._points, p.rng == "lfsr", *args)
+        _run_on_chip(q.astype(np.uint64), self.states, self._shifts, self._points, p.rng == "lfsr", *args,
+                     *feedback.args())
 
 
 # The model twin of every on-chip source kind (bayesmachine.sources.SOURCE_KINDS).
@@ -161,9 +190,37 @@ def _nm_index(params: MachineParams) -> int:
     return params.rows - 1 if params.nomatch_row and params.tie_break == "nomatch-first" else -1
 
 
+class _Feedback:
+    """A neighbour prior's state (the previous result's hypothesis row, -1 for none) and table; with
+    another prior, empty arrays that the kernels skip."""
+
+    def __init__(self, params: MachineParams) -> None:
+        self._table = np.array(params.feedback_words or (0,), np.int64)
+        self._nomatch = int(params.feedback_nomatch_word or 0)
+        self._nm_row = params.rows - 1 if params.nomatch_row else -1
+        self.line_start = np.zeros(0, np.uint8)
+        self.prev = np.full(1, -1, np.int64)
+
+    def reset(self) -> None:
+        self.prev[0] = -1
+
+    def args(self) -> tuple:
+        return self.line_start, self._table, self._nomatch, self._nm_row, self.prev
+
+
+def _expand(params: MachineParams, q: np.ndarray) -> np.ndarray:
+    """Loaded words (P, words_per_pixel) -> operator words (P, operators), the feedback column 0 (to
+    be formed by the kernel) zero."""
+    if not params.feedback_columns:
+        return q
+    full = np.zeros((q.shape[0], params.rows, params.operator_columns), q.dtype)
+    full[:, :, params.feedback_columns:] = q.reshape(q.shape[0], params.rows, params.loaded_columns)
+    return full.reshape(q.shape[0], params.operators)
+
+
 @numba.njit(cache=True)
-def _run_numbers(q, numbers, first, counts, done, rows, opcols, n_max, max_cycles, nm_index,
-                 out_counts, out_map, out_timeout, out_cycles):
+def _run_numbers(q, numbers, first, counts, done, rows, opcols, word_bits, n_max, max_cycles, nm_index,
+                 out_counts, out_map, out_timeout, out_cycles, line_start, fb, fb_nm, nm_row, prev):
     """Same machine, random numbers from ``numbers[t, o]``, resumable: pixel ``first`` has run
     ``done[0]`` cycles (its counters in ``counts``). Stops at the end of the pixels or of the
     numbers, saving the pixel in progress; returns (next pixel, rows of numbers used)."""
@@ -172,8 +229,11 @@ def _run_numbers(q, numbers, first, counts, done, rows, opcols, n_max, max_cycle
     k = done[0]
     bits = np.zeros(ops, np.uint8)
     over = np.zeros(rows, np.uint8)
+    feedback = line_start.shape[0] > 0
     for p in range(first, pixels):
         qp = q[p]
+        if feedback and k == 0:  # a pixel's start (not a resumed one)
+            _fill_feedback(qp, prev[0], line_start[p], fb, fb_nm, rows, opcols, nm_row, 1 << word_bits)
         while True:
             if t >= numbers.shape[0]:
                 done[0] = k
@@ -186,6 +246,7 @@ def _run_numbers(q, numbers, first, counts, done, rows, opcols, n_max, max_cycle
             if winner >= 0 or k == max_cycles:
                 break
         _store(p, counts, k, winner, out_counts, out_map, out_timeout, out_cycles)
+        prev[0] = _feedback_result(winner, nm_row)
         counts[:] = 0
         k = 0
     done[0] = 0
@@ -202,24 +263,35 @@ class MachineModel(EngineBase):
     """
 
     name = "model"
+    FEEDBACK = True
 
     def __init__(self, params: MachineParams) -> None:
         super().__init__(params)
         self._nm_index = _nm_index(params)
         self._twin = _ON_CHIP_SOURCES[params.rng](params) if self._kind.on_chip else None
+        self._feedback = _Feedback(params)
         self._reset()
 
     def _reset(self) -> None:
         if self._twin is not None:
             self._twin.reset()
+        self._feedback.reset()
+
+    def _run_feedback(self, q: np.ndarray, feed: NumberFeed | None, line_start: np.ndarray) -> MachineResult:
+        self._feedback.line_start = line_start
+        try:
+            return self._run(q, feed)
+        finally:
+            self._feedback.line_start = np.zeros(0, np.uint8)
 
     def _run(self, q: np.ndarray, feed: NumberFeed | None) -> MachineResult:
-        """``q``: checked (P, operators) words; ``feed``: the random numbers of an off-chip source."""
+        """``q``: checked (P, words_per_pixel) words; ``feed``: the random numbers of an off-chip source."""
         p = self._params
+        q = _expand(p, q)
         n = q.shape[0]
         out = MachineResult.zeros(n, p.rows)
         if feed is None:
-            self._twin.run(q, out)
+            self._twin.run(q, out, self._feedback)
         else:
             counts = np.zeros(p.rows, np.uint32)
             done = np.zeros(1, np.int64)
@@ -229,8 +301,9 @@ class MachineModel(EngineBase):
                 if not len(nums):
                     raise ran_out_error(feed.source)
                 first, used = _run_numbers(q, nums, first, counts, done, p.rows, p.operator_columns,
-                                           p.counter_max, p.max_cycles, self._nm_index,
-                                           out.counts, out.map, out.timeout, out.cycles)
+                                           p.word_bits, p.counter_max, p.max_cycles, self._nm_index,
+                                           out.counts, out.map, out.timeout, out.cycles,
+                                           *self._feedback.args())
                 feed.unread(nums[used:])
         if p.nomatch_row:
             out.nomatch[:] = (~out.timeout) & (out.map == p.rows - 1)

@@ -25,7 +25,7 @@ __all__ = [
     "MachineResult",
     "NumberFeed",
     "check_numbers",
-    "check_words",
+    "check_line_start", "check_words",
     "decode_results",
     "layout_fields",
     "ran_out_error",
@@ -80,24 +80,24 @@ class MachineResult:
 # --- Validation: the same checks, hence the same errors, in every engine ---
 
 def check_words(params: MachineParams, words: np.ndarray) -> np.ndarray:
-    """Validate a block of pixels' likelihood-memory words; returns them as (P, operators) int32.
+    """Validate a block of pixels' likelihood-memory words; returns them as (P, words_per_pixel) int32.
 
-    Accepts shape (P, rows, operator_columns) or (P, operators); values must be integers in
-    [0, 2**word_bits].
+    Accepts shape (P, rows, loaded_columns) or (P, words_per_pixel); values must be integers in
+    [0, 2**word_bits]. The loaded columns are all operator columns but a neighbour prior's
+    feedback column, which the machine forms itself.
     """
     w = np.asarray(words)
-    ops = params.operators
+    n, cols = params.words_per_pixel, params.loaded_columns
+    expect = f"(pixels, {params.rows}, {cols})"
+    if params.feedback_columns:
+        expect += f" (the loaded columns: column 0 of the {params.operator_columns} is the feedback prior)"
     if w.ndim == 3:
-        if w.shape[1:] != (params.rows, params.operator_columns):
-            raise ValueError(
-                f"likelihood memories have shape {w.shape}; this machine expects "
-                f"(pixels, {params.rows}, {params.operator_columns})"
-            )
-        w = w.reshape(w.shape[0], ops)
-    elif w.ndim != 2 or w.shape[1] != ops:
+        if w.shape[1:] != (params.rows, cols):
+            raise ValueError(f"likelihood memories have shape {w.shape}; this machine expects {expect}")
+        w = w.reshape(w.shape[0], n)
+    elif w.ndim != 2 or w.shape[1] != n:
         raise ValueError(
-            f"likelihood memories have shape {w.shape}; this machine expects "
-            f"(pixels, {params.rows}, {params.operator_columns}) or (pixels, {ops})"
+            f"likelihood memories have shape {w.shape}; this machine expects {expect} or (pixels, {n})"
         )
     if w.dtype.kind not in "iu":
         raise ValueError(f"likelihood memory words must be integers, got dtype {w.dtype}")
@@ -107,6 +107,26 @@ def check_words(params: MachineParams, words: np.ndarray) -> np.ndarray:
             f"got [{w.min()}, {w.max()}]"
         )
     return np.ascontiguousarray(w, dtype=np.int32)
+
+
+def check_line_start(params: MachineParams, line_start: object, pixels: int) -> np.ndarray | None:
+    """Validate the per-pixel ``line_start`` flags: required with a neighbour prior, refused otherwise.
+
+    Returns them as (P,) uint8 (None without a neighbour prior)."""
+    if not params.feedback_columns:
+        if line_start is not None:
+            raise ValueError(f"line_start flags are only taken by a machine with prior = 'neighbour', "
+                             f"not {params.prior!r}")
+        return None
+    if line_start is None:
+        raise ValueError("a machine with prior = 'neighbour' needs line_start= (one flag per pixel: True "
+                         "where a pixel has no left neighbour)")
+    f = np.asarray(line_start)
+    if f.shape != (pixels,):
+        raise ValueError(f"line_start must have shape ({pixels},) (one flag per pixel), got {f.shape}")
+    if f.dtype.kind not in "biu" or (f.size and (f.min() < 0 or f.max() > 1)):
+        raise ValueError("line_start flags must be booleans (or 0/1)")
+    return np.ascontiguousarray(f, dtype=np.uint8)
 
 
 def check_numbers(params: MachineParams, numbers: np.ndarray) -> np.ndarray:

@@ -1,0 +1,144 @@
+"""The neighbour prior's feedback column (``prior = "neighbour"``), held to an independent oracle.
+
+A neighbour-prior machine has the operator matrix of a loaded-prior machine with one more data
+column: its column 0 is formed from its previous result instead of loaded. So the oracle runs
+that loaded-prior machine one pixel at a time, writing column 0 itself from the rule in
+``MachineParams``'s docstring, and the two must give the same results bit for bit (same random
+numbers: the sources depend on the operator matrix's shape and the seed only).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from bayesmachine.params import MachineParams, ParameterError
+from bayesmachine.sim.engines import get_engine
+from bayesmachine.sim.results import MachineResult
+
+FEEDBACK = (1024, 900, 600, 300, 120, 60)
+NOMATCH = 641
+
+
+def neighbour_params(**kw: object) -> MachineParams:
+    kw.setdefault("counter_max", 3)
+    return MachineParams.for_disparity(7, columns=2, prior="neighbour", feedback_words=FEEDBACK,
+                                       feedback_nomatch_word=NOMATCH, **kw)
+
+
+def oracle_params(p: MachineParams) -> MachineParams:
+    return dataclasses.replace(p, prior="loaded", columns=p.columns + 1, feedback_words=(),
+                               feedback_nomatch_word=None)
+
+
+def feedback_column(p: MachineParams, prev: int | None, start: bool) -> np.ndarray:
+    """The rule, written out: flat after a line start or a non-hypothesis result."""
+    one = p.word_one
+    if start or prev is None:
+        return np.full(p.rows, one)
+    col = np.array([FEEDBACK[min(abs(r - prev), len(FEEDBACK) - 1)] for r in range(p.rows)])
+    col[p.rows - 1] = NOMATCH
+    return col
+
+
+def words_and_starts(p: MachineParams, pixels: int, width: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    words = rng.integers(0, 300, size=(pixels, p.rows, p.loaded_columns))
+    good = rng.integers(0, p.rows - 1, size=pixels)  # a likely hypothesis per pixel, runs of equal ones
+    good[1::3] = good[::3][: len(good[1::3])]
+    words[np.arange(pixels), good] = rng.integers(700, p.word_one + 1, size=(pixels, p.loaded_columns))
+    words[::7, p.rows - 1] = p.word_one  # some no-match calls
+    starts = (np.arange(pixels) % width) == 0
+    return words, starts
+
+
+def run_oracle(p: MachineParams, words: np.ndarray, starts: np.ndarray, numbers: np.ndarray | None):
+    q = oracle_params(p)
+    eng = get_engine("model", q)
+    prev: int | None = None
+    out = []
+    used = 0
+    for i in range(len(words)):
+        full = np.empty((1, p.rows, q.operator_columns), np.int64)
+        full[0, :, 0] = feedback_column(p, prev, bool(starts[i]) or i == 0)
+        full[0, :, 1:] = words[i]
+        if numbers is None:
+            res = eng.run(full)
+        else:
+            res = eng.run(full, numbers[used:])
+            used += int(res.cycles[0])
+        out.append(res)
+        nm = bool(res.nomatch[0]) or bool(res.timeout[0])
+        prev = None if nm else int(res.map[0])
+    return out
+
+
+def assert_same(res: MachineResult, oracle: list[MachineResult]) -> None:
+    for name in ("map", "nomatch", "timeout", "cycles", "counts"):
+        got = np.asarray(getattr(res, name))
+        want = np.concatenate([np.asarray(getattr(o, name)) for o in oracle])
+        np.testing.assert_array_equal(got, want, err_msg=name)
+
+
+@pytest.mark.parametrize("rng", ["sobol", "lfsr", "lfsr-shared"])
+def test_feedback_column_follows_the_previous_result(rng: str) -> None:
+    p = neighbour_params(rng=rng, seed=5)
+    words, starts = words_and_starts(p, 60, 9, seed=1)
+    res = get_engine("model", p).run(words, line_start=starts)
+    oracle = run_oracle(p, words, starts, None)
+    assert_same(res, oracle)
+    # The prior matters: the same words with every pixel flagged as a line start differ.
+    flat = get_engine("model", p).run(words, line_start=np.ones(len(words), bool))
+    assert not np.array_equal(flat.map, res.map)
+
+
+def test_feedback_with_numbers_from_a_port_and_timeouts() -> None:
+    p = neighbour_params(rng="external", max_cycles=12)
+    words, starts = words_and_starts(p, 40, 6, seed=2)
+    words[5] = 0  # nothing fires: a timeout, after which the prior is flat
+    numbers = np.random.default_rng(3).integers(0, p.word_one, size=(40 * 12, p.operators))
+    res = get_engine("model", p).run(words, numbers, line_start=starts)
+    assert res.timeout[5]
+    assert_same(res, run_oracle(p, words, starts, numbers))
+
+
+def test_previous_result_carries_over_calls_and_reset_forgets_it() -> None:
+    p = neighbour_params()
+    words, starts = words_and_starts(p, 30, 30, seed=4)
+    whole = get_engine("model", p).run(words, line_start=starts)
+    eng = get_engine("model", p)
+    parts = [eng.run(words[i:i + 7], line_start=starts[i:i + 7]) for i in range(0, 30, 7)]
+    for name in ("map", "counts", "cycles"):
+        np.testing.assert_array_equal(np.concatenate([getattr(r, name) for r in parts]), getattr(whole, name))
+    eng.reset()
+    again = eng.run(words, line_start=starts)
+    np.testing.assert_array_equal(again.map, whole.map)
+
+
+def test_params_and_contract_errors() -> None:
+    with pytest.raises(ParameterError, match="feedback_words"):
+        MachineParams.for_disparity(3, prior="neighbour")
+    with pytest.raises(ParameterError, match="feedback_nomatch_word"):
+        MachineParams.for_disparity(3, prior="neighbour", feedback_words=(1024,))
+    with pytest.raises(ParameterError, match=r"feedback_words\[1\]"):
+        MachineParams.for_disparity(3, prior="neighbour", feedback_words=(1024, 1025),
+                                    feedback_nomatch_word=1)
+    with pytest.raises(ParameterError, match="belong to prior"):
+        MachineParams.for_disparity(3, feedback_words=(1024,))
+    p = neighbour_params()
+    assert (p.operator_columns, p.loaded_columns, p.words_per_pixel) == (4, 3, 27)
+    assert p.to_dict()["feedback_words"] == list(FEEDBACK)
+    assert "feedback_words" not in MachineParams.for_disparity(3).to_dict()
+    eng = get_engine("model", p)
+    words = np.zeros((2, p.rows, p.loaded_columns), np.int64)
+    with pytest.raises(ValueError, match="needs line_start"):
+        eng.run(words)
+    with pytest.raises(ValueError, match=r"shape \(2,\)"):
+        eng.run(words, line_start=np.zeros(3, bool))
+    with pytest.raises(ValueError, match="loaded columns"):
+        eng.run(np.zeros((2, p.rows, p.operator_columns), np.int64), line_start=np.zeros(2, bool))
+    with pytest.raises(ValueError, match="only taken by a machine with prior = 'neighbour'"):
+        get_engine("model", MachineParams.for_disparity(3)).run(
+            np.zeros((1, 5, 3), np.int64), line_start=np.zeros(1, bool))
