@@ -65,7 +65,7 @@ def main() -> None:
     ap.add_argument("--counter-max", default="1,2,4,8,16",
                     help="the machine's counter max values, comma-separated (Fig 6 for each model)")
     ap.add_argument("--figure", default=None, metavar="PNG",
-                    help="write the paper and census machines, SGBM and the ground truth side by side")
+                    help="write the paper and census machines, SGBM, StereoBM and the ground truth")
     args = ap.parse_args()
     left, right, gt_full = bundled_pair()
     dmax = args.dmax
@@ -137,6 +137,7 @@ def main() -> None:
         panels = [("Paper model: machine (counter max 16)", figure_maps["paper"]),
                   ("Census + neighbour prior: machine (counter max 16)", figure_maps["census + prior"]),
                   ("OpenCV StereoSGBM (block 5)", sgbm_disparity(left, right, dmax)),
+                  ("OpenCV StereoBM (block 15)", bm_disparity(left, right, dmax)),
                   ("Ground truth", gt)]
         save_disparity_figure(args.figure, region.cut(left), panels, dmax)
         print(f"wrote {args.figure}")
