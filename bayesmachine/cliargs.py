@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TypeVar
 
-from bayesmachine.likelihood import ModelParams
+from bayesmachine.likelihood import DEFAULT_MODEL, MODELS, ModelParams, disparity_machine
 from bayesmachine.params import (
     DEFAULT_COLUMNS,
     DEFAULT_COUNTER_MAX,
@@ -49,7 +49,10 @@ __all__ = [
     "add_dmax_option",
     "add_machine_options",
     "add_model_options",
+    "add_census_options",
     "MODEL_OPTION_FLAGS",
+    "CENSUS_OPTION_FLAGS",
+    "model_list",
     "output_path",
     "machine_params_from_args",
     "model_params_from_args",
@@ -217,8 +220,11 @@ def add_option(option: MachineOption) -> MachineOption:
     return option
 
 
-add_option(MachineOption("columns", "--columns", "data-term operator columns N (default %(default)s)",
-                         default=DEFAULT_COLUMNS, metavar="N"))
+# --columns and --prior are left at None unless given: the model decides them (--model census: 4
+# columns and its neighbour prior), and a given one that contradicts it is refused.
+add_option(MachineOption("columns", "--columns",
+                         f"data-term operator columns N (default {DEFAULT_COLUMNS}; the model's: 4 with "
+                         "--model census)", metavar="N"))
 add_option(MachineOption("word_bits", "--word-bits",
                          "comparator resolution W; likelihood-memory words are W+1 bits "
                          "(default %(default)s)",
@@ -242,8 +248,10 @@ add_option(MachineOption("tie_break", "--tie-break",
                          default=DEFAULT_TIE_BREAK, choices=TIE_BREAKS))
 add_option(MachineOption("prior", "--prior",
                          "uniform: always-on 1s enter each row; loaded: an extra operator column 0 holds a "
-                         "prior word per row (default %(default)s)",
-                         default=DEFAULT_PRIOR, choices=PRIORS))
+                         "prior word per row; neighbour: the census model's neighbour prior (a feedback "
+                         "column from the machine's own previous result and a loaded column), which "
+                         f"--model census sets (default {DEFAULT_PRIOR}; neighbour with --model census)",
+                         choices=PRIORS))
 add_option(MachineOption("smtj_dwell", "--smtj-dwell",
                          "--rng smtj: mean dwell time of a device state, in clock cycles (default 1)",
                          type=float_arg, metavar="TAU"))
@@ -293,11 +301,16 @@ def add_machine_options(
     return group
 
 
-def machine_params_from_args(args: argparse.Namespace, dmax: int, **overrides: Any) -> MachineParams:
+def machine_params_from_args(
+    args: argparse.Namespace, dmax: int, model: ModelParams | None = None, **overrides: Any
+) -> MachineParams:
     """``MachineParams.for_disparity(dmax, ...)`` from the declared options present in ``args``.
 
     ``overrides`` win over ``args`` (a sweep passes each ``counter_max``). Options left at
-    None are left to ``for_disparity``'s defaults. A ParameterError names the option's flag.
+    None are left to ``for_disparity``'s defaults. With ``model``, the machine that model needs
+    (:func:`~bayesmachine.likelihood.disparity_machine`: its columns, and for the census model its
+    neighbour prior; a contradicting ``--columns`` or ``--prior`` is refused). A ParameterError
+    names the option's flag.
     """
     kwargs: dict[str, Any] = {}
     for field in MACHINE_OPTIONS:
@@ -317,9 +330,13 @@ def machine_params_from_args(args: argparse.Namespace, dmax: int, **overrides: A
             flags = ", ".join(MACHINE_OPTIONS[f].flag for f in device)
             got = ",".join(listed) if isinstance(listed, list) else rng
             raise ParameterError(f"{flags}: device options of --rng smtj (got --rng {got})")
+    if kwargs.get("prior") == "neighbour" and (model is None or not model.has_prior):
+        raise ParameterError("--prior neighbour: the census model's neighbour prior; the machine gets its "
+                             "feedback table from the model: use --model census (and leave --prior out)")
     try:
-        params = MachineParams.for_disparity(dmax, **kwargs)
-        return params
+        if model is not None:
+            return disparity_machine(model, **kwargs)
+        return MachineParams.for_disparity(dmax, **kwargs)
     except ParameterError as exc:
         message = str(exc)
         for field, option in MACHINE_OPTIONS.items():
@@ -339,10 +356,11 @@ MODEL_OPTION_FLAGS: tuple[tuple[str, str], ...] = (
 
 def add_model_options(
     parser: argparse.ArgumentParser, dmax: bool = True, given_only: bool = False,
-    title: str = "model (paper table 1 defaults)",
+    title: str = "model (paper table 1 defaults)", census: bool = False, sweep: bool = False,
 ) -> argparse._ActionsContainer:
     """The disparity model's options (paper table 1 defaults): ``--dmax`` unless ``dmax=False``,
-    ``--p0``, ``--sigma`` / ``--sigma-m|gh|gv``, ``--p-nm0``, ``--sigma-nm``.
+    ``--p0``, ``--sigma`` / ``--sigma-m|gh|gv``, ``--p-nm0``, ``--sigma-nm``; with ``census``,
+    ``--model`` and the census model's options (:func:`add_census_options`; ``sweep``: a list).
 
     ``given_only``: every option but ``--dmax`` stays None unless given (the defaults are filled in
     by :func:`model_params_from_args`), so that a command can refuse them where they do not apply."""
@@ -364,13 +382,98 @@ def add_model_options(
                    help=f"base no-match probability ({defaults.p_nm0:g})")
     g.add_argument("--sigma-nm", type=float_arg, default=default(defaults.sigma_nm),
                    help=f"no-match sigma ({defaults.sigma_nm:g})")
+    if census:
+        add_census_options(parser, sweep=sweep)
     return g
 
 
-def model_params_from_args(args: argparse.Namespace) -> ModelParams:
+# The census model's options (dest, flag, ModelParams field, type): None unless given, refused with
+# --model paper (they would do nothing).
+_CENSUS_OPTIONS: tuple[tuple[str, str, Callable[[str], Any], str], ...] = (
+    ("census_window", "--census-window", int_arg, "census window: 7 (7x7, 48 bits) or 5 (5x5, 24 bits) "
+     "(default 7)"),
+    ("census_p0", "--census-p0", float_arg, "base census likelihood p0 of L_c(h) = p0 + (1 - p0) "
+     "exp(-h^2 / (2 sigma_c^2)) (default 0.02)"),
+    ("census_sigma", "--census-sigma", float_arg, "census sigma_c (default 6 for 7x7, 3 for 5x5)"),
+    ("census_nomatch_h", "--census-nomatch-h", int_arg, "the no-match row's census entry L_c(h_nm): its "
+     "Hamming distance (default bits / 8: 6 for 7x7, 3 for 5x5; 0 leaves the row uncalibrated)"),
+    ("prior_eps", "--prior-eps", float_arg, "neighbour prior floor eps of f(k) = eps + (1 - eps) "
+     "exp(-k^2 / (2 s^2)), k = |d - d_neighbour| (default 0.05)"),
+    ("prior_s", "--prior-s", float_arg, "neighbour prior width s (default 4)"),
+    ("prior_nomatch", "--prior-nomatch", float_arg, "the no-match row's prior per matched neighbour "
+     "(default f(s), 0.626)"),
+)
+CENSUS_OPTION_FLAGS: tuple[tuple[str, str], ...] = (
+    *((dest, flag) for dest, flag, _, _ in _CENSUS_OPTIONS), ("neighbour_prior", "--no-neighbour-prior"),
+)
+
+
+def model_list(text: str) -> list[str]:
+    """``MODEL,MODEL,...`` models (for sweeps), each one of :data:`~bayesmachine.likelihood.MODELS`,
+    no repeats."""
+    names = [v.strip() for v in text.split(",") if v.strip()]
+    if not names:
+        raise argparse.ArgumentTypeError("give at least one model")
+    for n in names:
+        if n not in MODELS:
+            raise argparse.ArgumentTypeError(f"unknown model {n!r}; choose from {', '.join(MODELS)}")
+    if len(set(names)) != len(names):
+        raise argparse.ArgumentTypeError(f"a model is listed twice: {text!r}")
+    return names
+
+
+def add_census_options(parser: argparse._ActionsContainer, sweep: bool = False,
+                       title: str | None = "census model (--model census; issue 17 defaults)") -> None:
+    """``--model`` (``paper``, or ``census``: + a census column, a calibrated no-match row and the
+    raster-order neighbour prior) and the census model's options, all None unless given.
+
+    ``sweep``: ``--model`` takes a comma-separated list (:func:`model_list`)."""
+    g = parser.add_argument_group(title) if title else parser
+    described = ("paper: the paper's m, gH, gV columns; census: + a census column, a no-match row "
+                 "calibrated for it and the raster-order neighbour prior on the machine's own results")
+    if sweep:
+        g.add_argument("--model", type=model_list, default=None, metavar="MODEL,MODEL,...",
+                       help=f"comma-separated models to compare side by side, each over every random source "
+                       f"and counter max ({described}) (default {DEFAULT_MODEL})")
+    else:
+        g.add_argument("--model", choices=MODELS, default=None,
+                       help=f"the disparity model ({described}) (default {DEFAULT_MODEL})")
+    for dest, flag, kind, text in _CENSUS_OPTIONS:
+        g.add_argument(flag, dest=dest, type=kind, default=None, help=text)
+    g.add_argument("--neighbour-prior", dest="neighbour_prior", action=argparse.BooleanOptionalAction,
+                   default=None, help="the census model's raster-order neighbour prior (default on)")
+
+
+def model_names_from_args(args: argparse.Namespace) -> list[str]:
+    """The model(s) ``--model`` names: a list (a sweep's) or one, :data:`DEFAULT_MODEL` if not given."""
+    value = getattr(args, "model", None)
+    if value is None:
+        return [DEFAULT_MODEL]
+    return list(value) if isinstance(value, list) else [value]
+
+
+def _census_kwargs(args: argparse.Namespace, names: list[str]) -> dict[str, Any]:
+    given = {dest: getattr(args, dest) for dest, _ in CENSUS_OPTION_FLAGS
+             if getattr(args, dest, None) is not None}
+    if given and "census" not in names:
+        flags = ", ".join(flag if dest != "neighbour_prior" or not given[dest] else "--neighbour-prior"
+                          for dest, flag in CENSUS_OPTION_FLAGS if dest in given)
+        raise ParameterError(f"{flags}: options of --model census, which do not apply to --model "
+                             f"{','.join(names)}")
+    return given
+
+
+def model_params_from_args(args: argparse.Namespace, name: str | None = None) -> ModelParams:
     """``ModelParams`` from :func:`add_model_options`' options (``--sigma-X`` wins over ``--sigma``;
-    an option left at None takes the paper's default)."""
+    an option left at None takes the paper's default) and :func:`add_census_options`' (``--model``,
+    :data:`~bayesmachine.likelihood.DEFAULT_MODEL` if not given). ``name`` picks one model of a sweep's
+    list; census options given with only ``paper`` models are refused."""
     defaults = ModelParams()
+    names = model_names_from_args(args)
+    census = _census_kwargs(args, names)
+    name = names[0] if name is None else name
+    if name != "census":
+        census = {}
 
     def sigma(f: str) -> float:
         v = getattr(args, f"sigma_{f}")
@@ -383,4 +486,5 @@ def model_params_from_args(args: argparse.Namespace) -> ModelParams:
         return getattr(defaults, name) if v is None else float(v)
 
     return ModelParams(dmax=args.dmax, p0=given("p0"), sigma_m=sigma("m"), sigma_gh=sigma("gh"),
-                       sigma_gv=sigma("gv"), p_nm0=given("p_nm0"), sigma_nm=given("sigma_nm"))
+                       sigma_gv=sigma("gv"), p_nm0=given("p_nm0"), sigma_nm=given("sigma_nm"), name=name,
+                       **census)

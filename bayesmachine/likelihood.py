@@ -24,8 +24,12 @@ Two models (``ModelParams.name``):
   ``pi(d) = prod_n f(|d - d_n|)`` over its left (y, x-1) and upper (y-1, x) neighbours'
   MAPs d_n, ``f(k) = eps + (1-eps) exp(-k^2 / (2 s^2))`` (a table indexed by k = 0..Dmax),
   a factor 1 for a neighbour called no match or outside the output region; the no-match
-  row's prior is ``prior_nomatch`` per matched neighbour. On W-bit words the prior column's
-  word is ``combine_prior_words`` of the two neighbours' factor words (round(a b / 2^W)).
+  row's prior is ``prior_nomatch`` per matched neighbour. On the machine
+  (:func:`disparity_machine`: ``prior="neighbour"``) each neighbour's factor is a column of
+  its own, so the AND gates multiply the two factor words exactly (no rounded combined word):
+  the left factor is the machine's feedback column, formed from its own previous result
+  through ``feedback_words`` (the quantized table clamped where it stops changing), the above
+  factor a loaded column (:func:`neighbour_words` of the previous map row's results).
 """
 
 from __future__ import annotations
@@ -36,10 +40,11 @@ from numbers import Real
 
 import numpy as np
 
-from bayesmachine.params import DEFAULT_DMAX, MachineParams, ParameterError
+from bayesmachine.params import DEFAULT_DMAX, STEREO_ROWS_PER_BEAT, MachineParams, ParameterError
 
 __all__ = [
     "MODELS",
+    "DEFAULT_MODEL",
     "CENSUS_WINDOWS",
     "FEATURES",
     "SCALES",
@@ -51,11 +56,15 @@ __all__ = [
     "quantize",
     "QuantizedTables",
     "check_disparity_machine",
-    "combine_prior_words",
-    "prior_words",
+    "disparity_machine",
+    "neighbour_lanes",
+    "neighbour_words",
 ]
 
 MODELS = ("paper", "census")
+# The model the command line runs when --model is not given. The paper's, until the on-chip front
+# end (--feed pixels, emit --top stereo) computes the census model too: then this one line.
+DEFAULT_MODEL = "paper"
 # Census windows the model takes: 7x7 (48 bits, codes fit a uint64) or the cheaper 5x5 (24 bits).
 CENSUS_WINDOWS = (5, 7)
 # Default census sigma per window (issue 17: 6 for 7x7, 3 for 5x5).
@@ -341,43 +350,101 @@ class QuantizedTables:
             self.prior_last = int(changes[-1]) + 1 if changes.size else 0
 
 
-def combine_prior_words(a: np.ndarray | int, b: np.ndarray | int, word_bits: int) -> np.ndarray:
-    """One prior word from two neighbours' factor words: round(a * b / 2^W), half up, in integers.
+def neighbour_words(qtables: QuantizedTables, dmax: int, hat: np.ndarray) -> np.ndarray:
+    """One neighbour's prior factor words (P, Dmax+2) of P pixels from that neighbour's MAPs ``hat``.
 
-    A factor of 1.0 (2^W) leaves the other word unchanged, so a pixel with one matched neighbour
-    gets that neighbour's table word exactly. This is the prior column's word rule (a W x W
-    multiplier and a rounding in hardware).
-    """
-    prod = np.asarray(a, dtype=np.int64) * np.asarray(b, dtype=np.int64)
-    return ((prod + (1 << (word_bits - 1))) >> word_bits).astype(np.uint16)
-
-
-def prior_words(qtables: QuantizedTables, dmax: int, left: np.ndarray, above: np.ndarray) -> np.ndarray:
-    """The prior column's words (P, Dmax+2) of P pixels from their neighbours' MAPs.
-
-    ``left`` and ``above`` are the MAPs (P,) of each pixel's left and upper neighbour, -1 for no
-    match or outside the output region (factor 1.0). Row d gets the combined factor words
-    ``prior[|d - d_n|]``; the no-match row ``prior_nomatch`` per matched neighbour, combined
-    the same way.
+    ``hat`` (P,): the neighbour's disparity, -1 for no match, a timeout or outside the output region
+    (factor 1.0: every word 2^W). Row d gets ``prior[|d - hat|]``, the no-match row
+    ``prior_nomatch``. A neighbour-prior machine's loaded column 0 is the above neighbour's
+    factor; its feedback column is the same rule for the left neighbour, formed on chip.
     """
     if qtables.prior is None:
         raise ValueError("these tables have no neighbour prior (a census model with neighbour_prior has one)")
-    one = qtables.one
+    hat = np.asarray(hat)
+    if hat.ndim != 1 or hat.dtype.kind not in "iu":
+        raise ValueError(f"neighbour MAPs must be a 1-D integer array, got {hat.dtype} {hat.shape}")
+    if hat.size and hat.max() > dmax:
+        raise ValueError(f"neighbour MAPs must be -1 (none) or disparities 0..{dmax}, got {int(hat.max())}")
+    f = np.full((hat.shape[0], dmax + 2), qtables.one, dtype=np.uint16)
+    matched = hat >= 0
     d = np.arange(dmax + 1)
-    factors = []
-    for hat in (np.asarray(left), np.asarray(above)):
-        f = np.full((hat.shape[0], dmax + 2), one, dtype=np.int64)
-        matched = hat >= 0
-        f[matched, : dmax + 1] = qtables.prior[np.abs(d[None, :] - hat[matched, None])]
-        f[matched, dmax + 1] = qtables.prior_nomatch
-        factors.append(f)
-    return combine_prior_words(factors[0], factors[1], qtables.word_bits)
+    f[matched, : dmax + 1] = qtables.prior[np.abs(d[None, :] - hat[matched, None].astype(np.int64))]
+    f[matched, dmax + 1] = qtables.prior_nomatch
+    return f
+
+
+def neighbour_lanes(rows: int, loaded_columns: int) -> int:
+    """A neighbour-prior machine's default ``lanes``: the loaded words of
+    :data:`~bayesmachine.params.STEREO_ROWS_PER_BEAT` rows per load beat (the front end's rule).
+
+    A pixel's loaded words grow by the census and above-prior columns (5 per row: 410 at Dmax 80),
+    which the 16 lanes of ``for_disparity`` would load in 26 beats, longer than 47 % of the runs
+    on the bundled pair at counter max 16 (no run is shorter than 17 cycles): loading would show
+    (63.1 wall cycles per pixel instead of 60.4, docs/host.md). Six rows per beat
+    (30 lanes) load them in 14 beats, below the shortest run, so loading stays hidden behind the
+    previous pixel's run (wall cycles per pixel ``max(k + 1, beats + 1) + 1``) from counter max 13
+    up; a lane count a multiple of the loaded columns keeps a row's words in one beat.
+    """
+    return min(STEREO_ROWS_PER_BEAT, rows) * loaded_columns
+
+
+def disparity_machine(model: ModelParams, **machine_kwargs: object) -> MachineParams:
+    """The machine ``model`` needs: ``MachineParams.for_disparity(model.dmax, columns=model.columns, ...)``.
+
+    With the neighbour prior (``model.has_prior``): ``prior="neighbour"``, ``feedback_words`` the
+    quantized prior table clamped where it stops changing (``QuantizedTables.prior[:prior_last + 1]``),
+    ``feedback_nomatch_word`` the quantized no-match factor, and ``lanes`` by default
+    :func:`neighbour_lanes`. ``machine_kwargs`` are the other fields (``word_bits``, ``rng``, ...);
+    a ``columns``, ``prior`` or feedback table contradicting the model is a ``ParameterError``.
+    """
+    if "columns" in machine_kwargs and machine_kwargs["columns"] != model.columns:
+        raise ParameterError(f"columns: the {model.name} model has {model.columns} data columns, got "
+                             f"columns={machine_kwargs['columns']!r}")
+    kwargs = dict(machine_kwargs, columns=model.columns)
+    prior = kwargs.get("prior")
+    if model.has_prior:
+        if prior is not None and prior != "neighbour":
+            raise ParameterError(
+                f"prior: the {model.name} model's neighbour prior needs the machine's prior 'neighbour' "
+                f"(its own feedback column and a loaded above column), not {prior!r}; leave --prior out, "
+                "or turn the neighbour prior off (--no-neighbour-prior)")
+        # The other fields first, validated as usual (their errors name them), for the word width.
+        own = ("prior", "feedback_words", "feedback_nomatch_word")
+        rest = {k: v for k, v in kwargs.items() if k not in own}
+        word_bits = MachineParams.for_disparity(model.dmax, **rest).word_bits  # type: ignore[arg-type]
+        feedback, nm = feedback_table(model, word_bits)
+        for name, want in (("feedback_words", feedback), ("feedback_nomatch_word", nm)):
+            got = kwargs.get(name)
+            if got is not None and (tuple(got) if name == "feedback_words" else got) != want:  # type: ignore[arg-type]
+                raise ParameterError(f"{name}: the model's {word_bits}-bit prior table gives {want}, "
+                                     f"got {got!r}")
+        kwargs.update(prior="neighbour", feedback_words=feedback, feedback_nomatch_word=nm)
+        kwargs.setdefault("lanes", neighbour_lanes(model.hypotheses, model.columns + 1))
+    elif prior == "neighbour":
+        raise ParameterError(f"prior: 'neighbour' is the census model's neighbour prior; the {model.name} "
+                             "model" + (" without it" if model.census else "") + " has no feedback table")
+    machine = MachineParams.for_disparity(model.dmax, **kwargs)  # type: ignore[arg-type]
+    check_disparity_machine(model, machine)
+    return machine
+
+
+def feedback_table(model: ModelParams, word_bits: int) -> tuple[tuple[int, ...], int]:
+    """The neighbour prior's feedback table on ``word_bits``-bit words: (``feedback_words``,
+    ``feedback_nomatch_word``) = (quantized prior clamped at ``prior_last``, quantized no-match factor)."""
+    if not model.has_prior:
+        raise ValueError(f"the {model.name} model has no neighbour prior")
+    q = QuantizedTables(likelihood_tables(model), word_bits)
+    assert q.prior is not None and q.prior_last is not None and q.prior_nomatch is not None
+    return tuple(int(v) for v in q.prior[: q.prior_last + 1]), int(q.prior_nomatch)
 
 
 def check_disparity_machine(model: ModelParams, machine: MachineParams) -> int:
     """``ParameterError`` naming the parameter unless ``machine`` can run ``model``'s disparity pixels.
 
-    Returns the operator column of the first data column: 1 with a loaded prior (column 0), else 0.
+    Returns the operator column of the first data column: 1 with a loaded prior (column 0), 2 with
+    the neighbour prior (feedback column 0, loaded above column 1), else 0. The neighbour prior needs
+    the machine :func:`disparity_machine` builds (its feedback table is the model's); a neighbour
+    machine with a model without the prior is refused too.
     """
     if machine.rows != model.hypotheses or not machine.nomatch_row:
         raise ParameterError(
@@ -402,11 +469,20 @@ def check_disparity_machine(model: ModelParams, machine: MachineParams) -> int:
             raise _error("census_nomatch_h", f"= {model.h_nm}: the no-match row's census likelihood "
                          f"{float(l_nm):.3g} quantizes to 0 with {w}-bit words (no match could never win)")
     if model.has_prior:
-        if machine.prior != "loaded":
-            raise _error("neighbour_prior", "needs the machine's prior column: use --prior loaded "
-                         "(or turn the neighbour prior off)")
-        q = int(quantize(model.prior_nm, w))
-        if int(combine_prior_words(q, q, w)) == 0:
-            raise _error("prior_nomatch", f"= {model.prior_nm:.3g} quantizes to 0 over two neighbours "
-                         f"with {w}-bit words (the no-match row could never win)")
+        if machine.prior != "neighbour":
+            raise _error("neighbour_prior", f"needs the machine's neighbour prior (prior='neighbour': its "
+                         f"feedback column and a loaded above column), not prior={machine.prior!r}: build "
+                         "the machine with disparity_machine(model), or turn the neighbour prior off")
+        if int(quantize(model.prior_nm, w)) == 0:
+            raise _error("prior_nomatch", f"= {model.prior_nm:.3g} quantizes to 0 with {w}-bit words "
+                         "(the no-match row could never win next to a matched neighbour)")
+        feedback, nm = feedback_table(model, w)
+        if machine.feedback_words != feedback or machine.feedback_nomatch_word != nm:
+            raise _error("neighbour_prior", f"the machine's feedback table {machine.feedback_words} / "
+                         f"{machine.feedback_nomatch_word} is not the model's {w}-bit prior table "
+                         f"{feedback} / {nm}: build the machine with disparity_machine(model)")
+    elif machine.prior == "neighbour":
+        raise ParameterError(
+            f"prior: the machine has a neighbour prior (prior='neighbour') but the {model.name} model "
+            + ("has it turned off" if model.census else "has none (the census model has one)"))
     return machine.operator_columns - machine.columns

@@ -3,13 +3,17 @@
 Float64 reference of: the paper model; + a 7x7 census column with the no-match row left
 uncalibrated (h_nm = 0: its census entry is L_c(0) = 1); + the no-match row calibrated
 (h_nm = bits / 8); + the raster-order neighbour prior; the 5x5 census option (calibrated, with
-the prior). Each model also on 10-bit words (``reference_quantized``): the share of pixels whose
-MAP changes. OpenCV StereoSGBM (block 5) and StereoBM (block 15) on the same pixels. Then the
-machine (model engine, sobol, counter max 16) on the paper model and on the census model
-without the prior, each beside its float and quantized references. All bad-n figures come
-from ``host.metrics.bad_rates`` (report.json's). Prints figures; asserts nothing; tunes
-nothing (the issue's defaults).
-Run: python benchmarks/bench_models.py [--dmax 80] [--no-machine]
+and without the prior). Each model also on 10-bit words (``reference_quantized``: the machine's
+exact products): the share of pixels whose MAP changes. OpenCV StereoSGBM (block 5) and StereoBM
+(block 15) on the same pixels. Then the machine (model engine, sobol, seed 1) each model needs
+(``disparity_machine``: the census model's with its neighbour prior, fed back from its own
+results through ``run_machine``) on the paper model and the census model, against counter max,
+beside its float and quantized references, with cycles and wall cycles per pixel; then the
+random sources on the census model at counter max 16. All bad-n figures come from
+``host.metrics.bad_rates`` (report.json's). Prints figures; asserts nothing; tunes nothing (the
+issue's defaults).
+Run: python benchmarks/bench_models.py [--dmax 80] [--counter-max 1,2,4,8,16] [--no-machine]
+     [--figure docs/figures/motorcycle-models.png]
 """
 
 from __future__ import annotations
@@ -19,6 +23,7 @@ import time
 
 import numpy as np
 
+from bayesmachine.hdl.machine import BUBBLE_CYCLES, LOAD_LATENCY, pixel_wall_cycles
 from bayesmachine.host.features import model_features
 from bayesmachine.host.images import bundled_pair
 from bayesmachine.host.likelihoods import ModelParams
@@ -33,6 +38,7 @@ from bayesmachine.host.metrics import (
 from bayesmachine.host.records import Prepared
 from bayesmachine.host.reference import reference_map, reference_quantized_map, warm_up
 from bayesmachine.host.run import run_machine
+from bayesmachine.likelihood import disparity_machine
 from bayesmachine.params import MachineParams
 
 
@@ -56,8 +62,10 @@ def main() -> None:
     ap.add_argument("--dmax", type=int, default=80)
     ap.add_argument("--word-bits", type=int, default=10)
     ap.add_argument("--no-machine", action="store_true", help="skip the machine run")
-    ap.add_argument("--counter-max", default="16",
-                    help="the machine's counter max, or a comma-separated list (Fig 6 for each model)")
+    ap.add_argument("--counter-max", default="1,2,4,8,16",
+                    help="the machine's counter max values, comma-separated (Fig 6 for each model)")
+    ap.add_argument("--figure", default=None, metavar="PNG",
+                    help="write the paper and census machines, SGBM, StereoBM and the ground truth")
     args = ap.parse_args()
     left, right, gt_full = bundled_pair()
     dmax = args.dmax
@@ -100,27 +108,67 @@ def main() -> None:
             line(name, figures(disp, gt, occluded))
     if args.no_machine:
         return
-    runs = [(name, columns, key, int(cm)) for cm in args.counter_max.split(",")
-            for name, columns, key in (("paper", 3, None), ("+ census 7x7, no-match calibrated", 4, 7))]
-    for name, columns, key, counter_max in runs:
-        model = models[name]
-        machine = MachineParams.for_disparity(dmax, columns=columns, rng="sobol", counter_max=counter_max,
-                                              seed=1)
-        fl, fr = feats_cache[key]
-        ref, q = refs[name]
-        prepared = Prepared(left, right, model, (fl, fr), ref, 0.0, gt, gt_full)
-        t0 = time.perf_counter()
-        run = run_machine(prepared, machine, "model", progress=False)
-        t1 = time.perf_counter()
-        print(f"\nmachine ({machine.rng}, counter max {machine.counter_max}, {machine.columns} columns, "
-              f"word bits {machine.word_bits}) on the model '{name}' ({t1 - t0:.1f} s):")
-        line("machine", figures(run.map, gt, occluded),
-             f"cycles/pixel {run.cycles.mean():.2f} (median {np.median(run.cycles):.0f}), "
-             f"timeouts {int(run.timeout.sum())}")
-        line("its float64 reference", figures(ref, gt, occluded))
-        line(f"its {machine.word_bits}-bit quantized reference", figures(q, gt, occluded))
-        print(f"MAP agreement machine/float reference {np.mean(run.map == ref):.3f}, "
-              f"machine/quantized {np.mean(run.map == q):.3f}")
+    figure_maps: dict[str, np.ndarray] = {}
+    machine_models = {"paper": "paper", "census + prior": "+ neighbour prior (census model default)"}
+    counters = [int(c) for c in args.counter_max.split(",")]
+    print(f"\nThe machine (model engine, sobol, seed 1, W {args.word_bits}): against counter max; agreement "
+          "with its float64 / quantized reference; cycles per pixel mean (median); wall cycles per pixel "
+          "(hdl.machine timing rule, loading included)")
+    print(f"{'machine':<44} {'no-match':>8} {'bad2':>8} {'bad2,nm':>8} {'nm occl':>8}  "
+          "MAP=float MAP=words  cycles/px (median)  wall/px  beats")
+    for counter_max in counters:
+        for label, name in machine_models.items():
+            run = machine_run(left, right, gt, gt_full, models[name], feats_cache, refs[name], counter_max,
+                              "sobol", args.word_bits)
+            if counter_max == 16:
+                figure_maps[label] = run.map
+            machine_line(f"{label}, counter max {counter_max}", run, refs[name], gt, occluded)
+    print("\nRandom sources on the census model with its prior, counter max 16:")
+    name = machine_models["census + prior"]
+    for rng in ("sobol", "lfsr", "lfsr-shared"):
+        run = machine_run(left, right, gt, gt_full, models[name], feats_cache, refs[name], 16, rng,
+                          args.word_bits)
+        machine_line(f"census + prior, {rng}", run, refs[name], gt, occluded)
+    if args.figure and {"paper", "census + prior"} <= set(figure_maps):
+        from bayesmachine.host.plots import save_disparity_figure
+        from bayesmachine.host.region import OutputRegion
+
+        region = OutputRegion.of_image(left.shape, dmax)
+        panels = [("Paper model: machine (counter max 16)", figure_maps["paper"]),
+                  ("Census + neighbour prior: machine (counter max 16)", figure_maps["census + prior"]),
+                  ("OpenCV StereoSGBM (block 5)", sgbm_disparity(left, right, dmax)),
+                  ("OpenCV StereoBM (block 15)", bm_disparity(left, right, dmax)),
+                  ("Ground truth", gt)]
+        save_disparity_figure(args.figure, region.cut(left), panels, dmax)
+        print(f"wrote {args.figure}")
+
+
+def wall_cycles(machine: MachineParams, cycles: np.ndarray) -> np.ndarray:
+    """Clock cycles per pixel in steady state, loading included (hdl.machine.pixel_wall_cycles).
+
+    A neighbour-prior machine forms its feedback column in one more cycle per pixel:
+    ``max(k + 1, beats + 1) + 1`` (the pysim/Verilator timing of the neighbour machine)."""
+    if machine.feedback_columns:
+        k = np.asarray(cycles, np.int64)
+        return np.maximum(k + 1, machine.beats_per_pixel + LOAD_LATENCY) + BUBBLE_CYCLES
+    return pixel_wall_cycles(machine, cycles)
+
+
+def machine_run(left, right, gt, gt_full, model, feats_cache, ref, counter_max, rng, word_bits):
+    machine = disparity_machine(model, rng=rng, counter_max=counter_max, seed=1, word_bits=word_bits)
+    fl, fr = feats_cache[model.census_window if model.census else None]
+    prepared = Prepared(left, right, model, (fl, fr), ref[0], 0.0, gt, gt_full)
+    return run_machine(prepared, machine, "model", progress=False)
+
+
+def machine_line(name: str, run, ref: tuple, gt: np.ndarray, occluded: np.ndarray) -> None:
+    m = run.machine
+    wall = wall_cycles(m, run.cycles)
+    line(name, figures(run.map, gt, occluded),
+         f"{np.mean(run.map == ref[0]):8.3f} {np.mean(run.map == ref[1]):9.3f}  "
+         f"{run.cycles.mean():8.2f} ({np.median(run.cycles):4.0f})  {wall.mean():8.2f}  "
+         f"{m.beats_per_pixel:5d}"
+         + (f"  timeouts {int(run.timeout.sum())}" if run.timeout.any() else ""))
 
 
 if __name__ == "__main__":

@@ -4,7 +4,14 @@ from __future__ import annotations
 
 import argparse
 
-from bayesmachine.cliargs import add_dmax_option, add_machine_options, machine_params_from_args, output_path
+from bayesmachine.cliargs import (
+    add_census_options,
+    add_dmax_option,
+    add_machine_options,
+    machine_params_from_args,
+    model_params_from_args,
+    output_path,
+)
 
 from .emit import emit, summary
 
@@ -28,6 +35,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     from .frontend.cli import add_options as add_stereo_options
 
     add_stereo_options(p)
+    # --model census: the machine the census model needs (4 columns and its neighbour prior).
+    add_census_options(p, title="model (--model census emits the census model's machine)")
     p.add_argument("-o", "--output", type=output_path, default="build/bayesmachine.v",
                    help="output file; .v for Verilog, .il for RTLIL (default build/bayesmachine.v)")
     p.set_defaults(func=_run)
@@ -37,7 +46,18 @@ def _run(args: argparse.Namespace) -> int:
     from .frontend.cli import check_top
 
     check_top(args)  # stereo options with --top machine would do nothing: refused
-    params = machine_params_from_args(args, args.dmax)
+    model = model_params_from_args(args)
+    if model.census and args.top == "stereo":
+        raise ValueError("--model census: the on-chip front end (--top stereo) computes the paper model only "
+                         "(for now); emit the census model's machine with --top machine")
+    params = machine_params_from_args(args, args.dmax, model=model if model.census else None)
+    if params.feedback_columns:
+        from bayesmachine.sim.pysim import PysimEngine  # the simulator of this very RTL
+
+        if not PysimEngine.FEEDBACK:  # never write RTL that would not form the feedback column
+            raise ValueError("--model census: this version's RTL does not form the neighbour prior's "
+                             "feedback column yet; use --no-neighbour-prior, or the model engine "
+                             "(bayesmachine run)")
     if args.top == "stereo":
         from .frontend.cli import build
         from .frontend.cli import summary as stereo_summary

@@ -23,6 +23,7 @@ from bayesmachine.cliargs import (
     argument_type,
     counter_max_list,
     machine_params_from_args,
+    model_names_from_args,
     model_params_from_args,
     output_path,
     positive_float_arg,
@@ -39,7 +40,7 @@ from bayesmachine.outputs import (
 )
 from bayesmachine.params import DEFAULT_RNG, MachineParams
 
-from .features import feature_sums
+from .features import model_features
 from .images import Crop, bundled_pair, crop_image, load_gt, load_image, parse_crop, validate_pair
 from .likelihoods import ModelParams
 from .reference import reference_bands, warm_up
@@ -121,7 +122,9 @@ def _add_machine_options(p: argparse.ArgumentParser, sweep: bool) -> None:
     helps = {
         "rng": _host_rng_help() + " (default %(default)s)",
         "prior": "uniform: always-on 1s enter each row; loaded: an extra operator column 0 holds a prior "
-        "word per row, which the host fills with a uniform prior (1.0) (default %(default)s)",
+        "word per row, which the host fills with a uniform prior (1.0); neighbour: the census model's "
+        "neighbour prior, which --model census sets by itself (default uniform; neighbour with --model "
+        "census)",
     }
     if sweep:
         changes["rng"] = {
@@ -180,10 +183,15 @@ def _add_machine_options(p: argparse.ArgumentParser, sweep: bool) -> None:
 def _machine_params(
     args: argparse.Namespace, model: ModelParams, counter_max: int | None = None, rng: str | None = None
 ) -> MachineParams:
+    """The machine ``model`` needs (``disparity_machine``: the census model's neighbour prior) from the
+    machine options."""
     overrides: dict[str, object] = {} if counter_max is None else {"counter_max": counter_max}
     if rng is not None:
         overrides["rng"] = rng
-    machine = machine_params_from_args(args, model.dmax, **overrides)
+    if getattr(args, "feed", "words") == "pixels" and model.census:
+        raise ValueError("--feed pixels: the on-chip front end computes the paper model only (for now); run "
+                         "--model census with --feed words (the host's words), or --model paper")
+    machine = machine_params_from_args(args, model.dmax, model=model, **overrides)
     if getattr(args, "feed", "words") == "pixels" and args.lanes is None:
         # The front end writes one feature per lane: lanes a multiple of the operator columns.
         from bayesmachine.params import stereo_lanes
@@ -221,6 +229,7 @@ def _report(outcome: RunOutcome, source: str, crop: Crop | None) -> dict[str, ob
         "image_shape": list(prep.left.shape),
         "output_shape": list(prep.shape),
         "ground_truth": prep.gt is not None,
+        "model_name": prep.model.name,
         "model": prep.model.to_dict(),
         "machine": run.machine.to_dict(),
     }
@@ -237,7 +246,8 @@ def _summary(r: dict[str, object]) -> str:
         return "n/a" if v is None else format(v, fmt)
 
     line = (
-        f"{r['engine']} rng={r['rng']} counter_max={r['counter_max']}: {r['pixels']} px, "
+        f"{r['engine']} model={r['model_name']} rng={r['rng']} counter_max={r['counter_max']}: "
+        f"{r['pixels']} px, "
         f"{f('cycles_per_pixel_mean', '.2f')} +- {f('cycles_per_pixel_std', '.2f')} cycles/px, "
         f"RMS {f('rms_error')}, no-match F1 {f('nomatch_f1')}, MAP agreement {f('map_agreement')}, "
         f"timeouts {r['timeouts']}, engine {f('seconds', '.2f')} s"
@@ -253,6 +263,12 @@ def _summary(r: dict[str, object]) -> str:
         )
         if "sgbm_bad2" in r:
             line += f", SGBM {f('sgbm_bad2')} / {f('sgbm_bad2_nomatch_bad')}"
+        if "bm_bad2" in r:
+            line += f", StereoBM {f('bm_bad2')} / {f('bm_bad2_nomatch_bad')}"
+        if r.get("machine_nomatch_occluded") is not None:
+            line += f"\n  no-match calls on occluded pixels: machine {f('machine_nomatch_occluded', '.3f')}"
+            if r.get("sgbm_nomatch_occluded") is not None:
+                line += f", SGBM {f('sgbm_nomatch_occluded', '.3f')}"
     return line
 
 
@@ -272,9 +288,9 @@ def _cmd_reference(args: argparse.Namespace) -> int:
         "use --crop or a smaller --dmax",
     )
     validate_pair(left, right, model.dmax)
-    warm_up()  # numba's cache load stays out of the timing
+    warm_up(model)  # numba's cache load stays out of the timing
     t0 = time.perf_counter()
-    features = (feature_sums(left), feature_sums(right))
+    features = (model_features(left, model), model_features(right, model))
     ref_map = np.empty(region.shape, np.int16)
 
     def bands():  # the posterior of each band, in order; the MAP is kept on the way
@@ -287,7 +303,7 @@ def _cmd_reference(args: argparse.Namespace) -> int:
         npz.add("map", ref_map)
     if not args.quiet:
         print(
-            f"reference: {shape[0]}x{shape[1]} px x {model.hypotheses} hypotheses "
+            f"reference ({model.name} model): {shape[0]}x{shape[1]} px x {model.hypotheses} hypotheses "
             f"({format_bytes(volume)} of posterior) in {time.perf_counter() - t0:.3f} s, "
             f"{int((ref_map < 0).sum())} no match -> {out}"
         )
@@ -380,19 +396,29 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
-    model = model_params_from_args(args)
+    names = model_names_from_args(args)  # model_list: no repeats
+    models = [model_params_from_args(args, name) for name in names]
     counters: list[int] = args.counter_max  # sorted, no repeats (counter_max_list)
     kinds: list[str] = args.rng  # rng_list: no repeats
-    # Validate all before running; the sources side by side, each over every counter max.
-    machines = [_machine_params(args, model, n, k) for k in kinds for n in counters]
+    # Validate all before running; models, then sources side by side, each over every counter max.
+    runs = [(model, _machine_params(args, model, n, k)) for model in models for k in kinds for n in counters]
     left, right, gt, source = _load_inputs(args, with_gt=True)
-    region = OutputRegion.of_image(left.shape, model.dmax)
-    _check_fits(region, machines[-1])
+    region = OutputRegion.of_image(left.shape, models[0].dmax)
+    _check_fits(region, max((m for _, m in runs), key=lambda m: m.rows))
+    machine_dicts = [m.to_dict() for _, m in runs]
+    own = ("counter_max", "rng", *_DEVICE_FIELDS)
+    # The machine fields every point shares; a point records the ones of its own (its model's machine).
+    common = {k: v for k, v in machine_dicts[0].items()
+              if k not in own and all(d.get(k) == v for d in machine_dicts)}
     with OutputDir(args.output, SWEEP_OUTPUTS, last="sweep.json") as out:
-        prep = prepare(left, right, model, gt)
         points = []
+        reference_seconds = {}
         t0 = time.perf_counter()
-        for i, machine in enumerate(machines):
+        prep = None
+        for i, (model, machine) in enumerate(runs):
+            if prep is None or prep.model != model:
+                prep = prepare(left, right, model, gt)  # one model's features and reference at a time
+                reference_seconds[model.name] = prep.reference_seconds
             outcome = run_pair(
                 left,
                 right,
@@ -404,11 +430,14 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
                 sgbm=(not args.no_sgbm) and i == 0,
             )
             report = _report(outcome, source, args.crop)
-            for key in ("input", "crop", "image_shape", "output_shape", "ground_truth", "model", "machine"):
+            for key in ("input", "crop", "image_shape", "output_shape", "ground_truth", "machine"):
                 report.pop(key)
             device = {k: v for k, v in machine.to_dict().items() if k in _DEVICE_FIELDS}
             if device:  # the device options are the smtj points' own (--rng smtj,sobol --smtj-dwell 2)
                 report["device"] = device
+            mine = {k: v for k, v in machine.to_dict().items() if k not in own and k not in common}
+            if mine:
+                report["machine"] = mine
             points.append(report)
             del outcome  # one run's per-pixel results at a time
             if not args.quiet:
@@ -417,19 +446,21 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
             "engine": args.engine,
             "input": source,
             "crop": str(args.crop) if args.crop is not None else None,
-            "output_shape": list(prep.shape),
+            "output_shape": list(region.shape),
             "ground_truth": gt is not None,
-            "reference_seconds": prep.reference_seconds,
+            "reference_seconds": reference_seconds,
             "total_seconds": time.perf_counter() - t0,
-            "model": model.to_dict(),
+            "models": names,
             "rng": kinds,
-            "machine": {k: v for k, v in machines[0].to_dict().items()
-                        if k not in ("counter_max", "rng", *_DEVICE_FIELDS)},
+            "machine": common,
             "points": points,
         }
         from .plots import save_sweep_figure
 
-        out.write("sweep.png", lambda path: save_sweep_figure(path, points))
+        # Several models: one colour per model and source.
+        plotted = points if len(models) == 1 else [dict(p, rng=f"{p['model_name']} {p['rng']}")
+                                                   for p in points]
+        out.write("sweep.png", lambda path: save_sweep_figure(path, plotted))
         out.write("sweep.json", lambda path: _write_json(path, sweep))
         written = out.commit()
     if not args.quiet:
@@ -448,7 +479,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         "when the disk cannot hold it.",
     )
     _add_input_options(p, optional=False)
-    add_model_options(p)
+    add_model_options(p, census=True)
     p.add_argument("-o", "--output", required=True, type=output_path, metavar="REF.npz",
                    help="output .npz file")
     p.add_argument("--quiet", action="store_true", help="no summary line")
@@ -465,7 +496,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         "while the first is writing.",
     )
     _add_input_options(p, optional=True)
-    add_model_options(p)
+    add_model_options(p, census=True)
     _add_machine_options(p, sweep=False)
     p.set_defaults(func=_cmd_run)
 
@@ -473,12 +504,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         "sweep",
         help="paper Fig 6: accuracy and cycles per pixel against counter max (and random source)",
         description="Run the machine for several counter max values (and, with --rng, several random "
-        "sources side by side) on one pair; write OUT/sweep.json and OUT/sweep.png (RMS error, no-match "
-        "F1 and MAP agreement vs counter max; cycles per pixel: mean, median, 10-90 % band). "
+        "sources side by side; with --model paper,census, several models) on one pair; write "
+        "OUT/sweep.json (each point with its model and the machine fields of its own) and OUT/sweep.png "
+        "(RMS error, no-match F1 and MAP agreement vs counter max; cycles per pixel: mean, median, "
+        "10-90 % band). "
         "sweep.json is written last.",
     )
     _add_input_options(p, optional=True)
-    add_model_options(p)
+    add_model_options(p, census=True, sweep=True)
     _add_machine_options(p, sweep=True)
     p.set_defaults(func=_cmd_sweep)
 

@@ -8,9 +8,11 @@ of a pair.
 The census model (``ModelParams(name="census")``) adds a fourth data column, the census
 likelihood at the Hamming distance h = popcount(C_l(x) xor C_r(x - d)) of the pixels' census
 codes (``FeatureSums.census``, from :func:`host.features.model_features`), and the no-match
-row's census entry L_c(h_nm). Its neighbour prior goes into the loaded prior column (operator
-column 0): the words come from the neighbours' MAPs (:func:`bayesmachine.likelihood.prior_words`),
-which only the machine's own results give, so ``memory_words`` takes them as an argument.
+row's census entry L_c(h_nm). Its neighbour prior runs on the machine
+:func:`bayesmachine.likelihood.disparity_machine` builds (``prior="neighbour"``): the left
+neighbour's factor is the machine's own feedback column, the above neighbour's factor its loaded
+column 0, whose words (:func:`bayesmachine.likelihood.neighbour_words`) come from the machine's
+results of the previous map row, so ``memory_words`` takes them as an argument.
 """
 
 from __future__ import annotations
@@ -101,19 +103,23 @@ def memory_words(
 ) -> np.ndarray:
     """Likelihood-memory words of the output pixels of map rows ``rows`` (default: all).
 
-    Shape (P, M, operator_columns), row-major pixel order. Rows 0..Dmax hold the quantized
+    Shape (P, M, loaded_columns), row-major pixel order. Rows 0..Dmax hold the quantized
     likelihoods (columns m, gH, gV, and census for the census model); the no-match row holds
     [P(nomatch), 1, 1] (1 = 2^W), [P(nomatch), 1, 1, L_c(h_nm)] for the census model. With a
-    loaded prior, column 0 is ``prior`` ((P, M) words), else a uniform prior (2^W everywhere).
-    A model with the neighbour prior needs ``prior`` (from ``prior_words`` of the neighbours'
-    MAPs): the machine's own results, which the words of a whole band cannot wait for.
+    loaded prior column (``prior="loaded"``, or the above column of ``prior="neighbour"``),
+    column 0 is ``prior`` ((P, M) words), else a uniform prior (2^W everywhere). A model with
+    the neighbour prior needs ``prior``: the above neighbours' factor words
+    (:func:`~bayesmachine.likelihood.neighbour_words` of the machine's results of the previous
+    map row), which the words of a band cannot wait for; the left neighbour's factor is the
+    machine's own feedback column, not loaded.
     """
-    off = check_disparity_machine(model, machine)
+    check_disparity_machine(model, machine)
+    off = machine.loaded_columns - machine.columns  # loaded prior columns before the data columns
     _need_census(left, right, model)
     if model.has_prior and prior is None:
         raise ParameterError(
-            "--neighbour-prior: the neighbour prior's words come from the machine's own results "
-            "(prior_words of each pixel's neighbours): pass prior=, or turn the neighbour prior off")
+            "--neighbour-prior: the above neighbour's prior words come from the machine's own results "
+            "of the previous map row (neighbour_words): pass prior=, or turn the neighbour prior off")
     if prior is not None and not off:
         raise ParameterError("--prior: prior words given but the machine has no loaded prior column")
     if qtables is None:
@@ -124,7 +130,7 @@ def memory_words(
     band_l = left.band(rows if rows is not None else slice(None))
     band_r = right.band(rows if rows is not None else slice(None))
     p = band_l.shape[0] * region.shape[1]
-    words = np.empty((p, model.hypotheses, machine.operator_columns), dtype=np.uint16)
+    words = np.empty((p, model.hypotheses, machine.loaded_columns), dtype=np.uint16)
     tabs = (qtables.m, qtables.gh, qtables.gv)
     for k, (fl, fr, tab) in enumerate(zip(band_l.as_tuple(), band_r.as_tuple(), tabs, strict=True)):
         delta = np.abs(fl[:, x, None] - fr[:, xr])
@@ -153,11 +159,12 @@ def memory_words_plain(
     left: FeatureSums, right: FeatureSums, model: ModelParams, machine: MachineParams
 ) -> np.ndarray:
     """The same words from the plain formula (a test oracle for ``memory_words``; uniform prior)."""
-    off = check_disparity_machine(model, machine)
+    check_disparity_machine(model, machine)
+    off = machine.loaded_columns - machine.columns
     lik, nm = likelihoods_plain(left, right, model)
     p = lik.shape[0] * lik.shape[1]
     one = 1 << machine.word_bits
-    words = np.full((p, model.hypotheses, machine.operator_columns), one, dtype=np.uint16)
+    words = np.full((p, model.hypotheses, machine.loaded_columns), one, dtype=np.uint16)
     cols = model.columns
     words[:, : model.dmax + 1, off:] = quantize(lik, machine.word_bits).reshape(p, model.dmax + 1, cols)
     words[:, model.dmax + 1, off] = quantize(nm, machine.word_bits).reshape(p)

@@ -6,7 +6,8 @@
 * F1 of no-match detection, positive class = no match (a timeout counts as no match);
 * MAP agreement with the reference (no match = -1 on both sides);
 * bad-1 / bad-2 against ground truth over pixels with finite gt, both excluding the
-  pixels a method calls no match and counting them as bad; OpenCV StereoSGBM alongside.
+  pixels a method calls no match and counting them as bad; OpenCV StereoSGBM and StereoBM
+  alongside; the share of each method's no-match calls that fall on occluded pixels.
 """
 
 from __future__ import annotations
@@ -262,10 +263,17 @@ def evaluate(prepared: Prepared, run: MachineRun, sgbm: bool | None = None) -> R
     sgbm_map = None
     if prepared.gt is not None:
         methods = {"machine": run.map, "reference": ref_map}
-        if sgbm is None or sgbm:
-            sgbm_map = sgbm_disparity(prepared.left, prepared.right, prepared.model.dmax)
+        if sgbm is None or sgbm:  # OpenCV's block matchers: SGBM (block 5) and StereoBM (block 15)
+            dmax = prepared.model.dmax
+            sgbm_map = sgbm_disparity(prepared.left, prepared.right, dmax)
             if sgbm_map is not None:  # too narrow for SGBM: the report simply has no SGBM figures
                 methods["sgbm"] = sgbm_map
+            bm_map = bm_disparity(prepared.left, prepared.right, dmax)
+            if bm_map is not None:
+                methods["bm"] = bm_map
+        occluded = None
+        if prepared.gt_image is not None:
+            occluded = gt_region(occluded_mask(prepared.gt_image), prepared.model.dmax).astype(bool)
         bad = {}
         for name, disp in methods.items():
             b1 = bad_rates(disp, prepared.gt, 1)
@@ -277,6 +285,8 @@ def evaluate(prepared: Prepared, run: MachineRun, sgbm: bool | None = None) -> R
                 "bad2_nomatch_bad": b2["nomatch_bad"],
                 "coverage": b1["coverage"],
             }
+            if occluded is not None:
+                bad[name]["nomatch_occluded"] = nomatch_occluded_share(disp, occluded)
     return RunMetrics(
         pixels=int(run.map.size),
         cycles=cycle_stats(run.cycles),

@@ -22,9 +22,11 @@ band applies the prior and takes the MAPs; bands go top to bottom, the last MAP 
 carried into the next (``above``).
 
 ``reference_quantized`` is the same inference on the W-bit quantized tables: each data column
-a word q/2^W, the prior column ``combine_prior_words`` of the two neighbours' factor words, the
-products exact in int64 (so a MAP is decided exactly, ties to the lowest index as above). It is
-what the machine samples from: the distribution an ideal machine's counters approach.
+a word q/2^W, and with the prior the left and the above neighbour's factor words as two more
+factors (the neighbour-prior machine's feedback and loaded above columns, which its AND gates
+multiply), the products exact in int64 (so a MAP is decided exactly, ties to the lowest index as
+above). It is what the machine samples from: the distribution an ideal machine's counters
+approach.
 """
 
 from __future__ import annotations
@@ -197,11 +199,11 @@ def _prior_pass_float(data, tp, p_nm, has_prior, above, post, idx):  # pragma: n
 
 @numba.njit(cache=True, fastmath=False, boundscheck=False)
 def _prior_pass_words(data, tp, q_nm, has_prior, word_bits, above, post, idx):  # pragma: no cover
-    """The same on words: the prior word round(fL * fA / 2^W) (combine_prior_words), int64 products."""
+    """The same on words: the left and above factor words fL, fA as two factors of the exact int64
+    product (the machine's two prior columns), data words (< 2^(4W)) * fL * fA < 2^(6W)."""
     n, wo, m = data.shape
     dmax = m - 2
     one = np.int64(1) << word_bits
-    half = np.int64(1) << (word_bits - 1)
     for y in range(n):
         for i in range(wo):
             hl = idx[y, i - 1] if i > 0 else -1
@@ -221,7 +223,7 @@ def _prior_pass_words(data, tp, q_nm, has_prior, word_bits, above, post, idx):  
                 else:
                     fl = q_nm if hl >= 0 else one
                     fa = q_nm if ha >= 0 else one
-                v = src[d] * ((fl * fa + half) >> word_bits)
+                v = src[d] * fl * fa
                 out[d] = float(v)
                 total += float(v)
                 if v > best:  # strict: the lowest index wins exact ties
@@ -451,10 +453,11 @@ def reference_quantized(
 ) -> Reference:
     """The exact inference on the ``word_bits``-bit quantized tables (either model), rows ``rows``.
 
-    Each hypothesis's value is the exact integer product of its words (the prior word from
-    ``combine_prior_words``); the posterior is those products normalized (float64).
+    Each hypothesis's value is the exact integer product of its words, with the prior the left and
+    the above neighbour's factor words separately (the machine's feedback and above columns); the
+    posterior is those products normalized (float64).
     """
-    factors = model.columns + (1 if model.has_prior else 0)
+    factors = model.columns + (2 if model.has_prior else 0)
     if not 1 <= word_bits <= 15 or factors * word_bits > 62:
         raise ParameterError(f"--word-bits: {word_bits}-bit words: the exact product of {factors} words "
                              f"must fit 62 bits (word bits at most {62 // factors})")

@@ -4,6 +4,10 @@
 MAP, ground truth cut to the output region); ``run_machine`` streams the likelihood memories
 through an engine one chunk of map rows at a time (engines keep their LFSR state across
 calls, so chunking does not change results); ``run_pair`` does both and the metrics.
+A machine with the neighbour prior (``prior="neighbour"``, the census model's) runs one map row
+per call: row y's loaded prior column is the above neighbours' factor, formed from the machine's
+own results of row y - 1 (none for row 0), and each row's first pixel is flagged ``line_start``
+(the machine forms the left neighbour's factor itself from its previous result).
 Memory grows with the outputs (per-pixel maps and counts), not with frame x Dmax: the
 float64 posterior is only ever computed one band of rows at a time.
 """
@@ -17,6 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from tqdm import tqdm
 
+from bayesmachine.likelihood import neighbour_words
 from bayesmachine.outputs import require_memory
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.engines import ENGINES, get_engine
@@ -97,6 +102,8 @@ def run_machine(
 
     ``engine_options`` go to the engine's constructor (e.g. ``trace`` for ``verilator``).
     ``feed="pixels"``: the pair itself goes into the StereoMachine (front end on chip; Verilator).
+    A neighbour-prior machine runs one map row per call whatever ``chunk_rows`` (its above column
+    needs the previous row's results; see the module's text).
     """
     model = prepared.model
     if machine.rows != model.hypotheses:
@@ -114,7 +121,13 @@ def run_machine(
         "use --crop or a smaller --dmax",
     )
     if feed == "pixels":
+        if model.census:
+            raise ValueError("--feed pixels: the on-chip front end computes the paper model only (for now); "
+                             "run the census model with --feed words, or use --model paper")
         return _run_pixels(prepared, machine, engine, engine_options)
+    neighbour = machine.feedback_columns > 0
+    if neighbour:
+        chunk_rows = 1  # row y's above column is the machine's own row y - 1
     eng = get_engine(engine, machine, **(engine_options or {}))
     qtables = QuantizedTables(likelihood_tables(model), machine.word_bits)
     counts = np.zeros((ho, wo, m), counts_dtype(machine.counter_max))
@@ -124,14 +137,29 @@ def run_machine(
     cycles = np.zeros((ho, wo), np.int64)
     engine_s = words_s = 0.0
     left_f, right_f = prepared.features
+
+    def disp_row(y: int) -> np.ndarray:
+        return np.where(nomatch[y] | timeout[y], np.int16(-1), flat_map[y])
+
     try:
         with tqdm(total=ho * wo, unit="px", disable=not _want_progress(progress), desc=f"{engine}") as bar:
             for y0 in range(0, ho, chunk_rows):
                 rows = slice(y0, min(ho, y0 + chunk_rows))
                 t0 = time.perf_counter()
-                words = memory_words(left_f, right_f, model, machine, rows=rows, qtables=qtables)
-                t1 = time.perf_counter()
-                res = eng.run(words)
+                if neighbour:
+                    # The machine's own results of the row above (-1: no match, timeout, none for row 0).
+                    above = np.full(wo, -1, np.int16) if y0 == 0 else disp_row(y0 - 1)
+                    prior = neighbour_words(qtables, model.dmax, above)
+                    words = memory_words(left_f, right_f, model, machine, rows=rows, qtables=qtables,
+                                         prior=prior)
+                    starts = np.zeros(wo, bool)
+                    starts[0] = True  # each map row's first pixel has no left neighbour
+                    t1 = time.perf_counter()
+                    res = eng.run(words, line_start=starts)
+                else:
+                    words = memory_words(left_f, right_f, model, machine, rows=rows, qtables=qtables)
+                    t1 = time.perf_counter()
+                    res = eng.run(words)
                 t2 = time.perf_counter()
                 words_s += t1 - t0
                 engine_s += t2 - t1

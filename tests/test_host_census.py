@@ -36,9 +36,9 @@ from bayesmachine.likelihood import (
     ModelParams,
     QuantizedTables,
     check_disparity_machine,
-    combine_prior_words,
+    disparity_machine,
     likelihood_tables,
-    prior_words,
+    neighbour_words,
     quantize,
 )
 from bayesmachine.params import MachineParams, ParameterError
@@ -121,30 +121,55 @@ def test_tables_at_known_points():
     assert likelihood_tables(ModelParams(dmax=8, name="census", census_nomatch_h=0)).census_nomatch == 1.0
 
 
-def test_combine_prior_words_rounds_half_up_and_keeps_one():
-    assert int(combine_prior_words(1024, 641, 10)) == 641
-    assert int(combine_prior_words(641, 641, 10)) == round(641 * 641 / 1024)  # 401.25 -> 401
-    assert int(combine_prior_words(3, 512, 10)) == 2  # 1.5 -> 2 (half up)
-    assert int(combine_prior_words(1, 512, 10)) == 1  # 0.5 -> 1
-
-
-def test_prior_words_from_neighbours():
+def test_neighbour_words_from_one_neighbour():
     model = ModelParams(dmax=6, name="census")
     q = QuantizedTables(likelihood_tables(model), 10)
-    left = np.array([-1, 2, -1, 5])
-    above = np.array([-1, -1, 3, 1])
-    w = prior_words(q, 6, left, above)
+    w = neighbour_words(q, 6, np.array([-1, 2, 3, 6], np.int16))
     assert w.shape == (4, 8)
-    assert (w[0] == 1024).all()  # no matched neighbour: uniform, no-match factor 1
+    assert (w[0] == 1024).all()  # no matched neighbour: factor 1.0 everywhere, no-match row too
     d = np.arange(7)
     eps = model.prior_eps
     f = [quantize(eps + (1 - eps) * np.exp(-(k * k) / (2 * 16.0)), 10) for k in range(7)]
     np.testing.assert_array_equal(w[1, :7], [f[abs(k - 2)] for k in d])
     np.testing.assert_array_equal(w[2, :7], [f[abs(k - 3)] for k in d])
-    assert w[1, 7] == w[2, 7] == q.prior_nomatch
-    exp = [(int(f[abs(k - 5)]) * int(f[abs(k - 1)]) + 512) >> 10 for k in d]
-    np.testing.assert_array_equal(w[3, :7], exp)
-    assert w[3, 7] == (q.prior_nomatch * q.prior_nomatch + 512) >> 10
+    np.testing.assert_array_equal(w[3, :7], [f[abs(k - 6)] for k in d])
+    assert (w[1:, 7] == q.prior_nomatch).all()
+    with pytest.raises(ValueError, match="0..6"):
+        neighbour_words(q, 6, np.array([7]))
+    with pytest.raises(ValueError, match="no neighbour prior"):
+        neighbour_words(QuantizedTables(likelihood_tables(ModelParams(dmax=6)), 10), 6, np.array([1]))
+
+
+def test_disparity_machine_builds_the_model_s_machine():
+    paper = ModelParams(dmax=6)
+    assert disparity_machine(paper, counter_max=4) == MachineParams.for_disparity(6, counter_max=4)
+    no_prior = ModelParams(dmax=6, name="census", neighbour_prior=False)
+    assert disparity_machine(no_prior) == MachineParams.for_disparity(6, columns=4)
+    census = ModelParams(dmax=80, name="census")
+    m = disparity_machine(census, word_bits=10)
+    q = QuantizedTables(likelihood_tables(census), 10)
+    assert m.prior == "neighbour" and m.columns == 4
+    assert m.feedback_words == tuple(int(v) for v in q.prior[: q.prior_last + 1])
+    assert m.feedback_nomatch_word == q.prior_nomatch == 641
+    # The clamped table gives every |d - d_n| the full table's word.
+    for k in range(81):
+        assert m.feedback_words[min(k, len(m.feedback_words) - 1)] == q.prior[k]
+    # Loading stays hidden at counter max 16: no run is shorter than n_max + 1 = 17 cycles.
+    assert (m.lanes, m.words_per_pixel, m.beats_per_pixel) == (30, 410, 14)
+    assert m.beats_per_pixel <= 17 - 1
+    # A different word width gives its own table; contradicting fields are refused.
+    assert disparity_machine(census, word_bits=8).feedback_words != m.feedback_words
+    with pytest.raises(ParameterError, match="^prior: .*'neighbour'"):
+        disparity_machine(census, prior="loaded")
+    with pytest.raises(ParameterError, match="^columns: "):
+        disparity_machine(census, columns=3)
+    with pytest.raises(ParameterError, match="^feedback_words: "):
+        disparity_machine(census, feedback_words=(1024, 3))
+    with pytest.raises(ParameterError, match="^prior: 'neighbour'"):
+        disparity_machine(no_prior, prior="neighbour")
+    with pytest.raises(ParameterError, match="^prior: 'neighbour'"):
+        disparity_machine(paper, prior="neighbour")
+    assert disparity_machine(census, prior="neighbour", lanes=7).lanes == 7
 
 
 # --- Census codes ---
@@ -215,19 +240,21 @@ def test_census_words_equal_plain_formula(window):
     np.testing.assert_array_equal(part, words[3 * wo : 6 * wo])
 
 
-def test_words_with_a_loaded_prior():
+def test_words_with_the_neighbour_prior():
     fl, fr, model = _pair(6)
-    machine = MachineParams.for_disparity(6, columns=4, prior="loaded")
+    machine = disparity_machine(model)
     with pytest.raises(ParameterError, match="--neighbour-prior"):
-        memory_words(fl, fr, model, machine)  # the prior words must come from the machine's results
+        memory_words(fl, fr, model, machine)  # the above words must come from the machine's results
     p = fl.shape[0] * (fl.shape[1] - 6)
     q = QuantizedTables(likelihood_tables(model), 10)
     rng = np.random.default_rng(0)
-    pw = prior_words(q, 6, rng.integers(-1, 7, p), rng.integers(-1, 7, p))
+    pw = neighbour_words(q, 6, rng.integers(-1, 7, p))
     words = memory_words(fl, fr, model, machine, prior=pw)
+    assert words.shape == (p, 8, machine.loaded_columns) == (p, 8, 5)  # the feedback column is not loaded
     np.testing.assert_array_equal(words[:, :, 0], pw)
     no_prior = ModelParams(dmax=6, name="census", neighbour_prior=False)
-    np.testing.assert_array_equal(words[:, :, 1:], memory_words(fl, fr, no_prior, machine)[:, :, 1:])
+    plain = memory_words(fl, fr, no_prior, disparity_machine(no_prior))
+    np.testing.assert_array_equal(words[:, :, 1:], plain)
 
 
 def test_machine_checks_are_one_function():
@@ -237,14 +264,27 @@ def test_machine_checks_are_one_function():
         check_disparity_machine(no_prior, MachineParams.for_disparity(6))
     with pytest.raises(ParameterError, match="^rows: .*for_disparity"):
         check_disparity_machine(no_prior, MachineParams.for_disparity(7, columns=4))
-    with pytest.raises(ParameterError, match="^--neighbour-prior: .*--prior loaded"):
+    with pytest.raises(ParameterError, match="^--neighbour-prior: .*prior='neighbour'.*disparity_machine"):
         check_disparity_machine(census, MachineParams.for_disparity(6, columns=4))
+    with pytest.raises(ParameterError, match="^--neighbour-prior: .*prior='neighbour'"):
+        check_disparity_machine(census, MachineParams.for_disparity(6, columns=4, prior="loaded"))
+    # A neighbour machine with another table (another model's eps) is refused: its feedback would
+    # not be the model's prior.
+    other = disparity_machine(ModelParams(dmax=6, name="census", prior_eps=0.2))
+    with pytest.raises(ParameterError, match="^--neighbour-prior: .*feedback table"):
+        check_disparity_machine(census, other)
+    # A neighbour machine with a model without the prior.
+    with pytest.raises(ParameterError, match="^prior: .*turned off"):
+        check_disparity_machine(no_prior, disparity_machine(census))
     with pytest.raises(ParameterError, match="^p_nm0: .*quantizes to 0"):
         check_disparity_machine(ModelParams(dmax=6, p_nm0=1e-4), MachineParams.for_disparity(6, word_bits=4))
     with pytest.raises(ParameterError, match="^--census-nomatch-h: "):
         far = ModelParams(dmax=6, name="census", census_nomatch_h=48, neighbour_prior=False, p_nm0=0.5)
         check_disparity_machine(far, MachineParams.for_disparity(6, columns=4, word_bits=4))
-    assert check_disparity_machine(census, MachineParams.for_disparity(6, columns=4, prior="loaded")) == 1
+    with pytest.raises(ParameterError, match="^--prior-nomatch: .*quantizes to 0"):
+        disparity_machine(ModelParams(dmax=6, name="census", prior_nomatch=1e-4))
+    assert check_disparity_machine(census, disparity_machine(census)) == 2
+    assert check_disparity_machine(no_prior, MachineParams.for_disparity(6, columns=4, prior="loaded")) == 1
     fl, fr, _ = _pair(6)
     with pytest.raises(ParameterError, match="census codes"):
         bare = FeatureSums(fl.m25, fl.gh20, fl.gv20)  # no census codes
@@ -293,34 +333,49 @@ def test_prior_changes_the_map_and_needs_the_row_above():
 
 
 def _quantized_plain(fl, fr, model, word_bits):
-    """The exact inference on the machine's words: Python-int products, raster-order prior words."""
-    cols = model.columns
-    machine = MachineParams.for_disparity(model.dmax, columns=cols, word_bits=word_bits, prior="loaded")
-    one = 1 << word_bits
+    """The exact inference on the machine's words: Python-int products of the loaded words and, with
+    the prior, the feedback word the machine forms from the left MAP (its own rule, written out)."""
+    machine = disparity_machine(model, word_bits=word_bits)
     ho, wo = fl.shape[0], fl.shape[1] - model.dmax
     m = model.hypotheses
-    uniform = np.full((ho * wo, m), one, np.uint16)
-    words = memory_words(fl, fr, model, machine, prior=uniform if model.has_prior else None)
-    q = QuantizedTables(likelihood_tables(model), word_bits) if model.has_prior else None
     disp = np.full((ho, wo), -1, np.int64)
+    post = np.empty((ho, wo, m))
+    q = QuantizedTables(likelihood_tables(model), word_bits) if model.has_prior else None
+    fb = machine.feedback_words
     for y in range(ho):
+        if model.has_prior:  # the above column: this inference's own previous row
+            above = neighbour_words(q, model.dmax, disp[y - 1] if y > 0 else np.full(wo, -1))
+            words = memory_words(fl, fr, model, machine, rows=slice(y, y + 1), prior=above)
+        else:
+            words = memory_words(fl, fr, model, machine, rows=slice(y, y + 1))
         for x in range(wo):
-            w = words[y * wo + x].astype(object)
+            w = [[int(v) for v in row] for row in words[x]]
+            left = disp[y, x - 1] if x > 0 else -1
             if model.has_prior:
-                left = disp[y, x - 1] if x > 0 else -1
-                above = disp[y - 1, x] if y > 0 else -1
-                w[:, 0] = prior_words(q, model.dmax, np.array([left]), np.array([above]))[0]
-            vals = [math.prod(int(v) for v in w[j]) for j in range(m)]
+                for r in range(m):
+                    if left < 0:
+                        f = 1 << word_bits
+                    elif r == m - 1:
+                        f = machine.feedback_nomatch_word
+                    else:
+                        f = fb[min(abs(r - left), len(fb) - 1)]
+                    w[r].append(f)
+            vals = [math.prod(w[j]) for j in range(m)]
             best = max(range(m), key=lambda j: (vals[j], -j))
             disp[y, x] = best if best <= model.dmax else -1
-    return disp
+            post[y, x] = [v / sum(vals) for v in vals]
+    return disp, post
 
 
 @pytest.mark.parametrize("kw", [{}, {"neighbour_prior": False}, {"census_window": 5}])
 def test_quantized_reference_is_the_words_inference(kw):
     fl, fr, model = _pair(8, **kw)
     got = reference_quantized(fl, fr, model, 10)
-    np.testing.assert_array_equal(got.map, _quantized_plain(fl, fr, model, 10))
+    want_map, want_post = _quantized_plain(fl, fr, model, 10)
+    np.testing.assert_array_equal(got.map, want_map)
+    # The weights are the exact products (the two prior factors separately, as the machine's AND
+    # gates multiply them), not a rounded combined prior word.
+    np.testing.assert_allclose(got.posterior, want_post, rtol=1e-12, atol=1e-300)
     np.testing.assert_allclose(got.posterior.sum(axis=-1), 1.0, rtol=1e-12)
     np.testing.assert_array_equal(reference_quantized_map(fl, fr, model, 10, band_rows=3), got.map)
     # Coarse words change some MAPs; the float reference is close to 10-bit words here.
@@ -331,9 +386,9 @@ def test_quantized_reference_of_the_paper_model():
     fl, fr, _ = _pair(8)
     paper = ModelParams(dmax=8)
     got = reference_quantized(fl, fr, paper, 6)
-    np.testing.assert_array_equal(got.map, _quantized_plain(fl, fr, paper, 6))
-    with pytest.raises(ParameterError, match="--word-bits"):
-        reference_quantized(fl, fr, ModelParams(dmax=8, name="census"), 13)
+    np.testing.assert_array_equal(got.map, _quantized_plain(fl, fr, paper, 6)[0])
+    with pytest.raises(ParameterError, match="--word-bits"):  # 4 data words and 2 prior words of 11 bits
+        reference_quantized(fl, fr, ModelParams(dmax=8, name="census"), 11)
 
 
 # --- The machine on the census model ---
@@ -348,8 +403,8 @@ def test_machine_runs_the_census_model_without_the_prior():
     assert out.prepared.features[0].census is not None  # prepare() computed the model's features
     assert out.metrics.map_agreement > 0.9
     assert out.metrics.bad["machine"]["bad2"] < 0.1
-    # With the neighbour prior the machine needs a loaded prior column, and its words the machine's
-    # own results: refused, never run with a silently uniform prior.
+    # With the neighbour prior the machine needs its neighbour prior (its feedback column, and the
+    # above column from its own results): refused, never run with a silently uniform prior.
     with pytest.raises(ParameterError, match="--neighbour-prior"):
         run_pair(left, right, ModelParams(dmax=10, name="census"), machine)
     loaded = MachineParams.for_disparity(10, columns=4, prior="loaded")
