@@ -23,7 +23,7 @@ import time
 
 import numpy as np
 
-from bayesmachine.hdl.machine import BUBBLE_CYCLES, LOAD_LATENCY, pixel_wall_cycles
+from bayesmachine.hdl.machine import pixel_wall_cycles
 from bayesmachine.host.features import model_features
 from bayesmachine.host.images import bundled_pair
 from bayesmachine.host.likelihoods import ModelParams
@@ -39,7 +39,6 @@ from bayesmachine.host.records import Prepared
 from bayesmachine.host.reference import reference_map, reference_quantized_map, warm_up
 from bayesmachine.host.run import run_machine
 from bayesmachine.likelihood import disparity_machine
-from bayesmachine.params import MachineParams
 
 
 def figures(disp: np.ndarray, gt: np.ndarray, occluded: np.ndarray) -> dict[str, float]:
@@ -143,17 +142,6 @@ def main() -> None:
         print(f"wrote {args.figure}")
 
 
-def wall_cycles(machine: MachineParams, cycles: np.ndarray) -> np.ndarray:
-    """Clock cycles per pixel in steady state, loading included (hdl.machine.pixel_wall_cycles).
-
-    A neighbour-prior machine forms its feedback column in one more cycle per pixel:
-    ``max(k + 1, beats + 1) + 1`` (the pysim/Verilator timing of the neighbour machine)."""
-    if machine.feedback_columns:
-        k = np.asarray(cycles, np.int64)
-        return np.maximum(k + 1, machine.beats_per_pixel + LOAD_LATENCY) + BUBBLE_CYCLES
-    return pixel_wall_cycles(machine, cycles)
-
-
 def machine_run(left, right, gt, gt_full, model, feats_cache, ref, counter_max, rng, word_bits):
     machine = disparity_machine(model, rng=rng, counter_max=counter_max, seed=1, word_bits=word_bits)
     fl, fr = feats_cache[model.census_window if model.census else None]
@@ -163,7 +151,7 @@ def machine_run(left, right, gt, gt_full, model, feats_cache, ref, counter_max, 
 
 def machine_line(name: str, run, ref: tuple, gt: np.ndarray, occluded: np.ndarray) -> None:
     m = run.machine
-    wall = wall_cycles(m, run.cycles)
+    wall = pixel_wall_cycles(m, run.cycles)
     line(name, figures(run.map, gt, occluded),
          f"{np.mean(run.map == ref[0]):8.3f} {np.mean(run.map == ref[1]):9.3f}  "
          f"{run.cycles.mean():8.2f} ({np.median(run.cycles):4.0f})  {wall.mean():8.2f}  "

@@ -51,13 +51,6 @@ def _run(args: argparse.Namespace) -> int:
         raise ValueError("--model census: the on-chip front end (--top stereo) computes the paper model only "
                          "(for now); emit the census model's machine with --top machine")
     params = machine_params_from_args(args, args.dmax, model=model if model.census else None)
-    if params.feedback_columns:
-        from bayesmachine.sim.pysim import PysimEngine  # the simulator of this very RTL
-
-        if not PysimEngine.FEEDBACK:  # never write RTL that would not form the feedback column
-            raise ValueError("--model census: this version's RTL does not form the neighbour prior's "
-                             "feedback column yet; use --no-neighbour-prior, or the model engine "
-                             "(bayesmachine run)")
     if args.top == "stereo":
         from .frontend.cli import build
         from .frontend.cli import summary as stereo_summary
