@@ -344,7 +344,8 @@ def _tiny_build(root: Path) -> vb.VerilatorBuild:
 @needs_tools
 def test_concurrent_builds_and_broken_cache_entries(tmp_path: Path) -> None:
     """Two builds of the same design race, both end with one sound entry; a broken entry (a harness
-    that is truncated, or a missing build.json) is detected (its rebuild: the slow test below)."""
+    that is truncated, or a missing build.json) is detected (its rebuild: the slow test below); a
+    build of another design reuses the runtime objects the first ones left in the cache."""
     from concurrent.futures import ThreadPoolExecutor
 
     p = MachineParams.for_disparity(dmax=1, lanes=3)
@@ -365,6 +366,16 @@ def test_concurrent_builds_and_broken_cache_entries(tmp_path: Path) -> None:
         assert not eng.compiled
         words = _words(p, 50, 12)
         assert eng.run(words).equal(MachineModel(p).run(words))
+    # Verilator's runtime objects: compiled by the first builds into the cache, copied by the next.
+    runtime = sorted(o.name.split("-")[0] for o in (tmp_path / "runtime").glob("*.o"))
+    assert runtime == ["verilated", "verilated_threads"]
+    q = MachineParams.for_disparity(dmax=2, lanes=3)
+    with VerilatorEngine(q, build_dir=tmp_path) as eng:
+        assert eng.compiled
+        log = (eng.build.directory / "build.log").read_text()
+        assert log.count(f"from {tmp_path / 'runtime'}") == 2, log[-3000:]
+        words = _words(q, 50, 13)
+        assert eng.run(words).equal(MachineModel(q).run(words))
 
 
 @needs_tools
@@ -427,7 +438,8 @@ def test_sigterm_during_compile_ends_the_compiler_and_cleans_up(tmp_path: Path) 
 
 
 def test_orphaned_build_directories_are_removed(tmp_path: Path) -> None:
-    """A build directory whose process is gone (killed outright) goes; a live process's stays."""
+    """A build directory (or a runtime object's temporary) whose process is gone (killed outright)
+    goes; a live process's stays."""
     dead = subprocess.Popen([sys.executable, "-c", "pass"])
     dead.wait()
     orphan = tmp_path / f".build-0123abcd-{dead.pid}-x1y2"
@@ -435,5 +447,11 @@ def test_orphaned_build_directories_are_removed(tmp_path: Path) -> None:
     other = tmp_path / ".build-0123abcd-q5r6"  # no pid in the name (an older layout): left alone
     for d in (orphan, live, other):
         (d / "obj").mkdir(parents=True)
+    # A runtime object being stored (sim/verilator/objcache.py: .tmp-<pid>-<random>), likewise.
+    runtime = tmp_path / "runtime"
+    runtime.mkdir()
+    for pid in (dead.pid, os.getpid()):
+        (runtime / f".tmp-{pid}-abc").write_bytes(b"")
     vb._remove_orphans(tmp_path)
-    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([live.name, other.name])
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([live.name, other.name, "runtime"])
+    assert [p.name for p in runtime.iterdir()] == [f".tmp-{os.getpid()}-abc"]
