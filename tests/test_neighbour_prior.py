@@ -1,3 +1,4 @@
+# amaranth: UnusedElaboratable=no
 """The neighbour prior's feedback column (``prior = "neighbour"``), held to an independent oracle;
 the RTL (pysim and Verilator) held to the model, and what cannot run it refusing it.
 
