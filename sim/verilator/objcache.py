@@ -5,7 +5,8 @@ and, with a trace, the trace writers) with the same command, whatever the design
 each. ``build_design`` runs make with ``OBJCACHE`` set to a wrapper that calls :func:`main`,
 which make puts in front of every compile command. A compile of a file from Verilator's
 ``include`` directory is looked up in ``<cache>/runtime/`` under a key hashing the Verilator
-version, the whole command, the source's content and the compiler (path, size, mtime): a hit
+version, the whole command, the source's content, the include directory's headers (size, mtime)
+and the compiler (path, size, mtime): a hit
 copies the object, a miss compiles it and stores it (written under a temporary name and renamed:
 concurrent builds store the same bytes, and an entry is complete or absent). Every other compile
 (the design's, the harness's) runs unchanged.
@@ -39,6 +40,10 @@ def _key(store: Path, version: str, args: list[str], source: Path) -> Path:
         h.update(a.encode())
         h.update(b"\0")
     h.update(source.read_bytes())
+    # The headers it includes: a Verilator reinstalled under the same version string changes them.
+    for f in sorted(source.parent.rglob("*.h")):
+        st = f.stat()
+        h.update(f"{f.relative_to(source.parent)} {st.st_size} {st.st_mtime_ns}\0".encode())
     compiler = shutil.which(args[0])
     if compiler is not None:
         st = os.stat(compiler)
