@@ -50,6 +50,12 @@ class MachineLanes(wiring.Component):
             raise ParameterError(f"machines must be an integer in [1, 256], got {machines!r}")
         if not source_kind(params.rng).on_chip:
             raise ParameterError(f"lanes of machines need an on-chip random source, not {params.rng!r}")
+        if params.feedback_columns:
+            # Round-robin lanes: each lane's previous result is pixel i - k's, not the left neighbour's.
+            raise ParameterError(
+                f"prior = 'neighbour' cannot run on lanes of machines: pixels are dealt round-robin, so each "
+                f"lane's feedback column would come from pixel i - {machines}, not the left neighbour "
+                f"(use one machine, or prior = 'loaded')")
         self._params = params
         self._machines = machines
         super().__init__(MachineSignature(params))

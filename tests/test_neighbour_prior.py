@@ -1,4 +1,6 @@
-"""The neighbour prior's feedback column (``prior = "neighbour"``), held to an independent oracle.
+# amaranth: UnusedElaboratable=no
+"""The neighbour prior's feedback column (``prior = "neighbour"``), held to an independent oracle;
+the RTL (pysim and Verilator) held to the model, and what cannot run it refusing it.
 
 A neighbour-prior machine has the operator matrix of a loaded-prior machine with one more data
 column: its column 0 is formed from its previous result instead of loaded. So the oracle runs
@@ -179,3 +181,93 @@ def test_rtl_wall_cycles_follow_the_timing_rule() -> None:
     # The first pixel waits for its load (beat + write + swap); the results leave a cycle after.
     total = eng.wall_cycles
     assert abs(total - int(per_pixel.sum())) <= 4, (total, int(per_pixel.sum()))
+
+
+def _run_in_chunks(eng, words: np.ndarray, starts: np.ndarray, numbers: np.ndarray | None,
+                   cuts: tuple[int, ...]) -> list[MachineResult]:
+    """The stream in calls cut at ``cuts``, each call's numbers from where the last one stopped."""
+    parts, used = [], 0
+    for lo, hi in zip((0, *cuts), (*cuts, len(words)), strict=True):
+        res = eng.run(words[lo:hi], None if numbers is None else numbers[used:], line_start=starts[lo:hi])
+        used += int(res.cycles.sum())
+        parts.append(res)
+    return parts
+
+
+@pytest.mark.usefixtures("verilator_toolchain")
+@pytest.mark.parametrize("rng", ["sobol", "lfsr", "external"])
+def test_verilator_equals_the_model_with_back_pressure_in_chunks(rng: str, verilator_cache) -> None:
+    """The Verilator harness carries each pixel's line_start flag into every beat of it: equal to
+    the model bit for bit, with random stalls on both streams and a stream cut into calls (the
+    previous result carries over)."""
+    from bayesmachine.sim.verilator import VerilatorEngine
+
+    p = neighbour_params(rng=rng, lanes=5, max_cycles=40)
+    words, starts = words_and_starts(p, 120, 11, seed=12)
+    words[9] = 0  # a timeout: the next pixel's feedback prior is flat
+    numbers = (np.random.default_rng(13).integers(0, p.word_one, size=(120 * 40, p.operators))
+               if rng == "external" else None)
+    want = get_engine("model", p).run(words, numbers, line_start=starts)
+    assert want.timeout[9] and want.nomatch.any() and (~want.nomatch).any()
+    with VerilatorEngine(p, build_dir=verilator_cache, load_stall=0.3, result_stall=0.3, stall_seed=4,
+                         verbose=False) as eng:
+        parts = _run_in_chunks(eng, words, starts, numbers, (10, 11, 57))
+        for name in ("map", "nomatch", "timeout", "cycles", "counts"):
+            np.testing.assert_array_equal(np.concatenate([getattr(r, name) for r in parts]),
+                                          getattr(want, name), err_msg=name)
+        # The flags reach the machine: every pixel flagged as a line start gives other results.
+        eng.reset()
+        flat = eng.run(words, numbers, line_start=np.ones(len(words), bool))
+        assert not np.array_equal(flat.map, want.map)
+        np.testing.assert_array_equal(
+            flat.map, get_engine("model", p).run(words, numbers, line_start=np.ones(len(words), bool)).map)
+
+
+@pytest.mark.usefixtures("verilator_toolchain")
+def test_verilator_wall_cycles_follow_the_timing_rule(verilator_cache) -> None:
+    """The clock cycles of a compute-bound stream, derived from the timing rules of
+    docs/architecture.md ("Timing"): a neighbour prior's swap comes the cycle after the bubble."""
+    from bayesmachine.hdl.machine import pixel_wall_cycles
+    from bayesmachine.sim.verilator import VerilatorEngine
+
+    p = neighbour_params(lanes=27, rng="sobol")  # one beat per pixel: compute-bound
+    words, starts = words_and_starts(p, 50, 5, seed=9)
+    with VerilatorEngine(p, build_dir=verilator_cache, verbose=False) as eng:
+        got = eng.run(words, line_start=starts)
+        assert got.equal(get_engine("model", p).run(words, line_start=starts))
+        beats = p.beats_per_pixel
+        # Cycle 0 carries pixel 0's first beat; the shadow is complete beats + 1 cycles later and the
+        # idle machine swaps it in at once. A run of k compute cycles ends with its bubble (cycle
+        # swap + k + 1); the swap of a neighbour prior comes a cycle later, when the result of the
+        # bubble is registered, or when the next pixel's load (which starts the cycle after the
+        # swap) is written, whichever is later.
+        swaps = [beats + 1]
+        for k in got.cycles[:-1].tolist():
+            swaps.append(max(swaps[-1] + k + 2, swaps[-1] + 1 + beats + 1))
+        # The last pixel's result is valid the cycle after its bubble and taken in it.
+        assert eng.last_wall_cycles == swaps[-1] + int(got.cycles[-1]) + 2 + 1
+        assert pixel_wall_cycles(p, got.cycles)[:-1].tolist() == np.diff(swaps).tolist()
+        assert (got.cycles[:-1] + 2 > beats + 2).all()  # compute-bound: every swap waits for a run
+
+
+def test_lanes_of_machines_and_the_front_end_refuse_it() -> None:
+    """Round-robin lanes would feed each lane pixel i - k's result, and the on-chip front end makes
+    no line_start flags: both refuse a neighbour-prior machine up front, naming the prior."""
+    from bayesmachine.hdl.frontend.stereo import StereoMachine, check_stereo_machine
+    from bayesmachine.hdl.lanes import MachineLanes
+    from bayesmachine.likelihood import ModelParams
+
+    p = neighbour_params(rng="sobol")
+    with pytest.raises(ParameterError, match=r"prior = 'neighbour' cannot run on lanes of machines.*i - 2"):
+        MachineLanes(params=p, machines=2)
+    MachineLanes(params=dataclasses.replace(p, prior="loaded", columns=3, feedback_words=(),
+                                            feedback_nomatch_word=None), machines=2)  # the same shape, loaded
+    # A paper-model machine (three data columns) whose lanes suit the front end, with a neighbour prior.
+    q = MachineParams.for_disparity(7, columns=3, prior="neighbour", feedback_words=FEEDBACK,
+                                    feedback_nomatch_word=NOMATCH, lanes=15)
+    model = ModelParams(dmax=7)
+    refused = r"^prior: the on-chip front end does not feed .*'neighbour'"
+    with pytest.raises(ParameterError, match=refused):
+        check_stereo_machine(q, model, 40)
+    with pytest.raises(ParameterError, match=refused):
+        StereoMachine(params=q, model=model, width=40)

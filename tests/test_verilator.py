@@ -1,7 +1,7 @@
 """The Verilator engine: bit-exact with the model, state across calls, traces, cache, errors.
 
-Builds go to one temporary cache per session: a small machine (most checks), a small one with
-other parameters (timeouts, lowest-index ties), its traced variant, and the Dmax = 80 machine
+Builds go to one temporary cache per session: a small machine (most checks) and its traced
+variant, a small one with other parameters (timeouts, lowest-index ties), and the Dmax = 80 machine
 (a crop-sized run, and its back-pressure flavour). Without the toolchain the tests skip with
 the reason, or fail under CI (see ``conftest.require_tool``).
 """
@@ -143,14 +143,13 @@ def test_timeouts_lowest_index_loaded_prior_heavy_back_pressure(cache: Path) -> 
 
 
 @needs_tools
-def test_trace_pixel_range(cache: Path, tmp_path: Path) -> None:
-    p = ODD
+def test_trace_pixel_range(small: VerilatorEngine, cache: Path, tmp_path: Path) -> None:
+    # SMALL's traced VCD build is the one `run --dmax 6 --lanes 4 --waves` uses (one build for both).
+    p = SMALL
     words = _words(p, 12, 8)
     path = tmp_path / "window.vcd"
     eng = VerilatorEngine(p, build_dir=cache, trace=(4, 6, path))
-    plain = VerilatorEngine(p, build_dir=cache)
-    assert eng.build.key != plain.build.key  # the traced variant has its own build
-    plain.close()
+    assert eng.build.key != small.build.key  # the traced variant has its own build
     res = MachineResult.concatenate([eng.run(words[:5]), eng.run(words[5:])], p.rows)
     eng.close()
     assert res.equal(MachineModel(p).run(words))
@@ -307,7 +306,8 @@ def test_run_command_with_verilator_and_waves(cache: Path, tmp_path: Path,
     from bayesmachine.cli import main
 
     monkeypatch.setenv("BAYESMACHINE_CACHE_DIR", str(cache.parent))
-    common = ["run", "--crop", "300,200,40,12", "--dmax", "6", "--no-sgbm", "--quiet"]
+    # --lanes 4: SMALL, whose traced build test_trace_pixel_range shares.
+    common = ["run", "--crop", "300,200,40,12", "--dmax", "6", "--lanes", "4", "--no-sgbm", "--quiet"]
     assert main([*common, "-o", str(tmp_path / "model")]) == 0
     assert main([*common, "--engine", "verilator", "--waves", "2:4", "-o", str(tmp_path / "rtl")]) == 0
     a, b = np.load(tmp_path / "model" / "result.npz"), np.load(tmp_path / "rtl" / "result.npz")
@@ -342,10 +342,10 @@ def _tiny_build(root: Path) -> vb.VerilatorBuild:
 
 
 @needs_tools
-def test_concurrent_builds_and_broken_cache_entries(tmp_path: Path,
-                                                    capfd: pytest.CaptureFixture[str]) -> None:
+def test_concurrent_builds_and_broken_cache_entries(tmp_path: Path) -> None:
     """Two builds of the same design race, both end with one sound entry; a broken entry (a harness
-    that is truncated, or a missing build.json) is detected, reported and rebuilt."""
+    that is truncated, or a missing build.json) is detected (its rebuild: the slow test below); a
+    build of another design reuses the runtime objects the first ones left in the cache."""
     from concurrent.futures import ThreadPoolExecutor
 
     p = MachineParams.for_disparity(dmax=1, lanes=3)
@@ -360,9 +360,35 @@ def test_concurrent_builds_and_broken_cache_entries(tmp_path: Path,
     (entry / "build.json.bak").rename(entry / "build.json")
     data = builds[0].executable.read_bytes()
     builds[0].executable.write_bytes(data[: len(data) // 3])  # as a crash mid-copy would leave it
+    assert "the harness has" in vb._entry_problem(entry)
+    builds[0].executable.write_bytes(data)
+    with VerilatorEngine(p, build_dir=tmp_path) as eng:
+        assert not eng.compiled
+        words = _words(p, 50, 12)
+        assert eng.run(words).equal(MachineModel(p).run(words))
+    # Verilator's runtime objects: compiled by the first builds into the cache, copied by the next.
+    runtime = sorted(o.name.split("-")[0] for o in (tmp_path / "runtime").glob("*.o"))
+    assert runtime == ["verilated", "verilated_threads"]
+    q = MachineParams.for_disparity(dmax=2, lanes=3)
+    with VerilatorEngine(q, build_dir=tmp_path) as eng:
+        assert eng.compiled
+        log = (eng.build.directory / "build.log").read_text()
+        assert log.count(f"from {tmp_path / 'runtime'}") == 2, log[-3000:]
+        words = _words(q, 50, 13)
+        assert eng.run(words).equal(MachineModel(q).run(words))
+
+
+@needs_tools
+@pytest.mark.slow  # two compiles; the default suite checks the detection (above)
+def test_broken_cache_entry_is_rebuilt(tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
+    """A truncated harness in the cache is reported and rebuilt in place, and the rebuild runs."""
+    p = MachineParams.for_disparity(dmax=1, lanes=3)
+    first = _tiny_build(tmp_path)
+    data = first.executable.read_bytes()
+    first.executable.write_bytes(data[: len(data) // 3])  # as a crash mid-copy would leave it
     capfd.readouterr()
     again = _tiny_build(tmp_path)
-    assert again.compiled and again.directory == entry
+    assert again.compiled and again.directory == first.directory
     assert "is broken (the harness has" in capfd.readouterr().err
     with VerilatorEngine(p, build_dir=tmp_path) as eng:
         assert not eng.compiled
@@ -412,7 +438,8 @@ def test_sigterm_during_compile_ends_the_compiler_and_cleans_up(tmp_path: Path) 
 
 
 def test_orphaned_build_directories_are_removed(tmp_path: Path) -> None:
-    """A build directory whose process is gone (killed outright) goes; a live process's stays."""
+    """A build directory (or a runtime object's temporary) whose process is gone (killed outright)
+    goes; a live process's stays."""
     dead = subprocess.Popen([sys.executable, "-c", "pass"])
     dead.wait()
     orphan = tmp_path / f".build-0123abcd-{dead.pid}-x1y2"
@@ -420,5 +447,11 @@ def test_orphaned_build_directories_are_removed(tmp_path: Path) -> None:
     other = tmp_path / ".build-0123abcd-q5r6"  # no pid in the name (an older layout): left alone
     for d in (orphan, live, other):
         (d / "obj").mkdir(parents=True)
+    # A runtime object being stored (sim/verilator/objcache.py: .tmp-<pid>-<random>), likewise.
+    runtime = tmp_path / "runtime"
+    runtime.mkdir()
+    for pid in (dead.pid, os.getpid()):
+        (runtime / f".tmp-{pid}-abc").write_bytes(b"")
     vb._remove_orphans(tmp_path)
-    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([live.name, other.name])
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([live.name, other.name, "runtime"])
+    assert [p.name for p in runtime.iterdir()] == [f".tmp-{os.getpid()}-abc"]

@@ -66,6 +66,11 @@ def check_frontend_params(params: MachineParams, model: ModelParams) -> None:
         raise ParameterError(f"model must be a host.likelihoods.ModelParams, not {type(model).__name__}")
     if model.census:
         raise ParameterError("--model: the on-chip front end computes the paper model only (census: not yet)")
+    if params.feedback_columns:
+        # Its words are one data column short and the beats carry no line_start flags.
+        raise ParameterError(
+            "prior: the on-chip front end does not feed a machine with prior = 'neighbour' (its feedback "
+            "column and line_start flags); use prior = 'loaded' or 'uniform' with --feed pixels")
     check_disparity_machine(model, params)
     if params.lanes % params.operator_columns:
         raise ParameterError(

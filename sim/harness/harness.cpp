@@ -7,8 +7,10 @@
 //
 // Protocol (little-endian, binary), one batch per request, repeated until EOF or QUIT:
 //   in : uint32 magic 'BMRN', uint32 flags (bit 0: drop the random numbers left over from earlier
-//        batches), uint64 pixels; then pixels * WORDS_PER_PIXEL uint16 likelihood words in
-//        operator order (read before the batch runs).
+//        batches), uint64 pixels; then per pixel its WORDS_PER_PIXEL uint16 likelihood words in
+//        operator order and, if the design has a neighbour prior (BM_LINE_START 1), one uint16
+//        line_start flag (0 or 1; set in every load beat of the pixel at LINE_START_OFFSET). The
+//        whole batch is read before it runs.
 //   out: uint64 message, one of
 //        0 DONE: pixels * RESULT_WORDS uint32 raw result payloads, then uint64 wall cycles of this
 //          batch, uint64 wall cycles since reset; the batch is over.
@@ -106,6 +108,8 @@ int main(int argc, char** argv) {
     top->BM_PORT_LOAD_VALID = 0;
     reset_design(*top);
 
+    // A pixel's record in a request: its words, then its line_start flag (neighbour prior only).
+    const unsigned record = WORDS_PER_PIXEL + BM_LINE_START;
     std::vector<uint16_t> words;
     std::vector<uint32_t> beats(static_cast<std::size_t>(BEATS_PER_PIXEL) * (LOAD_WORDS + 1));
     std::vector<uint32_t> records;
@@ -117,7 +121,7 @@ int main(int argc, char** argv) {
         if (!read_request(head, MAGIC_RUN)) break;
         const uint32_t flags = head[1];
         const uint64_t pixels = head[2] | (static_cast<uint64_t>(head[3]) << 32);
-        words.resize(pixels * WORDS_PER_PIXEL);
+        words.resize(pixels * record);
         read_exact(words.data(), words.size() * sizeof(uint16_t));
         records.assign(pixels * RESULT_WORDS, 0);
         if (flags & 1) supply.clear();
@@ -126,11 +130,17 @@ int main(int argc, char** argv) {
         unsigned beat = 0;
         auto pack = [&]() {  // the next pixel's words as load beats
             std::fill(beats.begin(), beats.end(), 0u);
-            const uint16_t* px = &words[loaded * WORDS_PER_PIXEL];
+            const uint16_t* px = &words[loaded * record];
             for (unsigned o = 0; o < WORDS_PER_PIXEL; ++o) {
                 if (px[o] > WORD_ONE) fail("likelihood word out of range");
                 put_bits(&beats[(o / LANES) * (LOAD_WORDS + 1)], LANE_OFFSET[o % LANES], LANE_BITS, px[o]);
             }
+#if BM_LINE_START
+            // The machine reads the flag with the pixel's last beat; every beat carries it.
+            if (px[WORDS_PER_PIXEL] > 1) fail("line_start flag out of range");
+            for (unsigned b = 0; b < BEATS_PER_PIXEL; ++b)
+                put_bits(&beats[b * (LOAD_WORDS + 1)], LINE_START_OFFSET, 1, px[WORDS_PER_PIXEL]);
+#endif
         };
         if (pixels) pack();
         while (collected < pixels) {

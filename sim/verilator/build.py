@@ -10,12 +10,14 @@ are safe and an entry is complete or absent. An entry whose ``build.json`` is mi
 not describe its ``harness`` (size and SHA-256) is rebuilt, with a message. A SIGTERM or
 KeyboardInterrupt during the compile ends the compiler's whole process group and removes the
 temporary directory; temporary directories of processes that died anyway are removed on the
-next build.
+next build. Verilator's runtime objects, the same for every design, are compiled once per cache
+(``<cache>/runtime/``, see :mod:`.objcache`) and copied into later builds.
 """
 
 from __future__ import annotations
 
 import contextlib
+import functools
 import hashlib
 import json
 import os
@@ -36,6 +38,7 @@ from bayesmachine.outputs import atomic_write_text
 from bayesmachine.params import MachineParams
 
 from .codegen import HARNESS_TOP, design_header, wrapper_verilog
+from .objcache import RUNTIME_DIR, wrapper_script
 from .tools import VerilatorError, find_toolchain
 
 __all__ = ["HARNESS_DIR", "HarnessSources", "VerilatorBuild", "build_design", "build_harness", "cache_dir"]
@@ -110,12 +113,37 @@ class VerilatorBuild:
     seconds: float  # compile time (of the cached build, when reused)
 
 
+@functools.lru_cache(maxsize=8)
 def _verilator_version(verilator: str) -> str:
     try:
         out = subprocess.run([verilator, "--version"], capture_output=True, text=True, timeout=60)
         return out.stdout.strip()
     except (OSError, subprocess.SubprocessError):
         return "unknown"
+
+
+@functools.lru_cache(maxsize=8)
+def _verilator_include(verilator: str) -> Path | None:
+    """Verilator's runtime sources (``$VERILATOR_ROOT/include``), None if it does not say."""
+    try:
+        out = subprocess.run([verilator, "--getenv", "VERILATOR_ROOT"], capture_output=True, text=True,
+                             timeout=60)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    include = Path(out.stdout.strip()) / "include"
+    return include if out.returncode == 0 and out.stdout.strip() and include.is_dir() else None
+
+
+def _runtime_cache_flag(root: Path, tmp: Path, verilator: str) -> str:
+    """``OBJCACHE=<wrapper>`` for make: Verilator's runtime objects compiled once per cache and
+    reused (see :mod:`.objcache`); empty if a path has white space (make would split it)."""
+    include = _verilator_include(verilator)
+    wrapper = tmp / "objcache"
+    if include is None or any(c.isspace() for c in f"{root}{tmp}{include}{sys.executable}"):
+        return ""
+    wrapper.write_text(wrapper_script(root / RUNTIME_DIR, include, _verilator_version(verilator)))
+    wrapper.chmod(0o755)
+    return f" OBJCACHE={wrapper}"
 
 
 def _file_digest(path: Path) -> str:
@@ -157,6 +185,10 @@ def _remove_orphans(root: Path) -> None:
         parts = tmp.name.split("-")  # .build-<key>-<pid>-<random>; a key may hold dashes
         if len(parts) >= 4 and parts[-2].isdigit() and not _pid_alive(int(parts[-2])):
             shutil.rmtree(tmp, ignore_errors=True)
+    for tmp in (root / RUNTIME_DIR).glob(".tmp-*"):  # objcache's .tmp-<pid>-<random>
+        parts = tmp.name.split("-")
+        if len(parts) >= 3 and parts[1].isdigit() and not _pid_alive(int(parts[1])):
+            tmp.unlink(missing_ok=True)
 
 
 class _Terminated(SystemExit):
@@ -268,8 +300,9 @@ def build_design(
         (tmp / design.header_name).write_text(design.header)
         for name, text in texts.items():
             (tmp / name).write_text(text)
+        make_flags = MAKE_FLAGS + _runtime_cache_flag(root, tmp, tools["verilator"])
         cmd = [tools["verilator"], *flags, "-j", str(max(1, jobs)), "--top-module", HARNESS_TOP,
-               "-Mdir", str(tmp / "obj"), "-o", str(tmp / "harness"), "-MAKEFLAGS", MAKE_FLAGS,
+               "-Mdir", str(tmp / "obj"), "-o", str(tmp / "harness"), "-MAKEFLAGS", make_flags,
                f"{TOP_NAME}.v", f"{HARNESS_TOP}.v", *design.sources]
         t0 = time.perf_counter()
         with open(tmp / "build.log", "w") as log:

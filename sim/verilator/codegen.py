@@ -159,7 +159,17 @@ def design_header(params: MachineParams, signature: Any, trace_kind: int, *, tie
              "LOAD_READY": ("load", "ready"), "RESULT_PAYLOAD": ("result", "payload"),
              "RESULT_VALID": ("result", "valid"), "RESULT_READY": ("result", "ready")}
     load_layout = _shape(signature, "load", "payload")
-    lane_offsets = _element_offsets(load_layout, params.lanes, params.memory_word_width, "load payload")
+    # A neighbour prior's beat is a struct: the word lanes (under "words") and the line_start flag,
+    # which the harness sets in every beat of a pixel flagged in the request.
+    leaves = layout_fields(load_layout)
+    flag = leaves.pop("line_start", None)
+    if (flag is not None) != bool(params.feedback_columns) or (flag is not None and flag[1] != 1):
+        raise VerilatorError(f"load payload layout {load_layout!r} does not match the parameters")
+    if len(leaves) != params.lanes or {w for _, w in leaves.values()} != {params.memory_word_width}:
+        raise VerilatorError(f"load payload layout {load_layout!r} does not match the parameters")
+    lane_offsets = ", ".join(str(offset) for offset, _ in leaves.values())
+    line_start = ("#define BM_LINE_START 0\n" if flag is None else
+                  f"#define BM_LINE_START 1\nstatic const unsigned LINE_START_OFFSET = {flag[0]};\n")
     entropy_ports, external = entropy_header(params, signature)
     # A hung design: nothing loaded nor returned for longer than a whole timed-out run.
     hang = params.max_cycles + 4 * params.beats_per_pixel + 64
@@ -173,4 +183,4 @@ static const unsigned WORD_ONE = {params.word_one};
 static const unsigned LANE_BITS = {params.memory_word_width};
 static const unsigned LANE_OFFSET[LANES] = {{{lane_offsets}}};
 static const unsigned LOAD_WORDS = {_words32(load_layout.size)};
-{external}"""
+{line_start}{external}"""

@@ -226,6 +226,7 @@ class VerilatorEngine(HarnessProcess, EngineBase):
     """
 
     name = "verilator"
+    FEEDBACK = True
     OPTIONS = ("build_dir", "trace", "jobs", "verbose", "load_stall", "result_stall", "stall_seed")
 
     def __init__(
@@ -265,6 +266,13 @@ class VerilatorEngine(HarnessProcess, EngineBase):
             self._held = None  # a fresh harness holds no rows
         return super()._start()
 
+    def _run_feedback(self, q: np.ndarray, feed: NumberFeed | None, line_start: np.ndarray) -> MachineResult:
+        # The protocol's pixel record with a neighbour prior: its words, then its line_start flag.
+        records = np.empty((q.shape[0], self.params.words_per_pixel + 1), "<u2")
+        records[:, :-1] = q.reshape(q.shape[0], -1)
+        records[:, -1] = line_start
+        return self._run(records, feed)
+
     def _run(self, q: np.ndarray, feed: NumberFeed | None) -> MachineResult:
         p = self.params
         n = q.shape[0]
@@ -276,7 +284,7 @@ class VerilatorEngine(HarnessProcess, EngineBase):
         t0 = time.perf_counter()
         try:
             self._write(proc, struct.pack("<IIQ", _MAGIC_RUN, flags, n),
-                        memoryview(q.astype("<u2")).cast("B"))
+                        memoryview(np.ascontiguousarray(q, dtype="<u2")).cast("B"))
             self._held = source
             self._serve_numbers(proc, feed)
             return self._read_results(proc, n, t0)
