@@ -153,6 +153,16 @@ def _data_kernel(ml, mr, ghl, ghr, gvl, gvr, cl, cr,  # pragma: no cover
             out[dmax + 1] = v
 
 
+@numba.njit(cache=True, inline="always")
+def _neighbours(idx, above, y, i, has_prior):  # pragma: no cover
+    """The MAPs of pixel (y, i)'s left and above neighbours already taken (-1: none, or no prior)."""
+    if not has_prior:
+        return -1, -1
+    hl = idx[y, i - 1] if i > 0 else -1
+    ha = above[i] if y == 0 else idx[y - 1, i]
+    return hl, ha
+
+
 @numba.njit(cache=True, fastmath=False, boundscheck=False)
 def _prior_pass_float(data, tp, p_nm, has_prior, above, post, idx):  # pragma: no cover
     """Raster order: prior from the MAPs already taken (``above``: the MAP row above the band)."""
@@ -160,11 +170,7 @@ def _prior_pass_float(data, tp, p_nm, has_prior, above, post, idx):  # pragma: n
     dmax = m - 2
     for y in range(n):
         for i in range(wo):
-            hl = idx[y, i - 1] if i > 0 else -1
-            ha = above[i] if y == 0 else idx[y - 1, i]
-            if not has_prior:
-                hl = -1
-                ha = -1
+            hl, ha = _neighbours(idx, above, y, i, has_prior)
             src = data[y, i]
             out = post[y, i]
             best = -1.0
@@ -206,11 +212,7 @@ def _prior_pass_words(data, tp, q_nm, has_prior, word_bits, above, post, idx):  
     one = np.int64(1) << word_bits
     for y in range(n):
         for i in range(wo):
-            hl = idx[y, i - 1] if i > 0 else -1
-            ha = above[i] if y == 0 else idx[y - 1, i]
-            if not has_prior:
-                hl = -1
-                ha = -1
+            hl, ha = _neighbours(idx, above, y, i, has_prior)
             src = data[y, i]
             out = post[y, i]
             best = np.int64(-1)

@@ -36,6 +36,7 @@ from typing import Any
 from bayesmachine.hdl.emit import TOP_NAME, verilog_text
 from bayesmachine.outputs import atomic_write_text
 from bayesmachine.params import MachineParams
+from bayesmachine.tools import start_tool, stop_tool
 
 from .codegen import HARNESS_TOP, design_header, wrapper_verilog
 from .objcache import RUNTIME_DIR, wrapper_script
@@ -213,23 +214,14 @@ def _sigterm_raises() -> Iterator[None]:
 
 
 def _compile(cmd: list[str], cwd: Path, log: Any) -> int:
-    """Run the compiler in its own process group; on any interruption end the whole group."""
-    proc = subprocess.Popen(cmd, cwd=cwd, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+    """Run the compiler in its own process group; on any interruption end the whole group (make's
+    children may outlive make itself)."""
+    proc = start_tool(cmd, cwd=cwd, stdout=log, stderr=subprocess.STDOUT)
     try:
         with _sigterm_raises():
             return proc.wait()
     except BaseException:
-        for sig, wait in ((signal.SIGTERM, 5), (signal.SIGKILL, 5)):
-            with contextlib.suppress(ProcessLookupError):
-                os.killpg(proc.pid, sig)
-            try:
-                proc.wait(timeout=wait)
-                break
-            except subprocess.TimeoutExpired:
-                continue
-        # make's children may outlive make itself: the group goes whatever its leader did.
-        with contextlib.suppress(ProcessLookupError):
-            os.killpg(proc.pid, signal.SIGKILL)
+        stop_tool(proc, grace=5.0)
         raise
 
 
