@@ -10,11 +10,13 @@ import argparse
 from pathlib import Path
 
 from bayesmachine.cliargs import (
+    add_census_options,
     add_dmax_option,
     add_machine_options,
     float_arg,
     int_arg,
     machine_params_from_args,
+    model_params_from_args,
     output_path,
 )
 
@@ -47,6 +49,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     from bayesmachine.hdl.frontend.cli import add_options as add_stereo_options
 
     add_stereo_options(p)
+    # --model census: the census model's machine (4 columns and its neighbour prior), its throughput
+    # measured on the census model's words.
+    add_census_options(p, title="model (--model census: the census model's machine; --top machine)")
     p.add_argument("--machines", type=int_arg, default=1,
                    help="machines side by side behind one load and one result stream (default 1; "
                    "--top machine only)")
@@ -76,16 +81,18 @@ def _run(args: argparse.Namespace) -> int:
                                     ("--router", args.router)) if value is not None]
     if args.synth_only and pnr:
         raise ValueError(f"{', '.join(pnr)}: options of place and route, which --synth-only skips")
-    params = machine_params_from_args(args, args.dmax)
-    stereo: dict[str, object] = {}
+    model = model_params_from_args(args)
+    if model.census and args.top == "stereo":
+        raise ValueError("--model census: the on-chip front end (--top stereo) computes the paper model only "
+                         "(for now); synthesize the census model's machine with --top machine")
+    params = machine_params_from_args(args, args.dmax, model=model if model.census else None)
+    stereo: dict[str, object] = {"model": model} if model.census else {}
     if args.top == "stereo":
-        from bayesmachine.cliargs import model_params_from_args
         from bayesmachine.hdl.frontend.cli import fifo_pixels, stereo_params, width
 
         params = stereo_params(args, params)
-        stereo = {"width": width(args), "model": model_params_from_args(args),
-                  "fifo_pixels": fifo_pixels(args)}
-    name = f"synth-stereo-{args.target}" if stereo else f"synth-{args.target}"
+        stereo = {"width": width(args), "model": model, "fifo_pixels": fifo_pixels(args)}
+    name = f"synth-stereo-{args.target}" if args.top == "stereo" else f"synth-{args.target}"
     out = Path(args.output or f"build/{name}")
     synth(params, args.target, out, machines=args.machines, pin_width=args.pin_width,
           freq_mhz=150.0 if args.freq is None else args.freq,

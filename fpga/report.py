@@ -180,11 +180,14 @@ def markdown(report: dict) -> str:
                      f"{tp['input_bits_per_second'] / 1e6:.1f} Mbit/s")
         lines += ["", text + "."]
     elif tp:
-        lines += ["", f"Throughput ({tp['pair']}): {tp['compute_cycles_per_pixel']:.2f} compute and "
-                  f"{tp['wall_cycles_per_pixel']:.2f} wall cycles per pixel (loading included); at "
-                  f"{_fmt(fmax)} MHz, {report['lanes']} lane(s): {tp['pixels_per_second'] / 1e6:.2f} Mpx/s = "
-                  f"{tp['vga_fps']:.1f} VGA fps, load stream {tp['load_bits_per_second'] / 1e9:.2f} Gbit/s"
-                  + (" (load-bound)" if tp["load_bound"] else "") + "."]
+        text = (f"Throughput ({tp['pair']}): {tp['compute_cycles_per_pixel']:.2f} compute and "
+                f"{tp['wall_cycles_per_pixel']:.2f} wall cycles per pixel (loading included)")
+        if tp.get("pixels_per_second") is not None:  # synthesis only: no fmax, no rates
+            text += (f"; at {_fmt(fmax)} MHz, {report['lanes']} lane(s): "
+                     f"{tp['pixels_per_second'] / 1e6:.2f} Mpx/s = {tp['vga_fps']:.1f} VGA fps, load "
+                     f"stream {tp['load_bits_per_second'] / 1e9:.2f} Gbit/s"
+                     + (" (load-bound)" if tp["load_bound"] else ""))
+        lines += ["", text + "."]
         if tp.get("vga_fps_fit") is not None:
             lines.append(f"With the {report['lanes_fit']} lanes that fit (same fmax assumed, "
                          f"load stream widened to keep up): {tp['vga_fps_fit']:.1f} VGA fps.")

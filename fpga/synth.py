@@ -27,6 +27,19 @@ __all__ = ["measure_cycles", "synth", "SYNTH_OUTPUTS"]
 SYNTH_OUTPUTS = ("report.md", "report.json")
 
 
+def throughput_model(params: MachineParams, model: ModelParams | None) -> ModelParams:
+    """The model whose words the throughput run feeds ``params`` (default: the paper's), checked: a
+    disparity machine that runs it (rows, columns, prior: ``likelihood.check_disparity_machine``)."""
+    from bayesmachine.likelihood import check_disparity_machine
+
+    model = model if model is not None else ModelParams(dmax=params.rows - 2)
+    if not params.nomatch_row:
+        raise ValueError("throughput is measured on a stereo pair: it needs a disparity machine "
+                         "(a no-match row); pass --no-throughput")
+    check_disparity_machine(model, params)
+    return model
+
+
 def measure_cycles(params: MachineParams, progress: bool = True,
                    model: ModelParams | None = None) -> dict[str, object]:
     """Compute and wall cycles per pixel of ``params`` on the bundled pair (the model's cycles, and the
@@ -36,14 +49,8 @@ def measure_cycles(params: MachineParams, progress: bool = True,
     from bayesmachine.host.images import bundled_pair
     from bayesmachine.host.run import prepare, run_machine
 
-    if not (params.nomatch_row and params.columns == 3):
-        raise ValueError("throughput is measured on a stereo pair: it needs a disparity machine "
-                         "(3 columns and a no-match row); pass --no-throughput")
+    model = throughput_model(params, model)
     left, right, _ = bundled_pair()
-    if model is None:
-        model = ModelParams(dmax=params.rows - 2)
-    elif model.dmax != params.rows - 2:
-        raise ValueError(f"model dmax {model.dmax} does not match the machine's {params.rows - 2}")
     # The cycles need the machine only: no float64 reference.
     prepared = prepare(left, right, model, reference=False)
     c = run_machine(prepared, params, "model", progress=progress, chunk_rows=32).cycles.reshape(-1)
@@ -63,7 +70,9 @@ def synth(params: MachineParams, target_name: str, out: Path, *, machines: int =
 
     With ``width`` (pixels per image line) the design is the camera-fed ``StereoMachine`` of the
     machine ``params``, the disparity ``model`` (default: the paper's, Dmax = rows - 2) and a FIFO
-    of ``fifo_pixels``, instead of the machine alone; one StereoMachine (``machines`` = 1).
+    of ``fifo_pixels``, instead of the machine alone; one StereoMachine (``machines`` = 1). Without
+    ``width``, ``model`` is the model whose words the throughput run feeds the machine (the census
+    model's machine: ``likelihood.disparity_machine``).
     Every parameter is checked before any file is written."""
     from amaranth.back import rtlil
     from amaranth.lib import wiring
@@ -86,11 +95,8 @@ def synth(params: MachineParams, target_name: str, out: Path, *, machines: int =
     if not source_kind(params.rng).on_chip:
         raise ValueError(f"synth needs an on-chip random source, not {params.rng!r} (numbers on a port "
                          "as wide as the matrix): --rng lfsr, lfsr-shared or sobol")
-    if measure and not (params.nomatch_row and params.columns == 3):
-        raise ValueError("throughput is measured on a stereo pair: it needs a disparity machine "
-                         "(3 columns and a no-match row); pass --no-throughput")
-    if width is None and model is not None:
-        raise ValueError("a disparity model is for the stereo top: give the image width too")
+    if measure:
+        throughput_model(params, model)  # before any work: the machine must run the model's words
     if width is not None and machines != 1:
         raise ValueError(f"--top stereo is one StereoMachine (its front end feeds one machine), not "
                          f"--machines {machines}")

