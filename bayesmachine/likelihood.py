@@ -380,9 +380,9 @@ def neighbour_lanes(rows: int, loaded_columns: int) -> int:
     A pixel's loaded words grow by the census and above-prior columns (5 per row: 410 at Dmax 80),
     which the 16 lanes of ``for_disparity`` would load in 26 beats, longer than 47 % of the runs
     on the bundled pair at counter max 16 (no run is shorter than 17 cycles): loading would show
-    (63.1 wall cycles per pixel instead of 60.4, docs/host.md). Six rows per beat
+    (63.7 wall cycles per pixel instead of 61.4, docs/host.md). Six rows per beat
     (30 lanes) load them in 14 beats, below the shortest run, so loading stays hidden behind the
-    previous pixel's run (wall cycles per pixel ``max(k + 1, beats + 1) + 1``) from counter max 13
+    previous pixel's run (wall cycles per pixel ``max(k + 2, beats + 1) + 1``) from counter max 12
     up; a lane count a multiple of the loaded columns keeps a row's words in one beat.
     """
     return min(STEREO_ROWS_PER_BEAT, rows) * loaded_columns

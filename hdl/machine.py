@@ -48,12 +48,14 @@ from .signatures import MachineSignature, beat_words, entropy_layout, load_layou
 from .sources import OnChipSource, random_source
 
 __all__ = [
-    "BUBBLE_CYCLES", "GROUP_OPERATORS", "LOAD_LATENCY", "BayesianMachine", "entropy_layout", "load_layout",
-    "pixel_wall_cycles", "result_layout",
+    "BUBBLE_CYCLES", "FEEDBACK_CYCLES", "GROUP_OPERATORS", "LOAD_LATENCY", "BayesianMachine",
+    "entropy_layout",
+    "load_layout", "pixel_wall_cycles", "result_layout",
 ]
 
 BUBBLE_CYCLES = 1  # clock cycles per run after its last compute cycle (the registered stop)
 LOAD_LATENCY = 1  # a load beat is written into the shadow memory the cycle after its handshake
+FEEDBACK_CYCLES = 2  # a neighbour prior's swap after the bubble: the result, then the feedback words
 GROUP_OPERATORS = 12  # operators per registered copy of the compute and start enables
 
 
@@ -66,9 +68,10 @@ def pixel_wall_cycles(params: MachineParams, cycles: np.ndarray) -> np.ndarray:
     ``max(k, beats_per_pixel + LOAD_LATENCY) + BUBBLE_CYCLES``.
     """
     cycles = np.asarray(cycles, dtype=np.int64)
-    # A neighbour prior's swap waits a cycle more: it forms the feedback column from the result
-    # registered in the bubble (see ``BayesianMachine._feedback_prior``).
-    return np.maximum(cycles + params.feedback_columns, params.beats_per_pixel + LOAD_LATENCY) + BUBBLE_CYCLES
+    # A neighbour prior's swap waits two cycles more: the bubble registers the result, the next cycle
+    # the feedback column's words (see ``BayesianMachine._feedback_prior``).
+    settle = FEEDBACK_CYCLES * params.feedback_columns
+    return np.maximum(cycles + settle, params.beats_per_pixel + LOAD_LATENCY) + BUBBLE_CYCLES
 
 
 @dataclass
@@ -106,6 +109,7 @@ class _Nets:
     valid_q: Value | None = None  # the encoder: some row overflowed (not a timeout)
     winner: Value | None = None  # the encoder: the winning row
     start: Signal | None = None  # the shadow is swapped in (in a bubble or when idle)
+    settle: Value = field(default_factory=lambda: Const(0))  # neighbour prior: feedback words forming
 
 
 class BayesianMachine(wiring.Component):
@@ -356,11 +360,12 @@ class BayesianMachine(wiring.Component):
         """A neighbour prior's feedback column 0: formed at each swap from the previous result.
 
         The bubble registers the winning row (``prev_row``) and whether it is a hypothesis row
-        (``prev_valid``: not the no-match row, not a timeout); the swap, a cycle later, gives row r
-        the word ``feedback_words[min(|r - prev_row|, last)]`` (the no-match row
-        ``feedback_nomatch_word``), or 1.0 everywhere when the pixel starts a line or there is no
-        previous hypothesis (after reset too). A function of registers only: the swap's path is
-        a subtraction, a clamp and a small table per row.
+        (``prev_valid``: not the no-match row, not a timeout); the next cycle (``settle``) registers
+        each row's word, ``feedback_words[min(|r - prev_row|, last)]`` (the no-match row
+        ``feedback_nomatch_word``; 1.0 everywhere without a previous hypothesis, after reset too);
+        the swap, a cycle later still, takes them, or 1.0 everywhere when the pixel starts a line.
+        So the swap's path is the same as a loaded word's (a register, a comparator), and the
+        subtraction, clamp and table per row have a cycle of their own.
         """
         p = self._params
         if not p.feedback_columns:
@@ -372,30 +377,32 @@ class BayesianMachine(wiring.Component):
             if p.nomatch_row:
                 hypothesis = hypothesis & (n.winner != p.rows - 1)
             m.d.sync += [prev_row.eq(n.winner), prev_valid.eq(hypothesis)]
-        flat = Signal(name="feedback_flat")
-        m.d.comb += flat.eq(n.shadow_line_start | ~prev_valid)
+        settle = Signal(name="feedback_settle")
+        m.d.sync += settle.eq(n.leave)
+        n.settle = settle
         one = Const(p.word_one, p.memory_word_width)
         table = p.feedback_words
         last = len(table) - 1
         cols = p.operator_columns
         for r in range(p.rows):
-            word = n.incoming[r * cols]
+            word_q = Signal(p.memory_word_width, name=f"feedback_q_{r}", init=p.word_one)
             if p.nomatch_row and r == p.rows - 1:
-                m.d.comb += word.eq(Mux(flat, one, p.feedback_nomatch_word))
+                m.d.sync += word_q.eq(Mux(prev_valid, p.feedback_nomatch_word, one))
             else:
                 dist = Signal(p.map_width, name=f"feedback_dist_{r}")
                 m.d.comb += dist.eq(Mux(prev_row > r, prev_row - r, r - prev_row))
                 entries = Array(Const(w, p.memory_word_width) for w in table)
                 clamped = Mux(dist > last, last, dist) if last < (1 << p.map_width) - 1 else dist
-                m.d.comb += word.eq(Mux(flat, one, entries[clamped]))
+                m.d.sync += word_q.eq(Mux(prev_valid, entries[clamped], one))
+            m.d.comb += n.incoming[r * cols].eq(Mux(n.shadow_line_start, one, word_q))
 
     def _start(self, m: Module, n: _Nets) -> None:
         """Start: swap in the shadow memory, in a bubble or when idle (overrides the above)."""
         p = self._params
         cols = p.operator_columns
         n.start = start = Signal()
-        if p.feedback_columns:  # the swap reads the result registered in the bubble: a cycle later
-            m.d.comb += start.eq(n.shadow_full & ~n.running)
+        if p.feedback_columns:  # the swap takes the feedback words registered after the bubble
+            m.d.comb += start.eq(n.shadow_full & ~n.running & ~n.settle)
         else:
             m.d.comb += start.eq(n.shadow_full & (n.leave | ~n.running))
         with m.If(start):
@@ -445,8 +452,8 @@ class BayesianMachine(wiring.Component):
         running_n = n.start | (n.running & ~n.leave)
         compute_n, start_n = Signal(), Signal()
         m.d.comb += compute_n.eq(Mux(n.compute, ~fin, running_n & ~stop_idle))
-        if self._params.feedback_columns:  # no swap in a bubble (see _start): only when idle
-            m.d.comb += start_n.eq(shadow_full_n & ~running_n)
+        if self._params.feedback_columns:  # no swap in a bubble nor while settling (see _start)
+            m.d.comb += start_n.eq(shadow_full_n & ~running_n & ~n.leave)
         else:
             m.d.comb += start_n.eq(Mux(n.compute, fin & shadow_full_n & ~valid_n,
                                        shadow_full_n & ((stop_idle & ~valid_n) | ~running_n)))

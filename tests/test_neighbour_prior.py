@@ -168,7 +168,7 @@ def test_rtl_equals_the_model_under_pysim(rng: str) -> None:
 
 
 def test_rtl_wall_cycles_follow_the_timing_rule() -> None:
-    """Back to back with loads keeping up, each pixel takes max(k + 1, beats + 1) + 1 cycles."""
+    """Back to back with loads keeping up, each pixel takes max(k + 2, beats + 1) + 1 cycles."""
     from bayesmachine.hdl.machine import pixel_wall_cycles
     from bayesmachine.sim.pysim import PysimEngine
 
@@ -177,7 +177,7 @@ def test_rtl_wall_cycles_follow_the_timing_rule() -> None:
     eng = PysimEngine(p)
     res = eng.run(words, line_start=starts)
     per_pixel = pixel_wall_cycles(p, res.cycles)
-    assert (per_pixel == np.maximum(res.cycles + 1, p.beats_per_pixel + 1) + 1).all()
+    assert (per_pixel == np.maximum(res.cycles + 2, p.beats_per_pixel + 1) + 1).all()
     # The first pixel waits for its load (beat + write + swap); the results leave a cycle after.
     total = eng.wall_cycles
     assert abs(total - int(per_pixel.sum())) <= 4, (total, int(per_pixel.sum()))
@@ -226,7 +226,7 @@ def test_verilator_equals_the_model_with_back_pressure_in_chunks(rng: str, veril
 @pytest.mark.usefixtures("verilator_toolchain")
 def test_verilator_wall_cycles_follow_the_timing_rule(verilator_cache) -> None:
     """The clock cycles of a compute-bound stream, derived from the timing rules of
-    docs/architecture.md ("Timing"): a neighbour prior's swap comes the cycle after the bubble."""
+    docs/architecture.md ("Timing"): a neighbour prior's swap comes two cycles after the bubble."""
     from bayesmachine.hdl.machine import pixel_wall_cycles
     from bayesmachine.sim.verilator import VerilatorEngine
 
@@ -238,16 +238,16 @@ def test_verilator_wall_cycles_follow_the_timing_rule(verilator_cache) -> None:
         beats = p.beats_per_pixel
         # Cycle 0 carries pixel 0's first beat; the shadow is complete beats + 1 cycles later and the
         # idle machine swaps it in at once. A run of k compute cycles ends with its bubble (cycle
-        # swap + k + 1); the swap of a neighbour prior comes a cycle later, when the result of the
-        # bubble is registered, or when the next pixel's load (which starts the cycle after the
-        # swap) is written, whichever is later.
+        # swap + k + 1); the swap of a neighbour prior comes two cycles later (the bubble registers
+        # the result, the next cycle the feedback words), or when the next pixel's load (which
+        # starts the cycle after the swap) is written, whichever is later.
         swaps = [beats + 1]
         for k in got.cycles[:-1].tolist():
-            swaps.append(max(swaps[-1] + k + 2, swaps[-1] + 1 + beats + 1))
+            swaps.append(max(swaps[-1] + k + 3, swaps[-1] + 1 + beats + 1))
         # The last pixel's result is valid the cycle after its bubble and taken in it.
         assert eng.last_wall_cycles == swaps[-1] + int(got.cycles[-1]) + 2 + 1
         assert pixel_wall_cycles(p, got.cycles)[:-1].tolist() == np.diff(swaps).tolist()
-        assert (got.cycles[:-1] + 2 > beats + 2).all()  # compute-bound: every swap waits for a run
+        assert (got.cycles[:-1] + 3 > beats + 2).all()  # compute-bound: every swap waits for a run
 
 
 def test_lanes_of_machines_and_the_front_end_refuse_it() -> None:
