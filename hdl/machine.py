@@ -359,24 +359,27 @@ class BayesianMachine(wiring.Component):
     def _feedback_prior(self, m: Module, n: _Nets) -> None:
         """A neighbour prior's feedback column 0: formed at each swap from the previous result.
 
-        The bubble registers the winning row (``prev_row``) and whether it is a hypothesis row
-        (``prev_valid``: not the no-match row, not a timeout); the next cycle (``settle``) registers
-        each row's word, ``feedback_words[min(|r - prev_row|, last)]`` (the no-match row
-        ``feedback_nomatch_word``; 1.0 everywhere without a previous hypothesis, after reset too);
-        the swap, a cycle later still, takes them, or 1.0 everywhere when the pixel starts a line.
-        So the swap's path is the same as a loaded word's (a register, a comparator), and the
-        subtraction, clamp and table per row have a cycle of their own.
+        The bubble registers the winning row (``prev_row``, a copy per group of rows) and whether
+        it is a hypothesis row (``prev_valid``: not the no-match row, not a timeout); the next
+        cycle (``settle``) registers each row's word, ``feedback_words[min(|r - prev_row|, last)]``
+        (the no-match row ``feedback_nomatch_word``; 1.0 everywhere without a previous
+        hypothesis, after reset too); the swap, a cycle later still, takes them, or 1.0
+        everywhere when the pixel starts a line. So the swap's path is the same as a loaded
+        word's (a register, a comparator), and the subtraction, clamp and table per row have a
+        cycle of their own.
         """
         p = self._params
         if not p.feedback_columns:
             return
-        prev_row = Signal(p.map_width, name="prev_row")
-        prev_valid = Signal(name="prev_valid")
+        # One registered copy of the previous result per group of rows, as for the enables: a single
+        # register would fan out to every row's distance logic (the flow keeps the _rep copies apart).
+        prev_rows = [Signal(p.map_width, name=f"prev_row_rep{g}") for g in range(n.groups)]
+        prev_valids = [Signal(name=f"prev_valid_rep{g}") for g in range(n.groups)]
         with m.If(n.leave):
             hypothesis = n.valid_q
             if p.nomatch_row:
                 hypothesis = hypothesis & (n.winner != p.rows - 1)
-            m.d.sync += [prev_row.eq(n.winner), prev_valid.eq(hypothesis)]
+            m.d.sync += [c.eq(n.winner) for c in prev_rows] + [c.eq(hypothesis) for c in prev_valids]
         settle = Signal(name="feedback_settle")
         m.d.sync += settle.eq(n.leave)
         n.settle = settle
@@ -385,6 +388,7 @@ class BayesianMachine(wiring.Component):
         last = len(table) - 1
         cols = p.operator_columns
         for r in range(p.rows):
+            prev_row, prev_valid = prev_rows[r // n.rows_per_group], prev_valids[r // n.rows_per_group]
             word_q = Signal(p.memory_word_width, name=f"feedback_q_{r}", init=p.word_one)
             if p.nomatch_row and r == p.rows - 1:
                 m.d.sync += word_q.eq(Mux(prev_valid, p.feedback_nomatch_word, one))
