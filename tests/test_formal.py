@@ -35,8 +35,11 @@ MACHINES = {
                             nomatch_row=True, lanes=4, tie_break="lowest-index"),
 }
 # Loading (2 beats, 1 cycle of load latency, the swap) plus a whole run (max_cycles compute cycles and
-# the bubble) is at most 11 cycles; 40 steps hold three or more whole pixels back to back.
+# the bubble) is at most 12 cycles, and each next pixel at most max_cycles + 1 more while loads keep
+# up: 40 steps hold three or more whole pixels, 30 two or more (the ``runs`` group's queue of run
+# lengths makes its unrolling the costly one: ~5 s at 30 steps, ~30 s at 40).
 MACHINE_BMC_DEPTH = 40
+RUNS_BMC_DEPTH = 30
 MACHINE_COVER_DEPTH = 25
 STREAM_PROVE_DEPTH = 2
 
@@ -83,8 +86,14 @@ def test_machine_stream_proved(machine: str) -> None:
 
 @pytest.mark.parametrize("machine", sorted(MACHINES))
 def test_machine_bmc(machine: str) -> None:
-    check(run_formal(MachineProperties(params=MACHINES[machine]), name=f"machine-{machine}", mode="bmc",
-                     depth=MACHINE_BMC_DEPTH))
+    check(run_formal(MachineProperties(params=MACHINES[machine], checks=("stream", "watchdog", "result")),
+                     name=f"machine-{machine}", mode="bmc", depth=MACHINE_BMC_DEPTH))
+
+
+@pytest.mark.parametrize("machine", sorted(MACHINES))
+def test_machine_runs_bmc(machine: str) -> None:
+    check(run_formal(MachineProperties(params=MACHINES[machine], checks=("runs",)),
+                     name=f"runs-{machine}", mode="bmc", depth=RUNS_BMC_DEPTH))
 
 
 @pytest.mark.parametrize("machine", sorted(MACHINES))
@@ -107,7 +116,7 @@ def test_mutant_caught(mutant: Mutant) -> None:
                 for tb in ("nomatch-first", "lowest-index")]
     else:
         runs = [(MachineProperties(params=MACHINES["n1-mc5"], checks=CHECKS, **mutant.inject), "bmc",
-                 MACHINE_BMC_DEPTH)]
+                 RUNS_BMC_DEPTH)]
     for wrapper, mode, depth in runs:
         start = time.monotonic()
         result = run_formal(wrapper, name=f"mutant-{mutant.name}", mode=mode, depth=depth)

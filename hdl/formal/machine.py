@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from amaranth.hdl import Assert, Assume, Cover, Fragment, Module, Signal
+from amaranth.hdl import Assert, Assume, Cover, Fragment, Module, Mux, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
@@ -24,7 +24,7 @@ from bayesmachine.sources import source_kind
 
 __all__ = ["CHECKS", "MachineFactory", "MachineProperties"]
 
-CHECKS = ("stream", "watchdog", "result")
+CHECKS = ("stream", "watchdog", "result", "runs")
 MachineFactory = Callable[..., wiring.Component]
 
 
@@ -37,7 +37,8 @@ class MachineProperties(wiring.Component):
         The machine the properties describe (an off-chip ``rng``: ``external``).
     checks : tuple of str
         Which groups of assertions to include (``CHECKS``): ``stream`` (the result stream rule),
-        ``watchdog`` (cycles and timeout), ``result`` (the fields of a result agree). One group per
+        ``watchdog`` (cycles and timeout), ``result`` (the fields of a result agree), ``runs`` (the
+        compute cycles seen on ``entropy_ready`` against the results' ``cycles``). One group per
         run lets a group that closes by induction be proved apart from one checked to a depth.
     machine : callable
         Builds the machine under check from a ``params`` keyword; ``BayesianMachine`` unless a
@@ -135,6 +136,9 @@ class MachineProperties(wiring.Component):
                 nomatch = (~res.timeout & (res.map == p.rows - 1)) if p.nomatch_row else 0
                 m.d.comb += Assert(res.nomatch == nomatch, "nomatch iff the no-match row won")
 
+        if "runs" in self._checks:
+            self._runs(m, dut.entropy_ready, valid & ready, res.cycles)
+
         # Not vacuous: a timeout, a stalled result, a tie of the no-match row with a disparity row
         # in the machine's encoder and a no-match result out of it, and two results in a row.
         m.d.comb += Cover(valid & res.timeout)
@@ -154,3 +158,42 @@ class MachineProperties(wiring.Component):
             m.d.sync += taken.eq(taken + 1)
         m.d.comb += Cover(taken == 2)
         return m
+
+    def _runs(self, m: Module, compute: Signal, taken: Signal, cycles: Signal) -> None:
+        """A run's compute cycles are a burst of ``entropy_ready`` (the port is high on compute
+        cycles, and every run ends with a bubble): the wrapper measures each burst, queues its
+        length and checks it against the ``cycles`` of the result taken next."""
+        p = self._params
+        mc = p.max_cycles
+        burst = Signal(range(mc + 2))  # compute cycles of the current burst, saturating past max_cycles
+        was = Signal()
+        m.d.sync += was.eq(compute)
+        with m.If(compute):
+            m.d.sync += burst.eq(Mux(burst > mc, burst, burst + 1))
+        with m.Else():
+            m.d.sync += burst.eq(0)
+        # The watchdog stops every run at max_cycles compute cycles at the latest, whatever the numbers.
+        m.d.comb += Assert(burst <= mc, "no run computes past max_cycles")
+        # The finished runs whose results are not taken yet: one in the result register, one whose
+        # bubble waits for it (compute cycles never wait for back-pressure).
+        q0, q1 = Signal.like(burst), Signal.like(burst)
+        pending = Signal(range(4))
+        push = was & ~compute
+        m.d.comb += Assert(pending <= 2, "at most two finished runs wait for the result stream")
+        with m.If(taken):
+            # One result per run, in order: a result is taken only after its run, with its length.
+            m.d.comb += Assert(pending >= 1, "no result without a run")
+            m.d.comb += Assert(cycles == q0, "a result's cycles are its run's compute cycles")
+        with m.If(push & ~taken):
+            m.d.sync += pending.eq(pending + 1)
+            with m.If(pending == 0):
+                m.d.sync += q0.eq(burst)
+            with m.Else():
+                m.d.sync += q1.eq(burst)
+        with m.Elif(taken & ~push):
+            m.d.sync += [pending.eq(pending - 1), q0.eq(q1)]
+        with m.Elif(taken & push):
+            with m.If(pending == 1):
+                m.d.sync += q0.eq(burst)
+            with m.Else():
+                m.d.sync += [q0.eq(q1), q1.eq(burst)]
