@@ -139,20 +139,38 @@ class MachineProperties(wiring.Component):
         if "runs" in self._checks:
             self._runs(m, dut.entropy_ready, valid & ready, res.cycles)
 
-        # Not vacuous: a timeout, a stalled result, a tie of the no-match row with a disparity row
-        # in the machine's encoder and a no-match result out of it, and two results in a row.
+        # A new result (valid rises: a handshake always leaves a cycle without one) was taken in the
+        # cycle before from the MAP encoder's outputs on the registered overflow flags of the run's
+        # last compute cycle: keep those outputs a cycle.
+        last = p.rows - 1
+        was_valid = Signal()
+        enc_valid, enc_index, enc_tie = Signal(), Signal.like(encoder.index), Signal()
+        tie = encoder.over[last] & encoder.over[:last].any()
+        m.d.sync += [was_valid.eq(valid), enc_valid.eq(encoder.valid), enc_index.eq(encoder.index),
+                     enc_tie.eq(tie)]
+        rise = valid & ~was_valid
+        if "result" in self._checks:
+            # The result is the MAP encoder's choice at the stop (so the machine reports ties by the
+            # tie rule proved of the encoder), a timeout exactly when no row overflowed.
+            with m.If(rise):
+                m.d.comb += Assert(res.timeout == ~enc_valid, "timeout iff no row overflowed at the stop")
+                with m.If(~res.timeout):
+                    m.d.comb += Assert(res.map == enc_index, "map is the MAP encoder's choice")
+            if p.nomatch_row:
+                # The machine's tie rule is the one its parameters name: a tie of the no-match row
+                # with a disparity row is no match under nomatch-first, the disparity otherwise.
+                with m.If(rise & enc_tie):
+                    m.d.comb += Assert(res.nomatch == (p.tie_break == "nomatch-first"),
+                                       "the machine's tie rule")
+
+        # Not vacuous: a timeout, a stalled result, a result from a tie of the no-match row with a
+        # disparity row (reported as no match under nomatch-first, as the disparity under
+        # lowest-index), and two results taken.
         m.d.comb += Cover(valid & res.timeout)
         m.d.comb += Cover(stall & valid & ~res.timeout)
-        last = p.rows - 1
-        tie = encoder.over[last] & encoder.over[:last].any()
-        tie_seen = Signal()
-        with m.If(tie & ~valid):
-            m.d.sync += tie_seen.eq(1)
-        with m.Elif(valid & ready):
-            m.d.sync += tie_seen.eq(0)
-        m.d.comb += Cover(tie)
         if p.nomatch_row:
-            m.d.comb += Cover(tie_seen & valid & res.nomatch)
+            nomatch_wins = p.tie_break == "nomatch-first"
+            m.d.comb += Cover(rise & enc_tie & (res.nomatch if nomatch_wins else ~res.nomatch & ~res.timeout))
         taken = Signal(2)
         with m.If(valid & ready & (taken != 3)):
             m.d.sync += taken.eq(taken + 1)

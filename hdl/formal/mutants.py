@@ -120,6 +120,8 @@ def mutants(machine_params: MachineParams) -> list[Mutant]:
     machine's properties are checked on (the watchdog mutants change its ``max_cycles`` by one)."""
     late = dataclasses.replace(machine_params, max_cycles=machine_params.max_cycles + 1)
     early = dataclasses.replace(machine_params, max_cycles=machine_params.max_cycles - 1)
+    swap = {"nomatch-first": "lowest-index", "lowest-index": "nomatch-first"}
+    other_tie = dataclasses.replace(machine_params, tie_break=swap[machine_params.tie_break])
     return [
         Mutant("counter-early", "counter", {"counter": counter_early_overflow},
                "overflows on the n_max-th 1"),
@@ -134,6 +136,7 @@ def mutants(machine_params: MachineParams) -> list[Mutant]:
         Mutant("machine-valid-drop", "machine", {"machine": ValidDropMachine}, "a stalled result is dropped"),
         Mutant("machine-payload-moves", "machine", {"machine": PayloadFollowsEncoderMachine},
                "a stalled result's map changes"),
+        Mutant("machine-other-tie", "machine", {"dut_params": other_tie}, "the machine's other tie rule"),
         Mutant("watchdog-late", "machine", {"dut_params": late}, "a run goes one cycle past max_cycles"),
         Mutant("watchdog-early", "machine", {"dut_params": early}, "a timeout one cycle before max_cycles"),
     ]
