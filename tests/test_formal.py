@@ -4,7 +4,9 @@ stated depth), each cover reached, and every known mutant caught. See docs/forma
 
 from __future__ import annotations
 
+import sys
 import time
+from pathlib import Path
 
 import pytest
 from conftest import require_tool
@@ -143,7 +145,24 @@ def test_sby_text_and_bad_arguments() -> None:
         sby_text("bmc", 0)
 
 
-def test_missing_tool_is_a_clear_error(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setenv("PATH", "/nonexistent")
+@pytest.fixture
+def no_tools(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A PATH with no tools, and no interpreter directory to fall back on."""
+    monkeypatch.setenv("PATH", str(tmp_path))
+    monkeypatch.setattr(sys, "executable", str(tmp_path / "python"))
+
+
+def test_missing_tool_is_a_clear_error(no_tools: None) -> None:
     with pytest.raises(FormalError, match="yices-smt2.*pip install"):
         run_formal(CounterProperties(n_max=1), name="counter1", mode="bmc", depth=2)
+
+
+@pytest.mark.parametrize("tool", FORMAL_TOOLS)
+def test_missing_formal_tool_skips_locally_and_fails_under_ci(tool: str, no_tools: None,
+                                                              monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.delenv("CI", raising=False)
+    with pytest.raises(pytest.skip.Exception, match=tool):
+        require_tool(tool)
+    monkeypatch.setenv("CI", "true")
+    with pytest.raises(pytest.fail.Exception, match="CI is set"):
+        require_tool(tool)

