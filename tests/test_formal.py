@@ -9,6 +9,9 @@ import time
 from pathlib import Path
 
 import pytest
+from amaranth.hdl import Assert, ClockDomain, Module, Signal
+from amaranth.lib import wiring
+from amaranth.lib.wiring import In
 from conftest import require_tool
 
 from bayesmachine.hdl.formal.counter import CounterProperties
@@ -166,3 +169,24 @@ def test_missing_formal_tool_skips_locally_and_fails_under_ci(tool: str, no_tool
     monkeypatch.setenv("CI", "true")
     with pytest.raises(pytest.fail.Exception, match="CI is set"):
         require_tool(tool)
+
+
+class _OwnClock(wiring.Component):
+    """A wrapper with a clock domain of its own: its clock would be a constant."""
+
+    def __init__(self) -> None:
+        super().__init__({"a": In(1)})
+
+    def elaborate(self, platform: object) -> Module:
+        m = Module()
+        m.domains.sync = ClockDomain()
+        seen = Signal()
+        m.d.sync += seen.eq(self.a)
+        m.d.comb += Assert(~seen)
+        return m
+
+
+def test_a_wrapper_with_its_own_clock_is_refused() -> None:
+    """Its assertion would pass vacuously (the register never changes): the runner says why instead."""
+    with pytest.raises(FormalError, match="clocked by .*not by an input"):
+        run_formal(_OwnClock(), name="own-clock", mode="bmc", depth=4)

