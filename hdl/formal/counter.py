@@ -39,8 +39,8 @@ class CounterProperties(wiring.Component):
     enable : ``In(1)``
         A compute cycle: the counter advances (free).
     clear : ``In(1)``
-        The run's start: the counter and its flag restart empty (free; wins over ``enable``,
-        as the machine never has both).
+        The run's start: the counter and its flag restart empty (free; wins over ``enable``, as
+        the machine's start assignments come after its compute-cycle ones).
     """
 
     def __init__(self, *, n_max: int, counter: CounterFn = overflow_counter_full,

@@ -1,4 +1,5 @@
-"""Properties of a small ``BayesianMachine`` seen from its ports: the result stream and the watchdog.
+"""Properties of a small ``BayesianMachine`` seen from its ports (and its documented MAP encoder
+submodule): the result stream, the watchdog, the fields of a result, and one result per run.
 
 The machine under check has an off-chip source (``rng = "external"``), so the random numbers are a
 free input like the load stream and ``result.ready``: the solver plays every environment and
