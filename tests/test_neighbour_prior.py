@@ -271,3 +271,20 @@ def test_lanes_of_machines_and_the_front_end_refuse_it() -> None:
         check_stereo_machine(q, model, 40)
     with pytest.raises(ParameterError, match=refused):
         StereoMachine(params=q, model=model, width=40)
+
+
+@pytest.mark.slow
+@pytest.mark.usefixtures("verilator_toolchain")
+def test_census_model_on_the_whole_bundled_pair_verilator_equals_the_model(tmp_path, verilator_cache,
+                                                                            monkeypatch) -> None:
+    """``run --model census``: the full Dmax 80 neighbour machine under Verilator gives the model's
+    result.npz on the whole bundled pair (each engine feeding back its own results)."""
+    from bayesmachine.cli import main
+
+    monkeypatch.setenv("BAYESMACHINE_CACHE_DIR", str(verilator_cache.parent))
+    for engine in ("model", "verilator"):
+        assert main(["run", "--model", "census", "--engine", engine, "--quiet", "-o",
+                     str(tmp_path / engine)]) == 0
+    a, b = np.load(tmp_path / "model" / "result.npz"), np.load(tmp_path / "verilator" / "result.npz")
+    for name in ("map", "counts", "cycles", "timeout"):
+        np.testing.assert_array_equal(a[name], b[name], err_msg=name)
