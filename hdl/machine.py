@@ -39,7 +39,6 @@ from amaranth.hdl import Array, Cat, Const, Module, Mux, Signal, Value
 from amaranth.lib import wiring
 
 from bayesmachine.params import MachineParams
-from bayesmachine.sources import check_source
 
 from .counters import overflow_counter_full
 from .encoder import MAPEncoder
@@ -139,7 +138,6 @@ class BayesianMachine(wiring.Component):
     def __init__(self, *, params: MachineParams) -> None:
         if not isinstance(params, MachineParams):
             raise TypeError(f"BayesianMachine takes a MachineParams, not {type(params).__name__}")
-        check_source(params)  # before elaboration: a clear error, not one from deep inside
         self._params = params
         super().__init__(MachineSignature(params))
 

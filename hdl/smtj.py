@@ -20,7 +20,6 @@ from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
 from bayesmachine.params import MachineParams, ParameterError
-from bayesmachine.sources import check_source
 from bayesmachine.sources.smtj import EMULATOR_RANDOM_BITS, SMTJEmulatorSpec
 
 from .machine import BayesianMachine
@@ -113,7 +112,6 @@ class SMTJEmulatedMachine(wiring.Component):
             raise TypeError(f"SMTJEmulatedMachine takes a MachineParams, not {type(params).__name__}")
         if params.rng != "smtj":
             raise ParameterError(f"SMTJEmulatedMachine needs rng = 'smtj', got {params.rng!r}")
-        check_source(params)  # as BayesianMachine's constructor; both are built at elaboration
         self._params = params
         super().__init__(MachineSignature(params, entropy=False))
 

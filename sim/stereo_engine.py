@@ -81,11 +81,9 @@ def build_stereo_harness(
     (``options``: ``jobs``, ``verbose``, as :func:`~bayesmachine.sim.verilator.build.build_design`)."""
     from bayesmachine.hdl.frontend.stereo import StereoMachine, check_stereo_machine
     from bayesmachine.hdl.signatures import StereoSignature
-    from bayesmachine.sources import check_source
 
     find_toolchain()  # a missing tool is reported before the seconds of emitting the Verilog
     check_stereo_machine(params, model, width, fifo_pixels)  # as StereoMachine's constructor
-    check_source(params)
     signature = StereoSignature(params)
     root = Path(build_dir) if build_dir is not None else cache_dir()
     root.mkdir(parents=True, exist_ok=True)
