@@ -212,15 +212,20 @@ def _check_fits(region: OutputRegion, machine: MachineParams) -> None:
 
 def _report(outcome: RunOutcome, source: str, crop: Crop | None) -> dict[str, object]:
     prep, run = outcome.prepared, outcome.run
+    right = run.right  # census-lr's right pass: its cycles count too
+    frame = int(run.cycles.sum()) + (int(right.cycles.sum()) if right is not None else 0)
+    wall = run.wall_cycles
+    if wall is not None and right is not None:
+        wall = None if right.wall_cycles is None else wall + right.wall_cycles
     report: dict[str, object] = {
         "engine": run.engine,
         "rng": run.machine.rng,
         "counter_max": run.machine.counter_max,
         **outcome.metrics.to_report(),
-        "frame_cycles": int(run.cycles.sum()),
+        "frame_cycles": frame,
         # Compute cycles count the machine's runs only; wall cycles (RTL engines) add loading.
-        "wall_cycles": run.wall_cycles,
-        "wall_cycles_per_pixel": None if run.wall_cycles is None else run.wall_cycles / run.cycles.size,
+        "wall_cycles": wall,
+        "wall_cycles_per_pixel": None if wall is None else wall / run.cycles.size,
         "seconds": run.seconds,
         "words_seconds": run.words_seconds,
         "reference_seconds": prep.reference_seconds,
@@ -233,6 +238,9 @@ def _report(outcome: RunOutcome, source: str, crop: Crop | None) -> dict[str, ob
         "model": prep.model.to_dict(),
         "machine": run.machine.to_dict(),
     }
+    if right is not None:
+        report["right_pass_machine"] = right.machine.to_dict()
+        report["right_pass_seconds"] = right.seconds
     return report
 
 
@@ -362,6 +370,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
         report = _report(outcome, source, args.crop)
         report["feed"] = args.feed
         run, prep = outcome.run, outcome.prepared
+        # census-lr: the right pass's MAPs, cycles and timeouts too (over its own columns).
+        extra = {} if run.right is None else {"right_map": run.right.map, "right_cycles": run.right.cycles,
+                                               "right_timeout": run.right.timeout}
         out.write(
             "result.npz",
             lambda path: np.savez_compressed(
@@ -371,6 +382,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
                 cycles=run.cycles,
                 timeout=run.timeout,
                 reference_map=prep.reference_map,
+                **extra,
             ),
         )
         from .plots import save_disparity_figure
