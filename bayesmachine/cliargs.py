@@ -490,10 +490,12 @@ def _lr_kwargs(args: argparse.Namespace, names: list[str]) -> dict[str, Any]:
     given = {dest: getattr(args, dest) for dest, _ in LR_OPTION_FLAGS
              if getattr(args, dest, None) is not None}
     if given and "census-lr" not in names:
-        bools = {"lr_nomatch": ("--lr-nomatch", "--no-lr-nomatch"),
-                 "lr_right_nomatch": ("--no-lr-right-nomatch", "--lr-right-nomatch")}
-        flags = ", ".join(bools[dest][bool(given[dest])] if dest in bools else flag
-                          for dest, flag in LR_OPTION_FLAGS if dest in given)
+        def spelt(dest: str, flag: str) -> str:  # a yes/no option as it was given
+            if isinstance(given[dest], bool):
+                return "--" + ("" if given[dest] else "no-") + dest.replace("_", "-")
+            return flag
+
+        flags = ", ".join(spelt(dest, flag) for dest, flag in LR_OPTION_FLAGS if dest in given)
         raise ParameterError(f"{flags}: options of --model census-lr, which do not apply to --model "
                              f"{','.join(names)}")
     return given
