@@ -402,7 +402,7 @@ _CENSUS_OPTIONS: tuple[tuple[str, str, Callable[[str], Any], str], ...] = (
      "exp(-k^2 / (2 s^2)), k = |d - d_neighbour| (default 0.05)"),
     ("prior_s", "--prior-s", float_arg, "neighbour prior width s (default 4)"),
     ("prior_nomatch", "--prior-nomatch", float_arg, "the no-match row's prior per matched neighbour "
-     "(default f(s), 0.626)"),
+     "(default f(s), 0.626; 0.1 with --model census-lr)"),
 )
 CENSUS_OPTION_FLAGS: tuple[tuple[str, str], ...] = (
     *((dest, flag) for dest, flag, _, _ in _CENSUS_OPTIONS), ("neighbour_prior", "--no-neighbour-prior"),

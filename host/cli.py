@@ -260,6 +260,10 @@ def _summary(r: dict[str, object]) -> str:
         f"RMS {f('rms_error')}, no-match F1 {f('nomatch_f1')}, MAP agreement {f('map_agreement')}, "
         f"timeouts {r['timeouts']}, engine {f('seconds', '.2f')} s"
     )
+    if r.get("right_pass_pixels") is not None:
+        line += (f"\n  census-lr: cycles/px over both passes {f('cycles_per_pixel_mean', '.2f')}: left pass "
+                 f"{f('left_pass_cycles_per_pixel_mean', '.2f')}, right pass {r['right_pass_pixels']} px at "
+                 f"{f('right_pass_cycles_per_pixel_mean', '.2f')} (timeouts {r['right_pass_timeouts']})")
     if r.get("wall_cycles_per_pixel") is not None:
         line += f"\n  wall cycles per pixel, loading included: {f('wall_cycles_per_pixel', '.2f')}"
 
