@@ -493,14 +493,16 @@ def reference_map(
 
 _warm = False
 _warm_census = False
+_warm_lr = False
 
 
 def warm_up(model: ModelParams | None = None) -> None:
     """Load (or compile) the numba kernels once, so timings measure the computation only.
 
-    The census model's kernels (float and words) too when ``model`` is a census model.
+    The census model's kernels (float and words) too when ``model`` is a census model, and the
+    right pass's and the (high, low) word product's for census-lr.
     """
-    global _warm, _warm_census
+    global _warm, _warm_census, _warm_lr
     img = np.zeros((6, 7), np.uint8)
     if not _warm:
         f = feature_sums(img)
@@ -512,6 +514,12 @@ def warm_up(model: ModelParams | None = None) -> None:
         reference_fast(fc, fc, census)
         reference_quantized(fc, fc, census, 10)
         _warm_census = True
+    if model is not None and model.lr and not _warm_lr:
+        lr = ModelParams(dmax=1, name="census-lr")
+        fc = model_features(img, lr)
+        reference_map(fc, fc, lr)  # the right pass's kernel and the left pass's
+        reference_quantized_map(fc, fc, lr, 10)  # the words' pass with the (high, low) product
+        _warm_lr = True
 
 
 def reference_plain(left: FeatureSums, right: FeatureSums, model: ModelParams) -> Reference:

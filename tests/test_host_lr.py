@@ -431,3 +431,23 @@ def test_cli_refusals_are_one_line(pair_files, tmp_path, capsys, argv, message):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0], err
     assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())
+
+
+@pytest.mark.slow  # the whole bundled pair through both passes of the model engine: minutes on 2 cores
+def test_whole_bundled_pair_meets_the_issue():
+    """Issue 22's target on the bundled pair at counter max 16 (sobol): bad-2 with no match counted as
+    an error <= 0.15, machine and float reference, the machine within 0.02 of its reference."""
+    from bayesmachine.host.images import bundled_pair
+    from bayesmachine.host.run import run_pair
+
+    left, right, gt = bundled_pair()
+    model = ModelParams(name="census-lr")
+    out = run_pair(left, right, model, disparity_machine(model, counter_max=16), "model", gt=gt,
+                   progress=False)
+    bad = out.metrics.bad
+    assert bad["reference"]["bad2_nomatch_bad"] <= 0.15
+    assert bad["machine"]["bad2_nomatch_bad"] <= 0.15
+    assert abs(bad["machine"]["bad2_nomatch_bad"] - bad["reference"]["bad2_nomatch_bad"]) <= 0.02
+    assert abs(bad["machine"]["bad2"] - bad["reference"]["bad2"]) <= 0.02
+    # The consistency column is what closes the gap: most no-match calls now fall on occluded pixels.
+    assert bad["machine"]["nomatch_occluded"] > 0.5
