@@ -631,4 +631,6 @@ def reference_quantized_map(
 def reference(left: np.ndarray, right: np.ndarray, model: ModelParams) -> Reference:
     """Validate a gray pair and run the fast reference on it."""
     validate_pair(left, right, model.dmax)
-    return reference_fast(model_features(left, model), model_features(right, model), model)
+    fl, fr = model_features(left, model), model_features(right, model)
+    right_map = right_reference_map(fl, fr, model) if model.lr else None  # census-lr: the right pass first
+    return reference_fast(fl, fr, model, right_map=right_map)

@@ -451,3 +451,15 @@ def test_whole_bundled_pair_meets_the_issue():
     assert abs(bad["machine"]["bad2"] - bad["reference"]["bad2"]) <= 0.02
     # The consistency column is what closes the gap: most no-match calls now fall on occluded pixels.
     assert bad["machine"]["nomatch_occluded"] > 0.5
+
+
+def test_reference_of_a_pair_runs_the_right_pass_first(pair, model):
+    from bayesmachine.host.reference import reference, reference_fast
+
+    left, right, _ = pair
+    fl, fr = model_features(left, model), model_features(right, model)
+    got = reference(left, right, model)
+    np.testing.assert_array_equal(got.map, reference_map(fl, fr, model))
+    np.testing.assert_allclose(got.posterior.sum(axis=-1), 1.0)
+    with pytest.raises(ValueError, match="needs the right pass's MAPs"):
+        reference_fast(fl, fr, model)
