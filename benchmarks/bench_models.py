@@ -146,23 +146,10 @@ def main() -> None:
         print("\ncensus-lr machine (both passes, model engine): cycles/px over both passes = all compute "
               "cycles / output pixels; the right pass's own cycles per right pixel and timeouts")
         for counter_max in lr_counters:
-            t0 = time.perf_counter()
-            run = machine_run(left, right, gt, gt_full, models[lr_name], feats_cache, refs[lr_name],
-                              counter_max, "sobol", args.word_bits)
+            run = lr_machine_line(left, right, gt, gt_full, models[lr_name], feats_cache, refs[lr_name],
+                                  counter_max, args.word_bits, occluded)
             if counter_max == 16:
                 figure_maps["census-lr"] = run.map
-            machine_line(f"census-lr, counter max {counter_max}", run, refs[lr_name], gt, occluded)
-            r = run.right
-            both = (run.cycles.sum() + r.cycles.sum()) / run.cycles.size
-            rwall = pixel_wall_cycles(r.machine, r.cycles)
-            lwall = pixel_wall_cycles(run.machine, run.cycles)
-            wall = (lwall.sum() + rwall.sum()) / run.cycles.size
-            print(f"{'':<44} both passes {both:.2f} cycles/px, wall {wall:.2f}"
-                  f"; left pass {run.cycles.mean():.2f} (median {np.median(run.cycles):.0f}, p99 "
-                  f"{np.percentile(run.cycles, 99):.0f}); right pass {r.cycles.size} px, "
-                  f"{r.cycles.mean():.2f} (median {np.median(r.cycles):.0f}, "
-                  f"p99 {np.percentile(r.cycles, 99):.0f}), timeouts "
-                  f"{int(r.timeout.sum())}; {time.perf_counter() - t0:.0f} s")
     print("\nRandom sources on the census model with its prior, counter max 16:")
     name = machine_models["census + prior"]
     for rng in ("sobol", "lfsr", "lfsr-shared"):
@@ -188,6 +175,25 @@ def machine_run(left, right, gt, gt_full, model, feats_cache, ref, counter_max, 
     fl, fr = feats_cache[model.census_window if model.census else None]
     prepared = Prepared(left, right, model, (fl, fr), ref[0], 0.0, gt, gt_full)
     return run_machine(prepared, machine, "model", progress=False)
+
+
+def lr_machine_line(left, right, gt, gt_full, model, feats_cache, ref, counter_max, word_bits, occluded):
+    """One census-lr machine run: its figures, then both passes' cycles (compute and wall)."""
+    t0 = time.perf_counter()
+    run = machine_run(left, right, gt, gt_full, model, feats_cache, ref, counter_max, "sobol", word_bits)
+    machine_line(f"census-lr, counter max {counter_max}", run, ref, gt, occluded)
+    r = run.right
+    both = (run.cycles.sum() + r.cycles.sum()) / run.cycles.size
+    rwall = pixel_wall_cycles(r.machine, r.cycles)
+    lwall = pixel_wall_cycles(run.machine, run.cycles)
+    wall = (lwall.sum() + rwall.sum()) / run.cycles.size
+    print(f"{'':<44} both passes {both:.2f} cycles/px, wall {wall:.2f}"
+          f"; left pass {run.cycles.mean():.2f} (median {np.median(run.cycles):.0f}, p99 "
+          f"{np.percentile(run.cycles, 99):.0f}); right pass {r.cycles.size} px, "
+          f"{r.cycles.mean():.2f} (median {np.median(r.cycles):.0f}, "
+          f"p99 {np.percentile(r.cycles, 99):.0f}), timeouts "
+          f"{int(r.timeout.sum())}; {time.perf_counter() - t0:.0f} s")
+    return run
 
 
 def machine_line(name: str, run, ref: tuple, gt: np.ndarray, occluded: np.ndarray) -> None:
