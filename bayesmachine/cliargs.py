@@ -414,6 +414,8 @@ _LR_OPTIONS: tuple[tuple[str, str, Callable[[str], Any], str], ...] = (
     ("lr_gamma", "--lr-gamma", float_arg, "the consistency column's no-match factor gamma when any lane is "
      "consistent (1 when none is) (default 0.01)"),
     ("lr_tolerance", "--lr-tolerance", int_arg, "the left-right test's tolerance in disparities (default 1)"),
+    ("lr_right_max_cycles", "--lr-right-max-cycles", int_arg, "the right pass's watchdog in cycles: a right "
+     "pixel stopped by it has no right MAP (default: --max-cycles, as the left pass)"),
 )
 LR_OPTION_FLAGS: tuple[tuple[str, str], ...] = (
     *((dest, flag) for dest, flag, _, _ in _LR_OPTIONS), ("lr_nomatch", "--no-lr-nomatch"),

@@ -116,13 +116,14 @@ OPTION_NAMES = {
     "lr_tolerance": "--lr-tolerance",
     "lr_nomatch": "--lr-nomatch/--no-lr-nomatch",
     "lr_right_nomatch": "--lr-right-nomatch/--no-lr-right-nomatch",
+    "lr_right_max_cycles": "--lr-right-max-cycles",
 }
 # The census model's own fields: left out of a paper model's to_dict(), so its reports and the
 # Verilator design keys (sim/stereo_engine.py hashes model.to_dict()) stay what they were.
 CENSUS_FIELDS = ("name", "census_window", "census_p0", "census_sigma", "census_nomatch_h",
                  "neighbour_prior", "prior_eps", "prior_s", "prior_nomatch")
 # The left-right model's own fields: left out of the other models' to_dict() (same reason).
-LR_FIELDS = ("lr_beta", "lr_gamma", "lr_tolerance", "lr_nomatch", "lr_right_nomatch")
+LR_FIELDS = ("lr_beta", "lr_gamma", "lr_tolerance", "lr_nomatch", "lr_right_nomatch", "lr_right_max_cycles")
 # The census-lr model's default no-match prior factor per matched neighbour (issue 22).
 LR_PRIOR_NOMATCH = 0.1
 
@@ -183,6 +184,7 @@ class ModelParams:
     lr_tolerance: int = 1
     lr_nomatch: bool = True
     lr_right_nomatch: bool = False
+    lr_right_max_cycles: int | None = None
 
     def __post_init__(self) -> None:
         if isinstance(self.dmax, bool) or not isinstance(self.dmax, int) or not 0 <= self.dmax <= 4094:
@@ -228,6 +230,10 @@ class ModelParams:
         for name in ("lr_nomatch", "lr_right_nomatch"):
             if not isinstance(getattr(self, name), bool):
                 raise _error(name, f"must be True or False, got {getattr(self, name)!r}")
+        c = self.lr_right_max_cycles
+        if c is not None and (isinstance(c, bool) or not isinstance(c, int) or not 2 <= c <= (1 << 32) - 1):
+            raise _error("lr_right_max_cycles", f"must be an integer number of cycles in [2, 2^32 - 1] "
+                         f"(or None: the left machine's watchdog), got {c!r}")
         if self.lr and not self.neighbour_prior:
             # The right pass and the left pass are the census model with its prior (issue 22).
             raise _error("neighbour_prior", "must be on for --model census-lr (both passes use it)")
@@ -550,7 +556,8 @@ def right_machine(model: ModelParams, machine: MachineParams) -> MachineParams:
 
     The census model's machine (:func:`disparity_machine` of :attr:`ModelParams.right_model`: 4 data
     columns and its neighbour prior) with ``machine``'s word width, counter max, random source,
-    watchdog and tie rule, and the seed of lane 1 of a row of machines
+    watchdog (``model.lr_right_max_cycles`` if given: a right pixel stopped by it has no right MAP)
+    and tie rule, and the seed of lane 1 of a row of machines
     (:func:`~bayesmachine.params.lane_params`): a second machine beside the left one, with its own
     random numbers.
     """
@@ -559,6 +566,8 @@ def right_machine(model: ModelParams, machine: MachineParams) -> MachineParams:
     check_disparity_machine(model, machine)
     keep = ("word_bits", "counter_max", "rng", "lfsr_bits", "seed", "max_cycles", "tie_break")
     kwargs = {k: getattr(machine, k) for k in keep}
+    if model.lr_right_max_cycles is not None:
+        kwargs["max_cycles"] = model.lr_right_max_cycles
     if machine.rng == "smtj":
         kwargs.update(smtj_dwell=machine.smtj_dwell, smtj_spread=machine.smtj_spread,
                       smtj_share=machine.smtj_share)
@@ -606,6 +615,10 @@ def check_disparity_machine(model: ModelParams, machine: MachineParams) -> int:
             raise _error("census_nomatch_h", f"= {model.h_nm}: the no-match row's census likelihood "
                          f"{float(l_nm):.3g} quantizes to 0 with {w}-bit words (no match could never win)")
     if model.lr:
+        c = model.lr_right_max_cycles
+        if c is not None and c <= machine.counter_max:
+            raise _error("lr_right_max_cycles", f"= {c} must exceed the counter max ({machine.counter_max}): "
+                         "no counter can overflow in fewer than counter max + 1 cycles")
         for name in ("lr_beta", "lr_gamma"):
             if int(quantize(getattr(model, name), w)) == 0:
                 raise _error(name, f"= {getattr(model, name):.3g} quantizes to 0 with {w}-bit words "

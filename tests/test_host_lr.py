@@ -81,6 +81,8 @@ def test_model_fields_and_dict():
         ({"lr_tolerance": 1.5}, "--lr-tolerance"),
         ({"lr_nomatch": 1}, "lr_nomatch must be True or False"),
         ({"neighbour_prior": False}, "--neighbour-prior: neighbour_prior must be on for --model census-lr"),
+        ({"lr_right_max_cycles": 1}, "--lr-right-max-cycles: lr_right_max_cycles must be an integer"),
+        ({"lr_right_max_cycles": 2.5}, "--lr-right-max-cycles"),
     ],
 )
 def test_bad_parameters_are_refused_up_front(kwargs, message):
@@ -316,6 +318,21 @@ def test_run_machine_equals_a_hand_driven_run(pair, model):
     assert (run.map >= 0).mean() > 0.5
 
 
+def test_right_pass_watchdog(pair):
+    """``lr_right_max_cycles`` is the right machine's watchdog: its timeouts are "no right MAP"."""
+    left, right, gt = pair
+    model = ModelParams(dmax=DMAX, name="census-lr", lr_right_max_cycles=20)
+    machine = disparity_machine(model, counter_max=8)
+    rmachine = right_machine(model, machine)
+    assert rmachine.max_cycles == 20 and machine.max_cycles == disparity_machine(
+        ModelParams(dmax=DMAX, name="census-lr"), counter_max=8).max_cycles
+    run = run_machine(prepare(left, right, model, gt), machine, "model", progress=False)
+    assert run.right.timeout.any() and (run.right.cycles <= 20).all()
+    np.testing.assert_array_equal(run.right.map[run.right.timeout], -1)
+    with pytest.raises(ParameterError, match="--lr-right-max-cycles: lr_right_max_cycles = 8 must exceed"):
+        disparity_machine(ModelParams(dmax=DMAX, name="census-lr", lr_right_max_cycles=8), counter_max=8)
+
+
 def test_machine_near_its_quantized_reference(pair, model):
     left, right, gt = pair
     prepared = prepare(left, right, model, gt)
@@ -420,6 +437,8 @@ def test_cli_sweep_three_models(pair_files, tmp_path):
         (["run", "--model", "census-lr", "--lr-tolerance", "-1"], "--lr-tolerance: lr_tolerance must be"),
         (["run", "--model", "census-lr", "--lr-beta", "1e-5"], "--lr-beta: lr_beta = 1e-05 quantizes to 0"),
         (["run", "--model", "census-lr", "--no-neighbour-prior"], "neighbour_prior must be on"),
+        (["run", "--model", "census-lr", "--lr-right-max-cycles", "16"], "--lr-right-max-cycles: lr_right"),
+        (["run", "--model", "census", "--lr-right-max-cycles", "100"], "--lr-right-max-cycles: options of"),
         (["run", "--model", "census-lr", "--engine", "verilator", "--feed", "pixels"], "paper model only"),
     ],
 )
