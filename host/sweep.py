@@ -380,7 +380,7 @@ def _local_cluster(workers: int, processes: bool = True) -> Any:
     from distributed import Client, LocalCluster
 
     cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=processes,
-                           dashboard_address=None, silence_logs=logging.ERROR)
+                           dashboard_address=None, silence_logs=logging.CRITICAL)
     return Client(cluster, set_as_default=False), cluster
 
 
@@ -404,7 +404,7 @@ def _on_dask(tasks: list[Task], client: Any) -> Iterator[tuple[Done, int]]:
                for i, t in enumerate(tasks)}
     threads = max(1, sum(client.nthreads().values()))
     try:
-        for fut in as_completed(futures):
+        for fut in as_completed(list(futures), loop=client.loop):
             task = futures.pop(fut)
             if fut.status == "finished":
                 done: Done = (task, fut.result(), None)
