@@ -448,6 +448,9 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         for pair in pairs:
             if pair.note and dataset is not None:
                 print(f"note: {pair.name}: {pair.note}", file=sys.stderr)
+            if pair.dmax_hint is not None and pair.dmax_hint > args.dmax:
+                print(f"note: {pair.name}: the dataset says disparities reach {pair.dmax_hint}, above --dmax "
+                      f"{args.dmax} (nearer surfaces will not match)", file=sys.stderr)
         where = (f"the Dask cluster at {args.scheduler}" if args.scheduler else
                  f"a local Dask cluster of {workers} worker processes" if workers else "this process")
         print(f"sweep: {len(pairs)} pair(s) x {len(points)} point(s) = {len(pairs) * len(points)} tasks "
