@@ -158,7 +158,9 @@ def main() -> None:
         fixed = float(np.median([m["fixed"] for m in runs[label]]))
         over = (s - fixed - d / max(workers, 1)) / tasks * 1000
         line = (f"{label:<20} {s:6.2f} s ({median(label):6.2f}), {tasks / s:5.2f} tasks/s, "
-                f"of it {fixed:.2f} s pooling + plotting; overhead {over:+4.0f} ms per task vs direct / workers; peak memory per "
+                f"of it {fixed:.2f} s pooling + plotting; overhead {over:+4.0f} ms per task vs "
+                f"direct / workers; "
+                f"peak memory per "
                 f"{'worker' if workers else 'process'} {max(m['rss'] for m in runs[label]) / 2**20:.0f} MiB")
         if workers:
             line += f"; cluster start-up {best(label, 'start'):.2f} s"
