@@ -66,6 +66,12 @@ def peak_rss() -> int:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
 
 
+def cpu_seconds() -> float:
+    """This process's CPU time (user + system): unlike wall time, not inflated by other sessions' load."""
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--pairs", type=int, default=8)
@@ -94,12 +100,12 @@ def main() -> None:
 
     def direct() -> float:
         """The same work as plain calls (a pair prepared once, as the sweep's cache does)."""
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), cpu_seconds()
         for (left, right, gt) in loaded:
             prep = prepare(left, right, points[0].model, gt)
             for i, point in enumerate(points):
                 run_pair(left, right, point.model, point.machine, prepared=prep, progress=False, sgbm=i == 0)
-        return time.perf_counter() - t0
+        return {"seconds": time.perf_counter() - t0, "cpu": cpu_seconds() - c0}
 
     results = {}
 
@@ -117,9 +123,11 @@ def main() -> None:
         else:
             clear_cache()
         try:
-            t = time.perf_counter()
+            worker_cpu = sum(client.run(cpu_seconds).values()) if client else 0.0
+            t, c = time.perf_counter(), cpu_seconds()
             run_sweep(config, client=client)
             seconds = time.perf_counter() - t
+            cpu = cpu_seconds() - c + (sum(client.run(cpu_seconds).values()) - worker_cpu if client else 0.0)
             rss = max(client.run(peak_rss).values()) if client else peak_rss()
         finally:
             if client is not None:
@@ -127,22 +135,23 @@ def main() -> None:
                 cluster.close()
         results[label] = strip_timings(json.loads((out / "sweep.json").read_text()))
         # The sweep's fixed cost (read the results, pool, plot, commit): a --resume of the complete sweep.
-        t = time.perf_counter()
+        t, c = time.perf_counter(), cpu_seconds()
         run_sweep(SweepConfig(pairs=pairs, points=points, output=out, resume=True))
-        fixed = time.perf_counter() - t
-        return {"start": start, "seconds": seconds, "fixed": fixed, "rss": rss}
+        fixed, fixed_cpu = time.perf_counter() - t, cpu_seconds() - c
+        return {"start": start, "seconds": seconds, "fixed": fixed, "rss": rss, "cpu": cpu,
+                "fixed_cpu": fixed_cpu}
 
     configs = [("direct", -1), ("in this process", 0)] + [
         (f"{n} worker process{'es' if n > 1 else ''}", n) for n in range(1, a.workers_max + 1)]
     runs: dict[str, list[dict[str, float]]] = {label: [] for label, _ in configs}
     for r in range(a.rounds):
         for label, workers in configs:
-            m = {"seconds": direct()} if workers < 0 else sweep(label, workers)
+            m = direct() if workers < 0 else sweep(label, workers)
             runs[label].append(m)
-            print(f"round {r + 1}: {label:<20} {m['seconds']:6.2f} s"
+            print(f"round {r + 1}: {label:<20} {m['seconds']:6.2f} s, {m['cpu']:6.2f} CPU s"
                   + (f" (+ {m['start']:.2f} s cluster start-up)" if m.get("start") else ""), flush=True)
 
-    def best(label: str, key: str = "seconds") -> float:
+    def best(label: str, key: str = "seconds") -> float:  # the least disturbed run
         return min(m[key] for m in runs[label])
 
     def median(label: str) -> float:
@@ -151,8 +160,9 @@ def main() -> None:
     d = best("direct")
     print(f"\nbest (median) of {a.rounds} rounds, {tasks} tasks; "
           f"load average {os.getloadavg()[0]:.1f} at the end")
+    dc = best("direct", "cpu")
     print(f"{'direct':<20} {d:6.2f} s ({median('direct'):6.2f}), {tasks / d:5.2f} tasks/s, "
-          f"{d / tasks * 1000:.0f} ms per task")
+          f"{d / tasks * 1000:.0f} ms per task; CPU {dc / tasks * 1000:.0f} ms per task")
     for label, workers in configs[1:]:
         s = best(label)
         fixed = float(np.median([m["fixed"] for m in runs[label]]))
@@ -162,6 +172,8 @@ def main() -> None:
                 f"direct / workers; "
                 f"peak memory per "
                 f"{'worker' if workers else 'process'} {max(m['rss'] for m in runs[label]) / 2**20:.0f} MiB")
+        cpu_over = (best(label, "cpu") - float(np.median([m["fixed_cpu"] for m in runs[label]])) - dc) / tasks
+        line += f"; CPU overhead {cpu_over * 1000:+4.0f} ms per task"
         if workers:
             line += f"; cluster start-up {best(label, 'start'):.2f} s"
         if workers > 1:

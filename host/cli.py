@@ -188,7 +188,8 @@ def _add_machine_options(p: argparse.ArgumentParser, sweep: bool) -> None:
     p.add_argument(
         "--gt-scale", type=positive_float_arg, default=None, metavar="S",
         help="the --gt file stores disparity x S: divide by S (256 for KITTI's 16-bit PNGs; 4 for "
-        "Middlebury 2003's quarter-size disp*.png); default 1, required for 16-bit images",
+        "Middlebury 2003's quarter-size disp*.png); default 1, required for 16-bit images"
+        + ("; with --dataset it replaces the layout's scale" if sweep else ""),
     )
     p.add_argument("--no-sgbm", action="store_true", help="skip the OpenCV StereoSGBM comparison")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
@@ -412,15 +413,19 @@ def _cmd_run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _sweep_pairs(args: argparse.Namespace) -> tuple[list[PairSpec], str, dict[str, object] | None]:
+def _sweep_pairs(
+    args: argparse.Namespace, machines: list[MachineParams], dmax: int
+) -> tuple[list[PairSpec], str, dict[str, object] | None]:
     """The pairs of a sweep: ``--dataset``'s, or the one pair of LEFT RIGHT (or the bundled one),
-    which is loaded here first so that a bad input is one error line, as for ``run``."""
+    which is loaded and sized here first so that a bad input is one error line, as for ``run``."""
     if args.dataset is None:
         left, right, gt, source = _load_inputs(args, with_gt=True)
+        _check_fits(OutputRegion.of_image(left.shape, dmax), max(machines, key=lambda m: m.rows))
         if args.left is None:
             spec = bundled_spec()
         else:
-            spec = files_spec(args.left, args.right, args.gt, args.gt_scale)
+            spec = files_spec(os.path.abspath(args.left), os.path.abspath(args.right),
+                              os.path.abspath(args.gt) if args.gt else None, args.gt_scale)
         seed_cache(spec, args.crop, (left, right, gt))  # the in-process run does not load it again
         return [spec], source, None
     if args.left is not None:
@@ -428,18 +433,20 @@ def _sweep_pairs(args: argparse.Namespace) -> tuple[list[PairSpec], str, dict[st
     if args.gt:
         raise ValueError("--gt: the dataset's layout names each pair's ground truth (--gt-scale replaces "
                          "its scale)")
-    dataset = resolve_dataset(args.dataset, gt_scale=args.gt_scale, occluded=args.kitti_gt == "occ")
+    # Absolute paths: a worker elsewhere (--scheduler) has its own working directory.
+    dataset = resolve_dataset([os.path.abspath(p) for p in args.dataset], gt_scale=args.gt_scale,
+                              occluded=args.kitti_gt == "occ")
     pairs = dataset.pairs[args.pairs] if args.pairs is not None else dataset.pairs
     if not pairs:
         raise ValueError(f"--pairs {args.pairs.start}:{args.pairs.stop}:{args.pairs.step} selects none of "
                          f"the dataset's {len(dataset.pairs)} pairs")
     described = {"path": dataset.path, "layout": dataset.layout, "pairs_found": len(dataset.pairs)}
-    return pairs, dataset.path, described
+    return pairs, " ".join(args.dataset), described
 
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
     points = sweep_points(args)  # every point validated before any input is read
-    pairs, source, dataset = _sweep_pairs(args)
+    pairs, source, dataset = _sweep_pairs(args, [p.machine for p in points], points[0].model.dmax)
     workers = args.workers
     if workers is None:  # one pair: this process (its points share one prepared pair); a dataset: all cores
         workers = 0 if dataset is None and args.scheduler is None else (os.cpu_count() or 1)

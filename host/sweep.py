@@ -181,7 +181,7 @@ def sweep_points(args: argparse.Namespace) -> list[Point]:
         seen.add(key)
         parts = [model.name, machine.rng, f"cm{machine.counter_max}"]
         parts += [f"{a}{mdict[a]}" for a in varying if a in mdict]
-        own = {a: mdict.get(a, values[a]) for a in names if a != "model"}
+        own = {a: mdict.get(a) for a in names if a != "model"}  # None: not this source's option
         points.append(Point(len(points), _safe("_".join(str(p) for p in parts)), model, machine,
                             {"model": model.name, **own}))
     if len({p.id for p in points}) != len(points):  # an option value that _safe maps onto another's
@@ -568,7 +568,9 @@ def _plot(path: Path, sweep: dict[str, Any]) -> None:
 def run_sweep(config: SweepConfig, client: Any = None) -> SweepOutcome:
     """Run (or, ``resume``, finish) the sweep into ``config.output``; ``client``: a Dask client to use
     (else one per ``config``: this process, a LocalCluster, or ``--scheduler``'s cluster)."""
-    tasks = make_tasks(config.pairs, config.points, config.output, config.crop, config.engine, config.sgbm)
+    # Absolute: a worker elsewhere (--scheduler) has its own working directory.
+    tasks = make_tasks(config.pairs, config.points, config.output.absolute(), config.crop, config.engine,
+                       config.sgbm)
     records: dict[tuple[str, str], dict[str, Any]] = {}
     failures: list[TaskFailure] = []
     with OutputDir(config.output, SWEEP_OUTPUTS, last="sweep.json") as out:
