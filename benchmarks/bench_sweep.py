@@ -8,9 +8,11 @@ compare like with like on a shared machine:
 * direct: the tasks as plain ``prepare`` (once per pair) + ``run_pair`` calls in this process
   (no files, no scheduler): the cost of the work itself;
 * ``--workers 0``: the sweep engine in this process (per-task result.json, the cache);
+* ``bayesmachine run`` of one task's pair and point as a command (a new process each time: imports,
+  numba's cache, the report and figures): what a shell loop over the tasks would pay per task;
 * a LocalCluster of 1 and of 2 worker processes (and N with --workers-max N): its start-up (processes,
   imports, numba's cache load) apart, then the sweep on it: tasks/s, the speed-up over 1 worker, the
-  overhead per task against direct, and each worker's peak resident memory (ru_maxrss).
+  overhead per task against direct, and each worker's peak resident memory (VmHWM).
 
 All sweeps must give the same sweep.json (times aside): checked. Prints figures; asserts only that.
 Run: python benchmarks/bench_sweep.py [--pairs 8] [--size 96x160] [--dmax 40]
@@ -23,6 +25,8 @@ import argparse
 import json
 import os
 import resource
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -63,7 +67,13 @@ def write_dataset(root: Path, pairs: int, h: int, w: int) -> Path:
 
 
 def peak_rss() -> int:
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    """This process's peak resident memory: VmHWM (ru_maxrss would carry the parent's peak across the
+    fork + exec that starts a worker process)."""
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) * 1024
+    raise RuntimeError("no VmHWM in /proc/self/status")
 
 
 def cpu_seconds() -> float:
@@ -141,12 +151,26 @@ def main() -> None:
         return {"start": start, "seconds": seconds, "fixed": fixed, "rss": rss, "cpu": cpu,
                 "fixed_cpu": fixed_cpu}
 
+    def command() -> dict[str, float]:
+        spec, point = pairs[0], points[0]
+        argv = [sys.executable, "-m", "bayesmachine", "run", spec.left, spec.right, "--gt", spec.gt,
+                "--dmax", a.dmax, "--counter-max", str(point.machine.counter_max), "--rng", point.machine.rng,
+                "--quiet", "-o", str(tmp / "run-out")]
+        t0 = time.perf_counter()
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        subprocess.run(argv, check=True)
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        cpu = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
+        return {"seconds": time.perf_counter() - t0, "cpu": cpu}
+
     configs = [("direct", -1), ("in this process", 0)] + [
         (f"{n} worker process{'es' if n > 1 else ''}", n) for n in range(1, a.workers_max + 1)]
     runs: dict[str, list[dict[str, float]]] = {label: [] for label, _ in configs}
     for r in range(a.rounds):
         for label, workers in configs:
             m = direct() if workers < 0 else sweep(label, workers)
+            if workers < 0:
+                runs.setdefault("bayesmachine run", []).append(command())
             runs[label].append(m)
             print(f"round {r + 1}: {label:<20} {m['seconds']:6.2f} s, {m['cpu']:6.2f} CPU s"
                   + (f" (+ {m['start']:.2f} s cluster start-up)" if m.get("start") else ""), flush=True)
@@ -163,6 +187,11 @@ def main() -> None:
     dc = best("direct", "cpu")
     print(f"{'direct':<20} {d:6.2f} s ({median('direct'):6.2f}), {tasks / d:5.2f} tasks/s, "
           f"{d / tasks * 1000:.0f} ms per task; CPU {dc / tasks * 1000:.0f} ms per task")
+    run_s, run_cpu = best("bayesmachine run"), best("bayesmachine run", "cpu")
+    print(f"{'bayesmachine run':<20} {run_s:6.2f} s ({median('bayesmachine run'):6.2f}) for one task as a "
+          f"command, CPU {run_cpu:.2f} s: {run_s - d / tasks:+.2f} s "
+          f"({run_cpu - dc / tasks:+.2f} CPU s) over "
+          f"the direct task")
     for label, workers in configs[1:]:
         s = best(label)
         fixed = float(np.median([m["fixed"] for m in runs[label]]))

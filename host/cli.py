@@ -458,10 +458,10 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
             if pair.dmax_hint is not None and pair.dmax_hint > args.dmax:
                 print(f"note: {pair.name}: the dataset says disparities reach {pair.dmax_hint}, above --dmax "
                       f"{args.dmax} (nearer surfaces will not match)", file=sys.stderr)
-        where = (f"the Dask cluster at {args.scheduler}" if args.scheduler else
-                 f"a local Dask cluster of {workers} worker processes" if workers else "this process")
+        where = (f"on the Dask cluster at {args.scheduler}" if args.scheduler else
+                 f"on a local Dask cluster of {workers} worker process(es)" if workers else "in this process")
         print(f"sweep: {len(pairs)} pair(s) x {len(points)} point(s) = {len(pairs) * len(points)} tasks "
-              f"on {where}", flush=True)
+              f"{where}", flush=True)
     config = SweepConfig(pairs=pairs, points=points, output=args.output, engine=args.engine, crop=args.crop,
                          sgbm=not args.no_sgbm, resume=args.resume, workers=workers,
                          scheduler=args.scheduler, connect_timeout=args.connect_timeout, progress=progress,

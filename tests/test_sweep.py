@@ -19,8 +19,7 @@ from test_datasets import middlebury2014, stereo
 
 from bayesmachine.cli import build_parser, main
 from bayesmachine.host import sweep as sweep_mod
-from bayesmachine.host.datasets import resolve_dataset
-from bayesmachine.host.sweep import CACHE_STATS, SweepConfig, run_sweep, strip_timings, sweep_points
+from bayesmachine.host.sweep import CACHE_STATS, strip_timings, sweep_points
 
 SMALL = ["--dmax", "8", "--quiet"]
 
@@ -157,11 +156,14 @@ def test_the_grid_is_the_product_of_the_list_options() -> None:
     assert main(["sweep", "--word-bits", "8,8", "-o", "x"]) == 2  # a repeated value is refused
 
 
-def test_the_points_of_a_pair_share_its_prepared_features_and_reference(tmp_path) -> None:
+def test_the_points_of_a_pair_share_its_prepared_features_and_reference(tmp_path, capsys) -> None:
     data = _dataset(tmp_path)
-    args = build_parser().parse_args(["sweep", "--dmax", "8", "--counter-max", "2,4,8", "--rng", "sobol,lfsr",
-                                      "-o", str(tmp_path / "o")])
     sweep_mod.clear_cache()
-    run_sweep(SweepConfig(pairs=resolve_dataset([str(data)]).pairs, points=sweep_points(args),
-                          output=tmp_path / "o", sgbm=False))
-    assert CACHE_STATS["pair_loads"] == 3 and CACHE_STATS["prepares"] == 3  # not 3 x 6
+    out = tmp_path / "o"
+    assert main(["sweep", "--dataset", str(data), "--pairs", "::2", "--dmax", "8", "--counter-max", "2,4,8",
+                 "--rng", "sobol,lfsr", "--no-sgbm", "--workers", "0", "-o", str(out)]) == 0
+    assert CACHE_STATS["pair_loads"] == 2 and CACHE_STATS["prepares"] == 2  # not 2 x 6
+    assert [e["name"] for e in load(out)["pairs"]] == ["l0", "l2"]  # --pairs ::2 of l0, l1, l2
+    said = capsys.readouterr()
+    assert "sweep: 2 pair(s) x 6 point(s) = 12 tasks in this process" in said.out
+    assert said.err.splitlines() == [f"note: {n}: no ground truth given" for n in ("l0", "l2")]
