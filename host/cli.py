@@ -445,6 +445,9 @@ def _sweep_pairs(
 
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
+    if args.workers is not None and args.scheduler is not None:
+        raise ValueError("--workers sizes a local cluster and --scheduler names another one: "
+                         "give one of them")
     points = sweep_points(args)  # every point validated before any input is read
     pairs, source, dataset = _sweep_pairs(args, [p.machine for p in points], points[0].model.dmax)
     workers = args.workers

@@ -154,6 +154,7 @@ def test_the_grid_is_the_product_of_the_list_options() -> None:
     assert [(p.machine.rng, p.machine.smtj_dwell if p.machine.rng == "smtj" else None)
             for p in sweep_points(args)] == [("smtj", 1.0), ("smtj", 2.0), ("sobol", None)]
     assert main(["sweep", "--word-bits", "8,8", "-o", "x"]) == 2  # a repeated value is refused
+    assert main(["sweep", "--workers", "2", "--scheduler", "tcp://127.0.0.1:9", "-o", "x"]) == 2
 
 
 def test_the_points_of_a_pair_share_its_prepared_features_and_reference(tmp_path, capsys) -> None:
