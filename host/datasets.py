@@ -119,9 +119,16 @@ def _video_frame(path: str, index: int) -> np.ndarray:
     try:
         if not cap.isOpened():
             raise ValueError(f"cannot open {path} as a video")
-        # Read up to the frame rather than seek: seeking a compressed stream may land on a key frame.
+        # Seek (OpenCV's FFmpeg back end decodes forward from the key frame before it); a back end
+        # that cannot says so through the position, and then the frames are read up to it.
+        skip = index
+        if index and cap.set(cv2.CAP_PROP_POS_FRAMES, index) \
+                and int(cap.get(cv2.CAP_PROP_POS_FRAMES)) == index:
+            skip = 0
+        elif index:
+            cap.set(cv2.CAP_PROP_POS_FRAMES, 0)
         frame = None
-        for _ in range(index + 1):
+        for _ in range(skip + 1):
             ok, frame = cap.read()
             if not ok:
                 raise ValueError(f"{path}: no frame {index} (the video ends earlier)")
