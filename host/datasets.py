@@ -8,8 +8,8 @@ directory found is one pair, named by its path under the root):
 
 * Middlebury 2001 (``im2.ppm``, ``im6.ppm``, ``disp2.pgm``: disparity x 8, x 16 for Tsukuba),
   2003 (``im2.png``, ``im6.png``, ``disp2.png``: quarter size, disparity x 4), 2005/2006
-  (``view1.png``, ``view5.png``, ``disp1.png``: the disparity of the size the views have);
-  0 = unknown;
+  (``view1.png``, ``view5.png``, ``disp1.png``: at face value; ``--gt-scale`` for a copy stored
+  scaled); 0 = unknown;
 * Middlebury 2014/2021 and MiddEval3 (``im0.png``, ``im1.png``, ``disp0.pfm`` or
   ``disp0GT.pfm``: floats, inf = unknown; ``calib.txt``'s ``ndisp`` gives the Dmax hint):
   full, half or quarter size is whichever directory you point at (``trainingQ/``...);
