@@ -175,7 +175,7 @@ def sweep_points(args: argparse.Namespace) -> list[Point]:
         overrides = {k: v for k, v in values.items() if k != "model"}
         machine = machine_params_from_args(args, model.dmax, model=model, **overrides)
         mdict = machine.to_dict()
-        key = json.dumps([model.to_dict(), mdict], sort_keys=True, default=str)
+        key = json.dumps([model.name, model.to_dict(), mdict], sort_keys=True, default=str)
         if key in seen:
             continue
         seen.add(key)
