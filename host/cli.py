@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -18,16 +19,14 @@ from pathlib import Path
 import numpy as np
 
 from bayesmachine.cliargs import (
+    MACHINE_OPTIONS,
     add_machine_options,
     add_model_options,
     argument_type,
-    counter_max_list,
     machine_params_from_args,
-    model_names_from_args,
     model_params_from_args,
     output_path,
     positive_float_arg,
-    rng_list,
     runnable_sources,
 )
 from bayesmachine.outputs import (
@@ -40,12 +39,14 @@ from bayesmachine.outputs import (
 )
 from bayesmachine.params import DEFAULT_RNG, MachineParams
 
+from .datasets import PairSpec, bundled_spec, files_spec, resolve_dataset
 from .features import model_features
 from .images import Crop, bundled_pair, crop_image, load_gt, load_image, parse_crop, validate_pair
 from .likelihoods import ModelParams
 from .reference import reference_bands, warm_up
 from .region import OutputRegion
-from .run import ENGINES, FEEDS, RunOutcome, prepare, result_bytes, run_pair
+from .run import ENGINES, FEEDS, RunOutcome, result_bytes, run_pair
+from .sweep import SWEEP_OUTPUTS, SweepConfig, list_option_changes, run_sweep, seed_cache, sweep_points
 
 __all__ = ["register", "RUN_OUTPUTS", "SWEEP_OUTPUTS"]
 
@@ -53,11 +54,7 @@ DEFAULTS = ModelParams()
 # Every file each command can write into OUT/, the report first (it is removed first and
 # committed last: its presence means the rest is complete and from the same run).
 RUN_OUTPUTS = ("report.json", "result.npz", "disparity.png", "waves.vcd")
-SWEEP_OUTPUTS = ("sweep.json", "sweep.png")
 SWEEP_COUNTER_MAX = [1, 2, 4, 8, 16, 32]
-# A random source's device options (MachineParams.to_dict keys): per point in sweep.json, as they
-# apply to the points of that source only.
-_DEVICE_FIELDS = ("smtj_dwell", "smtj_spread", "smtj_share")
 
 
 def _add_input_options(p: argparse.ArgumentParser, optional: bool) -> None:
@@ -104,6 +101,30 @@ def _load_inputs(
     return np.ascontiguousarray(left), np.ascontiguousarray(right), gt, source
 
 
+def _parse_slice(text: str) -> slice:
+    """``START:STOP[:STEP]`` (any part may be empty), as a Python slice of the dataset's pairs."""
+    parts = text.split(":")
+    if not 2 <= len(parts) <= 3:
+        raise ValueError(f"--pairs takes START:STOP[:STEP], got {text!r}")
+    try:
+        values = [int(v) if v.strip() else None for v in parts]
+    except ValueError:
+        raise ValueError(f"--pairs takes integers START:STOP[:STEP], got {text!r}") from None
+    if len(values) == 3 and values[2] is not None and values[2] <= 0:
+        raise ValueError(f"--pairs: STEP must be > 0, got {values[2]}")
+    return slice(*values)
+
+
+def _parse_workers(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        raise ValueError(f"expected a number of workers, got {text!r}") from None
+    if n < 0:
+        raise ValueError(f"expected 0 (this process) or more workers, got {n}")
+    return n
+
+
 def _host_rng_help() -> str:
     return f"random source; the host runs the kinds it can drive: {', '.join(runnable_sources())}"
 
@@ -127,22 +148,18 @@ def _add_machine_options(p: argparse.ArgumentParser, sweep: bool) -> None:
         "census)",
     }
     if sweep:
-        changes["rng"] = {
-            "type": rng_list, "default": [DEFAULT_RNG], "choices": None, "metavar": "KIND,KIND,...",
-        }
+        changes = list_option_changes(SWEEP_COUNTER_MAX)
         helps["rng"] = (
             "comma-separated random sources to compare side by side, each over every counter max; "
             + _host_rng_help() + f" (default {DEFAULT_RNG})"
         )
-        changes["counter_max"] = {
-            "type": counter_max_list,
-            "default": SWEEP_COUNTER_MAX,
-            "metavar": "N,N,...",
-        }
         helps["counter_max"] = (
             "comma-separated counter max values, run in ascending order with repeats removed "
             f"(default {','.join(map(str, SWEEP_COUNTER_MAX))})"
         )
+        for name, option in MACHINE_OPTIONS.items():
+            if name not in ("rng", "counter_max", "columns"):  # every other one: a list, a grid axis
+                helps[name] = helps.get(name, option.help) + "; A,B,... sweeps it (a grid axis)"
     g = add_machine_options(p, skip=("columns",), help=helps, **changes)
     g.add_argument(
         "--engine", choices=ENGINES, default="model", help="how to run the machine (default model)"
@@ -171,7 +188,8 @@ def _add_machine_options(p: argparse.ArgumentParser, sweep: bool) -> None:
     p.add_argument(
         "--gt-scale", type=positive_float_arg, default=None, metavar="S",
         help="the --gt file stores disparity x S: divide by S (256 for KITTI's 16-bit PNGs; 4 for "
-        "Middlebury 2003's quarter-size disp*.png); default 1, required for 16-bit images",
+        "Middlebury 2003's quarter-size disp*.png); default 1, required for 16-bit images"
+        + ("; with --dataset it replaces the layout's scale" if sweep else ""),
     )
     p.add_argument("--no-sgbm", action="store_true", help="skip the OpenCV StereoSGBM comparison")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
@@ -411,77 +429,102 @@ def _cmd_run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_sweep(args: argparse.Namespace) -> int:
-    names = model_names_from_args(args)  # model_list: no repeats
-    models = [model_params_from_args(args, name) for name in names]
-    counters: list[int] = args.counter_max  # sorted, no repeats (counter_max_list)
-    kinds: list[str] = args.rng  # rng_list: no repeats
-    # Validate all before running; models, then sources side by side, each over every counter max.
-    runs = [(model, _machine_params(args, model, n, k)) for model in models for k in kinds for n in counters]
-    left, right, gt, source = _load_inputs(args, with_gt=True)
-    region = OutputRegion.of_image(left.shape, models[0].dmax)
-    _check_fits(region, max((m for _, m in runs), key=lambda m: m.rows))
-    machine_dicts = [m.to_dict() for _, m in runs]
-    own = ("counter_max", "rng", *_DEVICE_FIELDS)
-    # The machine fields every point shares; a point records the ones of its own (its model's machine).
-    common = {k: v for k, v in machine_dicts[0].items()
-              if k not in own and all(d.get(k) == v for d in machine_dicts)}
-    with OutputDir(args.output, SWEEP_OUTPUTS, last="sweep.json") as out:
-        points = []
-        reference_seconds = {}
-        t0 = time.perf_counter()
-        prep = None
-        for i, (model, machine) in enumerate(runs):
-            if prep is None or prep.model != model:
-                prep = prepare(left, right, model, gt)  # one model's features and reference at a time
-                reference_seconds[model.name] = prep.reference_seconds
-            outcome = run_pair(
-                left,
-                right,
-                model,
-                machine,
-                engine=args.engine,
-                prepared=prep,
-                progress=False if args.quiet else None,
-                sgbm=(not args.no_sgbm) and i == 0,
-            )
-            report = _report(outcome, source, args.crop)
-            for key in ("input", "crop", "image_shape", "output_shape", "ground_truth", "machine"):
-                report.pop(key)
-            device = {k: v for k, v in machine.to_dict().items() if k in _DEVICE_FIELDS}
-            if device:  # the device options are the smtj points' own (--rng smtj,sobol --smtj-dwell 2)
-                report["device"] = device
-            mine = {k: v for k, v in machine.to_dict().items() if k not in own and k not in common}
-            if mine:
-                report["machine"] = mine
-            points.append(report)
-            del outcome  # one run's per-pixel results at a time
-            if not args.quiet:
-                print(_summary(report), flush=True)
-        sweep = {
-            "engine": args.engine,
-            "input": source,
-            "crop": str(args.crop) if args.crop is not None else None,
-            "output_shape": list(region.shape),
-            "ground_truth": gt is not None,
-            "reference_seconds": reference_seconds,
-            "total_seconds": time.perf_counter() - t0,
-            "models": names,
-            "rng": kinds,
-            "machine": common,
-            "points": points,
-        }
-        from .plots import save_sweep_figure
+def _sweep_pairs(
+    args: argparse.Namespace, machines: list[MachineParams], dmax: int
+) -> tuple[list[PairSpec], str, dict[str, object] | None]:
+    """The pairs of a sweep: ``--dataset``'s, or the one pair of LEFT RIGHT (or the bundled one),
+    which is loaded and sized here first so that a bad input is one error line, as for ``run``."""
+    if args.dataset is None:
+        left, right, gt, source = _load_inputs(args, with_gt=True)
+        _check_fits(OutputRegion.of_image(left.shape, dmax), max(machines, key=lambda m: m.rows))
+        if args.left is None:
+            spec = bundled_spec()
+        else:
+            spec = files_spec(os.path.abspath(args.left), os.path.abspath(args.right),
+                              os.path.abspath(args.gt) if args.gt else None, args.gt_scale)
+        seed_cache(spec, args.crop, (left, right, gt))  # the in-process run does not load it again
+        return [spec], source, None
+    if args.left is not None:
+        raise ValueError("give LEFT RIGHT or --dataset, not both")
+    if args.gt:
+        raise ValueError("--gt: the dataset's layout names each pair's ground truth (--gt-scale replaces "
+                         "its scale)")
+    # Absolute paths: a worker elsewhere (--scheduler) has its own working directory.
+    dataset = resolve_dataset([os.path.abspath(p) for p in args.dataset], gt_scale=args.gt_scale,
+                              occluded=args.kitti_gt == "occ")
+    pairs = dataset.pairs[args.pairs] if args.pairs is not None else dataset.pairs
+    if not pairs:
+        raise ValueError(f"--pairs {args.pairs.start}:{args.pairs.stop}:{args.pairs.step} selects none of "
+                         f"the dataset's {len(dataset.pairs)} pairs")
+    described = {"path": dataset.path, "layout": dataset.layout, "pairs_found": len(dataset.pairs)}
+    return pairs, " ".join(args.dataset), described
 
-        # Several models: one colour per model and source.
-        plotted = points if len(models) == 1 else [dict(p, rng=f"{p['model_name']} {p['rng']}")
-                                                   for p in points]
-        out.write("sweep.png", lambda path: save_sweep_figure(path, plotted))
-        out.write("sweep.json", lambda path: _write_json(path, sweep))
-        written = out.commit()
+
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    if args.workers is not None and args.scheduler is not None:
+        raise ValueError("--workers sizes a local cluster and --scheduler names another one: "
+                         "give one of them")
+    points = sweep_points(args)  # every point validated before any input is read
+    pairs, source, dataset = _sweep_pairs(args, [p.machine for p in points], points[0].model.dmax)
+    workers = args.workers
+    if workers is None:  # one pair: this process (its points share one prepared pair); a dataset: all cores
+        workers = 0 if dataset is None and args.scheduler is None else (os.cpu_count() or 1)
+    progress = not args.quiet and sys.stderr.isatty()
     if not args.quiet:
-        print("wrote " + ", ".join(str(p) for p in written))
+        for pair in pairs:
+            if pair.note and dataset is not None:
+                print(f"note: {pair.name}: {pair.note}", file=sys.stderr)
+            if pair.dmax_hint is not None and pair.dmax_hint > args.dmax:
+                print(f"note: {pair.name}: the dataset says disparities reach {pair.dmax_hint}, above --dmax "
+                      f"{args.dmax} (nearer surfaces will not match)", file=sys.stderr)
+        where = (f"on the Dask cluster at {args.scheduler}" if args.scheduler else
+                 f"on a local Dask cluster of {workers} worker process(es)" if workers else "in this process")
+        print(f"sweep: {len(pairs)} pair(s) x {len(points)} point(s) = {len(pairs) * len(points)} tasks "
+              f"{where}", flush=True)
+    config = SweepConfig(pairs=pairs, points=points, output=args.output, engine=args.engine, crop=args.crop,
+                         sgbm=not args.no_sgbm, resume=args.resume, workers=workers,
+                         scheduler=args.scheduler, connect_timeout=args.connect_timeout, progress=progress,
+                         input=source, dataset=dataset)
+    outcome = run_sweep(config)
+    if not args.quiet:
+        if outcome.resumed:
+            print(f"resumed: {outcome.resumed} task(s) complete from an earlier run, {outcome.ran} run now")
+        for point in outcome.sweep["points"]:
+            varying = [k for k, v in outcome.sweep["grid"].items()
+                       if len(v) > 1 and k not in ("model", "rng", "counter_max")]
+            print(_pooled_summary(point, len(pairs), varying), flush=True)
+        print("wrote " + ", ".join(str(p) for p in outcome.written))
+    for f in outcome.failures:
+        print(f"bayesmachine sweep: task failed: pair {f.pair}, point {f.point}: {f.error}", file=sys.stderr)
+    if outcome.failures:
+        print(f"bayesmachine sweep: {len(outcome.failures)} of {len(pairs) * len(points)} tasks failed; the "
+              f"others are in {args.output / 'sweep.json'} (rerun with --resume to retry the failed ones)",
+              file=sys.stderr)
+        return 1
     return 0
+
+
+def _pooled_summary(p: dict[str, object], pairs: int, varying: list[str]) -> str:
+    """One point of a sweep: its figures (the mean over the pairs, +- std over them with several)."""
+    std = p.get("std") or {}
+
+    def f(key: str, fmt: str = ".4f") -> str:
+        v = p.get(key)
+        if v is None:
+            return "n/a"
+        s = std.get(key) if pairs > 1 else None  # type: ignore[union-attr]
+        return format(v, fmt) + ("" if s is None else f" +- {format(s, fmt)}")
+
+    line = (f"{p['engine']} model={p['model_name']} rng={p['rng']} counter_max={p['counter_max']}"
+            + "".join(f" {k}={p['grid'][k]}" for k in varying)  # type: ignore[index]
+            + (f" ({p['pairs']} pairs)" if pairs > 1 else "")
+            + f": {f('cycles_per_pixel_mean', '.2f')} cycles/px, RMS {f('rms_error')}, "
+            f"no-match F1 {f('nomatch_f1')}, MAP agreement {f('map_agreement')}")
+    if p.get("machine_bad2_nomatch_bad") is not None:
+        line += f", bad-2 {f('machine_bad2_nomatch_bad')} (reference {f('reference_bad2_nomatch_bad')})"
+    if p.get("failed"):
+        line += f"; {p['failed']} pair(s) failed"
+    return line
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -518,17 +561,43 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
 
     p = subparsers.add_parser(
         "sweep",
-        help="paper Fig 6: accuracy and cycles per pixel against counter max (and random source)",
-        description="Run the machine for several counter max values (and, with --rng, several random "
-        "sources side by side; with --model paper,census, several models) on one pair; write "
-        "OUT/sweep.json (each point with its model and the machine fields of its own) and OUT/sweep.png "
-        "(RMS error, no-match F1 and MAP agreement vs counter max; cycles per pixel: mean, median, "
-        "10-90 % band). "
-        "sweep.json is written last.",
+        help="paper Fig 6 over a grid of designs, on one pair or a whole dataset (Dask)",
+        description="Run the machine over a grid of designs -- the product of every option given as a "
+        "comma-separated list (--model, --rng, --counter-max, --word-bits, --seed, ...) -- on one pair "
+        "(LEFT RIGHT, or the bundled pair) or on every pair of a dataset (--dataset: Middlebury, KITTI, "
+        "a list file, frame directories or videos). Every (pair, point) is one task: in this process "
+        "(one pair, by default), on a local Dask cluster of --workers processes (a dataset, by default "
+        "one per core) or on a Dask cluster (--scheduler). Each task writes OUT/runs/<pair>/<point>/"
+        "result.json; --resume keeps the complete ones. OUT/sweep.json (written last) holds each point's "
+        "figures as the mean (and std) over the pairs, each pair's figures and the failed tasks; "
+        "OUT/sweep.png plots accuracy and cycles per pixel against counter max. Exit code 1 when a task "
+        "failed (each reported with its pair and point; the others complete).",
     )
     _add_input_options(p, optional=True)
     add_model_options(p, census=True, sweep=True)
     _add_machine_options(p, sweep=True)
+    d = p.add_argument_group("dataset and cluster")
+    d.add_argument("--dataset", nargs="+", metavar="PATH", default=None,
+                   help="a dataset directory (Middlebury 2001-2006 or 2014/2021/MiddEval3 scenes, KITTI "
+                   "2012/2015, left/ and right/ frame directories; searched recursively), a list file "
+                   "('left right [gt [gt_scale]]' per line), or two frame directories or two video files")
+    d.add_argument("--pairs", type=argument_type(_parse_slice, "pairs"), default=None,
+                   metavar="START:STOP[:STEP]",
+                   help="run these of the dataset's pairs (Python slice, in the layout's order), e.g. "
+                   "0:6300:50 for every 50th frame")
+    d.add_argument("--kitti-gt", choices=("noc", "occ"), default="noc",
+                   help="KITTI ground truth: disp_noc (non-occluded pixels, default) or disp_occ (all)")
+    d.add_argument("--workers", type=argument_type(_parse_workers, "workers"), default=None, metavar="N",
+                   help="local Dask worker processes (default: one per core with --dataset, 0 = in this "
+                   "process for one pair)")
+    d.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run the tasks on the Dask cluster whose scheduler is at ADDRESS (tcp://host:8786); "
+                   "the workers need this package, the dataset and OUT at the same paths")
+    d.add_argument("--connect-timeout", type=positive_float_arg, default=5.0, metavar="S",
+                   help="give up on --scheduler after S seconds (default 5)")
+    d.add_argument("--resume", action="store_true",
+                   help="keep the tasks whose OUT/runs/.../result.json is complete and of the same pair and "
+                   "point (an interrupted or partly failed sweep); run the rest")
     p.set_defaults(func=_cmd_sweep)
 
 

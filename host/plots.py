@@ -11,7 +11,7 @@ matplotlib.use("Agg")  # files only, never a display
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-__all__ = ["disparity_gray", "save_disparity_figure", "save_sweep_figure"]
+__all__ = ["disparity_gray", "save_disparity_figure", "save_sweep_figure", "save_dataset_sweep_figure"]
 
 
 def disparity_gray(disp: np.ndarray, dmax: int) -> np.ndarray:
@@ -99,6 +99,71 @@ def save_sweep_figure(path: str | Path, sweep: Sequence[dict[str, object]]) -> N
     b.set_xlabel("counter max")
     b.set_ylabel("cycles per pixel")
     b.grid(True, alpha=0.3)
+    b.set_title("(b) run time per pixel")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _series_label(point: dict[str, object], varying: Sequence[str]) -> str:
+    grid = point.get("grid") or {}
+    return " ".join(f"{grid.get(a)}" if a in ("model", "rng") else f"{a}={grid.get(a)}"  # type: ignore[union-attr]
+                    for a in varying) or str(point.get("rng", ""))
+
+
+def save_dataset_sweep_figure(path: str | Path, points: Sequence[dict[str, object]]) -> None:
+    """A sweep over a dataset: (a) accuracy (RMS error, no-match F1, MAP agreement and, with ground
+    truth, the machine's bad-2 with no match counted bad) and (b) cycles per pixel against counter max,
+    each the mean over the pairs with a band of +- one std over the pairs. One colour per combination
+    of the other grid axes (model, source, word bits, ...)."""
+    from matplotlib.lines import Line2D
+
+    axes_values: dict[str, list[object]] = {}
+    for p in points:
+        for k, v in (p.get("grid") or {}).items():  # type: ignore[union-attr]
+            axes_values.setdefault(k, [])
+            if v not in axes_values[k]:
+                axes_values[k].append(v)
+    varying = [k for k, v in axes_values.items() if k != "counter_max" and len(v) > 1]
+    labels = list(dict.fromkeys(_series_label(p, varying) for p in points))
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    metrics = [("rms_error", "o-", "RMS error"), ("nomatch_f1", "s-", "no-match F1"),
+               ("map_agreement", "^--", "MAP agreement"), ("machine_bad2_nomatch_bad", "D:", "bad-2 (vs gt)")]
+    metrics = [m for m in metrics if any(p.get(m[0]) is not None for p in points)]
+    fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4.5))
+    n_pairs = max(int(p.get("pairs") or 0) for p in points) if points else 0  # type: ignore[call-overload]
+
+    def col(pts: list[dict[str, object]], key: str, spread: bool = False) -> np.ndarray:
+        src = [(p.get("std") or {}) if spread else p for p in pts]
+        return np.array([np.nan if s.get(key) is None else float(s[key])  # type: ignore[union-attr,arg-type]
+                         for s in src])
+
+    for i, label in enumerate(labels):
+        pts = sorted((p for p in points if _series_label(p, varying) == label),
+                     key=lambda p: float(p["counter_max"]))  # type: ignore[arg-type]
+        cm = np.array([float(p["counter_max"]) for p in pts])  # type: ignore[arg-type]
+        colour = colours[i % len(colours)]
+        for key, style, _ in metrics:
+            m, s = col(pts, key), col(pts, key, spread=True)
+            a.plot(cm, m, style, color=colour)
+            a.fill_between(cm, m - s, m + s, color=colour, alpha=0.12)
+        m, s = col(pts, "cycles_per_pixel_mean"), col(pts, "cycles_per_pixel_mean", spread=True)
+        b.plot(cm, m, "o-", color=colour, label=label)
+        b.fill_between(cm, m - s, m + s, color=colour, alpha=0.15)
+    handles = [Line2D([], [], color="gray", marker=st[0], linestyle=st[1:], label=lb)
+               for _, st, lb in metrics]
+    if len(labels) > 1:
+        handles = [Line2D([], [], color=colours[i % len(colours)], label=lb)
+                   for i, lb in enumerate(labels)] + handles
+    a.legend(handles=handles, fontsize=7, ncol=2)
+    b.legend(fontsize=7, title="mean over pairs, +- 1 std shaded", title_fontsize=7)
+    for ax in (a, b):
+        ax.set_xscale("log", base=2)
+        ax.set_xlabel("counter max")
+        ax.grid(True, alpha=0.3)
+    a.set_ylim(0, 1.02)
+    a.set_title(f"(a) accuracy, mean +- std over {n_pairs} pairs")
+    b.set_ylabel("cycles per pixel (pair mean)")
     b.set_title("(b) run time per pixel")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
