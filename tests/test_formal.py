@@ -15,6 +15,7 @@ from amaranth.lib import wiring
 from amaranth.lib.wiring import In
 from conftest import require_tool
 
+from bayesmachine.hdl.formal.control import ControlProperties
 from bayesmachine.hdl.formal.counter import CounterProperties
 from bayesmachine.hdl.formal.encoder import EncoderProperties
 from bayesmachine.hdl.formal.machine import CHECKS, MachineProperties
@@ -44,6 +45,18 @@ MACHINES = {
 # the bubble) is at most 12 cycles, and each next pixel at most max_cycles + 1 more while loads keep
 # up: 40 steps hold three or more whole pixels, 30 two or more (the ``runs`` group's queue of run
 # lengths makes its unrolling the costly one: ~5 s at 30 steps, ~30 s at 40).
+# The control scoreboard (ControlProperties) on both machines and a neighbour-prior one: 4 rows
+# (3 disparities and the no-match row) x 1 data column plus the feedback and loaded prior columns,
+# W = 3, counter max 1, max_cycles 4, feedback words (1.0, 5/8, 2/8) and 4/8 for the no-match row.
+CONTROL = {
+    **MACHINES,
+    "neighbour": MachineParams(rows=4, columns=1, word_bits=3, counter_max=1, rng="external", max_cycles=4,
+                               nomatch_row=True, lanes=4, prior="neighbour", feedback_words=(8, 5, 2),
+                               feedback_nomatch_word=4),
+}
+CONTROL_PROVE_DEPTH = 4  # k of the k-induction (with the strengthening invariants)
+CONTROL_COVER_DEPTH = 25
+CONTROL_MUTANT_DEPTH = 16  # BMC: a pixel's loading and run (12 cycles) and the next one's start
 MACHINE_BMC_DEPTH = 40
 RUNS_BMC_DEPTH = 30
 MACHINE_COVER_DEPTH = 25
@@ -116,6 +129,21 @@ def test_machine_covers(machine: str) -> None:
                      depth=MACHINE_COVER_DEPTH))
 
 
+@pytest.mark.parametrize("machine", sorted(CONTROL))
+def test_control_proved(machine: str) -> None:
+    """Against the reference run: one result per loaded pixel, in order, with the counters at the
+    stop; the stop at the first overflow or at max_cycles; no beat lost; the one-cycle bubble; the
+    neighbour prior's feedback words. Proved by k-induction."""
+    check(run_formal(ControlProperties(params=CONTROL[machine]), name=f"control-{machine}", mode="prove",
+                     depth=CONTROL_PROVE_DEPTH))
+
+
+@pytest.mark.parametrize("machine", sorted(CONTROL))
+def test_control_covers(machine: str) -> None:
+    check(run_formal(ControlProperties(params=CONTROL[machine]), name=f"control-{machine}", mode="cover",
+                     depth=CONTROL_COVER_DEPTH))
+
+
 MUTANTS = mutants(MACHINES["n1-mc5"])
 
 
@@ -128,6 +156,8 @@ def test_mutant_caught(mutant: Mutant) -> None:
     elif mutant.wrapper == "encoder":
         runs = [(EncoderProperties(rows=5, nomatch_row=True, tie_break=tb, **mutant.inject), "prove", 1)
                 for tb in ("nomatch-first", "lowest-index")]
+    elif mutant.wrapper == "control":
+        runs = [(ControlProperties(params=MACHINES["n1-mc5"], **mutant.inject), "bmc", CONTROL_MUTANT_DEPTH)]
     else:
         runs = [(MachineProperties(params=MACHINES["n1-mc5"], checks=CHECKS, **mutant.inject), "bmc",
                  RUNS_BMC_DEPTH)]
