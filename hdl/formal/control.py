@@ -37,12 +37,16 @@ __all__ = ["ControlProperties", "MachineFactory", "queue"]
 MachineFactory = Callable[..., wiring.Component]
 
 
-def driven(fragment: Fragment) -> dict[str, Signal]:
-    """The signals a fragment's own statements drive, by name (a local register of ``elaborate``
-    that a strengthening invariant needs; a name driven twice is left out)."""
+def driven(block: Fragment | Module, domain: str | None = None) -> dict[str, Signal]:
+    """The signals an elaborated fragment's (or a module's) own statements drive (in ``domain``, or
+    any), by name: a local register of ``elaborate`` that an invariant or a mutant needs (a name
+    driven twice is left out)."""
     found: dict[str, Signal] = {}
     twice: set[str] = set()
-    for statements in fragment.statements.values():
+    statements_of = block.statements if isinstance(block, Fragment) else block._statements
+    for name, statements in statements_of.items():
+        if domain is not None and name != domain:
+            continue
         for stmt in statements:
             for sig in stmt._lhs_signals():
                 if sig.name in found and found[sig.name] is not sig:

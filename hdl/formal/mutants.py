@@ -15,12 +15,16 @@ from amaranth.hdl import Cat, Module, Mux, Signal, Value
 
 from bayesmachine.hdl.counters import overflow_counter_full
 from bayesmachine.hdl.encoder import MAPEncoder, map_encoder
+from bayesmachine.hdl.formal.control import driven
+from bayesmachine.hdl.frontend.costs import WordGenerator
+from bayesmachine.hdl.frontend.stereo import FrontEnd, StereoMachine
 from bayesmachine.hdl.machine import BayesianMachine
 from bayesmachine.params import MachineParams
 
 __all__ = [
-    "HighestIndexEncoder", "LateCountsMachine", "LostBeatMachine", "Mutant", "NoMatchBlindEncoder",
-    "PayloadFollowsEncoderMachine", "SkippedSwapMachine", "ValidDropMachine", "counter_early_overflow",
+    "EarlyReadStereoMachine", "FirstIgnoredFrontEnd", "HighestIndexEncoder", "LateCountsMachine",
+    "LostBeatMachine", "Mutant", "NoMatchBlindEncoder", "PayloadFollowsEncoderMachine", "ShortWordGenerator",
+    "SkippedSwapMachine", "ValidDropMachine", "counter_early_overflow",
     "counter_late_overflow", "counter_wraps", "mutants", "other_tie_rule",
 ]
 
@@ -149,10 +153,47 @@ class LateCountsMachine(_ObservedMachine):
         return m
 
 
+# --- front end -------------------------------------------------------------------------------
+
+class ShortWordGenerator(WordGenerator):
+    """Off by one: an output pixel's last beat is never issued (the pixel ends a beat early)."""
+
+    def elaborate(self, platform: object) -> Module:
+        m = super().elaborate(platform)
+        local = driven(m)
+        beat, active = local["beat"], local["active"]
+        issue = active & (~self.beats.valid | self.beats.ready)
+        with m.If(issue & (beat == self.params.beats_per_pixel - 2)):
+            m.d.sync += [beat.eq(0), active.eq(0)]
+        return m
+
+
+class FirstIgnoredFrontEnd(FrontEnd):
+    """The frame-start marker is ignored: the position counters run on across frames."""
+
+    def elaborate(self, platform: object) -> Module:
+        m = super().elaborate(platform)
+        comb, sync = driven(m, "comb"), driven(m, "sync")
+        m.d.comb += [comb["cur_col"].eq(sync["col"]), comb["cur_line"].eq(sync["line"])]
+        return m
+
+
+class EarlyReadStereoMachine(StereoMachine):
+    """The machine's load ``valid`` from the beat count ``StereoMachine`` keeps instead of the FIFO's
+    read side: a beat just written (not yet readable) is read, an underflow."""
+
+    def elaborate(self, platform: object) -> Module:
+        m = super().elaborate(platform)
+        used = driven(m, "sync")["used"]
+        machine = m.submodules.machine
+        m.d.comb += machine.load.valid.eq(used != 0)
+        return m
+
+
 @dataclass(frozen=True)
 class Mutant:
     """One known bug: its name, the wrapper it is checked in (``counter``, ``encoder``, ``machine``,
-    ``control``, ``generator``, ``frontend``, ``fifo``),
+    ``control``, ``miter``, ``generator``, ``frontend``, ``fifo``),
     the keyword arguments that inject it, and what it breaks."""
 
     name: str
@@ -195,6 +236,14 @@ def mutants(machine_params: MachineParams) -> list[Mutant]:
         Mutant("control-watchdog-late", "control", {"dut_params": late},
                "a run goes one cycle past max_cycles"),
         Mutant("control-valid-drop", "control", {"machine": ValidDropMachine}, "a stalled result is dropped"),
+        Mutant("miter-payload-moves", "miter", {"machine": PayloadFollowsEncoderMachine},
+               "a stalled result's map changes"),
+        Mutant("generator-short", "generator", {"generator": ShortWordGenerator},
+               "an output pixel gets beats_per_pixel - 1 beats"),
+        Mutant("frontend-first-ignored", "frontend", {"frontend": FirstIgnoredFrontEnd},
+               "a frame start does not restart the position counters"),
+        Mutant("fifo-early-read", "fifo", {"stereo": EarlyReadStereoMachine},
+               "the machine reads a beat the FIFO does not offer yet (underflow)"),
     ]
 
 
