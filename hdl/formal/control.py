@@ -52,7 +52,15 @@ def driven(block: Fragment | Module, domain: str | None = None) -> dict[str, Sig
                 if sig.name in found and found[sig.name] is not sig:
                     twice.add(sig.name)
                 found[sig.name] = sig
-    return {k: v for k, v in found.items() if k not in twice}
+    return _Driven({k: v for k, v in found.items() if k not in twice})
+
+
+class _Driven(dict):
+    """A name the block no longer drives (the RTL moved on) is a clear error, not a bare KeyError."""
+
+    def __missing__(self, name: str) -> Signal:
+        raise KeyError(f"no signal named {name!r} is driven (once) by this block: the RTL changed; update "
+                       "the formal wrapper or mutant that watches it (hdl/formal)")
 
 
 def queue(m: Module, name: str, width: int, depth: int, push: Value, data: Value,
