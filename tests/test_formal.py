@@ -75,7 +75,7 @@ GENERATOR_DEPTH = 30
 FRONTEND_DEPTH = 45  # an output pixel's beats after a frame started again (the cover: step 39)
 FIFO_PROVE_DEPTH = 4
 FIFO_COVER_DEPTH = 45
-FIFO_MUTANT_DEPTH = 40  # the first output pixel's beats through the FIFO (read early: step 37)
+FIFO_MUTANT_DEPTH = 45  # the first output pixel's beats through the FIFO (read early: step 37)
 MACHINE_BMC_DEPTH = 40
 RUNS_BMC_DEPTH = 30
 MACHINE_COVER_DEPTH = 25
@@ -172,10 +172,14 @@ def test_miter_back_pressure() -> None:
 
 
 @pytest.mark.slow
-def test_generator_beats_per_pixel() -> None:
-    wrapper = GeneratorProperties(params=FRONT_PARAMS, model=FRONT_MODEL)
-    check(run_formal(wrapper, name="generator", mode="bmc", depth=GENERATOR_DEPTH))
-    check(run_formal(GeneratorProperties(params=FRONT_PARAMS, model=FRONT_MODEL), name="generator",
+@pytest.mark.parametrize("dmax", [1, 2])
+def test_generator_beats_per_pixel(dmax: int) -> None:
+    """Dmax 1 (3 beats per pixel) and Dmax 2 (4 rows x 3 columns in 3 lanes: 4 beats per pixel)."""
+    params = stereo_machine_params(dmax, counter_max=1, word_bits=3, rng="external", max_cycles=3, lanes=3)
+    model = ModelParams(dmax=dmax, p_nm0=0.1)
+    check(run_formal(GeneratorProperties(params=params, model=model), name=f"generator{dmax}", mode="bmc",
+                     depth=GENERATOR_DEPTH))
+    check(run_formal(GeneratorProperties(params=params, model=model), name=f"generator{dmax}",
                      mode="cover", depth=20))
 
 

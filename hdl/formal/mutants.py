@@ -22,9 +22,9 @@ from bayesmachine.hdl.machine import BayesianMachine
 from bayesmachine.params import MachineParams
 
 __all__ = [
-    "EarlyReadStereoMachine", "FirstIgnoredFrontEnd", "HighestIndexEncoder", "LateCountsMachine",
-    "LostBeatMachine", "Mutant", "NoMatchBlindEncoder", "PayloadFollowsEncoderMachine", "ShortWordGenerator",
-    "SkippedSwapMachine", "ValidDropMachine", "counter_early_overflow",
+    "DriftingCountStereoMachine", "EarlyReadStereoMachine", "FirstIgnoredFrontEnd", "HighestIndexEncoder",
+    "LateCountsMachine", "LostBeatMachine", "Mutant", "NoMatchBlindEncoder", "PayloadFollowsEncoderMachine",
+    "ShortWordGenerator", "SkippedSwapMachine", "ValidDropMachine", "counter_early_overflow",
     "counter_late_overflow", "counter_wraps", "mutants", "other_tie_rule",
 ]
 
@@ -190,6 +190,19 @@ class EarlyReadStereoMachine(StereoMachine):
         return m
 
 
+class DriftingCountStereoMachine(StereoMachine):
+    """The beat count ``StereoMachine`` keeps misses a read in a cycle with a write: it drifts above
+    the FIFO's level (and its registered ready falls too early)."""
+
+    def elaborate(self, platform: object) -> Module:
+        m = super().elaborate(platform)
+        comb, sync = driven(m, "comb"), driven(m, "sync")
+        used = sync["used"]
+        with m.If(comb["write"] & comb["read"]):
+            m.d.sync += used.eq(used + 1)
+        return m
+
+
 @dataclass(frozen=True)
 class Mutant:
     """One known bug: its name, the wrapper it is checked in (``counter``, ``encoder``, ``machine``,
@@ -244,6 +257,8 @@ def mutants(machine_params: MachineParams) -> list[Mutant]:
                "a frame start does not restart the position counters"),
         Mutant("fifo-early-read", "fifo", {"stereo": EarlyReadStereoMachine},
                "the machine reads a beat the FIFO does not offer yet (underflow)"),
+        Mutant("fifo-count-drift", "fifo", {"stereo": DriftingCountStereoMachine},
+               "the beat count misses a read in a cycle with a write"),
     ]
 
 
