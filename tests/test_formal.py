@@ -58,6 +58,17 @@ CONTROL = {
                                nomatch_row=True, lanes=4, prior="neighbour", feedback_words=(8, 5, 2),
                                feedback_nomatch_word=4),
 }
+# Larger machines the same proof closes on (slow: 15-20 s each): 10 rows x 3 columns, W = 6, counter
+# max 7, max_cycles 40, 5 beats per pixel; a neighbour prior with 8 rows x 2 data columns, W = 5,
+# counter max 3, max_cycles 16, 5 feedback words, lowest-index.
+CONTROL_LARGER = {
+    "10x3-w6-n7": MachineParams(rows=10, columns=3, word_bits=6, counter_max=7, rng="external", max_cycles=40,
+                                nomatch_row=True, lanes=6),
+    "neighbour-8x2-w5": MachineParams(rows=8, columns=2, word_bits=5, counter_max=3, rng="external",
+                                      max_cycles=16, nomatch_row=True, lanes=4, prior="neighbour",
+                                      feedback_words=(32, 25, 15, 8, 3), feedback_nomatch_word=12,
+                                      tie_break="lowest-index"),
+}
 CONTROL_PROVE_DEPTH = 4  # k of the k-induction (with the strengthening invariants)
 CONTROL_COVER_DEPTH = 25
 CONTROL_MUTANT_DEPTH = 16  # BMC: a pixel's loading and run (12 cycles) and the next one's start
@@ -155,6 +166,13 @@ def test_control_proved(machine: str) -> None:
     neighbour prior's feedback words. Proved by k-induction."""
     check(run_formal(ControlProperties(params=CONTROL[machine]), name=f"control-{machine}", mode="prove",
                      depth=CONTROL_PROVE_DEPTH))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("machine", sorted(CONTROL_LARGER))
+def test_control_proved_larger(machine: str) -> None:
+    check(run_formal(ControlProperties(params=CONTROL_LARGER[machine]), name=f"control-{machine}",
+                     mode="prove", depth=CONTROL_PROVE_DEPTH))
 
 
 @pytest.mark.slow

@@ -315,6 +315,7 @@ class ControlProperties(wiring.Component):
         # The load side: the machine's beat is the reference's, and the shadow as it will be once
         # the beat in flight is written holds the beats taken so far.
         dut_beat, load_q = local["beat"], data.View(load_layout(p), local["load_q"])
+        m.d.comb += Assert(beat < nbeats, "the reference's beat is a beat")
         m.d.comb += Assert(dut_beat == (Const(1, nbeats + 1) << beat)[:nbeats],
                            "the machine's beat is the reference's")
         q_words = beat_words(p, load_q)
