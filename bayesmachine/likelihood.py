@@ -213,6 +213,12 @@ class ModelParams:
         return self.census_window * self.census_window - 1
 
     @property
+    def margin(self) -> int:
+        """Pixels from a window's centre to its edge, for the model's largest window (5x5 filters: 2,
+        7x7 census: 3): the output region keeps every window inside the image (``host.region``)."""
+        return max(2, self.census_window // 2) if self.census else 2
+
+    @property
     def sigma_c(self) -> float:
         """The census sigma in use (``census_sigma`` or the window's default)."""
         return float(self.census_sigma) if self.census_sigma is not None else CENSUS_SIGMA[self.census_window]

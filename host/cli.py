@@ -275,7 +275,7 @@ def _summary(r: dict[str, object]) -> str:
 def _cmd_reference(args: argparse.Namespace) -> int:
     model = model_params_from_args(args)
     left, right, _, _ = _load_inputs(args, with_gt=False)
-    region = OutputRegion.of_image(left.shape, model.dmax)
+    region = OutputRegion.of_model(left.shape, model)
     out = Path(args.output)
     if out.suffix != ".npz":
         out = out.with_name(out.name + ".npz")  # what np.savez would write: say the real name
@@ -287,7 +287,7 @@ def _cmd_reference(args: argparse.Namespace) -> int:
         f"the posterior volume ({shape[0]}x{shape[1]}x{shape[2]} float64, {format_bytes(volume)})",
         "use --crop or a smaller --dmax",
     )
-    validate_pair(left, right, model.dmax)
+    validate_pair(left, right, model.dmax, model.margin)
     warm_up(model)  # numba's cache load stays out of the timing
     t0 = time.perf_counter()
     features = (model_features(left, model), model_features(right, model))
@@ -341,7 +341,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     if args.feed == "pixels" and waves is not None:
         raise ValueError("--waves is not available with --feed pixels")
     left, right, gt, source = _load_inputs(args, with_gt=True)
-    region = OutputRegion.of_image(left.shape, model.dmax)
+    region = OutputRegion.of_model(left.shape, model)
     _check_waves(waves, region.pixels)
     _check_fits(region, machine)
     with OutputDir(args.output, RUN_OUTPUTS, last="report.json") as out:
@@ -431,7 +431,9 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
             )
             report = _report(outcome, source, args.crop)
             for key in ("input", "crop", "image_shape", "output_shape", "ground_truth", "machine"):
-                report.pop(key)
+                shape = report.pop(key)
+                if key == "output_shape" and model.margin != models[0].margin:
+                    report[key] = shape  # a model of another margin has its own output region
             device = {k: v for k, v in machine.to_dict().items() if k in _DEVICE_FIELDS}
             if device:  # the device options are the smtj points' own (--rng smtj,sobol --smtj-dwell 2)
                 report["device"] = device
