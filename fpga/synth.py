@@ -189,7 +189,7 @@ def synth(params: MachineParams, target_name: str, out: Path, *, machines: int =
                 # Pixels in, results out: the front end hides loading (benchmarks/bench_frontend.py), so a
                 # pixel takes the machine's own wall cycles; the input is every pixel pair of the frame.
                 tp.update(rep.stereo_throughput(report["fmax_mhz"], cyc["wall_cycles_per_pixel"], width,
-                                                params.rows - 2))
+                                                params.rows - 2, margin=model.margin))
             elif report["fmax_mhz"]:
                 beat_bits = params.lanes * params.memory_word_width
                 tp.update(rep.throughput(report["fmax_mhz"], machines, cyc["wall_cycles_per_pixel"],

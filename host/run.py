@@ -121,9 +121,6 @@ def run_machine(
         "use --crop or a smaller --dmax",
     )
     if feed == "pixels":
-        if model.census:
-            raise ValueError("--feed pixels: the on-chip front end computes the paper model only (for now); "
-                             "run the census model with --feed words, or use --model paper")
         return _run_pixels(prepared, machine, engine, engine_options)
     neighbour = machine.feedback_columns > 0
     if neighbour:
