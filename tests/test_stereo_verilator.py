@@ -242,6 +242,11 @@ def test_whole_bundled_pair_census_through_the_front_end_equals_the_model() -> N
     want = run_machine(prepare(left, right, model, reference=False), params, engine="model", progress=False)
     with StereoVerilatorEngine(params, model, left.shape[1], verbose=False) as engine:
         got = engine.run(left, right)
+        wall = engine.last_wall_cycles
+    alone = int(pixel_wall_cycles(params, got.cycles).sum())  # the machine fed words at full rate
+    print(f"\ncensus through the front end: {wall / len(got):.3f} wall cycles per output pixel, "
+          f"the machine alone {alone / len(got):.3f}, compute {got.cycles.mean():.3f}")
+    assert alone <= wall < 1.005 * alone  # loading and filtering hidden
     ho, wo = want.map.shape
     assert (ho, wo) == (left.shape[0] - 6, left.shape[1] - 6 - 80)
     disp = np.where(got.nomatch | got.timeout, -1, got.map).reshape(ho, wo)
