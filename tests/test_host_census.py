@@ -301,12 +301,13 @@ def test_machine_checks_are_one_function():
         memory_words(bare, fr, no_prior, MachineParams.for_disparity(6, columns=4))
 
 
-def test_front_end_refuses_the_census_model():
+def test_front_end_takes_the_census_model_on_whole_rows_per_lane():
     from bayesmachine.hdl.frontend.costs import check_frontend_params
 
-    with pytest.raises(ParameterError, match="paper model only"):
-        check_frontend_params(MachineParams.for_disparity(6, columns=4, lanes=8),
-                              ModelParams(dmax=6, name="census", neighbour_prior=False))
+    model = ModelParams(dmax=6, name="census", neighbour_prior=False)
+    check_frontend_params(MachineParams.for_disparity(6, columns=4, lanes=8), model)  # 2 rows per beat
+    with pytest.raises(ParameterError, match=r"lanes \(6\) must be a multiple of the loaded columns \(4\)"):
+        check_frontend_params(MachineParams.for_disparity(6, columns=4, lanes=6), model)
 
 
 # --- References ---
