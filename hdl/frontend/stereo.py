@@ -3,17 +3,19 @@ disparity results out): the pipeline from a camera to the MAP, on chip.
 
 Pixel stream: one ``pixel_in_layout()`` beat per pixel pair (``left``, ``right``: 8-bit gray;
 ``first``: set on the first pixel of a frame), frames in raster order, ``width`` pixels per line,
-any number of lines (at least 5). The front end's position counters restart at every ``first``
-(and at reset), so a frame may follow another immediately: nothing computed for a frame depends
-on pixels of an earlier one. The output region is the host's: map rows 0..H-5 (image lines
-4..H-1, a window's bottom line) and map columns Dmax..W-5 (image columns Dmax+4..W-1, a
+any number of lines (at least 2k + 1, k = ``model.margin``). The front end's position counters
+restart at every ``first`` (and at reset), so a frame may follow another immediately: nothing
+computed for a frame depends on pixels of an earlier one. The output region is the host's
+(``host.region``: every window of the model inside the image): map rows 0..H-2k-1 (image lines
+2k..H-1, a window's bottom line) and map columns Dmax..W-2k-1 (image columns Dmax+2k..W-1, a
 window's right column); every other pixel passes in one cycle and starts no machine run.
 
 Pipeline (one pixel per cycle when no output pixel holds it):
 
-1. the pixel is taken and its column read from the line buffer;
-2. both images' 5-high columns' partial sums enter the feature filters' first registers;
-3. the columns' sums enter the filters' windows;
+1. the pixel is taken and its column read from the line buffer (2k lines);
+2. both images' 5-high columns' partial sums enter the feature filters' first registers (the
+   census model: and the 7-high columns the census filters' column registers);
+3. the columns' sums enter the filters' windows (the census filters' windows too);
 4. the word generator takes the features (right ones into the delay line); for an output pixel
    it writes ``beats_per_pixel`` beats into a FIFO in front of the machine's load stream.
 
@@ -22,7 +24,8 @@ machine's runs are long and the line ends' non-output pixels stream in; when it 
 back-pressure reaches the pixel input. Its ready toward the word generator is a register (set
 while at most all but one entry is used; the FIFO has one entry more than the pixels' beats), so
 no path runs from its level through the pixel take. Results leave in raster order of the output region, on
-the machine's own result stream.
+the machine's own result stream. With the census model's neighbour prior each result, as it
+leaves, also goes back into the word generator's line of MAPs (the above neighbour's prior).
 """
 
 from __future__ import annotations
