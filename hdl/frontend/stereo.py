@@ -249,7 +249,7 @@ class StereoMachine(wiring.Component):
     Parameters
     ----------
     params : MachineParams
-        The machine's parameters (lanes a multiple of the operator columns: see
+        The machine's parameters (lanes a multiple of the loaded columns: see
         :func:`stereo_machine_params`).
     model : ModelParams
         The disparity model (Dmax, p0, sigmas, p_nm0, sigma_nm).
