@@ -156,7 +156,8 @@ def markdown(report: dict) -> str:
         lines.append(f"Per operator (front end and FIFO included): {po['lut4']:.1f} LUT4 sites, "
                      f"{po['ff']:.1f} FF. Lanes that fit: copies of the whole StereoMachine, each fed by "
                      "its own pixel stream.")
-        lines += ["", f"Memories (the line buffer, {stereo['width']} x 64 bits; the FIFO, "
+        buffer_bits = stereo.get("line_buffer_bits", 64)  # reports written before it had the key: 64
+        lines += ["", f"Memories (the line buffer, {stereo['width']} x {buffer_bits} bits; the FIFO, "
                   f"{stereo['fifo_beats']} beats of {stereo['beat_bits']} bits; the likelihood tables): "
                   f"{_fmt(r['bram'])} block RAMs ({u['bram']:.0%} of the device) and {_fmt(r['lutram'])} "
                   f"LUT RAMs."]

@@ -156,6 +156,8 @@ def synth(params: MachineParams, target_name: str, out: Path, *, machines: int =
                 "beat_bits": params.lanes * params.memory_word_width,
                 "model": dataclasses.asdict(model),
                 "input_bits": rep.PIXEL_BITS,
+                # The line buffer's word: 2 margin lines of 16-bit pairs (64 bits; 96 with a 7x7 census).
+                "line_buffer_bits": rep.PIXEL_BITS * 2 * model.margin,
             }
         logic = rep.logic_cells(target, res)
         report["per_lane"] = {"lut4": logic / machines, "ff": res["ff"] / machines,
