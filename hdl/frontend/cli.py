@@ -64,10 +64,12 @@ def stereo_params(args: argparse.Namespace, params: MachineParams) -> MachinePar
 def build(args: argparse.Namespace, params: MachineParams) -> StereoMachine:
     """The ``StereoMachine`` the options describe, around the machine ``params`` (whose lanes default
     to the front end's, :func:`stereo_params`)."""
-    from .stereo import StereoMachine
+    from .stereo import StereoMachine, check_stereo_machine
 
-    return StereoMachine(params=stereo_params(args, params), model=model_params_from_args(args),
-                         width=width(args), fifo_pixels=fifo_pixels(args))
+    top_params, model = stereo_params(args, params), model_params_from_args(args)
+    # Checked first: a component whose constructor raises would be reported as never elaborated.
+    check_stereo_machine(top_params, model, width(args), fifo_pixels(args))
+    return StereoMachine(params=top_params, model=model, width=width(args), fifo_pixels=fifo_pixels(args))
 
 
 def summary(top: StereoMachine) -> str:
