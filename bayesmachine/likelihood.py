@@ -62,8 +62,8 @@ __all__ = [
 ]
 
 MODELS = ("paper", "census")
-# The model the command line runs when --model is not given. The paper's, until the on-chip front
-# end (--feed pixels, emit --top stereo) computes the census model too: then this one line.
+# The model the command line runs when --model is not given: the paper's for now. The on-chip front
+# end (--feed pixels, emit --top stereo) computes the census model too; switching is this one line.
 DEFAULT_MODEL = "paper"
 # Census windows the model takes: 7x7 (48 bits, codes fit a uint64) or the cheaper 5x5 (24 bits).
 CENSUS_WINDOWS = (5, 7)

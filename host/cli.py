@@ -190,7 +190,7 @@ def _machine_params(
         overrides["rng"] = rng
     machine = machine_params_from_args(args, model.dmax, model=model, **overrides)
     if getattr(args, "feed", "words") == "pixels" and args.lanes is None:
-        # The front end writes one feature per lane: lanes a multiple of the operator columns.
+        # The front end writes one feature per lane: lanes a multiple of the loaded columns.
         from bayesmachine.params import stereo_lanes
 
         machine = dataclasses.replace(machine, lanes=stereo_lanes(machine))
