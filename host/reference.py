@@ -382,7 +382,7 @@ def warm_up(model: ModelParams | None = None) -> None:
     The census model's kernels (float and words) too when ``model`` is a census model.
     """
     global _warm, _warm_census
-    img = np.zeros((6, 7), np.uint8)
+    img = np.zeros((8, 9), np.uint8)  # room for a 7x7 census and Dmax 1
     if not _warm:
         f = feature_sums(img)
         reference_fast(f, f, ModelParams(dmax=1))
@@ -492,5 +492,5 @@ def reference_quantized_map(
 
 def reference(left: np.ndarray, right: np.ndarray, model: ModelParams) -> Reference:
     """Validate a gray pair and run the fast reference on it."""
-    validate_pair(left, right, model.dmax)
+    validate_pair(left, right, model.dmax, model.margin)
     return reference_fast(model_features(left, model), model_features(right, model), model)
