@@ -79,8 +79,8 @@ __all__ = [
 ]
 
 MODELS = ("paper", "census", "census-lr")
-# The model the command line runs when --model is not given. The paper's, until the on-chip front
-# end (--feed pixels, emit --top stereo) computes the census model too: then this one line.
+# The model the command line runs when --model is not given: the paper's for now. The on-chip front
+# end (--feed pixels, emit --top stereo) computes the census model too; switching is this one line.
 DEFAULT_MODEL = "paper"
 # Census windows the model takes: 7x7 (48 bits, codes fit a uint64) or the cheaper 5x5 (24 bits).
 CENSUS_WINDOWS = (5, 7)
@@ -275,6 +275,12 @@ class ModelParams:
     def census_bits(self) -> int:
         """Bits of a census code: the window's neighbours (48 for 7x7, 24 for 5x5)."""
         return self.census_window * self.census_window - 1
+
+    @property
+    def margin(self) -> int:
+        """Pixels from a window's centre to its edge, for the model's largest window (5x5 filters: 2,
+        7x7 census: 3): the output region keeps every window inside the image (``host.region``)."""
+        return max(2, self.census_window // 2) if self.census else 2
 
     @property
     def sigma_c(self) -> float:

@@ -328,7 +328,8 @@ def lane_params(params: MachineParams, lane: int) -> MachineParams:
 
 def stereo_lanes(params: MachineParams) -> int:
     """The on-chip front end's default lane count (``hdl.frontend``, ``--top stereo``, ``--feed
-    pixels``): the words of :data:`STEREO_ROWS_PER_BEAT` rows per beat, a multiple of the operator
+    pixels``): the words of :data:`STEREO_ROWS_PER_BEAT` rows per beat, a multiple of the loaded
     columns since the front end writes one feature per lane (18 words: 14 beats per pixel at Dmax 80,
-    below the 17 cycles of the shortest run at counter max 16)."""
-    return min(STEREO_ROWS_PER_BEAT, params.rows) * params.operator_columns
+    below the 17 cycles of the shortest run at counter max 16; 30 for the census model's neighbour
+    machine, whose feedback column is formed on chip, not loaded)."""
+    return min(STEREO_ROWS_PER_BEAT, params.rows) * params.loaded_columns

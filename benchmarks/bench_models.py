@@ -4,8 +4,10 @@ Float64 reference of: the paper model; + a 7x7 census column with the no-match r
 uncalibrated (h_nm = 0: its census entry is L_c(0) = 1); + the no-match row calibrated
 (h_nm = bits / 8); + the raster-order neighbour prior; the 5x5 census option (calibrated, with
 and without the prior). Each model also on 10-bit words (``reference_quantized``: the machine's
-exact products): the share of pixels whose MAP changes. OpenCV StereoSGBM (block 5) and StereoBM
-(block 15) on the same pixels. Then the machine (model engine, sobol, seed 1) each model needs
+exact products): the share of pixels whose MAP changes. Each model on its own output region (the
+7x7 census's is one pixel further inside: ``host.region``). OpenCV StereoSGBM (block 5) and
+StereoBM (block 15) on the same pixels, on both regions. Then the machine (model engine, sobol,
+seed 1) each model needs
 (``disparity_machine``: the census model's with its neighbour prior, fed back from its own
 results through ``run_machine``) on the paper model and the census model, against counter max,
 beside its float and quantized references, with cycles and wall cycles per pixel; then the
@@ -77,8 +79,10 @@ def main() -> None:
     args = ap.parse_args()
     left, right, gt_full = bundled_pair()
     dmax = args.dmax
-    gt = gt_region(gt_full, dmax)
-    occluded = gt_region(occluded_mask(gt_full), dmax).astype(bool)
+    # Each model on its own output region (host.region: margin 2, or 3 with a 7x7 census).
+    truth = {k: (gt_region(gt_full, dmax, k), gt_region(occluded_mask(gt_full), dmax, k).astype(bool))
+             for k in (2, 3)}
+    gt, occluded = truth[2]
     warm_up(ModelParams(name="census"))
     models = {
         "paper": ModelParams(dmax=dmax),
@@ -116,13 +120,15 @@ def main() -> None:
         t1 = time.perf_counter()
         q = reference_quantized_map(fl, fr, model, args.word_bits)
         refs[name] = (ref, q)
+        gt, occluded = truth[model.margin]
         fq = figures(q, gt, occluded)
         line(name, figures(ref, gt, occluded),
              f"{np.mean(q != ref):.4f}, {fq['bad2']:.3f} / {fq['bad2_nm']:.3f}   ({t1 - t0:.2f} s)")
-    for name, disp in (("OpenCV StereoSGBM (block 5)", sgbm_disparity(left, right, dmax)),
-                       ("OpenCV StereoBM (block 15)", bm_disparity(left, right, dmax))):
-        if disp is not None:
-            line(name, figures(disp, gt, occluded))
+    for k, (gt, occluded) in truth.items():
+        for name, disp in (("OpenCV StereoSGBM (block 5)", sgbm_disparity(left, right, dmax, k)),
+                           ("OpenCV StereoBM (block 15)", bm_disparity(left, right, dmax, margin=k))):
+            if disp is not None:
+                line(f"{name}, margin {k}", figures(disp, gt, occluded))
     if args.no_machine:
         return
     figure_maps: dict[str, np.ndarray] = {}
@@ -135,6 +141,7 @@ def main() -> None:
           "MAP=float MAP=words  cycles/px (median)  wall/px  beats")
     for counter_max in counters:
         for label, name in machine_models.items():
+            gt, occluded = truth[models[name].margin]
             run = machine_run(left, right, gt, gt_full, models[name], feats_cache, refs[name], counter_max,
                               "sobol", args.word_bits)
             if counter_max == 16:
@@ -152,6 +159,7 @@ def main() -> None:
                 figure_maps["census-lr"] = run.map
     print("\nRandom sources on the census model with its prior, counter max 16:")
     name = machine_models["census + prior"]
+    gt, occluded = truth[models[name].margin]
     for rng in ("sobol", "lfsr", "lfsr-shared"):
         run = machine_run(left, right, gt, gt_full, models[name], feats_cache, refs[name], 16, rng,
                           args.word_bits)
@@ -160,12 +168,13 @@ def main() -> None:
         from bayesmachine.host.plots import save_disparity_figure
         from bayesmachine.host.region import OutputRegion
 
-        region = OutputRegion.of_image(left.shape, dmax)
-        panels = [("Paper model: machine (counter max 16)", figure_maps["paper"]),
+        # The census model's output region (margin 3), the paper machine's map cut to it.
+        region = OutputRegion.of_image(left.shape, dmax, 3)
+        panels = [("Paper model: machine (counter max 16)", figure_maps["paper"][1:-1, 1:-1]),
                   ("Census + neighbour prior: machine (counter max 16)", figure_maps["census + prior"]),
-                  ("OpenCV StereoSGBM (block 5)", sgbm_disparity(left, right, dmax)),
-                  ("OpenCV StereoBM (block 15)", bm_disparity(left, right, dmax)),
-                  ("Ground truth", gt)]
+                  ("OpenCV StereoSGBM (block 5)", sgbm_disparity(left, right, dmax, 3)),
+                  ("OpenCV StereoBM (block 15)", bm_disparity(left, right, dmax, margin=3)),
+                  ("Ground truth", truth[3][0])]
         save_disparity_figure(args.figure, region.cut(left), panels, dmax)
         print(f"wrote {args.figure}")
 

@@ -51,7 +51,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_stereo_options(p)
     # --model census: the census model's machine (4 columns and its neighbour prior), its throughput
     # measured on the census model's words.
-    add_census_options(p, title="model (--model census: the census model's machine; --top machine)")
+    add_census_options(p, title="model (--model census: the census model's machine; with --top stereo its "
+                       "front end too)")
     p.add_argument("--machines", type=int_arg, default=1,
                    help="machines side by side behind one load and one result stream (default 1; "
                    "--top machine only)")
@@ -82,9 +83,6 @@ def _run(args: argparse.Namespace) -> int:
     if args.synth_only and pnr:
         raise ValueError(f"{', '.join(pnr)}: options of place and route, which --synth-only skips")
     model = model_params_from_args(args)
-    if model.census and args.top == "stereo":
-        raise ValueError("--model census: the on-chip front end (--top stereo) computes the paper model only "
-                         "(for now); synthesize the census model's machine with --top machine")
     params = machine_params_from_args(args, args.dmax, model=model if model.census else None)
     stereo: dict[str, object] = {"model": model} if model.census else {}
     if args.top == "stereo":

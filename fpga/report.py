@@ -84,14 +84,15 @@ def throughput(fmax_mhz: float, lanes: int, wall_cycles_per_pixel: float, beats_
 
 
 def stereo_throughput(fmax_mhz: float | None, wall_cycles_per_pixel: float, width: int, dmax: int,
-                      height: int = VGA_HEIGHT) -> dict[str, object]:
+                      height: int = VGA_HEIGHT, margin: int = 2) -> dict[str, object]:
     """The stereo top's rates for frames of ``width`` x ``height`` pixels (VGA at width 640).
 
     Every pixel pair of the frame comes in (16 bits, the borders included); results come out for
-    the output region, (height - 4) (width - 4 - dmax) pixels, each taking
+    the output region, (height - 2 margin) (width - 2 margin - dmax) pixels (the model's margin:
+    2, or 3 with a 7x7 census), each taking
     ``wall_cycles_per_pixel`` (the machine's own: it assumes the front end keeps up, as
     benchmarks/bench_frontend.py measures). Without ``fmax_mhz`` only the bits per pixel."""
-    out_px = (height - 4) * (width - 4 - dmax)
+    out_px = (height - 2 * margin) * (width - 2 * margin - dmax)
     if out_px <= 0:
         raise ValueError(f"a {width}x{height} frame has no output pixel at Dmax {dmax}")
     in_bits = PIXEL_BITS * width * height
@@ -155,7 +156,8 @@ def markdown(report: dict) -> str:
         lines.append(f"Per operator (front end and FIFO included): {po['lut4']:.1f} LUT4 sites, "
                      f"{po['ff']:.1f} FF. Lanes that fit: copies of the whole StereoMachine, each fed by "
                      "its own pixel stream.")
-        lines += ["", f"Memories (the line buffer, {stereo['width']} x 64 bits; the FIFO, "
+        buffer_bits = stereo.get("line_buffer_bits", 64)  # reports written before it had the key: 64
+        lines += ["", f"Memories (the line buffer, {stereo['width']} x {buffer_bits} bits; the FIFO, "
                   f"{stereo['fifo_beats']} beats of {stereo['beat_bits']} bits; the likelihood tables): "
                   f"{_fmt(r['bram'])} block RAMs ({u['bram']:.0%} of the device) and {_fmt(r['lutram'])} "
                   f"LUT RAMs."]

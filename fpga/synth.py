@@ -156,6 +156,8 @@ def synth(params: MachineParams, target_name: str, out: Path, *, machines: int =
                 "beat_bits": params.lanes * params.memory_word_width,
                 "model": dataclasses.asdict(model),
                 "input_bits": rep.PIXEL_BITS,
+                # The line buffer's word: 2 margin lines of 16-bit pairs (64 bits; 96 with a 7x7 census).
+                "line_buffer_bits": rep.PIXEL_BITS * 2 * model.margin,
             }
         logic = rep.logic_cells(target, res)
         report["per_lane"] = {"lut4": logic / machines, "ff": res["ff"] / machines,
@@ -189,7 +191,7 @@ def synth(params: MachineParams, target_name: str, out: Path, *, machines: int =
                 # Pixels in, results out: the front end hides loading (benchmarks/bench_frontend.py), so a
                 # pixel takes the machine's own wall cycles; the input is every pixel pair of the frame.
                 tp.update(rep.stereo_throughput(report["fmax_mhz"], cyc["wall_cycles_per_pixel"], width,
-                                                params.rows - 2))
+                                                params.rows - 2, margin=model.margin))
             elif report["fmax_mhz"]:
                 beat_bits = params.lanes * params.memory_word_width
                 tp.update(rep.throughput(report["fmax_mhz"], machines, cyc["wall_cycles_per_pixel"],

@@ -47,9 +47,6 @@ def _run(args: argparse.Namespace) -> int:
 
     check_top(args)  # stereo options with --top machine would do nothing: refused
     model = model_params_from_args(args)
-    if model.census and args.top == "stereo":
-        raise ValueError("--model census: the on-chip front end (--top stereo) computes the paper model only "
-                         "(for now); emit the census model's machine with --top machine")
     params = machine_params_from_args(args, args.dmax, model=model if model.census else None)
     if args.top == "stereo":
         from .frontend.cli import build

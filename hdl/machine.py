@@ -393,9 +393,11 @@ class BayesianMachine(wiring.Component):
             else:
                 dist = Signal(p.map_width, name=f"feedback_dist_{r}")
                 m.d.comb += dist.eq(Mux(prev_row > r, prev_row - r, r - prev_row))
-                entries = Array(Const(w, p.memory_word_width) for w in table)
-                clamped = Mux(dist > last, last, dist) if last < (1 << p.map_width) - 1 else dist
-                m.d.sync += word_q.eq(Mux(prev_valid, entries[clamped], one))
+                # The table clamped by padding it with its last word to every distance the index can
+                # take: the same words as min(dist, last), and a complete case (verilator -Wall).
+                entries = Array(Const(table[min(i, last)], p.memory_word_width)
+                                for i in range(1 << p.map_width))
+                m.d.sync += word_q.eq(Mux(prev_valid, entries[dist], one))
             m.d.comb += n.incoming[r * cols].eq(Mux(n.shadow_line_start, one, word_q))
 
     def _start(self, m: Module, n: _Nets) -> None:

@@ -46,7 +46,7 @@ from .likelihoods import ModelParams
 from .reference import reference_bands, warm_up
 from .region import OutputRegion
 from .run import ENGINES, FEEDS, RunOutcome, result_bytes, run_pair
-from .sweep import SWEEP_OUTPUTS, SweepConfig, list_option_changes, run_sweep, seed_cache, sweep_points
+from .sweep import SWEEP_OUTPUTS, Point, SweepConfig, list_option_changes, run_sweep, seed_cache, sweep_points
 
 __all__ = ["register", "RUN_OUTPUTS", "SWEEP_OUTPUTS"]
 
@@ -206,12 +206,13 @@ def _machine_params(
     overrides: dict[str, object] = {} if counter_max is None else {"counter_max": counter_max}
     if rng is not None:
         overrides["rng"] = rng
-    if getattr(args, "feed", "words") == "pixels" and model.census:
-        raise ValueError("--feed pixels: the on-chip front end computes the paper model only (for now); run "
-                         "--model census with --feed words (the host's words), or --model paper")
+    if getattr(args, "feed", "words") == "pixels" and model.lr:
+        raise ValueError("--feed pixels: the on-chip front end computes the paper and census models, not "
+                         "census-lr's right pass and consistency column yet; run --model census-lr with "
+                         "--feed words")
     machine = machine_params_from_args(args, model.dmax, model=model, **overrides)
     if getattr(args, "feed", "words") == "pixels" and args.lanes is None:
-        # The front end writes one feature per lane: lanes a multiple of the operator columns.
+        # The front end writes one feature per lane: lanes a multiple of the loaded columns.
         from bayesmachine.params import stereo_lanes
 
         machine = dataclasses.replace(machine, lanes=stereo_lanes(machine))
@@ -305,7 +306,7 @@ def _summary(r: dict[str, object]) -> str:
 def _cmd_reference(args: argparse.Namespace) -> int:
     model = model_params_from_args(args)
     left, right, _, _ = _load_inputs(args, with_gt=False)
-    region = OutputRegion.of_image(left.shape, model.dmax)
+    region = OutputRegion.of_model(left.shape, model)
     out = Path(args.output)
     if out.suffix != ".npz":
         out = out.with_name(out.name + ".npz")  # what np.savez would write: say the real name
@@ -317,7 +318,7 @@ def _cmd_reference(args: argparse.Namespace) -> int:
         f"the posterior volume ({shape[0]}x{shape[1]}x{shape[2]} float64, {format_bytes(volume)})",
         "use --crop or a smaller --dmax",
     )
-    validate_pair(left, right, model.dmax)
+    validate_pair(left, right, model.dmax, model.margin)
     warm_up(model)  # numba's cache load stays out of the timing
     t0 = time.perf_counter()
     features = (model_features(left, model), model_features(right, model))
@@ -371,7 +372,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     if args.feed == "pixels" and waves is not None:
         raise ValueError("--waves is not available with --feed pixels")
     left, right, gt, source = _load_inputs(args, with_gt=True)
-    region = OutputRegion.of_image(left.shape, model.dmax)
+    region = OutputRegion.of_model(left.shape, model)
     _check_waves(waves, region.pixels)
     _check_fits(region, machine)
     with OutputDir(args.output, RUN_OUTPUTS, last="report.json") as out:
@@ -430,13 +431,14 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _sweep_pairs(
-    args: argparse.Namespace, machines: list[MachineParams], dmax: int
+    args: argparse.Namespace, points: list[Point]
 ) -> tuple[list[PairSpec], str, dict[str, object] | None]:
     """The pairs of a sweep: ``--dataset``'s, or the one pair of LEFT RIGHT (or the bundled one),
     which is loaded and sized here first so that a bad input is one error line, as for ``run``."""
     if args.dataset is None:
         left, right, gt, source = _load_inputs(args, with_gt=True)
-        _check_fits(OutputRegion.of_image(left.shape, dmax), max(machines, key=lambda m: m.rows))
+        for point in points:  # each model on its own output region (OutputRegion.of_model)
+            _check_fits(OutputRegion.of_model(left.shape, point.model), point.machine)
         if args.left is None:
             spec = bundled_spec()
         else:
@@ -465,7 +467,7 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         raise ValueError("--workers sizes a local cluster and --scheduler names another one: "
                          "give one of them")
     points = sweep_points(args)  # every point validated before any input is read
-    pairs, source, dataset = _sweep_pairs(args, [p.machine for p in points], points[0].model.dmax)
+    pairs, source, dataset = _sweep_pairs(args, points)
     workers = args.workers
     if workers is None:  # one pair: this process (its points share one prepared pair); a dataset: all cores
         workers = 0 if dataset is None and args.scheduler is None else (os.cpu_count() or 1)

@@ -1,22 +1,21 @@
 """The paper's three 5x5 feature filters, computed exactly from integer sums.
 
-Maps cover the valid region: (H-4, W-4), map pixel (y, x) centred on image pixel
-(y+2, x+2). We keep integer multiples of the features so that costs are exact:
+Maps cover the model's map grid (``host.region``): (H-2k, W-2k) pixels for a model of margin
+k (``ModelParams.margin``: 2 for the paper model, 3 with a 7x7 census), map pixel (y, x)
+centred on image pixel (y+k, x+k). We keep integer multiples of the features so that costs
+are exact:
 
 * ``m25``  = 25 * m  = sum of the 5x5 window                      (0 .. 6375)
 * ``gh20`` = 20 * gH = two rightmost columns - two leftmost columns (-2550 .. 2550)
 * ``gv20`` = 20 * gV = two bottom rows - two top rows               (-2550 .. 2550)
 
 With the census model (:func:`model_features`), ``census`` holds each map pixel's census code
-(uint64) on the same (H-4, W-4) grid, so the output region is the paper's for both models.
-The code of the w x w window (w = 7 or 5, r = w // 2) centred on image pixel (y+2, x+2):
-bit k (k = 0 is the least significant) is 1 when the k-th neighbour is darker than the centre
-(``neighbour < centre``), the neighbours taken in raster order of the window (offsets
-(dy, dx) = (-r, -r), (-r, -r+1), ..., (r, r), the centre skipped): 48 bits for 7x7, 24 for
-5x5. A neighbour outside the image gives bit 0 (only 7x7 windows reach outside: the region's
-outermost row and column on each side, and the right image's first map columns): the same
-bit in both images of a row near the top or bottom, so those bits add nothing to a Hamming
-distance there.
+(uint64) on the same grid. The code of the w x w window (w = 7 or 5, r = w // 2) centred on
+the map pixel: bit k (k = 0 is the least significant) is 1 when the k-th neighbour is darker
+than the centre (``neighbour < centre``), the neighbours taken in raster order of the window
+(offsets (dy, dx) = (-r, -r), (-r, -r+1), ..., (r, r), the centre skipped): 48 bits for 7x7,
+24 for 5x5. The grid's margin is at least r, so every window lies inside the image: no bit
+reads outside it (the on-chip front end could not complete a window past a frame's last line).
 """
 
 from __future__ import annotations
@@ -38,13 +37,15 @@ __all__ = [
     "census_offsets",
     "census_codes",
     "census_codes_plain",
+    "grid_margin",
     "model_features",
 ]
 
 
 @dataclass(frozen=True)
 class FeatureSums:
-    """Integer feature maps of one image, each (H-4, W-4) int32; ``census`` (H-4, W-4) uint64 or None."""
+    """Integer feature maps of one image on its map grid, each (H-2k, W-2k) int32 for margin k;
+    ``census`` the same shape, uint64, or None."""
 
     m25: np.ndarray
     gh20: np.ndarray
@@ -65,11 +66,16 @@ class FeatureSums:
 
 
 def feature_sums(image: np.ndarray, census_window: int | None = None) -> FeatureSums:
-    """m, gH, gV sums of an (H, W) uint8 image with separable running sums (+ census codes if asked)."""
+    """m, gH, gV sums of an (H, W) uint8 image with separable running sums (+ census codes if asked).
+
+    The maps cover the grid of margin :func:`grid_margin` ``(census_window)``: (H-4, W-4) without a
+    census or with a 5x5 one, (H-6, W-6) with a 7x7 census (the 5x5 sums around the same centres)."""
     img = np.asarray(image, dtype=np.int32)
-    if img.ndim != 2 or img.shape[0] < FILTER_SIZE or img.shape[1] < FILTER_SIZE:
-        raise ValueError(f"image of shape {img.shape} is too small for the 5x5 filters")
     k = FILTER_SIZE
+    margin = grid_margin(census_window)
+    if img.ndim != 2 or img.shape[0] < 2 * margin + 1 or img.shape[1] < 2 * margin + 1:
+        size = 2 * margin + 1
+        raise ValueError(f"image of shape {img.shape} is too small for the {size}x{size} windows")
     # Column sums over 5 rows: cols5[y, x] = sum img[y:y+5, x]; (H-4, W).
     c = np.cumsum(img, axis=0)
     cols5 = c[k - 1 :].copy()
@@ -83,16 +89,24 @@ def feature_sums(image: np.ndarray, census_window: int | None = None) -> Feature
     m25 = sum(cols5[:, j : w4 + j] for j in range(k))
     gh20 = (cols5[:, 3 : w4 + 3] + cols5[:, 4 : w4 + 4]) - (cols5[:, 0:w4] + cols5[:, 1 : w4 + 1])
     gv20 = (rows5[3 : h4 + 3] + rows5[4 : h4 + 4]) - (rows5[0:h4] + rows5[1 : h4 + 1])
+    inset = margin - MARGIN  # the 5x5 grid cut to the model's
+    cut = (slice(inset, h4 - inset), slice(inset, w4 - inset))
     return FeatureSums(
-        np.ascontiguousarray(m25, dtype=np.int32),
-        np.ascontiguousarray(gh20, dtype=np.int32),
-        np.ascontiguousarray(gv20, dtype=np.int32),
+        np.ascontiguousarray(m25[cut], dtype=np.int32),
+        np.ascontiguousarray(gh20[cut], dtype=np.int32),
+        np.ascontiguousarray(gv20[cut], dtype=np.int32),
         census_codes(image, census_window) if census_window is not None else None,
     )
 
 
+def grid_margin(census_window: int | None) -> int:
+    """The map grid's margin for features with a ``census_window`` census (None: the 5x5 filters')."""
+    return MARGIN if census_window is None else max(MARGIN, census_window // 2)
+
+
 def model_features(image: np.ndarray, model: ModelParams) -> FeatureSums:
-    """The features ``model`` reads: the paper's three sums, and the census codes for a census model."""
+    """The features ``model`` reads, on its map grid (margin ``model.margin``): the paper's three
+    sums, and the census codes for a census model."""
     return feature_sums(image, model.census_window if model.census else None)
 
 
@@ -105,21 +119,20 @@ def census_offsets(window: int) -> list[tuple[int, int]]:
 
 
 def census_codes(image: np.ndarray, window: int) -> np.ndarray:
-    """Census codes (H-4, W-4) uint64 of the map pixels of an (H, W) image (see the module's text)."""
+    """Census codes, uint64, of an (H, W) image on the map grid of margin ``grid_margin(window)``:
+    (H-4, W-4) for 5x5, (H-6, W-6) for 7x7 (see the module's text); every window inside the image."""
     offsets = census_offsets(window)
     img = np.asarray(image)
-    if img.ndim != 2 or img.shape[0] < FILTER_SIZE or img.shape[1] < FILTER_SIZE:
-        raise ValueError(f"image of shape {img.shape} is too small for the 5x5 filters")
-    r = window // 2
-    pad = r - MARGIN  # how far the window reaches past the 5x5 filters' valid region
-    # 256 is never below an 8-bit centre: a neighbour outside the image gives bit 0.
-    padded = np.pad(img.astype(np.int16), pad, constant_values=256) if pad else img.astype(np.int16)
-    h4, w4 = img.shape[0] - 2 * MARGIN, img.shape[1] - 2 * MARGIN
-    centre = padded[r : r + h4, r : r + w4]
-    codes = np.zeros((h4, w4), dtype=np.uint64)
-    for k, (dy, dx) in enumerate(offsets):
-        nb = padded[r + dy : r + dy + h4, r + dx : r + dx + w4]
-        codes |= (nb < centre).astype(np.uint64) << np.uint64(k)
+    k = grid_margin(window)
+    if img.ndim != 2 or img.shape[0] < 2 * k + 1 or img.shape[1] < 2 * k + 1:
+        raise ValueError(f"image of shape {img.shape} is too small for the {2 * k + 1}x{2 * k + 1} windows")
+    src = img.astype(np.int16)
+    h, w = img.shape[0] - 2 * k, img.shape[1] - 2 * k
+    centre = src[k : k + h, k : k + w]
+    codes = np.zeros((h, w), dtype=np.uint64)
+    for bit, (dy, dx) in enumerate(offsets):
+        nb = src[k + dy : k + dy + h, k + dx : k + dx + w]
+        codes |= (nb < centre).astype(np.uint64) << np.uint64(bit)
     return codes
 
 
@@ -127,16 +140,16 @@ def census_codes_plain(image: np.ndarray, window: int) -> np.ndarray:
     """The same codes pixel by pixel in plain Python (a test oracle)."""
     img = np.asarray(image)
     h, w = img.shape
+    k = grid_margin(window)
     offsets = census_offsets(window)
-    out = np.zeros((h - 2 * MARGIN, w - 2 * MARGIN), dtype=np.uint64)
+    out = np.zeros((h - 2 * k, w - 2 * k), dtype=np.uint64)
     for y in range(out.shape[0]):
         for x in range(out.shape[1]):
-            cy, cx = y + MARGIN, x + MARGIN
+            cy, cx = y + k, x + k
             code = 0
-            for k, (dy, dx) in enumerate(offsets):
-                ny, nx = cy + dy, cx + dx
-                if 0 <= ny < h and 0 <= nx < w and int(img[ny, nx]) < int(img[cy, cx]):
-                    code |= 1 << k
+            for bit, (dy, dx) in enumerate(offsets):
+                if int(img[cy + dy, cx + dx]) < int(img[cy, cx]):
+                    code |= 1 << bit
             out[y, x] = code
     return out
 

@@ -230,14 +230,15 @@ def bundled_pair() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return to_gray(left, rgb=True), to_gray(right, rgb=True), gt
 
 
-def validate_pair(left: np.ndarray, right: np.ndarray, dmax: int) -> None:
-    """Raise ValueError naming the problem if the pair cannot be processed with ``dmax``."""
+def validate_pair(left: np.ndarray, right: np.ndarray, dmax: int, margin: int = MARGIN) -> None:
+    """Raise ValueError naming the problem if the pair cannot be processed with ``dmax`` (by a model
+    of ``margin``: ``ModelParams.margin``)."""
     for name, image in (("left", left), ("right", right)):
         if image.ndim != 2 or image.dtype != np.uint8:
             raise ValueError(f"{name} image must be 2-D uint8 gray, got {image.dtype} {image.shape}")
     if left.shape != right.shape:
         raise ValueError(f"left and right images differ in shape: {left.shape} vs {right.shape}")
-    OutputRegion.of_image(left.shape, dmax)  # raises naming the size problem
+    OutputRegion.of_image(left.shape, dmax, margin)  # raises naming the size problem
 
 
 def random_dot_stereogram(

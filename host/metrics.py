@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 
 from .records import MachineRun, Prepared
-from .region import OutputRegion
+from .region import MARGIN, OutputRegion
 
 __all__ = [
     "RunMetrics",
@@ -40,9 +40,10 @@ __all__ = [
 ]
 
 
-def gt_region(gt: np.ndarray, dmax: int) -> np.ndarray:
-    """Ground truth (image coordinates) over the output region, float, non-finite = unknown."""
-    return np.asarray(OutputRegion.of_image(gt.shape, dmax).cut(gt), dtype=np.float64)
+def gt_region(gt: np.ndarray, dmax: int, margin: int = MARGIN) -> np.ndarray:
+    """Ground truth (image coordinates) over the output region (a model's ``margin``), float,
+    non-finite = unknown."""
+    return np.asarray(OutputRegion.of_image(gt.shape, dmax, margin).cut(gt), dtype=np.float64)
 
 
 def cycle_stats(cycles: np.ndarray) -> dict[str, float]:
@@ -145,7 +146,7 @@ def sgbm_numdisparities(dmax: int) -> int:
     return -(-(dmax + 1) // 16) * 16
 
 
-def sgbm_disparity(left: np.ndarray, right: np.ndarray, dmax: int) -> np.ndarray | None:
+def sgbm_disparity(left: np.ndarray, right: np.ndarray, dmax: int, margin: int = MARGIN) -> np.ndarray | None:
     """OpenCV StereoSGBM (blockSize 5) on the full pair, cut to the output region; -1 = invalid.
 
     None when OpenCV cannot run it: an image barely wider than numDisparities (a narrow crop).
@@ -157,10 +158,11 @@ def sgbm_disparity(left: np.ndarray, right: np.ndarray, dmax: int) -> np.ndarray
         return None
     disp = raw.astype(np.float64) / 16.0
     disp[raw < 0] = -1.0
-    return OutputRegion.of_image(disp.shape, dmax).cut(disp)
+    return OutputRegion.of_image(disp.shape, dmax, margin).cut(disp)
 
 
-def bm_disparity(left: np.ndarray, right: np.ndarray, dmax: int, block: int = 15) -> np.ndarray | None:
+def bm_disparity(left: np.ndarray, right: np.ndarray, dmax: int, block: int = 15,
+                 margin: int = MARGIN) -> np.ndarray | None:
     """OpenCV StereoBM (``block`` x ``block``), like :func:`sgbm_disparity`: output region, -1 = invalid."""
     bm = cv2.StereoBM_create(numDisparities=sgbm_numdisparities(dmax), blockSize=block)
     try:
@@ -169,7 +171,7 @@ def bm_disparity(left: np.ndarray, right: np.ndarray, dmax: int, block: int = 15
         return None
     disp = raw.astype(np.float64) / 16.0
     disp[raw < 0] = -1.0
-    return OutputRegion.of_image(disp.shape, dmax).cut(disp)
+    return OutputRegion.of_image(disp.shape, dmax, margin).cut(disp)
 
 
 def occluded_mask(gt: np.ndarray, tolerance: float = 0.0) -> np.ndarray:
@@ -272,16 +274,17 @@ def evaluate(prepared: Prepared, run: MachineRun, sgbm: bool | None = None) -> R
     if prepared.gt is not None:
         methods = {"machine": run.map, "reference": ref_map}
         if sgbm is None or sgbm:  # OpenCV's block matchers: SGBM (block 5) and StereoBM (block 15)
-            dmax = prepared.model.dmax
-            sgbm_map = sgbm_disparity(prepared.left, prepared.right, dmax)
+            dmax, margin = prepared.model.dmax, prepared.model.margin
+            sgbm_map = sgbm_disparity(prepared.left, prepared.right, dmax, margin)
             if sgbm_map is not None:  # too narrow for SGBM: the report simply has no SGBM figures
                 methods["sgbm"] = sgbm_map
-            bm_map = bm_disparity(prepared.left, prepared.right, dmax)
+            bm_map = bm_disparity(prepared.left, prepared.right, dmax, margin=margin)
             if bm_map is not None:
                 methods["bm"] = bm_map
         occluded = None
         if prepared.gt_image is not None:
-            occluded = gt_region(occluded_mask(prepared.gt_image), prepared.model.dmax).astype(bool)
+            occluded = gt_region(occluded_mask(prepared.gt_image), prepared.model.dmax,
+                                 prepared.model.margin).astype(bool)
         bad = {}
         for name, disp in methods.items():
             b1 = bad_rates(disp, prepared.gt, 1)

@@ -44,7 +44,7 @@ class Prepared:
 
     @property
     def region(self) -> OutputRegion:
-        return OutputRegion.of_image(self.left.shape, self.model.dmax)
+        return OutputRegion.of_model(self.left.shape, self.model)
 
     @property
     def shape(self) -> tuple[int, int]:

@@ -503,7 +503,7 @@ def warm_up(model: ModelParams | None = None) -> None:
     right pass's and the (high, low) word product's for census-lr.
     """
     global _warm, _warm_census, _warm_lr
-    img = np.zeros((6, 7), np.uint8)
+    img = np.zeros((8, 9), np.uint8)  # room for a 7x7 census and Dmax 1
     if not _warm:
         f = feature_sums(img)
         reference_fast(f, f, ModelParams(dmax=1))
@@ -630,7 +630,7 @@ def reference_quantized_map(
 
 def reference(left: np.ndarray, right: np.ndarray, model: ModelParams) -> Reference:
     """Validate a gray pair and run the fast reference on it."""
-    validate_pair(left, right, model.dmax)
+    validate_pair(left, right, model.dmax, model.margin)
     fl, fr = model_features(left, model), model_features(right, model)
     right_map = right_reference_map(fl, fr, model) if model.lr else None  # census-lr: the right pass first
     return reference_fast(fl, fr, model, right_map=right_map)

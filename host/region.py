@@ -1,9 +1,18 @@
 """The output region: which pixels get a disparity, in every coordinate system the host uses.
 
-The features are 5x5 correlations over the valid region, (H-4)x(W-4) "map" pixels, map
-pixel (y, x) centred on image pixel (y+2, x+2). Costs for every d in 0..Dmax exist for map
-columns x >= Dmax, so the output region is map rows 0..H-5 x map columns Dmax..W-5:
-(H-4)x(W-4-Dmax) pixels in row-major order, image rows 2..H-3 x columns Dmax+2..W-3.
+A model's output region is where every one of its windows lies inside the image. Its
+``margin`` (``ModelParams.margin``) is the half-size of its largest window: 2 for the paper's
+5x5 filters (and the census model's 5x5 census), 3 for the 7x7 census. The feature maps cover
+the "map" grid of (H-2·margin)x(W-2·margin) pixels, map pixel (y, x) centred on image pixel
+(y+margin, x+margin), so no feature, census bit included, ever reads outside the image. Costs
+for every d in 0..Dmax exist for map columns x >= Dmax, so the output region is map rows
+0..H-2·margin-1 x map columns Dmax..W-2·margin-1: (H-2·margin)x(W-2·margin-Dmax) pixels in
+row-major order, image rows margin..H-1-margin x columns Dmax+margin..W-1-margin (margin 2:
+rows 2..H-3, columns Dmax+2..W-3, the paper's, bit for bit as before margins existed).
+
+Why the census model does not read past the image (a neighbour outside read as "not darker"):
+the on-chip front end cannot know a frame's last line (a frame has any number of lines), so a
+window reaching past the bottom line could never be completed there.
 Features, likelihoods, reference, metrics and plots all take the geometry from here.
 """
 
@@ -16,7 +25,8 @@ import numpy as np
 
 __all__ = ["FILTER_SIZE", "MARGIN", "OutputRegion"]
 
-# The paper's three features are 5x5 correlations: maps lose 2 pixels on every side.
+# The paper's three features are 5x5 correlations: maps lose 2 pixels on every side (the paper
+# model's margin; a model's own is ``ModelParams.margin``).
 FILTER_SIZE = 5
 MARGIN = FILTER_SIZE // 2
 
@@ -27,38 +37,51 @@ BAND_PIXELS = 1 << 16
 
 @dataclass(frozen=True)
 class OutputRegion:
-    """Geometry of the output region of an ``image_height`` x ``image_width`` pair at ``dmax``."""
+    """Geometry of the output region of an ``image_height`` x ``image_width`` pair at ``dmax``,
+    whose model's windows reach ``margin`` pixels from their centre (``ModelParams.margin``)."""
 
     image_height: int
     image_width: int
     dmax: int
+    margin: int = MARGIN
 
     def __post_init__(self) -> None:
-        if self.image_height < FILTER_SIZE or self.image_width < FILTER_SIZE:
+        if isinstance(self.margin, bool) or not isinstance(self.margin, int) or self.margin < MARGIN:
+            raise ValueError(f"margin must be an integer >= {MARGIN} (the 5x5 filters'), got {self.margin!r}")
+        size = 2 * self.margin + 1
+        if self.image_height < size or self.image_width < size:
             raise ValueError(
-                f"images of {self.image_width}x{self.image_height} are too small for the "
-                f"{FILTER_SIZE}x{FILTER_SIZE} filters (need at least {FILTER_SIZE}x{FILTER_SIZE})"
+                f"images of {self.image_width}x{self.image_height} are too small for the model's "
+                f"{size}x{size} windows (need at least {size}x{size})"
             )
-        usable = self.image_width - 2 * MARGIN
+        usable = self.image_width - 2 * self.margin
         if self.dmax >= usable:
             raise ValueError(
                 f"dmax ({self.dmax}) must be below the usable width ({usable} = image width "
-                f"{self.image_width} - {2 * MARGIN}): no pixel would have all {self.dmax + 1} disparities; "
+                f"{self.image_width} - {2 * self.margin}): no pixel would have all {self.dmax + 1} "
+                "disparities; "
                 f"use a wider image or a smaller --dmax"
             )
 
     @classmethod
-    def of_image(cls, shape: tuple[int, ...], dmax: int) -> OutputRegion:
-        return cls(int(shape[0]), int(shape[1]), dmax)
+    def of_image(cls, shape: tuple[int, ...], dmax: int, margin: int = MARGIN) -> OutputRegion:
+        return cls(int(shape[0]), int(shape[1]), dmax, margin)
 
     @classmethod
-    def of_features(cls, shape: tuple[int, ...], dmax: int) -> OutputRegion:
-        """From the (H-4, W-4) shape of the feature maps."""
-        return cls(int(shape[0]) + 2 * MARGIN, int(shape[1]) + 2 * MARGIN, dmax)
+    def of_model(cls, shape: tuple[int, ...], model: object) -> OutputRegion:
+        """The output region of ``model`` (a ``ModelParams``: its ``dmax`` and ``margin``) on images of
+        ``shape``."""
+        return cls(int(shape[0]), int(shape[1]), model.dmax, model.margin)  # type: ignore[attr-defined]
+
+    @classmethod
+    def of_features(cls, shape: tuple[int, ...], dmax: int, margin: int = MARGIN) -> OutputRegion:
+        """From the (H-2·margin, W-2·margin) shape of the feature maps (the map grid)."""
+        return cls(int(shape[0]) + 2 * margin, int(shape[1]) + 2 * margin, dmax, margin)
 
     @property
     def feature_shape(self) -> tuple[int, int]:
-        return self.image_height - 2 * MARGIN, self.image_width - 2 * MARGIN
+        """The map grid: (H-2·margin, W-2·margin)."""
+        return self.image_height - 2 * self.margin, self.image_width - 2 * self.margin
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -73,12 +96,12 @@ class OutputRegion:
 
     @property
     def map_slice(self) -> slice:
-        """The output columns as a slice of feature-map columns (Dmax .. W-5)."""
+        """The output columns as a slice of feature-map columns (Dmax .. W-2·margin-1)."""
         return slice(self.dmax, self.feature_shape[1])
 
     @property
     def map_columns(self) -> np.ndarray:
-        """Feature-map column of each output column (Dmax .. W-5)."""
+        """Feature-map column of each output column (Dmax .. W-2·margin-1)."""
         return np.arange(self.dmax, self.feature_shape[1])
 
     @property
@@ -93,7 +116,8 @@ class OutputRegion:
             raise ValueError(
                 f"array of shape {array.shape[:2]} is not {self.image_height}x{self.image_width}"
             )
-        return array[MARGIN : h - MARGIN, MARGIN + self.dmax : w - MARGIN]
+        k = self.margin
+        return array[k : h - k, k + self.dmax : w - k]
 
     def band_rows(self, pixels: int | None = None) -> int:
         """Output rows per band: about ``pixels`` (default BAND_PIXELS) output pixels, at least one row."""

@@ -83,7 +83,7 @@ def prepare(
 
     ``reference=False`` skips the reference (``reference_map`` is None): enough to run the
     machine (``run_machine``, e.g. to measure its cycles), not to evaluate it."""
-    validate_pair(left, right, model.dmax)
+    validate_pair(left, right, model.dmax, model.margin)
     if gt is not None and gt.shape != left.shape:
         raise ValueError(f"ground truth shape {gt.shape} differs from the images' {left.shape}")
     if reference:
@@ -92,7 +92,7 @@ def prepare(
     feats = (model_features(left, model), model_features(right, model))
     ref_map = reference_map(*feats, model) if reference else None
     seconds = time.perf_counter() - t0
-    cut = gt_region(gt, model.dmax) if gt is not None else None
+    cut = gt_region(gt, model.dmax, model.margin) if gt is not None else None
     return Prepared(left, right, model, feats, ref_map, seconds, cut, gt)
 
 
@@ -132,9 +132,9 @@ def run_machine(
         "use --crop or a smaller --dmax",
     )
     if feed == "pixels":
-        if model.census:
-            raise ValueError("--feed pixels: the on-chip front end computes the paper model only (for now); "
-                             "run the census model with --feed words, or use --model paper")
+        if model.lr:
+            raise ValueError("--feed pixels: the on-chip front end does not compute census-lr's right pass "
+                             "and consistency column yet; run it with --feed words")
         return _run_pixels(prepared, machine, engine, engine_options)
     neighbour = machine.feedback_columns > 0
     if neighbour:

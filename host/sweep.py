@@ -498,6 +498,12 @@ def _aggregate(config: SweepConfig, records: dict[tuple[str, str], dict[str, Any
                                  "failed": failed.get(point.id, 0)}
         entry.update(mean)
         entry["std"] = std
+        if len(pairs) == 1:  # a model of another margin (census 7x7) has its own output region
+            shapes = [records[(pairs[0].name, p.id)]["output_shape"] for p in points
+                      if (pairs[0].name, p.id) in records]
+            rec = records.get((pairs[0].name, point.id))
+            if rec is not None and rec["output_shape"] != shapes[0]:
+                entry["output_shape"] = rec["output_shape"]
         entry["model"] = point.model.to_dict()
         device = {k: v for k, v in mdict.items() if k.startswith("smtj_")}
         if device:  # the device options are the smtj points' own
@@ -516,7 +522,11 @@ def _aggregate(config: SweepConfig, records: dict[tuple[str, str], dict[str, Any
             if rec is None:
                 continue
             results[point.id] = rec["report"]
-            info = {k: rec[k] for k in ("image_shape", "output_shape", "ground_truth")}
+            if not info:
+                info = {k: rec[k] for k in ("image_shape", "output_shape", "ground_truth")}
+            elif rec["output_shape"] != info["output_shape"]:
+                # A model of another margin (census 7x7) has its own output region.
+                results[point.id] = {**rec["report"], "output_shape": rec["output_shape"]}
             # The reference is computed once per pair and model: count it once.
             key = f"{pr.name}\0{point.model.name}"
             if key not in ref_seconds:

@@ -59,11 +59,12 @@ def stereo_header(params: MachineParams, model: ModelParams, width: int, signatu
     entropy_ports, external = entropy_header(params, signature)
     pix = layout_fields(pixel_in_layout())
     # A hung design: no pixel taken and no result for longer than a timed-out run and a line.
-    hang = params.max_cycles + 8 * params.words_per_pixel + 4 * width + 64
+    hang = params.max_cycles + 8 * params.words_per_pixel + 2 * model.margin * width + 64
     prologue = header_prologue(signature, params, ports | entropy_ports, hang_cycles=hang,
                                generator="bayesmachine.sim.stereo_engine")
     return prologue + f"""static const unsigned WIDTH = {width};
 static const unsigned DMAX = {model.dmax};
+static const unsigned MARGIN = {model.margin};  // the output region's (host.region)
 static const unsigned LEFT_OFFSET = {pix["left"][0]}, RIGHT_OFFSET = {pix["right"][0]};
 static const unsigned FIRST_OFFSET = {pix["first"][0]};
 {external}"""
@@ -111,8 +112,9 @@ class StereoVerilatorEngine(HarnessProcess, EngineLifecycle):
     """Pixel pairs through the compiled ``StereoMachine``; results as ``MachineModel`` gives them
     for the host's words of the same frames.
 
-    ``run(left, right)``: one frame ((H, width) uint8 each, H >= 5); returns the results of its
-    (H - 4) x (width - 4 - Dmax) output pixels, row-major. The engines' life cycle otherwise:
+    ``run(left, right)``: one frame ((H, width) uint8 each, H >= 2k + 1 for the model's margin k);
+    returns the results of its (H - 2k) x (width - 2k - Dmax) output pixels, row-major. The
+    engines' life cycle otherwise:
     ``reset()`` (a hardware reset: the next frame starts a fresh simulation), ``close()`` (then
     ``run()``/``reset()`` raise ``EngineClosedError``), ``EngineStateError`` after a frame cut
     short, ``wall_cycles`` since reset. After each frame, as the Verilator engine:
@@ -161,9 +163,11 @@ class StereoVerilatorEngine(HarnessProcess, EngineLifecycle):
             raise ValueError(
                 f"this stereo machine was built for {self.width}-pixel lines, the frame has {width}"
             )
-        if height < 5:
-            raise ValueError(f"a frame needs at least 5 lines for the 5x5 filters, got {height}")
-        n = (height - 4) * (width - 4 - self.model.dmax)
+        k = self.model.margin  # the output region's (host.region): every window inside the frame
+        if height < 2 * k + 1:
+            raise ValueError(f"a frame needs at least {2 * k + 1} lines for the model's "
+                             f"{2 * k + 1}x{2 * k + 1} windows, got {height}")
+        n = (height - 2 * k) * (width - 2 * k - self.model.dmax)
         pairs = np.stack([left, right], axis=-1).astype(np.uint8)
         with self._in_flight():
             proc = self._start()

@@ -14,11 +14,13 @@ import numpy as np
 from amaranth.sim import Simulator, SimulatorContext
 
 from bayesmachine.hdl.frontend.stereo import FrontEnd, StereoMachine
-from bayesmachine.hdl.signatures import load_layout, pixel_in_layout
+from bayesmachine.hdl.signatures import beat_words, load_layout, pixel_in_layout
+from bayesmachine.likelihood import ModelParams
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.results import MachineResult, decode_results
 
-__all__ = ["frame_beats", "run_frontend", "run_frontend_beats", "run_stereo", "words_from_beats"]
+__all__ = ["frame_beats", "line_starts_from_beats", "output_pixels", "run_frontend", "run_frontend_beats",
+           "run_frontend_neighbour", "run_stereo", "words_from_beats"]
 
 
 def frame_beats(left: np.ndarray, right: np.ndarray) -> list[int]:
@@ -33,17 +35,25 @@ def frame_beats(left: np.ndarray, right: np.ndarray) -> list[int]:
 
 
 def words_from_beats(params: MachineParams, beats: Sequence[int]) -> np.ndarray:
-    """Load beats (raw) back into pixels' words, (P, rows, operator_columns), decoded from the layout."""
+    """Load beats (raw) back into pixels' words, (P, rows, loaded_columns), decoded from the layout."""
     layout = load_layout(params)
     b = params.beats_per_pixel
     if len(beats) % b:
         raise ValueError(f"{len(beats)} beats is not a whole number of pixels ({b} beats each)")
     flat = []
     for raw in beats:
-        view = layout.from_bits(raw)
+        view = beat_words(params, layout.from_bits(raw))
         flat.extend(int(view[lane]) for lane in range(params.lanes))
     per_pixel = np.array(flat, np.int64).reshape(-1, b * params.lanes)[:, : params.words_per_pixel]
-    return per_pixel.reshape(-1, params.rows, params.operator_columns)
+    return per_pixel.reshape(-1, params.rows, params.loaded_columns)
+
+
+def line_starts_from_beats(params: MachineParams, beats: Sequence[int]) -> np.ndarray:
+    """The ``line_start`` flag of each beat of a neighbour-prior machine's load beats,
+    (P, beats_per_pixel)."""
+    layout = load_layout(params)
+    flags = [int(layout.from_bits(raw).line_start) for raw in beats]
+    return np.array(flags, np.int64).reshape(-1, params.beats_per_pixel)
 
 
 def _simulate(dut: object, source: object, sink_stream: object, beats: list[int], expected: int,
@@ -84,17 +94,19 @@ def _simulate(dut: object, source: object, sink_stream: object, beats: list[int]
     return got, cycles
 
 
-def _output_pixels(frames: Sequence[tuple[np.ndarray, np.ndarray]], dmax: int) -> int:
-    return sum((lf.shape[0] - 4) * (lf.shape[1] - 4 - dmax) for lf, _ in frames)
+def output_pixels(frames: Sequence[tuple[np.ndarray, np.ndarray]], model: ModelParams) -> int:
+    """The output pixels of ``frames`` for ``model`` (its output region's, ``host.region``)."""
+    k = model.margin
+    return sum((lf.shape[0] - 2 * k) * (lf.shape[1] - 2 * k - model.dmax) for lf, _ in frames)
 
 
 def run_frontend(front: FrontEnd, frames: Sequence[tuple[np.ndarray, np.ndarray]], *,
                  in_stall: float = 0.0, out_stall: float = 0.0, seed: int = 0,
                  max_cycles: int = 1_000_000) -> np.ndarray:
     """The words the front end writes for ``frames`` (pairs of (H, width) uint8 images), all frames'
-    output pixels in order: (P, rows, operator_columns)."""
+    output pixels in order: (P, rows, loaded_columns)."""
     beats = [b for lf, rf in frames for b in frame_beats(lf, rf)]
-    return run_frontend_beats(front, beats, _output_pixels(frames, front.model.dmax), in_stall=in_stall,
+    return run_frontend_beats(front, beats, output_pixels(frames, front.model), in_stall=in_stall,
                               out_stall=out_stall, seed=seed, max_cycles=max_cycles)
 
 
@@ -113,8 +125,71 @@ def run_stereo(top: StereoMachine, frames: Sequence[tuple[np.ndarray, np.ndarray
     """The machine's results for ``frames`` through ``StereoMachine`` and the clock cycles it took."""
     p = top.params
     beats = [b for lf, rf in frames for b in frame_beats(lf, rf)]
-    expected = _output_pixels(frames, top.model.dmax)
+    expected = output_pixels(frames, top.model)
     got, cycles = _simulate(top, top.pixels, top.result, beats, expected, in_stall, out_stall, seed,
                             max_cycles)
     res = decode_results(p, got) if got else MachineResult.empty(p.rows)
     return res, cycles
+
+
+def run_frontend_neighbour(front: FrontEnd, frames: Sequence[tuple[np.ndarray, np.ndarray]], maps: np.ndarray,
+                           *, in_stall: float = 0.0, out_stall: float = 0.0, result_delay: int = 0,
+                           seed: int = 0, max_cycles: int = 1_000_000) -> tuple[np.ndarray, np.ndarray]:
+    """A neighbour-prior front end's words and beats' ``line_start`` flags for ``frames``, with
+    ``maps`` (one per output pixel, -1 = no match) standing in for the machine's results: the
+    result of pixel k is given (``result_*``) after its last beat left, up to ``result_delay``
+    random cycles later. Returns (words (P, rows, loaded_columns), flags (P, beats_per_pixel))."""
+    p = front.params
+    beats = [b for lf, rf in frames for b in frame_beats(lf, rf)]
+    n = output_pixels(frames, front.model)
+    maps = np.asarray(maps).reshape(-1)
+    if maps.shape != (n,):
+        raise ValueError(f"maps must hold one MAP per output pixel ({n}), got {maps.shape}")
+    expected = n * p.beats_per_pixel
+    rnd = random.Random(seed)
+    got: list[int] = []
+
+    async def feeder(ctx: SimulatorContext) -> None:
+        raw = front.pixels.payload.as_value()
+        for beat in beats:
+            while in_stall and rnd.random() < in_stall:
+                ctx.set(front.pixels.valid, 0)
+                await ctx.tick()
+            ctx.set(front.pixels.valid, 1)
+            ctx.set(raw, beat)
+            await ctx.tick().until(front.pixels.ready)
+        ctx.set(front.pixels.valid, 0)
+
+    async def results(ctx: SimulatorContext) -> None:
+        for k in range(n):
+            while len(got) < (k + 1) * p.beats_per_pixel:  # the pixel's words have left
+                await ctx.tick()
+            for _ in range(rnd.randint(0, result_delay)):
+                await ctx.tick()
+            value = int(maps[k])
+            ctx.set(front.result_map, max(0, value))
+            ctx.set(front.result_hit, int(value >= 0))
+            ctx.set(front.result_take, 1)
+            await ctx.tick()
+            ctx.set(front.result_take, 0)
+
+    async def collector(ctx: SimulatorContext) -> None:
+        raw = front.beats.payload.as_value()
+        cycles = 0
+        while len(got) < expected:
+            ready = not (out_stall and rnd.random() < out_stall)
+            ctx.set(front.beats.ready, ready)
+            _, _, valid, payload = await ctx.tick().sample(front.beats.valid, raw)
+            cycles += 1
+            if valid and ready:
+                got.append(payload)
+            if cycles > max_cycles:
+                raise RuntimeError(f"no complete output after {max_cycles} cycles ({len(got)}/{expected})")
+
+    sim = Simulator(front)
+    sim.add_clock(1e-8)
+    sim.add_testbench(feeder, background=True)
+    sim.add_testbench(results, background=True)
+    sim.add_testbench(collector)
+    sim.run()
+    return words_from_beats(p, got), line_starts_from_beats(p, got)

@@ -15,11 +15,16 @@ from amaranth.lib import wiring
 from amaranth.lib.wiring import In
 from conftest import require_tool
 
+from bayesmachine.hdl.formal.control import ControlProperties
 from bayesmachine.hdl.formal.counter import CounterProperties
 from bayesmachine.hdl.formal.encoder import EncoderProperties
+from bayesmachine.hdl.formal.frontend import FifoProperties, FrontEndProperties, GeneratorProperties
 from bayesmachine.hdl.formal.machine import CHECKS, MachineProperties
+from bayesmachine.hdl.formal.miter import MiterProperties
 from bayesmachine.hdl.formal.mutants import Mutant, counter_early_overflow, mutants
 from bayesmachine.hdl.formal.runner import FormalError, FormalResult, run_formal, sby_text
+from bayesmachine.hdl.frontend.stereo import stereo_machine_params
+from bayesmachine.likelihood import ModelParams
 from bayesmachine.params import MachineParams
 
 pytestmark = pytest.mark.formal
@@ -44,6 +49,44 @@ MACHINES = {
 # the bubble) is at most 12 cycles, and each next pixel at most max_cycles + 1 more while loads keep
 # up: 40 steps hold three or more whole pixels, 30 two or more (the ``runs`` group's queue of run
 # lengths makes its unrolling the costly one: ~5 s at 30 steps, ~30 s at 40).
+# The control scoreboard (ControlProperties) on both machines and a neighbour-prior one: 4 rows
+# (3 disparities and the no-match row) x 1 data column plus the feedback and loaded prior columns,
+# W = 3, counter max 1, max_cycles 4, feedback words (1.0, 5/8, 2/8) and 4/8 for the no-match row.
+CONTROL = {
+    **MACHINES,
+    "neighbour": MachineParams(rows=4, columns=1, word_bits=3, counter_max=1, rng="external", max_cycles=4,
+                               nomatch_row=True, lanes=4, prior="neighbour", feedback_words=(8, 5, 2),
+                               feedback_nomatch_word=4),
+}
+# Larger machines the same proof closes on (slow: 15-20 s each): 10 rows x 3 columns, W = 6, counter
+# max 7, max_cycles 40, 5 beats per pixel; a neighbour prior with 8 rows x 2 data columns, W = 5,
+# counter max 3, max_cycles 16, 5 feedback words, lowest-index.
+CONTROL_LARGER = {
+    "10x3-w6-n7": MachineParams(rows=10, columns=3, word_bits=6, counter_max=7, rng="external", max_cycles=40,
+                                nomatch_row=True, lanes=6),
+    "neighbour-8x2-w5": MachineParams(rows=8, columns=2, word_bits=5, counter_max=3, rng="external",
+                                      max_cycles=16, nomatch_row=True, lanes=4, prior="neighbour",
+                                      feedback_words=(32, 25, 15, 8, 3), feedback_nomatch_word=12,
+                                      tie_break="lowest-index"),
+}
+CONTROL_PROVE_DEPTH = 4  # k of the k-induction (with the strengthening invariants)
+CONTROL_COVER_DEPTH = 25
+CONTROL_MUTANT_DEPTH = 16  # BMC: a pixel's loading and run (12 cycles) and the next one's start
+# The miter's machine is smaller still (3 rows x 1 column, W = 2, counter max 1, max_cycles 3, two
+# beats per pixel): a first result within 9 cycles, B's second result compared by step 12.
+MITER = MachineParams(rows=3, columns=1, word_bits=2, counter_max=1, rng="external", max_cycles=3,
+                      nomatch_row=True, lanes=2)
+MITER_DEPTH = 14
+# The front end at its smallest: Dmax 1 (3 rows), lines of 6 pixels (one output pixel per line, the
+# first one the 29th pixel of a frame), 3 lanes (3 beats per pixel), a FIFO of one pixel.
+FRONT_MODEL = ModelParams(dmax=1, p_nm0=0.1)
+FRONT_PARAMS = stereo_machine_params(1, counter_max=1, word_bits=3, rng="external", max_cycles=3, lanes=3)
+FRONT_WIDTH = 6
+GENERATOR_DEPTH = 30
+FRONTEND_DEPTH = 45  # an output pixel's beats after a frame started again (the cover: step 39)
+FIFO_PROVE_DEPTH = 4
+FIFO_COVER_DEPTH = 45
+FIFO_MUTANT_DEPTH = 45  # the first output pixel's beats through the FIFO (read early: step 37)
 MACHINE_BMC_DEPTH = 40
 RUNS_BMC_DEPTH = 30
 MACHINE_COVER_DEPTH = 25
@@ -116,10 +159,79 @@ def test_machine_covers(machine: str) -> None:
                      depth=MACHINE_COVER_DEPTH))
 
 
+@pytest.mark.parametrize("machine", sorted(CONTROL))
+def test_control_proved(machine: str) -> None:
+    """Against the reference run: one result per loaded pixel, in order, with the counters at the
+    stop; the stop at the first overflow or at max_cycles; no beat lost; the one-cycle bubble; the
+    neighbour prior's feedback words. Proved by k-induction."""
+    check(run_formal(ControlProperties(params=CONTROL[machine]), name=f"control-{machine}", mode="prove",
+                     depth=CONTROL_PROVE_DEPTH))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("machine", sorted(CONTROL_LARGER))
+def test_control_proved_larger(machine: str) -> None:
+    check(run_formal(ControlProperties(params=CONTROL_LARGER[machine]), name=f"control-{machine}",
+                     mode="prove", depth=CONTROL_PROVE_DEPTH))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("machine", sorted(CONTROL))
+def test_control_covers(machine: str) -> None:
+    check(run_formal(ControlProperties(params=CONTROL[machine]), name=f"control-{machine}", mode="cover",
+                     depth=CONTROL_COVER_DEPTH))
+
+
+@pytest.mark.slow
+def test_miter_back_pressure() -> None:
+    """Two copies, one with a free result.ready and load valid: the same results in the same order."""
+    check(run_formal(MiterProperties(params=MITER), name="miter", mode="bmc", depth=MITER_DEPTH))
+    check(run_formal(MiterProperties(params=MITER), name="miter", mode="cover", depth=MITER_DEPTH))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("dmax", [1, 2])
+def test_generator_beats_per_pixel(dmax: int) -> None:
+    """Dmax 1 (3 beats per pixel) and Dmax 2 (4 rows x 3 columns in 3 lanes: 4 beats per pixel)."""
+    params = stereo_machine_params(dmax, counter_max=1, word_bits=3, rng="external", max_cycles=3, lanes=3)
+    model = ModelParams(dmax=dmax, p_nm0=0.1)
+    check(run_formal(GeneratorProperties(params=params, model=model), name=f"generator{dmax}", mode="bmc",
+                     depth=GENERATOR_DEPTH))
+    check(run_formal(GeneratorProperties(params=params, model=model), name=f"generator{dmax}",
+                     mode="cover", depth=20))
+
+
+@pytest.mark.slow
+def test_frontend_frame_start_and_beats() -> None:
+    def wrapper() -> FrontEndProperties:
+        return FrontEndProperties(params=FRONT_PARAMS, model=FRONT_MODEL, width=FRONT_WIDTH)
+    check(run_formal(wrapper(), name="frontend", mode="bmc", depth=FRONTEND_DEPTH))
+    check(run_formal(wrapper(), name="frontend", mode="cover", depth=FRONTEND_DEPTH))
+
+
+def fifo_wrapper(**kwargs: object) -> FifoProperties:
+    return FifoProperties(params=FRONT_PARAMS, model=FRONT_MODEL, width=FRONT_WIDTH, fifo_pixels=1, **kwargs)
+
+
+def test_fifo_proved() -> None:
+    """No overflow, no underflow, StereoMachine's count is the FIFO's level: k-induction."""
+    check(run_formal(fifo_wrapper(), name="fifo", mode="prove", depth=FIFO_PROVE_DEPTH))
+
+
+@pytest.mark.slow
+def test_fifo_covers() -> None:
+    check(run_formal(fifo_wrapper(), name="fifo", mode="cover", depth=FIFO_COVER_DEPTH))
+
+
 MUTANTS = mutants(MACHINES["n1-mc5"])
+# The mutants of the wrappers of the issue's second part (reference run, miter, front end, FIFO) are
+# slow (5-13 s each): the default suite keeps its formal time small, CI runs them (.ci/run).
+NEW_WRAPPERS = {"control", "miter", "generator", "frontend", "fifo"}
+MUTANT_PARAMS = [pytest.param(m, id=m.name, marks=[pytest.mark.slow] if m.wrapper in NEW_WRAPPERS else [])
+                 for m in MUTANTS]
 
 
-@pytest.mark.parametrize("mutant", MUTANTS, ids=[m.name for m in MUTANTS])
+@pytest.mark.parametrize("mutant", MUTANT_PARAMS)
 def test_mutant_caught(mutant: Mutant) -> None:
     """Each known bug fails the check that passes on the shipped RTL (same wrapper, mode, depth)."""
     if mutant.wrapper == "counter":
@@ -128,6 +240,18 @@ def test_mutant_caught(mutant: Mutant) -> None:
     elif mutant.wrapper == "encoder":
         runs = [(EncoderProperties(rows=5, nomatch_row=True, tie_break=tb, **mutant.inject), "prove", 1)
                 for tb in ("nomatch-first", "lowest-index")]
+    elif mutant.wrapper == "control":
+        runs = [(ControlProperties(params=MACHINES["n1-mc5"], **mutant.inject), "bmc", CONTROL_MUTANT_DEPTH)]
+    elif mutant.wrapper == "miter":
+        runs = [(MiterProperties(params=MITER, **mutant.inject), "bmc", MITER_DEPTH)]
+    elif mutant.wrapper == "generator":
+        runs = [(GeneratorProperties(params=FRONT_PARAMS, model=FRONT_MODEL, **mutant.inject), "bmc",
+                 GENERATOR_DEPTH)]
+    elif mutant.wrapper == "frontend":
+        runs = [(FrontEndProperties(params=FRONT_PARAMS, model=FRONT_MODEL, width=FRONT_WIDTH,
+                                    **mutant.inject), "bmc", FRONTEND_DEPTH)]
+    elif mutant.wrapper == "fifo":
+        runs = [(fifo_wrapper(**mutant.inject), "bmc", FIFO_MUTANT_DEPTH)]
     else:
         runs = [(MachineProperties(params=MACHINES["n1-mc5"], checks=CHECKS, **mutant.inject), "bmc",
                  RUNS_BMC_DEPTH)]

@@ -321,7 +321,7 @@ def test_synth_command_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]
     (["--dmax", "8", "--width", "12"], "width must be in [dmax + 5, 4096] = [13, 4096]"),
     (["--rng", "external"], "synth needs an on-chip random source, not 'external'"),
     (["--rng", "smtj"], "synth needs an on-chip random source, not 'smtj'"),
-    (["--lanes", "16"], "lanes (16) must be a multiple of the operator columns (3)"),
+    (["--lanes", "16"], "lanes (16) must be a multiple of the loaded columns (3)"),
     (["--fifo-pixels", "0"], "fifo_pixels must be an integer in [1, 64], got 0"),
     (["--p-nm0", "0.0001", "--word-bits", "4"], "p_nm0: 0.0001 quantizes to 0 with 4-bit words"),
 ])
@@ -394,9 +394,9 @@ def test_census_machine_through_yosys_with_its_throughput(tmp_path: Path) -> Non
 def test_synth_census_options_refused_where_they_do_not_apply(tmp_path: Path, capsys) -> None:
     from bayesmachine.cli import main
 
-    assert main(["synth", "--target", "ecp5-85k", "--model", "census", "--top", "stereo",
+    assert main(["synth", "--target", "ecp5-85k", "--model", "census", "--top", "stereo", "--lanes", "12",
                  "-o", str(tmp_path / "a")]) == 2
-    assert "computes the paper model only" in capsys.readouterr().err
+    assert "multiple of the loaded columns (5)" in capsys.readouterr().err
     assert main(["synth", "--target", "ecp5-85k", "--census-window", "5", "-o", str(tmp_path / "b")]) == 2
     assert "--model census" in capsys.readouterr().err
     assert not any(tmp_path.iterdir())

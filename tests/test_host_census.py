@@ -16,6 +16,7 @@ from bayesmachine.host.features import (
     census_codes,
     census_codes_plain,
     census_offsets,
+    feature_sums,
     model_features,
 )
 from bayesmachine.host.images import random_dot_stereogram
@@ -180,9 +181,10 @@ def test_census_codes_equal_plain(window, seed):
     rng = np.random.default_rng(seed)
     img = rng.integers(0, 256, (15, 19), dtype=np.uint8)
     img[4:9, 3:10] = 77  # flat patch: equal neighbours give 0 bits
-    img[0, :] = 255  # a bright border row (7x7 windows reach it and beyond)
+    img[0, :] = 255  # a bright border row (the 7x7 windows of the grid's first row reach it)
     codes = census_codes(img, window)
-    assert codes.dtype == np.uint64 and codes.shape == (11, 15)
+    k = window // 2  # the map grid's margin: every window inside the image
+    assert codes.dtype == np.uint64 and codes.shape == (15 - 2 * k, 19 - 2 * k)
     np.testing.assert_array_equal(codes, census_codes_plain(img, window))
     bits = window * window - 1
     assert int(codes.max()) < (1 << bits) and int(codes.max()).bit_length() == bits
@@ -194,13 +196,21 @@ def test_census_bit_order_is_raster():
     img = np.full((9, 9), 100, np.uint8)
     img[4 - 3, 4 - 3] = 10  # darker top-left neighbour of map pixel (2, 2): bit 0
     img[4, 5] = 10  # darker right neighbour: bit 24
-    assert int(census_codes(img, 7)[2, 2]) == (1 << 0) | (1 << 24)
-    # A 7x7 window reaching outside the image: those neighbours give bit 0.
-    dark = np.full((9, 9), 50, np.uint8)
-    dark[2, 2] = 200
-    code = int(census_codes(dark, 7)[0, 0])
-    outside = [k for k, (dy, dx) in enumerate(offs) if dy == -3 or dx == -3]
-    assert all(not code >> k & 1 for k in outside) and bin(code).count("1") == 48 - len(outside)
+    assert int(census_codes(img, 7)[1, 1]) == (1 << 0) | (1 << 24)  # map grid of margin 3
+    # The grid keeps every 7x7 window inside the image: a 7x7 image has one code, all 48 bits read.
+    dark = np.full((7, 7), 50, np.uint8)
+    dark[3, 3] = 200
+    dark[0, 0] = 255  # not darker: bit 0 clear
+    codes = census_codes(dark, 7)
+    assert codes.shape == (1, 1) and int(codes[0, 0]) == ((1 << 48) - 1) & ~1
+    # The features of a 7x7-census model share that grid: the 5x5 sums around the same centres.
+    img2 = np.random.default_rng(5).integers(0, 256, (12, 14), dtype=np.uint8)
+    census = ModelParams(dmax=2, name="census")
+    f7, f5 = model_features(img2, census), feature_sums(img2)
+    assert census.margin == 3 and f7.census.shape == f7.m25.shape == (6, 8)
+    np.testing.assert_array_equal(f7.m25, f5.m25[1:-1, 1:-1])
+    np.testing.assert_array_equal(f7.gv20, f5.gv20[1:-1, 1:-1])
+    assert ModelParams(dmax=2, name="census", census_window=5).margin == ModelParams().margin == 2
 
 
 def test_hamming_equals_plain():
@@ -291,12 +301,13 @@ def test_machine_checks_are_one_function():
         memory_words(bare, fr, no_prior, MachineParams.for_disparity(6, columns=4))
 
 
-def test_front_end_refuses_the_census_model():
+def test_front_end_takes_the_census_model_on_whole_rows_per_lane():
     from bayesmachine.hdl.frontend.costs import check_frontend_params
 
-    with pytest.raises(ParameterError, match="paper model only"):
-        check_frontend_params(MachineParams.for_disparity(6, columns=4, lanes=8),
-                              ModelParams(dmax=6, name="census", neighbour_prior=False))
+    model = ModelParams(dmax=6, name="census", neighbour_prior=False)
+    check_frontend_params(MachineParams.for_disparity(6, columns=4, lanes=8), model)  # 2 rows per beat
+    with pytest.raises(ParameterError, match=r"lanes \(6\) must be a multiple of the loaded columns \(4\)"):
+        check_frontend_params(MachineParams.for_disparity(6, columns=4, lanes=6), model)
 
 
 # --- References ---

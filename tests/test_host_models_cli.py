@@ -47,8 +47,10 @@ def test_run_census_is_the_neighbour_machine_of_the_model(pair, tmp_path):
     for key in ("machine_bad2", "machine_bad2_nomatch_bad", "sgbm_bad2", "bm_bad2", "bm_bad2_nomatch_bad",
                 "machine_nomatch_occluded", "reference_nomatch_occluded"):
         assert key in report, key
-    # The command's map is the run API's (the above column and line starts from the machine's results).
+    # The command's map is the run API's (the above column and line starts from the machine's results),
+    # on the census model's own output region (margin 3: every 7x7 window inside the image).
     _, left, right, gt = pair
+    assert report["output_shape"] == [left.shape[0] - 6, left.shape[1] - 6 - DMAX]
     want = run_machine(prepare(left, right, model, gt), machine, "model", progress=False)
     np.testing.assert_array_equal(np.load(out / "result.npz")["map"], want.map)
 
@@ -85,12 +87,17 @@ def test_sweep_puts_models_side_by_side(pair, tmp_path):
     got = [(p["model_name"], p["rng"], p["counter_max"]) for p in sweep["points"]]
     assert got == [(m, r, n) for m in ("paper", "census") for r in ("sobol", "lfsr") for n in (2, 4)]
     census = disparity_machine(ModelParams(dmax=DMAX, name="census"))
+    h, w = pair[1].shape
+    assert sweep["output_shape"] == [h - 4, w - 4 - DMAX]  # the first model's region
     for p in sweep["points"]:
         assert p["model"] == ModelParams(dmax=DMAX, name=p["model_name"]).to_dict()
         if p["model_name"] == "census":
+            # Its own output region: every 7x7 window inside the image (margin 3).
+            assert p["output_shape"] == [h - 6, w - 6 - DMAX]
             assert p["machine"]["prior"] == "neighbour" and p["machine"]["columns"] == 4
             assert p["machine"]["feedback_words"] == list(census.feedback_words)
         else:
+            assert "output_shape" not in p
             assert p["machine"]["prior"] == "uniform" and p["machine"]["columns"] == 3
     assert "prior" not in sweep["machine"] and sweep["machine"]["rows"] == DMAX + 2
     assert set(sweep["reference_seconds"]) == {"paper", "census"}
@@ -114,11 +121,13 @@ def test_sweep_puts_models_side_by_side(pair, tmp_path):
         (["run", "--model", "census", "--census-window", "6"],
          "--census-window: census_window must be 5 or 7"),
         (["run", "--model", "census", "--prior-s", "0"], "--prior-s: prior_s must be"),
-        (["run", "--model", "census", "--engine", "verilator", "--feed", "pixels"], "paper model only"),
+        (["run", "--model", "census", "--engine", "verilator", "--feed", "pixels", "--lanes", "12"],
+         "multiple of the loaded columns"),
         (["sweep", "--model", "paper,paper"], "listed twice"),
         (["sweep", "--model", "sgbm"], "unknown model"),
         (["run", "--model", "sgbm"], "invalid choice"),
-        (["emit", "--top", "stereo", "--model", "census"], "computes the paper model only"),
+        (["emit", "--top", "stereo", "--model", "census", "--lanes", "12"],
+         "multiple of the loaded columns (5)"),
         (["emit", "--census-window", "5"], "--census-window: options of --model census"),
         (["emit", "--model", "census", "--columns", "3"], "--columns: columns: the census model has 4"),
         (["emit", "--model", "census", "--prior", "uniform"], "--prior: prior:"),

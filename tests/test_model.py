@@ -250,3 +250,8 @@ def test_front_end_lanes_are_defined_once() -> None:
     assert (p.lanes, p.beats_per_pixel) == (18, 14)
     assert stereo_lanes(MachineParams.for_disparity(80, prior="loaded")) == 24
     assert stereo_lanes(MachineParams.for_disparity(2)) == 4 * 3  # fewer rows than 6: all of them
+    # A neighbour machine's feedback column is formed on chip: 6 rows of its 5 loaded columns.
+    from bayesmachine.likelihood import ModelParams, disparity_machine
+
+    census = disparity_machine(ModelParams(name="census"))
+    assert census.operator_columns == 6 and stereo_lanes(census) == 30

@@ -251,8 +251,9 @@ def test_verilator_wall_cycles_follow_the_timing_rule(verilator_cache) -> None:
 
 
 def test_lanes_of_machines_and_the_front_end_refuse_it() -> None:
-    """Round-robin lanes would feed each lane pixel i - k's result, and the on-chip front end makes
-    no line_start flags: both refuse a neighbour-prior machine up front, naming the prior."""
+    """Round-robin lanes would feed each lane pixel i - k's result: they refuse a neighbour-prior
+    machine up front, naming the prior; the on-chip front end feeds one only with the model whose
+    prior it is (the census model's: tests/test_frontend_census.py)."""
     from bayesmachine.hdl.frontend.stereo import StereoMachine, check_stereo_machine
     from bayesmachine.hdl.lanes import MachineLanes
     from bayesmachine.likelihood import ModelParams
@@ -266,7 +267,7 @@ def test_lanes_of_machines_and_the_front_end_refuse_it() -> None:
     q = MachineParams.for_disparity(7, columns=3, prior="neighbour", feedback_words=FEEDBACK,
                                     feedback_nomatch_word=NOMATCH, lanes=15)
     model = ModelParams(dmax=7)
-    refused = r"^prior: the on-chip front end does not feed .*'neighbour'"
+    refused = r"^prior: the machine has a neighbour prior \(prior='neighbour'\) but the paper model has none"
     with pytest.raises(ParameterError, match=refused):
         check_stereo_machine(q, model, 40)
     with pytest.raises(ParameterError, match=refused):

@@ -146,6 +146,58 @@ def test_cli_run_feed_pixels_with_smtj_gives_the_models_result(tmp_path: Path) -
         assert np.array_equal(got[key], want[key]), key
 
 
+@needs_verilator
+def test_cli_run_feed_pixels_census_gives_the_models_result(tmp_path: Path) -> None:
+    """The census model (7x7 census, calibrated no-match row, neighbour prior) through the front end:
+    its census codes, census words and the above prior from the machine's own results equal the
+    host's, so every result is the model's."""
+    rows = 12
+    crop = ["--crop", f"250,200,{WIDTH},{rows}", "--dmax", str(DMAX), "--quiet", "--no-sgbm",
+            "--model", "census"]
+    assert main(["run", "--engine", "verilator", "--feed", "pixels", *crop, "-o", str(tmp_path / "px")]) == 0
+    assert main(["run", "--engine", "model", *crop, "-o", str(tmp_path / "model")]) == 0
+    got, want = np.load(tmp_path / "px" / "result.npz"), np.load(tmp_path / "model" / "result.npz")
+    assert got["map"].shape == (rows - 6, WIDTH - 6 - DMAX)  # margin 3: every 7x7 window inside
+    for key in ("map", "counts", "cycles", "timeout"):
+        assert np.array_equal(got[key], want[key]), key
+    assert len(set(want["map"].ravel().tolist())) > 2  # not a degenerate answer
+
+
+def _census_model_run(left: np.ndarray, right: np.ndarray, model: ModelParams,
+                      params: object) -> tuple[np.ndarray, ...]:
+    from bayesmachine.host.run import prepare, run_machine
+
+    run = run_machine(prepare(left, right, model, reference=False), params, engine="model", progress=False)
+    return run.map, run.counts, run.cycles
+
+
+def _disp(res, shape: tuple[int, int]) -> np.ndarray:
+    return np.where(res.nomatch | res.timeout, -1, res.map).reshape(shape)
+
+
+@needs_verilator
+def test_census_narrow_frames_wait_for_the_result_above() -> None:
+    """Output rows of 3 pixels behind a FIFO of 8 pixels: the front end builds a pixel's above
+    column only once the result above it has left the machine (else a stale entry: other results);
+    frames back to back, the LFSRs carrying over as in one model engine."""
+    from bayesmachine.sim.stereo_engine import StereoVerilatorEngine
+
+    width = DMAX + 9
+    model = ModelParams(dmax=DMAX, name="census")
+    params = stereo_machine_params(DMAX, model=model, counter_max=16)
+    rng = np.random.default_rng(12)
+    left = rng.integers(0, 256, (11, width), dtype=np.uint8)
+    # Each line its own shift, so the row above's MAPs (and a stale entry's) differ from a pixel's own.
+    right = np.stack([np.roll(row, -(1 + y % 4)) for y, row in enumerate(left)])
+    want_map, want_counts, want_cycles = _census_model_run(left, right, model, params)
+    assert len(set(want_map.ravel().tolist())) > 2
+    with StereoVerilatorEngine(params, model, width, verbose=False) as engine:
+        got = engine.run(left, right)
+    assert np.array_equal(_disp(got, want_map.shape), want_map)
+    assert np.array_equal(got.counts.reshape(want_counts.shape), want_counts)
+    assert np.array_equal(got.cycles.reshape(want_cycles.shape), want_cycles)
+
+
 def test_cli_feed_pixels_needs_verilator(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     args = ["run", "--feed", "pixels", "--crop", "250,200,40,12", "--dmax", "8", "-o", str(tmp_path)]
     assert main(args) == 2
@@ -172,3 +224,32 @@ def test_whole_bundled_pair_through_the_front_end_equals_the_model() -> None:
         alone = int(pixel_wall_cycles(params, got.cycles).sum())
         assert alone == int(want.cycles.sum()) + BUBBLE_CYCLES * len(want)  # compute-bound here
         assert alone <= engine.last_wall_cycles < 1.005 * alone
+
+
+@needs_verilator
+@pytest.mark.slow
+def test_whole_bundled_pair_census_through_the_front_end_equals_the_model() -> None:
+    """The census model (Dmax 80, counter max 16, the neighbour prior) on the full Motorcycle pair
+    through the front end: every result equals the model's, run row by row as the host runs it."""
+    from bayesmachine.host.run import prepare, run_machine
+    from bayesmachine.likelihood import disparity_machine
+    from bayesmachine.sim.stereo_engine import StereoVerilatorEngine
+
+    left, right, _ = bundled_pair()
+    model = ModelParams(dmax=80, name="census")
+    params = stereo_machine_params(80, model=model, counter_max=16)
+    assert params == disparity_machine(model, counter_max=16)  # the same machine as --feed words
+    want = run_machine(prepare(left, right, model, reference=False), params, engine="model", progress=False)
+    with StereoVerilatorEngine(params, model, left.shape[1], verbose=False) as engine:
+        got = engine.run(left, right)
+        wall = engine.last_wall_cycles
+    alone = int(pixel_wall_cycles(params, got.cycles).sum())  # the machine fed words at full rate
+    print(f"\ncensus through the front end: {wall / len(got):.3f} wall cycles per output pixel, "
+          f"the machine alone {alone / len(got):.3f}, compute {got.cycles.mean():.3f}")
+    assert alone <= wall < 1.005 * alone  # loading and filtering hidden
+    ho, wo = want.map.shape
+    assert (ho, wo) == (left.shape[0] - 6, left.shape[1] - 6 - 80)
+    disp = np.where(got.nomatch | got.timeout, -1, got.map).reshape(ho, wo)
+    assert np.array_equal(disp, want.map)
+    assert np.array_equal(got.counts.reshape(ho, wo, -1), want.counts)
+    assert np.array_equal(got.cycles.reshape(ho, wo), want.cycles)

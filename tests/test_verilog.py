@@ -227,20 +227,24 @@ def test_emit_writes_complete_files_or_none(tmp_path: Path, monkeypatch: pytest.
     assert [p.name for p in tmp_path.iterdir()] == ["bayesmachine.v"]
 
 
+@pytest.mark.parametrize("model", ["paper", "census"])
 def test_stereo_top_is_lint_clean_and_latch_free(
-    verilator: str, yosys: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    verilator: str, yosys: str, tmp_path: Path, capsys: pytest.CaptureFixture[str], model: str
 ) -> None:
-    """``emit --top stereo``: the front end + FIFO + machine pass -Wall and synthesize without latches."""
+    """``emit --top stereo``: the front end + FIFO + machine pass -Wall and synthesize without latches
+    (the census model's too: census filters, the neighbour prior's line of MAPs)."""
     parser = argparse.ArgumentParser()
     hdl_cli.register(parser.add_subparsers())
     out = tmp_path / "bayesmachine.v"
-    # 3 beats per pixel: the beat counter's values are not all used (the lint checks complete cases).
+    # 3 (4) beats per pixel: the beat counter's values are not all used (the lint checks complete cases).
+    lanes, beats = ("9", 3) if model == "paper" else ("10", 4)
     args = parser.parse_args(["emit", "--top", "stereo", "--dmax", "6", "--width", "23", "--counter-max", "4",
-                              "--lanes", "9", "--sigma", "12", "-o", str(out)])
+                              "--lanes", lanes, "--sigma", "12", "--model", model, "-o", str(out)])
     assert args.func(args) == 0
     text = capsys.readouterr().out
     assert "stereo top: 23-pixel lines, Dmax 6" in text
-    assert "load: 9 words per beat, 3 beats per pixel" in text
+    assert f"load: {lanes} words per beat, {beats} beats per pixel" in text
+    assert ("census model: 7x7 census" in text) == (model == "census")
     assert re.search(r"in\s+pixels__payload\s+17 bits", text)
     # The machine's waivers alone: their scoped DECLFILENAME rule covers the submodules
     # (``bayesmachine.<path>``) of every top emitted as bayesmachine.v.

@@ -11,17 +11,21 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
-from amaranth.hdl import Module, Mux, Value
+from amaranth.hdl import Cat, Module, Mux, Signal, Value
 
 from bayesmachine.hdl.counters import overflow_counter_full
 from bayesmachine.hdl.encoder import MAPEncoder, map_encoder
+from bayesmachine.hdl.formal.control import driven
+from bayesmachine.hdl.frontend.costs import WordGenerator
+from bayesmachine.hdl.frontend.stereo import FrontEnd, StereoMachine
 from bayesmachine.hdl.machine import BayesianMachine
 from bayesmachine.params import MachineParams
 
 __all__ = [
-    "HighestIndexEncoder", "Mutant", "NoMatchBlindEncoder", "PayloadFollowsEncoderMachine",
-    "ValidDropMachine", "counter_early_overflow", "counter_late_overflow", "counter_wraps", "mutants",
-    "other_tie_rule",
+    "DriftingCountStereoMachine", "EarlyReadStereoMachine", "FirstIgnoredFrontEnd", "HighestIndexEncoder",
+    "LateCountsMachine", "LostBeatMachine", "Mutant", "NoMatchBlindEncoder", "PayloadFollowsEncoderMachine",
+    "ShortWordGenerator", "SkippedSwapMachine", "ValidDropMachine", "counter_early_overflow",
+    "counter_late_overflow", "counter_wraps", "mutants", "other_tie_rule",
 ]
 
 
@@ -104,9 +108,105 @@ class PayloadFollowsEncoderMachine(BayesianMachine):
         return m
 
 
+class _ObservedMachine(BayesianMachine):
+    """Keeps the nets ``elaborate`` shares between its builders (``self._nets``), for the mutants below."""
+
+    def _memories(self):  # type: ignore[no-untyped-def]
+        self._nets = super()._memories()
+        return self._nets
+
+
+class SkippedSwapMachine(_ObservedMachine):
+    """A swap in a bubble starts the next run but leaves the active memory as it was: the pixel
+    loaded is skipped and the previous one is run again (an idle machine's swap still copies)."""
+
+    def elaborate(self, platform: object) -> Module:
+        m = super().elaborate(platform)
+        n = self._nets
+        with m.If(n.start_rep[0] & n.stop):
+            m.d.sync += [w.eq(w) for w in n.active]  # the last assignment wins
+        return m
+
+
+class LostBeatMachine(_ObservedMachine):
+    """A beat taken right behind another is not written into the shadow memory (its write enable
+    is dropped while the previous beat's is up): back-to-back beats lose one."""
+
+    def elaborate(self, platform: object) -> Module:
+        m = super().elaborate(platform)
+        n = self._nets
+        with m.If(n.write_q.any()):
+            m.d.sync += n.write_q.eq(0)
+        return m
+
+
+class LateCountsMachine(_ObservedMachine):
+    """The result takes the counters a cycle late: their values before the run's last compute cycle."""
+
+    def elaborate(self, platform: object) -> Module:
+        m = super().elaborate(platform)
+        n = self._nets
+        counts_q = [Signal.like(c, name=f"{c.name}_late") for c in n.counts]
+        m.d.sync += [q.eq(c) for q, c in zip(counts_q, n.counts, strict=True)]
+        with m.If(n.leave):
+            m.d.sync += self.result.payload.counts.eq(Cat(*counts_q))
+        return m
+
+
+# --- front end -------------------------------------------------------------------------------
+
+class ShortWordGenerator(WordGenerator):
+    """Off by one: an output pixel's last beat is never issued (the pixel ends a beat early)."""
+
+    def elaborate(self, platform: object) -> Module:
+        m = super().elaborate(platform)
+        local = driven(m)
+        beat, active = local["beat"], local["active"]
+        issue = active & (~self.beats.valid | self.beats.ready)
+        with m.If(issue & (beat == self.params.beats_per_pixel - 2)):
+            m.d.sync += [beat.eq(0), active.eq(0)]
+        return m
+
+
+class FirstIgnoredFrontEnd(FrontEnd):
+    """The frame-start marker is ignored: the position counters run on across frames."""
+
+    def elaborate(self, platform: object) -> Module:
+        m = super().elaborate(platform)
+        comb, sync = driven(m, "comb"), driven(m, "sync")
+        m.d.comb += [comb["cur_col"].eq(sync["col"]), comb["cur_line"].eq(sync["line"])]
+        return m
+
+
+class EarlyReadStereoMachine(StereoMachine):
+    """The machine's load ``valid`` from the beat count ``StereoMachine`` keeps instead of the FIFO's
+    read side: a beat just written (not yet readable) is read, an underflow."""
+
+    def elaborate(self, platform: object) -> Module:
+        m = super().elaborate(platform)
+        used = driven(m, "sync")["used"]
+        machine = m.submodules.machine
+        m.d.comb += machine.load.valid.eq(used != 0)
+        return m
+
+
+class DriftingCountStereoMachine(StereoMachine):
+    """The beat count ``StereoMachine`` keeps misses a read in a cycle with a write: it drifts above
+    the FIFO's level (and its registered ready falls too early)."""
+
+    def elaborate(self, platform: object) -> Module:
+        m = super().elaborate(platform)
+        comb, sync = driven(m, "comb"), driven(m, "sync")
+        used = sync["used"]
+        with m.If(comb["write"] & comb["read"]):
+            m.d.sync += used.eq(used + 1)
+        return m
+
+
 @dataclass(frozen=True)
 class Mutant:
-    """One known bug: its name, the wrapper it is checked in (``counter``, ``encoder``, ``machine``),
+    """One known bug: its name, the wrapper it is checked in (``counter``, ``encoder``, ``machine``,
+    ``control``, ``miter``, ``generator``, ``frontend``, ``fifo``),
     the keyword arguments that inject it, and what it breaks."""
 
     name: str
@@ -139,6 +239,26 @@ def mutants(machine_params: MachineParams) -> list[Mutant]:
         Mutant("machine-other-tie", "machine", {"dut_params": other_tie}, "the machine's other tie rule"),
         Mutant("watchdog-late", "machine", {"dut_params": late}, "a run goes one cycle past max_cycles"),
         Mutant("watchdog-early", "machine", {"dut_params": early}, "a timeout one cycle before max_cycles"),
+        Mutant("control-skipped-swap", "control", {"machine": SkippedSwapMachine},
+               "a bubble's swap leaves the active memory: the previous pixel runs again"),
+        Mutant("control-lost-beat", "control", {"machine": LostBeatMachine},
+               "a beat right behind another is not written"),
+        Mutant("control-late-counts", "control", {"machine": LateCountsMachine},
+               "the result's counts are taken a cycle late"),
+        Mutant("control-other-tie", "control", {"dut_params": other_tie}, "the machine's other tie rule"),
+        Mutant("control-watchdog-late", "control", {"dut_params": late},
+               "a run goes one cycle past max_cycles"),
+        Mutant("control-valid-drop", "control", {"machine": ValidDropMachine}, "a stalled result is dropped"),
+        Mutant("miter-payload-moves", "miter", {"machine": PayloadFollowsEncoderMachine},
+               "a stalled result's map changes"),
+        Mutant("generator-short", "generator", {"generator": ShortWordGenerator},
+               "an output pixel gets beats_per_pixel - 1 beats"),
+        Mutant("frontend-first-ignored", "frontend", {"frontend": FirstIgnoredFrontEnd},
+               "a frame start does not restart the position counters"),
+        Mutant("fifo-early-read", "fifo", {"stereo": EarlyReadStereoMachine},
+               "the machine reads a beat the FIFO does not offer yet (underflow)"),
+        Mutant("fifo-count-drift", "fifo", {"stereo": DriftingCountStereoMachine},
+               "the beat count misses a read in a cycle with a write"),
     ]
 
 

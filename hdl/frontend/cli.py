@@ -64,10 +64,12 @@ def stereo_params(args: argparse.Namespace, params: MachineParams) -> MachinePar
 def build(args: argparse.Namespace, params: MachineParams) -> StereoMachine:
     """The ``StereoMachine`` the options describe, around the machine ``params`` (whose lanes default
     to the front end's, :func:`stereo_params`)."""
-    from .stereo import StereoMachine
+    from .stereo import StereoMachine, check_stereo_machine
 
-    return StereoMachine(params=stereo_params(args, params), model=model_params_from_args(args),
-                         width=width(args), fifo_pixels=fifo_pixels(args))
+    top_params, model = stereo_params(args, params), model_params_from_args(args)
+    # Checked first: a component whose constructor raises would be reported as never elaborated.
+    check_stereo_machine(top_params, model, width(args), fifo_pixels(args))
+    return StereoMachine(params=top_params, model=model, width=width(args), fifo_pixels=fifo_pixels(args))
 
 
 def summary(top: StereoMachine) -> str:
@@ -79,6 +81,15 @@ def summary(top: StereoMachine) -> str:
         f"stereo top: {top.width}-pixel lines, Dmax {m.dmax}, p0 {m.p0}, sigmas m/gh/gv "
         f"{m.sigma_m}/{m.sigma_gh}/{m.sigma_gv}, p_nm0 {m.p_nm0}, sigma_nm {m.sigma_nm}; "
         f"FIFO of {top.fifo_pixels} pixels ({top.fifo_pixels * p.beats_per_pixel} beats)",
+    ]
+    if m.census:
+        w = m.census_window
+        lines.append(
+            f"census model: {w}x{w} census ({m.census_bits} bits, p0 {m.census_p0}, sigma {m.sigma_c}, "
+            f"no-match at h = {m.h_nm}), line buffer of {2 * m.margin} lines, output region margin {m.margin}"
+            + (f"; neighbour prior (eps {m.prior_eps}, s {m.prior_s}): the above factor from a line of "
+               f"{top.width - 2 * m.margin - m.dmax} MAPs" if m.has_prior else ""))
+    lines += [
         "ports (Verilog names; clk and rst as well):",
     ]
     lines += [f"  {d:3} {name:15} {bits:6} bits" for d, name, bits in signature_ports(top.signature)]

@@ -1,38 +1,52 @@
 """Costs and likelihood-memory words: the right features' delay line and the table look-ups.
 
-``WordGenerator`` takes every pixel's features (left and right sums, and whether the pixel is
-in the output region). Each pixel's right features enter a delay line of Dmax + 1 pixels, so
-that when an output pixel at map column x arrives, entry d holds the right features at x - d.
-For an output pixel it then writes the pixel's ``words_per_pixel`` words, ``lanes`` per beat,
-in operator order (word o in lane o % lanes of beat o // lanes), exactly the words
-``host.likelihoods.memory_words`` computes (its twin):
+``WordGenerator`` takes every pixel's features (left and right sums, census codes with the
+census model, and whether the pixel is in the output region). Each pixel's right features enter
+a delay line of Dmax + 1 pixels, so that when an output pixel at map column x arrives, entry d
+holds the right features at x - d. For an output pixel it then writes the pixel's
+``words_per_pixel`` words, ``lanes`` per beat, in load order (word o in lane o % lanes of beat
+o // lanes, row o // loaded_columns), exactly the words ``host.likelihoods.memory_words``
+computes (its twin):
 
 - row d <= Dmax, feature column f: the table of f at min(|left_f - right_f[d]|, last entry);
-- the no-match row: the no-match table at min(|left gV|, last entry), then words of 1.0;
-- with a loaded prior, operator column 0 is 1.0 (a uniform prior), as the host writes it.
+- census column (census model): the census table at popcount(left code xor right code[d]);
+- the no-match row: the no-match table at min(|left gV|, last entry), then words of 1.0, and in
+  the census column the census table's word at the constant Hamming distance h_nm;
+- with a loaded prior (``prior="loaded"``), operator column 0 is 1.0 (a uniform prior), as the
+  host writes it;
+- with the neighbour prior (``prior="neighbour"``), the loaded column (the above neighbour's
+  factor, the machine's operator column 1) is ``neighbour_words`` of the machine's own result
+  for the pixel above: a line of MAPs (a ``Memory`` of the output width, written as results
+  leave through ``result_*``, read when the pixel is taken) through the prior table clamped
+  where it stops changing (the machine's ``feedback_words``); 1.0 in a frame's first output row
+  and after a no-match or timeout above. An output pixel is taken only when the result above it
+  has left the machine (fewer than an output row's pixels in flight), so no word is built from a
+  stale entry, whatever the FIFO's depth and the image's width. Each beat of the first output
+  pixel of a row carries ``line_start`` (the machine's left factor is then 1.0).
 
-``lanes`` must be a multiple of the operator columns, so each lane always holds the same
-operator column: a lane of feature f reads its own port of f's table. One beat per cycle, in
-a four-step pipeline that stalls as a whole while the stream does: in the cycle of the beat's
-issue each lane's difference goes into a register; its absolute value, clamped, into the
-address register in the next; the look-up (block RAM read) in the next; the beat on the stream
-the one after. The registers keep the subtraction (on the left sums' wide fan-out), the
-absolute value and clamp, and the long route to the block RAM apart. The difference's operands
-are registers: the left sums, and per lane the delay-line entry of the
-beat, chosen a cycle ahead (beat 0's when the pixel is taken, the next beat's at each issue), so
-no path runs from the beat counter through the entry multiplexer into a table address. The delay
-line shifts a cycle after the take (from a register holding the taken right features), its
-enables on registered copies of the take, so the take (which depends on the stream's ready)
-drives only the entry registers and the left sums, not the delay line's thousands of enables.
+``lanes`` must be a multiple of the loaded columns, so each lane always holds the same operator
+column: a lane of feature f reads its own port of f's table. One beat per cycle, in a four-step
+pipeline that stalls as a whole while the stream does: in the cycle of the beat's issue each
+lane's difference (census: Hamming distance; prior: row minus the MAP above) goes into a
+register; its absolute value, clamped, into the address register in the next; the look-up
+(block RAM read) in the next; the beat on the stream the one after. The registers keep the
+subtraction (on the left sums' wide fan-out), the absolute value and clamp, and the long route
+to the block RAM apart. The difference's operands are registers: the left sums, and per lane the
+delay-line entry of the beat, chosen a cycle ahead (beat 0's when the pixel is taken, the next
+beat's at each issue), so no path runs from the beat counter through the entry multiplexer into
+a table address. The delay line shifts a cycle after the take (from a register holding the taken
+right features), its enables on registered copies of the take, so the take (which depends on the
+stream's ready) drives only the entry registers and the left sums, not the delay line's
+thousands of enables.
 """
 
 from __future__ import annotations
 
-from amaranth.hdl import Module, Mux, Signal, signed, unsigned
+from amaranth.hdl import Module, Mux, Signal, Value, signed, unsigned
 from amaranth.lib import data, memory, stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from bayesmachine.hdl.signatures import load_stream
+from bayesmachine.hdl.signatures import beat_words, load_stream
 from bayesmachine.likelihood import ModelParams, check_disparity_machine
 from bayesmachine.params import MachineParams, ParameterError
 
@@ -40,14 +54,31 @@ from .filters import feature_layout
 from .tables import FrontEndTables, frontend_tables
 
 __all__ = ["FEATURES", "WordGenerator", "check_frontend_params", "check_frontend_types",
-           "pixel_features_layout"]
+           "pixel_features_layout", "popcount"]
 
 FEATURES = ("m25", "gh20", "gv20")  # feature sum fields, in the operator columns' order
 
 
-def pixel_features_layout() -> data.StructLayout:
-    """One pixel for the word generator: both images' feature sums and the output-region flag."""
-    return data.StructLayout({"left": feature_layout(), "right": feature_layout(), "output": unsigned(1)})
+def pixel_features_layout(census_bits: int = 0, neighbour: bool = False) -> data.StructLayout:
+    """One pixel for the word generator: both images' feature sums (and census codes with
+    ``census_bits``), the output-region flag and, with the neighbour prior, ``row_start`` (the
+    first output pixel of an output row) and ``first_row`` (an output pixel of a frame's first
+    output row: no pixel above)."""
+    side = feature_layout(census_bits)
+    fields = {"left": side, "right": side, "output": unsigned(1)}
+    if neighbour:
+        fields |= {"row_start": unsigned(1), "first_row": unsigned(1)}
+    return data.StructLayout(fields)
+
+
+def popcount(value: Value) -> Value:
+    """The number of set bits of ``value``, as a balanced adder tree."""
+    terms: list[Value] = [value[i] for i in range(len(value))]
+    if not terms:
+        return Value.cast(0)
+    while len(terms) > 1:
+        terms = [terms[i] + terms[i + 1] if i + 1 < len(terms) else terms[i] for i in range(0, len(terms), 2)]
+    return terms[0]
 
 
 def check_frontend_types(params: object, model: object) -> None:
@@ -64,19 +95,12 @@ def check_frontend_params(params: MachineParams, model: ModelParams) -> None:
         raise ParameterError(f"params must be a MachineParams, not {type(params).__name__}")
     if not isinstance(model, ModelParams):
         raise ParameterError(f"model must be a host.likelihoods.ModelParams, not {type(model).__name__}")
-    if model.census:
-        raise ParameterError("--model: the on-chip front end computes the paper model only (census: not yet)")
-    if params.feedback_columns:
-        # Its words are one data column short and the beats carry no line_start flags.
-        raise ParameterError(
-            "prior: the on-chip front end does not feed a machine with prior = 'neighbour' (its feedback "
-            "column and line_start flags); use prior = 'loaded' or 'uniform' with --feed pixels")
     check_disparity_machine(model, params)
-    if params.lanes % params.operator_columns:
+    if params.lanes % params.loaded_columns:
         raise ParameterError(
-            f"lanes ({params.lanes}) must be a multiple of the operator columns ({params.operator_columns}) "
+            f"lanes ({params.lanes}) must be a multiple of the loaded columns ({params.loaded_columns}) "
             f"for the front end, so that each lane holds one feature (e.g. lanes="
-            f"{min(params.words_per_pixel, 6 * params.operator_columns)})")
+            f"{min(params.words_per_pixel, 6 * params.loaded_columns)})")
 
 
 class WordGenerator(wiring.Component):
@@ -84,39 +108,61 @@ class WordGenerator(wiring.Component):
 
     ``pixel.ready`` is high when no output pixel is being written, and in the cycle of its last
     beat's issue: a pixel outside the output region passes in one cycle, an output pixel holds
-    the stream for ``beats_per_pixel`` cycles (more if ``beats`` is not ready).
+    the stream for ``beats_per_pixel`` cycles (more if ``beats`` is not ready, or, with the
+    neighbour prior, until the result of the pixel above has left the machine).
 
     Parameters
     ----------
     params : MachineParams
-        The machine fed (``lanes`` a multiple of the operator columns: :func:`check_frontend_params`).
+        The machine fed (``lanes`` a multiple of the loaded columns: :func:`check_frontend_params`).
     model : ModelParams
-        The disparity model (Dmax, p0, sigmas, p_nm0, sigma_nm).
+        The disparity model (Dmax, p0, sigmas, p_nm0, sigma_nm; the census model's fields).
     tables : FrontEndTables, optional
         The likelihood tables (default: ``frontend_tables(model, params.word_bits)``).
+    output_columns : int, optional
+        Output pixels per row (W - 2·margin - Dmax): the line of MAPs of the neighbour prior
+        (required with ``prior="neighbour"``, refused otherwise).
 
     Attributes
     ----------
-    pixel : ``In(stream.Signature(pixel_features_layout()))``
+    pixel : ``In(stream.Signature(pixel_features_layout(bits, neighbour)))``
         Every pixel of the frame in raster order (the right features of all of them enter the
         delay line).
     beats : ``Out(load_stream(params))``
         ``beats_per_pixel`` beats per pixel whose ``output`` flag is set.
+    result_take, result_map, result_hit : ``In(1)``, ``In(params.map_width)``, ``In(1)``
+        Neighbour prior only: a result leaves the machine (its MAP row, and whether it is a
+        disparity: not no match, not a timeout), in raster order of the output region.
     """
 
     def __init__(self, *, params: MachineParams, model: ModelParams,
-                 tables: FrontEndTables | None = None) -> None:
+                 tables: FrontEndTables | None = None, output_columns: int | None = None) -> None:
         check_frontend_types(params, model)
         check_frontend_params(params, model)
         if tables is not None and not isinstance(tables, FrontEndTables):
             raise TypeError(f"tables must be a FrontEndTables, not {type(tables).__name__}")
+        neighbour = params.feedback_columns > 0
+        if output_columns is not None and (isinstance(output_columns, bool)
+                                           or not isinstance(output_columns, int)):
+            raise TypeError(f"output_columns must be an integer, not {type(output_columns).__name__}")
+        if neighbour and (output_columns is None or output_columns < 1):
+            raise ParameterError(f"output_columns: the neighbour prior's line of MAPs needs the output "
+                                 "pixels "
+                                 f"per row (>= 1), got {output_columns!r}")
+        if not neighbour and output_columns is not None:
+            raise ParameterError("output_columns: only for a machine with prior = 'neighbour'")
         self._params = params
         self._model = model
         self._tables = tables if tables is not None else frontend_tables(model, params.word_bits)
-        super().__init__({
-            "pixel": In(stream.Signature(pixel_features_layout())),
+        self._output_columns = output_columns
+        bits = model.census_bits if model.census else 0
+        members = {
+            "pixel": In(stream.Signature(pixel_features_layout(bits, neighbour))),
             "beats": Out(load_stream(params)),
-        })
+        }
+        if neighbour:
+            members |= {"result_take": In(1), "result_map": In(params.map_width), "result_hit": In(1)}
+        super().__init__(members)
 
     @property
     def params(self) -> MachineParams:
@@ -130,19 +176,27 @@ class WordGenerator(wiring.Component):
     def tables(self) -> FrontEndTables:
         return self._tables
 
+    @property
+    def output_columns(self) -> int | None:
+        return self._output_columns
+
     def elaborate(self, platform: object) -> Module:
         m = Module()
-        p, dmax = self._params, self._model.dmax
-        cols = p.operator_columns
-        off = cols - p.columns  # 1 with a loaded prior (operator column 0)
-        rows_per_beat = p.lanes // cols
+        p, model = self._params, self._model
+        dmax = model.dmax
+        lc = p.loaded_columns  # words per row in a beat
+        off = lc - p.columns  # 1 with a loaded prior column (the above factor with the neighbour prior)
+        neighbour = p.feedback_columns > 0
+        fields = FEATURES + (("census",) if model.census else ())
+        rows_per_beat = p.lanes // lc
         n_beats = p.beats_per_pixel
         one = p.word_one
+        bits = model.census_bits if model.census else 0
 
         # Delay line: right[d] = right features d pixels back (reset-less: no output reads a
         # stale entry, since an output pixel is at least Dmax pixels into its line).
-        right = [Signal(feature_layout(), name=f"right_{d}", reset_less=True) for d in range(dmax + 1)]
-        left = Signal(feature_layout(), reset_less=True)
+        right = [Signal(feature_layout(bits), name=f"right_{d}", reset_less=True) for d in range(dmax + 1)]
+        left = Signal(feature_layout(bits), reset_less=True)
         active = Signal()  # writing the words of an output pixel
         beat = Signal(range(max(2, n_beats)))
         beat_d = Signal(range(max(2, n_beats)))  # the beat in the difference registers
@@ -152,11 +206,27 @@ class WordGenerator(wiring.Component):
         beat_q = Signal(range(max(2, n_beats)))  # the beat on the stream
 
         out = self.beats
+        words = beat_words(p, out.payload)
         advance = Signal()  # the look-up pipeline (address registers, table reads, stream) moves
         issue = Signal()
         m.d.comb += [advance.eq(~out.valid | out.ready), issue.eq(active & advance)]
         last = beat == n_beats - 1
-        m.d.comb += self.pixel.ready.eq(~active | (issue & last))
+        free = ~active | (issue & last)
+        if neighbour:
+            # An output pixel waits until the result above it has left the machine: fewer than an
+            # output row's pixels taken and not yet out. ``room`` is that test on the counts of
+            # the next cycle, registered (a register toward the take, no path from the result).
+            wo = self._output_columns
+            assert wo is not None
+            in_flight = Signal(range(wo + 2))
+            room = Signal(init=1)
+            out_take = self.pixel.valid & self.pixel.ready & self.pixel.payload.output
+            flight_next = Signal.like(in_flight)
+            m.d.comb += flight_next.eq(in_flight + out_take - self.result_take)
+            m.d.sync += [in_flight.eq(flight_next), room.eq(flight_next < wo)]
+            m.d.comb += self.pixel.ready.eq(free & (~self.pixel.payload.output | room))
+        else:
+            m.d.comb += self.pixel.ready.eq(free)
         take = self.pixel.valid & self.pixel.ready
 
         with m.If(advance):
@@ -171,7 +241,7 @@ class WordGenerator(wiring.Component):
         # pixel's right features: its thousands of enables hang on registered copies of the
         # take (groups of entries), not on the take itself (FIFO ready -> issue -> take). While
         # a shift is pending (``shift_q``) the line as the words see it is [right_in, right...].
-        right_in = Signal(feature_layout(), reset_less=True)
+        right_in = Signal(feature_layout(bits), reset_less=True)
         shift_q = Signal()
         group = 9  # delay-line entries per copy of the shift enable
         shift_rep = [Signal(name=f"shift_rep{g}") for g in range((dmax + group) // group)]
@@ -198,14 +268,18 @@ class WordGenerator(wiring.Component):
                 m.d.sync += [diff.eq(value), reg.eq(Mux(far, depth - 1, a))]
             return reg
 
+        def table_memory(name: str, table: object) -> memory.Memory:
+            words_ = [int(w) for w in table]
+            mem = memory.Memory(shape=unsigned(p.memory_word_width), depth=len(words_), init=words_)
+            m.submodules[f"table_{name}"] = mem
+            return mem
+
         # Each lane's delay-line entry comes from a register loaded a cycle ahead (the beat
         # counter's multiplexer ends there, not at the table address): with beat 0's entry when
         # a pixel is taken (the line as it is after the shift), with the next beat's on an issue.
         lane_data: dict[int, object] = {}
-        for f, name in enumerate(FEATURES):
-            table = self._tables.feature(f)
-            mem = memory.Memory(shape=unsigned(p.memory_word_width), depth=len(table), init=table.tolist())
-            m.submodules[f"table_{name}"] = mem
+        for f, name in enumerate(fields):
+            mem = table_memory(name, self._tables.census if name == "census" else self._tables.feature(f))
             for j in range(rows_per_beat):
                 def entry(d: int, name: str = name) -> object:
                     # Entry d of the line as the words see it (a pending shift included).
@@ -228,34 +302,102 @@ class WordGenerator(wiring.Component):
                         with m.Default():  # the last beat: the next take reloads it; a complete case
                             m.d.sync += sel.eq(entries[-1])
                 port = mem.read_port()
-                m.d.comb += [port.en.eq(advance),
-                             port.addr.eq(address(getattr(left, name) - sel, len(table), f"{name}_{j}"))]
-                lane_data[j * cols + off + f] = port.data
-        nm_table = self._tables.nomatch
-        nm_mem = memory.Memory(shape=unsigned(p.memory_word_width), depth=len(nm_table),
-                               init=nm_table.tolist())
-        m.submodules.table_nomatch = nm_mem
-        nm_port = nm_mem.read_port()
+                # A feature's |difference of sums|, or the census codes' Hamming distance.
+                value = popcount(left.census ^ sel) if name == "census" else getattr(left, name) - sel
+                m.d.comb += [port.en.eq(advance), port.addr.eq(address(value, mem.depth, f"{name}_{j}"))]
+                lane_data[j * lc + off + f] = port.data
+        nm_port = table_memory("nomatch", self._tables.nomatch).read_port()
         m.d.comb += [nm_port.en.eq(advance),
-                     nm_port.addr.eq(address(left.gv20, len(nm_table), "nomatch"))]
+                     nm_port.addr.eq(address(left.gv20, len(self._tables.nomatch), "nomatch"))]
+        census_nm = 0
+        if model.census:
+            # The no-match row's census word: the census table read at the constant address h_nm.
+            t = self._tables.census
+            census_nm = int(t[min(model.h_nm, len(t) - 1)])
 
-        # The beat on the stream: each lane's word by its operator (row, column).
+        prior_data: dict[int, object] = {}
+        above_valid = Signal()  # the pixel above is a disparity (with the beat on the stream)
+        if neighbour:
+            above_valid = self._above_prior(m, take, advance, beat, address, table_memory, rows_per_beat,
+                                            prior_data)
+        line_start_q = Signal()
+        if neighbour:
+            row_start = Signal()
+            ls_d, ls_a = Signal(), Signal()
+            with m.If(take):
+                m.d.sync += row_start.eq(self.pixel.payload.row_start)
+            with m.If(advance):
+                m.d.sync += [ls_d.eq(row_start), ls_a.eq(ls_d), line_start_q.eq(ls_a)]
+            m.d.comb += out.payload.line_start.eq(line_start_q)
+
+        # The beat on the stream: each lane's word by its (row, loaded column).
+        prior_nm = p.feedback_nomatch_word if neighbour else one
         unused = range(n_beats, 1 << len(beat_q))  # never occur; in the last case for a complete case
         with m.Switch(beat_q):
             for b in range(n_beats):
                 with m.Case(b, *(unused if b == n_beats - 1 else ())):
                     for lane in range(p.lanes):
-                        row = b * rows_per_beat + lane // cols
-                        col = lane % cols
+                        row = b * rows_per_beat + lane // lc
+                        col = lane % lc
                         if row > dmax + 1:
                             word: object = 0  # past the last operator: the machine ignores it
                         elif col < off:
-                            word = one  # loaded prior: uniform
+                            if not neighbour:
+                                word = one  # loaded prior: uniform
+                            elif row <= dmax:
+                                word = Mux(above_valid, prior_data[lane // lc], one)
+                            else:
+                                word = Mux(above_valid, prior_nm, one)
                         elif row <= dmax:
                             word = lane_data[lane]
                         elif col == off:
                             word = nm_port.data
+                        elif col == off + 3:
+                            word = census_nm
                         else:
                             word = one
-                        m.d.comb += out.payload[lane].eq(word)
+                        m.d.comb += words[lane].eq(word)
         return m
+
+    def _above_prior(self, m: Module, take: Value, advance: Value, beat: Value,
+                     address: object, table_memory: object, rows_per_beat: int,
+                     prior_data: dict[int, object]) -> Signal:
+        """The neighbour prior's line of MAPs and its look-ups: fills ``prior_data`` (lane row j ->
+        the prior table's word at min(|row - MAP above|, last)); returns whether the pixel above
+        (of the beat on the stream) is a disparity."""
+        p = self._params
+        wo = self._output_columns
+        assert wo is not None
+        pix = self.pixel.payload
+        above_layout = data.StructLayout({"map": unsigned(p.map_width), "hit": unsigned(1)})
+        m.submodules.above_line = line = memory.Memory(shape=above_layout, depth=wo, init=[])
+        wr = line.write_port()
+        rd = line.read_port()  # not transparent: a result written this cycle is read the next
+        wr_ptr = Signal(range(wo))
+        rd_ptr = Signal(range(wo))
+        m.d.comb += [wr.en.eq(self.result_take), wr.addr.eq(wr_ptr),
+                     wr.data.map.eq(self.result_map), wr.data.hit.eq(self.result_hit)]
+        with m.If(self.result_take):
+            m.d.sync += wr_ptr.eq(Mux(wr_ptr == wo - 1, 0, wr_ptr + 1))
+        out_take = take & pix.output
+        m.d.comb += [rd.en.eq(out_take), rd.addr.eq(rd_ptr)]
+        with m.If(out_take):
+            m.d.sync += rd_ptr.eq(Mux(rd_ptr == wo - 1, 0, rd_ptr + 1))
+        first_row = Signal()
+        with m.If(take):
+            m.d.sync += first_row.eq(pix.first_row)
+        # The read data holds from the cycle after the take until the next output pixel's take (in
+        # the cycle of this pixel's last issue), so each issue sees this pixel's MAP above.
+        hit = ~first_row & rd.data.hit
+        hit_d, hit_a, hit_q = Signal(), Signal(), Signal()
+        with m.If(advance):
+            m.d.sync += [hit_d.eq(hit), hit_a.eq(hit_d), hit_q.eq(hit_a)]
+        table = p.feedback_words  # the quantized prior clamped where it stops changing
+        mem = table_memory("prior", table)
+        for j in range(rows_per_beat):
+            port = mem.read_port()
+            row = beat * rows_per_beat + j
+            m.d.comb += [port.en.eq(advance),
+                         port.addr.eq(address(row - rd.data.map, len(table), f"prior_{j}"))]
+            prior_data[j] = port.data
+        return hit_q

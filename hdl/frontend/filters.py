@@ -11,6 +11,10 @@ window ending at the last column shifted in then gives, as ``host.features`` com
 * ``m25``  = Σ s over the 5 columns                        (0 .. 6375)
 * ``gh20`` = s[3] + s[4] - s[0] - s[1]  (columns, 0 oldest) (-2550 .. 2550)
 * ``gv20`` = Σ v over the 5 columns                        (-2550 .. 2550)
+
+With ``lag`` = 1 (a 7x7 census beside the features: its window's centre is a column behind the
+5x5 window's) the register is one deeper and the sums are those of the window ending at the
+column before the last one shifted in.
 """
 
 from __future__ import annotations
@@ -24,13 +28,22 @@ from .linebuffer import WINDOW
 __all__ = ["FeatureFilter", "feature_layout"]
 
 
-def feature_layout() -> data.StructLayout:
-    """One pixel's feature sums (the widths hold every 8-bit window exactly)."""
-    return data.StructLayout({"m25": unsigned(13), "gh20": signed(13), "gv20": signed(13)})
+def feature_layout(census_bits: int = 0) -> data.StructLayout:
+    """One pixel's feature sums (the widths hold every 8-bit window exactly), and with
+    ``census_bits`` > 0 its census code (``census``)."""
+    fields = {"m25": unsigned(13), "gh20": signed(13), "gv20": signed(13)}
+    if census_bits:
+        fields["census"] = unsigned(census_bits)
+    return data.StructLayout(fields)
 
 
 class FeatureFilter(wiring.Component):
-    """Feature sums of one image's 5x5 windows. No parameters.
+    """Feature sums of one image's 5x5 windows.
+
+    Parameters
+    ----------
+    lag : int
+        0 (default): the window ends at the last column shifted in; 1: at the one before.
 
     Attributes
     ----------
@@ -49,7 +62,12 @@ class FeatureFilter(wiring.Component):
     the earlier column in while loading the next.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, *, lag: int = 0) -> None:
+        if isinstance(lag, bool) or not isinstance(lag, int):
+            raise TypeError(f"lag must be an integer, not {type(lag).__name__}")
+        if lag not in (0, 1):
+            raise ValueError(f"lag must be 0 or 1, got {lag!r}")
+        self._lag = lag
         super().__init__({
             "load": In(1),
             "column": In(data.ArrayLayout(unsigned(8), WINDOW)),
@@ -57,9 +75,14 @@ class FeatureFilter(wiring.Component):
             "features": Out(feature_layout()),
         })
 
+    @property
+    def lag(self) -> int:
+        return self._lag
+
     def elaborate(self, platform: object) -> Module:
         m = Module()
         col = self.column
+        depth = WINDOW + self._lag
         # Partial sums (reset-less: a column is loaded before it is shifted in).
         top = Signal(unsigned(9), reset_less=True)  # lines 0 + 1
         mid = Signal(unsigned(8), reset_less=True)  # line 2
@@ -69,11 +92,11 @@ class FeatureFilter(wiring.Component):
         s_in = Signal(unsigned(11))
         v_in = Signal(signed(11))
         m.d.comb += [s_in.eq(top + mid + bottom), v_in.eq(bottom - top)]
-        s = [Signal(unsigned(11), name=f"s{i}") for i in range(WINDOW)]  # s[0]: oldest column
-        v = [Signal(signed(11), name=f"v{i}") for i in range(WINDOW)]
+        s = [Signal(unsigned(11), name=f"s{i}") for i in range(depth)]  # s[0]: oldest column
+        v = [Signal(signed(11), name=f"v{i}") for i in range(depth)]
         with m.If(self.en):
-            m.d.sync += [s[i].eq(s[i + 1]) for i in range(WINDOW - 1)]
-            m.d.sync += [v[i].eq(v[i + 1]) for i in range(WINDOW - 1)]
+            m.d.sync += [s[i].eq(s[i + 1]) for i in range(depth - 1)]
+            m.d.sync += [v[i].eq(v[i + 1]) for i in range(depth - 1)]
             m.d.sync += [s[-1].eq(s_in), v[-1].eq(v_in)]
         f = self.features
         m.d.comb += [

@@ -1,8 +1,9 @@
-"""Line buffers for the 5x5 windows: the four previous lines of both images in one ``Memory``.
+"""Line buffers for the windows: the ``height - 1`` previous lines of both images in one ``Memory``.
 
-For each incoming pixel pair at column ``col`` the block outputs, one cycle later, its 5-high
-column: the pixels of the four lines above it at that column (from the memory) and the pixel
-itself. The memory word at ``col`` holds the pair's last four lines at that column; it is read
+For each incoming pixel pair at column ``col`` the block outputs, one cycle later, its
+``height``-high column (5 for the paper's 5x5 filters, 7 with a 7x7 census): the pixels of the
+lines above it at that column (from the memory) and the pixel itself. The memory word at
+``col`` holds the pair's last lines at that column; it is read
 when the pixel comes in and written back, shifted by one line, in the next cycle. A read port
 with an enable and a write port on one address space: block RAM on an FPGA.
 """
@@ -25,7 +26,7 @@ def pair_layout() -> data.StructLayout:
 
 
 class LineBuffer(wiring.Component):
-    """``WINDOW - 1`` lines of pixel pairs, ``width`` pixels each.
+    """``height - 1`` lines of pixel pairs, ``width`` pixels each.
 
     Two pixels taken at the same column must be at least two cycles apart: guaranteed for
     raster order and width >= 2.
@@ -34,6 +35,8 @@ class LineBuffer(wiring.Component):
     ----------
     width : int
         Pixels per line (>= 2).
+    height : int
+        The column's height, the windows' (``WINDOW`` = 5 by default; 7 for a 7x7 census).
 
     Attributes
     ----------
@@ -43,32 +46,41 @@ class LineBuffer(wiring.Component):
         The column of the pixel taken.
     pixel : ``In(pair_layout())``
         The pixel pair taken.
-    column : ``Out(ArrayLayout(pair_layout(), WINDOW))``
-        From the cycle after ``en`` until the next ``en``, the 5-high column of the last pixel
-        taken (index 0 = four lines up, index 4 = the pixel). Columns of the first four lines of
-        a frame hold older data.
+    column : ``Out(ArrayLayout(pair_layout(), height))``
+        From the cycle after ``en`` until the next ``en``, the ``height``-high column of the last
+        pixel taken (index 0 = ``height - 1`` lines up, the last index = the pixel). Columns of a
+        frame's first ``height - 1`` lines hold older data.
     """
 
-    def __init__(self, *, width: int) -> None:
-        if isinstance(width, bool) or not isinstance(width, int):
-            raise TypeError(f"width must be an integer, not {type(width).__name__}")
+    def __init__(self, *, width: int, height: int = WINDOW) -> None:
+        for name, value in (("width", width), ("height", height)):
+            if isinstance(value, bool) or not isinstance(value, int):
+                raise TypeError(f"{name} must be an integer, not {type(value).__name__}")
         if width < 2:
             raise ValueError(f"width must be an integer >= 2, got {width!r}")
+        if height < 3:
+            raise ValueError(f"height must be an integer >= 3, got {height!r}")
         self._width = width
+        self._height = height
         super().__init__({
             "en": In(1),
             "col": In(range(width)),
             "pixel": In(pair_layout()),
-            "column": Out(data.ArrayLayout(pair_layout(), WINDOW)),
+            "column": Out(data.ArrayLayout(pair_layout(), height)),
         })
 
     @property
     def width(self) -> int:
         return self._width
 
+    @property
+    def height(self) -> int:
+        return self._height
+
     def elaborate(self, platform: object) -> Module:
         m = Module()
-        lines = data.ArrayLayout(pair_layout(), WINDOW - 1)
+        n = self._height
+        lines = data.ArrayLayout(pair_layout(), n - 1)
         m.submodules.mem = mem = memory.Memory(shape=lines, depth=self._width, init=[])
         rd = mem.read_port()
         wr = mem.write_port()
@@ -81,16 +93,17 @@ class LineBuffer(wiring.Component):
             m.d.sync += [pixel_q.eq(self.pixel), col_q.eq(self.col)]
         # Write back the column shifted up by one line, the new pixel at the bottom.
         m.d.comb += [wr.en.eq(write), wr.addr.eq(col_q)]
-        for i in range(WINDOW - 2):
+        for i in range(n - 2):
             m.d.comb += wr.data[i].eq(rd.data[i + 1])
-        m.d.comb += wr.data[WINDOW - 2].eq(pixel_q)
-        for i in range(WINDOW - 1):
+        m.d.comb += wr.data[n - 2].eq(pixel_q)
+        for i in range(n - 1):
             m.d.comb += self.column[i].eq(rd.data[i])
-        m.d.comb += self.column[WINDOW - 1].eq(pixel_q)
+        m.d.comb += self.column[n - 1].eq(pixel_q)
         return m
 
 
-def column_windows(image: np.ndarray) -> np.ndarray:
-    """Twin: the 5-high column of every pixel at or below line 4, shape (H - 4, W, 5), index 0 oldest."""
+def column_windows(image: np.ndarray, height: int = WINDOW) -> np.ndarray:
+    """Twin: the ``height``-high column of every pixel at or below line ``height - 1``, shape
+    (H - height + 1, W, height), index 0 oldest."""
     img = np.asarray(image)
-    return np.lib.stride_tricks.sliding_window_view(img, WINDOW, axis=0)
+    return np.lib.stride_tricks.sliding_window_view(img, height, axis=0)

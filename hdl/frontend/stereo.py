@@ -3,17 +3,19 @@ disparity results out): the pipeline from a camera to the MAP, on chip.
 
 Pixel stream: one ``pixel_in_layout()`` beat per pixel pair (``left``, ``right``: 8-bit gray;
 ``first``: set on the first pixel of a frame), frames in raster order, ``width`` pixels per line,
-any number of lines (at least 5). The front end's position counters restart at every ``first``
-(and at reset), so a frame may follow another immediately: nothing computed for a frame depends
-on pixels of an earlier one. The output region is the host's: map rows 0..H-5 (image lines
-4..H-1, a window's bottom line) and map columns Dmax..W-5 (image columns Dmax+4..W-1, a
+any number of lines (at least 2k + 1, k = ``model.margin``). The front end's position counters
+restart at every ``first`` (and at reset), so a frame may follow another immediately: nothing
+computed for a frame depends on pixels of an earlier one. The output region is the host's
+(``host.region``: every window of the model inside the image): map rows 0..H-2k-1 (image lines
+2k..H-1, a window's bottom line) and map columns Dmax..W-2k-1 (image columns Dmax+2k..W-1, a
 window's right column); every other pixel passes in one cycle and starts no machine run.
 
 Pipeline (one pixel per cycle when no output pixel holds it):
 
-1. the pixel is taken and its column read from the line buffer;
-2. both images' 5-high columns' partial sums enter the feature filters' first registers;
-3. the columns' sums enter the filters' windows;
+1. the pixel is taken and its column read from the line buffer (2k lines);
+2. both images' 5-high columns' partial sums enter the feature filters' first registers (the
+   census model: and the 7-high columns the census filters' column registers);
+3. the columns' sums enter the filters' windows (the census filters' windows too);
 4. the word generator takes the features (right ones into the delay line); for an output pixel
    it writes ``beats_per_pixel`` beats into a FIFO in front of the machine's load stream.
 
@@ -22,7 +24,8 @@ machine's runs are long and the line ends' non-output pixels stream in; when it 
 back-pressure reaches the pixel input. Its ready toward the word generator is a register (set
 while at most all but one entry is used; the FIFO has one entry more than the pixels' beats), so
 no path runs from its level through the pixel take. Results leave in raster order of the output region, on
-the machine's own result stream.
+the machine's own result stream. With the census model's neighbour prior each result, as it
+leaves, also goes back into the word generator's line of MAPs (the above neighbour's prior).
 """
 
 from __future__ import annotations
@@ -42,10 +45,11 @@ from bayesmachine.hdl.signatures import (
     pixel_in_layout,
     pixel_stream,
 )
-from bayesmachine.likelihood import ModelParams
+from bayesmachine.likelihood import ModelParams, disparity_machine
 from bayesmachine.params import MachineParams, ParameterError, stereo_lanes
 
 from . import DEFAULT_FIFO_PIXELS, MAX_WIDTH
+from .census import CensusFilter
 from .costs import WordGenerator, check_frontend_params, check_frontend_types
 from .filters import FeatureFilter
 from .linebuffer import WINDOW, LineBuffer
@@ -54,20 +58,29 @@ __all__ = ["MAX_WIDTH", "FrontEnd", "StereoMachine", "check_stereo_machine", "pi
            "stereo_machine_params"]
 
 
-def stereo_machine_params(dmax: int = 80, **kwargs: object) -> MachineParams:
-    """``MachineParams.for_disparity`` with the front end's lane count (:func:`stereo_lanes`) unless
-    ``lanes`` is given."""
-    params = MachineParams.for_disparity(dmax, **kwargs)
+def stereo_machine_params(dmax: int = 80, *, model: ModelParams | None = None,
+                          **kwargs: object) -> MachineParams:
+    """The machine the front end feeds: ``MachineParams.for_disparity`` (the paper model), or with a
+    ``model`` (whose Dmax is ``dmax``) ``disparity_machine(model, ...)``, with the front end's lane
+    count (:func:`stereo_lanes`) unless ``lanes`` is given."""
+    if model is None:
+        params = MachineParams.for_disparity(dmax, **kwargs)
+    else:
+        if model.dmax != dmax:
+            raise ParameterError(f"dmax: {dmax} given, the model's is {model.dmax}")
+        params = disparity_machine(model, **kwargs)
     return params if "lanes" in kwargs else dataclasses.replace(params, lanes=stereo_lanes(params))
 
 
-def _check_width(width: object, dmax: int) -> int:
+def _check_width(width: object, model: ModelParams) -> int:
     if isinstance(width, bool) or not isinstance(width, int):
         raise ParameterError(f"width must be an integer, not {width!r}")
-    if not dmax + WINDOW <= width <= MAX_WIDTH:
+    size = 2 * model.margin + 1  # the model's windows
+    if not model.dmax + size <= width <= MAX_WIDTH:
         raise ParameterError(
-            f"width must be in [dmax + 5, {MAX_WIDTH}] = [{dmax + WINDOW}, {MAX_WIDTH}] (a line needs one "
-            f"output pixel with all {dmax + 1} disparities), got {width}")
+            f"width must be in [dmax + {size}, {MAX_WIDTH}] = [{model.dmax + size}, {MAX_WIDTH}] (a line "
+            f"needs one output pixel with all {model.dmax + 1} disparities and its {size}x{size} windows), "
+            f"got {width}")
     return width
 
 
@@ -79,7 +92,7 @@ def check_stereo_machine(params: MachineParams, model: ModelParams, width: int,
     ``params`` or ``model`` of the wrong type."""
     check_frontend_types(params, model)
     check_frontend_params(params, model)
-    _check_width(width, model.dmax)
+    _check_width(width, model)
     if isinstance(fifo_pixels, bool) or not isinstance(fifo_pixels, int) or not 1 <= fifo_pixels <= 64:
         raise ParameterError(f"fifo_pixels must be an integer in [1, 64], got {fifo_pixels!r}")
 
@@ -94,7 +107,7 @@ class FrontEnd(wiring.Component):
     model : ModelParams
         The disparity model.
     width : int
-        Pixels per image line (dmax + 5 .. ``MAX_WIDTH``).
+        Pixels per image line (dmax + 2·margin + 1 .. ``MAX_WIDTH``).
 
     Attributes
     ----------
@@ -102,15 +115,21 @@ class FrontEnd(wiring.Component):
         Pixel pairs in raster order.
     beats : ``Out(load_stream(params))``
         The output pixels' load beats.
+    result_take, result_map, result_hit : ``In(1)``, ``In(params.map_width)``, ``In(1)``
+        With the neighbour prior only: the machine's results as they leave (see
+        :class:`~.costs.WordGenerator`), for the above neighbour's prior column.
     """
 
     def __init__(self, *, params: MachineParams, model: ModelParams, width: int) -> None:
         check_frontend_types(params, model)
         check_frontend_params(params, model)
-        self._width = _check_width(width, model.dmax)
+        self._width = _check_width(width, model)
         self._params = params
         self._model = model
-        super().__init__({"pixels": In(pixel_stream()), "beats": Out(load_stream(params))})
+        members = {"pixels": In(pixel_stream()), "beats": Out(load_stream(params))}
+        if params.feedback_columns:
+            members |= {"result_take": In(1), "result_map": In(params.map_width), "result_hit": In(1)}
+        super().__init__(members)
 
     @property
     def params(self) -> MachineParams:
@@ -126,12 +145,24 @@ class FrontEnd(wiring.Component):
 
     def elaborate(self, platform: object) -> Module:
         m = Module()
-        width, dmax = self._width, self._model.dmax
-        m.submodules.linebuffer = lines = LineBuffer(width=width)
-        m.submodules.filter_left = fl = FeatureFilter()
-        m.submodules.filter_right = fr = FeatureFilter()
-        m.submodules.generator = gen = WordGenerator(params=self._params, model=self._model)
+        width, model = self._width, self._model
+        dmax, margin = model.dmax, model.margin
+        size = 2 * margin + 1  # the model's windows: line buffer columns of this height
+        lag = margin - WINDOW // 2  # 5x5 features a line and a column behind a 7x7 census window
+        neighbour = self._params.feedback_columns > 0
+        m.submodules.linebuffer = lines = LineBuffer(width=width, height=size)
+        m.submodules.filter_left = fl = FeatureFilter(lag=lag)
+        m.submodules.filter_right = fr = FeatureFilter(lag=lag)
+        if model.census:
+            m.submodules.census_left = cl = CensusFilter(window=model.census_window)
+            m.submodules.census_right = cr = CensusFilter(window=model.census_window)
+        output_columns = width - 2 * margin - dmax if neighbour else None
+        m.submodules.generator = gen = WordGenerator(params=self._params, model=model,
+                                                     output_columns=output_columns)
         wiring.connect(m, gen.beats, wiring.flipped(self.beats))
+        if neighbour:
+            m.d.comb += [gen.result_take.eq(self.result_take), gen.result_map.eq(self.result_map),
+                         gen.result_hit.eq(self.result_hit)]
 
         # The pipeline advances as a whole whenever its last stage is empty or taken.
         valid1 = Signal()  # stage 1: the line buffer shows the pixel's column
@@ -140,12 +171,14 @@ class FrontEnd(wiring.Component):
         advance = Signal()
         m.d.comb += advance.eq(~valid3 | gen.pixel.ready)
 
-        # Stage 0: position of the incoming pixel (restarts at a frame's first pixel).
+        # Stage 0: position of the incoming pixel (restarts at a frame's first pixel). The line
+        # saturates at ``size``: size - 1 is the first line whose windows are complete (the first
+        # output row), size any later one.
         col = Signal(range(width))
-        line = Signal(range(WINDOW))  # image line, saturating at 4 (a window's bottom line)
+        line = Signal(range(size + 1))
         pin = self.pixels.payload
         cur_col = Signal(range(width))
-        cur_line = Signal(range(WINDOW))
+        cur_line = Signal(range(size + 1))
         with m.If(pin.first):
             m.d.comb += [cur_col.eq(0), cur_line.eq(0)]
         with m.Else():
@@ -159,39 +192,54 @@ class FrontEnd(wiring.Component):
             lines.pixel.right.eq(pin.right),
         ]
         col1 = Signal(range(width))
-        line1 = Signal(range(WINDOW))
+        line1 = Signal(range(size + 1))
         with m.If(take):
             with m.If(cur_col == width - 1):
-                m.d.sync += [col.eq(0), line.eq(Mux(cur_line == WINDOW - 1, cur_line, cur_line + 1))]
+                m.d.sync += [col.eq(0), line.eq(Mux(cur_line == size, cur_line, cur_line + 1))]
             with m.Else():
                 m.d.sync += [col.eq(cur_col + 1), line.eq(cur_line)]
         with m.If(advance):
             m.d.sync += [valid1.eq(self.pixels.valid), col1.eq(cur_col), line1.eq(cur_line)]
 
         # Stage 1 -> 2: the columns' partial sums into the filters' first registers (the block
-        # RAM's slow clock-to-output leaves no room for the whole column sum in one cycle).
-        output2 = Signal()
+        # RAM's slow clock-to-output leaves no room for the whole column sum in one cycle); the
+        # census filters take the whole column. The 5x5 filters take the column's middle 5 lines.
+        output2, row_start2, first_row2 = Signal(), Signal(), Signal()
         m.d.comb += [fl.load.eq(advance), fr.load.eq(advance)]
         for i in range(WINDOW):
-            m.d.comb += [fl.column[i].eq(lines.column[i].left), fr.column[i].eq(lines.column[i].right)]
+            m.d.comb += [fl.column[i].eq(lines.column[lag + i].left),
+                         fr.column[i].eq(lines.column[lag + i].right)]
+        if model.census:
+            m.d.comb += [cl.load.eq(advance), cr.load.eq(advance)]
+            for i in range(size):
+                m.d.comb += [cl.column[i].eq(lines.column[i].left), cr.column[i].eq(lines.column[i].right)]
+        first_output_col = dmax + size - 1
         with m.If(advance):
             m.d.sync += [valid2.eq(valid1),
-                         output2.eq((line1 == WINDOW - 1) & (col1 >= dmax + WINDOW - 1))]
+                         output2.eq((line1 >= size - 1) & (col1 >= first_output_col)),
+                         row_start2.eq(col1 == first_output_col),
+                         first_row2.eq(line1 == size - 1)]
 
         # Stage 2 -> 3: the columns' sums enter the filters' windows.
-        output3 = Signal()
+        output3, row_start3, first_row3 = Signal(), Signal(), Signal()
         shift = advance & valid2
         m.d.comb += [fl.en.eq(shift), fr.en.eq(shift)]
+        if model.census:
+            m.d.comb += [cl.en.eq(shift), cr.en.eq(shift)]
         with m.If(advance):
-            m.d.sync += [valid3.eq(valid2), output3.eq(output2)]
+            m.d.sync += [valid3.eq(valid2), output3.eq(output2), row_start3.eq(row_start2),
+                         first_row3.eq(first_row2)]
 
         # Stage 3 -> the word generator.
-        m.d.comb += [
-            gen.pixel.valid.eq(valid3),
-            gen.pixel.payload.left.eq(fl.features),
-            gen.pixel.payload.right.eq(fr.features),
-            gen.pixel.payload.output.eq(output3),
-        ]
+        px = gen.pixel.payload
+        m.d.comb += [gen.pixel.valid.eq(valid3), px.output.eq(output3)]
+        for side, filt in ((px.left, fl), (px.right, fr)):
+            m.d.comb += [side.m25.eq(filt.features.m25), side.gh20.eq(filt.features.gh20),
+                         side.gv20.eq(filt.features.gv20)]
+        if model.census:
+            m.d.comb += [px.left.census.eq(cl.code), px.right.census.eq(cr.code)]
+        if neighbour:
+            m.d.comb += [px.row_start.eq(row_start3), px.first_row.eq(first_row3)]
         return m
 
 
@@ -201,7 +249,7 @@ class StereoMachine(wiring.Component):
     Parameters
     ----------
     params : MachineParams
-        The machine's parameters (lanes a multiple of the operator columns: see
+        The machine's parameters (lanes a multiple of the loaded columns: see
         :func:`stereo_machine_params`).
     model : ModelParams
         The disparity model (Dmax, p0, sigmas, p_nm0, sigma_nm).
@@ -284,6 +332,11 @@ class StereoMachine(wiring.Component):
             buf.r_stream.ready.eq(machine.load.ready),
         ]
         wiring.connect(m, machine.result, wiring.flipped(self.result))
+        if p.feedback_columns:  # the neighbour prior's line of MAPs: each result as it leaves
+            res = machine.result
+            m.d.comb += [front.result_take.eq(res.valid & self.result.ready),
+                         front.result_map.eq(res.payload.map),
+                         front.result_hit.eq(~res.payload.nomatch & ~res.payload.timeout)]
         # An off-chip source's ports: the machine's and this top's come from the same
         # entropy_members(params), so they exist together.
         for name in ENTROPY_PORTS:

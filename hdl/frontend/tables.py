@@ -31,12 +31,14 @@ def clamp_table(table: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class FrontEndTables:
-    """Clamped word tables: ``m``, ``gh``, ``gv`` indexed by |delta|, ``nomatch`` by |gv20|."""
+    """Clamped word tables: ``m``, ``gh``, ``gv`` indexed by |delta|, ``nomatch`` by |gv20|;
+    ``census`` (census model) by the Hamming distance."""
 
     m: np.ndarray
     gh: np.ndarray
     gv: np.ndarray
     nomatch: np.ndarray
+    census: np.ndarray | None = None
 
     def feature(self, index: int) -> np.ndarray:
         return (self.m, self.gh, self.gv)[index]
@@ -44,10 +46,14 @@ class FrontEndTables:
     def lookup(self, name: str, delta: np.ndarray) -> np.ndarray:
         """Twin of a table read: the word at min(|delta|, last index)."""
         t = getattr(self, name)
+        if t is None:
+            raise ValueError(f"these tables have no {name} table (a census model's have one)")
         return t[np.minimum(np.abs(np.asarray(delta, np.int64)), len(t) - 1)]
 
 
 def frontend_tables(model: ModelParams, word_bits: int) -> FrontEndTables:
     """The clamped tables of ``model`` quantized to ``word_bits``-bit words (host code, then clamped)."""
     q = QuantizedTables(likelihood_tables(model), word_bits)
-    return FrontEndTables(clamp_table(q.m), clamp_table(q.gh), clamp_table(q.gv), clamp_table(q.nomatch))
+    census = clamp_table(q.census) if q.census is not None else None
+    return FrontEndTables(clamp_table(q.m), clamp_table(q.gh), clamp_table(q.gv), clamp_table(q.nomatch),
+                          census)

@@ -10,7 +10,7 @@
 //   in : uint32 magic 'BMSF', uint32 reserved, uint32 height, uint32 width (== WIDTH); then
 //        height * width pixel pairs, uint8 left then uint8 right, raster order.
 //   out: uint64 message, one of
-//        0 DONE: (height - 4) * (width - 4 - DMAX) raw result payloads of RESULT_WORDS uint32
+//        0 DONE: (height - 2 MARGIN) * (width - 2 MARGIN - DMAX) raw result payloads of RESULT_WORDS uint32
 //          each, in raster order of the output region, then uint64 wall cycles of this frame
 //          (first pixel presented to last result taken), uint64 wall cycles since reset;
 //        2 NEED NUMBERS, 1 RAN OUT (rng off chip only): as in harness.cpp (EntropySupply in
@@ -45,11 +45,11 @@ int main(int argc, char**) {
         if (!read_request(head, MAGIC_FRAME)) break;
         const uint64_t height = head[2], width = head[3];
         if (width != WIDTH) fail("frame width differs from the design's");
-        if (height < 5) fail("a frame needs at least 5 lines");
+        if (height < 2 * MARGIN + 1) fail("a frame needs at least 2 MARGIN + 1 lines");
         pixels.resize(height * width * 2);
         read_exact(pixels.data(), pixels.size());
         const uint64_t n_in = height * width;
-        const uint64_t expected = (height - 4) * (width - 4 - DMAX);
+        const uint64_t expected = uint64_t(height - 2 * MARGIN) * (width - 2 * MARGIN - DMAX);
         records.assign(expected * RESULT_WORDS, 0);
         uint64_t sent = 0, collected = 0, cycles = 0, idle = 0;
         while (collected < expected) {
