@@ -350,7 +350,7 @@ def test_engines_equal_the_model(engine, verilator_cache):
     if engine == "verilator":
         require_tool("verilator", "g++", "make")
         options = {"build_dir": verilator_cache, "verbose": False}
-    left, right, gt = random_dot_stereogram(height=6, width=16, background=1, square=4, seed=7)
+    left, right, gt = random_dot_stereogram(height=8, width=16, background=1, square=4, seed=7)
     small = ModelParams(dmax=3, name="census-lr")
     prepared = prepare(left, right, small, gt)
     machine = disparity_machine(small, counter_max=3)
