@@ -52,6 +52,7 @@ __all__ = [
     "add_census_options",
     "MODEL_OPTION_FLAGS",
     "CENSUS_OPTION_FLAGS",
+    "LR_OPTION_FLAGS",
     "model_list",
     "output_path",
     "machine_params_from_args",
@@ -401,10 +402,24 @@ _CENSUS_OPTIONS: tuple[tuple[str, str, Callable[[str], Any], str], ...] = (
      "exp(-k^2 / (2 s^2)), k = |d - d_neighbour| (default 0.05)"),
     ("prior_s", "--prior-s", float_arg, "neighbour prior width s (default 4)"),
     ("prior_nomatch", "--prior-nomatch", float_arg, "the no-match row's prior per matched neighbour "
-     "(default f(s), 0.626)"),
+     "(default f(s), 0.626; 0.1 with --model census-lr)"),
 )
 CENSUS_OPTION_FLAGS: tuple[tuple[str, str], ...] = (
     *((dest, flag) for dest, flag, _, _ in _CENSUS_OPTIONS), ("neighbour_prior", "--no-neighbour-prior"),
+)
+# The census-lr model's own options (issue 22), refused unless --model names census-lr.
+_LR_OPTIONS: tuple[tuple[str, str, Callable[[str], Any], str], ...] = (
+    ("lr_beta", "--lr-beta", float_arg, "the consistency column's factor beta of an inconsistent lane, "
+     "|d_R(x - d) - d| > tolerance (default 0.1)"),
+    ("lr_gamma", "--lr-gamma", float_arg, "the consistency column's no-match factor gamma when any lane is "
+     "consistent (1 when none is) (default 0.01)"),
+    ("lr_tolerance", "--lr-tolerance", int_arg, "the left-right test's tolerance in disparities (default 1)"),
+    ("lr_right_max_cycles", "--lr-right-max-cycles", int_arg, "the right pass's watchdog in cycles: a right "
+     "pixel stopped by it has no right MAP (default: --max-cycles, as the left pass)"),
+)
+LR_OPTION_FLAGS: tuple[tuple[str, str], ...] = (
+    *((dest, flag) for dest, flag, _, _ in _LR_OPTIONS), ("lr_nomatch", "--no-lr-nomatch"),
+    ("lr_right_nomatch", "--lr-right-nomatch"),
 )
 
 
@@ -430,7 +445,8 @@ def add_census_options(parser: argparse._ActionsContainer, sweep: bool = False,
     ``sweep``: ``--model`` takes a comma-separated list (:func:`model_list`)."""
     g = parser.add_argument_group(title) if title else parser
     described = ("paper: the paper's m, gH, gV columns; census: + a census column, a no-match row "
-                 "calibrated for it and the raster-order neighbour prior on the machine's own results")
+                 "calibrated for it and the raster-order neighbour prior on the machine's own results; "
+                 "census-lr: + a left-right consistency column from a right pass")
     if sweep:
         g.add_argument("--model", type=model_list, default=None, metavar="MODEL,MODEL,...",
                        help=f"comma-separated models to compare side by side, each over every random source "
@@ -442,6 +458,15 @@ def add_census_options(parser: argparse._ActionsContainer, sweep: bool = False,
         g.add_argument(flag, dest=dest, type=kind, default=None, help=text)
     g.add_argument("--neighbour-prior", dest="neighbour_prior", action=argparse.BooleanOptionalAction,
                    default=None, help="the census model's raster-order neighbour prior (default on)")
+    lr = parser.add_argument_group("left-right consistency (--model census-lr; issue 22 defaults)") \
+        if title else parser
+    for dest, flag, kind, text in _LR_OPTIONS:
+        lr.add_argument(flag, dest=dest, type=kind, default=None, help=text)
+    lr.add_argument("--lr-nomatch", dest="lr_nomatch", action=argparse.BooleanOptionalAction, default=None,
+                    help="the left pass's no-match row (default on; off: no no-match row at all)")
+    lr.add_argument("--lr-right-nomatch", dest="lr_right_nomatch", action=argparse.BooleanOptionalAction,
+                    default=None, help="give the right pass the census model's no-match row (default off: "
+                    "no no-match row, as the issue's right pass)")
 
 
 def model_names_from_args(args: argparse.Namespace) -> list[str]:
@@ -455,10 +480,25 @@ def model_names_from_args(args: argparse.Namespace) -> list[str]:
 def _census_kwargs(args: argparse.Namespace, names: list[str]) -> dict[str, Any]:
     given = {dest: getattr(args, dest) for dest, _ in CENSUS_OPTION_FLAGS
              if getattr(args, dest, None) is not None}
-    if given and "census" not in names:
+    if given and not {"census", "census-lr"} & set(names):
         flags = ", ".join(flag if dest != "neighbour_prior" or not given[dest] else "--neighbour-prior"
                           for dest, flag in CENSUS_OPTION_FLAGS if dest in given)
-        raise ParameterError(f"{flags}: options of --model census, which do not apply to --model "
+        raise ParameterError(f"{flags}: options of --model census and census-lr, which do not apply to "
+                             f"--model {','.join(names)}")
+    return given
+
+
+def _lr_kwargs(args: argparse.Namespace, names: list[str]) -> dict[str, Any]:
+    given = {dest: getattr(args, dest) for dest, _ in LR_OPTION_FLAGS
+             if getattr(args, dest, None) is not None}
+    if given and "census-lr" not in names:
+        def spelt(dest: str, flag: str) -> str:  # a yes/no option as it was given
+            if isinstance(given[dest], bool):
+                return "--" + ("" if given[dest] else "no-") + dest.replace("_", "-")
+            return flag
+
+        flags = ", ".join(spelt(dest, flag) for dest, flag in LR_OPTION_FLAGS if dest in given)
+        raise ParameterError(f"{flags}: options of --model census-lr, which do not apply to --model "
                              f"{','.join(names)}")
     return given
 
@@ -471,9 +511,12 @@ def model_params_from_args(args: argparse.Namespace, name: str | None = None) ->
     defaults = ModelParams()
     names = model_names_from_args(args)
     census = _census_kwargs(args, names)
+    lr = _lr_kwargs(args, names)
     name = names[0] if name is None else name
-    if name != "census":
+    if name not in ("census", "census-lr"):
         census = {}
+    if name == "census-lr":
+        census = {**census, **lr}
 
     def sigma(f: str) -> float:
         v = getattr(args, f"sigma_{f}")

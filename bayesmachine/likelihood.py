@@ -30,17 +30,30 @@ Two models (``ModelParams.name``):
   the left factor is the machine's feedback column, formed from its own previous result
   through ``feedback_words`` (the quantized table clamped where it stops changing), the above
   factor a loaded column (:func:`neighbour_words` of the previous map row's results).
+* ``"census-lr"``: the census model and a left-right consistency column (issue 22). A right pass
+  (:attr:`ModelParams.right_model`: the census model with the right image as reference, lane d
+  pairing right map column x_r with left map column x_r + d, raster order, its own left/above
+  neighbour prior, no no-match row: that row's words are 0, so it never fires) gives the right
+  MAPs d_R; the left pass multiplies in one more column: row d of left map column x gets 1 when
+  ``|d_R(x - d) - d| <= lr_tolerance`` and ``lr_beta`` otherwise (also when x - d has no right
+  MAP); the no-match row gets ``lr_gamma`` when any lane is consistent, 1 when none is (0 with
+  ``lr_nomatch=False``: no no-match row at all), and its prior factor per matched neighbour is
+  ``prior_nomatch`` (0.1 by default for this model). :func:`lr_consistent` and
+  :func:`consistency_column` are the one definition the host, the references and the machine runs
+  read. The right pass covers right map columns ``x_first - Dmax .. x_last`` (every column an output
+  pixel consults); its lane d is loaded with word 0 (it never fires) where the left pixel
+  x_r + d lies right of ``x_last``, the last output column (:func:`right_lanes_valid`).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from numbers import Real
 
 import numpy as np
 
-from bayesmachine.params import DEFAULT_DMAX, STEREO_ROWS_PER_BEAT, MachineParams, ParameterError
+from bayesmachine.params import DEFAULT_DMAX, STEREO_ROWS_PER_BEAT, MachineParams, ParameterError, lane_params
 
 __all__ = [
     "MODELS",
@@ -59,9 +72,13 @@ __all__ = [
     "disparity_machine",
     "neighbour_lanes",
     "neighbour_words",
+    "lr_consistent",
+    "right_lanes_valid",
+    "consistency_column",
+    "right_machine",
 ]
 
-MODELS = ("paper", "census")
+MODELS = ("paper", "census", "census-lr")
 # The model the command line runs when --model is not given: the paper's for now. The on-chip front
 # end (--feed pixels, emit --top stereo) computes the census model too; switching is this one line.
 DEFAULT_MODEL = "paper"
@@ -94,11 +111,21 @@ OPTION_NAMES = {
     "prior_eps": "--prior-eps",
     "prior_s": "--prior-s",
     "prior_nomatch": "--prior-nomatch",
+    "lr_beta": "--lr-beta",
+    "lr_gamma": "--lr-gamma",
+    "lr_tolerance": "--lr-tolerance",
+    "lr_nomatch": "--lr-nomatch/--no-lr-nomatch",
+    "lr_right_nomatch": "--lr-right-nomatch/--no-lr-right-nomatch",
+    "lr_right_max_cycles": "--lr-right-max-cycles",
 }
 # The census model's own fields: left out of a paper model's to_dict(), so its reports and the
 # Verilator design keys (sim/stereo_engine.py hashes model.to_dict()) stay what they were.
 CENSUS_FIELDS = ("name", "census_window", "census_p0", "census_sigma", "census_nomatch_h",
                  "neighbour_prior", "prior_eps", "prior_s", "prior_nomatch")
+# The left-right model's own fields: left out of the other models' to_dict() (same reason).
+LR_FIELDS = ("lr_beta", "lr_gamma", "lr_tolerance", "lr_nomatch", "lr_right_nomatch", "lr_right_max_cycles")
+# The census-lr model's default no-match prior factor per matched neighbour (issue 22).
+LR_PRIOR_NOMATCH = 0.1
 
 
 def _error(name: str, text: str) -> ParameterError:
@@ -152,6 +179,12 @@ class ModelParams:
     prior_eps: float = 0.05
     prior_s: float = 4.0
     prior_nomatch: float | None = None
+    lr_beta: float = 0.1
+    lr_gamma: float = 0.01
+    lr_tolerance: int = 1
+    lr_nomatch: bool = True
+    lr_right_nomatch: bool = False
+    lr_right_max_cycles: int | None = None
 
     def __post_init__(self) -> None:
         if isinstance(self.dmax, bool) or not isinstance(self.dmax, int) or not 0 <= self.dmax <= 4094:
@@ -186,6 +219,24 @@ class ModelParams:
                 # With both neighbours matched and every disparity's likelihood ~0, a no-match prior
                 # of 0 would leave the pixel 0/0.
                 raise _error("prior_nomatch", "must be > 0: it keeps every pixel's posterior defined")
+        for name in ("lr_beta", "lr_gamma"):
+            _check_probability(name, getattr(self, name))
+            if not getattr(self, name) > 0:
+                # beta 0 with no consistent lane (and no no-match row) would leave a pixel 0/0.
+                raise _error(name, "must be > 0: it keeps every pixel's posterior defined")
+        t = self.lr_tolerance
+        if isinstance(t, bool) or not isinstance(t, int) or not 0 <= t <= 4094:
+            raise _error("lr_tolerance", f"must be an integer disparity distance in [0, 4094], got {t!r}")
+        for name in ("lr_nomatch", "lr_right_nomatch"):
+            if not isinstance(getattr(self, name), bool):
+                raise _error(name, f"must be True or False, got {getattr(self, name)!r}")
+        c = self.lr_right_max_cycles
+        if c is not None and (isinstance(c, bool) or not isinstance(c, int) or not 2 <= c <= (1 << 32) - 1):
+            raise _error("lr_right_max_cycles", f"must be an integer number of cycles in [2, 2^32 - 1] "
+                         f"(or None: the left machine's watchdog), got {c!r}")
+        if self.lr and not self.neighbour_prior:
+            # The right pass and the left pass are the census model with its prior (issue 22).
+            raise _error("neighbour_prior", "must be on for --model census-lr (both passes use it)")
 
     @property
     def hypotheses(self) -> int:
@@ -194,8 +245,21 @@ class ModelParams:
 
     @property
     def census(self) -> bool:
-        """Whether the model has a census column."""
-        return self.name == "census"
+        """Whether the model has a census column (census and census-lr)."""
+        return self.name in ("census", "census-lr")
+
+    @property
+    def lr(self) -> bool:
+        """Whether the model has the left-right consistency column (census-lr)."""
+        return self.name == "census-lr"
+
+    @property
+    def right_model(self) -> ModelParams:
+        """The right pass's model: this census-lr model as a census model (its columns, its prior,
+        the census model's own no-match prior factor)."""
+        if not self.lr:
+            raise ValueError(f"the {self.name} model has no right pass")
+        return replace(self, name="census", prior_nomatch=None)
 
     @property
     def has_prior(self) -> bool:
@@ -204,8 +268,8 @@ class ModelParams:
 
     @property
     def columns(self) -> int:
-        """Data columns of the machine (the prior column aside): 3 (paper) or 4 (+ census)."""
-        return 4 if self.census else 3
+        """Data columns of the machine (the prior column aside): 3 (paper), 4 (+ census), 5 (+ left-right)."""
+        return 5 if self.lr else 4 if self.census else 3
 
     @property
     def census_bits(self) -> int:
@@ -233,6 +297,8 @@ class ModelParams:
         """The no-match row's prior factor per matched neighbour in use (default: f(s))."""
         if self.prior_nomatch is not None:
             return float(self.prior_nomatch)
+        if self.lr:
+            return LR_PRIOR_NOMATCH
         return float(likelihood_formula(np.int64(1), 1, self.prior_eps, 1.0))
 
     def sigma(self, feature: str) -> float:
@@ -245,6 +311,8 @@ class ModelParams:
         ``prior_nomatch`` (what ran), so ``ModelParams(**to_dict())`` is the same model.
         """
         out = asdict(self)
+        if not self.lr:
+            out = {k: v for k, v in out.items() if k not in LR_FIELDS}
         if not self.census:
             return {k: v for k, v in out.items() if k not in CENSUS_FIELDS}
         out.update(census_sigma=self.sigma_c, census_nomatch_h=self.h_nm, prior_nomatch=self.prior_nm)
@@ -280,6 +348,8 @@ class LikelihoodTables:
     census_nomatch: float | None = None
     prior: np.ndarray | None = None
     prior_nomatch: float | None = None
+    lr_beta: float | None = None
+    lr_gamma: float | None = None
 
 
 def likelihood_tables(model: ModelParams) -> LikelihoodTables:
@@ -304,7 +374,10 @@ def likelihood_tables(model: ModelParams) -> LikelihoodTables:
     for name, tab in checks:
         if not ((tab >= 0.0) & (tab <= 1.0)).all():  # NaN fails both comparisons
             raise _error(name, f"= {getattr(model, name)!r} gives likelihoods outside [0, 1]")
-    return LikelihoodTables(tabs["m"], tabs["gh"], tabs["gv"], nm, census, census_nm, prior, prior_nm)
+    lr_beta = float(model.lr_beta) if model.lr else None
+    lr_gamma = float(model.lr_gamma) if model.lr else None
+    return LikelihoodTables(tabs["m"], tabs["gh"], tabs["gv"], nm, census, census_nm, prior, prior_nm,
+                            lr_beta, lr_gamma)
 
 
 def quantize(p: np.ndarray | float, word_bits: int) -> np.ndarray:
@@ -354,6 +427,10 @@ class QuantizedTables:
             self.prior_nomatch = int(quantize(tables.prior_nomatch, word_bits))
             changes = np.flatnonzero(self.prior[1:] != self.prior[:-1])
             self.prior_last = int(changes[-1]) + 1 if changes.size else 0
+        self.lr_beta = self.lr_gamma = None
+        if tables.lr_beta is not None and tables.lr_gamma is not None:
+            self.lr_beta = int(quantize(tables.lr_beta, word_bits))
+            self.lr_gamma = int(quantize(tables.lr_gamma, word_bits))
 
 
 def neighbour_words(qtables: QuantizedTables, dmax: int, hat: np.ndarray) -> np.ndarray:
@@ -377,6 +454,52 @@ def neighbour_words(qtables: QuantizedTables, dmax: int, hat: np.ndarray) -> np.
     f[matched, : dmax + 1] = qtables.prior[np.abs(d[None, :] - hat[matched, None].astype(np.int64))]
     f[matched, dmax + 1] = qtables.prior_nomatch
     return f
+
+
+def right_lanes_valid(right_columns: np.ndarray, dmax: int, last: int) -> np.ndarray:
+    """(Wr, Dmax+1) bool: lane d of right map column x_r pairs it with left map column x_r + d, which
+    must not lie right of ``last``, the last output column (a lane past it is loaded with word 0)."""
+    xr = np.asarray(right_columns, dtype=np.int64)
+    return (xr[:, None] + np.arange(dmax + 1)[None, :]) <= last
+
+
+def lr_consistent(right_map: np.ndarray, right_first: int, columns: np.ndarray, dmax: int,
+                  tolerance: int) -> np.ndarray:
+    """The left-right test: (..., Wo, Dmax+1) bool, lane d of left map column ``columns[i]`` consistent.
+
+    ``right_map`` (..., Wr): the right pass's MAPs of right map columns ``right_first ..``, -1 for none
+    (no MAP, a timeout). Lane d is consistent when ``|d_R(x - d) - d| <= tolerance``; a column
+    x - d outside ``right_map``'s columns or without a MAP is not.
+    """
+    hat = np.asarray(right_map)
+    if hat.dtype.kind not in "iu":
+        raise ValueError(f"right MAPs must be integers (-1: none), got {hat.dtype}")
+    cols = np.asarray(columns, dtype=np.int64)
+    d = np.arange(dmax + 1)
+    j = cols[:, None] - d[None, :] - int(right_first)  # (Wo, Dmax+1) index into right_map
+    inside = (j >= 0) & (j < hat.shape[-1])
+    got = hat[..., np.clip(j, 0, max(0, hat.shape[-1] - 1))].astype(np.int64)
+    return inside & (got >= 0) & (np.abs(got - d) <= tolerance)
+
+
+def consistency_column(consistent: np.ndarray, model: ModelParams, one: float | int, beta: float | int,
+                       gamma: float | int) -> np.ndarray:
+    """The consistency column (..., Dmax+2) of :func:`lr_consistent`'s test (..., Dmax+1).
+
+    Row d: ``one`` when consistent, ``beta`` otherwise; the no-match row: ``gamma`` when any lane is
+    consistent, ``one`` when none is, 0 without a no-match row (``lr_nomatch=False``). In floats
+    (1.0, beta, gamma: the reference) or in words (2^W and the quantized beta, gamma: the machine's
+    loaded column); the dtype follows ``one`` (float64, or uint16 for words).
+    """
+    c = np.asarray(consistent, dtype=bool)
+    dtype = np.float64 if isinstance(one, float) else np.uint16
+    out = np.empty((*c.shape[:-1], c.shape[-1] + 1), dtype=dtype)
+    out[..., :-1] = np.where(c, one, beta)
+    if model.lr_nomatch:
+        out[..., -1] = np.where(c.any(axis=-1), gamma, one)
+    else:
+        out[..., -1] = 0
+    return out
 
 
 def neighbour_lanes(rows: int, loaded_columns: int) -> int:
@@ -434,6 +557,29 @@ def disparity_machine(model: ModelParams, **machine_kwargs: object) -> MachinePa
     return machine
 
 
+def right_machine(model: ModelParams, machine: MachineParams) -> MachineParams:
+    """The right pass's machine of a census-lr model whose left pass runs on ``machine``.
+
+    The census model's machine (:func:`disparity_machine` of :attr:`ModelParams.right_model`: 4 data
+    columns and its neighbour prior) with ``machine``'s word width, counter max, random source,
+    watchdog (``model.lr_right_max_cycles`` if given: a right pixel stopped by it has no right MAP)
+    and tie rule, and the seed of lane 1 of a row of machines
+    (:func:`~bayesmachine.params.lane_params`): a second machine beside the left one, with its own
+    random numbers.
+    """
+    if not model.lr:
+        raise ValueError(f"the {model.name} model has no right pass")
+    check_disparity_machine(model, machine)
+    keep = ("word_bits", "counter_max", "rng", "lfsr_bits", "seed", "max_cycles", "tie_break")
+    kwargs = {k: getattr(machine, k) for k in keep}
+    if model.lr_right_max_cycles is not None:
+        kwargs["max_cycles"] = model.lr_right_max_cycles
+    if machine.rng == "smtj":
+        kwargs.update(smtj_dwell=machine.smtj_dwell, smtj_spread=machine.smtj_spread,
+                      smtj_share=machine.smtj_share)
+    return lane_params(disparity_machine(model.right_model, **kwargs), 1)
+
+
 def feedback_table(model: ModelParams, word_bits: int) -> tuple[tuple[int, ...], int]:
     """The neighbour prior's feedback table on ``word_bits``-bit words: (``feedback_words``,
     ``feedback_nomatch_word``) = (quantized prior clamped at ``prior_last``, quantized no-match factor)."""
@@ -474,6 +620,15 @@ def check_disparity_machine(model: ModelParams, machine: MachineParams) -> int:
         if quantize(l_nm, w) == 0:
             raise _error("census_nomatch_h", f"= {model.h_nm}: the no-match row's census likelihood "
                          f"{float(l_nm):.3g} quantizes to 0 with {w}-bit words (no match could never win)")
+    if model.lr:
+        c = model.lr_right_max_cycles
+        if c is not None and c <= machine.counter_max:
+            raise _error("lr_right_max_cycles", f"= {c} must exceed the counter max ({machine.counter_max}): "
+                         "no counter can overflow in fewer than counter max + 1 cycles")
+        for name in ("lr_beta", "lr_gamma"):
+            if int(quantize(getattr(model, name), w)) == 0:
+                raise _error(name, f"= {getattr(model, name):.3g} quantizes to 0 with {w}-bit words "
+                             "(raise it or --word-bits)")
     if model.has_prior:
         if machine.prior != "neighbour":
             raise _error("neighbour_prior", f"needs the machine's neighbour prior (prior='neighbour': its "

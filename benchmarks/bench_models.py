@@ -1,4 +1,4 @@
-"""Benchmark: the paper model against the census model (issue 17) on the bundled Motorcycle pair.
+"""Benchmark: the paper model, the census model (issue 17) and census-lr (issue 22) on the bundled pair.
 
 Float64 reference of: the paper model; + a 7x7 census column with the no-match row left
 uncalibrated (h_nm = 0: its census entry is L_c(0) = 1); + the no-match row calibrated
@@ -11,17 +11,23 @@ seed 1) each model needs
 (``disparity_machine``: the census model's with its neighbour prior, fed back from its own
 results through ``run_machine``) on the paper model and the census model, against counter max,
 beside its float and quantized references, with cycles and wall cycles per pixel; then the
-random sources on the census model at counter max 16. All bad-n figures come from
-``host.metrics.bad_rates`` (report.json's). Prints figures; asserts nothing; tunes nothing (the
-issue's defaults).
-Run: python benchmarks/bench_models.py [--dmax 80] [--counter-max 1,2,4,8,16] [--no-machine]
-     [--figure docs/figures/motorcycle-models.png]
+random sources on the census model at counter max 16. The census-lr model (left-right
+consistency column from a right pass): its float64 reference with the issue's defaults, without the
+left pass's no-match row, with the census model's no-match row in the right pass, and 2-3 values
+each of beta, gamma, the no-match prior factor and the tolerance around the defaults (the issue's
+flatness claim; nothing is picked from these); its machine (both passes, model engine) at
+``--lr-counter-max`` (default 16: its right pass is long, minutes on 2 cores), with the right
+pass's cycles. All bad-n figures come from ``host.metrics.bad_rates`` (report.json's). Prints
+figures; asserts nothing; tunes nothing (the issues' defaults).
+Run: python benchmarks/bench_models.py [--dmax 80] [--counter-max 1,2,4,8,16] [--lr-counter-max 16]
+     [--no-machine] [--no-lr] [--figure docs/figures/motorcycle-models.png]
 """
 
 from __future__ import annotations
 
 import argparse
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -65,6 +71,9 @@ def main() -> None:
     ap.add_argument("--no-machine", action="store_true", help="skip the machine run")
     ap.add_argument("--counter-max", default="1,2,4,8,16",
                     help="the machine's counter max values, comma-separated (Fig 6 for each model)")
+    ap.add_argument("--lr-counter-max", default="16",
+                    help="counter max values of the census-lr machine, comma-separated ('' for none)")
+    ap.add_argument("--no-lr", action="store_true", help="skip the census-lr model")
     ap.add_argument("--figure", default=None, metavar="PNG",
                     help="write the paper and census machines, SGBM, StereoBM and the ground truth")
     args = ap.parse_args()
@@ -85,6 +94,15 @@ def main() -> None:
         "census 5x5 + calibrated, no prior": ModelParams(dmax=dmax, name="census", census_window=5,
                                                          neighbour_prior=False),
     }
+    if not args.no_lr:
+        lr = ModelParams(dmax=dmax, name="census-lr")
+        models["+ left-right column (census-lr default)"] = lr
+        models["census-lr, no no-match row (left pass)"] = replace(lr, lr_nomatch=False)
+        models["census-lr, right pass with a no-match row"] = replace(lr, lr_right_nomatch=True)
+        for field, values in (("lr_beta", (0.03, 0.3)), ("lr_gamma", (0.001, 0.03)),
+                              ("prior_nomatch", (0.05, 0.25)), ("lr_tolerance", (0, 2))):
+            for v in values:
+                models[f"census-lr, {field} {v}"] = replace(lr, **{field: v})
     print(f"Motorcycle {left.shape[1]}x{left.shape[0]}, Dmax {dmax}, output {gt.shape[1]}x{gt.shape[0]} = "
           f"{gt.size} pixels, {np.isfinite(gt).mean():.3f} with finite gt, "
           f"{occluded.mean():.3f} occluded (gt)")
@@ -129,6 +147,16 @@ def main() -> None:
             if counter_max == 16:
                 figure_maps[label] = run.map
             machine_line(f"{label}, counter max {counter_max}", run, refs[name], gt, occluded)
+    lr_name = "+ left-right column (census-lr default)"
+    lr_counters = [int(c) for c in args.lr_counter_max.split(",") if c.strip()]
+    if lr_name in models and lr_counters:
+        print("\ncensus-lr machine (both passes, model engine): cycles/px over both passes = all compute "
+              "cycles / output pixels; the right pass's own cycles per right pixel and timeouts")
+        for counter_max in lr_counters:
+            run = lr_machine_line(left, right, gt, gt_full, models[lr_name], feats_cache, refs[lr_name],
+                                  counter_max, args.word_bits, occluded)
+            if counter_max == 16:
+                figure_maps["census-lr"] = run.map
     print("\nRandom sources on the census model with its prior, counter max 16:")
     name = machine_models["census + prior"]
     gt, occluded = truth[models[name].margin]
@@ -156,6 +184,25 @@ def machine_run(left, right, gt, gt_full, model, feats_cache, ref, counter_max, 
     fl, fr = feats_cache[model.census_window if model.census else None]
     prepared = Prepared(left, right, model, (fl, fr), ref[0], 0.0, gt, gt_full)
     return run_machine(prepared, machine, "model", progress=False)
+
+
+def lr_machine_line(left, right, gt, gt_full, model, feats_cache, ref, counter_max, word_bits, occluded):
+    """One census-lr machine run: its figures, then both passes' cycles (compute and wall)."""
+    t0 = time.perf_counter()
+    run = machine_run(left, right, gt, gt_full, model, feats_cache, ref, counter_max, "sobol", word_bits)
+    machine_line(f"census-lr, counter max {counter_max}", run, ref, gt, occluded)
+    r = run.right
+    both = (run.cycles.sum() + r.cycles.sum()) / run.cycles.size
+    rwall = pixel_wall_cycles(r.machine, r.cycles)
+    lwall = pixel_wall_cycles(run.machine, run.cycles)
+    wall = (lwall.sum() + rwall.sum()) / run.cycles.size
+    print(f"{'':<44} both passes {both:.2f} cycles/px, wall {wall:.2f}"
+          f"; left pass {run.cycles.mean():.2f} (median {np.median(run.cycles):.0f}, p99 "
+          f"{np.percentile(run.cycles, 99):.0f}); right pass {r.cycles.size} px, "
+          f"{r.cycles.mean():.2f} (median {np.median(r.cycles):.0f}, "
+          f"p99 {np.percentile(r.cycles, 99):.0f}), timeouts "
+          f"{int(r.timeout.sum())}; {time.perf_counter() - t0:.0f} s")
+    return run
 
 
 def machine_line(name: str, run, ref: tuple, gt: np.ndarray, occluded: np.ndarray) -> None:

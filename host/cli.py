@@ -206,6 +206,10 @@ def _machine_params(
     overrides: dict[str, object] = {} if counter_max is None else {"counter_max": counter_max}
     if rng is not None:
         overrides["rng"] = rng
+    if getattr(args, "feed", "words") == "pixels" and model.lr:
+        raise ValueError("--feed pixels: the on-chip front end computes the paper and census models, not "
+                         "census-lr's right pass and consistency column yet; run --model census-lr with "
+                         "--feed words")
     machine = machine_params_from_args(args, model.dmax, model=model, **overrides)
     if getattr(args, "feed", "words") == "pixels" and args.lanes is None:
         # The front end writes one feature per lane: lanes a multiple of the loaded columns.
@@ -227,15 +231,20 @@ def _check_fits(region: OutputRegion, machine: MachineParams) -> None:
 
 def _report(outcome: RunOutcome, source: str, crop: Crop | None) -> dict[str, object]:
     prep, run = outcome.prepared, outcome.run
+    right = run.right  # census-lr's right pass: its cycles count too
+    frame = int(run.cycles.sum()) + (int(right.cycles.sum()) if right is not None else 0)
+    wall = run.wall_cycles
+    if wall is not None and right is not None:
+        wall = None if right.wall_cycles is None else wall + right.wall_cycles
     report: dict[str, object] = {
         "engine": run.engine,
         "rng": run.machine.rng,
         "counter_max": run.machine.counter_max,
         **outcome.metrics.to_report(),
-        "frame_cycles": int(run.cycles.sum()),
+        "frame_cycles": frame,
         # Compute cycles count the machine's runs only; wall cycles (RTL engines) add loading.
-        "wall_cycles": run.wall_cycles,
-        "wall_cycles_per_pixel": None if run.wall_cycles is None else run.wall_cycles / run.cycles.size,
+        "wall_cycles": wall,
+        "wall_cycles_per_pixel": None if wall is None else wall / run.cycles.size,
         "seconds": run.seconds,
         "words_seconds": run.words_seconds,
         "reference_seconds": prep.reference_seconds,
@@ -248,6 +257,9 @@ def _report(outcome: RunOutcome, source: str, crop: Crop | None) -> dict[str, ob
         "model": prep.model.to_dict(),
         "machine": run.machine.to_dict(),
     }
+    if right is not None:
+        report["right_pass_machine"] = right.machine.to_dict()
+        report["right_pass_seconds"] = right.seconds
     return report
 
 
@@ -267,6 +279,10 @@ def _summary(r: dict[str, object]) -> str:
         f"RMS {f('rms_error')}, no-match F1 {f('nomatch_f1')}, MAP agreement {f('map_agreement')}, "
         f"timeouts {r['timeouts']}, engine {f('seconds', '.2f')} s"
     )
+    if r.get("right_pass_pixels") is not None:
+        line += (f"\n  census-lr: cycles/px over both passes {f('cycles_per_pixel_mean', '.2f')}: left pass "
+                 f"{f('left_pass_cycles_per_pixel_mean', '.2f')}, right pass {r['right_pass_pixels']} px at "
+                 f"{f('right_pass_cycles_per_pixel_mean', '.2f')} (timeouts {r['right_pass_timeouts']})")
     if r.get("wall_cycles_per_pixel") is not None:
         line += f"\n  wall cycles per pixel, loading included: {f('wall_cycles_per_pixel', '.2f')}"
 
@@ -377,6 +393,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
         report = _report(outcome, source, args.crop)
         report["feed"] = args.feed
         run, prep = outcome.run, outcome.prepared
+        # census-lr: the right pass's MAPs, cycles and timeouts too (over its own columns).
+        extra = {} if run.right is None else {"right_map": run.right.map, "right_cycles": run.right.cycles,
+                                               "right_timeout": run.right.timeout}
         out.write(
             "result.npz",
             lambda path: np.savez_compressed(
@@ -386,6 +405,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
                 cycles=run.cycles,
                 timeout=run.timeout,
                 reference_map=prep.reference_map,
+                **extra,
             ),
         )
         from .plots import save_disparity_figure

@@ -14,7 +14,7 @@ from .likelihoods import ModelParams
 from .reference import Reference, reference_bands
 from .region import OutputRegion
 
-__all__ = ["Prepared", "MachineRun", "counts_dtype"]
+__all__ = ["Prepared", "MachineRun", "RightPass", "counts_dtype"]
 
 
 def counts_dtype(counter_max: int) -> np.dtype:
@@ -70,3 +70,16 @@ class MachineRun:
     seconds: float  # time inside the engine's run calls
     words_seconds: float  # time building likelihood memories
     wall_cycles: int | None = None  # RTL engines: clock cycles including loading (None: model)
+    right: RightPass | None = None  # census-lr: its right pass (the second machine run)
+
+
+@dataclass
+class RightPass:
+    """census-lr's right pass over ``host.likelihoods.right_columns`` (its own machine, run by ``run``)."""
+
+    machine: MachineParams
+    map: np.ndarray  # (Ho, Wr) int16, -1 = none (a timeout: the right pass has no no-match row)
+    cycles: np.ndarray  # (Ho, Wr) int64
+    timeout: np.ndarray  # (Ho, Wr) bool
+    seconds: float
+    wall_cycles: int | None = None

@@ -8,6 +8,10 @@ A machine with the neighbour prior (``prior="neighbour"``, the census model's) r
 per call: row y's loaded prior column is the above neighbours' factor, formed from the machine's
 own results of row y - 1 (none for row 0), and each row's first pixel is flagged ``line_start``
 (the machine forms the left neighbour's factor itself from its previous result).
+The census-lr model runs a second machine (:func:`bayesmachine.likelihood.right_machine`, the same
+engine kind) for its right pass: per map row, first the right pass's row (its own above prior from
+its previous row), then the left pass's row, whose consistency column comes from the right MAPs just
+produced (:func:`bayesmachine.likelihood.consistency_column`); the run keeps them as ``run.right``.
 Memory grows with the outputs (per-pixel maps and counts), not with frame x Dmax: the
 float64 posterior is only ever computed one band of rows at a time.
 """
@@ -21,16 +25,23 @@ from dataclasses import dataclass, field
 import numpy as np
 from tqdm import tqdm
 
-from bayesmachine.likelihood import neighbour_words
+from bayesmachine.likelihood import consistency_column, lr_consistent, neighbour_words, right_machine
 from bayesmachine.outputs import require_memory
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.engines import ENGINES, get_engine
 
 from .features import model_features
 from .images import validate_pair
-from .likelihoods import ModelParams, QuantizedTables, likelihood_tables, memory_words
+from .likelihoods import (
+    ModelParams,
+    QuantizedTables,
+    likelihood_tables,
+    memory_words,
+    right_columns,
+    right_memory_words,
+)
 from .metrics import RunMetrics, evaluate, gt_region
-from .records import MachineRun, Prepared, counts_dtype
+from .records import MachineRun, Prepared, RightPass, counts_dtype
 from .reference import reference_map, warm_up
 from .region import OutputRegion
 
@@ -121,12 +132,16 @@ def run_machine(
         "use --crop or a smaller --dmax",
     )
     if feed == "pixels":
+        if model.lr:
+            raise ValueError("--feed pixels: the on-chip front end does not compute census-lr's right pass "
+                             "and consistency column yet; run it with --feed words")
         return _run_pixels(prepared, machine, engine, engine_options)
     neighbour = machine.feedback_columns > 0
     if neighbour:
         chunk_rows = 1  # row y's above column is the machine's own row y - 1
     eng = get_engine(engine, machine, **(engine_options or {}))
     qtables = QuantizedTables(likelihood_tables(model), machine.word_bits)
+    lr = _RightRun(prepared, machine, engine, engine_options) if model.lr else None
     counts = np.zeros((ho, wo, m), counts_dtype(machine.counter_max))
     flat_map = np.zeros((ho, wo), np.int16)  # row indices < 4096
     nomatch = np.zeros((ho, wo), bool)
@@ -147,8 +162,13 @@ def run_machine(
                     # The machine's own results of the row above (-1: no match, timeout, none for row 0).
                     above = np.full(wo, -1, np.int16) if y0 == 0 else disp_row(y0 - 1)
                     prior = neighbour_words(qtables, model.dmax, above)
+                    consistency = None
+                    if lr is not None:
+                        t_r = time.perf_counter()
+                        consistency = lr.row(y0, qtables)
+                        t0 += time.perf_counter() - t_r  # the right pass's time is its own
                     words = memory_words(left_f, right_f, model, machine, rows=rows, qtables=qtables,
-                                         prior=prior)
+                                         prior=prior, consistency=consistency)
                     starts = np.zeros(wo, bool)
                     starts[0] = True  # each map row's first pixel has no left neighbour
                     t1 = time.perf_counter()
@@ -170,9 +190,62 @@ def run_machine(
         wall = eng.wall_cycles
     finally:
         eng.close()  # the Verilator harness is a process: end it now, not at garbage collection
+        if lr is not None:
+            lr.close()
     # Timeouts count as no match: the machine gave no answer within its watchdog.
     disp = np.where(nomatch | timeout, np.int16(-1), flat_map)
-    return MachineRun(engine, machine, disp, counts, cycles, nomatch, timeout, engine_s, words_s, wall)
+    right = lr.result() if lr is not None else None
+    return MachineRun(engine, machine, disp, counts, cycles, nomatch, timeout, engine_s, words_s, wall, right)
+
+
+class _RightRun:
+    """census-lr's right pass, one map row at a time, on its own machine (the left pass's engine kind)."""
+
+    def __init__(self, prepared: Prepared, machine: MachineParams, engine: str,
+                 engine_options: dict[str, object] | None) -> None:
+        model = prepared.model
+        self.model = model
+        self.features = prepared.features
+        self.machine = right_machine(model, machine)
+        self.qtables = QuantizedTables(likelihood_tables(model.right_model), machine.word_bits)
+        region = OutputRegion.of_features(prepared.features[0].shape, model.dmax)
+        self.columns = right_columns(region)
+        self.map_columns = region.map_columns
+        ho, wr = region.shape[0], self.columns.size
+        self.map = np.full((ho, wr), -1, np.int16)
+        self.cycles = np.zeros((ho, wr), np.int64)
+        self.timeout = np.zeros((ho, wr), bool)
+        self.seconds = 0.0
+        self.wall: int | None = None
+        self.engine = get_engine(engine, self.machine, **(engine_options or {}))
+
+    def row(self, y: int, left_q: QuantizedTables) -> np.ndarray:
+        """Run right map row ``y`` and return the left pass's consistency words (Wo, Dmax+2) of row ``y``."""
+        model, wr = self.model, self.columns.size
+        above = np.full(wr, -1, np.int16) if y == 0 else self.map[y - 1]
+        prior = neighbour_words(self.qtables, model.dmax, above)
+        words = right_memory_words(*self.features, model, self.machine, rows=slice(y, y + 1),
+                                   qtables=self.qtables, prior=prior)
+        starts = np.zeros(wr, bool)
+        starts[0] = True
+        t0 = time.perf_counter()
+        res = self.engine.run(words, line_start=starts)
+        self.seconds += time.perf_counter() - t0
+        timeout = np.asarray(res.timeout, bool)
+        self.timeout[y] = timeout
+        self.cycles[y] = np.asarray(res.cycles)
+        # No match cannot win (its words are 0); a timeout is no right MAP.
+        self.map[y] = np.where(timeout | np.asarray(res.nomatch, bool), np.int16(-1), np.asarray(res.map))
+        consistent = lr_consistent(self.map[y], int(self.columns[0]), self.map_columns, model.dmax,
+                                   model.lr_tolerance)
+        return consistency_column(consistent, model, left_q.one, left_q.lr_beta, left_q.lr_gamma)
+
+    def close(self) -> None:
+        self.wall = self.engine.wall_cycles
+        self.engine.close()
+
+    def result(self) -> RightPass:
+        return RightPass(self.machine, self.map, self.cycles, self.timeout, self.seconds, self.wall)
 
 
 def _run_pixels(
