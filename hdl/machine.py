@@ -42,7 +42,7 @@ from bayesmachine.params import MachineParams
 
 from .counters import overflow_counter_full
 from .encoder import MAPEncoder
-from .operator import bus_rows, operator_bits, operator_rows
+from .operator import bus_rows, operator_bits, operator_rows, top_bit_pair
 from .signatures import MachineSignature, beat_words, entropy_layout, load_layout, result_layout
 from .sources import OnChipSource, random_source
 
@@ -306,21 +306,20 @@ class BayesianMachine(wiring.Component):
             # No bubble (hides_bubble, "Timing" in docs/architecture.md): the swap is the next run's
             # first compute cycle. Its bits (the restart numbers against the shadow words) are
             # registered every cycle in ``first_bit`` and drive ``first_row`` in the swap; the swap
-            # loads ``bit_q`` with the run's second bits, the restart numbers XOR V_c[0] (a block's
-            # second point) against the shadow words, which the swap is still reading.
-            first_bits = []
+            # loads ``bit_q`` with the run's second bits, the restart numbers XOR V_c[0] = 2^(W-1)
+            # (a block's second point) against the shadow words, which the swap is still reading.
+            # Both come from one comparator of the low W - 1 bits (``top_bit_pair``).
+            restart = ([restart_copies[o // cols // n.rows_per_group][index[o]] for o in range(ops)]
+                       if source.shared else [source.restart_numbers[index[o]] for o in range(ops)])
+            assert all(d == 1 << (p.word_bits - 1) for d in source.first_directions)
+            first_bits, swap_bits = [], []
             for o in range(ops):
+                first, second = top_bit_pair(restart[o], n.incoming[o])
                 first_bit = Signal(name=f"first_bit_{o // cols}_{o % cols}")
-                m.d.sync += first_bit.eq(start_bits[o])
+                m.d.sync += first_bit.eq(first)
                 first_bits.append(first_bit)
+                swap_bits.append(second)
             n.first_row = bus_rows(first_bits, rows, cols)
-            def second(numbers: list[Value]) -> list[Value]:
-                return [x ^ d for x, d in zip(numbers, source.first_directions, strict=True)]
-
-            if source.shared:
-                swap_bits = group_bits([second(copy) for copy in restart_copies], n.incoming)
-            else:  # a single row: no copies
-                swap_bits = operator_bits(second(list(source.restart_numbers)), n.incoming, index)
         bits = []
         for o in range(ops):
             g = o // cols // n.rows_per_group

