@@ -243,3 +243,48 @@ def test_following_restart_numbers_is_the_next_cycles_restart_numbers(w: int, co
     for t, (restart, copy) in enumerate(seen):
         assert copy == restart, t
     assert sum(a[0] != b[0] for a, b in zip(seen[:-1], seen[1:], strict=True)) > 20  # the shift LFSRs do step
+
+
+@pytest.mark.parametrize(("rng", "w"), [("sobol", 1), ("sobol", 3), ("lfsr-shared", 4)])
+def test_candidates_picked_by_the_next_inputs_are_the_numbers(rng: str, w: int) -> None:
+    """The machine's second level of copies: registers loaded every clock with each entry of
+    ``candidate_numbers`` / ``candidate_restart_numbers`` (one per (enable, restart) of the next
+    cycle), then a register loaded with the entry of that cycle's actual inputs, equal
+    ``next_numbers`` / ``restart_numbers`` in every cycle from the second on, for random inputs
+    (all four combinations: blocks end, restarts mid-block, restarting compute cycles)."""
+    from amaranth.hdl import Module, Mux, Signal
+
+    from bayesmachine.hdl.sources import CANDIDATE_INPUTS, random_source
+
+    params = MachineParams(rows=3, columns=3, word_bits=w, lfsr_bits=w + 8, counter_max=3, lanes=1, rng=rng)
+    dut = random_source(params)
+    m = Module()
+    m.submodules.dut = dut
+    enable, restart = Signal(), Signal()
+    m.d.comb += [dut.enable.eq(enable), dut.restart.eq(restart)]
+    copies = {}
+    for kind in ("numbers", "restart_numbers"):
+        rows = getattr(dut, f"candidate_{kind}")
+        cand = [[Signal(w) for _ in row] for row in rows]
+        for regs, row in zip(cand, rows, strict=True):
+            m.d.sync += [c.eq(x) for c, x in zip(regs, row, strict=True)]
+        chosen = {inputs: cand[j] for j, inputs in enumerate(CANDIDATE_INPUTS)}
+        copy = [Signal(w) for _ in rows[0]]
+        m.d.sync += [c.eq(Mux(enable, Mux(restart, chosen[1, 1][i], chosen[1, 0][i]),
+                              Mux(restart, chosen[0, 1][i], chosen[0, 0][i]))) for i, c in enumerate(copy)]
+        copies[kind] = copy
+    rnd = random.Random(w)
+    drive = [CANDIDATE_INPUTS[rnd.choice([0, 1, 1, 1, 2, 3])] for _ in range(max(120, 6 << w))]
+    seen = []
+
+    async def bench(ctx):
+        for e, r in drive:
+            await ctx.tick()
+            ctx.set(enable, e)
+            ctx.set(restart, r)
+            seen.append(tuple([ctx.get(x) for x in v] for v in (
+                dut.next_numbers, copies["numbers"], dut.restart_numbers, copies["restart_numbers"])))
+
+    run_sim(m, bench)
+    for t, (nxt, nxt_copy, rst, rst_copy) in enumerate(seen[2:]):
+        assert (nxt_copy, rst_copy) == (nxt, rst), t
