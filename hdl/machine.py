@@ -44,7 +44,7 @@ from .counters import overflow_counter_full
 from .encoder import MAPEncoder
 from .operator import bus_rows, operator_bits, operator_rows, top_bit_pair
 from .signatures import MachineSignature, beat_words, entropy_layout, load_layout, result_layout
-from .sources import CANDIDATE_INPUTS, OnChipSource, random_source
+from .sources import OnChipSource, random_source
 
 __all__ = [
     "BUBBLE_CYCLES", "FEEDBACK_CYCLES", "GROUP_OPERATORS", "LOAD_LATENCY", "SOURCE_GROUPS", "BayesianMachine",
@@ -282,30 +282,12 @@ class BayesianMachine(wiring.Component):
             # every clock from ``following_numbers`` (so equal to ``next_numbers`` in every
             # cycle), and one of its restart numbers, loaded from ``following_restart_numbers``
             # (equal to ``restart_numbers``). The flow keeps these ``_rep`` registers apart too.
-            # Two levels: each source copy's candidates (the numbers two cycles ahead for each
-            # (enable, restart) of the next cycle, CANDIDATE_INPUTS) are registered beside it
-            # (``<name>_cand_rep<k>_<j>_<i>``); each group's copy then picks the candidate of the
-            # inputs its own registered enables say this cycle has (a 4:1 choice on local
-            # flip-flops), so the source's logic and the net across the groups are in separate
-            # cycles.
             def group_copies(name: str, attr: str) -> list[list[Signal]]:
-                cands = []
-                for k, src in enumerate(n.sources):
-                    per_input = []
-                    for j, row in enumerate(getattr(src, attr)):
-                        regs = [Signal(len(x), name=f"{name}_cand_rep{k}_{j}_{i}") for i, x in enumerate(row)]
-                        m.d.sync += [c.eq(x) for c, x in zip(regs, row, strict=True)]
-                        per_input.append(regs)
-                    cands.append(per_input)
                 copies = []
                 for g in range(n.groups):
-                    cand = cands[g // SOURCE_GROUPS]
-                    chosen = {inputs: cand[j] for j, inputs in enumerate(CANDIDATE_INPUTS)}
-                    e, r = n.compute_rep[g], n.start_rep[g]
-                    copy = [Signal(len(x), name=f"{name}_rep{g}_{i}") for i, x in enumerate(cand[0])]
-                    for i, c in enumerate(copy):
-                        m.d.sync += c.eq(Mux(e, Mux(r, chosen[1, 1][i], chosen[1, 0][i]),
-                                             Mux(r, chosen[0, 1][i], chosen[0, 0][i])))
+                    following = list(getattr(n.sources[g // SOURCE_GROUPS], attr))
+                    copy = [Signal(len(x), name=f"{name}_rep{g}_{i}") for i, x in enumerate(following)]
+                    m.d.sync += [c.eq(x) for c, x in zip(copy, following, strict=True)]
                     copies.append(copy)
                 return copies
 
@@ -313,8 +295,8 @@ class BayesianMachine(wiring.Component):
                 return [operator_bits(copies[o // cols // n.rows_per_group], [words[o]], [index[o]])[0]
                         for o in range(ops)]
 
-            n.next_bits = group_bits(group_copies("next_number", "candidate_numbers"), n.active)
-            restart_copies = group_copies("restart_number", "candidate_restart_numbers")
+            n.next_bits = group_bits(group_copies("next_number", "following_numbers"), n.active)
+            restart_copies = group_copies("restart_number", "following_restart_numbers")
             start_bits = group_bits(restart_copies, n.incoming)
         else:
             n.next_bits = operator_bits(list(source.next_numbers), n.active, index)

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value, unsigned
+from amaranth.hdl import Cat, Module, Mux, Signal, Value, unsigned
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
@@ -35,15 +35,12 @@ from bayesmachine.sources import source_kind
 from bayesmachine.sources.lfsr import LFSRSpec, column_lfsr_specs, lfsr_specs
 from bayesmachine.sources.sobol import check_params, direction_numbers
 
-__all__ = ["CANDIDATE_INPUTS", "SOURCE_NUMBERS", "LFSRBank", "OnChipSource", "SobolGenerators",
-           "lfsr_next_state_expr", "random_source"]
+__all__ = ["SOURCE_NUMBERS", "LFSRBank", "OnChipSource", "SobolGenerators", "lfsr_next_state_expr",
+           "random_source"]
 
 # The per-cycle number lists every on-chip source gives (see OnChipSource).
 SOURCE_NUMBERS = ("numbers", "next_numbers", "restart_numbers", "following_numbers",
                   "following_restart_numbers")
-# The (enable, restart) inputs of the next cycle a shared source's candidates are given for
-# (``candidate_numbers``), in this order: idle, compute, restart, restarting compute.
-CANDIDATE_INPUTS = ((0, 0), (1, 0), (0, 1), (1, 1))
 
 
 def lfsr_next_state_expr(state: Value, spec: LFSRSpec) -> Value:
@@ -212,33 +209,6 @@ class LFSRBank(OnChipSource):
         return [Mux(self.enable[self._groups[i]], n, r)
                 for i, (n, r) in enumerate(zip(self.next_numbers, self.numbers, strict=True))]
 
-    def _candidates(self, restart_kind: bool) -> list[list[Value]]:
-        out = []
-        for e, _ in CANDIDATE_INPUTS:  # an LFSR ignores restart
-            row = []
-            for i, s in enumerate(self._specs):
-                state = getattr(self, f"state_{i}")
-                step1 = lfsr_next_state_expr(state, s)
-                after = Mux(self.enable[self._groups[i]], step1, state)  # the next cycle's state
-                if e:
-                    after = lfsr_next_state_expr(after, s)
-                row.append(after[: s.step] if restart_kind else lfsr_next_state_expr(after, s)[: s.step])
-            out.append(row)
-        return out
-
-    @property
-    def candidate_numbers(self) -> list[list[Value]]:
-        """Per entry of ``CANDIDATE_INPUTS`` (the next cycle's enable, restart), the
-        ``next_numbers`` of the cycle after it: a register loaded with it every clock, chosen in the
-        next cycle by that cycle's inputs, equals ``next_numbers`` (the machine's second level of
-        copies of shared numbers)."""
-        return self._candidates(False)
-
-    @property
-    def candidate_restart_numbers(self) -> list[list[Value]]:
-        """The same for ``restart_numbers``."""
-        return self._candidates(True)
-
     @property
     def specs(self) -> tuple[LFSRSpec, ...]:
         return self._specs
@@ -318,9 +288,6 @@ class SobolGenerators(OnChipSource):
             "following_numbers": Out(unsigned(params.word_bits)).array(params.operator_columns),
             "following_restart_numbers": Out(unsigned(params.word_bits)).array(params.operator_columns),
             "fresh": Out(1, init=1),
-            "candidate_numbers": Out(unsigned(params.word_bits)).array(cols).array(len(CANDIDATE_INPUTS)),
-            "candidate_restart_numbers":
-                Out(unsigned(params.word_bits)).array(cols).array(len(CANDIDATE_INPUTS)),
         }, operator_numbers=[o % cols for o in range(params.operators)])
 
     @property
@@ -342,89 +309,81 @@ class SobolGenerators(OnChipSource):
         m = Module()
         w = self._params.word_bits
         top = (1 << w) - 1
-
+        index = Signal(w)
+        fresh = self.fresh
+        # Registered functions of the index, loaded with its next value, so that the numbers of
+        # the next cycle, and of the one after (``following_numbers``), are a few LUTs from
+        # flip-flops: ``last`` (i == 2^W - 1), ``penult`` (i == 2^W - 2), and per column the
+        # direction numbers of i's, i + 1's and i + 2's lowest 0 bit (0 for 2^W - 1, a block's last).
         def lowest_zero_direction(vs: Sequence[int], j: int) -> int:
             return 0 if j == top else vs[((~j & (j + 1)).bit_length() - 1)]
 
-        dirs = [direction_numbers(c, w) for c in range(self._params.operator_columns)]
-
-        def at(c: int, j: int) -> int:  # V_c of j's lowest 0 bit (0 from 2^W - 1 on: never used)
-            return lowest_zero_direction(dirs[c], j) if j < top else 0
-
-        # The registers. Besides i, fresh, y and the shift LFSRs, functions of i loaded with their
-        # next values, so that the numbers of the next cycle, and of the ones after
-        # (``following_numbers``, the candidates), are a few LUTs from flip-flops: ``last``
-        # (i == 2^W - 1), ``penult`` (i == 2^W - 2), and per column the direction numbers of i's,
-        # i + 1's and i + 2's lowest 0 bit (a step shifts them down and loads the third from
-        # i + 3's one-hot, computed from the index register alone).
-        regs: dict[str, object] = {
-            "index": Signal(w, name="index"), "last": Signal(name="last"),
-            "penult": Signal(name="penult", init=int(top == 1)), "fresh": self.fresh,
-            "state": [Signal(s.length, init=s.init, name=f"shift_lfsr_{c}")
-                      for c, s in enumerate(self._specs)],
-            "y": [Signal(w, name=f"sobol_{c}") for c in range(len(dirs))],
-        }
-        for k, name in enumerate(("direction", "direction_succ", "direction_succ2")):
-            regs[f"dir{k}"] = [Signal(w, init=at(c, k), name=f"{name}_{c}") for c in range(len(dirs))]
-
-        def step(st: dict, enable: Value, restart: Value) -> tuple[dict, list[Value]]:
-            """One clock edge's rules on a state (registers or expressions): the next state, and
-            the numbers of this cycle. A restart takes effect first (i = 0, fresh), then ``enable``
-            acts on that state as on any other; the enable and restart enter last."""
-            last_e = ~restart & st["last"]
-            penult_e = Mux(restart, top == 1, st["penult"])
-            fresh_e = restart | st["fresh"]
-            index = st["index"]
-            nxt: dict = {
-                "index": Mux(enable, Mux(last_e, 0, Mux(restart, 1, index + 1)), Mux(restart, 0, index))[:w],
-                "penult": Mux(enable, Mux(last_e, top == 1, Mux(restart, top == 2, index == top - 2)),
-                              penult_e),
-                "last": Mux(enable, ~last_e & penult_e, last_e),
-                "fresh": Mux(enable, last_e, fresh_e),
-                "state": [], "y": [], "dir0": [], "dir1": [], "dir2": [],
-            }
-            lowest_zero_3 = ~(index + 3)[:w] & (index + 4)[:w]
-            numbers = []
-            for c, spec in enumerate(self._specs):
-                d0, d1, d2 = (Mux(restart, at(c, k), st[f"dir{k}"][c]) for k in range(3))
-                d3 = 0
-                for k, v in enumerate(dirs[c]):
-                    d3 = d3 | Mux(lowest_zero_3[k], v, 0)
-                d3 = Mux(restart, at(c, 3), d3)
-                state = st["state"][c]
-                number = Mux(fresh_e, state[:w], st["y"][c])
-                numbers.append(number)
-                nxt["y"].append(Mux(enable, number ^ d0, st["y"][c]))
-                # i == 2^W - 1 implies fresh == 0 (fresh is set with i = 0): the LFSR keeps its state.
-                nxt["state"].append(Mux(enable & fresh_e, lfsr_next_state_expr(state, spec), state))
-                nxt["dir0"].append(Mux(enable, Mux(last_e, at(c, 0), d1), d0))
-                nxt["dir1"].append(Mux(enable, Mux(last_e, at(c, 1), d2), d1))
-                nxt["dir2"].append(Mux(enable, Mux(last_e, at(c, 2), d3), d2))
-            return nxt, numbers
-
-        def next_numbers(st: dict) -> list[Value]:  # after a compute cycle without restart
-            return [Mux(st["last"], s[:w], Mux(st["fresh"], s[:w], y) ^ d)
-                    for s, y, d in zip(st["state"], st["y"], st["dir0"], strict=True)]
-
-        def restart_numbers(st: dict) -> list[Value]:  # after a restart without compute
-            return [s[:w] for s in st["state"]]
-
-        following, numbers = step(regs, self.enable, self.restart)
-        for key, reg in regs.items():
-            nxt = following[key]
-            pairs = zip(reg, nxt, strict=True) if isinstance(reg, list) else [(reg, nxt)]
-            m.d.sync += [r.eq(v) for r, v in pairs]
+        last, penult = Signal(), Signal(init=int(top == 1))
+        # A restart takes effect before the cycle's compute step: the cycle's state is that of a
+        # block's start (i = 0, fresh), on which ``enable`` then acts as on any other state.
+        last_e, penult_e = ~self.restart & last, Mux(self.restart, int(top == 1), penult)
+        fresh_e = self.restart | fresh
+        # The next index and ``penult`` with the enable and restart entering last: the increment
+        # and the compare are made on the index register alone.
+        index_n = Signal(w)
+        m.d.comb += index_n.eq(Mux(self.enable, Mux(last_e, 0, Mux(self.restart, 1, index + 1)),
+                                   Mux(self.restart, 0, index)))
+        penult_n = Mux(self.enable, Mux(last_e, top == 1, Mux(self.restart, top == 2, index == top - 2)),
+                       penult_e)
+        # The lowest 0 bit of i + 3 (one-hot), for the direction register two steps ahead.
+        plus3, plus4 = (index + 3)[:w], (index + 4)[:w]
+        lowest_zero_3 = Signal(w)
+        m.d.comb += lowest_zero_3.eq(~plus3 & plus4)
+        last_n, fresh_n = Signal(), Signal()
         m.d.comb += [
-            Cat(self.numbers).eq(Cat(numbers)),
-            Cat(self.next_numbers).eq(Cat(next_numbers(regs))),
-            Cat(self.restart_numbers).eq(Cat(restart_numbers(regs))),
-            Cat(self.following_numbers).eq(Cat(next_numbers(following))),
-            Cat(self.following_restart_numbers).eq(Cat(restart_numbers(following))),
+            last_n.eq(Mux(self.enable, ~last_e & penult_e, last_e)),
+            fresh_n.eq(Mux(self.enable, last_e, fresh_e)),
         ]
-        for combo, (e, r) in enumerate(CANDIDATE_INPUTS):
-            after, _ = step(following, Const(e, 1), Const(r, 1))
-            m.d.comb += [Cat(self.candidate_numbers[combo]).eq(Cat(next_numbers(after))),
-                         Cat(self.candidate_restart_numbers[combo]).eq(Cat(restart_numbers(after)))]
+        m.d.sync += [index.eq(index_n), last.eq(last_n), penult.eq(penult_n), fresh.eq(fresh_n)]
+        for c, spec in enumerate(self._specs):
+            state = Signal(spec.length, init=spec.init, name=f"shift_lfsr_{c}")
+            y = Signal(w, name=f"sobol_{c}")
+            vs = direction_numbers(c, w)
+
+            def at(j: int, vs: Sequence[int] = vs) -> int:  # V of j's lowest 0 bit (0 from 2^W - 1 on)
+                return lowest_zero_direction(vs, j) if j < top else 0
+
+            # The direction numbers of i's, i + 1's and i + 2's lowest 0 bit, registers: a step
+            # shifts them down, the third from i + 3's one-hot (off the numbers' path); a block's
+            # start loads those of 0, 1, 2.
+            direction = Signal(w, init=at(0), name=f"direction_{c}")
+            direction_succ = Signal(w, init=at(1), name=f"direction_succ_{c}")
+            direction_succ2 = Signal(w, init=at(2), name=f"direction_succ2_{c}")
+            direction_3 = 0
+            for k, v in enumerate(vs):
+                direction_3 = direction_3 | Mux(lowest_zero_3[k], v, 0)
+            direction_e = Mux(self.restart, at(0), direction)
+            direction_succ_e = Mux(self.restart, at(1), direction_succ)
+            direction_succ2_e = Mux(self.restart, at(2), direction_succ2)
+            direction_3_e = Mux(self.restart, at(3), direction_3)
+            # The direction of index_n: of 0 after a block's end, of i + 1 after a step.
+            direction_n = Signal(w, name=f"direction_n_{c}")
+            m.d.comb += direction_n.eq(Mux(self.enable, Mux(last_e, at(0), direction_succ_e), direction_e))
+            m.d.sync += [
+                direction.eq(direction_n),
+                direction_succ.eq(Mux(self.enable, Mux(last_e, at(1), direction_succ2_e), direction_succ_e)),
+                direction_succ2.eq(Mux(self.enable, Mux(last_e, at(2), direction_3_e), direction_succ2_e)),
+            ]
+            m.d.comb += self.numbers[c].eq(Mux(fresh_e, state[:w], y))
+            # i == 2^W - 1 implies fresh == 0 (fresh is set with i = 0): the LFSR keeps its state.
+            m.d.comb += [
+                self.next_numbers[c].eq(Mux(last, state[:w], Mux(fresh, state[:w], y) ^ direction)),
+                self.restart_numbers[c].eq(state[:w]),
+            ]
+            # The same rules on the next cycle's registers (y, the LFSR, fresh, last, direction).
+            y_n = Mux(self.enable, self.numbers[c] ^ direction_e, y)
+            state_n = Mux(self.enable & fresh_e, lfsr_next_state_expr(state, spec), state)
+            m.d.sync += [y.eq(y_n), state.eq(state_n)]
+            number_n = Mux(fresh_n, state_n[:w], y_n)
+            m.d.comb += [
+                self.following_numbers[c].eq(Mux(last_n, state_n[:w], number_n ^ direction_n)),
+                self.following_restart_numbers[c].eq(state_n[:w]),
+            ]
         return m
 
 

