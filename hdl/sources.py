@@ -76,12 +76,6 @@ class OnChipSource(wiring.Component):
         ``next_numbers`` / ``restart_numbers`` of the next cycle, from this cycle's state and
         inputs: a register loaded with one every clock equals the other in every cycle (the
         machine keeps such copies per group of rows for numbers shared by many comparators).
-    candidate_numbers, candidate_restart_numbers : list of list of Value
-        Shared sources only: per entry of :data:`CANDIDATE_INPUTS` (the next cycle's ``enable``,
-        ``restart``), ``following_numbers`` / ``following_restart_numbers`` of the next cycle
-        with those inputs. A register loaded with each every clock, and one loaded from the
-        candidate that the next cycle's actual inputs pick, equals ``next_numbers`` /
-        ``restart_numbers`` in every cycle (the machine's second level of copies of shared numbers).
     operator_numbers : tuple of int
         Per operator, the index of the entry of ``numbers`` it compares against.
     shared : bool
@@ -266,8 +260,6 @@ class SobolGenerators(OnChipSource):
     fresh : ``Out(1)``
         The register ``fresh``: a compute cycle now (without restart) would start a block (the
         shift LFSR steps at its end).
-    candidate_numbers, candidate_restart_numbers :
-        ``Out(unsigned(W)).array(operator_columns).array(4)``, see :class:`OnChipSource`.
     numbers, next_numbers, restart_numbers, following_numbers, following_restart_numbers :
         ``Out(unsigned(W)).array(operator_columns)``, see above; operator o reads column o % columns.
     """
