@@ -266,7 +266,11 @@ def test_small_stereo_machine_through_yosys(tmp_path: Path) -> None:
     assert res["ff"] >= params.operators * (2 * params.memory_word_width + 1)
     assert res["bram"] >= 1
     tp = report["throughput"]
-    assert tp["wall_cycles_per_pixel"] >= tp["compute_cycles_per_pixel"] + 1
+    # sobol without the bubble: wall cycles equal compute cycles where loading is hidden (not less).
+    from bayesmachine.hdl.machine import hides_bubble
+
+    assert hides_bubble(params)
+    assert tp["wall_cycles_per_pixel"] >= tp["compute_cycles_per_pixel"]
     assert tp["frame_output_pixels"] == (480 - 4) * (width - 4 - dmax)
     assert tp["input_bits_per_pixel"] == pytest.approx(16 * width * 480 / tp["frame_output_pixels"], abs=0.01)
     assert "pixels_per_second" not in tp  # no fmax, no rate
