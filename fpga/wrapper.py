@@ -35,6 +35,8 @@ from bayesmachine.params import ParameterError
 
 __all__ = ["PinWrapper", "input_stream", "stream_widths"]
 
+OUT_GROUP = 8  # result chunks per registered copy of the shifter's take enable
+
 
 def input_stream(core: wiring.Component) -> str:
     """The name of ``core``'s one input stream: its only ``In`` member whose signature is a
@@ -139,9 +141,20 @@ class PinWrapper(wiring.Component):
         out = Signal(n_out * pw)
         busy = Signal(n_out)  # ones for the chunks still to send
         m.d.comb += core.result.ready.eq(~busy[0])
-        with m.If(core.result.valid & core.result.ready):
-            m.d.sync += [out.eq(core.result.payload.as_value()), busy.eq(-1)]
-        with m.Else():
-            m.d.sync += [out.eq(out >> pw), busy.eq(busy >> 1)]
+        take = core.result.valid & ~busy[0]
+        # The take loads the whole shift register (a full machine's result: 440 bits): each group
+        # of OUT_GROUP chunks has a registered copy of ``~busy[0]`` (``free_rep<g>``, loaded with
+        # its next value, kept apart by the flow), so no single net reaches every bit.
+        payload = core.result.payload.as_value()
+        for g in range(-(-n_out // OUT_GROUP)):
+            free = Signal(name=f"free_rep{g}", init=1)
+            m.d.sync += free.eq(~Mux(take, 1, busy[1] if n_out > 1 else 0))
+            lo, hi = g * OUT_GROUP, min(n_out, (g + 1) * OUT_GROUP)
+            bits = slice(lo * pw, hi * pw)
+            nxt = Cat(out, Const(0, pw))[(lo + 1) * pw:(hi + 1) * pw]
+            with m.If(core.result.valid & free):
+                m.d.sync += [out[bits].eq(Cat(payload, Const(0, n_out * pw))[bits]), busy[lo:hi].eq(-1)]
+            with m.Else():
+                m.d.sync += [out[bits].eq(nxt), busy[lo:hi].eq(Cat(busy, Const(0, 1))[lo + 1:hi + 1])]
         m.d.sync += [self.dout.eq(out[:pw]), self.dout_valid.eq(busy[0])]
         return m

@@ -42,13 +42,13 @@ from bayesmachine.params import MachineParams
 
 from .counters import overflow_counter_full
 from .encoder import MAPEncoder
-from .operator import bus_rows, operator_bits, operator_rows
+from .operator import bus_rows, operator_bits, operator_rows, top_bit_pair
 from .signatures import MachineSignature, beat_words, entropy_layout, load_layout, result_layout
 from .sources import OnChipSource, random_source
 
 __all__ = [
-    "BUBBLE_CYCLES", "FEEDBACK_CYCLES", "GROUP_OPERATORS", "LOAD_LATENCY", "BayesianMachine",
-    "entropy_layout",
+    "BUBBLE_CYCLES", "FEEDBACK_CYCLES", "GROUP_OPERATORS", "LOAD_LATENCY", "SOURCE_GROUPS", "BayesianMachine",
+    "entropy_layout", "hides_bubble",
     "load_layout", "pixel_wall_cycles", "result_layout",
 ]
 
@@ -56,6 +56,20 @@ BUBBLE_CYCLES = 1  # clock cycles per run after its last compute cycle (the regi
 LOAD_LATENCY = 1  # a load beat is written into the shadow memory the cycle after its handshake
 FEEDBACK_CYCLES = 2  # a neighbour prior's swap after the bubble: the result, then the feedback words
 GROUP_OPERATORS = 12  # operators per registered copy of the compute and start enables
+SOURCE_GROUPS = 3  # groups of rows per copy of a shared random source (its next numbers' fan-out)
+
+
+def hides_bubble(params: MachineParams) -> bool:
+    """Whether the machine swaps the next pixel in during its first compute cycle (no bubble).
+
+    With ``sobol`` the next pixel's first numbers (a block's shift) are known while the previous
+    pixel runs, so its first cycle's bits are compared in advance and the cycle after a run's last
+    one is already the next run's first. Not with a neighbour prior (the next pixel's feedback
+    words follow the result), nor with counter max 1 (a run's second cycle could overflow: its
+    prefetched overflow flag would need the first cycle's counters), nor with LFSR sources (their
+    next numbers depend on whether the previous run goes on).
+    """
+    return params.rng == "sobol" and not params.feedback_columns and params.counter_max >= 2
 
 
 def pixel_wall_cycles(params: MachineParams, cycles: np.ndarray) -> np.ndarray:
@@ -65,8 +79,17 @@ def pixel_wall_cycles(params: MachineParams, cycles: np.ndarray) -> np.ndarray:
     its ``beats_per_pixel`` load beats have been written (they start the cycle after the previous
     swap, and each is written the cycle after its handshake):
     ``max(k, beats_per_pixel + LOAD_LATENCY) + BUBBLE_CYCLES``.
+
+    Without the bubble (:func:`hides_bubble`) the next run's first compute cycle is its swap, and the
+    next pixel's beats start in it: ``max(k, beats_per_pixel + LOAD_LATENCY + 1)``, plus one bubble
+    after a run whose last cycle began a Sobol block (k - 1 a nonzero multiple of 2^W: that cycle
+    steps the shift LFSR, so the next run's first numbers were not known a cycle early).
     """
     cycles = np.asarray(cycles, dtype=np.int64)
+    if hides_bubble(params):
+        block = 1 << params.word_bits
+        late = (cycles > 1) & ((cycles - 1) % block == 0)
+        return np.maximum(cycles + late, params.beats_per_pixel + LOAD_LATENCY + 1)
     # A neighbour prior's swap waits two cycles more: the bubble registers the result, the next cycle
     # the feedback column's words (see ``BayesianMachine._feedback_prior``).
     settle = FEEDBACK_CYCLES * params.feedback_columns
@@ -92,9 +115,12 @@ class _Nets:
     rows_per_group: int
     compute_rep: list[Signal]  # per group, a registered copy of the compute enable
     start_rep: list[Signal]  # per group, a registered copy of the start (swap) enable
-    # A shared source's own copies of the compute and start enables (see _random_numbers).
+    # A shared source's own copies of the compute and start enables, one pair per copy of the
+    # source (see _random_numbers).
     src_reps: list[tuple[Signal, Signal]] = field(default_factory=list)
     source: OnChipSource | None = None
+    sources: list[OnChipSource] = field(default_factory=list)  # a shared source's copies (source first)
+    groups_per_source: int = SOURCE_GROUPS  # groups of rows fed by one copy of a shared source
     next_bits: list[Value] = field(default_factory=list)  # see _operator_matrix
     row: Signal | None = None  # this compute cycle's stochastic bus, one bit per row
     full: Signal | None = None  # registered: count == counter max, per row
@@ -109,6 +135,8 @@ class _Nets:
     winner: Value | None = None  # the encoder: the winning row
     start: Signal | None = None  # the shadow is swapped in (in a bubble or when idle)
     settle: Value = field(default_factory=lambda: Const(0))  # neighbour prior: feedback words forming
+    hidden: bool = False  # no bubble: a run's first compute cycle is its swap (hides_bubble)
+    first_row: Value | None = None  # hidden: the next run's first stochastic bus, from registered bits
 
 
 class BayesianMachine(wiring.Component):
@@ -185,6 +213,11 @@ class BayesianMachine(wiring.Component):
         rows_per_group = max(1, GROUP_OPERATORS // cols)
         groups = -(-rows // rows_per_group)
         return _Nets(
+            hidden=hides_bubble(p),
+            # The census model's machine (a neighbour prior, 6 columns) keeps one source: with a copy
+            # per 3 groups (14 copies of 6 columns) it routed at 63.9 MHz against 64.4 MHz with one,
+            # for 30,763 LUT4 sites against 19,713 (docs/fpga.md).
+            groups_per_source=groups if p.feedback_columns else SOURCE_GROUPS,
             shadow=shadow, incoming=incoming, active=active, shadow_full=Signal(name="shadow_full"),
             shadow_line_start=Signal(name="shadow_line_start"),
             write_q=Signal(p.beats_per_pixel, name="write_q"), running=Signal(name="running"),
@@ -206,14 +239,27 @@ class BayesianMachine(wiring.Component):
             m.d.comb += self.entropy_ready.eq(n.compute)
             return
         m.submodules.source = source
+        n.sources.append(source)
         if source.shared:
-            # One registered copy each of the compute and start enables for the shared source:
-            # its next-number logic feeds every group's copy of the numbers (_operator_matrix), so
-            # its inputs come straight from flip-flops. Amaranth aliases these registers with the
-            # source's ports, so the flow's keep selection goes two steps back from the ``_rep``
-            # wires to reach them (``KEEP_REGISTER_COPIES`` in fpga/flow.py, docs/fpga.md).
-            n.src_reps.append((Signal(name="compute_rep_src"), Signal(name="start_rep_src")))
-            m.d.comb += [source.enable.eq(n.src_reps[0][0]), source.restart.eq(n.src_reps[0][1])]
+            # A second level of copies: the source itself is replicated, one identical copy per
+            # SOURCE_GROUPS groups of rows, each feeding only its groups' registered copies of the
+            # numbers (_operator_matrix), so the next-number logic's nets stay within a few groups
+            # instead of spanning the matrix (docs/fpga.md). Copy k's flip-flops are named
+            # ``source_rep<k>.*`` after flattening, which the flow keeps apart.
+            for k in range(1, -(-n.groups // n.groups_per_source)):
+                copy = random_source(p, [o // cols // n.rows_per_group for o in range(p.operators)])
+                m.submodules[f"source_rep{k}"] = copy
+                n.sources.append(copy)
+            # One registered copy each of the compute and start enables per source copy: its
+            # next-number logic feeds the groups' copies of the numbers, so its inputs come straight
+            # from flip-flops. Amaranth aliases these registers with the source's ports, so the
+            # flow's keep selection goes two steps back from the ``_rep`` wires to reach them
+            # (``KEEP_REGISTER_COPIES`` in fpga/flow.py, docs/fpga.md).
+            for k, src in enumerate(n.sources):
+                suffix = "" if k == 0 else str(k)
+                n.src_reps.append((Signal(name=f"compute_rep_src{suffix}"),
+                                   Signal(name=f"start_rep_src{suffix}")))
+                m.d.comb += [src.enable.eq(n.src_reps[k][0]), src.restart.eq(n.src_reps[k][1])]
         else:  # a number per operator: one enable (and restart) bit per group of rows
             m.d.comb += [source.enable.eq(Cat(n.compute_rep)), source.restart.eq(Cat(n.start_rep))]
 
@@ -241,9 +287,10 @@ class BayesianMachine(wiring.Component):
             # every clock from ``following_numbers`` (so equal to ``next_numbers`` in every
             # cycle), and one of its restart numbers, loaded from ``following_restart_numbers``
             # (equal to ``restart_numbers``). The flow keeps these ``_rep`` registers apart too.
-            def group_copies(name: str, following: list[Value]) -> list[list[Signal]]:
+            def group_copies(name: str, attr: str) -> list[list[Signal]]:
                 copies = []
                 for g in range(n.groups):
+                    following = list(getattr(n.sources[g // n.groups_per_source], attr))
                     copy = [Signal(len(x), name=f"{name}_rep{g}_{i}") for i, x in enumerate(following)]
                     m.d.sync += [c.eq(x) for c, x in zip(copy, following, strict=True)]
                     copies.append(copy)
@@ -253,20 +300,41 @@ class BayesianMachine(wiring.Component):
                 return [operator_bits(copies[o // cols // n.rows_per_group], [words[o]], [index[o]])[0]
                         for o in range(ops)]
 
-            n.next_bits = group_bits(group_copies("next_number", list(source.following_numbers)), n.active)
-            restart_copies = group_copies("restart_number", list(source.following_restart_numbers))
+            n.next_bits = group_bits(group_copies("next_number", "following_numbers"), n.active)
+            restart_copies = group_copies("restart_number", "following_restart_numbers")
             start_bits = group_bits(restart_copies, n.incoming)
         else:
             n.next_bits = operator_bits(list(source.next_numbers), n.active, index)
             start_bits = operator_bits(list(source.restart_numbers), n.incoming, index)
+        swap_bits = start_bits
+        if n.hidden:
+            # No bubble (hides_bubble, "Timing" in docs/architecture.md): the swap is the next run's
+            # first compute cycle. Its bits (the restart numbers against the shadow words) are
+            # registered every cycle in ``first_bit`` and drive ``first_row`` in the swap; the swap
+            # loads ``bit_q`` with the run's second bits, the restart numbers XOR V_c[0] = 2^(W-1)
+            # (a block's second point) against the shadow words, which the swap is still reading.
+            # Both come from one comparator of the low W - 1 bits (``top_bit_pair``).
+            restart = ([restart_copies[o // cols // n.rows_per_group][index[o]] for o in range(ops)]
+                       if source.shared else [source.restart_numbers[index[o]] for o in range(ops)])
+            assert all(d == 1 << (p.word_bits - 1) for d in source.first_directions)
+            first_bits, swap_bits = [], []
+            for o in range(ops):
+                first, second = top_bit_pair(restart[o], n.incoming[o])
+                first_bit = Signal(name=f"first_bit_{o // cols}_{o % cols}")
+                m.d.sync += first_bit.eq(first)
+                first_bits.append(first_bit)
+                swap_bits.append(second)
+            n.first_row = bus_rows(first_bits, rows, cols)
         bits = []
         for o in range(ops):
             g = o // cols // n.rows_per_group
             bit_q = Signal(name=f"bit_{o // cols}_{o % cols}")
-            with m.If(n.compute_rep[g]):
+            # A swap first: with the bubble it never coincides with a compute cycle; without, the
+            # swap is also a compute cycle (the next run's first).
+            with m.If(n.start_rep[g]):
+                m.d.sync += bit_q.eq(swap_bits[o])
+            with m.Elif(n.compute_rep[g]):
                 m.d.sync += bit_q.eq(n.next_bits[o])
-            with m.Elif(n.start_rep[g]):
-                m.d.sync += bit_q.eq(start_bits[o])
             bits.append(bit_q)
         m.d.comb += n.row.eq(bus_rows(bits, rows, cols))
 
@@ -300,10 +368,12 @@ class BayesianMachine(wiring.Component):
                 for r in range(g * n.rows_per_group, min(p.rows, (g + 1) * n.rows_per_group)):
                     row_next = bus_rows(n.next_bits[r * cols:(r + 1) * cols], 1, cols)
                     terms.append(row_next & n.next_full[r])
-                with m.If(n.compute_rep[g]):
-                    m.d.sync += over_group[g].eq(Cat(terms).any())
-                with m.Elif(n.start_rep[g]):
+                # 0 after a swap: the counters restart empty (without the bubble the swap is the
+                # run's first cycle, and its second cannot overflow either: counter max >= 2).
+                with m.If(n.start_rep[g]):
                     m.d.sync += over_group[g].eq(0)
+                with m.Elif(n.compute_rep[g]):
+                    m.d.sync += over_group[g].eq(Cat(terms).any())
             n.any_over = Cat(over_group).any()
         else:
             n.any_over = n.over.any()
@@ -404,24 +474,36 @@ class BayesianMachine(wiring.Component):
         """Start: swap in the shadow memory, in a bubble or when idle (overrides the above)."""
         p = self._params
         cols = p.operator_columns
-        n.start = start = Signal()
-        if p.feedback_columns:  # the swap takes the feedback words registered after the bubble
-            m.d.comb += start.eq(n.shadow_full & ~n.running & ~n.settle)
+        if n.hidden:
+            # The swap is the run's first compute cycle, decided a cycle early (_enables): a register.
+            # It counts that cycle (the counters take its first bus) while the result register takes
+            # the previous run's counters and cycles (_result).
+            n.start = start = Signal(name="start_rep_ctl")
+            with m.If(start):
+                m.d.sync += [n.at_last.eq(p.max_cycles == 2), n.cycles_done.eq(1), n.running.eq(1),
+                             n.shadow_full.eq(0), n.stop.eq(0)]
         else:
-            m.d.comb += start.eq(n.shadow_full & (n.leave | ~n.running))
-        with m.If(start):
-            m.d.sync += [n.at_last.eq(0), n.cycles_done.eq(0), n.running.eq(1), n.shadow_full.eq(0)]
+            n.start = start = Signal()
+            if p.feedback_columns:  # the swap takes the feedback words registered after the bubble
+                m.d.comb += start.eq(n.shadow_full & ~n.running & ~n.settle)
+            else:
+                m.d.comb += start.eq(n.shadow_full & (n.leave | ~n.running))
+            with m.If(start):
+                m.d.sync += [n.at_last.eq(0), n.cycles_done.eq(0), n.running.eq(1), n.shadow_full.eq(0)]
         for r in range(p.rows):
             with m.If(n.start_rep[r // n.rows_per_group]):
                 m.d.sync += [n.active[o].eq(n.incoming[o]) for o in range(r * cols, (r + 1) * cols)]
-                m.d.sync += [n.counts[r].eq(0), n.full[r].eq(0)]
+                # Empty, or (no bubble) after the run's first cycle: its bus (counter max >= 2: not full).
+                m.d.sync += [n.counts[r].eq(n.first_row[r] if n.hidden else 0), n.full[r].eq(0)]
 
     def _load(self, m: Module, n: _Nets) -> None:
         """The load stream: one beat per handshake into the shadow memory, written a cycle later."""
         p = self._params
         nbeats = p.beats_per_pixel
         # Not ready while the shadow is full or its last beat is being written.
-        m.d.comb += self.load.ready.eq(~n.shadow_full & ~n.write_q[nbeats - 1])
+        # Without the bubble the swap cycle already takes a beat (written after the swap).
+        held = n.shadow_full & ~n.start if n.hidden else n.shadow_full
+        m.d.comb += self.load.ready.eq(~held & ~n.write_q[nbeats - 1])
         accept = self.load.valid & self.load.ready
         # Registered load: a beat is taken into ``load_q`` and written into the shadow memory the
         # cycle after, under a registered one-hot enable (no logic between a flip-flop and the
@@ -455,11 +537,24 @@ class BayesianMachine(wiring.Component):
         stop_idle = n.stop & ~n.leave  # stop's next value outside compute cycles
         running_n = n.start | (n.running & ~n.leave)
         compute_n, start_n = Signal(), Signal()
-        m.d.comb += compute_n.eq(Mux(n.compute, ~fin, running_n & ~stop_idle))
-        if self._params.feedback_columns:  # no swap in a bubble nor while settling (see _start)
-            m.d.comb += start_n.eq(shadow_full_n & ~running_n & ~n.leave)
+        if n.hidden:
+            # The next cycle is a swap (and the next run's first compute cycle) after a run's last
+            # compute cycle, if the shadow was complete in it (the first bits were registered from
+            # it), the result register will be free, and that cycle did not begin a Sobol block (it
+            # steps the shift LFSR: the registered first bits used the shift before it); else the
+            # bubble, then a swap from the bubble or idle once the shadow is complete.
+            hold = self.result.valid & ~self.result.ready
+            go_on = n.shadow_full & ~hold & ~n.source.fresh
+            idle_start = n.shadow_full & ((stop_idle & ~hold) | ~(n.running & ~n.leave))
+            m.d.comb += [compute_n.eq(Mux(n.compute, ~fin | go_on, n.start | idle_start)),
+                         start_n.eq(Mux(n.compute, fin & go_on, ~n.start & idle_start))]
+            m.d.sync += [n.start.eq(start_n)]
         else:
-            m.d.comb += start_n.eq(Mux(n.compute, fin & shadow_full_n & ~valid_n,
-                                       shadow_full_n & ((stop_idle & ~valid_n) | ~running_n)))
+            m.d.comb += compute_n.eq(Mux(n.compute, ~fin, running_n & ~stop_idle))
+            if self._params.feedback_columns:  # no swap in a bubble nor while settling (see _start)
+                m.d.comb += start_n.eq(shadow_full_n & ~running_n & ~n.leave)
+            else:
+                m.d.comb += start_n.eq(Mux(n.compute, fin & shadow_full_n & ~valid_n,
+                                           shadow_full_n & ((stop_idle & ~valid_n) | ~running_n)))
         m.d.sync += [c.eq(compute_n) for c in n.compute_rep + [c for c, _ in n.src_reps]]
         m.d.sync += [s.eq(start_n) for s in n.start_rep + [s for _, s in n.src_reps]]

@@ -122,6 +122,24 @@ def operator_bits(numbers: Sequence[Value], words: Sequence[Value], sources: Seq
     return [stochastic_operator(1, numbers[s], word) for s, word in zip(sources, words, strict=True)]
 
 
+def top_bit_pair(number: Value, word: Value) -> tuple[Value, Value]:
+    """``(number < word, (number ^ 2^(W-1)) < word)`` for a W-bit number and a (W+1)-bit word, from
+    one (W-1)-bit comparator of the low bits: the two numbers differ only in their top bit.
+
+    A Sobol block's first two numbers are its shift s and s ^ V_0, and V_0 = 2^(W-1) in every
+    dimension (m_1 = 1), so the machine without a bubble gets a run's first and second bits this
+    way (``BayesianMachine``)."""
+    w = len(number)
+    low = number[: w - 1] < word[: w - 1] if w > 1 else Const(0, 1)
+    high = word[w - 1:]  # 0, 1 or 2 (a word is at most 2^W)
+    top = number[w - 1]
+
+    def bit(t: Value) -> Value:
+        return (t < high) | ((t == high) & low)
+
+    return bit(top), bit(~top)
+
+
 def bus_rows(bits: Sequence[Value], rows: int, columns: int) -> Value:
     """The stochastic bus from the comparator bits: bit r is the AND of row r's operator bits."""
     out = []

@@ -222,14 +222,19 @@ class SobolGenerators(OnChipSource):
     Shared: the block index ``i`` (W bits) and ``fresh`` (the next compute cycle starts a block,
     1 after reset). Per column c: a register ``y`` and a shift LFSR. Per cycle::
 
+        on restart, first: i, fresh = 0, 1       (this cycle is a block's start)
         numbers[c] = fresh ? lfsr_c.number : y_c
         on enable: lfsr_c advances if fresh; y_c = numbers[c] ^ V_c[lowest 0 bit of i];
                    i, fresh = (0, 1) if i == 2^W - 1 else (i + 1, 0)
-        on restart (wins over enable for i and fresh): i, fresh = 0, 1
+
+    A restart alone (no compute) makes the next compute cycle a block's first; a restart with
+    ``enable`` is itself a block's first compute cycle (the machine's swap when it has no bubble:
+    ``BayesianMachine``). The twin's ``clock(False, True)`` then ``clock(True, False)`` is the latter.
 
     ``last`` (i == 2^W - 1), ``penult`` (i == 2^W - 2) and each column's direction numbers
-    V_c[lowest 0 bit of i] and of i + 1 are registers loaded with the next index's values (the
-    same numbers, a shorter path to them).
+    V_c[lowest 0 bit of i], of i + 1 and of i + 2 are registers loaded with the next index's values
+    (the same numbers, a shorter path to them: a step shifts the directions down and loads the
+    third from i + 3's lowest 0 bit, computed from the index register alone).
 
     For the machine's prefetched comparators it also gives the next compute cycle's numbers:
     ``next_numbers[c]`` if this cycle is a compute cycle without restart (the block's last cycle
@@ -251,7 +256,10 @@ class SobolGenerators(OnChipSource):
     Attributes
     ----------
     enable, restart : ``In(1)``
-        See :class:`OnChipSource`.
+        See :class:`OnChipSource` and above (``restart`` takes effect before ``enable``'s step).
+    fresh : ``Out(1)``
+        The register ``fresh``: a compute cycle now (without restart) would start a block (the
+        shift LFSR steps at its end).
     numbers, next_numbers, restart_numbers, following_numbers, following_restart_numbers :
         ``Out(unsigned(W)).array(operator_columns)``, see above; operator o reads column o % columns.
     """
@@ -271,6 +279,7 @@ class SobolGenerators(OnChipSource):
             "restart_numbers": Out(unsigned(params.word_bits)).array(params.operator_columns),
             "following_numbers": Out(unsigned(params.word_bits)).array(params.operator_columns),
             "following_restart_numbers": Out(unsigned(params.word_bits)).array(params.operator_columns),
+            "fresh": Out(1, init=1),
         }, operator_numbers=[o % cols for o in range(params.operators)])
 
     @property
@@ -281,76 +290,92 @@ class SobolGenerators(OnChipSource):
     def specs(self) -> tuple[LFSRSpec, ...]:
         return self._specs
 
+    @property
+    def first_directions(self) -> tuple[int, ...]:
+        """Per column, V_c[0]: a block's second number is its first XOR this (the Sobol points
+        0 and V_0), so a run's second numbers are ``restart_numbers[c] ^ first_directions[c]``."""
+        w = self._params.word_bits
+        return tuple(direction_numbers(c, w)[0] for c in range(self._params.operator_columns))
+
     def elaborate(self, platform: object) -> Module:
         m = Module()
         w = self._params.word_bits
         top = (1 << w) - 1
         index = Signal(w)
-        fresh = Signal(init=1)
+        fresh = self.fresh
         # Registered functions of the index, loaded with its next value, so that the numbers of
         # the next cycle, and of the one after (``following_numbers``), are a few LUTs from
         # flip-flops: ``last`` (i == 2^W - 1), ``penult`` (i == 2^W - 2), and per column the
-        # direction numbers of i's and of i + 1's lowest 0 bit (0 for 2^W - 1, a block's last cycle).
+        # direction numbers of i's, i + 1's and i + 2's lowest 0 bit (0 for 2^W - 1, a block's last).
         def lowest_zero_direction(vs: Sequence[int], j: int) -> int:
             return 0 if j == top else vs[((~j & (j + 1)).bit_length() - 1)]
 
         last, penult = Signal(), Signal(init=int(top == 1))
+        # A restart takes effect before the cycle's compute step: the cycle's state is that of a
+        # block's start (i = 0, fresh), on which ``enable`` then acts as on any other state.
+        last_e, penult_e = ~self.restart & last, Mux(self.restart, int(top == 1), penult)
+        fresh_e = self.restart | fresh
+        # The next index and ``penult`` with the enable and restart entering last: the increment
+        # and the compare are made on the index register alone.
         index_n = Signal(w)
-        m.d.comb += index_n.eq(Mux(self.restart, 0, Mux(self.enable, Mux(last, 0, index + 1), index)))
-        successor_n = Signal(w)  # index_n + 1 (mod 2^W)
-        m.d.comb += successor_n.eq(index_n + 1)
-        lowest_zero_n = Signal(w)  # one-hot of the lowest 0 bit of index_n
-        lowest_zero_succ_n = Signal(w)  # and of index_n + 1
-        m.d.comb += [
-            lowest_zero_n.eq(~index_n & successor_n),
-            lowest_zero_succ_n.eq(~successor_n & (successor_n + 1)[:w]),
-        ]
+        m.d.comb += index_n.eq(Mux(self.enable, Mux(last_e, 0, Mux(self.restart, 1, index + 1)),
+                                   Mux(self.restart, 0, index)))
+        penult_n = Mux(self.enable, Mux(last_e, top == 1, Mux(self.restart, top == 2, index == top - 2)),
+                       penult_e)
+        # The lowest 0 bit of i + 3 (one-hot), for the direction register two steps ahead.
+        plus3, plus4 = (index + 3)[:w], (index + 4)[:w]
+        lowest_zero_3 = Signal(w)
+        m.d.comb += lowest_zero_3.eq(~plus3 & plus4)
         last_n, fresh_n = Signal(), Signal()
         m.d.comb += [
-            last_n.eq(~self.restart & Mux(self.enable, ~last & penult, last)),
-            fresh_n.eq(self.restart | Mux(self.enable, last, fresh)),
+            last_n.eq(Mux(self.enable, ~last_e & penult_e, last_e)),
+            fresh_n.eq(Mux(self.enable, last_e, fresh_e)),
         ]
-        m.d.sync += [index.eq(index_n), last.eq(last_n), penult.eq(index_n == top - 1)]
+        m.d.sync += [index.eq(index_n), last.eq(last_n), penult.eq(penult_n), fresh.eq(fresh_n)]
         for c, spec in enumerate(self._specs):
             state = Signal(spec.length, init=spec.init, name=f"shift_lfsr_{c}")
             y = Signal(w, name=f"sobol_{c}")
             vs = direction_numbers(c, w)
-            direction = Signal(w, init=lowest_zero_direction(vs, 0), name=f"direction_{c}")
-            direction_succ = Signal(w, init=lowest_zero_direction(vs, 1), name=f"direction_succ_{c}")
-            # The direction of index_n: of 0 after a restart or a block's end, of i + 1 after a step.
-            direction_n = Signal(w, name=f"direction_n_{c}")
-            m.d.comb += direction_n.eq(Mux(self.restart, vs[0],
-                                           Mux(self.enable, Mux(last, vs[0], direction_succ), direction)))
-            # The registers themselves are loaded from the one-hots (the same values as
-            # direction_n; the one-hots' carry chains stay off the following_numbers path).
-            direction_reg_n, direction_succ_n = 0, 0
+
+            def at(j: int, vs: Sequence[int] = vs) -> int:  # V of j's lowest 0 bit (0 from 2^W - 1 on)
+                return lowest_zero_direction(vs, j) if j < top else 0
+
+            # The direction numbers of i's, i + 1's and i + 2's lowest 0 bit, registers: a step
+            # shifts them down, the third from i + 3's one-hot (off the numbers' path); a block's
+            # start loads those of 0, 1, 2.
+            direction = Signal(w, init=at(0), name=f"direction_{c}")
+            direction_succ = Signal(w, init=at(1), name=f"direction_succ_{c}")
+            direction_succ2 = Signal(w, init=at(2), name=f"direction_succ2_{c}")
+            direction_3 = 0
             for k, v in enumerate(vs):
-                direction_reg_n = direction_reg_n | Mux(lowest_zero_n[k], v, 0)
-                direction_succ_n = direction_succ_n | Mux(lowest_zero_succ_n[k], v, 0)
-            m.d.sync += [direction.eq(direction_reg_n), direction_succ.eq(direction_succ_n)]
-            number = Mux(fresh, state[:w], y)
-            m.d.comb += self.numbers[c].eq(number)
+                direction_3 = direction_3 | Mux(lowest_zero_3[k], v, 0)
+            direction_e = Mux(self.restart, at(0), direction)
+            direction_succ_e = Mux(self.restart, at(1), direction_succ)
+            direction_succ2_e = Mux(self.restart, at(2), direction_succ2)
+            direction_3_e = Mux(self.restart, at(3), direction_3)
+            # The direction of index_n: of 0 after a block's end, of i + 1 after a step.
+            direction_n = Signal(w, name=f"direction_n_{c}")
+            m.d.comb += direction_n.eq(Mux(self.enable, Mux(last_e, at(0), direction_succ_e), direction_e))
+            m.d.sync += [
+                direction.eq(direction_n),
+                direction_succ.eq(Mux(self.enable, Mux(last_e, at(1), direction_succ2_e), direction_succ_e)),
+                direction_succ2.eq(Mux(self.enable, Mux(last_e, at(2), direction_3_e), direction_succ2_e)),
+            ]
+            m.d.comb += self.numbers[c].eq(Mux(fresh_e, state[:w], y))
             # i == 2^W - 1 implies fresh == 0 (fresh is set with i = 0): the LFSR keeps its state.
             m.d.comb += [
-                self.next_numbers[c].eq(Mux(last, state[:w], self.numbers[c] ^ direction)),
+                self.next_numbers[c].eq(Mux(last, state[:w], Mux(fresh, state[:w], y) ^ direction)),
                 self.restart_numbers[c].eq(state[:w]),
             ]
-            with m.If(self.enable):
-                m.d.sync += y.eq(self.numbers[c] ^ direction)
-                with m.If(fresh):
-                    m.d.sync += state.eq(lfsr_next_state_expr(state, spec))
             # The same rules on the next cycle's registers (y, the LFSR, fresh, last, direction).
-            y_n = Mux(self.enable, self.numbers[c] ^ direction, y)
-            state_n = Mux(self.enable & fresh, lfsr_next_state_expr(state, spec), state)[:w]
-            number_n = Mux(fresh_n, state_n, y_n)
+            y_n = Mux(self.enable, self.numbers[c] ^ direction_e, y)
+            state_n = Mux(self.enable & fresh_e, lfsr_next_state_expr(state, spec), state)
+            m.d.sync += [y.eq(y_n), state.eq(state_n)]
+            number_n = Mux(fresh_n, state_n[:w], y_n)
             m.d.comb += [
-                self.following_numbers[c].eq(Mux(last_n, state_n, number_n ^ direction_n)),
-                self.following_restart_numbers[c].eq(state_n),
+                self.following_numbers[c].eq(Mux(last_n, state_n[:w], number_n ^ direction_n)),
+                self.following_restart_numbers[c].eq(state_n[:w]),
             ]
-        with m.If(self.enable):
-            m.d.sync += fresh.eq(last)
-        with m.If(self.restart):
-            m.d.sync += fresh.eq(1)
         return m
 
 

@@ -13,7 +13,13 @@ from amaranth.hdl import Module, Shape, Signal
 from conftest import assert_same_results, run_sim, small_params
 
 from bayesmachine.hdl.counters import overflow_counter, overflow_counter_twin
-from bayesmachine.hdl.machine import BayesianMachine, load_layout, result_layout
+from bayesmachine.hdl.machine import (
+    BayesianMachine,
+    hides_bubble,
+    load_layout,
+    pixel_wall_cycles,
+    result_layout,
+)
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.model import MachineModel
 from bayesmachine.sim.pysim import PysimEngine
@@ -159,16 +165,27 @@ def test_state_carries_over_between_calls() -> None:
         assert np.array_equal(np.concatenate([getattr(p, field) for p in parts]), getattr(whole, field))
 
 
-def test_runs_are_back_to_back() -> None:
-    # Without stalls: the first pixel's beats_per_pixel load cycles, then each run's compute
-    # cycles and its one bubble cycle (the registered stop, in which the next run is swapped in)
-    # with no idle cycle between runs (each run lasts >= counter_max + 1 >= beats + 1 cycles, so
-    # the next pixel is always in the shadow memory in time; a beat is written the cycle after
-    # its handshake), then the last result is handed over.
-    params = small_params(lanes=3, counter_max=4)  # 10 words: 4 beats per pixel
-    words = _mixed_words(params, 12, seed=6)
+@pytest.mark.parametrize("rng", ["lfsr", "sobol"])
+def test_runs_are_back_to_back(rng: str) -> None:
+    # Without stalls: the first pixel's beats_per_pixel load cycles, its swap, then each run's
+    # compute cycles with no idle cycle between runs (each run lasts >= counter_max + 1 >= beats + 2
+    # cycles, so the next pixel is always in the shadow memory in time; a beat is written the cycle
+    # after its handshake), then the last run's bubble and the hand-over of its result. With an
+    # LFSR source each run ends with its bubble (the registered stop, in which the next run is
+    # swapped in); with ``sobol`` the next run's first compute cycle is its swap, so there is no
+    # bubble between runs except after a run whose last cycle began a Sobol block (k - 1 a
+    # nonzero multiple of 2^W = 8 here, which the run lengths below include).
+    params = small_params(lanes=3, counter_max=6, word_bits=3, rng=rng)  # 10 words: 4 beats per pixel
+    assert hides_bubble(params) == (rng == "sobol")
+    words = _mixed_words(params, 40, seed=6)
     engine = _check(params, words)
-    assert engine.clock_cycles == params.beats_per_pixel + engine.compute_cycles + len(words) + 3
+    k = MachineModel(params).run(words).cycles.astype(np.int64)
+    between = len(words) - 1 if rng == "lfsr" else int(((k[:-1] > 1) & ((k[:-1] - 1) % 8 == 0)).sum())
+    if rng == "sobol":
+        assert 0 < between < len(words) // 4  # some late runs, and most runs without a bubble
+    assert engine.clock_cycles == params.beats_per_pixel + 1 + engine.compute_cycles + between + 3
+    wall = int(pixel_wall_cycles(params, k)[:-1].sum())
+    assert engine.clock_cycles == params.beats_per_pixel + 4 + wall + k[-1]
 
 
 def test_heavy_result_backpressure() -> None:

@@ -105,3 +105,25 @@ def test_rate_equals_p_full_size(q: int) -> None:
     for index in (0, 5):
         ones = sum(_stream(_spec(31, 10, index), q, n))
         assert abs(ones - n * p) < 5 * math.sqrt(n * p * (1 - p))
+
+
+@pytest.mark.parametrize("w", [1, 3, 4])
+def test_top_bit_pair_compares_both_numbers(w: int) -> None:
+    """``top_bit_pair`` gives ``n < word`` and ``(n ^ 2^(W-1)) < word`` for every number and word."""
+    from amaranth.hdl import Module, Signal
+
+    from bayesmachine.hdl.operator import top_bit_pair
+
+    m = Module()
+    number, word, first, second = Signal(w), Signal(w + 1), Signal(), Signal()
+    a, b = top_bit_pair(number, word)
+    m.d.comb += [first.eq(a), second.eq(b)]
+    cases = [(n, q) for n in range(1 << w) for q in range((1 << w) + 1)]
+
+    async def bench(ctx):
+        for n, q in cases:
+            ctx.set(number, n)
+            ctx.set(word, q)
+            assert (ctx.get(first), ctx.get(second)) == (int(n < q), int((n ^ (1 << (w - 1))) < q)), (n, q)
+
+    run_sim(m, bench, clock=False)

@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 from conftest import assert_same_results
 
-from bayesmachine.hdl.machine import pixel_wall_cycles
+from bayesmachine.hdl.machine import hides_bubble, pixel_wall_cycles
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.model import MachineModel, MachineResult
 from bayesmachine.sim.results import EngineStateError
@@ -77,6 +77,10 @@ def test_bit_exact_random(small: VerilatorEngine) -> None:
     # (hdl.machine.pixel_wall_cycles), plus the first pixel's load and the last hand-over per call.
     want = int(pixel_wall_cycles(SMALL, res.cycles).sum())
     assert 0 <= small.last_wall_cycles - want <= SMALL.beats_per_pixel + 4
+    # With sobol there is no bubble: 400 runs cost their compute cycles (plus one per run whose
+    # last cycle began a Sobol block, none here), the first load and the last hand-over.
+    assert hides_bubble(SMALL) and not ((res.cycles - 1) % (1 << SMALL.word_bits) == 0).any()
+    assert 0 <= small.last_wall_cycles - int(res.cycles.sum()) <= SMALL.beats_per_pixel + 4
 
 
 @needs_tools
