@@ -121,6 +121,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         default=4,
         help="simulated clock cycles per UART bit (default 4: the pty has no baud rate)",
     )
+    s.add_argument(
+        "--sim-timeout-bits",
+        type=int_arg,
+        default=None,
+        help="the board's receive timeout in bit times (default 131072: simulated time runs only while the "
+        "harness has the CPU, so shorter ones may fire while a loaded host is still sending)",
+    )
     s.add_argument("--quiet", action="store_true", help="only the path")
     s.set_defaults(func=_simulate)
 
@@ -152,8 +159,16 @@ def _simulate(args: argparse.Namespace) -> int:
     from .simulate import BoardSimulation
 
     machine, model, width = _design(args)
+    from .simulate import DEFAULT_SIM_TIMEOUT_BITS
+
+    timeout_bits = DEFAULT_SIM_TIMEOUT_BITS if args.sim_timeout_bits is None else args.sim_timeout_bits
     with BoardSimulation(
-        machine, model, width, clocks_per_bit=args.sim_clocks_per_bit, verbose=not args.quiet
+        machine,
+        model,
+        width,
+        clocks_per_bit=args.sim_clocks_per_bit,
+        timeout_bits=timeout_bits,
+        verbose=not args.quiet,
     ) as sim:
         print(sim.port, flush=True)
         if not args.quiet:
