@@ -233,3 +233,20 @@ def test_bitstream_for_the_ulx3s_85f(tmp_path: Path) -> None:
         "Critical path" in (out / "nextpnr.log").read_text()
         or "Max frequency" in (out / "nextpnr.log").read_text()
     )
+
+
+def test_pacing_keeps_the_receive_fifo_from_overflowing(board) -> None:
+    """200 lines of 16 pixels: the results (11 bytes per output pixel at Dmax 4) drain slower than
+    the pixels (2 bytes) come, so unpaced the 2 KiB receive FIFO would overflow; paced (line y once
+    line y - lag is answered) the frame passes at once with the model's results."""
+    left, right, _ = bundled_pair()
+    x, y, h = 300, 150, 200
+    left, right = left[y : y + h, x : x + WIDTH].copy(), right[y : y + h, x : x + WIDTH].copy()
+    with _open(board) as port:
+        link = BoardLink(port, timeout=1.5, log=lambda msg: None)
+        assert link.info().rx_fifo_bytes < 2 * WIDTH * h  # the frame does not fit in the FIFO
+        out = link.run_frame(left, right, PARAMS, MODEL)
+    assert link.stats.attempts == 1, link.stats.failures
+    want = frame_results(PARAMS, MODEL, left, right)
+    for name in ("map", "counts", "cycles"):
+        np.testing.assert_array_equal(out[name], np.asarray(getattr(want, name)), err_msg=name)

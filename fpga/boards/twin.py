@@ -1,11 +1,11 @@
 """The Python twin of the board (``BoardCore``: UART bridge + StereoMachine), at the byte level.
 
 ``BoardTwin(params, model, width).feed(data)`` takes the bytes the host sends and returns the
-bytes the board sends back, record for record what the RTL sends for the same input (the RTL's
-tests hold it to this); a frame's results are the machine model's on the host's words of that
-frame, from reset (the board resets the StereoMachine at every frame it accepts). Timing is not
-modelled: :meth:`silence` is the board's receive timeout firing (the host went quiet mid-frame),
-:meth:`reset` a board reset.
+bytes the board sends back: for headers, info requests, garbage and whole frames, byte for byte
+what the RTL sends for the same input (``tests/test_board_sim.py`` holds the RTL to it). A
+frame's results are the machine model's on the host's words of that frame, from reset (the board
+resets the StereoMachine at every frame it accepts). Timing is not modelled: :meth:`silence` is
+the board's receive timeout firing (the host went quiet mid-frame), :meth:`reset` a board reset.
 """
 
 from __future__ import annotations
@@ -52,9 +52,9 @@ class BoardTwin:
         return pr.encode_record(pr.HELLO, 0, self.info)
 
     def silence(self) -> bytes:
-        """The receive timeout: a frame still receiving ends with status TIMEOUT (no result of it
-        is sent, as the RTL's results of a frame cut short would be sent only up to the timeout:
-        the twin computes none before the pixels are complete)."""
+        """The receive timeout: a frame still receiving ends with status TIMEOUT. (The RTL sends
+        the results of the pixels it had before its end record, and counts them in it; the twin
+        computes none before a frame is complete: the host discards them either way.)"""
         if self._frame is None:
             self._buf.clear()
             return b""
