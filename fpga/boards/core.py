@@ -237,7 +237,6 @@ class BoardCore(wiring.Component):
         fields = Signal(2)
         res_pending = Signal()
         res = Signal(result_layout(p))
-        res_idx = Signal(range(256 + p.rows * 4))
         fmt = pr.ResultFormat.of(p, pr.FIELDS_ALL)
 
         def chunks(value: Value, nbytes: int) -> list[Value]:
@@ -250,6 +249,7 @@ class BoardCore(wiring.Component):
         cycles = chunks(res.cycles, fmt.cycle_bytes)
         res_bytes = Array([*head, *counts, *cycles])
         end_head, end_counts, last = len(head) - 1, len(head) + len(counts) - 1, len(res_bytes) - 1
+        res_idx = Signal(range(len(res_bytes)))
 
         # --- The transmitter's owner: a whole record at a time.
         owner_ctl = Signal()

@@ -20,6 +20,7 @@ import signal
 import subprocess
 import time
 import tty
+from pathlib import Path
 
 from bayesmachine.likelihood import ModelParams
 from bayesmachine.params import MachineParams
@@ -77,7 +78,9 @@ def build_board_harness(
 
     root = cache_dir()
     root.mkdir(parents=True, exist_ok=True)
-    key = json.dumps([params.to_dict(), model.to_dict(), width, options], sort_keys=True)
+    # The Verilog cache keys on the hdl/ sources; the board's own RTL (core, UART, protocol) too.
+    rtl = "".join((Path(__file__).parent / f).read_text() for f in ("core.py", "uart.py", "protocol.py"))
+    key = json.dumps([params.to_dict(), model.to_dict(), width, options, rtl], sort_keys=True)
     name = f"board-{hashlib.sha256(key.encode()).hexdigest()[:20]}"
     design = HarnessSources(
         verilog=cached_verilog(name, build_top, root),
