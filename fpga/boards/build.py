@@ -29,15 +29,13 @@ DEFAULT_BAUD = 3_000_000
 DEFAULT_CLOCK_MHZ = 60.0  # exact from 25 MHz; the StereoMachine alone closes at 76 MHz on the 85F
 
 
-def _sync_clock(report: dict) -> tuple[str, dict]:
-    """nextpnr's entry for the PLL's clock (the net driven by CLKOP)."""
+def _sync_clock(report: dict, freq_mhz: float) -> tuple[str, dict]:
+    """nextpnr's entry for the PLL's clock: the one constrained at ``freq_mhz`` (the 25 MHz input
+    drives only the PLL)."""
     fmax = report.get("fmax") or {}
     if not fmax:
-        raise RuntimeError("nextpnr's report has no clock")
-    for name, entry in fmax.items():
-        if "sync" in name or "CLKOP" in name:
-            return name, entry
-    return min(fmax.items(), key=lambda kv: kv[1]["achieved"])
+        raise RuntimeError("nextpnr's report has no clock: the design has no registers on the PLL's clock")
+    return min(fmax.items(), key=lambda kv: abs(float(kv[1].get("constraint", 0.0)) - freq_mhz))
 
 
 def board_build(
@@ -153,7 +151,7 @@ def board_build(
             say,
         )
         pnr_report = json.loads((work / "pnr.json").read_text())
-        clock, entry = _sync_clock(pnr_report)
+        clock, entry = _sync_clock(pnr_report, freq)
         parsed = parse_nextpnr(pnr_report)
         fmax = round(float(entry["achieved"]), 2)
         report = {
