@@ -210,7 +210,10 @@ class BoardCore(wiring.Component):
         pop = Signal()
         m.d.comb += rxf.r_stream.ready.eq(pop)
 
+        # The StereoMachine's reset, registered: it reaches every flip-flop of the machine, so it
+        # must not start from the parser's header checks (the first place and route's critical path).
         sm_rst = Signal()
+        m.d.sync += sm_rst.eq(0)
         stereo = StereoMachine(params=p, model=self._model, width=width)
         m.submodules.stereo = ResetInserter({"sync": sm_rst})(stereo)
 
@@ -251,24 +254,28 @@ class BoardCore(wiring.Component):
         end_head, end_counts, last = len(head) - 1, len(head) + len(counts) - 1, len(res_bytes) - 1
         res_idx = Signal(range(len(res_bytes)))
 
-        # --- The transmitter's owner: a whole record at a time.
+        # --- The transmitter's owner: a whole record at a time, into a byte register in front of the
+        # UART (the record multiplexers and the CRC's XORs stay off the UART's path).
         owner_ctl = Signal()
         owner_res = Signal()
-        sent_byte = Signal()
-        m.d.comb += sent_byte.eq(utx.data.valid & utx.data.ready)
+        tx_valid = Signal()
+        tx_byte = Signal(8)
+        m.d.comb += [utx.data.valid.eq(tx_valid), utx.data.payload.eq(tx_byte)]
+        with m.If(utx.data.ready):
+            m.d.sync += tx_valid.eq(0)
+        load = Signal()  # the owner's next byte goes into the register
+        m.d.comb += load.eq((~tx_valid | utx.data.ready) & (owner_ctl | owner_res))
         with m.If(~owner_ctl & ~owner_res):
             with m.If(ctl_pending):
                 m.d.sync += owner_ctl.eq(1)
             with m.Elif(res_pending):
                 m.d.sync += owner_res.eq(1)
-        with m.If(owner_ctl):
-            m.d.comb += [utx.data.valid.eq(1), utx.data.payload.eq(ctl_bytes[ctl_idx])]
-        with m.Elif(owner_res):
-            m.d.comb += [utx.data.valid.eq(1), utx.data.payload.eq(res_bytes[res_idx])]
+        with m.If(load):
+            m.d.sync += [tx_valid.eq(1), tx_byte.eq(Mux(owner_ctl, ctl_bytes[ctl_idx], res_bytes[res_idx]))]
 
-        with m.If(owner_ctl & sent_byte):
+        with m.If(owner_ctl & load):
             with m.If(ctl_idx < pr.RECORD_BYTES - 2):
-                m.d.sync += ctl_crc.eq(crc16_byte(ctl_crc, utx.data.payload))
+                m.d.sync += ctl_crc.eq(crc16_byte(ctl_crc, ctl_bytes[ctl_idx]))
             with m.If(ctl_idx == pr.RECORD_BYTES - 1):
                 m.d.sync += [ctl_idx.eq(0), ctl_pending.eq(0), owner_ctl.eq(0), ctl_crc.eq(0xFFFF)]
             with m.Else():
@@ -276,8 +283,12 @@ class BoardCore(wiring.Component):
 
         results_sent = Signal(32)
         res_crc = Signal(32, init=0xFFFFFFFF)
-        with m.If(owner_res & sent_byte):
-            m.d.sync += res_crc.eq(crc32_byte(res_crc, utx.data.payload))
+        # The results' CRC-32 from the byte register, the cycle after its load (it holds the byte then).
+        crc_pending = Signal()
+        m.d.sync += crc_pending.eq(owner_res & load)
+        with m.If(crc_pending):
+            m.d.sync += res_crc.eq(crc32_byte(res_crc, tx_byte))
+        with m.If(owner_res & load):
             done = Signal()
             nxt = Signal.like(res_idx)
             with m.If(res_idx == end_head):
@@ -303,7 +314,7 @@ class BoardCore(wiring.Component):
 
         aborting = Signal()
         results_taken = Signal(32)
-        m.d.comb += stereo.result.ready.eq(~res_pending & ~aborting)
+        m.d.comb += stereo.result.ready.eq(~res_pending & ~aborting & ~sm_rst)
         with m.If(stereo.result.valid & stereo.result.ready):
             m.d.sync += [
                 res.eq(stereo.result.payload),
@@ -323,6 +334,8 @@ class BoardCore(wiring.Component):
         seq = Signal(8)
         height = Signal(16)
         expected = Signal(32)
+        mul_a = Signal(16)
+        mul_add = Signal(32)
         col = Signal(range(width))
         line = Signal(16)
         left = Signal(8)
@@ -364,6 +377,7 @@ class BoardCore(wiring.Component):
             & ~owner_ctl
             & ~owner_res
             & ~utx.active
+            & ~tx_valid
             & ~urx.active
         )
         m.d.comb += timed_out.eq(quiet & (silence == self._timeout_bits * self._cpb - 1))
@@ -408,15 +422,14 @@ class BoardCore(wiring.Component):
                         m.next = "SYNC0"
                     with m.Elif(h_type == pr.FRAME):
                         with m.If((h_width == width) & (h_height >= 5)):
-                            results = Signal(32)
-                            m.d.comb += results.eq((h_height - 4) * out_cols)
-                            emit(pr.START, h_seq, Cat(h_fields[:2], C(0, 6), h_width, h_height, results))
-                            m.d.comb += sm_rst.eq(1)
+                            m.d.sync += sm_rst.eq(1)
                             m.d.sync += [
                                 seq.eq(h_seq),
                                 fields.eq(h_fields[:2]),
                                 height.eq(h_height),
-                                expected.eq(results),
+                                mul_a.eq(h_height - 4),
+                                mul_add.eq(out_cols),
+                                expected.eq(0),
                                 col.eq(0),
                                 line.eq(0),
                                 pix_crc.eq(0xFFFFFFFF),
@@ -427,7 +440,7 @@ class BoardCore(wiring.Component):
                                 trailer.eq(0),
                                 overflow.eq(0),
                             ]
-                            m.next = "LEFT"
+                            m.next = "COUNT"
                         with m.Else():
                             emit(pr.ERROR, h_seq, Cat(C(pr.ERR_SIZE, 8), C(width, 16)))
                             m.d.sync += error_led.eq(1)
@@ -436,6 +449,16 @@ class BoardCore(wiring.Component):
                         emit(pr.ERROR, h_seq, Cat(C(pr.ERR_TYPE, 8), h_type, C(0, 8)))
                         m.d.sync += error_led.eq(1)
                         m.next = "SYNC0"
+            with m.State("COUNT"):  # the results to come, (height - 4) x out_cols, by shift and add
+                m.d.comb += in_frame.eq(1)
+                with m.If(mul_a == 0):
+                    with m.If(~ctl_pending):
+                        emit(pr.START, seq, Cat(fields, C(0, 6), C(width, 16), height, expected))
+                        m.next = "LEFT"
+                with m.Else():
+                    with m.If(mul_a[0]):
+                        m.d.sync += expected.eq(expected + mul_add)
+                    m.d.sync += [mul_a.eq(mul_a >> 1), mul_add.eq(mul_add << 1)]
             with m.State("LEFT"):
                 m.d.comb += [in_frame.eq(1), waiting.eq(1)]
                 with m.If(have):
@@ -484,7 +507,7 @@ class BoardCore(wiring.Component):
                     m.next = "ABORT"
             with m.State("DRAIN"):
                 m.d.comb += in_frame.eq(1)
-                with m.If(~ctl_pending & (results_sent == expected)):
+                with m.If(~ctl_pending & ~crc_pending & (results_sent == expected)):
                     status = Signal(8)
                     with m.If(overflow):
                         m.d.comb += status.eq(pr.STATUS_OVERFLOW)
@@ -496,9 +519,9 @@ class BoardCore(wiring.Component):
                     m.next = "SYNC0"
             with m.State("ABORT"):
                 m.d.comb += [in_frame.eq(1), aborting.eq(1)]
-                with m.If(~ctl_pending & ~res_pending):
+                with m.If(~ctl_pending & ~res_pending & ~crc_pending):
                     end_record(Mux(overflow, C(pr.STATUS_OVERFLOW, 8), C(pr.STATUS_TIMEOUT, 8)))
-                    m.d.comb += sm_rst.eq(1)
+                    m.d.sync += sm_rst.eq(1)
                     m.next = "SYNC0"
 
         with m.If(urx.data.valid & ~rxf.w_stream.ready):
@@ -508,12 +531,21 @@ class BoardCore(wiring.Component):
         led_tx = Signal()
         with m.If(urx.data.valid):
             m.d.sync += led_rx.eq(~led_rx)
-        with m.If(sent_byte):
+        with m.If(load):
             m.d.sync += led_tx.eq(~led_tx)
         m.d.comb += [
             self.leds.eq(Cat(in_frame, error_led, led_rx, led_tx, overflow)),
             self.busy.eq(
-                in_frame | ctl_pending | res_pending | owner_ctl | owner_res | have | utx.active | urx.active
+                in_frame
+                | ctl_pending
+                | res_pending
+                | owner_ctl
+                | owner_res
+                | tx_valid
+                | crc_pending
+                | have
+                | utx.active
+                | urx.active
             ),
         ]
         return m
