@@ -227,7 +227,7 @@ def test_bitstream_for_the_ulx3s_85f(tmp_path: Path) -> None:
     bit = out / "top.bit"
     assert bit.stat().st_size > 100_000 and (out / "top.svf").stat().st_size > 0
     report = json.loads((out / "report.json").read_text())
-    assert report["timing_met"] is True and report["fmax_mhz"] >= report["constraint_mhz"] == 60.0
+    assert report["timing_met"] is True and report["fmax_mhz"] >= report["constraint_mhz"] == 45.0
     assert report["program"] == f"openFPGALoader -b ulx3s {bit}"
     assert (
         "Critical path" in (out / "nextpnr.log").read_text()

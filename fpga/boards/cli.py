@@ -96,7 +96,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         type=float_arg,
         default=None,
         metavar="MHZ",
-        help="the design's clock from the PLL (default 60)",
+        help="the design's clock from the PLL (default 45: 3 Mbaud in 15 clocks per bit)",
     )
     b.add_argument("--baud", type=int_arg, default=None, help="UART baud rate (default 3000000)")
     b.add_argument("--pnr-seed", type=int_arg, default=1, help="nextpnr placement seed (default 1)")
