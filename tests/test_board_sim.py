@@ -9,7 +9,6 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -52,6 +51,8 @@ def board():
 def _open(board) -> serial.Serial:
     port = serial.Serial(board.port, 3_000_000, timeout=1.0)
     port.reset_input_buffer()
+    _read_until_quiet(port, 0.3)  # the hello the board sent after its power-on reset, if still coming
+    port.timeout = 1.0
     return port
 
 
@@ -113,7 +114,7 @@ class FaultyPort:
                 else:
                     self._port.write(data[: i + 1])
                     self._port.flush()
-                    time.sleep(0.05)
+                    # No pause: a quiet host would let the board's receive timeout end the frame first.
                     self._board.reset()
                     data = data[i + 1 :]
                     self.sent += i + 1
