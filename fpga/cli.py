@@ -71,6 +71,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    "--top stereo)")
     p.set_defaults(func=_run)
 
+    from .boards.cli import register as register_board
+
+    register_board(subparsers)
+
 
 def _run(args: argparse.Namespace) -> int:
     from bayesmachine.hdl.frontend.cli import check_top

@@ -23,6 +23,7 @@ from bayesmachine.cliargs import (
     add_machine_options,
     add_model_options,
     argument_type,
+    int_arg,
     machine_params_from_args,
     model_params_from_args,
     output_path,
@@ -161,10 +162,26 @@ def _add_machine_options(p: argparse.ArgumentParser, sweep: bool) -> None:
             if name not in ("rng", "counter_max", "columns"):  # every other one: a list, a grid axis
                 helps[name] = helps.get(name, option.help) + "; A,B,... sweeps it (a grid axis)"
     g = add_machine_options(p, skip=("columns",), help=helps, **changes)
-    g.add_argument(
-        "--engine", choices=ENGINES, default="model", help="how to run the machine (default model)"
-    )
-    if not sweep:
+    if sweep:
+        g.add_argument(
+            "--engine", choices=ENGINES, default="model", help="how to run the machine (default model)"
+        )
+    else:
+        g.add_argument(
+            "--engine", choices=(*ENGINES, "board"), default="model",
+            help="how to run the machine (default model); board: the StereoMachine on a board (or "
+            "`bayesmachine board simulate`) over a serial port, --port (docs/board.md)",
+        )
+        g.add_argument("--port", default=None,
+                       help="with --engine board: the serial port (/dev/ttyUSB0, or the path board simulate "
+                       "printed)")
+        g.add_argument("--baud", type=int_arg, default=None,
+                       help="with --engine board: the baud rate the bitstream was built for "
+                       "(default 3000000)")
+        g.add_argument("--board-timeout", type=positive_float_arg, default=None, metavar="S",
+                       help="with --engine board: seconds of silence before the board is deemed not to "
+                       "answer "
+                       "(default 2)")
         g.add_argument(
             "--feed",
             choices=FEEDS,
@@ -365,8 +382,30 @@ def _check_waves(waves: tuple[int, int] | None, pixels: int) -> None:
         )
 
 
+def _check_board_args(args: argparse.Namespace, model: ModelParams) -> None:
+    """``--engine board`` and its options: together, and with a model the board computes."""
+    given = [flag for flag, v in (("--port", args.port), ("--baud", args.baud),
+                                  ("--board-timeout", args.board_timeout)) if v is not None]
+    if args.engine != "board":
+        if given:
+            raise ValueError(f"{', '.join(given)}: only with --engine board")
+        return
+    if args.port is None:
+        raise ValueError("--engine board needs --port (the board's serial port, or the path "
+                         "`bayesmachine board "
+                         "simulate` printed)")
+    if model.census:
+        raise ValueError("--engine board --model census: the board carries the on-chip front end, "
+                         "which computes "
+                         "the paper model only (census is not in the front end yet); use --model paper")
+    if args.waves is not None:
+        raise ValueError("--waves is not available with --engine board")
+    args.feed = "pixels"  # the board takes the pair itself: its machine has the front end's lanes
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
     model = model_params_from_args(args)
+    _check_board_args(args, model)
     machine = _machine_params(args, model)
     waves = _parse_waves(args.waves, args.engine)
     if args.feed == "pixels" and waves is not None:
@@ -378,20 +417,34 @@ def _cmd_run(args: argparse.Namespace) -> int:
     with OutputDir(args.output, RUN_OUTPUTS, last="report.json") as out:
         # The harness writes the trace under its temporary name; commit() renames it with the rest.
         engine_options = {} if waves is None else {"trace": (*waves, str(out.path("waves.vcd")))}
-        outcome = run_pair(
-            left,
-            right,
-            model,
-            machine,
-            engine=args.engine,
-            gt=gt,
-            progress=False if args.quiet else None,
-            sgbm=not args.no_sgbm,
-            engine_options=engine_options,
-            feed=args.feed,
-        )
+        board: dict[str, object] | None = None
+        if args.engine == "board":
+            from bayesmachine.fpga.boards.link import run_board
+
+            from .metrics import evaluate
+
+            prep = prepare(left, right, model, gt)
+            run, board = run_board(prep, machine, args.port, 3_000_000 if args.baud is None else args.baud,
+                                   timeout=2.0 if args.board_timeout is None else args.board_timeout,
+                                   progress=False if args.quiet else None)
+            outcome = RunOutcome(prep, run, evaluate(prep, run, sgbm=not args.no_sgbm))
+        else:
+            outcome = run_pair(
+                left,
+                right,
+                model,
+                machine,
+                engine=args.engine,
+                gt=gt,
+                progress=False if args.quiet else None,
+                sgbm=not args.no_sgbm,
+                engine_options=engine_options,
+                feed=args.feed,
+            )
         report = _report(outcome, source, args.crop)
         report["feed"] = args.feed
+        if board is not None:
+            report["board"] = board  # the link: wall time, bytes each way, rates, attempts
         run, prep = outcome.run, outcome.prepared
         # census-lr: the right pass's MAPs, cycles and timeouts too (over its own columns).
         extra = {} if run.right is None else {"right_map": run.right.map, "right_cycles": run.right.cycles,

@@ -1,0 +1,197 @@
+"""``bayesmachine board build``: the ULX3S bitstream, through the yowasp tools from PyPI.
+
+The amaranth-boards platform prepares the design (``top.il``, the Yosys script ``top.ys``, the pin
+constraints ``top.lpf`` with the PLL clock's frequency); the flow then runs Yosys, nextpnr-ecp5 and
+ecppack itself (``fpga.flow``'s runner: progress lines, the tool's process group ended on any
+interruption), each with ``cwd = OUT/work`` and relative names, since the WebAssembly tools only
+see the working directory and ``$HOME``. OUT gets ``top.bit``, ``top.svf``, ``nextpnr.log`` (the
+timing report) and ``report.json`` (committed last; see docs/board.md).
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import sys
+import time
+from pathlib import Path
+
+from bayesmachine.likelihood import ModelParams
+from bayesmachine.params import MachineParams
+
+from . import protocol as pr
+from .ulx3s import get_board, pll_config
+
+__all__ = ["BUILD_OUTPUTS", "DEFAULT_BAUD", "DEFAULT_CLOCK_MHZ", "board_build"]
+
+BUILD_OUTPUTS = ("top.bit", "top.svf", "nextpnr.log", "report.json")
+DEFAULT_BAUD = 3_000_000
+# 25 / 5 x 9, and 3 Mbaud in exactly 15 clocks per bit. 60 MHz (20 clocks per bit) did not close with
+# the UART and protocol around the StereoMachine (docs/board.md, timing closure).
+DEFAULT_CLOCK_MHZ = 45.0
+
+
+def _sync_clock(report: dict, freq_mhz: float) -> tuple[str, dict]:
+    """nextpnr's entry for the PLL's clock: the one constrained at ``freq_mhz`` (the 25 MHz input
+    drives only the PLL)."""
+    fmax = report.get("fmax") or {}
+    if not fmax:
+        raise RuntimeError("nextpnr's report has no clock: the design has no registers on the PLL's clock")
+    return min(fmax.items(), key=lambda kv: abs(float(kv[1].get("constraint", 0.0)) - freq_mhz))
+
+
+def board_build(
+    params: MachineParams,
+    model: ModelParams,
+    width: int,
+    board_name: str,
+    out: Path,
+    *,
+    clock_mhz: float = DEFAULT_CLOCK_MHZ,
+    baud: int = DEFAULT_BAUD,
+    rx_fifo_log2: int = 12,
+    seed: int = 1,
+    progress: bool = True,
+) -> dict:
+    """Build the bitstream into ``out``; returns the report (also ``out/report.json``)."""
+    import importlib
+
+    from amaranth_boards import ulx3s
+
+    from bayesmachine.fpga.flow import _run, _tool, parse_nextpnr
+    from bayesmachine.outputs import OutputDir
+
+    from .core import DEFAULT_TIMEOUT_BITS, BoardCore, check_board, check_core_options
+    from .ulx3s import ULX3STop
+
+    board = get_board(board_name)
+    check_board(params, model, width)
+    pll = pll_config(clock_mhz)
+    freq = pll.out_mhz
+    if isinstance(baud, bool) or not isinstance(baud, int) or baud <= 0:
+        raise ValueError(f"--baud must be a positive integer, got {baud!r}")
+    cpb = round(freq * 1e6 / baud)
+    actual_baud = freq * 1e6 / max(cpb, 1)
+    if cpb < 4 or abs(actual_baud - baud) / baud > 0.02:
+        raise ValueError(
+            f"--baud {baud}: a {freq:g} MHz clock gives {cpb} clocks per bit "
+            f"({actual_baud:.0f} baud); a UART needs at least 4 and within 2 %"
+        )
+    check_core_options(cpb, rx_fifo_log2, DEFAULT_TIMEOUT_BITS)
+    tools = {name: _tool(f"yowasp-{name}") for name in ("yosys", "nextpnr-ecp5", "ecppack")}
+    t0 = time.monotonic()
+
+    def say(msg: str) -> None:
+        if progress:
+            print(f"[{time.monotonic() - t0:6.0f} s] {msg}", file=sys.stderr, flush=True)
+
+    platform = getattr(importlib.import_module(ulx3s.__name__), board.platform)()
+    with OutputDir(out, BUILD_OUTPUTS, last="report.json") as od:
+        work = Path(out) / "work"
+        work.mkdir(parents=True, exist_ok=True)
+        core = BoardCore(
+            params=params, model=model, width=width, clocks_per_bit=cpb, rx_fifo_log2=rx_fifo_log2
+        )
+        top = ULX3STop(core=core, pll=pll)
+        say(
+            f"elaborating the board top for {board.name}: StereoMachine Dmax {model.dmax}, width {width}, "
+            f"{freq:g} MHz, {actual_baud:.0f} baud ({cpb} clocks per bit)"
+        )
+        from bayesmachine.fpga.flow import KEEP_REGISTER_COPIES
+
+        plan = platform.prepare(
+            top,
+            name="top",
+            # As fpga.flow: flattened first (Yosys's ABC9 step), the register copies kept.
+            script_after_read=f"hierarchy -top top\nflatten\n{KEEP_REGISTER_COPIES}",
+            script_after_synth="tee -q -o stat.json stat -json",
+        )
+        for name in ("top.il", "top.ys", "top.lpf"):
+            text = plan.files[name]
+            (work / name).write_text(text if isinstance(text, str) else text.decode())
+        _run(
+            [tools["yosys"], "-q", "-l", "yosys.log", "top.ys"], work, "yosys", "synthesis (synth_ecp5)", say
+        )
+        device = platform._nextpnr_device_options[platform.device]
+        package = platform._nextpnr_package_options[platform.package].upper()
+        (work / "pnr.json").unlink(missing_ok=True)
+        _run(
+            [
+                tools["nextpnr-ecp5"],
+                device,
+                "--package",
+                package,
+                "--speed",
+                str(platform.speed),
+                "--json",
+                "top.json",
+                "--lpf",
+                "top.lpf",
+                "--textcfg",
+                "top.config",
+                "--report",
+                "pnr.json",
+                "--seed",
+                str(seed),
+                "--router",
+                "router2",
+                "--timing-allow-fail",
+                "-q",
+                "-l",
+                "nextpnr.log",
+            ],
+            work,
+            "nextpnr",
+            "place and route (nextpnr-ecp5)",
+            say,
+        )
+        _run(
+            [tools["ecppack"], "--compress", "--input", "top.config", "--bit", "top.bit", "--svf", "top.svf"],
+            work,
+            "ecppack",
+            "bitstream (ecppack)",
+            say,
+        )
+        pnr_report = json.loads((work / "pnr.json").read_text())
+        clock, entry = _sync_clock(pnr_report, freq)
+        parsed = parse_nextpnr(pnr_report)
+        fmax = round(float(entry["achieved"]), 2)
+        report = {
+            "board": board.name,
+            "device": board.device,
+            "top": "stereo",
+            "width": width,
+            "model": model.to_dict(),
+            "machine": params.to_dict(),
+            "fingerprint": f"{core.fingerprint:08x}",
+            "protocol_version": pr.PROTOCOL_VERSION,
+            "clock": clock,
+            "clock_mhz": freq,
+            "pll": {
+                "clki_div": pll.clki_div,
+                "clkfb_div": pll.clkfb_div,
+                "clkop_div": pll.clkop_div,
+                "vco_mhz": pll.vco_mhz,
+            },
+            "constraint_mhz": freq,
+            "fmax_mhz": fmax,
+            "timing_met": fmax >= freq,
+            "baud": round(actual_baud),
+            "baud_asked": baud,
+            "clocks_per_bit": cpb,
+            "rx_fifo_bytes": 1 << rx_fifo_log2,
+            "critical_path": parsed["critical_path"],
+            "resources": parsed["pnr_utilization"],
+            "program": f"openFPGALoader -b ulx3s {Path(out) / 'top.bit'}",
+            "program_alternative": f"fujprog {Path(out) / 'top.bit'}",
+            "seconds": round(time.monotonic() - t0, 1),
+        }
+        for name in ("top.bit", "top.svf", "nextpnr.log"):
+            od.write(name, lambda path, name=name: shutil.copyfile(work / name, path))
+        od.write("report.json", lambda path: path.write_text(json.dumps(report, indent=2) + "\n"))
+        od.commit()
+    say(
+        f"wrote {out}/top.bit: {fmax} MHz achieved at {freq:g} MHz asked "
+        f"({'met' if report['timing_met'] else 'NOT met'})"
+    )
+    return report

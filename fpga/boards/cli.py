@@ -1,0 +1,188 @@
+"""``bayesmachine board build|simulate``: the ULX3S bitstream, and its design simulated behind a
+pseudo-terminal (see docs/board.md)."""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+from pathlib import Path
+
+from bayesmachine.cliargs import (
+    add_dmax_option,
+    add_machine_options,
+    add_model_options,
+    float_arg,
+    int_arg,
+    machine_params_from_args,
+    model_params_from_args,
+    output_path,
+)
+
+from .ulx3s import BOARDS
+
+__all__ = ["register"]
+
+DEFAULT_WIDTH = 640
+
+
+def _design_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--board", choices=sorted(BOARDS), default="ulx3s-85f", help="the ULX3S's FPGA (default ulx3s-85f)"
+    )
+    p.add_argument(
+        "--top",
+        choices=("stereo",),
+        default="stereo",
+        help="stereo: the camera-fed StereoMachine (front end + machine), pixel pairs in (the only top "
+        "so far)",
+    )
+    p.add_argument(
+        "--width",
+        type=int_arg,
+        default=DEFAULT_WIDTH,
+        help=f"pixels per line of every frame the board takes (default {DEFAULT_WIDTH}); "
+        "run --engine board needs pairs (or crops) of this width",
+    )
+    g = p.add_argument_group("machine (the options of emit; --rng: an on-chip source)")
+    add_dmax_option(g)
+    add_machine_options(g, title=None)
+    add_model_options(p, dmax=False, census=True, title="model (paper table 1 defaults)")
+
+
+def _design(args: argparse.Namespace):  # noqa: ANN202
+    """(machine, model, width) the options describe, checked (one clear error)."""
+    import dataclasses
+
+    from bayesmachine.params import stereo_lanes
+
+    from .core import check_board
+
+    model = model_params_from_args(args)
+    if model.census:
+        raise ValueError(
+            "--model census: the board carries the on-chip front end, which computes the paper "
+            "model only (census is not in the front end yet); use --model paper"
+        )
+    machine = machine_params_from_args(args, args.dmax)
+    if args.lanes is None:
+        machine = dataclasses.replace(machine, lanes=stereo_lanes(machine))
+    check_board(machine, model, args.width)
+    return machine, model, args.width
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Add ``board build`` and ``board simulate``."""
+    p = subparsers.add_parser(
+        "board",
+        help="a ULX3S bitstream with a serial host link, and its simulation on a pseudo-terminal",
+        description="The camera-fed StereoMachine on a ULX3S board behind a UART (the board's FTDI"
+        " USB-serial link), driven by `bayesmachine run --engine board --port PORT`. See docs/board.md.",
+    )
+    sub = p.add_subparsers(dest="board_command", metavar="SUBCOMMAND", required=True)
+
+    b = sub.add_parser(
+        "build",
+        help="build the bitstream (Yosys, nextpnr-ecp5, ecppack from PyPI)",
+        description="Build OUT/top.bit and OUT/top.svf for a ULX3S: the board's 25 MHz clock through the"
+        " ECP5 PLL, the UART on the FTDI pins, status on the LEDs, FIRE1 as reset. Writes OUT/nextpnr.log"
+        " (timing "
+        "report) and OUT/report.json (resources, fmax, the clock asked for, timing_met, the command to "
+        "program it) last. Place and route takes 10+ minutes for the default design.",
+    )
+    _design_options(b)
+    b.add_argument(
+        "--clock",
+        type=float_arg,
+        default=None,
+        metavar="MHZ",
+        help="the design's clock from the PLL (default 45: 3 Mbaud in 15 clocks per bit)",
+    )
+    b.add_argument("--baud", type=int_arg, default=None, help="UART baud rate (default 3000000)")
+    b.add_argument("--pnr-seed", type=int_arg, default=1, help="nextpnr placement seed (default 1)")
+    b.add_argument(
+        "-o", "--output", type=output_path, default=None, help="output directory (default build/BOARD)"
+    )
+    b.set_defaults(func=_build)
+
+    s = sub.add_parser(
+        "simulate",
+        help="run the board's design under Verilator behind a pseudo-terminal",
+        description="Simulate the board's design (UART at bit level, protocol, StereoMachine) under"
+        " Verilator, its UART bridged to a pseudo-terminal. The first line of output is the pseudo-terminal's"
+        " path: give it to `bayesmachine run --engine board --port PATH`. Serves until interrupted (Ctrl-C,"
+        " SIGTERM); SIGUSR1 "
+        "resets the simulated board. Use a small --width and --dmax: every bit of the UART is simulated.",
+    )
+    _design_options(s)
+    s.add_argument(
+        "--sim-clocks-per-bit",
+        type=int_arg,
+        default=4,
+        help="simulated clock cycles per UART bit (default 4: the pty has no baud rate)",
+    )
+    s.add_argument(
+        "--sim-timeout-bits",
+        type=int_arg,
+        default=None,
+        help="the board's receive timeout in bit times (default 131072: simulated time runs only while the "
+        "harness has the CPU, so shorter ones may fire while a loaded host is still sending)",
+    )
+    s.add_argument("--quiet", action="store_true", help="only the path")
+    s.set_defaults(func=_simulate)
+
+
+def _build(args: argparse.Namespace) -> int:
+    from .build import DEFAULT_BAUD, DEFAULT_CLOCK_MHZ, board_build
+
+    machine, model, width = _design(args)
+    out = Path(args.output or f"build/{args.board}")
+    report = board_build(
+        machine,
+        model,
+        width,
+        args.board,
+        out,
+        clock_mhz=DEFAULT_CLOCK_MHZ if args.clock is None else args.clock,
+        baud=DEFAULT_BAUD if args.baud is None else args.baud,
+        seed=args.pnr_seed,
+    )
+    print(
+        f"{out / 'top.bit'}: {report['fmax_mhz']} MHz achieved, {report['constraint_mhz']:g} MHz asked: "
+        f"timing {'met' if report['timing_met'] else 'NOT met'}; {report['baud']} baud"
+    )
+    print(f"program it: {report['program']}  (or: {report['program_alternative']})")
+    return 0
+
+
+def _simulate(args: argparse.Namespace) -> int:
+    from .simulate import BoardSimulation
+
+    machine, model, width = _design(args)
+    from .simulate import DEFAULT_SIM_TIMEOUT_BITS
+
+    timeout_bits = DEFAULT_SIM_TIMEOUT_BITS if args.sim_timeout_bits is None else args.sim_timeout_bits
+    with BoardSimulation(
+        machine,
+        model,
+        width,
+        clocks_per_bit=args.sim_clocks_per_bit,
+        timeout_bits=timeout_bits,
+        verbose=not args.quiet,
+    ) as sim:
+        print(sim.port, flush=True)
+        if not args.quiet:
+            print(
+                f"board simulate: {args.board} design (Dmax {model.dmax}, width {width}) on {sim.port}, "
+                f"{args.sim_clocks_per_bit} cycles per bit; Ctrl-C to stop",
+                file=sys.stderr,
+                flush=True,
+            )
+        previous = signal.signal(signal.SIGUSR1, lambda *_: sim.reset())
+        try:
+            while sim.running:
+                sim.wait(0.5)
+        finally:
+            signal.signal(signal.SIGUSR1, previous)
+    # Reached only when the harness ended by itself (an interruption ends the command above).
+    raise RuntimeError("the simulated board's harness ended unexpectedly")

@@ -1,0 +1,372 @@
+"""The host side of the board's serial link: ``run --engine board --port PORT [--baud B]``.
+
+:class:`BoardLink` speaks :mod:`.protocol` over any port with pyserial's ``read``/``write``/
+``reset_input_buffer`` (a ``serial.Serial``, or the pseudo-terminal of ``board simulate``):
+
+1. ``info()``: ask the board what it was built for (width, rows, receive buffer, fingerprint);
+   no answer within ``timeout`` seconds is one clear error.
+2. ``run_frame(left, right)``: the ``F`` header; once the board accepts it (``S``), the pixel
+   pairs line by line, paced so the board's receive buffer cannot overflow (line y goes out once
+   the results of image line y - lag are in, lag from the buffer's size), then the CRC-32. The
+   results are accepted only with an ``E`` of status OK whose count and CRC-32 match what came:
+   anything else (a refused header, a board reset, a garbled or lost byte either way, silence)
+   fails the attempt, and after the board has settled the frame is sent again, under a new
+   sequence number, up to ``attempts`` times.
+
+:func:`run_board` runs a prepared pair through it for ``bayesmachine run`` (same ``MachineRun`` as
+every engine, plus the link's figures for the report).
+"""
+
+from __future__ import annotations
+
+import struct
+import sys
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from bayesmachine.likelihood import ModelParams
+from bayesmachine.params import MachineParams
+
+from . import protocol as pr
+
+__all__ = ["BoardError", "BoardLink", "LinkStats", "open_port", "run_board"]
+
+
+class BoardError(RuntimeError):
+    """The board did not answer, or kept failing a frame; the message says which and why."""
+
+
+class _AttemptFailed(Exception):
+    pass
+
+
+@dataclass
+class LinkStats:
+    bytes_sent: int = 0
+    bytes_received: int = 0
+    garbage_bytes: int = 0  # received bytes that were neither a record nor a result
+    attempts: int = 0
+    failures: list[str] = field(default_factory=list)
+    seconds: float = 0.0
+
+
+class BoardLink:
+    """The protocol over an open port (see the module text). ``timeout``: seconds of silence
+    from the board before an attempt (or the first question) is given up."""
+
+    def __init__(
+        self, port, *, timeout: float = 2.0, attempts: int = 4, name: str = "the board", log=None
+    ) -> None:  # noqa: ANN001 - a serial.Serial-like object
+        self.port = port
+        self.timeout = timeout
+        self.attempts = attempts
+        self.name = name
+        self.stats = LinkStats()
+        self._buf = bytearray()
+        self._seq = 0
+        self._log = log if log is not None else (lambda msg: print(msg, file=sys.stderr))
+        self.board_info: pr.BoardInfo | None = None
+
+    # --- bytes and records
+    def _write(self, data: bytes) -> None:
+        self.port.write(data)
+        self.stats.bytes_sent += len(data)
+
+    def _fill(self, wait: float) -> bool:
+        """Read what is there (waiting up to ``wait`` s for the first byte); True if anything came."""
+        self.port.timeout = wait
+        first = self.port.read(1)
+        if not first:
+            return False
+        more = self.port.read(self.port.in_waiting) if self.port.in_waiting else b""
+        self._buf += first + more
+        self.stats.bytes_received += len(first) + len(more)
+        return True
+
+    def _next_item(self, body_bytes: int):  # noqa: ANN202
+        """The next complete item of the buffer: ("R", record bytes) or ("C", Record), None if incomplete.
+        Bytes that start neither are dropped (counted as garbage)."""
+        while self._buf:
+            b = self._buf[0]
+            if b == pr.RESULT_TAG:
+                if len(self._buf) < 1 + body_bytes:
+                    return None
+                rec = bytes(self._buf[: 1 + body_bytes])
+                del self._buf[: 1 + body_bytes]
+                return ("R", rec)
+            if b == pr.SYNC[0]:
+                if len(self._buf) < 2:
+                    return None
+                if self._buf[1] == pr.SYNC[1]:
+                    if len(self._buf) < pr.RECORD_BYTES:
+                        return None
+                    rec = pr.decode_record(bytes(self._buf[: pr.RECORD_BYTES]))
+                    if rec is not None:
+                        del self._buf[: pr.RECORD_BYTES]
+                        return ("C", rec)
+            del self._buf[0]
+            self.stats.garbage_bytes += 1
+        return None
+
+    def _drain(self) -> None:
+        self.port.reset_input_buffer()
+        self._buf.clear()
+
+    def _settle(self) -> None:
+        """After a failed attempt: wait until the board has been quiet for ``timeout`` s (it ends any
+        frame it was receiving by itself: its receive timeout), then forget what came."""
+        deadline = time.monotonic() + 10 * self.timeout
+        while self._fill(self.timeout):
+            self._buf.clear()
+            if time.monotonic() > deadline:
+                raise BoardError(f"{self.name} keeps sending after a failed frame; reset it")
+        self._drain()
+
+    def _new_seq(self) -> int:
+        self._seq = (self._seq + 1) & 0xFF
+        return self._seq
+
+    # --- requests
+    def info(self) -> pr.BoardInfo:
+        """What the board was built for; a clear error if it does not answer."""
+        self._drain()
+        for _ in range(2):
+            seq = self._new_seq()
+            self._write(pr.encode_record(pr.INFO, seq))
+            deadline = time.monotonic() + self.timeout
+            while time.monotonic() < deadline:
+                item = self._next_item(0)
+                if item is None:
+                    self._fill(max(0.0, deadline - time.monotonic()))
+                    continue
+                if item[0] == "C" and item[1].kind == pr.INFO and item[1].seq == seq:
+                    self.board_info = pr.parse_info(item[1].payload)
+                    if self.board_info.version != pr.PROTOCOL_VERSION:
+                        raise BoardError(
+                            f"{self.name} speaks protocol version {self.board_info.version}, "
+                            f"this host {pr.PROTOCOL_VERSION}: rebuild the bitstream"
+                        )
+                    return self.board_info
+        raise BoardError(
+            f"{self.name} did not answer within {self.timeout:g} s: is it programmed with a "
+            "`bayesmachine board build` bitstream (or is `bayesmachine board simulate` running), "
+            "and is the baud rate the one it was built for?"
+        )
+
+    def run_frame(
+        self,
+        left: np.ndarray,
+        right: np.ndarray,
+        params: MachineParams,
+        model: ModelParams,
+        fields: int = pr.FIELDS_ALL,
+        progress=None,
+    ) -> dict[str, np.ndarray]:  # noqa: ANN001
+        """One frame's results (the fields of :meth:`ResultFormat.decode`), in raster order of the
+        output region; ``progress(n)`` is called with the results received as they come."""
+        info = self.board_info or self.info()
+        height, width = left.shape
+        if width != info.width:
+            raise BoardError(
+                f"{self.name} was built for {info.width}-pixel lines, the frame has {width}: crop "
+                f"to width {info.width} (--crop X,Y,{info.width},H) or rebuild with --width {width}"
+            )
+        fmt = pr.ResultFormat.of(params, fields)
+        pixels = np.stack([left, right], axis=-1).astype(np.uint8)
+        lines = [pixels[y].tobytes() for y in range(height)]
+        trailer = struct.pack("<I", pr.crc32(b"".join(lines)))
+        out_cols = width - 4 - model.dmax
+        expected = (height - 4) * out_cols
+        # Lines in flight beyond the one whose results are awaited: what the receive buffer holds.
+        lag = max(1, info.rx_fifo_bytes // (2 * width) - 1)
+        reasons = []
+        for _ in range(self.attempts):
+            self.stats.attempts += 1
+            try:
+                return self._attempt(
+                    lines, trailer, height, width, fields, fmt, expected, out_cols, lag, progress
+                )
+            except _AttemptFailed as exc:
+                reasons.append(str(exc))
+                self.stats.failures.append(str(exc))
+                self._log(f"board: frame failed ({exc}); sending it again")
+                self._settle()
+        raise BoardError(f"{self.name} failed the frame {self.attempts} times: " + "; ".join(reasons))
+
+    def _attempt(
+        self,
+        lines,
+        trailer,
+        height,
+        width,
+        fields,
+        fmt,
+        expected,
+        out_cols,
+        lag,  # noqa: ANN001
+        progress,
+    ) -> dict[str, np.ndarray]:
+        seq = self._new_seq()
+        self._drain()
+        self._write(pr.frame_header(seq, fields, width, height))
+        started = False
+        sent = 0  # lines sent
+        records = bytearray()
+        count = 0
+        last_heard = time.monotonic()
+        while True:
+            # Send what the board can take: line y once image line y - lag is answered.
+            if started:
+                while sent < height and (sent < 4 + lag or count >= (sent - 4 - lag + 1) * out_cols):
+                    self._write(lines[sent])
+                    sent += 1
+                    if sent == height:
+                        self._write(trailer)
+            item = self._next_item(fmt.body_bytes)
+            if item is None:
+                if self._fill(0.05):
+                    last_heard = time.monotonic()
+                elif time.monotonic() - last_heard > self.timeout:
+                    what = "accept the frame" if not started else f"send results ({count} of {expected} came)"
+                    raise _AttemptFailed(f"no answer within {self.timeout:g} s (waiting for it to {what})")
+                continue
+            kind, value = item
+            if kind == "R":
+                if not started:
+                    raise _AttemptFailed("a result came before the frame was accepted")
+                records += value
+                count += 1
+                if progress is not None:
+                    progress(1)
+                continue
+            rec = value
+            if rec.kind == pr.HELLO:
+                raise _AttemptFailed("the board was reset")
+            if rec.kind == pr.ERROR:
+                code = rec.payload[0]
+                detail = struct.unpack("<H", rec.payload[1:3])[0]
+                what = pr.ERROR_NAMES.get(code, f"error {code}")
+                if code == pr.ERR_SIZE:
+                    raise BoardError(
+                        f"{self.name} refused the frame: {what} (it was built for {detail}-pixel lines)"
+                    )
+                raise _AttemptFailed(f"the board refused the header: {what}")
+            if rec.seq != seq:
+                continue  # a record of an earlier attempt
+            if rec.kind == pr.START:
+                fields_b, _w, _h, n = struct.unpack("<BHHI", rec.payload[:9])
+                if n != expected or fields_b != fields:
+                    raise _AttemptFailed(
+                        f"the board accepted a different frame ({n} results, fields {fields_b})"
+                    )
+                started = True
+                continue
+            if rec.kind == pr.END:
+                status, n, crc = struct.unpack("<BII", rec.payload[:9])
+                if status != pr.STATUS_OK:
+                    raise _AttemptFailed(f"the board ended the frame: {pr.STATUS_NAMES.get(status, status)}")
+                if n != expected or count != expected:
+                    raise _AttemptFailed(
+                        f"{count} results came, the board sent {n}, the frame has {expected}"
+                    )
+                if crc != pr.crc32(bytes(records)):
+                    raise _AttemptFailed(
+                        "the results' checksum does not match (a byte garbled on the way back)"
+                    )
+                if sent != height:
+                    raise _AttemptFailed("the board ended the frame before all of it was sent")
+                return fmt.decode(bytes(records))
+
+
+def open_port(port: str, baud: int, timeout: float = 2.0):  # noqa: ANN201
+    """``serial.Serial`` on ``port``, or one clear error."""
+    try:
+        import serial
+    except ImportError:
+        raise BoardError("--engine board needs pyserial: pip install 'bayesmachine[board]'") from None
+    try:
+        return serial.Serial(port, baud, timeout=timeout, write_timeout=30 * timeout)
+    except (serial.SerialException, OSError, ValueError) as exc:
+        raise BoardError(f"cannot open {port} at {baud} baud: {exc}") from None
+
+
+def run_board(
+    prepared,
+    machine: MachineParams,
+    port: str,
+    baud: int,
+    *,
+    timeout: float = 2.0,  # noqa: ANN001
+    progress: bool | None = None,
+    link_port=None,
+):  # noqa: ANN001
+    """The pair of ``prepared`` through the board: ``(MachineRun, link figures for the report)``."""
+    from tqdm import tqdm
+
+    from bayesmachine.host.records import MachineRun, counts_dtype
+
+    from .core import check_board
+
+    model = prepared.model
+    height, width = prepared.left.shape
+    check_board(machine, model, width if width >= model.dmax + 5 else model.dmax + 5)
+    expect = pr.board_fingerprint(machine.to_dict(), model.to_dict(), width)
+    ser = link_port if link_port is not None else open_port(port, baud, timeout)
+    try:
+        link = BoardLink(ser, timeout=timeout, name=f"the board on {port}")
+        t0 = time.perf_counter()
+        info = link.info()
+        if info.width != width:
+            raise BoardError(
+                f"the board on {port} was built for {info.width}-pixel lines, the pair has {width}: "
+                f"crop it (--crop X,Y,{info.width},H) or build the board with --width {width}"
+            )
+        if info.fingerprint != expect:
+            raise BoardError(
+                f"the board on {port} was built for another machine or model "
+                f"(fingerprint {info.fingerprint:08x}, "
+                f"these options give {expect:08x}; rows {info.rows} vs {machine.rows}): run with the options "
+                "the bitstream was built with (its report.json), or rebuild it"
+            )
+        ho, wo = prepared.shape
+        show = sys.stderr.isatty() if progress is None else progress
+        with tqdm(total=ho * wo, unit="px", disable=not show, desc="board") as bar:
+            fields = link.run_frame(prepared.left, prepared.right, machine, model, pr.FIELDS_ALL, bar.update)
+        seconds = time.perf_counter() - t0
+    finally:
+        if link_port is None:
+            ser.close()
+    nomatch = fields["nomatch"].reshape(ho, wo)
+    timeout_ = fields["timeout"].reshape(ho, wo)
+    disp = np.where(nomatch | timeout_, -1, fields["map"].reshape(ho, wo)).astype(np.int16)
+    counts = fields["counts"].reshape(ho, wo, machine.rows).astype(counts_dtype(machine.counter_max))
+    run = MachineRun(
+        "board",
+        machine,
+        disp,
+        counts,
+        fields["cycles"].reshape(ho, wo).astype(np.int64),
+        nomatch,
+        timeout_,
+        seconds,
+        0.0,
+        None,
+    )
+    st = link.stats
+    figures = {
+        "port": port,
+        "baud": baud,
+        "wall_seconds": seconds,
+        "bytes_sent": st.bytes_sent,
+        "bytes_received": st.bytes_received,
+        "link_bytes_per_second": (st.bytes_sent + st.bytes_received) / seconds if seconds > 0 else None,
+        "sent_bytes_per_second": st.bytes_sent / seconds if seconds > 0 else None,
+        "received_bytes_per_second": st.bytes_received / seconds if seconds > 0 else None,
+        "attempts": st.attempts,
+        "failures": st.failures,
+        "garbage_bytes": st.garbage_bytes,
+        "board_fingerprint": f"{info.fingerprint:08x}",
+    }
+    return run, figures

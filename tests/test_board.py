@@ -1,0 +1,252 @@
+"""The board's protocol, its Python twin and the host link (fpga/boards), without Verilator: the link
+talks to the twin through a port that loses, garbles or resets on demand, and must come back with
+the model's results or a clear error, never a wrong result."""
+
+from __future__ import annotations
+
+import struct
+
+import numpy as np
+import pytest
+
+from bayesmachine.cli import main
+from bayesmachine.fpga.boards import protocol as pr
+from bayesmachine.fpga.boards.core import check_board
+from bayesmachine.fpga.boards.link import BoardError, BoardLink
+from bayesmachine.fpga.boards.twin import BoardTwin, frame_results
+from bayesmachine.fpga.boards.ulx3s import pll_config
+from bayesmachine.hdl.frontend.stereo import stereo_machine_params
+from bayesmachine.host.images import bundled_pair
+from bayesmachine.likelihood import ModelParams
+from bayesmachine.params import ParameterError
+
+DMAX = 4
+WIDTH = DMAX + 12
+HEIGHT = 12
+PARAMS = stereo_machine_params(DMAX)
+MODEL = ModelParams(dmax=DMAX)
+
+
+def _crop(x: int = 300, y: int = 200) -> tuple[np.ndarray, np.ndarray]:
+    left, right, _ = bundled_pair()
+    return (left[y : y + HEIGHT, x : x + WIDTH].copy(), right[y : y + HEIGHT, x : x + WIDTH].copy())
+
+
+class TwinPort:
+    """A serial port with the twin at its other end. Faults (byte indices of the whole host -> board
+    stream, or of the board -> host one): ``drop``, ``garble``, ``reset`` (the board resets after that
+    byte), ``garble_back``; ``mute``: the board never answers. A read that finds nothing while the
+    twin is mid-frame is the board's receive timeout firing."""
+
+    def __init__(self, twin: BoardTwin, *, drop=(), garble=(), reset=(), garble_back=(), mute=False):
+        self.twin, self.mute = twin, mute
+        self.drop, self.garble, self.reset, self.garble_back = (
+            set(drop),
+            set(garble),
+            set(reset),
+            set(garble_back),
+        )
+        self.sent = self.back = 0
+        self.rx = bytearray()
+        self.timeout = 1.0
+
+    def write(self, data: bytes) -> None:
+        for b in data:
+            i = self.sent
+            self.sent += 1
+            if i in self.drop:
+                continue
+            if i in self.garble:
+                b ^= 0x55
+            self._deliver(self.twin.feed(bytes([b])))
+            if i in self.reset:
+                self._deliver(self.twin.reset())
+
+    def _deliver(self, data: bytes) -> None:
+        if self.mute:
+            return
+        for b in data:
+            self.rx.append(b ^ 0x55 if self.back in self.garble_back else b)
+            self.back += 1
+
+    @property
+    def in_waiting(self) -> int:
+        return len(self.rx)
+
+    def read(self, n: int) -> bytes:
+        if not self.rx:
+            self._deliver(self.twin.silence())
+        out = bytes(self.rx[:n])
+        del self.rx[:n]
+        return out
+
+    def reset_input_buffer(self) -> None:
+        self.rx.clear()
+
+
+def _link(port: TwinPort) -> BoardLink:
+    return BoardLink(port, timeout=0.05, log=lambda msg: None)
+
+
+def _assert_model(
+    out: dict[str, np.ndarray], left: np.ndarray, right: np.ndarray, fields: int = pr.FIELDS_ALL
+):
+    want = frame_results(PARAMS, MODEL, left, right)
+    assert len(out["map"]) == (HEIGHT - 4) * (WIDTH - 4 - DMAX)
+    names = (
+        ["map", "nomatch", "timeout"]
+        + (["counts"] if fields & 1 else [])
+        + (["cycles"] if fields & 2 else [])
+    )
+    assert sorted(out) == sorted(names)
+    for name in names:
+        np.testing.assert_array_equal(out[name], np.asarray(getattr(want, name)), err_msg=name)
+
+
+def test_record_round_trip_and_crc() -> None:
+    raw = pr.encode_record(pr.FRAME, 300, struct.pack("<BHH", 3, 640, 480))
+    assert len(raw) == pr.RECORD_BYTES and raw[:2] == b"BM"
+    rec = pr.decode_record(raw)
+    assert rec is not None and rec.kind == pr.FRAME and rec.seq == 300 % 256 and rec.name == "frame"
+    for i in range(2, pr.RECORD_BYTES):  # any garbled byte fails the CRC
+        bad = bytearray(raw)
+        bad[i] ^= 0x01
+        assert pr.decode_record(bytes(bad)) is None
+    with pytest.raises(ValueError, match="payload"):
+        pr.encode_record(pr.INFO, 0, bytes(11))
+
+
+@pytest.mark.parametrize("fields", [0, 1, 2, 3])
+def test_result_format_round_trip(fields: int) -> None:
+    fmt = pr.ResultFormat.of(PARAMS, fields)
+    rng = np.random.default_rng(fields)
+    n = 7
+    res = {
+        "map": rng.integers(0, PARAMS.rows, n),
+        "nomatch": rng.integers(0, 2, n).astype(bool),
+        "timeout": rng.integers(0, 2, n).astype(bool),
+        "counts": rng.integers(0, PARAMS.counter_max + 1, (n, PARAMS.rows)),
+        "cycles": rng.integers(0, PARAMS.max_cycles, n),
+    }
+    raw = fmt.encode(res["map"], res["nomatch"], res["timeout"], res["counts"], res["cycles"])
+    assert len(raw) == n * fmt.record_bytes
+    back = fmt.decode(raw)
+    for name, value in back.items():
+        np.testing.assert_array_equal(value, res[name])
+    assert ("counts" in back) == bool(fields & 1) and ("cycles" in back) == bool(fields & 2)
+    with pytest.raises(ValueError, match="tag"):
+        fmt.decode(b"X" + raw[1:])
+
+
+def test_twin_answers_info_and_refuses_bad_headers() -> None:
+    twin = BoardTwin(PARAMS, MODEL, WIDTH)
+    hello = pr.decode_record(twin.reset())
+    assert hello is not None and hello.kind == pr.HELLO
+    info = pr.parse_info(pr.decode_record(twin.feed(b"junk" + pr.encode_record(pr.INFO, 9))).payload)
+    assert (info.width, info.rows, info.version) == (WIDTH, PARAMS.rows, pr.PROTOCOL_VERSION)
+    assert info.fingerprint == pr.board_fingerprint(PARAMS.to_dict(), MODEL.to_dict(), WIDTH)
+    bad = bytearray(pr.frame_header(1, 3, WIDTH, HEIGHT))
+    bad[6] ^= 1
+    err = pr.decode_record(twin.feed(bytes(bad)))
+    assert err.kind == pr.ERROR and err.payload[0] == pr.ERR_HEADER
+    err = pr.decode_record(twin.feed(pr.frame_header(2, 3, WIDTH + 1, HEIGHT)))
+    assert err.kind == pr.ERROR and err.payload[0] == pr.ERR_SIZE
+    assert struct.unpack("<H", err.payload[1:3])[0] == WIDTH
+
+
+@pytest.mark.parametrize("fields", [pr.FIELDS_ALL, 0])
+def test_link_gives_the_model_results(fields: int) -> None:
+    left, right = _crop()
+    port = TwinPort(BoardTwin(PARAMS, MODEL, WIDTH))
+    link = _link(port)
+    out = link.run_frame(left, right, PARAMS, MODEL, fields)
+    _assert_model(out, left, right, fields)
+    assert link.stats.attempts == 1 and not link.stats.failures
+
+
+HEADER_AND_SOME = pr.RECORD_BYTES + 2 * WIDTH * 6 + 3  # a byte in the middle of the pixels
+
+
+@pytest.mark.parametrize(
+    "fault, reason",
+    [
+        ({"garble": [HEADER_AND_SOME]}, "checksum"),
+        ({"garble": [pr.RECORD_BYTES + 5]}, "header"),  # after the info request
+        ({"drop": [HEADER_AND_SOME]}, "stopped coming"),
+        ({"reset": [HEADER_AND_SOME]}, "reset"),
+        ({"garble_back": [pr.RECORD_BYTES * 2 + 40]}, ""),
+    ],
+)
+def test_link_recovers_from_a_fault(fault: dict, reason: str) -> None:
+    """A garbled, dropped byte or a board reset fails the attempt (saying why), the frame is sent
+    again and the results are the model's."""
+    left, right = _crop()
+    port = TwinPort(BoardTwin(PARAMS, MODEL, WIDTH), **fault)
+    link = _link(port)
+    link.info()
+    out = link.run_frame(left, right, PARAMS, MODEL)
+    _assert_model(out, left, right)
+    assert link.stats.attempts == 2
+    assert reason in link.stats.failures[0]
+
+
+def test_link_never_accepts_a_frame_that_keeps_failing() -> None:
+    left, right = _crop()
+    step = pr.RECORD_BYTES + 2 * WIDTH * HEIGHT + 4  # one attempt's bytes, after the info request's
+    port = TwinPort(
+        BoardTwin(PARAMS, MODEL, WIDTH), garble=[pr.RECORD_BYTES + 100 + k * step for k in range(8)]
+    )
+    link = _link(port)
+    link.info()
+    with pytest.raises(BoardError, match="failed the frame 4 times"):
+        link.run_frame(left, right, PARAMS, MODEL)
+
+
+def test_link_says_when_the_board_does_not_answer() -> None:
+    port = TwinPort(BoardTwin(PARAMS, MODEL, WIDTH), mute=True)
+    with pytest.raises(BoardError, match="did not answer within"):
+        _link(port).info()
+
+
+def test_link_refuses_a_frame_of_another_width() -> None:
+    left, right = _crop()
+    port = TwinPort(BoardTwin(PARAMS, MODEL, WIDTH + 2))
+    with pytest.raises(BoardError, match=f"built for {WIDTH + 2}-pixel lines"):
+        _link(port).run_frame(left, right, PARAMS, MODEL)
+
+
+def test_board_refuses_census_and_off_chip_sources() -> None:
+    with pytest.raises(ParameterError, match="census is not in the front end yet"):
+        check_board(PARAMS, ModelParams(dmax=DMAX, name="census"), WIDTH)
+    smtj = stereo_machine_params(DMAX, rng="smtj")
+    with pytest.raises(ParameterError, match="on-chip random source"):
+        check_board(smtj, MODEL, WIDTH)
+
+
+def test_pll_config() -> None:
+    pll = pll_config(60.0)
+    assert pll.out_mhz == 60.0 and 400 <= pll.vco_mhz <= 800
+    with pytest.raises(ValueError, match="clock"):
+        pll_config(500.0)
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["run", "--engine", "board", "-o", "{out}"], "--engine board needs --port"),
+        (["run", "--port", "/dev/null", "-o", "{out}"], "--port: only with --engine board"),
+        (
+            ["run", "--engine", "board", "--port", "/dev/null", "--model", "census", "-o", "{out}"],
+            "census is not in the front end yet",
+        ),
+        (["board", "simulate", "--model", "census"], "census is not in the front end yet"),
+        (["board", "build", "--baud", "20000000", "--dmax", "4", "--width", "16"], None),
+    ],
+)
+def test_cli_errors(argv: list[str], message: str | None, tmp_path, capsys) -> None:
+    argv = [a.replace("{out}", str(tmp_path / "out")) for a in argv]
+    if message is None:  # the baud check comes before any tool runs
+        message = "clocks per bit"
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
