@@ -46,7 +46,7 @@ from .images import Crop, bundled_pair, crop_image, load_gt, load_image, parse_c
 from .likelihoods import ModelParams
 from .reference import reference_bands, warm_up
 from .region import OutputRegion
-from .run import ENGINES, FEEDS, RunOutcome, result_bytes, run_pair
+from .run import ENGINES, FEEDS, RunOutcome, prepare, result_bytes, run_pair
 from .sweep import SWEEP_OUTPUTS, Point, SweepConfig, list_option_changes, run_sweep, seed_cache, sweep_points
 
 __all__ = ["register", "RUN_OUTPUTS", "SWEEP_OUTPUTS"]
@@ -394,10 +394,9 @@ def _check_board_args(args: argparse.Namespace, model: ModelParams) -> None:
         raise ValueError("--engine board needs --port (the board's serial port, or the path "
                          "`bayesmachine board "
                          "simulate` printed)")
-    if model.census:
-        raise ValueError("--engine board --model census: the board carries the on-chip front end, "
-                         "which computes "
-                         "the paper model only (census is not in the front end yet); use --model paper")
+    if model.lr:
+        raise ValueError(f"--engine board --model {model.name}: the board carries the on-chip front end, "
+                         "which computes the paper and census models (not the right pass)")
     if args.waves is not None:
         raise ValueError("--waves is not available with --engine board")
     args.feed = "pixels"  # the board takes the pair itself: its machine has the front end's lanes

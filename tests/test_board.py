@@ -215,9 +215,9 @@ def test_link_refuses_a_frame_of_another_width() -> None:
         _link(port).run_frame(left, right, PARAMS, MODEL)
 
 
-def test_board_refuses_census_and_off_chip_sources() -> None:
-    with pytest.raises(ParameterError, match="census is not in the front end yet"):
-        check_board(PARAMS, ModelParams(dmax=DMAX, name="census"), WIDTH)
+def test_board_refuses_census_lr_and_off_chip_sources() -> None:
+    with pytest.raises(ParameterError, match="on-chip front end computes the paper and census models"):
+        check_board(PARAMS, ModelParams(dmax=DMAX, name="census-lr"), WIDTH)
     smtj = stereo_machine_params(DMAX, rng="smtj")
     with pytest.raises(ParameterError, match="on-chip random source"):
         check_board(smtj, MODEL, WIDTH)
@@ -236,10 +236,10 @@ def test_pll_config() -> None:
         (["run", "--engine", "board", "-o", "{out}"], "--engine board needs --port"),
         (["run", "--port", "/dev/null", "-o", "{out}"], "--port: only with --engine board"),
         (
-            ["run", "--engine", "board", "--port", "/dev/null", "--model", "census", "-o", "{out}"],
-            "census is not in the front end yet",
+            ["run", "--engine", "board", "--port", "/dev/null", "--model", "census-lr", "-o", "{out}"],
+            "front end",
         ),
-        (["board", "simulate", "--model", "census"], "census is not in the front end yet"),
+        (["board", "simulate", "--model", "census-lr"], "front end computes the paper and census models"),
         (["board", "build", "--baud", "20000000", "--dmax", "4", "--width", "16"], None),
     ],
 )

@@ -20,7 +20,7 @@ from bayesmachine.cli import build_parser, main
 from bayesmachine.host.images import random_dot_stereogram
 from bayesmachine.outputs import MANIFEST, read_manifest
 
-SMALL = ["--dmax", "8", "--quiet"]
+SMALL = ["--dmax", "8", "--quiet", "--model", "paper"]  # the paper model's region: (16-4) x (40-4-8)
 
 
 @pytest.fixture

@@ -334,11 +334,11 @@ def test_synth_command_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]
 @pytest.mark.parametrize(("extra", "message"), [
     (["--machines", "2"], "--top stereo is one StereoMachine (its front end feeds one machine), not "
                           "--machines 2"),
-    (["--width", "50"], "width must be in [dmax + 5, 4096] = [85, 4096]"),
-    (["--dmax", "8", "--width", "12"], "width must be in [dmax + 5, 4096] = [13, 4096]"),
+    (["--width", "50"], "width must be in [dmax + 7, 4096] = [87, 4096]"),
+    (["--dmax", "8", "--width", "12"], "width must be in [dmax + 7, 4096] = [15, 4096]"),
     (["--rng", "external"], "synth needs an on-chip random source, not 'external'"),
     (["--rng", "smtj"], "synth needs an on-chip random source, not 'smtj'"),
-    (["--lanes", "16"], "lanes (16) must be a multiple of the loaded columns (3)"),
+    (["--lanes", "16"], "lanes (16) must be a multiple of the loaded columns (5)"),
     (["--fifo-pixels", "0"], "fifo_pixels must be an integer in [1, 64], got 0"),
     (["--p-nm0", "0.0001", "--word-bits", "4"], "p_nm0: 0.0001 quantizes to 0 with 4-bit words"),
 ])
@@ -414,6 +414,7 @@ def test_synth_census_options_refused_where_they_do_not_apply(tmp_path: Path, ca
     assert main(["synth", "--target", "ecp5-85k", "--model", "census", "--top", "stereo", "--lanes", "12",
                  "-o", str(tmp_path / "a")]) == 2
     assert "multiple of the loaded columns (5)" in capsys.readouterr().err
-    assert main(["synth", "--target", "ecp5-85k", "--census-window", "5", "-o", str(tmp_path / "b")]) == 2
+    assert main(["synth", "--target", "ecp5-85k", "--model", "paper", "--census-window", "5",
+                 "-o", str(tmp_path / "b")]) == 2
     assert "--model census" in capsys.readouterr().err
     assert not any(tmp_path.iterdir())

@@ -18,18 +18,20 @@ REPORT_KEYS = set(
 
 def test_run_on_bundled_crop(tmp_path):
     out = tmp_path / "out"
-    # A 140x40 crop of Motorcycle with Dmax 40: (40-4) x (140-4-40) output pixels.
+    # A 140x40 crop of Motorcycle with Dmax 40, the default (census 7x7) model: its output region
+    # keeps every 7x7 window inside the image, (40-6) x (140-6-40) output pixels.
     rc = main(
         ["run", "--crop", "300,200,140,40", "--dmax", "40", "--counter-max", "8", "--quiet", "-o", str(out)]
     )
     assert rc == 0
     report = json.loads((out / "report.json").read_text())
     assert REPORT_KEYS <= report.keys()
-    assert report["engine"] == "model" and report["counter_max"] == 8 and report["pixels"] == 36 * 96
+    assert report["engine"] == "model" and report["counter_max"] == 8 and report["pixels"] == 34 * 94
     assert report["machine"]["rows"] == 42 and report["model"]["dmax"] == 40
     res = np.load(out / "result.npz")
-    assert res["map"].shape == (36, 96) and res["map"].dtype == np.int16
-    assert res["counts"].shape == (36, 96, 42) and res["cycles"].shape == (36, 96)
+    assert res["map"].shape == (34, 94) and res["map"].dtype == np.int16
+    assert res["counts"].shape == (34, 94, 42) and res["cycles"].shape == (34, 94)
+    assert report["model_name"] == "census" and report["machine"]["prior"] == "neighbour"
     assert res["map"].min() >= -1 and res["map"].max() <= 40
     assert (out / "disparity.png").stat().st_size > 0
 
@@ -46,7 +48,8 @@ def test_reference_command(tmp_path):
     left, right, _ = _write_pair(tmp_path)
     out = tmp_path / "ref.npz"
     assert (
-        main(["reference", str(left), str(right), "--dmax", "16", "--sigma", "12", "-o", str(out), "--quiet"])
+        main(["reference", str(left), str(right), "--model", "paper", "--dmax", "16", "--sigma", "12", "-o",
+              str(out), "--quiet"])
         == 0
     )
     ref = np.load(out)
@@ -63,12 +66,12 @@ def test_reference_output_name_gets_npz(tmp_path, capsys):
 
 
 def test_run_on_a_crop_too_narrow_for_sgbm(tmp_path):
-    """Width 98 leaves the machine 14 columns with Dmax 80, but OpenCV's SGBM (96 disparities)
+    """Width 98 leaves the (census) machine 12 columns with Dmax 80, but OpenCV's SGBM (96 disparities)
     cannot run: the report goes without SGBM figures instead of failing."""
     out = tmp_path / "narrow"
     assert main(["run", "--crop", "300,200,98,10", "--quiet", "-o", str(out)]) == 0
     report = json.loads((out / "report.json").read_text())
-    assert report["pixels"] == 6 * 14 and "machine_bad2" in report
+    assert report["pixels"] == 4 * 12 and "machine_bad2" in report
     assert not any(k.startswith("sgbm_") for k in report)
 
 

@@ -238,7 +238,8 @@ def test_emit_cli_smtj_machine(tmp_path, capsys: pytest.CaptureFixture[str]) -> 
     from bayesmachine.cli import main
 
     out = tmp_path / "smtj.v"
-    assert main(["emit", "--dmax", "2", "--rng", "smtj", "--smtj-dwell", "20", "--smtj-share", "column",
+    assert main(["emit", "--model", "paper", "--dmax", "2", "--rng", "smtj", "--smtj-dwell", "20",
+                 "--smtj-share", "column",
                  "-o", str(out)]) == 0
     text = capsys.readouterr().out
     assert "simulated by 30 SMTJ devices, 10 per column: dwell 20 cycles" in text

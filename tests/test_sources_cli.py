@@ -15,7 +15,8 @@ from bayesmachine.likelihood import ModelParams
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.model import MachineModel
 
-CROP = ["--crop", "300,200,60,16", "--dmax", "16", "--no-sgbm", "--quiet"]  # 12 x 40 output pixels
+# The paper model (its words computed below without the command line): 12 x 40 output pixels.
+CROP = ["--crop", "300,200,60,16", "--dmax", "16", "--model", "paper", "--no-sgbm", "--quiet"]
 ON_CHIP = ("lfsr", "lfsr-shared", "sobol")
 
 

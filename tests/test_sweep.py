@@ -43,7 +43,7 @@ def test_dataset_sweep_on_two_workers_reports_a_raising_task(tmp_path, capsys, m
     err = capsys.readouterr().err.strip().splitlines()
     sweep = load(out)
     points = [p["id"] for p in sweep["points"]]
-    assert points == ["paper_sobol_cm2", "paper_sobol_cm8"]
+    assert points == ["census_sobol_cm2", "census_sobol_cm8"]  # the default model
     # Each of the bad pair's tasks is reported with its pair and point; the other pairs completed.
     assert [(f["pair"], f["point"]) for f in sweep["failures"]] == [("Q/Scene1", p) for p in points]
     assert all("Q/Scene1/im1.png as an image" in f["error"] for f in sweep["failures"])
@@ -147,7 +147,7 @@ def test_the_grid_is_the_product_of_the_list_options() -> None:
     assert len(points) == 16 and len({p.id for p in points}) == 16
     got = [(p.machine.rng, p.machine.word_bits, p.machine.seed, p.machine.counter_max) for p in points]
     assert got == [(r, w, s, n) for r in ("sobol", "lfsr") for w in (8, 10) for s in (1, 2) for n in (2, 4)]
-    assert points[0].id == "paper_sobol_cm2_word_bits8_seed1"
+    assert points[0].id == "census_sobol_cm2_word_bits8_seed1"  # the default model first
     # Device options of --rng smtj: a point of another source does not repeat per device value.
     args = parser.parse_args(["sweep", "--dmax", "8", "--rng", "smtj,sobol", "--smtj-dwell", "1,2",
                               "--counter-max", "2", "-o", "x"])

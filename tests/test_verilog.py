@@ -193,9 +193,9 @@ def test_emit_cli_writes_verilog_and_rtlil(tmp_path: Path, capsys: pytest.Captur
     hdl_cli.register(parser.add_subparsers())
     for suffix, marker in ((".v", "module bayesmachine"), (".il", "module \\bayesmachine")):
         out = tmp_path / f"bm{suffix}"
-        args = parser.parse_args(["emit", "--dmax", "4", "--lanes", "4", "--counter-max", "3",
-                                  "--max-cycles", "1000", "--rng", "external", "--tie-break", "lowest-index",
-                                  "-o", str(out)])
+        args = parser.parse_args(["emit", "--model", "paper", "--dmax", "4", "--lanes", "4",
+                                  "--counter-max", "3", "--max-cycles", "1000", "--rng", "external",
+                                  "--tie-break", "lowest-index", "-o", str(out)])
         assert args.func(args) == 0
         assert marker in out.read_text()
     text = capsys.readouterr().out
@@ -222,7 +222,7 @@ def test_emit_small_machine_defaults_to_one_beat_per_pixel(tmp_path: Path,
     """Dmax 1 has 9 words per pixel, fewer than the default 16 lanes: the load stream narrows."""
     parser = argparse.ArgumentParser()
     hdl_cli.register(parser.add_subparsers())
-    args = parser.parse_args(["emit", "--dmax", "1", "-o", str(tmp_path / "bm.v")])
+    args = parser.parse_args(["emit", "--model", "paper", "--dmax", "1", "-o", str(tmp_path / "bm.v")])
     assert args.func(args) == 0
     assert "load: 9 words per beat, 1 beats per pixel" in capsys.readouterr().out
 
@@ -295,8 +295,8 @@ def test_stereo_top_exposes_an_off_chip_sources_entropy_port(
     parser = argparse.ArgumentParser()
     hdl_cli.register(parser.add_subparsers())
     out = tmp_path / "bayesmachine.v"
-    args = parser.parse_args(["emit", "--top", "stereo", "--dmax", "3", "--width", "12", "--counter-max", "2",
-                              "--rng", rng, "-o", str(out)])
+    args = parser.parse_args(["emit", "--top", "stereo", "--model", "paper", "--dmax", "3", "--width", "12",
+                              "--counter-max", "2", "--rng", rng, "-o", str(out)])
     assert args.func(args) == 0
     text = capsys.readouterr().out
     operators, word_bits = 5 * 3, 10

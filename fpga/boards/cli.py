@@ -59,12 +59,7 @@ def _design(args: argparse.Namespace):  # noqa: ANN202
     from .core import check_board
 
     model = model_params_from_args(args)
-    if model.census:
-        raise ValueError(
-            "--model census: the board carries the on-chip front end, which computes the paper "
-            "model only (census is not in the front end yet); use --model paper"
-        )
-    machine = machine_params_from_args(args, args.dmax)
+    machine = machine_params_from_args(args, args.dmax, model=model)
     if args.lanes is None:
         machine = dataclasses.replace(machine, lanes=stereo_lanes(machine))
     check_board(machine, model, args.width)

@@ -85,11 +85,6 @@ def check_board(params: MachineParams, model: ModelParams, width: int) -> None:
     """``ParameterError`` naming the problem unless a board top can carry this StereoMachine."""
     from bayesmachine.hdl.frontend.stereo import check_stereo_machine
 
-    if isinstance(model, ModelParams) and model.census:
-        raise ParameterError(
-            "--model census: the board carries the on-chip front end, which computes the paper model only "
-            "(census is not in the front end yet); use --model paper"
-        )
     check_stereo_machine(params, model, width)
     if not source_kind(params.rng).on_chip:
         raise ParameterError(
@@ -197,7 +192,8 @@ class BoardCore(wiring.Component):
 
         m = Module()
         p, width, dmax = self._params, self._width, self._model.dmax
-        out_cols = width - 4 - dmax
+        edge = 2 * self._model.margin  # the model's output region: every window inside the image
+        out_cols = width - edge - dmax
 
         m.submodules.uart_rx = urx = UARTRx(clocks_per_bit=self._cpb)
         m.submodules.uart_tx = utx = UARTTx(clocks_per_bit=self._cpb)
@@ -421,13 +417,13 @@ class BoardCore(wiring.Component):
                         emit(pr.INFO, h_seq, info)
                         m.next = "SYNC0"
                     with m.Elif(h_type == pr.FRAME):
-                        with m.If((h_width == width) & (h_height >= 5)):
+                        with m.If((h_width == width) & (h_height >= edge + 1)):
                             m.d.sync += sm_rst.eq(1)
                             m.d.sync += [
                                 seq.eq(h_seq),
                                 fields.eq(h_fields[:2]),
                                 height.eq(h_height),
-                                mul_a.eq(h_height - 4),
+                                mul_a.eq(h_height - edge),
                                 mul_add.eq(out_cols),
                                 expected.eq(0),
                                 col.eq(0),
@@ -449,7 +445,7 @@ class BoardCore(wiring.Component):
                         emit(pr.ERROR, h_seq, Cat(C(pr.ERR_TYPE, 8), h_type, C(0, 8)))
                         m.d.sync += error_led.eq(1)
                         m.next = "SYNC0"
-            with m.State("COUNT"):  # the results to come, (height - 4) x out_cols, by shift and add
+            with m.State("COUNT"):  # the results to come, (height - edge) x out_cols, by shift and add
                 m.d.comb += in_frame.eq(1)
                 with m.If(mul_a == 0):
                     with m.If(~ctl_pending):
@@ -485,7 +481,7 @@ class BoardCore(wiring.Component):
                     pix.payload.first.eq((col == 0) & (line == 0)),
                 ]
                 with m.If(pix.ready):
-                    with m.If((line >= 4) & (col >= dmax + 4)):
+                    with m.If((line >= edge) & (col >= dmax + edge)):
                         m.d.sync += fed_outputs.eq(fed_outputs + 1)
                     with m.If(col == width - 1):
                         m.d.sync += [col.eq(0), line.eq(line + 1)]

@@ -177,8 +177,9 @@ class BoardLink:
         pixels = np.stack([left, right], axis=-1).astype(np.uint8)
         lines = [pixels[y].tobytes() for y in range(height)]
         trailer = struct.pack("<I", pr.crc32(b"".join(lines)))
-        out_cols = width - 4 - model.dmax
-        expected = (height - 4) * out_cols
+        edge = 2 * model.margin  # the model's output region (census 7x7: margin 3)
+        out_cols = width - edge - model.dmax
+        expected = (height - edge) * out_cols
         # Lines in flight beyond the one whose results are awaited: what the receive buffer holds.
         lag = max(1, info.rx_fifo_bytes // (2 * width) - 1)
         reasons = []
@@ -186,7 +187,7 @@ class BoardLink:
             self.stats.attempts += 1
             try:
                 return self._attempt(
-                    lines, trailer, height, width, fields, fmt, expected, out_cols, lag, progress
+                    lines, trailer, height, width, fields, fmt, expected, out_cols, edge, lag, progress
                 )
             except _AttemptFailed as exc:
                 reasons.append(str(exc))
@@ -205,6 +206,7 @@ class BoardLink:
         fmt,
         expected,
         out_cols,
+        edge,
         lag,  # noqa: ANN001
         progress,
     ) -> dict[str, np.ndarray]:
@@ -219,7 +221,7 @@ class BoardLink:
         while True:
             # Send what the board can take: line y once image line y - lag is answered.
             if started:
-                while sent < height and (sent < 4 + lag or count >= (sent - 4 - lag + 1) * out_cols):
+                while sent < height and (sent < edge + lag or count >= (sent - edge - lag + 1) * out_cols):
                     self._write(lines[sent])
                     sent += 1
                     if sent == height:

@@ -99,10 +99,11 @@ class BoardTwin:
             return pr.encode_record(pr.ERROR, seq, struct.pack("<BH", pr.ERR_TYPE, rec.kind))
         fields, width, height = struct.unpack("<BHH", rec.payload[:5])
         fields &= pr.FIELDS_ALL
-        if width != self.width or height < 5:
+        if width != self.width or height < 2 * self.model.margin + 1:
             return pr.encode_record(pr.ERROR, seq, struct.pack("<BH", pr.ERR_SIZE, self.width))
         self._frame = (seq, fields, height)
-        results = (height - 4) * (self.width - 4 - self.model.dmax)
+        edge = 2 * self.model.margin
+        results = (height - edge) * (self.width - edge - self.model.dmax)
         return pr.encode_record(pr.START, seq, struct.pack("<BHHI", fields, width, height, results))
 
     def _finish_frame(self, seq: int, fields: int, height: int, data: bytes) -> bytes:

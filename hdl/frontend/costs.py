@@ -95,6 +95,10 @@ def check_frontend_params(params: MachineParams, model: ModelParams) -> None:
         raise ParameterError(f"params must be a MachineParams, not {type(params).__name__}")
     if not isinstance(model, ModelParams):
         raise ParameterError(f"model must be a host.likelihoods.ModelParams, not {type(model).__name__}")
+    if model.lr:  # the right pass's machine and its line of right MAPs are not on chip yet
+        raise ParameterError(
+            f"--model {model.name}: the on-chip front end computes the paper and census models; run "
+            f"--model {model.name} with --feed words (the host's words)")
     check_disparity_machine(model, params)
     if params.lanes % params.loaded_columns:
         raise ParameterError(
