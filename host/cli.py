@@ -223,10 +223,6 @@ def _machine_params(
     overrides: dict[str, object] = {} if counter_max is None else {"counter_max": counter_max}
     if rng is not None:
         overrides["rng"] = rng
-    if getattr(args, "feed", "words") == "pixels" and model.lr:
-        raise ValueError("--feed pixels: the on-chip front end computes the paper and census models, not "
-                         "census-lr's right pass and consistency column yet; run --model census-lr with "
-                         "--feed words")
     machine = machine_params_from_args(args, model.dmax, model=model, **overrides)
     if getattr(args, "feed", "words") == "pixels" and args.lanes is None:
         # The front end writes one feature per lane: lanes a multiple of the loaded columns.

@@ -33,7 +33,7 @@ from __future__ import annotations
 import dataclasses
 
 from amaranth.hdl import Module, Mux, Shape, Signal
-from amaranth.lib import fifo, stream, wiring
+from amaranth.lib import fifo, wiring
 from amaranth.lib.wiring import In, Out
 
 from bayesmachine.hdl.machine import BayesianMachine
@@ -57,7 +57,7 @@ from .linebuffer import WINDOW, LineBuffer
 from .lr import feeder_in_layout, lr_split, right_pass_params
 
 __all__ = ["MAX_WIDTH", "FrontEnd", "StereoMachine", "check_stereo_machine", "pixel_in_layout",
-           "stereo_machine_params"]
+           "stereo_machine_params", "stereo_signature"]
 
 
 def stereo_machine_params(dmax: int = 80, *, model: ModelParams | None = None,
@@ -84,6 +84,17 @@ def _check_width(width: object, model: ModelParams) -> int:
             f"needs one output pixel with all {model.dmax + 1} disparities and its {size}x{size} windows), "
             f"got {width}")
     return width
+
+
+def stereo_signature(params: MachineParams, model: ModelParams) -> wiring.Signature:
+    """:class:`StereoMachine`'s ports: ``StereoSignature(params)``, and with census-lr also
+    ``right_result``: ``valid`` and ``payload`` (``result_layout(right_pass_params(model, params))``),
+    the right pass's results as they leave its machine (observed: no ``ready``, no back-pressure)."""
+    if not model.lr:
+        return StereoSignature(params)
+    rp = right_pass_params(model, params)
+    observed = wiring.Signature({"valid": Out(1), "payload": Out(result_layout(rp))})
+    return wiring.Signature(dict(StereoSignature(params).members.items()) | {"right_result": Out(observed)})
 
 
 def check_stereo_machine(params: MachineParams, model: ModelParams, width: int,
@@ -288,6 +299,9 @@ class StereoMachine(wiring.Component):
     entropy, entropy_ready
         With an off-chip ``rng`` ("external", "smtj"): the machine's own ports, passed through
         (the numbers of every compute cycle come from outside, as for the machine alone).
+    right_result
+        census-lr only: the right pass's results, raster order of its columns, ``valid`` and
+        ``payload`` (``result_layout(right_pass_params(model, params))``; :func:`stereo_signature`).
     """
 
     def __init__(self, *, params: MachineParams, model: ModelParams, width: int,
@@ -297,12 +311,7 @@ class StereoMachine(wiring.Component):
         self._model = model
         self._width = width
         self._fifo_pixels = fifo_pixels
-        if model.lr:  # the right pass's results leave too (observed as they leave, no back-pressure)
-            rp = right_pass_params(model, params)
-            super().__init__(dict(StereoSignature(params).members.items())
-                             | {"right_result": Out(stream.Signature(result_layout(rp), always_ready=True))})
-        else:
-            super().__init__(StereoSignature(params))
+        super().__init__(stereo_signature(params, model))
 
     @property
     def params(self) -> MachineParams:
