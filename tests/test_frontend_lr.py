@@ -38,7 +38,7 @@ from bayesmachine.likelihood import consistency_column, lr_consistent, neighbour
 from bayesmachine.params import ParameterError
 from bayesmachine.sim.model import MachineModel
 from bayesmachine.sim.results import MachineResult
-from bayesmachine.sim.stereo_testbench import run_stereo_lr
+from bayesmachine.sim.stereo_testbench import run_frontend_lr, run_stereo_lr
 
 
 def _noisy_pair(height: int, width: int, seed: int, shift: int = 2) -> tuple[np.ndarray, np.ndarray]:
@@ -136,6 +136,56 @@ def test_right_pass_feeder_delays_the_reference_and_flushes_each_output_row() ->
         RightPassFeeder(dmax=2.0, census_bits=24)
     with pytest.raises(ValueError, match="census_bits"):
         RightPassFeeder(dmax=2, census_bits=0)
+
+
+# --- The front end's words of both passes equal the host's ---
+
+@pytest.mark.parametrize(("model", "width", "delay"), [
+    (_lr(3), 15, 6),
+    (_lr(2, lr_right_nomatch=True, lr_nomatch=False, lr_tolerance=0), 11, 25),  # 2 output pixels per row
+])
+def test_lr_frontend_words_equal_host_words(model: ModelParams, width: int, delay: int) -> None:
+    """With stand-in results for both machines (given late, up to ``delay`` cycles after a pixel's
+    words), the right pass's words are ``right_memory_words`` (its above column from the stand-in right
+    results of the row before) and the left pass's ``memory_words`` with the consistency column of the
+    stand-in right MAPs of its row (``consistency_column(lr_consistent(...))``)."""
+    params = stereo_machine_params(model.dmax, model=model, counter_max=2)
+    rp = right_pass_params(model, params)
+    frames = [_noisy_pair(9, width, seed=4), _noisy_pair(8, width, seed=5)]
+    rng = np.random.default_rng(3)
+    wo, wr = width - 6 - model.dmax, width - 6
+    rows = [f[0].shape[0] - 6 for f in frames]
+    maps = rng.integers(-1, model.dmax + 1, sum(rows) * wo)
+    right_maps = rng.integers(-1, model.dmax + 1, sum(rows) * wr)
+    front = FrontEnd(params=params, model=model, width=width)
+    got, flags, got_r, flags_r = run_frontend_lr(front, frames, maps, right_maps, in_stall=0.2, out_stall=0.2,
+                                                 result_delay=delay, seed=3)
+    q = QuantizedTables(likelihood_tables(model), params.word_bits)
+    rq = QuantizedTables(likelihood_tables(model.right_model), params.word_bits)
+    want, want_r, k, kr = [], [], 0, 0
+    for (lf, rf), h in zip(frames, rows, strict=True):
+        fl, fr = model_features(lf, model), model_features(rf, model)
+        cols = right_columns(OutputRegion.of_features(fl.shape, model.dmax))
+        for y in range(h):
+            r_above = np.full(wr, -1) if y == 0 else right_maps[kr - wr : kr]
+            want_r.append(right_memory_words(fl, fr, model, rp, rows=slice(y, y + 1), qtables=rq,
+                                             prior=neighbour_words(rq, model.dmax, r_above)))
+            consistent = lr_consistent(right_maps[kr : kr + wr], int(cols[0]), cols[model.dmax:], model.dmax,
+                                       model.lr_tolerance)
+            above = np.full(wo, -1) if y == 0 else maps[k - wo : k]
+            want.append(memory_words(fl, fr, model, params, rows=slice(y, y + 1), qtables=q,
+                                     prior=neighbour_words(q, model.dmax, above),
+                                     consistency=consistency_column(consistent, model, q.one, q.lr_beta,
+                                                                    q.lr_gamma)))
+            k += wo
+            kr += wr
+    want_r_all, want_all = np.concatenate(want_r), np.concatenate(want)
+    assert got_r.shape == want_r_all.shape and got.shape == want_all.shape
+    assert np.array_equal(got_r, want_r_all), np.argwhere(got_r != want_r_all)[:5]
+    assert np.array_equal(got, want_all), np.argwhere(got != want_all)[:5]
+    assert (flags == np.array(([1] + [0] * (wo - 1)) * sum(rows))[:, None]).all()
+    assert (flags_r == np.array(([1] + [0] * (wr - 1)) * sum(rows))[:, None]).all()
+    assert (want_r_all[:, : model.dmax + 1, 1:] == 0).any()  # lanes past the last output column: word 0
 
 
 # --- The census-lr StereoMachine against the model run as the host runs it ---

@@ -283,15 +283,15 @@ def test_cli_run_feed_pixels_census_lr_gives_the_models_result(tmp_path: Path) -
 @needs_verilator
 @pytest.mark.slow
 def test_census_lr_crop_through_the_front_end_equals_the_model() -> None:
-    """census-lr at Dmax 80, counter max 16 on a 200 x 40 crop of Motorcycle through the front end: both
+    """census-lr at Dmax 80, counter max 16 on a 140 x 40 crop of Motorcycle through the front end: both
     passes' results equal the model's run as the host runs it (``run_machine``: the right pass's row, then
-    the left pass's)."""
+    the left pass's). 140 pixels: the width of the CLI's crop below (one Verilator build)."""
     from bayesmachine.hdl.frontend.lr import right_pass_params
     from bayesmachine.host.run import prepare, run_machine
     from bayesmachine.sim.stereo_engine import StereoVerilatorEngine
 
     left, right, _ = bundled_pair()
-    left, right = left[150:190, 300:500].copy(), right[150:190, 300:500].copy()
+    left, right = left[150:190, 300:440].copy(), right[150:190, 300:440].copy()
     model = ModelParams(dmax=80, name="census-lr")
     params = stereo_machine_params(80, model=model, counter_max=16)
     want = run_machine(prepare(left, right, model, reference=False), params, engine="model", progress=False)
