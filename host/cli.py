@@ -392,7 +392,8 @@ def _check_board_args(args: argparse.Namespace, model: ModelParams) -> None:
                          "simulate` printed)")
     if model.lr:
         raise ValueError(f"--engine board --model {model.name}: the board carries the on-chip front end, "
-                         "which computes the paper and census models (not the right pass)")
+                         "whose link carries the paper and census models (not census-lr's right pass: "
+                         "run it with --engine verilator --feed pixels)")
     if args.waves is not None:
         raise ValueError("--waves is not available with --engine board")
     args.feed = "pixels"  # the board takes the pair itself: its machine has the front end's lanes
