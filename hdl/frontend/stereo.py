@@ -224,7 +224,8 @@ class FrontEnd(wiring.Component):
         # Stage 1 -> 2: the columns' partial sums into the filters' first registers (the block
         # RAM's slow clock-to-output leaves no room for the whole column sum in one cycle); the
         # census filters take the whole column. The 5x5 filters take the column's middle 5 lines.
-        output2, row_start2, first_row2, line_end2, consult2 = (Signal() for _ in range(5))
+        output2, row_start2, first_row2 = Signal(), Signal(), Signal()
+        line_end2, consult2 = Signal(), Signal()  # census-lr's
         m.d.comb += [fl.load.eq(advance), fr.load.eq(advance)]
         for i in range(WINDOW):
             m.d.comb += [fl.column[i].eq(lines.column[lag + i].left),
@@ -244,7 +245,8 @@ class FrontEnd(wiring.Component):
                          consult2.eq((line1 >= size - 1) & (col1 >= size - 1))]
 
         # Stage 2 -> 3: the columns' sums enter the filters' windows.
-        output3, row_start3, first_row3, line_end3, consult3 = (Signal() for _ in range(5))
+        output3, row_start3, first_row3 = Signal(), Signal(), Signal()
+        line_end3, consult3 = Signal(), Signal()
         shift = advance & valid2
         m.d.comb += [fl.en.eq(shift), fr.en.eq(shift)]
         if model.census:
