@@ -23,6 +23,11 @@ computes (its twin):
   has left the machine (fewer than an output row's pixels in flight), so no word is built from a
   stale entry, whatever the FIFO's depth and the image's width. Each beat of the first output
   pixel of a row carries ``line_start`` (the machine's left factor is then 1.0).
+- census-lr (``hdl.frontend.lr``): the left pass's consistency column (the last loaded column),
+  row d 1.0 or β by lane d's window test on the right MAP d_R(x - d) (:class:`~.lr.ConsistencyTest`,
+  fed one right MAP per pixel at a map column of an output row: ``right_map``), the no-match row γ
+  when any lane is consistent, else 1.0 (0 without a left no-match row); and with ``right_pass``
+  the right pass's words (twin: ``host.likelihoods.right_memory_words``).
 
 ``lanes`` must be a multiple of the loaded columns, so each lane always holds the same operator
 column: a lane of feature f reads its own port of f's table. One beat per cycle, in a four-step
