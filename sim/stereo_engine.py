@@ -6,7 +6,9 @@ result for every output pixel, in raster order of the output region: the same
 :class:`MachineResult` as ``MachineModel(params).run(memory_words(...))`` on the host's words,
 bit for bit. Frames run back to back in one simulation (the machine's random sources carry over,
 as in the model); the front end restarts at each frame's first pixel. ``wall_cycles`` counts
-every clock cycle since reset, filtering and loading included.
+every clock cycle since reset, filtering and loading included. With census-lr the design has a second
+machine, the right pass's; the harness also collects its results (``right_result``) and the engine
+keeps the last frame's as ``last_right`` (every right map column of every output row, raster order).
 
 With an off-chip random source (``rng = "smtj"``) the design's ``entropy`` port is fed, one row
 per compute cycle, from the kind's device model, one stream from reset on, exactly as the word
