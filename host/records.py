@@ -63,8 +63,9 @@ class MachineRun:
     engine: str
     machine: MachineParams
     map: np.ndarray  # (Ho, Wo) int16, -1 = no match (timeouts included)
-    counts: np.ndarray  # (Ho, Wo, M), the smallest unsigned dtype holding n_max (counts_dtype)
-    cycles: np.ndarray  # (Ho, Wo) int64
+    # counts, cycles: None only from a board asked for the MAP without them (--board-fields)
+    counts: np.ndarray | None  # (Ho, Wo, M), the smallest unsigned dtype holding n_max (counts_dtype)
+    cycles: np.ndarray | None  # (Ho, Wo) int64
     nomatch: np.ndarray  # (Ho, Wo) bool, the no-match row won
     timeout: np.ndarray  # (Ho, Wo) bool, the watchdog stopped the run
     seconds: float  # time inside the engine's run calls
