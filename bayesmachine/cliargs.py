@@ -419,7 +419,7 @@ _LR_OPTIONS: tuple[tuple[str, str, Callable[[str], Any], str], ...] = (
 )
 LR_OPTION_FLAGS: tuple[tuple[str, str], ...] = (
     *((dest, flag) for dest, flag, _, _ in _LR_OPTIONS), ("lr_nomatch", "--no-lr-nomatch"),
-    ("lr_right_nomatch", "--lr-right-nomatch"),
+    ("lr_right_nomatch", "--lr-right-nomatch"), ("lr_neutral", "--lr-neutral"),
 )
 
 
@@ -467,6 +467,9 @@ def add_census_options(parser: argparse._ActionsContainer, sweep: bool = False,
     lr.add_argument("--lr-right-nomatch", dest="lr_right_nomatch", action=argparse.BooleanOptionalAction,
                     default=None, help="give the right pass the census model's no-match row (default off: "
                     "no no-match row, as the issue's right pass)")
+    lr.add_argument("--lr-neutral", dest="lr_neutral", action=argparse.BooleanOptionalAction, default=None,
+                    help="a lane whose right pixel has no right MAP (the right pass's no match or a timeout) "
+                    "gets factor 1, no information, instead of beta (default off)")
 
 
 def model_names_from_args(args: argparse.Namespace) -> list[str]:

@@ -38,7 +38,10 @@ Two models (``ModelParams.name``):
   ``|d_R(x - d) - d| <= lr_tolerance`` and ``lr_beta`` otherwise (also when x - d has no right
   MAP); the no-match row gets ``lr_gamma`` when any lane is consistent, 1 when none is (0 with
   ``lr_nomatch=False``: no no-match row at all), and its prior factor per matched neighbour is
-  ``prior_nomatch`` (0.1 by default for this model). :func:`lr_consistent` and
+  ``prior_nomatch`` (0.1 by default for this model). With ``lr_neutral`` a lane whose right pixel
+  x - d has no right MAP (the right pass's no match, with ``lr_right_nomatch``, or its watchdog) is
+  *neutral*: factor 1, no information either way (it does not count as consistent for gamma);
+  x - d outside the right pass's columns stays beta. :func:`lr_consistent`, :func:`lr_unknown` and
   :func:`consistency_column` are the one definition the host, the references and the machine runs
   read. The right pass covers right map columns ``x_first - Dmax .. x_last`` (every column an output
   pixel consults); its lane d is loaded with word 0 (it never fires) where the left pixel
@@ -73,6 +76,8 @@ __all__ = [
     "neighbour_lanes",
     "neighbour_words",
     "lr_consistent",
+    "lr_unknown",
+    "lr_column",
     "right_lanes_valid",
     "consistency_column",
     "right_machine",
@@ -118,13 +123,15 @@ OPTION_NAMES = {
     "lr_nomatch": "--lr-nomatch/--no-lr-nomatch",
     "lr_right_nomatch": "--lr-right-nomatch/--no-lr-right-nomatch",
     "lr_right_max_cycles": "--lr-right-max-cycles",
+    "lr_neutral": "--lr-neutral/--no-lr-neutral",
 }
 # The census model's own fields: left out of a paper model's to_dict(), so its reports and the
 # Verilator design keys (sim/stereo_engine.py hashes model.to_dict()) stay what they were.
 CENSUS_FIELDS = ("name", "census_window", "census_p0", "census_sigma", "census_nomatch_h",
                  "neighbour_prior", "prior_eps", "prior_s", "prior_nomatch")
 # The left-right model's own fields: left out of the other models' to_dict() (same reason).
-LR_FIELDS = ("lr_beta", "lr_gamma", "lr_tolerance", "lr_nomatch", "lr_right_nomatch", "lr_right_max_cycles")
+LR_FIELDS = ("lr_beta", "lr_gamma", "lr_tolerance", "lr_nomatch", "lr_right_nomatch", "lr_right_max_cycles",
+             "lr_neutral")
 # The census-lr model's default no-match prior factor per matched neighbour (issue 22).
 LR_PRIOR_NOMATCH = 0.1
 
@@ -186,6 +193,7 @@ class ModelParams:
     lr_nomatch: bool = True
     lr_right_nomatch: bool = False
     lr_right_max_cycles: int | None = None
+    lr_neutral: bool = False
 
     def __post_init__(self) -> None:
         if isinstance(self.dmax, bool) or not isinstance(self.dmax, int) or not 0 <= self.dmax <= 4094:
@@ -228,7 +236,7 @@ class ModelParams:
         t = self.lr_tolerance
         if isinstance(t, bool) or not isinstance(t, int) or not 0 <= t <= 4094:
             raise _error("lr_tolerance", f"must be an integer disparity distance in [0, 4094], got {t!r}")
-        for name in ("lr_nomatch", "lr_right_nomatch"):
+        for name in ("lr_nomatch", "lr_right_nomatch", "lr_neutral"):
             if not isinstance(getattr(self, name), bool):
                 raise _error(name, f"must be True or False, got {getattr(self, name)!r}")
         c = self.lr_right_max_cycles
@@ -483,24 +491,59 @@ def lr_consistent(right_map: np.ndarray, right_first: int, columns: np.ndarray, 
     return inside & (got >= 0) & (np.abs(got - d) <= tolerance)
 
 
+def lr_unknown(right_map: np.ndarray, right_first: int, columns: np.ndarray, dmax: int) -> np.ndarray:
+    """(..., Wo, Dmax+1) bool: lane d of left map column ``columns[i]`` reads a right pixel x - d inside
+    ``right_map``'s columns that has no right MAP (-1: the right pass's no match or a timeout).
+
+    With ``lr_neutral`` such a lane is neutral in :func:`consistency_column` (factor 1); a lane whose
+    x - d lies outside the right columns is not unknown (it stays inconsistent, beta).
+    """
+    hat = np.asarray(right_map)
+    if hat.dtype.kind not in "iu":
+        raise ValueError(f"right MAPs must be integers (-1: none), got {hat.dtype}")
+    cols = np.asarray(columns, dtype=np.int64)
+    j = cols[:, None] - np.arange(dmax + 1)[None, :] - int(right_first)
+    inside = (j >= 0) & (j < hat.shape[-1])
+    return inside & (hat[..., np.clip(j, 0, max(0, hat.shape[-1] - 1))].astype(np.int64) < 0)
+
+
 def consistency_column(consistent: np.ndarray, model: ModelParams, one: float | int, beta: float | int,
-                       gamma: float | int) -> np.ndarray:
+                       gamma: float | int, unknown: np.ndarray | None = None) -> np.ndarray:
     """The consistency column (..., Dmax+2) of :func:`lr_consistent`'s test (..., Dmax+1).
 
-    Row d: ``one`` when consistent, ``beta`` otherwise; the no-match row: ``gamma`` when any lane is
-    consistent, ``one`` when none is, 0 without a no-match row (``lr_nomatch=False``). In floats
-    (1.0, beta, gamma: the reference) or in words (2^W and the quantized beta, gamma: the machine's
-    loaded column); the dtype follows ``one`` (float64, or uint16 for words).
+    Row d: ``one`` when consistent, ``beta`` otherwise; with ``model.lr_neutral`` also ``one`` where
+    ``unknown`` (:func:`lr_unknown`: the lane's right pixel has no right MAP; required then). The
+    no-match row: ``gamma`` when any lane is consistent (an unknown lane does not count), ``one`` when
+    none is, 0 without a no-match row (``lr_nomatch=False``). In floats (1.0, beta, gamma: the
+    reference) or in words (2^W and the quantized beta, gamma: the machine's loaded column); the
+    dtype follows ``one`` (float64, or uint16 for words).
     """
     c = np.asarray(consistent, dtype=bool)
     dtype = np.float64 if isinstance(one, float) else np.uint16
     out = np.empty((*c.shape[:-1], c.shape[-1] + 1), dtype=dtype)
-    out[..., :-1] = np.where(c, one, beta)
+    if model.lr_neutral:
+        if unknown is None or np.shape(unknown) != c.shape:
+            got = None if unknown is None else np.shape(unknown)
+            raise ValueError(f"--lr-neutral: the consistency column needs the unknown lanes (lr_unknown), "
+                             f"shape {c.shape}, got {got}")
+        out[..., :-1] = np.where(c | np.asarray(unknown, dtype=bool), one, beta)
+    else:
+        out[..., :-1] = np.where(c, one, beta)
     if model.lr_nomatch:
         out[..., -1] = np.where(c.any(axis=-1), gamma, one)
     else:
         out[..., -1] = 0
     return out
+
+
+def lr_column(right_map: np.ndarray, right_first: int, columns: np.ndarray, model: ModelParams,
+              one: float | int, beta: float | int, gamma: float | int) -> np.ndarray:
+    """The consistency column (..., Wo, Dmax+2) of left map columns ``columns`` from the right MAPs
+    ``right_map`` (..., Wr) of right map columns ``right_first ..``: :func:`lr_consistent` (and
+    :func:`lr_unknown` with ``lr_neutral``) then :func:`consistency_column`, as every caller needs."""
+    consistent = lr_consistent(right_map, right_first, columns, model.dmax, model.lr_tolerance)
+    unknown = lr_unknown(right_map, right_first, columns, model.dmax) if model.lr_neutral else None
+    return consistency_column(consistent, model, one, beta, gamma, unknown)
 
 
 def neighbour_lanes(rows: int, loaded_columns: int) -> int:

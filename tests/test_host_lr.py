@@ -32,7 +32,9 @@ from bayesmachine.likelihood import (
     consistency_column,
     disparity_machine,
     likelihood_formula,
+    lr_column,
     lr_consistent,
+    lr_unknown,
     neighbour_words,
     quantize,
     right_machine,
@@ -102,26 +104,35 @@ def test_consistency_column_against_its_definition():
     columns = np.arange(12, 30)
     wr = 40
     hat = rng.integers(-1, dmax + 1, size=wr).astype(np.int16)
-    for lr_nomatch in (True, False):
-        model = ModelParams(dmax=dmax, name="census-lr", lr_tolerance=tol, lr_nomatch=lr_nomatch)
+    for lr_nomatch, neutral in ((True, False), (False, False), (True, True), (False, True)):
+        model = ModelParams(dmax=dmax, name="census-lr", lr_tolerance=tol, lr_nomatch=lr_nomatch,
+                            lr_neutral=neutral)
         q = QuantizedTables(likelihood_tables(model), 10)
-        got = consistency_column(lr_consistent(hat, first, columns, dmax, tol), model, q.one, q.lr_beta,
-                                 q.lr_gamma)
+        got = lr_column(hat, first, columns, model, q.one, q.lr_beta, q.lr_gamma)
         assert got.dtype == np.uint16 and got.shape == (columns.size, dmax + 2)
         for i, x in enumerate(columns):
             any_ok = False
             for d in range(dmax + 1):
                 j = x - d - first
                 ok = 0 <= j < wr and hat[j] >= 0 and abs(int(hat[j]) - d) <= tol
+                unknown = 0 <= j < wr and hat[j] < 0  # inside the right columns, no right MAP
                 any_ok |= ok
-                assert got[i, d] == (1024 if ok else int(quantize(0.1, 10))), (x, d)
+                one = ok or (neutral and unknown)
+                assert got[i, d] == (1024 if one else int(quantize(0.1, 10))), (x, d)
             nm = (int(quantize(0.01, 10)) if any_ok else 1024) if lr_nomatch else 0
             assert got[i, dmax + 1] == nm
-        floats = consistency_column(lr_consistent(hat, first, columns, dmax, tol), model, 1.0, 0.1, 0.01)
+        floats = lr_column(hat, first, columns, model, 1.0, 0.1, 0.01)
         assert floats.dtype == np.float64 and set(np.unique(floats[:, :-1])) <= {0.1, 1.0}
-    # A right MAP column past the right pass's columns (or before them) counts as no right MAP.
+        np.testing.assert_array_equal(floats == 1.0, got == 1024)
+        if neutral:
+            with pytest.raises(ValueError, match="--lr-neutral: the consistency column needs the unknown"):
+                consistency_column(lr_consistent(hat, first, columns, dmax, tol), model, 1.0, 0.1, 0.01)
+    # A right MAP column past the right pass's columns (or before them) counts as no right MAP, and is
+    # not unknown (a neutral lane needs a right pixel without a MAP).
     c = lr_consistent(np.zeros(2, np.int16), 10, np.array([10, 11, 12]), 1, 0)
     np.testing.assert_array_equal(c, [[True, False], [True, False], [False, False]])  # x 12, d 0: past
+    u = lr_unknown(np.array([-1, 0], np.int16), 10, np.array([10, 11, 12]), 1)
+    np.testing.assert_array_equal(u, [[True, False], [False, True], [False, False]])
 
 
 def _plain_likelihood(model, fa, fb, ca, cb, a, b):
@@ -174,6 +185,11 @@ def _brute_right_pass(model, fl, fr, word_bits=None):
         p = float(likelihood_formula(np.int64(k), 1, model.prior_eps, model.prior_s))
         return p if word_bits is None else int(quantize(p, word_bits))
 
+    def w(p):
+        return p if word_bits is None else int(quantize(p, word_bits))
+
+    from bayesmachine.likelihood import SCALES
+
     for y in range(out.shape[0]):
         for j, x in enumerate(xr):
             hats = [h for h in (out[y, j - 1] if j > 0 else -1, out[y - 1, j] if y > 0 else -1) if h >= 0]
@@ -185,21 +201,37 @@ def _brute_right_pass(model, fl, fr, word_bits=None):
                 lik = _plain_likelihood(model, fr, fl, fr.census, fl.census, (y, x), (y, x + d))
                 v = one if word_bits is None else 1
                 for p in lik:
-                    v = v * (p if word_bits is None else int(quantize(p, word_bits)))
+                    v = v * w(p)
                 for h in hats:
                     v = v * f(abs(d - h))
                 vals.append(v)
-            out[y, j] = max(range(len(vals)), key=lambda k: (vals[k], -k))
+            if model.lr_right_nomatch:
+                # The census model's no-match row of the right pixel: [P_nm(gV), 1, 1, L_c(h_nm)], its
+                # own no-match prior factor f(s) per matched neighbour.
+                gv = np.int64(fr.gv20[y, x])
+                nm = w(float(likelihood_formula(gv, SCALES["gv"], model.p_nm0, model.sigma_nm)))
+                if word_bits is not None:
+                    nm = nm * one * one
+                l_nm = likelihood_formula(np.int64(model.h_nm), 1, model.census_p0, model.sigma_c)
+                nm = nm * w(float(l_nm))
+                for _ in hats:
+                    nm = nm * w(model.right_model.prior_nm)
+                vals.append(nm)
+            best = max(range(len(vals)), key=lambda k: (vals[k], -k))
+            out[y, j] = best if best <= model.dmax else -1
     return out
 
 
 @pytest.mark.parametrize("word_bits", [None, 10])
-def test_right_pass_reference_against_brute_force(pair, model, word_bits):
+@pytest.mark.parametrize("right_nomatch", [False, True])
+def test_right_pass_reference_against_brute_force(pair, word_bits, right_nomatch):
     left, right, _ = pair
+    model = ModelParams(dmax=DMAX, name="census-lr", lr_right_nomatch=right_nomatch)
     fl, fr = model_features(left, model), model_features(right, model)
     got = right_reference_map(fl, fr, model, word_bits, band_rows=4)  # bands carry the row above
     want = _brute_right_pass(model, fl, fr, word_bits)
     np.testing.assert_array_equal(got, want)
+    assert (got < 0).any() == right_nomatch  # only a no-match row gives a right pixel no MAP
 
 
 def _brute_left_pass(model, fl, fr, right_map, word_bits=None):
@@ -224,10 +256,11 @@ def _brute_left_pass(model, fl, fr, right_map, word_bits=None):
                 hat = right_map[y, x - d - xr0]
                 ok = hat >= 0 and abs(int(hat) - d) <= model.lr_tolerance
                 any_ok |= ok
+                neutral = model.lr_neutral and hat < 0  # no right MAP: no information, factor 1
                 v = one if wb is None else 1
                 for p in _plain_likelihood(model, fl, fr, fl.census, fr.census, (y, x), (y, x - d)):
                     v = v * w(p)
-                v = v * (one if ok else w(model.lr_beta))
+                v = v * (one if ok or neutral else w(model.lr_beta))
                 for h in hats:
                     k = np.int64(abs(d - h))
                     v = v * w(float(likelihood_formula(k, 1, model.prior_eps, model.prior_s)))
@@ -247,10 +280,13 @@ def _brute_left_pass(model, fl, fr, right_map, word_bits=None):
 
 
 @pytest.mark.parametrize("word_bits", [None, 10])
-@pytest.mark.parametrize("lr_nomatch", [True, False])
-def test_left_pass_reference_against_brute_force(pair, word_bits, lr_nomatch):
+@pytest.mark.parametrize(("lr_nomatch", "right_nomatch", "neutral"),
+                         [(True, False, False), (False, False, False), (True, True, False),
+                          (True, True, True)])
+def test_left_pass_reference_against_brute_force(pair, word_bits, lr_nomatch, right_nomatch, neutral):
     left, right, _ = pair
-    model = ModelParams(dmax=DMAX, name="census-lr", lr_nomatch=lr_nomatch)
+    model = ModelParams(dmax=DMAX, name="census-lr", lr_nomatch=lr_nomatch, lr_right_nomatch=right_nomatch,
+                        lr_neutral=neutral)
     fl, fr = model_features(left, model), model_features(right, model)
     right_map = _brute_right_pass(model, fl, fr, word_bits)
     want = _brute_left_pass(model, fl, fr, right_map, word_bits)
@@ -263,6 +299,17 @@ def test_left_pass_reference_against_brute_force(pair, word_bits, lr_nomatch):
         assert (got < 0).any() and (got >= 0).mean() > 0.5
     else:
         assert (got >= 0).all()  # no no-match row: never no match
+
+
+def test_neutral_lanes_change_the_left_pass(pair):
+    """With the right pass's no-match row, --lr-neutral changes the left MAPs (its lanes reading a right
+    no-match get 1, not beta) on this pair: the brute-force test above is not vacuous for it."""
+    left, right, _ = pair
+    base = ModelParams(dmax=DMAX, name="census-lr", lr_right_nomatch=True)
+    fl, fr = model_features(left, base), model_features(right, base)
+    neutral = ModelParams(dmax=DMAX, name="census-lr", lr_right_nomatch=True, lr_neutral=True)
+    assert (reference_map(fl, fr, base) != reference_map(fl, fr, neutral)).any()
+    assert (reference_quantized_map(fl, fr, base, 10) != reference_quantized_map(fl, fr, neutral, 10)).any()
 
 
 def test_the_column_changes_the_census_model(pair, model):
@@ -293,7 +340,8 @@ def _hand_run(prepared, machine, engine="model"):
             res = right_eng.run(rw, line_start=np.arange(xr.size) == 0)
             rmap[y] = np.where(res.nomatch | res.timeout, -1, res.map)
             ok = lr_consistent(rmap[y], int(xr[0]), region.map_columns, DMAX, model.lr_tolerance)
-            cons = consistency_column(ok, model, ql.one, ql.lr_beta, ql.lr_gamma)
+            unknown = lr_unknown(rmap[y], int(xr[0]), region.map_columns, DMAX) if model.lr_neutral else None
+            cons = consistency_column(ok, model, ql.one, ql.lr_beta, ql.lr_gamma, unknown)
             lw = memory_words(fl, fr, model, machine, rows=slice(y, y + 1),
                               prior=neighbour_words(ql, DMAX, disp[y - 1] if y else np.full(wo, -1)),
                               consistency=cons)
