@@ -33,17 +33,22 @@ Two models (``ModelParams.name``):
 * ``"census-lr"``: the census model and a left-right consistency column (issue 22). A right pass
   (:attr:`ModelParams.right_model`: the census model with the right image as reference, lane d
   pairing right map column x_r with left map column x_r + d, raster order, its own left/above
-  neighbour prior, no no-match row: that row's words are 0, so it never fires) gives the right
-  MAPs d_R; the left pass multiplies in one more column: row d of left map column x gets 1 when
-  ``|d_R(x - d) - d| <= lr_tolerance`` and ``lr_beta`` otherwise (also when x - d has no right
-  MAP); the no-match row gets ``lr_gamma`` when any lane is consistent, 1 when none is (0 with
-  ``lr_nomatch=False``: no no-match row at all), and its prior factor per matched neighbour is
-  ``prior_nomatch`` (0.1 by default for this model). With ``lr_neutral`` a lane whose right pixel
-  x - d has no right MAP (the right pass's no match, with ``lr_right_nomatch``, or its watchdog) is
-  *neutral*: factor 1, no information either way (it does not count as consistent for gamma);
-  x - d outside the right pass's columns stays beta. :func:`lr_consistent`, :func:`lr_unknown` and
-  :func:`consistency_column` are the one definition the host, the references and the machine runs
-  read. The right pass covers right map columns ``x_first - Dmax .. x_last`` (every column an output
+  neighbour prior, and the census model's no-match row, ``lr_right_nomatch``; without it, the
+  issue's right pass, that row's words are 0, so it never fires) gives the right MAPs d_R; the
+  left pass multiplies in one more column: row d of left map column x gets 1 when
+  ``|d_R(x - d) - d| <= lr_tolerance`` and ``lr_beta`` otherwise; a lane whose right pixel x - d has
+  no right MAP (the right pass's no match or its watchdog) is *neutral* (``lr_neutral``): factor 1,
+  no information either way (without ``lr_neutral``, the issue's rule: beta); x - d outside the
+  right pass's columns gets beta. The no-match row gets ``lr_gamma`` when any lane is consistent
+  (a neutral lane does not count), 1 when none is (0 with ``lr_nomatch=False``: no no-match row at
+  all), and its prior factor per matched neighbour is ``prior_nomatch`` (0.1 by default for this
+  model). Its machine's watchdog is by default :data:`LR_WATCHDOG_RUNS` runs of n_max + 1 cycles
+  (:func:`disparity_machine`): a pixel whose winning row fires too rarely stops as no match. The
+  right no-match row, the neutral lanes and the watchdog cut the model's cycles per pixel by more than
+  an order of magnitude within the issue's accuracy target (docs/host.md, "census-lr's cycles").
+  :func:`lr_consistent`, :func:`lr_unknown` and :func:`consistency_column` (both through
+  :func:`lr_column`) are the one definition the host, the references and the machine runs read. The
+  right pass covers right map columns ``x_first - Dmax .. x_last`` (every column an output
   pixel consults); its lane d is loaded with word 0 (it never fires) where the left pixel
   x_r + d lies right of ``x_last``, the last output column (:func:`right_lanes_valid`).
 """
@@ -60,6 +65,7 @@ from bayesmachine.params import DEFAULT_DMAX, STEREO_ROWS_PER_BEAT, MachineParam
 
 __all__ = [
     "MODELS",
+    "LR_WATCHDOG_RUNS",
     "DEFAULT_MODEL",
     "CENSUS_WINDOWS",
     "FEATURES",
@@ -134,6 +140,12 @@ LR_FIELDS = ("lr_beta", "lr_gamma", "lr_tolerance", "lr_nomatch", "lr_right_noma
              "lr_neutral")
 # The census-lr model's default no-match prior factor per matched neighbour (issue 22).
 LR_PRIOR_NOMATCH = 0.1
+# The census-lr machine's default watchdog, in runs of n_max + 1 cycles: max_cycles =
+# LR_WATCHDOG_RUNS * (counter_max + 1) (1088 at counter max 16). A run lasts about (n_max + 1) / p_win
+# cycles, so a pixel stops as a timeout (no match) when its winning row fires less than about once in
+# 64 cycles: every hypothesis explains the pixel badly. It cuts the long tail of the left pass's runs
+# (docs/host.md, "census-lr's cycles"); a given max_cycles (--max-cycles) wins.
+LR_WATCHDOG_RUNS = 64
 
 
 def _error(name: str, text: str) -> ParameterError:
@@ -191,9 +203,9 @@ class ModelParams:
     lr_gamma: float = 0.01
     lr_tolerance: int = 1
     lr_nomatch: bool = True
-    lr_right_nomatch: bool = False
+    lr_right_nomatch: bool = True
     lr_right_max_cycles: int | None = None
-    lr_neutral: bool = False
+    lr_neutral: bool = True
 
     def __post_init__(self) -> None:
         if isinstance(self.dmax, bool) or not isinstance(self.dmax, int) or not 0 <= self.dmax <= 4094:
@@ -567,8 +579,11 @@ def disparity_machine(model: ModelParams, **machine_kwargs: object) -> MachinePa
     With the neighbour prior (``model.has_prior``): ``prior="neighbour"``, ``feedback_words`` the
     quantized prior table clamped where it stops changing (``QuantizedTables.prior[:prior_last + 1]``),
     ``feedback_nomatch_word`` the quantized no-match factor, and ``lanes`` by default
-    :func:`neighbour_lanes`. ``machine_kwargs`` are the other fields (``word_bits``, ``rng``, ...);
-    a ``columns``, ``prior`` or feedback table contradicting the model is a ``ParameterError``.
+    :func:`neighbour_lanes`. For census-lr ``max_cycles`` is by default
+    :data:`LR_WATCHDOG_RUNS` x (``counter_max`` + 1), the watchdog that ends its long runs as no
+    match (the right pass takes it too unless ``lr_right_max_cycles``). ``machine_kwargs`` are the
+    other fields (``word_bits``, ``rng``, ...); a ``columns``, ``prior`` or feedback table
+    contradicting the model is a ``ParameterError``.
     """
     if "columns" in machine_kwargs and machine_kwargs["columns"] != model.columns:
         raise ParameterError(f"columns: the {model.name} model has {model.columns} data columns, got "
@@ -596,6 +611,9 @@ def disparity_machine(model: ModelParams, **machine_kwargs: object) -> MachinePa
     elif prior == "neighbour":
         raise ParameterError(f"prior: 'neighbour' is the census model's neighbour prior; the {model.name} "
                              "model" + (" without it" if model.census else "") + " has no feedback table")
+    if model.lr and "max_cycles" not in kwargs:
+        counter_max = MachineParams.for_disparity(model.dmax, **kwargs).counter_max  # type: ignore[arg-type]
+        kwargs["max_cycles"] = LR_WATCHDOG_RUNS * (counter_max + 1)
     machine = MachineParams.for_disparity(model.dmax, **kwargs)  # type: ignore[arg-type]
     check_disparity_machine(model, machine)
     return machine

@@ -234,7 +234,7 @@ class _RightRun:
         timeout = np.asarray(res.timeout, bool)
         self.timeout[y] = timeout
         self.cycles[y] = np.asarray(res.cycles)
-        # No match cannot win (its words are 0); a timeout is no right MAP.
+        # A no-match call (the right pass's no-match row, lr_right_nomatch) or a timeout: no right MAP.
         self.map[y] = np.where(timeout | np.asarray(res.nomatch, bool), np.int16(-1), np.asarray(res.map))
         return lr_column(self.map[y], int(self.columns[0]), self.map_columns, model, left_q.one,
                          left_q.lr_beta, left_q.lr_gamma)

@@ -65,7 +65,7 @@ def test_model_fields_and_dict():
     assert m.right_model.prior_nm == pytest.approx(0.626, abs=1e-3)  # the census model's own
     d = m.to_dict()
     assert (d["lr_beta"], d["lr_gamma"], d["lr_tolerance"], d["prior_nomatch"]) == (0.1, 0.01, 1, 0.1)
-    assert d["lr_nomatch"] is True and d["lr_right_nomatch"] is False
+    assert d["lr_nomatch"] is True and d["lr_right_nomatch"] is True and d["lr_neutral"] is True
     assert ModelParams(**d).to_dict() == d
     # The other models' dicts (reports, Verilator design keys) are what they were.
     assert not any(k.startswith("lr_") for k in ModelParams(name="census").to_dict())
@@ -82,6 +82,7 @@ def test_model_fields_and_dict():
         ({"lr_tolerance": -1}, "--lr-tolerance: lr_tolerance must be an integer"),
         ({"lr_tolerance": 1.5}, "--lr-tolerance"),
         ({"lr_nomatch": 1}, "lr_nomatch must be True or False"),
+        ({"lr_neutral": "yes"}, "lr_neutral must be True or False"),
         ({"neighbour_prior": False}, "--neighbour-prior: neighbour_prior must be on for --model census-lr"),
         ({"lr_right_max_cycles": 1}, "--lr-right-max-cycles: lr_right_max_cycles must be an integer"),
         ({"lr_right_max_cycles": 2.5}, "--lr-right-max-cycles"),
@@ -149,8 +150,10 @@ def _plain_likelihood(model, fa, fb, ca, cb, a, b):
     return out
 
 
-def test_right_pass_words_against_the_formula(pair, model):
+@pytest.mark.parametrize("right_nomatch", [True, False])
+def test_right_pass_words_against_the_formula(pair, right_nomatch):
     left, right, _ = pair
+    model = ModelParams(dmax=DMAX, name="census-lr", lr_right_nomatch=right_nomatch)
     fl, fr = model_features(left, model), model_features(right, model)
     machine = right_machine(model, disparity_machine(model))
     region = OutputRegion.of_features(fl.shape, DMAX)
@@ -169,7 +172,16 @@ def test_right_pass_words_against_the_formula(pair, model):
                 continue
             lik = _plain_likelihood(model, fr, fl, fr.census, fl.census, (y, x), (y, x + d))
             np.testing.assert_array_equal(words[j, d, 1:], quantize(np.array(lik), 10))
-        assert not words[j, DMAX + 1, 1:].any()  # no no-match row
+        if right_nomatch:  # the census model's no-match row of the right pixel: [P_nm(gV), 1, 1, L_c(h_nm)]
+            from bayesmachine.likelihood import SCALES
+
+            gv = np.int64(fr.gv20[y, x])
+            p_nm = likelihood_formula(gv, SCALES["gv"], model.p_nm0, model.sigma_nm)
+            l_nm = likelihood_formula(np.int64(model.h_nm), 1, model.census_p0, model.sigma_c)
+            want = [int(quantize(float(p_nm), 10)), 1024, 1024, int(quantize(float(l_nm), 10))]
+            np.testing.assert_array_equal(words[j, DMAX + 1, 1:], want)
+        else:
+            assert not words[j, DMAX + 1, 1:].any()  # no no-match row
     assert (words[:, :, 0] == 1024).all()
 
 
@@ -305,7 +317,7 @@ def test_neutral_lanes_change_the_left_pass(pair):
     """With the right pass's no-match row, --lr-neutral changes the left MAPs (its lanes reading a right
     no-match get 1, not beta) on this pair: the brute-force test above is not vacuous for it."""
     left, right, _ = pair
-    base = ModelParams(dmax=DMAX, name="census-lr", lr_right_nomatch=True)
+    base = ModelParams(dmax=DMAX, name="census-lr", lr_right_nomatch=True, lr_neutral=False)
     fl, fr = model_features(left, base), model_features(right, base)
     neutral = ModelParams(dmax=DMAX, name="census-lr", lr_right_nomatch=True, lr_neutral=True)
     assert (reference_map(fl, fr, base) != reference_map(fl, fr, neutral)).any()
@@ -361,7 +373,8 @@ def test_run_machine_equals_a_hand_driven_run(pair, model):
     want, want_right = _hand_run(prepared, machine)
     np.testing.assert_array_equal(run.map, want)
     np.testing.assert_array_equal(run.right.map, want_right)
-    assert run.right.machine == lane_params(disparity_machine(model.right_model, counter_max=8), 1)
+    assert run.right.machine == lane_params(disparity_machine(model.right_model, counter_max=8,
+                                                              max_cycles=machine.max_cycles), 1)
     assert run.right.cycles.shape == want_right.shape and (run.right.cycles > 8).all()
     assert (run.map >= 0).mean() > 0.5
 
@@ -381,10 +394,42 @@ def test_right_pass_watchdog(pair):
         disparity_machine(ModelParams(dmax=DMAX, name="census-lr", lr_right_max_cycles=8), counter_max=8)
 
 
+def test_census_lr_machine_default_watchdog():
+    """census-lr's machine stops a run after LR_WATCHDOG_RUNS runs of n_max + 1 cycles by default (both
+    passes); a given max_cycles wins; the other models keep the machine's own default."""
+    from bayesmachine.likelihood import LR_WATCHDOG_RUNS
+    from bayesmachine.params import DEFAULT_MAX_CYCLES, MachineParams
+
+    lr = ModelParams(dmax=DMAX, name="census-lr")
+    for n in (1, 8, 16):
+        m = disparity_machine(lr, counter_max=n)
+        assert m.max_cycles == LR_WATCHDOG_RUNS * (n + 1) and right_machine(lr, m).max_cycles == m.max_cycles
+    m = disparity_machine(lr, counter_max=8, max_cycles=5000)
+    assert m.max_cycles == 5000 and right_machine(lr, m).max_cycles == 5000
+    assert right_machine(ModelParams(dmax=DMAX, name="census-lr", lr_right_max_cycles=100),
+                         disparity_machine(lr, counter_max=8)).max_cycles == 100
+    census = ModelParams(dmax=DMAX, name="census")
+    assert disparity_machine(census, counter_max=8).max_cycles == DEFAULT_MAX_CYCLES
+    assert MachineParams.for_disparity(DMAX).max_cycles == DEFAULT_MAX_CYCLES
+
+
+def test_left_watchdog_stops_long_runs_as_no_match(pair):
+    """A short left watchdog turns the long runs into timeouts, reported as no match."""
+    left, right, gt = pair
+    model = ModelParams(dmax=DMAX, name="census-lr")
+    prepared = prepare(left, right, model, gt)
+    machine = disparity_machine(model, counter_max=8, max_cycles=40)
+    run = run_machine(prepared, machine, "model", progress=False)
+    assert run.timeout.any() and (run.cycles <= 40).all()
+    np.testing.assert_array_equal(run.map[run.timeout], -1)
+
+
 def test_machine_near_its_quantized_reference(pair, model):
     left, right, gt = pair
     prepared = prepare(left, right, model, gt)
-    run = run_machine(prepared, disparity_machine(model, counter_max=32), "model", progress=False)
+    # The references have no watchdog: hold the sampler to them with the machine's long one.
+    machine = disparity_machine(model, counter_max=32, max_cycles=(1 << 20) - 1)
+    run = run_machine(prepared, machine, "model", progress=False)
     fl, fr = prepared.features
     q = reference_quantized_map(fl, fr, model, 10)
     assert np.mean(run.map == q) > 0.8
@@ -450,7 +495,11 @@ def test_cli_run_census_lr(pair_files, pair, tmp_path):
     assert report["cycles_per_pixel_mean"] == pytest.approx(both)
     assert report["left_pass_cycles_per_pixel_mean"] == pytest.approx(want.cycles.mean())
     assert report["right_pass_cycles_per_pixel_mean"] == pytest.approx(want.right.cycles.mean())
-    assert report["right_pass_pixels"] == want.right.map.size and report["right_pass_timeouts"] == 0
+    assert report["right_pass_pixels"] == want.right.map.size
+    assert report["right_pass_timeouts"] == int(want.right.timeout.sum())
+    from bayesmachine.likelihood import LR_WATCHDOG_RUNS
+
+    assert report["machine"]["max_cycles"] == LR_WATCHDOG_RUNS * 9  # census-lr's default watchdog
     assert report["frame_cycles"] == int(want.cycles.sum() + want.right.cycles.sum())
 
 
@@ -479,6 +528,7 @@ def test_cli_sweep_three_models(pair_files, tmp_path):
     [
         (["run", "--model", "census", "--lr-beta", "0.2"], "--lr-beta: options of --model census-lr"),
         (["run", "--no-lr-nomatch"], "--no-lr-nomatch: options of --model census-lr"),
+        (["run", "--model", "census", "--no-lr-neutral"], "--no-lr-neutral: options of --model census-lr"),
         (["sweep", "--model", "paper,census", "--lr-right-nomatch"], "--lr-right-nomatch: options of"),
         (["run", "--model", "census-lr", "--lr-beta", "0"], "--lr-beta: lr_beta must be > 0"),
         (["run", "--model", "census-lr", "--lr-gamma", "2"], "--lr-gamma: lr_gamma must be a probability"),
