@@ -461,7 +461,7 @@ def add_census_options(parser: argparse._ActionsContainer, sweep: bool = False,
         g.add_argument(flag, dest=dest, type=kind, default=None, help=text)
     g.add_argument("--neighbour-prior", dest="neighbour_prior", action=argparse.BooleanOptionalAction,
                    default=None, help="the census model's raster-order neighbour prior (default on)")
-    lr = parser.add_argument_group("left-right consistency (--model census-lr; issue 22 defaults)") \
+    lr = parser.add_argument_group("left-right consistency (--model census-lr; issue 22)") \
         if title else parser
     for dest, flag, kind, text in _LR_OPTIONS:
         lr.add_argument(flag, dest=dest, type=kind, default=None, help=text)

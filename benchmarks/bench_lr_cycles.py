@@ -11,14 +11,14 @@ would load (``memory_words``, ``right_memory_words``), and caps each pixel at th
 (model engine, sobol, counter max 16, seed 1) on one band with ``--machine``.
 
 Per variant it prints: the float64 reference's no-match rate, bad-2 on matched pixels, bad-2 with
-no match counted as an error, the share of no-match calls on occluded pixels; the estimated
-cycles per output pixel over both passes (mean, median, p99: the left pass's pixel plus the right
-pass's cycles per right pixel scaled by Wr / Wo), the left pass's and the right pass's means, and
-the estimated share of pixels stopped by each watchdog. Variants: the issue's defaults and values
-inside the issue's stated flat ranges (beta 0.03-0.3, gamma 0.001-0.03, no-match prior factor
-0.05-0.25), the right pass's watchdog, and the right pass's no-match row with the no-MAP lanes
-inconsistent (``lr_right_nomatch``) or neutral (``lr_neutral``). Prints figures; asserts
-nothing.
+no match counted as an error, the share of no-match calls on occluded pixels (the references have
+no watchdog); the estimated cycles per output pixel over both passes (mean, median, p99: the left
+pass's pixel plus the right pass's cycles per right pixel scaled by Wr / Wo), the left pass's and
+the right pass's means, and the estimated share of pixels stopped by each watchdog; with
+``--machine`` the same figures measured (timeouts as counts). Variants: census-lr's defaults, the
+issue's model (no right no-match row, no neutral lanes), values inside the issue's stated flat
+ranges, the right pass's watchdog; ``--max-cycles`` sets the left pass's watchdog (default: the
+census-lr machine's, 64 runs of n_max + 1 cycles). Prints figures; asserts nothing.
 Run: python benchmarks/bench_lr_cycles.py [--rows 150,190] [--machine] [--variants NAME,...]
 """
 
@@ -48,24 +48,26 @@ from bayesmachine.likelihood import (
 )
 from bayesmachine.params import MachineParams
 
-# Short names of the census-lr fields a variant sets: NAME=VALUE, or a bare flag for a yes/no field.
+# Short names of the census-lr fields a variant sets: NAME=VALUE (0/1 for a yes/no field).
 KEYS = {"beta": ("lr_beta", float), "gamma": ("lr_gamma", float), "pnm": ("prior_nomatch", float),
         "tol": ("lr_tolerance", int), "rmax": ("lr_right_max_cycles", int), "rnm": ("lr_right_nomatch", bool),
-        "neutral": ("lr_neutral", bool), "nolnm": ("lr_nomatch", bool)}
-VARIANTS = ("default", "beta=0.3", "pnm=0.25", "gamma=0.03", "beta=0.3,pnm=0.25,gamma=0.03", "rmax=4096",
-            "rnm", "rnm,neutral", "rnm,neutral,beta=0.3", "rnm,neutral,pnm=0.25", "rnm,neutral,gamma=0.03",
-            "rnm,neutral,beta=0.3,pnm=0.25,gamma=0.03")
+        "neutral": ("lr_neutral", bool), "lnm": ("lr_nomatch", bool)}
+# census-lr's defaults; the issue's model (no right no-match row, no neutral lanes), alone and with the
+# right pass's watchdog at 4096; the right no-match row without neutral lanes; values inside the issue's
+# flat ranges (beta 0.03-0.3, gamma 0.001-0.03, no-match prior factor 0.05-0.25).
+VARIANTS = ("default", "rnm=0,neutral=0", "rnm=0,neutral=0,rmax=4096", "neutral=0", "beta=0.03", "beta=0.3",
+            "gamma=0.001", "gamma=0.03", "pnm=0.05", "pnm=0.25")
 
 
 def variant(spec: str) -> dict[str, object]:
-    """The ModelParams fields of a variant spec (``default``, or ``beta=0.3,pnm=0.25,rnm,...``)."""
+    """The ModelParams fields of a variant spec (``default``, or ``beta=0.3,rnm=0,...``)."""
     out: dict[str, object] = {}
     for item in spec.split(","):
         if item in ("", "default"):
             continue
         key, _, value = item.partition("=")
         field, kind = KEYS[key]
-        out[field] = (key != "nolnm") if kind is bool else kind(value)
+        out[field] = bool(int(value)) if kind is bool else kind(value)
     return out
 
 
@@ -111,7 +113,7 @@ def estimate(fl, fr, model: ModelParams, machine: MachineParams) -> dict[str, np
         lfb = neighbour_words(q, model.dmax, _shifted_left(left_map[y]))
         left_c.append(_run_cycles(lw, lfb, w, machine.counter_max, machine.max_cycles))
     return {"left": np.stack(left_c), "right": np.stack(right_c), "right_max": rmach.max_cycles,
-            "left_max": machine.max_cycles}
+            "left_max": machine.max_cycles, "left_map": left_map}
 
 
 def cycle_figures(left_c: np.ndarray, right_c: np.ndarray, left_max: int, right_max: int) -> dict[str, float]:
@@ -180,6 +182,12 @@ def main() -> None:
               f"{'':>15}{c['mean']:8.1f} {c['median']:7.1f} {c['p99']:8.0f} | {c['left']:8.1f} "
               f"{c['right']:8.1f} {c['right_median']:6.1f} {c['right_p99']:8.0f} {c['left_to']:6.4f} "
               f"{c['right_to']:6.4f} | {time.perf_counter() - t0:.0f}", flush=True)
+        # The left watchdog's effect, estimated: the 10-bit reference's MAP, no match where the estimate
+        # reaches the watchdog (the right pass's timeouts and the neighbours' changed priors left out).
+        stopped = np.where(est["left"] >= est["left_max"], np.int16(-1), est["left_map"])
+        acc = accuracy(stopped, gt, occ)
+        print(f"{'  10-bit ref, estimated left timeouts':<40} {acc['nomatch']:6.3f} {acc['bad2']:6.3f} "
+              f"{acc['bad2_nm']:6.3f} {acc['nm_occ']:6.3f} |", flush=True)
         if args.machine:
             t0 = time.perf_counter()
             prep = Prepared(left, right, model, (fl, fr), None, 0.0, None, None)

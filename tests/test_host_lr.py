@@ -552,8 +552,10 @@ def test_cli_refusals_are_one_line(pair_files, tmp_path, capsys, argv, message):
 
 @pytest.mark.slow  # the whole bundled pair through both passes of the model engine: minutes on 2 cores
 def test_whole_bundled_pair_meets_the_issue():
-    """Issue 22's target on the bundled pair at counter max 16 (sobol): bad-2 with no match counted as
-    an error <= 0.15, machine and float reference, the machine within 0.02 of its reference."""
+    """Issue 22's target on the bundled pair at counter max 16 (sobol), census-lr's defaults (its
+    watchdog included): bad-2 with no match counted as an error <= 0.15, machine and float reference,
+    the machine within 0.02 of its reference, and cycles per pixel over both passes within 3x the
+    census machine's 58.65 (docs/host.md)."""
     from bayesmachine.host.images import bundled_pair
     from bayesmachine.host.run import run_pair
 
@@ -566,8 +568,12 @@ def test_whole_bundled_pair_meets_the_issue():
     assert bad["machine"]["bad2_nomatch_bad"] <= 0.15
     assert abs(bad["machine"]["bad2_nomatch_bad"] - bad["reference"]["bad2_nomatch_bad"]) <= 0.02
     assert abs(bad["machine"]["bad2"] - bad["reference"]["bad2"]) <= 0.02
-    # The consistency column is what closes the gap: most no-match calls now fall on occluded pixels.
-    assert bad["machine"]["nomatch_occluded"] > 0.5
+    # The consistency column is what closes the gap: far more of the no-match calls fall on occluded
+    # pixels than the census model's (22 %) and SGBM's (37 %); the watchdog's calls bring it below 50 %.
+    assert bad["machine"]["nomatch_occluded"] > max(0.45, bad["sgbm"]["nomatch_occluded"])
+    run = out.run
+    both = (run.cycles.sum() + run.right.cycles.sum()) / run.cycles.size
+    assert both <= 3 * 58.65
 
 
 def test_reference_of_a_pair_runs_the_right_pass_first(pair, model):
