@@ -448,6 +448,7 @@ def test_engines_equal_the_model(engine, verilator_cache):
     prepared = prepare(left, right, small, gt)
     machine = disparity_machine(small, counter_max=3)
     want = run_machine(prepared, machine, "model", progress=False)
+    assert small.lr_neutral and (want.right.map < 0).any()  # right no-match calls: neutral lanes read
     got = run_machine(prepared, machine, engine, progress=False, engine_options=options)
     for name in ("map", "counts", "cycles", "timeout"):
         np.testing.assert_array_equal(getattr(got, name), getattr(want, name), err_msg=name)
