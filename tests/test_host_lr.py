@@ -504,6 +504,23 @@ def test_cli_run_census_lr(pair_files, pair, tmp_path):
     assert report["frame_cycles"] == int(want.cycles.sum() + want.right.cycles.sum())
 
 
+def test_cli_the_issues_census_lr(pair_files, tmp_path):
+    """--no-lr-right-nomatch --no-lr-neutral --max-cycles N: the issue's model on the machine's long
+    watchdog, as report.json records it."""
+    import json
+
+    from bayesmachine.cli import main
+
+    out = tmp_path / "issue"
+    argv = _argv(pair_files, "--model", "census-lr", "--counter-max", "8", "--no-sgbm",
+                 "--no-lr-right-nomatch", "--no-lr-neutral", "--max-cycles", "5000")
+    assert main(["run", *argv, "-o", str(out)]) == 0
+    report = json.loads((out / "report.json").read_text())
+    model = ModelParams(dmax=DMAX, name="census-lr", lr_right_nomatch=False, lr_neutral=False)
+    assert report["model"] == model.to_dict()
+    assert report["machine"]["max_cycles"] == 5000 and report["right_pass_machine"]["max_cycles"] == 5000
+
+
 def test_cli_sweep_three_models(pair_files, tmp_path):
     import json
 
