@@ -79,7 +79,7 @@ class RightPass:
     """census-lr's right pass over ``host.likelihoods.right_columns`` (its own machine, run by ``run``)."""
 
     machine: MachineParams
-    map: np.ndarray  # (Ho, Wr) int16, -1 = none (a timeout: the right pass has no no-match row)
+    map: np.ndarray  # (Ho, Wr) int16, -1 = none (its no-match row won, or a timeout)
     cycles: np.ndarray  # (Ho, Wr) int64
     timeout: np.ndarray  # (Ho, Wr) bool
     seconds: float
