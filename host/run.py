@@ -11,7 +11,7 @@ own results of row y - 1 (none for row 0), and each row's first pixel is flagged
 The census-lr model runs a second machine (:func:`bayesmachine.likelihood.right_machine`, the same
 engine kind) for its right pass: per map row, first the right pass's row (its own above prior from
 its previous row), then the left pass's row, whose consistency column comes from the right MAPs just
-produced (:func:`bayesmachine.likelihood.consistency_column`); the run keeps them as ``run.right``.
+produced (:func:`bayesmachine.likelihood.lr_column`); the run keeps them as ``run.right``.
 Memory grows with the outputs (per-pixel maps and counts), not with frame x Dmax: the
 float64 posterior is only ever computed one band of rows at a time.
 """
@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from tqdm import tqdm
 
-from bayesmachine.likelihood import consistency_column, lr_consistent, neighbour_words, right_machine
+from bayesmachine.likelihood import lr_column, neighbour_words, right_machine
 from bayesmachine.outputs import require_memory
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.engines import ENGINES, get_engine
@@ -231,11 +231,10 @@ class _RightRun:
         timeout = np.asarray(res.timeout, bool)
         self.timeout[y] = timeout
         self.cycles[y] = np.asarray(res.cycles)
-        # No match cannot win (its words are 0); a timeout is no right MAP.
+        # A no-match call (the right pass's no-match row, lr_right_nomatch) or a timeout: no right MAP.
         self.map[y] = np.where(timeout | np.asarray(res.nomatch, bool), np.int16(-1), np.asarray(res.map))
-        consistent = lr_consistent(self.map[y], int(self.columns[0]), self.map_columns, model.dmax,
-                                   model.lr_tolerance)
-        return consistency_column(consistent, model, left_q.one, left_q.lr_beta, left_q.lr_gamma)
+        return lr_column(self.map[y], int(self.columns[0]), self.map_columns, model, left_q.one,
+                         left_q.lr_beta, left_q.lr_gamma)
 
     def close(self) -> None:
         self.wall = self.engine.wall_cycles

@@ -34,7 +34,7 @@ from bayesmachine.host.likelihoods import (
     right_memory_words,
 )
 from bayesmachine.host.region import OutputRegion
-from bayesmachine.likelihood import consistency_column, lr_consistent, neighbour_words, right_machine
+from bayesmachine.likelihood import lr_column, lr_consistent, lr_unknown, neighbour_words, right_machine
 from bayesmachine.params import ParameterError
 from bayesmachine.sim.model import MachineModel
 from bayesmachine.sim.results import MachineResult
@@ -65,6 +65,7 @@ def test_consistency_test_equals_lr_consistent(dmax: int, tolerance: int) -> Non
     map_width = max(1, (dmax + 4).bit_length())
     dut = ConsistencyTest(dmax=dmax, map_width=map_width, tolerance=tolerance)
     want = lr_consistent(row, 0, np.arange(dmax, width), dmax, tolerance)
+    want_unknown = lr_unknown(row, 0, np.arange(dmax, width), dmax)
     rnd = random.Random(dmax)
 
     async def bench(ctx):
@@ -81,6 +82,9 @@ def test_consistency_test_equals_lr_consistent(dmax: int, tolerance: int) -> Non
                 got = [(bits >> d) & 1 for d in range(dmax + 1)]
                 assert got == want[x - dmax].astype(int).tolist(), x
                 assert ctx.get(dut.any) == int(want[x - dmax].any()), x
+                unknown = ctx.get(dut.unknown)
+                got_unknown = [(unknown >> d) & 1 for d in range(dmax + 1)]
+                assert got_unknown == want_unknown[x - dmax].astype(int).tolist(), x
 
     run_sim(dut, bench)
 
@@ -142,13 +146,13 @@ def test_right_pass_feeder_delays_the_reference_and_flushes_each_output_row() ->
 
 @pytest.mark.parametrize(("model", "width", "delay"), [
     (_lr(3), 15, 6),
-    (_lr(2, lr_right_nomatch=True, lr_nomatch=False, lr_tolerance=0), 11, 25),  # 2 output pixels per row
+    (_lr(2, lr_right_nomatch=False, lr_neutral=False, lr_nomatch=False, lr_tolerance=0), 11, 25),  # 2 per row
 ])
 def test_lr_frontend_words_equal_host_words(model: ModelParams, width: int, delay: int) -> None:
     """With stand-in results for both machines (given late, up to ``delay`` cycles after a pixel's
     words), the right pass's words are ``right_memory_words`` (its above column from the stand-in right
     results of the row before) and the left pass's ``memory_words`` with the consistency column of the
-    stand-in right MAPs of its row (``consistency_column(lr_consistent(...))``)."""
+    stand-in right MAPs of its row (``lr_column``)."""
     params = stereo_machine_params(model.dmax, model=model, counter_max=2)
     rp = right_pass_params(model, params)
     frames = [_noisy_pair(9, width, seed=4), _noisy_pair(8, width, seed=5)]
@@ -170,13 +174,12 @@ def test_lr_frontend_words_equal_host_words(model: ModelParams, width: int, dela
             r_above = np.full(wr, -1) if y == 0 else right_maps[kr - wr : kr]
             want_r.append(right_memory_words(fl, fr, model, rp, rows=slice(y, y + 1), qtables=rq,
                                              prior=neighbour_words(rq, model.dmax, r_above)))
-            consistent = lr_consistent(right_maps[kr : kr + wr], int(cols[0]), cols[model.dmax:], model.dmax,
-                                       model.lr_tolerance)
+            column = lr_column(right_maps[kr : kr + wr], int(cols[0]), cols[model.dmax:], model, q.one,
+                               q.lr_beta, q.lr_gamma)
             above = np.full(wo, -1) if y == 0 else maps[k - wo : k]
             want.append(memory_words(fl, fr, model, params, rows=slice(y, y + 1), qtables=q,
                                      prior=neighbour_words(q, model.dmax, above),
-                                     consistency=consistency_column(consistent, model, q.one, q.lr_beta,
-                                                                    q.lr_gamma)))
+                                     consistency=column))
             k += wo
             kr += wr
     want_r_all, want_all = np.concatenate(want_r), np.concatenate(want)
@@ -214,9 +217,7 @@ def _model_run(frames: list[tuple[np.ndarray, np.ndarray]], model: ModelParams,
             starts[0] = True
             res_r = right_eng.run(rw, line_start=starts)
             right_above = np.where(res_r.nomatch | res_r.timeout, -1, res_r.map)
-            consistent = lr_consistent(right_above, int(cols[0]), region.map_columns, model.dmax,
-                                       model.lr_tolerance)
-            cw = consistency_column(consistent, model, q.one, q.lr_beta, q.lr_gamma)
+            cw = lr_column(right_above, int(cols[0]), region.map_columns, model, q.one, q.lr_beta, q.lr_gamma)
             words = memory_words(fl, fr, model, params, rows=rows, qtables=q,
                                  prior=neighbour_words(q, model.dmax, above), consistency=cw)
             starts = np.zeros(wo, bool)
@@ -233,7 +234,9 @@ CASES = {
     "bundled-crop": (_lr(3), [(9, 18), "noisy"], 2, 6),
     "narrow-deep-fifo": (_lr(2, lr_tolerance=0), [(8, 11)], 8, 4),
     "no-nomatch-row-right-watchdog": (_lr(3, lr_nomatch=False, lr_right_max_cycles=9), [(8, 14)], 3, 6),
-    "right-nomatch-5x5": (_lr(2, lr_right_nomatch=True, census_window=5), [(7, 12), "noisy"], 2, 5),
+    "census5": (_lr(2, census_window=5), [(7, 12), "noisy"], 2, 5),
+    # The issue's rules: no right no-match row, a lane without a right MAP gets beta (not neutral).
+    "issue-rules": (_lr(3, lr_right_nomatch=False, lr_neutral=False), [(9, 16)], 2, 6),
     "dmax0": (_lr(0), [(8, 8)], 2, 4),
 }
 

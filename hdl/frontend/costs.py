@@ -442,7 +442,8 @@ class WordGenerator(wiring.Component):
         """census-lr's per-lane flags, aligned with the beat on the stream (registered on ``advance``
         as the table look-ups are: issue, address, data). Right pass: whether lane row j of the beat
         pairs with a left pixel inside the output region (row + flush <= Dmax). Left pass: whether
-        lane row j's right MAP is consistent, and whether any lane is (the no-match row's word)."""
+        lane row j's word is 1.0 (its right MAP consistent, or with ``lr_neutral`` none), and whether
+        any lane is consistent (the no-match row's word)."""
         dmax = self._model.dmax
         n_beats = self._params.beats_per_pixel
         pix = self.pixel.payload
@@ -472,7 +473,9 @@ class WordGenerator(wiring.Component):
             m.d.comb += [test.shift.eq(shift), test.entry.eq(self.right_map.payload),
                          self.right_map.ready.eq(shift)]
             # Padded with 0 to every row a beat can reach (rows past Dmax are not read).
-            bits = Cat(test.consistent, Const(0, n_beats * rows_per_beat))
+            # A lane reading a right pixel without a MAP is neutral (factor 1) with lr_neutral.
+            one_bits = test.consistent | test.unknown if self._model.lr_neutral else test.consistent
+            bits = Cat(one_bits, Const(0, n_beats * rows_per_beat))
             for j in range(rows_per_beat):
                 consistent.append(pipeline(bits.bit_select(beat * rows_per_beat + j, 1), f"consistent{j}"))
             any_q = pipeline(test.any, "any_consistent")

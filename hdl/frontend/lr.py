@@ -224,6 +224,9 @@ class ConsistencyTest(wiring.Component):
         shift register).
     any : ``Out(1)``
         Some lane is consistent.
+    unknown : ``Out(dmax + 1)``
+        Bit d: entry d is no MAP (the right pass's no match or timeout: with ``lr_neutral`` the lane
+        is neutral; twin :func:`~bayesmachine.likelihood.lr_unknown`).
     """
 
     def __init__(self, *, dmax: int, map_width: int, tolerance: int) -> None:
@@ -235,6 +238,7 @@ class ConsistencyTest(wiring.Component):
             "entry": In(right_map_layout(map_width)),
             "consistent": Out(dmax + 1),
             "any": Out(1),
+            "unknown": Out(dmax + 1),
         })
 
     @property
@@ -268,5 +272,6 @@ class ConsistencyTest(wiring.Component):
             if d - t > 0:
                 inside = inside & (e.map >= d - t)
             bits.append(e.hit & inside)
-        m.d.comb += [self.consistent.eq(Cat(*bits)), self.any.eq(Cat(*bits).any())]
+        m.d.comb += [self.consistent.eq(Cat(*bits)), self.any.eq(Cat(*bits).any()),
+                     self.unknown.eq(~Cat(*(e.hit for e in line)))]
         return m
