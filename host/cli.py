@@ -228,10 +228,6 @@ def _machine_params(
     overrides: dict[str, object] = {} if counter_max is None else {"counter_max": counter_max}
     if rng is not None:
         overrides["rng"] = rng
-    if getattr(args, "feed", "words") == "pixels" and model.lr:
-        raise ValueError("--feed pixels: the on-chip front end computes the paper and census models, not "
-                         "census-lr's right pass and consistency column yet; run --model census-lr with "
-                         "--feed words")
     machine = machine_params_from_args(args, model.dmax, model=model, **overrides)
     if getattr(args, "feed", "words") == "pixels" and args.lanes is None:
         # The front end writes one feature per lane: lanes a multiple of the loaded columns.
@@ -403,7 +399,8 @@ def _check_board_args(args: argparse.Namespace, model: ModelParams) -> None:
                          "simulate` printed)")
     if model.lr:
         raise ValueError(f"--engine board --model {model.name}: the board carries the on-chip front end, "
-                         "which computes the paper and census models (not the right pass)")
+                         "whose link carries the paper and census models (not census-lr's right pass: "
+                         "run it with --engine verilator --feed pixels)")
     if args.waves is not None:
         raise ValueError("--waves is not available with --engine board")
     args.feed = "pixels"  # the board takes the pair itself: its machine has the front end's lanes

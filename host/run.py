@@ -132,9 +132,6 @@ def run_machine(
         "use --crop or a smaller --dmax",
     )
     if feed == "pixels":
-        if model.lr:
-            raise ValueError("--feed pixels: the on-chip front end does not compute census-lr's right pass "
-                             "and consistency column yet; run it with --feed words")
         return _run_pixels(prepared, machine, engine, engine_options)
     neighbour = machine.feedback_columns > 0
     if neighbour:
@@ -271,8 +268,21 @@ def _run_pixels(
     nomatch = res.nomatch.reshape(ho, wo)
     disp = np.where(nomatch | timeout, -1, res.map.reshape(ho, wo)).astype(np.int16)
     counts = res.counts.reshape(ho, wo, m).astype(counts_dtype(machine.counter_max))
+    right = None
+    if model.lr:
+        # The right pass ran on chip beside the left one (its own machine, the same clock): it adds no
+        # wall cycles of its own, the frame's (first pixel in to last result out) are both passes'.
+        from bayesmachine.hdl.frontend.lr import right_pass_params
+
+        r = eng.last_right
+        assert r is not None
+        wr = r.map.size // ho
+        r_timeout = r.timeout.reshape(ho, wr)
+        r_map = np.where(r_timeout | r.nomatch.reshape(ho, wr), -1, r.map.reshape(ho, wr)).astype(np.int16)
+        right = RightPass(right_pass_params(model, machine), r_map, r.cycles.reshape(ho, wr), r_timeout,
+                          seconds, 0)
     return MachineRun("verilator", machine, disp, counts, res.cycles.reshape(ho, wo),
-                      nomatch, timeout, seconds, 0.0, wall)
+                      nomatch, timeout, seconds, 0.0, wall, right)
 
 
 def run_pair(

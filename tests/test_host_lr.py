@@ -555,7 +555,9 @@ def test_cli_sweep_three_models(pair_files, tmp_path):
         (["run", "--model", "census-lr", "--no-neighbour-prior"], "neighbour_prior must be on"),
         (["run", "--model", "census-lr", "--lr-right-max-cycles", "16"], "--lr-right-max-cycles: lr_right"),
         (["run", "--model", "census", "--lr-right-max-cycles", "100"], "--lr-right-max-cycles: options of"),
-        (["run", "--model", "census-lr", "--engine", "verilator", "--feed", "pixels"], "not census-lr's"),
+        # On chip the right pass's machine has no entropy port: an off-chip source is refused.
+        (["run", "--model", "census-lr", "--engine", "verilator", "--feed", "pixels", "--rng", "smtj"],
+         "rng: --model census-lr on chip needs an on-chip random source"),
     ],
 )
 def test_cli_refusals_are_one_line(pair_files, tmp_path, capsys, argv, message):

@@ -44,6 +44,7 @@ from bayesmachine.hdl.signatures import (
     load_stream,
     pixel_in_layout,
     pixel_stream,
+    result_layout,
 )
 from bayesmachine.likelihood import ModelParams, disparity_machine
 from bayesmachine.params import MachineParams, ParameterError, stereo_lanes
@@ -53,9 +54,10 @@ from .census import CensusFilter
 from .costs import WordGenerator, check_frontend_params, check_frontend_types
 from .filters import FeatureFilter
 from .linebuffer import WINDOW, LineBuffer
+from .lr import feeder_in_layout, lr_split, right_pass_params
 
 __all__ = ["MAX_WIDTH", "FrontEnd", "StereoMachine", "check_stereo_machine", "pixel_in_layout",
-           "stereo_machine_params"]
+           "stereo_machine_params", "stereo_signature"]
 
 
 def stereo_machine_params(dmax: int = 80, *, model: ModelParams | None = None,
@@ -82,6 +84,17 @@ def _check_width(width: object, model: ModelParams) -> int:
             f"needs one output pixel with all {model.dmax + 1} disparities and its {size}x{size} windows), "
             f"got {width}")
     return width
+
+
+def stereo_signature(params: MachineParams, model: ModelParams) -> wiring.Signature:
+    """:class:`StereoMachine`'s ports: ``StereoSignature(params)``, and with census-lr also
+    ``right_result``: ``valid`` and ``payload`` (``result_layout(right_pass_params(model, params))``),
+    the right pass's results as they leave its machine (observed: no ``ready``, no back-pressure)."""
+    if not model.lr:
+        return StereoSignature(params)
+    rp = right_pass_params(model, params)
+    observed = wiring.Signature({"valid": Out(1), "payload": Out(result_layout(rp))})
+    return wiring.Signature(dict(StereoSignature(params).members.items()) | {"right_result": Out(observed)})
 
 
 def check_stereo_machine(params: MachineParams, model: ModelParams, width: int,
@@ -118,6 +131,10 @@ class FrontEnd(wiring.Component):
     result_take, result_map, result_hit : ``In(1)``, ``In(params.map_width)``, ``In(1)``
         With the neighbour prior only: the machine's results as they leave (see
         :class:`~.costs.WordGenerator`), for the above neighbour's prior column.
+    right_beats, right_take, right_map, right_hit, right_room
+        census-lr only: the right pass's load beats (``Out(load_stream(right_pass_params(model,
+        params)))``), and its machine's results as they leave (taken only while ``right_room``: the
+        line of right MAPs the left pass reads has room). See :mod:`.lr`.
     """
 
     def __init__(self, *, params: MachineParams, model: ModelParams, width: int) -> None:
@@ -129,6 +146,10 @@ class FrontEnd(wiring.Component):
         members = {"pixels": In(pixel_stream()), "beats": Out(load_stream(params))}
         if params.feedback_columns:
             members |= {"result_take": In(1), "result_map": In(params.map_width), "result_hit": In(1)}
+        if model.lr:
+            rp = right_pass_params(model, params)
+            members |= {"right_beats": Out(load_stream(rp)), "right_take": In(1),
+                        "right_map": In(rp.map_width), "right_hit": In(1), "right_room": Out(1)}
         super().__init__(members)
 
     @property
@@ -169,7 +190,6 @@ class FrontEnd(wiring.Component):
         valid2 = Signal()  # stage 2: the filters hold the column's partial sums
         valid3 = Signal()  # stage 3: the filters hold the pixel's window
         advance = Signal()
-        m.d.comb += advance.eq(~valid3 | gen.pixel.ready)
 
         # Stage 0: position of the incoming pixel (restarts at a frame's first pixel). The line
         # saturates at ``size``: size - 1 is the first line whose windows are complete (the first
@@ -205,6 +225,7 @@ class FrontEnd(wiring.Component):
         # RAM's slow clock-to-output leaves no room for the whole column sum in one cycle); the
         # census filters take the whole column. The 5x5 filters take the column's middle 5 lines.
         output2, row_start2, first_row2 = Signal(), Signal(), Signal()
+        line_end2, consult2 = Signal(), Signal()  # census-lr's
         m.d.comb += [fl.load.eq(advance), fr.load.eq(advance)]
         for i in range(WINDOW):
             m.d.comb += [fl.column[i].eq(lines.column[lag + i].left),
@@ -218,21 +239,32 @@ class FrontEnd(wiring.Component):
             m.d.sync += [valid2.eq(valid1),
                          output2.eq((line1 >= size - 1) & (col1 >= first_output_col)),
                          row_start2.eq(col1 == first_output_col),
-                         first_row2.eq(line1 == size - 1)]
+                         first_row2.eq(line1 == size - 1),
+                         # census-lr: an output row's last pixel, and a map column (>= 0) of an output row
+                         line_end2.eq((line1 >= size - 1) & (col1 == width - 1)),
+                         consult2.eq((line1 >= size - 1) & (col1 >= size - 1))]
 
         # Stage 2 -> 3: the columns' sums enter the filters' windows.
         output3, row_start3, first_row3 = Signal(), Signal(), Signal()
+        line_end3, consult3 = Signal(), Signal()
         shift = advance & valid2
         m.d.comb += [fl.en.eq(shift), fr.en.eq(shift)]
         if model.census:
             m.d.comb += [cl.en.eq(shift), cr.en.eq(shift)]
         with m.If(advance):
             m.d.sync += [valid3.eq(valid2), output3.eq(output2), row_start3.eq(row_start2),
-                         first_row3.eq(first_row2)]
+                         first_row3.eq(first_row2), line_end3.eq(line_end2), consult3.eq(consult2)]
 
-        # Stage 3 -> the word generator.
-        px = gen.pixel.payload
-        m.d.comb += [gen.pixel.valid.eq(valid3), px.output.eq(output3)]
+        # Stage 3 -> the word generator (census-lr: through a FIFO, and to the right pass: lr_split).
+        if model.lr:
+            px = Signal(feeder_in_layout(model.census_bits))
+            m.d.comb += [px.line_end.eq(line_end3), px.consult.eq(consult3)]
+            ready3 = lr_split(m, self, gen, px, valid3, width - 2 * margin)
+        else:
+            px = gen.pixel.payload
+            m.d.comb += gen.pixel.valid.eq(valid3)
+            ready3 = gen.pixel.ready
+        m.d.comb += [advance.eq(~valid3 | ready3), px.output.eq(output3)]
         for side, filt in ((px.left, fl), (px.right, fr)):
             m.d.comb += [side.m25.eq(filt.features.m25), side.gh20.eq(filt.features.gh20),
                          side.gv20.eq(filt.features.gv20)]
@@ -269,6 +301,9 @@ class StereoMachine(wiring.Component):
     entropy, entropy_ready
         With an off-chip ``rng`` ("external", "smtj"): the machine's own ports, passed through
         (the numbers of every compute cycle come from outside, as for the machine alone).
+    right_result
+        census-lr only: the right pass's results, raster order of its columns, ``valid`` and
+        ``payload`` (``result_layout(right_pass_params(model, params))``; :func:`stereo_signature`).
     """
 
     def __init__(self, *, params: MachineParams, model: ModelParams, width: int,
@@ -278,7 +313,7 @@ class StereoMachine(wiring.Component):
         self._model = model
         self._width = width
         self._fifo_pixels = fifo_pixels
-        super().__init__(StereoSignature(params))
+        super().__init__(stereo_signature(params, model))
 
     @property
     def params(self) -> MachineParams:
@@ -296,11 +331,29 @@ class StereoMachine(wiring.Component):
     def fifo_pixels(self) -> int:
         return self._fifo_pixels
 
+    def _lr_right_machine(self, m: Module, front: FrontEnd) -> None:
+        """census-lr: the right pass's machine beside the left one, fed through its own FIFO; its results
+        go to the front end (taken while the front end's line of right MAPs has room) and out."""
+        rp = right_pass_params(self._model, self._params)
+        m.submodules.right_machine = machine = BayesianMachine(params=rp)
+        m.submodules.right_fifo = buf = fifo.SyncFIFOBuffered(
+            width=Shape.cast(load_layout(rp)).width, depth=self._fifo_pixels * rp.beats_per_pixel + 1)
+        wiring.connect(m, front.right_beats, buf.w_stream)
+        wiring.connect(m, buf.r_stream, machine.load)
+        res = machine.result
+        take = res.valid & front.right_room
+        m.d.comb += [res.ready.eq(front.right_room), front.right_take.eq(take),
+                     front.right_map.eq(res.payload.map),
+                     front.right_hit.eq(~res.payload.nomatch & ~res.payload.timeout),
+                     self.right_result.valid.eq(take), self.right_result.payload.eq(res.payload)]
+
     def elaborate(self, platform: object) -> Module:
         m = Module()
         p = self._params
         m.submodules.frontend = front = FrontEnd(params=p, model=self._model, width=self._width)
         m.submodules.machine = machine = BayesianMachine(params=p)
+        if self._model.lr:
+            self._lr_right_machine(m, front)
         beat_bits = Shape.cast(load_layout(p)).width
         # One entry more than the pixels' beats: the registered ready below keeps one free.
         depth = self._fifo_pixels * p.beats_per_pixel + 1
