@@ -95,8 +95,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     )
     b.add_argument("--baud", type=int_arg, default=None, help="UART baud rate (default 3000000)")
     b.add_argument("--pnr-seed", type=int_arg, default=2,
-                   help="nextpnr placement seed (default 2: seed 1 does not route the default census "
-                   "design on the ULX3S-85F, docs/board.md)")
+                   help="nextpnr placement seed (default 2: the census design on the ULX3S-85F is hard "
+                   "to route and some seeds do not converge; try another, docs/board.md)")
     b.add_argument(
         "-o", "--output", type=output_path, default=None, help="output directory (default build/BOARD)"
     )
