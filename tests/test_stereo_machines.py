@@ -103,3 +103,48 @@ def test_verilator_machines_on_a_crop_equal_the_model(machines: int) -> None:
     assert_same_results(MachineResult.concatenate(rows, params.rows), want)
     one = machines_model(frames, model, params, 1)
     assert not np.array_equal(one.cycles, want.cycles)  # the dealing shows: each machine its own stream
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (["emit", "--top", "stereo", "--machines", "0"], "machines must be in [1, 16], got 0"),
+    (["emit", "--machines", "2"], "--machines: only with --top stereo"),
+    (["emit", "--top", "stereo", "--machines", "2", "--rng", "smtj"], "rng 'smtj' is off chip"),
+    (["synth", "--top", "stereo", "--machines", "17", "--target", "ecp5-85k"], "machines must be in [1, 16]"),
+    (["run", "--engine", "model", "--machines", "2", "--model", "census-lr"],
+     "--model census-lr runs with one"),
+    (["run", "--engine", "board", "--port", "/dev/null", "--machines", "2"], "the board carries one machine"),
+])
+def test_cli_refuses_a_bad_machines_in_one_line(argv: list[str], message: str, tmp_path,
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    from bayesmachine.cli import main
+
+    assert main([*argv, "-o", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and len(err.splitlines()) == 1, err
+    assert not (tmp_path / "out").exists()
+
+
+def test_cli_emit_stereo_machines(tmp_path, capsys: pytest.CaptureFixture[str]) -> None:
+    from bayesmachine.cli import main
+
+    out = tmp_path / "top.il"
+    assert main(["emit", "--top", "stereo", "--dmax", "4", "--width", "16", "--machines", "3",
+                 "-o", str(out)]) == 0
+    assert "3 machines (map row r on machine r mod 3" in capsys.readouterr().out
+    text = out.read_text()
+    assert all(f"machine{j}" in text for j in range(3)) and "machine3" not in text
+
+
+def test_model_run_with_machines_deals_rows(tmp_path) -> None:
+    """``run --engine model --machines K`` is :func:`machines_model` on the pair (the twin the
+    StereoMachine's results are held to)."""
+    from bayesmachine.cli import main
+
+    crop = ["--crop", "250,200,40,12", "--dmax", "8", "--quiet", "--no-sgbm"]
+    assert main(["run", "--engine", "model", "--machines", "3", *crop, "-o", str(tmp_path / "k3")]) == 0
+    got = np.load(tmp_path / "k3" / "result.npz")
+    left, right = _crop(200, 250, 12, 40)
+    model = ModelParams(dmax=8, name="census")
+    want = machines_model([(left, right)], model, stereo_machine_params(8, model=model), 3)
+    assert np.array_equal(got["cycles"].ravel(), want.cycles)
+    assert np.array_equal(got["counts"].reshape(len(want), -1), want.counts)

@@ -90,7 +90,7 @@ def check_machines(machines: object, params: MachineParams, model: ModelParams) 
     """``machines`` if a ``StereoMachine`` can have that many machines: an integer (``TypeError``
     otherwise) in [1, MAX_MACHINES], more than one only for an on-chip random source (off chip,
     each machine would need its own number port and device stream) and not for census-lr (its
-    right pass is one machine's), else ``ParameterError`` naming the parameter."""
+    right pass is not dealt to several), else ``ParameterError`` naming the parameter."""
     if isinstance(machines, bool) or not isinstance(machines, int):
         raise TypeError(f"machines must be an integer, not {type(machines).__name__}")
     if not 1 <= machines <= MAX_MACHINES:
@@ -102,7 +102,7 @@ def check_machines(machines: object, params: MachineParams, model: ModelParams) 
                                  "(sobol, lfsr, lfsr-shared)")
         if model.lr:
             raise ParameterError(f"machines = {machines}: --model {model.name} runs with one machine "
-                                 "(its right pass's machine is shared)")
+                                 "(its right pass is not dealt to several)")
     return machines
 
 
