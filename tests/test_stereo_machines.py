@@ -148,3 +148,23 @@ def test_model_run_with_machines_deals_rows(tmp_path) -> None:
     want = machines_model([(left, right)], model, stereo_machine_params(8, model=model), 3)
     assert np.array_equal(got["cycles"].ravel(), want.cycles)
     assert np.array_equal(got["counts"].reshape(len(want), -1), want.counts)
+
+
+@needs_verilator
+@pytest.mark.slow
+def test_verilator_four_machines_on_a_vga_frame_equal_the_model() -> None:
+    """A 640 x 480 crop of the bundled pair through StereoMachine(machines=4) (the default census
+    model, Dmax 80, counter max 16, ``sobol``): every result the model's, and the machines overlap (the
+    frame's wall cycles well below one machine's compute cycles)."""
+    from bayesmachine.host.images import Crop, crop_image
+    from bayesmachine.sim.stereo_engine import StereoVerilatorEngine
+
+    left, right, _ = (crop_image(a, Crop(50, 10, 640, 480)) for a in bundled_pair())
+    model = ModelParams(dmax=80, name="census")
+    params = stereo_machine_params(80, model=model, counter_max=16)
+    want = machines_model([(left, right)], model, params, 4)
+    with StereoVerilatorEngine(params, model, 640, verbose=False, machines=4) as engine:
+        got = engine.run(left, right)
+        wall = engine.last_wall_cycles
+    assert_same_results(got, want)
+    assert wall < 0.5 * int(want.cycles.sum())
