@@ -41,7 +41,7 @@ def test_census_machines_equal_the_model(machines: int) -> None:
     assert_same_results(got, machines_model(frames, model, params, machines))
 
 
-@pytest.mark.parametrize(("machines", "rng"), [(2, "sobol"), (3, "lfsr")])
+@pytest.mark.parametrize(("machines", "rng"), [(2, "sobol"), (3, "lfsr"), (2, "lfsr-shared")])
 def test_paper_machines_equal_the_model(machines: int, rng: str) -> None:
     """The paper model (no neighbour prior), frames back to back without waiting."""
     width = 16
