@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TypeVar
 
-from bayesmachine.likelihood import DEFAULT_MODEL, MODELS, ModelParams, disparity_machine
+from bayesmachine.likelihood import DEFAULT_MODEL, LR_WATCHDOG_RUNS, MODELS, ModelParams, disparity_machine
 from bayesmachine.params import (
     DEFAULT_COLUMNS,
     DEFAULT_COUNTER_MAX,
@@ -241,9 +241,12 @@ add_option(MachineOption("seed", "--seed",
                          "machine seed: LFSR polynomials and start states; 0x.. accepted "
                          "(default %(default)s)",
                          default=DEFAULT_SEED))
+# --max-cycles is left at None unless given: census-lr's machine has its own default watchdog.
 add_option(MachineOption("max_cycles", "--max-cycles",
-                         "watchdog: a pixel stops as a timeout after this many cycles (default %(default)s)",
-                         default=DEFAULT_MAX_CYCLES, metavar="N"))
+                         "watchdog: a pixel stops as a timeout (no match) after this many cycles "
+                         f"(default {DEFAULT_MAX_CYCLES}; with --model census-lr {LR_WATCHDOG_RUNS} x "
+                         f"(counter max + 1), {LR_WATCHDOG_RUNS * (DEFAULT_COUNTER_MAX + 1)} at counter max "
+                         f"{DEFAULT_COUNTER_MAX}, for both passes)", metavar="N"))
 add_option(MachineOption("tie_break", "--tie-break",
                          "MAP encoder rule when several counters overflow in one cycle (default %(default)s)",
                          default=DEFAULT_TIE_BREAK, choices=TIE_BREAKS))
@@ -415,11 +418,11 @@ _LR_OPTIONS: tuple[tuple[str, str, Callable[[str], Any], str], ...] = (
      "consistent (1 when none is) (default 0.01)"),
     ("lr_tolerance", "--lr-tolerance", int_arg, "the left-right test's tolerance in disparities (default 1)"),
     ("lr_right_max_cycles", "--lr-right-max-cycles", int_arg, "the right pass's watchdog in cycles: a right "
-     "pixel stopped by it has no right MAP (default: --max-cycles, as the left pass)"),
+     "pixel stopped by it has no right MAP (default: the left pass's watchdog, --max-cycles)"),
 )
 LR_OPTION_FLAGS: tuple[tuple[str, str], ...] = (
     *((dest, flag) for dest, flag, _, _ in _LR_OPTIONS), ("lr_nomatch", "--no-lr-nomatch"),
-    ("lr_right_nomatch", "--lr-right-nomatch"),
+    ("lr_right_nomatch", "--lr-right-nomatch"), ("lr_neutral", "--lr-neutral"),
 )
 
 
@@ -458,15 +461,18 @@ def add_census_options(parser: argparse._ActionsContainer, sweep: bool = False,
         g.add_argument(flag, dest=dest, type=kind, default=None, help=text)
     g.add_argument("--neighbour-prior", dest="neighbour_prior", action=argparse.BooleanOptionalAction,
                    default=None, help="the census model's raster-order neighbour prior (default on)")
-    lr = parser.add_argument_group("left-right consistency (--model census-lr; issue 22 defaults)") \
+    lr = parser.add_argument_group("left-right consistency (--model census-lr; issue 22)") \
         if title else parser
     for dest, flag, kind, text in _LR_OPTIONS:
         lr.add_argument(flag, dest=dest, type=kind, default=None, help=text)
     lr.add_argument("--lr-nomatch", dest="lr_nomatch", action=argparse.BooleanOptionalAction, default=None,
                     help="the left pass's no-match row (default on; off: no no-match row at all)")
     lr.add_argument("--lr-right-nomatch", dest="lr_right_nomatch", action=argparse.BooleanOptionalAction,
-                    default=None, help="give the right pass the census model's no-match row (default off: "
-                    "no no-match row, as the issue's right pass)")
+                    default=None, help="give the right pass the census model's no-match row (default on; "
+                    "off: no no-match row, the issue's right pass)")
+    lr.add_argument("--lr-neutral", dest="lr_neutral", action=argparse.BooleanOptionalAction, default=None,
+                    help="a lane whose right pixel has no right MAP (the right pass's no match or a timeout) "
+                    "gets factor 1, no information (default on; off: beta, the issue's rule)")
 
 
 def model_names_from_args(args: argparse.Namespace) -> list[str]:

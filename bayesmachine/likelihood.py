@@ -33,14 +33,22 @@ Two models (``ModelParams.name``):
 * ``"census-lr"``: the census model and a left-right consistency column (issue 22). A right pass
   (:attr:`ModelParams.right_model`: the census model with the right image as reference, lane d
   pairing right map column x_r with left map column x_r + d, raster order, its own left/above
-  neighbour prior, no no-match row: that row's words are 0, so it never fires) gives the right
-  MAPs d_R; the left pass multiplies in one more column: row d of left map column x gets 1 when
-  ``|d_R(x - d) - d| <= lr_tolerance`` and ``lr_beta`` otherwise (also when x - d has no right
-  MAP); the no-match row gets ``lr_gamma`` when any lane is consistent, 1 when none is (0 with
-  ``lr_nomatch=False``: no no-match row at all), and its prior factor per matched neighbour is
-  ``prior_nomatch`` (0.1 by default for this model). :func:`lr_consistent` and
-  :func:`consistency_column` are the one definition the host, the references and the machine runs
-  read. The right pass covers right map columns ``x_first - Dmax .. x_last`` (every column an output
+  neighbour prior, and the census model's no-match row, ``lr_right_nomatch``; without it, the
+  issue's right pass, that row's words are 0, so it never fires) gives the right MAPs d_R; the
+  left pass multiplies in one more column: row d of left map column x gets 1 when
+  ``|d_R(x - d) - d| <= lr_tolerance`` and ``lr_beta`` otherwise; a lane whose right pixel x - d has
+  no right MAP (the right pass's no match or its watchdog) is *neutral* (``lr_neutral``): factor 1,
+  no information either way (without ``lr_neutral``, the issue's rule: beta); x - d outside the
+  right pass's columns gets beta. The no-match row gets ``lr_gamma`` when any lane is consistent
+  (a neutral lane does not count), 1 when none is (0 with ``lr_nomatch=False``: no no-match row at
+  all), and its prior factor per matched neighbour is ``prior_nomatch`` (0.1 by default for this
+  model). Its machine's watchdog is by default :data:`LR_WATCHDOG_RUNS` runs of n_max + 1 cycles
+  (:func:`disparity_machine`): a pixel whose winning row fires too rarely stops as no match. The
+  right no-match row, the neutral lanes and the watchdog cut the model's cycles per pixel by more than
+  an order of magnitude within the issue's accuracy target (docs/host.md, "census-lr's cycles").
+  :func:`lr_consistent`, :func:`lr_unknown` and :func:`consistency_column` (both through
+  :func:`lr_column`) are the one definition the host, the references and the machine runs read. The
+  right pass covers right map columns ``x_first - Dmax .. x_last`` (every column an output
   pixel consults); its lane d is loaded with word 0 (it never fires) where the left pixel
   x_r + d lies right of ``x_last``, the last output column (:func:`right_lanes_valid`).
 """
@@ -57,6 +65,7 @@ from bayesmachine.params import DEFAULT_DMAX, STEREO_ROWS_PER_BEAT, MachineParam
 
 __all__ = [
     "MODELS",
+    "LR_WATCHDOG_RUNS",
     "DEFAULT_MODEL",
     "CENSUS_WINDOWS",
     "FEATURES",
@@ -73,6 +82,8 @@ __all__ = [
     "neighbour_lanes",
     "neighbour_words",
     "lr_consistent",
+    "lr_unknown",
+    "lr_column",
     "right_lanes_valid",
     "consistency_column",
     "right_machine",
@@ -118,15 +129,23 @@ OPTION_NAMES = {
     "lr_nomatch": "--lr-nomatch/--no-lr-nomatch",
     "lr_right_nomatch": "--lr-right-nomatch/--no-lr-right-nomatch",
     "lr_right_max_cycles": "--lr-right-max-cycles",
+    "lr_neutral": "--lr-neutral/--no-lr-neutral",
 }
 # The census model's own fields: left out of a paper model's to_dict(), so its reports and the
 # Verilator design keys (sim/stereo_engine.py hashes model.to_dict()) stay what they were.
 CENSUS_FIELDS = ("name", "census_window", "census_p0", "census_sigma", "census_nomatch_h",
                  "neighbour_prior", "prior_eps", "prior_s", "prior_nomatch")
 # The left-right model's own fields: left out of the other models' to_dict() (same reason).
-LR_FIELDS = ("lr_beta", "lr_gamma", "lr_tolerance", "lr_nomatch", "lr_right_nomatch", "lr_right_max_cycles")
+LR_FIELDS = ("lr_beta", "lr_gamma", "lr_tolerance", "lr_nomatch", "lr_right_nomatch", "lr_right_max_cycles",
+             "lr_neutral")
 # The census-lr model's default no-match prior factor per matched neighbour (issue 22).
 LR_PRIOR_NOMATCH = 0.1
+# The census-lr machine's default watchdog, in runs of n_max + 1 cycles: max_cycles =
+# LR_WATCHDOG_RUNS * (counter_max + 1) (1088 at counter max 16). A run lasts about (n_max + 1) / p_win
+# cycles, so a pixel stops as a timeout (no match) when its winning row fires less than about once in
+# 64 cycles: every hypothesis explains the pixel badly. It cuts the long tail of the left pass's runs
+# (docs/host.md, "census-lr's cycles"); a given max_cycles (--max-cycles) wins.
+LR_WATCHDOG_RUNS = 64
 
 
 def _error(name: str, text: str) -> ParameterError:
@@ -184,8 +203,9 @@ class ModelParams:
     lr_gamma: float = 0.01
     lr_tolerance: int = 1
     lr_nomatch: bool = True
-    lr_right_nomatch: bool = False
+    lr_right_nomatch: bool = True
     lr_right_max_cycles: int | None = None
+    lr_neutral: bool = True
 
     def __post_init__(self) -> None:
         if isinstance(self.dmax, bool) or not isinstance(self.dmax, int) or not 0 <= self.dmax <= 4094:
@@ -228,7 +248,7 @@ class ModelParams:
         t = self.lr_tolerance
         if isinstance(t, bool) or not isinstance(t, int) or not 0 <= t <= 4094:
             raise _error("lr_tolerance", f"must be an integer disparity distance in [0, 4094], got {t!r}")
-        for name in ("lr_nomatch", "lr_right_nomatch"):
+        for name in ("lr_nomatch", "lr_right_nomatch", "lr_neutral"):
             if not isinstance(getattr(self, name), bool):
                 raise _error(name, f"must be True or False, got {getattr(self, name)!r}")
         c = self.lr_right_max_cycles
@@ -483,24 +503,59 @@ def lr_consistent(right_map: np.ndarray, right_first: int, columns: np.ndarray, 
     return inside & (got >= 0) & (np.abs(got - d) <= tolerance)
 
 
+def lr_unknown(right_map: np.ndarray, right_first: int, columns: np.ndarray, dmax: int) -> np.ndarray:
+    """(..., Wo, Dmax+1) bool: lane d of left map column ``columns[i]`` reads a right pixel x - d inside
+    ``right_map``'s columns that has no right MAP (-1: the right pass's no match or a timeout).
+
+    With ``lr_neutral`` such a lane is neutral in :func:`consistency_column` (factor 1); a lane whose
+    x - d lies outside the right columns is not unknown (it stays inconsistent, beta).
+    """
+    hat = np.asarray(right_map)
+    if hat.dtype.kind not in "iu":
+        raise ValueError(f"right MAPs must be integers (-1: none), got {hat.dtype}")
+    cols = np.asarray(columns, dtype=np.int64)
+    j = cols[:, None] - np.arange(dmax + 1)[None, :] - int(right_first)
+    inside = (j >= 0) & (j < hat.shape[-1])
+    return inside & (hat[..., np.clip(j, 0, max(0, hat.shape[-1] - 1))].astype(np.int64) < 0)
+
+
 def consistency_column(consistent: np.ndarray, model: ModelParams, one: float | int, beta: float | int,
-                       gamma: float | int) -> np.ndarray:
+                       gamma: float | int, unknown: np.ndarray | None = None) -> np.ndarray:
     """The consistency column (..., Dmax+2) of :func:`lr_consistent`'s test (..., Dmax+1).
 
-    Row d: ``one`` when consistent, ``beta`` otherwise; the no-match row: ``gamma`` when any lane is
-    consistent, ``one`` when none is, 0 without a no-match row (``lr_nomatch=False``). In floats
-    (1.0, beta, gamma: the reference) or in words (2^W and the quantized beta, gamma: the machine's
-    loaded column); the dtype follows ``one`` (float64, or uint16 for words).
+    Row d: ``one`` when consistent, ``beta`` otherwise; with ``model.lr_neutral`` also ``one`` where
+    ``unknown`` (:func:`lr_unknown`: the lane's right pixel has no right MAP; required then). The
+    no-match row: ``gamma`` when any lane is consistent (an unknown lane does not count), ``one`` when
+    none is, 0 without a no-match row (``lr_nomatch=False``). In floats (1.0, beta, gamma: the
+    reference) or in words (2^W and the quantized beta, gamma: the machine's loaded column); the
+    dtype follows ``one`` (float64, or uint16 for words).
     """
     c = np.asarray(consistent, dtype=bool)
     dtype = np.float64 if isinstance(one, float) else np.uint16
     out = np.empty((*c.shape[:-1], c.shape[-1] + 1), dtype=dtype)
-    out[..., :-1] = np.where(c, one, beta)
+    if model.lr_neutral:
+        if unknown is None or np.shape(unknown) != c.shape:
+            got = None if unknown is None else np.shape(unknown)
+            raise ValueError(f"--lr-neutral: the consistency column needs the unknown lanes (lr_unknown), "
+                             f"shape {c.shape}, got {got}")
+        out[..., :-1] = np.where(c | np.asarray(unknown, dtype=bool), one, beta)
+    else:
+        out[..., :-1] = np.where(c, one, beta)
     if model.lr_nomatch:
         out[..., -1] = np.where(c.any(axis=-1), gamma, one)
     else:
         out[..., -1] = 0
     return out
+
+
+def lr_column(right_map: np.ndarray, right_first: int, columns: np.ndarray, model: ModelParams,
+              one: float | int, beta: float | int, gamma: float | int) -> np.ndarray:
+    """The consistency column (..., Wo, Dmax+2) of left map columns ``columns`` from the right MAPs
+    ``right_map`` (..., Wr) of right map columns ``right_first ..``: :func:`lr_consistent` (and
+    :func:`lr_unknown` with ``lr_neutral``) then :func:`consistency_column`, as every caller needs."""
+    consistent = lr_consistent(right_map, right_first, columns, model.dmax, model.lr_tolerance)
+    unknown = lr_unknown(right_map, right_first, columns, model.dmax) if model.lr_neutral else None
+    return consistency_column(consistent, model, one, beta, gamma, unknown)
 
 
 def neighbour_lanes(rows: int, loaded_columns: int) -> int:
@@ -524,8 +579,11 @@ def disparity_machine(model: ModelParams, **machine_kwargs: object) -> MachinePa
     With the neighbour prior (``model.has_prior``): ``prior="neighbour"``, ``feedback_words`` the
     quantized prior table clamped where it stops changing (``QuantizedTables.prior[:prior_last + 1]``),
     ``feedback_nomatch_word`` the quantized no-match factor, and ``lanes`` by default
-    :func:`neighbour_lanes`. ``machine_kwargs`` are the other fields (``word_bits``, ``rng``, ...);
-    a ``columns``, ``prior`` or feedback table contradicting the model is a ``ParameterError``.
+    :func:`neighbour_lanes`. For census-lr ``max_cycles`` is by default
+    :data:`LR_WATCHDOG_RUNS` x (``counter_max`` + 1), the watchdog that ends its long runs as no
+    match (the right pass takes it too unless ``lr_right_max_cycles``). ``machine_kwargs`` are the
+    other fields (``word_bits``, ``rng``, ...); a ``columns``, ``prior`` or feedback table
+    contradicting the model is a ``ParameterError``.
     """
     if "columns" in machine_kwargs and machine_kwargs["columns"] != model.columns:
         raise ParameterError(f"columns: the {model.name} model has {model.columns} data columns, got "
@@ -553,6 +611,9 @@ def disparity_machine(model: ModelParams, **machine_kwargs: object) -> MachinePa
     elif prior == "neighbour":
         raise ParameterError(f"prior: 'neighbour' is the census model's neighbour prior; the {model.name} "
                              "model" + (" without it" if model.census else "") + " has no feedback table")
+    if model.lr and "max_cycles" not in kwargs:
+        counter_max = MachineParams.for_disparity(model.dmax, **kwargs).counter_max  # type: ignore[arg-type]
+        kwargs["max_cycles"] = LR_WATCHDOG_RUNS * (counter_max + 1)
     machine = MachineParams.for_disparity(model.dmax, **kwargs)  # type: ignore[arg-type]
     check_disparity_machine(model, machine)
     return machine

@@ -12,12 +12,14 @@ seed 1) each model needs
 results through ``run_machine``) on the paper model and the census model, against counter max,
 beside its float and quantized references, with cycles and wall cycles per pixel; then the
 random sources on the census model at counter max 16. The census-lr model (left-right
-consistency column from a right pass): its float64 reference with the issue's defaults, without the
-left pass's no-match row, with the census model's no-match row in the right pass, and 2-3 values
+consistency column from a right pass): its float64 reference with its defaults (the right pass's
+no-match row, neutral lanes), the issue's model (no right no-match row, no neutral lanes) with and
+without the left pass's no-match row, the right no-match row without neutral lanes, and 2 values
 each of beta, gamma, the no-match prior factor and the tolerance around the defaults (the issue's
-flatness claim; nothing is picked from these); its machine (both passes, model engine) at
-``--lr-counter-max`` (default 16: its right pass is long, minutes on 2 cores), with the right
-pass's cycles. All bad-n figures come from ``host.metrics.bad_rates`` (report.json's). Prints
+flatness claim; nothing is picked from these); its machine (both passes, model engine, its default
+watchdog) at ``--lr-counter-max`` (default 16), with the right pass's cycles. The references have no
+watchdog; ``benchmarks/bench_lr_cycles.py`` estimates and measures census-lr's cycles per variant. All bad-n
+figures come from ``host.metrics.bad_rates`` (report.json's). Prints
 figures; asserts nothing; tunes nothing (the issues' defaults).
 Run: python benchmarks/bench_models.py [--dmax 80] [--counter-max 1,2,4,8,16] [--lr-counter-max 16]
      [--no-machine] [--no-lr] [--figure docs/figures/motorcycle-models.png]
@@ -96,9 +98,11 @@ def main() -> None:
     }
     if not args.no_lr:
         lr = ModelParams(dmax=dmax, name="census-lr")
+        issue = replace(lr, lr_right_nomatch=False, lr_neutral=False)
         models["+ left-right column (census-lr default)"] = lr
-        models["census-lr, no no-match row (left pass)"] = replace(lr, lr_nomatch=False)
-        models["census-lr, right pass with a no-match row"] = replace(lr, lr_right_nomatch=True)
+        models["census-lr, the issue's (no right no-match row)"] = issue
+        models["the issue's, no no-match row (left pass)"] = replace(issue, lr_nomatch=False)
+        models["the issue's + right no-match row, not neutral"] = replace(lr, lr_neutral=False)
         for field, values in (("lr_beta", (0.03, 0.3)), ("lr_gamma", (0.001, 0.03)),
                               ("prior_nomatch", (0.05, 0.25)), ("lr_tolerance", (0, 2))):
             for v in values:

@@ -178,6 +178,11 @@ def _add_machine_options(p: argparse.ArgumentParser, sweep: bool) -> None:
         g.add_argument("--baud", type=int_arg, default=None,
                        help="with --engine board: the baud rate the bitstream was built for "
                        "(default 3000000)")
+        g.add_argument("--board-fields", default=None, metavar="LIST",
+                       help="with --engine board: the result fields the board sends, a comma-separated "
+                       "list of map, counts, cycles (default all three; the MAP and its flags always "
+                       "come). --board-fields map cuts the results' bytes on the link; result.npz then "
+                       "has no counts or cycles and report.json's figures of them are null")
         g.add_argument("--board-timeout", type=positive_float_arg, default=None, metavar="S",
                        help="with --engine board: seconds of silence before the board is deemed not to "
                        "answer "
@@ -229,10 +234,6 @@ def _machine_params(
     overrides: dict[str, object] = {} if counter_max is None else {"counter_max": counter_max}
     if rng is not None:
         overrides["rng"] = rng
-    if getattr(args, "feed", "words") == "pixels" and model.lr:
-        raise ValueError("--feed pixels: the on-chip front end computes the paper and census models, not "
-                         "census-lr's right pass and consistency column yet; run --model census-lr with "
-                         "--feed words")
     machine = machine_params_from_args(args, model.dmax, model=model, **overrides)
     if getattr(args, "feed", "words") == "pixels" and args.lanes is None:
         # The front end writes one feature per lane: lanes a multiple of the loaded columns.
@@ -255,7 +256,8 @@ def _check_fits(region: OutputRegion, machine: MachineParams) -> None:
 def _report(outcome: RunOutcome, source: str, crop: Crop | None) -> dict[str, object]:
     prep, run = outcome.prepared, outcome.run
     right = run.right  # census-lr's right pass: its cycles count too
-    frame = int(run.cycles.sum()) + (int(right.cycles.sum()) if right is not None else 0)
+    frame = None if run.cycles is None else (
+        int(run.cycles.sum()) + (int(right.cycles.sum()) if right is not None else 0))
     wall = run.wall_cycles
     if wall is not None and right is not None:
         wall = None if right.wall_cycles is None else wall + right.wall_cycles
@@ -267,7 +269,7 @@ def _report(outcome: RunOutcome, source: str, crop: Crop | None) -> dict[str, ob
         "frame_cycles": frame,
         # Compute cycles count the machine's runs only; wall cycles (RTL engines) add loading.
         "wall_cycles": wall,
-        "wall_cycles_per_pixel": None if wall is None else wall / run.cycles.size,
+        "wall_cycles_per_pixel": None if wall is None else wall / run.map.size,
         "seconds": run.seconds,
         "words_seconds": run.words_seconds,
         "reference_seconds": prep.reference_seconds,
@@ -391,7 +393,8 @@ def _check_waves(waves: tuple[int, int] | None, pixels: int) -> None:
 def _check_board_args(args: argparse.Namespace, model: ModelParams) -> None:
     """``--engine board`` and its options: together, and with a model the board computes."""
     given = [flag for flag, v in (("--port", args.port), ("--baud", args.baud),
-                                  ("--board-timeout", args.board_timeout)) if v is not None]
+                                  ("--board-timeout", args.board_timeout),
+                                  ("--board-fields", args.board_fields)) if v is not None]
     if args.engine != "board":
         if given:
             raise ValueError(f"{', '.join(given)}: only with --engine board")
@@ -402,10 +405,14 @@ def _check_board_args(args: argparse.Namespace, model: ModelParams) -> None:
                          "simulate` printed)")
     if model.lr:
         raise ValueError(f"--engine board --model {model.name}: the board carries the on-chip front end, "
-                         "which computes the paper and census models (not the right pass)")
+                         "whose link carries the paper and census models (not census-lr's right pass: "
+                         "run it with --engine verilator --feed pixels)")
     if args.waves is not None:
         raise ValueError("--waves is not available with --engine board")
     args.feed = "pixels"  # the board takes the pair itself: its machine has the front end's lanes
+    from bayesmachine.fpga.boards.protocol import FIELDS_ALL, fields_from_names
+
+    args.board_fields = FIELDS_ALL if args.board_fields is None else fields_from_names(args.board_fields)
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
@@ -440,7 +447,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
             prep = prepare(left, right, model, gt)
             run, board = run_board(prep, machine, args.port, 3_000_000 if args.baud is None else args.baud,
                                    timeout=2.0 if args.board_timeout is None else args.board_timeout,
-                                   progress=False if args.quiet else None)
+                                   progress=False if args.quiet else None, fields=args.board_fields)
             outcome = RunOutcome(prep, run, evaluate(prep, run, sgbm=not args.no_sgbm))
         else:
             outcome = run_pair(
@@ -470,8 +477,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
             lambda path: np.savez_compressed(
                 path,
                 map=run.map,
-                counts=run.counts,
-                cycles=run.cycles,
+                # a board asked for MAPs only (--board-fields map) sent no counts or cycles
+                **({} if run.counts is None else {"counts": run.counts}),
+                **({} if run.cycles is None else {"cycles": run.cycles}),
                 timeout=run.timeout,
                 reference_map=prep.reference_map,
                 **extra,

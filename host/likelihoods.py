@@ -15,10 +15,11 @@ column 0, whose words (:func:`bayesmachine.likelihood.neighbour_words`) come fro
 results of the previous map row, so ``memory_words`` takes them as an argument.
 
 The census-lr model (issue 22) adds the left-right consistency column, a fifth data column whose
-words (:func:`bayesmachine.likelihood.consistency_column` of the right pass's MAPs) ``memory_words``
+words (:func:`bayesmachine.likelihood.lr_column` of the right pass's MAPs) ``memory_words``
 takes as an argument too; :func:`right_memory_words` builds the right pass's words (the census
 model with the right image as reference: lane d pairs right map column x_r with left map column
-x_r + d; word 0 in the no-match row and in the lanes past the last output column).
+x_r + d; word 0 in the lanes past the last output column, and in the no-match row without
+``lr_right_nomatch``).
 """
 
 from __future__ import annotations

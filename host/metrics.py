@@ -267,8 +267,9 @@ def evaluate(prepared: Prepared, run: MachineRun, sgbm: bool | None = None) -> R
     machine_nm = run.map < 0  # no-match row won, or watchdog timeout
     ref_nm = ref_map < 0
     rms = RmsAccumulator(run.machine.counter_max)
-    for rows, band in prepared.reference_bands():
-        rms.add(run.counts[rows], band.posterior, band.map >= 0)
+    if run.counts is not None:  # a board asked for MAPs only has no counts: no RMS error (null)
+        for rows, band in prepared.reference_bands():
+            rms.add(run.counts[rows], band.posterior, band.map >= 0)
     bad = None
     sgbm_map = None
     if prepared.gt is not None:
@@ -300,7 +301,7 @@ def evaluate(prepared: Prepared, run: MachineRun, sgbm: bool | None = None) -> R
                 bad[name]["nomatch_occluded"] = nomatch_occluded_share(disp, occluded)
     return RunMetrics(
         pixels=int(run.map.size),
-        cycles=cycle_stats(run.cycles),
+        cycles=cycle_stats(run.cycles if run.cycles is not None else np.empty(0)),
         rms_error=rms.value,
         nomatch_f1=f1_score(machine_nm, ref_nm),
         map_agreement=map_agreement(run.map, ref_map),

@@ -63,8 +63,9 @@ class MachineRun:
     engine: str
     machine: MachineParams
     map: np.ndarray  # (Ho, Wo) int16, -1 = no match (timeouts included)
-    counts: np.ndarray  # (Ho, Wo, M), the smallest unsigned dtype holding n_max (counts_dtype)
-    cycles: np.ndarray  # (Ho, Wo) int64
+    # counts, cycles: None only from a board asked for the MAP without them (--board-fields)
+    counts: np.ndarray | None  # (Ho, Wo, M), the smallest unsigned dtype holding n_max (counts_dtype)
+    cycles: np.ndarray | None  # (Ho, Wo) int64
     nomatch: np.ndarray  # (Ho, Wo) bool, the no-match row won
     timeout: np.ndarray  # (Ho, Wo) bool, the watchdog stopped the run
     seconds: float  # time inside the engine's run calls
@@ -78,7 +79,7 @@ class RightPass:
     """census-lr's right pass over ``host.likelihoods.right_columns`` (its own machine, run by ``run``)."""
 
     machine: MachineParams
-    map: np.ndarray  # (Ho, Wr) int16, -1 = none (a timeout: the right pass has no no-match row)
+    map: np.ndarray  # (Ho, Wr) int16, -1 = none (its no-match row won, or a timeout)
     cycles: np.ndarray  # (Ho, Wr) int64
     timeout: np.ndarray  # (Ho, Wr) bool
     seconds: float

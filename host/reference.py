@@ -45,7 +45,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from bayesmachine.likelihood import QuantizedTables, consistency_column, likelihood_formula, lr_consistent
+from bayesmachine.likelihood import QuantizedTables, likelihood_formula, lr_column
 from bayesmachine.params import ParameterError
 
 from .features import FeatureSums, feature_sums, model_features
@@ -349,13 +349,13 @@ def _run_model(left, right, model, tabs, prior, p_nm, words_bits, out, rows, abo
             got = None if right_map is None else np.shape(right_map)
             raise ValueError(f"the census-lr left pass needs the right pass's MAPs of its rows, shape "
                              f"{(shape[0], xr.size)}, got {got}")
-        consistent = lr_consistent(np.asarray(right_map), int(xr[0]), region.map_columns, model.dmax,
-                                   model.lr_tolerance)
+        rmap = np.asarray(right_map)
         if words_bits is None:
             # (((m * gH) * gV) * census) * lr, then the prior: the column is one more data factor.
-            data *= consistency_column(consistent, model, 1.0, *lr_values[1:])
+            data *= lr_column(rmap, int(xr[0]), region.map_columns, model, 1.0, *lr_values[1:])
         else:
-            extra = consistency_column(consistent, model, int(one), *lr_values[1:]).astype(np.int64)
+            extra = lr_column(rmap, int(xr[0]), region.map_columns, model, int(one),
+                              *lr_values[1:]).astype(np.int64)
     idx = np.empty(shape[:2], dtype=np.int16)
     has_prior = model.has_prior
     if prior is None:

@@ -11,7 +11,7 @@ own results of row y - 1 (none for row 0), and each row's first pixel is flagged
 The census-lr model runs a second machine (:func:`bayesmachine.likelihood.right_machine`, the same
 engine kind) for its right pass: per map row, first the right pass's row (its own above prior from
 its previous row), then the left pass's row, whose consistency column comes from the right MAPs just
-produced (:func:`bayesmachine.likelihood.consistency_column`); the run keeps them as ``run.right``.
+produced (:func:`bayesmachine.likelihood.lr_column`); the run keeps them as ``run.right``.
 Memory grows with the outputs (per-pixel maps and counts), not with frame x Dmax: the
 float64 posterior is only ever computed one band of rows at a time.
 """
@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from tqdm import tqdm
 
-from bayesmachine.likelihood import consistency_column, lr_consistent, neighbour_words, right_machine
+from bayesmachine.likelihood import lr_column, neighbour_words, right_machine
 from bayesmachine.outputs import require_memory
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.engines import ENGINES, get_engine
@@ -137,13 +137,10 @@ def run_machine(
         f"the per-pixel results of {ho}x{wo} pixels x {m} counters",
         "use --crop or a smaller --dmax",
     )
-    if feed == "pixels":
-        if model.lr:
-            raise ValueError("--feed pixels: the on-chip front end does not compute census-lr's right pass "
-                             "and consistency column yet; run it with --feed words")
-        return _run_pixels(prepared, machine, engine, engine_options, machines)
     if machines != 1 and model.lr:
         raise ValueError(f"--machines {machines}: --model {model.name} runs with one machine")
+    if feed == "pixels":
+        return _run_pixels(prepared, machine, engine, engine_options, machines)
     neighbour = machine.feedback_columns > 0
     if neighbour or machines != 1:
         chunk_rows = 1  # row y's above column is the machine's own row y - 1; rows dealt to machines
@@ -243,11 +240,10 @@ class _RightRun:
         timeout = np.asarray(res.timeout, bool)
         self.timeout[y] = timeout
         self.cycles[y] = np.asarray(res.cycles)
-        # No match cannot win (its words are 0); a timeout is no right MAP.
+        # A no-match call (the right pass's no-match row, lr_right_nomatch) or a timeout: no right MAP.
         self.map[y] = np.where(timeout | np.asarray(res.nomatch, bool), np.int16(-1), np.asarray(res.map))
-        consistent = lr_consistent(self.map[y], int(self.columns[0]), self.map_columns, model.dmax,
-                                   model.lr_tolerance)
-        return consistency_column(consistent, model, left_q.one, left_q.lr_beta, left_q.lr_gamma)
+        return lr_column(self.map[y], int(self.columns[0]), self.map_columns, model, left_q.one,
+                         left_q.lr_beta, left_q.lr_gamma)
 
     def close(self) -> None:
         self.wall = self.engine.wall_cycles
@@ -283,8 +279,21 @@ def _run_pixels(
     nomatch = res.nomatch.reshape(ho, wo)
     disp = np.where(nomatch | timeout, -1, res.map.reshape(ho, wo)).astype(np.int16)
     counts = res.counts.reshape(ho, wo, m).astype(counts_dtype(machine.counter_max))
+    right = None
+    if model.lr:
+        # The right pass ran on chip beside the left one (its own machine, the same clock): it adds no
+        # wall cycles of its own, the frame's (first pixel in to last result out) are both passes'.
+        from bayesmachine.hdl.frontend.lr import right_pass_params
+
+        r = eng.last_right
+        assert r is not None
+        wr = r.map.size // ho
+        r_timeout = r.timeout.reshape(ho, wr)
+        r_map = np.where(r_timeout | r.nomatch.reshape(ho, wr), -1, r.map.reshape(ho, wr)).astype(np.int16)
+        right = RightPass(right_pass_params(model, machine), r_map, r.cycles.reshape(ho, wr), r_timeout,
+                          seconds, 0)
     return MachineRun("verilator", machine, disp, counts, res.cycles.reshape(ho, wo),
-                      nomatch, timeout, seconds, 0.0, wall)
+                      nomatch, timeout, seconds, 0.0, wall, right)
 
 
 def machines_model(

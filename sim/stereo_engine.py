@@ -8,7 +8,10 @@ bit for bit. Frames run back to back in one simulation (the machine's random sou
 as in the model); the front end restarts at each frame's first pixel. ``wall_cycles`` counts
 every clock cycle since reset, filtering and loading included. With ``machines`` = K > 1 the design
 is ``StereoMachine(machines=K)`` and its results are ``host.run.machines_model``'s (map row r on
-machine r mod K, each machine's random source over its own rows).
+machine r mod K, each machine's random source over its own rows). With census-lr (one machine) the
+design has a second machine, the right pass's; the harness also collects its results
+(``right_result``) and the engine keeps the last frame's as ``last_right`` (every right map column of
+every output row, raster order).
 
 With an off-chip random source (``rng = "smtj"``) the design's ``entropy`` port is fed, one row
 per compute cycle, from the kind's device model, one stream from reset on, exactly as the word
@@ -39,7 +42,7 @@ from bayesmachine.hdl.signatures import pixel_in_layout
 from bayesmachine.likelihood import ModelParams
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.engines import EngineLifecycle
-from bayesmachine.sim.results import MachineResult, NumberFeed, layout_fields
+from bayesmachine.sim.results import MachineResult, NumberFeed, decode_results, layout_fields, result_words
 from bayesmachine.sim.verilator import VerilatorError, cache_dir, find_toolchain
 from bayesmachine.sim.verilator.build import HarnessSources, VerilatorBuild, build_design, cached_verilog
 from bayesmachine.sim.verilator.codegen import entropy_header, header_prologue, wrapper_verilog
@@ -55,7 +58,8 @@ _MAGIC_FRAME = 0x46534D42  # "BMSF", see harness/stereo.cpp
 def stereo_header(params: MachineParams, model: ModelParams, width: int, signature: Any,
                   machines: int = 1) -> str:
     """``stereo_design.h``: the shared prologue (ports, result size), the pixel beat's offsets and,
-    with an off-chip source, the entropy port's (fed as in the machine's harness)."""
+    with an off-chip source, the entropy port's (fed as in the machine's harness); census-lr: the
+    right pass's result port and its payload's size (``RIGHT_WORDS``)."""
     ports = {"PIXELS_PAYLOAD": ("pixels", "payload"), "PIXELS_VALID": ("pixels", "valid"),
              "PIXELS_READY": ("pixels", "ready"), "RESULT_PAYLOAD": ("result", "payload"),
              "RESULT_VALID": ("result", "valid")}
@@ -64,6 +68,15 @@ def stereo_header(params: MachineParams, model: ModelParams, width: int, signatu
     # A hung design: no pixel taken and no result for longer than a timed-out run and a line.
     # (K machines: a frame's first pixel may wait for every machine to go idle.)
     hang = machines * (params.max_cycles + 8 * params.words_per_pixel + 2 * model.margin * width + 64)
+    right = ""
+    if model.lr:
+        from bayesmachine.hdl.frontend.lr import right_pass_params
+
+        rp = right_pass_params(model, params)
+        ports |= {"RIGHT_PAYLOAD": ("right_result", "payload"), "RIGHT_VALID": ("right_result", "valid")}
+        right = f"static const unsigned RIGHT_WORDS = {result_words(rp)};\n"
+        # The right pass's runs (its own watchdog) and a line's flush of Dmax right pixels.
+        hang += rp.max_cycles + (model.dmax + 1) * 8 * rp.words_per_pixel
     prologue = header_prologue(signature, params, ports | entropy_ports, hang_cycles=hang,
                                generator="bayesmachine.sim.stereo_engine")
     return prologue + f"""static const unsigned WIDTH = {width};
@@ -71,7 +84,7 @@ static const unsigned DMAX = {model.dmax};
 static const unsigned MARGIN = {model.margin};  // the output region's (host.region)
 static const unsigned LEFT_OFFSET = {pix["left"][0]}, RIGHT_OFFSET = {pix["right"][0]};
 static const unsigned FIRST_OFFSET = {pix["first"][0]};
-{external}"""
+{right}{external}"""
 
 
 def build_stereo_harness(
@@ -85,12 +98,11 @@ def build_stereo_harness(
 ) -> VerilatorBuild:
     """Compile (or find in the cache) the stereo harness, through the Verilator engine's build cache
     (``options``: ``jobs``, ``verbose``, as :func:`~bayesmachine.sim.verilator.build.build_design`)."""
-    from bayesmachine.hdl.frontend.stereo import StereoMachine, check_stereo_machine
-    from bayesmachine.hdl.signatures import StereoSignature
+    from bayesmachine.hdl.frontend.stereo import StereoMachine, check_stereo_machine, stereo_signature
 
     find_toolchain()  # a missing tool is reported before the seconds of emitting the Verilog
     check_stereo_machine(params, model, width, fifo_pixels, machines)  # as StereoMachine's constructor
-    signature = StereoSignature(params)
+    signature = stereo_signature(params, model)
     root = Path(build_dir) if build_dir is not None else cache_dir()
     root.mkdir(parents=True, exist_ok=True)
     key: list[object] = [params.to_dict(), model.to_dict(), width, fifo_pixels]
@@ -154,6 +166,7 @@ class StereoVerilatorEngine(HarnessProcess, EngineLifecycle):
         self.model = model
         self.width = width
         self.machines = machines
+        self.last_right: MachineResult | None = None  # census-lr: the last frame's right-pass results
         self._args: list[str] = []
         self.build = build_stereo_harness(params, model, width, fifo_pixels=fifo_pixels, build_dir=build_dir,
                                           machines=machines, jobs=jobs, verbose=verbose)
@@ -184,12 +197,24 @@ class StereoVerilatorEngine(HarnessProcess, EngineLifecycle):
             try:
                 self._write(proc, struct.pack("<IIII", _MAGIC_FRAME, 0, height, width), pairs.tobytes())
                 self._serve_numbers(proc, None if self._kind.on_chip else self._numbers())
-                return self._read_results(proc, n, t0)
+                out = self._read_results(proc, n, t0)
+                if self.model.lr:  # then the right pass's results, every right map column
+                    self.last_right = self._read_right(proc, (height - 2 * k) * (width - 2 * k))
+                return out
             except (VerilatorError, ValueError):
                 raise
             except BaseException:
                 self._kill()  # an interrupt leaves the pipes mid-frame
                 raise
+
+    def _read_right(self, proc: Any, n: int) -> MachineResult:
+        """census-lr: the right pass's ``n`` raw payloads after the DONE reply, decoded."""
+        from bayesmachine.hdl.frontend.lr import right_pass_params
+
+        rp = right_pass_params(self.model, self.params)
+        words = result_words(rp)
+        raw = self._read(proc, n * words * 4)
+        return decode_results(rp, np.frombuffer(raw, dtype="<u4", count=n * words).reshape(n, words))
 
     def _numbers(self) -> NumberFeed:
         """The device model's stream (one from reset on: a fresh harness holds no rows)."""

@@ -20,7 +20,7 @@ from bayesmachine.params import MachineParams
 from bayesmachine.sim.results import MachineResult, decode_results
 
 __all__ = ["frame_beats", "line_starts_from_beats", "output_pixels", "run_frontend", "run_frontend_beats",
-           "run_frontend_neighbour", "run_stereo", "words_from_beats"]
+           "run_frontend_lr", "run_frontend_neighbour", "run_stereo", "run_stereo_lr", "words_from_beats"]
 
 
 def frame_beats(left: np.ndarray, right: np.ndarray) -> list[int]:
@@ -130,6 +130,149 @@ def run_stereo(top: StereoMachine, frames: Sequence[tuple[np.ndarray, np.ndarray
                             max_cycles)
     res = decode_results(p, got) if got else MachineResult.empty(p.rows)
     return res, cycles
+
+
+def run_stereo_lr(top: StereoMachine, frames: Sequence[tuple[np.ndarray, np.ndarray]], *,
+                  in_stall: float = 0.0, out_stall: float = 0.0, seed: int = 0,
+                  max_cycles: int = 1_000_000) -> tuple[MachineResult, MachineResult, int]:
+    """A census-lr ``StereoMachine``'s results for ``frames``: the left pass's (the ``result`` stream,
+    as :func:`run_stereo`), the right pass's (``right_result``, every right map column of every output
+    row, raster order) and the clock cycles it took."""
+    from bayesmachine.hdl.frontend.lr import right_pass_params
+
+    p, model = top.params, top.model
+    rp = right_pass_params(model, p)
+    beats = [b for lf, rf in frames for b in frame_beats(lf, rf)]
+    expected = output_pixels(frames, model)
+    k = model.margin
+    right_expected = sum((lf.shape[0] - 2 * k) * (lf.shape[1] - 2 * k) for lf, _ in frames)
+    rnd = random.Random(seed)
+    got: list[int] = []
+    right: list[int] = []
+    cycles = 0
+
+    async def feeder(ctx: SimulatorContext) -> None:
+        raw = top.pixels.payload.as_value()
+        for beat in beats:
+            while in_stall and rnd.random() < in_stall:
+                ctx.set(top.pixels.valid, 0)
+                await ctx.tick()
+            ctx.set(top.pixels.valid, 1)
+            ctx.set(raw, beat)
+            await ctx.tick().until(top.pixels.ready)
+        ctx.set(top.pixels.valid, 0)
+
+    async def collector(ctx: SimulatorContext) -> None:
+        nonlocal cycles
+        raw = top.result.payload.as_value()
+        right_raw = top.right_result.payload.as_value()
+        while len(got) < expected or len(right) < right_expected:
+            ready = not (out_stall and rnd.random() < out_stall)
+            ctx.set(top.result.ready, ready)
+            _, _, valid, payload, r_valid, r_payload = await ctx.tick().sample(
+                top.result.valid, raw, top.right_result.valid, right_raw)
+            cycles += 1
+            if valid and ready:
+                got.append(payload)
+            if r_valid:
+                right.append(r_payload)
+            if cycles > max_cycles:
+                raise RuntimeError(f"no complete output after {max_cycles} cycles ({len(got)}/{expected}, "
+                                   f"right {len(right)}/{right_expected})")
+
+    sim = Simulator(top)
+    sim.add_clock(1e-8)
+    sim.add_testbench(feeder, background=True)
+    sim.add_testbench(collector)
+    sim.run()
+    res = decode_results(p, got) if got else MachineResult.empty(p.rows)
+    res_r = decode_results(rp, right) if right else MachineResult.empty(rp.rows)
+    return res, res_r, cycles
+
+
+def run_frontend_lr(front: FrontEnd, frames: Sequence[tuple[np.ndarray, np.ndarray]], maps: np.ndarray,
+                    right_maps: np.ndarray, *, in_stall: float = 0.0, out_stall: float = 0.0,
+                    result_delay: int = 0, seed: int = 0, max_cycles: int = 1_000_000
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A census-lr front end's words for ``frames``, both passes, with stand-ins for both machines'
+    results: ``maps`` (one per output pixel) and ``right_maps`` (one per right pixel: every map column
+    of every output row), -1 = none; each given after its pixel's last beat left, up to
+    ``result_delay`` random cycles later (a right result only while ``right_room``). Returns the left
+    pass's words and ``line_start`` flags, then the right pass's."""
+    from bayesmachine.hdl.frontend.lr import right_pass_params
+
+    p, model = front.params, front.model
+    rp = right_pass_params(model, p)
+    beats = [b for lf, rf in frames for b in frame_beats(lf, rf)]
+    n = output_pixels(frames, model)
+    k = model.margin
+    n_right = sum((lf.shape[0] - 2 * k) * (lf.shape[1] - 2 * k) for lf, _ in frames)
+    maps, right_maps = np.asarray(maps).reshape(-1), np.asarray(right_maps).reshape(-1)
+    if maps.shape != (n,) or right_maps.shape != (n_right,):
+        raise ValueError(f"maps must hold one MAP per output pixel ({n}) and right_maps one per right pixel "
+                         f"({n_right}), got {maps.shape} and {right_maps.shape}")
+    rnd = random.Random(seed)
+    got: list[int] = []
+    got_right: list[int] = []
+
+    async def feeder(ctx: SimulatorContext) -> None:
+        raw = front.pixels.payload.as_value()
+        for beat in beats:
+            while in_stall and rnd.random() < in_stall:
+                ctx.set(front.pixels.valid, 0)
+                await ctx.tick()
+            ctx.set(front.pixels.valid, 1)
+            ctx.set(raw, beat)
+            await ctx.tick().until(front.pixels.ready)
+        ctx.set(front.pixels.valid, 0)
+
+    def results(sink: list[int], params: MachineParams, values: np.ndarray, take: object, map_: object,
+                hit: object, room: object | None) -> object:
+        async def bench(ctx: SimulatorContext) -> None:
+            for i in range(len(values)):
+                while len(sink) < (i + 1) * params.beats_per_pixel:  # the pixel's words have left
+                    await ctx.tick()
+                for _ in range(rnd.randint(0, result_delay)):
+                    await ctx.tick()
+                if room is not None:
+                    while not ctx.get(room):
+                        await ctx.tick()
+                value = int(values[i])
+                ctx.set(map_, max(0, value))
+                ctx.set(hit, int(value >= 0))
+                ctx.set(take, 1)
+                await ctx.tick()
+                ctx.set(take, 0)
+        return bench
+
+    def collector(stream_: object, sink: list[int], expected: int) -> object:
+        async def bench(ctx: SimulatorContext) -> None:
+            raw = stream_.payload.as_value()
+            cycles = 0
+            while len(sink) < expected:
+                ready = not (out_stall and rnd.random() < out_stall)
+                ctx.set(stream_.ready, ready)
+                _, _, valid, payload = await ctx.tick().sample(stream_.valid, raw)
+                cycles += 1
+                if valid and ready:
+                    sink.append(payload)
+                if cycles > max_cycles:
+                    raise RuntimeError(f"no complete output after {max_cycles} cycles "
+                                       f"({len(sink)}/{expected})")
+        return bench
+
+    sim = Simulator(front)
+    sim.add_clock(1e-8)
+    sim.add_testbench(feeder, background=True)
+    sim.add_testbench(results(got, p, maps, front.result_take, front.result_map, front.result_hit, None),
+                      background=True)
+    sim.add_testbench(results(got_right, rp, right_maps, front.right_take, front.right_map, front.right_hit,
+                              front.right_room), background=True)
+    sim.add_testbench(collector(front.right_beats, got_right, n_right * rp.beats_per_pixel), background=True)
+    sim.add_testbench(collector(front.beats, got, n * p.beats_per_pixel))
+    sim.run()
+    return (words_from_beats(p, got), line_starts_from_beats(p, got),
+            words_from_beats(rp, got_right), line_starts_from_beats(rp, got_right))
 
 
 def run_frontend_neighbour(front: FrontEnd, frames: Sequence[tuple[np.ndarray, np.ndarray]], maps: np.ndarray,

@@ -250,3 +250,51 @@ def test_cli_errors(argv: list[str], message: str | None, tmp_path, capsys) -> N
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+def test_cli_board_fields_map_only(tmp_path, monkeypatch) -> None:
+    """``run --engine board --board-fields map``: the board sends MAP records only (fewer bytes back),
+    result.npz has the model's MAP and no counts or cycles, report.json says null for their figures."""
+    import json
+
+    from bayesmachine.fpga.boards import link as link_mod
+
+    ports: list[TwinPort] = []
+
+    def open_twin(port: str, baud: int, timeout: float = 2.0) -> TwinPort:
+        ports.append(TwinPort(BoardTwin(PARAMS, MODEL, WIDTH)))
+        ports[-1].close = lambda: None
+        return ports[-1]
+
+    monkeypatch.setattr(link_mod, "open_port", open_twin)
+    crop = ["--crop", f"400,250,{WIDTH},{HEIGHT}", "--dmax", str(DMAX), "--model", "paper"]
+    common = ["run", *crop, "--no-sgbm", "--quiet"]
+    for name, extra in (("map", ["--board-fields", "map"]), ("all", [])):
+        argv = [*common, "--engine", "board", "--port", "twin", *extra, "-o", str(tmp_path / name)]
+        assert main(argv) == 0
+    assert main([*common, "-o", str(tmp_path / "model")]) == 0
+    got, full, want = (np.load(tmp_path / n / "result.npz") for n in ("map", "all", "model"))
+    assert sorted(got.files) == sorted(set(want.files) - {"counts", "cycles"})
+    assert sorted(full.files) == sorted(want.files)
+    for name in got.files:
+        np.testing.assert_array_equal(got[name], want[name], err_msg=name)
+    rep, rep_all = (json.loads((tmp_path / n / "report.json").read_text()) for n in ("map", "all"))
+    assert rep["board"]["fields"] == ["map"] and rep_all["board"]["fields"] == ["map", "counts", "cycles"]
+    assert rep["rms_error"] is None and rep["cycles_per_pixel_mean"] is None and rep["frame_cycles"] is None
+    assert rep_all["rms_error"] is not None and rep_all["frame_cycles"] == int(want["cycles"].sum())
+    assert rep["map_agreement"] == rep_all["map_agreement"]
+    assert 0 < rep["board"]["bytes_received"] < rep_all["board"]["bytes_received"] / 3
+
+
+@pytest.mark.parametrize(
+    "extra, message",
+    [
+        (["--engine", "board", "--port", "twin", "--board-fields", "map,depth"], "unknown field 'depth'"),
+        (["--engine", "board", "--port", "twin", "--board-fields", ","], "--board-fields: give map"),
+        (["--board-fields", "map"], "--board-fields: only with --engine board"),
+    ],
+)
+def test_cli_board_fields_errors(extra: list[str], message: str, tmp_path, capsys) -> None:
+    assert main(["run", "--dmax", str(DMAX), *extra, "-o", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err and len(err.strip().splitlines()) == 1

@@ -257,3 +257,61 @@ def test_whole_bundled_pair_census_through_the_front_end_equals_the_model() -> N
     assert np.array_equal(disp, want.map)
     assert np.array_equal(got.counts.reshape(ho, wo, -1), want.counts)
     assert np.array_equal(got.cycles.reshape(ho, wo), want.cycles)
+
+
+@needs_verilator
+def test_cli_run_feed_pixels_census_lr_gives_the_models_result(tmp_path: Path) -> None:
+    """census-lr (issue 22) through the front end: the right pass's machine beside the left one, the
+    consistency column from the right MAPs on chip; every array equals the model's, the right pass's
+    too, and the report's wall cycles are the frame's clock cycles (both passes run at once)."""
+    rows = 12
+    crop = ["--crop", f"250,200,{WIDTH},{rows}", "--dmax", str(DMAX), "--quiet", "--no-sgbm",
+            "--model", "census-lr"]
+    assert main(["run", "--engine", "verilator", "--feed", "pixels", *crop, "-o", str(tmp_path / "px")]) == 0
+    assert main(["run", "--engine", "model", *crop, "-o", str(tmp_path / "model")]) == 0
+    got, want = np.load(tmp_path / "px" / "result.npz"), np.load(tmp_path / "model" / "result.npz")
+    assert got["map"].shape == (rows - 6, WIDTH - 6 - DMAX)
+    assert got["right_map"].shape == (rows - 6, WIDTH - 6)  # every right map column
+    assert set(want.files) <= set(got.files)
+    for key in want.files:
+        assert np.array_equal(got[key], want[key]), key
+    assert len(set(want["map"].ravel().tolist())) > 2 and len(set(want["right_map"].ravel().tolist())) > 2
+    report = json.loads((tmp_path / "px" / "report.json").read_text())
+    assert report["wall_cycles_per_pixel"] > report["left_pass_cycles_per_pixel_mean"]
+
+
+@needs_verilator
+@pytest.mark.slow
+def test_census_lr_crop_through_the_front_end_equals_the_model() -> None:
+    """census-lr at Dmax 80, counter max 16 on a 140 x 40 crop of Motorcycle through the front end: both
+    passes' results equal the model's run as the host runs it (``run_machine``: the right pass's row, then
+    the left pass's). 140 pixels: the width of the CLI's crop below (one Verilator build)."""
+    from bayesmachine.hdl.frontend.lr import right_pass_params
+    from bayesmachine.host.run import prepare, run_machine
+    from bayesmachine.sim.stereo_engine import StereoVerilatorEngine
+
+    left, right, _ = bundled_pair()
+    left, right = left[150:190, 300:440].copy(), right[150:190, 300:440].copy()
+    model = ModelParams(dmax=80, name="census-lr")
+    params = stereo_machine_params(80, model=model, counter_max=16)
+    want = run_machine(prepare(left, right, model, reference=False), params, engine="model", progress=False)
+    with StereoVerilatorEngine(params, model, left.shape[1], verbose=False) as engine:
+        got = engine.run(left, right)
+        got_right = engine.last_right
+        wall = engine.last_wall_cycles
+    assert got_right is not None and want.right is not None
+    rp = right_pass_params(model, params)
+    alone = int(pixel_wall_cycles(params, got.cycles).sum())
+    print(f"\ncensus-lr through the front end: {wall / len(got):.3f} wall cycles per output pixel "
+          f"(left machine alone {alone / len(got):.3f}, right machine alone "
+          f"{int(pixel_wall_cycles(rp, got_right.cycles).sum()) / len(got):.3f} per output pixel)")
+    ho, wo = want.map.shape
+    disp = np.where(got.nomatch | got.timeout, -1, got.map).reshape(ho, wo)
+    assert np.array_equal(disp, want.map)
+    assert np.array_equal(got.counts.reshape(ho, wo, -1), want.counts)
+    assert np.array_equal(got.cycles.reshape(ho, wo), want.cycles)
+    wr = want.right.map.shape[1]
+    r_map = np.where(got_right.timeout, -1, got_right.map).reshape(ho, wr)
+    assert np.array_equal(r_map, want.right.map)
+    assert np.array_equal(got_right.cycles.reshape(ho, wr), want.right.cycles)
+    assert np.array_equal(got_right.timeout.reshape(ho, wr), want.right.timeout)

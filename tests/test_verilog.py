@@ -246,7 +246,7 @@ def test_emit_writes_complete_files_or_none(tmp_path: Path, monkeypatch: pytest.
     assert [p.name for p in tmp_path.iterdir()] == ["bayesmachine.v"]
 
 
-@pytest.mark.parametrize("model", ["paper", "census"])
+@pytest.mark.parametrize("model", ["paper", "census", "census-lr"])
 def test_stereo_top_is_lint_clean_and_latch_free(
     verilator: str, yosys: str, tmp_path: Path, capsys: pytest.CaptureFixture[str], model: str
 ) -> None:
@@ -256,14 +256,15 @@ def test_stereo_top_is_lint_clean_and_latch_free(
     hdl_cli.register(parser.add_subparsers())
     out = tmp_path / "bayesmachine.v"
     # 3 (4) beats per pixel: the beat counter's values are not all used (the lint checks complete cases).
-    lanes, beats = ("9", 3) if model == "paper" else ("10", 4)
+    lanes, beats = {"paper": ("9", 3), "census": ("10", 4), "census-lr": ("12", 4)}[model]
     args = parser.parse_args(["emit", "--top", "stereo", "--dmax", "6", "--width", "23", "--counter-max", "4",
                               "--lanes", lanes, "--sigma", "12", "--model", model, "-o", str(out)])
     assert args.func(args) == 0
     text = capsys.readouterr().out
     assert "stereo top: 23-pixel lines, Dmax 6" in text
     assert f"load: {lanes} words per beat, {beats} beats per pixel" in text
-    assert ("census model: 7x7 census" in text) == (model == "census")
+    assert ("census model: 7x7 census" in text) == (model != "paper")
+    assert ("census-lr: a right pass's machine" in text) == (model == "census-lr")
     assert re.search(r"in\s+pixels__payload\s+17 bits", text)
     # The machine's waivers alone: their scoped DECLFILENAME rule covers the submodules
     # (``bayesmachine.<path>``) of every top emitted as bayesmachine.v.

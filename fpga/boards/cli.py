@@ -94,7 +94,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         help="the design's clock from the PLL (default 45: 3 Mbaud in 15 clocks per bit)",
     )
     b.add_argument("--baud", type=int_arg, default=None, help="UART baud rate (default 3000000)")
-    b.add_argument("--pnr-seed", type=int_arg, default=1, help="nextpnr placement seed (default 1)")
+    b.add_argument("--pnr-seed", type=int_arg, default=2,
+                   help="nextpnr placement seed (default 2: seed 1 does not route the default census "
+                   "design on the ULX3S-85F, docs/board.md)")
     b.add_argument(
         "-o", "--output", type=output_path, default=None, help="output directory (default build/BOARD)"
     )

@@ -85,6 +85,11 @@ def check_board(params: MachineParams, model: ModelParams, width: int) -> None:
     """``ParameterError`` naming the problem unless a board top can carry this StereoMachine."""
     from bayesmachine.hdl.frontend.stereo import check_stereo_machine
 
+    if model.lr:  # the StereoMachine runs it (issue 22), the board's link carries no right pass
+        raise ParameterError(
+            f"--model {model.name}: the board's on-chip front end computes the paper and census models (its "
+            f"link does not carry census-lr's right pass); run --model {model.name} with --engine verilator "
+            "--feed pixels, or --feed words")
     check_stereo_machine(params, model, width)
     if not source_kind(params.rng).on_chip:
         raise ParameterError(

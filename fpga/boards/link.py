@@ -303,8 +303,12 @@ def run_board(
     timeout: float = 2.0,  # noqa: ANN001
     progress: bool | None = None,
     link_port=None,
+    fields: int = pr.FIELDS_ALL,
 ):  # noqa: ANN001
-    """The pair of ``prepared`` through the board: ``(MachineRun, link figures for the report)``."""
+    """The pair of ``prepared`` through the board: ``(MachineRun, link figures for the report)``.
+
+    ``fields`` (:func:`~.protocol.fields_from_names`) says which optional fields the board sends:
+    without ``FIELD_COUNTS`` the run's ``counts`` are None, without ``FIELD_CYCLES`` its ``cycles``."""
     from tqdm import tqdm
 
     from bayesmachine.host.records import MachineRun, counts_dtype
@@ -335,21 +339,25 @@ def run_board(
         ho, wo = prepared.shape
         show = sys.stderr.isatty() if progress is None else progress
         with tqdm(total=ho * wo, unit="px", disable=not show, desc="board") as bar:
-            fields = link.run_frame(prepared.left, prepared.right, machine, model, pr.FIELDS_ALL, bar.update)
+            got = link.run_frame(prepared.left, prepared.right, machine, model, fields, bar.update)
         seconds = time.perf_counter() - t0
     finally:
         if link_port is None:
             ser.close()
-    nomatch = fields["nomatch"].reshape(ho, wo)
-    timeout_ = fields["timeout"].reshape(ho, wo)
-    disp = np.where(nomatch | timeout_, -1, fields["map"].reshape(ho, wo)).astype(np.int16)
-    counts = fields["counts"].reshape(ho, wo, machine.rows).astype(counts_dtype(machine.counter_max))
+    nomatch = got["nomatch"].reshape(ho, wo)
+    timeout_ = got["timeout"].reshape(ho, wo)
+    disp = np.where(nomatch | timeout_, -1, got["map"].reshape(ho, wo)).astype(np.int16)
+    counts = cycles = None  # not asked for: absent, never made up
+    if "counts" in got:
+        counts = got["counts"].reshape(ho, wo, machine.rows).astype(counts_dtype(machine.counter_max))
+    if "cycles" in got:
+        cycles = got["cycles"].reshape(ho, wo).astype(np.int64)
     run = MachineRun(
         "board",
         machine,
         disp,
         counts,
-        fields["cycles"].reshape(ho, wo).astype(np.int64),
+        cycles,
         nomatch,
         timeout_,
         seconds,
@@ -370,5 +378,6 @@ def run_board(
         "failures": st.failures,
         "garbage_bytes": st.garbage_bytes,
         "board_fingerprint": f"{info.fingerprint:08x}",
+        "fields": ["map", *(n for n in ("counts", "cycles") if fields & pr.FIELD_NAMES[n])],
     }
     return run, figures

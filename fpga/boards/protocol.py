@@ -48,6 +48,7 @@ __all__ = [
     "crc32",
     "decode_record",
     "encode_record",
+    "fields_from_names",
     "frame_header",
     "info_payload",
     "parse_info",
@@ -67,6 +68,24 @@ CONTROL_TYPES = {FRAME: "frame", INFO: "info", HELLO: "hello", START: "start", E
 FIELD_COUNTS = 1
 FIELD_CYCLES = 2
 FIELDS_ALL = FIELD_COUNTS | FIELD_CYCLES
+FIELD_NAMES = {"map": 0, "counts": FIELD_COUNTS, "cycles": FIELD_CYCLES}
+
+
+def fields_from_names(text: str) -> int:
+    """The ``fields`` byte of a comma-separated list of ``map``, ``counts``, ``cycles``.
+
+    The MAP and its flags always come; ``counts`` and ``cycles`` are the optional fields. A
+    MAP-only record is the tag and the MAP's bytes, without one byte per counter: the link's
+    frame time falls with it."""
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    if not names:
+        raise ValueError("--board-fields: give map, counts, cycles or a comma-separated list of them")
+    fields = 0
+    for n in names:
+        if n not in FIELD_NAMES:
+            raise ValueError(f"--board-fields: unknown field {n!r} (map, counts, cycles)")
+        fields |= FIELD_NAMES[n]
+    return fields
 
 # E statuses.
 STATUS_OK, STATUS_CHECKSUM, STATUS_TIMEOUT, STATUS_OVERFLOW = 0, 1, 2, 3

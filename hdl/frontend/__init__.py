@@ -12,6 +12,8 @@ Blocks (each a ``wiring.Component`` with a Python twin its tests hold it to):
   table look-ups (census: Hamming distance) and the words of a pixel, ``lanes`` per beat, with the
   neighbour prior's above column from a line of the machine's own MAPs (twin:
   ``host.likelihoods.memory_words``).
+- ``lr``: census-lr's right pass (``RightPassFeeder`` into a ``WordGenerator(right_pass=True)``) and
+  the consistency column's test (``ConsistencyTest``; twins: ``bayesmachine.likelihood``).
 - ``stereo``: ``FrontEnd`` (pixels in, load beats out) and ``StereoMachine`` (pixels in, the
   machine's results out). Timing and protocol: ``docs/frontend.md``.
 """

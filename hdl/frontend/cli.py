@@ -99,6 +99,15 @@ def summary(top: StereoMachine) -> str:
             f"no-match at h = {m.h_nm}), line buffer of {2 * m.margin} lines, output region margin {m.margin}"
             + (f"; neighbour prior (eps {m.prior_eps}, s {m.prior_s}): the above factor from a line of "
                f"{top.width - 2 * m.margin - m.dmax} MAPs" if m.has_prior else ""))
+    if m.lr:
+        from .lr import right_pass_params
+
+        rp = right_pass_params(m, p)
+        lines.append(
+            f"census-lr: a right pass's machine beside the left one ({rp.columns} data columns, {rp.lanes} "
+            f"lanes, seed {rp.seed:#x}, watchdog {rp.max_cycles}); consistency column beta {m.lr_beta}, "
+            f"gamma {m.lr_gamma} ({'a' if m.lr_nomatch else 'no'} left no-match row), tolerance "
+            f"{m.lr_tolerance}; right results on right_result")
     lines += [
         "ports (Verilog names; clk and rst as well):",
     ]

@@ -23,6 +23,11 @@ computes (its twin):
   has left the machine (fewer than an output row's pixels in flight), so no word is built from a
   stale entry, whatever the FIFO's depth and the image's width. Each beat of the first output
   pixel of a row carries ``line_start`` (the machine's left factor is then 1.0).
+- census-lr (``hdl.frontend.lr``): the left pass's consistency column (the last loaded column),
+  row d 1.0 or β by lane d's window test on the right MAP d_R(x - d) (:class:`~.lr.ConsistencyTest`,
+  fed one right MAP per pixel at a map column of an output row: ``right_map``), the no-match row γ
+  when any lane is consistent, else 1.0 (0 without a left no-match row); and with ``right_pass``
+  the right pass's words (twin: ``host.likelihoods.right_memory_words``).
 
 ``lanes`` must be a multiple of the loaded columns, so each lane always holds the same operator
 column: a lane of feature f reads its own port of f's table. One beat per cycle, in a four-step
@@ -42,13 +47,14 @@ thousands of enables.
 
 from __future__ import annotations
 
-from amaranth.hdl import Module, Mux, Signal, Value, signed, unsigned
+from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value, signed, unsigned
 from amaranth.lib import data, memory, stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from bayesmachine.hdl.signatures import beat_words, load_stream
-from bayesmachine.likelihood import ModelParams, check_disparity_machine
+from bayesmachine.likelihood import ModelParams, QuantizedTables, check_disparity_machine, likelihood_tables
 from bayesmachine.params import MachineParams, ParameterError
+from bayesmachine.sources import source_kind
 
 from .filters import feature_layout
 from .tables import FrontEndTables, frontend_tables
@@ -59,15 +65,23 @@ __all__ = ["FEATURES", "WordGenerator", "check_frontend_params", "check_frontend
 FEATURES = ("m25", "gh20", "gv20")  # feature sum fields, in the operator columns' order
 
 
-def pixel_features_layout(census_bits: int = 0, neighbour: bool = False) -> data.StructLayout:
+def pixel_features_layout(census_bits: int = 0, neighbour: bool = False, *, consult: bool = False,
+                          flush_bits: int = 0) -> data.StructLayout:
     """One pixel for the word generator: both images' feature sums (and census codes with
     ``census_bits``), the output-region flag and, with the neighbour prior, ``row_start`` (the
     first output pixel of an output row) and ``first_row`` (an output pixel of a frame's first
-    output row: no pixel above)."""
+    output row: no pixel above). census-lr's left pass (``consult``): ``consult``, the pixel is at a
+    map column (>= 0) of an output row, so its right MAP enters the consistency test; its right pass
+    (``flush_bits``): ``flush`` = k, lanes d > Dmax - k pair the right pixel with a left pixel past the
+    last output column (``hdl.frontend.lr.RightPassFeeder``)."""
     side = feature_layout(census_bits)
     fields = {"left": side, "right": side, "output": unsigned(1)}
     if neighbour:
         fields |= {"row_start": unsigned(1), "first_row": unsigned(1)}
+    if consult:
+        fields |= {"consult": unsigned(1)}
+    if flush_bits:
+        fields |= {"flush": unsigned(flush_bits)}
     return data.StructLayout(fields)
 
 
@@ -95,11 +109,11 @@ def check_frontend_params(params: MachineParams, model: ModelParams) -> None:
         raise ParameterError(f"params must be a MachineParams, not {type(params).__name__}")
     if not isinstance(model, ModelParams):
         raise ParameterError(f"model must be a host.likelihoods.ModelParams, not {type(model).__name__}")
-    if model.lr:  # the right pass's machine and its line of right MAPs are not on chip yet
-        raise ParameterError(
-            f"--model {model.name}: the on-chip front end computes the paper and census models; run "
-            f"--model {model.name} with --feed words (the host's words)")
     check_disparity_machine(model, params)
+    if model.lr and not source_kind(params.rng).on_chip:
+        # The right pass's machine would need an entropy port of its own.
+        raise ParameterError(f"rng: --model {model.name} on chip needs an on-chip random source (the right "
+                             f"pass's machine has no entropy port), got {params.rng!r}")
     if params.lanes % params.loaded_columns:
         raise ParameterError(
             f"lanes ({params.lanes}) must be a multiple of the loaded columns ({params.loaded_columns}) "
@@ -131,6 +145,14 @@ class WordGenerator(wiring.Component):
         only machine, or machine 0 of several); otherwise its results above come from the machine
         of the map rows just before its own, which must write an output row's first result
         before this generator takes that row's first output pixel (see ``result_room``).
+    right_pass : bool
+        census-lr's right pass (``model`` its :attr:`~bayesmachine.likelihood.ModelParams.right_model`,
+        pixels from :class:`~.lr.RightPassFeeder`): ``left`` is the right pixel (the reference), lane d
+        reads delay-line entry Dmax - d (the left pixel x_r + d), a lane past the last output column
+        (``flush``) and the no-match row are word 0 in every data column (with ``right_nomatch`` the
+        no-match row is the census model's).
+    right_nomatch : bool
+        With ``right_pass``: ``ModelParams.lr_right_nomatch`` of the census-lr model.
 
     Attributes
     ----------
@@ -149,13 +171,27 @@ class WordGenerator(wiring.Component):
     frame_reset : ``In(1)``
         Neighbour prior only: every machine is idle and a frame starts (the counts start afresh);
         held low with one machine.
+    right_map : ``In(stream.Signature(right_map_layout(params.map_width)))``
+        census-lr's left pass only: the right pass's MAPs in raster order of its columns; one is taken
+        with each pixel whose ``consult`` is set, into the consistency column's test
+        (:class:`~.lr.ConsistencyTest`), and such a pixel waits for it.
     """
 
     def __init__(self, *, params: MachineParams, model: ModelParams,
                  tables: FrontEndTables | None = None, output_columns: int | None = None,
-                 leads: bool = True) -> None:
+                 leads: bool = True, right_pass: bool = False, right_nomatch: bool = False) -> None:
         check_frontend_types(params, model)
         check_frontend_params(params, model)
+        for name, value in (("right_pass", right_pass), ("right_nomatch", right_nomatch)):
+            if not isinstance(value, bool):
+                raise TypeError(f"{name} must be a bool, not {type(value).__name__}")
+        if right_pass and (model.name != "census" or not model.has_prior):
+            raise ParameterError("right_pass: the right pass runs a census-lr model's right_model (the "
+                                 f"census model with its neighbour prior), got the {model.name} model")
+        if right_nomatch and not right_pass:
+            raise ParameterError("right_nomatch: only with right_pass")
+        self._right_pass = right_pass
+        self._right_nomatch = right_nomatch
         if tables is not None and not isinstance(tables, FrontEndTables):
             raise TypeError(f"tables must be a FrontEndTables, not {type(tables).__name__}")
         neighbour = params.feedback_columns > 0
@@ -176,14 +212,28 @@ class WordGenerator(wiring.Component):
         self._tables = tables if tables is not None else frontend_tables(model, params.word_bits)
         self._output_columns = output_columns
         bits = model.census_bits if model.census else 0
+        from .lr import flush_bits, right_map_layout
+
+        layout = pixel_features_layout(bits, neighbour, consult=model.lr,
+                                       flush_bits=flush_bits(model.dmax) if right_pass else 0)
         members = {
-            "pixel": In(stream.Signature(pixel_features_layout(bits, neighbour))),
+            "pixel": In(stream.Signature(layout)),
             "beats": Out(load_stream(params)),
         }
         if neighbour:
             members |= {"result_take": In(1), "result_map": In(params.map_width), "result_hit": In(1),
                         "result_room": Out(1), "frame_reset": In(1)}
+        if model.lr:
+            members |= {"right_map": In(stream.Signature(right_map_layout(params.map_width)))}
         super().__init__(members)
+
+    @property
+    def right_pass(self) -> bool:
+        return self._right_pass
+
+    @property
+    def right_nomatch(self) -> bool:
+        return self._right_nomatch
 
     @property
     def params(self) -> MachineParams:
@@ -260,9 +310,12 @@ class WordGenerator(wiring.Component):
             with m.Else():
                 m.d.sync += [unread.eq(unread_next), room.eq(unread_next >= 1),
                              write_room.eq(unread_next < wo)]
-            m.d.comb += self.pixel.ready.eq(free & (~self.pixel.payload.output | room))
+            ready = free & (~self.pixel.payload.output | room)
         else:
-            m.d.comb += self.pixel.ready.eq(free)
+            ready = free
+        if model.lr:  # a pixel whose right MAP enters the consistency test waits for it
+            ready = ready & (~self.pixel.payload.consult | self.right_map.valid)
+        m.d.comb += self.pixel.ready.eq(ready)
         take = self.pixel.valid & self.pixel.ready
 
         with m.If(advance):
@@ -310,6 +363,11 @@ class WordGenerator(wiring.Component):
             m.submodules[f"table_{name}"] = mem
             return mem
 
+        # The delay-line entry of lane row r: d = r, or in the right pass Dmax - r (the left pixel x_r + d).
+        def lane_entry(row: int) -> int:
+            d = min(row, dmax)
+            return dmax - d if self._right_pass else d
+
         # Each lane's delay-line entry comes from a register loaded a cycle ahead (the beat
         # counter's multiplexer ends there, not at the table address): with beat 0's entry when
         # a pixel is taken (the line as it is after the shift), with the next beat's on an issue.
@@ -322,16 +380,16 @@ class WordGenerator(wiring.Component):
                     seen = right_in if d == 0 else right[d - 1]
                     return Mux(shift_q, getattr(seen, name), getattr(right[d], name))
 
-                entries = [getattr(right[min(b * rows_per_beat + j, dmax)], name) for b in range(n_beats)]
+                entries = [getattr(right[lane_entry(b * rows_per_beat + j)], name) for b in range(n_beats)]
                 sel = Signal(entries[0].shape(), name=f"right_{name}_{j}", reset_less=True)
                 with m.If(take):
-                    d = min(j, dmax)  # entry d after the take is entry d - 1 now
+                    d = lane_entry(j)  # entry d after the take is entry d - 1 now
                     m.d.sync += sel.eq(getattr(self.pixel.payload.right, name) if d == 0 else entry(d - 1))
                 with m.Elif(issue):
                     with m.Switch(beat):
                         if n_beats > 1:  # beat 0: the only one issued with a shift pending
                             with m.Case(0):
-                                m.d.sync += sel.eq(entry(min(rows_per_beat + j, dmax)))
+                                m.d.sync += sel.eq(entry(lane_entry(rows_per_beat + j)))
                         for b in range(1, n_beats - 1):
                             with m.Case(b):
                                 m.d.sync += sel.eq(entries[b + 1])
@@ -366,8 +424,15 @@ class WordGenerator(wiring.Component):
                 m.d.sync += [ls_d.eq(row_start), ls_a.eq(ls_d), line_start_q.eq(ls_a)]
             m.d.comb += out.payload.line_start.eq(line_start_q)
 
+        lane_ok, consistent, any_consistent = self._lr_lanes(m, take, advance, beat, rows_per_beat)
+
         # The beat on the stream: each lane's word by its (row, loaded column).
         prior_nm = p.feedback_nomatch_word if neighbour else one
+        beta = gamma = 0
+        if model.lr:
+            q = QuantizedTables(likelihood_tables(model), p.word_bits)
+            assert q.lr_beta is not None and q.lr_gamma is not None
+            beta, gamma = q.lr_beta, q.lr_gamma
         unused = range(n_beats, 1 << len(beat_q))  # never occur; in the last case for a complete case
         with m.Switch(beat_q):
             for b in range(n_beats):
@@ -384,16 +449,68 @@ class WordGenerator(wiring.Component):
                                 word = Mux(above_valid, prior_data[lane // lc], one)
                             else:
                                 word = Mux(above_valid, prior_nm, one)
+                        elif row <= dmax and col == off + 4:  # census-lr: the consistency column
+                            word = Mux(consistent[lane // lc], one, beta)
                         elif row <= dmax:
                             word = lane_data[lane]
+                            if self._right_pass:  # a lane past the last output column never fires
+                                word = Mux(lane_ok[lane // lc], word, 0)
+                        elif self._right_pass and not self._right_nomatch:
+                            word = 0  # the right pass has no no-match row
                         elif col == off:
                             word = nm_port.data
                         elif col == off + 3:
                             word = census_nm
+                        elif col == off + 4:
+                            word = Mux(any_consistent, gamma, one) if model.lr_nomatch else 0
                         else:
                             word = one
                         m.d.comb += words[lane].eq(word)
         return m
+
+    def _lr_lanes(self, m: Module, take: Value, advance: Value, beat: Value,
+                  rows_per_beat: int) -> tuple[list[Value], list[Value], Value]:
+        """census-lr's per-lane flags, aligned with the beat on the stream (registered on ``advance``
+        as the table look-ups are: issue, address, data). Right pass: whether lane row j of the beat
+        pairs with a left pixel inside the output region (row + flush <= Dmax). Left pass: whether
+        lane row j's word is 1.0 (its right MAP consistent, or with ``lr_neutral`` none), and whether
+        any lane is consistent (the no-match row's word)."""
+        dmax = self._model.dmax
+        n_beats = self._params.beats_per_pixel
+        pix = self.pixel.payload
+        lane_ok: list[Value] = []
+        consistent: list[Value] = []
+        any_q: Value = Const(0)
+
+        def pipeline(value: Value, name: str) -> Signal:
+            stages = [Signal(name=f"{name}_{s}") for s in "daq"]
+            with m.If(advance):
+                m.d.sync += [stages[0].eq(value), stages[1].eq(stages[0]), stages[2].eq(stages[1])]
+            return stages[2]
+
+        if self._right_pass:
+            flush = Signal.like(pix.flush)
+            with m.If(take):
+                m.d.sync += flush.eq(pix.flush)
+            for j in range(rows_per_beat):
+                row = beat * rows_per_beat + j
+                lane_ok.append(pipeline(row + flush <= dmax, f"lane_ok{j}"))
+        if self._model.lr:
+            from .lr import ConsistencyTest
+
+            m.submodules.consistency = test = ConsistencyTest(dmax=dmax, map_width=self._params.map_width,
+                                                              tolerance=self._model.lr_tolerance)
+            shift = take & pix.consult
+            m.d.comb += [test.shift.eq(shift), test.entry.eq(self.right_map.payload),
+                         self.right_map.ready.eq(shift)]
+            # Padded with 0 to every row a beat can reach (rows past Dmax are not read).
+            # A lane reading a right pixel without a MAP is neutral (factor 1) with lr_neutral.
+            one_bits = test.consistent | test.unknown if self._model.lr_neutral else test.consistent
+            bits = Cat(one_bits, Const(0, n_beats * rows_per_beat))
+            for j in range(rows_per_beat):
+                consistent.append(pipeline(bits.bit_select(beat * rows_per_beat + j, 1), f"consistent{j}"))
+            any_q = pipeline(test.any, "any_consistent")
+        return lane_ok, consistent, any_q
 
     def _above_prior(self, m: Module, take: Value, advance: Value, beat: Value,
                      address: object, table_memory: object, rows_per_beat: int,

@@ -55,9 +55,11 @@ from .census import CensusFilter
 from .costs import WordGenerator, check_frontend_params, check_frontend_types, pixel_features_layout
 from .filters import FeatureFilter
 from .linebuffer import WINDOW, LineBuffer
+from .lr import feeder_in_layout, lr_split, right_pass_params
 
 __all__ = ["MAX_MACHINES", "MAX_WIDTH", "FeaturePipeline", "FrontEnd", "StereoMachine", "check_machines",
-           "check_stereo_machine", "pipeline_layout", "pixel_in_layout", "stereo_machine_params"]
+           "check_stereo_machine", "pipeline_layout", "pixel_in_layout", "stereo_machine_params",
+           "stereo_signature"]
 
 
 def stereo_machine_params(dmax: int = 80, *, model: ModelParams | None = None,
@@ -106,6 +108,17 @@ def check_machines(machines: object, params: MachineParams, model: ModelParams) 
     return machines
 
 
+def stereo_signature(params: MachineParams, model: ModelParams) -> wiring.Signature:
+    """:class:`StereoMachine`'s ports: ``StereoSignature(params)``, and with census-lr also
+    ``right_result``: ``valid`` and ``payload`` (``result_layout(right_pass_params(model, params))``),
+    the right pass's results as they leave its machine (observed: no ``ready``, no back-pressure)."""
+    if not model.lr:
+        return StereoSignature(params)
+    rp = right_pass_params(model, params)
+    observed = wiring.Signature({"valid": Out(1), "payload": Out(result_layout(rp))})
+    return wiring.Signature(dict(StereoSignature(params).members.items()) | {"right_result": Out(observed)})
+
+
 def check_stereo_machine(params: MachineParams, model: ModelParams, width: int,
                          fifo_pixels: int = DEFAULT_FIFO_PIXELS, machines: int = 1) -> None:
     """``ParameterError`` naming the parameter unless ``StereoMachine(params=params, model=model,
@@ -127,11 +140,15 @@ def pipeline_layout(model: ModelParams, neighbour: bool) -> data.StructLayout:
     """One pixel out of :class:`FeaturePipeline`: the word generator's pixel (``pixel``,
     :func:`~.costs.pixel_features_layout`) and where it is: ``line_begin`` (an image line's first
     pixel), ``output_line`` (a line with output pixels: a map row's), ``first_line`` (the frame's
-    first such line) and ``frame_begin`` (the frame's first pixel)."""
+    first such line) and ``frame_begin`` (the frame's first pixel). census-lr: the pixel's
+    ``consult`` (see :func:`~.costs.pixel_features_layout`) and ``line_end`` (an output row's last
+    pixel), for :func:`~.lr.lr_split`."""
     bits = model.census_bits if model.census else 0
-    return data.StructLayout({"pixel": pixel_features_layout(bits, neighbour), "line_begin": unsigned(1),
-                              "output_line": unsigned(1), "first_line": unsigned(1),
-                              "frame_begin": unsigned(1)})
+    fields = {"pixel": pixel_features_layout(bits, neighbour, consult=model.lr), "line_begin": unsigned(1),
+              "output_line": unsigned(1), "first_line": unsigned(1), "frame_begin": unsigned(1)}
+    if model.lr:
+        fields |= {"line_end": unsigned(1)}
+    return data.StructLayout(fields)
 
 
 class FeaturePipeline(wiring.Component):
@@ -236,6 +253,7 @@ class FeaturePipeline(wiring.Component):
         # census filters take the whole column. The 5x5 filters take the column's middle 5 lines.
         output2, row_start2, first_row2 = Signal(), Signal(), Signal()
         where2 = Signal(4)  # line_begin, output_line, first_line, frame_begin
+        line_end2, consult2 = Signal(), Signal()  # census-lr's
         m.d.comb += [fl.load.eq(advance), fr.load.eq(advance)]
         for i in range(WINDOW):
             m.d.comb += [fl.column[i].eq(lines.column[lag + i].left),
@@ -250,18 +268,23 @@ class FeaturePipeline(wiring.Component):
                          output2.eq((line1 >= size - 1) & (col1 >= first_output_col)),
                          row_start2.eq(col1 == first_output_col),
                          first_row2.eq(line1 == size - 1),
-                         where2.eq(Cat(col1 == 0, line1 >= size - 1, line1 == size - 1, first1))]
+                         where2.eq(Cat(col1 == 0, line1 >= size - 1, line1 == size - 1, first1)),
+                         # census-lr: an output row's last pixel, and a map column (>= 0) of an output row
+                         line_end2.eq((line1 >= size - 1) & (col1 == width - 1)),
+                         consult2.eq((line1 >= size - 1) & (col1 >= size - 1))]
 
         # Stage 2 -> 3: the columns' sums enter the filters' windows.
         output3, row_start3, first_row3 = Signal(), Signal(), Signal()
         where3 = Signal(4)
+        line_end3, consult3 = Signal(), Signal()
         shift = advance & valid2
         m.d.comb += [fl.en.eq(shift), fr.en.eq(shift)]
         if model.census:
             m.d.comb += [cl.en.eq(shift), cr.en.eq(shift)]
         with m.If(advance):
             m.d.sync += [valid3.eq(valid2), output3.eq(output2), row_start3.eq(row_start2),
-                         first_row3.eq(first_row2), where3.eq(where2)]
+                         first_row3.eq(first_row2), where3.eq(where2), line_end3.eq(line_end2),
+                         consult3.eq(consult2)]
 
         # Stage 3 -> out.
         px = out.payload.pixel
@@ -275,6 +298,8 @@ class FeaturePipeline(wiring.Component):
             m.d.comb += [px.left.census.eq(cl.code), px.right.census.eq(cr.code)]
         if neighbour:
             m.d.comb += [px.row_start.eq(row_start3), px.first_row.eq(first_row3)]
+        if model.lr:
+            m.d.comb += [px.consult.eq(consult3), out.payload.line_end.eq(line_end3)]
         return m
 
 
@@ -299,6 +324,10 @@ class FrontEnd(wiring.Component):
     result_take, result_map, result_hit : ``In(1)``, ``In(params.map_width)``, ``In(1)``
         With the neighbour prior only: the machine's results as they leave (see
         :class:`~.costs.WordGenerator`), for the above neighbour's prior column.
+    right_beats, right_take, right_map, right_hit, right_room
+        census-lr only: the right pass's load beats (``Out(load_stream(right_pass_params(model,
+        params)))``), and its machine's results as they leave (taken only while ``right_room``: the
+        line of right MAPs the left pass reads has room). See :mod:`.lr`.
     """
 
     def __init__(self, *, params: MachineParams, model: ModelParams, width: int) -> None:
@@ -310,6 +339,10 @@ class FrontEnd(wiring.Component):
         members = {"pixels": In(pixel_stream()), "beats": Out(load_stream(params))}
         if params.feedback_columns:
             members |= {"result_take": In(1), "result_map": In(params.map_width), "result_hit": In(1)}
+        if model.lr:
+            rp = right_pass_params(model, params)
+            members |= {"right_beats": Out(load_stream(rp)), "right_take": In(1),
+                        "right_map": In(rp.map_width), "right_hit": In(1), "right_room": Out(1)}
         super().__init__(members)
 
     @property
@@ -333,9 +366,18 @@ class FrontEnd(wiring.Component):
         m.submodules.generator = gen = WordGenerator(params=self._params, model=model,
                                                      output_columns=output_columns)
         wiring.connect(m, wiring.flipped(self.pixels), pipe.pixels)
-        m.d.comb += [gen.pixel.valid.eq(pipe.features.valid),
-                     gen.pixel.payload.eq(pipe.features.payload.pixel),
-                     pipe.features.ready.eq(gen.pixel.ready)]
+        features = pipe.features
+        if model.lr:  # through a FIFO, and to the right pass (lr_split)
+            pix, px = features.payload.pixel, Signal(feeder_in_layout(model.census_bits))
+            m.d.comb += [px.left.eq(pix.left), px.right.eq(pix.right), px.output.eq(pix.output),
+                         px.consult.eq(pix.consult), px.line_end.eq(features.payload.line_end)]
+            if neighbour:
+                m.d.comb += [px.row_start.eq(pix.row_start), px.first_row.eq(pix.first_row)]
+            ready = lr_split(m, self, gen, px, features.valid, self._width - 2 * model.margin)
+            m.d.comb += features.ready.eq(ready)
+        else:
+            m.d.comb += [gen.pixel.valid.eq(features.valid), gen.pixel.payload.eq(features.payload.pixel),
+                         features.ready.eq(gen.pixel.ready)]
         wiring.connect(m, gen.beats, wiring.flipped(self.beats))
         if neighbour:
             m.d.comb += [gen.result_take.eq(self.result_take), gen.result_map.eq(self.result_map),
@@ -373,6 +415,9 @@ class StereoMachine(wiring.Component):
     entropy, entropy_ready
         With an off-chip ``rng`` ("external", "smtj"): the machine's own ports, passed through
         (the numbers of every compute cycle come from outside, as for the machine alone).
+    right_result
+        census-lr only: the right pass's results, raster order of its columns, ``valid`` and
+        ``payload`` (``result_layout(right_pass_params(model, params))``; :func:`stereo_signature`).
     """
 
     def __init__(self, *, params: MachineParams, model: ModelParams, width: int,
@@ -383,7 +428,7 @@ class StereoMachine(wiring.Component):
         self._width = width
         self._fifo_pixels = fifo_pixels
         self._machines = machines
-        super().__init__(StereoSignature(params))
+        super().__init__(stereo_signature(params, model))
 
     @property
     def params(self) -> MachineParams:
@@ -405,6 +450,22 @@ class StereoMachine(wiring.Component):
     def machines(self) -> int:
         return self._machines
 
+    def _lr_right_machine(self, m: Module, front: FrontEnd) -> None:
+        """census-lr: the right pass's machine beside the left one, fed through its own FIFO; its results
+        go to the front end (taken while the front end's line of right MAPs has room) and out."""
+        rp = right_pass_params(self._model, self._params)
+        m.submodules.right_machine = machine = BayesianMachine(params=rp)
+        m.submodules.right_fifo = buf = fifo.SyncFIFOBuffered(
+            width=Shape.cast(load_layout(rp)).width, depth=self._fifo_pixels * rp.beats_per_pixel + 1)
+        wiring.connect(m, front.right_beats, buf.w_stream)
+        wiring.connect(m, buf.r_stream, machine.load)
+        res = machine.result
+        take = res.valid & front.right_room
+        m.d.comb += [res.ready.eq(front.right_room), front.right_take.eq(take),
+                     front.right_map.eq(res.payload.map),
+                     front.right_hit.eq(~res.payload.nomatch & ~res.payload.timeout),
+                     self.right_result.valid.eq(take), self.right_result.payload.eq(res.payload)]
+
     def elaborate(self, platform: object) -> Module:
         if self._machines > 1:
             return self._elaborate_machines()
@@ -412,6 +473,8 @@ class StereoMachine(wiring.Component):
         p = self._params
         m.submodules.frontend = front = FrontEnd(params=p, model=self._model, width=self._width)
         m.submodules.machine = machine = BayesianMachine(params=p)
+        if self._model.lr:
+            self._lr_right_machine(m, front)
         beat_bits = Shape.cast(load_layout(p)).width
         # One entry more than the pixels' beats: the registered ready below keeps one free.
         depth = self._fifo_pixels * p.beats_per_pixel + 1
