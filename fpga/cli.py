@@ -54,8 +54,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_census_options(p, title="model (--model census: the census model's machine; with --top stereo its "
                        "front end too)")
     p.add_argument("--machines", type=int_arg, default=1,
-                   help="machines side by side behind one load and one result stream (default 1; "
-                   "--top machine only)")
+                   help="machines side by side (default 1): --top machine, behind one load and one result "
+                   "stream; --top stereo, behind the one feature pipeline, map rows dealt to them, each "
+                   "with its own word generator (1 .. 16; docs/frontend.md)")
     p.add_argument("--pin-width", type=int_arg, default=8, help="wrapper chunk width in pins (default 8)")
     # The place-and-route options stay None unless given: --synth-only refuses them (they would do nothing).
     p.add_argument("--freq", type=float_arg, default=None, help="nextpnr clock target in MHz (default 150)")

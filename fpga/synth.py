@@ -70,7 +70,8 @@ def synth(params: MachineParams, target_name: str, out: Path, *, machines: int =
 
     With ``width`` (pixels per image line) the design is the camera-fed ``StereoMachine`` of the
     machine ``params``, the disparity ``model`` (default: the paper's, Dmax = rows - 2) and a FIFO
-    of ``fifo_pixels``, instead of the machine alone; one StereoMachine (``machines`` = 1). Without
+    of ``fifo_pixels``, instead of the machine alone; one StereoMachine with ``machines`` machines
+    behind its feature pipeline (map rows dealt to them; docs/frontend.md). Without
     ``width``, ``model`` is the model whose words the throughput run feeds the machine (the census
     model's machine: ``likelihood.disparity_machine``).
     Every parameter is checked before any file is written."""
@@ -97,12 +98,9 @@ def synth(params: MachineParams, target_name: str, out: Path, *, machines: int =
                          "as wide as the matrix): --rng lfsr, lfsr-shared or sobol")
     if measure:
         throughput_model(params, model)  # before any work: the machine must run the model's words
-    if width is not None and machines != 1:
-        raise ValueError(f"--top stereo is one StereoMachine (its front end feeds one machine), not "
-                         f"--machines {machines}")
     if width is not None:
         model = model if model is not None else ModelParams(dmax=params.rows - 2)
-        check_stereo_machine(params, model, width, fifo_pixels)
+        check_stereo_machine(params, model, width, fifo_pixels, machines)
     if isinstance(pin_width, bool) or not isinstance(pin_width, int) or not 1 <= pin_width <= 64:
         raise ValueError(f"pin_width must be an integer in [1, 64], got {pin_width!r}")
     t0 = time.monotonic()
@@ -118,14 +116,15 @@ def synth(params: MachineParams, target_name: str, out: Path, *, machines: int =
         # elaborated, e.g. before a refused directory, would warn as unused).
         core: wiring.Component
         if width is not None:
-            core = StereoMachine(params=params, model=model, width=width, fifo_pixels=fifo_pixels)
+            core = StereoMachine(params=params, model=model, width=width, fifo_pixels=fifo_pixels,
+                                 machines=machines)
         else:
             core = (BayesianMachine(params=params) if machines == 1
                     else MachineLanes(params=params, machines=machines))
         top = PinWrapper(core, pin_width=pin_width)
         if width is not None:
-            say(f"elaborating the StereoMachine ({width}-pixel lines, {params.operators} operators) for "
-                f"{target.device}")
+            say(f"elaborating the StereoMachine ({width}-pixel lines, {machines} machine(s) of "
+                f"{params.operators} operators) for {target.device}")
         else:
             say(f"elaborating {machines} machine(s) of {params.operators} operators for {target.device}")
         text = rtlil.convert(top, name="top")
@@ -141,6 +140,7 @@ def synth(params: MachineParams, target_name: str, out: Path, *, machines: int =
             "top": "stereo" if width is not None else "machine",
             "stereo": None,
             "lanes": machines,
+            "machines": machines,
             "pin_width": pin_width,
             "cells": cells,
             "resources": res,
@@ -176,7 +176,8 @@ def synth(params: MachineParams, target_name: str, out: Path, *, machines: int =
                     fit = int(0.9 * u["available"] // (u["used"] / machines))
                     report["lanes_fit"] = min(report["lanes_fit"], fit)
             report["lanes_fit"] = max(report["lanes_fit"], machines)  # these just placed and routed
-            what = "one StereoMachine" if width is not None else f"{machines} machine(s)"
+            what = (f"one StereoMachine ({machines} machine(s))" if width is not None
+                    else f"{machines} machine(s)")
             report["measured"] = (f"Yosys {target.yosys_synth} and nextpnr ({router}) place and route of "
                                   f"{what}; lanes that fit from synthesis utilization "
                                   f"(at most 90 % of each resource)")
@@ -187,7 +188,12 @@ def synth(params: MachineParams, target_name: str, out: Path, *, machines: int =
             say("throughput: running the model on the bundled pair")
             cyc = measure_cycles(params, progress, model)
             tp: dict = dict(cyc)
-            if width is not None:
+            if width is not None and machines > 1:
+                # Several machines: the frame's wall cycles are measured in Verilator on a VGA pair
+                # (benchmarks/bench_machines.py), not derived from one machine's cycles per pixel.
+                tp["assumes"] = ("one machine's cycles per pixel; the K-machine frame rate comes from the "
+                                 "wall cycles of run --engine verilator --feed pixels --machines K")
+            elif width is not None:
                 # Pixels in, results out: the front end hides loading (benchmarks/bench_frontend.py), so a
                 # pixel takes the machine's own wall cycles; the input is every pixel pair of the frame.
                 tp.update(rep.stereo_throughput(report["fmax_mhz"], cyc["wall_cycles_per_pixel"], width,

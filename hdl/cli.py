@@ -8,6 +8,7 @@ from bayesmachine.cliargs import (
     add_census_options,
     add_dmax_option,
     add_machine_options,
+    int_arg,
     machine_params_from_args,
     model_params_from_args,
     output_path,
@@ -35,6 +36,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     from .frontend.cli import add_options as add_stereo_options
 
     add_stereo_options(p)
+    p.add_argument("--machines", type=int_arg, default=None,
+                   help="--top stereo: machines behind the one feature pipeline, map rows dealt to them "
+                   "(1 .. 16, default 1; docs/frontend.md)")
     # --model census: the machine the census model needs (4 columns and its neighbour prior).
     add_census_options(p, title="model (--model census emits the census model's machine)")
     p.add_argument("-o", "--output", type=output_path, default="build/bayesmachine.v",
@@ -46,6 +50,8 @@ def _run(args: argparse.Namespace) -> int:
     from .frontend.cli import check_top
 
     check_top(args)  # stereo options with --top machine would do nothing: refused
+    if args.machines is not None and args.top != "stereo":
+        raise ValueError(f"--machines: only with --top stereo (got --top {args.top})")
     model = model_params_from_args(args)
     params = machine_params_from_args(args, args.dmax, model=model if model.census else None)
     if args.top == "stereo":

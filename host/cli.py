@@ -195,6 +195,12 @@ def _add_machine_options(p: argparse.ArgumentParser, sweep: bool) -> None:
             "goes into the on-chip front end + machine (StereoMachine RTL, --engine verilator)",
         )
         g.add_argument(
+            "--machines", type=int_arg, default=None,
+            help="machines behind the one front end (1 .. 16, default 1): map row r runs on machine "
+            "r mod K, each with its own random source and left neighbour (--feed pixels: the "
+            "StereoMachine with K machines; --feed words: K engines dealt the rows the same way)",
+        )
+        g.add_argument(
             "--waves",
             metavar="FIRST:LAST",
             default=None,
@@ -416,6 +422,15 @@ def _cmd_run(args: argparse.Namespace) -> int:
     waves = _parse_waves(args.waves, args.engine)
     if args.feed == "pixels" and waves is not None:
         raise ValueError("--waves is not available with --feed pixels")
+    machines = 1 if args.machines is None else args.machines
+    if machines != 1:
+        from bayesmachine.hdl.frontend.stereo import check_machines
+
+        if args.engine == "board":
+            raise ValueError("--machines: the board carries one machine (--engine board)")
+        if waves is not None:
+            raise ValueError("--waves is not available with --machines")
+        check_machines(machines, machine, model)
     left, right, gt, source = _load_inputs(args, with_gt=True)
     region = OutputRegion.of_model(left.shape, model)
     _check_waves(waves, region.pixels)
@@ -446,9 +461,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
                 sgbm=not args.no_sgbm,
                 engine_options=engine_options,
                 feed=args.feed,
+                machines=machines,
             )
         report = _report(outcome, source, args.crop)
         report["feed"] = args.feed
+        report["machines"] = machines
         if board is not None:
             report["board"] = board  # the link: wall time, bytes each way, rates, attempts
         run, prep = outcome.run, outcome.prepared

@@ -29,6 +29,7 @@ from bayesmachine.likelihood import lr_column, neighbour_words, right_machine
 from bayesmachine.outputs import require_memory
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.engines import ENGINES, get_engine
+from bayesmachine.sim.results import MachineResult
 
 from .features import model_features
 from .images import validate_pair
@@ -55,6 +56,7 @@ __all__ = [
     "run_machine",
     "run_pair",
     "result_bytes",
+    "machines_model",
 ]
 
 # How the machine is fed: the host's likelihood words (any engine), or the pixel pairs through the
@@ -108,6 +110,7 @@ def run_machine(
     chunk_rows: int = 1,
     engine_options: dict[str, object] | None = None,
     feed: str = "words",
+    machines: int = 1,
 ) -> MachineRun:
     """Stream the output pixels (row-major) through ``engine``, ``chunk_rows`` map rows per call.
 
@@ -115,6 +118,9 @@ def run_machine(
     ``feed="pixels"``: the pair itself goes into the StereoMachine (front end on chip; Verilator).
     A neighbour-prior machine runs one map row per call whatever ``chunk_rows`` (its above column
     needs the previous row's results; see the module's text).
+    ``machines`` = K > 1: map row y runs on machine y mod K (``feed="pixels"``: the StereoMachine
+    with K machines; ``feed="words"``: K engines, one map row per call, as :func:`machines_model`
+    says; their wall cycles are not a K-machine design's, so ``wall_cycles`` is None).
     """
     model = prepared.model
     if machine.rows != model.hypotheses:
@@ -131,12 +137,14 @@ def run_machine(
         f"the per-pixel results of {ho}x{wo} pixels x {m} counters",
         "use --crop or a smaller --dmax",
     )
+    if machines != 1 and model.lr:
+        raise ValueError(f"--machines {machines}: --model {model.name} runs with one machine")
     if feed == "pixels":
-        return _run_pixels(prepared, machine, engine, engine_options)
+        return _run_pixels(prepared, machine, engine, engine_options, machines)
     neighbour = machine.feedback_columns > 0
-    if neighbour:
-        chunk_rows = 1  # row y's above column is the machine's own row y - 1
-    eng = get_engine(engine, machine, **(engine_options or {}))
+    if neighbour or machines != 1:
+        chunk_rows = 1  # row y's above column is the machine's own row y - 1; rows dealt to machines
+    engines = [get_engine(engine, machine, **(engine_options or {})) for _ in range(machines)]
     qtables = QuantizedTables(likelihood_tables(model), machine.word_bits)
     lr = _RightRun(prepared, machine, engine, engine_options) if model.lr else None
     counts = np.zeros((ho, wo, m), counts_dtype(machine.counter_max))
@@ -169,11 +177,11 @@ def run_machine(
                     starts = np.zeros(wo, bool)
                     starts[0] = True  # each map row's first pixel has no left neighbour
                     t1 = time.perf_counter()
-                    res = eng.run(words, line_start=starts)
+                    res = engines[y0 % machines].run(words, line_start=starts)
                 else:
                     words = memory_words(left_f, right_f, model, machine, rows=rows, qtables=qtables)
                     t1 = time.perf_counter()
-                    res = eng.run(words)
+                    res = engines[y0 % machines].run(words)
                 t2 = time.perf_counter()
                 words_s += t1 - t0
                 engine_s += t2 - t1
@@ -184,9 +192,10 @@ def run_machine(
                 timeout[rows] = np.asarray(res.timeout).reshape(n, wo)
                 cycles[rows] = np.asarray(res.cycles).reshape(n, wo)
                 bar.update(n * wo)
-        wall = eng.wall_cycles
+        wall = engines[0].wall_cycles if machines == 1 else None
     finally:
-        eng.close()  # the Verilator harness is a process: end it now, not at garbage collection
+        for eng in engines:
+            eng.close()  # the Verilator harness is a process: end it now, not at garbage collection
         if lr is not None:
             lr.close()
     # Timeouts count as no match: the machine gave no answer within its watchdog.
@@ -245,7 +254,8 @@ class _RightRun:
 
 
 def _run_pixels(
-    prepared: Prepared, machine: MachineParams, engine: str, engine_options: dict[str, object] | None
+    prepared: Prepared, machine: MachineParams, engine: str, engine_options: dict[str, object] | None,
+    machines: int = 1,
 ) -> MachineRun:
     """The whole pair through the StereoMachine RTL: pixels in, one result per output pixel out."""
     if engine != "verilator":
@@ -254,7 +264,8 @@ def _run_pixels(
     from bayesmachine.sim.stereo_engine import StereoVerilatorEngine
 
     model = prepared.model
-    eng = StereoVerilatorEngine(machine, model, prepared.left.shape[1], **(engine_options or {}))
+    eng = StereoVerilatorEngine(machine, model, prepared.left.shape[1], machines=machines,
+                                **(engine_options or {}))
     try:
         t0 = time.perf_counter()
         res = eng.run(prepared.left, prepared.right)
@@ -285,6 +296,44 @@ def _run_pixels(
                       nomatch, timeout, seconds, 0.0, wall, right)
 
 
+def machines_model(
+    frames: list[tuple[np.ndarray, np.ndarray]], model: ModelParams, machine: MachineParams,
+    machines: int = 1, engine: str = "model",
+) -> MachineResult:
+    """What ``StereoMachine(machines=K)`` streams out for ``frames`` (pairs, back to back), from an
+    engine fed with the host's words: map row y of a frame runs on machine y mod K, each machine an
+    engine of its own from reset, so its random source (every on-chip kind: a ``sobol`` pixel's
+    shift, the LFSRs) and its left neighbour's result run over its own rows only, frame after frame;
+    with the neighbour prior the above column comes from row y - 1's results (machine (y - 1) mod K),
+    each row's first pixel is flagged ``line_start``. Results in raster order of each frame's output
+    region (the same as one engine when K = 1)."""
+    neighbour = machine.feedback_columns > 0
+    qtables = QuantizedTables(likelihood_tables(model), machine.word_bits)
+    engines = [get_engine(engine, machine) for _ in range(machines)]
+    parts: list[MachineResult] = []
+    try:
+        for left, right in frames:
+            fl, fr = model_features(left, model), model_features(right, model)
+            ho, wo = fl.m25.shape[0], fl.m25.shape[1] - model.dmax  # the output region's
+            above = np.full(wo, -1, np.int16)
+            for y in range(ho):
+                eng = engines[y % machines]
+                if neighbour:
+                    words = memory_words(fl, fr, model, machine, rows=slice(y, y + 1), qtables=qtables,
+                                         prior=neighbour_words(qtables, model.dmax, above))
+                    starts = np.zeros(wo, bool)
+                    starts[0] = True
+                    res = eng.run(words, line_start=starts)
+                    above = np.where(res.nomatch | res.timeout, -1, res.map).astype(np.int16)
+                else:
+                    res = eng.run(memory_words(fl, fr, model, machine, rows=slice(y, y + 1), qtables=qtables))
+                parts.append(res)
+    finally:
+        for eng in engines:
+            eng.close()
+    return MachineResult.concatenate(parts, machine.rows)
+
+
 def run_pair(
     left: np.ndarray,
     right: np.ndarray,
@@ -297,6 +346,7 @@ def run_pair(
     sgbm: bool | None = None,
     engine_options: dict[str, object] | None = None,
     feed: str = "words",
+    machines: int = 1,
 ) -> RunOutcome:
     """Run the machine on a gray pair and compare it with the reference (and gt, if given).
 
@@ -305,6 +355,7 @@ def run_pair(
     """
     if prepared is None:
         prepared = prepare(left, right, model_params, gt)
-    run = run_machine(prepared, machine_params, engine, progress, engine_options=engine_options, feed=feed)
+    run = run_machine(prepared, machine_params, engine, progress, engine_options=engine_options, feed=feed,
+                      machines=machines)
     metrics = evaluate(prepared, run, sgbm=sgbm)
     return RunOutcome(prepared, run, metrics)

@@ -6,9 +6,12 @@ result for every output pixel, in raster order of the output region: the same
 :class:`MachineResult` as ``MachineModel(params).run(memory_words(...))`` on the host's words,
 bit for bit. Frames run back to back in one simulation (the machine's random sources carry over,
 as in the model); the front end restarts at each frame's first pixel. ``wall_cycles`` counts
-every clock cycle since reset, filtering and loading included. With census-lr the design has a second
-machine, the right pass's; the harness also collects its results (``right_result``) and the engine
-keeps the last frame's as ``last_right`` (every right map column of every output row, raster order).
+every clock cycle since reset, filtering and loading included. With ``machines`` = K > 1 the design
+is ``StereoMachine(machines=K)`` and its results are ``host.run.machines_model``'s (map row r on
+machine r mod K, each machine's random source over its own rows). With census-lr (one machine) the
+design has a second machine, the right pass's; the harness also collects its results
+(``right_result``) and the engine keeps the last frame's as ``last_right`` (every right map column of
+every output row, raster order).
 
 With an off-chip random source (``rng = "smtj"``) the design's ``entropy`` port is fed, one row
 per compute cycle, from the kind's device model, one stream from reset on, exactly as the word
@@ -52,7 +55,8 @@ HEADER = "stereo_design.h"
 _MAGIC_FRAME = 0x46534D42  # "BMSF", see harness/stereo.cpp
 
 
-def stereo_header(params: MachineParams, model: ModelParams, width: int, signature: Any) -> str:
+def stereo_header(params: MachineParams, model: ModelParams, width: int, signature: Any,
+                  machines: int = 1) -> str:
     """``stereo_design.h``: the shared prologue (ports, result size), the pixel beat's offsets and,
     with an off-chip source, the entropy port's (fed as in the machine's harness); census-lr: the
     right pass's result port and its payload's size (``RIGHT_WORDS``)."""
@@ -62,7 +66,8 @@ def stereo_header(params: MachineParams, model: ModelParams, width: int, signatu
     entropy_ports, external = entropy_header(params, signature)
     pix = layout_fields(pixel_in_layout())
     # A hung design: no pixel taken and no result for longer than a timed-out run and a line.
-    hang = params.max_cycles + 8 * params.words_per_pixel + 2 * model.margin * width + 64
+    # (K machines: a frame's first pixel may wait for every machine to go idle.)
+    hang = machines * (params.max_cycles + 8 * params.words_per_pixel + 2 * model.margin * width + 64)
     right = ""
     if model.lr:
         from bayesmachine.hdl.frontend.lr import right_pass_params
@@ -88,6 +93,7 @@ def build_stereo_harness(
     width: int,
     fifo_pixels: int = 8,
     build_dir: str | os.PathLike[str] | None = None,
+    machines: int = 1,
     **options: Any,
 ) -> VerilatorBuild:
     """Compile (or find in the cache) the stereo harness, through the Verilator engine's build cache
@@ -95,25 +101,27 @@ def build_stereo_harness(
     from bayesmachine.hdl.frontend.stereo import StereoMachine, check_stereo_machine, stereo_signature
 
     find_toolchain()  # a missing tool is reported before the seconds of emitting the Verilog
-    check_stereo_machine(params, model, width, fifo_pixels)  # as StereoMachine's constructor
+    check_stereo_machine(params, model, width, fifo_pixels, machines)  # as StereoMachine's constructor
     signature = stereo_signature(params, model)
     root = Path(build_dir) if build_dir is not None else cache_dir()
     root.mkdir(parents=True, exist_ok=True)
-    design_key = json.dumps([params.to_dict(), model.to_dict(), width, fifo_pixels])
+    key: list[object] = [params.to_dict(), model.to_dict(), width, fifo_pixels]
+    design_key = json.dumps(key + ([machines] if machines != 1 else []))
     name = f"stereo-{hashlib.sha256(design_key.encode()).hexdigest()[:20]}"
 
     def build_top() -> StereoMachine:
-        return StereoMachine(params=params, model=model, width=width, fifo_pixels=fifo_pixels)
+        return StereoMachine(params=params, model=model, width=width, fifo_pixels=fifo_pixels,
+                             machines=machines)
 
     design = HarnessSources(
         verilog=cached_verilog(name, build_top, root),
         wrapper=wrapper_verilog(signature),
-        header=stereo_header(params, model, width, signature),
+        header=stereo_header(params, model, width, signature, machines),
         sources=("stereo.cpp",),
-        label=f"the stereo machine, Dmax {model.dmax}, width {width},",
+        label=f"the stereo machine, Dmax {model.dmax}, width {width}, {machines} machine(s),",
         header_name=HEADER,
         info={"params": params.to_dict(), "model": model.to_dict(), "width": width,
-              "fifo_pixels": fifo_pixels},
+              "fifo_pixels": fifo_pixels, "machines": machines},
         prefix="stereo-",
     )
     return build_design(design, build_dir=root, **options)
@@ -145,6 +153,7 @@ class StereoVerilatorEngine(HarnessProcess, EngineLifecycle):
         build_dir: str | os.PathLike[str] | None = None,
         jobs: int = 2,
         verbose: bool = True,
+        machines: int = 1,
     ) -> None:
         kind = source_kind(params.rng)
         if not kind.on_chip and kind.numbers is None:
@@ -156,10 +165,11 @@ class StereoVerilatorEngine(HarnessProcess, EngineLifecycle):
         self.params = params
         self.model = model
         self.width = width
+        self.machines = machines
         self.last_right: MachineResult | None = None  # census-lr: the last frame's right-pass results
         self._args: list[str] = []
         self.build = build_stereo_harness(params, model, width, fifo_pixels=fifo_pixels, build_dir=build_dir,
-                                          jobs=jobs, verbose=verbose)
+                                          machines=machines, jobs=jobs, verbose=verbose)
         self._init_process()
 
     def run(self, left: np.ndarray, right: np.ndarray) -> MachineResult:

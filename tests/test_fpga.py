@@ -332,8 +332,7 @@ def test_synth_command_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]
 
 
 @pytest.mark.parametrize(("extra", "message"), [
-    (["--machines", "2"], "--top stereo is one StereoMachine (its front end feeds one machine), not "
-                          "--machines 2"),
+    (["--machines", "17"], "machines must be in [1, 16], got 17"),
     (["--width", "50"], "width must be in [dmax + 7, 4096] = [87, 4096]"),
     (["--dmax", "8", "--width", "12"], "width must be in [dmax + 7, 4096] = [15, 4096]"),
     (["--rng", "external"], "synth needs an on-chip random source, not 'external'"),

@@ -14,8 +14,8 @@ from . import DEFAULT_FIFO_PIXELS, MAX_WIDTH
 if TYPE_CHECKING:
     from .stereo import StereoMachine
 
-__all__ = ["DEFAULT_WIDTH", "add_options", "build", "check_top", "fifo_pixels", "stereo_params", "summary",
-           "width"]
+__all__ = ["DEFAULT_WIDTH", "add_options", "build", "check_top", "fifo_pixels", "machines", "stereo_params",
+           "summary", "width"]
 
 DEFAULT_WIDTH = 640
 
@@ -67,9 +67,17 @@ def build(args: argparse.Namespace, params: MachineParams) -> StereoMachine:
     from .stereo import StereoMachine, check_stereo_machine
 
     top_params, model = stereo_params(args, params), model_params_from_args(args)
+    k = machines(args)
     # Checked first: a component whose constructor raises would be reported as never elaborated.
-    check_stereo_machine(top_params, model, width(args), fifo_pixels(args))
-    return StereoMachine(params=top_params, model=model, width=width(args), fifo_pixels=fifo_pixels(args))
+    check_stereo_machine(top_params, model, width(args), fifo_pixels(args), k)
+    return StereoMachine(params=top_params, model=model, width=width(args), fifo_pixels=fifo_pixels(args),
+                         machines=k)
+
+
+def machines(args: argparse.Namespace) -> int:
+    """``--machines`` (the stereo top's machines behind its feature pipeline), or 1."""
+    k = getattr(args, "machines", None)
+    return 1 if k is None else int(k)
 
 
 def summary(top: StereoMachine) -> str:
@@ -80,7 +88,9 @@ def summary(top: StereoMachine) -> str:
     lines = [
         f"stereo top: {top.width}-pixel lines, Dmax {m.dmax}, p0 {m.p0}, sigmas m/gh/gv "
         f"{m.sigma_m}/{m.sigma_gh}/{m.sigma_gv}, p_nm0 {m.p_nm0}, sigma_nm {m.sigma_nm}; "
-        f"FIFO of {top.fifo_pixels} pixels ({top.fifo_pixels * p.beats_per_pixel} beats)",
+        f"FIFO of {top.fifo_pixels} pixels ({top.fifo_pixels * p.beats_per_pixel} beats)"
+        + (f" per machine; {top.machines} machines (map row r on machine r mod {top.machines}, each with "
+           "its own word generator)" if top.machines > 1 else ""),
     ]
     if m.census:
         w = m.census_window

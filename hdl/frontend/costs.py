@@ -140,6 +140,11 @@ class WordGenerator(wiring.Component):
     output_columns : int, optional
         Output pixels per row (W - 2·margin - Dmax): the line of MAPs of the neighbour prior
         (required with ``prior="neighbour"``, refused otherwise).
+    leads : bool
+        Neighbour prior: whether this generator's machine runs a frame's first map row (True: the
+        only machine, or machine 0 of several); otherwise its results above come from the machine
+        of the map rows just before its own, which must write an output row's first result
+        before this generator takes that row's first output pixel (see ``result_room``).
     right_pass : bool
         census-lr's right pass (``model`` its :attr:`~bayesmachine.likelihood.ModelParams.right_model`,
         pixels from :class:`~.lr.RightPassFeeder`): ``left`` is the right pixel (the reference), lane d
@@ -157,8 +162,15 @@ class WordGenerator(wiring.Component):
     beats : ``Out(load_stream(params))``
         ``beats_per_pixel`` beats per pixel whose ``output`` flag is set.
     result_take, result_map, result_hit : ``In(1)``, ``In(params.map_width)``, ``In(1)``
-        Neighbour prior only: a result leaves the machine (its MAP row, and whether it is a
-        disparity: not no match, not a timeout), in raster order of the output region.
+        Neighbour prior only: a result of the map rows above this generator's leaves its machine
+        (its MAP row, and whether it is a disparity: not no match, not a timeout), in raster
+        order of those rows.
+    result_room : ``Out(1)``
+        Neighbour prior only: a result may be written into the line of MAPs this cycle (its entry
+        has been read). With one machine it is always set when a result leaves.
+    frame_reset : ``In(1)``
+        Neighbour prior only: every machine is idle and a frame starts (the counts start afresh);
+        held low with one machine.
     right_map : ``In(stream.Signature(right_map_layout(params.map_width)))``
         census-lr's left pass only: the right pass's MAPs in raster order of its columns; one is taken
         with each pixel whose ``consult`` is set, into the consistency column's test
@@ -167,7 +179,7 @@ class WordGenerator(wiring.Component):
 
     def __init__(self, *, params: MachineParams, model: ModelParams,
                  tables: FrontEndTables | None = None, output_columns: int | None = None,
-                 right_pass: bool = False, right_nomatch: bool = False) -> None:
+                 leads: bool = True, right_pass: bool = False, right_nomatch: bool = False) -> None:
         check_frontend_types(params, model)
         check_frontend_params(params, model)
         for name, value in (("right_pass", right_pass), ("right_nomatch", right_nomatch)):
@@ -192,6 +204,9 @@ class WordGenerator(wiring.Component):
                                  f"per row (>= 1), got {output_columns!r}")
         if not neighbour and output_columns is not None:
             raise ParameterError("output_columns: only for a machine with prior = 'neighbour'")
+        if not isinstance(leads, bool):
+            raise TypeError(f"leads must be a bool, not {type(leads).__name__}")
+        self._leads = leads
         self._params = params
         self._model = model
         self._tables = tables if tables is not None else frontend_tables(model, params.word_bits)
@@ -206,7 +221,8 @@ class WordGenerator(wiring.Component):
             "beats": Out(load_stream(params)),
         }
         if neighbour:
-            members |= {"result_take": In(1), "result_map": In(params.map_width), "result_hit": In(1)}
+            members |= {"result_take": In(1), "result_map": In(params.map_width), "result_hit": In(1),
+                        "result_room": Out(1), "frame_reset": In(1)}
         if model.lr:
             members |= {"right_map": In(stream.Signature(right_map_layout(params.map_width)))}
         super().__init__(members)
@@ -226,6 +242,10 @@ class WordGenerator(wiring.Component):
     @property
     def model(self) -> ModelParams:
         return self._model
+
+    @property
+    def leads(self) -> bool:
+        return self._leads
 
     @property
     def tables(self) -> FrontEndTables:
@@ -268,17 +288,28 @@ class WordGenerator(wiring.Component):
         last = beat == n_beats - 1
         free = ~active | (issue & last)
         if neighbour:
-            # An output pixel waits until the result above it has left the machine: fewer than an
-            # output row's pixels taken and not yet out. ``room`` is that test on the counts of
-            # the next cycle, registered (a register toward the take, no path from the result).
+            # An output pixel waits until the result above it is in the line of MAPs, and a result
+            # is written only over an entry already read: ``unread`` = results written - output
+            # pixels taken (+ an output row with ``leads``: the first map row reads no result).
+            # An output pixel is taken while unread >= 1, a result written while unread < the row.
+            # Both tests are on the counts of the next cycle, registered (a register toward the
+            # take, no path from the result). With one machine this is "fewer than an output
+            # row's pixels taken and not yet out".
             wo = self._output_columns
             assert wo is not None
-            in_flight = Signal(range(wo + 2))
-            room = Signal(init=1)
+            start = wo if self._leads else 0
+            unread = Signal(range(wo + 1), init=start)
+            room = Signal(init=start >= 1)
+            write_room = Signal(init=start < wo)
+            m.d.comb += self.result_room.eq(write_room)
             out_take = self.pixel.valid & self.pixel.ready & self.pixel.payload.output
-            flight_next = Signal.like(in_flight)
-            m.d.comb += flight_next.eq(in_flight + out_take - self.result_take)
-            m.d.sync += [in_flight.eq(flight_next), room.eq(flight_next < wo)]
+            unread_next = Signal.like(unread)
+            m.d.comb += unread_next.eq(unread + self.result_take - out_take)
+            with m.If(self.frame_reset):  # every machine idle: a frame starts afresh
+                m.d.sync += [unread.eq(start), room.eq(start >= 1), write_room.eq(start < wo)]
+            with m.Else():
+                m.d.sync += [unread.eq(unread_next), room.eq(unread_next >= 1),
+                             write_room.eq(unread_next < wo)]
             ready = free & (~self.pixel.payload.output | room)
         else:
             ready = free
@@ -505,6 +536,8 @@ class WordGenerator(wiring.Component):
         m.d.comb += [rd.en.eq(out_take), rd.addr.eq(rd_ptr)]
         with m.If(out_take):
             m.d.sync += rd_ptr.eq(Mux(rd_ptr == wo - 1, 0, rd_ptr + 1))
+        with m.If(self.frame_reset):  # (both are back at 0 after whole rows; said, not assumed)
+            m.d.sync += [wr_ptr.eq(0), rd_ptr.eq(0)]
         first_row = Signal()
         with m.If(take):
             m.d.sync += first_row.eq(pix.first_row)

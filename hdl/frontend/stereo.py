@@ -32,8 +32,8 @@ from __future__ import annotations
 
 import dataclasses
 
-from amaranth.hdl import Module, Mux, Shape, Signal
-from amaranth.lib import fifo, wiring
+from amaranth.hdl import Array, Cat, Module, Mux, Shape, Signal, Value, unsigned
+from amaranth.lib import data, fifo, stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from bayesmachine.hdl.machine import BayesianMachine
@@ -48,16 +48,18 @@ from bayesmachine.hdl.signatures import (
 )
 from bayesmachine.likelihood import ModelParams, disparity_machine
 from bayesmachine.params import MachineParams, ParameterError, stereo_lanes
+from bayesmachine.sources import source_kind
 
-from . import DEFAULT_FIFO_PIXELS, MAX_WIDTH
+from . import DEFAULT_FIFO_PIXELS, MAX_MACHINES, MAX_WIDTH
 from .census import CensusFilter
-from .costs import WordGenerator, check_frontend_params, check_frontend_types
+from .costs import WordGenerator, check_frontend_params, check_frontend_types, pixel_features_layout
 from .filters import FeatureFilter
 from .linebuffer import WINDOW, LineBuffer
 from .lr import feeder_in_layout, lr_split, right_pass_params
 
-__all__ = ["MAX_WIDTH", "FrontEnd", "StereoMachine", "check_stereo_machine", "pixel_in_layout",
-           "stereo_machine_params", "stereo_signature"]
+__all__ = ["MAX_MACHINES", "MAX_WIDTH", "FeaturePipeline", "FrontEnd", "StereoMachine", "check_machines",
+           "check_stereo_machine", "pipeline_layout", "pixel_in_layout", "stereo_machine_params",
+           "stereo_signature"]
 
 
 def stereo_machine_params(dmax: int = 80, *, model: ModelParams | None = None,
@@ -86,6 +88,26 @@ def _check_width(width: object, model: ModelParams) -> int:
     return width
 
 
+def check_machines(machines: object, params: MachineParams, model: ModelParams) -> int:
+    """``machines`` if a ``StereoMachine`` can have that many machines: an integer (``TypeError``
+    otherwise) in [1, MAX_MACHINES], more than one only for an on-chip random source (off chip,
+    each machine would need its own number port and device stream) and not for census-lr (its
+    right pass is not dealt to several), else ``ParameterError`` naming the parameter."""
+    if isinstance(machines, bool) or not isinstance(machines, int):
+        raise TypeError(f"machines must be an integer, not {type(machines).__name__}")
+    if not 1 <= machines <= MAX_MACHINES:
+        raise ParameterError(f"machines must be in [1, {MAX_MACHINES}], got {machines}")
+    if machines > 1:
+        if not source_kind(params.rng).on_chip:
+            raise ParameterError(f"machines = {machines}: rng {params.rng!r} is off chip (one number port, "
+                                 "one device stream); several machines need an on-chip source "
+                                 "(sobol, lfsr, lfsr-shared)")
+        if model.lr:
+            raise ParameterError(f"machines = {machines}: --model {model.name} runs with one machine "
+                                 "(its right pass is not dealt to several)")
+    return machines
+
+
 def stereo_signature(params: MachineParams, model: ModelParams) -> wiring.Signature:
     """:class:`StereoMachine`'s ports: ``StereoSignature(params)``, and with census-lr also
     ``right_result``: ``valid`` and ``payload`` (``result_layout(right_pass_params(model, params))``),
@@ -98,16 +120,187 @@ def stereo_signature(params: MachineParams, model: ModelParams) -> wiring.Signat
 
 
 def check_stereo_machine(params: MachineParams, model: ModelParams, width: int,
-                         fifo_pixels: int = DEFAULT_FIFO_PIXELS) -> None:
+                         fifo_pixels: int = DEFAULT_FIFO_PIXELS, machines: int = 1) -> None:
     """``ParameterError`` naming the parameter unless ``StereoMachine(params=params, model=model,
-    width=width, fifo_pixels=fifo_pixels)`` can be built (callers check before building anything: a
-    component whose constructor fails would be reported as never elaborated); ``TypeError`` for a
-    ``params`` or ``model`` of the wrong type."""
+    width=width, fifo_pixels=fifo_pixels, machines=machines)`` can be built (callers check before
+    building anything: a component whose constructor fails would be reported as never elaborated);
+    ``TypeError`` for a ``params``, ``model`` or ``machines`` of the wrong type."""
     check_frontend_types(params, model)
+    check_machines(machines, params, model)
     check_frontend_params(params, model)
     _check_width(width, model)
     if isinstance(fifo_pixels, bool) or not isinstance(fifo_pixels, int) or not 1 <= fifo_pixels <= 64:
         raise ParameterError(f"fifo_pixels must be an integer in [1, 64], got {fifo_pixels!r}")
+
+
+RESULT_FIFO_MAX = 511  # results buffered per machine of several (one DP16KD deep at 36 bits wide)
+
+
+def pipeline_layout(model: ModelParams, neighbour: bool) -> data.StructLayout:
+    """One pixel out of :class:`FeaturePipeline`: the word generator's pixel (``pixel``,
+    :func:`~.costs.pixel_features_layout`) and where it is: ``line_begin`` (an image line's first
+    pixel), ``output_line`` (a line with output pixels: a map row's), ``first_line`` (the frame's
+    first such line) and ``frame_begin`` (the frame's first pixel). census-lr: the pixel's
+    ``consult`` (see :func:`~.costs.pixel_features_layout`) and ``line_end`` (an output row's last
+    pixel), for :func:`~.lr.lr_split`."""
+    bits = model.census_bits if model.census else 0
+    fields = {"pixel": pixel_features_layout(bits, neighbour, consult=model.lr), "line_begin": unsigned(1),
+              "output_line": unsigned(1), "first_line": unsigned(1), "frame_begin": unsigned(1)}
+    if model.lr:
+        fields |= {"line_end": unsigned(1)}
+    return data.StructLayout(fields)
+
+
+class FeaturePipeline(wiring.Component):
+    """Pixel pairs in, every pixel's features out (the line buffer and the feature and census
+    filters: stages 0 to 3 of the module's pipeline).
+
+    Parameters
+    ----------
+    model : ModelParams
+        The disparity model.
+    width : int
+        Pixels per image line (dmax + 2·margin + 1 .. ``MAX_WIDTH``).
+    neighbour : bool
+        Whether the pixels carry the neighbour prior's ``row_start`` and ``first_row``.
+
+    Attributes
+    ----------
+    pixels : ``In(pixel_stream())``
+        Pixel pairs in raster order.
+    features : ``Out(stream.Signature(pipeline_layout(model, neighbour)))``
+        Every pixel, in raster order, its features three cycles after its take.
+    """
+
+    def __init__(self, *, model: ModelParams, width: int, neighbour: bool) -> None:
+        if not isinstance(model, ModelParams):
+            raise TypeError(f"model must be a host.likelihoods.ModelParams, not {type(model).__name__}")
+        if not isinstance(neighbour, bool):
+            raise TypeError(f"neighbour must be a bool, not {type(neighbour).__name__}")
+        self._width = _check_width(width, model)
+        self._model = model
+        self._neighbour = neighbour
+        super().__init__({"pixels": In(pixel_stream()),
+                          "features": Out(stream.Signature(pipeline_layout(model, neighbour)))})
+
+    @property
+    def model(self) -> ModelParams:
+        return self._model
+
+    @property
+    def width(self) -> int:
+        return self._width
+
+    @property
+    def neighbour(self) -> bool:
+        return self._neighbour
+
+    def elaborate(self, platform: object) -> Module:
+        m = Module()
+        width, model = self._width, self._model
+        dmax, margin = model.dmax, model.margin
+        size = 2 * margin + 1  # the model's windows: line buffer columns of this height
+        lag = margin - WINDOW // 2  # 5x5 features a line and a column behind a 7x7 census window
+        neighbour = self._neighbour
+        m.submodules.linebuffer = lines = LineBuffer(width=width, height=size)
+        m.submodules.filter_left = fl = FeatureFilter(lag=lag)
+        m.submodules.filter_right = fr = FeatureFilter(lag=lag)
+        if model.census:
+            m.submodules.census_left = cl = CensusFilter(window=model.census_window)
+            m.submodules.census_right = cr = CensusFilter(window=model.census_window)
+        out = self.features
+
+        # The pipeline advances as a whole whenever its last stage is empty or taken.
+        valid1 = Signal()  # stage 1: the line buffer shows the pixel's column
+        valid2 = Signal()  # stage 2: the filters hold the column's partial sums
+        valid3 = Signal()  # stage 3: the filters hold the pixel's window
+        advance = Signal()
+        m.d.comb += advance.eq(~valid3 | out.ready)
+        # Stage 0: position of the incoming pixel (restarts at a frame's first pixel). The line
+        # saturates at ``size``: size - 1 is the first line whose windows are complete (the first
+        # output row), size any later one.
+        col = Signal(range(width))
+        line = Signal(range(size + 1))
+        pin = self.pixels.payload
+        cur_col = Signal(range(width))
+        cur_line = Signal(range(size + 1))
+        with m.If(pin.first):
+            m.d.comb += [cur_col.eq(0), cur_line.eq(0)]
+        with m.Else():
+            m.d.comb += [cur_col.eq(col), cur_line.eq(line)]
+        take = self.pixels.valid & advance
+        m.d.comb += [
+            self.pixels.ready.eq(advance),
+            lines.en.eq(take),
+            lines.col.eq(cur_col),
+            lines.pixel.left.eq(pin.left),
+            lines.pixel.right.eq(pin.right),
+        ]
+        col1 = Signal(range(width))
+        line1 = Signal(range(size + 1))
+        with m.If(take):
+            with m.If(cur_col == width - 1):
+                m.d.sync += [col.eq(0), line.eq(Mux(cur_line == size, cur_line, cur_line + 1))]
+            with m.Else():
+                m.d.sync += [col.eq(cur_col + 1), line.eq(cur_line)]
+        first1 = Signal()
+        with m.If(advance):
+            m.d.sync += [valid1.eq(self.pixels.valid), col1.eq(cur_col), line1.eq(cur_line),
+                         first1.eq(pin.first)]
+
+        # Stage 1 -> 2: the columns' partial sums into the filters' first registers (the block
+        # RAM's slow clock-to-output leaves no room for the whole column sum in one cycle); the
+        # census filters take the whole column. The 5x5 filters take the column's middle 5 lines.
+        output2, row_start2, first_row2 = Signal(), Signal(), Signal()
+        where2 = Signal(4)  # line_begin, output_line, first_line, frame_begin
+        line_end2, consult2 = Signal(), Signal()  # census-lr's
+        m.d.comb += [fl.load.eq(advance), fr.load.eq(advance)]
+        for i in range(WINDOW):
+            m.d.comb += [fl.column[i].eq(lines.column[lag + i].left),
+                         fr.column[i].eq(lines.column[lag + i].right)]
+        if model.census:
+            m.d.comb += [cl.load.eq(advance), cr.load.eq(advance)]
+            for i in range(size):
+                m.d.comb += [cl.column[i].eq(lines.column[i].left), cr.column[i].eq(lines.column[i].right)]
+        first_output_col = dmax + size - 1
+        with m.If(advance):
+            m.d.sync += [valid2.eq(valid1),
+                         output2.eq((line1 >= size - 1) & (col1 >= first_output_col)),
+                         row_start2.eq(col1 == first_output_col),
+                         first_row2.eq(line1 == size - 1),
+                         where2.eq(Cat(col1 == 0, line1 >= size - 1, line1 == size - 1, first1)),
+                         # census-lr: an output row's last pixel, and a map column (>= 0) of an output row
+                         line_end2.eq((line1 >= size - 1) & (col1 == width - 1)),
+                         consult2.eq((line1 >= size - 1) & (col1 >= size - 1))]
+
+        # Stage 2 -> 3: the columns' sums enter the filters' windows.
+        output3, row_start3, first_row3 = Signal(), Signal(), Signal()
+        where3 = Signal(4)
+        line_end3, consult3 = Signal(), Signal()
+        shift = advance & valid2
+        m.d.comb += [fl.en.eq(shift), fr.en.eq(shift)]
+        if model.census:
+            m.d.comb += [cl.en.eq(shift), cr.en.eq(shift)]
+        with m.If(advance):
+            m.d.sync += [valid3.eq(valid2), output3.eq(output2), row_start3.eq(row_start2),
+                         first_row3.eq(first_row2), where3.eq(where2), line_end3.eq(line_end2),
+                         consult3.eq(consult2)]
+
+        # Stage 3 -> out.
+        px = out.payload.pixel
+        m.d.comb += [out.valid.eq(valid3), px.output.eq(output3),
+                     Cat(out.payload.line_begin, out.payload.output_line, out.payload.first_line,
+                         out.payload.frame_begin).eq(where3)]
+        for side, filt in ((px.left, fl), (px.right, fr)):
+            m.d.comb += [side.m25.eq(filt.features.m25), side.gh20.eq(filt.features.gh20),
+                         side.gv20.eq(filt.features.gv20)]
+        if model.census:
+            m.d.comb += [px.left.census.eq(cl.code), px.right.census.eq(cr.code)]
+        if neighbour:
+            m.d.comb += [px.row_start.eq(row_start3), px.first_row.eq(first_row3)]
+        if model.lr:
+            m.d.comb += [px.consult.eq(consult3), out.payload.line_end.eq(line_end3)]
+        return m
 
 
 class FrontEnd(wiring.Component):
@@ -166,112 +359,29 @@ class FrontEnd(wiring.Component):
 
     def elaborate(self, platform: object) -> Module:
         m = Module()
-        width, model = self._width, self._model
-        dmax, margin = model.dmax, model.margin
-        size = 2 * margin + 1  # the model's windows: line buffer columns of this height
-        lag = margin - WINDOW // 2  # 5x5 features a line and a column behind a 7x7 census window
+        model = self._model
         neighbour = self._params.feedback_columns > 0
-        m.submodules.linebuffer = lines = LineBuffer(width=width, height=size)
-        m.submodules.filter_left = fl = FeatureFilter(lag=lag)
-        m.submodules.filter_right = fr = FeatureFilter(lag=lag)
-        if model.census:
-            m.submodules.census_left = cl = CensusFilter(window=model.census_window)
-            m.submodules.census_right = cr = CensusFilter(window=model.census_window)
-        output_columns = width - 2 * margin - dmax if neighbour else None
+        m.submodules.pipeline = pipe = FeaturePipeline(model=model, width=self._width, neighbour=neighbour)
+        output_columns = self._width - 2 * model.margin - model.dmax if neighbour else None
         m.submodules.generator = gen = WordGenerator(params=self._params, model=model,
                                                      output_columns=output_columns)
+        wiring.connect(m, wiring.flipped(self.pixels), pipe.pixels)
+        features = pipe.features
+        if model.lr:  # through a FIFO, and to the right pass (lr_split)
+            pix, px = features.payload.pixel, Signal(feeder_in_layout(model.census_bits))
+            m.d.comb += [px.left.eq(pix.left), px.right.eq(pix.right), px.output.eq(pix.output),
+                         px.consult.eq(pix.consult), px.line_end.eq(features.payload.line_end)]
+            if neighbour:
+                m.d.comb += [px.row_start.eq(pix.row_start), px.first_row.eq(pix.first_row)]
+            ready = lr_split(m, self, gen, px, features.valid, self._width - 2 * model.margin)
+            m.d.comb += features.ready.eq(ready)
+        else:
+            m.d.comb += [gen.pixel.valid.eq(features.valid), gen.pixel.payload.eq(features.payload.pixel),
+                         features.ready.eq(gen.pixel.ready)]
         wiring.connect(m, gen.beats, wiring.flipped(self.beats))
         if neighbour:
             m.d.comb += [gen.result_take.eq(self.result_take), gen.result_map.eq(self.result_map),
                          gen.result_hit.eq(self.result_hit)]
-
-        # The pipeline advances as a whole whenever its last stage is empty or taken.
-        valid1 = Signal()  # stage 1: the line buffer shows the pixel's column
-        valid2 = Signal()  # stage 2: the filters hold the column's partial sums
-        valid3 = Signal()  # stage 3: the filters hold the pixel's window
-        advance = Signal()
-
-        # Stage 0: position of the incoming pixel (restarts at a frame's first pixel). The line
-        # saturates at ``size``: size - 1 is the first line whose windows are complete (the first
-        # output row), size any later one.
-        col = Signal(range(width))
-        line = Signal(range(size + 1))
-        pin = self.pixels.payload
-        cur_col = Signal(range(width))
-        cur_line = Signal(range(size + 1))
-        with m.If(pin.first):
-            m.d.comb += [cur_col.eq(0), cur_line.eq(0)]
-        with m.Else():
-            m.d.comb += [cur_col.eq(col), cur_line.eq(line)]
-        take = self.pixels.valid & advance
-        m.d.comb += [
-            self.pixels.ready.eq(advance),
-            lines.en.eq(take),
-            lines.col.eq(cur_col),
-            lines.pixel.left.eq(pin.left),
-            lines.pixel.right.eq(pin.right),
-        ]
-        col1 = Signal(range(width))
-        line1 = Signal(range(size + 1))
-        with m.If(take):
-            with m.If(cur_col == width - 1):
-                m.d.sync += [col.eq(0), line.eq(Mux(cur_line == size, cur_line, cur_line + 1))]
-            with m.Else():
-                m.d.sync += [col.eq(cur_col + 1), line.eq(cur_line)]
-        with m.If(advance):
-            m.d.sync += [valid1.eq(self.pixels.valid), col1.eq(cur_col), line1.eq(cur_line)]
-
-        # Stage 1 -> 2: the columns' partial sums into the filters' first registers (the block
-        # RAM's slow clock-to-output leaves no room for the whole column sum in one cycle); the
-        # census filters take the whole column. The 5x5 filters take the column's middle 5 lines.
-        output2, row_start2, first_row2 = Signal(), Signal(), Signal()
-        line_end2, consult2 = Signal(), Signal()  # census-lr's
-        m.d.comb += [fl.load.eq(advance), fr.load.eq(advance)]
-        for i in range(WINDOW):
-            m.d.comb += [fl.column[i].eq(lines.column[lag + i].left),
-                         fr.column[i].eq(lines.column[lag + i].right)]
-        if model.census:
-            m.d.comb += [cl.load.eq(advance), cr.load.eq(advance)]
-            for i in range(size):
-                m.d.comb += [cl.column[i].eq(lines.column[i].left), cr.column[i].eq(lines.column[i].right)]
-        first_output_col = dmax + size - 1
-        with m.If(advance):
-            m.d.sync += [valid2.eq(valid1),
-                         output2.eq((line1 >= size - 1) & (col1 >= first_output_col)),
-                         row_start2.eq(col1 == first_output_col),
-                         first_row2.eq(line1 == size - 1),
-                         # census-lr: an output row's last pixel, and a map column (>= 0) of an output row
-                         line_end2.eq((line1 >= size - 1) & (col1 == width - 1)),
-                         consult2.eq((line1 >= size - 1) & (col1 >= size - 1))]
-
-        # Stage 2 -> 3: the columns' sums enter the filters' windows.
-        output3, row_start3, first_row3 = Signal(), Signal(), Signal()
-        line_end3, consult3 = Signal(), Signal()
-        shift = advance & valid2
-        m.d.comb += [fl.en.eq(shift), fr.en.eq(shift)]
-        if model.census:
-            m.d.comb += [cl.en.eq(shift), cr.en.eq(shift)]
-        with m.If(advance):
-            m.d.sync += [valid3.eq(valid2), output3.eq(output2), row_start3.eq(row_start2),
-                         first_row3.eq(first_row2), line_end3.eq(line_end2), consult3.eq(consult2)]
-
-        # Stage 3 -> the word generator (census-lr: through a FIFO, and to the right pass: lr_split).
-        if model.lr:
-            px = Signal(feeder_in_layout(model.census_bits))
-            m.d.comb += [px.line_end.eq(line_end3), px.consult.eq(consult3)]
-            ready3 = lr_split(m, self, gen, px, valid3, width - 2 * margin)
-        else:
-            px = gen.pixel.payload
-            m.d.comb += gen.pixel.valid.eq(valid3)
-            ready3 = gen.pixel.ready
-        m.d.comb += [advance.eq(~valid3 | ready3), px.output.eq(output3)]
-        for side, filt in ((px.left, fl), (px.right, fr)):
-            m.d.comb += [side.m25.eq(filt.features.m25), side.gh20.eq(filt.features.gh20),
-                         side.gv20.eq(filt.features.gv20)]
-        if model.census:
-            m.d.comb += [px.left.census.eq(cl.code), px.right.census.eq(cr.code)]
-        if neighbour:
-            m.d.comb += [px.row_start.eq(row_start3), px.first_row.eq(first_row3)]
         return m
 
 
@@ -288,7 +398,11 @@ class StereoMachine(wiring.Component):
     width : int
         Pixels per image line (dmax + 5 .. ``MAX_WIDTH``).
     fifo_pixels : int
-        The pixels' worth of load beats the FIFO holds (1 .. 64).
+        The pixels' worth of load beats the FIFO holds (1 .. 64), per machine.
+    machines : int
+        Machines behind the one feature pipeline (1 .. ``MAX_MACHINES``; more than one: an on-chip
+        ``rng``, see :func:`check_machines`). Map row r of a frame runs on machine r mod K, with
+        its own word generator (see "Several machines" in docs/frontend.md).
 
     Attributes
     ----------
@@ -307,12 +421,13 @@ class StereoMachine(wiring.Component):
     """
 
     def __init__(self, *, params: MachineParams, model: ModelParams, width: int,
-                 fifo_pixels: int = DEFAULT_FIFO_PIXELS) -> None:
-        check_stereo_machine(params, model, width, fifo_pixels)
+                 fifo_pixels: int = DEFAULT_FIFO_PIXELS, machines: int = 1) -> None:
+        check_stereo_machine(params, model, width, fifo_pixels, machines)
         self._params = params
         self._model = model
         self._width = width
         self._fifo_pixels = fifo_pixels
+        self._machines = machines
         super().__init__(stereo_signature(params, model))
 
     @property
@@ -331,6 +446,10 @@ class StereoMachine(wiring.Component):
     def fifo_pixels(self) -> int:
         return self._fifo_pixels
 
+    @property
+    def machines(self) -> int:
+        return self._machines
+
     def _lr_right_machine(self, m: Module, front: FrontEnd) -> None:
         """census-lr: the right pass's machine beside the left one, fed through its own FIFO; its results
         go to the front end (taken while the front end's line of right MAPs has room) and out."""
@@ -348,6 +467,8 @@ class StereoMachine(wiring.Component):
                      self.right_result.valid.eq(take), self.right_result.payload.eq(res.payload)]
 
     def elaborate(self, platform: object) -> Module:
+        if self._machines > 1:
+            return self._elaborate_machines()
         m = Module()
         p = self._params
         m.submodules.frontend = front = FrontEnd(params=p, model=self._model, width=self._width)
@@ -398,3 +519,118 @@ class StereoMachine(wiring.Component):
                 flow = self.signature.members[name].flow
                 m.d.comb += inner.eq(outer) if flow == In else outer.eq(inner)
         return m
+
+    def _elaborate_machines(self) -> Module:
+        """K machines: one feature pipeline; a dealer sends the pixels of map row r to lane r mod K
+        (a line FIFO, a word generator, a beats FIFO, a machine, a result FIFO); the results leave
+        lane by lane, a map row at a time, in the order the rows were dealt."""
+        m = Module()
+        p, model, width, k = self._params, self._model, self._width, self._machines
+        neighbour = p.feedback_columns > 0
+        wo = width - 2 * model.margin - model.dmax  # output pixels per map row
+        m.submodules.frontend = pipe = FeaturePipeline(model=model, width=width, neighbour=neighbour)
+        wiring.connect(m, wiring.flipped(self.pixels), pipe.pixels)
+        fx, w = pipe.features, pipe.features.payload
+
+        # Rows in flight, in dealing order: the lane of each map row dealt and not yet out.
+        rows, row_room, row_write = _room_fifo(m, "rows", Shape.cast(range(k)).width, 4 * k + 4)
+        rows_open = Signal(range(4 * k + 6))
+        idle = Signal(init=1)  # registered: no row in flight
+
+        # The dealer: a map row's pixels go to its lane's line FIFO (a line's worth: the filters
+        # move on to the next rows while a machine works through this one); other lines' pixels
+        # (the first 2k, the frame's top) are dropped.
+        lane = Signal(range(k))  # the lane of the current map row
+        new_row = w.output_line & w.line_begin
+        following = Mux(w.first_line | (lane == k - 1), 0, lane + 1)
+        target = Mux(w.line_begin, following, lane)
+        pixel_bits = Shape.cast(w.pixel.shape()).width
+        lines = [_room_fifo(m, f"line{j}", pixel_bits, width) for j in range(k)]
+        fits = Array(room for _, room, _ in lines)[target] & (~new_row | row_room)
+        # Neighbour prior: a frame's first pixel waits until every machine is idle, then the word
+        # generators' counts of results above restart (rows of two frames never share a line of MAPs).
+        hold = w.frame_begin & ~idle if neighbour else Value.cast(0)
+        m.d.comb += fx.ready.eq(~hold & (~w.output_line | fits))
+        take = fx.valid & fx.ready
+        frame_reset = take & w.frame_begin
+        for j, (buf, _, write) in enumerate(lines):
+            m.d.comb += [write.eq(take & w.output_line & (target == j)),
+                         buf.w_stream.payload.eq(w.pixel.as_value())]
+        m.d.comb += [row_write.eq(take & new_row), rows.w_stream.payload.eq(target)]
+        with m.If(take & new_row):
+            m.d.sync += lane.eq(following)
+
+        # The lanes.
+        beat_bits = Shape.cast(load_layout(p)).width
+        res_bits = Shape.cast(result_layout(p)).width
+        gens, machines, results = [], [], []
+        for j in range(k):
+            gen = WordGenerator(params=p, model=model, output_columns=wo if neighbour else None,
+                                leads=j == 0)
+            machine = BayesianMachine(params=p)
+            m.submodules[f"generator{j}"] = gen
+            m.submodules[f"machine{j}"] = machine
+            line = lines[j][0]
+            m.d.comb += [gen.pixel.valid.eq(line.r_stream.valid),
+                         gen.pixel.payload.as_value().eq(line.r_stream.payload),
+                         line.r_stream.ready.eq(gen.pixel.ready)]
+            beats, beat_room, beat_write = _room_fifo(m, f"beats{j}", beat_bits,
+                                                      self._fifo_pixels * p.beats_per_pixel)
+            m.d.comb += [beat_write.eq(gen.beats.valid & beat_room),
+                         beats.w_stream.payload.eq(gen.beats.payload.as_value()),
+                         gen.beats.ready.eq(beat_room),
+                         machine.load.payload.as_value().eq(beats.r_stream.payload),
+                         machine.load.valid.eq(beats.r_stream.valid),
+                         beats.r_stream.ready.eq(machine.load.ready)]
+            # A map row's results wait here while the rows dealt before it leave (a row's worth, at
+            # most 511: one block RAM deep in its 36-bit-wide mode; a longer row's machine may wait
+            # for the row before it to leave).
+            results.append(_room_fifo(m, f"results{j}", res_bits, min(wo, RESULT_FIFO_MAX)))
+            gens.append(gen)
+            machines.append(machine)
+        for j, machine in enumerate(machines):
+            buf, room, write = results[j]
+            below = gens[(j + 1) % k]  # the generator of the map rows below this machine's
+            res = machine.result
+            accept = room & below.result_room if neighbour else room
+            m.d.comb += [write.eq(res.valid & accept), res.ready.eq(accept),
+                         buf.w_stream.payload.eq(res.payload.as_value())]
+            if neighbour:  # the line of MAPs of the rows below: each result as it leaves
+                m.d.comb += [below.result_take.eq(write), below.result_map.eq(res.payload.map),
+                             below.result_hit.eq(~res.payload.nomatch & ~res.payload.timeout),
+                             below.frame_reset.eq(frame_reset)]
+
+        # The merge: a map row's wo results from its lane, rows in dealing order (raster order).
+        col = Signal(range(wo))
+        src = rows.r_stream.payload
+        out = self.result
+        m.d.comb += [out.valid.eq(rows.r_stream.valid & Array(b.r_stream.valid for b, _, _ in results)[src]),
+                     out.payload.as_value().eq(Array(b.r_stream.payload for b, _, _ in results)[src])]
+        sent = out.valid & out.ready
+        for j, (buf, _, _) in enumerate(results):
+            m.d.comb += buf.r_stream.ready.eq(rows.r_stream.valid & (src == j) & out.ready)
+        row_done = sent & (col == wo - 1)
+        m.d.comb += rows.r_stream.ready.eq(row_done)
+        with m.If(sent):
+            m.d.sync += col.eq(Mux(col == wo - 1, 0, col + 1))
+        open_next = Signal.like(rows_open)
+        m.d.comb += open_next.eq(rows_open + row_write - row_done)
+        m.d.sync += [rows_open.eq(open_next), idle.eq(open_next == 0)]
+        return m
+
+
+def _room_fifo(m: Module, name: str, width: int,
+               capacity: int) -> tuple[fifo.SyncFIFOBuffered, Signal, Signal]:
+    """A FIFO of ``capacity`` entries whose writer sees a registered ``room`` (no path from the
+    FIFO's level into the writer's enables): returns (fifo, room, write); the caller drives ``write``
+    (only while ``room``) and the write stream's payload."""
+    depth = capacity + 1  # one entry more: room is set while at most capacity - 1 are in
+    m.submodules[name] = buf = fifo.SyncFIFOBuffered(width=width, depth=depth)
+    used = Signal(range(depth + 1), name=f"{name}_used")
+    used_next = Signal(range(depth + 1), name=f"{name}_used_next")
+    room = Signal(name=f"{name}_room")
+    write = Signal(name=f"{name}_write")
+    m.d.comb += [used_next.eq(used + write - (buf.r_stream.valid & buf.r_stream.ready)),
+                 buf.w_stream.valid.eq(write)]
+    m.d.sync += [used.eq(used_next), room.eq(used_next <= depth - 2)]
+    return buf, room, write
