@@ -16,8 +16,9 @@ from amaranth.hdl import Cat, Module, Mux, Signal, Value
 from bayesmachine.hdl.counters import overflow_counter_full
 from bayesmachine.hdl.encoder import MAPEncoder, map_encoder
 from bayesmachine.hdl.formal.control import driven
+from bayesmachine.hdl.frontend import stereo as _stereo
 from bayesmachine.hdl.frontend.costs import WordGenerator
-from bayesmachine.hdl.frontend.stereo import FrontEnd, StereoMachine
+from bayesmachine.hdl.frontend.stereo import FeaturePipeline, FrontEnd, StereoMachine
 from bayesmachine.hdl.machine import BayesianMachine
 from bayesmachine.params import MachineParams
 
@@ -168,7 +169,7 @@ class ShortWordGenerator(WordGenerator):
         return m
 
 
-class FirstIgnoredFrontEnd(FrontEnd):
+class FirstIgnoredPipeline(FeaturePipeline):
     """The frame-start marker is ignored: the position counters run on across frames."""
 
     def elaborate(self, platform: object) -> Module:
@@ -176,6 +177,19 @@ class FirstIgnoredFrontEnd(FrontEnd):
         comb, sync = driven(m, "comb"), driven(m, "sync")
         m.d.comb += [comb["cur_col"].eq(sync["col"]), comb["cur_line"].eq(sync["line"])]
         return m
+
+
+class FirstIgnoredFrontEnd(FrontEnd):
+    """A front end whose feature pipeline (where the position counters live since the front end
+    was split for K machines) is :class:`FirstIgnoredPipeline`."""
+
+    def elaborate(self, platform: object) -> Module:
+        saved = _stereo.FeaturePipeline
+        _stereo.FeaturePipeline = FirstIgnoredPipeline  # the class FrontEnd.elaborate instantiates
+        try:
+            return super().elaborate(platform)
+        finally:
+            _stereo.FeaturePipeline = saved
 
 
 class EarlyReadStereoMachine(StereoMachine):
