@@ -23,6 +23,21 @@ __all__ = ["frame_beats", "line_starts_from_beats", "output_pixels", "run_fronte
            "run_frontend_lr", "run_frontend_neighbour", "run_stereo", "run_stereo_lr", "words_from_beats"]
 
 
+async def feed_stream(ctx: SimulatorContext, stream: object, beats: Sequence[int], rnd: random.Random,
+                      in_stall: float) -> None:
+    """Drive ``stream`` (valid/ready/payload) with ``beats``, holding valid low before a beat with
+    probability ``in_stall`` per cycle (``rnd``): the testbenches' random input stalls."""
+    raw = stream.payload.as_value()  # type: ignore[attr-defined]
+    for beat in beats:
+        while in_stall and rnd.random() < in_stall:
+            ctx.set(stream.valid, 0)  # type: ignore[attr-defined]
+            await ctx.tick()
+        ctx.set(stream.valid, 1)  # type: ignore[attr-defined]
+        ctx.set(raw, beat)
+        await ctx.tick().until(stream.ready)  # type: ignore[attr-defined]
+    ctx.set(stream.valid, 0)  # type: ignore[attr-defined]
+
+
 def frame_beats(left: np.ndarray, right: np.ndarray) -> list[int]:
     """A pair as raw pixel-stream beats in raster order, ``first`` set on the first pixel."""
     if left.shape != right.shape or left.ndim != 2:
@@ -63,15 +78,7 @@ def _simulate(dut: object, source: object, sink_stream: object, beats: list[int]
     cycles = 0
 
     async def feeder(ctx: SimulatorContext) -> None:
-        raw = source.payload.as_value()
-        for beat in beats:
-            while in_stall and rnd.random() < in_stall:
-                ctx.set(source.valid, 0)
-                await ctx.tick()
-            ctx.set(source.valid, 1)
-            ctx.set(raw, beat)
-            await ctx.tick().until(source.ready)
-        ctx.set(source.valid, 0)
+        await feed_stream(ctx, source, beats, rnd, in_stall)
 
     async def collector(ctx: SimulatorContext) -> None:
         nonlocal cycles
@@ -152,15 +159,7 @@ def run_stereo_lr(top: StereoMachine, frames: Sequence[tuple[np.ndarray, np.ndar
     cycles = 0
 
     async def feeder(ctx: SimulatorContext) -> None:
-        raw = top.pixels.payload.as_value()
-        for beat in beats:
-            while in_stall and rnd.random() < in_stall:
-                ctx.set(top.pixels.valid, 0)
-                await ctx.tick()
-            ctx.set(top.pixels.valid, 1)
-            ctx.set(raw, beat)
-            await ctx.tick().until(top.pixels.ready)
-        ctx.set(top.pixels.valid, 0)
+        await feed_stream(ctx, top.pixels, beats, rnd, in_stall)
 
     async def collector(ctx: SimulatorContext) -> None:
         nonlocal cycles
@@ -216,15 +215,7 @@ def run_frontend_lr(front: FrontEnd, frames: Sequence[tuple[np.ndarray, np.ndarr
     got_right: list[int] = []
 
     async def feeder(ctx: SimulatorContext) -> None:
-        raw = front.pixels.payload.as_value()
-        for beat in beats:
-            while in_stall and rnd.random() < in_stall:
-                ctx.set(front.pixels.valid, 0)
-                await ctx.tick()
-            ctx.set(front.pixels.valid, 1)
-            ctx.set(raw, beat)
-            await ctx.tick().until(front.pixels.ready)
-        ctx.set(front.pixels.valid, 0)
+        await feed_stream(ctx, front.pixels, beats, rnd, in_stall)
 
     def results(sink: list[int], params: MachineParams, values: np.ndarray, take: object, map_: object,
                 hit: object, room: object | None) -> object:
@@ -293,15 +284,7 @@ def run_frontend_neighbour(front: FrontEnd, frames: Sequence[tuple[np.ndarray, n
     got: list[int] = []
 
     async def feeder(ctx: SimulatorContext) -> None:
-        raw = front.pixels.payload.as_value()
-        for beat in beats:
-            while in_stall and rnd.random() < in_stall:
-                ctx.set(front.pixels.valid, 0)
-                await ctx.tick()
-            ctx.set(front.pixels.valid, 1)
-            ctx.set(raw, beat)
-            await ctx.tick().until(front.pixels.ready)
-        ctx.set(front.pixels.valid, 0)
+        await feed_stream(ctx, front.pixels, beats, rnd, in_stall)
 
     async def results(ctx: SimulatorContext) -> None:
         for k in range(n):
