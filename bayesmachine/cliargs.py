@@ -20,7 +20,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TypeVar
 
-from bayesmachine.likelihood import DEFAULT_MODEL, LR_WATCHDOG_RUNS, MODELS, ModelParams, disparity_machine
+from bayesmachine.likelihood import (
+    DEFAULT_MODEL,
+    HARDWARE_MODEL,
+    LR_WATCHDOG_RUNS,
+    MODELS,
+    ModelParams,
+    disparity_machine,
+)
 from bayesmachine.params import (
     DEFAULT_COLUMNS,
     DEFAULT_COUNTER_MAX,
@@ -54,6 +61,7 @@ __all__ = [
     "CENSUS_OPTION_FLAGS",
     "LR_OPTION_FLAGS",
     "model_list",
+    "default_model",
     "output_path",
     "machine_params_from_args",
     "model_params_from_args",
@@ -361,10 +369,12 @@ MODEL_OPTION_FLAGS: tuple[tuple[str, str], ...] = (
 def add_model_options(
     parser: argparse.ArgumentParser, dmax: bool = True, given_only: bool = False,
     title: str = "model (paper table 1 defaults)", census: bool = False, sweep: bool = False,
+    hardware: bool = False, board_engine: bool = False,
 ) -> argparse._ActionsContainer:
     """The disparity model's options (paper table 1 defaults): ``--dmax`` unless ``dmax=False``,
     ``--p0``, ``--sigma`` / ``--sigma-m|gh|gv``, ``--p-nm0``, ``--sigma-nm``; with ``census``,
-    ``--model`` and the census model's options (:func:`add_census_options`; ``sweep``: a list).
+    ``--model`` and the census model's options (:func:`add_census_options`; ``sweep``: a list;
+    ``hardware``, ``board_engine``: its default, as there).
 
     ``given_only``: every option but ``--dmax`` stays None unless given (the defaults are filled in
     by :func:`model_params_from_args`), so that a command can refuse them where they do not apply."""
@@ -387,7 +397,7 @@ def add_model_options(
     g.add_argument("--sigma-nm", type=float_arg, default=default(defaults.sigma_nm),
                    help=f"no-match sigma ({defaults.sigma_nm:g})")
     if census:
-        add_census_options(parser, sweep=sweep)
+        add_census_options(parser, sweep=sweep, hardware=hardware, board_engine=board_engine)
     return g
 
 
@@ -440,23 +450,55 @@ def model_list(text: str) -> list[str]:
     return names
 
 
-def add_census_options(parser: argparse._ActionsContainer, sweep: bool = False,
-                       title: str | None = "census model (--model census; issue 17 defaults)") -> None:
-    """``--model`` (``paper``, or ``census``: + a census column, a calibrated no-match row and the
-    raster-order neighbour prior) and the census model's options, all None unless given.
+# Set (True) by add_census_options(hardware=True): the command builds or drives an FPGA design.
+_HARDWARE_DEST = "model_default_is_hardware"
 
-    ``sweep``: ``--model`` takes a comma-separated list (:func:`model_list`)."""
+
+def default_model(args: argparse.Namespace) -> str:
+    """The model a command runs when ``--model`` is not given, the one rule:
+    :data:`~bayesmachine.likelihood.HARDWARE_MODEL` for what builds or drives an FPGA design (a
+    command that declared ``add_census_options(hardware=True)``: emit, synth, board; ``run --engine
+    board``; ``--machines K`` with K > 1, which census-lr refuses), else
+    :data:`~bayesmachine.likelihood.DEFAULT_MODEL` (run, reference, sweep: on the host or in
+    simulation)."""
+    machines = getattr(args, "machines", None)
+    if (getattr(args, _HARDWARE_DEST, False) or getattr(args, "engine", None) == "board"
+            or (isinstance(machines, int) and machines > 1)):
+        return HARDWARE_MODEL
+    return DEFAULT_MODEL
+
+
+def add_census_options(parser: argparse._ActionsContainer, sweep: bool = False,
+                       title: str | None = "census model (--model census; issue 17 defaults)",
+                       hardware: bool = False, board_engine: bool = False) -> None:
+    """``--model`` (``paper``, or ``census``: + a census column, a calibrated no-match row and the
+    raster-order neighbour prior) and the census model's options, all None unless given; without
+    ``--model``, :func:`default_model` decides.
+
+    ``sweep``: ``--model`` takes a comma-separated list (:func:`model_list`). ``hardware``: the
+    command builds or drives an FPGA design (its default model is
+    :data:`~bayesmachine.likelihood.HARDWARE_MODEL`). ``board_engine``: the command has ``--engine
+    board`` and ``--machines`` (``run``), which :func:`default_model` reads; its help says so."""
     g = parser.add_argument_group(title) if title else parser
     described = ("paper: the paper's m, gH, gV columns; census: + a census column, a no-match row "
                  "calibrated for it and the raster-order neighbour prior on the machine's own results; "
                  "census-lr: + a left-right consistency column from a right pass")
+    why = f"{DEFAULT_MODEL}'s StereoMachine does not place on the ECP5-85F; README, Models"
+    if hardware:
+        default = f"default {HARDWARE_MODEL}: {why}"
+        parser.set_defaults(**{_HARDWARE_DEST: True})
+    elif board_engine:
+        default = (f"default {DEFAULT_MODEL}; {HARDWARE_MODEL} with --engine board or --machines K > 1: "
+                   f"{why}; its right pass runs on one machine")
+    else:
+        default = f"default {DEFAULT_MODEL}"
     if sweep:
         g.add_argument("--model", type=model_list, default=None, metavar="MODEL,MODEL,...",
                        help=f"comma-separated models to compare side by side, each over every random source "
-                       f"and counter max ({described}) (default {DEFAULT_MODEL})")
+                       f"and counter max ({described}) ({default})")
     else:
         g.add_argument("--model", choices=MODELS, default=None,
-                       help=f"the disparity model ({described}) (default {DEFAULT_MODEL})")
+                       help=f"the disparity model ({described}) ({default})")
     for dest, flag, kind, text in _CENSUS_OPTIONS:
         g.add_argument(flag, dest=dest, type=kind, default=None, help=text)
     g.add_argument("--neighbour-prior", dest="neighbour_prior", action=argparse.BooleanOptionalAction,
@@ -476,10 +518,10 @@ def add_census_options(parser: argparse._ActionsContainer, sweep: bool = False,
 
 
 def model_names_from_args(args: argparse.Namespace) -> list[str]:
-    """The model(s) ``--model`` names: a list (a sweep's) or one, :data:`DEFAULT_MODEL` if not given."""
+    """The model(s) ``--model`` names: a list (a sweep's) or one, :func:`default_model`'s if not given."""
     value = getattr(args, "model", None)
     if value is None:
-        return [DEFAULT_MODEL]
+        return [default_model(args)]
     return list(value) if isinstance(value, list) else [value]
 
 
@@ -512,7 +554,7 @@ def _lr_kwargs(args: argparse.Namespace, names: list[str]) -> dict[str, Any]:
 def model_params_from_args(args: argparse.Namespace, name: str | None = None) -> ModelParams:
     """``ModelParams`` from :func:`add_model_options`' options (``--sigma-X`` wins over ``--sigma``;
     an option left at None takes the paper's default) and :func:`add_census_options`' (``--model``,
-    :data:`~bayesmachine.likelihood.DEFAULT_MODEL` if not given). ``name`` picks one model of a sweep's
+    :func:`default_model`'s if not given). ``name`` picks one model of a sweep's
     list; census options given with only ``paper`` models are refused."""
     defaults = ModelParams()
     names = model_names_from_args(args)

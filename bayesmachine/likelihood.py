@@ -67,6 +67,7 @@ __all__ = [
     "MODELS",
     "LR_WATCHDOG_RUNS",
     "DEFAULT_MODEL",
+    "HARDWARE_MODEL",
     "CENSUS_WINDOWS",
     "FEATURES",
     "SCALES",
@@ -90,10 +91,16 @@ __all__ = [
 ]
 
 MODELS = ("paper", "census", "census-lr")
-# The model every command runs when --model is not given: the census model, which wins on the
-# measurements (README, Models) and which the host, every engine and the on-chip front end compute.
+# The model a command that computes disparities on the host or in simulation runs when --model is
+# not given (run, reference, sweep): census-lr, the best on the measurements (README, Models), which
+# the host, every engine and the simulated StereoMachine compute.
 # ModelParams() itself stays the paper's model (its figures stay reproducible with --model paper).
-DEFAULT_MODEL = "census"
+DEFAULT_MODEL = "census-lr"
+# The default of what builds or drives an FPGA design (emit, synth, board, run --engine board,
+# run --machines K > 1): census-lr's StereoMachine does not place on the ECP5-85F (89 % of its
+# flip-flops, docs/fpga.md) and K machines cannot share its right pass; census is the best model
+# that does. cliargs.default_model is the one rule choosing between the two.
+HARDWARE_MODEL = "census"
 # Census windows the model takes: 7x7 (48 bits, codes fit a uint64) or the cheaper 5x5 (24 bits).
 CENSUS_WINDOWS = (5, 7)
 # Default census sigma per window (issue 17: 6 for 7x7, 3 for 5x5).

@@ -49,10 +49,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     from bayesmachine.hdl.frontend.cli import add_options as add_stereo_options
 
     add_stereo_options(p)
-    # --model census: the census model's machine (4 columns and its neighbour prior), its throughput
-    # measured on the census model's words.
+    # --model census (the default, cliargs.default_model): the census model's machine (4 columns and
+    # its neighbour prior), its throughput measured on the census model's words.
     add_census_options(p, title="model (--model census: the census model's machine; with --top stereo its "
-                       "front end too)")
+                       "front end too)", hardware=True)
     p.add_argument("--machines", type=int_arg, default=1,
                    help="machines side by side (default 1): --top machine, behind one load and one result "
                    "stream; --top stereo, behind the one feature pipeline, map rows dealt to them, each "

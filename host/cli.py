@@ -634,7 +634,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         "while the first is writing.",
     )
     _add_input_options(p, optional=True)
-    add_model_options(p, census=True)
+    add_model_options(p, census=True, board_engine=True)
     _add_machine_options(p, sweep=False)
     p.set_defaults(func=_cmd_run)
 

@@ -163,8 +163,8 @@ def test_link_against_the_rtl(board, fault, reason) -> None:
 @pytest.mark.parametrize("model", ["census", "paper"])
 def test_the_two_commands(tmp_path: Path, model: str) -> None:
     """``board simulate`` prints the pty first; ``run --engine board`` on a crop writes the same
-    result.npz as ``run --engine model``, for the default (census) model and the paper's; SIGTERM ends
-    the simulation."""
+    result.npz as ``run --engine model``, for the census model (the board's default) and the paper's;
+    SIGTERM ends the simulation."""
     require_tool("verilator", "g++", "make")
     exe = [sys.executable, "-m", "bayesmachine"]
     design = ["--dmax", str(DMAX), "--model", model]

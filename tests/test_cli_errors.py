@@ -52,7 +52,7 @@ def test_run_under_a_file_size_limit_leaves_nothing(tmp_path: Path) -> None:
         resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
 
     command = [sys.executable, "-m", "bayesmachine", "run", "--crop", "300,200,140,40", "--dmax", "40",
-               "--no-sgbm", "--quiet", "-o"]
+               "--model", "census", "--no-sgbm", "--quiet", "-o"]
     # Once without the limit: numba's on-disk cache of the kernels (larger than the limit on a fresh
     # checkout) is written then, so the limited run fails where the test means it to.
     warm = subprocess.run(command + [str(tmp_path / "warm")], capture_output=True, text=True, timeout=600)
@@ -282,7 +282,8 @@ def test_waves_are_committed_with_the_run_and_dropped_by_a_rerun(tmp_path, pair)
     except Exception as exc:  # the engine's own "toolchain missing" error
         pytest.skip(str(exc))
     out = tmp_path / "w"
-    argv = ["run", *pair, "--dmax", "6", "--lanes", "4", "--quiet", "--engine", "verilator", "-o", str(out)]
+    argv = ["run", *pair, "--dmax", "6", "--model", "census", "--lanes", "4", "--quiet", "--engine",
+            "verilator", "-o", str(out)]
     assert main([*argv, "--waves", "0:1"]) == 0
     assert files(out) == ["disparity.png", "report.json", "result.npz", "waves.vcd"]
     assert (out / "waves.vcd").read_text().startswith("$version")

@@ -110,7 +110,8 @@ def test_signal_to_run_leaves_no_partial_file(tmp_path: Path, sig: int, code: in
         sys.exit(main(sys.argv[2:]))
     """)
     proc = subprocess.Popen([sys.executable, "-c", script, str(marker), "run", str(tmp_path / "l.png"),
-                             str(tmp_path / "r.png"), "--dmax", "8", "--quiet", "--no-sgbm", "-o", str(out)],
+                             str(tmp_path / "r.png"), "--dmax", "8", "--model", "census", "--quiet",
+                             "--no-sgbm", "-o", str(out)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     partial = Path(_wait_for(marker, proc, 120))
     assert partial.exists() and partial.parent == out and ".partial-" in partial.name

@@ -18,11 +18,11 @@ REPORT_KEYS = set(
 
 def test_run_on_bundled_crop(tmp_path):
     out = tmp_path / "out"
-    # A 140x40 crop of Motorcycle with Dmax 40, the default (census 7x7) model: its output region
-    # keeps every 7x7 window inside the image, (40-6) x (140-6-40) output pixels.
-    rc = main(
-        ["run", "--crop", "300,200,140,40", "--dmax", "40", "--counter-max", "8", "--quiet", "-o", str(out)]
-    )
+    # A 140x40 crop of Motorcycle with Dmax 40, the census 7x7 model (one pass: the default
+    # census-lr's two would double the time): its output region keeps every 7x7 window inside the
+    # image, (40-6) x (140-6-40) output pixels.
+    rc = main(["run", "--crop", "300,200,140,40", "--dmax", "40", "--model", "census", "--counter-max", "8",
+               "--quiet", "-o", str(out)])
     assert rc == 0
     report = json.loads((out / "report.json").read_text())
     assert REPORT_KEYS <= report.keys()
@@ -69,7 +69,7 @@ def test_run_on_a_crop_too_narrow_for_sgbm(tmp_path):
     """Width 98 leaves the (census) machine 12 columns with Dmax 80, but OpenCV's SGBM (96 disparities)
     cannot run: the report goes without SGBM figures instead of failing."""
     out = tmp_path / "narrow"
-    assert main(["run", "--crop", "300,200,98,10", "--quiet", "-o", str(out)]) == 0
+    assert main(["run", "--crop", "300,200,98,10", "--model", "census", "--quiet", "-o", str(out)]) == 0
     report = json.loads((out / "report.json").read_text())
     assert report["pixels"] == 4 * 12 and "machine_bad2" in report
     assert not any(k.startswith("sgbm_") for k in report)
@@ -80,8 +80,10 @@ def test_small_dmax_runs(tmp_path):
     left, right, _ = _write_pair(tmp_path)
     for dmax in (0, 3):
         out = tmp_path / f"d{dmax}"
+        # The default model, census-lr: both passes at Dmax 0 and 3.
         assert main(["run", str(left), str(right), "--dmax", str(dmax), "--quiet", "-o", str(out)]) == 0
-        assert json.loads((out / "report.json").read_text())["machine"]["rows"] == dmax + 2
+        report = json.loads((out / "report.json").read_text())
+        assert report["model_name"] == "census-lr" and report["machine"]["rows"] == dmax + 2
 
 
 def test_sweep_command(tmp_path):
@@ -97,6 +99,8 @@ def test_sweep_command(tmp_path):
         "16",
         "--counter-max",
         "1,4",
+        "--model",
+        "census",
         "--quiet",
     ]
     assert main([*args, "-o", str(out)]) == 0

@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 from bayesmachine import cliargs
-from bayesmachine.cli import main
+from bayesmachine.cli import build_parser, main
 from bayesmachine.host.features import model_features
 from bayesmachine.host.images import random_dot_stereogram
 from bayesmachine.host.reference import reference_map
 from bayesmachine.host.run import prepare, run_machine
-from bayesmachine.likelihood import DEFAULT_MODEL, ModelParams, disparity_machine
+from bayesmachine.likelihood import DEFAULT_MODEL, HARDWARE_MODEL, ModelParams, disparity_machine
 
 DMAX = 12
 
@@ -55,24 +55,92 @@ def test_run_census_is_the_neighbour_machine_of_the_model(pair, tmp_path):
     np.testing.assert_array_equal(np.load(out / "result.npz")["map"], want.map)
 
 
-def test_default_model_is_one_constant(pair, tmp_path, monkeypatch):
-    # The census model is the default (it wins on the measurements: README, Models); the paper's
-    # model stays one option away and its report is what it always was.
-    assert DEFAULT_MODEL == "census"
+def test_default_model_is_one_rule(pair, tmp_path, monkeypatch):
+    # census-lr is the default of what runs on the host or in simulation (it wins on the
+    # measurements: README, Models); the paper's model stays one option away and its report is what
+    # it always was.
+    assert (DEFAULT_MODEL, HARDWARE_MODEL) == ("census-lr", "census")
     out = tmp_path / "default"
     assert main(["run", *_args(pair, "--counter-max", "4", "--no-sgbm"), "-o", str(out)]) == 0
     report = json.loads((out / "report.json").read_text())
-    assert report["model_name"] == "census" and report["machine"]["prior"] == "neighbour"
+    assert report["model_name"] == "census-lr" and report["model"] == ModelParams(dmax=DMAX,
+                                                                                   name="census-lr").to_dict()
+    assert report["machine"]["prior"] == "neighbour" and report["machine"]["columns"] == 5
+    assert "right_pass_machine" in report and report["right_pass_pixels"] > 0
     out = tmp_path / "paper"
     argv = _args(pair, "--model", "paper", "--counter-max", "4", "--no-sgbm")
     assert main(["run", *argv, "-o", str(out)]) == 0
     report = json.loads((out / "report.json").read_text())
     assert report["model_name"] == "paper" and report["machine"]["prior"] == "uniform"
     assert "name" not in report["model"]  # the paper model's dict is what it always was
+    # One constant each: the rule reads them, no command spells a model.
     monkeypatch.setattr(cliargs, "DEFAULT_MODEL", "paper")
     out = tmp_path / "switched"
     assert main(["run", *_args(pair, "--counter-max", "4", "--no-sgbm"), "-o", str(out)]) == 0
     assert json.loads((out / "report.json").read_text())["machine"]["prior"] == "uniform"
+
+
+# Without --model: census-lr where the command computes on the host or in simulation, census where it
+# builds or drives an FPGA design (census-lr's StereoMachine does not place on the ECP5-85F) or runs
+# K > 1 machines (census-lr's right pass runs on one).
+DEFAULTS = [
+    (["run", "-o", "x"], "census-lr"),
+    (["run", "--engine", "pysim", "-o", "x"], "census-lr"),
+    (["run", "--engine", "verilator", "--feed", "pixels", "-o", "x"], "census-lr"),
+    (["run", "--machines", "1", "-o", "x"], "census-lr"),
+    (["reference", "l.png", "r.png", "-o", "x"], "census-lr"),
+    (["run", "--engine", "board", "--port", "/dev/null", "-o", "x"], "census"),
+    (["run", "--machines", "2", "-o", "x"], "census"),
+    (["run", "--engine", "verilator", "--feed", "pixels", "--machines", "2", "-o", "x"], "census"),
+    (["emit"], "census"),
+    (["emit", "--top", "stereo"], "census"),
+    (["synth", "--target", "ecp5-85k"], "census"),
+    (["synth", "--target", "ecp5-85k", "--top", "stereo"], "census"),
+    (["board", "build"], "census"),
+    (["board", "simulate"], "census"),
+]
+
+
+@pytest.mark.parametrize(("argv", "want"), DEFAULTS)
+def test_each_command_resolves_its_default_model(argv, want):
+    args = build_parser().parse_args(argv)
+    assert cliargs.default_model(args) == want
+    assert cliargs.model_params_from_args(args).name == want
+    # An explicit --model wins everywhere.
+    args = build_parser().parse_args([*argv, "--model", "paper"])
+    assert cliargs.model_params_from_args(args).name == "paper"
+
+
+def test_sweep_defaults_to_census_lr():
+    args = build_parser().parse_args(["sweep", "-o", "x"])
+    assert cliargs.model_names_from_args(args) == ["census-lr"]
+    args = build_parser().parse_args(["sweep", "--model", "paper,census", "-o", "x"])
+    assert cliargs.model_names_from_args(args) == ["paper", "census"]
+
+
+def test_help_states_each_commands_default(capsys):
+    def model_help(*command):
+        with pytest.raises(SystemExit):
+            build_parser().parse_args([*command, "--help"])
+        text = " ".join(capsys.readouterr().out.split())  # argparse wraps the lines
+        return text.split("consistency column from a right pass) (default ", 1)[1]  # --model's
+
+    for command in (["run"], ["reference"], ["sweep"]):
+        assert model_help(*command).startswith("census-lr"), command
+    assert "census with --engine board or --machines K > 1" in model_help("run")
+    for command in (["emit"], ["synth"], ["board", "build"], ["board", "simulate"]):
+        assert model_help(*command).startswith("census: census-lr's StereoMachine does not place"), command
+
+
+@pytest.mark.parametrize("argv", [["emit", "--top", "stereo", "-o", "{o}"], ["board", "simulate"],
+                                  ["run", "--engine", "board", "--port", "/dev/null", "-o", "{o}"]])
+def test_census_lr_options_are_refused_where_census_is_the_default(argv, tmp_path, capsys):
+    argv = [a.replace("{o}", str(tmp_path / "o")) for a in argv]
+    assert main([*argv, "--lr-beta", "0.2"]) == 2
+    assert not (tmp_path / "o").exists()
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--lr-beta: options of --model census-lr, which do not apply to --model census" \
+        in err[0], err
 
 
 def test_reference_census(pair, tmp_path):

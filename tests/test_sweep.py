@@ -21,7 +21,8 @@ from bayesmachine.cli import build_parser, main
 from bayesmachine.host import sweep as sweep_mod
 from bayesmachine.host.sweep import CACHE_STATS, strip_timings, sweep_points
 
-SMALL = ["--dmax", "8", "--quiet"]
+# The census model: one pass (the default, census-lr, runs two).
+SMALL = ["--dmax", "8", "--model", "census", "--quiet"]
 
 
 def load(out: Path) -> dict:
@@ -43,7 +44,7 @@ def test_dataset_sweep_on_two_workers_reports_a_raising_task(tmp_path, capsys, m
     err = capsys.readouterr().err.strip().splitlines()
     sweep = load(out)
     points = [p["id"] for p in sweep["points"]]
-    assert points == ["census_sobol_cm2", "census_sobol_cm8"]  # the default model
+    assert points == ["census_sobol_cm2", "census_sobol_cm8"]  # the model, --model census
     # Each of the bad pair's tasks is reported with its pair and point; the other pairs completed.
     assert [(f["pair"], f["point"]) for f in sweep["failures"]] == [("Q/Scene1", p) for p in points]
     assert all("Q/Scene1/im1.png as an image" in f["error"] for f in sweep["failures"])
@@ -87,7 +88,7 @@ def _dataset(tmp_path: Path) -> Path:
 
 def test_a_killed_sweep_resumes_to_the_same_sweep_json(tmp_path, capsys) -> None:
     data = _dataset(tmp_path)
-    grid = ["--dataset", str(data), "--dmax", "8", "--no-sgbm", "--counter-max", "2,8"]
+    grid = ["--dataset", str(data), "--dmax", "8", "--model", "census", "--no-sgbm", "--counter-max", "2,8"]
     seeds = ["--seed", "1,2"]
     killed = tmp_path / "killed"
     proc = subprocess.Popen([sys.executable, "-m", "bayesmachine", "sweep", *grid, *seeds, "--workers", "0",
@@ -147,7 +148,7 @@ def test_the_grid_is_the_product_of_the_list_options() -> None:
     assert len(points) == 16 and len({p.id for p in points}) == 16
     got = [(p.machine.rng, p.machine.word_bits, p.machine.seed, p.machine.counter_max) for p in points]
     assert got == [(r, w, s, n) for r in ("sobol", "lfsr") for w in (8, 10) for s in (1, 2) for n in (2, 4)]
-    assert points[0].id == "census_sobol_cm2_word_bits8_seed1"  # the default model first
+    assert points[0].id == "census-lr_sobol_cm2_word_bits8_seed1"  # the default model first
     # Device options of --rng smtj: a point of another source does not repeat per device value.
     args = parser.parse_args(["sweep", "--dmax", "8", "--rng", "smtj,sobol", "--smtj-dwell", "1,2",
                               "--counter-max", "2", "-o", "x"])
@@ -161,8 +162,9 @@ def test_the_points_of_a_pair_share_its_prepared_features_and_reference(tmp_path
     data = _dataset(tmp_path)
     sweep_mod.clear_cache()
     out = tmp_path / "o"
-    assert main(["sweep", "--dataset", str(data), "--pairs", "::2", "--dmax", "8", "--counter-max", "2,4,8",
-                 "--rng", "sobol,lfsr", "--no-sgbm", "--workers", "0", "-o", str(out)]) == 0
+    assert main(["sweep", "--dataset", str(data), "--pairs", "::2", "--dmax", "8", "--model", "census",
+                 "--counter-max", "2,4,8", "--rng", "sobol,lfsr", "--no-sgbm", "--workers", "0",
+                 "-o", str(out)]) == 0
     assert CACHE_STATS["pair_loads"] == 2 and CACHE_STATS["prepares"] == 2  # not 2 x 6
     assert [e["name"] for e in load(out)["pairs"]] == ["l0", "l2"]  # --pairs ::2 of l0, l1, l2
     said = capsys.readouterr()

@@ -310,8 +310,9 @@ def test_run_command_with_verilator_and_waves(cache: Path, tmp_path: Path,
     from bayesmachine.cli import main
 
     monkeypatch.setenv("BAYESMACHINE_CACHE_DIR", str(cache.parent))
-    # --lanes 4: SMALL, whose traced build test_trace_pixel_range shares.
-    common = ["run", "--crop", "300,200,40,12", "--dmax", "6", "--lanes", "4", "--no-sgbm", "--quiet"]
+    # --model paper --lanes 4: SMALL, whose traced build test_trace_pixel_range shares.
+    common = ["run", "--crop", "300,200,40,12", "--dmax", "6", "--model", "paper", "--lanes", "4",
+              "--no-sgbm", "--quiet"]
     assert main([*common, "-o", str(tmp_path / "model")]) == 0
     assert main([*common, "--engine", "verilator", "--waves", "2:4", "-o", str(tmp_path / "rtl")]) == 0
     a, b = np.load(tmp_path / "model" / "result.npz"), np.load(tmp_path / "rtl" / "result.npz")
