@@ -232,6 +232,7 @@ def test_bitstream_for_the_ulx3s_85f(tmp_path: Path) -> None:
     report = json.loads((out / "report.json").read_text())
     assert report["timing_met"] is True and report["fmax_mhz"] >= report["constraint_mhz"] == 45.0
     assert report["program"] == f"openFPGALoader -b ulx3s {bit}"
+    assert (report["router"], report["seed"]) == ("router1", 1)
     assert (
         "Critical path" in (out / "nextpnr.log").read_text()
         or "Max frequency" in (out / "nextpnr.log").read_text()

@@ -18,7 +18,9 @@ from bayesmachine.cliargs import (
     model_params_from_args,
     output_path,
 )
+from bayesmachine.fpga.flow import ROUTERS
 
+from .build import DEFAULT_BOARD_ROUTER, DEFAULT_BOARD_SEED
 from .ulx3s import BOARDS
 
 __all__ = ["register"]
@@ -94,9 +96,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         help="the design's clock from the PLL (default 45: 3 Mbaud in 15 clocks per bit)",
     )
     b.add_argument("--baud", type=int_arg, default=None, help="UART baud rate (default 3000000)")
-    b.add_argument("--pnr-seed", type=int_arg, default=2,
-                   help="nextpnr placement seed (default 2: the census design on the ULX3S-85F is hard "
-                   "to route and some seeds do not converge; try another, docs/board.md)")
+    b.add_argument("--pnr-seed", type=int_arg, default=DEFAULT_BOARD_SEED,
+                   help=f"nextpnr placement seed (default {DEFAULT_BOARD_SEED})")
+    b.add_argument("--router", choices=ROUTERS, default=DEFAULT_BOARD_ROUTER,
+                   help=f"nextpnr router (default {DEFAULT_BOARD_ROUTER}: router2 does not converge on the "
+                   "census design on the ULX3S-85F, router1 routes it; docs/board.md)")
     b.add_argument(
         "-o", "--output", type=output_path, default=None, help="output directory (default build/BOARD)"
     )
@@ -143,6 +147,7 @@ def _build(args: argparse.Namespace) -> int:
         clock_mhz=DEFAULT_CLOCK_MHZ if args.clock is None else args.clock,
         baud=DEFAULT_BAUD if args.baud is None else args.baud,
         seed=args.pnr_seed,
+        router=args.router,
     )
     print(
         f"{out / 'top.bit'}: {report['fmax_mhz']} MHz achieved, {report['constraint_mhz']:g} MHz asked: "
