@@ -300,8 +300,9 @@ def test_cli_board_fields_errors(extra: list[str], message: str, tmp_path, capsy
     assert message in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
 
 
-@pytest.mark.parametrize("extra, router, seed", [([], "router1", 1), (["--router", "router2", "--pnr-seed", "3"],
-                                                                        "router2", 3)])
+@pytest.mark.parametrize(
+    "extra, router, seed", [([], "router1", 1), (["--router", "router2", "--pnr-seed", "3"], "router2", 3)]
+)
 def test_board_build_routes_with_router1_by_default(extra: list[str], router: str, seed: int, tmp_path,
                                                      monkeypatch) -> None:
     """`board build` hands nextpnr router1 unless told otherwise: router2 does not converge on the
