@@ -38,6 +38,25 @@ async def feed_stream(ctx: SimulatorContext, stream: object, beats: Sequence[int
     ctx.set(stream.valid, 0)  # type: ignore[attr-defined]
 
 
+async def collect_stream(ctx: SimulatorContext, stream: object, sink: list[int], expected: int,
+                         rnd: random.Random, out_stall: float, max_cycles: int) -> int:
+    """Take ``expected`` beats of ``stream`` into ``sink``, holding ready low with probability
+    ``out_stall`` per cycle (``rnd``): the testbenches' random output stalls. Returns the clock
+    cycles it took; more than ``max_cycles`` is an error (a design that never answers)."""
+    raw = stream.payload.as_value()  # type: ignore[attr-defined]
+    cycles = 0
+    while len(sink) < expected:
+        ready = not (out_stall and rnd.random() < out_stall)
+        ctx.set(stream.ready, ready)  # type: ignore[attr-defined]
+        _, _, valid, payload = await ctx.tick().sample(stream.valid, raw)  # type: ignore[attr-defined]
+        cycles += 1
+        if valid and ready:
+            sink.append(payload)
+        if cycles > max_cycles:
+            raise RuntimeError(f"no complete output after {max_cycles} cycles ({len(sink)}/{expected})")
+    return cycles
+
+
 def frame_beats(left: np.ndarray, right: np.ndarray) -> list[int]:
     """A pair as raw pixel-stream beats in raster order, ``first`` set on the first pixel."""
     if left.shape != right.shape or left.ndim != 2:
@@ -82,16 +101,7 @@ def _simulate(dut: object, source: object, sink_stream: object, beats: list[int]
 
     async def collector(ctx: SimulatorContext) -> None:
         nonlocal cycles
-        raw = sink_stream.payload.as_value()
-        while len(got) < expected:
-            ready = not (out_stall and rnd.random() < out_stall)
-            ctx.set(sink_stream.ready, ready)
-            _, _, valid, payload = await ctx.tick().sample(sink_stream.valid, raw)
-            cycles += 1
-            if valid and ready:
-                got.append(payload)
-            if cycles > max_cycles:
-                raise RuntimeError(f"no complete output after {max_cycles} cycles ({len(got)}/{expected})")
+        cycles = await collect_stream(ctx, sink_stream, got, expected, rnd, out_stall, max_cycles)
 
     sim = Simulator(dut)
     sim.add_clock(1e-8)
@@ -238,18 +248,7 @@ def run_frontend_lr(front: FrontEnd, frames: Sequence[tuple[np.ndarray, np.ndarr
 
     def collector(stream_: object, sink: list[int], expected: int) -> object:
         async def bench(ctx: SimulatorContext) -> None:
-            raw = stream_.payload.as_value()
-            cycles = 0
-            while len(sink) < expected:
-                ready = not (out_stall and rnd.random() < out_stall)
-                ctx.set(stream_.ready, ready)
-                _, _, valid, payload = await ctx.tick().sample(stream_.valid, raw)
-                cycles += 1
-                if valid and ready:
-                    sink.append(payload)
-                if cycles > max_cycles:
-                    raise RuntimeError(f"no complete output after {max_cycles} cycles "
-                                       f"({len(sink)}/{expected})")
+            await collect_stream(ctx, stream_, sink, expected, rnd, out_stall, max_cycles)
         return bench
 
     sim = Simulator(front)
