@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from bayesmachine.likelihood import (
+    CENSUS_TIMEOUT_ANSWER,
     DEFAULT_MODEL,
     HARDWARE_MODEL,
     LR_WATCHDOG_RUNS,
@@ -42,9 +43,11 @@ from bayesmachine.params import (
     DEFAULT_WORDS_PER_BEAT,
     PRIORS,
     RNG_KINDS,
+    SAMPLES_PER_CLOCK,
     SMTJ_SHARES,
     STEREO_ROWS_PER_BEAT,
     TIE_BREAKS,
+    TIMEOUT_ANSWERS,
     MachineParams,
     ParameterError,
 )
@@ -251,10 +254,20 @@ add_option(MachineOption("seed", "--seed",
                          default=DEFAULT_SEED))
 # --max-cycles is left at None unless given: census-lr's machine has its own default watchdog.
 add_option(MachineOption("max_cycles", "--max-cycles",
-                         "watchdog: a pixel stops as a timeout (no match) after this many cycles "
+                         "watchdog: a pixel stops as a timeout after this many cycles (samples) "
                          f"(default {DEFAULT_MAX_CYCLES}; with --model census-lr {LR_WATCHDOG_RUNS} x "
                          f"(counter max + 1), {LR_WATCHDOG_RUNS * (DEFAULT_COUNTER_MAX + 1)} at counter max "
                          f"{DEFAULT_COUNTER_MAX}, for both passes)", metavar="N"))
+add_option(MachineOption("timeout_answer", "--timeout-answer",
+                         "what a run stopped by the watchdog answers (still flagged timeout): none (no "
+                         "match) or leading (the row with the largest count, by the tie rule) (default none; "
+                         f"{CENSUS_TIMEOUT_ANSWER} with --model census and census-lr)",
+                         choices=TIMEOUT_ANSWERS))
+add_option(MachineOption("samples_per_clock", "--samples-per-clock",
+                         "B random samples per operator and clock, one of "
+                         f"{', '.join(map(str, SAMPLES_PER_CLOCK))}: the results of B = 1 in "
+                         "ceil(cycles / B) clocks (the cycles reported are clocks; --max-cycles counts "
+                         "samples); rng sobol or external (default 1)", metavar="B"))
 add_option(MachineOption("tie_break", "--tie-break",
                          "MAP encoder rule when several counters overflow in one cycle (default %(default)s)",
                          default=DEFAULT_TIE_BREAK, choices=TIE_BREAKS))

@@ -66,6 +66,7 @@ from bayesmachine.params import DEFAULT_DMAX, STEREO_ROWS_PER_BEAT, MachineParam
 __all__ = [
     "MODELS",
     "LR_WATCHDOG_RUNS",
+    "CENSUS_TIMEOUT_ANSWER",
     "DEFAULT_MODEL",
     "HARDWARE_MODEL",
     "CENSUS_WINDOWS",
@@ -153,6 +154,9 @@ LR_PRIOR_NOMATCH = 0.1
 # 64 cycles: every hypothesis explains the pixel badly. It cuts the long tail of the left pass's runs
 # (docs/host.md, "census-lr's cycles"); a given max_cycles (--max-cycles) wins.
 LR_WATCHDOG_RUNS = 64
+# The census models' answer to a timeout: the leading row (the counters hold the partial posterior);
+# the paper's machine keeps "none" (a timeout is no match).
+CENSUS_TIMEOUT_ANSWER = "leading"
 
 
 def _error(name: str, text: str) -> ParameterError:
@@ -618,6 +622,8 @@ def disparity_machine(model: ModelParams, **machine_kwargs: object) -> MachinePa
     elif prior == "neighbour":
         raise ParameterError(f"prior: 'neighbour' is the census model's neighbour prior; the {model.name} "
                              "model" + (" without it" if model.census else "") + " has no feedback table")
+    if model.census and kwargs.get("timeout_answer") is None:
+        kwargs["timeout_answer"] = CENSUS_TIMEOUT_ANSWER
     if model.lr and "max_cycles" not in kwargs:
         counter_max = MachineParams.for_disparity(model.dmax, **kwargs).counter_max  # type: ignore[arg-type]
         kwargs["max_cycles"] = LR_WATCHDOG_RUNS * (counter_max + 1)
@@ -639,7 +645,8 @@ def right_machine(model: ModelParams, machine: MachineParams) -> MachineParams:
     if not model.lr:
         raise ValueError(f"the {model.name} model has no right pass")
     check_disparity_machine(model, machine)
-    keep = ("word_bits", "counter_max", "rng", "lfsr_bits", "seed", "max_cycles", "tie_break")
+    keep = ("word_bits", "counter_max", "rng", "lfsr_bits", "seed", "max_cycles", "tie_break",
+            "samples_per_clock", "timeout_answer")
     kwargs = {k: getattr(machine, k) for k in keep}
     if model.lr_right_max_cycles is not None:
         kwargs["max_cycles"] = model.lr_right_max_cycles

@@ -156,7 +156,7 @@ def run_machine(
     left_f, right_f = prepared.features
 
     def disp_row(y: int) -> np.ndarray:
-        return disparities(flat_map[y], nomatch[y], timeout[y])
+        return disparities(flat_map[y], nomatch[y], timeout[y], machine)
 
     try:
         with tqdm(total=ho * wo, unit="px", disable=not _want_progress(progress), desc=f"{engine}") as bar:
@@ -198,8 +198,8 @@ def run_machine(
             eng.close()  # the Verilator harness is a process: end it now, not at garbage collection
         if lr is not None:
             lr.close()
-    # Timeouts count as no match: the machine gave no answer within its watchdog.
-    disp = disparities(flat_map, nomatch, timeout)
+    # A timeout is no match unless the machine answers it with its leading row (timeout_answer).
+    disp = disparities(flat_map, nomatch, timeout, machine)
     right = lr.result() if lr is not None else None
     return MachineRun(engine, machine, disp, counts, cycles, nomatch, timeout, engine_s, words_s, wall, right)
 
@@ -240,8 +240,9 @@ class _RightRun:
         timeout = np.asarray(res.timeout, bool)
         self.timeout[y] = timeout
         self.cycles[y] = np.asarray(res.cycles)
-        # A no-match call (the right pass's no-match row, lr_right_nomatch) or a timeout: no right MAP.
-        self.map[y] = res.disparities()
+        # A no-match call (the right pass's no-match row, lr_right_nomatch) or an unanswered timeout:
+        # no right MAP.
+        self.map[y] = res.disparities(self.machine)
         return lr_column(self.map[y], int(self.columns[0]), self.map_columns, model, left_q.one,
                          left_q.lr_beta, left_q.lr_gamma)
 
@@ -277,7 +278,7 @@ def _run_pixels(
     m = model.hypotheses
     timeout = res.timeout.reshape(ho, wo)
     nomatch = res.nomatch.reshape(ho, wo)
-    disp = disparities(res.map.reshape(ho, wo), nomatch, timeout)
+    disp = disparities(res.map.reshape(ho, wo), nomatch, timeout, machine)
     counts = res.counts.reshape(ho, wo, m).astype(counts_dtype(machine.counter_max))
     right = None
     if model.lr:
@@ -289,8 +290,9 @@ def _run_pixels(
         assert r is not None
         wr = r.map.size // ho
         r_timeout = r.timeout.reshape(ho, wr)
-        r_map = r.disparities().reshape(ho, wr)
-        right = RightPass(right_pass_params(model, machine), r_map, r.cycles.reshape(ho, wr), r_timeout,
+        r_params = right_pass_params(model, machine)
+        r_map = r.disparities(r_params).reshape(ho, wr)
+        right = RightPass(r_params, r_map, r.cycles.reshape(ho, wr), r_timeout,
                           seconds, 0)
     return MachineRun("verilator", machine, disp, counts, res.cycles.reshape(ho, wo),
                       nomatch, timeout, seconds, 0.0, wall, right)
@@ -324,7 +326,7 @@ def machines_model(
                     starts = np.zeros(wo, bool)
                     starts[0] = True
                     res = eng.run(words, line_start=starts)
-                    above = res.disparities()
+                    above = res.disparities(machine)
                 else:
                     res = eng.run(memory_words(fl, fr, model, machine, rows=slice(y, y + 1), qtables=qtables))
                 parts.append(res)

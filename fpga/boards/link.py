@@ -347,7 +347,7 @@ def run_board(
             ser.close()
     nomatch = got["nomatch"].reshape(ho, wo)
     timeout_ = got["timeout"].reshape(ho, wo)
-    disp = disparities(got["map"].reshape(ho, wo), nomatch, timeout_)
+    disp = disparities(got["map"].reshape(ho, wo), nomatch, timeout_, machine)
     counts = cycles = None  # not asked for: absent, never made up
     if "counts" in got:
         counts = got["counts"].reshape(ho, wo, machine.rows).astype(counts_dtype(machine.counter_max))
