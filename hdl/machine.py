@@ -575,7 +575,8 @@ class BayesianMachine(wiring.Component):
         """A neighbour prior's feedback column 0: formed at each swap from the previous result.
 
         The bubble registers the winning row (``prev_row``, a copy per group of rows) and whether
-        it is a hypothesis row (``prev_valid``: not the no-match row, not a timeout); the next
+        it is a hypothesis row (``prev_valid``: not the no-match row, not a timeout, answered or
+        not); the next
         cycle (``settle``) registers each row's word, ``feedback_words[min(|r - prev_row|, last)]``
         (the no-match row ``feedback_nomatch_word``; 1.0 everywhere without a previous
         hypothesis, after reset too); the swap, a cycle later still, takes them, or 1.0
@@ -592,6 +593,8 @@ class BayesianMachine(wiring.Component):
         prev_valids = [Signal(name=f"prev_valid_rep{g}") for g in range(n.groups)]
         with m.If(n.leave):
             hypothesis = n.valid_q
+            if n.timed_out is not None:  # a timeout's leading row is its answer, not information
+                hypothesis = hypothesis & ~n.timed_out
             if p.nomatch_row:
                 hypothesis = hypothesis & (n.winner != p.rows - 1)
             m.d.sync += [c.eq(n.winner) for c in prev_rows] + [c.eq(hypothesis) for c in prev_valids]

@@ -29,7 +29,7 @@ from bayesmachine.likelihood import lr_column, neighbour_words, right_machine
 from bayesmachine.outputs import require_memory
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.engines import ENGINES, get_engine
-from bayesmachine.sim.results import MachineResult, disparities
+from bayesmachine.sim.results import MachineResult, disparities, neighbour_answers
 
 from .features import model_features
 from .images import validate_pair
@@ -155,8 +155,8 @@ def run_machine(
     engine_s = words_s = 0.0
     left_f, right_f = prepared.features
 
-    def disp_row(y: int) -> np.ndarray:
-        return disparities(flat_map[y], nomatch[y], timeout[y], machine)
+    def above_row(y: int) -> np.ndarray:
+        return neighbour_answers(flat_map[y], nomatch[y], timeout[y])
 
     try:
         with tqdm(total=ho * wo, unit="px", disable=not _want_progress(progress), desc=f"{engine}") as bar:
@@ -165,7 +165,7 @@ def run_machine(
                 t0 = time.perf_counter()
                 if neighbour:
                     # The machine's own results of the row above (-1: no match, timeout, none for row 0).
-                    above = np.full(wo, -1, np.int16) if y0 == 0 else disp_row(y0 - 1)
+                    above = np.full(wo, -1, np.int16) if y0 == 0 else above_row(y0 - 1)
                     prior = neighbour_words(qtables, model.dmax, above)
                     consistency = None
                     if lr is not None:
@@ -240,9 +240,8 @@ class _RightRun:
         timeout = np.asarray(res.timeout, bool)
         self.timeout[y] = timeout
         self.cycles[y] = np.asarray(res.cycles)
-        # A no-match call (the right pass's no-match row, lr_right_nomatch) or an unanswered timeout:
-        # no right MAP.
-        self.map[y] = res.disparities(self.machine)
+        # A no-match call (the right pass's no-match row, lr_right_nomatch) or a timeout: no right MAP.
+        self.map[y] = res.neighbour_answers()
         return lr_column(self.map[y], int(self.columns[0]), self.map_columns, model, left_q.one,
                          left_q.lr_beta, left_q.lr_gamma)
 
@@ -290,9 +289,8 @@ def _run_pixels(
         assert r is not None
         wr = r.map.size // ho
         r_timeout = r.timeout.reshape(ho, wr)
-        r_params = right_pass_params(model, machine)
-        r_map = r.disparities(r_params).reshape(ho, wr)
-        right = RightPass(r_params, r_map, r.cycles.reshape(ho, wr), r_timeout,
+        r_map = r.neighbour_answers().reshape(ho, wr)
+        right = RightPass(right_pass_params(model, machine), r_map, r.cycles.reshape(ho, wr), r_timeout,
                           seconds, 0)
     return MachineRun("verilator", machine, disp, counts, res.cycles.reshape(ho, wo),
                       nomatch, timeout, seconds, 0.0, wall, right)
@@ -326,7 +324,7 @@ def machines_model(
                     starts = np.zeros(wo, bool)
                     starts[0] = True
                     res = eng.run(words, line_start=starts)
-                    above = res.disparities(machine)
+                    above = res.neighbour_answers()
                 else:
                     res = eng.run(memory_words(fl, fr, model, machine, rows=slice(y, y + 1), qtables=qtables))
                 parts.append(res)

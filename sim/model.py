@@ -64,8 +64,8 @@ def _leading_row(counts, nm_index):
 @numba.njit(cache=True, inline="always")
 def _store(p, counts, k, winner, samples, leading, nm_index, out_counts, out_map, out_timeout, out_cycles):
     """Pixel p's result: counters at the stop, MAP, timeout flag, clocks (``k`` samples in clocks of
-    ``samples``). A timeout's MAP is 0, or with ``leading`` the leading row. Returns the answer the
-    next pixel's feedback prior follows (the MAP, -1 for a timeout without an answer)."""
+    ``samples``). A timeout's MAP is 0, or with ``leading`` the leading row. Returns the MAP (-1 for
+    a timeout without an answer)."""
     out_counts[p, :] = counts
     out_cycles[p] = (k + samples - 1) // samples
     out_timeout[p] = winner < 0
@@ -91,9 +91,10 @@ def _fill_feedback(qp, prev, start, fb, fb_nm, rows, opcols, nm_row, one):
 
 
 @numba.njit(cache=True, inline="always")
-def _feedback_result(winner, nm_row):
-    """The result a next pixel's feedback prior follows: the winning hypothesis row, else -1."""
-    return winner if winner >= 0 and winner != nm_row else -1
+def _feedback_result(winner, timeout, nm_row):
+    """The result a next pixel's feedback prior follows: the winning hypothesis row, else -1 (no
+    match; a timeout, even one answered by its leading row: no information)."""
+    return winner if winner >= 0 and not timeout and winner != nm_row else -1
 
 
 @numba.njit(cache=True, inline="always")
@@ -168,7 +169,7 @@ def _run_on_chip(q, states, shifts, points, per_operator, rows, opcols, word_bit
                 break
         winner = _store(p, counts, k, winner, samples, leading, nm_index, out_counts, out_map, out_timeout,
                         out_cycles)
-        prev[0] = _feedback_result(winner, nm_row)
+        prev[0] = _feedback_result(winner, out_timeout[p], nm_row)
 
 
 def _lfsr_arrays(specs: list[LFSRSpec]) -> tuple[np.ndarray, np.ndarray]:
@@ -278,7 +279,7 @@ def _run_numbers(q, numbers, first, counts, done, rows, opcols, word_bits, n_max
                 break
         winner = _store(p, counts, k, winner, samples, leading, nm_index, out_counts, out_map, out_timeout,
                         out_cycles)
-        prev[0] = _feedback_result(winner, nm_row)
+        prev[0] = _feedback_result(winner, out_timeout[p], nm_row)
         counts[:] = 0
         k = 0
     done[0] = 0

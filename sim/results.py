@@ -30,6 +30,7 @@ __all__ = [
     "decode_results",
     "disparities",
     "layout_fields",
+    "neighbour_answers",
     "ran_out_error",
 ]
 
@@ -79,6 +80,10 @@ class MachineResult:
         """:func:`disparities` of these results, from the machine of ``params``."""
         return disparities(self.map, self.nomatch, self.timeout, params)
 
+    def neighbour_answers(self) -> np.ndarray:
+        """:func:`neighbour_answers` of these results."""
+        return neighbour_answers(self.map, self.nomatch, self.timeout)
+
     def equal(self, other: MachineResult) -> bool:
         return all(np.array_equal(getattr(self, f.name), getattr(other, f.name)) for f in fields(self))
 
@@ -94,9 +99,19 @@ def disparities(map_: np.ndarray, nomatch: np.ndarray, timeout: np.ndarray,
                 params: MachineParams) -> np.ndarray:
     """The answer of each pixel (int16) of the machine of ``params``: its MAP row, -1 where the
     no-match row won or the run gave no answer (stopped by the watchdog with ``timeout_answer =
-    "none"``). The one rule every engine's caller reads results by, the neighbour prior's above
-    column and census-lr's right MAPs included (they follow a timed-out pixel's answered row)."""
+    "none"``). The one rule every engine's caller reads a pixel's answer by (what a neighbour
+    follows is :func:`neighbour_answers`)."""
     none = np.asarray(nomatch, bool) | ~answered(params, timeout)
+    return np.where(none, -1, map_).astype(np.int16)
+
+
+def neighbour_answers(map_: np.ndarray, nomatch: np.ndarray, timeout: np.ndarray) -> np.ndarray:
+    """What the neighbours of each pixel follow (int16): the neighbour prior's above column and
+    census-lr's right MAPs, as the machine's feedback column does on chip. The MAP of a run that
+    overflowed; -1 where the no-match row won and for every timeout, answered or not: a timed-out
+    pixel's leading row is its answer, not information for its neighbours (measured on the bundled
+    pair, docs/architecture.md "The watchdog's answer")."""
+    none = np.asarray(nomatch, bool) | np.asarray(timeout, bool)
     return np.where(none, -1, map_).astype(np.int16)
 
 
