@@ -98,7 +98,8 @@ def test_model_samples_give_the_one_sample_results(samples: int, variant: dict[s
     """``sobol``, W = 5 (blocks of 32 points: runs span several blocks, and the pixels after them start
     new ones), watchdogs that are not multiples of B: the same counts, maps, flags as B = 1 and
     ceil(k / B) clocks, over pixels run in two calls."""
-    one = small_params(**{**dict(rng="sobol", word_bits=5, lfsr_bits=12, counter_max=6, max_cycles=61), **variant})
+    base = dict(rng="sobol", word_bits=5, lfsr_bits=12, counter_max=6, max_cycles=61)
+    one = small_params(**{**base, **variant})
     many = dataclasses.replace(one, samples_per_clock=samples)
     words = _words(one, 120, seed=samples)
     flags = _line_start(one, 120)
