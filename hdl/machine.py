@@ -21,7 +21,7 @@ Timing (``docs/architecture.md``, "Timing"):
 
 ``elaborate`` is a sequence of named builders, one per part of the design (``_memories``,
 ``_random_numbers``, ``_operator_matrix``, ``_overflow_counters``, ``_stop_decision``,
-``_result``, ``_start``, ``_enables``, ``_load``), sharing the nets of :class:`_Nets`.
+``_result``, ``_start``, ``_enables``, ``_load``), sharing the nets of :class:`MachineNets`.
 
 The random source and the MAP encoder are direct submodules (depth 1), the very components
 their unit tests drive; the operator matrix is built by ``operator.operator_bits`` and
@@ -129,8 +129,10 @@ def pixel_wall_cycles(params: MachineParams, cycles: np.ndarray,
 
 
 @dataclass
-class _Nets:
-    """The nets the builders of ``BayesianMachine.elaborate`` share (each documented where it is driven)."""
+class MachineNets:
+    """The nets the builders of ``BayesianMachine.elaborate`` share (each documented where it is driven),
+    and the registers a proof of the machine relates to its reference (``BayesianMachine.nets``: the
+    formal wrappers of ``hdl.formal`` and their mutants read them, never Amaranth's internals)."""
 
     shadow: list[Signal]  # the shadow likelihood memory, one word per loaded word of a pixel
     incoming: list[Value]  # per operator, the word a swap puts into the active memory
@@ -181,6 +183,15 @@ class _Nets:
     timed_out: Signal | None = None
     search: Signal | None = None
     search_n: Value = field(default_factory=lambda: Const(0))
+    search_phase: Signal | None = None  # the search's second cycle of a bit
+    search_bit: Signal | None = None  # one-hot: the counter bit the search looks at
+    search_any: list[Signal] = field(default_factory=list)  # per group: a candidate has that bit set
+    # The load's registers (_load) and a neighbour prior's previous result and feedback words.
+    beat: Signal | None = None
+    load_q: Signal | None = None
+    prev_rows: list[Signal] = field(default_factory=list)
+    prev_valids: list[Signal] = field(default_factory=list)
+    feedback_q: list[Signal] = field(default_factory=list)
 
 
 class BayesianMachine(wiring.Component):
@@ -198,11 +209,13 @@ class BayesianMachine(wiring.Component):
     result : ``Out(stream.Signature(result_layout(params)))``
         One result per pixel, in order.
     entropy : ``In(entropy_layout(params))``
-        With an off-chip ``rng`` ("external", "smtj") only: one random number per operator,
-        sampled on compute cycles.
+        With an off-chip ``rng`` ("external", "smtj") only: one random number per operator and
+        sample (B per operator), sampled on compute cycles.
     entropy_ready : ``Out(1)``
         With an off-chip ``rng`` only: high on compute cycles (the numbers on ``entropy`` are
         consumed at the clock edge).
+    nets : MachineNets
+        After elaboration: the internal nets a proof relates to its reference (read-only).
 
     The ports are :class:`~.signatures.MachineSignature` ``(params)``.
     """
@@ -211,15 +224,24 @@ class BayesianMachine(wiring.Component):
         if not isinstance(params, MachineParams):
             raise TypeError(f"BayesianMachine takes a MachineParams, not {type(params).__name__}")
         self._params = params
+        self._nets: MachineNets | None = None
         super().__init__(MachineSignature(params))
 
     @property
     def params(self) -> MachineParams:
         return self._params
 
+    @property
+    def nets(self) -> MachineNets:
+        """The :class:`MachineNets` of the last :meth:`elaborate`: the internal nets and registers a
+        proof relates to its reference (``hdl.formal``); elaborate first."""
+        if self._nets is None:
+            raise RuntimeError("BayesianMachine.nets: elaborate the machine first (Fragment.get)")
+        return self._nets
+
     def elaborate(self, platform: object) -> Module:
         m = Module()
-        n = self._memories()
+        n = self._nets = self._memories()
         self._random_numbers(m, n)
         self._operator_matrix(m, n)
         self._overflow_counters(m, n)
@@ -231,7 +253,7 @@ class BayesianMachine(wiring.Component):
         self._load(m, n)
         return m
 
-    def _memories(self) -> _Nets:
+    def _memories(self) -> MachineNets:
         """The likelihood memories, the run state and the registered enables' copies."""
         p = self._params
         rows, cols, ops = p.rows, p.operator_columns, p.operators
@@ -256,7 +278,7 @@ class BayesianMachine(wiring.Component):
         # out further than a group. The flow keeps these ``_rep`` registers apart (docs/fpga.md).
         rows_per_group = max(1, GROUP_OPERATORS // cols)
         groups = -(-rows // rows_per_group)
-        return _Nets(
+        return MachineNets(
             hidden=hides_bubble(p),
             # The census model's machine (a neighbour prior, 6 columns) keeps one source: with a copy
             # per 3 groups (14 copies of 6 columns) it routed at 63.9 MHz against 64.4 MHz with one,
@@ -273,7 +295,7 @@ class BayesianMachine(wiring.Component):
             start_rep=[Signal(name=f"start_rep{g}") for g in range(groups)],
         )
 
-    def _random_numbers(self, m: Module, n: _Nets) -> None:
+    def _random_numbers(self, m: Module, n: MachineNets) -> None:
         """The random source: advances on compute cycles only, restarts with each pixel's run."""
         p = self._params
         cols = p.operator_columns
@@ -307,7 +329,7 @@ class BayesianMachine(wiring.Component):
         else:  # a number per operator: one enable (and restart) bit per group of rows
             m.d.comb += [source.enable.eq(Cat(n.compute_rep)), source.restart.eq(Cat(n.start_rep))]
 
-    def _operator_matrix(self, m: Module, n: _Nets) -> None:
+    def _operator_matrix(self, m: Module, n: MachineNets) -> None:
         """The operator matrix: each row's AND of ``number < word``, the stochastic bus (B bits per row,
         one per sample: operator o's sample i compares its word with number ``sample_points[i]`` XOR
         its source's number)."""
@@ -389,7 +411,7 @@ class BayesianMachine(wiring.Component):
             bits.append(bit_q)
         m.d.comb += n.row.eq(bus_rows(bits, rows, cols, samples))
 
-    def _overflow_counters(self, m: Module, n: _Nets) -> None:
+    def _overflow_counters(self, m: Module, n: MachineNets) -> None:
         """The overflow counters: with registered "full" flags (count == n_max) for one sample per
         clock, with registered ``room`` (n_max - count, capped at 2B) for B samples."""
         p = self._params
@@ -408,7 +430,7 @@ class BayesianMachine(wiring.Component):
             n.next_counts.append(nxt)
             n.next_full.append(nfull)
 
-    def _group_flags(self, m: Module, n: _Nets, terms: list[list[Value]], start: list[Value],
+    def _group_flags(self, m: Module, n: MachineNets, terms: list[list[Value]], start: list[Value],
                      name: str) -> Value:
         """Per group of rows, a register holding the OR of its rows' ``terms`` (the next cycle's
         overflows, prefetched: loaded in a compute cycle) or ``start`` (its value after a swap, which
@@ -423,7 +445,7 @@ class BayesianMachine(wiring.Component):
                 m.d.sync += regs[g].eq(_or_all([Cat(terms[r]) for r in group]))
         return _or_all(regs)
 
-    def _overflow_detect(self, m: Module, n: _Nets) -> None:
+    def _overflow_detect(self, m: Module, n: MachineNets) -> None:
         """Whether some row overflows in this compute cycle (``any_over``) and, with B samples, the
         first sample at which one does (``G``, cumulative flags over the rows).
 
@@ -464,7 +486,7 @@ class BayesianMachine(wiring.Component):
         n.any_over = flags[b - 1]
         n.hit = flags[limit - 1] | ~n.at_last
 
-    def _stop_decision(self, m: Module, n: _Nets) -> None:
+    def _stop_decision(self, m: Module, n: MachineNets) -> None:
         """The registered stop: a row overflows or the watchdog expires; counters advance."""
         p = self._params
         # A compute cycle: running and not yet stopped. The stop is registered (see "Timing" in
@@ -500,7 +522,7 @@ class BayesianMachine(wiring.Component):
                     m.d.sync += [n.counts[r].eq(n.next_counts[r]), n.full[r].eq(n.next_full[r])]
         self._over_flags(m, n)
 
-    def _over_flags(self, m: Module, n: _Nets) -> None:
+    def _over_flags(self, m: Module, n: MachineNets) -> None:
         """``over_q``: the rows that overflowed at the stop, for the MAP encoder in the bubble. With
         ``timeout_answer = "leading"`` a timeout sets every row and a search keeps the rows with the
         largest count, a bit per two cycles from the top (``search``: the bubble waits for it)."""
@@ -513,6 +535,7 @@ class BayesianMachine(wiring.Component):
             phase = Signal(name="search_phase")
             bit = Signal(p.counter_width, name="search_bit", init=1 << (p.counter_width - 1))  # one-hot
             any_g = [Signal(name=f"search_any_{g}") for g in range(n.groups)]
+            n.search_phase, n.search_bit, n.search_any = phase, bit, any_g
             last = Signal()
             m.d.comb += last.eq(n.search & phase & bit[0])
             n.search_n = Mux(n.compute, timeout_now, n.search & ~last)
@@ -539,7 +562,7 @@ class BayesianMachine(wiring.Component):
                 group = range(g * n.rows_per_group, min(p.rows, (g + 1) * n.rows_per_group))
                 m.d.sync += any_g[g].eq(_or_all([n.over_q[r] & (n.counts[r] & bit).any() for r in group]))
 
-    def _result(self, m: Module, n: _Nets) -> None:
+    def _result(self, m: Module, n: MachineNets) -> None:
         """The bubble hands the result over (the result register is empty: a register, no ready)."""
         p = self._params
         res = self.result.payload
@@ -571,7 +594,7 @@ class BayesianMachine(wiring.Component):
             else:
                 m.d.sync += res.nomatch.eq(0)
 
-    def _feedback_prior(self, m: Module, n: _Nets) -> None:
+    def _feedback_prior(self, m: Module, n: MachineNets) -> None:
         """A neighbour prior's feedback column 0: formed at each swap from the previous result.
 
         The bubble registers the winning row (``prev_row``, a copy per group of rows) and whether
@@ -591,6 +614,7 @@ class BayesianMachine(wiring.Component):
         # register would fan out to every row's distance logic (the flow keeps the _rep copies apart).
         prev_rows = [Signal(p.map_width, name=f"prev_row_rep{g}") for g in range(n.groups)]
         prev_valids = [Signal(name=f"prev_valid_rep{g}") for g in range(n.groups)]
+        n.prev_rows, n.prev_valids = prev_rows, prev_valids
         with m.If(n.leave):
             hypothesis = n.valid_q
             if n.timed_out is not None:  # a timeout's leading row is its answer, not information
@@ -608,6 +632,7 @@ class BayesianMachine(wiring.Component):
         for r in range(p.rows):
             prev_row, prev_valid = prev_rows[r // n.rows_per_group], prev_valids[r // n.rows_per_group]
             word_q = Signal(p.memory_word_width, name=f"feedback_q_{r}", init=p.word_one)
+            n.feedback_q.append(word_q)
             if p.nomatch_row and r == p.rows - 1:
                 m.d.sync += word_q.eq(Mux(prev_valid, p.feedback_nomatch_word, one))
             else:
@@ -620,7 +645,7 @@ class BayesianMachine(wiring.Component):
                 m.d.sync += word_q.eq(Mux(prev_valid, entries[dist], one))
             m.d.comb += n.incoming[r * cols].eq(Mux(n.shadow_line_start, one, word_q))
 
-    def _start(self, m: Module, n: _Nets) -> None:
+    def _start(self, m: Module, n: MachineNets) -> None:
         """Start: swap in the shadow memory, in a bubble or when idle (overrides the above)."""
         p = self._params
         cols = p.operator_columns
@@ -653,7 +678,7 @@ class BayesianMachine(wiring.Component):
                     room = p.counter_max - first
                     m.d.sync += [n.counts[r].eq(first), n.room[r].eq(Mux(room > 2 * b, 2 * b, room))]
 
-    def _load(self, m: Module, n: _Nets) -> None:
+    def _load(self, m: Module, n: MachineNets) -> None:
         """The load stream: one beat per handshake into the shadow memory, written a cycle later."""
         p = self._params
         nbeats = p.beats_per_pixel
@@ -667,6 +692,7 @@ class BayesianMachine(wiring.Component):
         # enables of a beat's words, which are spread over the whole matrix).
         beat = Signal(nbeats, init=1)  # one-hot: the beat the next handshake carries
         load_q = Signal.like(self.load.payload)
+        n.beat, n.load_q = beat, load_q
         m.d.sync += n.write_q.eq(Mux(accept, beat, 0))
         with m.If(accept):
             m.d.sync += [load_q.eq(self.load.payload), beat.eq(beat.rotate_left(1))]
@@ -682,7 +708,7 @@ class BayesianMachine(wiring.Component):
             if p.feedback_columns:
                 m.d.sync += n.shadow_line_start.eq(load_q.line_start)
 
-    def _enables(self, m: Module, n: _Nets) -> None:
+    def _enables(self, m: Module, n: MachineNets) -> None:
         """The next values of the replicated enables: the registers' updates, one cycle early."""
         nbeats = self._params.beats_per_pixel
         # Written as a last 2:1 choice on ``compute`` so that the OR over the rows (``fin``), the

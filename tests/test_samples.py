@@ -237,3 +237,91 @@ def test_defaults_keep_fingerprints_and_census_answers_leading() -> None:
         assert disparity_machine(ModelParams(dmax=8, name=name)).timeout_answer == "leading"
     given = disparity_machine(ModelParams(dmax=8, name="census"), timeout_answer="none")
     assert given.timeout_answer == "none"
+
+
+# --- Verilator and the host ---------------------------------------------------------------------
+
+@pytest.fixture
+def cache(verilator_cache, monkeypatch: pytest.MonkeyPatch):  # noqa: ANN001, ANN201
+    from conftest import require_tool
+
+    require_tool("verilator", "g++", "make")
+    monkeypatch.setenv("BAYESMACHINE_CACHE_DIR", str(verilator_cache.parent))  # the session's builds
+    return verilator_cache
+
+
+@pytest.mark.parametrize(
+    "variant",
+    [dict(rng="sobol", samples_per_clock=8, word_bits=5, lfsr_bits=12, counter_max=16, max_cycles=75,
+          timeout_answer="leading"),
+     dict(rng="external", samples_per_clock=2, counter_max=3, max_cycles=21, timeout_answer="leading")],
+    ids=["sobol-b8", "external-b2"],
+)
+def test_verilator_matches_the_model(cache, variant: dict[str, object]) -> None:  # noqa: ANN001
+    """The emitted Verilog under Verilator: bit for bit the model, B samples per clock and the leading
+    answer; its wall cycles are ``pixel_wall_cycles`` plus the first load and the last hand-over."""
+    from bayesmachine.hdl.machine import pixel_wall_cycles
+    from bayesmachine.sim.verilator import VerilatorEngine
+
+    params = small_params(**variant)
+    words = _words(params, 300, seed=8)
+    numbers = {}
+    if params.rng == "external":
+        rows = np.random.default_rng(3).integers(0, 1 << params.word_bits, (30000, params.operators))
+        numbers["numbers"] = rows
+    engine = VerilatorEngine(params, build_dir=cache)
+    try:
+        got = engine.run(words, **numbers)
+        assert_same_results(got, MachineModel(params).run(words, **numbers))
+        assert got.timeout.any()
+        want = int(pixel_wall_cycles(params, got.cycles, got.timeout).sum())
+        assert 0 <= engine.last_wall_cycles - want <= params.beats_per_pixel + 4
+    finally:
+        engine.close()
+
+
+def test_census_lr_crop_at_eight_samples_per_clock(cache) -> None:  # noqa: ANN001
+    """The default model (census-lr, both passes) on a crop of the bundled pair at B = 8: the
+    Verilator engine equals the model array for array, and both are the B = 1 run's maps, no-match
+    flags, timeouts and counts, in ceil(k / 8) clocks."""
+    from bayesmachine.host.images import Crop, bundled_pair, crop_image
+    from bayesmachine.host.run import prepare, run_machine
+    from bayesmachine.likelihood import ModelParams, disparity_machine
+
+    left, right, gt = (crop_image(a, Crop(300, 200, 64, 5)) for a in bundled_pair())
+    model = ModelParams(dmax=24, name="census-lr")
+    prep = prepare(left, right, model, gt)
+    one = run_machine(prep, disparity_machine(model), "model", progress=False)
+    eight = disparity_machine(model, samples_per_clock=8)
+    runs = [run_machine(prep, eight, engine, progress=False) for engine in ("model", "verilator")]
+    for run in runs:
+        for field in ("map", "nomatch", "timeout", "counts"):
+            np.testing.assert_array_equal(getattr(run, field), getattr(one, field), err_msg=field)
+        np.testing.assert_array_equal(run.cycles, -(-one.cycles // 8))
+        np.testing.assert_array_equal(run.right.map, one.right.map)
+        np.testing.assert_array_equal(run.right.cycles, -(-one.right.cycles // 8))
+    assert one.timeout.any() and one.map.size == 5 * 40
+
+
+def test_run_command_reports_samples_per_clock(tmp_path, capsys) -> None:  # noqa: ANN001
+    """``bayesmachine run --samples-per-clock 8``: report.json has the machine's samples per clock and
+    its cycles in clocks; a B the machine refuses is one line and exit 2."""
+    import json
+
+    from bayesmachine.cli import main
+
+    crop = ["--crop", "300,200,64,4", "--model", "census", "--dmax", "24"]
+    for b in (1, 8):
+        assert main(["run", *crop, "--samples-per-clock", str(b), "-o", str(tmp_path / f"b{b}")]) == 0
+    one, eight = (json.loads((tmp_path / f"b{b}" / "report.json").read_text()) for b in (1, 8))
+    assert (one["samples_per_clock"], eight["samples_per_clock"]) == (1, 8)
+    assert eight["machine"]["samples_per_clock"] == 8
+    assert eight["cycles_per_pixel_mean"] < one["cycles_per_pixel_mean"] / 6
+    assert eight["machine_bad2"] == one["machine_bad2"]
+    capsys.readouterr()
+    for bad, message in ((["--samples-per-clock", "3"], "samples_per_clock must be one of"),
+                         (["--samples-per-clock", "2", "--rng", "lfsr"], "gives one number per operator")):
+        assert main(["run", *crop, *bad, "-o", str(tmp_path / "bad")]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) <= 2 and message in err[-1]
+        assert not (tmp_path / "bad").exists()

@@ -222,7 +222,7 @@ def test_whole_bundled_pair_through_the_front_end_equals_the_model() -> None:
         # Loading hidden: the pair through the front end takes what the machine alone takes when
         # fed words at full rate (compute + the registered stop's bubble per run), within 0.5 %
         # (measured +0.04 %: the first lines and the line ends).
-        alone = int(pixel_wall_cycles(params, got.cycles).sum())
+        alone = int(pixel_wall_cycles(params, got.cycles, got.timeout).sum())
         # Compute-bound here; sobol has no bubble but after a run whose last cycle began a block.
         k = want.cycles.astype(np.int64)
         late = (k > 1) & ((k - 1) % (1 << params.word_bits) == 0)
@@ -248,7 +248,8 @@ def test_whole_bundled_pair_census_through_the_front_end_equals_the_model() -> N
     with StereoVerilatorEngine(params, model, left.shape[1], verbose=False) as engine:
         got = engine.run(left, right)
         wall = engine.last_wall_cycles
-    alone = int(pixel_wall_cycles(params, got.cycles).sum())  # the machine fed words at full rate
+    # the machine fed words at full rate
+    alone = int(pixel_wall_cycles(params, got.cycles, got.timeout).sum())
     print(f"\ncensus through the front end: {wall / len(got):.3f} wall cycles per output pixel, "
           f"the machine alone {alone / len(got):.3f}, compute {got.cycles.mean():.3f}")
     assert alone <= wall < 1.005 * alone  # loading and filtering hidden
@@ -302,10 +303,11 @@ def test_census_lr_crop_through_the_front_end_equals_the_model() -> None:
         wall = engine.last_wall_cycles
     assert got_right is not None and want.right is not None
     rp = right_pass_params(model, params)
-    alone = int(pixel_wall_cycles(params, got.cycles).sum())
+    alone = int(pixel_wall_cycles(params, got.cycles, got.timeout).sum())
+    right_alone = int(pixel_wall_cycles(rp, got_right.cycles, got_right.timeout).sum())
     print(f"\ncensus-lr through the front end: {wall / len(got):.3f} wall cycles per output pixel "
           f"(left machine alone {alone / len(got):.3f}, right machine alone "
-          f"{int(pixel_wall_cycles(rp, got_right.cycles).sum()) / len(got):.3f} per output pixel)")
+          f"{right_alone / len(got):.3f} per output pixel)")
     ho, wo = want.map.shape
     disp = np.where(got.nomatch | got.timeout, -1, got.map).reshape(ho, wo)
     assert np.array_equal(disp, want.map)
