@@ -42,7 +42,7 @@ from bayesmachine.params import MachineParams
 
 from .counters import count_ones, overflow_counter_full, overflow_flags, room_width, sample_counter
 from .encoder import MAPEncoder
-from .operator import bus_rows, operator_bits, sample_bits
+from .operator import bus_rows, operator_bits, sample_bits, sample_low
 from .signatures import MachineSignature, beat_words, entropy_layout, load_layout, result_layout
 from .sources import OnChipSource, random_source
 
@@ -350,13 +350,22 @@ class BayesianMachine(wiring.Component):
         # instead of a carry chain.
         index, points = source.operator_numbers, source.sample_points
 
-        def compare(numbers: list[Value], words: list[Value],
+        def compare(numbers: list[Value], words: list[Value], kind: str,
                     at: list[tuple[int, ...]] | None = None) -> list[Value]:
-            """Per operator, its B bits (``at``: other points per number entry) from its number."""
+            """Per operator, its B bits (``at``: other points per number entry) from its number; with B
+            samples nets of their own (``<kind>_bits_<r>_<c>``, read in several places)."""
             at = points if at is None else at
-            if samples == 1 and not any(a != (0,) for a in at):
-                return operator_bits(numbers, words, range(ops))
-            return [sample_bits(numbers[o], words[o], at[index[o]]) for o in range(ops)]
+            if samples == 1:
+                if not any(a != (0,) for a in at):
+                    return operator_bits(numbers, words, range(ops))
+                return [sample_bits(numbers[o], words[o], at[index[o]]) for o in range(ops)]
+            out = []
+            for o in range(ops):
+                name = f"{o // cols}_{o % cols}"
+                low = self._net(m, f"{kind}_low_{name}", sample_low(numbers[o], words[o], at[index[o]]))
+                bits = sample_bits(numbers[o], words[o], at[index[o]], low=low)
+                out.append(self._net(m, f"{kind}_bits_{name}", bits))
+            return out
 
         if source.shared:
             # A number shared by a column's rows would reach all its comparators from one net:
@@ -378,7 +387,7 @@ class BayesianMachine(wiring.Component):
         else:
             next_numbers = [source.next_numbers[index[o]] for o in range(ops)]
             restart = [source.restart_numbers[index[o]] for o in range(ops)]
-        n.next_bits = compare(next_numbers, n.active)
+        n.next_bits = compare(next_numbers, n.active, "next")
         if n.hidden:
             # No bubble (hides_bubble, "Timing" in docs/architecture.md): the swap is the next run's
             # first compute cycle. Its bits (the restart numbers against the shadow words) are
@@ -387,7 +396,7 @@ class BayesianMachine(wiring.Component):
             # cycle's points against the shadow words, which the swap is still reading. Both come
             # from one comparator of the low bits (``sample_bits``: for B = 1 the points 0 and V_0 =
             # 2^(W-1), a comparator of the low W - 1 bits).
-            pair = compare(restart, n.incoming, list(source.swap_points))
+            pair = compare(restart, n.incoming, "swap", list(source.swap_points))
             first_bits, swap_bits = [], []
             for o in range(ops):
                 first_bit = Signal(samples, name=f"first_bit_{o // cols}_{o % cols}")
@@ -396,7 +405,7 @@ class BayesianMachine(wiring.Component):
                 swap_bits.append(pair[o][samples:])
             n.first_row = bus_rows(first_bits, rows, cols, samples)
         else:
-            swap_bits = compare(restart, n.incoming)
+            swap_bits = compare(restart, n.incoming, "swap")
         n.swap_bits = swap_bits
         bits = []
         for o in range(ops):
@@ -421,7 +430,8 @@ class BayesianMachine(wiring.Component):
             b = p.samples_per_clock
             n.room = [Signal(room_width(b), name=f"room_{r}", init=min(p.counter_max, 2 * b))
                       for r in range(p.rows)]
-            n.flags = [overflow_flags(n.row[r * b:(r + 1) * b], n.room[r]) for r in range(p.rows)]
+            n.flags = [self._net(m, f"flags_{r}", overflow_flags(n.row[r * b:(r + 1) * b], n.room[r]))
+                       for r in range(p.rows)]
             return
         n.full = Signal(p.rows, name="full")
         for r in range(p.rows):
@@ -429,6 +439,13 @@ class BayesianMachine(wiring.Component):
             m.d.comb += n.over[r].eq(ov)
             n.next_counts.append(nxt)
             n.next_full.append(nfull)
+
+    @staticmethod
+    def _net(m: Module, name: str, value: Value) -> Signal:
+        """``value`` as a net of its own (a value read in several places would be built again in each)."""
+        net = Signal(len(value), name=name)
+        m.d.comb += net.eq(value)
+        return net
 
     def _group_flags(self, m: Module, n: MachineNets, terms: list[list[Value]], start: list[Value],
                      name: str) -> Value:
@@ -466,13 +483,17 @@ class BayesianMachine(wiring.Component):
             return
         if n.next_bits:
             # The next cycle's 1s of row r follow this cycle's (all counted: a cycle that stops is
-            # followed by a swap, whose value takes priority).
-            terms = [[overflow_flags(bus_rows(n.next_bits[r * cols:(r + 1) * cols], 1, cols, b), n.room[r],
+            # followed by a swap, whose value takes priority). The buses are nets of their own: each
+            # sample's flag reads them.
+            def bus(name: str, bits: list[Value], r: int) -> Value:
+                return self._net(m, f"{name}_{r}", bus_rows(bits[r * cols:(r + 1) * cols], 1, cols, b))
+
+            terms = [[overflow_flags(bus("next_row", n.next_bits, r), n.room[r],
                                      count_ones(n.row[r * b:(r + 1) * b]))] for r in range(p.rows)]
             start = [Const(0, b)] * n.groups
             if not n.hidden and p.counter_max < b:  # a run's first cycle can overflow: its flags
-                first = [overflow_flags(bus_rows(n.swap_bits[r * cols:(r + 1) * cols], 1, cols, b),
-                                        Const(p.counter_max)) for r in range(p.rows)]
+                first = [overflow_flags(bus("swap_row", n.swap_bits, r), Const(p.counter_max))
+                         for r in range(p.rows)]
                 per = n.rows_per_group
                 start = [_or_all(first[g * per:(g + 1) * per]) for g in range(n.groups)]
             flags = self._group_flags(m, n, terms, start, "over_group")
@@ -508,8 +529,8 @@ class BayesianMachine(wiring.Component):
         b = p.samples_per_clock
         if b > 1:
             # The first stop sample (one-hot, 0 if none) and the samples up to it, which count.
-            first = n.G & ~(n.G << 1)[:b]
-            counted = ~(n.G << 1)[:b]
+            first = self._net(m, "stop_sample", n.G & ~(n.G << 1)[:b])
+            counted = self._net(m, "counted_samples", ~(n.G << 1)[:b])
             for r in range(p.rows):
                 nxt, room = sample_counter(n.row[r * b:(r + 1) * b], n.counts[r], counted, p.counter_max)
                 n.next_counts.append(nxt)

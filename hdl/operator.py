@@ -27,6 +27,7 @@ __all__ = [
     "operator_rows",
     "sample_bits",
     "sample_bits_twin",
+    "sample_low",
     "stochastic_operator",
     "stochastic_operator_twin",
 ]
@@ -129,19 +130,28 @@ def _top_bits(points: Sequence[int], w: int) -> int:
     return max((w - ((p & -p).bit_length() - 1) for p in points if p), default=0)
 
 
-def sample_bits(number: Value, word: Value, points: Sequence[int]) -> Value:
+def sample_low(number: Value, word: Value, points: Sequence[int]) -> Value:
+    """The comparator of the low bits the ``points`` leave alone, which :func:`sample_bits` shares
+    between them (0 when the points leave none)."""
+    w = len(number)
+    m = _top_bits(points, w)
+    return number[: w - m] < word[: w - m] if w > m else Const(0, 1)
+
+
+def sample_bits(number: Value, word: Value, points: Sequence[int], low: Value | None = None) -> Value:
     """``Cat((number ^ points[i]) < word for i)`` for a W-bit number and a (W+1)-bit word, from one
     comparator of the low bits the points leave alone and one small compare of the top bits per point.
 
     A clock's Sobol numbers are its first XOR the points 0 ... B - 1 (their Gray-code bits), which
     use the top log2(B) bits only (``sources.sobol.sample_points``); a block's first two clocks' use
     log2(B) + 1 (the machine without a bubble compares both in a swap). So B operator bits cost one
-    (W - log2 B)-bit comparator and B compares of log2(B) + 1 bits."""
+    (W - log2 B)-bit comparator and B compares of log2(B) + 1 bits. ``low``: :func:`sample_low`'s
+    comparator as a net of the caller's (Amaranth builds a value again wherever it is read)."""
     w = len(number)
     m = _top_bits(points, w)
     if m == 0:
         return Cat(*(number < word for _ in points))
-    low = number[: w - m] < word[: w - m] if w > m else Const(0, 1)
+    low = sample_low(number, word, points) if low is None else low
     high = word[w - m:]  # the word's top bits: up to 2^m (a word is at most 2^W)
     top = number[w - m:]
     out = []
