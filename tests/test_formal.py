@@ -57,6 +57,13 @@ CONTROL = {
     # B = 2 samples per clock (the stop at its sample; max_cycles 7: the watchdog's clock counts one).
     "b2-n2-mc7": MachineParams(rows=4, columns=2, word_bits=3, counter_max=2, rng="external", max_cycles=7,
                                nomatch_row=True, words_per_beat=4, samples_per_clock=2),
+    # The watchdog's leading answer (its search in the bubble), alone and with B = 4.
+    "n2-mc6-leading": MachineParams(rows=4, columns=2, word_bits=3, counter_max=2, rng="external",
+                                    max_cycles=6, nomatch_row=True, words_per_beat=4,
+                                    timeout_answer="leading"),
+    "b4-n3-leading": MachineParams(rows=4, columns=1, word_bits=2, counter_max=3, rng="external",
+                                   max_cycles=9, nomatch_row=True, words_per_beat=4, samples_per_clock=4,
+                                   timeout_answer="leading"),
     "neighbour": MachineParams(rows=4, columns=1, word_bits=3, counter_max=1, rng="external", max_cycles=4,
                                nomatch_row=True, words_per_beat=4, prior="neighbour", feedback_words=(8, 5,
                                                                                                       2),
@@ -65,15 +72,6 @@ CONTROL = {
 # Larger machines the same proof closes on (slow: 15-20 s each): 10 rows x 3 columns, W = 6, counter
 # max 7, max_cycles 40, 5 beats per pixel; a neighbour prior with 8 rows x 2 data columns, W = 5,
 # counter max 3, max_cycles 16, 5 feedback words, lowest-index.
-# The watchdog's leading answer (its search in the bubble), alone and with B = 4 (slow: 2-3 min each).
-CONTROL_LEADING = {
-    "n2-mc6-leading": MachineParams(rows=4, columns=2, word_bits=3, counter_max=2, rng="external",
-                                    max_cycles=6, nomatch_row=True, words_per_beat=4,
-                                    timeout_answer="leading"),
-    "b4-n3-leading": MachineParams(rows=4, columns=1, word_bits=2, counter_max=3, rng="external",
-                                   max_cycles=9, nomatch_row=True, words_per_beat=4, samples_per_clock=4,
-                                   timeout_answer="leading"),
-}
 # The machine the samples mutants are checked on.
 SAMPLES = "b2-n2-mc7"
 CONTROL_LARGER = {
@@ -180,7 +178,8 @@ def test_machine_covers(machine: str) -> None:
 def test_control_proved(machine: str) -> None:
     """Against the reference run: one result per loaded pixel, in order, with the counters at the
     stop; the stop at the first overflow or at max_cycles; no beat lost; the one-cycle bubble; the
-    neighbour prior's feedback words. Proved by k-induction."""
+    neighbour prior's feedback words; with B samples per clock the one-sample reference run (the
+    stop at its sample); with the leading answer its search and result. Proved by k-induction."""
     check(run_formal(ControlProperties(params=CONTROL[machine]), name=f"control-{machine}", mode="prove",
                      depth=CONTROL_PROVE_DEPTH))
 
@@ -196,18 +195,6 @@ def test_control_proved_larger(machine: str) -> None:
     check(run_formal(ControlProperties(params=CONTROL_LARGER[machine]), name=f"control-{machine}",
                      mode="bmc" if bounded else "prove",
                      depth=CONTROL_BMC_LARGER[machine] if bounded else CONTROL_PROVE_DEPTH))
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize("machine", sorted(CONTROL_LEADING))
-def test_control_leading_answer_proved(machine: str) -> None:
-    """The leading answer: a timed-out run's map is its largest count's row by the tie rule, its
-    search ends and hands the result over, the neighbour's feedback ignores it. k-induction."""
-    params = CONTROL_LEADING[machine]
-    check(run_formal(ControlProperties(params=params), name=f"control-{machine}", mode="prove",
-                     depth=CONTROL_PROVE_DEPTH))
-    check(run_formal(ControlProperties(params=params), name=f"control-{machine}", mode="cover",
-                     depth=CONTROL_COVER_DEPTH))
 
 
 @pytest.mark.slow

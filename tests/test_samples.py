@@ -288,7 +288,7 @@ def test_census_lr_crop_at_eight_samples_per_clock(cache) -> None:  # noqa: ANN0
     from bayesmachine.host.run import prepare, run_machine
     from bayesmachine.likelihood import ModelParams, disparity_machine
 
-    left, right, gt = (crop_image(a, Crop(300, 200, 64, 5)) for a in bundled_pair())
+    left, right, gt = (crop_image(a, Crop(300, 200, 64, 12)) for a in bundled_pair())
     model = ModelParams(dmax=24, name="census-lr")
     prep = prepare(left, right, model, gt)
     one = run_machine(prep, disparity_machine(model), "model", progress=False)
@@ -300,7 +300,7 @@ def test_census_lr_crop_at_eight_samples_per_clock(cache) -> None:  # noqa: ANN0
         np.testing.assert_array_equal(run.cycles, -(-one.cycles // 8))
         np.testing.assert_array_equal(run.right.map, one.right.map)
         np.testing.assert_array_equal(run.right.cycles, -(-one.right.cycles // 8))
-    assert one.timeout.any() and one.map.size == 5 * 40
+    assert one.timeout.any() and one.map.size > 100
 
 
 def test_run_command_reports_samples_per_clock(tmp_path, capsys) -> None:  # noqa: ANN001
@@ -310,7 +310,7 @@ def test_run_command_reports_samples_per_clock(tmp_path, capsys) -> None:  # noq
 
     from bayesmachine.cli import main
 
-    crop = ["--crop", "300,200,64,4", "--model", "census", "--dmax", "24"]
+    crop = ["--crop", "300,200,64,12", "--model", "census", "--dmax", "24"]
     for b in (1, 8):
         assert main(["run", *crop, "--samples-per-clock", str(b), "-o", str(tmp_path / f"b{b}")]) == 0
     one, eight = (json.loads((tmp_path / f"b{b}" / "report.json").read_text()) for b in (1, 8))
@@ -325,3 +325,49 @@ def test_run_command_reports_samples_per_clock(tmp_path, capsys) -> None:  # noq
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) <= 2 and message in err[-1]
         assert not (tmp_path / "bad").exists()
+
+
+@pytest.mark.slow
+def test_whole_pair_under_verilator_at_eight_samples_per_clock(cache) -> None:  # noqa: ANN001
+    """The issue's figure: the default run (census-lr, Dmax 80) on the whole bundled pair with
+    ``--samples-per-clock 8`` under Verilator gives exactly the B = 1 model's maps, no-match flags,
+    timeouts and counts (both passes), in at most a sixth of its cycles per pixel."""
+    from bayesmachine.host.images import bundled_pair
+    from bayesmachine.host.run import prepare, run_machine
+    from bayesmachine.likelihood import DEFAULT_MODEL, ModelParams, disparity_machine
+
+    left, right, gt = bundled_pair()
+    model = ModelParams(name=DEFAULT_MODEL)
+    prep = prepare(left, right, model, gt, reference=False)
+    one = run_machine(prep, disparity_machine(model), "model", progress=False)
+    eight = run_machine(prep, disparity_machine(model, samples_per_clock=8), "verilator", progress=False)
+    for field in ("map", "nomatch", "timeout", "counts"):
+        np.testing.assert_array_equal(getattr(eight, field), getattr(one, field), err_msg=field)
+    np.testing.assert_array_equal(eight.cycles, -(-one.cycles // 8))
+    np.testing.assert_array_equal(eight.right.map, one.right.map)
+    np.testing.assert_array_equal(eight.right.cycles, -(-one.right.cycles // 8))
+
+    def per_pixel(run) -> float:  # noqa: ANN001  # both passes' compute cycles per output pixel
+        return (run.cycles.sum() + run.right.cycles.sum()) / run.cycles.size
+
+    print(f"\ncensus-lr, whole pair: {per_pixel(one):.2f} cycles per pixel at B = 1, {per_pixel(eight):.2f} "
+          f"at B = 8 under Verilator")
+    assert per_pixel(eight) <= per_pixel(one) / 6
+
+
+def test_front_end_at_four_samples_per_clock(cache, tmp_path) -> None:  # noqa: ANN001
+    """``--feed pixels``: the census model's StereoMachine (front end, neighbour prior from its own
+    results) at B = 4 with a short watchdog (timeouts answered by their leading row, which the above
+    column does not follow) gives the model's B = 1 maps, counts and timeouts, in ceil(k / 4) clocks."""
+    from bayesmachine.cli import main
+
+    crop = ["--crop", "250,200,40,12", "--dmax", "8", "--quiet", "--no-sgbm", "--model", "census",
+            "--max-cycles", "61"]
+    assert main(["run", "--engine", "verilator", "--feed", "pixels", "--samples-per-clock", "4", *crop,
+                 "-o", str(tmp_path / "px")]) == 0
+    assert main(["run", "--engine", "model", *crop, "-o", str(tmp_path / "model")]) == 0
+    got, want = np.load(tmp_path / "px" / "result.npz"), np.load(tmp_path / "model" / "result.npz")
+    for key in ("map", "counts", "timeout"):
+        assert np.array_equal(got[key], want[key]), key
+    assert np.array_equal(got["cycles"], -(-want["cycles"] // 4))
+    assert want["timeout"].any() and (want["map"][want["timeout"]] >= 0).any()

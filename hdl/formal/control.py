@@ -280,12 +280,15 @@ class ControlProperties(wiring.Component):
                 bus.append(bit)
             over_i = Cat(bus[r] & (counts[r] == n_max) for r in range(rows))
             late = late | (stopped & over_i.any())
-            counts = [Mux(~stopped & bus[r] & (counts[r] != n_max), counts[r] + 1,
-                          counts[r])[:p.counter_width] for r in range(rows)]
+            # Each sample's values are nets of their own (each is read several times by the next).
+            nxt = [Signal(p.counter_width, name=f"ref_count_{r}_s{i}") for r in range(rows)]
+            m.d.comb += [n.eq(Mux(~stopped & bus[r] & (counts[r] != n_max), counts[r] + 1, counts[r]))
+                         for r, n in enumerate(nxt)]
             watchdog = ref.cyc_now * b + (i + 1) == p.max_cycles  # sample max_cycles
-            over = Mux(stopped, over, over_i)
-            hit = hit | (~stopped & over_i.any())
-            stopped = stopped | over_i.any() | watchdog
+            over_n, hit_n, stopped_n = Signal(rows, name=f"ref_over_s{i}"), Signal(), Signal()
+            m.d.comb += [over_n.eq(Mux(stopped, over, over_i)), hit_n.eq(hit | (~stopped & over_i.any())),
+                         stopped_n.eq(stopped | over_i.any() | watchdog)]
+            counts, over, hit, stopped = nxt, over_n, hit_n, stopped_n
         ref.finish, ref.hit, ref.over, ref.late_ties = stopped, hit, over, late
         with m.If(ref.compute):
             m.d.sync += [c.eq(x) for c, x in zip(cnt, counts, strict=True)]
