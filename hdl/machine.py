@@ -4,9 +4,12 @@ An M x N matrix of stochastic operators (``operator.py``) fed by a random source
 (``sources.py``: LFSRs, shared LFSRs or Sobol generators, or numbers on a port) and by
 double-buffered likelihood memories; the AND of a row's operators is the
 row's stochastic bus signal, counted by its overflow counter (``counters.py``); the first
-overflow(s) stop the run and the MAP encoder (``encoder.py``) names the winner. The exact
-per-cycle semantics, ports and word order are in ``docs/architecture.md``; the NumPy model
-``bayesmachine.sim.model`` computes the same thing bit for bit.
+overflow(s) stop the run and the MAP encoder (``encoder.py``) names the winner. With B samples per
+clock (``samples_per_clock``) every operator compares B numbers per clock, the bus carries B bits
+per row and the run stops at the sample of its first overflow; with ``timeout_answer = "leading"``
+a timed-out run's bubble searches the leading row first. The exact per-sample semantics, ports and
+word order are in ``docs/architecture.md``; the NumPy model ``bayesmachine.sim.model`` computes the
+same thing bit for bit.
 
 Timing (``docs/architecture.md``, "Timing"):
 
