@@ -111,11 +111,13 @@ def consistency_words(model: ModelParams, machine: Any, right_map_row: np.ndarra
 
 
 def stereo_rtlil(model: ModelParams, width: int) -> str:
-    from bayesmachine.hdl.emit import rtlil_text
+    """The RTLIL without source locations (they move with every edit of the Python)."""
+    from amaranth.back import rtlil
+
     from bayesmachine.hdl.frontend.stereo import StereoMachine, stereo_machine_params
 
     params = stereo_machine_params(model.dmax, model=model)
-    return rtlil_text(StereoMachine(params=params, model=model, width=width))
+    return rtlil.convert(StereoMachine(params=params, model=model, width=width), name="top", emit_src=False)
 
 
 def _pair(crop: str) -> tuple[np.ndarray, np.ndarray]:
