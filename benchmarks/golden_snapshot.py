@@ -34,7 +34,7 @@ from bayesmachine.host.likelihoods import memory_words, right_columns, right_mem
 from bayesmachine.host.reference import reference_bands, reference_quantized, right_reference_map
 from bayesmachine.host.region import OutputRegion
 from bayesmachine.host.run import prepare, run_machine
-from bayesmachine.likelihood import ModelParams, disparity_machine, right_machine
+from bayesmachine.models import ModelParams, disparity_machine, right_machine
 
 # Crops (x, y, width, height, shift) of the bundled Motorcycle pair (500 x 741): the right image's crop
 # starts ``shift`` pixels further left, so the crop's disparities (49.6, 29..42, 21.6) fall in 0..Dmax.
@@ -91,22 +91,23 @@ def has_right_pass(model: ModelParams) -> bool:
 
 
 def prior_words(model: ModelParams, machine: Any, above: np.ndarray) -> np.ndarray:
-    from bayesmachine.likelihood import QuantizedTables, likelihood_tables, neighbour_words
+    from bayesmachine.columns import AbovePrior
 
-    return neighbour_words(QuantizedTables(likelihood_tables(model), machine.word_bits), model.dmax, above)
+    column = model.column(AbovePrior)
+    return column.loaded(column.table(machine.word_bits), above)
 
 
 def right_prior_words(model: ModelParams, machine: Any, above: np.ndarray) -> np.ndarray:
-    return prior_words(model.right_model, machine, above)
+    return prior_words(model.pass_named("right").model, machine, above)
 
 
 def consistency_words(model: ModelParams, machine: Any, right_map_row: np.ndarray,
-                      region: OutputRegion) -> np.ndarray:
-    from bayesmachine.likelihood import QuantizedTables, likelihood_tables, lr_column
+                      region: OutputRegion) -> dict[str, np.ndarray]:
+    from bayesmachine.columns import Consistency
 
-    q = QuantizedTables(likelihood_tables(model), machine.word_bits)
-    return lr_column(right_map_row, int(right_columns(region)[0]), region.map_columns, model, q.one,
-                     q.lr_beta, q.lr_gamma)
+    column = model.column(Consistency)
+    first = int(right_columns(region)[0])
+    return {"fed": column.loaded(column.table(machine.word_bits), right_map_row, first, region.map_columns)}
 # ---------------------------------------------------------------------------------------------------
 
 
@@ -139,7 +140,7 @@ def _words(model: ModelParams, machine: Any, feats: tuple, qmap: np.ndarray, rma
             above = np.full(wo, -1, np.int16) if y == 0 else qmap[y - 1]
             kw["prior"] = prior_words(model, machine, above)
         if rmap_q is not None:
-            kw["consistency"] = consistency_words(model, machine, rmap_q[y], region)
+            kw |= consistency_words(model, machine, rmap_q[y], region)
             r_above = np.full(rmap_q.shape[1], -1, np.int16) if y == 0 else rmap_q[y - 1]
             right_rows.append(right_memory_words(*feats, model, rmachine, rows=slice(y, y + 1),
                                                  prior=right_prior_words(model, rmachine, r_above)))

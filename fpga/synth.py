@@ -8,13 +8,12 @@ time, the report committed last (its presence means a complete run), the tools' 
 
 from __future__ import annotations
 
-import dataclasses
 import sys
 import time
 from pathlib import Path
 
 from bayesmachine.hdl.frontend import DEFAULT_FIFO_PIXELS
-from bayesmachine.likelihood import ModelParams
+from bayesmachine.models import HARDWARE_MODEL, ModelParams
 from bayesmachine.params import MachineParams
 from bayesmachine.sources import source_kind
 
@@ -28,11 +27,12 @@ SYNTH_OUTPUTS = ("report.md", "report.json")
 
 
 def throughput_model(params: MachineParams, model: ModelParams | None) -> ModelParams:
-    """The model whose words the throughput run feeds ``params`` (default: the paper's), checked: a
-    disparity machine that runs it (rows, columns, prior: ``likelihood.check_disparity_machine``)."""
-    from bayesmachine.likelihood import check_disparity_machine
+    """The model whose words the throughput run feeds ``params`` (default: the hardware model's, as
+    ``bayesmachine synth``), checked: a disparity machine that runs it (rows, columns, prior:
+    ``models.check_disparity_machine``)."""
+    from bayesmachine.models import check_disparity_machine
 
-    model = model if model is not None else ModelParams(dmax=params.rows - 2)
+    model = model if model is not None else ModelParams(name=HARDWARE_MODEL, dmax=params.rows - 2)
     if not params.nomatch_row:
         raise ValueError("throughput is measured on a stereo pair: it needs a disparity machine "
                          "(a no-match row); pass --no-throughput")
@@ -44,7 +44,7 @@ def measure_cycles(params: MachineParams, progress: bool = True,
                    model: ModelParams | None = None) -> dict[str, object]:
     """Compute and wall cycles per pixel of ``params`` on the bundled pair (the model's cycles, and the
     RTL's per-pixel timing ``pixel_wall_cycles`` on top: loading included). ``model``: the disparity
-    model whose words the machine runs on (default: the paper's, Dmax = rows - 2)."""
+    model whose words the machine runs on (default: the hardware model's, Dmax = rows - 2)."""
     from bayesmachine.hdl.machine import pixel_wall_cycles
     from bayesmachine.host.images import bundled_pair
     from bayesmachine.host.run import prepare, run_machine
@@ -69,7 +69,8 @@ def synth(params: MachineParams, target_name: str, out: Path, *, machines: int =
     """The whole flow; returns the report (also written to ``out/report.json`` and ``out/report.md``).
 
     With ``width`` (pixels per image line) the design is the camera-fed ``StereoMachine`` of the
-    machine ``params``, the disparity ``model`` (default: the paper's, Dmax = rows - 2) and a FIFO
+    machine ``params``, the disparity ``model`` (default: :data:`~bayesmachine.models.HARDWARE_MODEL`, as
+    ``bayesmachine synth``, Dmax = rows - 2) and a FIFO
     of ``fifo_pixels``, instead of the machine alone; one StereoMachine with ``machines`` machines
     behind its feature pipeline (map rows dealt to them; docs/frontend.md). Without
     ``width``, ``model`` is the model whose words the throughput run feeds the machine (the census
@@ -99,7 +100,7 @@ def synth(params: MachineParams, target_name: str, out: Path, *, machines: int =
     if measure:
         throughput_model(params, model)  # before any work: the machine must run the model's words
     if width is not None:
-        model = model if model is not None else ModelParams(dmax=params.rows - 2)
+        model = model if model is not None else ModelParams(name=HARDWARE_MODEL, dmax=params.rows - 2)
         check_stereo_machine(params, model, width, fifo_pixels, machines)
     if isinstance(pin_width, bool) or not isinstance(pin_width, int) or not 1 <= pin_width <= 64:
         raise ValueError(f"pin_width must be an integer in [1, 64], got {pin_width!r}")
@@ -153,7 +154,7 @@ def synth(params: MachineParams, target_name: str, out: Path, *, machines: int =
                 "fifo_beats": fifo_pixels * params.beats_per_pixel,
                 "beats_per_pixel": params.beats_per_pixel,
                 "beat_bits": params.words_per_beat * params.memory_word_width,
-                "model": dataclasses.asdict(model),
+                "model": model.to_dict(),
                 "input_bits": rep.PIXEL_BITS,
                 # The line buffer's word: 2 margin lines of 16-bit pairs (64 bits; 96 with a 7x7 census).
                 "line_buffer_bits": rep.PIXEL_BITS * 2 * model.margin,

@@ -30,6 +30,7 @@ from bayesmachine.cliargs import (
     positive_float_arg,
     runnable_sources,
 )
+from bayesmachine.models import ModelParams
 from bayesmachine.outputs import (
     NpzWriter,
     OutputDir,
@@ -43,7 +44,6 @@ from bayesmachine.params import DEFAULT_RNG, MachineParams
 from .datasets import PairSpec, bundled_spec, files_spec, resolve_dataset
 from .features import model_features
 from .images import Crop, bundled_pair, crop_image, load_gt, load_image, parse_crop, validate_pair
-from .likelihoods import ModelParams
 from .reference import reference_bands, warm_up
 from .region import OutputRegion
 from .run import ENGINES, FEEDS, RunOutcome, prepare, result_bytes, run_pair
@@ -143,10 +143,6 @@ def _add_machine_options(p: argparse.ArgumentParser, sweep: bool) -> None:
     changes: dict[str, dict[str, object]] = {}
     helps = {
         "rng": _host_rng_help() + " (default %(default)s)",
-        "prior": "uniform: always-on 1s enter each row; loaded: an extra operator column 0 holds a prior "
-        "word per row, which the host fills with a uniform prior (1.0); neighbour: the census model's "
-        "neighbour prior, which --model census sets by itself (default uniform; neighbour with --model "
-        "census)",
     }
     if sweep:
         changes = list_option_changes(SWEEP_COUNTER_MAX)
@@ -403,10 +399,10 @@ def _check_board_args(args: argparse.Namespace, model: ModelParams) -> None:
         raise ValueError("--engine board needs --port (the board's serial port, or the path "
                          "`bayesmachine board "
                          "simulate` printed)")
-    if model.lr:
-        raise ValueError(f"--engine board --model {model.name}: the board carries the on-chip front end, "
-                         "whose link carries the paper and census models (not census-lr's right pass: "
-                         "run it with --engine verilator --feed pixels)")
+    if len(model.passes) > 1:
+        raise ValueError(f"--engine board --model {model.name}: the board's link carries one pass's results "
+                         f"(not the {model.passes[0].name} pass's: run it with --engine verilator --feed "
+                         "pixels)")
     if args.waves is not None:
         raise ValueError("--waves is not available with --engine board")
     args.feed = "pixels"  # the board takes the pair itself: its machine has the front end's lanes

@@ -7,10 +7,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams
 
 from .features import FeatureSums
-from .likelihoods import ModelParams
 from .reference import Reference, reference_bands
 from .region import OutputRegion
 

@@ -17,7 +17,7 @@ import time
 from pathlib import Path
 
 from bayesmachine.fpga.flow import ROUTERS
-from bayesmachine.likelihood import ModelParams
+from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams
 
 from . import protocol as pr

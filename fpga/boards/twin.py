@@ -14,7 +14,7 @@ import struct
 
 import numpy as np
 
-from bayesmachine.likelihood import ModelParams
+from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams
 
 from . import protocol as pr
