@@ -435,16 +435,14 @@ def _add_option(group: argparse._ActionsContainer, option: Option) -> None:
 
 
 def add_model_options(
-    parser: argparse.ArgumentParser, dmax: bool = True, given_only: bool = False,
-    title: str = "model (paper table 1 defaults)", census: bool = False, sweep: bool = False,
-    hardware: bool = False, board_engine: bool = False,
+    parser: argparse.ArgumentParser, dmax: bool = True, title: str = "model (paper table 1 defaults)",
+    census: bool = False, sweep: bool = False, hardware: bool = False, board_engine: bool = False,
 ) -> argparse._ActionsContainer:
     """The paper model's options (its columns' parameters, paper table 1 defaults): ``--dmax`` unless
     ``dmax=False``, ``--p0``, ``--sigma`` / ``--sigma-m|gh|gv``, ``--p-nm0``, ``--sigma-nm``; with
     ``census``, ``--model`` and the other models' options (:func:`add_census_options`; ``sweep``: a list;
     ``hardware``, ``board_engine``: its default, as there). Every option is None unless given (the model
-    fills in its defaults), so that a command can refuse one where it does not apply; ``given_only`` is
-    kept for the callers that say so."""
+    fills in its defaults), so that a command can refuse one where it does not apply."""
     g = parser.add_argument_group(title)
     if dmax:
         add_dmax_option(g)

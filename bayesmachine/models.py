@@ -220,6 +220,16 @@ class ModelParams:
     values :class:`~bayesmachine.params.ParameterError` naming the parameter. Two models with the same
     values are equal; ``to_dict()`` lists every value and ``ModelParams(**to_dict())`` is the same model.
 
+    Parameters
+    ----------
+    name : str
+        The model, one of :data:`MODELS` (default :data:`DEFAULT_MODEL`, the command line's).
+    dmax : int
+        The largest disparity, 0 .. 4094 (default 80).
+    **parameters
+        Its column kinds' parameters (:func:`all_options`; e.g. ``sigma_m``, ``census_window``,
+        ``lr_beta``); None or left out: the default.
+
     Attributes
     ----------
     name, dmax : str, int
@@ -232,7 +242,7 @@ class ModelParams:
         The passes a run makes, in order: the declared ones, then its own (the output).
     """
 
-    __slots__ = ("_definition", "_dmax", "_values", "_columns", "_nomatch", "_passes")
+    __slots__ = ("_definition", "_dmax", "_given", "_values", "_columns", "_nomatch", "_passes")
 
     def __init__(self, *, name: str = DEFAULT_MODEL, dmax: int = DEFAULT_DMAX, **parameters: Any) -> None:
         if not isinstance(name, str):
@@ -245,9 +255,11 @@ class ModelParams:
         off = {c for option, kinds in definition.switches if not values[option] for c in kinds}
         self._definition = definition
         self._dmax = dmax
+        self._given = {k: v for k, v in parameters.items() if v is not None}
         self._values = MappingProxyType(values)
-        self._columns = tuple(kind(values, dmax) for kind in definition.columns if kind not in off)
-        self._nomatch = definition.nomatch(values, dmax)
+        self._columns = tuple(kind(values=values, dmax=dmax) for kind in definition.columns
+                              if kind not in off)
+        self._nomatch = definition.nomatch(values=values, dmax=dmax)
         declared = tuple(self._declared_pass(p) for p in definition.passes)
         self._passes = (*declared, Pass("left", self))
 
@@ -325,12 +337,14 @@ class ModelParams:
         raise AttributeError(f"ModelParams is read-only: use model.replace({name}=...)")
 
     def replace(self, **changes: Any) -> ModelParams:
-        """The same model with ``changes`` (a new ``name`` keeps the parameters it has too)."""
-        base = {"name": self.name, "dmax": self._dmax, **self._values}
+        """The model of the parameters given to this one, with ``changes``: the others take their defaults
+        again (``census_window=5`` gives the 5x5 window's ``census_sigma``; a new ``name`` its model's
+        defaults and keeps the given parameters it has)."""
+        given = {"name": self.name, "dmax": self._dmax, **self._given}
         if "name" in changes and changes["name"] != self.name:
             other = MODELS[changes["name"]].options if changes["name"] in MODELS else {}
-            base = {k: v for k, v in base.items() if k in ("name", "dmax") or k in other}
-        return ModelParams(**{**base, **changes})
+            given = {k: v for k, v in given.items() if k in ("name", "dmax") or k in other}
+        return ModelParams(**{**given, **changes})
 
     def to_dict(self) -> dict[str, Any]:
         """``dmax``, ``name`` and every parameter's value (resolved: what ran)."""
@@ -346,7 +360,7 @@ class ModelParams:
         return "ModelParams(" + ", ".join(f"{k}={v!r}" for k, v in self.to_dict().items()) + ")"
 
     def __reduce__(self) -> tuple[Any, tuple[dict[str, Any]]]:
-        return _rebuild, (self.to_dict(),)
+        return _rebuild, ({"name": self.name, "dmax": self._dmax, **self._given},)
 
 
 def machine_layout(columns: tuple[Column, ...]) -> tuple[str, int]:

@@ -75,6 +75,18 @@ def test_paper_model_has_its_parameters_only_and_dicts_round_trip():
     assert ModelParams(**d) == census and hash(ModelParams(**d)) == hash(census)
 
 
+def test_replace_keeps_the_given_parameters_and_resolves_the_others():
+    import pickle
+
+    m = ModelParams(name="census", prior_s=3.0)
+    five = m.replace(census_window=5)
+    assert (five.census_window, five.census_sigma, five.census_nomatch_h, five.prior_s) == (5, 3.0, 3, 3.0)
+    assert pickle.loads(pickle.dumps(m)).replace(census_window=5) == five
+    # Another model: its own defaults (census-lr's no-match prior factor is its own, not census's).
+    assert ModelParams(name="census-lr").replace(name="census") == ModelParams(name="census")
+    assert ModelParams(name="census", census_window=5).replace(name="paper") == ModelParams(name="paper")
+
+
 @pytest.mark.parametrize(("kwargs", "option"), [
     ({"name": "sgbm"}, "--model"),
     ({"census_window": 9}, "--census-window"),
@@ -139,8 +151,13 @@ def test_every_table_is_checked_nonincreasing_in_its_cost():
             for term in (*p.columns, p.model.nomatch):
                 v = term.table().values
                 assert (np.diff(v) <= 0).all(), term
-    with pytest.raises(ParameterError, match="grow with the cost"):
-        ModelParams(name="paper", p0=0.5).columns[0]._check_table(np.array([0.5, 0.6]))
+    class Growing(Census):  # a kind whose likelihood grows with the cost: refused when its table is built
+        def likelihood(self, cost):
+            return np.linspace(0.5, 1.0, np.size(cost))
+
+    model = ModelParams(name="census")
+    with pytest.raises(ParameterError, match="^census_sigma = 6.0 gives likelihoods that grow with the cost"):
+        Growing(values=model.parameters, dmax=model.dmax).table()
 
 
 def test_neighbour_words_from_one_neighbour():

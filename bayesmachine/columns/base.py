@@ -182,14 +182,28 @@ class Term:
     ``likelihood(cost)``, the float64 value at a cost, over ``costs()``; ``nomatch_values()`` are its
     no-match row's constant entries. ``table()`` is checked once: every value in [0, 1] and
     nonincreasing in the cost (what makes a cost threshold of a row's words exact), named after
-    ``table_parameter``. Instances are built by a model from its resolved option values.
+    ``table_parameter``.
+
+    Parameters
+    ----------
+    values : Mapping[str, Any]
+        The resolved values of (at least) its options: a model's (:class:`~bayesmachine.models.ModelParams`
+        builds its terms; the values are checked there).
+    dmax : int
+        The model's largest disparity.
+
+    Attributes
+    ----------
+    values : dict
+        Its options' values.
+    dmax : int
     """
 
     name: ClassVar[str]
     options: ClassVar[tuple[Option, ...]] = ()
     table_parameter: ClassVar[str] = ""
 
-    def __init__(self, values: Mapping[str, Any], dmax: int) -> None:
+    def __init__(self, *, values: Mapping[str, Any], dmax: int) -> None:
         self.values = {o.name: values[o.name] for o in self.options}
         self.dmax = dmax
         self._tables: dict[int | None, Table] = {}

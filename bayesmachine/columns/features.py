@@ -41,10 +41,20 @@ SIGMAS = {f: Option(f"sigma_{f}", "float", 10.0, _sigma, f"sigma of the {what} f
 
 
 class FeatureColumn(Column):
-    """A 5x5 feature's column: cost |difference of the two pixels' sums|, the paper's likelihood."""
+    """A 5x5 feature's column: cost |difference of the two pixels' sums|, the paper's likelihood.
+
+    A subclass names its feature (``class Mean(FeatureColumn, feature="m")``): its plane (the
+    ``FeatureSums`` field ``m25``), its options (``p0``, shared by the three, and ``sigma_m``) follow."""
 
     source = Source.FEATURES
     feature: ClassVar[str]
+
+    def __init_subclass__(cls, feature: str, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        cls.name = cls.feature = feature
+        cls.plane = f"{feature}{SCALES[feature]}"
+        cls.options = (P0, SIGMAS[feature])
+        cls.table_parameter = f"sigma_{feature}"
 
     @property
     def scale(self) -> int:
@@ -70,28 +80,16 @@ class FeatureColumn(Column):
         return likelihood_formula(cost, self.scale, float(self.values["p0"]), self.sigma)
 
 
-class Mean(FeatureColumn):
-    name = "m"
-    feature = "m"
-    plane = "m25"
-    options = (P0, SIGMAS["m"])
-    table_parameter = "sigma_m"
+class Mean(FeatureColumn, feature="m"):
+    """The 5x5 window's mean."""
 
 
-class GradH(FeatureColumn):
-    name = "gh"
-    feature = "gh"
-    plane = "gh20"
-    options = (P0, SIGMAS["gh"])
-    table_parameter = "sigma_gh"
+class GradH(FeatureColumn, feature="gh"):
+    """The horizontal gradient: the window's two right columns minus its two left ones."""
 
 
-class GradV(FeatureColumn):
-    name = "gv"
-    feature = "gv"
-    plane = "gv20"
-    options = (P0, SIGMAS["gv"])
-    table_parameter = "sigma_gv"
+class GradV(FeatureColumn, feature="gv"):
+    """The vertical gradient: the window's two bottom rows minus its two top ones."""
 
 
 FEATURE_COLUMNS: tuple[type[FeatureColumn], ...] = (Mean, GradH, GradV)

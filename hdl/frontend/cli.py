@@ -28,7 +28,7 @@ _STEREO_OPTIONS = (("width", "--width"), ("fifo_pixels", "--fifo-pixels"), *MODE
 def add_options(p: argparse.ArgumentParser) -> None:
     """The ``--top stereo`` options: the model's parameters (shared with run/sweep), the image width,
     the FIFO."""
-    add_model_options(p, dmax=False, given_only=True, title="model (--top stereo; paper table 1 defaults)")
+    add_model_options(p, dmax=False, title="model (--top stereo; paper table 1 defaults)")
     g = p.add_argument_group("stereo top (--top stereo): pixels in, results out")
     g.add_argument("--width", type=int_arg, default=None,
                    help=f"image width in pixels, dmax + 5 .. {MAX_WIDTH} (default {DEFAULT_WIDTH})")
