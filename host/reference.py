@@ -32,6 +32,7 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
+from numba.extending import overload
 
 from bayesmachine.columns import AbovePrior, Column, LeftPrior, Source
 from bayesmachine.models import ModelParams, Pass
@@ -94,9 +95,78 @@ def _popcount(x):  # pragma: no cover
     return np.int64((x * _H01) >> np.uint64(56))
 
 
+def _cost(a, b):  # pragma: no cover
+    """A FEATURES column's cost of two pixels' values, by their type: census codes (uint64) their
+    Hamming distance, feature sums their |difference| (chosen when numba compiles, no branch)."""
+    raise NotImplementedError("compiled by numba only")
+
+
+@overload(_cost, inline="always")
+def _cost_for(a, b):  # pragma: no cover
+    if a == numba.types.uint64:
+        return lambda a, b: _popcount(a ^ b)
+    return lambda a, b: abs(a - b)
+
+
+# A pass's FEATURES columns the data kernel takes (the closed set's: m, gH, gV and census).
+KERNEL_SLOTS = 4
+
+
+@numba.njit(parallel=True, cache=True, fastmath=False, boundscheck=False)
+def _data_kernel(r0, o0, t0, r1, o1, t1, r2, o2, t2, r3, o3, t3, nm_entry,  # pragma: no cover
+                 nm_plane, nm_table, has_nm, first, step, last, dmax, data, idx):
+    """data[y, j, h]: the product of the FEATURES columns of pixel (y, first + j), in operator order
+    ((c0 * c1) * c2) * c3; a column slot k is None past the pass's columns.
+
+    Column k: reference plane ``rk``, match plane ``ok``, table ``tk`` at ``_cost`` of the two pixels'
+    values, the match at column x + step * d; a lane past ``last`` gets 0. The no-match row: column 0's
+    ``nm_table[|nm_plane|]`` (the pass's rule) times the other columns' entries ``nm_entry[1:]``, or 0
+    without one (``has_nm``). With ``idx`` (not None: a float pass without a prior or a PASS column)
+    also normalize and take the MAP (-1: no match; the lowest index wins exact ties).
+    """
+    h = data.shape[0]
+    wo = data.shape[1]
+    zero = t0[0] * 0
+    for y in numba.prange(h):
+        for j in range(wo):
+            x = first + j
+            out = data[y, j]
+            lanes = dmax + 1  # lanes 0 .. lanes - 1 have a match pixel (x + step * d <= last)
+            if step > 0 and x + dmax > last:
+                lanes = last - x + 1
+            a0 = r0[y, x]
+            if r1 is not None:
+                a1 = r1[y, x]
+            if r2 is not None:
+                a2 = r2[y, x]
+            if r3 is not None:
+                a3 = r3[y, x]
+            for d in range(lanes):
+                xm = x + step * d
+                v = t0[_cost(a0, o0[y, xm])]
+                if r1 is not None:
+                    v = v * t1[_cost(a1, o1[y, xm])]
+                if r2 is not None:
+                    v = v * t2[_cost(a2, o2[y, xm])]
+                if r3 is not None:
+                    v = v * t3[_cost(a3, o3[y, xm])]
+                out[d] = v
+            for d in range(lanes, dmax + 1):
+                out[d] = zero
+            v = zero
+            if has_nm:
+                v = nm_table[abs(nm_plane[y, x])]
+                for e in nm_entry[1:]:
+                    v = v * e
+            out[dmax + 1] = v
+            if idx is not None:
+                idx[y, j] = _finish(out)
+
+
 @numba.njit(cache=True, inline="always")
-def _finish_float(out, m):  # pragma: no cover
+def _finish(out):  # pragma: no cover
     """Normalize a pixel's unnormalized values in place; its MAP (-1: no match), ties to the lowest."""
+    m = out.shape[0]
     best = -1.0
     arg = 0
     total = 0.0
@@ -105,51 +175,10 @@ def _finish_float(out, m):  # pragma: no cover
         total += v
         if v > best:  # strict: the lowest index wins exact ties
             best = v
-            arg = d if d < m - 1 else -1
+            arg = d
     for d in range(m):
         out[d] = out[d] / total
-    return arg
-
-
-@numba.njit(parallel=True, cache=True, fastmath=False, boundscheck=False)
-def _data_kernel(ref, other, hamming, tables, nm_entry, nm_plane, nm_table, has_nm,  # pragma: no cover
-                 first, step, last, dmax, finish, data, idx):
-    """data[y, j, h]: the product of the FEATURES columns k of pixel (y, first + j), in operator order.
-
-    Column k's cost at lane d: popcount(ref[k] xor other[k]) (``hamming[k]``) or |ref[k] - other[k]| at
-    match column x + step * d; a lane past ``last`` gets 0. The no-match row: the product of the
-    columns' entries, column 0's ``nm_table[|nm_plane|]`` (the pass's rule), or 0 without one
-    (``has_nm``). ``finish``: also normalize and take the MAP (a pass without a prior or a PASS column).
-    """
-    n_k = ref.shape[0]
-    h = ref.shape[1]
-    wo = data.shape[1]
-    unit = tables[0, 0] * 0 + 1
-    for y in numba.prange(h):
-        for j in range(wo):
-            x = first + j
-            out = data[y, j]
-            for d in range(dmax + 1):
-                xm = x + step * d
-                if xm > last:
-                    out[d] = unit * 0
-                    continue
-                v = unit
-                for k in range(n_k):
-                    a = ref[k, y, x]
-                    b = other[k, y, xm]
-                    c = _popcount(np.uint64(a ^ b)) if hamming[k] else abs(a - b)
-                    v = v * tables[k, c]
-                out[d] = v
-            if has_nm:
-                v = unit
-                for k in range(n_k):
-                    v = v * (nm_table[abs(nm_plane[y, x])] if k == 0 else nm_entry[k])
-                out[dmax + 1] = v
-            else:
-                out[dmax + 1] = unit * 0
-            if finish:
-                idx[y, j] = _finish_float(out, dmax + 2)
+    return arg if arg < m - 1 else -1
 
 
 @numba.njit(cache=True, inline="always")
@@ -165,7 +194,7 @@ def _neighbours(idx, above, y, i, has_left, has_above):  # pragma: no cover
 @numba.njit(cache=True, fastmath=False, boundscheck=False)
 def _prior_pass_float(data, tl, nl, has_left, ta, na, has_above, above, post, idx):  # pragma: no cover
     """Raster order: the left and above factors from the MAPs already taken (``above``: the MAP row
-    above the band), then normalize and take the MAP."""
+    above the band), then normalize and take the MAP (ties to the lowest index)."""
     n, wo, m = data.shape
     dmax = m - 2
     for y in range(n):
@@ -173,14 +202,34 @@ def _prior_pass_float(data, tl, nl, has_left, ta, na, has_above, above, post, id
             hl, ha = _neighbours(idx, above, y, i, has_left, has_above)
             src = data[y, i]
             out = post[y, i]
-            for d in range(m):
+            best = -1.0
+            arg = 0
+            total = 0.0
+            for d in range(dmax + 1):
                 p = 1.0
                 if hl >= 0:
-                    p = p * (tl[abs(d - hl)] if d <= dmax else nl)
+                    p = p * tl[abs(d - hl)]
                 if ha >= 0:
-                    p = p * (ta[abs(d - ha)] if d <= dmax else na)
-                out[d] = src[d] * p
-            idx[y, i] = _finish_float(out, m)
+                    p = p * ta[abs(d - ha)]
+                v = src[d] * p
+                out[d] = v
+                total += v
+                if v > best:  # strict: the lowest index wins exact ties
+                    best = v
+                    arg = d
+            p = 1.0
+            if hl >= 0:
+                p = p * nl
+            if ha >= 0:
+                p = p * na
+            v = src[dmax + 1] * p
+            out[dmax + 1] = v
+            total += v
+            if v > best:
+                arg = -1
+            for d in range(m):
+                out[d] = out[d] / total
+            idx[y, i] = arg
 
 
 @numba.njit(cache=True, fastmath=False, boundscheck=False)
@@ -229,23 +278,18 @@ def _prior_pass_words(data, tl, nl, has_left, ta, na, has_above, above, post, id
             idx[y, i] = arg
 
 
-def _planes(features: FeatureSums, cols: list[Column]) -> np.ndarray:
-    """(K, H, W) int64: each FEATURES column's plane (census codes' bits as they are)."""
-    out = np.empty((len(cols), *features.shape), np.int64)
-    for k, c in enumerate(cols):
-        plane = getattr(features, c.plane)
-        out[k] = plane.view(np.int64) if plane.dtype == np.uint64 else plane
-    return out
-
-
-def _tables(cols: list[Column], word_bits: int | None) -> tuple[np.ndarray, np.ndarray]:
-    """(K, T) tables padded to one length, and each column's no-match entry, in the kernels' type."""
+def _slots(ref: FeatureSums, other: FeatureSums, cols: list[Column], word_bits: int | None) -> tuple:
+    """The data kernel's column slots: (reference plane, match plane, table) of each FEATURES column in
+    operator order (tables float64, or int64 words), None past them, then the no-match entries."""
+    if not 1 <= len(cols) <= KERNEL_SLOTS:
+        raise ValueError(f"the reference kernel takes 1 to {KERNEL_SLOTS} feature columns, got {len(cols)}")
     dtype = np.float64 if word_bits is None else np.int64
     tabs = [c.table(word_bits) for c in cols]
-    out = np.zeros((len(cols), max(t.values.size for t in tabs)), dtype)
-    for k, t in enumerate(tabs):
-        out[k, : t.values.size] = t.values
-    return out, np.array([c.nomatch_entry(t) for c, t in zip(cols, tabs, strict=True)], dtype)
+    slots: list = []
+    for c, t in zip(cols, tabs, strict=True):
+        slots += [getattr(ref, c.plane), getattr(other, c.plane), np.asarray(t.values, dtype)]
+    slots += [None] * (3 * (KERNEL_SLOTS - len(cols)))
+    return (*slots, np.array([c.nomatch_entry(t) for c, t in zip(cols, tabs, strict=True)], dtype))
 
 
 def _prior_args(p: Pass, word_bits: int | None) -> tuple:
@@ -324,16 +368,14 @@ def pass_reference(p: Pass, left: FeatureSums, right: FeatureSums, word_bits: in
     elif out.shape != shape or out.dtype != np.float64:
         raise ValueError(f"out must be float64 of shape {shape}, got {out.dtype} {out.shape}")
     cols = [c for c in p.columns if c.source is Source.FEATURES]
-    tables, nm_entry = _tables(cols, word_bits)
-    floor = model.nomatch.table(word_bits).values.astype(tables.dtype)
+    floor = model.nomatch.table(word_bits).values.astype(np.float64 if word_bits is None else np.int64)
     factors = _fed_factors(p, word_bits, region, grid, fed or {}, shape[0])
     priors = _prior_args(p, word_bits)
     finish = word_bits is None and not factors and not (priors[2] or priors[5])
     data = out if word_bits is None else np.empty(shape, np.int64)
     idx = np.empty(shape[:2], dtype=np.int16)
-    _data_kernel(_planes(ref, cols), _planes(other, cols), np.array([c.hamming for c in cols]), tables,
-                 nm_entry, getattr(ref, model.nomatch.plane).astype(np.int64), floor, p.nomatch, grid.first,
-                 p.step, grid.last, model.dmax, finish, data, idx)
+    _data_kernel(*_slots(ref, other, cols, word_bits), getattr(ref, model.nomatch.plane), floor, p.nomatch,
+                 grid.first, p.step, grid.last, model.dmax, data, idx if finish else None)
     if finish:
         return Reference(out, idx)
     top = _above(above, rows, p, grid.width)
