@@ -766,6 +766,9 @@ def _pooled_summary(p: dict[str, object], pairs: int, varying: list[str]) -> str
             f"no-match F1 {f('nomatch_f1')}, MAP agreement {f('map_agreement')}")
     if p.get("machine_bad2_nomatch_bad") is not None:
         line += f", bad-2 {f('machine_bad2_nomatch_bad')} (reference {f('reference_bad2_nomatch_bad')})"
+    if p.get("machine_confidence_auc") is not None:
+        line += (f", confidence ECE {f('machine_confidence_ece')}, sparsification AUC "
+                 f"{f('machine_confidence_auc')} (random {f('machine_confidence_auc_random')})")
     if p.get("failed"):
         line += f"; {p['failed']} pair(s) failed"
     return line
