@@ -349,7 +349,9 @@ def _report(outcome: RunOutcome, source: str, crop: Crop | None) -> dict[str, ob
 
 
 def _write_json(path: Path, obj: object) -> None:
-    path.write_text(json.dumps(obj, indent=2, allow_nan=False) + "\n")
+    from .metrics import json_safe
+
+    path.write_text(json.dumps(json_safe(obj), indent=2, allow_nan=False) + "\n")
 
 
 def _summary(r: dict[str, object]) -> str:

@@ -54,6 +54,7 @@ __all__ = [
     "nomatch_occluded_share",
     "evaluate",
     "confidence_report",
+    "json_safe",
 ]
 
 
@@ -243,17 +244,17 @@ def nomatch_occluded_share(disp: np.ndarray, occluded: np.ndarray) -> float:
     return float((nm & np.asarray(occluded, dtype=bool)).sum() / n) if n else math.nan
 
 
-def _clean(v: object) -> object:
-    """JSON-safe: NaN -> None, numpy scalars -> Python."""
+def json_safe(v: object) -> object:
+    """JSON-safe: NaN -> None, numpy scalars -> Python (in dicts and lists too)."""
     if isinstance(v, (float, np.floating)):
         v = float(v)
         return None if math.isnan(v) else v
     if isinstance(v, np.integer):
         return int(v)
     if isinstance(v, dict):
-        return {k: _clean(x) for k, x in v.items()}
+        return {k: json_safe(x) for k, x in v.items()}
     if isinstance(v, (list, tuple)):
-        return [_clean(x) for x in v]
+        return [json_safe(x) for x in v]
     return v
 
 
@@ -303,7 +304,7 @@ class RunMetrics:
         if self.confidence is not None:
             out.update(_confidence_keys(self.confidence))
             out["confidence"] = self.confidence
-        return _clean(out)  # type: ignore[return-value]
+        return json_safe(out)  # type: ignore[return-value]
 
 
 # The confidence figures a sweep pools over pairs (top-level numbers of each task's report).
