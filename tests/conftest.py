@@ -74,7 +74,7 @@ def assert_same_results(got: MachineResult, want: MachineResult) -> None:
 def small_params(**kwargs: object) -> MachineParams:
     """A small machine (5 rows x 2 columns, W = 4, L = 12) that runs fast in the simulator."""
     base: dict[str, object] = dict(
-        rows=5, columns=2, word_bits=4, lfsr_bits=12, counter_max=3, max_cycles=60, lanes=3,
+        rows=5, columns=2, word_bits=4, lfsr_bits=12, counter_max=3, max_cycles=60, words_per_beat=3,
         nomatch_row=True,
     )
     base.update(kwargs)

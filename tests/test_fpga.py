@@ -134,36 +134,36 @@ def test_wrapper_needs_one_input_stream_and_a_result_stream() -> None:
 
 
 @pytest.mark.parametrize("machines", [1, 3])
-def test_lanes_through_wrapper_match_lanes_model(machines: int) -> None:
-    from bayesmachine.hdl.lanes import MachineLanes
-    from bayesmachine.sim.lanes import LanesModel
+def test_machines_through_wrapper_match_their_model(machines: int) -> None:
+    from bayesmachine.hdl.machines import ParallelMachines
+    from bayesmachine.sim.machines import ParallelMachinesModel
 
     params = small_params()
     words = _words(params, 14, seed=5)
     beats = [b for pixel in words for b in pack_beats(params, pixel)]
-    raw = _through_wrapper(MachineLanes(params=params, machines=machines),
+    raw = _through_wrapper(ParallelMachines(params=params, machines=machines),
                            beats, len(words), _result_width(params),
                            8, 0.2, seed=2)
-    model = LanesModel(params, machines)
+    model = ParallelMachinesModel(params, machines)
     want = model.run(words[:5])  # two calls: the round-robin deal carries over
     rest = model.run(words[5:])
     assert decode_results(params, raw).equal(MachineResult.concatenate([want, rest], params.rows))
     if machines == 1:  # one lane is the machine itself
-        assert MachineModel(params).run(words).equal(LanesModel(params, 1).run(words))
-    else:  # lanes have their own seeds: lane 1's pixels differ from one machine's
+        assert MachineModel(params).run(words).equal(ParallelMachinesModel(params, 1).run(words))
+    else:  # machines have their own seeds: machine 1's pixels differ from one machine's
         one = MachineModel(params).run(words)
-        assert not np.array_equal(one.counts, LanesModel(params, machines).run(words).counts)
+        assert not np.array_equal(one.counts, ParallelMachinesModel(params, machines).run(words).counts)
 
 
-def test_lane_params() -> None:
-    from bayesmachine.params import lane_params
+def test_nth_machine() -> None:
+    from bayesmachine.params import nth_machine
 
     params = small_params(seed=7)
-    assert lane_params(params, 0) == params
-    seeds = {lane_params(params, i).seed for i in range(50)}
+    assert nth_machine(params, 0) == params
+    seeds = {nth_machine(params, i).seed for i in range(50)}
     assert len(seeds) == 50
-    with pytest.raises(ParameterError, match="lane"):
-        lane_params(params, -1)
+    with pytest.raises(ParameterError, match="index"):
+        nth_machine(params, -1)
 
 
 def _require_fpga_tools(target: str) -> None:
@@ -237,7 +237,7 @@ def test_small_machine_through_the_flow(target: str, rng: str, tmp_path: Path) -
     cp = report["critical_path"]
     assert cp["delay_ns"] == pytest.approx(cp["logic_ns"] + cp["routing_ns"], abs=0.01)
     assert cp["start"] and cp["end"]
-    assert report["lanes_fit"] >= 1
+    assert report["machines_fit"] >= 1
 
 
 def test_small_stereo_machine_through_yosys(tmp_path: Path) -> None:
@@ -257,7 +257,7 @@ def test_small_stereo_machine_through_yosys(tmp_path: Path) -> None:
     report = synth(params, "ecp5-25k", out, place=False, progress=False, width=width,
                    model=ModelParams(dmax=dmax), fifo_pixels=2)
     assert json.loads((out / "report.json").read_text()) == report
-    assert report["top"] == "stereo" and report["lanes"] == 1 and report["fmax_mhz"] is None
+    assert report["top"] == "stereo" and report["machines"] == 1 and report["fmax_mhz"] is None
     st = report["stereo"]
     assert (st["width"], st["fifo_pixels"], st["fifo_beats"]) == (width, 2, 2 * params.beats_per_pixel)
     assert st["model"]["dmax"] == dmax
@@ -337,7 +337,7 @@ def test_synth_command_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]
     (["--dmax", "8", "--width", "12"], "width must be in [dmax + 7, 4096] = [15, 4096]"),
     (["--rng", "external"], "synth needs an on-chip random source, not 'external'"),
     (["--rng", "smtj"], "synth needs an on-chip random source, not 'smtj'"),
-    (["--lanes", "16"], "lanes (16) must be a multiple of the loaded columns (5)"),
+    (["--words-per-beat", "16"], "words_per_beat (16) must be a multiple of the loaded columns (5)"),
     (["--fifo-pixels", "0"], "fifo_pixels must be an integer in [1, 64], got 0"),
     (["--p-nm0", "0.0001", "--word-bits", "4"], "p_nm0: 0.0001 quantizes to 0 with 4-bit words"),
 ])
@@ -373,7 +373,7 @@ def test_full_lane_on_ecp5_85k(tmp_path: Path) -> None:
     report = synth(params, "ecp5-85k", tmp_path / "out", measure=True, progress=False)
     assert report["resources"]["ff"] >= params.operators * (2 * params.memory_word_width + 1)
     assert report["fmax_mhz"] > 50
-    assert report["lanes_fit"] >= 1
+    assert report["machines_fit"] >= 1
     tp = report["throughput"]
     assert tp["wall_cycles_per_pixel"] == pytest.approx(tp["compute_cycles_per_pixel"] + 1, abs=0.01)
     assert tp["pixels_per_second"] == pytest.approx(report["fmax_mhz"] * 1e6 / tp["wall_cycles_per_pixel"],
@@ -410,7 +410,8 @@ def test_census_machine_through_yosys_with_its_throughput(tmp_path: Path) -> Non
 def test_synth_census_options_refused_where_they_do_not_apply(tmp_path: Path, capsys) -> None:
     from bayesmachine.cli import main
 
-    assert main(["synth", "--target", "ecp5-85k", "--model", "census", "--top", "stereo", "--lanes", "12",
+    assert main(["synth", "--target", "ecp5-85k", "--model", "census", "--top", "stereo", "--words-per-beat",
+                 "12",
                  "-o", str(tmp_path / "a")]) == 2
     assert "multiple of the loaded columns (5)" in capsys.readouterr().err
     assert main(["synth", "--target", "ecp5-85k", "--model", "paper", "--census-window", "5",

@@ -39,7 +39,7 @@ from bayesmachine.likelihood import (
     quantize,
     right_machine,
 )
-from bayesmachine.params import ParameterError, lane_params
+from bayesmachine.params import ParameterError, nth_machine
 from bayesmachine.sim.engines import get_engine
 
 DMAX = 6
@@ -373,7 +373,7 @@ def test_run_machine_equals_a_hand_driven_run(pair, model):
     want, want_right = _hand_run(prepared, machine)
     np.testing.assert_array_equal(run.map, want)
     np.testing.assert_array_equal(run.right.map, want_right)
-    assert run.right.machine == lane_params(disparity_machine(model.right_model, counter_max=8,
+    assert run.right.machine == nth_machine(disparity_machine(model.right_model, counter_max=8,
                                                               max_cycles=machine.max_cycles), 1)
     assert run.right.cycles.shape == want_right.shape and (run.right.cycles > 8).all()
     assert (run.map >= 0).mean() > 0.5

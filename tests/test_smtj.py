@@ -225,7 +225,8 @@ def test_verilator_agrees_on_smtj_numbers(verilator_toolchain: object, verilator
     from bayesmachine.sim.verilator import VerilatorEngine
 
     # The RTL (hence the Verilator build, shared in a session) of test_engines' external machine.
-    params = MachineParams.for_disparity(6, lanes=4, rng="smtj", smtj_dwell=20.0, seed=5, max_cycles=60)
+    params = MachineParams.for_disparity(6, words_per_beat=4, rng="smtj", smtj_dwell=20.0, seed=5,
+                                         max_cycles=60)
     words = synthetic_disparity_words(params, 40, np.random.default_rng(8))
     want = MachineModel(params).run(words)
     with VerilatorEngine(params, build_dir=verilator_cache) as eng:

@@ -30,9 +30,10 @@ from bayesmachine.sim.verilator import build as vb
 
 needs_tools = pytest.mark.usefixtures("verilator_toolchain")
 
-SMALL = MachineParams.for_disparity(dmax=6, lanes=4)  # 8 rows x 3 columns, 6 beats per pixel
+SMALL = MachineParams.for_disparity(dmax=6, words_per_beat=4)  # 8 rows x 3 columns, 6 beats per pixel
 # Short watchdog (timeouts), lowest-index ties, a loaded prior and an uneven last beat.
-ODD = MachineParams.for_disparity(dmax=4, lanes=5, counter_max=6, max_cycles=40, tie_break="lowest-index",
+ODD = MachineParams.for_disparity(dmax=4, words_per_beat=5, counter_max=6, max_cycles=40,
+                                  tie_break="lowest-index",
                                   prior="loaded", seed=7)
 
 
@@ -148,7 +149,7 @@ def test_timeouts_lowest_index_loaded_prior_heavy_back_pressure(cache: Path) -> 
 
 @needs_tools
 def test_trace_pixel_range(small: VerilatorEngine, cache: Path, tmp_path: Path) -> None:
-    # SMALL's traced VCD build is the one `run --dmax 6 --lanes 4 --waves` uses (one build for both).
+    # SMALL's traced VCD build is the one `run --dmax 6 --words-per-beat 4 --waves` uses (one build for both).
     p = SMALL
     words = _words(p, 12, 8)
     path = tmp_path / "window.vcd"
@@ -189,7 +190,8 @@ def test_dmax80_crop(cache: Path) -> None:
 @needs_tools
 @pytest.mark.parametrize("rng", ["lfsr-shared", "sobol"])
 def test_shared_sources_small_machine(cache: Path, rng: str) -> None:
-    p = MachineParams.for_disparity(dmax=6, lanes=4, rng=rng, word_bits=3, lfsr_bits=12, counter_max=5)
+    p = MachineParams.for_disparity(dmax=6, words_per_beat=4, rng=rng, word_bits=3, lfsr_bits=12,
+                                    counter_max=5)
     words = _words(p, 300, seed=11)  # 3-bit words: Sobol blocks of 8 cycles, runs span several
     with VerilatorEngine(p, build_dir=cache) as eng:
         model = MachineModel(p)
@@ -228,7 +230,7 @@ def test_host_run_through_registry(cache: Path, monkeypatch: pytest.MonkeyPatch)
     monkeypatch.setenv("BAYESMACHINE_CACHE_DIR", str(cache.parent))  # reuse this session's builds
     left, right, gt = random_dot_stereogram(height=10, width=24, background=1, square=3, seed=5)
     prep = host_run.prepare(left, right, ModelParams(dmax=6), gt)
-    machine = MachineParams.for_disparity(6, lanes=4)  # = SMALL
+    machine = MachineParams.for_disparity(6, words_per_beat=4)  # = SMALL
     vb.build_harness(machine, verbose=False)  # built already by other tests, or now
     before = vb.builds_done
     a = host_run.run_machine(prep, machine, "model", progress=False)
@@ -259,7 +261,7 @@ def test_harness_failure_is_reported(cache: Path) -> None:
 @needs_tools
 def test_external_random_numbers(cache: Path) -> None:
     """rng = "external": the numbers drive the ``entropy`` port on compute cycles, as in the model."""
-    p = MachineParams.for_disparity(dmax=6, lanes=4, rng="external", max_cycles=60)
+    p = MachineParams.for_disparity(dmax=6, words_per_beat=4, rng="external", max_cycles=60)
     rng = np.random.default_rng(13)
     words = _words(p, 60, 14)
     nums = rng.integers(0, 1 << p.word_bits, size=(4000, p.operators))
@@ -310,8 +312,8 @@ def test_run_command_with_verilator_and_waves(cache: Path, tmp_path: Path,
     from bayesmachine.cli import main
 
     monkeypatch.setenv("BAYESMACHINE_CACHE_DIR", str(cache.parent))
-    # --model paper --lanes 4: SMALL, whose traced build test_trace_pixel_range shares.
-    common = ["run", "--crop", "300,200,40,12", "--dmax", "6", "--model", "paper", "--lanes", "4",
+    # --model paper --words-per-beat 4: SMALL, whose traced build test_trace_pixel_range shares.
+    common = ["run", "--crop", "300,200,40,12", "--dmax", "6", "--model", "paper", "--words-per-beat", "4",
               "--no-sgbm", "--quiet"]
     assert main([*common, "-o", str(tmp_path / "model")]) == 0
     assert main([*common, "--engine", "verilator", "--waves", "2:4", "-o", str(tmp_path / "rtl")]) == 0
@@ -343,7 +345,7 @@ def test_full_size_machine_with_random_back_pressure(cache: Path) -> None:
 
 
 def _tiny_build(root: Path) -> vb.VerilatorBuild:
-    return vb.build_harness(MachineParams.for_disparity(dmax=1, lanes=3), build_dir=root, jobs=1)
+    return vb.build_harness(MachineParams.for_disparity(dmax=1, words_per_beat=3), build_dir=root, jobs=1)
 
 
 @needs_tools
@@ -353,7 +355,7 @@ def test_concurrent_builds_and_broken_cache_entries(tmp_path: Path) -> None:
     build of another design reuses the runtime objects the first ones left in the cache."""
     from concurrent.futures import ThreadPoolExecutor
 
-    p = MachineParams.for_disparity(dmax=1, lanes=3)
+    p = MachineParams.for_disparity(dmax=1, words_per_beat=3)
     with ThreadPoolExecutor(2) as pool:
         builds = list(pool.map(lambda _: _tiny_build(tmp_path), range(2)))
     assert builds[0].directory == builds[1].directory and builds[0].executable.exists()
@@ -374,7 +376,7 @@ def test_concurrent_builds_and_broken_cache_entries(tmp_path: Path) -> None:
     # Verilator's runtime objects: compiled by the first builds into the cache, copied by the next.
     runtime = sorted(o.name.split("-")[0] for o in (tmp_path / "runtime").glob("*.o"))
     assert runtime == ["verilated", "verilated_threads"]
-    q = MachineParams.for_disparity(dmax=2, lanes=3)
+    q = MachineParams.for_disparity(dmax=2, words_per_beat=3)
     with VerilatorEngine(q, build_dir=tmp_path) as eng:
         assert eng.compiled
         log = (eng.build.directory / "build.log").read_text()
@@ -387,7 +389,7 @@ def test_concurrent_builds_and_broken_cache_entries(tmp_path: Path) -> None:
 @pytest.mark.slow  # two compiles; the default suite checks the detection (above)
 def test_broken_cache_entry_is_rebuilt(tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
     """A truncated harness in the cache is reported and rebuilt in place, and the rebuild runs."""
-    p = MachineParams.for_disparity(dmax=1, lanes=3)
+    p = MachineParams.for_disparity(dmax=1, words_per_beat=3)
     first = _tiny_build(tmp_path)
     data = first.executable.read_bytes()
     first.executable.write_bytes(data[: len(data) // 3])  # as a crash mid-copy would leave it
@@ -421,7 +423,8 @@ def test_sigterm_during_compile_ends_the_compiler_and_cleans_up(tmp_path: Path) 
     root = tmp_path / "cache"
     code = ("from bayesmachine.params import MachineParams\n"
             "from bayesmachine.sim.verilator import build_harness\n"
-            f"build_harness(MachineParams.for_disparity(dmax=2, lanes=3), build_dir={str(root)!r}, jobs=1)")
+            "build_harness(MachineParams.for_disparity(dmax=2, words_per_beat=3), "
+            f"build_dir={str(root)!r}, jobs=1)")
     proc = subprocess.Popen([sys.executable, "-c", code], stderr=subprocess.PIPE)
     try:
         deadline = time.monotonic() + 120

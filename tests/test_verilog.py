@@ -38,7 +38,7 @@ VARIANTS = {
     "full-lfsr-shared": MachineParams.for_disparity(80, rng="lfsr-shared"),
     "full-sobol": MachineParams.for_disparity(80, rng="sobol"),
     "small-loaded-prior": MachineParams.for_disparity(
-        6, prior="loaded", lanes=5, counter_max=3, max_cycles=100
+        6, prior="loaded", words_per_beat=5, counter_max=3, max_cycles=100
     ),
 }
 
@@ -118,7 +118,7 @@ def _expected_flip_flops(p: MachineParams) -> int:
     # cycle count, flags (running, shadow full, stop, watchdog), the compute and start enables'
     # registered copies (identical, so plain `synth` merges them into one each)
     # the registered load (one-hot beat, one-hot write enables, the beat's words)
-    control = p.cycle_width + 4 + 2 + 2 * p.beats_per_pixel + p.lanes * p.memory_word_width
+    control = p.cycle_width + 4 + 2 + 2 * p.beats_per_pixel + p.words_per_beat * p.memory_word_width
     # With an on-chip source (lfsr, lfsr-shared, sobol): the prefetched comparators and each group
     # of rows' prefetched overflow; off-chip numbers are compared in their cycle.
     groups = -(-p.rows // max(1, GROUP_OPERATORS // p.operator_columns))
@@ -193,7 +193,7 @@ def test_emit_cli_writes_verilog_and_rtlil(tmp_path: Path, capsys: pytest.Captur
     hdl_cli.register(parser.add_subparsers())
     for suffix, marker in ((".v", "module bayesmachine"), (".il", "module \\bayesmachine")):
         out = tmp_path / f"bm{suffix}"
-        args = parser.parse_args(["emit", "--model", "paper", "--dmax", "4", "--lanes", "4",
+        args = parser.parse_args(["emit", "--model", "paper", "--dmax", "4", "--words-per-beat", "4",
                                   "--counter-max", "3", "--max-cycles", "1000", "--rng", "external",
                                   "--tie-break", "lowest-index", "-o", str(out)])
         assert args.func(args) == 0
@@ -213,7 +213,7 @@ def test_emit_cli_writes_verilog_and_rtlil(tmp_path: Path, capsys: pytest.Captur
 
 def test_emit_rejects_unknown_suffix(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="suffix|format"):
-        hdl_emit.emit(MachineParams.for_disparity(2, lanes=3), tmp_path / "bm.txt")
+        hdl_emit.emit(MachineParams.for_disparity(2, words_per_beat=3), tmp_path / "bm.txt")
     assert list(tmp_path.iterdir()) == []  # nothing written, not even a temporary file
 
 
@@ -240,7 +240,7 @@ def test_emit_writes_complete_files_or_none(tmp_path: Path, monkeypatch: pytest.
 
     monkeypatch.setattr(Path, "write_text", half_writer)
     with pytest.raises(OSError, match="No space left"):
-        hdl_emit.emit(MachineParams.for_disparity(2, lanes=3), out)
+        hdl_emit.emit(MachineParams.for_disparity(2, words_per_beat=3), out)
     monkeypatch.undo()
     assert out.read_text() == "// an earlier emission\n"
     assert [p.name for p in tmp_path.iterdir()] == ["bayesmachine.v"]
@@ -258,7 +258,7 @@ def test_stereo_top_is_lint_clean_and_latch_free(
     # 3 (4) beats per pixel: the beat counter's values are not all used (the lint checks complete cases).
     lanes, beats = {"paper": ("9", 3), "census": ("10", 4), "census-lr": ("12", 4)}[model]
     args = parser.parse_args(["emit", "--top", "stereo", "--dmax", "6", "--width", "23", "--counter-max", "4",
-                              "--lanes", lanes, "--sigma", "12", "--model", model, "-o", str(out)])
+                              "--words-per-beat", lanes, "--sigma", "12", "--model", model, "-o", str(out)])
     assert args.func(args) == 0
     text = capsys.readouterr().out
     assert "stereo top: 23-pixel lines, Dmax 6" in text

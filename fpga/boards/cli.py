@@ -56,14 +56,14 @@ def _design(args: argparse.Namespace):  # noqa: ANN202
     """(machine, model, width) the options describe, checked (one clear error)."""
     import dataclasses
 
-    from bayesmachine.params import stereo_lanes
+    from bayesmachine.params import stereo_words_per_beat
 
     from .core import check_board
 
     model = model_params_from_args(args)
     machine = machine_params_from_args(args, args.dmax, model=model)
-    if args.lanes is None:
-        machine = dataclasses.replace(machine, lanes=stereo_lanes(machine))
+    if args.words_per_beat is None:
+        machine = dataclasses.replace(machine, words_per_beat=stereo_words_per_beat(machine))
     check_board(machine, model, args.width)
     return machine, model, args.width
 

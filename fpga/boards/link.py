@@ -28,6 +28,7 @@ import numpy as np
 
 from bayesmachine.likelihood import ModelParams
 from bayesmachine.params import MachineParams
+from bayesmachine.sim.results import disparities
 
 from . import protocol as pr
 
@@ -346,7 +347,7 @@ def run_board(
             ser.close()
     nomatch = got["nomatch"].reshape(ho, wo)
     timeout_ = got["timeout"].reshape(ho, wo)
-    disp = np.where(nomatch | timeout_, -1, got["map"].reshape(ho, wo)).astype(np.int16)
+    disp = disparities(got["map"].reshape(ho, wo), nomatch, timeout_)
     counts = cycles = None  # not asked for: absent, never made up
     if "counts" in got:
         counts = got["counts"].reshape(ho, wo, machine.rows).astype(counts_dtype(machine.counter_max))
