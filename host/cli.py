@@ -605,7 +605,7 @@ def _write_run_outputs(out: OutputDir, args: argparse.Namespace, outcome: RunOut
     if maps is not None:  # a board asked for MAPs only sent no counts: no confidence, none made up
         extra.update(maps.arrays())
     if metrics.reference_maps is not None:
-        extra["reference_confidence"] = metrics.reference_maps.confidence
+        extra["reference_confidence"] = metrics.reference_maps.confidence.astype(np.float32)
     if prep.gt is not None:
         extra["gt"] = prep.gt.astype(np.float32)
     out.write(
@@ -623,7 +623,9 @@ def _write_run_outputs(out: OutputDir, args: argparse.Namespace, outcome: RunOut
     )
     shown, title = run.map, f"Machine ({run.engine}, counter max {run.machine.counter_max})"
     if args.min_confidence is not None and maps is not None:
-        shown = np.where(maps.confidence >= args.min_confidence, run.map, np.int16(-1))
+        # On the confidence as result.npz holds it (float32), so that a user's threshold there agrees.
+        kept = maps.confidence.astype(np.float32) >= np.float32(args.min_confidence)
+        shown = np.where(kept, run.map, np.int16(-1))
         title += f", confidence >= {args.min_confidence:g}"
         report["min_confidence"] = _kept_figures(shown, prep.gt, args.min_confidence)
     panels = [("Reference (float64)", prep.reference_map), (title, shown)]

@@ -35,6 +35,7 @@ __all__ = [
     "ECE_BINS",
     "FRACTIONS",
     "BAD_THRESHOLD",
+    "DECIMALS",
     "ConfidenceParams",
     "ConfidenceMaps",
     "DistributionMeasures",
@@ -53,6 +54,9 @@ ECE_BINS = 10
 # Fractions of the pixels removed, least confident first: 0, 0.05, ..., 0.95.
 FRACTIONS = np.arange(20) / 20
 BAD_THRESHOLD = 2  # the sparsification curve is of bad-2, the project's headline error rate
+# Confidences are binned and ranked after rounding to this many decimals: the same rational value
+# computed in two orders of floating-point additions then lands in one bin and ties with itself.
+DECIMALS = 9
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -94,7 +98,7 @@ class ConfidenceParams:
 
 @dataclass
 class ConfidenceMaps:
-    """The per-pixel measures of one method over the output region, each (Ho, Wo) float32."""
+    """The per-pixel measures of one method over the output region, each (Ho, Wo) float64."""
 
     mass: np.ndarray
     confidence: np.ndarray
@@ -102,8 +106,8 @@ class ConfidenceMaps:
     nomatch_mass: np.ndarray
 
     def arrays(self, prefix: str = "") -> dict[str, np.ndarray]:
-        """The four maps by name (``result.npz``'s keys), each name after ``prefix``."""
-        return {f"{prefix}{k}": getattr(self, k)
+        """The four maps by name (``result.npz``'s keys, after ``prefix``), as float32."""
+        return {f"{prefix}{k}": getattr(self, k).astype(np.float32)
                 for k in ("mass", "confidence", "entropy", "nomatch_mass")}
 
 
@@ -147,7 +151,7 @@ class DistributionMeasures:
         self.dmap = np.asarray(dmap)
         self.params = params
         shape = self.dmap.shape
-        self.maps = ConfidenceMaps(*(np.zeros(shape, np.float32) for _ in range(4)))
+        self.maps = ConfidenceMaps(*(np.zeros(shape) for _ in range(4)))
         self._half = params.window // 2
         self._rows: deque[tuple[int, np.ndarray, np.ndarray]] = deque()
         self._next = 0  # the next output row expected
@@ -202,9 +206,13 @@ def measure_counts(counts: np.ndarray, dmap: np.ndarray, params: ConfidenceParam
 # --- figures against ground truth ---------------------------------------------------------------
 
 
+def _rounded(conf: np.ndarray) -> np.ndarray:
+    return np.round(np.asarray(conf, np.float64), DECIMALS)
+
+
 def _bins(conf: np.ndarray, bins: int) -> np.ndarray:
-    """Bin i holds i/bins <= conf < (i+1)/bins; conf = 1 falls in the last bin."""
-    return np.minimum(np.floor(np.asarray(conf, np.float64) * bins).astype(np.int64), bins - 1)
+    """Bin i holds i/bins <= conf < (i+1)/bins (conf rounded to DECIMALS); conf = 1 falls in the last."""
+    return np.minimum(np.floor(_rounded(conf) * bins).astype(np.int64), bins - 1)
 
 
 def reliability_table(conf: np.ndarray, good: np.ndarray, bins: int = ECE_BINS) -> list[dict[str, object]]:
@@ -236,7 +244,7 @@ def sparsification_curve(conf: np.ndarray, bad: np.ndarray, fractions: np.ndarra
     """The rate of ``bad`` among the pixels kept when a fraction f of them, the least confident, is
     removed, for each f of ``fractions``. Equal confidences are removed together in expectation:
     the kept (1 - f) N pixels' expected bad count interpolates linearly within a group of ties."""
-    c = np.asarray(conf, np.float64).ravel()
+    c = _rounded(conf).ravel()
     b = np.asarray(bad, bool).ravel()
     n = c.size
     if n == 0:
