@@ -116,23 +116,31 @@ def save_calibration_figure(path: str | Path, report: dict[str, object]) -> None
     a.plot([0, 1], [0, 1], color="gray", linestyle=":", label="perfectly calibrated")
     fractions = np.asarray(report["fractions"], dtype=np.float64)
     styles = {"machine": ("o-", "C0", "machine"), "reference": ("s--", "C1", "float64 reference")}
+    def num(v: object, fmt: str) -> str:  # a figure of no pixel is null in the report
+        return "n/a" if v is None else format(v, fmt)
+
+    def curve(values: object) -> np.ndarray:
+        return np.asarray(values, dtype=np.float64)  # null points (no pixel) are NaN: not drawn
+
     for key, (style, colour, name) in styles.items():
         figs = report.get(key)
         if not isinstance(figs, dict):
             continue
         table = [r for r in figs["reliability"] if r["count"]]
         a.plot([r["predicted"] for r in table], [r["observed"] for r in table], style, color=colour,
-               label=f"{name} (ECE {figs['ece']:.3f})")
-        b.plot(fractions, figs["curve"], style, color=colour, label=f"{name} (AUC {figs['auc']:.4f})")
+               label=f"{name} (ECE {num(figs['ece'], '.3f')})")
+        b.plot(fractions, curve(figs["curve"]), style, color=colour,
+               label=f"{name} (AUC {num(figs['auc'], '.4f')})")
         if key == "machine":
-            b.plot(fractions, figs["curve_perfect"], ":", color=colour,
-                   label=f"machine, perfect order (AUC {figs['auc_perfect']:.4f})")
-            b.axhline(figs["auc_random"], color=colour, linestyle="-.", alpha=0.6,
-                      label=f"machine, random order (AUC {figs['auc_random']:.4f})")
+            b.plot(fractions, curve(figs["curve_perfect"]), ":", color=colour,
+                   label=f"machine, perfect order (AUC {num(figs['auc_perfect'], '.4f')})")
+            if figs["auc_random"] is not None:
+                b.axhline(figs["auc_random"], color=colour, linestyle="-.", alpha=0.6,
+                          label=f"machine, random order (AUC {figs['auc_random']:.4f})")
     lr = report.get("sgbm_lr")
     if isinstance(lr, dict):
-        b.plot(fractions, lr["curve"], "^-", color="C2", alpha=0.8,
-               label=f"SGBM, left-right check (AUC {lr['auc']:.4f})")
+        b.plot(fractions, curve(lr["curve"]), "^-", color="C2", alpha=0.8,
+               label=f"SGBM, left-right check (AUC {num(lr['auc'], '.4f')})")
     a.set_xlim(0, 1)
     a.set_ylim(0, 1.02)
     a.set_xlabel("confidence (mean per bin)")

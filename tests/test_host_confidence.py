@@ -303,3 +303,13 @@ def test_board_gives_the_model_confidence_or_none(tmp_path, monkeypatch, capsys)
     assert main([*common, *board, "--board-fields", "map", "--min-confidence", "0.5",
                  "-o", str(tmp_path / "x")]) == 2
     assert "no confidence to threshold" in capsys.readouterr().err
+
+
+def test_a_run_without_matched_ground_truth_pixels_has_null_figures(tmp_path) -> None:
+    """Dmax 8 on a crop whose disparities are all larger: no pixel to measure, figures null, figure drawn."""
+    out = tmp_path / "o"
+    assert main(["run", "--crop", "300,200,30,12", "--dmax", "8", "--model", "paper", "--no-sgbm", "--quiet",
+                 "-o", str(out)]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["confidence"]["machine"]["pixels"] == 0 and report["machine_confidence_ece"] is None
+    assert (out / "calibration.png").stat().st_size > 0
