@@ -799,8 +799,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         "run",
         help="run the machine on a stereo pair and compare it with the reference",
         description="Run the stochastic machine on a rectified pair (default: the bundled Motorcycle pair "
-        "with its ground truth); write OUT/report.json, OUT/result.npz and OUT/disparity.png "
-        "(and OUT/waves.vcd with --waves). The files of an earlier run into OUT (as "
+        "with its ground truth); write OUT/report.json, OUT/result.npz, OUT/disparity.png and "
+        "OUT/confidence.png (each pixel's confidence; with ground truth also OUT/calibration.png), "
+        "OUT/depth.npy and OUT/cloud.ply with --calib, OUT/waves.vcd with --waves. The files of an earlier "
+        "run into OUT (as "
         "OUT/.bayesmachine-manifest.json lists them) are removed first, nothing else there; report.json is "
         "written last, so its presence means the run is complete. A second run into the same OUT is refused "
         "while the first is writing.",
