@@ -586,7 +586,7 @@ def _run_calibration(args: argparse.Namespace) -> StereoCalibration | None:
     if args.calib is None:
         return None
     path = bundled_calibration_path() if args.calib == BUNDLED_CALIB else Path(args.calib)
-    calib = read_calibration(path, args.calib_cameras or KITTI_CAMERAS)
+    calib = read_calibration(path, args.calib_cameras)
     return calib.for_input(args.input_shape, args.crop)
 
 
