@@ -15,7 +15,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from bayesmachine.tools import tool_process, which
+from bayesmachine.tools import tool_process, user_cache_dir, which
 
 from .targets import Target
 
@@ -58,8 +58,7 @@ def yowasp_cache() -> Path:
     directory: ``$XDG_CACHE_HOME/YoWASP`` or ``~/.cache/YoWASP``)."""
     if os.environ.get("YOWASP_CACHE_DIR"):
         return Path(os.environ["YOWASP_CACHE_DIR"])
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "YoWASP"
+    return user_cache_dir("YoWASP")
 
 
 def _check_yowasp_cache(name: str) -> None:

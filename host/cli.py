@@ -39,13 +39,13 @@ from bayesmachine.outputs import (
     require_memory,
 )
 from bayesmachine.params import DEFAULT_RNG, MachineParams
+from bayesmachine.region import OutputRegion
 
 from .datasets import PairSpec, bundled_spec, files_spec, resolve_dataset
 from .features import model_features
 from .images import Crop, bundled_pair, crop_image, load_gt, load_image, parse_crop, validate_pair
 from .likelihoods import ModelParams
 from .reference import reference_bands, warm_up
-from .region import OutputRegion
 from .run import ENGINES, FEEDS, RunOutcome, prepare, result_bytes, run_pair
 from .sweep import SWEEP_OUTPUTS, Point, SweepConfig, list_option_changes, run_sweep, seed_cache, sweep_points
 

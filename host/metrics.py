@@ -20,8 +20,9 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from bayesmachine.region import MARGIN, OutputRegion
+
 from .records import MachineRun, Prepared
-from .region import MARGIN, OutputRegion
 
 __all__ = [
     "RunMetrics",

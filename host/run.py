@@ -28,6 +28,7 @@ from tqdm import tqdm
 from bayesmachine.likelihood import lr_column, neighbour_words, right_machine
 from bayesmachine.outputs import require_memory
 from bayesmachine.params import MachineParams
+from bayesmachine.region import OutputRegion
 from bayesmachine.sim.engines import ENGINES, get_engine
 from bayesmachine.sim.results import MachineResult, disparities
 
@@ -44,7 +45,6 @@ from .likelihoods import (
 from .metrics import RunMetrics, evaluate, gt_region
 from .records import MachineRun, Prepared, RightPass, counts_dtype
 from .reference import reference_map, warm_up
-from .region import OutputRegion
 
 __all__ = [
     "ENGINES",

@@ -81,7 +81,7 @@ def stereo_header(params: MachineParams, model: ModelParams, width: int, signatu
                                generator="bayesmachine.sim.stereo_engine")
     return prologue + f"""static const unsigned WIDTH = {width};
 static const unsigned DMAX = {model.dmax};
-static const unsigned MARGIN = {model.margin};  // the output region's (host.region)
+static const unsigned MARGIN = {model.margin};  // the output region's (bayesmachine.region)
 static const unsigned LEFT_OFFSET = {pix["left"][0]}, RIGHT_OFFSET = {pix["right"][0]};
 static const unsigned FIRST_OFFSET = {pix["first"][0]};
 {right}{external}"""
@@ -185,7 +185,7 @@ class StereoVerilatorEngine(HarnessProcess, EngineLifecycle):
             raise ValueError(
                 f"this stereo machine was built for {self.width}-pixel lines, the frame has {width}"
             )
-        k = self.model.margin  # the output region's (host.region): every window inside the frame
+        k = self.model.margin  # the output region's (bayesmachine.region): every window inside the frame
         if height < 2 * k + 1:
             raise ValueError(f"a frame needs at least {2 * k + 1} lines for the model's "
                              f"{2 * k + 1}x{2 * k + 1} windows, got {height}")
