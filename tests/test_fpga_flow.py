@@ -76,3 +76,29 @@ def test_ecp5_device_args_of_the_ulx3s_platforms(board: str) -> None:
 def test_ecp5_device_args_refuses_other_parts(device: str, package: str) -> None:
     with pytest.raises(ValueError, match="LFE5U|package"):
         ecp5_device_args(device, package)
+
+
+@pytest.mark.parametrize("extra", [[], ["--no-throughput"]])
+def test_synth_command_reports_the_measured_throughput(extra: list[str], tmp_path: Path,
+                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    """``bayesmachine synth`` hands the flow host's throughput measurement (the command line is the one
+    place that sees both packages); --no-throughput hands it none. Yosys is stood in for."""
+    from bayesmachine.host import throughput
+
+    calls = []
+
+    def measure(params, model, progress):  # noqa: ANN001, ANN202
+        calls.append((params.rows, model.name, model.dmax))
+        return {"pair": "stand-in", "pixels": 1, "compute_cycles_per_pixel": 10.0,
+                "wall_cycles_per_pixel": 12.0}
+
+    monkeypatch.setattr(throughput, "measure_cycles", measure)
+    monkeypatch.setattr(flow, "synthesize", lambda rtlil, target, out, progress: {"SB_LUT4": 10, "SB_DFF": 5})
+    out = tmp_path / "s"
+    argv = ["synth", "--target", "ice40-hx8k", "--dmax", "2", "--model", "paper", "--synth-only", *extra]
+    assert main([*argv, "-o", str(out)]) == 0
+    report = json.loads((out / "report.json").read_text())
+    if extra:
+        assert calls == [] and "throughput" not in report
+    else:
+        assert calls == [(4, "paper", 2)] and report["throughput"]["wall_cycles_per_pixel"] == 12.0
