@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from bayesmachine.cliargs import DEFAULT_BAUD
 from bayesmachine.fpga import flow
 from bayesmachine.fpga.targets import ecp5_device_args
 from bayesmachine.likelihood import ModelParams
@@ -28,11 +29,10 @@ from .ulx3s import Board, PLLConfig, get_board, pll_config
 if TYPE_CHECKING:
     from .core import BoardCore
 
-__all__ = ["BUILD_OUTPUTS", "DEFAULT_BAUD", "DEFAULT_BOARD_ROUTER", "DEFAULT_BOARD_SEED", "DEFAULT_CLOCK_MHZ",
+__all__ = ["BUILD_OUTPUTS", "DEFAULT_BOARD_ROUTER", "DEFAULT_BOARD_SEED", "DEFAULT_CLOCK_MHZ",
            "board_build", "uart_clocks_per_bit"]
 
 BUILD_OUTPUTS = ("top.bit", "top.svf", "nextpnr.log", "report.json")
-DEFAULT_BAUD = 3_000_000
 # 25 / 5 x 9, and 3 Mbaud in exactly 15 clocks per bit. 60 MHz (20 clocks per bit) did not close with
 # the UART and protocol around the StereoMachine (docs/board.md, timing closure).
 DEFAULT_CLOCK_MHZ = 45.0

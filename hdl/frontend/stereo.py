@@ -397,7 +397,7 @@ class StereoMachine(wiring.Component):
     model : ModelParams
         The disparity model (Dmax, p0, sigmas, p_nm0, sigma_nm).
     width : int
-        Pixels per image line (dmax + 5 .. ``MAX_WIDTH``).
+        Pixels per image line (dmax + 2·margin + 1 .. ``MAX_WIDTH``).
     fifo_pixels : int
         The pixels' worth of load beats the FIFO holds (1 .. 64), per machine.
     machines : int
