@@ -28,6 +28,7 @@ import numpy as np
 
 from bayesmachine.likelihood import ModelParams
 from bayesmachine.params import MachineParams
+from bayesmachine.region import OutputRegion
 
 from . import protocol as pr
 
@@ -177,9 +178,8 @@ class BoardLink:
         pixels = np.stack([left, right], axis=-1).astype(np.uint8)
         lines = [pixels[y].tobytes() for y in range(height)]
         trailer = struct.pack("<I", pr.crc32(b"".join(lines)))
-        edge = 2 * model.margin  # the model's output region (census 7x7: margin 3)
-        out_cols = width - edge - model.dmax
-        expected = (height - edge) * out_cols
+        region = OutputRegion.of_model(left.shape, model)  # census 7x7: margin 3
+        edge, out_cols, expected = 2 * region.margin, region.shape[1], region.pixels
         # Lines in flight beyond the one whose results are awaited: what the receive buffer holds.
         lag = max(1, info.rx_fifo_bytes // (2 * width) - 1)
         reasons = []
