@@ -95,18 +95,13 @@ class FrameReceiver(wiring.Component):
         with m.FSM():
             with m.State("IDLE"):
                 start_or_stop()
-            with m.State("LEFT"):
-                m.d.comb += [self.bytes.ready.eq(1), self.waiting.eq(1)]
-                with m.If(got):
-                    m.d.sync += pix.left.eq(byte)
-                    m.next = "RIGHT"
-                start_or_stop()
-            with m.State("RIGHT"):
-                m.d.comb += [self.bytes.ready.eq(1), self.waiting.eq(1)]
-                with m.If(got):
-                    m.d.sync += pix.right.eq(byte)
-                    m.next = "PUSH"
-                start_or_stop()
+            for state, field, after in (("LEFT", pix.left, "RIGHT"), ("RIGHT", pix.right, "PUSH")):
+                with m.State(state):
+                    m.d.comb += [self.bytes.ready.eq(1), self.waiting.eq(1)]
+                    with m.If(got):
+                        m.d.sync += field.eq(byte)
+                        m.next = after
+                    start_or_stop()
             with m.State("PUSH"):
                 m.d.comb += self.pixels.valid.eq(1)
                 with m.If(self.pixels.ready):
