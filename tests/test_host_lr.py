@@ -436,7 +436,7 @@ def test_machine_near_its_quantized_reference(pair, model):
     assert np.mean(run.right.map == right_reference_map(fl, fr, model, 10)) > 0.8
 
 
-@pytest.mark.parametrize("engine", ["pysim", "verilator"])
+@pytest.mark.parametrize("engine", ["pysim", pytest.param("verilator", marks=pytest.mark.eda)])
 def test_engines_equal_the_model(engine, verilator_cache):
     """census-lr on a small crop: both passes bit for bit the model's (maps, counts, cycles)."""
     options = {}
@@ -562,8 +562,9 @@ def test_cli_sweep_three_models(pair_files, tmp_path):
         (["run", "--model", "census-lr", "--lr-right-max-cycles", "16"], "--lr-right-max-cycles: lr_right"),
         (["run", "--model", "census", "--lr-right-max-cycles", "100"], "--lr-right-max-cycles: options of"),
         # On chip the right pass's machine has no entropy port: an off-chip source is refused.
-        (["run", "--model", "census-lr", "--engine", "verilator", "--feed", "pixels", "--rng", "smtj"],
-         "rng: --model census-lr on chip needs an on-chip random source"),
+        pytest.param(["run", "--model", "census-lr", "--engine", "verilator", "--feed", "pixels", "--rng",
+                      "smtj"],
+                     "rng: --model census-lr on chip needs an on-chip random source", marks=pytest.mark.eda),
     ],
 )
 def test_cli_refusals_are_one_line(pair_files, tmp_path, capsys, argv, message):
