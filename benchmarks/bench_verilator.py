@@ -133,7 +133,7 @@ def main() -> int:
           f"memories ({words_s:.2f} s)")
     print(f"simulated: {wall} clock cycles, {wall / engine_s / 1e6:.2f} M cycles/s; "
           f"{engine_s / n * 1e6:.1f} us per pixel; the harness's CPU time {harness_cpu:.2f} s, "
-          f"{wall / harness_cpu / 1e6:.2f} M cycles per CPU second (an idle core's speed)")
+          f"{wall / harness_cpu / 1e6:.2f} M cycles per CPU second")
     print(f"cycles per pixel: compute {compute / n:.3f}, wall {wall / n:.3f} (loading included; "
           f"difference {(wall - compute) / n:.3f})")
     # A run costs its compute cycles plus the registered stop's bubble, and the load stream must

@@ -22,8 +22,8 @@ A run cut short (its numbers ran out) leaves pixels in flight: every engine then
 run (:class:`EngineStateError`) until ``reset()``.
 
 - ``model``: the NumPy/numba machine model (the definition; whole frames in seconds).
-- ``pysim``: the RTL in Amaranth's Python simulator (about 1,000 to 2,000 compute cycles per second on
-  a small machine: crops; ``benchmarks/bench_engines.py``).
+- ``pysim``: the RTL in Amaranth's Python simulator (about 100 clock cycles per CPU second for the
+  Dmax = 80 machine, a few thousand for a Dmax = 8 one: ``benchmarks/bench_pysim.py``; crops).
 - ``verilator``: the emitted Verilog compiled with Verilator (whole frames, cycle-accurate RTL).
 
 **Pixel engines** (:class:`PixelEngine`, through :class:`PixelEngineBase`) take the rectified pair

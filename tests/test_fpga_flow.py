@@ -79,8 +79,8 @@ def test_ecp5_device_args_refuses_other_parts(device: str, package: str) -> None
 
 
 @pytest.mark.parametrize("extra", [[], ["--no-throughput"]])
-def test_synth_command_reports_the_measured_throughput(extra: list[str], tmp_path: Path,
-                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+def test_synth_command_reports_the_measured_throughput(
+        extra: list[str], commands: list[list[str]], tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """``bayesmachine synth`` hands the flow host's throughput measurement (the command line is the one
     place that sees both packages); --no-throughput hands it none. Yosys is stood in for."""
     from bayesmachine.host import throughput
@@ -97,6 +97,7 @@ def test_synth_command_reports_the_measured_throughput(extra: list[str], tmp_pat
     out = tmp_path / "s"
     argv = ["synth", "--target", "ice40-hx8k", "--dmax", "2", "--model", "paper", "--synth-only", *extra]
     assert main([*argv, "-o", str(out)]) == 0
+    assert commands == []  # synthesis only, and Yosys stood in for
     report = json.loads((out / "report.json").read_text())
     if extra:
         assert calls == [] and "throughput" not in report
