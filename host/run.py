@@ -115,7 +115,8 @@ def run_machine(
     """Stream the output pixels (row-major) through ``engine``, ``chunk_rows`` map rows per call.
 
     ``engine_options`` go to the engine's constructor (e.g. ``trace`` for ``verilator``).
-    ``feed="pixels"``: the pair itself goes into the StereoMachine (front end on chip; Verilator).
+    ``feed="pixels"``: the pair itself goes into the StereoMachine (front end on chip), through the
+    pixel engine ``engine`` (``verilator``, or ``board``: :data:`~bayesmachine.sim.engines.PIXEL_ENGINES`).
     A neighbour-prior machine runs one map row per call whatever ``chunk_rows`` (its above column
     needs the previous row's results; see the module's text).
     ``machines`` = K > 1: map row y runs on machine y mod K (``feed="pixels"``: the StereoMachine

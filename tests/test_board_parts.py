@@ -380,3 +380,24 @@ def test_protocol_control_ends_a_frame_with_its_status(kw: dict, status: int) ->
 def test_components_check_their_parameters(cls: type, kwargs: dict, error: type) -> None:
     with pytest.raises(error):
         cls(**kwargs)
+
+
+def test_the_simulated_boards_cache_keys_on_every_rtl_module() -> None:
+    """``RTL_MODULES`` (the Verilog cache key of ``board simulate``) lists every module of
+    fpga/boards that BoardCore's module imports, however deep: an edit to any of them rebuilds."""
+    import ast
+    from pathlib import Path
+
+    from bayesmachine.fpga.boards import core
+
+    boards = Path(core.__file__).parent
+    seen, todo = set(), ["core.py"]
+    while todo:
+        name = todo.pop()
+        if name in seen:
+            continue
+        seen.add(name)
+        for node in ast.walk(ast.parse((boards / name).read_text())):
+            if isinstance(node, ast.ImportFrom) and node.level == 1:
+                todo += [f"{node.module}.py"] if node.module else [f"{a.name}.py" for a in node.names]
+    assert seen <= set(core.RTL_MODULES), sorted(seen - set(core.RTL_MODULES))
