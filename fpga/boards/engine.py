@@ -138,7 +138,10 @@ class BoardEngine(PixelEngineBase):
     def figures(self) -> dict[str, object]:
         """The link's figures since the engine was built: for the run's report."""
         st, seconds = self._link.stats, self._seconds
-        rate = (lambda n: n / seconds if seconds > 0 else None)  # noqa: E731
+
+        def rate(count: int) -> float | None:
+            return count / seconds if seconds > 0 else None
+
         return {
             "port": self._port,
             "baud": self._baud,
