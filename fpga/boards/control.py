@@ -37,6 +37,10 @@ class ProtocolControl(wiring.Component):
 
     Attributes
     ----------
+    region : OutputRegion
+        The model's output region on ``width``-pixel lines (read-only).
+    info : bytes
+        The ``H`` and ``I`` payload (read-only).
     headers : ``In(stream.Signature(header_layout()))``
         The host's records.
     records : ``Out(stream.Signature(record_layout()))``
@@ -87,16 +91,8 @@ class ProtocolControl(wiring.Component):
         })
 
     @property
-    def width(self) -> int:
-        return self._region.image_width
-
-    @property
-    def dmax(self) -> int:
-        return self._region.dmax
-
-    @property
-    def margin(self) -> int:
-        return self._region.margin
+    def region(self) -> OutputRegion:
+        return self._region  # its image_height is a placeholder: frames have any number of lines
 
     @property
     def info(self) -> bytes:

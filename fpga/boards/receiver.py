@@ -33,6 +33,8 @@ class FrameReceiver(wiring.Component):
 
     Attributes
     ----------
+    region : OutputRegion
+        The model's output region on ``width``-pixel lines (read-only).
     start : ``In(1)``
         A frame of ``height`` lines begins (its header was accepted).
     stop : ``In(1)``
@@ -62,16 +64,8 @@ class FrameReceiver(wiring.Component):
         })
 
     @property
-    def width(self) -> int:
-        return self._region.image_width
-
-    @property
-    def dmax(self) -> int:
-        return self._region.dmax
-
-    @property
-    def margin(self) -> int:
-        return self._region.margin
+    def region(self) -> OutputRegion:
+        return self._region  # its image_height is a placeholder: frames have any number of lines
 
     def elaborate(self, platform: object) -> Module:
         m = Module()
