@@ -52,6 +52,7 @@ from bayesmachine.params import (
 )
 
 __all__ = [
+    "DEFAULT_BAUD",
     "MachineOption",
     "MACHINE_OPTIONS",
     "add_option",
@@ -80,6 +81,10 @@ __all__ = [
 ]
 
 T = TypeVar("T")
+
+# The board's serial link: the baud rate ``board build`` builds for and ``run --engine board`` opens
+# the port at, unless told otherwise (here, where both commands' packages can read it).
+DEFAULT_BAUD = 3_000_000
 
 
 def int_arg(text: str) -> int:

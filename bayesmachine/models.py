@@ -309,7 +309,7 @@ class ModelParams:
     @property
     def margin(self) -> int:
         """Pixels from a window's centre to its edge, for the model's largest window (5x5 filters: 2,
-        7x7 census: 3): the output region keeps every window inside the image (``host.region``)."""
+        7x7 census: 3): the output region keeps every window inside the image (``bayesmachine.region``)."""
         return max(c.margin for c in self._columns)
 
     def column(self, kind: type[Column]) -> Column | None:

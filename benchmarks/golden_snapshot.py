@@ -32,9 +32,9 @@ from bayesmachine.host.features import model_features
 from bayesmachine.host.images import bundled_pair
 from bayesmachine.host.likelihoods import memory_words, right_columns, right_memory_words
 from bayesmachine.host.reference import reference_bands, reference_quantized, right_reference_map
-from bayesmachine.host.region import OutputRegion
 from bayesmachine.host.run import prepare, run_machine
 from bayesmachine.models import ModelParams, disparity_machine, right_machine
+from bayesmachine.region import OutputRegion
 
 # Crops (x, y, width, height, shift) of the bundled Motorcycle pair (500 x 741): the right image's crop
 # starts ``shift`` pixels further left, so the crop's disparities (49.6, 29..42, 21.6) fall in 0..Dmax.

@@ -1,6 +1,6 @@
 """The paper's three 5x5 feature filters, computed exactly from integer sums.
 
-Maps cover the model's map grid (``host.region``): (H-2k, W-2k) pixels for a model of margin
+Maps cover the model's map grid (``bayesmachine.region``): (H-2k, W-2k) pixels for a model of margin
 k (``ModelParams.margin``: 2 for the paper model, 3 with a 7x7 census column), map pixel (y, x)
 centred on image pixel (y+k, x+k). We keep integer multiples of the features so that costs
 are exact:
@@ -26,8 +26,7 @@ import numpy as np
 
 from bayesmachine.columns import CENSUS_WINDOWS, MAX_ABS, SCALES
 from bayesmachine.models import ModelParams
-
-from .region import FILTER_SIZE, MARGIN
+from bayesmachine.region import FILTER_SIZE, MARGIN
 
 __all__ = [
     "FeatureSums",

@@ -24,9 +24,9 @@ from bayesmachine.columns import Column, Source, hamming
 from bayesmachine.columns.census import _hamming_plain as hamming_plain
 from bayesmachine.models import ModelParams, Pass, check_disparity_machine
 from bayesmachine.params import MachineParams, ParameterError
+from bayesmachine.region import OutputRegion
 
 from .features import FeatureSums
-from .region import OutputRegion
 
 __all__ = [
     "PassGrid",

@@ -37,11 +37,11 @@ from numba.extending import overload
 from bayesmachine.columns import AbovePrior, Column, LeftPrior, Source
 from bayesmachine.models import ModelParams, Pass
 from bayesmachine.params import ParameterError
+from bayesmachine.region import OutputRegion
 
 from .features import FeatureSums, model_features
 from .images import validate_pair
 from .likelihoods import PassGrid, likelihoods_plain, need_planes, pass_grid
-from .region import OutputRegion
 
 __all__ = [
     "Reference",

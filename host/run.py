@@ -30,16 +30,17 @@ from bayesmachine.columns import Source
 from bayesmachine.models import ModelParams, Pass, pass_machine
 from bayesmachine.outputs import require_memory
 from bayesmachine.params import MachineParams
-from bayesmachine.sim.engines import ENGINES, get_engine
+from bayesmachine.region import OutputRegion
+from bayesmachine.sim.engines import ENGINES, PIXEL_ENGINES, get_engine, get_pixel_engine
 from bayesmachine.sim.results import MachineResult, disparities
 
+from .confidence import ConfidenceParams
 from .features import FeatureSums, model_features
 from .images import validate_pair
 from .likelihoods import pass_grid, pass_words
 from .metrics import RunMetrics, evaluate, gt_region
 from .records import MachineRun, Prepared, RightPass, counts_dtype
 from .reference import reference_map, warm_up
-from .region import OutputRegion
 
 __all__ = [
     "ENGINES",
@@ -55,7 +56,7 @@ __all__ = [
 ]
 
 # How the machine is fed: the host's likelihood words (any engine), or the pixel pairs through the
-# on-chip front end (the StereoMachine RTL, Verilator only).
+# on-chip front end (the StereoMachine RTL: a pixel engine, sim.engines.PIXEL_ENGINES).
 FEEDS = ("words", "pixels")
 
 
@@ -191,7 +192,8 @@ def run_machine(
     Every pass the model declares runs on its own machine (:func:`~bayesmachine.models.pass_machine`,
     the same engine kind), each map row before the model's own pass takes it (module text).
     ``engine_options`` go to the engine's constructor (e.g. ``trace`` for ``verilator``).
-    ``feed="pixels"``: the pair itself goes into the StereoMachine (front end on chip; Verilator).
+    ``feed="pixels"``: the pair itself goes into the StereoMachine (front end on chip), through the
+    pixel engine ``engine`` (``verilator``, or ``board``: :data:`~bayesmachine.sim.engines.PIXEL_ENGINES`).
     A pass with a column fed by results runs one map row per call whatever ``chunk_rows``.
     ``machines`` = K > 1: map row y runs on machine y mod K (``feed="pixels"``: the StereoMachine
     with K machines; ``feed="words"``: K engines, one map row per call, as :func:`machines_model`
@@ -249,20 +251,19 @@ def _run_pixels(
     prepared: Prepared, machine: MachineParams, engine: str, engine_options: dict[str, object] | None,
     machines: int = 1,
 ) -> MachineRun:
-    """The whole pair through the StereoMachine RTL: pixels in, one result per output pixel out."""
-    if engine != "verilator":
-        raise ValueError(f"--feed pixels runs the StereoMachine RTL under Verilator: use --engine verilator "
+    """The whole pair through a pixel engine (the StereoMachine RTL under Verilator, or on a board):
+    pixels in, one result per output pixel out."""
+    if engine not in PIXEL_ENGINES:
+        raise ValueError(f"--feed pixels runs the StereoMachine RTL: use --engine verilator (or board) "
                          f"(got --engine {engine})")
-    from bayesmachine.sim.stereo_engine import StereoVerilatorEngine
-
     model = prepared.model
-    eng = StereoVerilatorEngine(machine, model, prepared.left.shape[1], machines=machines,
-                                **(engine_options or {}))
+    options = dict(engine_options or {}, **({"machines": machines} if machines != 1 else {}))
+    eng = get_pixel_engine(engine, machine, model, prepared.left.shape[1], **options)
     try:
         t0 = time.perf_counter()
         res = eng.run(prepared.left, prepared.right)
         seconds = time.perf_counter() - t0
-        wall = eng.wall_cycles
+        wall, figures, r = eng.wall_cycles, eng.figures, eng.last_right
     finally:
         eng.close()
     ho, wo = prepared.shape
@@ -270,19 +271,21 @@ def _run_pixels(
     timeout = res.timeout.reshape(ho, wo)
     nomatch = res.nomatch.reshape(ho, wo)
     disp = disparities(res.map.reshape(ho, wo), nomatch, timeout)
-    counts = res.counts.reshape(ho, wo, m).astype(counts_dtype(machine.counter_max))
+    # A board asked for the MAP alone sent no counts or cycles: absent, never made up.
+    dtype = counts_dtype(machine.counter_max)
+    counts = None if res.counts is None else res.counts.reshape(ho, wo, m).astype(dtype)
+    cycles = None if res.cycles is None else res.cycles.reshape(ho, wo)
     right = None
-    if eng.last_right is not None:
+    if r is not None:
         # The right pass ran on chip beside the left one (its own machine, the same clock): it adds no
         # wall cycles of its own, the frame's (first pixel in to last result out) are both passes'.
         from bayesmachine.hdl.frontend.lr import right_pass_params
 
-        r = eng.last_right
         wr = r.map.size // ho
         right = RightPass(right_pass_params(model, machine), r.disparities().reshape(ho, wr),
                           r.cycles.reshape(ho, wr), r.timeout.reshape(ho, wr), seconds, 0)
-    return MachineRun("verilator", machine, disp, counts, res.cycles.reshape(ho, wo),
-                      nomatch, timeout, seconds, 0.0, wall, right)
+    return MachineRun(engine, machine, disp, counts, cycles, nomatch, timeout, seconds, 0.0, wall, right,
+                      figures)
 
 
 def machines_model(
@@ -332,15 +335,17 @@ def run_pair(
     engine_options: dict[str, object] | None = None,
     feed: str = "words",
     machines: int = 1,
+    confidence: ConfidenceParams | None = None,
 ) -> RunOutcome:
     """Run the machine on a gray pair and compare it with the reference (and gt, if given).
 
     ``prepared`` reuses an earlier ``prepare`` of the same pair (sweeps). ``sgbm``: also
-    evaluate OpenCV StereoSGBM (default: when ground truth is given).
+    evaluate OpenCV StereoSGBM (default: when ground truth is given). ``confidence``: how the
+    per-pixel confidence is read (:class:`~.confidence.ConfidenceParams`, default its defaults).
     """
     if prepared is None:
         prepared = prepare(left, right, model_params, gt)
     run = run_machine(prepared, machine_params, engine, progress, engine_options=engine_options, feed=feed,
                       machines=machines)
-    metrics = evaluate(prepared, run, sgbm=sgbm)
+    metrics = evaluate(prepared, run, sgbm=sgbm, confidence=confidence)
     return RunOutcome(prepared, run, metrics)

@@ -27,9 +27,9 @@ from bayesmachine.hdl.frontend.stereo import (
 from bayesmachine.host.features import model_features
 from bayesmachine.host.images import bundled_pair
 from bayesmachine.host.likelihoods import memory_words, right_columns, right_memory_words
-from bayesmachine.host.region import OutputRegion
 from bayesmachine.models import ModelParams, right_machine
 from bayesmachine.params import ParameterError
+from bayesmachine.region import OutputRegion
 from bayesmachine.sim.model import MachineModel
 from bayesmachine.sim.results import MachineResult
 from bayesmachine.sim.stereo_testbench import run_frontend_lr, run_stereo_lr

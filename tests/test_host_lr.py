@@ -28,7 +28,6 @@ from bayesmachine.host.reference import (
     reference_quantized_map,
     right_reference_map,
 )
-from bayesmachine.host.region import OutputRegion
 from bayesmachine.host.run import prepare, run_machine
 from bayesmachine.models import (
     LR_WATCHDOG_RUNS,
@@ -38,6 +37,7 @@ from bayesmachine.models import (
     right_machine,
 )
 from bayesmachine.params import ParameterError, nth_machine
+from bayesmachine.region import OutputRegion
 from bayesmachine.sim.engines import get_engine
 
 DMAX = 6
@@ -434,7 +434,7 @@ def test_machine_near_its_quantized_reference(pair, model):
     assert np.mean(run.right.map == right_reference_map(fl, fr, model, 10)) > 0.8
 
 
-@pytest.mark.parametrize("engine", ["pysim", "verilator"])
+@pytest.mark.parametrize("engine", ["pysim", pytest.param("verilator", marks=pytest.mark.eda)])
 def test_engines_equal_the_model(engine, verilator_cache):
     """census-lr on a small crop: both passes bit for bit the model's (maps, counts, cycles)."""
     options = {}
@@ -558,8 +558,9 @@ def test_cli_sweep_three_models(pair_files, tmp_path):
         (["run", "--model", "census-lr", "--lr-right-max-cycles", "16"], "--lr-right-max-cycles: lr_right"),
         (["run", "--model", "census", "--lr-right-max-cycles", "100"], "--lr-right-max-cycles: options of"),
         # On chip the right pass's machine has no entropy port: an off-chip source is refused.
-        (["run", "--model", "census-lr", "--engine", "verilator", "--feed", "pixels", "--rng", "smtj"],
-         "rng: --model census-lr on chip needs an on-chip random source"),
+        pytest.param(["run", "--model", "census-lr", "--engine", "verilator", "--feed", "pixels", "--rng",
+                      "smtj"],
+                     "rng: --model census-lr on chip needs an on-chip random source", marks=pytest.mark.eda),
     ],
 )
 def test_cli_refusals_are_one_line(pair_files, tmp_path, capsys, argv, message):

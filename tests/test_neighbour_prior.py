@@ -194,6 +194,7 @@ def _run_in_chunks(eng, words: np.ndarray, starts: np.ndarray, numbers: np.ndarr
     return parts
 
 
+@pytest.mark.eda
 @pytest.mark.usefixtures("verilator_toolchain")
 @pytest.mark.parametrize("rng", ["sobol", "lfsr", "external"])
 def test_verilator_equals_the_model_with_back_pressure_in_chunks(rng: str, verilator_cache) -> None:
@@ -223,6 +224,7 @@ def test_verilator_equals_the_model_with_back_pressure_in_chunks(rng: str, veril
             flat.map, get_engine("model", p).run(words, numbers, line_start=np.ones(len(words), bool)).map)
 
 
+@pytest.mark.eda
 @pytest.mark.usefixtures("verilator_toolchain")
 def test_verilator_wall_cycles_follow_the_timing_rule(verilator_cache) -> None:
     """The clock cycles of a compute-bound stream, derived from the timing rules of

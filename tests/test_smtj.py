@@ -195,6 +195,7 @@ def test_bank_rejects_bad_device_values() -> None:
         TelegraphBank(0, 2.0)
 
 
+@pytest.mark.eda
 def test_smtj_machine_is_the_external_rtl() -> None:
     from bayesmachine.hdl.emit import verilog_text
     from bayesmachine.hdl.machine import BayesianMachine
@@ -226,6 +227,7 @@ def test_model_and_rtl_agree_on_smtj_numbers(dwell: float, share: str) -> None:
     assert_same_results(MachineModel(params).run(words, numbers), want)
 
 
+@pytest.mark.eda
 def test_verilator_agrees_on_smtj_numbers(verilator_toolchain: object, verilator_cache: object) -> None:
     from bayesmachine.sim.verilator import VerilatorEngine
 
@@ -240,6 +242,7 @@ def test_verilator_agrees_on_smtj_numbers(verilator_toolchain: object, verilator
     assert_same_results(got, want)
 
 
+@pytest.mark.eda
 def test_emit_cli_smtj_machine(tmp_path, capsys: pytest.CaptureFixture[str]) -> None:
     from bayesmachine.cli import main
 
