@@ -19,6 +19,8 @@ import threading
 from collections.abc import Iterator
 from typing import Any, NoReturn
 
+from bayesmachine.errors import ParameterError
+
 
 class Terminated(KeyboardInterrupt):
     """SIGTERM, raised where the command is so that it cleans up as after Ctrl-C."""
@@ -42,6 +44,7 @@ def build_parser() -> argparse.ArgumentParser:
     from bayesmachine.fpga.cli import register as register_fpga
     from bayesmachine.hdl.cli import register as register_hdl
     from bayesmachine.host.cli import register as register_host
+    from bayesmachine.host.throughput import measure_cycles
 
     parser = _Parser(
         prog="bayesmachine",
@@ -51,7 +54,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     register_hdl(sub)
     register_host(sub)
-    register_fpga(sub)
+    register_fpga(sub, measure=measure_cycles)  # the one place that hands host's work to fpga
     return parser
 
 
@@ -114,7 +117,12 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{prefix}: error: out of memory{detail}; try --crop or a smaller --dmax", file=sys.stderr)
         return 2
     except (ValueError, RuntimeError) as exc:
-        # Bad input and impossible parameters end with one clear line, not a traceback.
+        # Bad input and impossible parameters end with one clear line, not a traceback; a parameter the
+        # library names is said with the command's flag for it.
+        if isinstance(exc, ParameterError):
+            from bayesmachine.cliargs import with_flag
+
+            exc = with_flag(exc)
         print(f"{prefix}: error: {_one_line(str(exc))}", file=sys.stderr)
         return 2
 

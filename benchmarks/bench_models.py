@@ -5,7 +5,7 @@ uncalibrated (h_nm = 0: its census entry is L_c(0) = 1); + the no-match row cali
 (h_nm = bits / 8); + the raster-order neighbour prior; the 5x5 census option (calibrated, with
 and without the prior). Each model also on 10-bit words (``reference_quantized``: the machine's
 exact products): the share of pixels whose MAP changes. Each model on its own output region (the
-7x7 census's is one pixel further inside: ``host.region``). OpenCV StereoSGBM (block 5) and
+7x7 census's is one pixel further inside: ``bayesmachine.region``). OpenCV StereoSGBM (block 5) and
 StereoBM (block 15) on the same pixels, on both regions. Then the machine (model engine, sobol,
 seed 1) each model needs
 (``disparity_machine``: the census model's with its neighbour prior, fed back from its own
@@ -29,14 +29,12 @@ from __future__ import annotations
 
 import argparse
 import time
-from dataclasses import replace
 
 import numpy as np
 
 from bayesmachine.hdl.machine import pixel_wall_cycles
 from bayesmachine.host.features import model_features
 from bayesmachine.host.images import bundled_pair
-from bayesmachine.host.likelihoods import ModelParams
 from bayesmachine.host.metrics import (
     bad_rates,
     bm_disparity,
@@ -48,7 +46,7 @@ from bayesmachine.host.metrics import (
 from bayesmachine.host.records import Prepared
 from bayesmachine.host.reference import reference_map, reference_quantized_map, warm_up
 from bayesmachine.host.run import run_machine
-from bayesmachine.likelihood import disparity_machine
+from bayesmachine.models import ModelParams, disparity_machine
 
 
 def figures(disp: np.ndarray, gt: np.ndarray, occluded: np.ndarray) -> dict[str, float]:
@@ -81,13 +79,13 @@ def main() -> None:
     args = ap.parse_args()
     left, right, gt_full = bundled_pair()
     dmax = args.dmax
-    # Each model on its own output region (host.region: margin 2, or 3 with a 7x7 census).
+    # Each model on its own output region (bayesmachine.region: margin 2, or 3 with a 7x7 census).
     truth = {k: (gt_region(gt_full, dmax, k), gt_region(occluded_mask(gt_full), dmax, k).astype(bool))
              for k in (2, 3)}
     gt, occluded = truth[2]
     warm_up(ModelParams(name="census"))
     models = {
-        "paper": ModelParams(dmax=dmax),
+        "paper": ModelParams(name="paper", dmax=dmax),
         "+ census 7x7, no-match uncalibrated": ModelParams(dmax=dmax, name="census", census_nomatch_h=0,
                                                            neighbour_prior=False),
         "+ census 7x7, no-match calibrated": ModelParams(dmax=dmax, name="census", neighbour_prior=False),
@@ -98,24 +96,24 @@ def main() -> None:
     }
     if not args.no_lr:
         lr = ModelParams(dmax=dmax, name="census-lr")
-        issue = replace(lr, lr_right_nomatch=False, lr_neutral=False)
+        issue = lr.replace(lr_right_nomatch=False, lr_neutral=False)
         models["+ left-right column (census-lr default)"] = lr
         models["census-lr, the issue's (no right no-match row)"] = issue
-        models["the issue's, no no-match row (left pass)"] = replace(issue, lr_nomatch=False)
-        models["the issue's + right no-match row, not neutral"] = replace(lr, lr_neutral=False)
+        models["the issue's, no no-match row (left pass)"] = issue.replace(lr_nomatch=False)
+        models["the issue's + right no-match row, not neutral"] = lr.replace(lr_neutral=False)
         for field, values in (("lr_beta", (0.03, 0.3)), ("lr_gamma", (0.001, 0.03)),
                               ("prior_nomatch", (0.05, 0.25)), ("lr_tolerance", (0, 2))):
             for v in values:
-                models[f"census-lr, {field} {v}"] = replace(lr, **{field: v})
+                models[f"census-lr, {field} {v}"] = lr.replace(**{field: v})
     print(f"Motorcycle {left.shape[1]}x{left.shape[0]}, Dmax {dmax}, output {gt.shape[1]}x{gt.shape[0]} = "
           f"{gt.size} pixels, {np.isfinite(gt).mean():.3f} with finite gt, "
           f"{occluded.mean():.3f} occluded (gt)")
     print(f"{'float64 reference':<44} {'no-match':>8} {'bad2':>8} {'bad2,nm':>8} {'nm occl':>8}  "
           f"(W={args.word_bits} words: MAP changed, bad2 / bad2,nm)")
-    feats_cache: dict[int | None, tuple] = {}
+    feats_cache: dict[int, tuple] = {}
     refs = {}
     for name, model in models.items():
-        key = model.census_window if model.census else None
+        key = model.margin  # the feature grid: the census window decides it
         if key not in feats_cache:
             feats_cache[key] = (model_features(left, model), model_features(right, model))
         fl, fr = feats_cache[key]
@@ -170,7 +168,7 @@ def main() -> None:
         machine_line(f"census + prior, {rng}", run, refs[name], gt, occluded)
     if args.figure and {"paper", "census + prior"} <= set(figure_maps):
         from bayesmachine.host.plots import save_disparity_figure
-        from bayesmachine.host.region import OutputRegion
+        from bayesmachine.region import OutputRegion
 
         # The census model's output region (margin 3), the paper machine's map cut to it.
         region = OutputRegion.of_image(left.shape, dmax, 3)
@@ -185,7 +183,7 @@ def main() -> None:
 
 def machine_run(left, right, gt, gt_full, model, feats_cache, ref, counter_max, rng, word_bits):
     machine = disparity_machine(model, rng=rng, counter_max=counter_max, seed=1, word_bits=word_bits)
-    fl, fr = feats_cache[model.census_window if model.census else None]
+    fl, fr = feats_cache[model.margin]
     prepared = Prepared(left, right, model, (fl, fr), ref[0], 0.0, gt, gt_full)
     return run_machine(prepared, machine, "model", progress=False)
 

@@ -23,7 +23,7 @@ from bayesmachine.hdl.machine import pixel_wall_cycles
 from bayesmachine.host.images import bundled_pair
 from bayesmachine.host.likelihoods import ModelParams
 from bayesmachine.host.run import prepare, run_machine
-from bayesmachine.likelihood import disparity_machine
+from bayesmachine.models import disparity_machine
 
 
 def wall(machine, cycles: np.ndarray, timeout: np.ndarray, one_beat: bool = False) -> float:  # noqa: ANN001

@@ -18,7 +18,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from .region import FILTER_SIZE, MARGIN, OutputRegion
+from bayesmachine.region import FILTER_SIZE, MARGIN, OutputRegion
 
 __all__ = [
     "FILTER_SIZE",

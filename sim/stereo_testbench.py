@@ -15,7 +15,7 @@ from amaranth.sim import Simulator, SimulatorContext
 
 from bayesmachine.hdl.frontend.stereo import FrontEnd, StereoMachine
 from bayesmachine.hdl.signatures import beat_words, load_layout, pixel_in_layout
-from bayesmachine.likelihood import ModelParams
+from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.results import MachineResult, decode_results
 
@@ -112,7 +112,7 @@ def _simulate(dut: object, source: object, sink_stream: object, beats: list[int]
 
 
 def output_pixels(frames: Sequence[tuple[np.ndarray, np.ndarray]], model: ModelParams) -> int:
-    """The output pixels of ``frames`` for ``model`` (its output region's, ``host.region``)."""
+    """The output pixels of ``frames`` for ``model`` (its output region's, ``bayesmachine.region``)."""
     k = model.margin
     return sum((lf.shape[0] - 2 * k) * (lf.shape[1] - 2 * k - model.dmax) for lf, _ in frames)
 

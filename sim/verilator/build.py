@@ -36,7 +36,7 @@ from typing import Any
 from bayesmachine.hdl.emit import TOP_NAME, verilog_text
 from bayesmachine.outputs import atomic_write_text
 from bayesmachine.params import MachineParams
-from bayesmachine.tools import start_tool, stop_tool
+from bayesmachine.tools import start_tool, stop_tool, user_cache_dir
 
 from .codegen import HARNESS_TOP, design_header, wrapper_verilog
 from .objcache import RUNTIME_DIR, wrapper_script
@@ -66,23 +66,25 @@ def cache_dir() -> Path:
     env = os.environ.get("BAYESMACHINE_CACHE_DIR")
     if env:
         return Path(env) / "verilator"
-    xdg = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(xdg) / "bayesmachine" / "verilator"
+    return user_cache_dir("bayesmachine", "verilator")
 
 
 def sources_digest() -> str:
     """Hash of the Python sources that define the design: the Verilog cache keys on it."""
     import amaranth
 
+    import bayesmachine.columns
     import bayesmachine.hdl
-    import bayesmachine.likelihood
+    import bayesmachine.models
     import bayesmachine.params
     import bayesmachine.sources
 
     files = sorted(Path(bayesmachine.hdl.__file__).parent.rglob("*.py"))
     files += sorted(Path(bayesmachine.sources.__file__).parent.glob("*.py"))  # LFSR specs, Sobol table
     files.append(Path(bayesmachine.params.__file__))
-    files.append(Path(bayesmachine.likelihood.__file__))  # the front end's likelihood tables
+    # The front end's likelihood tables: the columns' and the models'.
+    files += sorted(Path(bayesmachine.columns.__file__).parent.glob("*.py"))
+    files.append(Path(bayesmachine.models.__file__))
     h = hashlib.sha256(amaranth.__version__.encode())
     for f in files:
         h.update(f.name.encode())
