@@ -212,7 +212,17 @@ class MachineOption:
     choices: tuple[str, ...] | None = None
     metavar: str | None = None
 
+    @property
+    def is_flag(self) -> bool:
+        """A yes/no option (``type=bool``): ``--flag`` / ``--no-flag``, None unless given."""
+        return self.type is bool
+
     def add_to(self, group: argparse._ActionsContainer, **changes: Any) -> argparse.Action:
+        if self.is_flag:
+            flag_kwargs = {"dest": self.field, "default": self.default, "help": self.help,
+                           "action": argparse.BooleanOptionalAction}
+            flag_kwargs.update(changes)
+            return group.add_argument(self.flag, **flag_kwargs)
         kwargs: dict[str, Any] = {
             "dest": self.field,
             "type": self.type,
@@ -283,6 +293,11 @@ add_option(MachineOption("samples_per_clock", "--samples-per-clock",
                          f"{', '.join(map(str, SAMPLES_PER_CLOCK))}: the results of B = 1 in "
                          "ceil(cycles / B) clocks (the cycles reported are clocks; --max-cycles counts "
                          "samples); rng sobol or external (default 1)", metavar="B"))
+add_option(MachineOption("normalize", "--normalize-columns",
+                         "per-pixel column normalization: each loaded column's random numbers shifted right "
+                         "so that its largest word compares as one in [2^(W-1), 2^W] (exactly the run on "
+                         "the words shifted left: the same posterior, shorter runs; docs/architecture.md) "
+                         "(default off)", type=bool))
 add_option(MachineOption("tie_break", "--tie-break",
                          "MAP encoder rule when several counters overflow in one cycle (default %(default)s)",
                          default=DEFAULT_TIE_BREAK, choices=TIE_BREAKS))

@@ -469,7 +469,7 @@ def pass_machine(model: ModelParams, machine: MachineParams, name: str) -> Machi
                          "disparity_machine(model)")
     check_disparity_machine(model, machine)
     keep = ("word_bits", "counter_max", "rng", "lfsr_bits", "seed", "max_cycles", "tie_break",
-            "samples_per_clock", "timeout_answer")
+            "samples_per_clock", "timeout_answer", "normalize")
     kwargs: dict[str, Any] = {k: getattr(machine, k) for k in keep}
     if p.max_cycles is not None:
         kwargs["max_cycles"] = p.max_cycles

@@ -163,6 +163,13 @@ class MachineParams:
         What a run stopped by the watchdog answers (still flagged ``timeout``): ``"none"`` (map 0,
         read as no match) or ``"leading"`` (the row with the largest count, the tie rule among equal
         counts; the no-match row's answer is no match).
+    normalize
+        Per-pixel column normalization: while a pixel's words are loaded the machine ORs each loaded
+        column's words; with L that OR's bit length, the column's operators compare their words with
+        the random number shifted right by s = max(0, W - L) bits (``word_bits`` W). Exactly the run
+        on the words ``w << s`` (the column's largest word lands in [2^(W-1), 2^W]): each column's
+        factor scaled by a power of two for the pixel, the posterior unchanged, the runs shorter.
+        A neighbour prior's feedback column is formed, not loaded: not shifted.
 
     The ``smtj_*`` fields belong to ``rng = "smtj"`` (None: the defaults 1.0, 0.0, "operator"); another
     kind refuses them and leaves them None, out of its ``to_dict`` (and fingerprint); the ``feedback_*``
@@ -188,6 +195,7 @@ class MachineParams:
     feedback_nomatch_word: int | None = None
     samples_per_clock: int = 1
     timeout_answer: str = "none"
+    normalize: bool = False
 
     def __post_init__(self) -> None:
         _check_int("rows", self.rows, 1, 4096)
@@ -229,6 +237,9 @@ class MachineParams:
             raise ParameterError(f"max_cycles ({self.max_cycles}) must exceed samples_per_clock "
                                  f"({self.samples_per_clock}): a run has at least two clocks", "max_cycles")
         _check_choice("timeout_answer", self.timeout_answer, TIMEOUT_ANSWERS)
+        if not isinstance(self.normalize, bool):
+            raise TypeError(f"normalize must be a bool, not {type(self.normalize).__name__} "
+                            f"{self.normalize!r}")
         # Last, what only the random source knows (the Sobol table's size, the LFSR polynomials):
         # the one place it is checked, so every holder of a MachineParams can build its source.
         check_source(self)
@@ -372,6 +383,8 @@ class MachineParams:
             del d["samples_per_clock"]
         if self.timeout_answer == "none":
             del d["timeout_answer"]
+        if not self.normalize:
+            del d["normalize"]
         return d
 
     def fingerprint(self) -> str:
