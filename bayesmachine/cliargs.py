@@ -295,9 +295,9 @@ add_option(MachineOption("samples_per_clock", "--samples-per-clock",
                          "samples); rng sobol or external (default 1)", metavar="B"))
 add_option(MachineOption("normalize", "--normalize-columns",
                          "per-pixel column normalization: each loaded column's random numbers shifted right "
-                         "so that its largest word compares as one in [2^(W-1), 2^W] (exactly the run on "
-                         "the words shifted left: the same posterior, shorter runs; docs/architecture.md) "
-                         "(default off)", type=bool))
+                         "so that the column's largest word compares as a word in [2^(W-1), 2^W] (exactly "
+                         "the run on the words shifted left: the same posterior, shorter runs; "
+                         "docs/architecture.md) (default off)", type=bool))
 add_option(MachineOption("tie_break", "--tie-break",
                          "MAP encoder rule when several counters overflow in one cycle (default %(default)s)",
                          default=DEFAULT_TIE_BREAK, choices=TIE_BREAKS))

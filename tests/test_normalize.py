@@ -122,3 +122,65 @@ def test_pysim_equals_the_model_external_numbers() -> None:
     numbers = np.random.default_rng(9).integers(0, 1 << params.word_bits, size=(3000, params.operators))
     got = PysimEngine(params, result_stall=0.2).run(words, numbers)
     assert_same_results(got, MachineModel(params).run(words, numbers))
+
+
+@pytest.fixture
+def cache(verilator_cache, monkeypatch: pytest.MonkeyPatch):  # noqa: ANN001, ANN201
+    from conftest import require_tool
+
+    require_tool("verilator", "g++", "make")
+    monkeypatch.setenv("BAYESMACHINE_CACHE_DIR", str(verilator_cache.parent))  # the session's builds
+    return verilator_cache
+
+
+@pytest.mark.eda
+@pytest.mark.parametrize("variant", [VARIANT_IDS["neighbour"], VARIANT_IDS["load-bound-hidden"]],
+                         ids=["neighbour", "load-bound-hidden"])
+def test_verilator_equals_the_model(cache, variant: dict[str, object]) -> None:  # noqa: ANN001
+    from bayesmachine.sim.verilator import VerilatorEngine
+
+    params = small_params(normalize=True, **variant)
+    words = _weak_words(params, 300, seed=10)
+    start = _line_start(params, 300)
+    engine = VerilatorEngine(params, build_dir=cache)
+    try:
+        assert_same_results(engine.run(words, **start), MachineModel(params).run(words, **start))
+    finally:
+        engine.close()
+
+
+@pytest.mark.eda
+def test_census_lr_crop_under_verilator(cache) -> None:  # noqa: ANN001
+    """census-lr (both passes normalized) on a crop of the bundled pair: Verilator equals the model
+    array for array."""
+    from bayesmachine.host.images import Crop, bundled_pair, crop_image
+    from bayesmachine.host.run import prepare, run_machine
+    from bayesmachine.models import ModelParams, disparity_machine, right_machine
+
+    left, right, gt = (crop_image(a, Crop(300, 200, 64, 12)) for a in bundled_pair())
+    model = ModelParams(dmax=24, name="census-lr")
+    prep = prepare(left, right, model, gt)
+    machine = disparity_machine(model, normalize=True, max_cycles=256)
+    assert right_machine(model, machine).normalize
+    runs = [run_machine(prep, machine, engine, progress=False) for engine in ("model", "verilator")]
+    for field in ("map", "nomatch", "timeout", "counts", "cycles"):
+        np.testing.assert_array_equal(getattr(runs[1], field), getattr(runs[0], field), err_msg=field)
+    np.testing.assert_array_equal(runs[1].right.map, runs[0].right.map)
+    np.testing.assert_array_equal(runs[1].right.cycles, runs[0].right.cycles)
+
+
+def test_command_line_flag() -> None:
+    """``--normalize-columns`` through the machine-option registry: on when given, the model's
+    machine (both census-lr passes) keeps it; off (left out of the report's machine) otherwise."""
+    from bayesmachine.cli import build_parser
+    from bayesmachine.cliargs import machine_params_from_args
+    from bayesmachine.models import ModelParams, right_machine
+
+    parser = build_parser()
+    model = ModelParams(dmax=8)
+    on = machine_params_from_args(parser.parse_args(["run", "--normalize-columns", "-o", "x"]), 8, model)
+    assert on.normalize and right_machine(model, on).normalize
+    off = machine_params_from_args(parser.parse_args(["run", "-o", "x"]), 8, model)
+    assert not off.normalize and "normalize" not in off.to_dict()
+    sweep = parser.parse_args(["sweep", "--normalize-columns", "-o", "x"])
+    assert sweep.normalize is True
