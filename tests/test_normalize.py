@@ -124,25 +124,16 @@ def test_pysim_equals_the_model_external_numbers() -> None:
     assert_same_results(got, MachineModel(params).run(words, numbers))
 
 
-@pytest.fixture
-def cache(verilator_cache, monkeypatch: pytest.MonkeyPatch):  # noqa: ANN001, ANN201
-    from conftest import require_tool
-
-    require_tool("verilator", "g++", "make")
-    monkeypatch.setenv("BAYESMACHINE_CACHE_DIR", str(verilator_cache.parent))  # the session's builds
-    return verilator_cache
-
-
 @pytest.mark.eda
 @pytest.mark.parametrize("variant", [VARIANT_IDS["neighbour"], VARIANT_IDS["load-bound-hidden"]],
                          ids=["neighbour", "load-bound-hidden"])
-def test_verilator_equals_the_model(cache, variant: dict[str, object]) -> None:  # noqa: ANN001
+def test_verilator_equals_the_model(verilator_builds, variant: dict[str, object]) -> None:  # noqa: ANN001
     from bayesmachine.sim.verilator import VerilatorEngine
 
     params = small_params(normalize=True, **variant)
     words = _weak_words(params, 300, seed=10)
     start = _line_start(params, 300)
-    engine = VerilatorEngine(params, build_dir=cache)
+    engine = VerilatorEngine(params, build_dir=verilator_builds)
     try:
         assert_same_results(engine.run(words, **start), MachineModel(params).run(words, **start))
     finally:
@@ -150,7 +141,7 @@ def test_verilator_equals_the_model(cache, variant: dict[str, object]) -> None: 
 
 
 @pytest.mark.eda
-def test_census_lr_crop_under_verilator(cache) -> None:  # noqa: ANN001
+def test_census_lr_crop_under_verilator(verilator_builds) -> None:  # noqa: ANN001
     """census-lr (both passes normalized) on a crop of the bundled pair: Verilator equals the model
     array for array."""
     from bayesmachine.host.images import Crop, bundled_pair, crop_image
