@@ -67,6 +67,8 @@ __all__ = [
     "model_params_from_args",
     "float_arg",
     "positive_float_arg",
+    "positive_float_at_most",
+    "int_in_range",
     "rng_list",
     "runnable_sources",
     "argument_type",
@@ -135,6 +137,32 @@ def positive_float_arg(text: str) -> float:
     if not value > 0:
         raise argparse.ArgumentTypeError(f"expected a number > 0, got {text!r}")
     return value
+
+
+def int_in_range(lo: int, hi: int) -> Callable[[str], int]:
+    """An argparse type: an integer (:func:`int_arg`'s spellings) in [lo, hi]."""
+
+    def convert(text: str) -> int:
+        value = int_arg(text)
+        if not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"expected an integer in [{lo}, {hi}], got {text!r}")
+        return value
+
+    convert.__name__ = "integer"
+    return convert
+
+
+def positive_float_at_most(hi: float) -> Callable[[str], float]:
+    """An argparse type: a number in (0, hi] (a time out, bounded so that nothing waits for ever)."""
+
+    def convert(text: str) -> float:
+        value = positive_float_arg(text)
+        if value > hi:
+            raise argparse.ArgumentTypeError(f"expected a number in (0, {hi:g}], got {text!r}")
+        return value
+
+    convert.__name__ = "number"
+    return convert
 
 
 _SMTJ_FIELDS = ("smtj_dwell", "smtj_spread", "smtj_share")
