@@ -32,7 +32,6 @@ from bayesmachine.params import (
     DEFAULT_COLUMNS,
     DEFAULT_COUNTER_MAX,
     DEFAULT_DMAX,
-    DEFAULT_LANES,
     DEFAULT_LFSR_BITS,
     DEFAULT_MAX_CYCLES,
     DEFAULT_PRIOR,
@@ -40,6 +39,7 @@ from bayesmachine.params import (
     DEFAULT_SEED,
     DEFAULT_TIE_BREAK,
     DEFAULT_WORD_BITS,
+    DEFAULT_WORDS_PER_BEAT,
     PRIORS,
     RNG_KINDS,
     SMTJ_SHARES,
@@ -301,10 +301,10 @@ add_option(MachineOption("smtj_spread", "--smtj-spread",
 add_option(MachineOption("smtj_share", "--smtj-share",
                          "--rng smtj: W devices per operator, or per column shared by its rows "
                          "(default operator)", type=str, choices=SMTJ_SHARES))
-add_option(MachineOption("lanes", "--lanes",
-                         f"likelihood-memory words per load beat (default {DEFAULT_LANES}, or one pixel's "
-                         f"words if fewer; {STEREO_ROWS_PER_BEAT} rows' words with the front end: "
-                         "--feed pixels, --top stereo)", metavar="N"))
+add_option(MachineOption("words_per_beat", "--words-per-beat",
+                         f"likelihood-memory words per load beat (default {DEFAULT_WORDS_PER_BEAT}, "
+                         f"or one pixel's words if fewer; {STEREO_ROWS_PER_BEAT} rows' words with the "
+                         "front end: --feed pixels, --top stereo)", metavar="N"))
 
 
 def add_dmax_option(group: argparse._ActionsContainer) -> argparse.Action:

@@ -61,7 +61,7 @@ from numbers import Real
 
 import numpy as np
 
-from bayesmachine.params import DEFAULT_DMAX, STEREO_ROWS_PER_BEAT, MachineParams, ParameterError, lane_params
+from bayesmachine.params import DEFAULT_DMAX, STEREO_ROWS_PER_BEAT, MachineParams, ParameterError, nth_machine
 
 __all__ = [
     "MODELS",
@@ -80,7 +80,7 @@ __all__ = [
     "QuantizedTables",
     "check_disparity_machine",
     "disparity_machine",
-    "neighbour_lanes",
+    "neighbour_words_per_beat",
     "neighbour_words",
     "lr_consistent",
     "lr_unknown",
@@ -565,8 +565,8 @@ def lr_column(right_map: np.ndarray, right_first: int, columns: np.ndarray, mode
     return consistency_column(consistent, model, one, beta, gamma, unknown)
 
 
-def neighbour_lanes(rows: int, loaded_columns: int) -> int:
-    """A neighbour-prior machine's default ``lanes``: the loaded words of
+def neighbour_words_per_beat(rows: int, loaded_columns: int) -> int:
+    """A neighbour-prior machine's default ``words_per_beat``: the loaded words of
     :data:`~bayesmachine.params.STEREO_ROWS_PER_BEAT` rows per load beat (the front end's rule).
 
     A pixel's loaded words grow by the census and above-prior columns (5 per row: 410 at Dmax 80),
@@ -585,8 +585,8 @@ def disparity_machine(model: ModelParams, **machine_kwargs: object) -> MachinePa
 
     With the neighbour prior (``model.has_prior``): ``prior="neighbour"``, ``feedback_words`` the
     quantized prior table clamped where it stops changing (``QuantizedTables.prior[:prior_last + 1]``),
-    ``feedback_nomatch_word`` the quantized no-match factor, and ``lanes`` by default
-    :func:`neighbour_lanes`. For census-lr ``max_cycles`` is by default
+    ``feedback_nomatch_word`` the quantized no-match factor, and ``words_per_beat`` by default
+    :func:`neighbour_words_per_beat`. For census-lr ``max_cycles`` is by default
     :data:`LR_WATCHDOG_RUNS` x (``counter_max`` + 1), the watchdog that ends its long runs as no
     match (the right pass takes it too unless ``lr_right_max_cycles``). ``machine_kwargs`` are the
     other fields (``word_bits``, ``rng``, ...); a ``columns``, ``prior`` or feedback table
@@ -614,7 +614,7 @@ def disparity_machine(model: ModelParams, **machine_kwargs: object) -> MachinePa
                 raise ParameterError(f"{name}: the model's {word_bits}-bit prior table gives {want}, "
                                      f"got {got!r}")
         kwargs.update(prior="neighbour", feedback_words=feedback, feedback_nomatch_word=nm)
-        kwargs.setdefault("lanes", neighbour_lanes(model.hypotheses, model.columns + 1))
+        kwargs.setdefault("words_per_beat", neighbour_words_per_beat(model.hypotheses, model.columns + 1))
     elif prior == "neighbour":
         raise ParameterError(f"prior: 'neighbour' is the census model's neighbour prior; the {model.name} "
                              "model" + (" without it" if model.census else "") + " has no feedback table")
@@ -633,7 +633,7 @@ def right_machine(model: ModelParams, machine: MachineParams) -> MachineParams:
     columns and its neighbour prior) with ``machine``'s word width, counter max, random source,
     watchdog (``model.lr_right_max_cycles`` if given: a right pixel stopped by it has no right MAP)
     and tie rule, and the seed of lane 1 of a row of machines
-    (:func:`~bayesmachine.params.lane_params`): a second machine beside the left one, with its own
+    (:func:`~bayesmachine.params.nth_machine`): a second machine beside the left one, with its own
     random numbers.
     """
     if not model.lr:
@@ -646,7 +646,7 @@ def right_machine(model: ModelParams, machine: MachineParams) -> MachineParams:
     if machine.rng == "smtj":
         kwargs.update(smtj_dwell=machine.smtj_dwell, smtj_spread=machine.smtj_spread,
                       smtj_share=machine.smtj_share)
-    return lane_params(disparity_machine(model.right_model, **kwargs), 1)
+    return nth_machine(disparity_machine(model.right_model, **kwargs), 1)
 
 
 def feedback_table(model: ModelParams, word_bits: int) -> tuple[tuple[int, ...], int]:

@@ -32,10 +32,10 @@ __all__ = [
     "DEFAULT_MAX_CYCLES",
     "DEFAULT_PRIOR",
     "DEFAULT_TIE_BREAK",
-    "DEFAULT_LANES",
+    "DEFAULT_WORDS_PER_BEAT",
     "STEREO_ROWS_PER_BEAT",
-    "lane_params",
-    "stereo_lanes",
+    "nth_machine",
+    "stereo_words_per_beat",
 ]
 
 # The random source kinds: the names of the one registry, bayesmachine.sources.SOURCE_KINDS.
@@ -49,8 +49,8 @@ TIE_BREAKS = ("nomatch-first", "lowest-index")
 DEFAULT_WORD_BITS = 10
 DEFAULT_LFSR_BITS = 31
 DEFAULT_MAX_CYCLES = (1 << 20) - 1
-DEFAULT_LANES = 16
-# The on-chip front end (hdl.frontend) writes 6 rows' words per load beat: see stereo_lanes.
+DEFAULT_WORDS_PER_BEAT = 16
+# The on-chip front end (hdl.frontend) writes 6 rows' words per load beat: see stereo_words_per_beat.
 STEREO_ROWS_PER_BEAT = 6
 # The paper's machine: Dmax 80 (82 rows), three data terms, counter max 16.
 DEFAULT_DMAX = 80
@@ -122,7 +122,7 @@ class MachineParams:
         When several rows overflow in the same cycle: ``"nomatch-first"`` (the
         no-match row wins any tie it is part of, otherwise the lowest index) or
         ``"lowest-index"``.
-    lanes
+    words_per_beat
         Likelihood-memory words carried per beat of the load stream.
     smtj_dwell
         ``rng = "smtj"`` only: tau, the mean dwell time of each SMTJ state, in clock cycles
@@ -149,7 +149,7 @@ class MachineParams:
     prior: str = DEFAULT_PRIOR
     nomatch_row: bool = False
     tie_break: str = DEFAULT_TIE_BREAK
-    lanes: int = DEFAULT_LANES
+    words_per_beat: int = DEFAULT_WORDS_PER_BEAT
     smtj_dwell: float = 1.0
     smtj_spread: float = 0.0
     smtj_share: str = "operator"
@@ -185,10 +185,10 @@ class MachineParams:
             raise ParameterError("a machine with a no-match row needs at least 2 rows")
         if self.tie_break not in TIE_BREAKS:
             raise ParameterError(f"tie_break must be one of {TIE_BREAKS}, got {self.tie_break!r}")
-        _check_int("lanes", self.lanes, 1)
-        if self.lanes > self.words_per_pixel:
+        _check_int("words_per_beat", self.words_per_beat, 1)
+        if self.words_per_beat > self.words_per_pixel:
             raise ParameterError(
-                f"lanes ({self.lanes}) exceeds the words per pixel ({self.words_per_pixel})"
+                f"words_per_beat ({self.words_per_beat}) exceeds the words per pixel ({self.words_per_pixel})"
             )
         for name in ("smtj_dwell", "smtj_spread"):
             v = getattr(self, name)
@@ -234,10 +234,10 @@ class MachineParams:
         """The disparity machine of the paper: M = Dmax + 2 rows, the last one no-match."""
         _check_int("dmax", dmax, 0, 4094)
         kwargs.setdefault("columns", DEFAULT_COLUMNS)
-        if "lanes" not in kwargs:
+        if "words_per_beat" not in kwargs:
             # Small machines get a load stream no wider than one pixel's words.
             columns = int(kwargs["columns"]) + _LOADED_PRIOR_COLUMNS.get(kwargs.get("prior"), 0)  # type: ignore[call-overload, arg-type]
-            kwargs["lanes"] = min(DEFAULT_LANES, (dmax + 2) * columns)
+            kwargs["words_per_beat"] = min(DEFAULT_WORDS_PER_BEAT, (dmax + 2) * columns)
         return cls(rows=dmax + 2, nomatch_row=True, **kwargs)  # type: ignore[arg-type]
 
     # Derived quantities: every width in the RTL, the model and the host comes from here.
@@ -268,7 +268,7 @@ class MachineParams:
 
     @property
     def beats_per_pixel(self) -> int:
-        return -(-self.words_per_pixel // self.lanes)
+        return -(-self.words_per_pixel // self.words_per_beat)
 
     @property
     def word_one(self) -> int:
@@ -313,20 +313,21 @@ class MachineParams:
         return hashlib.sha256(blob).hexdigest()[:16]
 
 
-_LANE_SEED_STEP = 0x9E3779B97F4A7C15  # odd (2**64 / golden ratio): distinct seeds for 2**64 lanes
+_MACHINE_SEED_STEP = 0x9E3779B97F4A7C15  # odd (2**64 / golden ratio): distinct seeds for 2**64 machines
 
 
-def lane_params(params: MachineParams, lane: int) -> MachineParams:
-    """The parameters of machine ``lane`` of a row of lanes (``hdl.lanes.MachineLanes``).
+def nth_machine(params: MachineParams, index: int) -> MachineParams:
+    """The parameters of machine ``index`` of K machines side by side (``hdl.machines.ParallelMachines``,
+    the StereoMachine's ``machines``, census-lr's right pass).
 
-    Lane 0 is the machine itself; lane i has seed ``(seed + i * 0x9E3779B97F4A7C15) mod 2**64``,
-    so every lane draws its own LFSR polynomials and start states.
+    Machine 0 is ``params`` itself; machine i has seed ``(seed + i * 0x9E3779B97F4A7C15) mod 2**64``,
+    so every machine draws its own LFSR polynomials and start states.
     """
-    _check_int("lane", lane, 0)
-    return replace(params, seed=(params.seed + lane * _LANE_SEED_STEP) % (1 << 64))
+    _check_int("index", index, 0)
+    return replace(params, seed=(params.seed + index * _MACHINE_SEED_STEP) % (1 << 64))
 
 
-def stereo_lanes(params: MachineParams) -> int:
+def stereo_words_per_beat(params: MachineParams) -> int:
     """The on-chip front end's default lane count (``hdl.frontend``, ``--top stereo``, ``--feed
     pixels``): the words of :data:`STEREO_ROWS_PER_BEAT` rows per beat, a multiple of the loaded
     columns since the front end writes one feature per lane (18 words: 14 beats per pixel at Dmax 80,

@@ -145,7 +145,7 @@ def main() -> None:
     model = ModelParams(dmax=args.dmax)
     params = stereo_machine_params(args.dmax, counter_max=args.counter_max)
     print(f"StereoMachine: {w}-pixel lines, Dmax {args.dmax}, counter max {args.counter_max}, "
-          f"{params.lanes} lanes ({params.beats_per_pixel} beats per pixel); "
+          f"{params.words_per_beat} lanes ({params.beats_per_pixel} beats per pixel); "
           f"frame: Motorcycle crop {args.crop}")
     if not args.no_verilator:
         wall = run_verilator(params, model, left, right, not args.no_model)

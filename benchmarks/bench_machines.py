@@ -40,7 +40,7 @@ def row(k: int, synth: dict | None, run: dict | None) -> dict[str, object]:
     """One configuration's figures (None where not measured)."""
     out: dict[str, object] = {"machines": k}
     if synth is not None:
-        if synth.get("machines", synth.get("lanes")) != k or synth.get("top") != "stereo":
+        if synth.get("machines", synth.get("words_per_beat")) != k or synth.get("top") != "stereo":
             raise SystemExit(f"bench_machines: the synth report is not --top stereo --machines {k}")
         res, util = synth["resources"], synth["utilization"]
         out |= {"lut4": res["lut4"], "ccu2c": res["carry"], "sites": res["lut4"] + 2 * res["carry"],

@@ -34,7 +34,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Put the machine (or several, --machines), or with --top stereo the camera-fed "
         "StereoMachine (front end + FIFO + machine, pixel pairs in), behind the pin-saving wrapper, run "
         "Yosys and nextpnr (PyPI WebAssembly wheels: pip install 'bayesmachine[fpga]'), and write "
-        "OUT/report.json and OUT/report.md: resources (block RAM included), fmax, critical path, lanes "
+        "OUT/report.json and OUT/report.md: resources (block RAM included), fmax, critical path, machines "
         "that fit and the throughput measured on the bundled pair. The first call of each tool compiles "
         "it (about a minute); nextpnr takes minutes on a full machine.",
     )

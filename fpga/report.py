@@ -1,5 +1,5 @@
 """``OUT/report.json`` and ``OUT/report.md`` of ``bayesmachine synth``: resources, fmax, critical
-path, lanes that fit, and the throughput those imply (the keys are listed in docs/fpga.md). One
+path, machines that fit, and the throughput those imply (the keys are listed in docs/fpga.md). One
 shape for both tops: the stereo top (``top = "stereo"``) adds its own fields."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import json
 
 from .targets import Target
 
-__all__ = ["PIXEL_BITS", "VGA_HEIGHT", "VGA_PIXELS", "resources", "lanes_that_fit", "stereo_throughput",
+__all__ = ["PIXEL_BITS", "VGA_HEIGHT", "VGA_PIXELS", "resources", "machines_that_fit", "stereo_throughput",
            "throughput", "markdown"]
 
 VGA_PIXELS = 640 * 480
@@ -52,13 +52,13 @@ def utilization(target: Target, res: dict[str, int]) -> dict[str, float]:
     return {k: round(v, 4) for k, v in out.items()}
 
 
-def lanes_that_fit(target: Target, per_lane: dict[str, float], overhead: dict[str, float],
-                   fill: float = 0.9) -> int:
-    """Lanes that fit with every resource at most ``fill`` of the device (place and route needs slack)."""
+def machines_that_fit(target: Target, per_machine: dict[str, float], overhead: dict[str, float],
+                      fill: float = 0.9) -> int:
+    """Machines that fit with every resource at most ``fill`` of the device (place and route needs slack)."""
     best = None
     caps = {"lut4": target.luts, "ff": target.ffs, "bram": target.brams, "dsp": target.dsps}
     for k, cap in caps.items():
-        need = per_lane.get(k, 0.0)
+        need = per_machine.get(k, 0.0)
         if need <= 0:
             continue
         n = int((fill * cap - overhead.get(k, 0.0)) // need)
@@ -66,13 +66,13 @@ def lanes_that_fit(target: Target, per_lane: dict[str, float], overhead: dict[st
     return max(0, best if best is not None else 0)
 
 
-def throughput(fmax_mhz: float, lanes: int, wall_cycles_per_pixel: float, beats_per_pixel: int,
+def throughput(fmax_mhz: float, machines: int, wall_cycles_per_pixel: float, beats_per_pixel: int,
                load_beat_bits: int) -> dict[str, float]:
-    """Pixels/s and VGA frames/s at ``fmax_mhz`` with ``lanes`` machines, each taking
+    """Pixels/s and VGA frames/s at ``fmax_mhz`` with ``machines`` machines, each taking
     ``wall_cycles_per_pixel`` clock cycles per pixel, all fed by one load stream of one beat per
     cycle (``beats_per_pixel`` beats a pixel): the slower of the two limits wins."""
     f = fmax_mhz * 1e6
-    compute_rate = f * lanes / wall_cycles_per_pixel
+    compute_rate = f * machines / wall_cycles_per_pixel
     load_rate = f / beats_per_pixel
     px = min(compute_rate, load_rate)
     return {
@@ -133,25 +133,25 @@ def markdown(report: dict) -> str:
                   f"machine: {report['machine_summary']}; wrapper {report['pin_width']}-bit pins.")
         fps_head, fps = f"frames/s ({tp.get('frame', 'W x 480')})", tp.get("vga_fps")
     else:
-        design = (f"Machine: {report['machine_summary']}; lanes {report['lanes']}; "
+        design = (f"Machine: {report['machine_summary']}; machines {report['machines']}; "
                   f"wrapper {report['pin_width']}-bit pins.")
-        fps_head, fps = "VGA fps (all lanes)", tp.get("vga_fps_fit")
+        fps_head, fps = "VGA fps (all machines)", tp.get("vga_fps_fit")
     lines = [
         f"# bayesmachine synth: {report['target']} ({report['device']})",
         "",
         design,
         "",
-        f"| LUT4 | carry | FF | block RAM | DSP | fmax (MHz) | lanes that fit | {fps_head} |",
+        f"| LUT4 | carry | FF | block RAM | DSP | fmax (MHz) | machines that fit | {fps_head} |",
         "|---|---|---|---|---|---|---|---|",
     ]
     lines.append(
         f"| {_fmt(r['lut4'])} ({u['lut4']:.0%}) | {_fmt(r['carry'])} | {_fmt(r['ff'])} ({u['ff']:.0%}) "
-        f"| {_fmt(r['bram'])} | {_fmt(r['dsp'])} | {_fmt(fmax)} | {report['lanes_fit']} "
+        f"| {_fmt(r['bram'])} | {_fmt(r['dsp'])} | {_fmt(fmax)} | {report['machines_fit']} "
         f"| {_fmt(fps, 1)} |"
     )
     lines.append("")
     po = report["per_operator"]
-    pl = report["per_lane"]
+    pl = report["per_machine"]
     if stereo:
         lines.append(f"Per operator (front end and FIFO included): {po['lut4']:.1f} LUT4 sites, "
                      f"{po['ff']:.1f} FF. Lanes that fit: copies of the whole StereoMachine, each fed by "
@@ -163,7 +163,7 @@ def markdown(report: dict) -> str:
                   f"LUT RAMs."]
     else:
         lines.append(f"Per operator: {po['lut4']:.1f} LUT4 sites, {po['ff']:.1f} FF. "
-                     f"Per lane: {pl['lut4']:,.0f} LUT4 sites, {pl['ff']:,.0f} FF.")
+                     f"Per machine: {pl['lut4']:,.0f} LUT4 sites, {pl['ff']:,.0f} FF.")
     cp = report.get("critical_path") or {}
     if cp:
         lines += ["", f"Critical path: {cp['start']} (net {cp['start_net']}) -> {cp['end']} "
@@ -185,13 +185,13 @@ def markdown(report: dict) -> str:
         text = (f"Throughput ({tp['pair']}): {tp['compute_cycles_per_pixel']:.2f} compute and "
                 f"{tp['wall_cycles_per_pixel']:.2f} wall cycles per pixel (loading included)")
         if tp.get("pixels_per_second") is not None:  # synthesis only: no fmax, no rates
-            text += (f"; at {_fmt(fmax)} MHz, {report['lanes']} lane(s): "
+            text += (f"; at {_fmt(fmax)} MHz, {report['machines']} machine(s): "
                      f"{tp['pixels_per_second'] / 1e6:.2f} Mpx/s = {tp['vga_fps']:.1f} VGA fps, load "
                      f"stream {tp['load_bits_per_second'] / 1e9:.2f} Gbit/s"
                      + (" (load-bound)" if tp["load_bound"] else ""))
         lines += ["", text + "."]
         if tp.get("vga_fps_fit") is not None:
-            lines.append(f"With the {report['lanes_fit']} lanes that fit (same fmax assumed, "
+            lines.append(f"With the {report['machines_fit']} machines that fit (same fmax assumed, "
                          f"load stream widened to keep up): {tp['vga_fps_fit']:.1f} VGA fps.")
     lines += ["", f"Figures from: {report['measured']}.", ""]
     return "\n".join(lines)

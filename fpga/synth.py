@@ -80,8 +80,8 @@ def synth(params: MachineParams, target_name: str, out: Path, *, machines: int =
 
     from bayesmachine.hdl.emit import summary
     from bayesmachine.hdl.frontend.stereo import StereoMachine, check_stereo_machine
-    from bayesmachine.hdl.lanes import MachineLanes
     from bayesmachine.hdl.machine import BayesianMachine
+    from bayesmachine.hdl.machines import ParallelMachines
     from bayesmachine.outputs import OutputDir
 
     from . import report as rep
@@ -120,7 +120,7 @@ def synth(params: MachineParams, target_name: str, out: Path, *, machines: int =
                                  machines=machines)
         else:
             core = (BayesianMachine(params=params) if machines == 1
-                    else MachineLanes(params=params, machines=machines))
+                    else ParallelMachines(params=params, machines=machines))
         top = PinWrapper(core, pin_width=pin_width)
         if width is not None:
             say(f"elaborating the StereoMachine ({width}-pixel lines, {machines} machine(s) of "
@@ -136,10 +136,9 @@ def synth(params: MachineParams, target_name: str, out: Path, *, machines: int =
             "machine": params.to_dict(),
             "machine_summary": f"Dmax {params.rows - 2}, N {params.columns}, "
             f"counter max {params.counter_max}, W {params.word_bits}, rng {params.rng}, "
-            f"{params.lanes} words per load beat",
+            f"{params.words_per_beat} words per load beat",
             "top": "stereo" if width is not None else "machine",
             "stereo": None,
-            "lanes": machines,
             "machines": machines,
             "pin_width": pin_width,
             "cells": cells,
@@ -153,33 +152,33 @@ def synth(params: MachineParams, target_name: str, out: Path, *, machines: int =
                 "fifo_pixels": fifo_pixels,
                 "fifo_beats": fifo_pixels * params.beats_per_pixel,
                 "beats_per_pixel": params.beats_per_pixel,
-                "beat_bits": params.lanes * params.memory_word_width,
+                "beat_bits": params.words_per_beat * params.memory_word_width,
                 "model": dataclasses.asdict(model),
                 "input_bits": rep.PIXEL_BITS,
                 # The line buffer's word: 2 margin lines of 16-bit pairs (64 bits; 96 with a 7x7 census).
                 "line_buffer_bits": rep.PIXEL_BITS * 2 * model.margin,
             }
         logic = rep.logic_cells(target, res)
-        report["per_lane"] = {"lut4": logic / machines, "ff": res["ff"] / machines,
+        report["per_machine"] = {"lut4": logic / machines, "ff": res["ff"] / machines,
                               "bram": res["bram"] / machines, "dsp": res["dsp"] / machines}
         report["per_operator"] = {"lut4": round(logic / (machines * params.operators), 2),
                                   "ff": round(res["ff"] / (machines * params.operators), 2)}
-        report["lanes_fit"] = rep.lanes_that_fit(target, report["per_lane"], {})
+        report["machines_fit"] = rep.machines_that_fit(target, report["per_machine"], {})
         if place:
             pnr = parse_nextpnr(place_and_route(target, out, freq_mhz, pnr_seed, say, router))
             report.update(pnr)
             # Placed logic cells (a slice half or an iCE40 logic cell holds a LUT and a flip-flop) can
-            # bind before LUTs or flip-flops alone do: count lanes against them too.
+            # bind before LUTs or flip-flops alone do: count machines against them too.
             for key in ("TRELLIS_COMB", "TRELLIS_FF", "ICESTORM_LC"):
                 u = pnr["pnr_utilization"].get(key)
                 if u and u["used"]:
                     fit = int(0.9 * u["available"] // (u["used"] / machines))
-                    report["lanes_fit"] = min(report["lanes_fit"], fit)
-            report["lanes_fit"] = max(report["lanes_fit"], machines)  # these just placed and routed
+                    report["machines_fit"] = min(report["machines_fit"], fit)
+            report["machines_fit"] = max(report["machines_fit"], machines)  # these just placed and routed
             what = (f"one StereoMachine ({machines} machine(s))" if width is not None
                     else f"{machines} machine(s)")
             report["measured"] = (f"Yosys {target.yosys_synth} and nextpnr ({router}) place and route of "
-                                  f"{what}; lanes that fit from synthesis utilization "
+                                  f"{what}; machines that fit from synthesis utilization "
                                   f"(at most 90 % of each resource)")
         else:
             report.update({"fmax_mhz": None, "critical_path": {}})
@@ -199,11 +198,11 @@ def synth(params: MachineParams, target_name: str, out: Path, *, machines: int =
                 tp.update(rep.stereo_throughput(report["fmax_mhz"], cyc["wall_cycles_per_pixel"], width,
                                                 params.rows - 2, margin=model.margin))
             elif report["fmax_mhz"]:
-                beat_bits = params.lanes * params.memory_word_width
+                beat_bits = params.words_per_beat * params.memory_word_width
                 tp.update(rep.throughput(report["fmax_mhz"], machines, cyc["wall_cycles_per_pixel"],
                                          params.beats_per_pixel, beat_bits))
-                # The lanes that fit, each fed a pixel per beat (the load stream widened to keep up).
-                fit = rep.throughput(report["fmax_mhz"], max(1, report["lanes_fit"]),
+                # The machines that fit, each fed a pixel per beat (the load stream widened to keep up).
+                fit = rep.throughput(report["fmax_mhz"], max(1, report["machines_fit"]),
                                      cyc["wall_cycles_per_pixel"], 1,
                                      params.words_per_pixel * params.memory_word_width)
                 tp["vga_fps_fit"] = fit["vga_fps"]

@@ -1,6 +1,6 @@
 """FPGA targets of ``bayesmachine synth``: the device, how to call the tools, and its size.
 
-Sizes are the device data sheets' counts; they give utilization from synthesis alone (the lane
+Sizes are the device data sheets' counts; they give utilization from synthesis alone (the machine
 estimate) and are checked against nextpnr's own counts in the report.
 """
 

@@ -8,7 +8,7 @@ payload bit stays observable and the timing report measures the core, not the pa
 
 The input stream is taken from the core's signature (:func:`input_stream`): its one ``In``
 member that is a ``stream.Signature``. That is ``load`` (likelihood-memory words) for
-``BayesianMachine`` and ``MachineLanes``, ``pixels`` (pixel pairs) for the front end's
+``BayesianMachine`` and ``ParallelMachines``, ``pixels`` (pixel pairs) for the front end's
 ``StereoMachine``; the wrapper is the same for all of them.
 
 Protocol (one clock, ``pin_width`` = P bits per chunk):
@@ -40,7 +40,7 @@ OUT_GROUP = 8  # result chunks per registered copy of the shifter's take enable
 
 def input_stream(core: wiring.Component) -> str:
     """The name of ``core``'s one input stream: its only ``In`` member whose signature is a
-    ``stream.Signature`` (``load`` for the machine and its lanes, ``pixels`` for the StereoMachine)."""
+    ``stream.Signature`` (``load`` for the machine and K machines, ``pixels`` for the StereoMachine)."""
     members = core.signature.members
     names = [name for name, member in members.items()
              if member.flow == In and member.is_signature and isinstance(member.signature, stream.Signature)]

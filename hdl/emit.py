@@ -58,7 +58,7 @@ def summary(params: MachineParams) -> str:
         f"counter max {params.counter_max} ({params.counter_width}-bit overflow counters); "
         f"watchdog {params.max_cycles} cycles",
         f"random source: {params.rng}: {source_kind(params.rng).description}{_source_detail(params)}",
-        f"load: {params.lanes} words per beat, {params.beats_per_pixel} beats per pixel",
+        f"load: {params.words_per_beat} words per beat, {params.beats_per_pixel} beats per pixel",
         "ports (Verilog names; clk and rst as well):",
     ]
     lines += [f"  {d:3} {name:15} {width:6} bits" for d, name, width in _ports(params)]

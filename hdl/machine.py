@@ -150,7 +150,7 @@ class BayesianMachine(wiring.Component):
     Attributes
     ----------
     load : ``In(stream.Signature(load_layout(params)))``
-        A pixel's words in operator order, ``lanes`` per beat, ``beats_per_pixel`` beats per pixel.
+        A pixel's words in operator order, ``words_per_beat`` per beat, ``beats_per_pixel`` beats per pixel.
     result : ``Out(stream.Signature(result_layout(params)))``
         One result per pixel, in order.
     entropy : ``In(entropy_layout(params))``
@@ -516,8 +516,8 @@ class BayesianMachine(wiring.Component):
         words = beat_words(p, load_q)
         for b in range(nbeats):
             with m.If(n.write_q[b]):
-                for lane in range(p.lanes):
-                    w = b * p.lanes + lane
+                for lane in range(p.words_per_beat):
+                    w = b * p.words_per_beat + lane
                     if w < p.words_per_pixel:  # unused lanes of the last beat are ignored
                         m.d.sync += n.shadow[w].eq(words[lane])
         with m.If(n.write_q[nbeats - 1]):

@@ -8,7 +8,7 @@
   is off chip (``source_kind(rng).on_chip`` is false: ``external``, ``smtj``), the one place
   that decides it;
 - :class:`MachineSignature`: ``load``, ``result`` and the entropy members (``BayesianMachine``,
-  ``MachineLanes``, ``SMTJEmulatedMachine``);
+  ``ParallelMachines``, ``SMTJEmulatedMachine``);
 - :class:`StereoSignature`: ``pixels``, ``result`` and the entropy members (``StereoMachine``).
 
 Ports and word order: ``docs/architecture.md``.
@@ -38,12 +38,12 @@ def _check_params(params: object, who: str) -> MachineParams:
 
 
 def load_layout(params: MachineParams) -> data.ArrayLayout | data.StructLayout:
-    """One beat of the load stream: ``lanes`` likelihood-memory words of W + 1 bits.
+    """One beat of the load stream: ``words_per_beat`` likelihood-memory words of W + 1 bits.
 
     With a neighbour prior (``prior = "neighbour"``) the beat is a struct: ``words`` (those lanes,
     from bit 0, so the words sit where they sit in every other machine) and ``line_start`` (the
     pixel has no left neighbour; the machine reads it with the pixel's last beat)."""
-    words = data.ArrayLayout(unsigned(params.memory_word_width), params.lanes)
+    words = data.ArrayLayout(unsigned(params.memory_word_width), params.words_per_beat)
     if not params.feedback_columns:
         return words
     return data.StructLayout({"words": words, "line_start": unsigned(1)})
@@ -113,7 +113,7 @@ class MachineSignature(wiring.Signature):
     Members
     -------
     load : ``In(load_stream(params))``
-        A pixel's words in operator order, ``lanes`` per beat, ``beats_per_pixel`` beats per pixel.
+        A pixel's words in operator order, ``words_per_beat`` per beat, ``beats_per_pixel`` beats per pixel.
     result : ``Out(result_stream(params))``
         One result per pixel, in order.
     entropy, entropy_ready

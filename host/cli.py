@@ -267,11 +267,11 @@ def _machine_params(
     if rng is not None:
         overrides["rng"] = rng
     machine = machine_params_from_args(args, model.dmax, model=model, **overrides)
-    if getattr(args, "feed", "words") == "pixels" and args.lanes is None:
+    if getattr(args, "feed", "words") == "pixels" and args.words_per_beat is None:
         # The front end writes one feature per lane: lanes a multiple of the loaded columns.
-        from bayesmachine.params import stereo_lanes
+        from bayesmachine.params import stereo_words_per_beat
 
-        machine = dataclasses.replace(machine, lanes=stereo_lanes(machine))
+        machine = dataclasses.replace(machine, words_per_beat=stereo_words_per_beat(machine))
     _check_host_rng(machine)
     return machine
 

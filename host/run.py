@@ -29,7 +29,7 @@ from bayesmachine.likelihood import lr_column, neighbour_words, right_machine
 from bayesmachine.outputs import require_memory
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.engines import ENGINES, get_engine
-from bayesmachine.sim.results import MachineResult
+from bayesmachine.sim.results import MachineResult, disparities
 
 from .features import model_features
 from .images import validate_pair
@@ -156,7 +156,7 @@ def run_machine(
     left_f, right_f = prepared.features
 
     def disp_row(y: int) -> np.ndarray:
-        return np.where(nomatch[y] | timeout[y], np.int16(-1), flat_map[y])
+        return disparities(flat_map[y], nomatch[y], timeout[y])
 
     try:
         with tqdm(total=ho * wo, unit="px", disable=not _want_progress(progress), desc=f"{engine}") as bar:
@@ -199,7 +199,7 @@ def run_machine(
         if lr is not None:
             lr.close()
     # Timeouts count as no match: the machine gave no answer within its watchdog.
-    disp = np.where(nomatch | timeout, np.int16(-1), flat_map)
+    disp = disparities(flat_map, nomatch, timeout)
     right = lr.result() if lr is not None else None
     return MachineRun(engine, machine, disp, counts, cycles, nomatch, timeout, engine_s, words_s, wall, right)
 
@@ -241,7 +241,7 @@ class _RightRun:
         self.timeout[y] = timeout
         self.cycles[y] = np.asarray(res.cycles)
         # A no-match call (the right pass's no-match row, lr_right_nomatch) or a timeout: no right MAP.
-        self.map[y] = np.where(timeout | np.asarray(res.nomatch, bool), np.int16(-1), np.asarray(res.map))
+        self.map[y] = res.disparities()
         return lr_column(self.map[y], int(self.columns[0]), self.map_columns, model, left_q.one,
                          left_q.lr_beta, left_q.lr_gamma)
 
@@ -277,7 +277,7 @@ def _run_pixels(
     m = model.hypotheses
     timeout = res.timeout.reshape(ho, wo)
     nomatch = res.nomatch.reshape(ho, wo)
-    disp = np.where(nomatch | timeout, -1, res.map.reshape(ho, wo)).astype(np.int16)
+    disp = disparities(res.map.reshape(ho, wo), nomatch, timeout)
     counts = res.counts.reshape(ho, wo, m).astype(counts_dtype(machine.counter_max))
     right = None
     if model.lr:
@@ -289,7 +289,7 @@ def _run_pixels(
         assert r is not None
         wr = r.map.size // ho
         r_timeout = r.timeout.reshape(ho, wr)
-        r_map = np.where(r_timeout | r.nomatch.reshape(ho, wr), -1, r.map.reshape(ho, wr)).astype(np.int16)
+        r_map = r.disparities().reshape(ho, wr)
         right = RightPass(right_pass_params(model, machine), r_map, r.cycles.reshape(ho, wr), r_timeout,
                           seconds, 0)
     return MachineRun("verilator", machine, disp, counts, res.cycles.reshape(ho, wo),
@@ -324,7 +324,7 @@ def machines_model(
                     starts = np.zeros(wo, bool)
                     starts[0] = True
                     res = eng.run(words, line_start=starts)
-                    above = np.where(res.nomatch | res.timeout, -1, res.map).astype(np.int16)
+                    above = res.disparities()
                 else:
                     res = eng.run(memory_words(fl, fr, model, machine, rows=slice(y, y + 1), qtables=qtables))
                 parts.append(res)

@@ -49,7 +49,7 @@ def pack_beats(params: MachineParams, words: np.ndarray, line_start: np.ndarray 
     """
     q = check_words(params, np.asarray(words).reshape(-1, params.words_per_pixel))
     flags = check_line_start(params, line_start, q.shape[0])
-    lanes, (offsets, flag_offset) = params.lanes, _lane_offsets(params)
+    lanes, (offsets, flag_offset) = params.words_per_beat, _lane_offsets(params)
     beats = []
     for i, pixel in enumerate(q):
         flag = int(flags[i]) << flag_offset if flags is not None else 0

@@ -27,6 +27,7 @@ __all__ = [
     "check_numbers",
     "check_line_start", "check_words",
     "decode_results",
+    "disparities",
     "layout_fields",
     "ran_out_error",
 ]
@@ -73,8 +74,18 @@ class MachineResult:
             return cls.empty(rows)
         return cls(**{f.name: np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(cls)})
 
+    def disparities(self) -> np.ndarray:
+        """:func:`disparities` of these results."""
+        return disparities(self.map, self.nomatch, self.timeout)
+
     def equal(self, other: MachineResult) -> bool:
         return all(np.array_equal(getattr(self, f.name), getattr(other, f.name)) for f in fields(self))
+
+
+def disparities(map_: np.ndarray, nomatch: np.ndarray, timeout: np.ndarray) -> np.ndarray:
+    """The answer of each pixel (int16): its MAP row, -1 where the no-match row won or the watchdog
+    stopped the run (the one rule every engine's caller reads results by)."""
+    return np.where(np.asarray(nomatch, bool) | np.asarray(timeout, bool), -1, map_).astype(np.int16)
 
 
 # --- Validation: the same checks, hence the same errors, in every engine ---

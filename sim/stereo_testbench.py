@@ -77,8 +77,8 @@ def words_from_beats(params: MachineParams, beats: Sequence[int]) -> np.ndarray:
     flat = []
     for raw in beats:
         view = beat_words(params, layout.from_bits(raw))
-        flat.extend(int(view[lane]) for lane in range(params.lanes))
-    per_pixel = np.array(flat, np.int64).reshape(-1, b * params.lanes)[:, : params.words_per_pixel]
+        flat.extend(int(view[lane]) for lane in range(params.words_per_beat))
+    per_pixel = np.array(flat, np.int64).reshape(-1, b * params.words_per_beat)[:, : params.words_per_pixel]
     return per_pixel.reshape(-1, params.rows, params.loaded_columns)
 
 

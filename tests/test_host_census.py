@@ -156,7 +156,7 @@ def test_disparity_machine_builds_the_model_s_machine():
     for k in range(81):
         assert m.feedback_words[min(k, len(m.feedback_words) - 1)] == q.prior[k]
     # Loading stays hidden at counter max 16: no run is shorter than n_max + 1 = 17 cycles.
-    assert (m.lanes, m.words_per_pixel, m.beats_per_pixel) == (30, 410, 14)
+    assert (m.words_per_beat, m.words_per_pixel, m.beats_per_pixel) == (30, 410, 14)
     assert m.beats_per_pixel <= 17 - 1
     # A different word width gives its own table; contradicting fields are refused.
     assert disparity_machine(census, word_bits=8).feedback_words != m.feedback_words
@@ -170,7 +170,7 @@ def test_disparity_machine_builds_the_model_s_machine():
         disparity_machine(no_prior, prior="neighbour")
     with pytest.raises(ParameterError, match="^prior: 'neighbour'"):
         disparity_machine(paper, prior="neighbour")
-    assert disparity_machine(census, prior="neighbour", lanes=7).lanes == 7
+    assert disparity_machine(census, prior="neighbour", words_per_beat=7).words_per_beat == 7
 
 
 # --- Census codes ---
@@ -305,9 +305,10 @@ def test_front_end_takes_the_census_model_on_whole_rows_per_lane():
     from bayesmachine.hdl.frontend.costs import check_frontend_params
 
     model = ModelParams(dmax=6, name="census", neighbour_prior=False)
-    check_frontend_params(MachineParams.for_disparity(6, columns=4, lanes=8), model)  # 2 rows per beat
-    with pytest.raises(ParameterError, match=r"lanes \(6\) must be a multiple of the loaded columns \(4\)"):
-        check_frontend_params(MachineParams.for_disparity(6, columns=4, lanes=6), model)
+    check_frontend_params(MachineParams.for_disparity(6, columns=4, words_per_beat=8),
+                          model)  # 2 rows per beat
+    with pytest.raises(ParameterError, match=r"words_per_beat \(6\) must be a multiple of the loaded"):
+        check_frontend_params(MachineParams.for_disparity(6, columns=4, words_per_beat=6), model)
 
 
 # --- References ---

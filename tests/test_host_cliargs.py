@@ -84,9 +84,9 @@ def test_a_new_option_is_one_declaration(monkeypatch):
     monkeypatch.setattr(cliargs, "MACHINE_OPTIONS", dict(cliargs.MACHINE_OPTIONS))
     with pytest.raises(ValueError, match="declared twice"):
         cliargs.add_option(cliargs.MachineOption("seed", "--seed2", "again"))
-    cliargs.MACHINE_OPTIONS.pop("lanes")
-    cliargs.add_option(cliargs.MachineOption("lanes", "--load-lanes", "lanes, respelled", default=4))
+    cliargs.MACHINE_OPTIONS.pop("words_per_beat")
+    cliargs.add_option(cliargs.MachineOption("words_per_beat", "--load-lanes", "lanes, respelled", default=4))
     args = build_parser().parse_args(["emit", "--dmax", "3", "--load-lanes", "0x5"])
-    assert cliargs.machine_params_from_args(args, args.dmax).lanes == 5
+    assert cliargs.machine_params_from_args(args, args.dmax).words_per_beat == 5
     with pytest.raises(ValueError, match="no machine option"):
         cliargs.add_machine_options(argparse.ArgumentParser(), skip=("colour",))

@@ -131,7 +131,7 @@ def _pair(dmax):
 @pytest.mark.parametrize("prior", ["uniform", "loaded"])
 def test_words_match_plain_formula_and_layout(prior):
     fl, fr, model = _pair(dmax=9)
-    machine = MachineParams.for_disparity(9, word_bits=8, prior=prior, lanes=8)
+    machine = MachineParams.for_disparity(9, word_bits=8, prior=prior, words_per_beat=8)
     words = memory_words(fl, fr, model, machine)
     plain = memory_words_plain(fl, fr, model, machine)
     ho, wo = fl.shape[0], fl.shape[1] - 9

@@ -39,7 +39,7 @@ from bayesmachine.likelihood import (
     quantize,
     right_machine,
 )
-from bayesmachine.params import ParameterError, lane_params
+from bayesmachine.params import ParameterError, nth_machine
 from bayesmachine.sim.engines import get_engine
 
 DMAX = 6
@@ -373,7 +373,7 @@ def test_run_machine_equals_a_hand_driven_run(pair, model):
     want, want_right = _hand_run(prepared, machine)
     np.testing.assert_array_equal(run.map, want)
     np.testing.assert_array_equal(run.right.map, want_right)
-    assert run.right.machine == lane_params(disparity_machine(model.right_model, counter_max=8,
+    assert run.right.machine == nth_machine(disparity_machine(model.right_model, counter_max=8,
                                                               max_cycles=machine.max_cycles), 1)
     assert run.right.cycles.shape == want_right.shape and (run.right.cycles > 8).all()
     assert (run.map >= 0).mean() > 0.5
@@ -436,7 +436,7 @@ def test_machine_near_its_quantized_reference(pair, model):
     assert np.mean(run.right.map == right_reference_map(fl, fr, model, 10)) > 0.8
 
 
-@pytest.mark.parametrize("engine", ["pysim", "verilator"])
+@pytest.mark.parametrize("engine", ["pysim", pytest.param("verilator", marks=pytest.mark.eda)])
 def test_engines_equal_the_model(engine, verilator_cache):
     """census-lr on a small crop: both passes bit for bit the model's (maps, counts, cycles)."""
     options = {}
@@ -562,8 +562,9 @@ def test_cli_sweep_three_models(pair_files, tmp_path):
         (["run", "--model", "census-lr", "--lr-right-max-cycles", "16"], "--lr-right-max-cycles: lr_right"),
         (["run", "--model", "census", "--lr-right-max-cycles", "100"], "--lr-right-max-cycles: options of"),
         # On chip the right pass's machine has no entropy port: an off-chip source is refused.
-        (["run", "--model", "census-lr", "--engine", "verilator", "--feed", "pixels", "--rng", "smtj"],
-         "rng: --model census-lr on chip needs an on-chip random source"),
+        pytest.param(["run", "--model", "census-lr", "--engine", "verilator", "--feed", "pixels", "--rng",
+                      "smtj"],
+                     "rng: --model census-lr on chip needs an on-chip random source", marks=pytest.mark.eda),
     ],
 )
 def test_cli_refusals_are_one_line(pair_files, tmp_path, capsys, argv, message):

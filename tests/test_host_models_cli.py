@@ -196,12 +196,12 @@ def test_sweep_puts_models_side_by_side(pair, tmp_path):
         (["run", "--model", "census", "--census-window", "6"],
          "--census-window: census_window must be 5 or 7"),
         (["run", "--model", "census", "--prior-s", "0"], "--prior-s: prior_s must be"),
-        (["run", "--model", "census", "--engine", "verilator", "--feed", "pixels", "--lanes", "12"],
-         "multiple of the loaded columns"),
+        pytest.param(["run", "--model", "census", "--engine", "verilator", "--feed", "pixels",
+                      "--words-per-beat", "12"], "multiple of the loaded columns", marks=pytest.mark.eda),
         (["sweep", "--model", "paper,paper"], "listed twice"),
         (["sweep", "--model", "sgbm"], "unknown model"),
         (["run", "--model", "sgbm"], "invalid choice"),
-        (["emit", "--top", "stereo", "--model", "census", "--lanes", "12"],
+        (["emit", "--top", "stereo", "--model", "census", "--words-per-beat", "12"],
          "multiple of the loaded columns (5)"),
         (["emit", "--model", "paper", "--census-window", "5"], "--census-window: options of --model census"),
         (["emit", "--model", "census", "--columns", "3"], "--columns: columns: the census model has 4"),
@@ -217,6 +217,7 @@ def test_refusals_are_one_line(pair, tmp_path, capsys, argv, message):
     assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())
 
 
+@pytest.mark.eda
 def test_emit_census_machine(tmp_path, capsys):
     """The census model's machine: its neighbour prior's two prior columns and the line_start flag."""
     out = tmp_path / "census.v"

@@ -94,7 +94,7 @@ def test_pysim_engine_matches_model_through_the_host():
     # The RTL in Amaranth's simulator, fed row by row by the host, equals the model bit for bit.
     left, right, gt = random_dot_stereogram(height=8, width=20, background=1, square=3, seed=11)
     prep = prepare(left, right, ModelParams(dmax=4), gt)
-    machine = MachineParams.for_disparity(4, counter_max=2, word_bits=8, lanes=6)
+    machine = MachineParams.for_disparity(4, counter_max=2, word_bits=8, words_per_beat=6)
     a = run_machine(prep, machine, "model", progress=False)
     b = run_machine(prep, machine, "pysim", progress=False)
     assert a.map.size == 4 * 12

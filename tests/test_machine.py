@@ -105,19 +105,19 @@ def test_timeout_pixels() -> None:
     "variant",
     [
         dict(prior="loaded"),
-        dict(lanes=1),
-        dict(lanes=10),  # exactly one beat per pixel
-        dict(lanes=4),  # the last beat has unused lanes
+        dict(words_per_beat=1),
+        dict(words_per_beat=10),  # exactly one beat per pixel
+        dict(words_per_beat=4),  # the last beat has unused lanes
         dict(nomatch_row=False),
-        dict(rows=2, columns=1, lanes=1),
-        dict(rows=1, columns=3, nomatch_row=False, lanes=2),
+        dict(rows=2, columns=1, words_per_beat=1),
+        dict(rows=1, columns=3, nomatch_row=False, words_per_beat=2),
         dict(counter_max=1, max_cycles=8),
         dict(word_bits=1, lfsr_bits=5, counter_max=2),
-        dict(columns=4, lanes=7, seed=12345),
+        dict(columns=4, words_per_beat=7, seed=12345),
         dict(rng="lfsr-shared"),
         dict(rng="lfsr-shared", prior="loaded", tie_break="lowest-index"),
         dict(rng="sobol"),
-        dict(rng="sobol", prior="loaded", lanes=4),
+        dict(rng="sobol", prior="loaded", words_per_beat=4),
         # 2-bit words: Sobol blocks of 4 cycles, so runs span several blocks and shifts.
         dict(rng="sobol", word_bits=2, lfsr_bits=7, counter_max=5, max_cycles=50),
     ],
@@ -175,7 +175,8 @@ def test_runs_are_back_to_back(rng: str) -> None:
     # swapped in); with ``sobol`` the next run's first compute cycle is its swap, so there is no
     # bubble between runs except after a run whose last cycle began a Sobol block (k - 1 a
     # nonzero multiple of 2^W = 8 here, which the run lengths below include).
-    params = small_params(lanes=3, counter_max=6, word_bits=3, rng=rng)  # 10 words: 4 beats per pixel
+    params = small_params(words_per_beat=3, counter_max=6, word_bits=3,
+                          rng=rng)  # 10 words: 4 beats per pixel
     assert hides_bubble(params) == (rng == "sobol")
     words = _mixed_words(params, 40, seed=6)
     engine = _check(params, words)
@@ -264,7 +265,7 @@ def test_full_size_machine_many_pixels(tie_break: str) -> None:
 
 def test_pysim_gives_up_with_a_clear_error_instead_of_hanging() -> None:
     """All-zero words never overflow; with a huge watchdog the engine stops on its patience."""
-    params = MachineParams(rows=2, columns=1, counter_max=1, max_cycles=10_000_000, lanes=2)
+    params = MachineParams(rows=2, columns=1, counter_max=1, max_cycles=10_000_000, words_per_beat=2)
     engine = PysimEngine(params, patience=300)
     with pytest.raises(RuntimeError, match="no result for 300 clock cycles"):
         engine.run(np.zeros((1, 2, 1), np.uint16))

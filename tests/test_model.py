@@ -28,7 +28,8 @@ def _random_words(params: MachineParams, pixels: int, seed: int) -> np.ndarray:
 
 def test_lfsr_kernel_equals_twin_via_external_numbers() -> None:
     """The compiled LFSR path and the external-number path agree when fed the twin's numbers."""
-    params = MachineParams(rows=5, columns=2, word_bits=6, lfsr_bits=17, counter_max=3, lanes=2, seed=7,
+    params = MachineParams(rows=5, columns=2, word_bits=6, lfsr_bits=17, counter_max=3, words_per_beat=2,
+                           seed=7,
                            rng="lfsr")
     words = _random_words(params, 60, 1)
     internal = MachineModel(params).run(words)
@@ -61,7 +62,8 @@ def _twin_numbers(params: MachineParams, cycles_per_pixel: np.ndarray) -> np.nda
 @pytest.mark.parametrize("rng", ["lfsr", "lfsr-shared", "sobol"])
 def test_on_chip_kernels_equal_their_twins_via_external_numbers(rng: str) -> None:
     """Each compiled on-chip kernel equals the external-number path fed its source's Python twin."""
-    params = MachineParams(rows=5, columns=2, word_bits=4, lfsr_bits=12, counter_max=3, lanes=2, seed=7,
+    params = MachineParams(rows=5, columns=2, word_bits=4, lfsr_bits=12, counter_max=3, words_per_beat=2,
+                           seed=7,
                            rng=rng, prior="loaded")
     words = _random_words(params, 80, 3)
     internal = MachineModel(params).run(words)
@@ -89,7 +91,7 @@ def test_model_imports_no_amaranth() -> None:
 
 @pytest.mark.parametrize("rng", ["lfsr", "lfsr-shared", "sobol"])
 def test_chunked_runs_equal_one_run(rng: str) -> None:
-    params = MachineParams.for_disparity(6, counter_max=4, lanes=4, rng=rng)
+    params = MachineParams.for_disparity(6, counter_max=4, words_per_beat=4, rng=rng)
     words = _random_words(params, 50, 2)
     whole = MachineModel(params).run(words)
     model = MachineModel(params)
@@ -102,7 +104,7 @@ def test_chunked_runs_equal_one_run(rng: str) -> None:
 @pytest.mark.parametrize("tie_break", ["nomatch-first", "lowest-index"])
 def test_all_ones_overflow_together(tie_break: str) -> None:
     """p = 1 everywhere: every row overflows on cycle n_max + 1, the tie rule picks the row."""
-    params = MachineParams.for_disparity(3, counter_max=5, lanes=1, tie_break=tie_break)
+    params = MachineParams.for_disparity(3, counter_max=5, words_per_beat=1, tie_break=tie_break)
     words = np.full((3, params.rows, 3), params.word_one, np.uint16)
     r = MachineModel(params).run(words)
     assert (r.cycles == 6).all()
@@ -114,14 +116,14 @@ def test_all_ones_overflow_together(tie_break: str) -> None:
 
 
 def test_all_zero_words_time_out() -> None:
-    params = MachineParams(rows=4, columns=3, counter_max=2, max_cycles=500, lanes=4)
+    params = MachineParams(rows=4, columns=3, counter_max=2, max_cycles=500, words_per_beat=4)
     words = np.zeros((2, 4, 3), np.uint16)
     r = MachineModel(params).run(words)
     assert r.timeout.all() and (r.cycles == 500).all() and (r.counts == 0).all() and (r.map == 0).all()
 
 
 def test_single_certain_row_wins_and_others_never_count() -> None:
-    params = MachineParams.for_disparity(8, counter_max=16, lanes=8)
+    params = MachineParams.for_disparity(8, counter_max=16, words_per_beat=8)
     words = np.zeros((4, params.rows, 3), np.uint16)
     for p, d in enumerate([0, 3, 8, 9]):
         words[p, d] = params.word_one
@@ -134,7 +136,7 @@ def test_single_certain_row_wins_and_others_never_count() -> None:
 
 def test_loaded_prior_column_gates_rows() -> None:
     """A loaded prior of 0 silences a row even when its likelihoods are 1."""
-    params = MachineParams(rows=3, columns=2, prior="loaded", counter_max=3, lanes=3)
+    params = MachineParams(rows=3, columns=2, prior="loaded", counter_max=3, words_per_beat=3)
     words = np.full((1, 3, 3), params.word_one, np.uint16)
     words[0, 0, 0] = 0  # prior of row 0
     r = MachineModel(params).run(words)
@@ -143,7 +145,7 @@ def test_loaded_prior_column_gates_rows() -> None:
 
 def test_counts_track_probabilities() -> None:
     """Over many pixels the counters of a two-row race follow the word ratio (p_j = n_j / n_max)."""
-    params = MachineParams(rows=2, columns=1, counter_max=64, lanes=2, word_bits=10)
+    params = MachineParams(rows=2, columns=1, counter_max=64, words_per_beat=2, word_bits=10)
     words = np.array([[[1024], [512]]] * 400, np.uint16)
     r = MachineModel(params).run(words)
     assert (r.map == 0).mean() > 0.99
@@ -162,24 +164,24 @@ def test_counts_track_probabilities() -> None:
     ],
 )
 def test_bad_words_are_clear_errors(words: np.ndarray, message: str) -> None:
-    model = MachineModel(MachineParams(rows=4, columns=3, lanes=4))
+    model = MachineModel(MachineParams(rows=4, columns=3, words_per_beat=4))
     with pytest.raises(ValueError, match=message):
         model.run(words)
 
 
 def test_external_numbers_must_cover_the_run() -> None:
-    params = MachineParams(rows=2, columns=1, rng="external", counter_max=2, lanes=1)
+    params = MachineParams(rows=2, columns=1, rng="external", counter_max=2, words_per_beat=1)
     words = np.zeros((1, 2, 1), np.uint16)
     with pytest.raises(ValueError, match="ran out"):
         MachineModel(params).run(words, numbers=np.zeros((10, 2), np.uint16))
 
 
 def test_small_disparity_machines_get_a_load_stream_no_wider_than_a_pixel() -> None:
-    assert MachineParams.for_disparity(0).lanes == 6
-    assert MachineParams.for_disparity(3, prior="loaded").lanes == 16
-    assert MachineParams.for_disparity(2, prior="loaded").lanes == 16
-    assert MachineParams.for_disparity(1, prior="loaded").lanes == 12
-    assert MachineParams.for_disparity(80).lanes == 16
+    assert MachineParams.for_disparity(0).words_per_beat == 6
+    assert MachineParams.for_disparity(3, prior="loaded").words_per_beat == 16
+    assert MachineParams.for_disparity(2, prior="loaded").words_per_beat == 16
+    assert MachineParams.for_disparity(1, prior="loaded").words_per_beat == 12
+    assert MachineParams.for_disparity(80).words_per_beat == 16
 
 
 @pytest.mark.parametrize(
@@ -192,7 +194,7 @@ def test_small_disparity_machines_get_a_load_stream_no_wider_than_a_pixel() -> N
         ({"rows": 4, "rng": "trng"}, "rng"),
         ({"rows": 4, "word_bits": 10, "lfsr_bits": 11}, "lfsr_bits"),
         ({"rows": 4, "counter_max": 100, "max_cycles": 100}, "max_cycles"),
-        ({"rows": 4, "lanes": 13}, "lanes"),
+        ({"rows": 4, "words_per_beat": 13}, "words_per_beat"),
         ({"rows": 1, "nomatch_row": True}, "no-match"),
         ({"rows": 4, "tie_break": "random"}, "tie_break"),
         ({"rows": 4.0}, "integer"),
@@ -214,8 +216,9 @@ def test_params_run_the_sources_own_checks() -> None:
         assert MachineParams.for_disparity(4, rng=rng, lfsr_bits=12).lfsr_bits == 12
     # The Sobol table holds 16 dimensions: one per operator column, a loaded prior's included.
     with pytest.raises(ParameterError, match="at most 16 operator columns .* has 17"):
-        MachineParams(rows=2, columns=16, rng="sobol", prior="loaded", lanes=2)
-    assert MachineParams(rows=2, columns=16, rng="lfsr", prior="loaded", lanes=2).operator_columns == 17
+        MachineParams(rows=2, columns=16, rng="sobol", prior="loaded", words_per_beat=2)
+    assert MachineParams(rows=2, columns=16, rng="lfsr", prior="loaded",
+                         words_per_beat=2).operator_columns == 17
     with pytest.raises(ParameterError, match="rng must be one of lfsr, lfsr-shared, sobol, external, smtj"):
         MachineParams(rows=4, rng=["sobol"])  # type: ignore[arg-type]
 
@@ -242,16 +245,16 @@ def test_sources_do_not_import_params_at_run_time() -> None:
 
 def test_front_end_lanes_are_defined_once() -> None:
     from bayesmachine.hdl.frontend import stereo
-    from bayesmachine.params import stereo_lanes
+    from bayesmachine.params import stereo_words_per_beat
 
-    assert stereo.stereo_lanes is stereo_lanes
+    assert stereo.stereo_words_per_beat is stereo_words_per_beat
     # 6 rows of the operator columns per beat: 18 words, 14 beats per pixel at Dmax 80.
     p = stereo.stereo_machine_params(80)
-    assert (p.lanes, p.beats_per_pixel) == (18, 14)
-    assert stereo_lanes(MachineParams.for_disparity(80, prior="loaded")) == 24
-    assert stereo_lanes(MachineParams.for_disparity(2)) == 4 * 3  # fewer rows than 6: all of them
+    assert (p.words_per_beat, p.beats_per_pixel) == (18, 14)
+    assert stereo_words_per_beat(MachineParams.for_disparity(80, prior="loaded")) == 24
+    assert stereo_words_per_beat(MachineParams.for_disparity(2)) == 4 * 3  # fewer rows than 6: all of them
     # A neighbour machine's feedback column is formed on chip: 6 rows of its 5 loaded columns.
     from bayesmachine.likelihood import ModelParams, disparity_machine
 
     census = disparity_machine(ModelParams(name="census"))
-    assert census.operator_columns == 6 and stereo_lanes(census) == 30
+    assert census.operator_columns == 6 and stereo_words_per_beat(census) == 30

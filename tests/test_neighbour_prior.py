@@ -152,7 +152,7 @@ def test_rtl_equals_the_model_under_pysim(rng: str) -> None:
     with back-pressure on both streams (a swap waits for the bubble's registered result)."""
     from bayesmachine.sim.pysim import PysimEngine
 
-    p = neighbour_params(rng=rng, lanes=5, max_cycles=40)
+    p = neighbour_params(rng=rng, words_per_beat=5, max_cycles=40)
     words, starts = words_and_starts(p, 24, 7, seed=6)
     words[9] = 0  # a timeout
     numbers = (np.random.default_rng(8).integers(0, p.word_one, size=(24 * 40, p.operators))
@@ -172,7 +172,7 @@ def test_rtl_wall_cycles_follow_the_timing_rule() -> None:
     from bayesmachine.hdl.machine import pixel_wall_cycles
     from bayesmachine.sim.pysim import PysimEngine
 
-    p = neighbour_params(lanes=27)  # one beat per pixel: compute-bound
+    p = neighbour_params(words_per_beat=27)  # one beat per pixel: compute-bound
     words, starts = words_and_starts(p, 20, 5, seed=9)
     eng = PysimEngine(p)
     res = eng.run(words, line_start=starts)
@@ -194,6 +194,7 @@ def _run_in_chunks(eng, words: np.ndarray, starts: np.ndarray, numbers: np.ndarr
     return parts
 
 
+@pytest.mark.eda
 @pytest.mark.usefixtures("verilator_toolchain")
 @pytest.mark.parametrize("rng", ["sobol", "lfsr", "external"])
 def test_verilator_equals_the_model_with_back_pressure_in_chunks(rng: str, verilator_cache) -> None:
@@ -202,7 +203,7 @@ def test_verilator_equals_the_model_with_back_pressure_in_chunks(rng: str, veril
     previous result carries over)."""
     from bayesmachine.sim.verilator import VerilatorEngine
 
-    p = neighbour_params(rng=rng, lanes=5, max_cycles=40)
+    p = neighbour_params(rng=rng, words_per_beat=5, max_cycles=40)
     words, starts = words_and_starts(p, 120, 11, seed=12)
     words[9] = 0  # a timeout: the next pixel's feedback prior is flat
     numbers = (np.random.default_rng(13).integers(0, p.word_one, size=(120 * 40, p.operators))
@@ -223,6 +224,7 @@ def test_verilator_equals_the_model_with_back_pressure_in_chunks(rng: str, veril
             flat.map, get_engine("model", p).run(words, numbers, line_start=np.ones(len(words), bool)).map)
 
 
+@pytest.mark.eda
 @pytest.mark.usefixtures("verilator_toolchain")
 def test_verilator_wall_cycles_follow_the_timing_rule(verilator_cache) -> None:
     """The clock cycles of a compute-bound stream, derived from the timing rules of
@@ -230,7 +232,7 @@ def test_verilator_wall_cycles_follow_the_timing_rule(verilator_cache) -> None:
     from bayesmachine.hdl.machine import pixel_wall_cycles
     from bayesmachine.sim.verilator import VerilatorEngine
 
-    p = neighbour_params(lanes=27, rng="sobol")  # one beat per pixel: compute-bound
+    p = neighbour_params(words_per_beat=27, rng="sobol")  # one beat per pixel: compute-bound
     words, starts = words_and_starts(p, 50, 5, seed=9)
     with VerilatorEngine(p, build_dir=verilator_cache, verbose=False) as eng:
         got = eng.run(words, line_start=starts)
@@ -255,17 +257,17 @@ def test_lanes_of_machines_and_the_front_end_refuse_it() -> None:
     machine up front, naming the prior; the on-chip front end feeds one only with the model whose
     prior it is (the census model's: tests/test_frontend_census.py)."""
     from bayesmachine.hdl.frontend.stereo import StereoMachine, check_stereo_machine
-    from bayesmachine.hdl.lanes import MachineLanes
+    from bayesmachine.hdl.machines import ParallelMachines
     from bayesmachine.likelihood import ModelParams
 
     p = neighbour_params(rng="sobol")
-    with pytest.raises(ParameterError, match=r"prior = 'neighbour' cannot run on lanes of machines.*i - 2"):
-        MachineLanes(params=p, machines=2)
-    MachineLanes(params=dataclasses.replace(p, prior="loaded", columns=3, feedback_words=(),
+    with pytest.raises(ParameterError, match=r"prior = 'neighbour' cannot run on K machines.*i - 2"):
+        ParallelMachines(params=p, machines=2)
+    ParallelMachines(params=dataclasses.replace(p, prior="loaded", columns=3, feedback_words=(),
                                             feedback_nomatch_word=None), machines=2)  # the same shape, loaded
     # A paper-model machine (three data columns) whose lanes suit the front end, with a neighbour prior.
     q = MachineParams.for_disparity(7, columns=3, prior="neighbour", feedback_words=FEEDBACK,
-                                    feedback_nomatch_word=NOMATCH, lanes=15)
+                                    feedback_nomatch_word=NOMATCH, words_per_beat=15)
     model = ModelParams(dmax=7)
     refused = r"^prior: the machine has a neighbour prior \(prior='neighbour'\) but the paper model has none"
     with pytest.raises(ParameterError, match=refused):

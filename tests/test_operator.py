@@ -16,7 +16,7 @@ from bayesmachine.sources.lfsr import LFSRSpec, lfsr_numbers, lfsr_specs
 
 def _spec(length: int, w: int, index: int = 0) -> LFSRSpec:
     params = MachineParams(rows=8, columns=1, word_bits=w, lfsr_bits=length, counter_max=1, max_cycles=2,
-                           lanes=1)
+                           words_per_beat=1)
     return lfsr_specs(params)[index]
 
 

@@ -27,7 +27,7 @@ from bayesmachine.sources.lfsr import (
 
 def _specs(length: int, w: int, n: int = 2, seed: int = 1) -> list[LFSRSpec]:
     params = MachineParams(rows=n, columns=1, word_bits=w, lfsr_bits=length, counter_max=1, max_cycles=2,
-                           lanes=1, seed=seed)
+                           words_per_beat=1, seed=seed)
     return lfsr_specs(params)
 
 
@@ -175,7 +175,7 @@ def test_polynomial_search_ends_when_heptanomials_run_out() -> None:
 def test_rtl_bank_of_column_lfsrs_matches_twins() -> None:
     """lfsr-shared's bank: one LFSR per operator column, distinct polynomials and start states."""
     params = MachineParams(rows=4, columns=3, prior="loaded", word_bits=4, lfsr_bits=12, counter_max=1,
-                           max_cycles=2, lanes=1, rng="lfsr-shared", seed=9)
+                           max_cycles=2, words_per_beat=1, rng="lfsr-shared", seed=9)
     specs = column_lfsr_specs(params)
     assert len(specs) == 4 and len({s.taps for s in specs}) == 4 and len({s.init for s in specs}) == 4
     assert {s.init for s in specs}.isdisjoint(s.init for s in lfsr_specs(params))

@@ -16,8 +16,8 @@ from bayesmachine.hdl.frontend.costs import WordGenerator
 from bayesmachine.hdl.frontend.filters import FeatureFilter
 from bayesmachine.hdl.frontend.linebuffer import LineBuffer
 from bayesmachine.hdl.frontend.stereo import FrontEnd, StereoMachine, stereo_machine_params
-from bayesmachine.hdl.lanes import MachineLanes
 from bayesmachine.hdl.machine import BayesianMachine
+from bayesmachine.hdl.machines import ParallelMachines
 from bayesmachine.hdl.operator import OperatorMatrix
 from bayesmachine.hdl.signatures import (
     MachineSignature,
@@ -64,7 +64,7 @@ def test_every_machine_top_has_the_declared_ports(rng: str) -> None:
             assert top.signature.members["entropy"].flow == wiring.In
             assert top.signature.members["entropy_ready"].flow == wiring.Out
     else:
-        lanes = MachineLanes(params=p, machines=2)
+        lanes = ParallelMachines(params=p, machines=2)
         assert lanes.signature == MachineSignature(p)
 
 
@@ -115,7 +115,7 @@ def test_components_take_keyword_arguments_only() -> None:
     p, model = _params(), ModelParams(dmax=DMAX)
     for build in (
         lambda: BayesianMachine(p),
-        lambda: MachineLanes(p, 2),
+        lambda: ParallelMachines(p, 2),
         lambda: StereoMachine(p, model, 20),
         lambda: FrontEnd(p, model, 20),
         lambda: WordGenerator(p, model),
@@ -136,9 +136,9 @@ def test_components_raise_type_error_for_a_wrong_type_and_value_error_for_a_wron
     with pytest.raises(TypeError, match="MachineParams"):
         BayesianMachine(params=p.to_dict())  # type: ignore[arg-type]
     with pytest.raises(TypeError, match="machines"):
-        MachineLanes(params=p, machines=2.0)  # type: ignore[arg-type]
+        ParallelMachines(params=p, machines=2.0)  # type: ignore[arg-type]
     with pytest.raises(ParameterError, match="machines"):
-        MachineLanes(params=p, machines=0)
+        ParallelMachines(params=p, machines=0)
     with pytest.raises(TypeError, match="model"):
         WordGenerator(params=p, model={"dmax": DMAX})  # type: ignore[arg-type]
     with pytest.raises(TypeError, match="params"):
@@ -165,7 +165,7 @@ def test_component_parameters_are_read_only() -> None:
     p, model = _params(), ModelParams(dmax=DMAX)
     for component, names in (
         (BayesianMachine(params=p), ("params",)),
-        (MachineLanes(params=p, machines=2), ("params", "machines")),
+        (ParallelMachines(params=p, machines=2), ("params", "machines")),
         (StereoMachine(params=p, model=model, width=20), ("params", "model", "width", "fifo_pixels")),
         (FrontEnd(params=p, model=model, width=20), ("params", "model", "width")),
         (WordGenerator(params=p, model=model), ("params", "model", "tables")),

@@ -190,6 +190,7 @@ def test_bank_rejects_bad_device_values() -> None:
         TelegraphBank(0, 2.0)
 
 
+@pytest.mark.eda
 def test_smtj_machine_is_the_external_rtl() -> None:
     from bayesmachine.hdl.emit import verilog_text
     from bayesmachine.hdl.machine import BayesianMachine
@@ -221,11 +222,13 @@ def test_model_and_rtl_agree_on_smtj_numbers(dwell: float, share: str) -> None:
     assert_same_results(MachineModel(params).run(words, numbers), want)
 
 
+@pytest.mark.eda
 def test_verilator_agrees_on_smtj_numbers(verilator_toolchain: object, verilator_cache: object) -> None:
     from bayesmachine.sim.verilator import VerilatorEngine
 
     # The RTL (hence the Verilator build, shared in a session) of test_engines' external machine.
-    params = MachineParams.for_disparity(6, lanes=4, rng="smtj", smtj_dwell=20.0, seed=5, max_cycles=60)
+    params = MachineParams.for_disparity(6, words_per_beat=4, rng="smtj", smtj_dwell=20.0, seed=5,
+                                         max_cycles=60)
     words = synthetic_disparity_words(params, 40, np.random.default_rng(8))
     want = MachineModel(params).run(words)
     with VerilatorEngine(params, build_dir=verilator_cache) as eng:
@@ -234,6 +237,7 @@ def test_verilator_agrees_on_smtj_numbers(verilator_toolchain: object, verilator
     assert_same_results(got, want)
 
 
+@pytest.mark.eda
 def test_emit_cli_smtj_machine(tmp_path, capsys: pytest.CaptureFixture[str]) -> None:
     from bayesmachine.cli import main
 

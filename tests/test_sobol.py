@@ -21,7 +21,7 @@ from bayesmachine.sources.sobol import MAX_DIMENSIONS, SobolTwin, direction_numb
 
 def _params(w: int, columns: int = 3, **kwargs: object) -> MachineParams:
     base: dict[str, object] = dict(rows=2, columns=columns, word_bits=w, lfsr_bits=12 if w <= 5 else 31,
-                                   counter_max=1, max_cycles=2, lanes=1, rng="sobol", seed=5)
+                                   counter_max=1, max_cycles=2, words_per_beat=1, rng="sobol", seed=5)
     base.update(kwargs)
     return MachineParams(**base)  # type: ignore[arg-type]
 
@@ -139,7 +139,8 @@ def test_first_points_are_a_0_m_2_net(shifted: bool) -> None:
 
 def _count_variance(rng: str, words: tuple[int, ...], cycles: int, pixels: int) -> tuple[float, float]:
     """Mean and variance over pixels of a row's 1s in ``cycles`` compute cycles (the model)."""
-    params = MachineParams(rows=2, columns=len(words), counter_max=cycles - 1, max_cycles=cycles, lanes=1,
+    params = MachineParams(rows=2, columns=len(words), counter_max=cycles - 1, max_cycles=cycles,
+                           words_per_beat=1,
                            rng=rng, seed=17)
     q = np.array([[words, [0] * len(words)]] * pixels, np.int32)
     res = MachineModel(params).run(q)
@@ -167,10 +168,10 @@ def test_row_counts_converge_faster_than_binomial(words: tuple[int, int, int]) -
 
 def test_sobol_needs_a_dimension_per_column() -> None:
     with pytest.raises(ParameterError, match="sobol"):
-        MachineParams(rows=2, columns=MAX_DIMENSIONS + 1, rng="sobol", lanes=1)
+        MachineParams(rows=2, columns=MAX_DIMENSIONS + 1, rng="sobol", words_per_beat=1)
     with pytest.raises(ParameterError, match="sobol"):
-        MachineParams(rows=2, columns=MAX_DIMENSIONS, prior="loaded", rng="sobol", lanes=1)
-    MachineParams(rows=2, columns=MAX_DIMENSIONS, rng="sobol", lanes=1)
+        MachineParams(rows=2, columns=MAX_DIMENSIONS, prior="loaded", rng="sobol", words_per_beat=1)
+    MachineParams(rows=2, columns=MAX_DIMENSIONS, rng="sobol", words_per_beat=1)
 
 
 @pytest.mark.parametrize(("w", "columns"), [(1, 2), (2, 3), (3, 3), (5, 2)])

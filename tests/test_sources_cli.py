@@ -100,6 +100,7 @@ def test_sweep_rejects_bad_source_lists(tmp_path, capsys, rng: str, message: str
     assert not (tmp_path / "x").exists()
 
 
+@pytest.mark.eda
 @pytest.mark.parametrize("rng", ["lfsr-shared", "sobol"])
 def test_emit_summary_names_the_source(tmp_path, capsys, rng: str) -> None:
     out = tmp_path / "bm.v"

@@ -38,7 +38,8 @@ def test_and_of_operators_fires_at_the_product(qs: tuple[int, ...], rng: str) ->
     # Overflow needs n ones in n cycles (impossible for p < 1): the run times out after n cycles
     # and the counter holds the number of 1s of the row's stochastic bus.
     n = 200_000
-    params = MachineParams(rows=2, columns=len(qs), counter_max=n - 1, max_cycles=n, lanes=1, seed=3, rng=rng)
+    params = MachineParams(rows=2, columns=len(qs), counter_max=n - 1, max_cycles=n, words_per_beat=1,
+                           seed=3, rng=rng)
     words = np.array([[qs, [0] * len(qs)]], np.int32)
     res = MachineModel(params).run(words)
     assert res.timeout[0] and res.counts[0, 1] == 0
@@ -95,7 +96,7 @@ def test_first_overflow_follows_exact_race_probability(
 ) -> None:
     pixels = 20_000
     params = MachineParams(rows=len(rows), columns=len(rows[0]), counter_max=n_max, nomatch_row=nomatch_row,
-                           tie_break=tie_break, lanes=1, seed=11, rng="lfsr")
+                           tie_break=tie_break, words_per_beat=1, seed=11, rng="lfsr")
     words = np.repeat(np.array([rows], np.int32), pixels, axis=0)
     res = MachineModel(params).run(words)
     assert not res.timeout.any()

@@ -71,18 +71,8 @@ def test_machines_is_validated() -> None:
     assert top.machines == 16
 
 
-try:
-    from bayesmachine.sim.verilator import VerilatorError, find_toolchain
-
-    find_toolchain()
-    MISSING = None
-except VerilatorError as exc:
-    MISSING = str(exc)
-
-needs_verilator = pytest.mark.skipif(MISSING is not None, reason=MISSING or "")
-
-
-@needs_verilator
+@pytest.mark.eda
+@pytest.mark.usefixtures("verilator_toolchain")
 @pytest.mark.parametrize("machines", [2, 4])
 def test_verilator_machines_on_a_crop_equal_the_model(machines: int) -> None:
     """The census model at Dmax 8 (counter max 16) on crops of the bundled pair, frames back to back
@@ -150,7 +140,7 @@ def test_model_run_with_machines_deals_rows(tmp_path) -> None:
     assert np.array_equal(got["counts"].reshape(len(want), -1), want.counts)
 
 
-@needs_verilator
+@pytest.mark.usefixtures("verilator_toolchain")
 @pytest.mark.slow
 def test_verilator_four_machines_on_a_vga_frame_equal_the_model() -> None:
     """A 640 x 480 crop of the bundled pair through StereoMachine(machines=4) (the default census

@@ -17,15 +17,7 @@ from bayesmachine.host.images import bundled_pair
 from bayesmachine.host.likelihoods import ModelParams, memory_words
 from bayesmachine.sim.model import MachineModel
 from bayesmachine.sim.results import EngineClosedError, EngineStateError
-from bayesmachine.sim.verilator import VerilatorError, find_toolchain
-
-try:
-    find_toolchain()
-    MISSING = None
-except VerilatorError as exc:
-    MISSING = str(exc)
-
-needs_verilator = pytest.mark.skipif(MISSING is not None, reason=MISSING or "")
+from bayesmachine.sim.verilator import VerilatorError
 
 DMAX, WIDTH = 8, 40
 
@@ -36,7 +28,8 @@ def _crops() -> list[tuple[np.ndarray, np.ndarray]]:
             for x, y, h in ((250, 200, 12), (400, 300, 7))]
 
 
-@needs_verilator
+@pytest.mark.eda
+@pytest.mark.usefixtures("verilator_toolchain")
 @pytest.mark.parametrize("counter_max", [1, 16])
 def test_pixels_through_the_stereo_machine_equal_the_model(counter_max: int, tmp_path: Path) -> None:
     from bayesmachine.sim.stereo_engine import StereoVerilatorEngine
@@ -57,7 +50,8 @@ def test_pixels_through_the_stereo_machine_equal_the_model(counter_max: int, tmp
             engine.run(frames[0][0][:4], frames[0][1][:4])
 
 
-@needs_verilator
+@pytest.mark.eda
+@pytest.mark.usefixtures("verilator_toolchain")
 def test_stereo_engine_follows_the_engine_life_cycle() -> None:
     """reset() restarts from a hardware reset, a frame cut short refuses later frames until reset(),
     close() makes run() and reset() raise EngineClosedError; wall_cycles counts since reset."""
@@ -101,7 +95,8 @@ def test_stereo_engine_refuses_an_off_chip_source_without_a_device_model() -> No
         StereoVerilatorEngine(params, ModelParams(dmax=DMAX), WIDTH, verbose=False)
 
 
-@needs_verilator
+@pytest.mark.eda
+@pytest.mark.usefixtures("verilator_toolchain")
 def test_smtj_pixels_through_the_stereo_machine_equal_the_model() -> None:
     """An off-chip source (SMTJ devices) on the stereo top: its entropy port is the top's, fed from
     the device model as the word engines feed the machine's; frames back to back continue the
@@ -122,7 +117,8 @@ def test_smtj_pixels_through_the_stereo_machine_equal_the_model() -> None:
     assert not wants[0].timeout.all() and len(set(wants[0].map.tolist())) > 2  # not a degenerate answer
 
 
-@needs_verilator
+@pytest.mark.eda
+@pytest.mark.usefixtures("verilator_toolchain")
 def test_cli_run_feed_pixels_gives_the_models_result(tmp_path: Path) -> None:
     # The census model: the default, census-lr, has its own test below.
     crop = ["--crop", f"250,200,{WIDTH},12", "--dmax", str(DMAX), "--quiet", "--no-sgbm", "--model", "census"]
@@ -136,7 +132,8 @@ def test_cli_run_feed_pixels_gives_the_models_result(tmp_path: Path) -> None:
     assert report["wall_cycles_per_pixel"] > report["cycles_per_pixel_mean"]
 
 
-@needs_verilator
+@pytest.mark.eda
+@pytest.mark.usefixtures("verilator_toolchain")
 def test_cli_run_feed_pixels_with_smtj_gives_the_models_result(tmp_path: Path) -> None:
     crop = ["--crop", f"250,200,{WIDTH},7", "--dmax", str(DMAX), "--quiet", "--no-sgbm", "--rng", "smtj",
             "--counter-max", "4", "--model", "census"]
@@ -147,7 +144,8 @@ def test_cli_run_feed_pixels_with_smtj_gives_the_models_result(tmp_path: Path) -
         assert np.array_equal(got[key], want[key]), key
 
 
-@needs_verilator
+@pytest.mark.eda
+@pytest.mark.usefixtures("verilator_toolchain")
 def test_cli_run_feed_pixels_census_gives_the_models_result(tmp_path: Path) -> None:
     """The census model (7x7 census, calibrated no-match row, neighbour prior) through the front end:
     its census codes, census words and the above prior from the machine's own results equal the
@@ -176,7 +174,8 @@ def _disp(res, shape: tuple[int, int]) -> np.ndarray:
     return np.where(res.nomatch | res.timeout, -1, res.map).reshape(shape)
 
 
-@needs_verilator
+@pytest.mark.eda
+@pytest.mark.usefixtures("verilator_toolchain")
 def test_census_narrow_frames_wait_for_the_result_above() -> None:
     """Output rows of 3 pixels behind a FIFO of 8 pixels: the front end builds a pixel's above
     column only once the result above it has left the machine (else a stale entry: other results);
@@ -205,7 +204,7 @@ def test_cli_feed_pixels_needs_verilator(tmp_path: Path, capsys: pytest.CaptureF
     assert "use --engine verilator" in capsys.readouterr().err
 
 
-@needs_verilator
+@pytest.mark.usefixtures("verilator_toolchain")
 @pytest.mark.slow
 def test_whole_bundled_pair_through_the_front_end_equals_the_model() -> None:
     """The full Motorcycle pair (741 x 500, Dmax 80, counter max 16): the front end's words are the
@@ -231,7 +230,7 @@ def test_whole_bundled_pair_through_the_front_end_equals_the_model() -> None:
         assert alone <= engine.last_wall_cycles < 1.005 * alone
 
 
-@needs_verilator
+@pytest.mark.usefixtures("verilator_toolchain")
 @pytest.mark.slow
 def test_whole_bundled_pair_census_through_the_front_end_equals_the_model() -> None:
     """The census model (Dmax 80, counter max 16, the neighbour prior) on the full Motorcycle pair
@@ -260,7 +259,8 @@ def test_whole_bundled_pair_census_through_the_front_end_equals_the_model() -> N
     assert np.array_equal(got.cycles.reshape(ho, wo), want.cycles)
 
 
-@needs_verilator
+@pytest.mark.eda
+@pytest.mark.usefixtures("verilator_toolchain")
 def test_cli_run_feed_pixels_census_lr_gives_the_models_result(tmp_path: Path) -> None:
     """census-lr (issue 22) through the front end: the right pass's machine beside the left one, the
     consistency column from the right MAPs on chip; every array equals the model's, the right pass's
@@ -281,7 +281,7 @@ def test_cli_run_feed_pixels_census_lr_gives_the_models_result(tmp_path: Path) -
     assert report["wall_cycles_per_pixel"] > report["left_pass_cycles_per_pixel_mean"]
 
 
-@needs_verilator
+@pytest.mark.usefixtures("verilator_toolchain")
 @pytest.mark.slow
 def test_census_lr_crop_through_the_front_end_equals_the_model() -> None:
     """census-lr at Dmax 80, counter max 16 on a 140 x 40 crop of Motorcycle through the front end: both

@@ -91,20 +91,28 @@ def test_a_killed_sweep_resumes_to_the_same_sweep_json(tmp_path, capsys) -> None
     grid = ["--dataset", str(data), "--dmax", "8", "--model", "census", "--no-sgbm", "--counter-max", "2,8"]
     seeds = ["--seed", "1,2"]
     killed = tmp_path / "killed"
+    # The last pair's left image is a named pipe nobody writes: its tasks block on reading it, so the
+    # sweep is killed with exactly the first two pairs' 8 tasks done, whatever the machine's speed.
+    last = data.parent / "l2.png"
+    image = last.read_bytes()
+    last.unlink()
+    os.mkfifo(last)
     proc = subprocess.Popen([sys.executable, "-m", "bayesmachine", "sweep", *grid, *seeds, "--workers", "0",
                              "--quiet", "-o", str(killed)], start_new_session=True, stdout=subprocess.DEVNULL,
                             stderr=subprocess.PIPE)
     try:
         deadline = time.monotonic() + 120
-        while not list(killed.glob("runs/*/*/result.json")):
+        while len(list(killed.glob("runs/*/*/result.json"))) < 8:
             assert proc.poll() is None, proc.stderr.read().decode()
-            assert time.monotonic() < deadline, "no task finished in 120 s"
-            time.sleep(0.002)
+            assert time.monotonic() < deadline, "the first two pairs did not finish in 120 s"
+            time.sleep(0.05)
     finally:
         os.killpg(proc.pid, signal.SIGKILL)
         proc.wait()
+    last.unlink()
+    last.write_bytes(image)
     done = len(list(killed.glob("runs/*/*/result.json")))
-    assert not (killed / "sweep.json").exists() and 0 < done < 12
+    assert not (killed / "sweep.json").exists() and done == 8
     assert main(["sweep", *grid, *seeds, "--workers", "0", "--resume", "-o", str(killed)]) == 0
     said = capsys.readouterr().out
     assert f"resumed: {done} task(s) complete from an earlier run, {12 - done} run now" in said

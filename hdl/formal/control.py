@@ -170,12 +170,12 @@ class ControlProperties(wiring.Component):
         words_in = beat_words(p, self.load_payload)
         pixel_words: list[Value] = []  # the complete pixel, in the cycle of its last beat
         for w in range(p.words_per_pixel):
-            b, lane = divmod(w, p.lanes)
+            b, lane = divmod(w, p.words_per_beat)
             pixel_words.append(words_in[lane] if b == nbeats - 1 else asm[w])
         with m.If(accept):
             m.d.sync += beat.eq(Mux(beat == nbeats - 1, 0, beat + 1))
             for w in range(p.words_per_pixel):
-                b, lane = divmod(w, p.lanes)
+                b, lane = divmod(w, p.words_per_beat)
                 if b < nbeats - 1:
                     with m.If(beat == b):
                         m.d.sync += asm[w].eq(words_in[lane])
@@ -321,7 +321,7 @@ class ControlProperties(wiring.Component):
         q_words = beat_words(p, load_q)
         eff = []
         for w in range(p.words_per_pixel):
-            b, lane = divmod(w, p.lanes)
+            b, lane = divmod(w, p.words_per_beat)
             eff.append(Mux(n.write_q[b], q_words[lane], n.shadow[w]))
         pending = n.shadow_full | n.write_q[nbeats - 1]
         m.d.comb += Assert(pq_count == (pending | run_start), "the pixel waiting is in the shadow")
@@ -332,7 +332,7 @@ class ControlProperties(wiring.Component):
                 ls = Mux(n.write_q[nbeats - 1], load_q.line_start, n.shadow_line_start)
                 m.d.comb += Assert(ls == pq_head[-1], "the shadow's line_start")
         for w in range(p.words_per_pixel):
-            b = w // p.lanes
+            b = w // p.words_per_beat
             if b < nbeats - 1:
                 with m.If(beat > b):
                     m.d.comb += Assert(eff[w] == asm[w], f"shadow word {w} holds its beat")

@@ -9,7 +9,7 @@ Blocks (each a ``wiring.Component`` with a Python twin its tests hold it to):
 - ``census``: the census codes of a 7x7 or 5x5 window (twin: ``host.features.census_codes``).
 - ``tables``: the likelihood tables, clamped, generated from the host's own quantized tables.
 - ``costs``: the right features' delay line of Dmax + 1 pixels, the |difference| of sums, the
-  table look-ups (census: Hamming distance) and the words of a pixel, ``lanes`` per beat, with the
+  table look-ups (census: Hamming distance) and the words of a pixel, ``words_per_beat`` per beat, with the
   neighbour prior's above column from a line of the machine's own MAPs (twin:
   ``host.likelihoods.memory_words``).
 - ``lr``: census-lr's right pass (``RightPassFeeder`` into a ``WordGenerator(right_pass=True)``) and
@@ -20,5 +20,5 @@ Blocks (each a ``wiring.Component`` with a Python twin its tests hold it to):
 
 # Limits shared by the RTL and the command line (importing them needs no Amaranth).
 MAX_WIDTH = 4096  # the line buffers hold `width` pixel pairs: 4 (or 6) lines x 16 bits each
-MAX_MACHINES = 16  # StereoMachine(machines=K): lanes behind one feature pipeline
+MAX_MACHINES = 16  # StereoMachine(machines=K): K machines behind one feature pipeline
 DEFAULT_FIFO_PIXELS = 8  # pixels' worth of load beats between the front end and the machine

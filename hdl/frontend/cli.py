@@ -7,7 +7,7 @@ import dataclasses
 from typing import TYPE_CHECKING
 
 from bayesmachine.cliargs import MODEL_OPTION_FLAGS, add_model_options, int_arg, model_params_from_args
-from bayesmachine.params import MachineParams, stereo_lanes
+from bayesmachine.params import MachineParams, stereo_words_per_beat
 
 from . import DEFAULT_FIFO_PIXELS, MAX_WIDTH
 
@@ -56,13 +56,15 @@ def fifo_pixels(args: argparse.Namespace) -> int:
 
 
 def stereo_params(args: argparse.Namespace, params: MachineParams) -> MachineParams:
-    """The machine ``params`` with the front end's lanes (:func:`~bayesmachine.params.stereo_lanes`)
-    unless ``--lanes`` was given."""
-    return dataclasses.replace(params, lanes=stereo_lanes(params)) if args.lanes is None else params
+    """The machine ``params`` with the front end's words per beat
+    (:func:`~bayesmachine.params.stereo_words_per_beat`) unless ``--words-per-beat`` was given."""
+    if args.words_per_beat is not None:
+        return params
+    return dataclasses.replace(params, words_per_beat=stereo_words_per_beat(params))
 
 
 def build(args: argparse.Namespace, params: MachineParams) -> StereoMachine:
-    """The ``StereoMachine`` the options describe, around the machine ``params`` (whose lanes default
+    """The ``StereoMachine`` the options describe, around the machine ``params`` (whose words per beat default
     to the front end's, :func:`stereo_params`)."""
     from .stereo import StereoMachine, check_stereo_machine
 
@@ -104,8 +106,9 @@ def summary(top: StereoMachine) -> str:
 
         rp = right_pass_params(m, p)
         lines.append(
-            f"census-lr: a right pass's machine beside the left one ({rp.columns} data columns, {rp.lanes} "
-            f"lanes, seed {rp.seed:#x}, watchdog {rp.max_cycles}); consistency column beta {m.lr_beta}, "
+            f"census-lr: a right pass's machine beside the left one ({rp.columns} data columns, "
+            f"{rp.words_per_beat} words per beat, seed {rp.seed:#x}, watchdog {rp.max_cycles}); "
+            f"consistency column beta {m.lr_beta}, "
             f"gamma {m.lr_gamma} ({'a' if m.lr_nomatch else 'no'} left no-match row), tolerance "
             f"{m.lr_tolerance}; right results on right_result")
     lines += [

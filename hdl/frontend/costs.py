@@ -4,8 +4,8 @@
 census model, and whether the pixel is in the output region). Each pixel's right features enter
 a delay line of Dmax + 1 pixels, so that when an output pixel at map column x arrives, entry d
 holds the right features at x - d. For an output pixel it then writes the pixel's
-``words_per_pixel`` words, ``lanes`` per beat, in load order (word o in lane o % lanes of beat
-o // lanes, row o // loaded_columns), exactly the words ``host.likelihoods.memory_words``
+``words_per_pixel`` words, ``words_per_beat`` per beat, in load order (word o in lane o % words_per_beat
+of beat o // words_per_beat, row o // loaded_columns), exactly the words ``host.likelihoods.memory_words``
 computes (its twin):
 
 - row d <= Dmax, feature column f: the table of f at min(|left_f - right_f[d]|, last entry);
@@ -29,12 +29,12 @@ computes (its twin):
   when any lane is consistent, else 1.0 (0 without a left no-match row); and with ``right_pass``
   the right pass's words (twin: ``host.likelihoods.right_memory_words``).
 
-``lanes`` must be a multiple of the loaded columns, so each lane always holds the same operator
-column: a lane of feature f reads its own port of f's table. One beat per cycle, in a four-step
-pipeline that stalls as a whole while the stream does: in the cycle of the beat's issue each
-lane's difference (census: Hamming distance; prior: row minus the MAP above) goes into a
-register; its absolute value, clamped, into the address register in the next; the look-up
-(block RAM read) in the next; the beat on the stream the one after. The registers keep the
+``words_per_beat`` must be a multiple of the loaded columns, so each lane (word position of a beat)
+always holds the same operator column: a lane of feature f reads its own port of f's table. One
+beat per cycle, in a four-step pipeline that stalls as a whole while the stream does: in the
+cycle of the beat's issue each lane's difference (census: Hamming distance; prior: row minus the
+MAP above) goes into a register; its absolute value, clamped, into the address register in the next;
+the look-up (block RAM read) in the next; the beat on the stream the one after. The registers keep the
 subtraction (on the left sums' wide fan-out), the absolute value and clamp, and the long route
 to the block RAM apart. The difference's operands are registers: the left sums, and per lane the
 delay-line entry of the beat, chosen a cycle ahead (beat 0's when the pixel is taken, the next
@@ -114,10 +114,11 @@ def check_frontend_params(params: MachineParams, model: ModelParams) -> None:
         # The right pass's machine would need an entropy port of its own.
         raise ParameterError(f"rng: --model {model.name} on chip needs an on-chip random source (the right "
                              f"pass's machine has no entropy port), got {params.rng!r}")
-    if params.lanes % params.loaded_columns:
+    if params.words_per_beat % params.loaded_columns:
         raise ParameterError(
-            f"lanes ({params.lanes}) must be a multiple of the loaded columns ({params.loaded_columns}) "
-            f"for the front end, so that each lane holds one feature (e.g. lanes="
+            f"words_per_beat ({params.words_per_beat}) must be a multiple of the loaded columns "
+            f"({params.loaded_columns}) "
+            f"for the front end, so that each word position of a beat holds one feature (e.g. words_per_beat="
             f"{min(params.words_per_pixel, 6 * params.loaded_columns)})")
 
 
@@ -132,7 +133,7 @@ class WordGenerator(wiring.Component):
     Parameters
     ----------
     params : MachineParams
-        The machine fed (``lanes`` a multiple of the loaded columns: :func:`check_frontend_params`).
+        The machine fed (``words_per_beat`` a multiple of the loaded columns: :func:`check_frontend_params`).
     model : ModelParams
         The disparity model (Dmax, p0, sigmas, p_nm0, sigma_nm; the census model's fields).
     tables : FrontEndTables, optional
@@ -263,7 +264,7 @@ class WordGenerator(wiring.Component):
         off = lc - p.columns  # 1 with a loaded prior column (the above factor with the neighbour prior)
         neighbour = p.feedback_columns > 0
         fields = FEATURES + (("census",) if model.census else ())
-        rows_per_beat = p.lanes // lc
+        rows_per_beat = p.words_per_beat // lc
         n_beats = p.beats_per_pixel
         one = p.word_one
         bits = model.census_bits if model.census else 0
@@ -437,7 +438,7 @@ class WordGenerator(wiring.Component):
         with m.Switch(beat_q):
             for b in range(n_beats):
                 with m.Case(b, *(unused if b == n_beats - 1 else ())):
-                    for lane in range(p.lanes):
+                    for lane in range(p.words_per_beat):
                         row = b * rows_per_beat + lane // lc
                         col = lane % lc
                         if row > dmax + 1:

@@ -31,7 +31,7 @@ from amaranth.lib import data, fifo, stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from bayesmachine.likelihood import ModelParams, right_machine
-from bayesmachine.params import MachineParams, stereo_lanes
+from bayesmachine.params import MachineParams, stereo_words_per_beat
 
 from .costs import WordGenerator, pixel_features_layout
 from .filters import feature_layout
@@ -65,10 +65,10 @@ def feeder_in_layout(census_bits: int) -> data.StructLayout:
 
 def right_pass_params(model: ModelParams, params: MachineParams) -> MachineParams:
     """The right pass's machine on chip: :func:`~bayesmachine.likelihood.right_machine` of the left
-    pass's ``params``, with the front end's lane count (:func:`~bayesmachine.params.stereo_lanes`; lanes
-    change no result)."""
+    pass's ``params``, with the front end's words per beat
+    (:func:`~bayesmachine.params.stereo_words_per_beat`; they change no result)."""
     right = right_machine(model, params)
-    return dataclasses.replace(right, lanes=stereo_lanes(right))
+    return dataclasses.replace(right, words_per_beat=stereo_words_per_beat(right))
 
 
 def lr_split(m: Module, front: wiring.Component, gen: WordGenerator, px: Value, valid: Value,

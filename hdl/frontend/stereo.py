@@ -47,7 +47,7 @@ from bayesmachine.hdl.signatures import (
     result_layout,
 )
 from bayesmachine.likelihood import ModelParams, disparity_machine
-from bayesmachine.params import MachineParams, ParameterError, stereo_lanes
+from bayesmachine.params import MachineParams, ParameterError, stereo_words_per_beat
 from bayesmachine.sources import source_kind
 
 from . import DEFAULT_FIFO_PIXELS, MAX_MACHINES, MAX_WIDTH
@@ -66,14 +66,15 @@ def stereo_machine_params(dmax: int = 80, *, model: ModelParams | None = None,
                           **kwargs: object) -> MachineParams:
     """The machine the front end feeds: ``MachineParams.for_disparity`` (the paper model), or with a
     ``model`` (whose Dmax is ``dmax``) ``disparity_machine(model, ...)``, with the front end's lane
-    count (:func:`stereo_lanes`) unless ``lanes`` is given."""
+    count (:func:`stereo_words_per_beat`) unless ``words_per_beat`` is given."""
     if model is None:
         params = MachineParams.for_disparity(dmax, **kwargs)
     else:
         if model.dmax != dmax:
             raise ParameterError(f"dmax: {dmax} given, the model's is {model.dmax}")
         params = disparity_machine(model, **kwargs)
-    return params if "lanes" in kwargs else dataclasses.replace(params, lanes=stereo_lanes(params))
+    return params if "words_per_beat" in kwargs else dataclasses.replace(params,
+                                                                         words_per_beat=stereo_words_per_beat(params))
 
 
 def _check_width(width: object, model: ModelParams) -> int:
@@ -391,7 +392,7 @@ class StereoMachine(wiring.Component):
     Parameters
     ----------
     params : MachineParams
-        The machine's parameters (lanes a multiple of the loaded columns: see
+        The machine's parameters (``words_per_beat`` a multiple of the loaded columns: see
         :func:`stereo_machine_params`).
     model : ModelParams
         The disparity model (Dmax, p0, sigmas, p_nm0, sigma_nm).
@@ -560,7 +561,7 @@ class StereoMachine(wiring.Component):
         with m.If(take & new_row):
             m.d.sync += lane.eq(following)
 
-        # The lanes.
+        # The machines.
         beat_bits = Shape.cast(load_layout(p)).width
         res_bits = Shape.cast(result_layout(p)).width
         gens, machines, results = [], [], []

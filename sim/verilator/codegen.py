@@ -165,7 +165,7 @@ def design_header(params: MachineParams, signature: Any, trace_kind: int, *, tie
     flag = leaves.pop("line_start", None)
     if (flag is not None) != bool(params.feedback_columns) or (flag is not None and flag[1] != 1):
         raise VerilatorError(f"load payload layout {load_layout!r} does not match the parameters")
-    if len(leaves) != params.lanes or {w for _, w in leaves.values()} != {params.memory_word_width}:
+    if len(leaves) != params.words_per_beat or {w for _, w in leaves.values()} != {params.memory_word_width}:
         raise VerilatorError(f"load payload layout {load_layout!r} does not match the parameters")
     lane_offsets = ", ".join(str(offset) for offset, _ in leaves.values())
     line_start = ("#define BM_LINE_START 0\n" if flag is None else
@@ -177,7 +177,7 @@ def design_header(params: MachineParams, signature: Any, trace_kind: int, *, tie
     return prologue + f"""#define BM_TRACE {trace_kind}
 #define BM_READY_TIED {int(tie_ready)}
 static const unsigned WORDS_PER_PIXEL = {params.words_per_pixel};
-static const unsigned LANES = {params.lanes};
+static const unsigned LANES = {params.words_per_beat};
 static const unsigned BEATS_PER_PIXEL = {params.beats_per_pixel};
 static const unsigned WORD_ONE = {params.word_one};
 static const unsigned LANE_BITS = {params.memory_word_width};

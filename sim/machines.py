@@ -1,45 +1,45 @@
-"""The model twin of ``hdl.lanes.MachineLanes``: pixel i to lane ``i % k``, each lane a machine model."""
+"""The model twin of ``hdl.machines.ParallelMachines``: pixel i to machine ``i % k``, each a machine model."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from bayesmachine.params import MachineParams, ParameterError, lane_params
+from bayesmachine.params import MachineParams, ParameterError, nth_machine
 
 from .model import MachineModel, MachineResult, check_words
 
-__all__ = ["LanesModel"]
+__all__ = ["ParallelMachinesModel"]
 
 
-class LanesModel:
-    """k machine models of ``lane_params(params, i)``; the round-robin deal carries over between calls."""
+class ParallelMachinesModel:
+    """k machine models of ``nth_machine(params, i)``; the round-robin deal carries over between calls."""
 
     def __init__(self, params: MachineParams, machines: int) -> None:
         if isinstance(machines, bool) or not isinstance(machines, int) or not 1 <= machines <= 256:
             raise ParameterError(f"machines must be an integer in [1, 256], got {machines!r}")
         self._params = params
-        self._lanes = [MachineModel(lane_params(params, i)) for i in range(machines)]
-        self._next = 0  # the lane of the next pixel
+        self._models = [MachineModel(nth_machine(params, i)) for i in range(machines)]
+        self._next = 0  # the machine of the next pixel
 
     @property
     def params(self) -> MachineParams:
         return self._params
 
     def reset(self) -> None:
-        for lane in self._lanes:
-            lane.reset()
+        for machine in self._models:
+            machine.reset()
         self._next = 0
 
     def run(self, words: np.ndarray) -> MachineResult:
         q = check_words(self._params, words)
-        k, n = len(self._lanes), q.shape[0]
-        lane_of = (self._next + np.arange(n)) % k
-        parts = {i: self._lanes[i].run(q[lane_of == i]) for i in range(k) if (lane_of == i).any()}
+        k, n = len(self._models), q.shape[0]
+        machine_of = (self._next + np.arange(n)) % k
+        parts = {i: self._models[i].run(q[machine_of == i]) for i in range(k) if (machine_of == i).any()}
         empty = MachineResult.empty(self._params.rows)
         out = MachineResult(*(np.zeros((n, *getattr(empty, f).shape[1:]), getattr(empty, f).dtype)
                               for f in MachineResult.__dataclass_fields__))
         for i, res in parts.items():
             for f in MachineResult.__dataclass_fields__:
-                getattr(out, f)[lane_of == i] = getattr(res, f)
+                getattr(out, f)[machine_of == i] = getattr(res, f)
         self._next = (self._next + n) % k
         return out
