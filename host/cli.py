@@ -361,8 +361,8 @@ def _summary(r: dict[str, object]) -> str:
 
 
 def _cmd_reference(args: argparse.Namespace) -> int:
-    check_prior_options(args)
     model = model_params_from_args(args)
+    check_prior_options(args)
     left, right, _, _ = _load_inputs(args, with_gt=False)
     region = OutputRegion.of_model(left.shape, model)
     out = Path(args.output)
@@ -453,8 +453,8 @@ def _check_board_args(args: argparse.Namespace, model: ModelParams) -> None:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    check_prior_options(args)
     model = model_params_from_args(args)
+    check_prior_options(args)
     _check_board_args(args, model)
     machine = _machine_params(args, model)
     waves = _parse_waves(args.waves, args.engine)
@@ -597,8 +597,8 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     if args.workers is not None and args.scheduler is not None:
         raise ValueError("--workers sizes a local cluster and --scheduler names another one: "
                          "give one of them")
-    check_prior_options(args)
     points = sweep_points(args)  # every point validated before any input is read
+    check_prior_options(args)
     pairs, source, dataset = _sweep_pairs(args, points)
     workers = args.workers
     if workers is None:  # one pair: this process (its points share one prepared pair); a dataset: all cores

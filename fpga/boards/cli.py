@@ -63,8 +63,8 @@ def _design(args: argparse.Namespace):  # noqa: ANN202
 
     from .core import check_board
 
+    model = model_params_from_args(args)  # census options with --model paper: refused first, there
     check_prior_options(args)
-    model = model_params_from_args(args)
     machine = machine_params_from_args(args, args.dmax, model=model)
     if args.words_per_beat is None:
         machine = dataclasses.replace(machine, words_per_beat=stereo_words_per_beat(machine))
