@@ -23,6 +23,7 @@ from bayesmachine.cliargs import (
     add_machine_options,
     add_model_options,
     argument_type,
+    float_arg,
     int_arg,
     int_in_range,
     machine_params_from_args,
@@ -43,6 +44,8 @@ from bayesmachine.outputs import (
 )
 from bayesmachine.params import DEFAULT_RNG, MachineParams
 
+from .calib import BUNDLED_CALIB, KITTI_CAMERAS, StereoCalibration, bundled_calibration_path, read_calibration
+from .confidence import DEFAULT_T, DEFAULT_WINDOW, ConfidenceParams
 from .datasets import PairSpec, bundled_spec, files_spec, resolve_dataset
 from .features import model_features
 from .images import Crop, bundled_pair, crop_image, load_gt, load_image, parse_crop, validate_pair
@@ -66,7 +69,8 @@ __all__ = ["register", "RUN_OUTPUTS", "SWEEP_OUTPUTS"]
 DEFAULTS = ModelParams()
 # Every file each command can write into OUT/, the report first (it is removed first and
 # committed last: its presence means the rest is complete and from the same run).
-RUN_OUTPUTS = ("report.json", "result.npz", "disparity.png", "waves.vcd")
+RUN_OUTPUTS = ("report.json", "result.npz", "disparity.png", "confidence.png", "calibration.png", "depth.npy",
+               "cloud.ply", "waves.vcd")
 SWEEP_COUNTER_MAX = [1, 2, 4, 8, 16, 32]
 MAX_CONNECT_S = 600.0  # --connect-timeout: a cluster that takes longer to answer is not coming
 
@@ -109,6 +113,7 @@ def _load_inputs(
     if gt is not None and gt.shape != left.shape:
         raise ValueError(f"ground truth shape {gt.shape} differs from the images' {left.shape}")
     crop: Crop | None = args.crop
+    args.input_shape = left.shape  # before the crop: what a calibration file's image size is checked against
     left, right = crop_image(left, crop), crop_image(right, crop)
     if gt is not None:
         gt = crop_image(gt, crop)
@@ -251,11 +256,66 @@ def _add_machine_options(p: argparse.ArgumentParser, sweep: bool) -> None:
         "Middlebury 2003's quarter-size disp*.png); default 1, required for 16-bit images"
         + ("; with --dataset it replaces the layout's scale" if sweep else ""),
     )
+    if not sweep:
+        _add_confidence_options(p)
     p.add_argument("--no-sgbm", action="store_true", help="skip the OpenCV StereoSGBM comparison")
     p.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     p.add_argument("-o", "--output", required=True, type=output_path, metavar="OUT/",
                    help="output directory; only files bayesmachine wrote there are ever replaced or removed, "
                    "and one run at a time may write into it")
+
+
+def _parse_probability(text: str) -> float:
+    value = float_arg(text)
+    if not 0.0 < value <= 1.0:
+        raise ValueError(f"expected a probability in (0, 1], got {text!r}")
+    return value
+
+
+def _parse_odd(text: str) -> int:
+    value = int_arg(text)
+    if value < 1 or value % 2 == 0:
+        raise ValueError(f"expected an odd number >= 1, got {text!r}")
+    return value
+
+
+def _parse_cameras(text: str) -> tuple[int, int]:
+    try:
+        left, right = (int(v) for v in text.split(","))
+    except ValueError:
+        raise ValueError(f"expected two camera numbers L,R (e.g. 2,3), got {text!r}") from None
+    if not (0 <= left <= 3 and 0 <= right <= 3) or left == right:
+        raise ValueError(f"expected two different KITTI cameras 0..3, got {text!r}")
+    return left, right
+
+
+def _add_confidence_options(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("confidence and depth (docs/confidence.md)")
+    g.add_argument("--confidence-t", type=argument_type(_parse_nonnegative, "t"), default=DEFAULT_T,
+                   metavar="T", help="a pixel's confidence is the mass of its distribution within +-T "
+                   f"disparities of its MAP: it predicts |d - gt| <= T (default {DEFAULT_T})")
+    g.add_argument("--confidence-window", type=argument_type(_parse_odd, "window"), default=DEFAULT_WINDOW,
+                   metavar="W", help="pool (average) the distributions of the WxW pixels around a pixel "
+                   f"before reading that mass; 1: the pixel's own (default {DEFAULT_WINDOW})")
+    g.add_argument("--min-confidence", type=argument_type(_parse_probability, "probability"), default=None,
+                   metavar="P", help="blank the machine's disparity in disparity.png, depth.npy and "
+                   "cloud.ply where its confidence is below P; report.json gives the density kept "
+                   "(result.npz keeps every MAP)")
+    g.add_argument("--calib", default=None, metavar="FILE",
+                   help="camera calibration: a Middlebury calib.txt (baseline in mm), a KITTI calib/*.txt "
+                   "or calib_cam_to_cam.txt, or JSON {fx, fy, cx, cy, baseline (metres)[, doffs, width, "
+                   f"height]}}; '{BUNDLED_CALIB}': the bundled pair's. Writes depth.npy (metres) and "
+                   "cloud.ply")
+    g.add_argument("--calib-cameras", type=argument_type(_parse_cameras, "cameras"), default=None,
+                   metavar="L,R", help="with a KITTI --calib: the left and right cameras' matrices "
+                   f"(default {KITTI_CAMERAS[0]},{KITTI_CAMERAS[1]}, the colour pair; 0,1 for the gray one)")
+
+
+def _parse_nonnegative(text: str) -> int:
+    value = int_arg(text)
+    if value < 0:
+        raise ValueError(f"expected an integer >= 0, got {value}")
+    return value
 
 
 def _machine_params(
@@ -321,7 +381,9 @@ def _report(outcome: RunOutcome, source: str, crop: Crop | None) -> dict[str, ob
 
 
 def _write_json(path: Path, obj: object) -> None:
-    path.write_text(json.dumps(obj, indent=2, allow_nan=False) + "\n")
+    from .metrics import json_safe
+
+    path.write_text(json.dumps(json_safe(obj), indent=2, allow_nan=False) + "\n")
 
 
 def _summary(r: dict[str, object]) -> str:
@@ -357,6 +419,29 @@ def _summary(r: dict[str, object]) -> str:
             line += f"\n  no-match calls on occluded pixels: machine {f('machine_nomatch_occluded', '.3f')}"
             if r.get("sgbm_nomatch_occluded") is not None:
                 line += f", SGBM {f('sgbm_nomatch_occluded', '.3f')}"
+    return line + _confidence_summary(r, f)
+
+
+def _confidence_summary(r: dict[str, object], f) -> str:  # noqa: ANN001
+    conf = r.get("confidence")
+    if not isinstance(conf, dict):
+        return ""
+    if conf.get("machine", {}) is None:
+        return "\n  confidence: none (the board sent no counts)"
+    line = f"\n  confidence (mass within +-{conf['t']}, {conf['window']}x{conf['window']} pooled): mean " \
+           f"{f('mean_confidence', '.3f')}"
+    if r.get("machine_confidence_ece") is not None:
+        line += (f", ECE {f('machine_confidence_ece')}, sparsification AUC {f('machine_confidence_auc')} "
+                 f"(random {f('machine_confidence_auc_random')}, "
+                 f"perfect {f('machine_confidence_auc_perfect')}; reference {f('reference_confidence_auc')}")
+        line += f", SGBM left-right check {f('sgbm_lr_auc')})" if r.get("sgbm_lr_auc") is not None else ")"
+    kept = r.get("min_confidence")
+    if isinstance(kept, dict):
+        line += f"\n  confidence >= {kept['threshold']:g}: density {kept['density']:.3f}"
+        if kept.get("bad2") is not None:
+            line += f", bad-2 of the kept pixels {kept['bad2']:.4f}"
+    if r.get("cloud_points") is not None:
+        line += f"\n  cloud.ply: {r['cloud_points']} points"
     return line
 
 
@@ -469,11 +554,17 @@ def _cmd_run(args: argparse.Namespace) -> int:
         if waves is not None:
             raise ValueError("--waves is not available with --machines")
         check_machines(machines, machine, model)
+    _check_confidence_args(args)
     left, right, gt, source = _load_inputs(args, with_gt=True)
     region = OutputRegion.of_model(left.shape, model)
     _check_waves(waves, region.pixels)
     _check_fits(region, machine)
-    writes = [n for n in RUN_OUTPUTS if n != "waves.vcd" or waves is not None]
+    calib = _run_calibration(args)  # read and checked before the machine runs
+    params = ConfidenceParams(t=args.confidence_t, window=args.confidence_window)
+    # What this run writes (a user's file under another of the names stays, and does not stop it).
+    optional = {"waves.vcd": waves is not None, "calibration.png": gt is not None,
+                "depth.npy": calib is not None, "cloud.ply": calib is not None}
+    writes = [n for n in RUN_OUTPUTS if optional.get(n, True)]
     with OutputDir(args.output, RUN_OUTPUTS, last="report.json", writes=writes) as out:
         # The harness writes the trace under its temporary name; commit() renames it with the rest.
         engine_options = {} if waves is None else {"trace": (*waves, str(out.path("waves.vcd")))}
@@ -487,7 +578,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
             run, board = run_board(prep, machine, args.port, 3_000_000 if args.baud is None else args.baud,
                                    timeout=2.0 if args.board_timeout is None else args.board_timeout,
                                    progress=False if args.quiet else None, fields=args.board_fields)
-            outcome = RunOutcome(prep, run, evaluate(prep, run, sgbm=not args.no_sgbm))
+            outcome = RunOutcome(prep, run, evaluate(prep, run, sgbm=not args.no_sgbm, confidence=params))
         else:
             outcome = run_pair(
                 left,
@@ -501,49 +592,130 @@ def _cmd_run(args: argparse.Namespace) -> int:
                 engine_options=engine_options,
                 feed=args.feed,
                 machines=machines,
+                confidence=params,
             )
         report = _report(outcome, source, args.crop)
         report["feed"] = args.feed
         report["machines"] = machines
         if board is not None:
             report["board"] = board  # the link: wall time, bytes each way, rates, attempts
-        run, prep = outcome.run, outcome.prepared
-        # census-lr: the right pass's MAPs, cycles and timeouts too (over its own columns).
-        extra = {} if run.right is None else {"right_map": run.right.map, "right_cycles": run.right.cycles,
-                                               "right_timeout": run.right.timeout}
-        out.write(
-            "result.npz",
-            lambda path: np.savez_compressed(
-                path,
-                map=run.map,
-                # a board asked for MAPs only (--board-fields map) sent no counts or cycles
-                **({} if run.counts is None else {"counts": run.counts}),
-                **({} if run.cycles is None else {"cycles": run.cycles}),
-                timeout=run.timeout,
-                reference_map=prep.reference_map,
-                **extra,
-            ),
-        )
-        from .plots import save_disparity_figure
-
-        panels = [
-            ("Reference (float64)", prep.reference_map),
-            (f"Machine ({run.engine}, counter max {machine.counter_max})", run.map),
-        ]
-        if gt is not None:
-            panels.append(("Ground truth", region.cut(gt)))
-            if outcome.metrics.sgbm_map is not None:  # computed once, for the report's bad-pixel rates
-                panels.append(("OpenCV StereoSGBM", outcome.metrics.sgbm_map))
-        out.write(
-            "disparity.png",
-            lambda path: save_disparity_figure(path, region.cut(left), panels, model.dmax),
-        )
+        _write_run_outputs(out, args, outcome, report, left, calib)
         out.write("report.json", lambda path: _write_json(path, report))
         written = out.commit()
     if not args.quiet:
         print(_summary(report))
         print("wrote " + ", ".join(str(p) for p in written))
     return 0
+
+
+def _check_confidence_args(args: argparse.Namespace) -> None:
+    """Options that need the counts, or the bundled pair, refused before anything runs."""
+    from bayesmachine.fpga.boards.protocol import FIELD_COUNTS
+
+    no_counts = args.engine == "board" and not args.board_fields & FIELD_COUNTS
+    if no_counts and args.min_confidence is not None:
+        raise ValueError("--min-confidence: the board sends no counts with these --board-fields, so there is "
+                         "no confidence to threshold (add counts)")
+    if args.calib == BUNDLED_CALIB and args.left is not None:
+        raise ValueError(f"--calib {BUNDLED_CALIB} is the bundled Motorcycle pair's calibration: give the "
+                         "calibration of LEFT RIGHT")
+    if args.calib_cameras is not None and args.calib is None:
+        raise ValueError("--calib-cameras: it picks a KITTI --calib file's matrices; give --calib too")
+
+
+def _run_calibration(args: argparse.Namespace) -> StereoCalibration | None:
+    """``--calib``'s calibration for the (cropped) input, its image size checked."""
+    if args.calib is None:
+        return None
+    path = bundled_calibration_path() if args.calib == BUNDLED_CALIB else Path(args.calib)
+    calib = read_calibration(path, args.calib_cameras or KITTI_CAMERAS)
+    return calib.for_input(args.input_shape, args.crop)
+
+
+def _write_run_outputs(out: OutputDir, args: argparse.Namespace, outcome: RunOutcome,
+                       report: dict[str, object], left: np.ndarray, calib: StereoCalibration | None) -> None:
+    """Stage result.npz and the figures (and depth.npy, cloud.ply with a calibration); add the
+    thresholded density and the cloud's figures to ``report``."""
+    from .plots import save_calibration_figure, save_confidence_figure, save_disparity_figure
+
+    run, prep, metrics = outcome.run, outcome.prepared, outcome.metrics
+    region, dmax = prep.region, prep.model.dmax
+    maps = metrics.maps
+    # census-lr: the right pass's MAPs, cycles and timeouts too (over its own columns).
+    extra = {} if run.right is None else {"right_map": run.right.map, "right_cycles": run.right.cycles,
+                                           "right_timeout": run.right.timeout}
+    if maps is not None:  # a board asked for MAPs only sent no counts: no confidence, none made up
+        extra.update(maps.arrays())
+    if metrics.reference_maps is not None:
+        extra["reference_confidence"] = metrics.reference_maps.confidence.astype(np.float32)
+    if prep.gt is not None:
+        extra["gt"] = prep.gt.astype(np.float32)
+    out.write(
+        "result.npz",
+        lambda path: np.savez_compressed(
+            path,
+            map=run.map,
+            # a board asked for MAPs only (--board-fields map) sent no counts or cycles
+            **({} if run.counts is None else {"counts": run.counts}),
+            **({} if run.cycles is None else {"cycles": run.cycles}),
+            timeout=run.timeout,
+            reference_map=prep.reference_map,
+            **extra,
+        ),
+    )
+    shown, title = run.map, f"Machine ({run.engine}, counter max {run.machine.counter_max})"
+    if args.min_confidence is not None and maps is not None:
+        # On the confidence as result.npz holds it (float32), so that a user's threshold there agrees.
+        kept = maps.confidence.astype(np.float32) >= np.float32(args.min_confidence)
+        shown = np.where(kept, run.map, np.int16(-1))
+        title += f", confidence >= {args.min_confidence:g}"
+        report["min_confidence"] = _kept_figures(shown, prep.gt, args.min_confidence)
+    panels = [("Reference (float64)", prep.reference_map), (title, shown)]
+    if prep.gt is not None:
+        panels.append(("Ground truth", prep.gt))
+        if metrics.sgbm_map is not None:  # computed once, for the report's bad-pixel rates
+            panels.append(("OpenCV StereoSGBM", metrics.sgbm_map))
+    cut_left = region.cut(left)
+    out.write("disparity.png", lambda path: save_disparity_figure(path, cut_left, panels, dmax))
+    if maps is not None:
+        label = f"Machine confidence (mass within +-{args.confidence_t}, {args.confidence_window}x" \
+                f"{args.confidence_window} pooled)"
+        out.write("confidence.png", lambda path: save_confidence_figure(path, cut_left, maps, run.map, label))
+    conf = report.get("confidence")
+    if prep.gt is not None and isinstance(conf, dict):
+        out.write("calibration.png", lambda path: save_calibration_figure(path, conf))
+    if calib is not None:
+        _write_cloud(out, args, report, region, shown, maps, calib)
+
+
+def _kept_figures(shown: np.ndarray, gt: np.ndarray | None, threshold: float) -> dict[str, object]:
+    """``--min-confidence``: the density kept (pixels with a disparity over all output pixels) and,
+    with ground truth, bad-2 of the kept pixels."""
+    from .confidence import BAD_THRESHOLD
+    from .metrics import bad_rates
+
+    kept = shown >= 0
+    figures: dict[str, object] = {"threshold": threshold, "density": float(kept.mean()),
+                                  "pixels": int(kept.sum())}
+    if gt is not None:
+        figures[f"bad{BAD_THRESHOLD}"] = bad_rates(shown, gt, BAD_THRESHOLD)["matched"]
+    return figures
+
+
+def _write_cloud(out: OutputDir, args: argparse.Namespace, report: dict[str, object], region: OutputRegion,
+                 shown: np.ndarray, maps: object, calib: StereoCalibration) -> None:
+    """depth.npy (metres, NaN: no match or blanked, inf: at infinity) and cloud.ply of ``shown``."""
+    from .cloud import left_colours, point_cloud, write_ply
+
+    depth = calib.depth(shown).astype(np.float32)
+    colours = left_colours(args.left, args.crop)
+    conf = None if maps is None else maps.confidence  # type: ignore[attr-defined]
+    points = point_cloud(depth, calib, region, colours, conf)
+    out.write("depth.npy", lambda path: np.save(path, depth))
+    comments = (f"bayesmachine run: depth = fx * baseline / (d + doffs), calibration {calib.source}",)
+    out.write("cloud.ply", lambda path: write_ply(path, points, comments))
+    report["calibration"] = calib.to_dict()
+    report["cloud_points"] = len(points)
 
 
 def _sweep_pairs(
@@ -658,6 +830,9 @@ def _pooled_summary(p: dict[str, object], pairs: int, varying: list[str]) -> str
             f"no-match F1 {f('nomatch_f1')}, MAP agreement {f('map_agreement')}")
     if p.get("machine_bad2_nomatch_bad") is not None:
         line += f", bad-2 {f('machine_bad2_nomatch_bad')} (reference {f('reference_bad2_nomatch_bad')})"
+    if p.get("machine_confidence_auc") is not None:
+        line += (f", confidence ECE {f('machine_confidence_ece')}, sparsification AUC "
+                 f"{f('machine_confidence_auc')} (random {f('machine_confidence_auc_random')})")
     if p.get("failed"):
         line += f"; {p['failed']} pair(s) failed"
     return line
@@ -684,8 +859,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         "run",
         help="run the machine on a stereo pair and compare it with the reference",
         description="Run the stochastic machine on a rectified pair (default: the bundled Motorcycle pair "
-        "with its ground truth); write OUT/report.json, OUT/result.npz and OUT/disparity.png "
-        "(and OUT/waves.vcd with --waves). The files of an earlier run into OUT (as "
+        "with its ground truth); write OUT/report.json, OUT/result.npz, OUT/disparity.png and "
+        "OUT/confidence.png (each pixel's confidence; with ground truth also OUT/calibration.png), "
+        "OUT/depth.npy and OUT/cloud.ply with --calib, OUT/waves.vcd with --waves. The files of an earlier "
+        "run into OUT (as "
         "OUT/.bayesmachine-manifest.json lists them) are removed first, nothing else there; report.json is "
         "written last, so its presence means the run is complete. A second run into the same OUT is refused "
         "while the first is writing.",

@@ -11,10 +11,12 @@ directory found is one pair, named by its path under the root):
   (``view1.png``, ``view5.png``, ``disp1.png``: at face value; ``--gt-scale`` for a copy stored
   scaled); 0 = unknown;
 * Middlebury 2014/2021 and MiddEval3 (``im0.png``, ``im1.png``, ``disp0.pfm`` or
-  ``disp0GT.pfm``: floats, inf = unknown; ``calib.txt``'s ``ndisp`` gives the Dmax hint):
+  ``disp0GT.pfm``: floats, inf = unknown; ``calib.txt``'s ``ndisp`` gives the Dmax hint and
+  the pair's calibration):
   full, half or quarter size is whichever directory you point at (``trainingQ/``...);
-* KITTI 2012 (``image_0``/``image_1``, ``disp_noc``/``disp_occ``) and 2015 (``image_2``/
-  ``image_3``, ``disp_noc_0``/``disp_occ_0``): the ``*_10.png`` frames, ground truth 16-bit
+* KITTI 2012 (``image_0``/``image_1``, ``disp_noc``/``disp_occ``, calibration ``calib/*.txt``'s
+  P0/P1) and 2015 (``image_2``/``image_3``, ``disp_noc_0``/``disp_occ_0``, calibration
+  ``calib_cam_to_cam/*.txt``'s P_rect_02/P_rect_03): the ``*_10.png`` frames, ground truth 16-bit
   PNG / 256, 0 = unknown (``noc``, non-occluded pixels, by default);
 * a list file: one pair per line, ``left right [gt [gt_scale]]`` separated by commas or
   white space, paths relative to the file, ``#`` comments;
@@ -40,6 +42,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from .calib import KITTI_CAMERAS, StereoCalibration, bundled_calibration_path, read_calibration
 from .images import Crop, bundled_pair, check_readable, crop_image, load_gt, load_image, opencv_quiet, to_gray
 
 __all__ = [
@@ -51,6 +54,7 @@ __all__ = [
     "bundled_spec",
     "files_spec",
     "load_pair",
+    "load_calibration",
     "write_pfm",
     "write_png16",
 ]
@@ -67,10 +71,12 @@ class PairSpec:
 
     ``gt_scale``: the ground-truth file stores disparity x scale (None: as stored). ``frame``:
     left and right are video files and this is the frame index. ``dmax_hint``: the largest
-    disparity the dataset says to expect (Middlebury ``ndisp`` - 1), if it says. ``gt_bits``: the
-    depth the layout's ground-truth images have (KITTI: 16); another is refused when loading.
-    ``error``: why the pair cannot be loaded (a directory that cannot be listed), raised by
-    :func:`load_pair`, so that its tasks fail with it.
+    disparity the dataset says to expect (Middlebury ``ndisp`` - 1), if it says. ``calib``: the
+    pair's calibration file (:func:`~.calib.read_calibration`; ``"bundled"``: the bundled pair's),
+    ``calib_cameras`` the KITTI cameras it is for. ``gt_bits``: the depth the layout's ground-truth
+    images have (KITTI: 16); another is refused when loading. ``error``: why the pair cannot be
+    loaded (a directory that cannot be listed), raised by :func:`load_pair`, so that its tasks fail
+    with it.
     """
 
     name: str
@@ -81,12 +87,14 @@ class PairSpec:
     dmax_hint: int | None = None
     frame: int | None = None
     note: str | None = None
+    calib: str | None = None
+    calib_cameras: tuple[int, int] | None = None
     gt_bits: int | None = None
     error: str | None = None
 
     def to_dict(self) -> dict[str, object]:
         d: dict[str, object] = {"name": self.name, "left": self.left, "right": self.right, "gt": self.gt}
-        for key in ("gt_scale", "dmax_hint", "frame", "note", "gt_bits", "error"):
+        for key in ("gt_scale", "dmax_hint", "frame", "note", "calib", "calib_cameras", "gt_bits", "error"):
             if getattr(self, key) is not None:
                 d[key] = getattr(self, key)
         return d
@@ -109,7 +117,7 @@ class Dataset:
 
 def bundled_spec() -> PairSpec:
     """The bundled Middlebury 2014 Motorcycle pair (scikit-image), as a pair spec."""
-    return PairSpec(name="motorcycle", left=BUNDLED, right=BUNDLED, gt=BUNDLED)
+    return PairSpec(name="motorcycle", left=BUNDLED, right=BUNDLED, gt=BUNDLED, calib=BUNDLED)
 
 
 def files_spec(left: str, right: str, gt: str | None = None, gt_scale: float | None = None) -> PairSpec:
@@ -180,6 +188,16 @@ def load_pair(spec: PairSpec, crop: Crop | None = None) -> tuple[np.ndarray, np.
     return np.ascontiguousarray(left), np.ascontiguousarray(right), gt
 
 
+def load_calibration(spec: PairSpec) -> StereoCalibration | None:
+    """The calibration of ``spec`` (None without one), checked against its images' size."""
+    if spec.calib is None:
+        return None
+    path = bundled_calibration_path() if spec.calib == BUNDLED else spec.calib
+    calib = read_calibration(path, spec.calib_cameras or KITTI_CAMERAS)
+    left = load_pair(spec)[0]
+    return calib.for_input(left.shape)
+
+
 # --- writers (tests and users building small datasets) ---------------------------------------
 
 
@@ -234,8 +252,10 @@ def _scene_pair(directory: Path, name: str, gt_scale: float | None) -> PairSpec 
         gt = _first(directory, ("disp0.pfm", "disp0GT.pfm"))
         ndisp = _ndisp(directory / "calib.txt")
         note = None if gt is not None else "no ground truth (disp0.pfm / disp0GT.pfm missing)"
+        calib = directory / "calib.txt"
         return PairSpec(name, str(left), str(right), str(gt) if gt else None, gt_scale,
-                        dmax_hint=ndisp - 1 if ndisp else None, note=note)
+                        dmax_hint=ndisp - 1 if ndisp else None, note=note,
+                        calib=str(calib) if calib.is_file() else None)
     # 2005/2006: view1/view5, disp1
     left = _first(directory, ("view1.png", "view1.ppm"))
     if left is not None:
@@ -255,9 +275,9 @@ def _scene_pair(directory: Path, name: str, gt_scale: float | None) -> PairSpec 
     return None
 
 
-_KITTI = (  # (left dir, right dir, ground-truth dirs: noc first)
-    ("image_0", "image_1", ("disp_noc", "disp_occ")),
-    ("image_2", "image_3", ("disp_noc_0", "disp_occ_0")),
+_KITTI = (  # (left dir, right dir, ground-truth dirs: noc first, calibration dirs, their cameras)
+    ("image_0", "image_1", ("disp_noc", "disp_occ"), ("calib",), (0, 1)),
+    ("image_2", "image_3", ("disp_noc_0", "disp_occ_0"), ("calib_cam_to_cam", "calib"), (2, 3)),
 )
 
 
@@ -265,16 +285,20 @@ def _kitti_pairs(directory: Path, prefix: str, gt_scale: float | None, occluded:
     found = [k for k in _KITTI if (directory / k[0]).is_dir() and (directory / k[1]).is_dir()]
     if not found:
         return []
-    left_dir, right_dir, gt_dirs = found[0]
+    left_dir, right_dir, gt_dirs, calib_dirs, cameras = found[0]
     gt_dir = directory / gt_dirs[1 if occluded else 0]
     pairs = []
     for left in sorted((directory / left_dir).glob("*_10.png")):
         gt = gt_dir / left.name
         note = None if gt.is_file() else f"no ground truth ({gt_dir.name}/{left.name} missing)"
+        frame = left.stem[: -len("_10")]  # calib files are named by the frame: 000000.txt
+        calib = next((c for c in (directory / d / f"{frame}.txt" for d in calib_dirs) if c.is_file()), None)
         # 16-bit PNGs of disparity x 256; --gt-scale reads another file as the user says.
         pairs.append(PairSpec(f"{prefix}{left.stem}", str(left), str(directory / right_dir / left.name),
                               str(gt) if gt.is_file() else None, gt_scale if gt_scale is not None else 256.0,
-                              note=note, gt_bits=16 if gt_scale is None else None))
+                              note=note, calib=str(calib) if calib else None,
+                              calib_cameras=cameras if calib else None,
+                              gt_bits=16 if gt_scale is None else None))
     return pairs
 
 

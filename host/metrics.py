@@ -9,7 +9,11 @@
 * MAP agreement with the reference (no match = -1 on both sides);
 * bad-1 / bad-2 against ground truth over pixels with finite gt, both excluding the
   pixels a method calls no match and counting them as bad; OpenCV StereoSGBM and StereoBM
-  alongside; the share of each method's no-match calls that fall on occluded pixels.
+  alongside; the share of each method's no-match calls that fall on occluded pixels;
+* the per-pixel confidence of the machine (from its counts) and of the reference (from its
+  posterior), :mod:`.confidence`: with ground truth, its calibration (ECE, reliability table) and
+  how it ranks errors (sparsification AUC beside the random and perfect orders); SGBM's
+  left-right-check confidence (:func:`sgbm_lr_confidence`) as the classical baseline.
 """
 
 from __future__ import annotations
@@ -20,6 +24,17 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from .confidence import (
+    BAD_THRESHOLD,
+    ECE_BINS,
+    FRACTIONS,
+    ConfidenceMaps,
+    ConfidenceParams,
+    DistributionMeasures,
+    measure_counts,
+    method_figures,
+    ranking_figures,
+)
 from .records import MachineRun, Prepared
 from .region import MARGIN, OutputRegion
 
@@ -33,10 +48,13 @@ __all__ = [
     "bad_rates",
     "gt_region",
     "sgbm_disparity",
+    "sgbm_lr_confidence",
     "bm_disparity",
     "occluded_mask",
     "nomatch_occluded_share",
     "evaluate",
+    "confidence_report",
+    "json_safe",
 ]
 
 
@@ -146,19 +164,46 @@ def sgbm_numdisparities(dmax: int) -> int:
     return -(-(dmax + 1) // 16) * 16
 
 
+def _sgbm_image(left: np.ndarray, right: np.ndarray, dmax: int) -> np.ndarray | None:
+    """OpenCV StereoSGBM (blockSize 5) over the whole image, float, -1 = invalid; None when OpenCV
+    cannot run it (an image barely wider than numDisparities)."""
+    sgbm = cv2.StereoSGBM_create(minDisparity=0, numDisparities=sgbm_numdisparities(dmax), blockSize=5)
+    try:
+        raw = sgbm.compute(np.ascontiguousarray(left), np.ascontiguousarray(right))
+    except cv2.error:
+        return None
+    disp = raw.astype(np.float64) / 16.0  # int16, 4 fractional bits, negative = invalid
+    disp[raw < 0] = -1.0
+    return disp
+
+
 def sgbm_disparity(left: np.ndarray, right: np.ndarray, dmax: int, margin: int = MARGIN) -> np.ndarray | None:
     """OpenCV StereoSGBM (blockSize 5) on the full pair, cut to the output region; -1 = invalid.
 
     None when OpenCV cannot run it: an image barely wider than numDisparities (a narrow crop).
     """
-    sgbm = cv2.StereoSGBM_create(minDisparity=0, numDisparities=sgbm_numdisparities(dmax), blockSize=5)
-    try:
-        raw = sgbm.compute(left, right)  # int16, 4 fractional bits, negative = invalid
-    except cv2.error:
+    disp = _sgbm_image(left, right, dmax)
+    return None if disp is None else OutputRegion.of_image(disp.shape, dmax, margin).cut(disp)
+
+
+def sgbm_lr_confidence(left: np.ndarray, right: np.ndarray, dmax: int,
+                       margin: int = MARGIN) -> np.ndarray | None:
+    """SGBM's left-right-check confidence over the output region: 1 / (1 + |d_L(x) - d_R(x')|), where
+    d_L is SGBM's left disparity, d_R its right one (SGBM on the mirrored pair, right image as the
+    reference) and x' = round(x - d_L(x)); 0 where either is invalid or x' leaves the image. None when
+    OpenCV cannot run SGBM."""
+    dl = _sgbm_image(left, right, dmax)
+    mirrored = _sgbm_image(right[:, ::-1], left[:, ::-1], dmax)
+    if dl is None or mirrored is None:
         return None
-    disp = raw.astype(np.float64) / 16.0
-    disp[raw < 0] = -1.0
-    return OutputRegion.of_image(disp.shape, dmax, margin).cut(disp)
+    dr = mirrored[:, ::-1]
+    h, w = dl.shape
+    xr = np.rint(np.arange(w)[None, :] - dl).astype(np.int64)
+    ok = (dl >= 0) & (xr >= 0) & (xr < w)
+    drx = dr[np.arange(h)[:, None], np.clip(xr, 0, w - 1)]
+    ok &= drx >= 0
+    conf = np.where(ok, 1.0 / (1.0 + np.abs(dl - drx)), 0.0)
+    return OutputRegion.of_image(conf.shape, dmax, margin).cut(conf)
 
 
 def bm_disparity(left: np.ndarray, right: np.ndarray, dmax: int, block: int = 15,
@@ -199,15 +244,17 @@ def nomatch_occluded_share(disp: np.ndarray, occluded: np.ndarray) -> float:
     return float((nm & np.asarray(occluded, dtype=bool)).sum() / n) if n else math.nan
 
 
-def _clean(v: object) -> object:
-    """JSON-safe: NaN -> None, numpy scalars -> Python."""
+def json_safe(v: object) -> object:
+    """JSON-safe: NaN -> None, numpy scalars -> Python (in dicts and lists too)."""
     if isinstance(v, (float, np.floating)):
         v = float(v)
         return None if math.isnan(v) else v
     if isinstance(v, np.integer):
         return int(v)
     if isinstance(v, dict):
-        return {k: _clean(x) for k, x in v.items()}
+        return {k: json_safe(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [json_safe(x) for x in v]
     return v
 
 
@@ -224,6 +271,9 @@ class RunMetrics:
     bad: dict[str, dict[str, float]] | None = None  # {"machine": {...}, "reference": ..., "sgbm": ...}
     sgbm_map: np.ndarray | None = field(default=None, repr=False)  # SGBM's disparity, when computed
     right: dict[str, float] | None = None  # census-lr's right pass: pixels, cycles, timeouts
+    confidence: dict[str, object] | None = None  # the confidence figures (confidence_report)
+    maps: ConfidenceMaps | None = field(default=None, repr=False)  # the machine's (None: no counts)
+    reference_maps: ConfidenceMaps | None = field(default=None, repr=False)
 
     def to_report(self) -> dict[str, object]:
         out: dict[str, object] = {
@@ -251,27 +301,56 @@ class RunMetrics:
             for method, figs in self.bad.items():
                 for k, v in figs.items():
                     out[f"{method}_{k}"] = v
-        return _clean(out)  # type: ignore[return-value]
+        if self.confidence is not None:
+            out.update(_confidence_keys(self.confidence))
+            out["confidence"] = self.confidence
+        return json_safe(out)  # type: ignore[return-value]
 
 
-def evaluate(prepared: Prepared, run: MachineRun, sgbm: bool | None = None) -> RunMetrics:
+# The confidence figures a sweep pools over pairs (top-level numbers of each task's report).
+_POOLED = ("ece", "auc", "auc_random", "auc_perfect")
+
+
+def _confidence_keys(conf: dict[str, object]) -> dict[str, object]:
+    """The confidence figures as flat report keys: ``machine_confidence_ece``, ``sgbm_lr_auc``, ..."""
+    out: dict[str, object] = {"mean_confidence": conf.get("mean_confidence")}
+    for method in ("machine", "reference"):
+        figs = conf.get(method)
+        if isinstance(figs, dict):
+            out.update({f"{method}_confidence_{k}": figs.get(k) for k in _POOLED})
+            out[f"{method}_pixel_mass_auc"] = figs["pixel_mass"]["auc"]  # type: ignore[index]
+    sgbm = conf.get("sgbm_lr")
+    if isinstance(sgbm, dict):
+        out.update({f"sgbm_lr_{k}": sgbm.get(k) for k in _POOLED if k != "ece"})
+    return out
+
+
+def evaluate(prepared: Prepared, run: MachineRun, sgbm: bool | None = None,
+             confidence: ConfidenceParams | None = None) -> RunMetrics:
     """All figures of one machine run against the prepared reference (and gt).
 
-    The RMS error needs the float64 posterior: it is recomputed band by band and
-    accumulated, so memory stays at one band whatever the frame size.
+    The RMS error and the reference's confidence need the float64 posterior: it is recomputed
+    band by band and accumulated, so memory stays at one band whatever the frame size.
+    ``confidence``: how confidence is read from a distribution (default ``ConfidenceParams()``).
     """
     ref_map = prepared.reference_map
     if ref_map is None:
         raise ValueError("the pair was prepared without its reference (prepare(..., reference=False)): "
                          "nothing to evaluate the run against")
+    params = confidence if confidence is not None else ConfidenceParams()
     machine_nm = run.map < 0  # no-match row won, or watchdog timeout
     ref_nm = ref_map < 0
     rms = RmsAccumulator(run.machine.counter_max)
-    if run.counts is not None:  # a board asked for MAPs only has no counts: no RMS error (null)
-        for rows, band in prepared.reference_bands():
+    ref_conf = DistributionMeasures(ref_map, params)
+    for rows, band in prepared.reference_bands():
+        ref_conf.add(rows, band.posterior)
+        if run.counts is not None:  # a board asked for MAPs only has no counts: no RMS error (null)
             rms.add(run.counts[rows], band.posterior, band.map >= 0)
+    maps = None if run.counts is None else measure_counts(run.counts, run.map, params)
+    ref_maps = ref_conf.result()
     bad = None
     sgbm_map = None
+    lr_conf = None
     if prepared.gt is not None:
         methods = {"machine": run.map, "reference": ref_map}
         if sgbm is None or sgbm:  # OpenCV's block matchers: SGBM (block 5) and StereoBM (block 15)
@@ -279,26 +358,11 @@ def evaluate(prepared: Prepared, run: MachineRun, sgbm: bool | None = None) -> R
             sgbm_map = sgbm_disparity(prepared.left, prepared.right, dmax, margin)
             if sgbm_map is not None:  # too narrow for SGBM: the report simply has no SGBM figures
                 methods["sgbm"] = sgbm_map
+                lr_conf = sgbm_lr_confidence(prepared.left, prepared.right, dmax, margin)
             bm_map = bm_disparity(prepared.left, prepared.right, dmax, margin=margin)
             if bm_map is not None:
                 methods["bm"] = bm_map
-        occluded = None
-        if prepared.gt_image is not None:
-            occluded = gt_region(occluded_mask(prepared.gt_image), prepared.model.dmax,
-                                 prepared.model.margin).astype(bool)
-        bad = {}
-        for name, disp in methods.items():
-            b1 = bad_rates(disp, prepared.gt, 1)
-            b2 = bad_rates(disp, prepared.gt, 2)
-            bad[name] = {
-                "bad1": b1["matched"],
-                "bad2": b2["matched"],
-                "bad1_nomatch_bad": b1["nomatch_bad"],
-                "bad2_nomatch_bad": b2["nomatch_bad"],
-                "coverage": b1["coverage"],
-            }
-            if occluded is not None:
-                bad[name]["nomatch_occluded"] = nomatch_occluded_share(disp, occluded)
+        bad = _bad_figures(prepared, methods)
     return RunMetrics(
         pixels=int(run.map.size),
         cycles=cycle_stats(run.cycles if run.cycles is not None else np.empty(0)),
@@ -311,7 +375,63 @@ def evaluate(prepared: Prepared, run: MachineRun, sgbm: bool | None = None) -> R
         bad=bad,
         sgbm_map=sgbm_map,
         right=None if run.right is None else _right_figures(run),
+        confidence=confidence_report(params, maps, ref_maps, run.map, ref_map, prepared.gt, sgbm_map,
+                                     lr_conf),
+        maps=maps,
+        reference_maps=ref_maps,
     )
+
+
+def _bad_figures(prepared: Prepared, methods: dict[str, np.ndarray]) -> dict[str, dict[str, float]]:
+    """bad-1 / bad-2 (matched, no match counted bad), coverage and no match on occluded pixels."""
+    assert prepared.gt is not None
+    occluded = None
+    if prepared.gt_image is not None:
+        occluded = gt_region(occluded_mask(prepared.gt_image), prepared.model.dmax,
+                             prepared.model.margin).astype(bool)
+    bad: dict[str, dict[str, float]] = {}
+    for name, disp in methods.items():
+        b1 = bad_rates(disp, prepared.gt, 1)
+        b2 = bad_rates(disp, prepared.gt, 2)
+        bad[name] = {
+            "bad1": b1["matched"],
+            "bad2": b2["matched"],
+            "bad1_nomatch_bad": b1["nomatch_bad"],
+            "bad2_nomatch_bad": b2["nomatch_bad"],
+            "coverage": b1["coverage"],
+        }
+        if occluded is not None:
+            bad[name]["nomatch_occluded"] = nomatch_occluded_share(disp, occluded)
+    return bad
+
+
+def confidence_report(
+    params: ConfidenceParams, maps: ConfidenceMaps | None, ref_maps: ConfidenceMaps, disp: np.ndarray,
+    ref_map: np.ndarray, gt: np.ndarray | None, sgbm_map: np.ndarray | None = None,
+    lr_conf: np.ndarray | None = None,
+) -> dict[str, object]:
+    """The report's ``confidence`` entry: the parameters, the machine's mean confidence over its
+    matched pixels and, with ground truth, each method's calibration and sparsification figures.
+    Without counts (a board asked for MAPs only) the machine has no confidence: None, never made up."""
+    matched = np.asarray(disp) >= 0
+    out: dict[str, object] = {
+        **params.to_dict(), "bins": ECE_BINS, "fractions": [float(f) for f in FRACTIONS],
+        "sparsification_bad": BAD_THRESHOLD,
+        "mean_confidence": (float(maps.confidence[matched].mean()) if maps is not None and matched.any()
+                            else None),
+    }
+    if maps is None:
+        out["machine"] = None
+        out["note"] = "the run has no counts (--board-fields without counts): no machine confidence"
+    if gt is None:
+        return out
+    if maps is not None:
+        out["machine"] = method_figures(maps, disp, gt, params.t)
+    out["reference"] = method_figures(ref_maps, ref_map, gt, params.t)
+    if sgbm_map is not None and lr_conf is not None:
+        sel = np.isfinite(gt) & (sgbm_map >= 0)
+        out["sgbm_lr"] = ranking_figures(lr_conf[sel], np.abs(sgbm_map[sel] - gt[sel]) > BAD_THRESHOLD)
+    return out
 
 
 def _right_figures(run: MachineRun) -> dict[str, float]:

@@ -1,4 +1,5 @@
-"""Figures: disparity images in the paper's Fig 7 convention and the Fig 6 sweep plots."""
+"""Figures: disparity and confidence maps as colour maps with their scales, the calibration
+(reliability and sparsification) plot, and the Fig 6 sweep plots."""
 
 from __future__ import annotations
 
@@ -11,7 +12,12 @@ matplotlib.use("Agg")  # files only, never a display
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-__all__ = ["disparity_gray", "save_disparity_figure", "save_sweep_figure", "save_dataset_sweep_figure"]
+__all__ = ["disparity_gray", "save_disparity_figure", "save_confidence_figure", "save_calibration_figure",
+           "save_sweep_figure", "save_dataset_sweep_figure"]
+
+DISPARITY_CMAP = "turbo"
+CONFIDENCE_CMAP = "viridis"
+NO_MATCH_COLOUR = "white"  # no match (and unknown ground truth): outside every colour map used here
 
 
 def disparity_gray(disp: np.ndarray, dmax: int) -> np.ndarray:
@@ -27,27 +33,127 @@ def disparity_gray(disp: np.ndarray, dmax: int) -> np.ndarray:
     return gray
 
 
+def _grid(n: int, shape: tuple[int, ...], extra_width: float = 0.0):  # noqa: ANN202
+    cols = 2 if n == 4 else min(n, 3)
+    rows = -(-n // cols)
+    h, w = shape[:2]
+    size = (4.5 * cols + extra_width, (4.5 * h / w + 0.5) * rows + 0.5)
+    return plt.subplots(rows, cols, figsize=size, squeeze=False, layout="constrained")
+
+
+def _masked(values: np.ndarray) -> np.ma.MaskedArray:
+    v = np.asarray(values, dtype=np.float64)
+    return np.ma.masked_invalid(np.where(np.isfinite(v) & (v >= 0), v, np.nan))
+
+
+def _no_match_legend(fig, label: str) -> None:  # noqa: ANN001
+    from matplotlib.patches import Patch
+
+    fig.legend(handles=[Patch(facecolor=NO_MATCH_COLOUR, edgecolor="black", label=label)],
+               loc="lower right", fontsize=8, frameon=False)
+
+
 def save_disparity_figure(
     path: str | Path,
     left: np.ndarray,
     panels: Sequence[tuple[str, np.ndarray]],
     dmax: int,
 ) -> None:
-    """The left image, then each (title, disparity map) panel, side by side, saved as PNG."""
-    n = 1 + len(panels)
-    cols = 2 if n == 4 else min(n, 3)
-    rows = -(-n // cols)
-    h, w = left.shape
-    size = (4.5 * cols, (4.5 * h / w + 0.4) * rows + 0.4)
-    fig, axes = plt.subplots(rows, cols, figsize=size, squeeze=False, layout="constrained")
-    items = [("Left image", left)] + [(t, disparity_gray(d, dmax)) for t, d in panels]
-    for ax, (title, img) in zip(axes.flat, items, strict=False):
-        ax.imshow(img, cmap="gray", vmin=0, vmax=255, interpolation="nearest")
+    """The left image, then each (title, disparity map) panel, coloured on one scale 0..Dmax with its
+    colour bar; no match (< 0) and unknown (non-finite) in :data:`NO_MATCH_COLOUR`."""
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import Normalize
+
+    fig, axes = _grid(1 + len(panels), left.shape, extra_width=1.0)
+    cmap = plt.get_cmap(DISPARITY_CMAP).with_extremes(bad=NO_MATCH_COLOUR)
+    norm = Normalize(0, max(dmax, 1))
+    axes.flat[0].imshow(left, cmap="gray", vmin=0, vmax=255, interpolation="nearest")
+    axes.flat[0].set_title("Left image", fontsize=9)
+    for ax, (title, disp) in zip(list(axes.flat)[1:], panels, strict=False):
+        ax.imshow(_masked(disp), cmap=cmap, norm=norm, interpolation="nearest")
         ax.set_title(title, fontsize=9)
+    for ax in axes.flat:
         ax.set_axis_off()
-    for ax in list(axes.flat)[n:]:
+    fig.colorbar(ScalarMappable(norm, cmap), ax=axes, shrink=0.8, label="disparity (pixels)")
+    _no_match_legend(fig, "no match / unknown")
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def save_confidence_figure(path: str | Path, left: np.ndarray, maps: object, disp: np.ndarray,
+                           title: str) -> None:
+    """The left image and a method's per-pixel confidence, entropy and no-match mass
+    (:class:`~.confidence.ConfidenceMaps`), each with its colour bar; the confidence of a pixel
+    without a MAP disparity (``disp`` < 0) in :data:`NO_MATCH_COLOUR`."""
+    fig, axes = _grid(4, left.shape, extra_width=1.5)
+    axes[0, 0].imshow(left, cmap="gray", vmin=0, vmax=255, interpolation="nearest")
+    axes[0, 0].set_title("Left image", fontsize=9)
+    conf = np.where(np.asarray(disp) >= 0, maps.confidence, np.nan)  # type: ignore[attr-defined]
+    for ax, (name, values, cmap, hi, label) in zip(list(axes.flat)[1:], [
+        (title, conf, CONFIDENCE_CMAP, 1.0, "confidence"),
+        ("Entropy of the distribution", maps.entropy, "magma", None, "bits"),  # type: ignore[attr-defined]
+        ("No-match mass", maps.nomatch_mass, "cividis", 1.0, "probability"),  # type: ignore[attr-defined]
+    ], strict=True):
+        cm = plt.get_cmap(cmap).with_extremes(bad=NO_MATCH_COLOUR)
+        vmax = hi if hi is not None else max(float(np.nanmax(values)) if np.isfinite(values).any() else 1.0,
+                                             1e-6)
+        im = ax.imshow(np.ma.masked_invalid(values), cmap=cm, vmin=0, vmax=vmax, interpolation="nearest")
+        ax.set_title(name, fontsize=9)
+        fig.colorbar(im, ax=ax, shrink=0.8, label=label)
+    for ax in axes.flat:
         ax.set_axis_off()
-    fig.suptitle(f"Disparity (black = no match, white = Dmax = {dmax})", fontsize=10)
+    _no_match_legend(fig, "no match")
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def save_calibration_figure(path: str | Path, report: dict[str, object]) -> None:
+    """(a) The reliability diagram (observed rate of |d - gt| <= t against the mean confidence per
+    bin) and (b) the sparsification curves (bad-2 of the kept pixels against the fraction removed,
+    least confident first) of the report's ``confidence`` entry (:func:`~.metrics.confidence_report`)."""
+    fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4.5), layout="constrained")
+    t = report["t"]
+    a.plot([0, 1], [0, 1], color="gray", linestyle=":", label="perfectly calibrated")
+    fractions = np.asarray(report["fractions"], dtype=np.float64)
+    styles = {"machine": ("o-", "C0", "machine"), "reference": ("s--", "C1", "float64 reference")}
+    def num(v: object, fmt: str) -> str:  # a figure of no pixel is null in the report
+        return "n/a" if v is None else format(v, fmt)
+
+    def curve(values: object) -> np.ndarray:
+        return np.asarray(values, dtype=np.float64)  # null points (no pixel) are NaN: not drawn
+
+    for key, (style, colour, name) in styles.items():
+        figs = report.get(key)
+        if not isinstance(figs, dict):
+            continue
+        table = [r for r in figs["reliability"] if r["count"]]
+        a.plot([r["predicted"] for r in table], [r["observed"] for r in table], style, color=colour,
+               label=f"{name} (ECE {num(figs['ece'], '.3f')})")
+        b.plot(fractions, curve(figs["curve"]), style, color=colour,
+               label=f"{name} (AUC {num(figs['auc'], '.4f')})")
+        if key == "machine":
+            b.plot(fractions, curve(figs["curve_perfect"]), ":", color=colour,
+                   label=f"machine, perfect order (AUC {num(figs['auc_perfect'], '.4f')})")
+            if figs["auc_random"] is not None:
+                b.axhline(figs["auc_random"], color=colour, linestyle="-.", alpha=0.6,
+                          label=f"machine, random order (AUC {figs['auc_random']:.4f})")
+    lr = report.get("sgbm_lr")
+    if isinstance(lr, dict):
+        b.plot(fractions, curve(lr["curve"]), "^-", color="C2", alpha=0.8,
+               label=f"SGBM, left-right check (AUC {num(lr['auc'], '.4f')})")
+    a.set_xlim(0, 1)
+    a.set_ylim(0, 1.02)
+    a.set_xlabel("confidence (mean per bin)")
+    a.set_ylabel(f"observed rate of |d - gt| <= {t}")
+    a.set_title(f"(a) reliability, {report['bins']} bins", fontsize=10)
+    a.legend(fontsize=8)
+    a.grid(True, alpha=0.3)
+    b.set_xlabel("fraction of pixels removed (least confident first)")
+    b.set_ylabel(f"bad-{report['sparsification_bad']} of the kept pixels")
+    b.set_title("(b) sparsification", fontsize=10)
+    b.set_ylim(bottom=0)
+    b.legend(fontsize=7)
+    b.grid(True, alpha=0.3)
     fig.savefig(path, dpi=110)
     plt.close(fig)
 

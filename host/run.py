@@ -31,6 +31,7 @@ from bayesmachine.params import MachineParams
 from bayesmachine.sim.engines import ENGINES, get_engine
 from bayesmachine.sim.results import MachineResult, disparities
 
+from .confidence import ConfidenceParams
 from .features import model_features
 from .images import validate_pair
 from .likelihoods import (
@@ -347,15 +348,17 @@ def run_pair(
     engine_options: dict[str, object] | None = None,
     feed: str = "words",
     machines: int = 1,
+    confidence: ConfidenceParams | None = None,
 ) -> RunOutcome:
     """Run the machine on a gray pair and compare it with the reference (and gt, if given).
 
     ``prepared`` reuses an earlier ``prepare`` of the same pair (sweeps). ``sgbm``: also
-    evaluate OpenCV StereoSGBM (default: when ground truth is given).
+    evaluate OpenCV StereoSGBM (default: when ground truth is given). ``confidence``: how the
+    per-pixel confidence is read (:class:`~.confidence.ConfidenceParams`, default its defaults).
     """
     if prepared is None:
         prepared = prepare(left, right, model_params, gt)
     run = run_machine(prepared, machine_params, engine, progress, engine_options=engine_options, feed=feed,
                       machines=machines)
-    metrics = evaluate(prepared, run, sgbm=sgbm)
+    metrics = evaluate(prepared, run, sgbm=sgbm, confidence=confidence)
     return RunOutcome(prepared, run, metrics)

@@ -102,7 +102,7 @@ def test_rerun_never_mixes_old_and_new_files(tmp_path: Path, pair) -> None:
     (out / "waves.vcd").write_text("$date stale $end\n")
     (out / ".result.partial-1.npz").write_bytes(b"PK")  # a killed run's temporary file
     assert main(["run", *pair, *SMALL, "-o", str(out)]) == 0
-    assert files(out) == ["disparity.png", "report.json", "result.npz"]
+    assert files(out) == ["confidence.png", "disparity.png", "report.json", "result.npz"]
     assert json.loads((out / "report.json").read_text())["machine"]["seed"] == 1
 
 
@@ -127,7 +127,7 @@ def test_a_foreign_file_in_the_output_directory_survives_a_rerun(tmp_path: Path,
     for _ in range(2):
         assert main(["run", *pair, *SMALL, "-o", str(out)]) == 0
     assert (out / "waves.vcd").read_text() == "the user's" and (out / "notes.txt").read_text() == "the user's"
-    assert read_manifest(out) == ["result.npz", "disparity.png", "report.json"]
+    assert read_manifest(out) == ["result.npz", "disparity.png", "confidence.png", "report.json"]
 
 
 def test_a_second_run_into_a_held_output_is_refused_at_once(tmp_path: Path, pair, capsys) -> None:
@@ -288,10 +288,10 @@ def test_waves_are_committed_with_the_run_and_dropped_by_a_rerun(tmp_path, pair)
     argv = ["run", *pair, "--dmax", "6", "--model", "census", "--words-per-beat", "4", "--quiet", "--engine",
             "verilator", "-o", str(out)]
     assert main([*argv, "--waves", "0:1"]) == 0
-    assert files(out) == ["disparity.png", "report.json", "result.npz", "waves.vcd"]
+    assert files(out) == ["confidence.png", "disparity.png", "report.json", "result.npz", "waves.vcd"]
     assert (out / "waves.vcd").read_text().startswith("$version")
     assert main(argv) == 0  # the same OUT without --waves: the old trace must not stay
-    assert files(out) == ["disparity.png", "report.json", "result.npz"]
+    assert files(out) == ["confidence.png", "disparity.png", "report.json", "result.npz"]
 
 
 @pytest.mark.parametrize("command", ["emit", "emit-stereo", "run", "synth"])

@@ -1,0 +1,79 @@
+"""Depth in metres and a coloured point cloud from a disparity map and a :class:`~.calib.StereoCalibration`.
+
+The cloud is a binary little-endian PLY (format 1.0, the layout Open3D, MeshLab and
+CloudCompare read): one ``vertex`` element with ``float x, y, z`` (metres, the left camera's
+frame: x right, y down, z forward), ``uchar red, green, blue`` (the left image's colour) and,
+when the run has counts, ``float confidence``. A point is written for every output pixel with a
+finite depth: no-match pixels, blanked ones (``--min-confidence``) and points at infinity are left
+out.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from .calib import StereoCalibration
+from .images import Crop, crop_image
+from .region import OutputRegion
+
+__all__ = ["PLY_FIELDS", "left_colours", "point_cloud", "write_ply"]
+
+# (name, PLY type, NumPy little-endian type), in file order.
+PLY_FIELDS = (("x", "float", "<f4"), ("y", "float", "<f4"), ("z", "float", "<f4"),
+              ("red", "uchar", "u1"), ("green", "uchar", "u1"), ("blue", "uchar", "u1"),
+              ("confidence", "float", "<f4"))
+
+
+def left_colours(path: str | None, crop: Crop | None = None) -> np.ndarray:
+    """The left image as RGB uint8 (H, W, 3), cropped: ``path`` (a gray image is repeated in all three
+    channels), or None for the bundled pair's."""
+    if path is None:
+        from skimage import data
+
+        rgb = np.asarray(data.stereo_motorcycle()[0])
+    else:
+        image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+        if image is None:
+            raise ValueError(f"cannot read {path} as an image")
+        if image.ndim == 2:
+            rgb = np.repeat(image[:, :, None], 3, axis=2)
+        else:
+            code = cv2.COLOR_BGRA2RGB if image.shape[2] == 4 else cv2.COLOR_BGR2RGB
+            rgb = cv2.cvtColor(image, code)
+    return np.ascontiguousarray(crop_image(rgb, crop))
+
+
+def point_cloud(depth: np.ndarray, calib: StereoCalibration, region: OutputRegion, colours: np.ndarray,
+                confidence: np.ndarray | None = None) -> np.ndarray:
+    """The points of the output pixels with a finite ``depth`` (Ho, Wo): a structured array of
+    :data:`PLY_FIELDS` (without ``confidence`` when None). ``calib`` is the calibration of the
+    (cropped) input image and ``colours`` that image's RGB; ``region`` places the output pixels on it."""
+    rows, cols = np.indices((region.image_height, region.image_width))
+    v, u = region.cut(rows), region.cut(cols)
+    keep = np.isfinite(depth)
+    z = depth[keep]
+    fields = PLY_FIELDS if confidence is not None else PLY_FIELDS[:6]
+    points = np.empty(int(keep.sum()), dtype=[(n, t) for n, _, t in fields])
+    points["x"] = (u[keep] - calib.cx) * z / calib.fx
+    points["y"] = (v[keep] - calib.cy) * z / calib.fy
+    points["z"] = z
+    rgb = region.cut(colours)[keep]
+    for i, name in enumerate(("red", "green", "blue")):
+        points[name] = rgb[:, i]
+    if confidence is not None:
+        points["confidence"] = confidence[keep]
+    return points
+
+
+def write_ply(path: str | Path, points: np.ndarray, comments: tuple[str, ...] = ()) -> None:
+    """Write ``points`` (a structured array of :data:`PLY_FIELDS`' names) as a binary little-endian PLY."""
+    types = {n: p for n, p, _ in PLY_FIELDS}
+    header = ["ply", "format binary_little_endian 1.0", *(f"comment {c}" for c in comments),
+              f"element vertex {len(points)}",
+              *(f"property {types[n]} {n}" for n in points.dtype.names or ()), "end_header"]
+    with open(path, "wb") as f:
+        f.write(("\n".join(header) + "\n").encode("ascii"))
+        f.write(np.ascontiguousarray(points).tobytes())
