@@ -526,12 +526,24 @@ def test_the_board_top_elaborates_without_deprecated_requests() -> None:
     assert 'FREQUENCY PORT "clk25_0__io" 25000000' in lpf
 
 
-def test_outputs_of_a_run_are_listed_in_its_manifest(tmp_path, pair) -> None:
-    """The run's own files are ours the next time (listed), so a rerun replaces them."""
+def test_a_run_refuses_only_the_users_files_it_would_write(tmp_path, pair, capsys) -> None:
+    """A user's file under an output name this run does not write (``cloud.ply`` without ``--calib``,
+    ``waves.vcd`` without ``--waves``) stays and does not stop it; the run's own files are listed, so
+    a rerun replaces them; ``calibration.png`` of the user's with ``--gt`` is refused."""
     out = tmp_path / "o"
+    out.mkdir()
+    for name in ("cloud.ply", "waves.vcd"):
+        (out / name).write_text("the user's")
     for _ in range(2):
         assert main(["run", *map(str, pair), *SMALL, "--quiet", "-o", str(out)]) == 0
-    assert json.loads((out / MANIFEST).read_text())["files"] == ["result.npz", "disparity.png", "report.json"]
+    listed = json.loads((out / MANIFEST).read_text())["files"]
+    assert sorted(listed) == sorted(p.name for p in out.iterdir() if p.name not in (MANIFEST, "cloud.ply",
+                                                                                  "waves.vcd"))
+    assert listed[-1] == "report.json" and (out / "cloud.ply").read_text() == "the user's"
+    np.save(tmp_path / "gt.npy", stereo(1)[2])
+    (out / "calibration.png").write_text("the user's")
+    assert main(["run", *map(str, pair), *SMALL, "--gt", str(tmp_path / "gt.npy"), "-o", str(out)]) == 2
+    assert f"{out / 'calibration.png'}: exists and bayesmachine did not write it" in one_error(capsys)
 
 
 def test_a_sweeps_results_are_listed_in_their_manifests(tmp_path, pair) -> None:
