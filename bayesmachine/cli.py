@@ -42,6 +42,7 @@ def build_parser() -> argparse.ArgumentParser:
     from bayesmachine.fpga.cli import register as register_fpga
     from bayesmachine.hdl.cli import register as register_hdl
     from bayesmachine.host.cli import register as register_host
+    from bayesmachine.host.throughput import measure_cycles
 
     parser = _Parser(
         prog="bayesmachine",
@@ -51,7 +52,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     register_hdl(sub)
     register_host(sub)
-    register_fpga(sub)
+    register_fpga(sub, measure=measure_cycles)  # the one place that hands host's work to fpga
     return parser
 
 

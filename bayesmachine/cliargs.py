@@ -50,6 +50,9 @@ from bayesmachine.params import (
 )
 
 __all__ = [
+    "DEFAULT_BAUD",
+    "BAUD_RANGE",
+    "MAX_SILENCE_S",
     "MachineOption",
     "MACHINE_OPTIONS",
     "add_option",
@@ -79,6 +82,14 @@ __all__ = [
 ]
 
 T = TypeVar("T")
+
+# The board's serial link: the baud rate ``board build`` builds for and ``run --engine board`` opens
+# the port at, unless told otherwise (here, where both commands' packages can read it).
+DEFAULT_BAUD = 3_000_000
+# ``run --engine board``'s bounds: the serial port's rates (pyserial overflows past 32 bits; USB-serial
+# chips reach 12 Mbaud, the ULX3S's FT231X 3), and seconds of silence before a board is deemed mute.
+BAUD_RANGE = (300, 12_000_000)
+MAX_SILENCE_S = 600.0
 
 
 def int_arg(text: str) -> int:
@@ -561,6 +572,10 @@ def _census_kwargs(args: argparse.Namespace, names: list[str]) -> dict[str, Any]
                           for dest, flag in CENSUS_OPTION_FLAGS if dest in given)
         raise ParameterError(f"{flags}: options of --model census and census-lr, which do not apply to "
                              f"--model {','.join(names)}")
+    prior = [flag for dest, flag in CENSUS_OPTION_FLAGS if dest.startswith("prior_") and dest in given]
+    if prior and given.get("neighbour_prior") is False:  # they would be recorded and do nothing
+        raise ParameterError(f"{', '.join(prior)}: options of the neighbour prior, which "
+                             "--no-neighbour-prior turns off; give one or the other")
     return given
 
 

@@ -307,7 +307,7 @@ class ModelParams:
     @property
     def margin(self) -> int:
         """Pixels from a window's centre to its edge, for the model's largest window (5x5 filters: 2,
-        7x7 census: 3): the output region keeps every window inside the image (``host.region``)."""
+        7x7 census: 3): the output region keeps every window inside the image (``bayesmachine.region``)."""
         return max(2, self.census_window // 2) if self.census else 2
 
     @property

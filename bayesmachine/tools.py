@@ -1,4 +1,4 @@
-"""External tools: the one lookup, and running one in its own process group.
+"""External tools: the one lookup, running one in its own process group, and the user cache directory.
 
 Neutral ground for every package that starts a tool (``sim.verilator``: Verilator, g++, make;
 ``fpga``: Yosys, nextpnr), so neither imports the other for it.
@@ -18,14 +18,22 @@ import signal
 import subprocess
 import sys
 from collections.abc import Iterator, Sequence
+from pathlib import Path
 from typing import Any
 
-__all__ = ["which", "start_tool", "stop_tool", "tool_process"]
+__all__ = ["which", "start_tool", "stop_tool", "tool_process", "user_cache_dir"]
 
 
 def which(tool: str) -> str | None:
     """``tool`` on PATH, else beside this Python (a virtual environment used without activating it)."""
     return shutil.which(tool) or shutil.which(tool, path=os.path.dirname(sys.executable))
+
+
+def user_cache_dir(*parts: str) -> Path:
+    """``$XDG_CACHE_HOME/<parts>`` (default ``~/.cache/<parts>``): where the project's builds and the
+    tools' compiled code are cached unless a variable of their own says otherwise."""
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base).joinpath(*parts)
 
 
 def start_tool(cmd: Sequence[str], **popen: Any) -> subprocess.Popen:

@@ -36,7 +36,6 @@ from bayesmachine.host.likelihoods import ModelParams, memory_words, right_colum
 from bayesmachine.host.metrics import bad_rates, gt_region, nomatch_occluded_share, occluded_mask
 from bayesmachine.host.records import Prepared
 from bayesmachine.host.reference import reference_map, reference_quantized_map, right_reference_map
-from bayesmachine.host.region import OutputRegion
 from bayesmachine.host.run import run_machine
 from bayesmachine.likelihood import (
     QuantizedTables,
@@ -47,6 +46,7 @@ from bayesmachine.likelihood import (
     right_machine,
 )
 from bayesmachine.params import MachineParams
+from bayesmachine.region import OutputRegion
 
 # Short names of the census-lr fields a variant sets: NAME=VALUE (0/1 for a yes/no field).
 KEYS = {"beta": ("lr_beta", float), "gamma": ("lr_gamma", float), "pnm": ("prior_nomatch", float),

@@ -20,8 +20,8 @@ from pathlib import Path
 import cv2
 
 from bayesmachine.host.images import random_dot_stereogram
-from bayesmachine.host.region import OutputRegion
 from bayesmachine.outputs import format_bytes
+from bayesmachine.region import OutputRegion
 
 # Runs one command and prints its peak RSS in bytes (ru_maxrss is in KiB on Linux).
 WRAPPER = (

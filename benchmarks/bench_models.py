@@ -5,7 +5,7 @@ uncalibrated (h_nm = 0: its census entry is L_c(0) = 1); + the no-match row cali
 (h_nm = bits / 8); + the raster-order neighbour prior; the 5x5 census option (calibrated, with
 and without the prior). Each model also on 10-bit words (``reference_quantized``: the machine's
 exact products): the share of pixels whose MAP changes. Each model on its own output region (the
-7x7 census's is one pixel further inside: ``host.region``). OpenCV StereoSGBM (block 5) and
+7x7 census's is one pixel further inside: ``bayesmachine.region``). OpenCV StereoSGBM (block 5) and
 StereoBM (block 15) on the same pixels, on both regions. Then the machine (model engine, sobol,
 seed 1) each model needs
 (``disparity_machine``: the census model's with its neighbour prior, fed back from its own
@@ -81,7 +81,7 @@ def main() -> None:
     args = ap.parse_args()
     left, right, gt_full = bundled_pair()
     dmax = args.dmax
-    # Each model on its own output region (host.region: margin 2, or 3 with a 7x7 census).
+    # Each model on its own output region (bayesmachine.region: margin 2, or 3 with a 7x7 census).
     truth = {k: (gt_region(gt_full, dmax, k), gt_region(occluded_mask(gt_full), dmax, k).astype(bool))
              for k in (2, 3)}
     gt, occluded = truth[2]
@@ -170,7 +170,7 @@ def main() -> None:
         machine_line(f"census + prior, {rng}", run, refs[name], gt, occluded)
     if args.figure and {"paper", "census + prior"} <= set(figure_maps):
         from bayesmachine.host.plots import save_disparity_figure
-        from bayesmachine.host.region import OutputRegion
+        from bayesmachine.region import OutputRegion
 
         # The census model's output region (margin 3), the paper machine's map cut to it.
         region = OutputRegion.of_image(left.shape, dmax, 3)

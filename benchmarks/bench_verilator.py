@@ -12,6 +12,7 @@ cycles per pixel and whether every result equals the model's. Run:
 from __future__ import annotations
 
 import argparse
+import resource
 import sys
 import time
 from collections.abc import Callable, Iterator
@@ -90,6 +91,8 @@ def main() -> int:
         f"cached build (compiled once in {engine.build.seconds:.1f} s)")
     stalls = f", stalls: load {args.load_stall}, result {args.result_stall}" if (
         args.load_stall or args.result_stall) else ""
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    children_cpu = children.ru_utime + children.ru_stime
     print(f"Verilator engine, Dmax {args.dmax}, counter max {args.counter_max}{stalls}: {how}; "
           f"engine ready in {built:.1f} s ({engine.build.directory})")
 
@@ -121,13 +124,16 @@ def main() -> int:
         n += len(words)
         alone += int(pixel_wall_cycles(machine, res.cycles).sum())
         t_words = time.perf_counter()
-    engine.close()
+    engine.close()  # the harness process ends: its CPU time is counted among the children's
+    harness_cpu = resource.getrusage(resource.RUSAGE_CHILDREN)
+    harness_cpu = harness_cpu.ru_utime + harness_cpu.ru_stime - children_cpu
     st = engine.stats
     compute, wall = st["compute_cycles"], st["wall_cycles"]
     print(f"frame time: {engine_s:.2f} s in the engine, {engine_s + words_s:.2f} s with the likelihood "
           f"memories ({words_s:.2f} s)")
     print(f"simulated: {wall} clock cycles, {wall / engine_s / 1e6:.2f} M cycles/s; "
-          f"{engine_s / n * 1e6:.1f} us per pixel")
+          f"{engine_s / n * 1e6:.1f} us per pixel; the harness's CPU time {harness_cpu:.2f} s, "
+          f"{wall / harness_cpu / 1e6:.2f} M cycles per CPU second")
     print(f"cycles per pixel: compute {compute / n:.3f}, wall {wall / n:.3f} (loading included; "
           f"difference {(wall - compute) / n:.3f})")
     # A run costs its compute cycles plus the registered stop's bubble, and the load stream must

@@ -7,6 +7,7 @@ docs/fpga.md)."""
 from __future__ import annotations
 
 import argparse
+import functools
 from pathlib import Path
 
 from bayesmachine.cliargs import (
@@ -21,13 +22,15 @@ from bayesmachine.cliargs import (
 )
 
 from .flow import ROUTERS
+from .synth import Measure
 from .targets import TARGETS
 
 __all__ = ["register"]
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
-    """Add the ``synth`` subcommand."""
+def register(subparsers: argparse._SubParsersAction, *, measure: Measure) -> None:
+    """Add the ``synth`` and ``board`` subcommands; ``measure`` is the throughput measurement synth
+    reports (:func:`bayesmachine.host.throughput.measure_cycles`)."""
     p = subparsers.add_parser(
         "synth",
         help="synthesize, place and route the machine for an FPGA (Yosys + nextpnr) and report",
@@ -70,14 +73,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("-o", "--output", type=output_path, default=None,
                    help="output directory (default build/synth-TARGET, build/synth-stereo-TARGET with "
                    "--top stereo)")
-    p.set_defaults(func=_run)
+    p.set_defaults(func=functools.partial(_run, measure=measure))
 
     from .boards.cli import register as register_board
 
     register_board(subparsers)
 
 
-def _run(args: argparse.Namespace) -> int:
+def _run(args: argparse.Namespace, *, measure: Measure) -> int:
     from bayesmachine.hdl.frontend.cli import check_top
 
     from .synth import synth
@@ -100,5 +103,6 @@ def _run(args: argparse.Namespace) -> int:
     synth(params, args.target, out, machines=args.machines, pin_width=args.pin_width,
           freq_mhz=150.0 if args.freq is None else args.freq,
           pnr_seed=1 if args.pnr_seed is None else args.pnr_seed, place=not args.synth_only,
-          measure=not args.no_throughput, router=args.router or "router2", **stereo)  # type: ignore[arg-type]
+          measure=None if args.no_throughput else measure, router=args.router or "router2",
+          **stereo)  # type: ignore[arg-type]
     return 0

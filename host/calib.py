@@ -223,9 +223,10 @@ def _json(text: str, source: str) -> StereoCalibration:
         raise ValueError(str(exc)) from None
 
 
-def read_calibration(path: str | Path, cameras: tuple[int, int] = KITTI_CAMERAS) -> StereoCalibration:
+def read_calibration(path: str | Path, cameras: tuple[int, int] | None = None) -> StereoCalibration:
     """The calibration in ``path`` (Middlebury ``calib.txt``, KITTI ``calib/*.txt`` or
-    ``calib_cam_to_cam.txt``, or JSON), ``cameras`` (left, right) naming KITTI's matrices."""
+    ``calib_cam_to_cam.txt``, or JSON), ``cameras`` (left, right) naming KITTI's matrices (default
+    :data:`KITTI_CAMERAS`); the other formats name no cameras, so ``cameras`` with them is refused."""
     path = Path(path)
     source = str(path)
     try:
@@ -234,12 +235,15 @@ def read_calibration(path: str | Path, cameras: tuple[int, int] = KITTI_CAMERAS)
         raise ValueError(f"{source}: not a text calibration file") from None
     except OSError as exc:
         raise OSError(exc.errno, f"cannot read the calibration: {exc.strerror}", source) from None
+    if re.search(r"^\s*P(_rect_)?\d+\s*:", text, re.MULTILINE) and not text.lstrip().startswith("{"):
+        return _kitti(text, source, cameras or KITTI_CAMERAS)
+    if cameras is not None:
+        raise ValueError(f"{source}: cameras {cameras[0]},{cameras[1]} pick a KITTI calibration's matrices; "
+                         "this file is not a KITTI calibration")
     if path.suffix.lower() == ".json" or text.lstrip().startswith("{"):
         return _json(text, source)
     if re.search(r"^\s*cam0\s*=", text, re.MULTILINE):
         return _middlebury(text, source)
-    if re.search(r"^\s*P(_rect_)?\d+\s*:", text, re.MULTILINE):
-        return _kitti(text, source, cameras)
     raise ValueError(f"{source}: not a calibration this reads: a Middlebury calib.txt (cam0=, doffs=, "
                      "baseline=), a KITTI calibration (P2:/P3: or P_rect_02:/P_rect_03:) or JSON "
                      "{fx, fy, cx, cy, baseline}")

@@ -19,7 +19,10 @@ from pathlib import Path
 import numpy as np
 
 from bayesmachine.cliargs import (
+    BAUD_RANGE,
+    DEFAULT_BAUD,
     MACHINE_OPTIONS,
+    MAX_SILENCE_S,
     add_machine_options,
     add_model_options,
     argument_type,
@@ -33,7 +36,6 @@ from bayesmachine.cliargs import (
     positive_float_at_most,
     runnable_sources,
 )
-from bayesmachine.fpga.boards.link import BAUD_RANGE, MAX_SILENCE_S
 from bayesmachine.outputs import (
     NpzWriter,
     OutputDir,
@@ -43,6 +45,8 @@ from bayesmachine.outputs import (
     require_memory,
 )
 from bayesmachine.params import DEFAULT_RNG, MachineParams
+from bayesmachine.region import OutputRegion
+from bayesmachine.sim.engines import check_pixel_engine_options
 
 from .calib import BUNDLED_CALIB, KITTI_CAMERAS, StereoCalibration, bundled_calibration_path, read_calibration
 from .confidence import DEFAULT_T, DEFAULT_WINDOW, ConfidenceParams
@@ -51,8 +55,7 @@ from .features import model_features
 from .images import Crop, bundled_pair, crop_image, load_gt, load_image, parse_crop, validate_pair
 from .likelihoods import ModelParams
 from .reference import reference_bands, warm_up
-from .region import OutputRegion
-from .run import ENGINES, FEEDS, RunOutcome, prepare, result_bytes, run_pair
+from .run import ENGINES, FEEDS, RunOutcome, result_bytes, run_pair
 from .sweep import (
     SWEEP_OUTPUTS,
     Point,
@@ -151,18 +154,6 @@ def _parse_workers(text: str) -> int:
     return n
 
 
-_PRIOR_FLAGS = (("prior_eps", "--prior-eps"), ("prior_s", "--prior-s"), ("prior_nomatch", "--prior-nomatch"))
-
-
-def check_prior_options(args: argparse.Namespace) -> None:
-    """The neighbour prior's options with ``--no-neighbour-prior``, which turns it off: refused (they
-    would be recorded in the report and do nothing)."""
-    given = [flag for dest, flag in _PRIOR_FLAGS if getattr(args, dest, None) is not None]
-    if given and getattr(args, "neighbour_prior", None) is False:
-        raise ValueError(f"{', '.join(given)}: options of the neighbour prior, which --no-neighbour-prior "
-                         "turns off; give one or the other")
-
-
 def _host_rng_help() -> str:
     return f"random source; the host runs the kinds it can drive: {', '.join(runnable_sources())}"
 
@@ -205,7 +196,7 @@ def _add_machine_options(p: argparse.ArgumentParser, sweep: bool) -> None:
         )
     else:
         g.add_argument(
-            "--engine", choices=(*ENGINES, "board"), default="model",
+            "--engine", choices=(*ENGINES, "board"), default="model",  # board: a pixel engine
             help="how to run the machine (default model); board: the StereoMachine on a board (or "
             "`bayesmachine board simulate`) over a serial port, --port (docs/board.md)",
         )
@@ -214,7 +205,7 @@ def _add_machine_options(p: argparse.ArgumentParser, sweep: bool) -> None:
                        "printed)")
         g.add_argument("--baud", type=int_in_range(*BAUD_RANGE), default=None,
                        help="with --engine board: the baud rate the bitstream was built for "
-                       f"({BAUD_RANGE[0]} to {BAUD_RANGE[1]}, default 3000000)")
+                       f"({BAUD_RANGE[0]} to {BAUD_RANGE[1]}, default {DEFAULT_BAUD})")
         g.add_argument("--board-fields", default=None, metavar="LIST",
                        help="with --engine board: the result fields the board sends, a comma-separated "
                        "list of map, counts, cycles (default all three; the MAP and its flags always "
@@ -447,7 +438,6 @@ def _confidence_summary(r: dict[str, object], f) -> str:  # noqa: ANN001
 
 def _cmd_reference(args: argparse.Namespace) -> int:
     model = model_params_from_args(args)
-    check_prior_options(args)
     left, right, _, _ = _load_inputs(args, with_gt=False)
     region = OutputRegion.of_model(left.shape, model)
     out = Path(args.output)
@@ -532,14 +522,18 @@ def _check_board_args(args: argparse.Namespace, model: ModelParams) -> None:
         raise ValueError("--engine board --feed words: the board takes the pair itself into its on-chip "
                          "front end (--feed pixels, which it runs); leave --feed out")
     args.feed = "pixels"  # the board takes the pair itself: its machine has the front end's lanes
-    from bayesmachine.fpga.boards.protocol import FIELDS_ALL, fields_from_names
+    check_pixel_engine_options("board", **_board_options(args))  # before any work
 
-    args.board_fields = FIELDS_ALL if args.board_fields is None else fields_from_names(args.board_fields)
+
+def _board_options(args: argparse.Namespace) -> dict[str, object]:
+    """The board engine's options given (the engine's own defaults for the others)."""
+    given = {"baud": args.baud, "timeout": args.board_timeout, "fields": args.board_fields,
+             "progress": False if args.quiet else None}
+    return {"port": args.port, **{k: v for k, v in given.items() if v is not None}}
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
     model = model_params_from_args(args)
-    check_prior_options(args)
     _check_board_args(args, model)
     machine = _machine_params(args, model)
     waves = _parse_waves(args.waves, args.engine)
@@ -568,37 +562,27 @@ def _cmd_run(args: argparse.Namespace) -> int:
     with OutputDir(args.output, RUN_OUTPUTS, last="report.json", writes=writes) as out:
         # The harness writes the trace under its temporary name; commit() renames it with the rest.
         engine_options = {} if waves is None else {"trace": (*waves, str(out.path("waves.vcd")))}
-        board: dict[str, object] | None = None
         if args.engine == "board":
-            from bayesmachine.fpga.boards.link import run_board
-
-            from .metrics import evaluate
-
-            prep = prepare(left, right, model, gt)
-            run, board = run_board(prep, machine, args.port, 3_000_000 if args.baud is None else args.baud,
-                                   timeout=2.0 if args.board_timeout is None else args.board_timeout,
-                                   progress=False if args.quiet else None, fields=args.board_fields)
-            outcome = RunOutcome(prep, run, evaluate(prep, run, sgbm=not args.no_sgbm, confidence=params))
-        else:
-            outcome = run_pair(
-                left,
-                right,
-                model,
-                machine,
-                engine=args.engine,
-                gt=gt,
-                progress=False if args.quiet else None,
-                sgbm=not args.no_sgbm,
-                engine_options=engine_options,
-                feed=args.feed,
-                machines=machines,
-                confidence=params,
-            )
+            engine_options = _board_options(args)
+        outcome = run_pair(
+            left,
+            right,
+            model,
+            machine,
+            engine=args.engine,
+            gt=gt,
+            progress=False if args.quiet else None,
+            sgbm=not args.no_sgbm,
+            engine_options=engine_options,
+            feed=args.feed,
+            machines=machines,
+            confidence=params,
+        )
         report = _report(outcome, source, args.crop)
         report["feed"] = args.feed
         report["machines"] = machines
-        if board is not None:
-            report["board"] = board  # the link: wall time, bytes each way, rates, attempts
+        if outcome.run.engine_figures is not None:
+            report[args.engine] = outcome.run.engine_figures  # the board's link: wall time, bytes, attempts
         _write_run_outputs(out, args, outcome, report, left, calib)
         out.write("report.json", lambda path: _write_json(path, report))
         written = out.commit()
@@ -610,9 +594,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 def _check_confidence_args(args: argparse.Namespace) -> None:
     """Options that need the counts, or the bundled pair, refused before anything runs."""
-    from bayesmachine.fpga.boards.protocol import FIELD_COUNTS
-
-    no_counts = args.engine == "board" and not args.board_fields & FIELD_COUNTS
+    fields = {name.strip() for name in (args.board_fields or "counts").split(",")}  # checked with the board's
+    no_counts = args.engine == "board" and "counts" not in fields
     if no_counts and args.min_confidence is not None:
         raise ValueError("--min-confidence: the board sends no counts with these --board-fields, so there is "
                          "no confidence to threshold (add counts)")
@@ -628,7 +611,7 @@ def _run_calibration(args: argparse.Namespace) -> StereoCalibration | None:
     if args.calib is None:
         return None
     path = bundled_calibration_path() if args.calib == BUNDLED_CALIB else Path(args.calib)
-    calib = read_calibration(path, args.calib_cameras or KITTI_CAMERAS)
+    calib = read_calibration(path, args.calib_cameras)
     return calib.for_input(args.input_shape, args.crop)
 
 
@@ -770,7 +753,6 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         raise ValueError("--workers sizes a local cluster and --scheduler names another one: "
                          "give one of them")
     points = sweep_points(args)  # every point validated before any input is read
-    check_prior_options(args)
     pairs, source, dataset = _sweep_pairs(args, points)
     workers = args.workers
     if workers is None:  # one pair: this process (its points share one prepared pair); a dataset: all cores

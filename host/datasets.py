@@ -42,7 +42,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from .calib import KITTI_CAMERAS, StereoCalibration, bundled_calibration_path, read_calibration
+from .calib import StereoCalibration, bundled_calibration_path, read_calibration
 from .images import Crop, bundled_pair, check_readable, crop_image, load_gt, load_image, opencv_quiet, to_gray
 
 __all__ = [
@@ -193,7 +193,7 @@ def load_calibration(spec: PairSpec) -> StereoCalibration | None:
     if spec.calib is None:
         return None
     path = bundled_calibration_path() if spec.calib == BUNDLED else spec.calib
-    calib = read_calibration(path, spec.calib_cameras or KITTI_CAMERAS)
+    calib = read_calibration(path, spec.calib_cameras)
     left = load_pair(spec)[0]
     return calib.for_input(left.shape)
 

@@ -1,6 +1,6 @@
 """The paper's three 5x5 feature filters, computed exactly from integer sums.
 
-Maps cover the model's map grid (``host.region``): (H-2k, W-2k) pixels for a model of margin
+Maps cover the model's map grid (``bayesmachine.region``): (H-2k, W-2k) pixels for a model of margin
 k (``ModelParams.margin``: 2 for the paper model, 3 with a 7x7 census), map pixel (y, x)
 centred on image pixel (y+k, x+k). We keep integer multiples of the features so that costs
 are exact:
@@ -25,8 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bayesmachine.likelihood import CENSUS_WINDOWS, MAX_ABS, SCALES, ModelParams
-
-from .region import FILTER_SIZE, MARGIN
+from bayesmachine.region import FILTER_SIZE, MARGIN
 
 __all__ = [
     "FeatureSums",

@@ -21,7 +21,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from .region import FILTER_SIZE, MARGIN, OutputRegion
+from bayesmachine.region import FILTER_SIZE, MARGIN, OutputRegion
 
 # FFmpeg (OpenCV's video back end) logs to stderr by itself ("moov atom not found" before our own
 # error line); it reads this once, at its first use. A user's own setting wins.

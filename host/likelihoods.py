@@ -38,9 +38,9 @@ from bayesmachine.likelihood import (
     right_lanes_valid,
 )
 from bayesmachine.params import MachineParams, ParameterError
+from bayesmachine.region import OutputRegion
 
 from .features import SCALES, FeatureSums
-from .region import OutputRegion
 
 __all__ = [
     "ModelParams",

@@ -24,6 +24,8 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from bayesmachine.region import MARGIN, OutputRegion
+
 from .confidence import (
     BAD_THRESHOLD,
     ECE_BINS,
@@ -36,7 +38,6 @@ from .confidence import (
     ranking_figures,
 )
 from .records import MachineRun, Prepared
-from .region import MARGIN, OutputRegion
 
 __all__ = [
     "RunMetrics",

@@ -8,11 +8,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from bayesmachine.params import MachineParams
+from bayesmachine.region import OutputRegion
 
 from .features import FeatureSums
 from .likelihoods import ModelParams
 from .reference import Reference, reference_bands
-from .region import OutputRegion
 
 __all__ = ["Prepared", "MachineRun", "RightPass", "counts_dtype"]
 
@@ -72,6 +72,7 @@ class MachineRun:
     words_seconds: float  # time building likelihood memories
     wall_cycles: int | None = None  # RTL engines: clock cycles including loading (None: model)
     right: RightPass | None = None  # census-lr: its right pass (the second machine run)
+    engine_figures: dict[str, object] | None = None  # what the engine says of the run (a board: its link's)
 
 
 @dataclass

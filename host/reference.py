@@ -47,11 +47,11 @@ import numpy as np
 
 from bayesmachine.likelihood import QuantizedTables, likelihood_formula, lr_column
 from bayesmachine.params import ParameterError
+from bayesmachine.region import OutputRegion
 
 from .features import FeatureSums, feature_sums, model_features
 from .images import validate_pair
 from .likelihoods import LikelihoodTables, ModelParams, likelihood_tables, likelihoods_plain, right_columns
-from .region import OutputRegion
 
 __all__ = [
     "Reference",

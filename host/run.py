@@ -28,7 +28,8 @@ from tqdm import tqdm
 from bayesmachine.likelihood import lr_column, neighbour_words, right_machine
 from bayesmachine.outputs import require_memory
 from bayesmachine.params import MachineParams
-from bayesmachine.sim.engines import ENGINES, get_engine
+from bayesmachine.region import OutputRegion
+from bayesmachine.sim.engines import ENGINES, PIXEL_ENGINES, get_engine, get_pixel_engine
 from bayesmachine.sim.results import MachineResult, disparities
 
 from .confidence import ConfidenceParams
@@ -45,7 +46,6 @@ from .likelihoods import (
 from .metrics import RunMetrics, evaluate, gt_region
 from .records import MachineRun, Prepared, RightPass, counts_dtype
 from .reference import reference_map, warm_up
-from .region import OutputRegion
 
 __all__ = [
     "ENGINES",
@@ -61,7 +61,7 @@ __all__ = [
 ]
 
 # How the machine is fed: the host's likelihood words (any engine), or the pixel pairs through the
-# on-chip front end (the StereoMachine RTL, Verilator only).
+# on-chip front end (the StereoMachine RTL: a pixel engine, sim.engines.PIXEL_ENGINES).
 FEEDS = ("words", "pixels")
 
 
@@ -116,7 +116,8 @@ def run_machine(
     """Stream the output pixels (row-major) through ``engine``, ``chunk_rows`` map rows per call.
 
     ``engine_options`` go to the engine's constructor (e.g. ``trace`` for ``verilator``).
-    ``feed="pixels"``: the pair itself goes into the StereoMachine (front end on chip; Verilator).
+    ``feed="pixels"``: the pair itself goes into the StereoMachine (front end on chip), through the
+    pixel engine ``engine`` (``verilator``, or ``board``: :data:`~bayesmachine.sim.engines.PIXEL_ENGINES`).
     A neighbour-prior machine runs one map row per call whatever ``chunk_rows`` (its above column
     needs the previous row's results; see the module's text).
     ``machines`` = K > 1: map row y runs on machine y mod K (``feed="pixels"``: the StereoMachine
@@ -258,20 +259,19 @@ def _run_pixels(
     prepared: Prepared, machine: MachineParams, engine: str, engine_options: dict[str, object] | None,
     machines: int = 1,
 ) -> MachineRun:
-    """The whole pair through the StereoMachine RTL: pixels in, one result per output pixel out."""
-    if engine != "verilator":
-        raise ValueError(f"--feed pixels runs the StereoMachine RTL under Verilator: use --engine verilator "
+    """The whole pair through a pixel engine (the StereoMachine RTL under Verilator, or on a board):
+    pixels in, one result per output pixel out."""
+    if engine not in PIXEL_ENGINES:
+        raise ValueError(f"--feed pixels runs the StereoMachine RTL: use --engine verilator (or board) "
                          f"(got --engine {engine})")
-    from bayesmachine.sim.stereo_engine import StereoVerilatorEngine
-
     model = prepared.model
-    eng = StereoVerilatorEngine(machine, model, prepared.left.shape[1], machines=machines,
-                                **(engine_options or {}))
+    options = dict(engine_options or {}, **({"machines": machines} if machines != 1 else {}))
+    eng = get_pixel_engine(engine, machine, model, prepared.left.shape[1], **options)
     try:
         t0 = time.perf_counter()
         res = eng.run(prepared.left, prepared.right)
         seconds = time.perf_counter() - t0
-        wall = eng.wall_cycles
+        wall, figures, r = eng.wall_cycles, eng.figures, eng.last_right
     finally:
         eng.close()
     ho, wo = prepared.shape
@@ -279,22 +279,24 @@ def _run_pixels(
     timeout = res.timeout.reshape(ho, wo)
     nomatch = res.nomatch.reshape(ho, wo)
     disp = disparities(res.map.reshape(ho, wo), nomatch, timeout)
-    counts = res.counts.reshape(ho, wo, m).astype(counts_dtype(machine.counter_max))
+    # A board asked for the MAP alone sent no counts or cycles: absent, never made up.
+    dtype = counts_dtype(machine.counter_max)
+    counts = None if res.counts is None else res.counts.reshape(ho, wo, m).astype(dtype)
+    cycles = None if res.cycles is None else res.cycles.reshape(ho, wo)
     right = None
     if model.lr:
         # The right pass ran on chip beside the left one (its own machine, the same clock): it adds no
         # wall cycles of its own, the frame's (first pixel in to last result out) are both passes'.
         from bayesmachine.hdl.frontend.lr import right_pass_params
 
-        r = eng.last_right
         assert r is not None
         wr = r.map.size // ho
         r_timeout = r.timeout.reshape(ho, wr)
         r_map = r.disparities().reshape(ho, wr)
         right = RightPass(right_pass_params(model, machine), r_map, r.cycles.reshape(ho, wr), r_timeout,
                           seconds, 0)
-    return MachineRun("verilator", machine, disp, counts, res.cycles.reshape(ho, wo),
-                      nomatch, timeout, seconds, 0.0, wall, right)
+    return MachineRun(engine, machine, disp, counts, cycles, nomatch, timeout, seconds, 0.0, wall, right,
+                      figures)
 
 
 def machines_model(

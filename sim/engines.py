@@ -22,19 +22,39 @@ A run cut short (its numbers ran out) leaves pixels in flight: every engine then
 run (:class:`EngineStateError`) until ``reset()``.
 
 - ``model``: the NumPy/numba machine model (the definition; whole frames in seconds).
-- ``pysim``: the RTL in Amaranth's Python simulator (hundreds of cycles per second: crops).
+- ``pysim``: the RTL in Amaranth's Python simulator (about 100 clock cycles per CPU second for the
+  Dmax = 80 machine, a few thousand for a Dmax = 8 one: ``benchmarks/bench_pysim.py``; crops).
 - ``verilator``: the emitted Verilog compiled with Verilator (whole frames, cycle-accurate RTL).
+
+**Pixel engines** (:class:`PixelEngine`, through :class:`PixelEngineBase`) take the rectified pair
+itself: the front end on chip computes the words (``--feed pixels``).
+
+- ``run(left, right) -> MachineResult``: one frame ((H, width) uint8 each, H >= 2k + 1 for the
+  model's margin k); the results of its output region (:class:`~bayesmachine.region.OutputRegion`),
+  row-major, bit for bit the model's on the host's words of the frame. ``last_right``: census-lr's
+  right pass of the last frame (None without one). ``reset()``, ``close()``, ``wall_cycles`` and the
+  errors as above; ``figures``: what the engine says of its runs beyond the results (None).
+- ``verilator``: the ``StereoMachine`` compiled with Verilator; frames run back to back (the
+  machine's random sources carry over).
+- ``board``: a board running the ``StereoMachine`` (or ``bayesmachine board simulate``) over its
+  serial link; it resets the machine at every frame. Its ``figures`` are the link's.
+
+The registry maps each name to its class's import path, imported when asked for: ``sim`` imports
+neither ``fpga`` (the board's engine) nor an engine's tools before they are needed.
 """
 
 from __future__ import annotations
 
 import contextlib
+import importlib
 from collections.abc import Iterator
 from typing import TYPE_CHECKING, ClassVar, Protocol, TypeVar
 
 import numpy as np
 
+from bayesmachine.likelihood import ModelParams
 from bayesmachine.params import MachineParams
+from bayesmachine.region import OutputRegion
 from bayesmachine.sim.results import (
     ArrayNumbers,
     EngineClosedError,
@@ -49,10 +69,22 @@ from bayesmachine.sources import SOURCE_KINDS
 if TYPE_CHECKING:
     from bayesmachine.sources import NumberSource
 
-__all__ = ["ENGINES", "Engine", "EngineBase", "EngineClosedError", "EngineLifecycle", "EngineStateError",
-           "get_engine"]
+__all__ = ["ENGINES", "PIXEL_ENGINES", "Engine", "EngineBase", "EngineClosedError", "EngineLifecycle",
+           "EngineStateError", "PixelEngine", "PixelEngineBase", "check_engine_options",
+           "check_pixel_engine_options", "get_engine", "get_pixel_engine"]
 
-ENGINES = ("model", "pysim", "verilator")
+# The registry: each engine's class, as "module:Class" (imported when asked for).
+_WORD_ENGINES = {
+    "model": "bayesmachine.sim.model:MachineModel",
+    "pysim": "bayesmachine.sim.pysim:PysimEngine",
+    "verilator": "bayesmachine.sim.verilator:VerilatorEngine",
+}
+_PIXEL_ENGINES = {
+    "verilator": "bayesmachine.sim.stereo_engine:StereoVerilatorEngine",
+    "board": "bayesmachine.fpga.boards.engine:BoardEngine",
+}
+ENGINES = tuple(_WORD_ENGINES)
+PIXEL_ENGINES = tuple(_PIXEL_ENGINES)
 
 _E = TypeVar("_E", bound="EngineLifecycle")
 
@@ -203,20 +235,107 @@ class EngineBase(EngineLifecycle):
         super().reset()
 
 
-def _engine_class(name: str) -> type[EngineBase]:
-    if name == "model":
-        from bayesmachine.sim.model import MachineModel
+class PixelEngine(Protocol):
+    @property
+    def params(self) -> MachineParams: ...
 
-        return MachineModel
-    if name == "pysim":
-        from bayesmachine.sim.pysim import PysimEngine
+    @property
+    def model(self) -> ModelParams: ...
 
-        return PysimEngine
-    if name == "verilator":
-        from bayesmachine.sim.verilator import VerilatorEngine
+    @property
+    def width(self) -> int: ...
 
-        return VerilatorEngine
-    raise ValueError(f"unknown engine {name!r}: choose one of {', '.join(ENGINES)}")
+    def run(self, left: np.ndarray, right: np.ndarray) -> MachineResult: ...
+
+    @property
+    def last_right(self) -> MachineResult | None: ...
+
+    @property
+    def figures(self) -> dict[str, object] | None: ...
+
+    def reset(self) -> None: ...
+
+    def close(self) -> None: ...
+
+    @property
+    def wall_cycles(self) -> int | None: ...
+
+
+class PixelEngineBase(EngineLifecycle):
+    """What the pixel engines share: the machine, the model and the line width they were built for,
+    and the one check of a frame (:meth:`_check_frame`, the same errors in every engine).
+
+    A subclass's ``run(left, right)`` calls :meth:`_check_open` and :meth:`_check_frame`, then runs
+    inside ``with self._in_flight():``.
+    """
+
+    name: ClassVar[str] = ""
+    OPTIONS: ClassVar[tuple[str, ...]] = ()  # the constructor's keyword options (get_pixel_engine checks)
+
+    def __init__(self, params: MachineParams, model: ModelParams, width: int) -> None:
+        if not isinstance(params, MachineParams):
+            raise TypeError(f"an engine takes a MachineParams, not {type(params).__name__}")
+        if not isinstance(model, ModelParams):
+            raise TypeError(f"a pixel engine takes a ModelParams, not {type(model).__name__}")
+        super().__init__()
+        self._params, self._model, self._width = params, model, width
+        self.last_right: MachineResult | None = None
+
+    @property
+    def params(self) -> MachineParams:
+        return self._params
+
+    @property
+    def model(self) -> ModelParams:
+        return self._model
+
+    @property
+    def width(self) -> int:
+        return self._width
+
+    @property
+    def figures(self) -> dict[str, object] | None:
+        """What the engine reports of its runs beyond the results (the board: its link's figures)."""
+        return None
+
+    @classmethod
+    def check_options(cls, **options: object) -> None:
+        """TypeError/ValueError naming a bad constructor option, before any work (the constructor
+        checks them again)."""
+
+    def _check_frame(self, left: np.ndarray, right: np.ndarray) -> OutputRegion:
+        """ValueError naming the problem unless ``left``, ``right`` are a frame this engine takes; the
+        frame's output region."""
+        for name, image in (("left", left), ("right", right)):
+            image = np.asarray(image)
+            if image.ndim != 2 or image.dtype != np.uint8:
+                raise ValueError(f"{name} image must be 2-D uint8 gray, got {image.dtype} {image.shape}")
+        if left.shape != right.shape:
+            raise ValueError(f"left and right images differ in shape: {left.shape} vs {right.shape}")
+        height, width = left.shape
+        if width != self._width:
+            raise ValueError(f"this stereo machine was built for {self._width}-pixel lines, the frame has "
+                             f"{width}")
+        k = self._model.margin  # the output region's: every window inside the frame
+        if height < 2 * k + 1:
+            raise ValueError(f"a frame needs at least {2 * k + 1} lines for the model's "
+                             f"{2 * k + 1}x{2 * k + 1} windows, got {height}")
+        return OutputRegion.of_model(left.shape, self._model)
+
+
+def _load(registry: dict[str, str], name: str, kind: str) -> type:
+    if name not in registry:
+        raise ValueError(f"unknown {kind} {name!r}: choose one of {', '.join(registry)}")
+    module, _, cls = registry[name].partition(":")
+    return getattr(importlib.import_module(module), cls)
+
+
+def check_engine_options(cls: type, name: str, options: dict[str, object]) -> None:
+    """ValueError unless ``cls`` (an engine class of the registry) takes every keyword of ``options``."""
+    unknown = sorted(set(options) - set(cls.OPTIONS))  # type: ignore[attr-defined]
+    if unknown:
+        takes = ", ".join(cls.OPTIONS) if cls.OPTIONS else "no options"  # type: ignore[attr-defined]
+        raise ValueError(f"engine {name!r} does not take option(s) {', '.join(unknown)}; it takes {takes}")
 
 
 def get_engine(name: str, params: MachineParams, **options: object) -> Engine:
@@ -224,9 +343,23 @@ def get_engine(name: str, params: MachineParams, **options: object) -> Engine:
 
     ``options`` go to the engine's constructor; one it does not take is a ``ValueError``.
     """
-    cls = _engine_class(name)
-    unknown = sorted(set(options) - set(cls.OPTIONS))
-    if unknown:
-        takes = ", ".join(cls.OPTIONS) if cls.OPTIONS else "no options"
-        raise ValueError(f"engine {name!r} does not take option(s) {', '.join(unknown)}; it takes {takes}")
+    cls = _load(_WORD_ENGINES, name, "engine")
+    check_engine_options(cls, name, options)
     return cls(params, **options)
+
+
+def check_pixel_engine_options(name: str, **options: object) -> None:
+    """ValueError (or TypeError) unless the pixel engine ``name`` takes ``options``: for a command
+    line to refuse a bad option before any work."""
+    cls = _load(_PIXEL_ENGINES, name, "pixel engine")
+    check_engine_options(cls, name, options)
+    cls.check_options(**options)
+
+
+def get_pixel_engine(name: str, params: MachineParams, model: ModelParams, width: int,
+                     **options: object) -> PixelEngine:
+    """A fresh pixel engine by name, one of :data:`PIXEL_ENGINES`, for frames of ``width``-pixel
+    lines; ``options`` go to its constructor (one it does not take is a ``ValueError``)."""
+    cls = _load(_PIXEL_ENGINES, name, "pixel engine")
+    check_engine_options(cls, name, options)
+    return cls(params, model, width, **options)

@@ -8,9 +8,9 @@ lives as long as the engine: the LFSR states (and the cycle count) carry over fr
 be run in chunks. Between calls the simulation just stops advancing; the machine is idle
 (no compute cycles), so nothing changes.
 
-Throughput is a few hundred to a few thousand cycles per second depending on the machine size
-(about 1,000-1,500/s for the full Dmax = 80 machine on a 2-core machine): crops and tests,
-not whole frames.
+Throughput falls with the machine's size: about 100 clock cycles per CPU second for the full
+Dmax = 80 machine, a few thousand for a Dmax = 8 one (``benchmarks/bench_pysim.py``): crops and
+tests, not whole frames.
 """
 
 from __future__ import annotations

@@ -49,6 +49,7 @@ _DTYPES = {"counts": np.uint32, "map": np.int32, "nomatch": np.bool_, "timeout":
 class MachineResult:
     """Per-pixel results, in load order. Build it by keyword: the field order is the layout's business."""
 
+    # counts, cycles: None only from the board's engine asked for the MAP without them
     counts: np.ndarray  # (P, rows) uint32: overflow counters at the stop (winner = n_max)
     map: np.ndarray  # (P,) int32: MAP row index (0 on timeout)
     nomatch: np.ndarray  # (P,) bool: the no-match row won

@@ -41,7 +41,7 @@ import numpy as np
 from bayesmachine.hdl.signatures import pixel_in_layout
 from bayesmachine.likelihood import ModelParams
 from bayesmachine.params import MachineParams
-from bayesmachine.sim.engines import EngineLifecycle
+from bayesmachine.sim.engines import PixelEngineBase
 from bayesmachine.sim.results import MachineResult, NumberFeed, decode_results, layout_fields, result_words
 from bayesmachine.sim.verilator import VerilatorError, cache_dir, find_toolchain
 from bayesmachine.sim.verilator.build import HarnessSources, VerilatorBuild, build_design, cached_verilog
@@ -81,7 +81,7 @@ def stereo_header(params: MachineParams, model: ModelParams, width: int, signatu
                                generator="bayesmachine.sim.stereo_engine")
     return prologue + f"""static const unsigned WIDTH = {width};
 static const unsigned DMAX = {model.dmax};
-static const unsigned MARGIN = {model.margin};  // the output region's (host.region)
+static const unsigned MARGIN = {model.margin};  // the output region's (bayesmachine.region)
 static const unsigned LEFT_OFFSET = {pix["left"][0]}, RIGHT_OFFSET = {pix["right"][0]};
 static const unsigned FIRST_OFFSET = {pix["first"][0]};
 {right}{external}"""
@@ -127,9 +127,10 @@ def build_stereo_harness(
     return build_design(design, build_dir=root, **options)
 
 
-class StereoVerilatorEngine(HarnessProcess, EngineLifecycle):
-    """Pixel pairs through the compiled ``StereoMachine``; results as ``MachineModel`` gives them
-    for the host's words of the same frames.
+class StereoVerilatorEngine(HarnessProcess, PixelEngineBase):
+    """Pixel pairs through the compiled ``StereoMachine`` (the pixel engine ``verilator``,
+    :class:`~bayesmachine.sim.engines.PixelEngine`); results as ``MachineModel`` gives them for the
+    host's words of the same frames.
 
     ``run(left, right)``: one frame ((H, width) uint8 each, H >= 2k + 1 for the model's margin k);
     returns the results of its (H - 2k) x (width - 2k - Dmax) output pixels, row-major. The
@@ -142,6 +143,7 @@ class StereoVerilatorEngine(HarnessProcess, EngineLifecycle):
     """
 
     name = "verilator"
+    OPTIONS = ("fifo_pixels", "build_dir", "jobs", "verbose", "machines")
 
     def __init__(
         self,
@@ -159,14 +161,10 @@ class StereoVerilatorEngine(HarnessProcess, EngineLifecycle):
         if not kind.on_chip and kind.numbers is None:
             raise ValueError(f"--feed pixels feeds an off-chip source from its device model; rng = "
                              f"{params.rng!r} has none (its numbers come from the caller)")
-        super().__init__()
+        super().__init__(params, model, width)  # last_right: census-lr's last frame's right-pass results
         self._kind = kind
         self._feed = NumberFeed(params)
-        self.params = params
-        self.model = model
-        self.width = width
         self.machines = machines
-        self.last_right: MachineResult | None = None  # census-lr: the last frame's right-pass results
         self._args: list[str] = []
         self.build = build_stereo_harness(params, model, width, fifo_pixels=fifo_pixels, build_dir=build_dir,
                                           machines=machines, jobs=jobs, verbose=verbose)
@@ -174,22 +172,9 @@ class StereoVerilatorEngine(HarnessProcess, EngineLifecycle):
 
     def run(self, left: np.ndarray, right: np.ndarray) -> MachineResult:
         self._check_open()
-        for name, image in (("left", left), ("right", right)):
-            image = np.asarray(image)
-            if image.ndim != 2 or image.dtype != np.uint8:
-                raise ValueError(f"{name} image must be 2-D uint8 gray, got {image.dtype} {image.shape}")
-        if left.shape != right.shape:
-            raise ValueError(f"left and right images differ in shape: {left.shape} vs {right.shape}")
+        n = self._check_frame(left, right).pixels
         height, width = left.shape
-        if width != self.width:
-            raise ValueError(
-                f"this stereo machine was built for {self.width}-pixel lines, the frame has {width}"
-            )
-        k = self.model.margin  # the output region's (host.region): every window inside the frame
-        if height < 2 * k + 1:
-            raise ValueError(f"a frame needs at least {2 * k + 1} lines for the model's "
-                             f"{2 * k + 1}x{2 * k + 1} windows, got {height}")
-        n = (height - 2 * k) * (width - 2 * k - self.model.dmax)
+        k = self.model.margin
         pairs = np.stack([left, right], axis=-1).astype(np.uint8)
         with self._in_flight():
             proc = self._start()

@@ -112,7 +112,7 @@ def _simulate(dut: object, source: object, sink_stream: object, beats: list[int]
 
 
 def output_pixels(frames: Sequence[tuple[np.ndarray, np.ndarray]], model: ModelParams) -> int:
-    """The output pixels of ``frames`` for ``model`` (its output region's, ``host.region``)."""
+    """The output pixels of ``frames`` for ``model`` (its output region's, ``bayesmachine.region``)."""
     k = model.margin
     return sum((lf.shape[0] - 2 * k) * (lf.shape[1] - 2 * k - model.dmax) for lf, _ in frames)
 

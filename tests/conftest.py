@@ -120,6 +120,14 @@ def assert_same_results(got: MachineResult, want: MachineResult) -> None:
             pytest.fail(f"{field} differs at pixels {bad[:10].tolist()}: pixel {i}: got {a[i]}, model {b[i]}")
 
 
+def frame_results(params: MachineParams, model: object, left: np.ndarray, right: np.ndarray) -> MachineResult:
+    """The machine model's results for one frame from reset, on the host's words: what a board's
+    StereoMachine computes (``BoardTwin``'s ``results``)."""
+    from bayesmachine.host.run import machines_model
+
+    return machines_model([(left, right)], model, params)  # type: ignore[arg-type]
+
+
 def small_params(**kwargs: object) -> MachineParams:
     """A small machine (5 rows x 2 columns, W = 4, L = 12) that runs fast in the simulator."""
     base: dict[str, object] = dict(

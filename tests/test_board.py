@@ -8,12 +8,13 @@ import struct
 
 import numpy as np
 import pytest
+from conftest import frame_results
 
 from bayesmachine.cli import main
 from bayesmachine.fpga.boards import protocol as pr
 from bayesmachine.fpga.boards.core import check_board
 from bayesmachine.fpga.boards.link import BoardError, BoardLink
-from bayesmachine.fpga.boards.twin import BoardTwin, frame_results
+from bayesmachine.fpga.boards.twin import BoardTwin
 from bayesmachine.fpga.boards.ulx3s import pll_config
 from bayesmachine.hdl.frontend.stereo import stereo_machine_params
 from bayesmachine.host.images import bundled_pair
@@ -25,6 +26,11 @@ WIDTH = DMAX + 12
 HEIGHT = 12
 PARAMS = stereo_machine_params(DMAX)
 MODEL = ModelParams(dmax=DMAX)
+
+
+def _twin(width: int = WIDTH) -> BoardTwin:
+    return BoardTwin(PARAMS, MODEL, width,
+                     results=lambda left, right: frame_results(PARAMS, MODEL, left, right))
 
 
 def _crop(x: int = 300, y: int = 200) -> tuple[np.ndarray, np.ndarray]:
@@ -139,7 +145,7 @@ def test_result_format_round_trip(fields: int) -> None:
 
 
 def test_twin_answers_info_and_refuses_bad_headers() -> None:
-    twin = BoardTwin(PARAMS, MODEL, WIDTH)
+    twin = _twin()
     hello = pr.decode_record(twin.reset())
     assert hello is not None and hello.kind == pr.HELLO
     info = pr.parse_info(pr.decode_record(twin.feed(b"junk" + pr.encode_record(pr.INFO, 9))).payload)
@@ -157,7 +163,7 @@ def test_twin_answers_info_and_refuses_bad_headers() -> None:
 @pytest.mark.parametrize("fields", [pr.FIELDS_ALL, 0])
 def test_link_gives_the_model_results(fields: int) -> None:
     left, right = _crop()
-    port = TwinPort(BoardTwin(PARAMS, MODEL, WIDTH))
+    port = TwinPort(_twin())
     link = _link(port)
     out = link.run_frame(left, right, PARAMS, MODEL, fields)
     _assert_model(out, left, right, fields)
@@ -181,7 +187,7 @@ def test_link_recovers_from_a_fault(fault: dict, reason: str) -> None:
     """A garbled, dropped byte or a board reset fails the attempt (saying why), the frame is sent
     again and the results are the model's."""
     left, right = _crop()
-    port = TwinPort(BoardTwin(PARAMS, MODEL, WIDTH), **fault)
+    port = TwinPort(_twin(), **fault)
     link = _link(port)
     link.info()
     out = link.run_frame(left, right, PARAMS, MODEL)
@@ -194,7 +200,7 @@ def test_link_never_accepts_a_frame_that_keeps_failing() -> None:
     left, right = _crop()
     step = pr.RECORD_BYTES + 2 * WIDTH * HEIGHT + 4  # one attempt's bytes, after the info request's
     port = TwinPort(
-        BoardTwin(PARAMS, MODEL, WIDTH), garble=[pr.RECORD_BYTES + 100 + k * step for k in range(8)]
+        _twin(), garble=[pr.RECORD_BYTES + 100 + k * step for k in range(8)]
     )
     link = _link(port)
     link.info()
@@ -203,14 +209,14 @@ def test_link_never_accepts_a_frame_that_keeps_failing() -> None:
 
 
 def test_link_says_when_the_board_does_not_answer() -> None:
-    port = TwinPort(BoardTwin(PARAMS, MODEL, WIDTH), mute=True)
+    port = TwinPort(_twin(), mute=True)
     with pytest.raises(BoardError, match="did not answer within"):
         _link(port).info()
 
 
 def test_link_refuses_a_frame_of_another_width() -> None:
     left, right = _crop()
-    port = TwinPort(BoardTwin(PARAMS, MODEL, WIDTH + 2))
+    port = TwinPort(_twin(WIDTH + 2))
     with pytest.raises(BoardError, match=f"built for {WIDTH + 2}-pixel lines"):
         _link(port).run_frame(left, right, PARAMS, MODEL)
 
@@ -262,7 +268,7 @@ def test_cli_board_fields_map_only(tmp_path, monkeypatch) -> None:
     ports: list[TwinPort] = []
 
     def open_twin(port: str, baud: int, timeout: float = 2.0) -> TwinPort:
-        ports.append(TwinPort(BoardTwin(PARAMS, MODEL, WIDTH)))
+        ports.append(TwinPort(_twin()))
         ports[-1].close = lambda: None
         return ports[-1]
 
@@ -332,11 +338,11 @@ def test_board_build_routes_with_router1_by_default(extra: list[str], router: st
     assert not (out / "report.json").exists()  # stopped before the end: nothing half-written
 
 
-def _twin_on_port(monkeypatch, params, model=MODEL) -> None:
+def _twin_on_port(monkeypatch) -> None:
     from bayesmachine.fpga.boards import link as link_mod
 
     def open_twin(port: str, baud: int, timeout: float = 2.0) -> TwinPort:
-        port = TwinPort(BoardTwin(params, model, WIDTH))
+        port = TwinPort(_twin())
         port.close = lambda: None
         return port
 
@@ -371,7 +377,7 @@ def test_board_simulate_writes_its_report_and_a_run_names_the_options_that_diffe
     report = json.loads((out / "report.json").read_text())
     assert report["fingerprint"] == f"{pr.board_fingerprint(PARAMS.to_dict(), MODEL.to_dict(), WIDTH):08x}"
     assert report["machine"] == PARAMS.to_dict() and report["port"] == "/dev/pts/stand-in"
-    _twin_on_port(monkeypatch, PARAMS)
+    _twin_on_port(monkeypatch)
     run = ["run", "--crop", f"400,250,{WIDTH},{HEIGHT}", "--dmax", str(DMAX), "--model", "paper", "--no-sgbm",
            "--quiet", "--engine", "board", "--port", "twin"]
     assert main([*run, "--counter-max", "4", "--seed", "7", "-o", str(tmp_path / "r")]) == 2

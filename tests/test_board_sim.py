@@ -13,11 +13,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import require_tool
+from conftest import frame_results, require_tool
 
 from bayesmachine.fpga.boards import protocol as pr
 from bayesmachine.fpga.boards.link import BoardLink
-from bayesmachine.fpga.boards.twin import BoardTwin, frame_results
+from bayesmachine.fpga.boards.twin import BoardTwin
 from bayesmachine.hdl.frontend.stereo import stereo_machine_params
 from bayesmachine.host.images import bundled_pair
 from bayesmachine.likelihood import ModelParams
@@ -85,7 +85,9 @@ def test_rtl_bytes_equal_the_twin(board) -> None:
         + pixels
         + (pr.crc32(pixels) ^ 1).to_bytes(4, "little")
     )
-    want = BoardTwin(PARAMS, MODEL, WIDTH, rx_fifo_log2=11).feed(stream)
+    twin = BoardTwin(PARAMS, MODEL, WIDTH, rx_fifo_log2=11,
+                     results=lambda left, right: frame_results(PARAMS, MODEL, left, right))
+    want = twin.feed(stream)
     with _open(board) as port:
         port.write(stream)
         got = _read_until_quiet(port)

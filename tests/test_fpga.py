@@ -11,6 +11,7 @@ from conftest import assert_same_results, require_tool, run_sim, small_params
 
 from bayesmachine.fpga.wrapper import PinWrapper
 from bayesmachine.hdl.machine import BayesianMachine
+from bayesmachine.host.throughput import measure_cycles
 from bayesmachine.params import MachineParams, ParameterError
 from bayesmachine.sim.model import MachineModel
 from bayesmachine.sim.packing import pack_beats
@@ -217,7 +218,7 @@ def test_small_machine_through_the_flow(target: str, rng: str, tmp_path: Path) -
     _require_fpga_tools(target)
     params = MachineParams.for_disparity(2, counter_max=3, word_bits=6, lfsr_bits=12, rng=rng)
     out = tmp_path / "out"
-    report = synth(params, target, out, measure=False, progress=False)
+    report = synth(params, target, out, progress=False)
     assert json.loads((out / "report.json").read_text()) == report
     assert (out / "report.md").read_text().startswith(f"# bayesmachine synth: {target}")
     # No temporary files left; the manifest lists what synth committed (a rerun removes only those).
@@ -251,7 +252,7 @@ def test_small_stereo_machine_through_yosys(tmp_path: Path) -> None:
     params = stereo_machine_params(dmax, counter_max=3)
     out = tmp_path / "out"
     report = synth(params, "ecp5-25k", out, place=False, progress=False, width=width,
-                   model=ModelParams(dmax=dmax), fifo_pixels=2)
+                   model=ModelParams(dmax=dmax), fifo_pixels=2, measure=measure_cycles)
     assert json.loads((out / "report.json").read_text()) == report
     assert report["top"] == "stereo" and report["machines"] == 1 and report["fmax_mhz"] is None
     st = report["stereo"]
@@ -323,7 +324,7 @@ def test_synth_command_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]
 
     out = tmp_path / "never"
     with pytest.raises(ValueError, match="disparity machine"):  # refused before any tool runs
-        synth(small_params(nomatch_row=False), "ice40-hx8k", out, progress=False)
+        synth(small_params(nomatch_row=False), "ice40-hx8k", out, progress=False, measure=measure_cycles)
     assert not out.exists()
 
 
@@ -366,7 +367,7 @@ def test_full_lane_on_ecp5_85k(tmp_path: Path) -> None:
 
     _require_fpga_tools("ecp5-85k")
     params = MachineParams.for_disparity(80)
-    report = synth(params, "ecp5-85k", tmp_path / "out", measure=True, progress=False)
+    report = synth(params, "ecp5-85k", tmp_path / "out", measure=measure_cycles, progress=False)
     assert report["resources"]["ff"] >= params.operators * (2 * params.memory_word_width + 1)
     assert report["fmax_mhz"] > 50
     assert report["machines_fit"] >= 1
@@ -390,7 +391,8 @@ def test_census_machine_through_yosys_with_its_throughput(tmp_path: Path) -> Non
     params = disparity_machine(model, counter_max=3)
     assert (params.prior, params.operator_columns) == ("neighbour", 6)
     out = tmp_path / "out"
-    report = synth(params, "ecp5-25k", out, place=False, progress=False, model=model)
+    report = synth(params, "ecp5-25k", out, place=False, progress=False, model=model,
+                   measure=measure_cycles)
     assert json.loads((out / "report.json").read_text()) == report
     # Loaded words in two memories, the feedback column in the active one, a prefetched bit each.
     res = report["resources"]
@@ -400,7 +402,7 @@ def test_census_machine_through_yosys_with_its_throughput(tmp_path: Path) -> Non
     assert tp["wall_cycles_per_pixel"] >= tp["compute_cycles_per_pixel"] + 2
     # The paper model's words do not fit this machine: refused before any work.
     with pytest.raises(ValueError, match="columns"):
-        synth(params, "ecp5-25k", tmp_path / "bad", place=False, progress=False)
+        synth(params, "ecp5-25k", tmp_path / "bad", place=False, progress=False, measure=measure_cycles)
     assert not (tmp_path / "bad").exists()
 
 

@@ -33,9 +33,9 @@ from bayesmachine.host.likelihoods import (
     right_columns,
     right_memory_words,
 )
-from bayesmachine.host.region import OutputRegion
 from bayesmachine.likelihood import lr_column, lr_consistent, lr_unknown, neighbour_words, right_machine
 from bayesmachine.params import ParameterError
+from bayesmachine.region import OutputRegion
 from bayesmachine.sim.model import MachineModel
 from bayesmachine.sim.results import MachineResult
 from bayesmachine.sim.stereo_testbench import run_frontend_lr, run_stereo_lr

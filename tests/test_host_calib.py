@@ -138,9 +138,12 @@ def test_cloud_points_are_at_the_calibrated_depth(tmp_path) -> None:
     (["--calib", "{tmp}/small.txt"], "the calibration is for 640x480 images, the pair is 741x500"),
     (["--calib-cameras", "0,1"], "--calib-cameras: it picks a KITTI --calib file's matrices"),
     (["--calib", "bundled", "--calib-cameras", "2,2"], "expected two different KITTI cameras"),
+    (["--calib", "bundled", "--calib-cameras", "0,1"], "cameras 0,1 pick a KITTI calibration's matrices"),
+    (["--calib", "{tmp}/cam.json", "--calib-cameras", "0,1"], "this file is not a KITTI calibration"),
 ])
 def test_calibration_errors_are_one_line(tmp_path, capsys, extra, message) -> None:
     (tmp_path / "small.txt").write_text(MIDDLEBURY)
+    (tmp_path / "cam.json").write_text('{"fx": 995, "fy": 995, "cx": 311, "cy": 255, "baseline": 0.193}')
     argv = ["run", "--crop", "300,150,130,32", "--dmax", "64", "--model", "census", "--no-sgbm", "--quiet",
             *(e.format(tmp=tmp_path) for e in extra), "-o", str(tmp_path / "o")]
     assert main(argv) == 2

@@ -25,7 +25,6 @@ from bayesmachine.host.reference import (
     reference_quantized_map,
     right_reference_map,
 )
-from bayesmachine.host.region import OutputRegion
 from bayesmachine.host.run import prepare, run_machine
 from bayesmachine.likelihood import (
     ModelParams,
@@ -40,6 +39,7 @@ from bayesmachine.likelihood import (
     right_machine,
 )
 from bayesmachine.params import ParameterError, nth_machine
+from bayesmachine.region import OutputRegion
 from bayesmachine.sim.engines import get_engine
 
 DMAX = 6

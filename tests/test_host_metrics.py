@@ -15,7 +15,7 @@ from bayesmachine.host.metrics import (
     sgbm_disparity,
     sgbm_numdisparities,
 )
-from bayesmachine.host.region import OutputRegion
+from bayesmachine.region import OutputRegion
 
 
 def test_f1():

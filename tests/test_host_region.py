@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from bayesmachine.host.features import feature_sums
-from bayesmachine.host.region import OutputRegion
+from bayesmachine.region import OutputRegion
 
 
 def test_vga_geometry():

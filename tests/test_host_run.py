@@ -128,7 +128,7 @@ def test_run_never_holds_more_than_a_band_of_posterior(pair, monkeypatch):
     """With bands of ~100 pixels, every posterior the host computes is one band, and the figures
     equal those of one big band."""
     import bayesmachine.host.reference as reference_module
-    import bayesmachine.host.region as region_module
+    import bayesmachine.region as region_module
 
     left, right, gt = pair
     model = ModelParams(dmax=DMAX)

@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 from bayesmachine.cliargs import (
+    DEFAULT_BAUD,
     add_dmax_option,
     add_machine_options,
     add_model_options,
@@ -20,14 +21,13 @@ from bayesmachine.cliargs import (
     output_path,
 )
 from bayesmachine.fpga.flow import ROUTERS
+from bayesmachine.hdl.frontend import DEFAULT_WIDTH
 
 from .build import DEFAULT_BOARD_ROUTER, DEFAULT_BOARD_SEED
 from .link import record_design
 from .ulx3s import BOARDS
 
 __all__ = ["register"]
-
-DEFAULT_WIDTH = 640
 
 
 def _design_options(p: argparse.ArgumentParser) -> None:
@@ -58,13 +58,11 @@ def _design(args: argparse.Namespace):  # noqa: ANN202
     """(machine, model, width) the options describe, checked (one clear error)."""
     import dataclasses
 
-    from bayesmachine.host.cli import check_prior_options
     from bayesmachine.params import stereo_words_per_beat
 
     from .core import check_board
 
-    model = model_params_from_args(args)  # census options with --model paper: refused first, there
-    check_prior_options(args)
+    model = model_params_from_args(args)
     machine = machine_params_from_args(args, args.dmax, model=model)
     if args.words_per_beat is None:
         machine = dataclasses.replace(machine, words_per_beat=stereo_words_per_beat(machine))
@@ -99,7 +97,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         metavar="MHZ",
         help="the design's clock from the PLL (default 45: 3 Mbaud in 15 clocks per bit)",
     )
-    b.add_argument("--baud", type=int_arg, default=None, help="UART baud rate (default 3000000)")
+    b.add_argument("--baud", type=int_arg, default=None, help=f"UART baud rate (default {DEFAULT_BAUD})")
     b.add_argument("--pnr-seed", type=int_in_range(0, 2**31 - 1), default=DEFAULT_BOARD_SEED,
                    help=f"nextpnr placement seed, 0 to 2^31 - 1 (default {DEFAULT_BOARD_SEED})")
     b.add_argument("--router", choices=ROUTERS, default=DEFAULT_BOARD_ROUTER,
@@ -141,7 +139,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
 
 
 def _build(args: argparse.Namespace) -> int:
-    from .build import DEFAULT_BAUD, DEFAULT_CLOCK_MHZ, board_build
+    from .build import DEFAULT_CLOCK_MHZ, board_build
 
     machine, model, width = _design(args)
     out = Path(args.output or f"build/{args.board}")

@@ -13,8 +13,8 @@
    fails the attempt, and after the board has settled the frame is sent again, under a new
    sequence number, up to ``attempts`` times.
 
-:func:`run_board` runs a prepared pair through it for ``bayesmachine run`` (same ``MachineRun`` as
-every engine, plus the link's figures for the report).
+The pixel engine ``board`` (:class:`~.engine.BoardEngine`) runs frames through it for
+``bayesmachine run --engine board``.
 """
 
 from __future__ import annotations
@@ -32,18 +32,12 @@ import numpy as np
 
 from bayesmachine.likelihood import ModelParams
 from bayesmachine.params import MachineParams
-from bayesmachine.sim.results import disparities
+from bayesmachine.region import OutputRegion
 
 from . import protocol as pr
 
-__all__ = ["BAUD_RANGE", "MAX_SILENCE_S", "BoardError", "BoardLink", "LinkStats", "design_differences",
-           "design_record", "open_port", "record_design", "run_board"]
-
-# The serial port's rates: pyserial refuses past what the OS takes (an OverflowError beyond 32 bits);
-# the ULX3S's FTDI FT231X reaches 3 Mbaud, USB-serial chips at most 12.
-BAUD_RANGE = (300, 12_000_000)
-# --board-timeout at most: silence longer than this is a board that does not answer.
-MAX_SILENCE_S = 600.0
+__all__ = ["BoardError", "BoardLink", "LinkStats", "design_differences", "design_record",
+           "fingerprint_message", "open_port", "record_design"]
 
 
 class BoardError(RuntimeError):
@@ -189,9 +183,8 @@ class BoardLink:
         pixels = np.stack([left, right], axis=-1).astype(np.uint8)
         lines = [pixels[y].tobytes() for y in range(height)]
         trailer = struct.pack("<I", pr.crc32(b"".join(lines)))
-        edge = 2 * model.margin  # the model's output region (census 7x7: margin 3)
-        out_cols = width - edge - model.dmax
-        expected = (height - edge) * out_cols
+        region = OutputRegion.of_model(left.shape, model)  # census 7x7: margin 3
+        edge, out_cols, expected = 2 * region.margin, region.shape[1], region.pixels
         # Lines in flight beyond the one whose results are awaited: what the receive buffer holds.
         lag = max(1, info.rx_fifo_bytes // (2 * width) - 1)
         reasons = []
@@ -359,8 +352,10 @@ def design_differences(board: dict, machine: MachineParams, model: ModelParams) 
     return found + differ(machine.to_dict(), board.get("machine"), flags, _DERIVED if found else ("rows",))
 
 
-def _fingerprint_message(port: str, found: int, expect: int, machine: MachineParams,
+def fingerprint_message(port: str, found: int, expect: int, machine: MachineParams,
                          model: ModelParams) -> str:
+    """Why a board of fingerprint ``found`` is refused for this run (``expect``): the options that
+    differ, when this machine recorded the board's design (:func:`record_design`)."""
     head = (f"the board on {port} was built for another machine or model (fingerprint {found:08x}, these "
             f"options give {expect:08x})")
     record = design_record(found)
@@ -373,87 +368,3 @@ def _fingerprint_message(port: str, found: int, expect: int, machine: MachinePar
     if diffs:
         return f"{head}: {'; '.join(diffs)}; run with the board's options, or rebuild it"
     return f"{head}: its design is {record}; run with its options, or rebuild it"
-
-
-def run_board(
-    prepared,
-    machine: MachineParams,
-    port: str,
-    baud: int,
-    *,
-    timeout: float = 2.0,  # noqa: ANN001
-    progress: bool | None = None,
-    link_port=None,
-    fields: int = pr.FIELDS_ALL,
-):  # noqa: ANN001
-    """The pair of ``prepared`` through the board: ``(MachineRun, link figures for the report)``.
-
-    ``fields`` (:func:`~.protocol.fields_from_names`) says which optional fields the board sends:
-    without ``FIELD_COUNTS`` the run's ``counts`` are None, without ``FIELD_CYCLES`` its ``cycles``."""
-    from tqdm import tqdm
-
-    from bayesmachine.host.records import MachineRun, counts_dtype
-
-    from .core import check_board
-
-    model = prepared.model
-    height, width = prepared.left.shape
-    check_board(machine, model, width if width >= model.dmax + 5 else model.dmax + 5)
-    expect = pr.board_fingerprint(machine.to_dict(), model.to_dict(), width)
-    ser = link_port if link_port is not None else open_port(port, baud, timeout)
-    try:
-        link = BoardLink(ser, timeout=timeout, name=f"the board on {port}")
-        t0 = time.perf_counter()
-        info = link.info()
-        if info.width != width:
-            raise BoardError(
-                f"the board on {port} was built for {info.width}-pixel lines, the pair has {width}: "
-                f"crop it (--crop X,Y,{info.width},H) or build the board with --width {width}"
-            )
-        if info.fingerprint != expect:
-            raise BoardError(_fingerprint_message(port, info.fingerprint, expect, machine, model))
-        ho, wo = prepared.shape
-        show = sys.stderr.isatty() if progress is None else progress
-        with tqdm(total=ho * wo, unit="px", disable=not show, desc="board") as bar:
-            got = link.run_frame(prepared.left, prepared.right, machine, model, fields, bar.update)
-        seconds = time.perf_counter() - t0
-    finally:
-        if link_port is None:
-            ser.close()
-    nomatch = got["nomatch"].reshape(ho, wo)
-    timeout_ = got["timeout"].reshape(ho, wo)
-    disp = disparities(got["map"].reshape(ho, wo), nomatch, timeout_)
-    counts = cycles = None  # not asked for: absent, never made up
-    if "counts" in got:
-        counts = got["counts"].reshape(ho, wo, machine.rows).astype(counts_dtype(machine.counter_max))
-    if "cycles" in got:
-        cycles = got["cycles"].reshape(ho, wo).astype(np.int64)
-    run = MachineRun(
-        "board",
-        machine,
-        disp,
-        counts,
-        cycles,
-        nomatch,
-        timeout_,
-        seconds,
-        0.0,
-        None,
-    )
-    st = link.stats
-    figures = {
-        "port": port,
-        "baud": baud,
-        "wall_seconds": seconds,
-        "bytes_sent": st.bytes_sent,
-        "bytes_received": st.bytes_received,
-        "link_bytes_per_second": (st.bytes_sent + st.bytes_received) / seconds if seconds > 0 else None,
-        "sent_bytes_per_second": st.bytes_sent / seconds if seconds > 0 else None,
-        "received_bytes_per_second": st.bytes_received / seconds if seconds > 0 else None,
-        "attempts": st.attempts,
-        "failures": st.failures,
-        "garbage_bytes": st.garbage_bytes,
-        "board_fingerprint": f"{info.fingerprint:08x}",
-        "fields": ["map", *(n for n in ("counts", "cycles") if fields & pr.FIELD_NAMES[n])],
-    }
-    return run, figures

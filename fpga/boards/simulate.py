@@ -66,7 +66,7 @@ def build_board_harness(
     from bayesmachine.sim.verilator.build import HarnessSources, build_design, cached_verilog
     from bayesmachine.sim.verilator.codegen import wrapper_verilog
 
-    from .core import BoardCore, board_signature, check_board, check_core_options
+    from .core import RTL_MODULES, BoardCore, board_signature, check_board, check_core_options
 
     find_toolchain()
     check_board(params, model, width)
@@ -78,8 +78,8 @@ def build_board_harness(
 
     root = cache_dir()
     root.mkdir(parents=True, exist_ok=True)
-    # The Verilog cache keys on the hdl/ sources; the board's own RTL (core, UART, protocol) too.
-    rtl = "".join((Path(__file__).parent / f).read_text() for f in ("core.py", "uart.py", "protocol.py"))
+    # The Verilog cache keys on the hdl/ sources; the board's own RTL too.
+    rtl = "".join((Path(__file__).parent / f).read_text() for f in RTL_MODULES)
     key = json.dumps([params.to_dict(), model.to_dict(), width, options, rtl], sort_keys=True)
     name = f"board-{hashlib.sha256(key.encode()).hexdigest()[:20]}"
     design = HarnessSources(

@@ -21,7 +21,7 @@ from pathlib import Path
 from amaranth.back import rtlil
 from amaranth.lib import wiring
 
-from bayesmachine.tools import tool_process, which
+from bayesmachine.tools import tool_process, user_cache_dir, which
 
 __all__ = [
     "MODES", "FormalError", "FormalResult", "check_clocks", "find_formal_tools", "run_formal", "sby_text",
@@ -111,11 +111,7 @@ def check_clocks(il: str) -> None:
 
 def _run_root() -> Path:
     env = os.environ.get("BAYESMACHINE_FORMAL_DIR")
-    if env:
-        root = Path(env)
-    else:
-        xdg = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-        root = Path(xdg) / "bayesmachine" / "formal"
+    root = Path(env) if env else user_cache_dir("bayesmachine", "formal")
     root.mkdir(parents=True, exist_ok=True)
     return root
 

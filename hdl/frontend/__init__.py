@@ -20,5 +20,6 @@ Blocks (each a ``wiring.Component`` with a Python twin its tests hold it to):
 
 # Limits shared by the RTL and the command line (importing them needs no Amaranth).
 MAX_WIDTH = 4096  # the line buffers hold `width` pixel pairs: 4 (or 6) lines x 16 bits each
+DEFAULT_WIDTH = 640  # pixels per line of a stereo top (emit, synth --top stereo, board build) unless told
 MAX_MACHINES = 16  # StereoMachine(machines=K): K machines behind one feature pipeline
 DEFAULT_FIFO_PIXELS = 8  # pixels' worth of load beats between the front end and the machine

@@ -9,15 +9,13 @@ from typing import TYPE_CHECKING
 from bayesmachine.cliargs import MODEL_OPTION_FLAGS, add_model_options, int_arg, model_params_from_args
 from bayesmachine.params import MachineParams, stereo_words_per_beat
 
-from . import DEFAULT_FIFO_PIXELS, MAX_WIDTH
+from . import DEFAULT_FIFO_PIXELS, DEFAULT_WIDTH, MAX_WIDTH
 
 if TYPE_CHECKING:
     from .stereo import StereoMachine
 
 __all__ = ["DEFAULT_WIDTH", "add_options", "build", "check_top", "fifo_pixels", "machines", "stereo_params",
            "summary", "width"]
-
-DEFAULT_WIDTH = 640
 
 # Every option of the stereo top (dest, flag): left at None unless given, so that one given with
 # --top machine, where it would do nothing, is refused (check_top).
@@ -30,7 +28,8 @@ def add_options(p: argparse.ArgumentParser) -> None:
     add_model_options(p, dmax=False, given_only=True, title="model (--top stereo; paper table 1 defaults)")
     g = p.add_argument_group("stereo top (--top stereo): pixels in, results out")
     g.add_argument("--width", type=int_arg, default=None,
-                   help=f"image width in pixels, dmax + 5 .. {MAX_WIDTH} (default {DEFAULT_WIDTH})")
+                   help=f"image width in pixels: dmax + 5 .. {MAX_WIDTH}, or dmax + 7 .. {MAX_WIDTH} with a "
+                   f"7x7 census (default {DEFAULT_WIDTH})")
     g.add_argument("--fifo-pixels", type=int_arg, default=None,
                    help=f"pixels' worth of load beats the FIFO holds (default {DEFAULT_FIFO_PIXELS})")
 

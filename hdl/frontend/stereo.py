@@ -6,7 +6,7 @@ Pixel stream: one ``pixel_in_layout()`` beat per pixel pair (``left``, ``right``
 any number of lines (at least 2k + 1, k = ``model.margin``). The front end's position counters
 restart at every ``first`` (and at reset), so a frame may follow another immediately: nothing
 computed for a frame depends on pixels of an earlier one. The output region is the host's
-(``host.region``: every window of the model inside the image): map rows 0..H-2k-1 (image lines
+(``bayesmachine.region``: every window of the model inside the image): map rows 0..H-2k-1 (image lines
 2k..H-1, a window's bottom line) and map columns Dmax..W-2k-1 (image columns Dmax+2k..W-1, a
 window's right column); every other pixel passes in one cycle and starts no machine run.
 
@@ -397,7 +397,7 @@ class StereoMachine(wiring.Component):
     model : ModelParams
         The disparity model (Dmax, p0, sigmas, p_nm0, sigma_nm).
     width : int
-        Pixels per image line (dmax + 5 .. ``MAX_WIDTH``).
+        Pixels per image line (dmax + 2·margin + 1 .. ``MAX_WIDTH``).
     fifo_pixels : int
         The pixels' worth of load beats the FIFO holds (1 .. 64), per machine.
     machines : int

@@ -37,7 +37,7 @@ from typing import Any
 from bayesmachine.hdl.emit import TOP_NAME, verilog_text
 from bayesmachine.outputs import atomic_write_text
 from bayesmachine.params import MachineParams
-from bayesmachine.tools import start_tool, stop_tool
+from bayesmachine.tools import start_tool, stop_tool, user_cache_dir
 
 from .codegen import HARNESS_TOP, design_header, wrapper_verilog
 from .objcache import RUNTIME_DIR, wrapper_script
@@ -68,8 +68,7 @@ def cache_dir() -> Path:
     env = os.environ.get("BAYESMACHINE_CACHE_DIR")
     if env:
         return Path(env) / "verilator"
-    xdg = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(xdg) / "bayesmachine" / "verilator"
+    return user_cache_dir("bayesmachine", "verilator")
 
 
 def sources_digest() -> str:
