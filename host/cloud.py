@@ -15,9 +15,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from bayesmachine.region import OutputRegion
+
 from .calib import StereoCalibration
 from .images import Crop, crop_image
-from .region import OutputRegion
 
 __all__ = ["PLY_FIELDS", "left_colours", "point_cloud", "write_ply"]
 

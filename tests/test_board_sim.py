@@ -23,6 +23,7 @@ from bayesmachine.host.images import bundled_pair
 from bayesmachine.likelihood import ModelParams
 
 serial = pytest.importorskip("serial")
+pytestmark = pytest.mark.eda  # every test here runs the board under Verilator
 
 DMAX = 4
 WIDTH = DMAX + 12
@@ -162,7 +163,6 @@ def test_link_against_the_rtl(board, fault, reason) -> None:
         assert reason in link.stats.failures[0]
 
 
-@pytest.mark.eda
 @pytest.mark.parametrize("model", ["census", "paper"])
 def test_the_two_commands(tmp_path: Path, model: str) -> None:
     """``board simulate`` prints the pty first; ``run --engine board`` on a crop writes the same

@@ -18,7 +18,7 @@ from bayesmachine.host.images import random_dot_stereogram
 from bayesmachine.tools import tool_process
 
 
-def _gone(pid: int, timeout: float = 10.0) -> bool:
+def _gone(pid: int, timeout: float = 30.0) -> bool:
     """``pid`` has exited (a zombie waiting for its new parent counts as exited)."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:

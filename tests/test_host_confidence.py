@@ -273,13 +273,12 @@ def test_sgbm_left_right_baseline(tmp_path) -> None:
 
 
 def test_board_gives_the_model_confidence_or_none(tmp_path, monkeypatch, capsys) -> None:
-    from test_board import DMAX, HEIGHT, MODEL, PARAMS, WIDTH, TwinPort
+    from test_board import DMAX, HEIGHT, WIDTH, TwinPort, _twin
 
     from bayesmachine.fpga.boards import link as link_mod
-    from bayesmachine.fpga.boards.twin import BoardTwin
 
     def open_twin(port: str, baud: int, timeout: float = 2.0) -> TwinPort:
-        port = TwinPort(BoardTwin(PARAMS, MODEL, WIDTH))
+        port = TwinPort(_twin())
         port.close = lambda: None
         return port
 
