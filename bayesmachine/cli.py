@@ -19,6 +19,8 @@ import threading
 from collections.abc import Iterator
 from typing import Any, NoReturn
 
+from bayesmachine.errors import ParameterError
+
 
 class Terminated(KeyboardInterrupt):
     """SIGTERM, raised where the command is so that it cleans up as after Ctrl-C."""
@@ -115,7 +117,12 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{prefix}: error: out of memory{detail}; try --crop or a smaller --dmax", file=sys.stderr)
         return 2
     except (ValueError, RuntimeError) as exc:
-        # Bad input and impossible parameters end with one clear line, not a traceback.
+        # Bad input and impossible parameters end with one clear line, not a traceback; a parameter the
+        # library names is said with the command's flag for it.
+        if isinstance(exc, ParameterError):
+            from bayesmachine.cliargs import with_flag
+
+            exc = with_flag(exc)
         print(f"{prefix}: error: {_one_line(str(exc))}", file=sys.stderr)
         return 2
 

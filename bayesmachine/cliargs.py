@@ -15,26 +15,28 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TypeVar
 
-from bayesmachine.likelihood import (
+from bayesmachine.columns import Option
+from bayesmachine.models import (
     DEFAULT_MODEL,
     HARDWARE_MODEL,
-    LR_WATCHDOG_RUNS,
+    MODEL_NAMES,
     MODELS,
     ModelParams,
+    all_options,
     disparity_machine,
+    machine_layout,
 )
 from bayesmachine.params import (
-    DEFAULT_COLUMNS,
     DEFAULT_COUNTER_MAX,
     DEFAULT_DMAX,
     DEFAULT_LFSR_BITS,
     DEFAULT_MAX_CYCLES,
-    DEFAULT_PRIOR,
     DEFAULT_RNG,
     DEFAULT_SEED,
     DEFAULT_TIE_BREAK,
@@ -61,8 +63,9 @@ __all__ = [
     "add_model_options",
     "add_census_options",
     "MODEL_OPTION_FLAGS",
-    "CENSUS_OPTION_FLAGS",
-    "LR_OPTION_FLAGS",
+    "flag_of",
+    "with_flag",
+    "model_names_from_args",
     "model_list",
     "default_model",
     "output_path",
@@ -260,6 +263,11 @@ class MachineOption:
 MACHINE_OPTIONS: dict[str, MachineOption] = {}
 
 
+def _machine_layouts() -> dict[str, tuple[str, int]]:
+    """Each model's machine (prior, data columns), for the help texts."""
+    return {name: machine_layout(ModelParams(name=name).columns) for name in MODEL_NAMES}
+
+
 def add_option(option: MachineOption) -> MachineOption:
     """Declare a machine option (once, at import) for every command that builds machines."""
     if option.field in MACHINE_OPTIONS:
@@ -268,11 +276,12 @@ def add_option(option: MachineOption) -> MachineOption:
     return option
 
 
-# --columns and --prior are left at None unless given: the model decides them (--model census: 4
-# columns and its neighbour prior), and a given one that contradicts it is refused.
-add_option(MachineOption("columns", "--columns",
-                         f"data-term operator columns N (default {DEFAULT_COLUMNS}; the model's: 4 with "
-                         "--model census)", metavar="N"))
+_LAYOUTS = _machine_layouts()
+# --columns, --prior and --max-cycles are left at None unless given: the model decides them (its data
+# columns, its prior columns, its watchdog), and a given one that contradicts it is refused.
+add_option(MachineOption(
+    "columns", "--columns", "data-term operator columns N (default the model's: " + ", ".join(
+        f"{data} with --model {name}" for name, (_, data) in _LAYOUTS.items()) + ")", metavar="N"))
 add_option(MachineOption("word_bits", "--word-bits",
                          "comparator resolution W; likelihood-memory words are W+1 bits "
                          "(default %(default)s)",
@@ -288,20 +297,23 @@ add_option(MachineOption("seed", "--seed",
                          "machine seed: LFSR polynomials and start states; 0x.. accepted "
                          "(default %(default)s)",
                          default=DEFAULT_SEED))
-# --max-cycles is left at None unless given: census-lr's machine has its own default watchdog.
+_WATCHDOGS = "; ".join(
+    f"with --model {d.name} {d.watchdog_runs} x (counter max + 1), "
+    f"{d.watchdog_runs * (DEFAULT_COUNTER_MAX + 1)} at counter max {DEFAULT_COUNTER_MAX}, for every pass"
+    for d in MODELS.values() if d.watchdog_runs)
 add_option(MachineOption("max_cycles", "--max-cycles",
                          "watchdog: a pixel stops as a timeout (no match) after this many cycles "
-                         f"(default {DEFAULT_MAX_CYCLES}; with --model census-lr {LR_WATCHDOG_RUNS} x "
-                         f"(counter max + 1), {LR_WATCHDOG_RUNS * (DEFAULT_COUNTER_MAX + 1)} at counter max "
-                         f"{DEFAULT_COUNTER_MAX}, for both passes)", metavar="N"))
+                         f"(default {DEFAULT_MAX_CYCLES}; {_WATCHDOGS})", metavar="N"))
 add_option(MachineOption("tie_break", "--tie-break",
                          "MAP encoder rule when several counters overflow in one cycle (default %(default)s)",
                          default=DEFAULT_TIE_BREAK, choices=TIE_BREAKS))
 add_option(MachineOption("prior", "--prior",
                          "uniform: always-on 1s enter each row; loaded: an extra operator column 0 holds a "
-                         "prior word per row; neighbour: the census model's neighbour prior (a feedback "
-                         "column from the machine's own previous result and a loaded column), which "
-                         f"--model census sets (default {DEFAULT_PRIOR}; neighbour with --model census)",
+                         "prior word per row (the host's: a uniform prior, 1.0); neighbour: the neighbour "
+                         "prior (a feedback column from the "
+                         "machine's own previous result and a loaded column), whose table is the model's "
+                         "(default the model's: " + ", ".join(
+                             f"{prior} with --model {name}" for name, (prior, _) in _LAYOUTS.items()) + ")",
                          choices=PRIORS))
 add_option(MachineOption("smtj_dwell", "--smtj-dwell",
                          "--rng smtj: mean dwell time of a device state, in clock cycles (default 1)",
@@ -352,6 +364,34 @@ def add_machine_options(
     return group
 
 
+def flag_of(parameter: str | None) -> str | None:
+    """The command line's spelling of a library parameter (None: no option sets it)."""
+    if parameter is None:
+        return None
+    if parameter in MACHINE_OPTIONS:
+        return MACHINE_OPTIONS[parameter].flag
+    if parameter == "dmax":
+        return "--dmax"
+    if parameter == "name":
+        return "--model"
+    options = all_options()
+    return options[parameter][0].flags if parameter in options else None
+
+
+def with_flag(exc: ParameterError) -> ParameterError:
+    """``exc`` with the flag of the parameter it names in front (``--census-sigma: census_sigma ...``):
+    its ``parameter``, or else the parameter its message starts with (the sources' errors)."""
+    message = str(exc)
+    name = exc.parameter
+    if name is None:
+        first = re.match(r"[a-z][a-z0-9_]*", message)
+        name = first.group(0) if first else None
+    flag = flag_of(name)
+    if flag is None or message.startswith("--"):
+        return exc
+    return ParameterError(f"{flag}: {message}", name)
+
+
 def machine_params_from_args(
     args: argparse.Namespace, dmax: int, model: ModelParams | None = None, **overrides: Any
 ) -> MachineParams:
@@ -359,9 +399,8 @@ def machine_params_from_args(
 
     ``overrides`` win over ``args`` (a sweep passes each ``counter_max``). Options left at
     None are left to ``for_disparity``'s defaults. With ``model``, the machine that model needs
-    (:func:`~bayesmachine.likelihood.disparity_machine`: its columns, and for the census model its
-    neighbour prior; a contradicting ``--columns`` or ``--prior`` is refused). A ParameterError
-    names the option's flag.
+    (:func:`~bayesmachine.models.disparity_machine`: its data columns and prior; a contradicting
+    ``--columns`` or ``--prior`` is refused). A ParameterError names the option's flag.
     """
     kwargs: dict[str, Any] = {}
     for field in MACHINE_OPTIONS:
@@ -381,109 +420,102 @@ def machine_params_from_args(
             flags = ", ".join(MACHINE_OPTIONS[f].flag for f in device)
             got = ",".join(listed) if isinstance(listed, list) else rng
             raise ParameterError(f"{flags}: device options of --rng smtj (got --rng {got})")
-    if kwargs.get("prior") == "neighbour" and (model is None or not model.has_prior):
-        raise ParameterError("--prior neighbour: the census model's neighbour prior; the machine gets its "
-                             "feedback table from the model: use --model census (and leave --prior out)")
+    if kwargs.get("prior") == "neighbour" and (model is None
+                                               or machine_layout(model.columns)[0] != "neighbour"):
+        with_prior = [n for n, (prior, _) in _LAYOUTS.items() if prior == "neighbour"]
+        raise ParameterError(f"--prior neighbour: the neighbour prior's machine takes its feedback table "
+                             f"from the model: use --model {' or '.join(with_prior)} (and leave --prior out)")
     try:
         if model is not None:
             return disparity_machine(model, **kwargs)
         return MachineParams.for_disparity(dmax, **kwargs)
     except ParameterError as exc:
-        message = str(exc)
-        for field, option in MACHINE_OPTIONS.items():
-            if message.startswith(field) and hasattr(args, field):
-                raise ParameterError(f"{option.flag}: {message}") from None
-        if message.startswith("dmax"):
-            raise ParameterError(f"--dmax: {message}") from None
-        raise
+        raise with_flag(exc) from None
 
 
-# The model's options after --dmax (dest, flag), as add_model_options declares them.
-MODEL_OPTION_FLAGS: tuple[tuple[str, str], ...] = (
-    ("p0", "--p0"), ("sigma", "--sigma"), ("sigma_m", "--sigma-m"), ("sigma_gh", "--sigma-gh"),
-    ("sigma_gv", "--sigma-gv"), ("p_nm0", "--p-nm0"), ("sigma_nm", "--sigma-nm"),
-)
+def _paper_options() -> list[Option]:
+    return list(MODELS["paper"].options.values())
+
+
+def _alias_dest(option: Option) -> str:
+    return option.alias.lstrip("-").replace("-", "_") if option.alias else option.name
+
+
+# The options of add_model_options after --dmax (dest, flag): the paper model's, and their aliases.
+MODEL_OPTION_FLAGS: tuple[tuple[str, str], ...] = tuple(dict.fromkeys(
+    pair for o in _paper_options()
+    for pair in ((((_alias_dest(o), o.alias),) if o.alias else ()) + ((o.name, o.flag),))))
+
+
+def _default_text(option: Option) -> str:
+    """What an option's default is, for its help: the kind's, and a model's own where one differs."""
+    if option.alias:
+        return f"{option.alias}'s"
+    if option.kind == "bool":
+        text = "on" if option.default else "off"
+    elif option.default is None:
+        text = option.default_text or "none"
+    else:
+        text = f"{option.default:g}"
+    own = [f"{dict(d.defaults)[option.name]:g} with --model {d.name}" for d in MODELS.values()
+           if option.name in dict(d.defaults)]
+    return "; ".join([text, *own])
+
+
+def _add_option(group: argparse._ActionsContainer, option: Option) -> None:
+    """One model option, None unless given (the model fills in its default)."""
+    text = f"{option.help} (default {_default_text(option)})"
+    if option.kind == "bool":
+        group.add_argument(option.flag, dest=option.name, action=argparse.BooleanOptionalAction, default=None,
+                           help=text)
+        return
+    parse = int_arg if option.kind == "int" else float_arg
+    group.add_argument(option.flag, dest=option.name, type=parse, default=None, help=text)
 
 
 def add_model_options(
-    parser: argparse.ArgumentParser, dmax: bool = True, given_only: bool = False,
-    title: str = "model (paper table 1 defaults)", census: bool = False, sweep: bool = False,
-    hardware: bool = False, board_engine: bool = False,
+    parser: argparse.ArgumentParser, dmax: bool = True, title: str = "model (paper table 1 defaults)",
+    census: bool = False, sweep: bool = False, hardware: bool = False, board_engine: bool = False,
 ) -> argparse._ActionsContainer:
-    """The disparity model's options (paper table 1 defaults): ``--dmax`` unless ``dmax=False``,
-    ``--p0``, ``--sigma`` / ``--sigma-m|gh|gv``, ``--p-nm0``, ``--sigma-nm``; with ``census``,
-    ``--model`` and the census model's options (:func:`add_census_options`; ``sweep``: a list;
-    ``hardware``, ``board_engine``: its default, as there).
-
-    ``given_only``: every option but ``--dmax`` stays None unless given (the defaults are filled in
-    by :func:`model_params_from_args`), so that a command can refuse them where they do not apply."""
-    defaults = ModelParams()
+    """The paper model's options (its columns' parameters, paper table 1 defaults): ``--dmax`` unless
+    ``dmax=False``, ``--p0``, ``--sigma`` / ``--sigma-m|gh|gv``, ``--p-nm0``, ``--sigma-nm``; with
+    ``census``, ``--model`` and the other models' options (:func:`add_census_options`; ``sweep``: a list;
+    ``hardware``, ``board_engine``: its default, as there). Every option is None unless given (the model
+    fills in its defaults), so that a command can refuse one where it does not apply."""
     g = parser.add_argument_group(title)
     if dmax:
         add_dmax_option(g)
-
-    def default(value: float) -> float | None:
-        return None if given_only else value
-
-    g.add_argument("--p0", type=float_arg, default=default(defaults.p0),
-                   help=f"base match likelihood p0 (default {defaults.p0:g})")
-    g.add_argument("--sigma", type=float_arg, default=None,
-                   help=f"sigma of all three features (default {defaults.sigma_m:g})")
-    for f, name in (("m", "mean"), ("gh", "horizontal gradient"), ("gv", "vertical gradient")):
-        g.add_argument(f"--sigma-{f}", type=float_arg, default=None, help=f"sigma of the {name} feature")
-    g.add_argument("--p-nm0", type=float_arg, default=default(defaults.p_nm0),
-                   help=f"base no-match probability ({defaults.p_nm0:g})")
-    g.add_argument("--sigma-nm", type=float_arg, default=default(defaults.sigma_nm),
-                   help=f"no-match sigma ({defaults.sigma_nm:g})")
+    aliases: set[str] = set()
+    for option in _paper_options():
+        if option.alias and option.alias not in aliases:
+            aliases.add(option.alias)
+            sharing = [o.name for o in _paper_options() if o.alias == option.alias]
+            g.add_argument(option.alias, dest=_alias_dest(option), type=float_arg, default=None,
+                           help=f"sets {', '.join(sharing)} (default {option.default:g})")
+        _add_option(g, option)
     if census:
         add_census_options(parser, sweep=sweep, hardware=hardware, board_engine=board_engine)
     return g
 
 
-# The census model's options (dest, flag, ModelParams field, type): None unless given, refused with
-# --model paper (they would do nothing).
-_CENSUS_OPTIONS: tuple[tuple[str, str, Callable[[str], Any], str], ...] = (
-    ("census_window", "--census-window", int_arg, "census window: 7 (7x7, 48 bits) or 5 (5x5, 24 bits) "
-     "(default 7)"),
-    ("census_p0", "--census-p0", float_arg, "base census likelihood p0 of L_c(h) = p0 + (1 - p0) "
-     "exp(-h^2 / (2 sigma_c^2)) (default 0.02)"),
-    ("census_sigma", "--census-sigma", float_arg, "census sigma_c (default 6 for 7x7, 3 for 5x5)"),
-    ("census_nomatch_h", "--census-nomatch-h", int_arg, "the no-match row's census entry L_c(h_nm): its "
-     "Hamming distance (default bits / 8: 6 for 7x7, 3 for 5x5; 0 leaves the row uncalibrated)"),
-    ("prior_eps", "--prior-eps", float_arg, "neighbour prior floor eps of f(k) = eps + (1 - eps) "
-     "exp(-k^2 / (2 s^2)), k = |d - d_neighbour| (default 0.05)"),
-    ("prior_s", "--prior-s", float_arg, "neighbour prior width s (default 4)"),
-    ("prior_nomatch", "--prior-nomatch", float_arg, "the no-match row's prior per matched neighbour "
-     "(default f(s), 0.626; 0.1 with --model census-lr)"),
-)
-CENSUS_OPTION_FLAGS: tuple[tuple[str, str], ...] = (
-    *((dest, flag) for dest, flag, _, _ in _CENSUS_OPTIONS), ("neighbour_prior", "--no-neighbour-prior"),
-)
-# The census-lr model's own options (issue 22), refused unless --model names census-lr.
-_LR_OPTIONS: tuple[tuple[str, str, Callable[[str], Any], str], ...] = (
-    ("lr_beta", "--lr-beta", float_arg, "the consistency column's factor beta of an inconsistent lane, "
-     "|d_R(x - d) - d| > tolerance (default 0.1)"),
-    ("lr_gamma", "--lr-gamma", float_arg, "the consistency column's no-match factor gamma when any lane is "
-     "consistent (1 when none is) (default 0.01)"),
-    ("lr_tolerance", "--lr-tolerance", int_arg, "the left-right test's tolerance in disparities (default 1)"),
-    ("lr_right_max_cycles", "--lr-right-max-cycles", int_arg, "the right pass's watchdog in cycles: a right "
-     "pixel stopped by it has no right MAP (default: the left pass's watchdog, --max-cycles)"),
-)
-LR_OPTION_FLAGS: tuple[tuple[str, str], ...] = (
-    *((dest, flag) for dest, flag, _, _ in _LR_OPTIONS), ("lr_nomatch", "--no-lr-nomatch"),
-    ("lr_right_nomatch", "--lr-right-nomatch"), ("lr_neutral", "--lr-neutral"),
-)
+def _model_groups() -> dict[str, list[Option]]:
+    """The options of every model but the paper's, grouped by the first model that has them."""
+    groups: dict[str, list[Option]] = {}
+    for option, owners in all_options().values():
+        if "paper" not in owners:
+            groups.setdefault(owners[0], []).append(option)
+    return groups
 
 
 def model_list(text: str) -> list[str]:
-    """``MODEL,MODEL,...`` models (for sweeps), each one of :data:`~bayesmachine.likelihood.MODELS`,
+    """``MODEL,MODEL,...`` models (for sweeps), each one of :data:`~bayesmachine.models.MODEL_NAMES`,
     no repeats."""
     names = [v.strip() for v in text.split(",") if v.strip()]
     if not names:
         raise argparse.ArgumentTypeError("give at least one model")
     for n in names:
         if n not in MODELS:
-            raise argparse.ArgumentTypeError(f"unknown model {n!r}; choose from {', '.join(MODELS)}")
+            raise argparse.ArgumentTypeError(f"unknown model {n!r}; choose from {', '.join(MODEL_NAMES)}")
     if len(set(names)) != len(names):
         raise argparse.ArgumentTypeError(f"a model is listed twice: {text!r}")
     return names
@@ -495,11 +527,10 @@ _HARDWARE_DEST = "model_default_is_hardware"
 
 def default_model(args: argparse.Namespace) -> str:
     """The model a command runs when ``--model`` is not given, the one rule:
-    :data:`~bayesmachine.likelihood.HARDWARE_MODEL` for what builds or drives an FPGA design (a
-    command that declared ``add_census_options(hardware=True)``: emit, synth, board; ``run --engine
-    board``; ``--machines K`` with K > 1, which census-lr refuses), else
-    :data:`~bayesmachine.likelihood.DEFAULT_MODEL` (run, reference, sweep: on the host or in
-    simulation)."""
+    :data:`~bayesmachine.models.HARDWARE_MODEL` for what builds or drives an FPGA design (a command that
+    declared ``add_census_options(hardware=True)``: emit, synth, board; ``run --engine board``;
+    ``--machines K`` with K > 1, which a model with more than one pass refuses), else
+    :data:`~bayesmachine.models.DEFAULT_MODEL` (run, reference, sweep: on the host or in simulation)."""
     machines = getattr(args, "machines", None)
     if (getattr(args, _HARDWARE_DEST, False) or getattr(args, "engine", None) == "board"
             or (isinstance(machines, int) and machines > 1)):
@@ -507,21 +538,17 @@ def default_model(args: argparse.Namespace) -> str:
     return DEFAULT_MODEL
 
 
-def add_census_options(parser: argparse._ActionsContainer, sweep: bool = False,
-                       title: str | None = "census model (--model census; issue 17 defaults)",
+def add_census_options(parser: argparse._ActionsContainer, sweep: bool = False, title: str | None = "model",
                        hardware: bool = False, board_engine: bool = False) -> None:
-    """``--model`` (``paper``, or ``census``: + a census column, a calibrated no-match row and the
-    raster-order neighbour prior) and the census model's options, all None unless given; without
-    ``--model``, :func:`default_model` decides.
+    """``--model`` and the options of every model but the paper's (each declared by its column kind),
+    grouped by model, all None unless given; without ``--model``, :func:`default_model` decides.
 
     ``sweep``: ``--model`` takes a comma-separated list (:func:`model_list`). ``hardware``: the
     command builds or drives an FPGA design (its default model is
-    :data:`~bayesmachine.likelihood.HARDWARE_MODEL`). ``board_engine``: the command has ``--engine
+    :data:`~bayesmachine.models.HARDWARE_MODEL`). ``board_engine``: the command has ``--engine
     board`` and ``--machines`` (``run``), which :func:`default_model` reads; its help says so."""
     g = parser.add_argument_group(title) if title else parser
-    described = ("paper: the paper's m, gH, gV columns; census: + a census column, a no-match row "
-                 "calibrated for it and the raster-order neighbour prior on the machine's own results; "
-                 "census-lr: + a left-right consistency column from a right pass")
+    described = "; ".join(f"{d.name}: {d.description}" for d in MODELS.values())
     why = f"{DEFAULT_MODEL}'s StereoMachine does not place on the ECP5-85F; README, Models"
     if hardware:
         default = f"default {HARDWARE_MODEL}: {why}"
@@ -536,24 +563,14 @@ def add_census_options(parser: argparse._ActionsContainer, sweep: bool = False,
                        help=f"comma-separated models to compare side by side, each over every random source "
                        f"and counter max ({described}) ({default})")
     else:
-        g.add_argument("--model", choices=MODELS, default=None,
+        g.add_argument("--model", choices=MODEL_NAMES, default=None,
                        help=f"the disparity model ({described}) ({default})")
-    for dest, flag, kind, text in _CENSUS_OPTIONS:
-        g.add_argument(flag, dest=dest, type=kind, default=None, help=text)
-    g.add_argument("--neighbour-prior", dest="neighbour_prior", action=argparse.BooleanOptionalAction,
-                   default=None, help="the census model's raster-order neighbour prior (default on)")
-    lr = parser.add_argument_group("left-right consistency (--model census-lr; issue 22)") \
-        if title else parser
-    for dest, flag, kind, text in _LR_OPTIONS:
-        lr.add_argument(flag, dest=dest, type=kind, default=None, help=text)
-    lr.add_argument("--lr-nomatch", dest="lr_nomatch", action=argparse.BooleanOptionalAction, default=None,
-                    help="the left pass's no-match row (default on; off: no no-match row at all)")
-    lr.add_argument("--lr-right-nomatch", dest="lr_right_nomatch", action=argparse.BooleanOptionalAction,
-                    default=None, help="give the right pass the census model's no-match row (default on; "
-                    "off: no no-match row, the issue's right pass)")
-    lr.add_argument("--lr-neutral", dest="lr_neutral", action=argparse.BooleanOptionalAction, default=None,
-                    help="a lane whose right pixel has no right MAP (the right pass's no match or a timeout) "
-                    "gets factor 1, no information (default on; off: beta, the issue's rule)")
+    for owner, options in _model_groups().items():
+        others = [n for n in MODEL_NAMES if n != owner and all(o.name in MODELS[n].options for o in options)]
+        label = f"--model {owner}" + "".join(f", {n}" for n in others)
+        group = parser.add_argument_group(f"{owner} model ({label})") if title else parser
+        for option in options:
+            _add_option(group, option)
 
 
 def model_names_from_args(args: argparse.Namespace) -> list[str]:
@@ -564,61 +581,42 @@ def model_names_from_args(args: argparse.Namespace) -> list[str]:
     return list(value) if isinstance(value, list) else [value]
 
 
-def _census_kwargs(args: argparse.Namespace, names: list[str]) -> dict[str, Any]:
-    given = {dest: getattr(args, dest) for dest, _ in CENSUS_OPTION_FLAGS
-             if getattr(args, dest, None) is not None}
-    if given and not {"census", "census-lr"} & set(names):
-        flags = ", ".join(flag if dest != "neighbour_prior" or not given[dest] else "--neighbour-prior"
-                          for dest, flag in CENSUS_OPTION_FLAGS if dest in given)
-        raise ParameterError(f"{flags}: options of --model census and census-lr, which do not apply to "
-                             f"--model {','.join(names)}")
-    prior = [flag for dest, flag in CENSUS_OPTION_FLAGS if dest.startswith("prior_") and dest in given]
-    if prior and given.get("neighbour_prior") is False:  # they would be recorded and do nothing
-        raise ParameterError(f"{', '.join(prior)}: options of the neighbour prior, which "
-                             "--no-neighbour-prior turns off; give one or the other")
-    return given
-
-
-def _lr_kwargs(args: argparse.Namespace, names: list[str]) -> dict[str, Any]:
-    given = {dest: getattr(args, dest) for dest, _ in LR_OPTION_FLAGS
-             if getattr(args, dest, None) is not None}
-    if given and "census-lr" not in names:
-        def spelt(dest: str, flag: str) -> str:  # a yes/no option as it was given
-            if isinstance(given[dest], bool):
-                return "--" + ("" if given[dest] else "no-") + dest.replace("_", "-")
-            return flag
-
-        flags = ", ".join(spelt(dest, flag) for dest, flag in LR_OPTION_FLAGS if dest in given)
-        raise ParameterError(f"{flags}: options of --model census-lr, which do not apply to --model "
-                             f"{','.join(names)}")
-    return given
+def _spelt(option: Option, value: Any) -> str:
+    """An option as it was given (a yes/no option's --x or --no-x)."""
+    if option.kind == "bool":
+        return option.flag if value else f"--no-{option.flag[2:]}"
+    return option.flag
 
 
 def model_params_from_args(args: argparse.Namespace, name: str | None = None) -> ModelParams:
-    """``ModelParams`` from :func:`add_model_options`' options (``--sigma-X`` wins over ``--sigma``;
-    an option left at None takes the paper's default) and :func:`add_census_options`' (``--model``,
-    :func:`default_model`'s if not given). ``name`` picks one model of a sweep's
-    list; census options given with only ``paper`` models are refused."""
-    defaults = ModelParams()
+    """``ModelParams`` of the model options given (an option left at None takes the model's default;
+    ``--sigma-X`` wins over its alias ``--sigma``) and ``--model`` (:func:`default_model`'s if not given).
+    ``name`` picks one model of a sweep's list; an option that none of the listed models has is refused,
+    naming the models that have it."""
     names = model_names_from_args(args)
-    census = _census_kwargs(args, names)
-    lr = _lr_kwargs(args, names)
     name = names[0] if name is None else name
-    if name not in ("census", "census-lr"):
-        census = {}
-    if name == "census-lr":
-        census = {**census, **lr}
-
-    def sigma(f: str) -> float:
-        v = getattr(args, f"sigma_{f}")
-        if v is not None:
-            return float(v)
-        return float(args.sigma) if args.sigma is not None else defaults.sigma(f)
-
-    def given(name: str) -> float:
-        v = getattr(args, name)
-        return getattr(defaults, name) if v is None else float(v)
-
-    return ModelParams(dmax=args.dmax, p0=given("p0"), sigma_m=sigma("m"), sigma_gh=sigma("gh"),
-                       sigma_gv=sigma("gv"), p_nm0=given("p_nm0"), sigma_nm=given("sigma_nm"), name=name,
-                       **census)
+    given: dict[str, Any] = {}
+    refused: dict[str, list[str]] = {}
+    for key, (option, owners) in all_options().items():
+        value = getattr(args, key, None)
+        if value is None and option.alias:
+            value = getattr(args, _alias_dest(option), None)
+        if value is None:
+            continue
+        if not set(owners) & set(names):
+            refused.setdefault(", ".join(owners), []).append(_spelt(option, value))
+        elif name in owners:
+            given[key] = value
+    if refused:
+        owners = [n for n in MODEL_NAMES if any(n in o.split(", ") for o in refused)]
+        flags = [f for fs in refused.values() for f in fs]
+        raise ParameterError(f"{', '.join(flags)}: options of --model {' and '.join(owners)}, which do not "
+                             f"apply to --model {','.join(names)}")
+    prior = [f"--{k.replace('_', '-')}" for k in ("prior_eps", "prior_s", "prior_nomatch") if k in given]
+    if prior and given.get("neighbour_prior") is False:  # they would be recorded and do nothing
+        raise ParameterError(f"{', '.join(prior)}: options of the neighbour prior, which "
+                             "--no-neighbour-prior turns off; give one or the other")
+    try:
+        return ModelParams(name=name, dmax=args.dmax, **given)
+    except ParameterError as exc:
+        raise with_flag(exc) from None

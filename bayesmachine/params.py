@@ -2,7 +2,8 @@
 
 Every width in the design derives from these numbers; every consumer validates
 nothing on its own but takes a :class:`MachineParams`, which checks everything up
-front and raises :class:`ParameterError` naming the offending parameter.
+front: a wrong type raises TypeError, an impossible value :class:`ParameterError` naming the
+offending parameter (its ``parameter``).
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ __all__ = [
     "DEFAULT_MAX_CYCLES",
     "DEFAULT_PRIOR",
     "DEFAULT_TIE_BREAK",
+    "SMTJ_DEFAULTS",
     "DEFAULT_WORDS_PER_BEAT",
     "STEREO_ROWS_PER_BEAT",
     "nth_machine",
@@ -60,6 +62,8 @@ DEFAULT_RNG = "sobol"  # measured best on the bundled pair: README "Random sourc
 DEFAULT_SEED = 1
 DEFAULT_PRIOR = "uniform"
 DEFAULT_TIE_BREAK = "nomatch-first"
+# rng = "smtj"'s device parameters when not given: smtj_dwell, smtj_spread, smtj_share.
+SMTJ_DEFAULTS = (1.0, 0.0, "operator")
 
 
 # Prior columns in the operator matrix per prior kind, and how many of them are loaded.
@@ -69,10 +73,17 @@ _LOADED_PRIOR_COLUMNS = {"uniform": 0, "loaded": 1, "neighbour": 1}
 
 def _check_int(name: str, value: object, lo: int, hi: int | None = None) -> None:
     if isinstance(value, bool) or not isinstance(value, int):
-        raise ParameterError(f"{name} must be an integer, not {value!r}")
+        raise TypeError(f"{name} must be an integer, not {type(value).__name__} {value!r}")
     if value < lo or (hi is not None and value > hi):
         bound = f"in [{lo}, {hi}]" if hi is not None else f">= {lo}"
-        raise ParameterError(f"{name} must be {bound}, got {value}")
+        raise ParameterError(f"{name} must be {bound}, got {value}", name)
+
+
+def _check_choice(name: str, value: object, choices: tuple[str, ...]) -> None:
+    if not isinstance(value, str):
+        raise TypeError(f"{name} must be one of {choices}, not {type(value).__name__} {value!r}")
+    if value not in choices:
+        raise ParameterError(f"{name} must be one of {choices}, got {value!r}", name)
 
 
 @dataclass(frozen=True)
@@ -134,8 +145,9 @@ class MachineParams:
         ``rng = "smtj"`` only: ``"operator"`` (W devices per operator) or ``"column"`` (W
         devices per operator column, their number shared by all rows).
 
-    The ``smtj_*`` fields are ignored by the other kinds and left out of their ``to_dict``
-    (and fingerprint); so are the ``feedback_*`` fields by the other priors.
+    The ``smtj_*`` fields belong to ``rng = "smtj"`` (None: the defaults 1.0, 0.0, "operator"); another
+    kind refuses them and leaves them None, out of its ``to_dict`` (and fingerprint); the ``feedback_*``
+    fields belong to the neighbour prior the same way.
     """
 
     rows: int
@@ -150,9 +162,9 @@ class MachineParams:
     nomatch_row: bool = False
     tie_break: str = DEFAULT_TIE_BREAK
     words_per_beat: int = DEFAULT_WORDS_PER_BEAT
-    smtj_dwell: float = 1.0
-    smtj_spread: float = 0.0
-    smtj_share: str = "operator"
+    smtj_dwell: float | None = None
+    smtj_spread: float | None = None
+    smtj_share: str | None = None
     feedback_words: tuple[int, ...] = ()
     feedback_nomatch_word: int | None = None
 
@@ -167,43 +179,56 @@ class MachineParams:
         if self.lfsr_bits < self.word_bits + 2:
             raise ParameterError(
                 f"lfsr_bits ({self.lfsr_bits}) must be at least word_bits + 2 "
-                f"({self.word_bits + 2}): each LFSR delivers word_bits fresh bits per cycle"
-            )
+                f"({self.word_bits + 2}): each LFSR delivers word_bits fresh bits per cycle", "lfsr_bits")
         _check_int("seed", self.seed, 0, (1 << 64) - 1)
         _check_int("max_cycles", self.max_cycles, 1, (1 << 32) - 1)
         if self.max_cycles <= self.counter_max:
             raise ParameterError(
                 f"max_cycles ({self.max_cycles}) must exceed counter_max ({self.counter_max}): "
-                f"no counter can overflow in fewer than counter_max + 1 cycles"
-            )
-        if self.prior not in PRIORS:
-            raise ParameterError(f"prior must be one of {PRIORS}, got {self.prior!r}")
+                f"no counter can overflow in fewer than counter_max + 1 cycles", "max_cycles")
+        _check_choice("prior", self.prior, PRIORS)
         self._check_feedback()
         if not isinstance(self.nomatch_row, bool):
-            raise ParameterError(f"nomatch_row must be a bool, not {self.nomatch_row!r}")
+            raise TypeError(f"nomatch_row must be a bool, not {self.nomatch_row!r}")
         if self.nomatch_row and self.rows < 2:
-            raise ParameterError("a machine with a no-match row needs at least 2 rows")
-        if self.tie_break not in TIE_BREAKS:
-            raise ParameterError(f"tie_break must be one of {TIE_BREAKS}, got {self.tie_break!r}")
+            raise ParameterError("rows: a machine with a no-match row needs at least 2 rows", "rows")
+        _check_choice("tie_break", self.tie_break, TIE_BREAKS)
         _check_int("words_per_beat", self.words_per_beat, 1)
         if self.words_per_beat > self.words_per_pixel:
             raise ParameterError(
-                f"words_per_beat ({self.words_per_beat}) exceeds the words per pixel ({self.words_per_pixel})"
-            )
-        for name in ("smtj_dwell", "smtj_spread"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise ParameterError(f"{name} must be a finite number, not {v!r}")
-            object.__setattr__(self, name, float(v))  # 20 and 20.0: one machine, one fingerprint
-        if not 0 < self.smtj_dwell <= 1e12:
-            raise ParameterError(f"smtj_dwell (clock cycles) must be in (0, 1e12], got {self.smtj_dwell}")
-        if not 0 <= self.smtj_spread <= 1:
-            raise ParameterError(f"smtj_spread (log-sd) must be in [0, 1], got {self.smtj_spread}")
-        if self.smtj_share not in SMTJ_SHARES:
-            raise ParameterError(f"smtj_share must be one of {SMTJ_SHARES}, got {self.smtj_share!r}")
+                f"words_per_beat ({self.words_per_beat}) exceeds the words per pixel "
+                f"({self.words_per_pixel})",
+                "words_per_beat")
+        self._check_smtj()
         # Last, what only the random source knows (the Sobol table's size, the LFSR polynomials):
         # the one place it is checked, so every holder of a MachineParams can build its source.
         check_source(self)
+
+    def _check_smtj(self) -> None:
+        fields = ("smtj_dwell", "smtj_spread", "smtj_share")
+        if self.rng != "smtj":
+            given = [f for f in fields if getattr(self, f) is not None]
+            if given:
+                raise ParameterError(f"{', '.join(given)}: device parameters of rng 'smtj', not of "
+                                     f"{self.rng!r}", given[0])
+            return
+        for name, default in zip(fields, SMTJ_DEFAULTS, strict=True):
+            if getattr(self, name) is None:
+                object.__setattr__(self, name, default)
+        for name in ("smtj_dwell", "smtj_spread"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)):
+                raise TypeError(f"{name} must be a number, not {type(v).__name__} {v!r}")
+            if not math.isfinite(v):
+                raise ParameterError(f"{name} must be a finite number, not {v!r}", name)
+            object.__setattr__(self, name, float(v))  # 20 and 20.0: one machine, one fingerprint
+        if not 0 < self.smtj_dwell <= 1e12:  # type: ignore[operator]
+            raise ParameterError(f"smtj_dwell (clock cycles) must be in (0, 1e12], got {self.smtj_dwell}",
+                                 "smtj_dwell")
+        if not 0 <= self.smtj_spread <= 1:  # type: ignore[operator]
+            raise ParameterError(f"smtj_spread (log-sd) must be in [0, 1], got {self.smtj_spread}",
+                                 "smtj_spread")
+        _check_choice("smtj_share", self.smtj_share, SMTJ_SHARES)
 
     def _check_feedback(self) -> None:
         words = self.feedback_words
@@ -211,23 +236,25 @@ class MachineParams:
             words = tuple(words)
             object.__setattr__(self, "feedback_words", words)  # a list and a tuple: one machine
         if not isinstance(words, tuple):
-            raise ParameterError(f"feedback_words must be a tuple of words, not {words!r}")
+            raise TypeError(f"feedback_words must be a tuple of words, not {words!r}")
         if self.prior != "neighbour":
             if words or self.feedback_nomatch_word is not None:
                 raise ParameterError("feedback_words and feedback_nomatch_word belong to prior = "
-                                     f"'neighbour', not {self.prior!r}")
+                                     f"'neighbour', not {self.prior!r}", "feedback_words")
             return
         if not 1 <= len(words) <= self.rows:
             raise ParameterError(f"prior = 'neighbour' needs 1 to rows ({self.rows}) feedback_words, "
-                                 f"got {len(words)}")
+                                 f"got {len(words)}", "feedback_words")
         for i, w in enumerate(words):
             _check_int(f"feedback_words[{i}]", w, 0, 1 << self.word_bits)
         if self.nomatch_row:
             if self.feedback_nomatch_word is None:
-                raise ParameterError("prior = 'neighbour' with a no-match row needs feedback_nomatch_word")
+                raise ParameterError("prior = 'neighbour' with a no-match row needs feedback_nomatch_word",
+                                     "feedback_nomatch_word")
             _check_int("feedback_nomatch_word", self.feedback_nomatch_word, 0, 1 << self.word_bits)
         elif self.feedback_nomatch_word is not None:
-            raise ParameterError("feedback_nomatch_word needs a no-match row (nomatch_row=True)")
+            raise ParameterError("feedback_nomatch_word needs a no-match row (nomatch_row=True)",
+                                 "feedback_nomatch_word")
 
     @classmethod
     def for_disparity(cls, dmax: int = DEFAULT_DMAX, **kwargs: object) -> MachineParams:

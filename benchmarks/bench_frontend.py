@@ -30,7 +30,8 @@ from bayesmachine.hdl.frontend.stereo import StereoMachine, stereo_machine_param
 from bayesmachine.hdl.machine import pixel_wall_cycles
 from bayesmachine.host.features import feature_sums
 from bayesmachine.host.images import Crop, bundled_pair, crop_image
-from bayesmachine.host.likelihoods import ModelParams, memory_words
+from bayesmachine.host.likelihoods import memory_words
+from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.model import MachineModel
 from bayesmachine.tools import which
@@ -142,7 +143,7 @@ def main() -> None:
     x, y, w, h = (int(v) for v in args.crop.split(","))
     left, right, _ = (crop_image(a, Crop(x, y, w, h)) for a in bundled_pair())
     left, right = np.ascontiguousarray(left), np.ascontiguousarray(right)
-    model = ModelParams(dmax=args.dmax)
+    model = ModelParams(name="paper", dmax=args.dmax)
     params = stereo_machine_params(args.dmax, counter_max=args.counter_max)
     print(f"StereoMachine: {w}-pixel lines, Dmax {args.dmax}, counter max {args.counter_max}, "
           f"{params.words_per_beat} lanes ({params.beats_per_pixel} beats per pixel); "

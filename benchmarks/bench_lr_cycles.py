@@ -26,25 +26,18 @@ from __future__ import annotations
 
 import argparse
 import time
-from dataclasses import replace
 
 import numpy as np
 
+from bayesmachine.columns import AbovePrior, Consistency
 from bayesmachine.host.features import model_features
 from bayesmachine.host.images import bundled_pair
-from bayesmachine.host.likelihoods import ModelParams, memory_words, right_columns, right_memory_words
+from bayesmachine.host.likelihoods import memory_words, right_columns, right_memory_words
 from bayesmachine.host.metrics import bad_rates, gt_region, nomatch_occluded_share, occluded_mask
 from bayesmachine.host.records import Prepared
 from bayesmachine.host.reference import reference_map, reference_quantized_map, right_reference_map
 from bayesmachine.host.run import run_machine
-from bayesmachine.likelihood import (
-    QuantizedTables,
-    disparity_machine,
-    likelihood_tables,
-    lr_column,
-    neighbour_words,
-    right_machine,
-)
+from bayesmachine.models import ModelParams, disparity_machine, right_machine
 from bayesmachine.params import MachineParams
 from bayesmachine.region import OutputRegion
 
@@ -95,22 +88,22 @@ def estimate(fl, fr, model: ModelParams, machine: MachineParams) -> dict[str, np
     rmach = right_machine(model, machine)
     right_map = right_reference_map(fl, fr, model, w)
     left_map = reference_quantized_map(fl, fr, model, w)
-    q = QuantizedTables(likelihood_tables(model), w)
-    qr = QuantizedTables(likelihood_tables(model.right_model), w)
+    above_l, lr = model.column(AbovePrior), model.column(Consistency)
+    above_r = model.pass_named("right").model.column(AbovePrior)
+    q, qr, qlr = above_l.table(w), above_r.table(w), lr.table(w)
     region = OutputRegion.of_features(fl.shape, model.dmax)
     xr = right_columns(region)
     left_c, right_c = [], []
     for y in range(left_map.shape[0]):
-        above_r = right_map[y - 1] if y > 0 else np.full(xr.size, -1, np.int16)
-        rw = right_memory_words(fl, fr, model, rmach, rows=slice(y, y + 1), qtables=qr,
-                                prior=neighbour_words(qr, model.dmax, above_r))
-        rfb = neighbour_words(qr, model.dmax, _shifted_left(right_map[y]))
+        row_r = right_map[y - 1] if y > 0 else np.full(xr.size, -1, np.int16)
+        rw = right_memory_words(fl, fr, model, rmach, rows=slice(y, y + 1), prior=above_r.loaded(qr, row_r))
+        rfb = above_r.loaded(qr, _shifted_left(right_map[y]))
         right_c.append(_run_cycles(rw, rfb, w, rmach.counter_max, rmach.max_cycles))
         above = left_map[y - 1] if y > 0 else np.full(left_map.shape[1], -1, np.int16)
-        cw = lr_column(right_map[y], int(xr[0]), region.map_columns, model, q.one, q.lr_beta, q.lr_gamma)
-        lw = memory_words(fl, fr, model, machine, rows=slice(y, y + 1), qtables=q,
-                          prior=neighbour_words(q, model.dmax, above), consistency=cw)
-        lfb = neighbour_words(q, model.dmax, _shifted_left(left_map[y]))
+        cw = lr.loaded(qlr, right_map[y], int(xr[0]), region.map_columns)
+        lw = memory_words(fl, fr, model, machine, rows=slice(y, y + 1), prior=above_l.loaded(q, above),
+                          fed=cw)
+        lfb = above_l.loaded(q, _shifted_left(left_map[y]))
         left_c.append(_run_cycles(lw, lfb, w, machine.counter_max, machine.max_cycles))
     return {"left": np.stack(left_c), "right": np.stack(right_c), "right_max": rmach.max_cycles,
             "left_max": machine.max_cycles, "left_map": left_map}
@@ -169,7 +162,7 @@ def main() -> None:
           f"{'to-L':>6} {'to-R':>6} | s")
     for name in names:
         t0 = time.perf_counter()
-        model = replace(base, **variant(name))  # type: ignore[arg-type]
+        model = base.replace(**variant(name))
         fl, fr = model_features(left, model), model_features(right, model)
         kw = {} if args.max_cycles is None else {"max_cycles": args.max_cycles}
         machine = disparity_machine(model, counter_max=args.counter_max, rng="sobol", seed=1, **kw)

@@ -11,9 +11,9 @@ import argparse
 import time
 
 from bayesmachine.host.images import Crop, bundled_pair, crop_image
-from bayesmachine.host.likelihoods import ModelParams
 from bayesmachine.host.metrics import evaluate
 from bayesmachine.host.run import prepare, run_machine
+from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams
 
 
@@ -25,7 +25,7 @@ def main() -> None:
     args = ap.parse_args()
     crop = Crop(50, 10, 640, 480)
     left, right, gt = (crop_image(a, crop) for a in bundled_pair())
-    model = ModelParams()
+    model = ModelParams(name="paper")
     prep = prepare(left, right, model, gt)
     ho, wo = prep.shape
     print(

@@ -29,14 +29,12 @@ from __future__ import annotations
 
 import argparse
 import time
-from dataclasses import replace
 
 import numpy as np
 
 from bayesmachine.hdl.machine import pixel_wall_cycles
 from bayesmachine.host.features import model_features
 from bayesmachine.host.images import bundled_pair
-from bayesmachine.host.likelihoods import ModelParams
 from bayesmachine.host.metrics import (
     bad_rates,
     bm_disparity,
@@ -48,7 +46,7 @@ from bayesmachine.host.metrics import (
 from bayesmachine.host.records import Prepared
 from bayesmachine.host.reference import reference_map, reference_quantized_map, warm_up
 from bayesmachine.host.run import run_machine
-from bayesmachine.likelihood import disparity_machine
+from bayesmachine.models import ModelParams, disparity_machine
 
 
 def figures(disp: np.ndarray, gt: np.ndarray, occluded: np.ndarray) -> dict[str, float]:
@@ -87,7 +85,7 @@ def main() -> None:
     gt, occluded = truth[2]
     warm_up(ModelParams(name="census"))
     models = {
-        "paper": ModelParams(dmax=dmax),
+        "paper": ModelParams(name="paper", dmax=dmax),
         "+ census 7x7, no-match uncalibrated": ModelParams(dmax=dmax, name="census", census_nomatch_h=0,
                                                            neighbour_prior=False),
         "+ census 7x7, no-match calibrated": ModelParams(dmax=dmax, name="census", neighbour_prior=False),
@@ -98,24 +96,24 @@ def main() -> None:
     }
     if not args.no_lr:
         lr = ModelParams(dmax=dmax, name="census-lr")
-        issue = replace(lr, lr_right_nomatch=False, lr_neutral=False)
+        issue = lr.replace(lr_right_nomatch=False, lr_neutral=False)
         models["+ left-right column (census-lr default)"] = lr
         models["census-lr, the issue's (no right no-match row)"] = issue
-        models["the issue's, no no-match row (left pass)"] = replace(issue, lr_nomatch=False)
-        models["the issue's + right no-match row, not neutral"] = replace(lr, lr_neutral=False)
+        models["the issue's, no no-match row (left pass)"] = issue.replace(lr_nomatch=False)
+        models["the issue's + right no-match row, not neutral"] = lr.replace(lr_neutral=False)
         for field, values in (("lr_beta", (0.03, 0.3)), ("lr_gamma", (0.001, 0.03)),
                               ("prior_nomatch", (0.05, 0.25)), ("lr_tolerance", (0, 2))):
             for v in values:
-                models[f"census-lr, {field} {v}"] = replace(lr, **{field: v})
+                models[f"census-lr, {field} {v}"] = lr.replace(**{field: v})
     print(f"Motorcycle {left.shape[1]}x{left.shape[0]}, Dmax {dmax}, output {gt.shape[1]}x{gt.shape[0]} = "
           f"{gt.size} pixels, {np.isfinite(gt).mean():.3f} with finite gt, "
           f"{occluded.mean():.3f} occluded (gt)")
     print(f"{'float64 reference':<44} {'no-match':>8} {'bad2':>8} {'bad2,nm':>8} {'nm occl':>8}  "
           f"(W={args.word_bits} words: MAP changed, bad2 / bad2,nm)")
-    feats_cache: dict[int | None, tuple] = {}
+    feats_cache: dict[int, tuple] = {}
     refs = {}
     for name, model in models.items():
-        key = model.census_window if model.census else None
+        key = model.margin  # the feature grid: the census window decides it
         if key not in feats_cache:
             feats_cache[key] = (model_features(left, model), model_features(right, model))
         fl, fr = feats_cache[key]
@@ -185,7 +183,7 @@ def main() -> None:
 
 def machine_run(left, right, gt, gt_full, model, feats_cache, ref, counter_max, rng, word_bits):
     machine = disparity_machine(model, rng=rng, counter_max=counter_max, seed=1, word_bits=word_bits)
-    fl, fr = feats_cache[model.census_window if model.census else None]
+    fl, fr = feats_cache[model.margin]
     prepared = Prepared(left, right, model, (fl, fr), ref[0], 0.0, gt, gt_full)
     return run_machine(prepared, machine, "model", progress=False)
 

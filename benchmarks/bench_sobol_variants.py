@@ -22,9 +22,10 @@ import numba
 import numpy as np
 
 from bayesmachine.host.images import bundled_pair
-from bayesmachine.host.likelihoods import ModelParams, QuantizedTables, likelihood_tables, memory_words
+from bayesmachine.host.likelihoods import memory_words
 from bayesmachine.host.metrics import f1_score, map_agreement, rms_error
 from bayesmachine.host.run import prepare, run_machine
+from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.model import _finish_cycle, _nm_index
 from bayesmachine.sources.lfsr import column_lfsr_specs, lfsr_numbers
@@ -73,14 +74,13 @@ def main() -> None:
     ap.add_argument("--counter-max", default="16")
     args = ap.parse_args()
     left, right, gt = bundled_pair()
-    model = ModelParams()
+    model = ModelParams(name="paper")
     prep = prepare(left, right, model, gt)
     ho, wo = prep.shape
     ref = prep.reference
     for n in (int(v) for v in args.counter_max.split(",")):
         machine = MachineParams.for_disparity(model.dmax, counter_max=n, rng="sobol")
-        qt = QuantizedTables(likelihood_tables(model), machine.word_bits)
-        q = memory_words(*prep.features, model, machine, rows=slice(0, ho), qtables=qt)
+        q = memory_words(*prep.features, model, machine, rows=slice(0, ho))
         q = np.ascontiguousarray(q.reshape(q.shape[0], -1), dtype=np.int64)
         w, cols, rows = machine.word_bits, machine.operator_columns, machine.rows
         points = np.array([sobol_points(c, w) for c in range(cols)], np.int64).T.copy()

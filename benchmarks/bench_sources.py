@@ -17,9 +17,10 @@ import argparse
 import numpy as np
 
 from bayesmachine.host.images import bundled_pair
-from bayesmachine.host.likelihoods import ModelParams, QuantizedTables, likelihood_tables, memory_words
+from bayesmachine.host.likelihoods import memory_words
 from bayesmachine.host.metrics import evaluate
 from bayesmachine.host.run import prepare, run_machine
+from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams
 
 
@@ -31,7 +32,7 @@ def main() -> None:
                     help="near-equal pixels: second-best / best reference posterior above this (and < 1)")
     args = ap.parse_args()
     left, right, gt = bundled_pair()
-    model = ModelParams()
+    model = ModelParams(name="paper")
     prep = prepare(left, right, model, gt)
     post = prep.reference.posterior.reshape(-1, model.hypotheses)
     top2 = np.sort(post, axis=1)[:, -2:]
@@ -43,11 +44,10 @@ def main() -> None:
           f"({100 * near.mean():.1f} %) have a runner-up hypothesis within {args.near:g}x of the best, "
           f"{(top2[:, 0] == top2[:, 1]).sum()} an exact tie")
     base = MachineParams.for_disparity(model.dmax)
-    qt = QuantizedTables(likelihood_tables(model), base.word_bits)
     ho, wo = prep.shape
     equal_best = np.zeros(ho * wo, bool)
     for y in range(ho):  # a row of pixels at a time: the words of a frame are large
-        q = memory_words(*prep.features, model, base, rows=slice(y, y + 1), qtables=qt).astype(np.int64)
+        q = memory_words(*prep.features, model, base, rows=slice(y, y + 1)).astype(np.int64)
         rates = q.prod(axis=2)
         top = np.sort(rates, axis=1)[:, -2:]
         equal_best[y * wo : (y + 1) * wo] = top[:, 0] == top[:, 1]

@@ -28,7 +28,8 @@ def real_words(params: MachineParams, rows: int) -> np.ndarray | None:
     try:
         from bayesmachine.host.features import feature_sums
         from bayesmachine.host.images import bundled_pair
-        from bayesmachine.host.likelihoods import ModelParams, memory_words
+        from bayesmachine.host.likelihoods import memory_words
+        from bayesmachine.models import ModelParams
     except ImportError as exc:  # the host pipeline is optional here
         print(f"(no real images: {exc})")
         return None
@@ -36,7 +37,7 @@ def real_words(params: MachineParams, rows: int) -> np.ndarray | None:
     # `rows` output rows need rows + 4 image rows (the 5x5 filters), taken from the middle.
     top = left.shape[0] // 2 - rows // 2 - 2
     left, right = left[top : top + rows + 4], right[top : top + rows + 4]
-    model = ModelParams(dmax=params.rows - 2)
+    model = ModelParams(name="paper", dmax=params.rows - 2)
     return memory_words(feature_sums(left), feature_sums(right), model, params)
 
 

@@ -31,19 +31,19 @@ def host_frame(machine: MachineParams, chunk_rows: int) -> Frame:
     """Likelihood memories of the VGA Motorcycle crop, chunk_rows map rows at a time."""
     from bayesmachine.host.features import feature_sums
     from bayesmachine.host.images import Crop, bundled_pair, crop_image
-    from bayesmachine.host.likelihoods import ModelParams, QuantizedTables, likelihood_tables, memory_words
+    from bayesmachine.host.likelihoods import memory_words
+    from bayesmachine.models import ModelParams
 
     crop = Crop(50, 10, 640, 480)
     left, right, _ = (crop_image(a, crop) for a in bundled_pair())
-    model = ModelParams(dmax=machine.rows - 2)
+    model = ModelParams(name="paper", dmax=machine.rows - 2)
     lf, rf = feature_sums(left), feature_sums(right)
-    q = QuantizedTables(likelihood_tables(model), machine.word_bits)
     ho = lf.shape[0]
     wo = lf.shape[1] - model.dmax
 
     def chunks() -> Iterator[np.ndarray]:
         for y in range(0, ho, chunk_rows):
-            yield memory_words(lf, rf, model, machine, rows=slice(y, min(ho, y + chunk_rows)), qtables=q)
+            yield memory_words(lf, rf, model, machine, rows=slice(y, min(ho, y + chunk_rows)))
 
     return f"Motorcycle crop {crop} (host likelihoods)", ho * wo, chunks
 

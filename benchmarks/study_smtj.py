@@ -36,9 +36,10 @@ import numpy as np
 
 from bayesmachine.host.features import feature_sums
 from bayesmachine.host.images import bundled_pair
-from bayesmachine.host.likelihoods import ModelParams, QuantizedTables, likelihood_tables, memory_words
+from bayesmachine.host.likelihoods import memory_words
 from bayesmachine.host.metrics import cycle_stats, f1_score, map_agreement, rms_error
 from bayesmachine.host.reference import reference_fast
+from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams, ParameterError
 from bayesmachine.sim.model import MachineModel, MachineResult, _finish_cycle, _store
 from bayesmachine.sources import SOURCE_KINDS, NumberSource
@@ -212,15 +213,14 @@ def main() -> None:
         ap.error(str(exc))
 
     t0 = time.perf_counter()
-    model = ModelParams()
+    model = ModelParams(name="paper")
     left, right, _ = bundled_pair()
     fl, fr = feature_sums(left), feature_sums(right)
     ref = reference_fast(fl, fr, model)
     base = MachineParams.for_disparity(model.dmax, counter_max=args.counter_max, seed=args.seed)
     rows = np.arange(0, ref.map.shape[0], args.row_step)
-    qt = QuantizedTables(likelihood_tables(model), base.word_bits)
     words = np.concatenate(
-        [memory_words(fl, fr, model, base, rows=slice(r, r + 1), qtables=qt) for r in rows]
+        [memory_words(fl, fr, model, base, rows=slice(r, r + 1)) for r in rows]
     )
     posterior, ref_map = ref.posterior[rows].reshape(len(words), -1), ref.map[rows].reshape(-1)
     chunk = ref.map.shape[1]

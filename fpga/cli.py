@@ -91,8 +91,8 @@ def _run(args: argparse.Namespace, *, measure: Measure) -> int:
     if args.synth_only and pnr:
         raise ValueError(f"{', '.join(pnr)}: options of place and route, which --synth-only skips")
     model = model_params_from_args(args)
-    params = machine_params_from_args(args, args.dmax, model=model if model.census else None)
-    stereo: dict[str, object] = {"model": model} if model.census else {}
+    params = machine_params_from_args(args, args.dmax, model=model)
+    stereo: dict[str, object] = {"model": model}
     if args.top == "stereo":
         from bayesmachine.hdl.frontend.cli import fifo_pixels, stereo_params, width
 

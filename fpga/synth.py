@@ -10,14 +10,13 @@ presence means a complete run), the tools' work files beside it.
 
 from __future__ import annotations
 
-import dataclasses
 import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
 
 from bayesmachine.hdl.frontend import DEFAULT_FIFO_PIXELS
-from bayesmachine.likelihood import ModelParams
+from bayesmachine.models import HARDWARE_MODEL, ModelParams
 from bayesmachine.params import MachineParams
 from bayesmachine.sources import source_kind
 
@@ -31,11 +30,12 @@ SYNTH_OUTPUTS = ("report.md", "report.json")
 
 
 def throughput_model(params: MachineParams, model: ModelParams | None) -> ModelParams:
-    """The model whose words the throughput run feeds ``params`` (default: the paper's), checked: a
-    disparity machine that runs it (rows, columns, prior: ``likelihood.check_disparity_machine``)."""
-    from bayesmachine.likelihood import check_disparity_machine
+    """The model whose words the throughput run feeds ``params`` (default: the hardware model's, as
+    ``bayesmachine synth``), checked: a disparity machine that runs it (rows, columns, prior:
+    ``models.check_disparity_machine``)."""
+    from bayesmachine.models import check_disparity_machine
 
-    model = model if model is not None else ModelParams(dmax=params.rows - 2)
+    model = model if model is not None else _default_model(params)
     if not params.nomatch_row:
         raise ValueError("throughput is measured on a stereo pair: it needs a disparity machine "
                          "(a no-match row); pass --no-throughput")
@@ -53,11 +53,11 @@ def synth(params: MachineParams, target_name: str, out: Path, *, machines: int =
     """The whole flow; returns the report (also written to ``out/report.json`` and ``out/report.md``).
 
     With ``width`` (pixels per image line) the design is the camera-fed ``StereoMachine`` of the
-    machine ``params``, the disparity ``model`` (default: the paper's, Dmax = rows - 2) and a FIFO
+    machine ``params``, the disparity ``model`` (default: the hardware model's, Dmax = rows - 2) and a FIFO
     of ``fifo_pixels``, instead of the machine alone; one StereoMachine with ``machines`` machines
     behind its feature pipeline (map rows dealt to them; docs/frontend.md). Without
     ``width``, ``model`` is the model whose words the throughput run feeds the machine (the census
-    model's machine: ``likelihood.disparity_machine``).
+    model's machine: ``models.disparity_machine``).
     ``measure(params, model, progress)``: the cycles per pixel of the machine on that model's words
     (:func:`bayesmachine.host.throughput.measure_cycles`); None: no throughput in the report.
     Every parameter is checked before any file is written."""
@@ -106,7 +106,7 @@ def _check(params: MachineParams, target: Target, *, machines: int, pin_width: i
            measure: Measure | None, width: int | None, model: ModelParams | None,
            fifo_pixels: int) -> ModelParams:
     """Every parameter of :func:`synth`, checked (TypeError, ValueError); returns the model (its
-    default: the paper's at Dmax = rows - 2)."""
+    default: the hardware model's at Dmax = rows - 2)."""
     from bayesmachine.hdl.frontend.stereo import check_stereo_machine
 
     if isinstance(machines, bool) or not isinstance(machines, int) or machines < 1:
@@ -122,11 +122,16 @@ def _check(params: MachineParams, target: Target, *, machines: int, pin_width: i
     if measure is not None:
         model = throughput_model(params, model)  # before any work: the machine must run the model's words
     if width is not None:
-        model = model if model is not None else ModelParams(dmax=params.rows - 2)
+        model = model if model is not None else _default_model(params)
         check_stereo_machine(params, model, width, fifo_pixels, machines)
     if isinstance(pin_width, bool) or not isinstance(pin_width, int) or not 1 <= pin_width <= 64:
         raise ValueError(f"pin_width must be an integer in [1, 64], got {pin_width!r}")
-    return model if model is not None else ModelParams(dmax=params.rows - 2)
+    return model if model is not None else _default_model(params)
+
+
+def _default_model(params: MachineParams) -> ModelParams:
+    """What ``bayesmachine synth`` builds without ``--model``: the hardware model, at Dmax = rows - 2."""
+    return ModelParams(name=HARDWARE_MODEL, dmax=params.rows - 2)
 
 
 def _synthesize(params: MachineParams, target: Target, out: Path, say: Callable[[str], None], *,
@@ -180,7 +185,7 @@ def _synthesize(params: MachineParams, target: Target, out: Path, say: Callable[
             "fifo_beats": fifo_pixels * params.beats_per_pixel,
             "beats_per_pixel": params.beats_per_pixel,
             "beat_bits": params.words_per_beat * params.memory_word_width,
-            "model": dataclasses.asdict(model),
+            "model": model.to_dict(),
             "input_bits": rep.PIXEL_BITS,
             # The line buffer's word: 2 margin lines of 16-bit pairs (64 bits; 96 with a 7x7 census).
             "line_buffer_bits": rep.PIXEL_BITS * 2 * model.margin,

@@ -54,7 +54,7 @@ def _run(args: argparse.Namespace) -> int:
     if args.machines is not None and args.top != "stereo":
         raise ValueError(f"--machines: only with --top stereo (got --top {args.top})")
     model = model_params_from_args(args)
-    params = machine_params_from_args(args, args.dmax, model=model if model.census else None)
+    params = machine_params_from_args(args, args.dmax, model=model)
     if args.top == "stereo":
         from .frontend.cli import build
         from .frontend.cli import summary as stereo_summary

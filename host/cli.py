@@ -36,6 +36,7 @@ from bayesmachine.cliargs import (
     positive_float_at_most,
     runnable_sources,
 )
+from bayesmachine.models import ModelParams
 from bayesmachine.outputs import (
     NpzWriter,
     OutputDir,
@@ -53,7 +54,6 @@ from .confidence import DEFAULT_T, DEFAULT_WINDOW, ConfidenceParams
 from .datasets import PairSpec, bundled_spec, files_spec, resolve_dataset
 from .features import model_features
 from .images import Crop, bundled_pair, crop_image, load_gt, load_image, parse_crop, validate_pair
-from .likelihoods import ModelParams
 from .reference import reference_bands, warm_up
 from .run import ENGINES, FEEDS, RunOutcome, result_bytes, run_pair
 from .sweep import (
@@ -69,7 +69,6 @@ from .sweep import (
 
 __all__ = ["register", "RUN_OUTPUTS", "SWEEP_OUTPUTS"]
 
-DEFAULTS = ModelParams()
 # Every file each command can write into OUT/, the report first (it is removed first and
 # committed last: its presence means the rest is complete and from the same run).
 RUN_OUTPUTS = ("report.json", "result.npz", "disparity.png", "confidence.png", "calibration.png", "depth.npy",
@@ -171,10 +170,6 @@ def _add_machine_options(p: argparse.ArgumentParser, sweep: bool) -> None:
     changes: dict[str, dict[str, object]] = {}
     helps = {
         "rng": _host_rng_help() + " (default %(default)s)",
-        "prior": "uniform: always-on 1s enter each row; loaded: an extra operator column 0 holds a prior "
-        "word per row, which the host fills with a uniform prior (1.0); neighbour: the census model's "
-        "neighbour prior, which --model census sets by itself (default uniform; neighbour with --model "
-        "census)",
     }
     if sweep:
         changes = list_option_changes(SWEEP_COUNTER_MAX)
@@ -512,10 +507,10 @@ def _check_board_args(args: argparse.Namespace, model: ModelParams) -> None:
         raise ValueError("--engine board needs --port (the board's serial port, or the path "
                          "`bayesmachine board "
                          "simulate` printed)")
-    if model.lr:
-        raise ValueError(f"--engine board --model {model.name}: the board carries the on-chip front end, "
-                         "whose link carries the paper and census models (not census-lr's right pass: "
-                         "run it with --engine verilator --feed pixels)")
+    if len(model.passes) > 1:
+        raise ValueError(f"--engine board --model {model.name}: the board's link carries one pass's results "
+                         f"(not the {model.passes[0].name} pass's: run it with --engine verilator --feed "
+                         "pixels)")
     if args.waves is not None:
         raise ValueError("--waves is not available with --engine board")
     if args.feed == "words":

@@ -1,7 +1,7 @@
 """The paper's three 5x5 feature filters, computed exactly from integer sums.
 
 Maps cover the model's map grid (``bayesmachine.region``): (H-2k, W-2k) pixels for a model of margin
-k (``ModelParams.margin``: 2 for the paper model, 3 with a 7x7 census), map pixel (y, x)
+k (``ModelParams.margin``: 2 for the paper model, 3 with a 7x7 census column), map pixel (y, x)
 centred on image pixel (y+k, x+k). We keep integer multiples of the features so that costs
 are exact:
 
@@ -9,7 +9,7 @@ are exact:
 * ``gh20`` = 20 * gH = two rightmost columns - two leftmost columns (-2550 .. 2550)
 * ``gv20`` = 20 * gV = two bottom rows - two top rows               (-2550 .. 2550)
 
-With the census model (:func:`model_features`), ``census`` holds each map pixel's census code
+With a census column (:func:`model_features`), ``census`` holds each map pixel's census code
 (uint64) on the same grid. The code of the w x w window (w = 7 or 5, r = w // 2) centred on
 the map pixel: bit k (k = 0 is the least significant) is 1 when the k-th neighbour is darker
 than the centre (``neighbour < centre``), the neighbours taken in raster order of the window
@@ -24,7 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bayesmachine.likelihood import CENSUS_WINDOWS, MAX_ABS, SCALES, ModelParams
+from bayesmachine.columns import CENSUS_WINDOWS, MAX_ABS, SCALES
+from bayesmachine.models import ModelParams
 from bayesmachine.region import FILTER_SIZE, MARGIN
 
 __all__ = [
@@ -104,9 +105,10 @@ def grid_margin(census_window: int | None) -> int:
 
 
 def model_features(image: np.ndarray, model: ModelParams) -> FeatureSums:
-    """The features ``model`` reads, on its map grid (margin ``model.margin``): the paper's three
-    sums, and the census codes for a census model."""
-    return feature_sums(image, model.census_window if model.census else None)
+    """The planes every pass of ``model`` reads, on its map grid (margin ``model.margin``): the paper's
+    three sums, and the census codes of a census column's window."""
+    windows = {c.window for p in model.passes for c in p.columns if c.plane == "census"}
+    return feature_sums(image, windows.pop() if windows else None)
 
 
 def census_offsets(window: int) -> list[tuple[int, int]]:

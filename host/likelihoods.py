@@ -1,182 +1,46 @@
-"""Likelihood memories: the per-pixel words the host loads into the machine.
+"""Likelihood memories: the per-pixel words the host loads into the machine, column by column.
 
-The model (``ModelParams``), the likelihood formula and tables (paper eq. 2 and 4) and the
-quantization live in :mod:`bayesmachine.likelihood`, shared with the on-chip front end;
-they are re-exported here. This module gathers them per output pixel from the features
-of a pair.
-
-The census model (``ModelParams(name="census")``) adds a fourth data column, the census
-likelihood at the Hamming distance h = popcount(C_l(x) xor C_r(x - d)) of the pixels' census
-codes (``FeatureSums.census``, from :func:`host.features.model_features`), and the no-match
-row's census entry L_c(h_nm). Its neighbour prior runs on the machine
-:func:`bayesmachine.likelihood.disparity_machine` builds (``prior="neighbour"``): the left
-neighbour's factor is the machine's own feedback column, the above neighbour's factor its loaded
-column 0, whose words (:func:`bayesmachine.likelihood.neighbour_words`) come from the machine's
-results of the previous map row, so ``memory_words`` takes them as an argument.
-
-The census-lr model (issue 22) adds the left-right consistency column, a fifth data column whose
-words (:func:`bayesmachine.likelihood.lr_column` of the right pass's MAPs) ``memory_words``
-takes as an argument too; :func:`right_memory_words` builds the right pass's words (the census
-model with the right image as reference: lane d pairs right map column x_r with left map column
-x_r + d; word 0 in the lanes past the last output column, and in the no-match row without
-``lr_right_nomatch``).
+A pass (:class:`~bayesmachine.models.Pass`) labels the pixels of its reference image: its own pass (the
+left image, lane d pairs map column x with right column x - d) or a declared one (census-lr's right
+pass: the right image, lane d pairs right column x_r with left column x_r + d, over
+:func:`right_columns`). :func:`pass_words` gathers its words from its columns
+(:mod:`bayesmachine.columns`): a FEATURES column's word of lane d is its table at the cost of the two
+pixels' features (0 for a lane without a match pixel: right of the last output column), its no-match
+entry in the no-match row (the pass's no-match rule in its first column: P_nm(gV); 0 in every column of
+a pass without a no-match row). The words of a loaded column that does not come from the features are
+arguments: ``prior`` (an ABOVE column's: the above neighbours' factor words, formed from the
+machine's results of the previous map row, or the machine's own loaded prior column) and ``fed`` (a
+PASS column's: census-lr's consistency words of the right pass's MAPs); a FEEDBACK column is formed by
+the machine, not loaded.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
-from bayesmachine.likelihood import (
-    FEATURES,
-    LikelihoodTables,
-    ModelParams,
-    QuantizedTables,
-    check_disparity_machine,
-    likelihood_formula,
-    likelihood_tables,
-    quantize,
-    right_lanes_valid,
-)
+from bayesmachine.columns import Column, Source, hamming
+from bayesmachine.columns.census import _hamming_plain as hamming_plain
+from bayesmachine.models import ModelParams, Pass, check_disparity_machine
 from bayesmachine.params import MachineParams, ParameterError
 from bayesmachine.region import OutputRegion
 
-from .features import SCALES, FeatureSums
+from .features import FeatureSums
 
 __all__ = [
-    "ModelParams",
-    "LikelihoodTables",
-    "QuantizedTables",
-    "likelihood_tables",
-    "likelihood_formula",
-    "likelihoods_plain",
-    "quantize",
+    "PassGrid",
+    "pass_grid",
+    "pass_words",
     "memory_words",
+    "right_memory_words",
+    "right_columns",
+    "likelihoods_plain",
     "memory_words_plain",
     "hamming",
     "hamming_plain",
-    "right_columns",
-    "right_memory_words",
+    "need_planes",
 ]
-
-
-def hamming(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamming distances popcount(a xor b) of uint64 census codes (broadcast), int64."""
-    return np.bitwise_count(np.bitwise_xor(a, b)).astype(np.int64)
-
-
-def hamming_plain(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """The same by unpacking the bytes (a test oracle independent of ``np.bitwise_count``)."""
-    x = np.ascontiguousarray(np.bitwise_xor(a, b), dtype=np.uint64)
-    return np.unpackbits(x.view(np.uint8).reshape(*x.shape, 8), axis=-1).sum(axis=-1).astype(np.int64)
-
-
-def _need_census(left: FeatureSums, right: FeatureSums, model: ModelParams) -> None:
-    if model.census and (left.census is None or right.census is None):
-        raise ParameterError(
-            "--model: the census model needs the census codes of both images "
-            "(features from host.features.model_features(image, model))")
-
-
-def likelihoods_plain(
-    left: FeatureSums, right: FeatureSums, model: ModelParams
-) -> tuple[np.ndarray, np.ndarray]:
-    """All likelihoods by the plain vectorized formula (the test oracle).
-
-    Returns ``lik`` (Ho, Wo, Dmax+1, 3 or 4) float64 (features m, gH, gV; census with the
-    census models, from :func:`hamming_plain`; not census-lr's consistency column) and
-    ``nomatch`` (Ho, Wo), P_nm(gV) (the no-match
-    row's census entry is the constant L_c(h_nm)).
-    """
-    _need_census(left, right, model)
-    region = OutputRegion.of_features(left.shape, model.dmax)
-    x, xr = region.map_slice, region.match_columns
-    lik = np.empty((*region.shape, model.dmax + 1, 4 if model.census else 3))
-    for k, f in enumerate(FEATURES):
-        fl = getattr(left, f"{f}{SCALES[f]}")
-        fr = getattr(right, f"{f}{SCALES[f]}")
-        delta = fl[:, x, None].astype(np.int64) - fr[:, xr].astype(np.int64)
-        lik[..., k] = likelihood_formula(delta, SCALES[f], model.p0, model.sigma(f))
-    if model.census:
-        h = hamming_plain(left.census[:, x, None], right.census[:, xr])
-        lik[..., 3] = likelihood_formula(h, 1, model.census_p0, model.sigma_c)
-    nomatch = likelihood_formula(left.gv20[:, x], SCALES["gv"], model.p_nm0, model.sigma_nm)
-    return lik, nomatch
-
-
-def memory_words(
-    left: FeatureSums,
-    right: FeatureSums,
-    model: ModelParams,
-    machine: MachineParams,
-    rows: slice | None = None,
-    qtables: QuantizedTables | None = None,
-    prior: np.ndarray | None = None,
-    consistency: np.ndarray | None = None,
-) -> np.ndarray:
-    """Likelihood-memory words of the output pixels of map rows ``rows`` (default: all).
-
-    Shape (P, M, loaded_columns), row-major pixel order. Rows 0..Dmax hold the quantized
-    likelihoods (columns m, gH, gV, and census for the census model); the no-match row holds
-    [P(nomatch), 1, 1] (1 = 2^W), [P(nomatch), 1, 1, L_c(h_nm)] for the census model. With a
-    loaded prior column (``prior="loaded"``, or the above column of ``prior="neighbour"``),
-    column 0 is ``prior`` ((P, M) words), else a uniform prior (2^W everywhere). A model with
-    the neighbour prior needs ``prior``: the above neighbours' factor words
-    (:func:`~bayesmachine.likelihood.neighbour_words` of the machine's results of the previous
-    map row), which the words of a band cannot wait for; the left neighbour's factor is the
-    machine's own feedback column, not loaded. The census-lr model needs ``consistency``: its
-    consistency column's words (P, M) (:func:`~bayesmachine.likelihood.consistency_column` of the
-    right pass's MAPs), the last loaded column.
-    """
-    check_disparity_machine(model, machine)
-    off = machine.loaded_columns - machine.columns  # loaded prior columns before the data columns
-    _need_census(left, right, model)
-    if model.has_prior and prior is None:
-        raise ParameterError(
-            "--neighbour-prior: the above neighbour's prior words come from the machine's own results "
-            "of the previous map row (neighbour_words): pass prior=, or turn the neighbour prior off")
-    if model.lr and consistency is None:
-        raise ParameterError("--model census-lr: the consistency column's words come from the right pass's "
-                             "MAPs (consistency_column): pass consistency=")
-    if consistency is not None and not model.lr:
-        raise ParameterError(f"consistency words given but the {model.name} model has no consistency column")
-    if prior is not None and not off:
-        raise ParameterError("--prior: prior words given but the machine has no loaded prior column")
-    if qtables is None:
-        qtables = QuantizedTables(likelihood_tables(model), machine.word_bits)
-    dmax = model.dmax
-    region = OutputRegion.of_features(left.shape, dmax)
-    x, xr = region.map_slice, region.match_columns
-    band_l = left.band(rows if rows is not None else slice(None))
-    band_r = right.band(rows if rows is not None else slice(None))
-    p = band_l.shape[0] * region.shape[1]
-    words = np.empty((p, model.hypotheses, machine.loaded_columns), dtype=np.uint16)
-    tabs = (qtables.m, qtables.gh, qtables.gv)
-    for k, (fl, fr, tab) in enumerate(zip(band_l.as_tuple(), band_r.as_tuple(), tabs, strict=True)):
-        delta = np.abs(fl[:, x, None] - fr[:, xr])
-        words[:, : dmax + 1, off + k] = tab[delta].reshape(p, dmax + 1)
-    if model.census:
-        if qtables.census is None:
-            raise ValueError("qtables lack the census table: build them from the census model")
-        h = hamming(band_l.census[:, x, None], band_r.census[:, xr])
-        words[:, : dmax + 1, off + 3] = qtables.census[h].reshape(p, dmax + 1)
-    words[:, dmax + 1, off] = qtables.nomatch[np.abs(band_l.gv20[:, x])].reshape(p)
-    words[:, dmax + 1, off + 1 :] = qtables.one
-    if model.census:
-        words[:, dmax + 1, off + 3] = qtables.census_nomatch
-    if consistency is not None:
-        cw = np.asarray(consistency)
-        if cw.shape != (p, model.hypotheses):
-            raise ValueError(f"consistency words must have shape {(p, model.hypotheses)}, got {cw.shape}")
-        words[:, :, off + 4] = cw
-    if off:
-        if prior is None:
-            words[:, :, 0] = qtables.one
-        else:
-            pw = np.asarray(prior)
-            if pw.shape != (p, model.hypotheses):
-                raise ValueError(f"prior words must have shape {(p, model.hypotheses)}, got {pw.shape}")
-            words[:, :, 0] = pw
-    return words
 
 
 def right_columns(region: OutputRegion) -> np.ndarray:
@@ -185,78 +49,169 @@ def right_columns(region: OutputRegion) -> np.ndarray:
     return np.arange(int(cols[0]) - region.dmax, int(cols[-1]) + 1)
 
 
-def right_memory_words(
-    left: FeatureSums,
-    right: FeatureSums,
-    model: ModelParams,
-    machine: MachineParams,
-    rows: slice | None = None,
-    qtables: QuantizedTables | None = None,
-    prior: np.ndarray | None = None,
-) -> np.ndarray:
-    """The census-lr right pass's words (Pr, M, loaded columns) of map rows ``rows``, row-major over
-    :func:`right_columns`: ``model.right_model``'s words with the right image as reference (lane d of
-    right column x_r reads left column x_r + d); every column of a lane past the last output column
-    is word 0 (it never fires), and so is the no-match row unless ``lr_right_nomatch`` (then the
-    census model's no-match row of the right pixel's gV). Column 0
-    is ``prior``, the above neighbours' factor words (:func:`~bayesmachine.likelihood.neighbour_words`
-    of the right pass's previous row)."""
-    if not model.lr:
-        raise ValueError(f"the {model.name} model has no right pass")
-    rmodel = model.right_model
-    check_disparity_machine(rmodel, machine)
-    _need_census(left, right, rmodel)
-    if prior is None:
-        raise ParameterError("the right pass's above prior words come from its own previous row: pass prior=")
-    if qtables is None:
-        qtables = QuantizedTables(likelihood_tables(rmodel), machine.word_bits)
-    dmax = model.dmax
-    region = OutputRegion.of_features(left.shape, dmax)
-    xr = right_columns(region)
+@dataclass(frozen=True)
+class PassGrid:
+    """Where a pass's pixels and their lanes are: reference map ``columns`` (W,), the ``match`` column of
+    each lane (W, Dmax+1; clamped to ``last``, the last output column), ``valid`` lanes (None: all)."""
+
+    columns: np.ndarray
+    match: np.ndarray
+    valid: np.ndarray | None
+    last: int
+
+    @property
+    def first(self) -> int:
+        return int(self.columns[0])
+
+    @property
+    def width(self) -> int:
+        return int(self.columns.size)
+
+
+def pass_grid(p: Pass, region: OutputRegion) -> PassGrid:
+    """The grid of pass ``p`` over ``region``: the output columns (left reference), or every right column
+    an output pixel reads (:func:`right_columns`), lane d pairing it with x + d (right reference)."""
     last = int(region.map_columns[-1])
-    valid = right_lanes_valid(xr, dmax, last)
-    xl = np.minimum(xr[:, None] + np.arange(dmax + 1)[None, :], last)  # clamped: invalid lanes zeroed below
-    band_l = left.band(rows if rows is not None else slice(None))
-    band_r = right.band(rows if rows is not None else slice(None))
-    n = band_l.shape[0]
-    p = n * xr.size
-    off = machine.loaded_columns - machine.columns
-    words = np.zeros((p, model.hypotheses, machine.loaded_columns), dtype=np.uint16)
-    tabs = (qtables.m, qtables.gh, qtables.gv)
-    for k, (fl, fr, tab) in enumerate(zip(band_l.as_tuple(), band_r.as_tuple(), tabs, strict=True)):
-        delta = np.abs(fr[:, xr, None] - fl[:, xl])
-        words[:, : dmax + 1, off + k] = tab[delta].reshape(p, dmax + 1)
-    h = hamming(band_r.census[:, xr, None], band_l.census[:, xl])
-    words[:, : dmax + 1, off + 3] = qtables.census[h].reshape(p, dmax + 1)
-    lanes = np.broadcast_to(valid[None], (n, *valid.shape)).reshape(p, dmax + 1)
-    words[:, : dmax + 1, off:] *= lanes[:, :, None]
-    if model.lr_right_nomatch:  # the census model's no-match row, of the right pixel's gV
-        words[:, dmax + 1, off] = qtables.nomatch[np.abs(band_r.gv20[:, xr])].reshape(p)
-        words[:, dmax + 1, off + 1 : off + 3] = qtables.one
-        words[:, dmax + 1, off + 3] = qtables.census_nomatch
-    pw = np.asarray(prior)
-    if pw.shape != (p, model.hypotheses):
-        raise ValueError(f"prior words must have shape {(p, model.hypotheses)}, got {pw.shape}")
-    words[:, :, 0] = pw
+    d = np.arange(region.dmax + 1)
+    if p.step < 0:
+        cols = region.map_columns
+        return PassGrid(cols, cols[:, None] - d[None, :], None, last)
+    cols = right_columns(region)
+    match = cols[:, None] + d[None, :]
+    return PassGrid(cols, np.minimum(match, last), match <= last, last)
+
+
+def need_planes(p: Pass, left: FeatureSums, right: FeatureSums) -> None:
+    """ParameterError unless both images' features hold every plane the pass's columns read."""
+    for c in p.columns:
+        missing = c.source is Source.FEATURES and (getattr(left, c.plane) is None
+                                                   or getattr(right, c.plane) is None)
+        if missing:
+            raise ParameterError(f"the {p.model.name} model's {c.name} column needs the {c.plane} maps of "
+                                 "both images (features from host.features.model_features(image, model))")
+
+
+def _feature_words(c: Column, p: Pass, ref: FeatureSums, other: FeatureSums, grid: PassGrid,
+                   word_bits: int, floor: np.ndarray | None) -> np.ndarray:
+    """(P, Dmax+2) words of FEATURES column ``c``: its table at each lane's cost, its no-match entry
+    (``floor``: the pass's no-match rule's words, in its first column)."""
+    table = c.table(word_bits)
+    a, b = getattr(ref, c.plane), getattr(other, c.plane)
+    words = table.values[c.cost(a[:, grid.columns, None], b[:, grid.match])]
+    if grid.valid is not None:  # a lane without a match pixel never fires
+        words = words * grid.valid[None]
+    n = words.shape[0] * grid.width
+    out = np.empty((n, grid.match.shape[1] + 1), np.uint16)
+    out[:, :-1] = words.reshape(n, -1)
+    out[:, -1] = 0 if not p.nomatch else floor if floor is not None else c.nomatch_entry(table)
+    return out
+
+
+def _given(words: np.ndarray | None, shape: tuple[int, int], parameter: str, source: str) -> np.ndarray:
+    """The words (P, M) given as ``parameter`` for a column that does not come from the features."""
+    if words is None:
+        raise ParameterError(f"{parameter}: {source}: pass {parameter}=", parameter)
+    w = np.asarray(words)
+    if w.shape != shape:
+        raise ValueError(f"{parameter} words must have shape {shape}, got {w.shape}")
+    return w
+
+
+def pass_words(p: Pass, left: FeatureSums, right: FeatureSums, machine: MachineParams,
+               rows: slice | None = None, prior: np.ndarray | None = None,
+               fed: np.ndarray | None = None) -> np.ndarray:
+    """The likelihood-memory words (P, M, loaded columns) of pass ``p``'s pixels of map rows ``rows``
+    (default: all), row-major over its grid (:func:`pass_grid`), on ``machine``.
+
+    ``prior``: the words (P, M) of its loaded prior column (an ABOVE column's, required then; or the
+    machine's own ``prior="loaded"`` column, 1.0 without them). ``fed``: the words (P, M) of its PASS
+    column (required then)."""
+    model = p.model
+    check_disparity_machine(model, machine)
+    need_planes(p, left, right)
+    ref, other = (left, right) if p.step < 0 else (right, left)
+    region = OutputRegion.of_features(left.shape, model.dmax)
+    grid = pass_grid(p, region)
+    band = rows if rows is not None else slice(None)
+    ref, other = ref.band(band), other.band(band)
+    n = ref.shape[0] * grid.width
+    shape = (n, model.hypotheses)
+    loaded = [c for c in p.columns if c.source is not Source.FEEDBACK]
+    own = machine.loaded_columns - len(loaded)  # the machine's own loaded prior column (prior="loaded")
+    if prior is not None and not (own or any(c.source is Source.ABOVE for c in loaded)):
+        raise ParameterError("prior: prior words given but the machine has no loaded prior column", "prior")
+    if fed is not None and not any(c.source is Source.PASS for c in loaded):
+        raise ParameterError(f"fed: words given but the {model.name} model has no column fed by another pass",
+                             "fed")
+    words = np.empty((n, model.hypotheses, machine.loaded_columns), dtype=np.uint16)
+    if own:
+        words[:, :, 0] = machine.word_one if prior is None else _given(prior, shape, "prior", "")
+    floor = None
+    if p.nomatch:
+        floor = model.nomatch.table(machine.word_bits).values[model.nomatch.cost(ref.gv20[:, grid.columns])]
+        floor = floor.reshape(n)
+    for k, c in enumerate(loaded, start=own):
+        if c.source is Source.FEATURES:
+            words[:, :, k] = _feature_words(c, p, ref, other, grid, machine.word_bits, floor)
+            floor = None  # the no-match rule sits in the first data column
+        elif c.source is Source.ABOVE:
+            words[:, :, k] = _given(prior, shape, "prior", "the above neighbours' factor words come from the "
+                                    "machine's own results of the previous map row (AbovePrior.loaded)")
+        else:
+            words[:, :, k] = _given(fed, shape, "fed", f"the {c.name} column's words come from the "
+                                    f"{c.feeds_from} pass's results (Consistency.loaded)")
     return words
 
 
-def memory_words_plain(
-    left: FeatureSums, right: FeatureSums, model: ModelParams, machine: MachineParams
-) -> np.ndarray:
-    """The same words from the plain formula (a test oracle for ``memory_words``; uniform prior)."""
-    if model.lr:
-        raise ValueError("memory_words_plain: the census-lr model's consistency column needs the right pass")
+def memory_words(left: FeatureSums, right: FeatureSums, model: ModelParams, machine: MachineParams,
+                 rows: slice | None = None, prior: np.ndarray | None = None,
+                 fed: np.ndarray | None = None) -> np.ndarray:
+    """The words (P, M, loaded columns) of ``model``'s own pass (the output pixels of map rows ``rows``,
+    row-major): :func:`pass_words` (``fed``: census-lr's consistency words of the right MAPs)."""
+    return pass_words(model.passes[-1], left, right, machine, rows, prior, fed)
+
+
+def right_memory_words(left: FeatureSums, right: FeatureSums, model: ModelParams, machine: MachineParams,
+                       rows: slice | None = None, prior: np.ndarray | None = None) -> np.ndarray:
+    """The words (Pr, M, loaded columns) of census-lr's right pass over :func:`right_columns`
+    (:func:`pass_words` of ``model.pass_named("right")``; ``prior``: its above words)."""
+    return pass_words(model.pass_named("right"), left, right, machine, rows, prior)
+
+
+def likelihoods_plain(left: FeatureSums, right: FeatureSums,
+                      model: ModelParams) -> tuple[np.ndarray, np.ndarray]:
+    """All likelihoods of the model's FEATURES columns by each kind's plain cost and formula (the test
+    oracle): ``lik`` (Ho, Wo, Dmax+1, columns) float64 and ``nomatch`` (Ho, Wo), P_nm(gV)."""
+    p = model.passes[-1]
+    need_planes(p, left, right)
+    region = OutputRegion.of_features(left.shape, model.dmax)
+    x, xr = region.map_slice, region.match_columns
+    cols = [c for c in model.columns if c.source is Source.FEATURES]
+    lik = np.empty((*region.shape, model.dmax + 1, len(cols)))
+    for k, c in enumerate(cols):
+        a, b = getattr(left, c.plane), getattr(right, c.plane)
+        lik[..., k] = c.likelihood(c.plain_cost(a[:, x, None], b[:, xr]))
+    return lik, model.nomatch.likelihood(left.gv20[:, x])
+
+
+def memory_words_plain(left: FeatureSums, right: FeatureSums, model: ModelParams,
+                       machine: MachineParams) -> np.ndarray:
+    """The same words from the plain formula (a test oracle for ``memory_words``; uniform prior; models
+    whose loaded columns all come from the features)."""
+    from bayesmachine.columns import quantize
+
+    cols = [c for c in model.columns if c.source is not Source.FEEDBACK]
+    if any(c.source is not Source.FEATURES for c in cols):
+        raise ValueError(f"memory_words_plain: the {model.name} model has loaded columns not from features")
     check_disparity_machine(model, machine)
-    off = machine.loaded_columns - machine.columns
+    off = machine.loaded_columns - len(cols)
     lik, nm = likelihoods_plain(left, right, model)
-    p = lik.shape[0] * lik.shape[1]
-    one = 1 << machine.word_bits
-    words = np.full((p, model.hypotheses, machine.loaded_columns), one, dtype=np.uint16)
-    cols = model.columns
-    words[:, : model.dmax + 1, off:] = quantize(lik, machine.word_bits).reshape(p, model.dmax + 1, cols)
-    words[:, model.dmax + 1, off] = quantize(nm, machine.word_bits).reshape(p)
-    if model.census:
-        l_nm = likelihood_formula(np.int64(model.h_nm), 1, model.census_p0, model.sigma_c)
-        words[:, model.dmax + 1, off + 3] = quantize(l_nm, machine.word_bits)
+    n = lik.shape[0] * lik.shape[1]
+    w = machine.word_bits
+    words = np.full((n, model.hypotheses, machine.loaded_columns), machine.word_one, dtype=np.uint16)
+    words[:, : model.dmax + 1, off:] = quantize(lik, w).reshape(n, model.dmax + 1, len(cols))
+    words[:, model.dmax + 1, off] = quantize(nm, w).reshape(n)
+    for k, c in enumerate(cols[1:], start=off + 1):
+        entry = c.nomatch_values()
+        words[:, model.dmax + 1, k] = quantize(entry[0], w) if entry else machine.word_one
     return words

@@ -7,11 +7,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams
 from bayesmachine.region import OutputRegion
 
 from .features import FeatureSums
-from .likelihoods import ModelParams
 from .reference import Reference, reference_bands
 
 __all__ = ["Prepared", "MachineRun", "RightPass", "counts_dtype"]

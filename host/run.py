@@ -4,14 +4,14 @@
 MAP, ground truth cut to the output region); ``run_machine`` streams the likelihood memories
 through an engine one chunk of map rows at a time (engines keep their LFSR state across
 calls, so chunking does not change results); ``run_pair`` does both and the metrics.
-A machine with the neighbour prior (``prior="neighbour"``, the census model's) runs one map row
-per call: row y's loaded prior column is the above neighbours' factor, formed from the machine's
-own results of row y - 1 (none for row 0), and each row's first pixel is flagged ``line_start``
-(the machine forms the left neighbour's factor itself from its previous result).
-The census-lr model runs a second machine (:func:`bayesmachine.likelihood.right_machine`, the same
-engine kind) for its right pass: per map row, first the right pass's row (its own above prior from
-its previous row), then the left pass's row, whose consistency column comes from the right MAPs just
-produced (:func:`bayesmachine.likelihood.lr_column`); the run keeps them as ``run.right``.
+The run makes every pass the model declares (:attr:`~bayesmachine.models.ModelParams.passes`), each on
+its own machine of the same engine kind, and feeds each column from where it says
+(:class:`~bayesmachine.columns.Source`): a FEATURES column from the pair's features, an ABOVE column
+from the pass's own results of map row y - 1 (none for row 0), a PASS column from the results of the
+pass it names for the same row (census-lr's consistency column: the right pass's MAPs, which that
+pass produced just before); a FEEDBACK column is formed by the machine from its previous result, each
+row's first pixel flagged ``line_start``. A pass with such columns runs one map row per call. A
+declared pass's results are kept as ``run.right`` (census-lr's right pass).
 Memory grows with the outputs (per-pixel maps and counts), not with frame x Dmax: the
 float64 posterior is only ever computed one band of rows at a time.
 """
@@ -20,12 +20,14 @@ from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
 from tqdm import tqdm
 
-from bayesmachine.likelihood import lr_column, neighbour_words, right_machine
+from bayesmachine.columns import Source
+from bayesmachine.models import ModelParams, Pass, pass_machine
 from bayesmachine.outputs import require_memory
 from bayesmachine.params import MachineParams
 from bayesmachine.region import OutputRegion
@@ -33,16 +35,9 @@ from bayesmachine.sim.engines import ENGINES, PIXEL_ENGINES, get_engine, get_pix
 from bayesmachine.sim.results import MachineResult, disparities
 
 from .confidence import ConfidenceParams
-from .features import model_features
+from .features import FeatureSums, model_features
 from .images import validate_pair
-from .likelihoods import (
-    ModelParams,
-    QuantizedTables,
-    likelihood_tables,
-    memory_words,
-    right_columns,
-    right_memory_words,
-)
+from .likelihoods import pass_grid, pass_words
 from .metrics import RunMetrics, evaluate, gt_region
 from .records import MachineRun, Prepared, RightPass, counts_dtype
 from .reference import reference_map, warm_up
@@ -103,6 +98,85 @@ def _want_progress(progress: bool | None) -> bool:
     return sys.stderr.isatty() if progress is None else progress
 
 
+def _row_words(p: Pass, features: tuple[FeatureSums, FeatureSums], machine: MachineParams, rows: slice,
+               above: np.ndarray, fed: Mapping[str, np.ndarray]) -> np.ndarray:
+    """The words of pass ``p``'s map rows ``rows``, each column fed from where it says: an ABOVE column
+    from ``above`` (the pass's own MAP row above: -1 for none), a PASS column from ``fed`` (the MAP row of
+    the pass feeding it, by name)."""
+    region = OutputRegion.of_features(features[0].shape, p.model.dmax)
+    prior = fed_words = None
+    for c in p.columns:
+        if c.source is Source.ABOVE:
+            prior = c.loaded(c.table(machine.word_bits), above)
+        elif c.source is Source.PASS:
+            first = pass_grid(p.model.pass_named(c.feeds_from), region).first
+            fed_words = c.loaded(c.table(machine.word_bits), fed[c.feeds_from], first,
+                                 pass_grid(p, region).columns)
+    return pass_words(p, *features, machine, rows, prior, fed_words)
+
+
+def _row_by_row(p: Pass) -> bool:
+    """Whether pass ``p`` runs one map row per call: a column fed by the machine's own results (its
+    previous result, the row above) or by another pass's row."""
+    return any(c.source is not Source.FEATURES for c in p.columns)
+
+
+def _line_starts(p: Pass, width: int) -> np.ndarray | None:
+    """Each map row's first pixel flagged (no left neighbour), for a pass with a FEEDBACK column."""
+    if not any(c.source is Source.FEEDBACK for c in p.columns):
+        return None
+    starts = np.zeros(width, bool)
+    starts[0] = True
+    return starts
+
+
+class _PassRun:
+    """One pass of a run on its own machine(s), map rows in order: its results so far."""
+
+    def __init__(self, prepared: Prepared, p: Pass, machine: MachineParams, engine: str,
+                 engine_options: dict[str, object] | None, machines: int = 1) -> None:
+        self.p = p
+        self.machine = machine
+        self.features = prepared.features
+        region = OutputRegion.of_features(prepared.features[0].shape, p.model.dmax)
+        self.width = pass_grid(p, region).width
+        ho = region.shape[0]
+        self.map = np.full((ho, self.width), -1, np.int16)  # -1: no match or a timeout
+        self.cycles = np.zeros((ho, self.width), np.int64)
+        self.timeout = np.zeros((ho, self.width), bool)
+        self.seconds = self.words_seconds = 0.0
+        self.wall: int | None = None
+        self.engines = [get_engine(engine, machine, **(engine_options or {})) for _ in range(machines)]
+
+    def run(self, rows: slice, fed: Mapping[str, np.ndarray]) -> MachineResult:
+        """Run map rows ``rows`` (one, where the pass's columns need it) and keep their results; ``fed``:
+        the other passes' MAPs so far, by name."""
+        t0 = time.perf_counter()
+        y0 = rows.start
+        above = np.full(self.width, -1, np.int16) if y0 == 0 else self.map[y0 - 1]
+        fed_row = {k: v[y0] for k, v in fed.items()}
+        words = _row_words(self.p, self.features, self.machine, rows, above, fed_row)
+        starts = _line_starts(self.p, self.width)
+        t1 = time.perf_counter()
+        eng = self.engines[y0 % len(self.engines)]
+        res = eng.run(words) if starts is None else eng.run(words, line_start=starts)
+        self.seconds += time.perf_counter() - t1
+        self.words_seconds += t1 - t0
+        n = rows.stop - rows.start
+        self.map[rows] = res.disparities().reshape(n, self.width)
+        self.cycles[rows] = np.asarray(res.cycles).reshape(n, self.width)
+        self.timeout[rows] = np.asarray(res.timeout, bool).reshape(n, self.width)
+        return res
+
+    def close(self) -> None:
+        self.wall = self.engines[0].wall_cycles if len(self.engines) == 1 else None
+        for eng in self.engines:
+            eng.close()  # the Verilator harness is a process: end it now, not at garbage collection
+
+    def record(self) -> RightPass:
+        return RightPass(self.machine, self.map, self.cycles, self.timeout, self.seconds, self.wall)
+
+
 def run_machine(
     prepared: Prepared,
     machine: MachineParams,
@@ -115,11 +189,12 @@ def run_machine(
 ) -> MachineRun:
     """Stream the output pixels (row-major) through ``engine``, ``chunk_rows`` map rows per call.
 
+    Every pass the model declares runs on its own machine (:func:`~bayesmachine.models.pass_machine`,
+    the same engine kind), each map row before the model's own pass takes it (module text).
     ``engine_options`` go to the engine's constructor (e.g. ``trace`` for ``verilator``).
     ``feed="pixels"``: the pair itself goes into the StereoMachine (front end on chip), through the
     pixel engine ``engine`` (``verilator``, or ``board``: :data:`~bayesmachine.sim.engines.PIXEL_ENGINES`).
-    A neighbour-prior machine runs one map row per call whatever ``chunk_rows`` (its above column
-    needs the previous row's results; see the module's text).
+    A pass with a column fed by results runs one map row per call whatever ``chunk_rows``.
     ``machines`` = K > 1: map row y runs on machine y mod K (``feed="pixels"``: the StereoMachine
     with K machines; ``feed="words"``: K engines, one map row per call, as :func:`machines_model`
     says; their wall cycles are not a K-machine design's, so ``wall_cycles`` is None).
@@ -139,120 +214,37 @@ def run_machine(
         f"the per-pixel results of {ho}x{wo} pixels x {m} counters",
         "use --crop or a smaller --dmax",
     )
-    if machines != 1 and model.lr:
-        raise ValueError(f"--machines {machines}: --model {model.name} runs with one machine")
+    declared = model.passes[:-1]
+    if machines != 1 and declared:
+        raise ValueError(f"--machines {machines}: --model {model.name} runs with one machine (its "
+                         f"{declared[0].name} pass is not dealt to several)")
     if feed == "pixels":
         return _run_pixels(prepared, machine, engine, engine_options, machines)
-    neighbour = machine.feedback_columns > 0
-    if neighbour or machines != 1:
-        chunk_rows = 1  # row y's above column is the machine's own row y - 1; rows dealt to machines
-    engines = [get_engine(engine, machine, **(engine_options or {})) for _ in range(machines)]
-    qtables = QuantizedTables(likelihood_tables(model), machine.word_bits)
-    lr = _RightRun(prepared, machine, engine, engine_options) if model.lr else None
+    if any(_row_by_row(p) for p in model.passes) or machines != 1:
+        chunk_rows = 1  # rows fed by the row above or by another pass's row; rows dealt to machines
+    runs = [_PassRun(prepared, p, pass_machine(model, machine, p.name), engine, engine_options)
+            for p in declared]
+    own = _PassRun(prepared, model.passes[-1], machine, engine, engine_options, machines)
     counts = np.zeros((ho, wo, m), counts_dtype(machine.counter_max))
-    flat_map = np.zeros((ho, wo), np.int16)  # row indices < 4096
     nomatch = np.zeros((ho, wo), bool)
-    timeout = np.zeros((ho, wo), bool)
-    cycles = np.zeros((ho, wo), np.int64)
-    engine_s = words_s = 0.0
-    left_f, right_f = prepared.features
-
-    def disp_row(y: int) -> np.ndarray:
-        return disparities(flat_map[y], nomatch[y], timeout[y])
-
     try:
         with tqdm(total=ho * wo, unit="px", disable=not _want_progress(progress), desc=f"{engine}") as bar:
             for y0 in range(0, ho, chunk_rows):
                 rows = slice(y0, min(ho, y0 + chunk_rows))
-                t0 = time.perf_counter()
-                if neighbour:
-                    # The machine's own results of the row above (-1: no match, timeout, none for row 0).
-                    above = np.full(wo, -1, np.int16) if y0 == 0 else disp_row(y0 - 1)
-                    prior = neighbour_words(qtables, model.dmax, above)
-                    consistency = None
-                    if lr is not None:
-                        t_r = time.perf_counter()
-                        consistency = lr.row(y0, qtables)
-                        t0 += time.perf_counter() - t_r  # the right pass's time is its own
-                    words = memory_words(left_f, right_f, model, machine, rows=rows, qtables=qtables,
-                                         prior=prior, consistency=consistency)
-                    starts = np.zeros(wo, bool)
-                    starts[0] = True  # each map row's first pixel has no left neighbour
-                    t1 = time.perf_counter()
-                    res = engines[y0 % machines].run(words, line_start=starts)
-                else:
-                    words = memory_words(left_f, right_f, model, machine, rows=rows, qtables=qtables)
-                    t1 = time.perf_counter()
-                    res = engines[y0 % machines].run(words)
-                t2 = time.perf_counter()
-                words_s += t1 - t0
-                engine_s += t2 - t1
+                for r in runs:
+                    r.run(rows, {q.p.name: q.map for q in runs})
+                res = own.run(rows, {q.p.name: q.map for q in runs})
                 n = rows.stop - rows.start
                 counts[rows] = np.asarray(res.counts).reshape(n, wo, m)
-                flat_map[rows] = np.asarray(res.map).reshape(n, wo)
                 nomatch[rows] = np.asarray(res.nomatch).reshape(n, wo)
-                timeout[rows] = np.asarray(res.timeout).reshape(n, wo)
-                cycles[rows] = np.asarray(res.cycles).reshape(n, wo)
                 bar.update(n * wo)
-        wall = engines[0].wall_cycles if machines == 1 else None
     finally:
-        for eng in engines:
-            eng.close()  # the Verilator harness is a process: end it now, not at garbage collection
-        if lr is not None:
-            lr.close()
-    # Timeouts count as no match: the machine gave no answer within its watchdog.
-    disp = disparities(flat_map, nomatch, timeout)
-    right = lr.result() if lr is not None else None
-    return MachineRun(engine, machine, disp, counts, cycles, nomatch, timeout, engine_s, words_s, wall, right)
-
-
-class _RightRun:
-    """census-lr's right pass, one map row at a time, on its own machine (the left pass's engine kind)."""
-
-    def __init__(self, prepared: Prepared, machine: MachineParams, engine: str,
-                 engine_options: dict[str, object] | None) -> None:
-        model = prepared.model
-        self.model = model
-        self.features = prepared.features
-        self.machine = right_machine(model, machine)
-        self.qtables = QuantizedTables(likelihood_tables(model.right_model), machine.word_bits)
-        region = OutputRegion.of_features(prepared.features[0].shape, model.dmax)
-        self.columns = right_columns(region)
-        self.map_columns = region.map_columns
-        ho, wr = region.shape[0], self.columns.size
-        self.map = np.full((ho, wr), -1, np.int16)
-        self.cycles = np.zeros((ho, wr), np.int64)
-        self.timeout = np.zeros((ho, wr), bool)
-        self.seconds = 0.0
-        self.wall: int | None = None
-        self.engine = get_engine(engine, self.machine, **(engine_options or {}))
-
-    def row(self, y: int, left_q: QuantizedTables) -> np.ndarray:
-        """Run right map row ``y`` and return the left pass's consistency words (Wo, Dmax+2) of row ``y``."""
-        model, wr = self.model, self.columns.size
-        above = np.full(wr, -1, np.int16) if y == 0 else self.map[y - 1]
-        prior = neighbour_words(self.qtables, model.dmax, above)
-        words = right_memory_words(*self.features, model, self.machine, rows=slice(y, y + 1),
-                                   qtables=self.qtables, prior=prior)
-        starts = np.zeros(wr, bool)
-        starts[0] = True
-        t0 = time.perf_counter()
-        res = self.engine.run(words, line_start=starts)
-        self.seconds += time.perf_counter() - t0
-        timeout = np.asarray(res.timeout, bool)
-        self.timeout[y] = timeout
-        self.cycles[y] = np.asarray(res.cycles)
-        # A no-match call (the right pass's no-match row, lr_right_nomatch) or a timeout: no right MAP.
-        self.map[y] = res.disparities()
-        return lr_column(self.map[y], int(self.columns[0]), self.map_columns, model, left_q.one,
-                         left_q.lr_beta, left_q.lr_gamma)
-
-    def close(self) -> None:
-        self.wall = self.engine.wall_cycles
-        self.engine.close()
-
-    def result(self) -> RightPass:
-        return RightPass(self.machine, self.map, self.cycles, self.timeout, self.seconds, self.wall)
+        for r in (*runs, own):
+            r.close()
+    right = runs[0].record() if runs else None
+    # Timeouts count as no match (own.map): the machine gave no answer within its watchdog.
+    return MachineRun(engine, machine, own.map, counts, own.cycles, nomatch, own.timeout, own.seconds,
+                      own.words_seconds, own.wall, right)
 
 
 def _run_pixels(
@@ -284,17 +276,14 @@ def _run_pixels(
     counts = None if res.counts is None else res.counts.reshape(ho, wo, m).astype(dtype)
     cycles = None if res.cycles is None else res.cycles.reshape(ho, wo)
     right = None
-    if model.lr:
+    if r is not None:
         # The right pass ran on chip beside the left one (its own machine, the same clock): it adds no
         # wall cycles of its own, the frame's (first pixel in to last result out) are both passes'.
         from bayesmachine.hdl.frontend.lr import right_pass_params
 
-        assert r is not None
         wr = r.map.size // ho
-        r_timeout = r.timeout.reshape(ho, wr)
-        r_map = r.disparities().reshape(ho, wr)
-        right = RightPass(right_pass_params(model, machine), r_map, r.cycles.reshape(ho, wr), r_timeout,
-                          seconds, 0)
+        right = RightPass(right_pass_params(model, machine), r.disparities().reshape(ho, wr),
+                          r.cycles.reshape(ho, wr), r.timeout.reshape(ho, wr), seconds, 0)
     return MachineRun(engine, machine, disp, counts, cycles, nomatch, timeout, seconds, 0.0, wall, right,
                       figures)
 
@@ -307,29 +296,25 @@ def machines_model(
     engine fed with the host's words: map row y of a frame runs on machine y mod K, each machine an
     engine of its own from reset, so its random source (every on-chip kind: a ``sobol`` pixel's
     shift, the LFSRs) and its left neighbour's result run over its own rows only, frame after frame;
-    with the neighbour prior the above column comes from row y - 1's results (machine (y - 1) mod K),
+    an ABOVE column comes from row y - 1's results (machine (y - 1) mod K), and with a FEEDBACK column
     each row's first pixel is flagged ``line_start``. Results in raster order of each frame's output
-    region (the same as one engine when K = 1)."""
-    neighbour = machine.feedback_columns > 0
-    qtables = QuantizedTables(likelihood_tables(model), machine.word_bits)
+    region (the same as one engine when K = 1). A model of one pass (K machines share no other)."""
+    if len(model.passes) > 1:
+        raise ValueError(f"machines_model: the {model.name} model runs more than one pass")
+    p = model.passes[-1]
     engines = [get_engine(engine, machine) for _ in range(machines)]
     parts: list[MachineResult] = []
     try:
         for left, right in frames:
-            fl, fr = model_features(left, model), model_features(right, model)
-            ho, wo = fl.m25.shape[0], fl.m25.shape[1] - model.dmax  # the output region's
+            feats = (model_features(left, model), model_features(right, model))
+            ho, wo = OutputRegion.of_features(feats[0].shape, model.dmax).shape
             above = np.full(wo, -1, np.int16)
+            starts = _line_starts(p, wo)
             for y in range(ho):
                 eng = engines[y % machines]
-                if neighbour:
-                    words = memory_words(fl, fr, model, machine, rows=slice(y, y + 1), qtables=qtables,
-                                         prior=neighbour_words(qtables, model.dmax, above))
-                    starts = np.zeros(wo, bool)
-                    starts[0] = True
-                    res = eng.run(words, line_start=starts)
-                    above = res.disparities()
-                else:
-                    res = eng.run(memory_words(fl, fr, model, machine, rows=slice(y, y + 1), qtables=qtables))
+                words = _row_words(p, feats, machine, slice(y, y + 1), above, {})
+                res = eng.run(words) if starts is None else eng.run(words, line_start=starts)
+                above = res.disparities()
                 parts.append(res)
     finally:
         for eng in engines:

@@ -47,12 +47,12 @@ from bayesmachine.cliargs import (
     model_params_from_args,
     rng_list,
 )
+from bayesmachine.models import ModelParams
 from bayesmachine.outputs import OutputDir, require_ours
 from bayesmachine.params import MachineParams
 
 from .datasets import PairSpec, load_pair
 from .images import Crop
-from .likelihoods import ModelParams
 from .run import prepare, run_pair
 
 __all__ = [

@@ -4,7 +4,7 @@
 
 from __future__ import annotations
 
-from bayesmachine.likelihood import ModelParams
+from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams
 
 __all__ = ["measure_cycles"]

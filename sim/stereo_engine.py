@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from bayesmachine.hdl.signatures import pixel_in_layout
-from bayesmachine.likelihood import ModelParams
+from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.engines import PixelEngineBase
 from bayesmachine.sim.results import MachineResult, NumberFeed, decode_results, layout_fields, result_words
@@ -69,7 +69,7 @@ def stereo_header(params: MachineParams, model: ModelParams, width: int, signatu
     # (K machines: a frame's first pixel may wait for every machine to go idle.)
     hang = machines * (params.max_cycles + 8 * params.words_per_pixel + 2 * model.margin * width + 64)
     right = ""
-    if model.lr:
+    for _ in model.passes[:-1]:  # the pass declared before the model's own: on chip, the right pass
         from bayesmachine.hdl.frontend.lr import right_pass_params
 
         rp = right_pass_params(model, params)
@@ -183,7 +183,7 @@ class StereoVerilatorEngine(HarnessProcess, PixelEngineBase):
                 self._write(proc, struct.pack("<IIII", _MAGIC_FRAME, 0, height, width), pairs.tobytes())
                 self._serve_numbers(proc, None if self._kind.on_chip else self._numbers())
                 out = self._read_results(proc, n, t0)
-                if self.model.lr:  # then the right pass's results, every right map column
+                for _ in self.model.passes[:-1]:  # then the right pass's results, every right map column
                     self.last_right = self._read_right(proc, (height - 2 * k) * (width - 2 * k))
                 return out
             except (VerilatorError, ValueError):

@@ -15,7 +15,7 @@ from amaranth.sim import Simulator, SimulatorContext
 
 from bayesmachine.hdl.frontend.stereo import FrontEnd, StereoMachine
 from bayesmachine.hdl.signatures import beat_words, load_layout, pixel_in_layout
-from bayesmachine.likelihood import ModelParams
+from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.results import MachineResult, decode_results
 

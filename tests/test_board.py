@@ -18,14 +18,14 @@ from bayesmachine.fpga.boards.twin import BoardTwin
 from bayesmachine.fpga.boards.ulx3s import pll_config
 from bayesmachine.hdl.frontend.stereo import stereo_machine_params
 from bayesmachine.host.images import bundled_pair
-from bayesmachine.likelihood import ModelParams
+from bayesmachine.models import ModelParams
 from bayesmachine.params import ParameterError
 
 DMAX = 4
 WIDTH = DMAX + 12
 HEIGHT = 12
 PARAMS = stereo_machine_params(DMAX)
-MODEL = ModelParams(dmax=DMAX)
+MODEL = ModelParams(name="paper", dmax=DMAX)
 
 
 def _twin(width: int = WIDTH) -> BoardTwin:
@@ -222,7 +222,8 @@ def test_link_refuses_a_frame_of_another_width() -> None:
 
 
 def test_board_refuses_census_lr_and_off_chip_sources() -> None:
-    with pytest.raises(ParameterError, match="on-chip front end computes the paper and census models"):
+    with pytest.raises(ParameterError, match="^the board's link carries one pass's results, not the "
+                       "census-lr model's right pass"):
         check_board(PARAMS, ModelParams(dmax=DMAX, name="census-lr"), WIDTH)
     smtj = stereo_machine_params(DMAX, rng="smtj")
     with pytest.raises(ParameterError, match="on-chip random source"):
@@ -243,9 +244,9 @@ def test_pll_config() -> None:
         (["run", "--port", "/dev/null", "-o", "{out}"], "--port: only with --engine board"),
         (
             ["run", "--engine", "board", "--port", "/dev/null", "--model", "census-lr", "-o", "{out}"],
-            "front end",
+            "the board's link carries one pass's results",
         ),
-        (["board", "simulate", "--model", "census-lr"], "front end computes the paper and census models"),
+        (["board", "simulate", "--model", "census-lr"], "--model: the board's link carries one pass's"),
         (["board", "build", "--baud", "20000000", "--dmax", "4", "--width", "16"], None),
     ],
 )

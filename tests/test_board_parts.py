@@ -25,7 +25,7 @@ from bayesmachine.fpga.boards.serializer import ControlSerializer, ResultSeriali
 from bayesmachine.fpga.boards.status import ReceiveTimeout, ReceiveTimeoutTwin, StatusLEDs, StatusLEDsTwin
 from bayesmachine.fpga.boards.streams import CRC16, CRC32
 from bayesmachine.fpga.boards.twin import BoardTwin
-from bayesmachine.likelihood import ModelParams
+from bayesmachine.models import ModelParams
 from bayesmachine.sim.results import MachineResult
 
 
@@ -288,7 +288,7 @@ def test_receive_timeout_and_leds_are_their_twins() -> None:
 
 
 WIDTH, DMAX = 12, 2
-MODEL = ModelParams(dmax=DMAX)
+MODEL = ModelParams(name="paper", dmax=DMAX)
 
 
 def _control_run(headers: list[bytes], records: int, *, frame_done: bool = True, crc_ok: bool = True,

@@ -20,7 +20,7 @@ from bayesmachine.fpga.boards.link import BoardLink
 from bayesmachine.fpga.boards.twin import BoardTwin
 from bayesmachine.hdl.frontend.stereo import stereo_machine_params
 from bayesmachine.host.images import bundled_pair
-from bayesmachine.likelihood import ModelParams
+from bayesmachine.models import ModelParams
 
 serial = pytest.importorskip("serial")
 pytestmark = pytest.mark.eda  # every test here runs the board under Verilator
@@ -30,7 +30,7 @@ WIDTH = DMAX + 12
 HEIGHT = 12
 TIMEOUT_BITS = 1 << 14  # the board's receive timeout: short, so a dropped byte is reported soon
 PARAMS = stereo_machine_params(DMAX)
-MODEL = ModelParams(dmax=DMAX)
+MODEL = ModelParams(name="paper", dmax=DMAX)
 CROP = (300, 200)
 
 

@@ -24,7 +24,7 @@ from bayesmachine.hdl.formal.miter import MiterProperties
 from bayesmachine.hdl.formal.mutants import Mutant, counter_early_overflow, mutants
 from bayesmachine.hdl.formal.runner import FormalError, FormalResult, run_formal, sby_text
 from bayesmachine.hdl.frontend.stereo import stereo_machine_params
-from bayesmachine.likelihood import ModelParams
+from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams
 
 pytestmark = pytest.mark.formal
@@ -81,7 +81,7 @@ MITER = MachineParams(rows=3, columns=1, word_bits=2, counter_max=1, rng="extern
 MITER_DEPTH = 14
 # The front end at its smallest: Dmax 1 (3 rows), lines of 6 pixels (one output pixel per line, the
 # first one the 29th pixel of a frame), 3 lanes (3 beats per pixel), a FIFO of one pixel.
-FRONT_MODEL = ModelParams(dmax=1, p_nm0=0.1)
+FRONT_MODEL = ModelParams(name="paper", dmax=1, p_nm0=0.1)
 FRONT_PARAMS = stereo_machine_params(1, counter_max=1, word_bits=3, rng="external", max_cycles=3,
                                      words_per_beat=3)
 FRONT_WIDTH = 6
@@ -204,7 +204,7 @@ def test_generator_beats_per_pixel(dmax: int) -> None:
     """Dmax 1 (3 beats per pixel) and Dmax 2 (4 rows x 3 columns in 3 lanes: 4 beats per pixel)."""
     params = stereo_machine_params(dmax, counter_max=1, word_bits=3, rng="external", max_cycles=3,
                                    words_per_beat=3)
-    model = ModelParams(dmax=dmax, p_nm0=0.1)
+    model = ModelParams(name="paper", dmax=dmax, p_nm0=0.1)
     check(run_formal(GeneratorProperties(params=params, model=model), name=f"generator{dmax}", mode="bmc",
                      depth=GENERATOR_DEPTH))
     check(run_formal(GeneratorProperties(params=params, model=model), name=f"generator{dmax}",

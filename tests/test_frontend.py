@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from conftest import assert_same_results, run_sim
 
+from bayesmachine.columns import GradH, GradV, Mean
 from bayesmachine.hdl.frontend.filters import FeatureFilter
 from bayesmachine.hdl.frontend.linebuffer import LineBuffer, column_windows
 from bayesmachine.hdl.frontend.stereo import MAX_WIDTH, FrontEnd, StereoMachine, stereo_machine_params
@@ -21,7 +22,8 @@ from bayesmachine.hdl.frontend.tables import clamp_table, frontend_tables
 from bayesmachine.hdl.machine import LOAD_LATENCY, pixel_wall_cycles
 from bayesmachine.host.features import feature_sums
 from bayesmachine.host.images import bundled_pair, random_dot_stereogram
-from bayesmachine.host.likelihoods import ModelParams, QuantizedTables, likelihood_tables, memory_words
+from bayesmachine.host.likelihoods import memory_words
+from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams, ParameterError
 from bayesmachine.sim.model import MachineModel
 from bayesmachine.sim.stereo_testbench import run_frontend, run_stereo
@@ -43,19 +45,21 @@ def _host_words(frames: list[tuple[np.ndarray, np.ndarray]], model: ModelParams,
 
 # --- Blocks against their twins ---
 
-@pytest.mark.parametrize("model", [ModelParams(), ModelParams(dmax=4, p0=0.1, sigma_m=3.0, sigma_gh=40.0,
-                                                              sigma_gv=1000.0, p_nm0=0.3, sigma_nm=2.0)])
+@pytest.mark.parametrize("model", [ModelParams(name="paper"),
+                                   ModelParams(name="paper", dmax=4, p0=0.1, sigma_m=3.0, sigma_gh=40.0,
+                                               sigma_gv=1000.0, p_nm0=0.3, sigma_nm=2.0)])
 @pytest.mark.parametrize("word_bits", [4, 10, 15])
 def test_clamped_tables_give_the_host_word_for_every_difference(model: ModelParams, word_bits: int) -> None:
-    full = QuantizedTables(likelihood_tables(model), word_bits)
+    full = {c.name: c.table(word_bits).values for c in (model.column(Mean), model.column(GradH),
+                                                         model.column(GradV), model.nomatch)}
     clamped = frontend_tables(model, word_bits)
     for name in ("m", "gh", "gv", "nomatch"):
-        table = getattr(full, name)
+        table = full[name]
         deltas = np.arange(-len(table) + 1, len(table))
         assert np.array_equal(clamped.lookup(name, deltas), table[np.abs(deltas)]), name
         assert len(getattr(clamped, name)) <= len(table)
-    if word_bits == 10 and model == ModelParams():
-        assert len(clamped.m) < len(full.m) // 4  # the paper's tables decay well before the end
+    if word_bits == 10 and model == ModelParams(name="paper"):
+        assert len(clamped.m) < len(full["m"]) // 4  # the paper's tables decay well before the end
 
 
 def test_clamp_table_edge_cases() -> None:
@@ -144,7 +148,7 @@ CASES = {
 @pytest.mark.parametrize("name", list(CASES))
 def test_frontend_words_equal_host_memory_words(name: str) -> None:
     dmax, options, shapes = CASES[name]
-    model = ModelParams(dmax=dmax)
+    model = ModelParams(name="paper", dmax=dmax)
     params = stereo_machine_params(dmax, counter_max=2, **options)
     frames = [_noisy_pair(h, w, seed=i) for i, (h, w) in enumerate(shapes)]
     got = run_frontend(FrontEnd(params=params, model=model, width=shapes[0][1]), frames)
@@ -157,7 +161,7 @@ def test_frontend_words_on_a_crop_of_the_bundled_pair_with_back_pressure() -> No
     left, right, _ = bundled_pair()
     y, x, h, w = 200, 300, 8, 24
     frames = [(left[y : y + h, x : x + w], right[y : y + h, x : x + w])]
-    model = ModelParams(dmax=10)
+    model = ModelParams(name="paper", dmax=10)
     params = stereo_machine_params(10, counter_max=4)
     got = run_frontend(FrontEnd(params=params, model=model, width=w),
                        frames, in_stall=0.3, out_stall=0.4, seed=5)
@@ -166,7 +170,7 @@ def test_frontend_words_on_a_crop_of_the_bundled_pair_with_back_pressure() -> No
 
 def test_frontend_frame_start_marker_restarts_position() -> None:
     """A frame right after another, of another height: the ``first`` marker restarts the counters."""
-    model = ModelParams(dmax=3, sigma_m=4.0, p_nm0=0.05)
+    model = ModelParams(name="paper", dmax=3, sigma_m=4.0, p_nm0=0.05)
     params = stereo_machine_params(3, words_per_beat=6)
     frames = [_noisy_pair(9, 10, seed=7), _noisy_pair(5, 10, seed=8), _noisy_pair(6, 10, seed=9)]
     got = run_frontend(FrontEnd(params=params, model=model, width=10),
@@ -180,7 +184,7 @@ def test_frontend_frame_start_marker_restarts_position() -> None:
 def test_stereo_machine_results_equal_the_model(counter_max: int) -> None:
     left, right, _ = random_dot_stereogram(height=8, width=20, background=2, square=4, seed=3)
     frames = [(left, right), _noisy_pair(6, 20, seed=4)]
-    model = ModelParams(dmax=5)
+    model = ModelParams(name="paper", dmax=5)
     params = stereo_machine_params(5, counter_max=counter_max, max_cycles=3000)
     got, _ = run_stereo(StereoMachine(params=params, model=model, width=20, fifo_pixels=2), frames,
                         in_stall=0.2, out_stall=0.3, seed=6)
@@ -193,7 +197,7 @@ def test_stereo_machine_hides_loading_and_filtering() -> None:
     end keeps the shadow memory full."""
     height, width, dmax = 6, 30, 6
     frames = [_noisy_pair(height, width, seed=11)]
-    model = ModelParams(dmax=dmax)
+    model = ModelParams(name="paper", dmax=dmax)
     params = stereo_machine_params(dmax, counter_max=16, max_cycles=3000)
     got, wall = run_stereo(StereoMachine(params=params, model=model, width=width), frames)
     compute = int(got.cycles.sum())
@@ -210,7 +214,7 @@ def test_stereo_machine_hides_loading_and_filtering() -> None:
 # --- Parameters ---
 
 def test_parameters_are_validated_up_front() -> None:
-    model = ModelParams(dmax=4)
+    model = ModelParams(name="paper", dmax=4)
     ok = stereo_machine_params(4)
     with pytest.raises(ParameterError, match="words_per_beat"):
         FrontEnd(params=MachineParams.for_disparity(4, words_per_beat=16), model=model, width=20)
@@ -223,8 +227,8 @@ def test_parameters_are_validated_up_front() -> None:
     with pytest.raises(ParameterError, match="fifo_pixels"):
         StereoMachine(params=ok, model=model, width=20, fifo_pixels=0)
     with pytest.raises(ParameterError, match="p_nm0"):
-        StereoMachine(params=stereo_machine_params(4, word_bits=3), model=ModelParams(dmax=4, p_nm0=0.01),
-                      width=20)
+        StereoMachine(params=stereo_machine_params(4, word_bits=3),
+                      model=ModelParams(name="paper", dmax=4, p_nm0=0.01), width=20)
     with pytest.raises(TypeError, match="model"):
         StereoMachine(params=ok, model={"dmax": 4}, width=20)  # type: ignore[arg-type]
     top = StereoMachine(params=ok, model=model, width=9)
@@ -240,7 +244,7 @@ def test_back_pressure_reaches_the_pixel_input() -> None:
     from bayesmachine.sim.stereo_testbench import frame_beats
 
     dmax, width, height = 2, 12, 7
-    model = ModelParams(dmax=dmax)
+    model = ModelParams(name="paper", dmax=dmax)
     params = stereo_machine_params(dmax, counter_max=2, max_cycles=500)
     left, right = _noisy_pair(height, width, seed=12)
     top = StereoMachine(params=params, model=model, width=width, fifo_pixels=1)
@@ -299,7 +303,7 @@ def test_stereo_machine_with_external_random_numbers(rng: str) -> None:
     from bayesmachine.sim.stereo_testbench import frame_beats
 
     dmax, width, height = 3, 11, 6
-    model = ModelParams(dmax=dmax)
+    model = ModelParams(name="paper", dmax=dmax)
     params = stereo_machine_params(dmax, counter_max=3, rng=rng, max_cycles=400)
     left, right = _noisy_pair(height, width, seed=13)
     numbers = np.random.default_rng(14).integers(0, params.word_one, size=(4000, params.operators))
@@ -348,7 +352,7 @@ def test_a_truncated_frame_leaves_nothing_behind() -> None:
     from bayesmachine.sim.stereo_testbench import frame_beats, run_frontend_beats
 
     dmax, width = 2, 10
-    model = ModelParams(dmax=dmax)
+    model = ModelParams(name="paper", dmax=dmax)
     params = stereo_machine_params(dmax, words_per_beat=6)
     cut_left, cut_right = _noisy_pair(7, width, seed=15)
     whole = _noisy_pair(6, width, seed=16)

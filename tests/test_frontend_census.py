@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 from conftest import assert_same_results, run_sim
 
+from bayesmachine.columns import AbovePrior, Census
 from bayesmachine.hdl.frontend.census import CensusFilter
 from bayesmachine.hdl.frontend.filters import FeatureFilter
 from bayesmachine.hdl.frontend.linebuffer import LineBuffer, column_windows
@@ -23,8 +24,8 @@ from bayesmachine.hdl.frontend.stereo import FrontEnd, StereoMachine, stereo_mac
 from bayesmachine.hdl.frontend.tables import frontend_tables
 from bayesmachine.host.features import census_codes, model_features
 from bayesmachine.host.images import bundled_pair
-from bayesmachine.host.likelihoods import ModelParams, QuantizedTables, likelihood_tables, memory_words
-from bayesmachine.likelihood import neighbour_words
+from bayesmachine.host.likelihoods import memory_words
+from bayesmachine.models import ModelParams
 from bayesmachine.params import ParameterError
 from bayesmachine.sim.model import MachineModel
 from bayesmachine.sim.results import MachineResult
@@ -112,13 +113,14 @@ def test_seven_high_line_buffer_and_lagged_filter_give_the_census_grid_features(
 
 def test_census_table_is_clamped_host_table() -> None:
     model = _census(4)
-    full = QuantizedTables(likelihood_tables(model), 10)
+    census = model.column(Census)
+    full = census.table(10).values
     clamped = frontend_tables(model, 10)
-    h = np.arange(model.census_bits + 1)
-    assert np.array_equal(clamped.lookup("census", h), full.census[h])
-    assert len(clamped.census) <= len(full.census)
+    h = np.arange(census.bits + 1)
+    assert np.array_equal(clamped.lookup("census", h), full[h])
+    assert len(clamped.census) <= len(full)
     with pytest.raises(ValueError, match="census"):
-        frontend_tables(ModelParams(dmax=4), 10).lookup("census", h)
+        frontend_tables(ModelParams(name="paper", dmax=4), 10).lookup("census", h)
 
 
 # --- The front end's words equal the host's ---
@@ -162,14 +164,15 @@ def test_neighbour_frontend_words_equal_host_words_with_the_above_prior(width: i
     maps = rng.integers(-1, model.dmax + 1, sum(rows) * wo)
     got, flags = run_frontend_neighbour(FrontEnd(params=params, model=model, width=width), frames, maps,
                                         in_stall=0.2, out_stall=0.2, result_delay=delay, seed=3)
-    qt = QuantizedTables(likelihood_tables(model), params.word_bits)
+    prior = model.column(AbovePrior)
+    qt = prior.table(params.word_bits)
     want, starts, k = [], [], 0
     for (lf, rf), h in zip(frames, rows, strict=True):
         fl, fr = model_features(lf, model), model_features(rf, model)
         for y in range(h):
             above = np.full(wo, -1) if y == 0 else maps[k - wo : k]
-            want.append(memory_words(fl, fr, model, params, rows=slice(y, y + 1), qtables=qt,
-                                     prior=neighbour_words(qt, model.dmax, above)))
+            want.append(memory_words(fl, fr, model, params, rows=slice(y, y + 1),
+                                     prior=prior.loaded(qt, above)))
             starts += [1] + [0] * (wo - 1)
             k += wo
     want = np.concatenate(want)
@@ -184,15 +187,15 @@ def _model_run(frames: list[tuple[np.ndarray, np.ndarray]], model: ModelParams, 
     """The model fed as ``host.run.run_machine`` feeds it: map row by map row, the above column from
     its own results of the row before, ``line_start`` on each row's first pixel; frames back to back."""
     engine = MachineModel(params)
-    qt = QuantizedTables(likelihood_tables(model), params.word_bits)
+    prior = model.column(AbovePrior)
+    qt = prior.table(params.word_bits)
     parts = []
     for lf, rf in frames:
         fl, fr = model_features(lf, model), model_features(rf, model)
         ho, wo = fl.m25.shape[0], fl.m25.shape[1] - model.dmax
         above = np.full(wo, -1)
         for y in range(ho):
-            words = memory_words(fl, fr, model, params, rows=slice(y, y + 1), qtables=qt,
-                                 prior=neighbour_words(qt, model.dmax, above))
+            words = memory_words(fl, fr, model, params, rows=slice(y, y + 1), prior=prior.loaded(qt, above))
             starts = np.zeros(wo, bool)
             starts[0] = True
             res = engine.run(words, line_start=starts)

@@ -1,7 +1,7 @@
 # amaranth: UnusedElaboratable=no
-"""census-lr on chip (issue 22): the right pass and the consistency column in the front end.
+"""census-lr on chip: the right pass and the consistency column in the front end.
 
-Blocks against their twins in ``bayesmachine.likelihood`` (``ConsistencyTest`` against
+Blocks against their twins in ``bayesmachine.columns.consistency`` (``ConsistencyTest`` against
 ``lr_consistent``), and the census-lr ``StereoMachine`` (two machines: the right pass's and the left
 pass's) against the model run as the host runs census-lr (``host.run.run_machine``: per map row the
 right pass's row, then the left pass's with the consistency column of the right MAPs), left and right
@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 from conftest import assert_same_results, run_sim
 
+from bayesmachine.columns import AbovePrior, Consistency, lr_consistent, lr_unknown
 from bayesmachine.hdl.frontend.lr import ConsistencyTest, RightPassFeeder, right_pass_params
 from bayesmachine.hdl.frontend.stereo import (
     FrontEnd,
@@ -25,15 +26,8 @@ from bayesmachine.hdl.frontend.stereo import (
 )
 from bayesmachine.host.features import model_features
 from bayesmachine.host.images import bundled_pair
-from bayesmachine.host.likelihoods import (
-    ModelParams,
-    QuantizedTables,
-    likelihood_tables,
-    memory_words,
-    right_columns,
-    right_memory_words,
-)
-from bayesmachine.likelihood import lr_column, lr_consistent, lr_unknown, neighbour_words, right_machine
+from bayesmachine.host.likelihoods import memory_words, right_columns, right_memory_words
+from bayesmachine.models import ModelParams, right_machine
 from bayesmachine.params import ParameterError
 from bayesmachine.region import OutputRegion
 from bayesmachine.sim.model import MachineModel
@@ -152,7 +146,7 @@ def test_lr_frontend_words_equal_host_words(model: ModelParams, width: int, dela
     """With stand-in results for both machines (given late, up to ``delay`` cycles after a pixel's
     words), the right pass's words are ``right_memory_words`` (its above column from the stand-in right
     results of the row before) and the left pass's ``memory_words`` with the consistency column of the
-    stand-in right MAPs of its row (``lr_column``)."""
+    stand-in right MAPs of its row (``Consistency.loaded``)."""
     params = stereo_machine_params(model.dmax, model=model, counter_max=2)
     rp = right_pass_params(model, params)
     frames = [_noisy_pair(9, width, seed=4), _noisy_pair(8, width, seed=5)]
@@ -164,22 +158,21 @@ def test_lr_frontend_words_equal_host_words(model: ModelParams, width: int, dela
     front = FrontEnd(params=params, model=model, width=width)
     got, flags, got_r, flags_r = run_frontend_lr(front, frames, maps, right_maps, in_stall=0.2, out_stall=0.2,
                                                  result_delay=delay, seed=3)
-    q = QuantizedTables(likelihood_tables(model), params.word_bits)
-    rq = QuantizedTables(likelihood_tables(model.right_model), params.word_bits)
+    w = params.word_bits
+    above_col, lr = model.column(AbovePrior), model.column(Consistency)
+    right_above_col = model.pass_named("right").model.column(AbovePrior)
     want, want_r, k, kr = [], [], 0, 0
     for (lf, rf), h in zip(frames, rows, strict=True):
         fl, fr = model_features(lf, model), model_features(rf, model)
         cols = right_columns(OutputRegion.of_features(fl.shape, model.dmax))
         for y in range(h):
             r_above = np.full(wr, -1) if y == 0 else right_maps[kr - wr : kr]
-            want_r.append(right_memory_words(fl, fr, model, rp, rows=slice(y, y + 1), qtables=rq,
-                                             prior=neighbour_words(rq, model.dmax, r_above)))
-            column = lr_column(right_maps[kr : kr + wr], int(cols[0]), cols[model.dmax:], model, q.one,
-                               q.lr_beta, q.lr_gamma)
+            want_r.append(right_memory_words(fl, fr, model, rp, rows=slice(y, y + 1),
+                                             prior=right_above_col.loaded(right_above_col.table(w), r_above)))
+            column = lr.loaded(lr.table(w), right_maps[kr : kr + wr], int(cols[0]), cols[model.dmax:])
             above = np.full(wo, -1) if y == 0 else maps[k - wo : k]
-            want.append(memory_words(fl, fr, model, params, rows=slice(y, y + 1), qtables=q,
-                                     prior=neighbour_words(q, model.dmax, above),
-                                     consistency=column))
+            want.append(memory_words(fl, fr, model, params, rows=slice(y, y + 1),
+                                     prior=above_col.loaded(above_col.table(w), above), fed=column))
             k += wo
             kr += wr
     want_r_all, want_all = np.concatenate(want_r), np.concatenate(want)
@@ -200,8 +193,9 @@ def _model_run(frames: list[tuple[np.ndarray, np.ndarray]], model: ModelParams,
     (its above column from its own previous row), then the left pass's with the consistency words."""
     rparams = right_machine(model, params)
     left_eng, right_eng = MachineModel(params), MachineModel(rparams)
-    q = QuantizedTables(likelihood_tables(model), params.word_bits)
-    rq = QuantizedTables(likelihood_tables(model.right_model), params.word_bits)
+    w = params.word_bits
+    above_col, lr = model.column(AbovePrior), model.column(Consistency)
+    right_above_col = model.pass_named("right").model.column(AbovePrior)
     left, right = [], []
     for lf, rf in frames:
         fl, fr = model_features(lf, model), model_features(rf, model)
@@ -211,15 +205,15 @@ def _model_run(frames: list[tuple[np.ndarray, np.ndarray]], model: ModelParams,
         above, right_above = np.full(wo, -1), np.full(cols.size, -1)
         for y in range(ho):
             rows = slice(y, y + 1)
-            rw = right_memory_words(fl, fr, model, rparams, rows=rows, qtables=rq,
-                                    prior=neighbour_words(rq, model.dmax, right_above))
+            rw = right_memory_words(fl, fr, model, rparams, rows=rows,
+                                    prior=right_above_col.loaded(right_above_col.table(w), right_above))
             starts = np.zeros(cols.size, bool)
             starts[0] = True
             res_r = right_eng.run(rw, line_start=starts)
             right_above = np.where(res_r.nomatch | res_r.timeout, -1, res_r.map)
-            cw = lr_column(right_above, int(cols[0]), region.map_columns, model, q.one, q.lr_beta, q.lr_gamma)
-            words = memory_words(fl, fr, model, params, rows=rows, qtables=q,
-                                 prior=neighbour_words(q, model.dmax, above), consistency=cw)
+            cw = lr.loaded(lr.table(w), right_above, int(cols[0]), region.map_columns)
+            words = memory_words(fl, fr, model, params, rows=rows,
+                                 prior=above_col.loaded(above_col.table(w), above), fed=cw)
             starts = np.zeros(wo, bool)
             starts[0] = True
             res = left_eng.run(words, line_start=starts)

@@ -1,4 +1,4 @@
-"""The census model (issue 17): parameters, tables, census codes, words, float and word references.
+"""The census model: parameters, tables, census codes, words, float and word references.
 
 Oracles are independent of the code under test: census codes pixel by pixel in Python,
 Hamming distances by unpacking bytes, likelihoods and priors from the formula (no tables),
@@ -11,6 +11,8 @@ import math
 import numpy as np
 import pytest
 
+from bayesmachine.cliargs import with_flag
+from bayesmachine.columns import AbovePrior, Census, neighbour_words, quantize
 from bayesmachine.host.features import (
     FeatureSums,
     census_codes,
@@ -33,65 +35,86 @@ from bayesmachine.host.reference import (
     reference_quantized,
     reference_quantized_map,
 )
-from bayesmachine.likelihood import (
-    ModelParams,
-    QuantizedTables,
-    check_disparity_machine,
-    disparity_machine,
-    likelihood_tables,
-    neighbour_words,
-    quantize,
-)
+from bayesmachine.models import ModelParams, check_disparity_machine, disparity_machine, machine_layout
 from bayesmachine.params import MachineParams, ParameterError
 
-PAPER_KEYS = ["dmax", "p0", "sigma_m", "sigma_gh", "sigma_gv", "p_nm0", "sigma_nm"]
+PAPER_KEYS = ["dmax", "name", "p0", "sigma_m", "sigma_gh", "sigma_gv", "p_nm0", "sigma_nm"]
 
 
 # --- Parameters ---
 
-def test_census_defaults_follow_the_issue():
+def test_census_defaults():
     m = ModelParams(name="census")
-    assert (m.census_window, m.census_bits, m.sigma_c, m.h_nm, m.census_p0) == (7, 48, 6.0, 6, 0.02)
-    assert (m.prior_eps, m.prior_s, m.has_prior, m.columns) == (0.05, 4.0, True, 4)
-    assert m.prior_nm == pytest.approx(0.05 + 0.95 * math.exp(-0.5)) and round(m.prior_nm, 3) == 0.626
+    census = m.column(Census)
+    assert (m.census_window, census.bits, m.census_sigma, m.census_nomatch_h) == (7, 48, 6.0, 6)
+    assert m.census_p0 == 0.02
+    assert (m.prior_eps, m.prior_s, machine_layout(m.columns)) == (0.05, 4.0, ("neighbour", 4))
+    assert m.prior_nomatch == pytest.approx(0.05 + 0.95 * math.exp(-0.5))
+    assert round(m.prior_nomatch, 3) == 0.626
     five = ModelParams(name="census", census_window=5)
-    assert (five.census_bits, five.sigma_c, five.h_nm) == (24, 3.0, 3)
-    assert ModelParams(name="census", census_window=5, census_sigma=2.5).sigma_c == 2.5
-    assert ModelParams(name="census", prior_eps=0.2).prior_nm == pytest.approx(0.2 + 0.8 * math.exp(-0.5))
+    assert (five.column(Census).bits, five.census_sigma, five.census_nomatch_h) == (24, 3.0, 3)
+    assert ModelParams(name="census", census_window=5, census_sigma=2.5).census_sigma == 2.5
+    wide = ModelParams(name="census", prior_eps=0.2)
+    assert wide.prior_nomatch == pytest.approx(0.2 + 0.8 * math.exp(-0.5))
 
 
-def test_paper_model_dict_is_unchanged_and_census_dict_round_trips():
-    paper = ModelParams()
-    assert list(paper.to_dict()) == PAPER_KEYS  # reports and Verilator design keys unchanged
-    assert (paper.census, paper.has_prior, paper.columns) == (False, False, 3)
+def test_paper_model_has_its_parameters_only_and_dicts_round_trip():
+    paper = ModelParams(name="paper")
+    assert list(paper.to_dict()) == PAPER_KEYS
+    assert ModelParams(**paper.to_dict()) == paper  # the name too: ModelParams() is another model
+    assert paper.column(Census) is None and machine_layout(paper.columns) == ("uniform", 3)
+    with pytest.raises(AttributeError, match="census_window"):
+        paper.census_window  # noqa: B018
+    with pytest.raises(ParameterError, match="^census_window is not a parameter of the paper model"):
+        ModelParams(name="paper", census_window=5)
+    with pytest.raises(TypeError, match="census_widow"):
+        ModelParams(name="census", census_widow=5)
     census = ModelParams(name="census", census_window=5)
     d = census.to_dict()
     assert d["name"] == "census" and d["census_sigma"] == 3.0 and d["census_nomatch_h"] == 3
-    again = ModelParams(**d)
-    assert (again.sigma_c, again.h_nm, again.prior_nm) == (census.sigma_c, census.h_nm, census.prior_nm)
+    assert ModelParams(**d) == census and hash(ModelParams(**d)) == hash(census)
+
+
+def test_replace_keeps_the_given_parameters_and_resolves_the_others():
+    import pickle
+
+    m = ModelParams(name="census", prior_s=3.0)
+    five = m.replace(census_window=5)
+    assert (five.census_window, five.census_sigma, five.census_nomatch_h, five.prior_s) == (5, 3.0, 3, 3.0)
+    assert pickle.loads(pickle.dumps(m)).replace(census_window=5) == five
+    # Another model: its own defaults (census-lr's no-match prior factor is its own, not census's).
+    assert ModelParams(name="census-lr").replace(name="census") == ModelParams(name="census")
+    assert ModelParams(name="census", census_window=5).replace(name="paper") == ModelParams(name="paper")
 
 
 @pytest.mark.parametrize(("kwargs", "option"), [
     ({"name": "sgbm"}, "--model"),
     ({"census_window": 9}, "--census-window"),
-    ({"census_window": True}, "--census-window"),
-    ({"census_window": 7.0}, "--census-window"),
     ({"census_p0": 1.5}, "--census-p0"),
     ({"census_sigma": 0.0}, "--census-sigma"),
     ({"census_sigma": math.nan}, "--census-sigma"),
     ({"census_sigma": 1e-300}, "--census-sigma"),
     ({"census_nomatch_h": 49}, "--census-nomatch-h"),
     ({"census_window": 5, "census_nomatch_h": 25}, "--census-nomatch-h"),
-    ({"census_nomatch_h": 2.5}, "--census-nomatch-h"),
-    ({"neighbour_prior": 1}, "--neighbour-prior"),
     ({"prior_eps": -0.1}, "--prior-eps"),
     ({"prior_s": -4.0}, "--prior-s"),
     ({"prior_s": math.inf}, "--prior-s"),
     ({"prior_nomatch": 0.0}, "--prior-nomatch"),
     ({"prior_nomatch": 1.2}, "--prior-nomatch"),
 ])
-def test_bad_census_params_name_the_option(kwargs, option):
-    with pytest.raises(ParameterError, match=f"^{option}: "):
+def test_bad_census_params_name_the_parameter_and_the_cli_its_option(kwargs, option):
+    with pytest.raises(ParameterError) as err:
+        ModelParams(**{"name": "census", **kwargs})
+    assert str(err.value).startswith(err.value.parameter)
+    assert str(with_flag(err.value)).startswith(f"{option}")
+
+
+@pytest.mark.parametrize(("kwargs", "name"), [
+    ({"census_window": True}, "census_window"), ({"census_window": 7.0}, "census_window"),
+    ({"census_nomatch_h": 2.5}, "census_nomatch_h"), ({"neighbour_prior": 1}, "neighbour_prior"),
+])
+def test_wrong_census_types_are_type_errors(kwargs, name):
+    with pytest.raises(TypeError, match=f"^{name}"):
         ModelParams(**{"name": "census", **kwargs})
 
 
@@ -99,33 +122,49 @@ def test_bad_census_params_name_the_option(kwargs, option):
 
 def test_tables_at_known_points():
     model = ModelParams(dmax=80, name="census")
-    t = likelihood_tables(model)
-    assert t.census.shape == (49,) and t.census[0] == 1.0
-    assert t.census[6] == pytest.approx(0.02 + 0.98 * math.exp(-0.5))
-    assert t.census[48] == pytest.approx(0.02 + 0.98 * math.exp(-48 * 48 / 72))
-    assert t.census_nomatch == t.census[6]
-    assert t.prior.shape == (81,) and t.prior[0] == 1.0
-    assert t.prior[4] == pytest.approx(model.prior_nm) and t.prior_nomatch == model.prior_nm
-    assert t.prior[80] == pytest.approx(0.05)
-    q = QuantizedTables(t, 10)
-    assert (q.census[0], q.census_nomatch, q.prior[0], q.prior_nomatch) == (1024, 629, 1024, 641)
-    assert q.census_nomatch == quantize(t.census[6], 10)
-    # prior_last: the quantized prior changes up to it and is constant from it on.
-    assert q.prior[q.prior_last - 1] != q.prior[q.prior_last]
-    assert (q.prior[q.prior_last:] == quantize(0.05, 10)).all()
-    # The paper model has none of them.
-    p = likelihood_tables(ModelParams(dmax=8))
-    assert p.census is None and p.prior is None
-    # Without the prior, no prior table.
-    assert likelihood_tables(ModelParams(dmax=8, name="census", neighbour_prior=False)).prior is None
+    census, prior = model.column(Census), model.column(AbovePrior)
+    t, tp = census.table(), prior.table()
+    assert t.values.shape == (49,) and t.values[0] == 1.0
+    assert t.values[6] == pytest.approx(0.02 + 0.98 * math.exp(-0.5))
+    assert t.values[48] == pytest.approx(0.02 + 0.98 * math.exp(-48 * 48 / 72))
+    assert t.nomatch == (t.values[6],) and census.nomatch_entry(t) == t.values[6]
+    assert tp.values.shape == (81,) and tp.values[0] == 1.0
+    assert tp.values[4] == pytest.approx(model.prior_nomatch) and tp.nomatch == (model.prior_nomatch,)
+    assert tp.values[80] == pytest.approx(0.05)
+    q, qp = census.table(10), prior.table(10)
+    assert (q.values[0], census.nomatch_entry(q), qp.values[0], qp.nomatch[0]) == (1024, 629, 1024, 641)
+    assert census.nomatch_entry(q) == quantize(t.values[6], 10)
+    # last_change: the quantized prior changes up to it and is constant from it on.
+    last = qp.last_change()
+    assert qp.values[last - 1] != qp.values[last]
+    assert (qp.values[last:] == quantize(0.05, 10)).all()
+    # The paper model has no such columns, nor the census model without its prior a prior column.
+    assert ModelParams(name="paper", dmax=8).column(Census) is None
+    assert ModelParams(dmax=8, name="census", neighbour_prior=False).column(AbovePrior) is None
     # h_nm = 0 leaves the no-match row uncalibrated: its census entry is exactly 1.0.
-    assert likelihood_tables(ModelParams(dmax=8, name="census", census_nomatch_h=0)).census_nomatch == 1.0
+    assert ModelParams(dmax=8, name="census", census_nomatch_h=0).column(Census).table().nomatch == (1.0,)
+
+
+def test_every_table_is_checked_nonincreasing_in_its_cost():
+    for model in (ModelParams(name="census-lr"), ModelParams(name="census", census_window=5, prior_s=0.5)):
+        for p in model.passes:
+            for term in (*p.columns, p.model.nomatch):
+                v = term.table().values
+                assert (np.diff(v) <= 0).all(), term
+    class Growing(Census):  # a kind whose likelihood grows with the cost: refused when its table is built
+        def likelihood(self, cost):
+            return np.linspace(0.5, 1.0, np.size(cost))
+
+    model = ModelParams(name="census")
+    with pytest.raises(ParameterError, match="^census_sigma = 6.0 gives likelihoods that grow with the cost"):
+        Growing(values=model.parameters, dmax=model.dmax).table()
 
 
 def test_neighbour_words_from_one_neighbour():
     model = ModelParams(dmax=6, name="census")
-    q = QuantizedTables(likelihood_tables(model), 10)
-    w = neighbour_words(q, 6, np.array([-1, 2, 3, 6], np.int16))
+    above = model.column(AbovePrior)
+    q = above.table(10)
+    w = above.loaded(q, np.array([-1, 2, 3, 6], np.int16))
     assert w.shape == (4, 8)
     assert (w[0] == 1024).all()  # no matched neighbour: factor 1.0 everywhere, no-match row too
     d = np.arange(7)
@@ -134,27 +173,28 @@ def test_neighbour_words_from_one_neighbour():
     np.testing.assert_array_equal(w[1, :7], [f[abs(k - 2)] for k in d])
     np.testing.assert_array_equal(w[2, :7], [f[abs(k - 3)] for k in d])
     np.testing.assert_array_equal(w[3, :7], [f[abs(k - 6)] for k in d])
-    assert (w[1:, 7] == q.prior_nomatch).all()
+    assert (w[1:, 7] == q.nomatch[0]).all()
     with pytest.raises(ValueError, match="0..6"):
         neighbour_words(q, 6, np.array([7]))
-    with pytest.raises(ValueError, match="no neighbour prior"):
-        neighbour_words(QuantizedTables(likelihood_tables(ModelParams(dmax=6)), 10), 6, np.array([1]))
+    # The float64 factors are the same rule on the float table (the reference's).
+    f = above.loaded(above.table(), np.array([2], np.int16))
+    np.testing.assert_array_equal(quantize(f, 10), w[1:2])
 
 
 def test_disparity_machine_builds_the_model_s_machine():
-    paper = ModelParams(dmax=6)
+    paper = ModelParams(name="paper", dmax=6)
     assert disparity_machine(paper, counter_max=4) == MachineParams.for_disparity(6, counter_max=4)
     no_prior = ModelParams(dmax=6, name="census", neighbour_prior=False)
     assert disparity_machine(no_prior) == MachineParams.for_disparity(6, columns=4)
     census = ModelParams(dmax=80, name="census")
     m = disparity_machine(census, word_bits=10)
-    q = QuantizedTables(likelihood_tables(census), 10)
+    q = census.column(AbovePrior).table(10)
     assert m.prior == "neighbour" and m.columns == 4
-    assert m.feedback_words == tuple(int(v) for v in q.prior[: q.prior_last + 1])
-    assert m.feedback_nomatch_word == q.prior_nomatch == 641
+    assert m.feedback_words == tuple(int(v) for v in q.values[: q.last_change() + 1])
+    assert m.feedback_nomatch_word == q.nomatch[0] == 641
     # The clamped table gives every |d - d_n| the full table's word.
     for k in range(81):
-        assert m.feedback_words[min(k, len(m.feedback_words) - 1)] == q.prior[k]
+        assert m.feedback_words[min(k, len(m.feedback_words) - 1)] == q.values[k]
     # Loading stays hidden at counter max 16: no run is shorter than n_max + 1 = 17 cycles.
     assert (m.words_per_beat, m.words_per_pixel, m.beats_per_pixel) == (30, 410, 14)
     assert m.beats_per_pixel <= 17 - 1
@@ -210,7 +250,7 @@ def test_census_bit_order_is_raster():
     assert census.margin == 3 and f7.census.shape == f7.m25.shape == (6, 8)
     np.testing.assert_array_equal(f7.m25, f5.m25[1:-1, 1:-1])
     np.testing.assert_array_equal(f7.gv20, f5.gv20[1:-1, 1:-1])
-    assert ModelParams(dmax=2, name="census", census_window=5).margin == ModelParams().margin == 2
+    assert ModelParams(dmax=2, name="census", census_window=5).margin == ModelParams(name="paper").margin == 2
 
 
 def test_hamming_equals_plain():
@@ -240,7 +280,8 @@ def test_census_words_equal_plain_formula(window):
     words = memory_words(fl, fr, model, machine)
     np.testing.assert_array_equal(words, memory_words_plain(fl, fr, model, machine))
     assert words.shape[1:] == (8, 4)
-    h_nm_word = quantize(0.02 + 0.98 * math.exp(-(model.h_nm**2) / (2 * model.sigma_c**2)), 10)
+    h, sigma = model.census_nomatch_h, model.census_sigma
+    h_nm_word = quantize(0.02 + 0.98 * math.exp(-(h**2) / (2 * sigma**2)), 10)
     assert (words[:, 7, 1:3] == 1024).all() and (words[:, 7, 3] == h_nm_word).all()
     # The census column varies (it is not a column of ones).
     assert len(np.unique(words[:, :7, 3])) > 5
@@ -253,12 +294,11 @@ def test_census_words_equal_plain_formula(window):
 def test_words_with_the_neighbour_prior():
     fl, fr, model = _pair(6)
     machine = disparity_machine(model)
-    with pytest.raises(ParameterError, match="--neighbour-prior"):
+    with pytest.raises(ParameterError, match="^prior: .*previous map row"):
         memory_words(fl, fr, model, machine)  # the above words must come from the machine's results
     p = fl.shape[0] * (fl.shape[1] - 6)
-    q = QuantizedTables(likelihood_tables(model), 10)
     rng = np.random.default_rng(0)
-    pw = neighbour_words(q, 6, rng.integers(-1, 7, p))
+    pw = neighbour_words(model.column(AbovePrior).table(10), 6, rng.integers(-1, 7, p))
     words = memory_words(fl, fr, model, machine, prior=pw)
     assert words.shape == (p, 8, machine.loaded_columns) == (p, 8, 5)  # the feedback column is not loaded
     np.testing.assert_array_equal(words[:, :, 0], pw)
@@ -270,33 +310,34 @@ def test_words_with_the_neighbour_prior():
 def test_machine_checks_are_one_function():
     census = ModelParams(dmax=6, name="census")
     no_prior = ModelParams(dmax=6, name="census", neighbour_prior=False)
-    with pytest.raises(ParameterError, match="^columns: .*4 data terms"):
+    with pytest.raises(ParameterError, match="^columns: .*4 data columns"):
         check_disparity_machine(no_prior, MachineParams.for_disparity(6))
     with pytest.raises(ParameterError, match="^rows: .*for_disparity"):
         check_disparity_machine(no_prior, MachineParams.for_disparity(7, columns=4))
-    with pytest.raises(ParameterError, match="^--neighbour-prior: .*prior='neighbour'.*disparity_machine"):
+    with pytest.raises(ParameterError, match="^neighbour_prior .*prior='neighbour'.*disparity_machine"):
         check_disparity_machine(census, MachineParams.for_disparity(6, columns=4))
-    with pytest.raises(ParameterError, match="^--neighbour-prior: .*prior='neighbour'"):
+    with pytest.raises(ParameterError, match="^neighbour_prior .*prior='neighbour'"):
         check_disparity_machine(census, MachineParams.for_disparity(6, columns=4, prior="loaded"))
     # A neighbour machine with another table (another model's eps) is refused: its feedback would
     # not be the model's prior.
     other = disparity_machine(ModelParams(dmax=6, name="census", prior_eps=0.2))
-    with pytest.raises(ParameterError, match="^--neighbour-prior: .*feedback table"):
+    with pytest.raises(ParameterError, match="^neighbour_prior: .*feedback table"):
         check_disparity_machine(census, other)
     # A neighbour machine with a model without the prior.
-    with pytest.raises(ParameterError, match="^prior: .*turned off"):
+    with pytest.raises(ParameterError, match="^prior: .*with neighbour_prior off has none"):
         check_disparity_machine(no_prior, disparity_machine(census))
     with pytest.raises(ParameterError, match="^p_nm0: .*quantizes to 0"):
-        check_disparity_machine(ModelParams(dmax=6, p_nm0=1e-4), MachineParams.for_disparity(6, word_bits=4))
-    with pytest.raises(ParameterError, match="^--census-nomatch-h: "):
+        check_disparity_machine(ModelParams(name="paper", dmax=6, p_nm0=1e-4),
+                                MachineParams.for_disparity(6, word_bits=4))
+    with pytest.raises(ParameterError, match="^census_nomatch_h = 48: .*quantizes to 0"):
         far = ModelParams(dmax=6, name="census", census_nomatch_h=48, neighbour_prior=False, p_nm0=0.5)
         check_disparity_machine(far, MachineParams.for_disparity(6, columns=4, word_bits=4))
-    with pytest.raises(ParameterError, match="^--prior-nomatch: .*quantizes to 0"):
+    with pytest.raises(ParameterError, match="^prior_nomatch = 0.0001 quantizes to 0"):
         disparity_machine(ModelParams(dmax=6, name="census", prior_nomatch=1e-4))
     assert check_disparity_machine(census, disparity_machine(census)) == 2
     assert check_disparity_machine(no_prior, MachineParams.for_disparity(6, columns=4, prior="loaded")) == 1
     fl, fr, _ = _pair(6)
-    with pytest.raises(ParameterError, match="census codes"):
+    with pytest.raises(ParameterError, match="census column needs the census"):
         bare = FeatureSums(fl.m25, fl.gh20, fl.gv20)  # no census codes
         memory_words(bare, fr, no_prior, MachineParams.for_disparity(6, columns=4))
 
@@ -352,18 +393,18 @@ def _quantized_plain(fl, fr, model, word_bits):
     m = model.hypotheses
     disp = np.full((ho, wo), -1, np.int64)
     post = np.empty((ho, wo, m))
-    q = QuantizedTables(likelihood_tables(model), word_bits) if model.has_prior else None
+    prior = model.column(AbovePrior)
     fb = machine.feedback_words
     for y in range(ho):
-        if model.has_prior:  # the above column: this inference's own previous row
-            above = neighbour_words(q, model.dmax, disp[y - 1] if y > 0 else np.full(wo, -1))
+        if prior is not None:  # the above column: this inference's own previous row
+            above = prior.loaded(prior.table(word_bits), disp[y - 1] if y > 0 else np.full(wo, -1))
             words = memory_words(fl, fr, model, machine, rows=slice(y, y + 1), prior=above)
         else:
             words = memory_words(fl, fr, model, machine, rows=slice(y, y + 1))
         for x in range(wo):
             w = [[int(v) for v in row] for row in words[x]]
             left = disp[y, x - 1] if x > 0 else -1
-            if model.has_prior:
+            if prior is not None:
                 for r in range(m):
                     if left < 0:
                         f = 1 << word_bits
@@ -396,11 +437,15 @@ def test_quantized_reference_is_the_words_inference(kw):
 
 def test_quantized_reference_of_the_paper_model():
     fl, fr, _ = _pair(8)
-    paper = ModelParams(dmax=8)
+    paper = ModelParams(name="paper", dmax=8)
     got = reference_quantized(fl, fr, paper, 6)
     np.testing.assert_array_equal(got.map, _quantized_plain(fl, fr, paper, 6)[0])
-    with pytest.raises(ParameterError, match="--word-bits"):  # 4 data words and 2 prior words of 11 bits
+    with pytest.raises(ParameterError, match="^word_bits"):  # 4 data words and 2 prior words of 11 bits
         reference_quantized(fl, fr, ModelParams(dmax=8, name="census"), 11)
+    # The paper model's three words take the widest words (their product fits 62 bits at W = 15).
+    wide = reference_quantized(fl, fr, paper, 15)
+    np.testing.assert_array_equal(wide.map, _quantized_plain(fl, fr, paper, 15)[0])
+    assert (wide.posterior >= 0).all()
 
 
 # --- The machine on the census model ---
@@ -417,8 +462,8 @@ def test_machine_runs_the_census_model_without_the_prior():
     assert out.metrics.bad["machine"]["bad2"] < 0.1
     # With the neighbour prior the machine needs its neighbour prior (its feedback column, and the
     # above column from its own results): refused, never run with a silently uniform prior.
-    with pytest.raises(ParameterError, match="--neighbour-prior"):
+    with pytest.raises(ParameterError, match="^neighbour_prior"):
         run_pair(left, right, ModelParams(dmax=10, name="census"), machine)
     loaded = MachineParams.for_disparity(10, columns=4, prior="loaded")
-    with pytest.raises(ParameterError, match="--neighbour-prior"):
+    with pytest.raises(ParameterError, match="^neighbour_prior"):
         run_pair(left, right, ModelParams(dmax=10, name="census"), loaded)

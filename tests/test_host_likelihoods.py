@@ -13,21 +13,17 @@ from fractions import Fraction
 import numpy as np
 import pytest
 
+from bayesmachine.cliargs import with_flag
+from bayesmachine.columns import GradH, GradV, Mean, likelihood_formula, quantize
 from bayesmachine.host.features import feature_sums
 from bayesmachine.host.images import random_dot_stereogram
-from bayesmachine.host.likelihoods import (
-    ModelParams,
-    likelihood_formula,
-    likelihood_tables,
-    memory_words,
-    memory_words_plain,
-    quantize,
-)
-from bayesmachine.params import MachineParams
+from bayesmachine.host.likelihoods import memory_words, memory_words_plain
+from bayesmachine.models import ModelParams
+from bayesmachine.params import MachineParams, ParameterError
 
 
 def test_defaults_are_the_paper_table():
-    m = ModelParams()
+    m = ModelParams(name="paper")
     assert (m.dmax, m.p0, m.sigma_m, m.sigma_gh, m.sigma_gv, m.p_nm0, m.sigma_nm) == (
         80,
         0.02,
@@ -48,17 +44,23 @@ def test_defaults_are_the_paper_table():
         ({"sigma_m": 0.0}, "sigma_m"),
         ({"sigma_nm": math.inf}, "sigma_nm"),
         ({"dmax": -1}, "dmax"),
-        ({"dmax": 2.5}, "dmax"),
         ({"p0": math.nan}, "p0"),
         ({"sigma_gh": 1e-300}, "sigma_gh"),  # 2 sigma^2 underflows to 0: NaN likelihoods
         ({"sigma_gv": 1e200}, "sigma_gv"),  # 2 sigma^2 overflows to inf
         ({"sigma_nm": -3.0}, "sigma_nm"),
-        ({"p_nm0": True}, "p_nm0"),
     ],
 )
 def test_bad_model_params_name_the_parameter(kwargs, name):
-    with pytest.raises(ValueError, match=name):
-        ModelParams(**kwargs)
+    with pytest.raises(ParameterError, match=f"^{name}") as err:
+        ModelParams(name="paper", **kwargs)
+    assert err.value.parameter == name
+
+
+@pytest.mark.parametrize(("kwargs", "name"), [({"dmax": 2.5}, "dmax"), ({"p_nm0": True}, "p_nm0"),
+                                              ({"sigma_m": "10"}, "sigma_m"), ({"name": 3}, "name")])
+def test_wrong_types_are_type_errors(kwargs, name):
+    with pytest.raises(TypeError, match=f"^{name}"):
+        ModelParams(**{"name": "paper", **kwargs})
 
 
 @pytest.mark.parametrize(
@@ -66,21 +68,25 @@ def test_bad_model_params_name_the_parameter(kwargs, name):
     [({"sigma_m": 1e-300}, "--sigma-m/--sigma"), ({"p_nm0": 0.0}, "--p-nm0"), ({"p0": 2.0}, "--p0"),
      ({"sigma_nm": 0.0}, "--sigma-nm"), ({"dmax": -2}, "--dmax")],
 )
-def test_model_errors_name_the_command_line_option(kwargs, option):
-    with pytest.raises(ValueError, match=f"^{option}: "):
-        ModelParams(**kwargs)
+def test_model_errors_speak_of_parameters_and_the_cli_adds_its_flag(kwargs, option):
+    with pytest.raises(ParameterError) as err:
+        ModelParams(name="paper", **kwargs)
+    assert not str(err.value).startswith("--")
+    assert str(with_flag(err.value)) == f"{option}: {err.value}"
 
 
 def test_tiny_and_huge_sigmas_that_fit_float64_give_tables_in_0_1():
     for sigma in (1e-150, 1e150):
-        t = likelihood_tables(ModelParams(sigma_m=sigma, sigma_gh=sigma, sigma_gv=sigma, sigma_nm=sigma))
-        for tab in (t.m, t.gh, t.gv, t.nomatch):
+        m = ModelParams(name="paper", sigma_m=sigma, sigma_gh=sigma, sigma_gv=sigma, sigma_nm=sigma)
+        for term in (*m.columns, m.nomatch):
+            tab = term.table().values
             assert np.isfinite(tab).all() and tab.min() >= 0 and tab.max() <= 1
 
 
-def test_core_likelihood_module_imports_no_host_and_no_amaranth():
+def test_core_model_modules_import_no_host_and_no_amaranth():
     code = (
-        "import sys, bayesmachine.likelihood as l; l.likelihood_tables(l.ModelParams()); "
+        "import sys, bayesmachine.models as m; model = m.ModelParams(); "
+        "[c.table() for p in model.passes for c in (*p.columns, p.model.nomatch)]; "
         "bad = [m for m in sys.modules if m.startswith(('bayesmachine.host', 'amaranth', 'cv2'))]; "
         "assert not bad, bad"
     )
@@ -96,9 +102,11 @@ def test_likelihood_formula_values():
 
 
 def test_tables_cover_every_difference():
-    t = likelihood_tables(ModelParams())
-    assert len(t.m) == 25 * 255 + 1 and len(t.gh) == 2 * 10 * 255 + 1 and len(t.nomatch) == 10 * 255 + 1
-    assert t.nomatch[0] == 1.0 and t.nomatch[-1] == pytest.approx(0.01)
+    model = ModelParams(name="paper")
+    m, gh, gv = (model.column(kind).table().values for kind in (Mean, GradH, GradV))
+    nomatch = model.nomatch.table().values
+    assert len(m) == 25 * 255 + 1 and len(gh) == len(gv) == 2 * 10 * 255 + 1 and len(nomatch) == 10 * 255 + 1
+    assert nomatch[0] == 1.0 and nomatch[-1] == pytest.approx(0.01)
 
 
 def test_quantize_edges():
@@ -125,7 +133,7 @@ def test_quantize_rejects_out_of_range(bad):
 
 def _pair(dmax):
     left, right, _ = random_dot_stereogram(height=14, width=40, background=3, square=6, seed=1)
-    return feature_sums(left), feature_sums(right), ModelParams(dmax=dmax)
+    return feature_sums(left), feature_sums(right), ModelParams(name="paper", dmax=dmax)
 
 
 @pytest.mark.parametrize("prior", ["uniform", "loaded"])
@@ -166,7 +174,8 @@ def test_words_equal_the_paper_formula_computed_directly():
     rng = np.random.default_rng(12)
     left = rng.integers(0, 256, size=(9, 17), dtype=np.uint8)
     right = np.roll(left, -2, axis=1) // 2 + rng.integers(0, 40, size=(9, 17), dtype=np.uint8)
-    model = ModelParams(dmax=3, p0=0.05, sigma_m=7.0, sigma_gh=9.0, sigma_gv=11.0, p_nm0=0.03, sigma_nm=5.0)
+    model = ModelParams(name="paper", dmax=3, p0=0.05, sigma_m=7.0, sigma_gh=9.0, sigma_gv=11.0, p_nm0=0.03,
+                        sigma_nm=5.0)
     w = 10
     machine = MachineParams.for_disparity(3, word_bits=w)
     words = memory_words(feature_sums(left), feature_sums(right), model, machine)

@@ -1,4 +1,4 @@
-"""``--model`` on the command line: run, reference, sweep and emit with the census model (issue 17)."""
+"""``--model`` on the command line: run, reference, sweep and emit with the census model."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from bayesmachine.host.features import model_features
 from bayesmachine.host.images import random_dot_stereogram
 from bayesmachine.host.reference import reference_map
 from bayesmachine.host.run import prepare, run_machine
-from bayesmachine.likelihood import DEFAULT_MODEL, HARDWARE_MODEL, ModelParams, disparity_machine
+from bayesmachine.models import DEFAULT_MODEL, HARDWARE_MODEL, ModelParams, disparity_machine
 
 DMAX = 12
 
@@ -60,6 +60,7 @@ def test_default_model_is_one_rule(pair, tmp_path, monkeypatch):
     # measurements: README, Models); the paper's model stays one option away and its report is what
     # it always was.
     assert (DEFAULT_MODEL, HARDWARE_MODEL) == ("census-lr", "census")
+    assert ModelParams() == ModelParams(name=DEFAULT_MODEL)  # the library's default is the command's
     out = tmp_path / "default"
     assert main(["run", *_args(pair, "--counter-max", "4", "--no-sgbm"), "-o", str(out)]) == 0
     report = json.loads((out / "report.json").read_text())
@@ -72,7 +73,7 @@ def test_default_model_is_one_rule(pair, tmp_path, monkeypatch):
     assert main(["run", *argv, "-o", str(out)]) == 0
     report = json.loads((out / "report.json").read_text())
     assert report["model_name"] == "paper" and report["machine"]["prior"] == "uniform"
-    assert "name" not in report["model"]  # the paper model's dict is what it always was
+    assert report["model"] == ModelParams(name="paper", dmax=DMAX).to_dict()
     # One constant each: the rule reads them, no command spells a model.
     monkeypatch.setattr(cliargs, "DEFAULT_MODEL", "paper")
     out = tmp_path / "switched"
@@ -187,12 +188,13 @@ def test_sweep_puts_models_side_by_side(pair, tmp_path):
     [
         (["run", "--model", "paper", "--census-sigma", "3"], "--census-sigma: options of --model census"),
         (["run", "--model", "paper", "--no-neighbour-prior", "--prior-eps", "0.1"],
-         "--prior-eps, --no-neighbour-prior: options of --model census"),
+         "--no-neighbour-prior, --prior-eps: options of --model census"),
         (["sweep", "--model", "paper", "--census-window", "5"],
          "--census-window: options of --model census"),
         (["run", "--model", "census", "--prior", "loaded"], "--prior: prior: the census model"),
         (["run", "--model", "census", "--no-neighbour-prior", "--prior", "neighbour"], "--prior neighbour"),
-        (["run", "--model", "paper", "--prior", "neighbour"], "--prior neighbour: the census model's"),
+        (["run", "--model", "paper", "--prior", "neighbour"],
+         "--prior neighbour: the neighbour prior's machine"),
         (["run", "--model", "census", "--census-window", "6"],
          "--census-window: census_window must be 5 or 7"),
         (["run", "--model", "census", "--prior-s", "0"], "--prior-s: prior_s must be"),

@@ -1,7 +1,7 @@
 """The census model's neighbour prior run end to end from the host (``run_machine``).
 
 The oracle drives the engine by hand, one map row per call: row y's loaded above column from the
-machine's own results of row y - 1 (``neighbour_words``; -1 for no match or a timeout, none for
+machine's own results of row y - 1 (``AbovePrior.loaded``; -1 for no match or a timeout, none for
 row 0), its first pixel flagged ``line_start``. ``run_machine`` must give the same results bit for
 bit, and the prior must change them.
 """
@@ -11,10 +11,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from bayesmachine.columns import AbovePrior
 from bayesmachine.host.images import random_dot_stereogram
-from bayesmachine.host.likelihoods import QuantizedTables, likelihood_tables, memory_words
+from bayesmachine.host.likelihoods import memory_words
 from bayesmachine.host.run import prepare, run_machine
-from bayesmachine.likelihood import ModelParams, disparity_machine, neighbour_words
+from bayesmachine.models import ModelParams, disparity_machine
 from bayesmachine.sim.engines import get_engine
 
 DMAX = 10
@@ -32,13 +33,14 @@ def hand_run(prepared, machine, max_rows: int | None = None):
     model = prepared.model
     fl, fr = prepared.features
     ho, wo = prepared.shape
-    q = QuantizedTables(likelihood_tables(model), machine.word_bits)
+    column = model.column(AbovePrior)
+    q = column.table(machine.word_bits)
     eng = get_engine("model", machine)
     disp = np.full((ho, wo), -1, np.int64)
     maps, cycles = [], []
     for y in range(ho if max_rows is None else max_rows):
         above = disp[y - 1] if y > 0 else np.full(wo, -1)
-        prior = neighbour_words(q, DMAX, above)
+        prior = column.loaded(q, above)
         words = memory_words(fl, fr, model, machine, rows=slice(y, y + 1), prior=prior)
         starts = np.arange(wo) == 0
         res = eng.run(words, line_start=starts)
@@ -71,14 +73,15 @@ def test_the_prior_changes_the_results(prepared):
     assert (flat_map != run.map).mean() > 0.02
     # A wrong above column (the row above shifted) changes the results too.
     model = prepared.model
-    q = QuantizedTables(likelihood_tables(model), machine.word_bits)
+    column = model.column(AbovePrior)
+    q = column.table(machine.word_bits)
     eng = get_engine("model", machine)
     y = 5
     eng2 = get_engine("model", machine)
     good = memory_words(fl, fr, model, machine, rows=slice(y, y + 1),
-                        prior=neighbour_words(q, DMAX, run.map[y - 1]))
+                        prior=column.loaded(q, run.map[y - 1]))
     shifted = memory_words(fl, fr, model, machine, rows=slice(y, y + 1),
-                           prior=neighbour_words(q, DMAX, np.roll(run.map[y - 1], 3)))
+                           prior=column.loaded(q, np.roll(run.map[y - 1], 3)))
     a = eng.run(good, line_start=np.arange(wo) == 0)
     b = eng2.run(shifted, line_start=np.arange(wo) == 0)
     assert not np.array_equal(a.counts, b.counts)

@@ -5,7 +5,6 @@ import pytest
 
 from bayesmachine.host.features import feature_sums
 from bayesmachine.host.images import random_dot_stereogram
-from bayesmachine.host.likelihoods import ModelParams
 from bayesmachine.host.metrics import gt_region
 from bayesmachine.host.reference import (
     reference,
@@ -14,6 +13,7 @@ from bayesmachine.host.reference import (
     reference_map,
     reference_plain,
 )
+from bayesmachine.models import ModelParams
 
 
 @pytest.fixture(scope="module")
@@ -23,7 +23,7 @@ def rds():
 
 def test_map_finds_the_known_disparity(rds):
     left, right, gt = rds
-    model = ModelParams(dmax=16)
+    model = ModelParams(name="paper", dmax=16)
     ref = reference(left, right, model)
     g = gt_region(gt, model.dmax)
     assert ref.map.shape == (44, 90 - 4 - 16) == g.shape
@@ -42,7 +42,7 @@ def test_map_finds_the_known_disparity(rds):
 
 def test_posterior_is_normalized_with_nomatch_last(rds):
     left, right, _ = rds
-    model = ModelParams(dmax=12)
+    model = ModelParams(name="paper", dmax=12)
     ref = reference(left, right, model)
     assert ref.posterior.shape == (44, 90 - 4 - 12, 14) and ref.posterior.dtype == np.float64
     np.testing.assert_allclose(ref.posterior.sum(axis=-1), 1.0, rtol=1e-12)
@@ -60,7 +60,8 @@ def test_fast_equals_plain(rds, seed):
     left[10:30, 40:70] = 128
     right[10:30, 30:60] = 128
     left[:, :20] = rng.integers(100, 104, size=(48, 20))
-    for model in (ModelParams(dmax=10), ModelParams(dmax=20, p0=0.1, sigma_m=4, sigma_gv=20, sigma_nm=3)):
+    for model in (ModelParams(name="paper", dmax=10),
+                  ModelParams(name="paper", dmax=20, p0=0.1, sigma_m=4, sigma_gv=20, sigma_nm=3)):
         fl, fr = feature_sums(left), feature_sums(right)
         fast, plain = reference_fast(fl, fr, model), reference_plain(fl, fr, model)
         np.testing.assert_allclose(fast.posterior, plain.posterior, rtol=1e-13, atol=1e-300)
@@ -72,7 +73,7 @@ def test_fast_equals_plain(rds, seed):
 def test_exact_ties_go_to_the_lowest_index():
     # A flat pair: every disparity has likelihood 1 and so has no match (gV = 0): a full tie.
     img = np.full((9, 20), 77, np.uint8)
-    model = ModelParams(dmax=5)
+    model = ModelParams(name="paper", dmax=5)
     for ref in (reference(img, img, model), reference_plain(feature_sums(img), feature_sums(img), model)):
         assert (ref.map == 0).all()
         np.testing.assert_allclose(ref.posterior, 1.0 / model.hypotheses)
@@ -81,7 +82,7 @@ def test_exact_ties_go_to_the_lowest_index():
 def test_out_buffer_is_checked(rds):
     left, right, _ = rds
     fl, fr = feature_sums(left), feature_sums(right)
-    model = ModelParams(dmax=4)
+    model = ModelParams(name="paper", dmax=4)
     with pytest.raises(ValueError, match="out must be float64"):
         reference_fast(fl, fr, model, out=np.empty((1, 2, 3)))
 
@@ -90,7 +91,7 @@ def test_out_buffer_is_checked(rds):
 def test_bands_equal_the_whole_frame(rds, band_rows):
     left, right, _ = rds
     fl, fr = feature_sums(left), feature_sums(right)
-    model = ModelParams(dmax=9)
+    model = ModelParams(name="paper", dmax=9)
     whole = reference_fast(fl, fr, model)
     posts, maps, rows_seen = [], [], []
     for rows, band in reference_bands(fl, fr, model, band_rows):

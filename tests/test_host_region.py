@@ -65,7 +65,7 @@ def test_a_models_margin_keeps_its_windows_inside_the_image():
     """The 7x7 census model's region is one pixel further inside (margin 3); the paper model's and a
     5x5 census's are the 5x5 filters' (margin 2, as before margins existed)."""
     from bayesmachine.host.features import model_features
-    from bayesmachine.host.likelihoods import ModelParams
+    from bayesmachine.models import ModelParams
 
     img = np.arange(12 * 20).reshape(12, 20)
     census = ModelParams(dmax=5, name="census")
@@ -76,7 +76,8 @@ def test_a_models_margin_keeps_its_windows_inside_the_image():
     assert cut[0, 0] == img[3, 8] and cut[-1, -1] == img[8, 16]
     assert OutputRegion.of_features(r.feature_shape, 5, 3) == r
     assert model_features(img.astype(np.uint8), census).m25.shape == r.feature_shape
-    for paper_like in (ModelParams(dmax=5), ModelParams(dmax=5, name="census", census_window=5)):
+    for paper_like in (ModelParams(name="paper", dmax=5),
+                       ModelParams(dmax=5, name="census", census_window=5)):
         assert OutputRegion.of_model(img.shape, paper_like) == OutputRegion.of_image(img.shape, 5)
     with pytest.raises(ValueError, match="too small for the model's 7x7 windows"):
         OutputRegion(6, 20, 1, 3)

@@ -4,11 +4,11 @@ import numpy as np
 import pytest
 
 from bayesmachine.host.images import random_dot_stereogram
-from bayesmachine.host.likelihoods import ModelParams
 from bayesmachine.host.metrics import RmsAccumulator, evaluate, rms_error
 from bayesmachine.host.records import counts_dtype
 from bayesmachine.host.reference import reference_fast
 from bayesmachine.host.run import prepare, run_machine, run_pair
+from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams
 
 DMAX = 12
@@ -22,7 +22,7 @@ def pair():
 @pytest.fixture(scope="module")
 def prepared(pair):
     left, right, gt = pair
-    return prepare(left, right, ModelParams(dmax=DMAX), gt)
+    return prepare(left, right, ModelParams(name="paper", dmax=DMAX), gt)
 
 
 def test_outcome_layout_and_metrics(pair, prepared):
@@ -66,7 +66,7 @@ def test_timeouts_count_as_no_match(pair, prepared):
 def test_prepare_without_reference_runs_the_machine_but_not_the_evaluation(pair, prepared):
     # What measuring a machine's cycles needs (synth's throughput): the same run, no reference.
     left, right, gt = pair
-    bare = prepare(left, right, ModelParams(dmax=DMAX), gt, reference=False)
+    bare = prepare(left, right, ModelParams(name="paper", dmax=DMAX), gt, reference=False)
     assert bare.reference_map is None
     machine = MachineParams.for_disparity(DMAX, counter_max=4, seed=5)
     a = run_machine(bare, machine, progress=False, chunk_rows=5)
@@ -87,13 +87,13 @@ def test_bad_machine_or_engine(prepared):
 def test_prepare_rejects_mismatched_gt(pair):
     left, right, gt = pair
     with pytest.raises(ValueError, match="ground truth shape"):
-        prepare(left, right, ModelParams(dmax=DMAX), gt[:, :-1])
+        prepare(left, right, ModelParams(name="paper", dmax=DMAX), gt[:, :-1])
 
 
 def test_pysim_engine_matches_model_through_the_host():
     # The RTL in Amaranth's simulator, fed row by row by the host, equals the model bit for bit.
     left, right, gt = random_dot_stereogram(height=8, width=20, background=1, square=3, seed=11)
-    prep = prepare(left, right, ModelParams(dmax=4), gt)
+    prep = prepare(left, right, ModelParams(name="paper", dmax=4), gt)
     machine = MachineParams.for_disparity(4, counter_max=2, word_bits=8, words_per_beat=6)
     a = run_machine(prep, machine, "model", progress=False)
     b = run_machine(prep, machine, "pysim", progress=False)
@@ -131,18 +131,18 @@ def test_run_never_holds_more_than_a_band_of_posterior(pair, monkeypatch):
     import bayesmachine.region as region_module
 
     left, right, gt = pair
-    model = ModelParams(dmax=DMAX)
+    model = ModelParams(name="paper", dmax=DMAX)
     machine = MachineParams.for_disparity(DMAX, counter_max=4)
     big = run_pair(left, right, model, machine, gt=gt, progress=False, sgbm=False)
     seen = []
-    real = reference_module.reference_fast
+    real = reference_module.pass_reference
 
     def spy(*args, **kwargs):
         ref = real(*args, **kwargs)
         seen.append(ref.posterior.shape[0])
         return ref
 
-    monkeypatch.setattr(reference_module, "reference_fast", spy)
+    monkeypatch.setattr(reference_module, "pass_reference", spy)
     monkeypatch.setattr(region_module, "BAND_PIXELS", 100)
     small = run_pair(left, right, model, machine, gt=gt, progress=False, sgbm=False)
     wo = 60 - 4 - DMAX

@@ -197,12 +197,31 @@ def test_small_disparity_machines_get_a_load_stream_no_wider_than_a_pixel() -> N
         ({"rows": 4, "words_per_beat": 13}, "words_per_beat"),
         ({"rows": 1, "nomatch_row": True}, "no-match"),
         ({"rows": 4, "tie_break": "random"}, "tie_break"),
-        ({"rows": 4.0}, "integer"),
     ],
 )
 def test_impossible_parameters_name_the_problem(kwargs: dict, message: str) -> None:
-    with pytest.raises(ParameterError, match=message):
+    with pytest.raises(ParameterError, match=message) as err:
         MachineParams(**kwargs)
+    assert err.value.parameter is None or err.value.parameter in kwargs or err.value.parameter == "rows"
+
+
+@pytest.mark.parametrize("kwargs, name", [({"rows": 4.0}, "rows"), ({"rows": 4, "seed": "1"}, "seed"),
+                                          ({"rows": 4, "prior": 1}, "prior"), ({"rows": True}, "rows")])
+def test_wrong_types_are_type_errors(kwargs: dict, name: str) -> None:
+    with pytest.raises(TypeError, match=f"^{name}"):
+        MachineParams(**kwargs)
+
+
+def test_device_parameters_belong_to_the_smtj_source() -> None:
+    """``MachineParams(rng="sobol", smtj_dwell=5)`` is refused as the command line refuses it."""
+    with pytest.raises(ParameterError, match="^smtj_dwell: device parameters of rng 'smtj'") as err:
+        MachineParams(rows=4, rng="sobol", smtj_dwell=5, words_per_beat=3)
+    assert err.value.parameter == "smtj_dwell"
+    plain = MachineParams(rows=4, rng="sobol", words_per_beat=3)
+    assert plain.smtj_dwell is None and "smtj_dwell" not in plain.to_dict()
+    smtj = MachineParams(rows=4, rng="smtj", words_per_beat=3)
+    assert (smtj.smtj_dwell, smtj.smtj_spread, smtj.smtj_share) == (1.0, 0.0, "operator")
+    assert MachineParams(**smtj.to_dict()) == smtj
 
 
 def test_params_run_the_sources_own_checks() -> None:
@@ -254,7 +273,7 @@ def test_front_end_lanes_are_defined_once() -> None:
     assert stereo_words_per_beat(MachineParams.for_disparity(80, prior="loaded")) == 24
     assert stereo_words_per_beat(MachineParams.for_disparity(2)) == 4 * 3  # fewer rows than 6: all of them
     # A neighbour machine's feedback column is formed on chip: 6 rows of its 5 loaded columns.
-    from bayesmachine.likelihood import ModelParams, disparity_machine
+    from bayesmachine.models import ModelParams, disparity_machine
 
     census = disparity_machine(ModelParams(name="census"))
     assert census.operator_columns == 6 and stereo_words_per_beat(census) == 30

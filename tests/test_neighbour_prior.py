@@ -258,7 +258,7 @@ def test_lanes_of_machines_and_the_front_end_refuse_it() -> None:
     prior it is (the census model's: tests/test_frontend_census.py)."""
     from bayesmachine.hdl.frontend.stereo import StereoMachine, check_stereo_machine
     from bayesmachine.hdl.machines import ParallelMachines
-    from bayesmachine.likelihood import ModelParams
+    from bayesmachine.models import ModelParams
 
     p = neighbour_params(rng="sobol")
     with pytest.raises(ParameterError, match=r"prior = 'neighbour' cannot run on K machines.*i - 2"):
@@ -268,7 +268,7 @@ def test_lanes_of_machines_and_the_front_end_refuse_it() -> None:
     # A paper-model machine (three data columns) whose lanes suit the front end, with a neighbour prior.
     q = MachineParams.for_disparity(7, columns=3, prior="neighbour", feedback_words=FEEDBACK,
                                     feedback_nomatch_word=NOMATCH, words_per_beat=15)
-    model = ModelParams(dmax=7)
+    model = ModelParams(name="paper", dmax=7)
     refused = r"^prior: the machine has a neighbour prior \(prior='neighbour'\) but the paper model has none"
     with pytest.raises(ParameterError, match=refused):
         check_stereo_machine(q, model, 40)

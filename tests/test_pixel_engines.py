@@ -11,7 +11,7 @@ from test_board import DMAX, HEIGHT, MODEL, PARAMS, WIDTH, TwinPort, _crop, _twi
 
 from bayesmachine.fpga.boards import protocol as pr
 from bayesmachine.fpga.boards.link import BoardError
-from bayesmachine.likelihood import ModelParams
+from bayesmachine.models import ModelParams
 from bayesmachine.sim.engines import (
     PIXEL_ENGINES,
     EngineClosedError,
@@ -79,7 +79,7 @@ def test_pixel_engines_check_a_frame_alike() -> None:
 def test_the_board_engine_refuses_a_board_built_for_something_else() -> None:
     with pytest.raises(BoardError, match=f"built for {WIDTH + 2}-pixel lines, the pair has {WIDTH}"):
         _board(_twin(WIDTH + 2))
-    other = ModelParams(dmax=DMAX, sigma_m=5.0)
+    other = ModelParams(name="paper", dmax=DMAX, sigma_m=5.0)
     twin = _twin()
     twin.fingerprint = pr.board_fingerprint(PARAMS.to_dict(), other.to_dict(), WIDTH)
     twin.info = pr.info_payload(WIDTH, PARAMS.rows, 12, twin.fingerprint)

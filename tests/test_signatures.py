@@ -28,7 +28,7 @@ from bayesmachine.hdl.signatures import (
 )
 from bayesmachine.hdl.smtj import SMTJEmulatedMachine, SMTJEmulator
 from bayesmachine.hdl.sources import LFSRBank, OnChipSource, SobolGenerators, random_source
-from bayesmachine.likelihood import ModelParams
+from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams, ParameterError
 from bayesmachine.sources import SOURCE_KINDS
 from bayesmachine.sources.lfsr import lfsr_specs
@@ -54,7 +54,7 @@ def test_every_machine_top_has_the_declared_ports(rng: str) -> None:
     machine = BayesianMachine(params=p)
     assert machine.signature == MachineSignature(p)
     assert _members(machine) == {"load", "result"} | entropy
-    stereo = StereoMachine(params=p, model=ModelParams(dmax=DMAX), width=20)
+    stereo = StereoMachine(params=p, model=ModelParams(name="paper", dmax=DMAX), width=20)
     assert stereo.signature == StereoSignature(p)
     assert _members(stereo) == {"pixels", "result"} | entropy
     assert stereo.signature.members["result"] == machine.signature.members["result"]
@@ -69,7 +69,7 @@ def test_every_machine_top_has_the_declared_ports(rng: str) -> None:
 
 
 def test_the_front_end_and_the_emulated_machine_use_the_declared_streams() -> None:
-    p, model = _params(), ModelParams(dmax=DMAX)
+    p, model = _params(), ModelParams(name="paper", dmax=DMAX)
     assert WordGenerator(params=p, model=model).signature.members["beats"].signature == load_stream(p)
     assert FrontEnd(params=p, model=model, width=20).signature.members["beats"].signature == load_stream(p)
     smtj = _params("smtj")
@@ -112,7 +112,7 @@ def test_an_on_chip_source_must_declare_the_interface() -> None:
 
 
 def test_components_take_keyword_arguments_only() -> None:
-    p, model = _params(), ModelParams(dmax=DMAX)
+    p, model = _params(), ModelParams(name="paper", dmax=DMAX)
     for build in (
         lambda: BayesianMachine(p),
         lambda: ParallelMachines(p, 2),
@@ -132,7 +132,7 @@ def test_components_take_keyword_arguments_only() -> None:
 
 
 def test_components_raise_type_error_for_a_wrong_type_and_value_error_for_a_wrong_value() -> None:
-    p, model = _params(), ModelParams(dmax=DMAX)
+    p, model = _params(), ModelParams(name="paper", dmax=DMAX)
     with pytest.raises(TypeError, match="MachineParams"):
         BayesianMachine(params=p.to_dict())  # type: ignore[arg-type]
     with pytest.raises(TypeError, match="machines"):
@@ -162,7 +162,7 @@ def test_components_raise_type_error_for_a_wrong_type_and_value_error_for_a_wron
 
 
 def test_component_parameters_are_read_only() -> None:
-    p, model = _params(), ModelParams(dmax=DMAX)
+    p, model = _params(), ModelParams(name="paper", dmax=DMAX)
     for component, names in (
         (BayesianMachine(params=p), ("params",)),
         (ParallelMachines(params=p, machines=2), ("params", "machines")),

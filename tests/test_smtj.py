@@ -170,15 +170,20 @@ def test_registry_and_parameters() -> None:
         ({"smtj_dwell": 0}, "smtj_dwell"),
         ({"smtj_dwell": -1.0}, "smtj_dwell"),
         ({"smtj_dwell": float("inf")}, "smtj_dwell"),
-        ({"smtj_dwell": "5"}, "smtj_dwell"),
         ({"smtj_spread": 1.5}, "smtj_spread"),
         ({"smtj_spread": -0.1}, "smtj_spread"),
         ({"smtj_share": "row"}, "smtj_share"),
     ],
 )
 def test_bad_device_parameters_name_the_problem(kwargs: dict, message: str) -> None:
-    with pytest.raises(ParameterError, match=message):
+    with pytest.raises(ParameterError, match=message) as err:
         _smtj(**kwargs)
+    assert err.value.parameter == message
+
+
+def test_a_device_parameter_of_the_wrong_type_is_a_type_error() -> None:
+    with pytest.raises(TypeError, match="^smtj_dwell"):
+        _smtj(smtj_dwell="5")
 
 
 def test_bank_rejects_bad_device_values() -> None:

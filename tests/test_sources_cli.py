@@ -11,7 +11,7 @@ from bayesmachine.cli import main
 from bayesmachine.host.features import feature_sums
 from bayesmachine.host.images import bundled_pair, crop_image, parse_crop
 from bayesmachine.host.likelihoods import memory_words
-from bayesmachine.likelihood import ModelParams
+from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.model import MachineModel
 
@@ -37,7 +37,7 @@ def _model_result(rng: str) -> dict[str, np.ndarray]:
     """What the model gives for the same crop and machine, computed without the command line."""
     left, right, _ = bundled_pair()
     crop = parse_crop("300,200,60,16")
-    model = ModelParams(dmax=16)
+    model = ModelParams(name="paper", dmax=16)
     machine = MachineParams.for_disparity(16, counter_max=8, rng=rng)
     words = memory_words(feature_sums(crop_image(left, crop)), feature_sums(crop_image(right, crop)),
                          model, machine)

@@ -10,8 +10,8 @@ from conftest import assert_same_results
 
 from bayesmachine.hdl.frontend.stereo import StereoMachine, stereo_machine_params
 from bayesmachine.host.images import bundled_pair
-from bayesmachine.host.likelihoods import ModelParams
 from bayesmachine.host.run import machines_model
+from bayesmachine.models import ModelParams
 from bayesmachine.params import ParameterError
 from bayesmachine.sim.stereo_testbench import run_stereo
 

@@ -14,7 +14,8 @@ from bayesmachine.hdl.frontend.stereo import stereo_machine_params
 from bayesmachine.hdl.machine import BUBBLE_CYCLES, hides_bubble, pixel_wall_cycles
 from bayesmachine.host.features import feature_sums
 from bayesmachine.host.images import bundled_pair
-from bayesmachine.host.likelihoods import ModelParams, memory_words
+from bayesmachine.host.likelihoods import memory_words
+from bayesmachine.models import ModelParams
 from bayesmachine.sim.model import MachineModel
 from bayesmachine.sim.results import EngineClosedError, EngineStateError
 from bayesmachine.sim.verilator import VerilatorError
@@ -34,7 +35,7 @@ def _crops() -> list[tuple[np.ndarray, np.ndarray]]:
 def test_pixels_through_the_stereo_machine_equal_the_model(counter_max: int, tmp_path: Path) -> None:
     from bayesmachine.sim.stereo_engine import StereoVerilatorEngine
 
-    model = ModelParams(dmax=DMAX)
+    model = ModelParams(name="paper", dmax=DMAX)
     params = stereo_machine_params(DMAX, counter_max=counter_max)
     frames = _crops()
     reference = MachineModel(params)
@@ -57,7 +58,7 @@ def test_stereo_engine_follows_the_engine_life_cycle() -> None:
     close() makes run() and reset() raise EngineClosedError; wall_cycles counts since reset."""
     from bayesmachine.sim.stereo_engine import StereoVerilatorEngine
 
-    model = ModelParams(dmax=DMAX)
+    model = ModelParams(name="paper", dmax=DMAX)
     params = stereo_machine_params(DMAX, counter_max=16)
     left, right = _crops()[1]
     want = MachineModel(params).run(memory_words(feature_sums(left), feature_sums(right), model, params))
@@ -92,7 +93,7 @@ def test_stereo_engine_refuses_an_off_chip_source_without_a_device_model() -> No
 
     params = stereo_machine_params(DMAX, counter_max=16, rng="external")
     with pytest.raises(ValueError, match="device model"):
-        StereoVerilatorEngine(params, ModelParams(dmax=DMAX), WIDTH, verbose=False)
+        StereoVerilatorEngine(params, ModelParams(name="paper", dmax=DMAX), WIDTH, verbose=False)
 
 
 @pytest.mark.eda
@@ -103,7 +104,7 @@ def test_smtj_pixels_through_the_stereo_machine_equal_the_model() -> None:
     device stream, and a reset starts it again."""
     from bayesmachine.sim.stereo_engine import StereoVerilatorEngine
 
-    model = ModelParams(dmax=DMAX)
+    model = ModelParams(name="paper", dmax=DMAX)
     params = stereo_machine_params(DMAX, counter_max=4, rng="smtj", smtj_dwell=3.0)
     frames = _crops()
     reference = MachineModel(params)  # numbers=None: the kind's device model, one stream from reset
@@ -212,7 +213,7 @@ def test_whole_bundled_pair_through_the_front_end_equals_the_model() -> None:
     from bayesmachine.sim.stereo_engine import StereoVerilatorEngine
 
     left, right, _ = bundled_pair()
-    model = ModelParams(dmax=80)
+    model = ModelParams(name="paper", dmax=80)
     params = stereo_machine_params(80, counter_max=16)
     want = MachineModel(params).run(memory_words(feature_sums(left), feature_sums(right), model, params))
     with StereoVerilatorEngine(params, model, left.shape[1], verbose=False) as engine:
@@ -236,7 +237,7 @@ def test_whole_bundled_pair_census_through_the_front_end_equals_the_model() -> N
     """The census model (Dmax 80, counter max 16, the neighbour prior) on the full Motorcycle pair
     through the front end: every result equals the model's, run row by row as the host runs it."""
     from bayesmachine.host.run import prepare, run_machine
-    from bayesmachine.likelihood import disparity_machine
+    from bayesmachine.models import disparity_machine
     from bayesmachine.sim.stereo_engine import StereoVerilatorEngine
 
     left, right, _ = bundled_pair()

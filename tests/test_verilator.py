@@ -215,11 +215,11 @@ def test_shared_sources_on_a_bundled_pair_crop(cache: Path, monkeypatch: pytest.
     """The column-shared sources through the RTL at Dmax 80: a crop of the bundled pair, bit exact."""
     host_run = pytest.importorskip("bayesmachine.host.run")
     from bayesmachine.host.images import Crop, bundled_pair, crop_image
-    from bayesmachine.host.likelihoods import ModelParams
+    from bayesmachine.models import ModelParams
 
     monkeypatch.setenv("BAYESMACHINE_CACHE_DIR", str(cache.parent))
     left, right, gt = (crop_image(a, Crop(300, 200, 124, 12)) for a in bundled_pair())
-    prep = host_run.prepare(left, right, ModelParams(), gt)
+    prep = host_run.prepare(left, right, ModelParams(name="paper"), gt)
     machine = MachineParams.for_disparity(80, rng=rng)
     a = host_run.run_machine(prep, machine, "model", progress=False)
     b = host_run.run_machine(prep, machine, "verilator", progress=False)
@@ -234,11 +234,11 @@ def test_host_run_through_registry(cache: Path, monkeypatch: pytest.MonkeyPatch)
     """``bayesmachine run --engine verilator``'s path: the host streams rows through the registry."""
     host_run = pytest.importorskip("bayesmachine.host.run")
     from bayesmachine.host.images import random_dot_stereogram
-    from bayesmachine.host.likelihoods import ModelParams
+    from bayesmachine.models import ModelParams
 
     monkeypatch.setenv("BAYESMACHINE_CACHE_DIR", str(cache.parent))  # reuse this session's builds
     left, right, gt = random_dot_stereogram(height=10, width=24, background=1, square=3, seed=5)
-    prep = host_run.prepare(left, right, ModelParams(dmax=6), gt)
+    prep = host_run.prepare(left, right, ModelParams(name="paper", dmax=6), gt)
     machine = MachineParams.for_disparity(6, words_per_beat=4)  # = SMALL
     vb.build_harness(machine, verbose=False)  # built already by other tests, or now
     before = vb.builds_done

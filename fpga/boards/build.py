@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 from bayesmachine.cliargs import DEFAULT_BAUD
 from bayesmachine.fpga import flow
 from bayesmachine.fpga.targets import ecp5_device_args
-from bayesmachine.likelihood import ModelParams
+from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams
 
 from . import protocol as pr

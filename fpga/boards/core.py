@@ -27,7 +27,7 @@ from amaranth.hdl import Module, ResetInserter
 from amaranth.lib import fifo, wiring
 from amaranth.lib.wiring import In, Out
 
-from bayesmachine.likelihood import ModelParams
+from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams, ParameterError
 from bayesmachine.sources import source_kind
 
@@ -53,11 +53,11 @@ def check_board(params: MachineParams, model: ModelParams, width: int) -> None:
     """``ParameterError`` naming the problem unless a board top can carry this StereoMachine."""
     from bayesmachine.hdl.frontend.stereo import check_stereo_machine
 
-    if model.lr:  # the StereoMachine runs it (issue 22), the board's link carries no right pass
+    if len(model.passes) > 1:  # the StereoMachine runs them, the board's link carries one pass's results
         raise ParameterError(
-            f"--model {model.name}: the board's on-chip front end computes the paper and census models (its "
-            f"link does not carry census-lr's right pass); run --model {model.name} with --engine verilator "
-            "--feed pixels, or --feed words")
+            f"the board's link carries one pass's results, not the {model.name} model's "
+            f"{model.passes[0].name} pass; run --model {model.name} with --engine verilator --feed pixels, "
+            "or --feed words", "name")
     check_stereo_machine(params, model, width)
     if not source_kind(params.rng).on_chip:
         raise ParameterError(

@@ -17,7 +17,7 @@ import time
 import numpy as np
 
 from bayesmachine.cliargs import DEFAULT_BAUD
-from bayesmachine.likelihood import ModelParams
+from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.engines import PixelEngineBase
 from bayesmachine.sim.results import MachineResult

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bayesmachine.likelihood import ModelParams
+from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams
 from bayesmachine.region import OutputRegion
 
@@ -333,23 +333,21 @@ _DERIVED = ("rows", "columns", "nomatch_row", "feedback_words", "feedback_nomatc
 def design_differences(board: dict, machine: MachineParams, model: ModelParams) -> list[str]:
     """The options in which this run's design differs from ``board``'s (:func:`record_design`'s
     record), each as ``FLAG: VALUE here, VALUE on the board``."""
-    from bayesmachine.cliargs import MACHINE_OPTIONS
-    from bayesmachine.likelihood import OPTION_NAMES
+    from bayesmachine.cliargs import flag_of
 
-    def differ(mine: dict, theirs: object, flags: dict[str, str], skip: tuple[str, ...] = ()) -> list[str]:
+    def differ(mine: dict, theirs: object, skip: tuple[str, ...] = ()) -> list[str]:
         theirs = theirs if isinstance(theirs, dict) else {}
         # A field only one side has follows from another option (--model): that one is named.
-        return [f"{flags.get(k, k)} {mine[k]} here, {theirs[k]} on the board" for k in mine
+        return [f"{flag_of(k) or k} {mine[k]} here, {theirs[k]} on the board" for k in mine
                 if k in theirs and k not in skip and mine[k] != theirs[k]]
 
     theirs = board.get("model") if isinstance(board.get("model"), dict) else {}
-    name = theirs.get("name", ModelParams().name)  # a paper model's dict leaves its name out
+    name = theirs.get("name", "paper")  # an older paper model's dict left its name out
     if name != model.name:  # the other model fields follow from it
         found = [f"--model {model.name} here, {name} on the board"]
     else:
-        found = differ(model.to_dict(), theirs, OPTION_NAMES)
-    flags = {name: option.flag for name, option in MACHINE_OPTIONS.items()}
-    return found + differ(machine.to_dict(), board.get("machine"), flags, _DERIVED if found else ("rows",))
+        found = differ(model.to_dict(), theirs)
+    return found + differ(machine.to_dict(), board.get("machine"), _DERIVED if found else ("rows",))
 
 
 def fingerprint_message(port: str, found: int, expect: int, machine: MachineParams,

@@ -22,7 +22,7 @@ import time
 import tty
 from pathlib import Path
 
-from bayesmachine.likelihood import ModelParams
+from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams
 
 __all__ = ["DEFAULT_SIM_CLOCKS_PER_BIT", "DEFAULT_SIM_TIMEOUT_BITS", "BoardSimulation", "build_board_harness"]

@@ -19,7 +19,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from bayesmachine.likelihood import ModelParams
+from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams
 from bayesmachine.region import OutputRegion
 from bayesmachine.sim.results import MachineResult

@@ -26,7 +26,7 @@ from bayesmachine.hdl.frontend.costs import WordGenerator, pixel_features_layout
 from bayesmachine.hdl.frontend.linebuffer import WINDOW
 from bayesmachine.hdl.frontend.stereo import FrontEnd, StereoMachine
 from bayesmachine.hdl.signatures import entropy_layout, pixel_in_layout, result_layout
-from bayesmachine.likelihood import ModelParams
+from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams
 
 from .control import driven

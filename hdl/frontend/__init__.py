@@ -13,7 +13,7 @@ Blocks (each a ``wiring.Component`` with a Python twin its tests hold it to):
   neighbour prior's above column from a line of the machine's own MAPs (twin:
   ``host.likelihoods.memory_words``).
 - ``lr``: census-lr's right pass (``RightPassFeeder`` into a ``WordGenerator(right_pass=True)``) and
-  the consistency column's test (``ConsistencyTest``; twins: ``bayesmachine.likelihood``).
+  the consistency column's test (``ConsistencyTest``; twins: ``bayesmachine.columns.consistency``).
 - ``stereo``: ``FrontEnd`` (pixels in, load beats out) and ``StereoMachine`` (pixels in, the
   machine's results out). Timing and protocol: ``docs/frontend.md``.
 """

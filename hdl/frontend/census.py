@@ -18,7 +18,7 @@ from amaranth.hdl import Module, Signal, unsigned
 from amaranth.lib import data, wiring
 from amaranth.lib.wiring import In, Out
 
-from bayesmachine.likelihood import CENSUS_WINDOWS
+from bayesmachine.columns import CENSUS_WINDOWS
 
 __all__ = ["CensusFilter", "census_bits"]
 
@@ -34,7 +34,7 @@ class CensusFilter(wiring.Component):
     Parameters
     ----------
     window : int
-        5 or 7 (``bayesmachine.likelihood.CENSUS_WINDOWS``).
+        5 or 7 (``bayesmachine.columns.CENSUS_WINDOWS``).
 
     Attributes
     ----------

@@ -7,6 +7,7 @@ import dataclasses
 from typing import TYPE_CHECKING
 
 from bayesmachine.cliargs import MODEL_OPTION_FLAGS, add_model_options, int_arg, model_params_from_args
+from bayesmachine.columns import AbovePrior, Census
 from bayesmachine.params import MachineParams, stereo_words_per_beat
 
 from . import DEFAULT_FIFO_PIXELS, DEFAULT_WIDTH, MAX_WIDTH
@@ -25,7 +26,7 @@ _STEREO_OPTIONS = (("width", "--width"), ("fifo_pixels", "--fifo-pixels"), *MODE
 def add_options(p: argparse.ArgumentParser) -> None:
     """The ``--top stereo`` options: the model's parameters (shared with run/sweep), the image width,
     the FIFO."""
-    add_model_options(p, dmax=False, given_only=True, title="model (--top stereo; paper table 1 defaults)")
+    add_model_options(p, dmax=False, title="model (--top stereo; paper table 1 defaults)")
     g = p.add_argument_group("stereo top (--top stereo): pixels in, results out")
     g.add_argument("--width", type=int_arg, default=None,
                    help=f"image width in pixels: dmax + 5 .. {MAX_WIDTH}, or dmax + 7 .. {MAX_WIDTH} with a "
@@ -93,14 +94,16 @@ def summary(top: StereoMachine) -> str:
         + (f" per machine; {top.machines} machines (map row r on machine r mod {top.machines}, each with "
            "its own word generator)" if top.machines > 1 else ""),
     ]
-    if m.census:
-        w = m.census_window
+    census = m.column(Census)
+    if census is not None:
+        w = census.window
         lines.append(
-            f"census model: {w}x{w} census ({m.census_bits} bits, p0 {m.census_p0}, sigma {m.sigma_c}, "
-            f"no-match at h = {m.h_nm}), line buffer of {2 * m.margin} lines, output region margin {m.margin}"
-            + (f"; neighbour prior (eps {m.prior_eps}, s {m.prior_s}): the above factor from a line of "
-               f"{top.width - 2 * m.margin - m.dmax} MAPs" if m.has_prior else ""))
-    if m.lr:
+            f"census model: {w}x{w} census ({census.bits} bits, p0 {m.census_p0}, sigma {m.census_sigma}, "
+            f"no-match at h = {census.nomatch_h}), line buffer of {2 * m.margin} lines, output region margin "
+            f"{m.margin}" + (f"; neighbour prior (eps {m.prior_eps}, s {m.prior_s}): the above factor from "
+                             f"a line of {top.width - 2 * m.margin - m.dmax} MAPs"
+                             if m.column(AbovePrior) else ""))
+    if len(m.passes) > 1:
         from .lr import right_pass_params
 
         rp = right_pass_params(m, p)

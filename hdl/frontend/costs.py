@@ -51,8 +51,9 @@ from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value, signed, unsigne
 from amaranth.lib import data, memory, stream, wiring
 from amaranth.lib.wiring import In, Out
 
+from bayesmachine.columns import AbovePrior, Census, Consistency
 from bayesmachine.hdl.signatures import beat_words, load_stream
-from bayesmachine.likelihood import ModelParams, QuantizedTables, check_disparity_machine, likelihood_tables
+from bayesmachine.models import ModelParams, check_disparity_machine
 from bayesmachine.params import MachineParams, ParameterError
 from bayesmachine.sources import source_kind
 
@@ -100,7 +101,7 @@ def check_frontend_types(params: object, model: object) -> None:
     if not isinstance(params, MachineParams):
         raise TypeError(f"params must be a MachineParams, not {type(params).__name__}")
     if not isinstance(model, ModelParams):
-        raise TypeError(f"model must be a host.likelihoods.ModelParams, not {type(model).__name__}")
+        raise TypeError(f"model must be a bayesmachine.models.ModelParams, not {type(model).__name__}")
 
 
 def check_frontend_params(params: MachineParams, model: ModelParams) -> None:
@@ -108,9 +109,9 @@ def check_frontend_params(params: MachineParams, model: ModelParams) -> None:
     if not isinstance(params, MachineParams):
         raise ParameterError(f"params must be a MachineParams, not {type(params).__name__}")
     if not isinstance(model, ModelParams):
-        raise ParameterError(f"model must be a host.likelihoods.ModelParams, not {type(model).__name__}")
+        raise ParameterError(f"model must be a bayesmachine.models.ModelParams, not {type(model).__name__}")
     check_disparity_machine(model, params)
-    if model.lr and not source_kind(params.rng).on_chip:
+    if len(model.passes) > 1 and not source_kind(params.rng).on_chip:
         # The right pass's machine would need an entropy port of its own.
         raise ParameterError(f"rng: --model {model.name} on chip needs an on-chip random source (the right "
                              f"pass's machine has no entropy port), got {params.rng!r}")
@@ -147,7 +148,7 @@ class WordGenerator(wiring.Component):
         of the map rows just before its own, which must write an output row's first result
         before this generator takes that row's first output pixel (see ``result_room``).
     right_pass : bool
-        census-lr's right pass (``model`` its :attr:`~bayesmachine.likelihood.ModelParams.right_model`,
+        census-lr's right pass (``model`` its ``model.pass_named("right").model``,
         pixels from :class:`~.lr.RightPassFeeder`): ``left`` is the right pixel (the reference), lane d
         reads delay-line entry Dmax - d (the left pixel x_r + d), a lane past the last output column
         (``flush``) and the no-match row are word 0 in every data column (with ``right_nomatch`` the
@@ -186,7 +187,7 @@ class WordGenerator(wiring.Component):
         for name, value in (("right_pass", right_pass), ("right_nomatch", right_nomatch)):
             if not isinstance(value, bool):
                 raise TypeError(f"{name} must be a bool, not {type(value).__name__}")
-        if right_pass and (model.name != "census" or not model.has_prior):
+        if right_pass and (model.column(Census) is None or model.column(AbovePrior) is None):
             raise ParameterError("right_pass: the right pass runs a census-lr model's right_model (the "
                                  f"census model with its neighbour prior), got the {model.name} model")
         if right_nomatch and not right_pass:
@@ -212,10 +213,12 @@ class WordGenerator(wiring.Component):
         self._model = model
         self._tables = tables if tables is not None else frontend_tables(model, params.word_bits)
         self._output_columns = output_columns
-        bits = model.census_bits if model.census else 0
+        census = model.column(Census)
+        bits = census.bits if census is not None else 0
+        lr = model.column(Consistency) is not None
         from .lr import flush_bits, right_map_layout
 
-        layout = pixel_features_layout(bits, neighbour, consult=model.lr,
+        layout = pixel_features_layout(bits, neighbour, consult=lr,
                                        flush_bits=flush_bits(model.dmax) if right_pass else 0)
         members = {
             "pixel": In(stream.Signature(layout)),
@@ -224,7 +227,7 @@ class WordGenerator(wiring.Component):
         if neighbour:
             members |= {"result_take": In(1), "result_map": In(params.map_width), "result_hit": In(1),
                         "result_room": Out(1), "frame_reset": In(1)}
-        if model.lr:
+        if lr:
             members |= {"right_map": In(stream.Signature(right_map_layout(params.map_width)))}
         super().__init__(members)
 
@@ -263,11 +266,13 @@ class WordGenerator(wiring.Component):
         lc = p.loaded_columns  # words per row in a beat
         off = lc - p.columns  # 1 with a loaded prior column (the above factor with the neighbour prior)
         neighbour = p.feedback_columns > 0
-        fields = FEATURES + (("census",) if model.census else ())
+        census = model.column(Census)
+        lr = model.column(Consistency)
+        fields = FEATURES + (("census",) if census is not None else ())
         rows_per_beat = p.words_per_beat // lc
         n_beats = p.beats_per_pixel
         one = p.word_one
-        bits = model.census_bits if model.census else 0
+        bits = census.bits if census is not None else 0
 
         # Delay line: right[d] = right features d pixels back (reset-less: no output reads a
         # stale entry, since an output pixel is at least Dmax pixels into its line).
@@ -314,7 +319,7 @@ class WordGenerator(wiring.Component):
             ready = free & (~self.pixel.payload.output | room)
         else:
             ready = free
-        if model.lr:  # a pixel whose right MAP enters the consistency test waits for it
+        if lr is not None:  # a pixel whose right MAP enters the consistency test waits for it
             ready = ready & (~self.pixel.payload.consult | self.right_map.valid)
         m.d.comb += self.pixel.ready.eq(ready)
         take = self.pixel.valid & self.pixel.ready
@@ -405,10 +410,10 @@ class WordGenerator(wiring.Component):
         m.d.comb += [nm_port.en.eq(advance),
                      nm_port.addr.eq(address(left.gv20, len(self._tables.nomatch), "nomatch"))]
         census_nm = 0
-        if model.census:
+        if census is not None:
             # The no-match row's census word: the census table read at the constant address h_nm.
             t = self._tables.census
-            census_nm = int(t[min(model.h_nm, len(t) - 1)])
+            census_nm = int(t[min(census.nomatch_h, len(t) - 1)])
 
         prior_data: dict[int, object] = {}
         above_valid = Signal()  # the pixel above is a disparity (with the beat on the stream)
@@ -430,10 +435,9 @@ class WordGenerator(wiring.Component):
         # The beat on the stream: each lane's word by its (row, loaded column).
         prior_nm = p.feedback_nomatch_word if neighbour else one
         beta = gamma = 0
-        if model.lr:
-            q = QuantizedTables(likelihood_tables(model), p.word_bits)
-            assert q.lr_beta is not None and q.lr_gamma is not None
-            beta, gamma = q.lr_beta, q.lr_gamma
+        if lr is not None:
+            q = lr.table(p.word_bits)
+            beta, gamma = int(q.values[1]), int(q.nomatch[0])
         unused = range(n_beats, 1 << len(beat_q))  # never occur; in the last case for a complete case
         with m.Switch(beat_q):
             for b in range(n_beats):
@@ -463,7 +467,7 @@ class WordGenerator(wiring.Component):
                         elif col == off + 3:
                             word = census_nm
                         elif col == off + 4:
-                            word = Mux(any_consistent, gamma, one) if model.lr_nomatch else 0
+                            word = Mux(any_consistent, gamma, one) if lr.has_nomatch else 0
                         else:
                             word = one
                         m.d.comb += words[lane].eq(word)
@@ -496,17 +500,18 @@ class WordGenerator(wiring.Component):
             for j in range(rows_per_beat):
                 row = beat * rows_per_beat + j
                 lane_ok.append(pipeline(row + flush <= dmax, f"lane_ok{j}"))
-        if self._model.lr:
+        lr = self._model.column(Consistency)
+        if lr is not None:
             from .lr import ConsistencyTest
 
             m.submodules.consistency = test = ConsistencyTest(dmax=dmax, map_width=self._params.map_width,
-                                                              tolerance=self._model.lr_tolerance)
+                                                              tolerance=lr.tolerance)
             shift = take & pix.consult
             m.d.comb += [test.shift.eq(shift), test.entry.eq(self.right_map.payload),
                          self.right_map.ready.eq(shift)]
             # Padded with 0 to every row a beat can reach (rows past Dmax are not read).
             # A lane reading a right pixel without a MAP is neutral (factor 1) with lr_neutral.
-            one_bits = test.consistent | test.unknown if self._model.lr_neutral else test.consistent
+            one_bits = test.consistent | test.unknown if lr.neutral else test.consistent
             bits = Cat(one_bits, Const(0, n_beats * rows_per_beat))
             for j in range(rows_per_beat):
                 consistent.append(pipeline(bits.bit_select(beat * rows_per_beat + j, 1), f"consistent{j}"))

@@ -1,11 +1,11 @@
 """census-lr on chip (issue 22): the right pass's pixel stream and the consistency column's test.
 
-The census-lr model runs a right pass (:attr:`~bayesmachine.likelihood.ModelParams.right_model`, the
+The census-lr model runs a right pass (``model.pass_named("right").model``, the
 census model with the right image as reference: lane d pairs right map column x_r with left map column
 x_r + d) on a second machine, and the left pass multiplies in one more column, the left-right
-consistency column of the right MAPs (:func:`~bayesmachine.likelihood.lr_consistent`,
-:func:`~bayesmachine.likelihood.consistency_column`). Two blocks here, each with its twin in
-``bayesmachine.likelihood``:
+consistency column of the right MAPs (:func:`~bayesmachine.columns.lr_consistent`,
+:meth:`~bayesmachine.columns.Consistency.values_of`). Two blocks here, each with its twin in
+``bayesmachine.columns.consistency``:
 
 - :class:`RightPassFeeder`: the front end's pixel features in, the right pass's pixels out, for a
   :class:`~.costs.WordGenerator` built with ``right_pass=True``. The reference (the right features) is
@@ -13,7 +13,7 @@ consistency column of the right MAPs (:func:`~bayesmachine.likelihood.lr_consist
   every left pixel it pairs with (x_r .. x_r + Dmax: the word generator's delay line, read backwards).
   After a line's last pixel the feeder holds its input for Dmax more right pixels (x_r = W4 - Dmax ..
   W4 - 1), each with ``flush`` = k: its lanes d > Dmax - k pair it with a left pixel past the last
-  output column (:func:`~bayesmachine.likelihood.right_lanes_valid`: word 0). So the right pass
+  output column (:func:`~bayesmachine.columns.right_lanes_valid`: word 0). So the right pass
   covers right map columns 0 .. W4 - 1 of every output row, in raster order, as the host's
   (``host.likelihoods.right_columns``).
 - :class:`ConsistencyTest`: the right MAPs of one map row, shifted in column by column (column x when
@@ -30,7 +30,8 @@ from amaranth.hdl import Cat, Const, Module, Mux, Shape, Signal, Value, unsigned
 from amaranth.lib import data, fifo, stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from bayesmachine.likelihood import ModelParams, right_machine
+from bayesmachine.columns import RIGHT_PASS, Census
+from bayesmachine.models import ModelParams, right_machine
 from bayesmachine.params import MachineParams, stereo_words_per_beat
 
 from .costs import WordGenerator, pixel_features_layout
@@ -64,7 +65,7 @@ def feeder_in_layout(census_bits: int) -> data.StructLayout:
 
 
 def right_pass_params(model: ModelParams, params: MachineParams) -> MachineParams:
-    """The right pass's machine on chip: :func:`~bayesmachine.likelihood.right_machine` of the left
+    """The right pass's machine on chip: :func:`~bayesmachine.models.right_machine` of the left
     pass's ``params``, with the front end's words per beat
     (:func:`~bayesmachine.params.stereo_words_per_beat`; they change no result)."""
     right = right_machine(model, params)
@@ -83,14 +84,14 @@ def lr_split(m: Module, front: wiring.Component, gen: WordGenerator, px: Value, 
     pixels' MAPs) that ``gen`` reads. Returns the ready of the stage (both take the pixel together)."""
     model, params = front.model, front.params
     rp = right_pass_params(model, params)
-    bits = model.census_bits
+    bits = model.column(Census).bits
     left_layout = pixel_features_layout(bits, True, consult=True)
     m.submodules.lr_pixels = pix = fifo.SyncFIFOBuffered(width=Shape.cast(left_layout).width,
                                                          depth=model.dmax + 4)
     m.submodules.lr_feeder = feeder = RightPassFeeder(dmax=model.dmax, census_bits=bits)
     m.submodules.lr_right_generator = rgen = WordGenerator(
-        params=rp, model=model.right_model, output_columns=map_columns, right_pass=True,
-        right_nomatch=model.lr_right_nomatch)
+        params=rp, model=model.pass_named(RIGHT_PASS).model, output_columns=map_columns, right_pass=True,
+        right_nomatch=model.pass_named(RIGHT_PASS).nomatch)
     m.submodules.lr_right_maps = maps = fifo.SyncFIFOBuffered(width=rp.map_width + 1, depth=model.dmax + 8)
     lp = Signal(left_layout)
     m.d.comb += [getattr(lp, f).eq(getattr(px, f)) for f in ("left", "right", "output", "row_start",
@@ -226,7 +227,7 @@ class ConsistencyTest(wiring.Component):
         Some lane is consistent.
     unknown : ``Out(dmax + 1)``
         Bit d: entry d is no MAP (the right pass's no match or timeout: with ``lr_neutral`` the lane
-        is neutral; twin :func:`~bayesmachine.likelihood.lr_unknown`).
+        is neutral; twin :func:`~bayesmachine.columns.lr_unknown`).
     """
 
     def __init__(self, *, dmax: int, map_width: int, tolerance: int) -> None:

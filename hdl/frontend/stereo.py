@@ -36,6 +36,7 @@ from amaranth.hdl import Array, Cat, Module, Mux, Shape, Signal, Value, unsigned
 from amaranth.lib import data, fifo, stream, wiring
 from amaranth.lib.wiring import In, Out
 
+from bayesmachine.columns import Census, Consistency
 from bayesmachine.hdl.machine import BayesianMachine
 from bayesmachine.hdl.signatures import (
     ENTROPY_PORTS,
@@ -46,7 +47,7 @@ from bayesmachine.hdl.signatures import (
     pixel_stream,
     result_layout,
 )
-from bayesmachine.likelihood import ModelParams, disparity_machine
+from bayesmachine.models import ModelParams, disparity_machine
 from bayesmachine.params import MachineParams, ParameterError, stereo_words_per_beat
 from bayesmachine.sources import source_kind
 
@@ -103,7 +104,7 @@ def check_machines(machines: object, params: MachineParams, model: ModelParams) 
             raise ParameterError(f"machines = {machines}: rng {params.rng!r} is off chip (one number port, "
                                  "one device stream); several machines need an on-chip source "
                                  "(sobol, lfsr, lfsr-shared)")
-        if model.lr:
+        if len(model.passes) > 1:
             raise ParameterError(f"machines = {machines}: --model {model.name} runs with one machine "
                                  "(its right pass is not dealt to several)")
     return machines
@@ -113,7 +114,7 @@ def stereo_signature(params: MachineParams, model: ModelParams) -> wiring.Signat
     """:class:`StereoMachine`'s ports: ``StereoSignature(params)``, and with census-lr also
     ``right_result``: ``valid`` and ``payload`` (``result_layout(right_pass_params(model, params))``),
     the right pass's results as they leave its machine (observed: no ``ready``, no back-pressure)."""
-    if not model.lr:
+    if len(model.passes) == 1:
         return StereoSignature(params)
     rp = right_pass_params(model, params)
     observed = wiring.Signature({"valid": Out(1), "payload": Out(result_layout(rp))})
@@ -144,10 +145,11 @@ def pipeline_layout(model: ModelParams, neighbour: bool) -> data.StructLayout:
     first such line) and ``frame_begin`` (the frame's first pixel). census-lr: the pixel's
     ``consult`` (see :func:`~.costs.pixel_features_layout`) and ``line_end`` (an output row's last
     pixel), for :func:`~.lr.lr_split`."""
-    bits = model.census_bits if model.census else 0
-    fields = {"pixel": pixel_features_layout(bits, neighbour, consult=model.lr), "line_begin": unsigned(1),
+    census, lr = model.column(Census), model.column(Consistency) is not None
+    bits = census.bits if census is not None else 0
+    fields = {"pixel": pixel_features_layout(bits, neighbour, consult=lr), "line_begin": unsigned(1),
               "output_line": unsigned(1), "first_line": unsigned(1), "frame_begin": unsigned(1)}
-    if model.lr:
+    if lr:
         fields |= {"line_end": unsigned(1)}
     return data.StructLayout(fields)
 
@@ -206,9 +208,10 @@ class FeaturePipeline(wiring.Component):
         m.submodules.linebuffer = lines = LineBuffer(width=width, height=size)
         m.submodules.filter_left = fl = FeatureFilter(lag=lag)
         m.submodules.filter_right = fr = FeatureFilter(lag=lag)
-        if model.census:
-            m.submodules.census_left = cl = CensusFilter(window=model.census_window)
-            m.submodules.census_right = cr = CensusFilter(window=model.census_window)
+        census = model.column(Census)
+        if census is not None:
+            m.submodules.census_left = cl = CensusFilter(window=census.window)
+            m.submodules.census_right = cr = CensusFilter(window=census.window)
         out = self.features
 
         # The pipeline advances as a whole whenever its last stage is empty or taken.
@@ -259,7 +262,7 @@ class FeaturePipeline(wiring.Component):
         for i in range(WINDOW):
             m.d.comb += [fl.column[i].eq(lines.column[lag + i].left),
                          fr.column[i].eq(lines.column[lag + i].right)]
-        if model.census:
+        if census is not None:
             m.d.comb += [cl.load.eq(advance), cr.load.eq(advance)]
             for i in range(size):
                 m.d.comb += [cl.column[i].eq(lines.column[i].left), cr.column[i].eq(lines.column[i].right)]
@@ -280,7 +283,7 @@ class FeaturePipeline(wiring.Component):
         line_end3, consult3 = Signal(), Signal()
         shift = advance & valid2
         m.d.comb += [fl.en.eq(shift), fr.en.eq(shift)]
-        if model.census:
+        if census is not None:
             m.d.comb += [cl.en.eq(shift), cr.en.eq(shift)]
         with m.If(advance):
             m.d.sync += [valid3.eq(valid2), output3.eq(output2), row_start3.eq(row_start2),
@@ -295,11 +298,11 @@ class FeaturePipeline(wiring.Component):
         for side, filt in ((px.left, fl), (px.right, fr)):
             m.d.comb += [side.m25.eq(filt.features.m25), side.gh20.eq(filt.features.gh20),
                          side.gv20.eq(filt.features.gv20)]
-        if model.census:
+        if census is not None:
             m.d.comb += [px.left.census.eq(cl.code), px.right.census.eq(cr.code)]
         if neighbour:
             m.d.comb += [px.row_start.eq(row_start3), px.first_row.eq(first_row3)]
-        if model.lr:
+        if model.column(Consistency) is not None:
             m.d.comb += [px.consult.eq(consult3), out.payload.line_end.eq(line_end3)]
         return m
 
@@ -340,7 +343,7 @@ class FrontEnd(wiring.Component):
         members = {"pixels": In(pixel_stream()), "beats": Out(load_stream(params))}
         if params.feedback_columns:
             members |= {"result_take": In(1), "result_map": In(params.map_width), "result_hit": In(1)}
-        if model.lr:
+        if len(model.passes) > 1:
             rp = right_pass_params(model, params)
             members |= {"right_beats": Out(load_stream(rp)), "right_take": In(1),
                         "right_map": In(rp.map_width), "right_hit": In(1), "right_room": Out(1)}
@@ -368,8 +371,8 @@ class FrontEnd(wiring.Component):
                                                      output_columns=output_columns)
         wiring.connect(m, wiring.flipped(self.pixels), pipe.pixels)
         features = pipe.features
-        if model.lr:  # through a FIFO, and to the right pass (lr_split)
-            pix, px = features.payload.pixel, Signal(feeder_in_layout(model.census_bits))
+        if len(model.passes) > 1:  # through a FIFO, and to the right pass (lr_split)
+            pix, px = features.payload.pixel, Signal(feeder_in_layout(model.column(Census).bits))
             m.d.comb += [px.left.eq(pix.left), px.right.eq(pix.right), px.output.eq(pix.output),
                          px.consult.eq(pix.consult), px.line_end.eq(features.payload.line_end)]
             if neighbour:
@@ -474,7 +477,7 @@ class StereoMachine(wiring.Component):
         p = self._params
         m.submodules.frontend = front = FrontEnd(params=p, model=self._model, width=self._width)
         m.submodules.machine = machine = BayesianMachine(params=p)
-        if self._model.lr:
+        if len(self._model.passes) > 1:
             self._lr_right_machine(m, front)
         beat_bits = Shape.cast(load_layout(p)).width
         # One entry more than the pixels' beats: the registered ready below keeps one free.

@@ -14,7 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bayesmachine.likelihood import ModelParams, QuantizedTables, likelihood_tables
+from bayesmachine.columns import FEATURE_COLUMNS, Census
+from bayesmachine.models import ModelParams
 
 __all__ = ["FrontEndTables", "clamp_table", "frontend_tables"]
 
@@ -53,7 +54,8 @@ class FrontEndTables:
 
 def frontend_tables(model: ModelParams, word_bits: int) -> FrontEndTables:
     """The clamped tables of ``model`` quantized to ``word_bits``-bit words (host code, then clamped)."""
-    q = QuantizedTables(likelihood_tables(model), word_bits)
-    census = clamp_table(q.census) if q.census is not None else None
-    return FrontEndTables(clamp_table(q.m), clamp_table(q.gh), clamp_table(q.gv), clamp_table(q.nomatch),
-                          census)
+    feats = [clamp_table(c.table(word_bits).values) for kind in FEATURE_COLUMNS
+             for c in model.columns if isinstance(c, kind)]
+    census = model.column(Census)
+    return FrontEndTables(*feats, clamp_table(model.nomatch.table(word_bits).values),
+                          clamp_table(census.table(word_bits).values) if census is not None else None)

@@ -75,15 +75,18 @@ def sources_digest() -> str:
     """Hash of the Python sources that define the design: the Verilog cache keys on it."""
     import amaranth
 
+    import bayesmachine.columns
     import bayesmachine.hdl
-    import bayesmachine.likelihood
+    import bayesmachine.models
     import bayesmachine.params
     import bayesmachine.sources
 
     files = sorted(Path(bayesmachine.hdl.__file__).parent.rglob("*.py"))
     files += sorted(Path(bayesmachine.sources.__file__).parent.glob("*.py"))  # LFSR specs, Sobol table
     files.append(Path(bayesmachine.params.__file__))
-    files.append(Path(bayesmachine.likelihood.__file__))  # the front end's likelihood tables
+    # The front end's likelihood tables: the columns' and the models'.
+    files += sorted(Path(bayesmachine.columns.__file__).parent.glob("*.py"))
+    files.append(Path(bayesmachine.models.__file__))
     h = hashlib.sha256(amaranth.__version__.encode())
     for f in files:
         h.update(f.name.encode())

@@ -1,0 +1,53 @@
+"""Evidence columns: the unit of a disparity model (paper sec. 3: every piece of evidence is one more
+operator column, and the AND gates multiply them).
+
+Each column kind (one module each) defines in one place:
+
+- its options: the model parameters it owns (:class:`~.base.Option`: default, check, help; the
+  command line's flag is derived from the name);
+- its cost (a feature difference, a census Hamming distance, a prior distance |d - d_n|, the
+  consistency test) and its float64 likelihood table indexed by that cost, checked once to lie in
+  [0, 1] and be nonincreasing in the cost (:meth:`~.base.Term.table`), and the table quantized to
+  W-bit words (``table(word_bits)``);
+- its entry in the no-match row;
+- where its words come from (:class:`~.base.Source`): both images' features, the machine's own
+  previous result (feedback), the previous map row's results (a loaded above column), or another
+  pass's results;
+- its host words (the twin of the RTL's lane) and its reference factor: the same function of the same
+  cost, on the word table or on the float64 table;
+- its checks against a machine (``check_machine``).
+
+Kinds: :class:`~.features.Mean`, :class:`~.features.GradH`, :class:`~.features.GradV` (the paper's),
+:class:`~.census.Census`, :class:`~.prior.LeftPrior` (feedback) and :class:`~.prior.AbovePrior`
+(loaded), :class:`~.consistency.Consistency` (fed by another pass); and the no-match row's floor
+:class:`~.features.NoMatchFloor`. A model (:mod:`bayesmachine.models`) is a list of them.
+"""
+
+from .base import Column, Option, Source, Table, Term, likelihood_formula, quantize
+from .census import CENSUS_SIGMA, CENSUS_WINDOWS, Census, census_bits, hamming
+from .consistency import RIGHT_PASS, Consistency, lr_consistent, lr_unknown, right_lanes_valid
+from .features import (
+    FEATURE_COLUMNS,
+    FEATURES,
+    MAX_ABS,
+    SCALES,
+    FeatureColumn,
+    GradH,
+    GradV,
+    Mean,
+    NoMatchFloor,
+)
+from .prior import NEIGHBOUR_PRIOR, AbovePrior, LeftPrior, NeighbourPrior, neighbour_words
+
+__all__ = [
+    "Column", "Option", "Source", "Table", "Term", "likelihood_formula", "quantize",
+    "FEATURES", "SCALES", "MAX_ABS", "FeatureColumn", "Mean", "GradH", "GradV", "FEATURE_COLUMNS",
+    "NoMatchFloor",
+    "CENSUS_WINDOWS", "CENSUS_SIGMA", "Census", "census_bits", "hamming",
+    "NEIGHBOUR_PRIOR", "NeighbourPrior", "LeftPrior", "AbovePrior", "neighbour_words",
+    "RIGHT_PASS", "Consistency", "lr_consistent", "lr_unknown", "right_lanes_valid",
+    "COLUMN_KINDS",
+]
+
+# The closed set of column kinds (the numba reference kernels specialize over their sources).
+COLUMN_KINDS: tuple[type[Column], ...] = (Mean, GradH, GradV, Census, LeftPrior, AbovePrior, Consistency)

@@ -1,0 +1,280 @@
+"""The column contract: options, tables and sources shared by every column kind.
+
+Pure computation (NumPy only): the host, the references, the machine builders and the on-chip front
+end read the same tables at elaboration.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from numbers import Real
+from typing import Any, ClassVar
+
+import numpy as np
+
+from bayesmachine.errors import ParameterError
+
+__all__ = [
+    "Source",
+    "Option",
+    "Table",
+    "Term",
+    "Column",
+    "likelihood_formula",
+    "quantize",
+    "check_int",
+    "check_bool",
+    "check_probability",
+    "check_sigma",
+]
+
+
+class Source(enum.Enum):
+    """Where a column's words come from."""
+
+    FEATURES = "features"  # both images' features: the reference pixel's and its match's at lane d
+    FEEDBACK = "feedback"  # the machine's own previous result, formed by the machine (not loaded)
+    ABOVE = "above"  # the same pass's results of the map row above: a loaded column
+    PASS = "pass"  # another pass's results (census-lr's right MAPs): a loaded column
+
+
+def check_int(name: str, value: object, low: int, high: int) -> None:
+    """TypeError unless ``value`` is an int (not a bool); ParameterError outside [low, high]."""
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise TypeError(f"{name} must be an integer, not {type(value).__name__} {value!r}")
+    if not low <= value <= high:
+        raise ParameterError(f"{name} must be an integer in [{low}, {high}], got {value!r}", name)
+
+
+def check_bool(name: str, value: object) -> None:
+    if not isinstance(value, bool):
+        raise TypeError(f"{name} must be True or False, not {type(value).__name__} {value!r}")
+
+
+def _check_real(name: str, value: object) -> None:
+    if isinstance(value, bool) or not isinstance(value, Real):
+        raise TypeError(f"{name} must be a number, not {type(value).__name__} {value!r}")
+
+
+def check_probability(name: str, value: object, positive: str = "") -> None:
+    """A probability in [0, 1]; with ``positive`` (the reason) also > 0."""
+    _check_real(name, value)
+    if not 0.0 <= float(value) <= 1.0:  # type: ignore[arg-type]
+        raise ParameterError(f"{name} must be a probability in [0, 1], got {value!r}", name)
+    if positive and not float(value) > 0:  # type: ignore[arg-type]
+        raise ParameterError(f"{name} must be > 0: {positive}", name)
+
+
+def check_sigma(name: str, value: object) -> None:
+    """A finite sigma > 0 whose ``2 sigma^2`` is a finite positive float64 (1e-300 would square to 0)."""
+    _check_real(name, value)
+    v = float(value)  # type: ignore[arg-type]
+    if not (math.isfinite(v) and v > 0):
+        raise ParameterError(f"{name} must be a finite number > 0, got {value!r}", name)
+    two_s2 = 2.0 * v * v
+    if not (math.isfinite(two_s2) and two_s2 > 0.0):
+        raise ParameterError(f"{name} = {value!r}: 2 sigma^2 = {two_s2!r} is not a finite positive float64 "
+                             "(use a sigma between about 1e-150 and 1e150)", name)
+
+
+@dataclass(frozen=True)
+class Option:
+    """One model parameter, declared once by the column kind that owns it.
+
+    ``kind`` is ``"int"``, ``"float"`` or ``"bool"`` (a yes/no switch: ``--x/--no-x``); ``default``
+    None with ``resolve`` means a default computed from the other values (``resolve(values)``);
+    ``optional`` lets None stand (e.g. "the machine's watchdog"); ``default_text`` says what such a
+    default is (for a help text). ``check(name, value, values)``
+    raises TypeError or :class:`ParameterError` naming the parameter. ``alias``: one more flag that
+    sets it (``--sigma`` sets the three feature sigmas).
+    """
+
+    name: str
+    kind: str
+    default: Any
+    check: Callable[[str, Any, Mapping[str, Any]], None]
+    help: str
+    resolve: Callable[[Mapping[str, Any]], Any] | None = None
+    optional: bool = False
+    alias: str | None = None
+    default_text: str | None = None
+
+    @property
+    def flag(self) -> str:
+        """The command line's spelling."""
+        return "--" + self.name.replace("_", "-")
+
+    @property
+    def flags(self) -> str:
+        """Every spelling, for a message: ``--x/--no-x`` for a switch, ``--x/ALIAS`` with an alias."""
+        if self.kind == "bool":
+            return f"{self.flag}/--no-{self.flag[2:]}"
+        return f"{self.flag}/{self.alias}" if self.alias else self.flag
+
+
+def likelihood_formula(delta: np.ndarray, scale: int, p0: float, sigma: float) -> np.ndarray:
+    """Paper eq. 2 from integer differences of sums: ``p0 + (1-p0) exp(-C / (2 sigma^2))`` with
+    ``C = delta^2 / scale^2``, exact in float64 (every table and every plain oracle goes through it)."""
+    d = np.asarray(delta, dtype=np.int64)
+    cost = (d * d) / float(scale * scale)
+    return p0 + (1.0 - p0) * np.exp(-cost / (2.0 * sigma * sigma))
+
+
+def quantize(p: np.ndarray | float, word_bits: int) -> np.ndarray:
+    """Probability -> likelihood-memory word: q = round(p * 2^W), round half up, in [0, 2^W].
+
+    ``p * 2^W`` is exact in float64 (a power-of-two scaling) and so is its fractional part,
+    so "half up" is decided exactly (``floor(x + 0.5)`` would not be: 0.5 - 2^-54 + 0.5 rounds
+    to 1.0). 0 maps to 0 and 1 to 2^W. Values outside [0, 1] or NaN are errors (they mean a bug
+    upstream, not something to clip silently).
+    """
+    check_int("word_bits", word_bits, 1, 15)  # words up to 2^15 fit uint16
+    arr = np.asarray(p, dtype=np.float64)
+    bad = ~((arr >= 0.0) & (arr <= 1.0))  # NaN compares false, so it lands here too
+    if bad.any():
+        first = arr[bad].flat[0]
+        raise ValueError(f"probabilities must be in [0, 1] to quantize, got {first!r} ({int(bad.sum())} bad)")
+    one = 1 << word_bits
+    scaled = arr * one
+    q = np.floor(scaled)
+    q += (scaled - q) >= 0.5
+    return np.clip(q, 0, one).astype(np.uint16)
+
+
+@dataclass(frozen=True, eq=False)
+class Table:
+    """A term's values indexed by its cost, and its no-match row's constant entries.
+
+    As probabilities (``word_bits`` None: float64, ``one`` 1.0: what the float64 reference multiplies)
+    or as W-bit likelihood-memory words (uint16, ``one`` 2^W: what the machine and the quantized
+    reference multiply).
+    """
+
+    values: np.ndarray
+    nomatch: tuple[Any, ...]
+    word_bits: int | None = None
+
+    @property
+    def one(self) -> float | int:
+        return 1.0 if self.word_bits is None else 1 << self.word_bits
+
+    @property
+    def zero(self) -> float | int:
+        return 0.0 if self.word_bits is None else 0
+
+    def quantized(self, word_bits: int) -> Table:
+        nomatch = tuple(int(quantize(v, word_bits)) for v in self.nomatch)
+        return Table(quantize(self.values, word_bits), nomatch, word_bits)
+
+    def last_change(self) -> int:
+        """The first cost from which the values no longer change (a table clamped there gives the same)."""
+        changes = np.flatnonzero(self.values[1:] != self.values[:-1])
+        return int(changes[-1]) + 1 if changes.size else 0
+
+
+class Term:
+    """What every column kind and the no-match rule share: their options and their table.
+
+    A subclass declares ``options`` (its :class:`Option` s, in the order they resolve) and
+    ``likelihood(cost)``, the float64 value at a cost, over ``costs()``; ``nomatch_values()`` are its
+    no-match row's constant entries. ``table()`` is checked once: every value in [0, 1] and
+    nonincreasing in the cost (what makes a cost threshold of a row's words exact), named after
+    ``table_parameter``.
+
+    Parameters
+    ----------
+    values : Mapping[str, Any]
+        The resolved values of (at least) its options: a model's (:class:`~bayesmachine.models.ModelParams`
+        builds its terms; the values are checked there).
+    dmax : int
+        The model's largest disparity.
+
+    Attributes
+    ----------
+    values : dict
+        Its options' values.
+    dmax : int
+    """
+
+    name: ClassVar[str]
+    options: ClassVar[tuple[Option, ...]] = ()
+    table_parameter: ClassVar[str] = ""
+
+    def __init__(self, *, values: Mapping[str, Any], dmax: int) -> None:
+        self.values = {o.name: values[o.name] for o in self.options}
+        self.dmax = dmax
+        self._tables: dict[int | None, Table] = {}
+
+    def __repr__(self) -> str:
+        own = ", ".join(f"{k}={v!r}" for k, v in self.values.items())
+        return f"{type(self).__name__}({own})"
+
+    def costs(self) -> np.ndarray:
+        raise NotImplementedError
+
+    def likelihood(self, cost: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
+    def nomatch_values(self) -> tuple[float, ...]:
+        return ()
+
+    def table(self, word_bits: int | None = None) -> Table:
+        """The float64 table (``word_bits`` None) or its quantization to W-bit words, built once."""
+        if word_bits not in self._tables:
+            if word_bits is None:
+                values = np.asarray(self.likelihood(self.costs()), dtype=np.float64)
+                self._check_table(values)
+                self._tables[None] = Table(values, tuple(float(v) for v in self.nomatch_values()))
+            else:
+                self._tables[word_bits] = self.table().quantized(word_bits)
+        return self._tables[word_bits]
+
+    def _check_table(self, values: np.ndarray) -> None:
+        name = self.table_parameter
+        if not ((values >= 0.0) & (values <= 1.0)).all():  # NaN fails both comparisons
+            raise ParameterError(f"{name} = {self.values.get(name)!r} gives likelihoods outside [0, 1]", name)
+        if (values[1:] > values[:-1]).any():
+            raise ParameterError(f"{name} = {self.values.get(name)!r} gives likelihoods that grow with the "
+                                 "cost", name)
+
+    def check_machine(self, machine: Any) -> None:
+        """ParameterError naming the parameter unless this term's words work on ``machine``."""
+
+    def _nonzero_word(self, parameter: str, value: float, machine: Any, why: str, what: str = "") -> None:
+        """ParameterError unless ``value`` (``parameter``'s, or ``what`` it gives) is a nonzero word."""
+        w = machine.word_bits
+        if int(quantize(value, w)) == 0:
+            given = self.values.get(parameter, value)
+            subject = f"{parameter} = {given!r}" + (f": {what} {value:.3g}" if what else "")
+            raise ParameterError(f"{subject} quantizes to 0 with {w}-bit words ({why}); raise it or "
+                                 "word_bits", parameter)
+
+
+class Column(Term):
+    """One operator column of a pass: a piece of evidence the AND gates multiply in (paper sec. 3).
+
+    ``source`` says where its words come from (:class:`Source`); ``margin`` is the half-size of the
+    largest window its features need (the output region keeps every window inside the image).
+    FEATURES columns read ``plane`` of both images' :class:`~bayesmachine.host.features.FeatureSums`
+    and define ``cost(a, b)`` (reference values, match values) and ``plain_cost`` (an independent
+    computation: the test oracle's); their no-match entry is ``nomatch_entry(table)``. The other
+    kinds define how their words are formed from their source (``loaded`` or ``feedback``).
+    """
+
+    source: ClassVar[Source]
+    margin: ClassVar[int] = 2
+    plane: ClassVar[str] = ""
+    hamming: ClassVar[bool] = False  # FEATURES: the cost is popcount(a xor b), else |a - b|
+
+    def cost(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
+    def plain_cost(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
+    def nomatch_entry(self, table: Table) -> float | int:
+        """A FEATURES column's entry in the no-match row: 1 unless its kind says otherwise."""
+        return table.one

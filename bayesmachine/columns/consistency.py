@@ -1,0 +1,181 @@
+"""The left-right consistency column, fed by another pass's MAPs (census-lr).
+
+A right pass (the census model with the right image as reference: lane d pairs right map column
+x_r with left map column x_r + d) gives the right MAPs d_R. Row d of left map column x gets 1 when
+lane d is consistent, ``|d_R(x - d) - d| <= lr_tolerance``, and ``lr_beta`` otherwise (its cost is 0 or
+1, its table [1, beta]); with ``lr_neutral`` a lane whose right pixel x - d has no right MAP (the right
+pass's no match or its watchdog) is neutral: factor 1, no information either way; x - d outside the
+right pass's columns gets beta. The no-match row gets ``lr_gamma`` when any lane is consistent (a
+neutral lane does not count), 1 when none is, and 0 with ``lr_nomatch`` off (no no-match row at all).
+
+Where its words come from is declared here too: the pass named :data:`RIGHT_PASS`, whose own
+options are ``lr_right_nomatch`` (its model's no-match row, else none: word 0) and
+``lr_right_max_cycles`` (its watchdog; None: the left machine's). :func:`lr_consistent`,
+:func:`lr_unknown` and :meth:`Consistency.loaded` are the one definition the host, the references and
+the runs read.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from bayesmachine.errors import ParameterError
+
+from .base import Column, Option, Source, Table, check_bool, check_int, check_probability
+
+__all__ = ["RIGHT_PASS", "Consistency", "lr_consistent", "lr_unknown", "right_lanes_valid"]
+
+RIGHT_PASS = "right"  # the pass whose MAPs feed the consistency column
+
+
+def _factor(name: str, value: object, values: Mapping[str, Any]) -> None:
+    # beta 0 with no consistent lane (and no no-match row) would leave a pixel 0/0.
+    check_probability(name, value, positive="it keeps every pixel's posterior defined")
+
+
+def _tolerance(name: str, value: object, values: Mapping[str, Any]) -> None:
+    check_int(name, value, 0, 4094)
+
+
+def _switch(name: str, value: object, values: Mapping[str, Any]) -> None:
+    check_bool(name, value)
+
+
+def _watchdog(name: str, value: object, values: Mapping[str, Any]) -> None:
+    if value is not None:
+        check_int(name, value, 2, (1 << 32) - 1)
+
+
+def _maps(right_map: np.ndarray) -> np.ndarray:
+    hat = np.asarray(right_map)
+    if hat.dtype.kind not in "iu":
+        raise ValueError(f"right MAPs must be integers (-1: none), got {hat.dtype}")
+    return hat
+
+
+def _lanes(right_map: np.ndarray, right_first: int, columns: np.ndarray, dmax: int):
+    """(inside, right MAP) of lane d of left map column ``columns[i]``: its right pixel x - d."""
+    hat = _maps(right_map)
+    cols = np.asarray(columns, dtype=np.int64)
+    j = cols[:, None] - np.arange(dmax + 1)[None, :] - int(right_first)  # (Wo, Dmax+1) into right_map
+    inside = (j >= 0) & (j < hat.shape[-1])
+    return inside, hat[..., np.clip(j, 0, max(0, hat.shape[-1] - 1))].astype(np.int64)
+
+
+def lr_consistent(right_map: np.ndarray, right_first: int, columns: np.ndarray, dmax: int,
+                  tolerance: int) -> np.ndarray:
+    """The left-right test: (..., Wo, Dmax+1) bool, lane d of left map column ``columns[i]`` consistent.
+
+    ``right_map`` (..., Wr): the right pass's MAPs of right map columns ``right_first ..``, -1 for none
+    (no MAP, a timeout). Lane d is consistent when ``|d_R(x - d) - d| <= tolerance``; a column
+    x - d outside ``right_map``'s columns or without a MAP is not.
+    """
+    inside, got = _lanes(right_map, right_first, columns, dmax)
+    return inside & (got >= 0) & (np.abs(got - np.arange(dmax + 1)) <= tolerance)
+
+
+def lr_unknown(right_map: np.ndarray, right_first: int, columns: np.ndarray, dmax: int) -> np.ndarray:
+    """(..., Wo, Dmax+1) bool: lane d of left map column ``columns[i]`` reads a right pixel x - d inside
+    ``right_map``'s columns that has no right MAP (-1: the right pass's no match or a timeout); a lane
+    whose x - d lies outside the right columns is not unknown (it stays inconsistent)."""
+    inside, got = _lanes(right_map, right_first, columns, dmax)
+    return inside & (got < 0)
+
+
+def right_lanes_valid(right_columns: np.ndarray, dmax: int, last: int) -> np.ndarray:
+    """(Wr, Dmax+1) bool: lane d of right map column x_r pairs it with left map column x_r + d, which
+    must not lie right of ``last``, the last output column (a lane past it is loaded with word 0)."""
+    xr = np.asarray(right_columns, dtype=np.int64)
+    return (xr[:, None] + np.arange(dmax + 1)[None, :]) <= last
+
+
+class Consistency(Column):
+    """The consistency column (source PASS: the MAPs of the pass :data:`RIGHT_PASS`)."""
+
+    name = "lr"
+    source = Source.PASS
+    feeds_from = RIGHT_PASS
+    table_parameter = "lr_beta"
+    options = (
+        Option("lr_beta", "float", 0.1, _factor,
+               "the consistency column's factor beta of an inconsistent lane, |d_R(x - d) - d| > tolerance"),
+        Option("lr_gamma", "float", 0.01, _factor, "the consistency column's no-match factor gamma when any "
+               "lane is consistent (1 when none is)"),
+        Option("lr_tolerance", "int", 1, _tolerance, "the left-right test's tolerance in disparities"),
+        Option("lr_nomatch", "bool", True, _switch,
+               "the left pass's no-match row (off: no no-match row at all)"),
+        Option("lr_right_nomatch", "bool", True, _switch,
+               "give the right pass its model's no-match row (off: none, word 0)"),
+        Option("lr_right_max_cycles", "int", None, _watchdog, "the right pass's watchdog in cycles: a right "
+               "pixel stopped by it has no right MAP", optional=True,
+               default_text="the left pass's watchdog"),
+        Option("lr_neutral", "bool", True, _switch, "a lane whose right pixel has no right MAP (the right "
+               "pass's no match or a timeout) gets factor 1, no information (off: beta)"),
+    )
+
+    @property
+    def tolerance(self) -> int:
+        return int(self.values["lr_tolerance"])
+
+    @property
+    def neutral(self) -> bool:
+        return bool(self.values["lr_neutral"])
+
+    @property
+    def has_nomatch(self) -> bool:
+        return bool(self.values["lr_nomatch"])
+
+    def costs(self) -> np.ndarray:
+        return np.arange(2)  # 0: consistent (or neutral), 1: not
+
+    def likelihood(self, cost: np.ndarray) -> np.ndarray:
+        return np.where(np.asarray(cost) == 0, 1.0, float(self.values["lr_beta"]))
+
+    def nomatch_values(self) -> tuple[float, ...]:
+        return (float(self.values["lr_gamma"]),)
+
+    def values_of(self, table: Table, consistent: np.ndarray,
+                  unknown: np.ndarray | None = None) -> np.ndarray:
+        """The column (..., Dmax+2) of the test (..., Dmax+1) in ``table``'s domain (float64 or uint16).
+
+        Row d: 1 when consistent, beta otherwise; with ``lr_neutral`` also 1 where ``unknown``
+        (:func:`lr_unknown`; required then). The no-match row: gamma when any lane is consistent, 1
+        when none is, 0 without a no-match row."""
+        c = np.asarray(consistent, dtype=bool)
+        dtype = np.float64 if table.word_bits is None else np.uint16
+        out = np.empty((*c.shape[:-1], c.shape[-1] + 1), dtype=dtype)
+        one, beta = table.values[0], table.values[1]
+        if self.neutral:
+            if unknown is None or np.shape(unknown) != c.shape:
+                got = None if unknown is None else np.shape(unknown)
+                raise ValueError(f"lr_neutral: the consistency column needs the unknown lanes (lr_unknown), "
+                                 f"shape {c.shape}, got {got}")
+            out[..., :-1] = np.where(c | np.asarray(unknown, dtype=bool), one, beta)
+        else:
+            out[..., :-1] = np.where(c, one, beta)
+        if self.has_nomatch:
+            out[..., -1] = np.where(c.any(axis=-1), table.nomatch[0], one)
+        else:
+            out[..., -1] = 0
+        return out
+
+    def loaded(self, table: Table, right_map: np.ndarray, right_first: int,
+               columns: np.ndarray) -> np.ndarray:
+        """The column (..., Wo, Dmax+2) of left map columns ``columns`` from the right MAPs ``right_map``
+        (..., Wr) of right map columns ``right_first ..``, in ``table``'s domain."""
+        consistent = lr_consistent(right_map, right_first, columns, self.dmax, self.tolerance)
+        unknown = lr_unknown(right_map, right_first, columns, self.dmax) if self.neutral else None
+        return self.values_of(table, consistent, unknown)
+
+    def check_machine(self, machine: Any) -> None:
+        c = self.values["lr_right_max_cycles"]  # the right pass's watchdog runs beside this machine
+        if c is not None and c <= machine.counter_max:
+            raise ParameterError(f"lr_right_max_cycles = {c} must exceed the counter max "
+                                 f"({machine.counter_max}): no counter can overflow in fewer than counter "
+                                 "max + 1 cycles",
+                                 "lr_right_max_cycles")
+        for name in ("lr_beta", "lr_gamma"):
+            self._nonzero_word(name, float(self.values[name]), machine, "a consistency factor of 0")

@@ -1,0 +1,504 @@
+"""Disparity models as data: a list of evidence columns, a no-match rule and the passes they need.
+
+A model definition (:class:`ModelDef`) names its column kinds in operator order
+(:mod:`bayesmachine.columns`), its no-match rule, the yes/no options that leave columns out, and the
+passes run before its own (:class:`PassDef`: another model with another reference image, whose results
+feed a column). :class:`ModelParams` is one model with its parameter values: flat keywords, each owned
+by one of its column kinds (the command line's options are the same declarations). The three models:
+
+* ``paper``: the paper's columns m, gH, gV; no-match row [P_nm(gV), 1, 1]; a uniform prior.
+* ``census``: + a census column (its no-match entry L_c(h_nm)) and the raster-order neighbour prior (a
+  left column formed by the machine from its own previous result, an above column loaded from the
+  previous map row's results); ``neighbour_prior=False`` leaves the prior's two columns out.
+* ``census-lr``: census + a left-right consistency column fed by the MAPs of a right pass (the census
+  model with the right image as reference, its own machine: seed of machine 1), the no-match factor of
+  its prior 0.1 by default, and a watchdog of :data:`LR_WATCHDOG_RUNS` runs.
+
+The machine a model's pass needs (:func:`disparity_machine`) follows from its columns: leading
+FEEDBACK and ABOVE columns are the machine's prior columns ("neighbour": feedback then loaded;
+"loaded": one loaded), the rest its data columns.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any
+
+from bayesmachine.columns import (
+    RIGHT_PASS,
+    AbovePrior,
+    Census,
+    Column,
+    Consistency,
+    GradH,
+    GradV,
+    LeftPrior,
+    Mean,
+    NoMatchFloor,
+    Option,
+    Source,
+    Term,
+)
+from bayesmachine.columns.base import check_int
+from bayesmachine.params import DEFAULT_DMAX, STEREO_ROWS_PER_BEAT, MachineParams, ParameterError, nth_machine
+
+__all__ = [
+    "ModelDef",
+    "PassDef",
+    "Pass",
+    "ModelParams",
+    "MODELS",
+    "MODEL_NAMES",
+    "DEFAULT_MODEL",
+    "HARDWARE_MODEL",
+    "LR_WATCHDOG_RUNS",
+    "all_options",
+    "machine_layout",
+    "disparity_machine",
+    "pass_machine",
+    "right_machine",
+    "check_disparity_machine",
+    "neighbour_words_per_beat",
+]
+
+# The model of every command and of ModelParams() when none is named: census-lr, the best on the
+# measurements (README, Models), which the host, every engine and the simulated StereoMachine compute.
+DEFAULT_MODEL = "census-lr"
+# The model of what builds or drives an FPGA design (emit, synth, board, run --engine board, K > 1
+# machines): census-lr's StereoMachine does not place on the ECP5-85F (89 % of its flip-flops,
+# docs/fpga.md) and K machines cannot share its right pass; census is the best model that does.
+HARDWARE_MODEL = "census"
+# census-lr's watchdog, in runs of n_max + 1 cycles: max_cycles = LR_WATCHDOG_RUNS * (counter_max + 1)
+# (1088 at counter max 16). A run lasts about (n_max + 1) / p_win cycles, so a pixel stops as a timeout
+# (no match) when its winning row fires less than about once in 64 cycles: every hypothesis explains
+# the pixel badly. It cuts the long tail of the left pass's runs (docs/host.md, "census-lr's cycles").
+LR_WATCHDOG_RUNS = 64
+
+
+@dataclass(frozen=True)
+class PassDef:
+    """A pass a model runs before its own: ``model``'s columns with ``reference`` ("right": lane d pairs
+    right map column x_r with left map column x_r + d) on machine ``machine`` of a row
+    (:func:`~bayesmachine.params.nth_machine`). ``nomatch``: the yes/no option giving it ``model``'s
+    no-match row (off: word 0, the row never fires); ``watchdog``: the option giving its watchdog in
+    cycles (None: the machine's). ``own_defaults``: options it leaves at ``model``'s defaults."""
+
+    name: str
+    model: str
+    reference: str
+    machine: int
+    nomatch: str | None = None
+    watchdog: str | None = None
+    own_defaults: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class ModelDef:
+    """A model: ``columns`` in operator order, its no-match rule, ``switches`` (a yes/no option and the
+    columns present only when it is on), ``passes`` run before its own, ``defaults`` of its own for
+    column options, ``requires`` (option values it needs, with the reason) and its machine's default
+    watchdog in runs of n_max + 1 cycles."""
+
+    name: str
+    description: str
+    columns: tuple[type[Column], ...]
+    nomatch: type[NoMatchFloor] = NoMatchFloor
+    switches: tuple[tuple[str, tuple[type[Column], ...]], ...] = ()
+    passes: tuple[PassDef, ...] = ()
+    defaults: tuple[tuple[str, Any], ...] = ()
+    requires: tuple[tuple[str, Any, str], ...] = ()
+    watchdog_runs: int | None = None
+
+    @property
+    def options(self) -> dict[str, Option]:
+        """Every parameter of the model, in order: its data columns', the no-match rule's, the rest's."""
+        data = [c for c in self.columns if c.source in (Source.FEATURES, Source.PASS)]
+        kinds: list[type[Term]] = [*(c for c in data if c.source is Source.FEATURES), self.nomatch,
+                                   *(c for c in self.columns if c not in data),
+                                   *(c for c in data if c.source is Source.PASS)]
+        out: dict[str, Option] = {}
+        for kind in kinds:
+            for option in kind.options:
+                if out.setdefault(option.name, option) is not option:
+                    raise ValueError(f"{option.name} is declared twice ({kind.__name__})")
+        return out
+
+    def resolve(self, given: Mapping[str, Any]) -> dict[str, Any]:
+        """The values of every option: given ones checked, the others their defaults."""
+        options = self.options
+        for key in given:
+            if key not in options:
+                owners = [d.name for d in MODELS.values() if key in d.options]
+                if not owners:
+                    raise TypeError(f"ModelParams: no parameter named {key!r}")
+                raise ParameterError(f"{key} is not a parameter of the {self.name} model (it is one of "
+                                     f"{', '.join(owners)})", key)
+        defaults = dict(self.defaults)
+        values: dict[str, Any] = {}
+        for name, option in options.items():
+            v = given.get(name)
+            if v is None:
+                v = defaults.get(name, option.default)
+            if v is None and option.resolve is not None:
+                v = option.resolve(values)
+            if v is not None or not option.optional:
+                option.check(name, v, values)
+            values[name] = v
+        for name, want, why in self.requires:
+            if values[name] != want:
+                said = {True: "on", False: "off"}.get(want, repr(want))
+                raise ParameterError(f"{name} must be {said} for the {self.name} model ({why})", name)
+        return values
+
+
+PAPER = ModelDef("paper", "the paper's m, gH, gV columns", (Mean, GradH, GradV))
+CENSUS = ModelDef(
+    "census", "+ a census column, a no-match row calibrated for it and the raster-order neighbour prior on "
+    "the machine's own results", (LeftPrior, AbovePrior, Mean, GradH, GradV, Census),
+    switches=(("neighbour_prior", (LeftPrior, AbovePrior)),))
+CENSUS_LR = ModelDef(
+    "census-lr", "+ a left-right consistency column from a right pass", (*CENSUS.columns, Consistency),
+    switches=CENSUS.switches,
+    passes=(PassDef(RIGHT_PASS, "census", "right", machine=1, nomatch="lr_right_nomatch",
+                    watchdog="lr_right_max_cycles", own_defaults=("prior_nomatch",)),),
+    defaults=(("prior_nomatch", 0.1),),
+    requires=(("neighbour_prior", True, "both passes use it"),),
+    watchdog_runs=LR_WATCHDOG_RUNS)
+
+MODELS: dict[str, ModelDef] = {d.name: d for d in (PAPER, CENSUS, CENSUS_LR)}
+MODEL_NAMES = tuple(MODELS)
+
+
+def all_options() -> dict[str, tuple[Option, tuple[str, ...]]]:
+    """Every model parameter once, with the models that have it (in :data:`MODELS` order)."""
+    out: dict[str, tuple[Option, tuple[str, ...]]] = {}
+    for d in MODELS.values():
+        for name, option in d.options.items():
+            owners = out[name][1] if name in out else ()
+            out[name] = (option, (*owners, d.name))
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class Pass:
+    """One pass of a model: the columns of ``model`` (the model itself for its own pass, named "left")
+    over the pixels of the ``reference`` image, on machine ``machine_index`` of a row. ``nomatch``:
+    whether its no-match row holds ``model``'s rule (else every column's entry there is 0, the row never
+    fires); ``max_cycles``: its own watchdog (None: the machine's), given by the option ``watchdog``."""
+
+    name: str
+    model: ModelParams = field(repr=False)
+    reference: str = "left"
+    nomatch: bool = True
+    machine_index: int = 0
+    max_cycles: int | None = None
+    watchdog: str | None = None
+
+    @property
+    def columns(self) -> tuple[Column, ...]:
+        return self.model.columns
+
+    @property
+    def step(self) -> int:
+        """Lane d's match column: x - d (the left image as reference) or x + d (the right)."""
+        return -1 if self.reference == "left" else 1
+
+
+def _rebuild(values: dict[str, Any]) -> ModelParams:
+    return ModelParams(**values)
+
+
+class ModelParams:
+    """A disparity model with its parameter values, validated up front.
+
+    ``ModelParams(name=DEFAULT_MODEL, dmax=DEFAULT_DMAX, **parameters)``: every keyword is a parameter
+    of one of the named model's column kinds (or its no-match rule), read back as an attribute
+    (``model.census_sigma``); a parameter left out or None takes its default (the model's own, or the
+    kind's, resolved: ``census_sigma`` 6 for 7x7, 3 for 5x5). Wrong types raise TypeError, impossible
+    values :class:`~bayesmachine.params.ParameterError` naming the parameter. Two models with the same
+    values are equal; ``to_dict()`` lists every value and ``ModelParams(**to_dict())`` is the same model.
+
+    Parameters
+    ----------
+    name : str
+        The model, one of :data:`MODELS` (default :data:`DEFAULT_MODEL`, the command line's).
+    dmax : int
+        The largest disparity, 0 .. 4094 (default 80).
+    **parameters
+        Its column kinds' parameters (:func:`all_options`; e.g. ``sigma_m``, ``census_window``,
+        ``lr_beta``); None or left out: the default.
+
+    Attributes
+    ----------
+    name, dmax : str, int
+        The model (one of :data:`MODELS`) and its largest disparity.
+    columns : tuple of Column
+        Its own pass's operator columns, in order.
+    nomatch : NoMatchFloor
+        Its no-match rule.
+    passes : tuple of Pass
+        The passes a run makes, in order: the declared ones, then its own (the output).
+    """
+
+    __slots__ = ("_definition", "_dmax", "_given", "_values", "_columns", "_nomatch", "_passes")
+
+    def __init__(self, *, name: str = DEFAULT_MODEL, dmax: int = DEFAULT_DMAX, **parameters: Any) -> None:
+        if not isinstance(name, str):
+            raise TypeError(f"name must be a model name (str), not {type(name).__name__} {name!r}")
+        if name not in MODELS:
+            raise ParameterError(f"name must be one of {', '.join(MODELS)}, got {name!r}", "name")
+        check_int("dmax", dmax, 0, 4094)
+        definition = MODELS[name]
+        values = definition.resolve(parameters)
+        off = {c for option, kinds in definition.switches if not values[option] for c in kinds}
+        self._definition = definition
+        self._dmax = dmax
+        self._given = {k: v for k, v in parameters.items() if v is not None}
+        self._values = MappingProxyType(values)
+        self._columns = tuple(kind(values=values, dmax=dmax) for kind in definition.columns
+                              if kind not in off)
+        self._nomatch = definition.nomatch(values=values, dmax=dmax)
+        declared = tuple(self._declared_pass(p) for p in definition.passes)
+        self._passes = (*declared, Pass("left", self))
+
+    def _declared_pass(self, p: PassDef) -> Pass:
+        other = MODELS[p.model].options
+        keep = {k: v for k, v in self._values.items() if k in other and k not in p.own_defaults}
+        max_cycles = self._values[p.watchdog] if p.watchdog else None
+        nomatch = bool(self._values[p.nomatch]) if p.nomatch else True
+        return Pass(p.name, ModelParams(name=p.model, dmax=self._dmax, **keep), p.reference, nomatch,
+                    p.machine, max_cycles, p.watchdog)
+
+    # What the model is.
+    @property
+    def name(self) -> str:
+        return self._definition.name
+
+    @property
+    def dmax(self) -> int:
+        return self._dmax
+
+    @property
+    def definition(self) -> ModelDef:
+        return self._definition
+
+    @property
+    def columns(self) -> tuple[Column, ...]:
+        return self._columns
+
+    @property
+    def nomatch(self) -> NoMatchFloor:
+        return self._nomatch
+
+    @property
+    def passes(self) -> tuple[Pass, ...]:
+        return self._passes
+
+    @property
+    def parameters(self) -> Mapping[str, Any]:
+        """The values of its column kinds' parameters (read-only)."""
+        return self._values
+
+    @property
+    def hypotheses(self) -> int:
+        """Dmax + 2: disparities 0..Dmax and no match (the machine's rows M)."""
+        return self._dmax + 2
+
+    @property
+    def margin(self) -> int:
+        """Pixels from a window's centre to its edge, for the model's largest window (5x5 filters: 2,
+        7x7 census: 3): the output region keeps every window inside the image (``bayesmachine.region``)."""
+        return max(c.margin for c in self._columns)
+
+    def column(self, kind: type[Column]) -> Column | None:
+        """Its own pass's column of ``kind`` (None if it has none)."""
+        return next((c for c in self._columns if isinstance(c, kind)), None)
+
+    def pass_named(self, name: str) -> Pass:
+        for p in self._passes:
+            if p.name == name:
+                return p
+        raise ValueError(f"the {self.name} model has no {name} pass")
+
+    def __getattr__(self, name: str) -> Any:
+        if name.startswith("_"):
+            raise AttributeError(name)
+        try:
+            return self._values[name]
+        except KeyError:
+            raise AttributeError(f"the {self._definition.name} model has no parameter {name!r}") from None
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        if name.startswith("_") and not hasattr(self, "_passes"):
+            object.__setattr__(self, name, value)
+            return
+        raise AttributeError(f"ModelParams is read-only: use model.replace({name}=...)")
+
+    def replace(self, **changes: Any) -> ModelParams:
+        """The model of the parameters given to this one, with ``changes``: the others take their defaults
+        again (``census_window=5`` gives the 5x5 window's ``census_sigma``; a new ``name`` its model's
+        defaults and keeps the given parameters it has)."""
+        given = {"name": self.name, "dmax": self._dmax, **self._given}
+        if "name" in changes and changes["name"] != self.name:
+            other = MODELS[changes["name"]].options if changes["name"] in MODELS else {}
+            given = {k: v for k, v in given.items() if k in ("name", "dmax") or k in other}
+        return ModelParams(**{**given, **changes})
+
+    def to_dict(self) -> dict[str, Any]:
+        """``dmax``, ``name`` and every parameter's value (resolved: what ran)."""
+        return {"dmax": self._dmax, "name": self.name, **self._values}
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, ModelParams) and self.to_dict() == other.to_dict()
+
+    def __hash__(self) -> int:
+        return hash(tuple(self.to_dict().items()))
+
+    def __repr__(self) -> str:
+        return "ModelParams(" + ", ".join(f"{k}={v!r}" for k, v in self.to_dict().items()) + ")"
+
+    def __reduce__(self) -> tuple[Any, tuple[dict[str, Any]]]:
+        return _rebuild, ({"name": self.name, "dmax": self._dmax, **self._given},)
+
+
+def machine_layout(columns: tuple[Column, ...]) -> tuple[str, int]:
+    """(prior, data columns) of the machine that runs ``columns``: its leading FEEDBACK and ABOVE
+    columns are the machine's prior columns (``"neighbour"``: feedback then loaded; ``"loaded"``: one
+    loaded; ``"uniform"``: none), the rest its data columns."""
+    lead = [c.source for c in columns if c.source in (Source.FEEDBACK, Source.ABOVE)]
+    prior = {(): "uniform", (Source.ABOVE,): "loaded", (Source.FEEDBACK, Source.ABOVE): "neighbour"}.get(
+        tuple(lead))
+    if prior is None or tuple(c.source for c in columns[: len(lead)]) != tuple(lead):
+        raise ValueError(f"no machine runs columns {[c.name for c in columns]}: its prior columns lead, "
+                         "a feedback column before a loaded one")
+    return prior, len(columns) - len(lead)
+
+
+def neighbour_words_per_beat(rows: int, loaded_columns: int) -> int:
+    """A neighbour-prior machine's default ``words_per_beat``: the loaded words of
+    :data:`~bayesmachine.params.STEREO_ROWS_PER_BEAT` rows per load beat (the front end's rule).
+
+    A pixel's loaded words grow by the census and above-prior columns (5 per row: 410 at Dmax 80),
+    which the 16 lanes of ``for_disparity`` would load in 26 beats, longer than 47 % of the runs
+    on the bundled pair at counter max 16 (no run is shorter than 17 cycles): loading would show
+    (63.7 wall cycles per pixel instead of 61.4, docs/host.md). Six rows per beat
+    (30 lanes) load them in 14 beats, below the shortest run, so loading stays hidden behind the
+    previous pixel's run (wall cycles per pixel ``max(k + 2, beats + 1) + 1``) from counter max 12
+    up; a lane count a multiple of the loaded columns keeps a row's words in one beat.
+    """
+    return min(STEREO_ROWS_PER_BEAT, rows) * loaded_columns
+
+
+def disparity_machine(model: ModelParams, **machine_kwargs: Any) -> MachineParams:
+    """The machine ``model``'s own pass needs: ``MachineParams.for_disparity(model.dmax, ...)`` with the
+    data columns and the prior its columns give (:func:`machine_layout`).
+
+    With a feedback column (the neighbour prior): ``prior="neighbour"``, ``feedback_words`` and
+    ``feedback_nomatch_word`` from that column's table (:meth:`~bayesmachine.columns.LeftPrior.feedback`)
+    and ``words_per_beat`` by default :func:`neighbour_words_per_beat`; with the definition's
+    ``watchdog_runs``, ``max_cycles`` by default that many runs of ``counter_max`` + 1 cycles.
+    ``machine_kwargs`` are the other fields (``word_bits``, ``rng``, ...); a ``columns``, ``prior`` or
+    feedback table contradicting the model is a ``ParameterError`` naming it.
+    """
+    prior, data = machine_layout(model.columns)
+    if "columns" in machine_kwargs and machine_kwargs["columns"] != data:
+        raise ParameterError(f"columns: the {model.name} model has {data} data columns, got "
+                             f"columns={machine_kwargs['columns']!r}", "columns")
+    kwargs = dict(machine_kwargs, columns=data)
+    given = kwargs.get("prior")
+    if prior == "neighbour":
+        if given is not None and given != "neighbour":
+            raise ParameterError(
+                f"prior: the {model.name} model's neighbour prior needs the machine's prior 'neighbour' "
+                f"(its own feedback column and a loaded above column), not {given!r}; leave prior out, or "
+                "turn neighbour_prior off", "prior")
+        # The other fields first, validated as usual (their errors name them), for the word width.
+        own = ("prior", "feedback_words", "feedback_nomatch_word")
+        rest = {k: v for k, v in kwargs.items() if k not in own}
+        word_bits = MachineParams.for_disparity(model.dmax, **rest).word_bits
+        left = model.column(LeftPrior)
+        assert left is not None
+        feedback, nm = left.feedback(word_bits)
+        for name, want in (("feedback_words", feedback), ("feedback_nomatch_word", nm)):
+            got = kwargs.get(name)
+            if got is not None and (tuple(got) if name == "feedback_words" else got) != want:
+                raise ParameterError(f"{name}: the model's {word_bits}-bit prior table gives {want}, "
+                                     f"got {got!r}", name)
+        kwargs.update(prior="neighbour", feedback_words=feedback, feedback_nomatch_word=nm)
+        kwargs.setdefault("words_per_beat", neighbour_words_per_beat(model.hypotheses, data + 1))
+    elif given == "neighbour":
+        raise ParameterError(f"prior: 'neighbour' is the neighbour prior's machine; {_described(model)} has "
+                             "no feedback column", "prior")
+    runs = model.definition.watchdog_runs
+    if runs is not None and kwargs.get("max_cycles") is None:
+        kwargs.pop("max_cycles", None)
+        counter_max = MachineParams.for_disparity(model.dmax, **kwargs).counter_max
+        kwargs["max_cycles"] = runs * (counter_max + 1)
+    machine = MachineParams.for_disparity(model.dmax, **kwargs)
+    check_disparity_machine(model, machine)
+    return machine
+
+
+def _described(model: ModelParams) -> str:
+    """"the census model with neighbour_prior off": the model and the switches that left columns out."""
+    switched = [option for option, _ in model.definition.switches if not model.parameters[option]]
+    return f"the {model.name} model" + (f" with {', '.join(switched)} off" if switched else "")
+
+
+def pass_machine(model: ModelParams, machine: MachineParams, name: str) -> MachineParams:
+    """The machine of ``model``'s declared pass ``name`` when its own pass runs on ``machine``.
+
+    The pass's model's machine (:func:`disparity_machine`) with ``machine``'s word width, counter max,
+    random source, watchdog (the pass's own if its option gives one: a pixel stopped by it has no
+    result) and tie rule, and the seed of machine ``machine_index`` of a row
+    (:func:`~bayesmachine.params.nth_machine`): a machine beside the left one, its own random numbers.
+    """
+    p = model.pass_named(name)
+    if p.model is model:
+        raise ValueError(f"{name} is the {model.name} model's own pass: its machine is "
+                         "disparity_machine(model)")
+    check_disparity_machine(model, machine)
+    keep = ("word_bits", "counter_max", "rng", "lfsr_bits", "seed", "max_cycles", "tie_break")
+    kwargs: dict[str, Any] = {k: getattr(machine, k) for k in keep}
+    if p.max_cycles is not None:
+        kwargs["max_cycles"] = p.max_cycles
+    if machine.rng == "smtj":
+        kwargs.update(smtj_dwell=machine.smtj_dwell, smtj_spread=machine.smtj_spread,
+                      smtj_share=machine.smtj_share)
+    return nth_machine(disparity_machine(p.model, **kwargs), p.machine_index)
+
+
+def right_machine(model: ModelParams, machine: MachineParams) -> MachineParams:
+    """:func:`pass_machine` of the right pass (census-lr's second machine)."""
+    return pass_machine(model, machine, RIGHT_PASS)
+
+
+def check_disparity_machine(model: ModelParams, machine: MachineParams) -> int:
+    """``ParameterError`` naming the parameter unless ``machine`` can run ``model``'s own pass.
+
+    Returns the operator column of the first data column: 1 with a loaded prior (column 0), 2 with
+    the neighbour prior (feedback column 0, loaded above column 1), else 0.
+    """
+    data_prior, data = machine_layout(model.columns)
+    if machine.rows != model.hypotheses or not machine.nomatch_row:
+        raise ParameterError(
+            f"rows: the machine has {machine.rows} rows (no-match row: {machine.nomatch_row}); the model's "
+            f"dmax {model.dmax} needs {model.hypotheses} = dmax + 2 with a no-match row: "
+            f"use MachineParams.for_disparity({model.dmax}, columns={data})", "rows")
+    if machine.columns != data:
+        raise ParameterError(f"columns: the {model.name} model has {data} data columns, the machine has "
+                             f"columns={machine.columns}", "columns")
+    if data_prior == "neighbour" and machine.prior != "neighbour":
+        raise ParameterError(
+            f"neighbour_prior needs the machine's neighbour prior (prior='neighbour': its feedback column "
+            f"and a loaded above column), not prior={machine.prior!r}: build the machine with "
+            "disparity_machine(model), or turn the neighbour prior off", "neighbour_prior")
+    if data_prior != "neighbour" and machine.prior == "neighbour":
+        raise ParameterError(f"prior: the machine has a neighbour prior (prior='neighbour') but "
+                             f"{_described(model)} has none", "prior")
+    for term in (model.nomatch, *model.columns):
+        term.check_machine(machine)
+    return machine.operator_columns - machine.columns
+
