@@ -44,9 +44,11 @@ from bayesmachine.params import (
     DEFAULT_WORDS_PER_BEAT,
     PRIORS,
     RNG_KINDS,
+    SAMPLES_PER_CLOCK,
     SMTJ_SHARES,
     STEREO_ROWS_PER_BEAT,
     TIE_BREAKS,
+    TIMEOUT_ANSWERS,
     MachineParams,
     ParameterError,
 )
@@ -302,8 +304,19 @@ _WATCHDOGS = "; ".join(
     f"{d.watchdog_runs * (DEFAULT_COUNTER_MAX + 1)} at counter max {DEFAULT_COUNTER_MAX}, for every pass"
     for d in MODELS.values() if d.watchdog_runs)
 add_option(MachineOption("max_cycles", "--max-cycles",
-                         "watchdog: a pixel stops as a timeout (no match) after this many cycles "
+                         "watchdog: a pixel stops as a timeout after this many cycles (samples) "
                          f"(default {DEFAULT_MAX_CYCLES}; {_WATCHDOGS})", metavar="N"))
+_LEADING = " and ".join(d.name for d in MODELS.values() if d.timeout_answer == "leading")
+add_option(MachineOption("timeout_answer", "--timeout-answer",
+                         "what a run stopped by the watchdog answers (still flagged timeout): none (no "
+                         "match) or leading (the row with the largest count, by the tie rule) (default none; "
+                         f"leading with --model {_LEADING})",
+                         choices=TIMEOUT_ANSWERS))
+add_option(MachineOption("samples_per_clock", "--samples-per-clock",
+                         "B random samples per operator and clock, one of "
+                         f"{', '.join(map(str, SAMPLES_PER_CLOCK))}: the results of B = 1 in "
+                         "ceil(cycles / B) clocks (the cycles reported are clocks; --max-cycles counts "
+                         "samples); rng sobol or external (default 1)", metavar="B"))
 add_option(MachineOption("tie_break", "--tie-break",
                          "MAP encoder rule when several counters overflow in one cycle (default %(default)s)",
                          default=DEFAULT_TIE_BREAK, choices=TIE_BREAKS))

@@ -54,6 +54,7 @@ __all__ = [
     "DEFAULT_MODEL",
     "HARDWARE_MODEL",
     "LR_WATCHDOG_RUNS",
+    "CENSUS_TIMEOUT_ANSWER",
     "all_options",
     "machine_layout",
     "disparity_machine",
@@ -75,6 +76,9 @@ HARDWARE_MODEL = "census"
 # (no match) when its winning row fires less than about once in 64 cycles: every hypothesis explains
 # the pixel badly. It cuts the long tail of the left pass's runs (docs/host.md, "census-lr's cycles").
 LR_WATCHDOG_RUNS = 64
+# The census models' answer to a timeout: the leading row (the counters hold the partial posterior);
+# the paper's machine keeps "none" (a timeout is no match).
+CENSUS_TIMEOUT_ANSWER = "leading"
 
 
 @dataclass(frozen=True)
@@ -98,8 +102,9 @@ class PassDef:
 class ModelDef:
     """A model: ``columns`` in operator order, its no-match rule, ``switches`` (a yes/no option and the
     columns present only when it is on), ``passes`` run before its own, ``defaults`` of its own for
-    column options, ``requires`` (option values it needs, with the reason) and its machine's default
-    watchdog in runs of n_max + 1 cycles."""
+    column options, ``requires`` (option values it needs, with the reason), its machine's default
+    watchdog in runs of n_max + 1 cycles and its machine's default answer to a timeout
+    (:data:`~bayesmachine.params.TIMEOUT_ANSWERS`)."""
 
     name: str
     description: str
@@ -110,6 +115,7 @@ class ModelDef:
     defaults: tuple[tuple[str, Any], ...] = ()
     requires: tuple[tuple[str, Any, str], ...] = ()
     watchdog_runs: int | None = None
+    timeout_answer: str = "none"
 
     @property
     def options(self) -> dict[str, Option]:
@@ -157,7 +163,7 @@ PAPER = ModelDef("paper", "the paper's m, gH, gV columns", (Mean, GradH, GradV))
 CENSUS = ModelDef(
     "census", "+ a census column, a no-match row calibrated for it and the raster-order neighbour prior on "
     "the machine's own results", (LeftPrior, AbovePrior, Mean, GradH, GradV, Census),
-    switches=(("neighbour_prior", (LeftPrior, AbovePrior)),))
+    switches=(("neighbour_prior", (LeftPrior, AbovePrior)),), timeout_answer=CENSUS_TIMEOUT_ANSWER)
 CENSUS_LR = ModelDef(
     "census-lr", "+ a left-right consistency column from a right pass", (*CENSUS.columns, Consistency),
     switches=CENSUS.switches,
@@ -165,7 +171,7 @@ CENSUS_LR = ModelDef(
                     watchdog="lr_right_max_cycles", own_defaults=("prior_nomatch",)),),
     defaults=(("prior_nomatch", 0.1),),
     requires=(("neighbour_prior", True, "both passes use it"),),
-    watchdog_runs=LR_WATCHDOG_RUNS)
+    watchdog_runs=LR_WATCHDOG_RUNS, timeout_answer=CENSUS_TIMEOUT_ANSWER)
 
 MODELS: dict[str, ModelDef] = {d.name: d for d in (PAPER, CENSUS, CENSUS_LR)}
 MODEL_NAMES = tuple(MODELS)
@@ -431,6 +437,8 @@ def disparity_machine(model: ModelParams, **machine_kwargs: Any) -> MachineParam
     elif given == "neighbour":
         raise ParameterError(f"prior: 'neighbour' is the neighbour prior's machine; {_described(model)} has "
                              "no feedback column", "prior")
+    if kwargs.get("timeout_answer") is None:
+        kwargs["timeout_answer"] = model.definition.timeout_answer
     runs = model.definition.watchdog_runs
     if runs is not None and kwargs.get("max_cycles") is None:
         kwargs.pop("max_cycles", None)
@@ -460,7 +468,8 @@ def pass_machine(model: ModelParams, machine: MachineParams, name: str) -> Machi
         raise ValueError(f"{name} is the {model.name} model's own pass: its machine is "
                          "disparity_machine(model)")
     check_disparity_machine(model, machine)
-    keep = ("word_bits", "counter_max", "rng", "lfsr_bits", "seed", "max_cycles", "tie_break")
+    keep = ("word_bits", "counter_max", "rng", "lfsr_bits", "seed", "max_cycles", "tie_break",
+            "samples_per_clock", "timeout_answer")
     kwargs: dict[str, Any] = {k: getattr(machine, k) for k in keep}
     if p.max_cycles is not None:
         kwargs["max_cycles"] = p.max_cycles

@@ -35,7 +35,9 @@ __all__ = [
     "DEFAULT_TIE_BREAK",
     "SMTJ_DEFAULTS",
     "DEFAULT_WORDS_PER_BEAT",
+    "SAMPLES_PER_CLOCK",
     "STEREO_ROWS_PER_BEAT",
+    "TIMEOUT_ANSWERS",
     "nth_machine",
     "stereo_words_per_beat",
 ]
@@ -44,6 +46,12 @@ __all__ = [
 RNG_KINDS = tuple(SOURCE_KINDS)
 PRIORS = ("uniform", "loaded", "neighbour")
 TIE_BREAKS = ("nomatch-first", "lowest-index")
+# Random samples each operator compares per clock (B): powers of two, so that a Sobol block of 2^W
+# points is whole clocks and a clock's points are its first point XOR constants.
+SAMPLES_PER_CLOCK = (1, 2, 4, 8, 16)
+# What a run stopped by the watchdog answers: "none" (map 0: no answer, read as no match) or "leading"
+# (the row with the largest count, by the tie rule).
+TIMEOUT_ANSWERS = ("none", "leading")
 
 # Default word width: 10 bits of comparator resolution. The paper's smallest
 # probability is p_nm0 = 0.01; at 8 bits it quantizes to 3/256 = 0.0117 (+17 %),
@@ -144,6 +152,17 @@ class MachineParams:
     smtj_share
         ``rng = "smtj"`` only: ``"operator"`` (W devices per operator) or ``"column"`` (W
         devices per operator column, their number shared by all rows).
+    samples_per_clock
+        B, one of ``SAMPLES_PER_CLOCK``: each operator compares its word with the next B random
+        numbers of its source per clock, each counter adds up to B, and a run stops at the sample
+        of its first overflow (or at sample ``max_cycles``, the watchdog, which counts samples). The
+        results are B = 1's; the ``cycles`` field counts clocks, ceil(samples / B). The random
+        source decides whether it has B numbers per clock (``bayesmachine.sources``: ``sobol`` and
+        ``external``).
+    timeout_answer
+        What a run stopped by the watchdog answers (still flagged ``timeout``): ``"none"`` (map 0,
+        read as no match) or ``"leading"`` (the row with the largest count, the tie rule among equal
+        counts; the no-match row's answer is no match).
 
     The ``smtj_*`` fields belong to ``rng = "smtj"`` (None: the defaults 1.0, 0.0, "operator"); another
     kind refuses them and leaves them None, out of its ``to_dict`` (and fingerprint); the ``feedback_*``
@@ -167,6 +186,8 @@ class MachineParams:
     smtj_share: str | None = None
     feedback_words: tuple[int, ...] = ()
     feedback_nomatch_word: int | None = None
+    samples_per_clock: int = 1
+    timeout_answer: str = "none"
 
     def __post_init__(self) -> None:
         _check_int("rows", self.rows, 1, 4096)
@@ -200,6 +221,14 @@ class MachineParams:
                 f"({self.words_per_pixel})",
                 "words_per_beat")
         self._check_smtj()
+        _check_int("samples_per_clock", self.samples_per_clock, 1)
+        if self.samples_per_clock not in SAMPLES_PER_CLOCK:
+            raise ParameterError(f"samples_per_clock must be one of {SAMPLES_PER_CLOCK}, "
+                                 f"got {self.samples_per_clock}", "samples_per_clock")
+        if self.max_cycles <= self.samples_per_clock:
+            raise ParameterError(f"max_cycles ({self.max_cycles}) must exceed samples_per_clock "
+                                 f"({self.samples_per_clock}): a run has at least two clocks", "max_cycles")
+        _check_choice("timeout_answer", self.timeout_answer, TIMEOUT_ANSWERS)
         # Last, what only the random source knows (the Sobol table's size, the LFSR polynomials):
         # the one place it is checked, so every holder of a MachineParams can build its source.
         check_source(self)
@@ -313,11 +342,17 @@ class MachineParams:
 
     @property
     def cycle_width(self) -> int:
-        return self.max_cycles.bit_length()
+        """The ``cycles`` field's width: it counts clocks, at most :attr:`max_clocks`."""
+        return self.max_clocks.bit_length()
 
     @property
     def map_width(self) -> int:
         return max(1, (self.rows - 1).bit_length())
+
+    @property
+    def max_clocks(self) -> int:
+        """The watchdog in clocks: a run's clocks are at most ceil(max_cycles / samples_per_clock)."""
+        return -(-self.max_cycles // self.samples_per_clock)
 
     @property
     def nomatch_index(self) -> int | None:
@@ -332,6 +367,11 @@ class MachineParams:
             del d["feedback_words"], d["feedback_nomatch_word"]
         else:
             d["feedback_words"] = list(self.feedback_words)
+        # Fields at the value every machine had before them: left out, so fingerprints stay.
+        if self.samples_per_clock == 1:
+            del d["samples_per_clock"]
+        if self.timeout_answer == "none":
+            del d["timeout_answer"]
         return d
 
     def fingerprint(self) -> str:

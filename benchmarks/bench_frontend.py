@@ -67,7 +67,7 @@ def run_verilator(params: MachineParams, model: ModelParams, left: np.ndarray, r
     # The machine alone, fed words as fast as it takes them, would need pixel_wall_cycles per
     # run (its compute cycles plus the registered stop's bubble): what exceeds that is the
     # front end's own cost (the first 4 lines, the line ends, a FIFO run dry).
-    alone = int(pixel_wall_cycles(params, res.cycles).sum())
+    alone = int(pixel_wall_cycles(params, res.cycles, res.timeout).sum())
     print(f"cycles per output pixel: compute {compute / n:.3f}, wall {wall / n:.3f} "
           f"(+{100 * (wall - compute) / compute:.2f} %; the first 4 lines and the line ends included)")
     print(f"the machine alone fed words at full rate: {alone / n:.3f} per pixel (compute + bubble); "

@@ -195,8 +195,8 @@ def lr_machine_line(left, right, gt, gt_full, model, feats_cache, ref, counter_m
     machine_line(f"census-lr, counter max {counter_max}", run, ref, gt, occluded)
     r = run.right
     both = (run.cycles.sum() + r.cycles.sum()) / run.cycles.size
-    rwall = pixel_wall_cycles(r.machine, r.cycles)
-    lwall = pixel_wall_cycles(run.machine, run.cycles)
+    rwall = pixel_wall_cycles(r.machine, r.cycles, r.timeout)
+    lwall = pixel_wall_cycles(run.machine, run.cycles, run.timeout)
     wall = (lwall.sum() + rwall.sum()) / run.cycles.size
     print(f"{'':<44} both passes {both:.2f} cycles/px, wall {wall:.2f}"
           f"; left pass {run.cycles.mean():.2f} (median {np.median(run.cycles):.0f}, p99 "
@@ -209,7 +209,7 @@ def lr_machine_line(left, right, gt, gt_full, model, feats_cache, ref, counter_m
 
 def machine_line(name: str, run, ref: tuple, gt: np.ndarray, occluded: np.ndarray) -> None:
     m = run.machine
-    wall = pixel_wall_cycles(m, run.cycles)
+    wall = pixel_wall_cycles(m, run.cycles, run.timeout)
     line(name, figures(run.map, gt, occluded),
          f"{np.mean(run.map == ref[0]):8.3f} {np.mean(run.map == ref[1]):9.3f}  "
          f"{run.cycles.mean():8.2f} ({np.median(run.cycles):4.0f})  {wall.mean():8.2f}  "

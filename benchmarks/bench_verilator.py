@@ -122,7 +122,7 @@ def main() -> int:
             equal &= res.equal(model.run(words))
             model_s += time.perf_counter() - t2
         n += len(words)
-        alone += int(pixel_wall_cycles(machine, res.cycles).sum())
+        alone += int(pixel_wall_cycles(machine, res.cycles, res.timeout).sum())
         t_words = time.perf_counter()
     engine.close()  # the harness process ends: its CPU time is counted among the children's
     harness_cpu = resource.getrusage(resource.RUSAGE_CHILDREN)

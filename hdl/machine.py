@@ -4,9 +4,12 @@ An M x N matrix of stochastic operators (``operator.py``) fed by a random source
 (``sources.py``: LFSRs, shared LFSRs or Sobol generators, or numbers on a port) and by
 double-buffered likelihood memories; the AND of a row's operators is the
 row's stochastic bus signal, counted by its overflow counter (``counters.py``); the first
-overflow(s) stop the run and the MAP encoder (``encoder.py``) names the winner. The exact
-per-cycle semantics, ports and word order are in ``docs/architecture.md``; the NumPy model
-``bayesmachine.sim.model`` computes the same thing bit for bit.
+overflow(s) stop the run and the MAP encoder (``encoder.py``) names the winner. With B samples per
+clock (``samples_per_clock``) every operator compares B numbers per clock, the bus carries B bits
+per row and the run stops at the sample of its first overflow; with ``timeout_answer = "leading"``
+a timed-out run's bubble searches the leading row first. The exact per-sample semantics, ports and
+word order are in ``docs/architecture.md``; the NumPy model ``bayesmachine.sim.model`` computes the
+same thing bit for bit.
 
 Timing (``docs/architecture.md``, "Timing"):
 
@@ -21,7 +24,7 @@ Timing (``docs/architecture.md``, "Timing"):
 
 ``elaborate`` is a sequence of named builders, one per part of the design (``_memories``,
 ``_random_numbers``, ``_operator_matrix``, ``_overflow_counters``, ``_stop_decision``,
-``_result``, ``_start``, ``_enables``, ``_load``), sharing the nets of :class:`_Nets`.
+``_result``, ``_start``, ``_enables``, ``_load``), sharing the nets of :class:`MachineNets`.
 
 The random source and the MAP encoder are direct submodules (depth 1), the very components
 their unit tests drive; the operator matrix is built by ``operator.operator_bits`` and
@@ -40,16 +43,16 @@ from amaranth.lib import wiring
 
 from bayesmachine.params import MachineParams
 
-from .counters import overflow_counter_full
+from .counters import count_ones, overflow_counter_full, overflow_flags, room_width, sample_counter
 from .encoder import MAPEncoder
-from .operator import bus_rows, operator_bits, operator_rows, top_bit_pair
+from .operator import bus_rows, operator_bits, sample_bits, sample_low
 from .signatures import MachineSignature, beat_words, entropy_layout, load_layout, result_layout
 from .sources import OnChipSource, random_source
 
 __all__ = [
-    "BUBBLE_CYCLES", "FEEDBACK_CYCLES", "GROUP_OPERATORS", "LOAD_LATENCY", "SOURCE_GROUPS", "BayesianMachine",
-    "entropy_layout", "hides_bubble",
-    "load_layout", "pixel_wall_cycles", "result_layout",
+    "BUBBLE_CYCLES", "FEEDBACK_CYCLES", "GROUP_OPERATORS", "LOAD_LATENCY", "SEARCH_CYCLES_PER_BIT",
+    "SOURCE_GROUPS", "BayesianMachine", "entropy_layout", "hides_bubble", "load_layout", "pixel_wall_cycles",
+    "result_layout", "search_cycles",
 ]
 
 BUBBLE_CYCLES = 1  # clock cycles per run after its last compute cycle (the registered stop)
@@ -59,46 +62,80 @@ GROUP_OPERATORS = 12  # operators per registered copy of the compute and start e
 SOURCE_GROUPS = 3  # groups of rows per copy of a shared random source (its next numbers' fan-out)
 
 
+def _or_all(values: list[Value]) -> Value:
+    """The bitwise OR of equal-width values."""
+    out = values[0]
+    for v in values[1:]:
+        out = out | v
+    return out
+
+
 def hides_bubble(params: MachineParams) -> bool:
     """Whether the machine swaps the next pixel in during its first compute cycle (no bubble).
 
     With ``sobol`` the next pixel's first numbers (a block's shift) are known while the previous
     pixel runs, so its first cycle's bits are compared in advance and the cycle after a run's last
     one is already the next run's first. Not with a neighbour prior (the next pixel's feedback
-    words follow the result), nor with counter max 1 (a run's second cycle could overflow: its
-    prefetched overflow flag would need the first cycle's counters), nor with LFSR sources (their
-    next numbers depend on whether the previous run goes on).
+    words follow the result), nor with counter max below 2B (a run's second cycle could overflow:
+    its prefetched overflow flags would need the first cycle's counters; B = ``samples_per_clock``),
+    nor with LFSR sources (their next numbers depend on whether the previous run goes on).
     """
-    return params.rng == "sobol" and not params.feedback_columns and params.counter_max >= 2
+    return (params.rng == "sobol" and not params.feedback_columns
+            and params.counter_max >= 2 * params.samples_per_clock)
 
 
-def pixel_wall_cycles(params: MachineParams, cycles: np.ndarray) -> np.ndarray:
+SEARCH_CYCLES_PER_BIT = 2  # timeout_answer "leading": the search's cycles per counter bit
+
+
+def search_cycles(params: MachineParams) -> int:
+    """The clock cycles a timed-out run's bubble waits for the leading row (``timeout_answer =
+    "leading"``: a search over the counters, a bit per two cycles from the top; 0 otherwise)."""
+    return SEARCH_CYCLES_PER_BIT * params.counter_width if params.timeout_answer == "leading" else 0
+
+
+def pixel_wall_cycles(params: MachineParams, cycles: np.ndarray,
+                      timeout: np.ndarray | None = None) -> np.ndarray:
     """Clock cycles per pixel in steady state (loads keep coming, results are taken at once).
+
+    ``cycles``: the results' compute cycles (clocks: k samples take ceil(k / B)); ``timeout``: their
+    timeout flags (needed with ``timeout_answer = "leading"``, whose timed-out runs wait
+    :func:`search_cycles` more).
 
     A run of k compute cycles is followed by its bubble, in which the next pixel is swapped in if
     its ``beats_per_pixel`` load beats have been written (they start the cycle after the previous
     swap, and each is written the cycle after its handshake):
-    ``max(k, beats_per_pixel + LOAD_LATENCY) + BUBBLE_CYCLES``.
+    ``max(k + search, beats_per_pixel + LOAD_LATENCY) + BUBBLE_CYCLES``.
 
     Without the bubble (:func:`hides_bubble`) the next run's first compute cycle is its swap, and the
     next pixel's beats start in it: ``max(k, beats_per_pixel + LOAD_LATENCY + 1)``, plus one bubble
-    after a run whose last cycle began a Sobol block (k - 1 a nonzero multiple of 2^W: that cycle
-    steps the shift LFSR, so the next run's first numbers were not known a cycle early).
+    after a run whose last cycle began a Sobol block (k - 1 a nonzero multiple of 2^W / B: that cycle
+    steps the shift LFSR, so the next run's first numbers were not known a cycle early), or, after a
+    timed-out run, its search (the bubble's cycle included).
     """
     cycles = np.asarray(cycles, dtype=np.int64)
+    search = search_cycles(params)
+    if search:
+        if timeout is None:
+            raise ValueError("pixel_wall_cycles: a machine with timeout_answer 'leading' needs the results' "
+                             "timeout flags (timeout=)")
+        extra = search * np.asarray(timeout, bool).astype(np.int64)
+    else:
+        extra = np.zeros_like(cycles)
     if hides_bubble(params):
-        block = 1 << params.word_bits
-        late = (cycles > 1) & ((cycles - 1) % block == 0)
-        return np.maximum(cycles + late, params.beats_per_pixel + LOAD_LATENCY + 1)
+        block = (1 << params.word_bits) // params.samples_per_clock
+        late = ((cycles > 1) & ((cycles - 1) % block == 0)).astype(np.int64)
+        return np.maximum(cycles + np.maximum(late, extra), params.beats_per_pixel + LOAD_LATENCY + 1)
     # A neighbour prior's swap waits two cycles more: the bubble registers the result, the next cycle
     # the feedback column's words (see ``BayesianMachine._feedback_prior``).
     settle = FEEDBACK_CYCLES * params.feedback_columns
-    return np.maximum(cycles + settle, params.beats_per_pixel + LOAD_LATENCY) + BUBBLE_CYCLES
+    return np.maximum(cycles + settle + extra, params.beats_per_pixel + LOAD_LATENCY) + BUBBLE_CYCLES
 
 
 @dataclass
-class _Nets:
-    """The nets the builders of ``BayesianMachine.elaborate`` share (each documented where it is driven)."""
+class MachineNets:
+    """The nets the builders of ``BayesianMachine.elaborate`` share (each documented where it is driven),
+    and the registers a proof of the machine relates to its reference (``BayesianMachine.nets``: the
+    formal wrappers of ``hdl.formal`` and their mutants read them, never Amaranth's internals)."""
 
     shadow: list[Signal]  # the shadow likelihood memory, one word per loaded word of a pixel
     incoming: list[Value]  # per operator, the word a swap puts into the active memory
@@ -137,6 +174,27 @@ class _Nets:
     settle: Value = field(default_factory=lambda: Const(0))  # neighbour prior: feedback words forming
     hidden: bool = False  # no bubble: a run's first compute cycle is its swap (hides_bubble)
     first_row: Value | None = None  # hidden: the next run's first stochastic bus, from registered bits
+    swap_bits: list[Value] = field(default_factory=list)  # per operator, the bits a swap loads into bit_q
+    hit: Value | None = None  # some row overflows in this compute cycle (by the watchdog's sample)
+    timeout_now: Value | None = None  # this compute cycle is the watchdog's and no row overflows
+    # B samples per clock (samples_per_clock > 1): per row its room (n_max - count, capped at 2B) and
+    # its cumulative overflow flags; the cycle's stop samples over the rows (cumulative).
+    room: list[Signal] = field(default_factory=list)
+    flags: list[Value] = field(default_factory=list)
+    G: Signal | None = None
+    # timeout_answer "leading": the run timed out; the search for the leading row is on (and its next value).
+    timed_out: Signal | None = None
+    search: Signal | None = None
+    search_n: Value = field(default_factory=lambda: Const(0))
+    search_phase: Signal | None = None  # the search's second cycle of a bit
+    search_bit: Signal | None = None  # one-hot: the counter bit the search looks at
+    search_any: list[Signal] = field(default_factory=list)  # per group: a candidate has that bit set
+    # The load's registers (_load) and a neighbour prior's previous result and feedback words.
+    beat: Signal | None = None
+    load_q: Signal | None = None
+    prev_rows: list[Signal] = field(default_factory=list)
+    prev_valids: list[Signal] = field(default_factory=list)
+    feedback_q: list[Signal] = field(default_factory=list)
 
 
 class BayesianMachine(wiring.Component):
@@ -154,11 +212,13 @@ class BayesianMachine(wiring.Component):
     result : ``Out(stream.Signature(result_layout(params)))``
         One result per pixel, in order.
     entropy : ``In(entropy_layout(params))``
-        With an off-chip ``rng`` ("external", "smtj") only: one random number per operator,
-        sampled on compute cycles.
+        With an off-chip ``rng`` ("external", "smtj") only: one random number per operator and
+        sample (B per operator), sampled on compute cycles.
     entropy_ready : ``Out(1)``
         With an off-chip ``rng`` only: high on compute cycles (the numbers on ``entropy`` are
         consumed at the clock edge).
+    nets : MachineNets
+        After elaboration: the internal nets a proof relates to its reference (read-only).
 
     The ports are :class:`~.signatures.MachineSignature` ``(params)``.
     """
@@ -167,15 +227,24 @@ class BayesianMachine(wiring.Component):
         if not isinstance(params, MachineParams):
             raise TypeError(f"BayesianMachine takes a MachineParams, not {type(params).__name__}")
         self._params = params
+        self._nets: MachineNets | None = None
         super().__init__(MachineSignature(params))
 
     @property
     def params(self) -> MachineParams:
         return self._params
 
+    @property
+    def nets(self) -> MachineNets:
+        """The :class:`MachineNets` of the last :meth:`elaborate`: the internal nets and registers a
+        proof relates to its reference (``hdl.formal``); elaborate first."""
+        if self._nets is None:
+            raise RuntimeError("BayesianMachine.nets: elaborate the machine first (Fragment.get)")
+        return self._nets
+
     def elaborate(self, platform: object) -> Module:
         m = Module()
-        n = self._memories()
+        n = self._nets = self._memories()
         self._random_numbers(m, n)
         self._operator_matrix(m, n)
         self._overflow_counters(m, n)
@@ -187,7 +256,7 @@ class BayesianMachine(wiring.Component):
         self._load(m, n)
         return m
 
-    def _memories(self) -> _Nets:
+    def _memories(self) -> MachineNets:
         """The likelihood memories, the run state and the registered enables' copies."""
         p = self._params
         rows, cols, ops = p.rows, p.operator_columns, p.operators
@@ -212,7 +281,7 @@ class BayesianMachine(wiring.Component):
         # out further than a group. The flow keeps these ``_rep`` registers apart (docs/fpga.md).
         rows_per_group = max(1, GROUP_OPERATORS // cols)
         groups = -(-rows // rows_per_group)
-        return _Nets(
+        return MachineNets(
             hidden=hides_bubble(p),
             # The census model's machine (a neighbour prior, 6 columns) keeps one source: with a copy
             # per 3 groups (14 copies of 6 columns) it routed at 63.9 MHz against 64.4 MHz with one,
@@ -229,7 +298,7 @@ class BayesianMachine(wiring.Component):
             start_rep=[Signal(name=f"start_rep{g}") for g in range(groups)],
         )
 
-    def _random_numbers(self, m: Module, n: _Nets) -> None:
+    def _random_numbers(self, m: Module, n: MachineNets) -> None:
         """The random source: advances on compute cycles only, restarts with each pixel's run."""
         p = self._params
         cols = p.operator_columns
@@ -263,16 +332,18 @@ class BayesianMachine(wiring.Component):
         else:  # a number per operator: one enable (and restart) bit per group of rows
             m.d.comb += [source.enable.eq(Cat(n.compute_rep)), source.restart.eq(Cat(n.start_rep))]
 
-    def _operator_matrix(self, m: Module, n: _Nets) -> None:
-        """The operator matrix: each row's AND of ``number < word``, the stochastic bus."""
+    def _operator_matrix(self, m: Module, n: MachineNets) -> None:
+        """The operator matrix: each row's AND of ``number < word``, the stochastic bus (B bits per row,
+        one per sample: operator o's sample i compares its word with number ``sample_points[i]`` XOR
+        its source's number)."""
         p = self._params
-        rows, cols, ops = p.rows, p.operator_columns, p.operators
+        rows, cols, ops, samples = p.rows, p.operator_columns, p.operators, p.samples_per_clock
         source = n.source
-        n.row = Signal(rows, name="row")
+        n.row = Signal(rows * samples, name="row")
         if source is None:
-            # Numbers from a port arrive in their cycle and are compared then.
-            numbers = [self.entropy[o] for o in range(ops)]
-            m.d.comb += n.row.eq(operator_rows(numbers, n.active, rows, cols, list(range(ops))))
+            # Numbers from a port arrive in their cycle and are compared then (sample i's at i * ops).
+            bits = [Cat(self.entropy[i * ops + o] < n.active[o] for i in range(samples)) for o in range(ops)]
+            m.d.comb += n.row.eq(bus_rows(bits, rows, cols, samples))
             return
         # Prefetched comparators (on-chip sources): ``bit_q[o]`` holds this compute cycle's
         # ``number < word``. It is loaded in the cycle before: in a compute cycle from the next
@@ -280,55 +351,69 @@ class BayesianMachine(wiring.Component):
         # start (a Sobol block restarts) and the incoming (shadow) word. Same bits as comparing
         # in the cycle itself, but the matrix's path to the stop flip-flop starts at a register
         # instead of a carry chain.
-        index = source.operator_numbers
+        index, points = source.operator_numbers, source.sample_points
+
+        def compare(numbers: list[Value], words: list[Value], kind: str,
+                    at: list[tuple[int, ...]] | None = None) -> list[Value]:
+            """Per operator, its B bits (``at``: other points per number entry) from its number; with B
+            samples nets of their own (``<kind>_bits_<r>_<c>``, read in several places)."""
+            at = points if at is None else at
+            if samples == 1:
+                if not any(a != (0,) for a in at):
+                    return operator_bits(numbers, words, range(ops))
+                return [sample_bits(numbers[o], words[o], at[index[o]]) for o in range(ops)]
+            out = []
+            for o in range(ops):
+                name = f"{o // cols}_{o % cols}"
+                low = self._net(m, f"{kind}_low_{name}", sample_low(numbers[o], words[o], at[index[o]]))
+                bits = sample_bits(numbers[o], words[o], at[index[o]], low=low)
+                out.append(self._net(m, f"{kind}_bits_{name}", bits))
+            return out
+
         if source.shared:
             # A number shared by a column's rows would reach all its comparators from one net:
             # each group of rows gets a registered copy of the column's next numbers, loaded
             # every clock from ``following_numbers`` (so equal to ``next_numbers`` in every
             # cycle), and one of its restart numbers, loaded from ``following_restart_numbers``
             # (equal to ``restart_numbers``). The flow keeps these ``_rep`` registers apart too.
-            def group_copies(name: str, attr: str) -> list[list[Signal]]:
+            def group_copies(name: str, attr: str) -> list[Value]:
                 copies = []
                 for g in range(n.groups):
                     following = list(getattr(n.sources[g // n.groups_per_source], attr))
                     copy = [Signal(len(x), name=f"{name}_rep{g}_{i}") for i, x in enumerate(following)]
                     m.d.sync += [c.eq(x) for c, x in zip(copy, following, strict=True)]
                     copies.append(copy)
-                return copies
+                return [copies[o // cols // n.rows_per_group][index[o]] for o in range(ops)]
 
-            def group_bits(copies: list[list[Signal]], words: list[Signal]) -> list[Value]:
-                return [operator_bits(copies[o // cols // n.rows_per_group], [words[o]], [index[o]])[0]
-                        for o in range(ops)]
-
-            n.next_bits = group_bits(group_copies("next_number", "following_numbers"), n.active)
-            restart_copies = group_copies("restart_number", "following_restart_numbers")
-            start_bits = group_bits(restart_copies, n.incoming)
+            next_numbers = group_copies("next_number", "following_numbers")
+            restart = group_copies("restart_number", "following_restart_numbers")
         else:
-            n.next_bits = operator_bits(list(source.next_numbers), n.active, index)
-            start_bits = operator_bits(list(source.restart_numbers), n.incoming, index)
-        swap_bits = start_bits
+            next_numbers = [source.next_numbers[index[o]] for o in range(ops)]
+            restart = [source.restart_numbers[index[o]] for o in range(ops)]
+        n.next_bits = compare(next_numbers, n.active, "next")
         if n.hidden:
             # No bubble (hides_bubble, "Timing" in docs/architecture.md): the swap is the next run's
             # first compute cycle. Its bits (the restart numbers against the shadow words) are
             # registered every cycle in ``first_bit`` and drive ``first_row`` in the swap; the swap
-            # loads ``bit_q`` with the run's second bits, the restart numbers XOR V_c[0] = 2^(W-1)
-            # (a block's second point) against the shadow words, which the swap is still reading.
-            # Both come from one comparator of the low W - 1 bits (``top_bit_pair``).
-            restart = ([restart_copies[o // cols // n.rows_per_group][index[o]] for o in range(ops)]
-                       if source.shared else [source.restart_numbers[index[o]] for o in range(ops)])
-            assert all(d == 1 << (p.word_bits - 1) for d in source.first_directions)
+            # loads ``bit_q`` with the run's second bits, the restart numbers XOR a block's second
+            # cycle's points against the shadow words, which the swap is still reading. Both come
+            # from one comparator of the low bits (``sample_bits``: for B = 1 the points 0 and V_0 =
+            # 2^(W-1), a comparator of the low W - 1 bits).
+            pair = compare(restart, n.incoming, "swap", list(source.swap_points))
             first_bits, swap_bits = [], []
             for o in range(ops):
-                first, second = top_bit_pair(restart[o], n.incoming[o])
-                first_bit = Signal(name=f"first_bit_{o // cols}_{o % cols}")
-                m.d.sync += first_bit.eq(first)
+                first_bit = Signal(samples, name=f"first_bit_{o // cols}_{o % cols}")
+                m.d.sync += first_bit.eq(pair[o][:samples])
                 first_bits.append(first_bit)
-                swap_bits.append(second)
-            n.first_row = bus_rows(first_bits, rows, cols)
+                swap_bits.append(pair[o][samples:])
+            n.first_row = bus_rows(first_bits, rows, cols, samples)
+        else:
+            swap_bits = compare(restart, n.incoming, "swap")
+        n.swap_bits = swap_bits
         bits = []
         for o in range(ops):
             g = o // cols // n.rows_per_group
-            bit_q = Signal(name=f"bit_{o // cols}_{o % cols}")
+            bit_q = Signal(samples, name=f"bit_{o // cols}_{o % cols}")
             # A swap first: with the bubble it never coincides with a compute cycle; without, the
             # swap is also a compute cycle (the next run's first).
             with m.If(n.start_rep[g]):
@@ -336,70 +421,178 @@ class BayesianMachine(wiring.Component):
             with m.Elif(n.compute_rep[g]):
                 m.d.sync += bit_q.eq(n.next_bits[o])
             bits.append(bit_q)
-        m.d.comb += n.row.eq(bus_rows(bits, rows, cols))
+        m.d.comb += n.row.eq(bus_rows(bits, rows, cols, samples))
 
-    def _overflow_counters(self, m: Module, n: _Nets) -> None:
-        """The overflow counters, with registered "full" flags (count == n_max)."""
+    def _overflow_counters(self, m: Module, n: MachineNets) -> None:
+        """The overflow counters: with registered "full" flags (count == n_max) for one sample per
+        clock, with registered ``room`` (n_max - count, capped at 2B) for B samples."""
         p = self._params
-        n.full, n.over = Signal(p.rows, name="full"), Signal(p.rows, name="over")
+        n.over = Signal(p.rows, name="over")
+        if p.samples_per_clock > 1:
+            # B samples: each row's flags F_i (overflowed by sample i) from its bits and room.
+            b = p.samples_per_clock
+            n.room = [Signal(room_width(b), name=f"room_{r}", init=min(p.counter_max, 2 * b))
+                      for r in range(p.rows)]
+            n.flags = [self._net(m, f"flags_{r}", overflow_flags(n.row[r * b:(r + 1) * b], n.room[r]))
+                       for r in range(p.rows)]
+            return
+        n.full = Signal(p.rows, name="full")
         for r in range(p.rows):
             ov, nxt, nfull = overflow_counter_full(n.row[r], n.counts[r], n.full[r], p.counter_max)
             m.d.comb += n.over[r].eq(ov)
             n.next_counts.append(nxt)
             n.next_full.append(nfull)
 
-    def _stop_decision(self, m: Module, n: _Nets) -> None:
+    @staticmethod
+    def _net(m: Module, name: str, value: Value) -> Signal:
+        """``value`` as a net of its own (a value read in several places would be built again in each)."""
+        net = Signal(len(value), name=name)
+        m.d.comb += net.eq(value)
+        return net
+
+    def _group_flags(self, m: Module, n: MachineNets, terms: list[list[Value]], start: list[Value],
+                     name: str) -> Value:
+        """Per group of rows, a register holding the OR of its rows' ``terms`` (the next cycle's
+        overflows, prefetched: loaded in a compute cycle) or ``start`` (its value after a swap, which
+        takes priority); returns the OR over the groups, a function of registers only."""
+        width = len(Cat(terms[0]))
+        regs = [Signal(width, name=f"{name}_{g}") for g in range(n.groups)]
+        for g in range(n.groups):
+            group = range(g * n.rows_per_group, min(self._params.rows, (g + 1) * n.rows_per_group))
+            with m.If(n.start_rep[g]):
+                m.d.sync += regs[g].eq(start[g])
+            with m.Elif(n.compute_rep[g]):
+                m.d.sync += regs[g].eq(_or_all([Cat(terms[r]) for r in group]))
+        return _or_all(regs)
+
+    def _overflow_detect(self, m: Module, n: MachineNets) -> None:
+        """Whether some row overflows in this compute cycle (``any_over``) and, with B samples, the
+        first sample at which one does (``G``, cumulative flags over the rows).
+
+        With prefetched comparators that is known a cycle early, per group of rows: the next cycle's
+        overflows from the next bits and the counters' next state, ORed over the group's rows into
+        registers (their value after a swap: none can overflow in a run's first cycle, nor, without
+        the bubble, in its second: counter max >= 2B). The stop is then an OR of registers."""
+        p = self._params
+        cols, b = p.operator_columns, p.samples_per_clock
+        if b == 1:
+            if n.next_bits:
+                terms = [[bus_rows(n.next_bits[r * cols:(r + 1) * cols], 1, cols) & n.next_full[r]]
+                         for r in range(p.rows)]
+                n.any_over = self._group_flags(m, n, terms, [Const(0)] * n.groups, "over_group")
+            else:
+                n.any_over = n.over.any()
+            n.hit = n.any_over  # an overflow within the watchdog's limit
+            return
+        if n.next_bits:
+            # The next cycle's 1s of row r follow this cycle's (all counted: a cycle that stops is
+            # followed by a swap, whose value takes priority). The buses are nets of their own: each
+            # sample's flag reads them.
+            def bus(name: str, bits: list[Value], r: int) -> Value:
+                return self._net(m, f"{name}_{r}", bus_rows(bits[r * cols:(r + 1) * cols], 1, cols, b))
+
+            terms = [[overflow_flags(bus("next_row", n.next_bits, r), n.room[r],
+                                     count_ones(n.row[r * b:(r + 1) * b]))] for r in range(p.rows)]
+            start = [Const(0, b)] * n.groups
+            if not n.hidden and p.counter_max < b:  # a run's first cycle can overflow: its flags
+                first = [overflow_flags(bus("swap_row", n.swap_bits, r), Const(p.counter_max))
+                         for r in range(p.rows)]
+                per = n.rows_per_group
+                start = [_or_all(first[g * per:(g + 1) * per]) for g in range(n.groups)]
+            flags = self._group_flags(m, n, terms, start, "over_group")
+        else:
+            flags = _or_all(n.flags)
+        # The watchdog stops at sample max_cycles: sample ``limit`` of the last cycle.
+        limit = p.max_cycles - (p.max_clocks - 1) * b
+        watchdog = Const(((1 << b) - 1) >> (limit - 1) << (limit - 1), b)
+        n.G = Signal(b, name="stop_samples")
+        m.d.comb += n.G.eq(flags | Mux(n.at_last, watchdog, 0))
+        n.any_over = flags[b - 1]
+        n.hit = flags[limit - 1] | ~n.at_last
+
+    def _stop_decision(self, m: Module, n: MachineNets) -> None:
         """The registered stop: a row overflows or the watchdog expires; counters advance."""
         p = self._params
-        cols = p.operator_columns
         # A compute cycle: running and not yet stopped. The stop is registered (see "Timing" in
         # docs/architecture.md), so every wide enable is a function of registers only, never of
         # the matrix.
         m.d.comb += n.compute.eq(n.running & ~n.stop)
-        # The stop decision needs only whether any row overflows (the encoder works in the bubble).
-        # With prefetched comparators that too is known a cycle early, per group of rows: the
-        # next cycle's ``row & full`` from the next bits and the next full flags, ORed over the
-        # group's rows into one flip-flop (0 after a swap: the counters restart empty). The
-        # stop is then an OR of one flip-flop per group.
-        if n.next_bits:
-            over_group = [Signal(name=f"over_group_{g}") for g in range(n.groups)]
-            for g in range(n.groups):
-                terms = []
-                for r in range(g * n.rows_per_group, min(p.rows, (g + 1) * n.rows_per_group)):
-                    row_next = bus_rows(n.next_bits[r * cols:(r + 1) * cols], 1, cols)
-                    terms.append(row_next & n.next_full[r])
-                # 0 after a swap: the counters restart empty (without the bubble the swap is the
-                # run's first cycle, and its second cannot overflow either: counter max >= 2).
-                with m.If(n.start_rep[g]):
-                    m.d.sync += over_group[g].eq(0)
-                with m.Elif(n.compute_rep[g]):
-                    m.d.sync += over_group[g].eq(Cat(terms).any())
-            n.any_over = Cat(over_group).any()
-        else:
-            n.any_over = n.over.any()
-
-        # The watchdog, registered too: ``at_last`` is high in compute cycle k == max_cycles.
+        # The watchdog, registered too: ``at_last`` is high in compute cycle k == max_clocks.
         n.at_last = Signal(name="at_last")
+        self._overflow_detect(m, n)
         finish = Signal()
         m.d.comb += finish.eq(n.compute & (n.any_over | n.at_last))
         n.over_q = Signal(p.rows, name="over_q")
         with m.If(n.compute):
             m.d.sync += [
                 n.cycles_done.eq(n.cycles_done + 1),
-                n.at_last.eq(n.cycles_done == p.max_cycles - 2),  # max_cycles >= 2: never at start
+                n.at_last.eq(n.cycles_done == p.max_clocks - 2),  # max_clocks >= 2: never at start
                 n.stop.eq(finish),
             ]
-        for r in range(p.rows):
-            with m.If(n.compute_rep[r // n.rows_per_group]):
-                m.d.sync += [n.counts[r].eq(n.next_counts[r]), n.full[r].eq(n.next_full[r]),
-                             n.over_q[r].eq(n.over[r])]
+        b = p.samples_per_clock
+        if b > 1:
+            # The first stop sample (one-hot, 0 if none) and the samples up to it, which count.
+            first = self._net(m, "stop_sample", n.G & ~(n.G << 1)[:b])
+            counted = self._net(m, "counted_samples", ~(n.G << 1)[:b])
+            for r in range(p.rows):
+                nxt, room = sample_counter(n.row[r * b:(r + 1) * b], n.counts[r], counted, p.counter_max)
+                n.next_counts.append(nxt)
+                m.d.comb += n.over[r].eq((n.flags[r] & first).any())
+                with m.If(n.compute_rep[r // n.rows_per_group]):
+                    m.d.sync += [n.counts[r].eq(nxt), n.room[r].eq(room)]
+        else:
+            for r in range(p.rows):
+                with m.If(n.compute_rep[r // n.rows_per_group]):
+                    m.d.sync += [n.counts[r].eq(n.next_counts[r]), n.full[r].eq(n.next_full[r])]
+        self._over_flags(m, n)
 
-    def _result(self, m: Module, n: _Nets) -> None:
+    def _over_flags(self, m: Module, n: MachineNets) -> None:
+        """``over_q``: the rows that overflowed at the stop, for the MAP encoder in the bubble. With
+        ``timeout_answer = "leading"`` a timeout sets every row and a search keeps the rows with the
+        largest count, a bit per two cycles from the top (``search``: the bubble waits for it)."""
+        p = self._params
+        leading = p.timeout_answer == "leading"
+        n.timeout_now = timeout_now = n.at_last & ~n.hit  # this compute cycle ends without an overflow
+        if leading:
+            n.timed_out = Signal(name="timed_out")
+            n.search = Signal(name="search")
+            phase = Signal(name="search_phase")
+            bit = Signal(p.counter_width, name="search_bit", init=1 << (p.counter_width - 1))  # one-hot
+            any_g = [Signal(name=f"search_any_{g}") for g in range(n.groups)]
+            n.search_phase, n.search_bit, n.search_any = phase, bit, any_g
+            last = Signal()
+            m.d.comb += last.eq(n.search & phase & bit[0])
+            n.search_n = Mux(n.compute, timeout_now, n.search & ~last)
+            with m.If(n.compute):
+                m.d.sync += [n.timed_out.eq(timeout_now), n.search.eq(timeout_now), phase.eq(0),
+                             bit.eq(1 << (p.counter_width - 1))]
+            with m.Elif(n.search):
+                m.d.sync += [phase.eq(~phase), n.search.eq(~last)]
+                with m.If(phase):
+                    m.d.sync += bit.eq(bit >> 1)
+            step = n.search & phase
+            any_set = _or_all(any_g)
+        for r in range(p.rows):
+            g = r // n.rows_per_group
+            with m.If(n.compute_rep[g]):
+                over = n.over[r] | timeout_now if leading else n.over[r]
+                m.d.sync += n.over_q[r].eq(over)
+            if leading:
+                set_bit = (n.counts[r] & bit).any()
+                with m.Elif(step):
+                    m.d.sync += n.over_q[r].eq(n.over_q[r] & (set_bit | ~any_set))
+        if leading:
+            for g in range(n.groups):
+                group = range(g * n.rows_per_group, min(p.rows, (g + 1) * n.rows_per_group))
+                m.d.sync += any_g[g].eq(_or_all([n.over_q[r] & (n.counts[r] & bit).any() for r in group]))
+
+    def _result(self, m: Module, n: MachineNets) -> None:
         """The bubble hands the result over (the result register is empty: a register, no ready)."""
         p = self._params
         res = self.result.payload
         n.leave = leave = Signal()
-        m.d.comb += leave.eq(n.stop & ~self.result.valid)
+        searching = n.search if n.search is not None else Const(0)
+        m.d.comb += leave.eq(n.stop & ~self.result.valid & ~searching)
         with m.If(self.result.ready):
             m.d.sync += self.result.valid.eq(0)
         m.submodules.encoder = encoder = MAPEncoder(rows=p.rows, nomatch_row=p.nomatch_row,
@@ -413,7 +606,8 @@ class BayesianMachine(wiring.Component):
             m.d.sync += [
                 self.result.valid.eq(1),
                 res.map.eq(valid_q.replicate(p.map_width) & map_value),
-                res.timeout.eq(~valid_q),
+                # A leading answer's encoder is valid (the leading rows): the flag says it timed out.
+                res.timeout.eq(n.timed_out if n.timed_out is not None else ~valid_q),
                 res.cycles.eq(n.cycles_done),
                 res.counts.eq(Cat(n.counts)),
                 n.running.eq(0),
@@ -424,11 +618,12 @@ class BayesianMachine(wiring.Component):
             else:
                 m.d.sync += res.nomatch.eq(0)
 
-    def _feedback_prior(self, m: Module, n: _Nets) -> None:
+    def _feedback_prior(self, m: Module, n: MachineNets) -> None:
         """A neighbour prior's feedback column 0: formed at each swap from the previous result.
 
         The bubble registers the winning row (``prev_row``, a copy per group of rows) and whether
-        it is a hypothesis row (``prev_valid``: not the no-match row, not a timeout); the next
+        it is a hypothesis row (``prev_valid``: not the no-match row, not a timeout, answered or
+        not); the next
         cycle (``settle``) registers each row's word, ``feedback_words[min(|r - prev_row|, last)]``
         (the no-match row ``feedback_nomatch_word``; 1.0 everywhere without a previous
         hypothesis, after reset too); the swap, a cycle later still, takes them, or 1.0
@@ -443,8 +638,11 @@ class BayesianMachine(wiring.Component):
         # register would fan out to every row's distance logic (the flow keeps the _rep copies apart).
         prev_rows = [Signal(p.map_width, name=f"prev_row_rep{g}") for g in range(n.groups)]
         prev_valids = [Signal(name=f"prev_valid_rep{g}") for g in range(n.groups)]
+        n.prev_rows, n.prev_valids = prev_rows, prev_valids
         with m.If(n.leave):
             hypothesis = n.valid_q
+            if n.timed_out is not None:  # a timeout's leading row is its answer, not information
+                hypothesis = hypothesis & ~n.timed_out
             if p.nomatch_row:
                 hypothesis = hypothesis & (n.winner != p.rows - 1)
             m.d.sync += [c.eq(n.winner) for c in prev_rows] + [c.eq(hypothesis) for c in prev_valids]
@@ -458,6 +656,7 @@ class BayesianMachine(wiring.Component):
         for r in range(p.rows):
             prev_row, prev_valid = prev_rows[r // n.rows_per_group], prev_valids[r // n.rows_per_group]
             word_q = Signal(p.memory_word_width, name=f"feedback_q_{r}", init=p.word_one)
+            n.feedback_q.append(word_q)
             if p.nomatch_row and r == p.rows - 1:
                 m.d.sync += word_q.eq(Mux(prev_valid, p.feedback_nomatch_word, one))
             else:
@@ -470,7 +669,7 @@ class BayesianMachine(wiring.Component):
                 m.d.sync += word_q.eq(Mux(prev_valid, entries[dist], one))
             m.d.comb += n.incoming[r * cols].eq(Mux(n.shadow_line_start, one, word_q))
 
-    def _start(self, m: Module, n: _Nets) -> None:
+    def _start(self, m: Module, n: MachineNets) -> None:
         """Start: swap in the shadow memory, in a bubble or when idle (overrides the above)."""
         p = self._params
         cols = p.operator_columns
@@ -480,7 +679,7 @@ class BayesianMachine(wiring.Component):
             # the previous run's counters and cycles (_result).
             n.start = start = Signal(name="start_rep_ctl")
             with m.If(start):
-                m.d.sync += [n.at_last.eq(p.max_cycles == 2), n.cycles_done.eq(1), n.running.eq(1),
+                m.d.sync += [n.at_last.eq(p.max_clocks == 2), n.cycles_done.eq(1), n.running.eq(1),
                              n.shadow_full.eq(0), n.stop.eq(0)]
         else:
             n.start = start = Signal()
@@ -490,13 +689,20 @@ class BayesianMachine(wiring.Component):
                 m.d.comb += start.eq(n.shadow_full & (n.leave | ~n.running))
             with m.If(start):
                 m.d.sync += [n.at_last.eq(0), n.cycles_done.eq(0), n.running.eq(1), n.shadow_full.eq(0)]
+        b = p.samples_per_clock
         for r in range(p.rows):
             with m.If(n.start_rep[r // n.rows_per_group]):
                 m.d.sync += [n.active[o].eq(n.incoming[o]) for o in range(r * cols, (r + 1) * cols)]
-                # Empty, or (no bubble) after the run's first cycle: its bus (counter max >= 2: not full).
-                m.d.sync += [n.counts[r].eq(n.first_row[r] if n.hidden else 0), n.full[r].eq(0)]
+                # Empty, or (no bubble) after the run's first cycle: its bus's 1s (counter max >= 2B:
+                # not full, and the second cycle cannot overflow either).
+                first = count_ones(n.first_row[r * b:(r + 1) * b]) if n.hidden else Const(0)
+                if b == 1:
+                    m.d.sync += [n.counts[r].eq(first), n.full[r].eq(0)]
+                else:
+                    room = p.counter_max - first
+                    m.d.sync += [n.counts[r].eq(first), n.room[r].eq(Mux(room > 2 * b, 2 * b, room))]
 
-    def _load(self, m: Module, n: _Nets) -> None:
+    def _load(self, m: Module, n: MachineNets) -> None:
         """The load stream: one beat per handshake into the shadow memory, written a cycle later."""
         p = self._params
         nbeats = p.beats_per_pixel
@@ -510,6 +716,7 @@ class BayesianMachine(wiring.Component):
         # enables of a beat's words, which are spread over the whole matrix).
         beat = Signal(nbeats, init=1)  # one-hot: the beat the next handshake carries
         load_q = Signal.like(self.load.payload)
+        n.beat, n.load_q = beat, load_q
         m.d.sync += n.write_q.eq(Mux(accept, beat, 0))
         with m.If(accept):
             m.d.sync += [load_q.eq(self.load.payload), beat.eq(beat.rotate_left(1))]
@@ -525,7 +732,7 @@ class BayesianMachine(wiring.Component):
             if p.feedback_columns:
                 m.d.sync += n.shadow_line_start.eq(load_q.line_start)
 
-    def _enables(self, m: Module, n: _Nets) -> None:
+    def _enables(self, m: Module, n: MachineNets) -> None:
         """The next values of the replicated enables: the registers' updates, one cycle early."""
         nbeats = self._params.beats_per_pixel
         # Written as a last 2:1 choice on ``compute`` so that the OR over the rows (``fin``), the
@@ -537,6 +744,9 @@ class BayesianMachine(wiring.Component):
         stop_idle = n.stop & ~n.leave  # stop's next value outside compute cycles
         running_n = n.start | (n.running & ~n.leave)
         compute_n, start_n = Signal(), Signal()
+        # timeout_answer "leading": a timed-out run's bubble waits for the search (no swap before it).
+        searched = n.timeout_now if n.search is not None else Const(0)  # in a compute cycle
+        search_n = n.search_n
         if n.hidden:
             # The next cycle is a swap (and the next run's first compute cycle) after a run's last
             # compute cycle, if the shadow was complete in it (the first bits were registered from
@@ -544,8 +754,8 @@ class BayesianMachine(wiring.Component):
             # steps the shift LFSR: the registered first bits used the shift before it); else the
             # bubble, then a swap from the bubble or idle once the shadow is complete.
             hold = self.result.valid & ~self.result.ready
-            go_on = n.shadow_full & ~hold & ~n.source.fresh
-            idle_start = n.shadow_full & ((stop_idle & ~hold) | ~(n.running & ~n.leave))
+            go_on = n.shadow_full & ~hold & ~n.source.fresh & ~searched
+            idle_start = n.shadow_full & ((stop_idle & ~hold & ~search_n) | ~(n.running & ~n.leave))
             m.d.comb += [compute_n.eq(Mux(n.compute, ~fin | go_on, n.start | idle_start)),
                          start_n.eq(Mux(n.compute, fin & go_on, ~n.start & idle_start))]
             m.d.sync += [n.start.eq(start_n)]
@@ -554,7 +764,7 @@ class BayesianMachine(wiring.Component):
             if self._params.feedback_columns:  # no swap in a bubble nor while settling (see _start)
                 m.d.comb += start_n.eq(shadow_full_n & ~running_n & ~n.leave)
             else:
-                m.d.comb += start_n.eq(Mux(n.compute, fin & shadow_full_n & ~valid_n,
-                                           shadow_full_n & ((stop_idle & ~valid_n) | ~running_n)))
+                m.d.comb += start_n.eq(Mux(n.compute, fin & shadow_full_n & ~valid_n & ~searched,
+                                           shadow_full_n & ((stop_idle & ~valid_n & ~search_n) | ~running_n)))
         m.d.sync += [c.eq(compute_n) for c in n.compute_rep + [c for c, _ in n.src_reps]]
         m.d.sync += [s.eq(start_n) for s in n.start_rep + [s for _, s in n.src_reps]]

@@ -25,6 +25,9 @@ __all__ = [
     "operator_bits",
     "operator_matrix_twin",
     "operator_rows",
+    "sample_bits",
+    "sample_bits_twin",
+    "sample_low",
     "stochastic_operator",
     "stochastic_operator_twin",
 ]
@@ -122,29 +125,54 @@ def operator_bits(numbers: Sequence[Value], words: Sequence[Value], sources: Seq
     return [stochastic_operator(1, numbers[s], word) for s, word in zip(sources, words, strict=True)]
 
 
-def top_bit_pair(number: Value, word: Value) -> tuple[Value, Value]:
-    """``(number < word, (number ^ 2^(W-1)) < word)`` for a W-bit number and a (W+1)-bit word, from
-    one (W-1)-bit comparator of the low bits: the two numbers differ only in their top bit.
+def _top_bits(points: Sequence[int], w: int) -> int:
+    """The top bits the ``points`` (W-bit constants) use: every point is 0 below them."""
+    return max((w - ((p & -p).bit_length() - 1) for p in points if p), default=0)
 
-    A Sobol block's first two numbers are its shift s and s ^ V_0, and V_0 = 2^(W-1) in every
-    dimension (m_1 = 1), so the machine without a bubble gets a run's first and second bits this
-    way (``BayesianMachine``)."""
+
+def sample_low(number: Value, word: Value, points: Sequence[int]) -> Value:
+    """The comparator of the low bits the ``points`` leave alone, which :func:`sample_bits` shares
+    between them (0 when the points leave none)."""
     w = len(number)
-    low = number[: w - 1] < word[: w - 1] if w > 1 else Const(0, 1)
-    high = word[w - 1:]  # 0, 1 or 2 (a word is at most 2^W)
-    top = number[w - 1]
-
-    def bit(t: Value) -> Value:
-        return (t < high) | ((t == high) & low)
-
-    return bit(top), bit(~top)
+    m = _top_bits(points, w)
+    return number[: w - m] < word[: w - m] if w > m else Const(0, 1)
 
 
-def bus_rows(bits: Sequence[Value], rows: int, columns: int) -> Value:
-    """The stochastic bus from the comparator bits: bit r is the AND of row r's operator bits."""
+def sample_bits(number: Value, word: Value, points: Sequence[int], low: Value | None = None) -> Value:
+    """``Cat((number ^ points[i]) < word for i)`` for a W-bit number and a (W+1)-bit word, from one
+    comparator of the low bits the points leave alone and one small compare of the top bits per point.
+
+    A clock's Sobol numbers are its first XOR the points 0 ... B - 1 (their Gray-code bits), which
+    use the top log2(B) bits only (``sources.sobol.sample_points``); a block's first two clocks' use
+    log2(B) + 1 (the machine without a bubble compares both in a swap). So B operator bits cost one
+    (W - log2 B)-bit comparator and B compares of log2(B) + 1 bits. ``low``: :func:`sample_low`'s
+    comparator as a net of the caller's (Amaranth builds a value again wherever it is read)."""
+    w = len(number)
+    m = _top_bits(points, w)
+    if m == 0:
+        return Cat(*(number < word for _ in points))
+    low = sample_low(number, word, points) if low is None else low
+    high = word[w - m:]  # the word's top bits: up to 2^m (a word is at most 2^W)
+    top = number[w - m:]
+    out = []
+    for p in points:
+        t = top ^ (p >> (w - m))
+        out.append((t < high) | ((t == high) & low))
+    return Cat(*out)
+
+
+def sample_bits_twin(number: int, word: int, points: Sequence[int]) -> list[int]:
+    """Python twin of :func:`sample_bits`."""
+    return [int((number ^ p) < word) for p in points]
+
+
+def bus_rows(bits: Sequence[Value], rows: int, columns: int, samples: int = 1) -> Value:
+    """The stochastic bus from the comparator bits: row r's ``samples`` bits (from bit ``r * samples``)
+    are the AND of row r's operator bits (``samples`` bits each, sample i at bit i)."""
     out = []
     for r in range(rows):
-        bus: Value = Const(1, 1)  # uniform prior: always-on 1s (a loaded prior is operator column 0)
+        # uniform prior: always-on 1s (a loaded prior is operator column 0)
+        bus: Value = Const((1 << samples) - 1, samples)
         for c in range(columns):
             bus = bus & bits[r * columns + c]
         out.append(bus)

@@ -66,8 +66,9 @@ def result_layout(params: MachineParams) -> data.StructLayout:
 
 
 def entropy_layout(params: MachineParams) -> data.ArrayLayout:
-    """One compute cycle's random numbers of an off-chip source: a W-bit number per operator."""
-    return data.ArrayLayout(unsigned(params.word_bits), params.operators)
+    """One compute cycle's random numbers of an off-chip source: a W-bit number per operator and
+    sample (B = ``samples_per_clock``), sample i's of operator o at element ``i * operators + o``."""
+    return data.ArrayLayout(unsigned(params.word_bits), params.operators * params.samples_per_clock)
 
 
 def pixel_in_layout() -> data.StructLayout:

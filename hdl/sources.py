@@ -33,7 +33,7 @@ from amaranth.lib.wiring import In, Out
 from bayesmachine.params import MachineParams, ParameterError
 from bayesmachine.sources import source_kind
 from bayesmachine.sources.lfsr import LFSRSpec, column_lfsr_specs, lfsr_specs
-from bayesmachine.sources.sobol import check_params, direction_numbers
+from bayesmachine.sources.sobol import check_params, clock_directions, sample_points
 
 __all__ = ["SOURCE_NUMBERS", "LFSRBank", "OnChipSource", "SobolGenerators", "lfsr_next_state_expr",
            "random_source"]
@@ -81,6 +81,9 @@ class OnChipSource(wiring.Component):
     shared : bool
         Whether an entry is read by several operators (a column's rows): the machine then keeps
         registered per-group copies of the numbers, and the source has one enable group.
+    sample_points : tuple of tuple of int
+        Per entry, the B constants (B = ``samples_per_clock``) a compute cycle's B numbers are the
+        entry's number XOR, sample by sample: ``(0,)`` for a source of one number per clock.
     """
 
     def __init__(self, signature: dict[str, wiring.Member], *, operator_numbers: Sequence[int]) -> None:
@@ -104,6 +107,10 @@ class OnChipSource(wiring.Component):
     @property
     def shared(self) -> bool:
         return len(set(self._operator_numbers)) < len(self._operator_numbers)
+
+    @property
+    def sample_points(self) -> tuple[tuple[int, ...], ...]:
+        return ((0,),) * len(self.numbers)
 
 
 class LFSRBank(OnChipSource):
@@ -219,27 +226,30 @@ class LFSRBank(OnChipSource):
 class SobolGenerators(OnChipSource):
     """One randomized W-bit Sobol generator per operator column (twin: ``sources.sobol.SobolTwin``).
 
-    Shared: the block index ``i`` (W bits) and ``fresh`` (the next compute cycle starts a block,
-    1 after reset). Per column c: a register ``y`` and a shift LFSR. Per cycle::
+    B = ``samples_per_clock`` points per compute cycle: ``numbers[c]`` is the cycle's first, the
+    others that XOR :attr:`sample_points` (constants). Shared: the block index ``i`` (counting
+    cycles: W - log2(B) bits, a block's 2^W points are 2^W / B cycles) and ``fresh`` (the next
+    compute cycle starts a block, 1 after reset). Per column c: a register ``y`` and a shift LFSR.
+    With D_c the per-cycle directions (``sources.sobol.clock_directions``, V_c when B = 1)::
 
         on restart, first: i, fresh = 0, 1       (this cycle is a block's start)
         numbers[c] = fresh ? lfsr_c.number : y_c
-        on enable: lfsr_c advances if fresh; y_c = numbers[c] ^ V_c[lowest 0 bit of i];
-                   i, fresh = (0, 1) if i == 2^W - 1 else (i + 1, 0)
+        on enable: lfsr_c advances if fresh; y_c = numbers[c] ^ D_c[lowest 0 bit of i];
+                   i, fresh = (0, 1) if i == 2^W / B - 1 else (i + 1, 0)
 
     A restart alone (no compute) makes the next compute cycle a block's first; a restart with
     ``enable`` is itself a block's first compute cycle (the machine's swap when it has no bubble:
     ``BayesianMachine``). The twin's ``clock(False, True)`` then ``clock(True, False)`` is the latter.
 
-    ``last`` (i == 2^W - 1), ``penult`` (i == 2^W - 2) and each column's direction numbers
-    V_c[lowest 0 bit of i], of i + 1 and of i + 2 are registers loaded with the next index's values
+    ``last`` (i == 2^W / B - 1), ``penult`` (i == 2^W / B - 2) and each column's direction numbers
+    D_c[lowest 0 bit of i], of i + 1 and of i + 2 are registers loaded with the next index's values
     (the same numbers, a shorter path to them: a step shifts the directions down and loads the
     third from i + 3's lowest 0 bit, computed from the index register alone).
 
     For the machine's prefetched comparators it also gives the next compute cycle's numbers:
     ``next_numbers[c]`` if this cycle is a compute cycle without restart (the block's last cycle
     hands over to the shift LFSR's number, which has not stepped since the block began:
-    ``i == 2^W - 1 ? lfsr_c.number : numbers[c] ^ V_c[...]``) and ``restart_numbers[c]`` if
+    ``i == 2^W / B - 1 ? lfsr_c.number : numbers[c] ^ D_c[...]``) and ``restart_numbers[c]`` if
     this cycle restarts without computing (a new block: ``lfsr_c.number``);
     ``following_numbers[c]`` is ``next_numbers[c]`` of the next cycle, from this cycle's state,
     ``enable`` and ``restart`` (a register loaded with it every clock equals ``next_numbers``),
@@ -291,17 +301,28 @@ class SobolGenerators(OnChipSource):
         return self._specs
 
     @property
-    def first_directions(self) -> tuple[int, ...]:
-        """Per column, V_c[0]: a block's second number is its first XOR this (the Sobol points
-        0 and V_0), so a run's second numbers are ``restart_numbers[c] ^ first_directions[c]``."""
-        w = self._params.word_bits
-        return tuple(direction_numbers(c, w)[0] for c in range(self._params.operator_columns))
+    def sample_points(self) -> tuple[tuple[int, ...], ...]:
+        """Per column, the B points a cycle's numbers are its first (``numbers[c]``) XOR
+        (``sources.sobol.sample_points``: the unrandomized Sobol points 0 ... B - 1)."""
+        p = self._params
+        return tuple(sample_points(c, p.word_bits, p.samples_per_clock) for c in range(p.operator_columns))
+
+    @property
+    def swap_points(self) -> tuple[tuple[int, ...], ...]:
+        """Per column, the 2B points of a block's first two compute cycles relative to its first
+        number (the shift): a run's first and second cycles' numbers are ``restart_numbers[c] ^``
+        these (the machine without a bubble compares both in the swap)."""
+        p = self._params
+        return tuple(sample_points(c, p.word_bits, 2 * p.samples_per_clock)
+                     for c in range(p.operator_columns))
 
     def elaborate(self, platform: object) -> Module:
         m = Module()
         w = self._params.word_bits
-        top = (1 << w) - 1
-        index = Signal(w)
+        samples = self._params.samples_per_clock
+        iw = w - (samples.bit_length() - 1)  # the index counts cycles: 2^W / B per block
+        top = (1 << iw) - 1
+        index = Signal(iw)
         fresh = self.fresh
         # Registered functions of the index, loaded with its next value, so that the numbers of
         # the next cycle, and of the one after (``following_numbers``), are a few LUTs from
@@ -317,14 +338,14 @@ class SobolGenerators(OnChipSource):
         fresh_e = self.restart | fresh
         # The next index and ``penult`` with the enable and restart entering last: the increment
         # and the compare are made on the index register alone.
-        index_n = Signal(w)
+        index_n = Signal(iw)
         m.d.comb += index_n.eq(Mux(self.enable, Mux(last_e, 0, Mux(self.restart, 1, index + 1)),
                                    Mux(self.restart, 0, index)))
         penult_n = Mux(self.enable, Mux(last_e, top == 1, Mux(self.restart, top == 2, index == top - 2)),
                        penult_e)
         # The lowest 0 bit of i + 3 (one-hot), for the direction register two steps ahead.
-        plus3, plus4 = (index + 3)[:w], (index + 4)[:w]
-        lowest_zero_3 = Signal(w)
+        plus3, plus4 = (index + 3)[:iw], (index + 4)[:iw]
+        lowest_zero_3 = Signal(iw)
         m.d.comb += lowest_zero_3.eq(~plus3 & plus4)
         last_n, fresh_n = Signal(), Signal()
         m.d.comb += [
@@ -335,9 +356,9 @@ class SobolGenerators(OnChipSource):
         for c, spec in enumerate(self._specs):
             state = Signal(spec.length, init=spec.init, name=f"shift_lfsr_{c}")
             y = Signal(w, name=f"sobol_{c}")
-            vs = direction_numbers(c, w)
+            vs = clock_directions(c, w, samples)
 
-            def at(j: int, vs: Sequence[int] = vs) -> int:  # V of j's lowest 0 bit (0 from 2^W - 1 on)
+            def at(j: int, vs: Sequence[int] = vs) -> int:  # D of j's lowest 0 bit (0 from the block's end)
                 return lowest_zero_direction(vs, j) if j < top else 0
 
             # The direction numbers of i's, i + 1's and i + 2's lowest 0 bit, registers: a step

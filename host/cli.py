@@ -343,6 +343,8 @@ def _report(outcome: RunOutcome, source: str, crop: Crop | None) -> dict[str, ob
         "engine": run.engine,
         "rng": run.machine.rng,
         "counter_max": run.machine.counter_max,
+        # The cycles below are clocks: B random samples per operator and clock (results: B = 1's).
+        "samples_per_clock": run.machine.samples_per_clock,
         **outcome.metrics.to_report(),
         "frame_cycles": frame,
         # Compute cycles count the machine's runs only; wall cycles (RTL engines) add loading.
@@ -378,8 +380,9 @@ def _summary(r: dict[str, object]) -> str:
         return "n/a" if v is None else format(v, fmt)
 
     line = (
-        f"{r['engine']} model={r['model_name']} rng={r['rng']} counter_max={r['counter_max']}: "
-        f"{r['pixels']} px, "
+        f"{r['engine']} model={r['model_name']} rng={r['rng']} counter_max={r['counter_max']}"
+        + (f" samples_per_clock={r['samples_per_clock']}" if r.get("samples_per_clock", 1) != 1 else "")
+        + f": {r['pixels']} px, "
         f"{f('cycles_per_pixel_mean', '.2f')} +- {f('cycles_per_pixel_std', '.2f')} cycles/px, "
         f"RMS {f('rms_error')}, no-match F1 {f('nomatch_f1')}, MAP agreement {f('map_agreement')}, "
         f"timeouts {r['timeouts']}, engine {f('seconds', '.2f')} s"

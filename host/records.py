@@ -62,7 +62,7 @@ class MachineRun:
 
     engine: str
     machine: MachineParams
-    map: np.ndarray  # (Ho, Wo) int16, -1 = no match (timeouts included)
+    map: np.ndarray  # (Ho, Wo) int16, -1 = no match (timeouts unless the machine answers them)
     # counts, cycles: None only from a board asked for the MAP without them (--board-fields)
     counts: np.ndarray | None  # (Ho, Wo, M), the smallest unsigned dtype holding n_max (counts_dtype)
     cycles: np.ndarray | None  # (Ho, Wo) int64

@@ -141,7 +141,8 @@ class _PassRun:
         region = OutputRegion.of_features(prepared.features[0].shape, p.model.dmax)
         self.width = pass_grid(p, region).width
         ho = region.shape[0]
-        self.map = np.full((ho, self.width), -1, np.int16)  # -1: no match or a timeout
+        self.map = np.full((ho, self.width), -1, np.int16)  # the answers (disparities): -1 no match
+        self.follow = np.full((ho, self.width), -1, np.int16)  # what neighbours follow: -1 for timeouts too
         self.cycles = np.zeros((ho, self.width), np.int64)
         self.timeout = np.zeros((ho, self.width), bool)
         self.seconds = self.words_seconds = 0.0
@@ -153,7 +154,7 @@ class _PassRun:
         the other passes' MAPs so far, by name."""
         t0 = time.perf_counter()
         y0 = rows.start
-        above = np.full(self.width, -1, np.int16) if y0 == 0 else self.map[y0 - 1]
+        above = np.full(self.width, -1, np.int16) if y0 == 0 else self.follow[y0 - 1]
         fed_row = {k: v[y0] for k, v in fed.items()}
         words = _row_words(self.p, self.features, self.machine, rows, above, fed_row)
         starts = _line_starts(self.p, self.width)
@@ -163,7 +164,8 @@ class _PassRun:
         self.seconds += time.perf_counter() - t1
         self.words_seconds += t1 - t0
         n = rows.stop - rows.start
-        self.map[rows] = res.disparities().reshape(n, self.width)
+        self.map[rows] = res.disparities(self.machine).reshape(n, self.width)
+        self.follow[rows] = res.neighbour_answers().reshape(n, self.width)
         self.cycles[rows] = np.asarray(res.cycles).reshape(n, self.width)
         self.timeout[rows] = np.asarray(res.timeout, bool).reshape(n, self.width)
         return res
@@ -174,7 +176,8 @@ class _PassRun:
             eng.close()  # the Verilator harness is a process: end it now, not at garbage collection
 
     def record(self) -> RightPass:
-        return RightPass(self.machine, self.map, self.cycles, self.timeout, self.seconds, self.wall)
+        # A feeding pass's MAPs are what the pass it feeds followed (timeouts no information).
+        return RightPass(self.machine, self.follow, self.cycles, self.timeout, self.seconds, self.wall)
 
 
 def run_machine(
@@ -232,8 +235,8 @@ def run_machine(
             for y0 in range(0, ho, chunk_rows):
                 rows = slice(y0, min(ho, y0 + chunk_rows))
                 for r in runs:
-                    r.run(rows, {q.p.name: q.map for q in runs})
-                res = own.run(rows, {q.p.name: q.map for q in runs})
+                    r.run(rows, {q.p.name: q.follow for q in runs})
+                res = own.run(rows, {q.p.name: q.follow for q in runs})
                 n = rows.stop - rows.start
                 counts[rows] = np.asarray(res.counts).reshape(n, wo, m)
                 nomatch[rows] = np.asarray(res.nomatch).reshape(n, wo)
@@ -242,7 +245,7 @@ def run_machine(
         for r in (*runs, own):
             r.close()
     right = runs[0].record() if runs else None
-    # Timeouts count as no match (own.map): the machine gave no answer within its watchdog.
+    # own.map: a timeout is no match unless the machine answers it with its leading row (timeout_answer).
     return MachineRun(engine, machine, own.map, counts, own.cycles, nomatch, own.timeout, own.seconds,
                       own.words_seconds, own.wall, right)
 
@@ -270,7 +273,7 @@ def _run_pixels(
     m = model.hypotheses
     timeout = res.timeout.reshape(ho, wo)
     nomatch = res.nomatch.reshape(ho, wo)
-    disp = disparities(res.map.reshape(ho, wo), nomatch, timeout)
+    disp = disparities(res.map.reshape(ho, wo), nomatch, timeout, machine)
     # A board asked for the MAP alone sent no counts or cycles: absent, never made up.
     dtype = counts_dtype(machine.counter_max)
     counts = None if res.counts is None else res.counts.reshape(ho, wo, m).astype(dtype)
@@ -282,7 +285,7 @@ def _run_pixels(
         from bayesmachine.hdl.frontend.lr import right_pass_params
 
         wr = r.map.size // ho
-        right = RightPass(right_pass_params(model, machine), r.disparities().reshape(ho, wr),
+        right = RightPass(right_pass_params(model, machine), r.neighbour_answers().reshape(ho, wr),
                           r.cycles.reshape(ho, wr), r.timeout.reshape(ho, wr), seconds, 0)
     return MachineRun(engine, machine, disp, counts, cycles, nomatch, timeout, seconds, 0.0, wall, right,
                       figures)
@@ -314,7 +317,7 @@ def machines_model(
                 eng = engines[y % machines]
                 words = _row_words(p, feats, machine, slice(y, y + 1), above, {})
                 res = eng.run(words) if starts is None else eng.run(words, line_start=starts)
-                above = res.disparities()
+                above = res.neighbour_answers()
                 parts.append(res)
     finally:
         for eng in engines:

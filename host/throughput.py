@@ -22,10 +22,12 @@ def measure_cycles(params: MachineParams, model: ModelParams, progress: bool = T
     left, right, _ = bundled_pair()
     # The cycles need the machine only: no float64 reference.
     prepared = prepare(left, right, model, reference=False)
-    c = run_machine(prepared, params, "model", progress=progress, chunk_rows=32).cycles.reshape(-1)
+    run = run_machine(prepared, params, "model", progress=progress, chunk_rows=32)
+    c, timeout = run.cycles.reshape(-1), run.timeout.reshape(-1)
     return {
         "pair": f"bundled Middlebury Motorcycle {left.shape[1]}x{left.shape[0]}, model engine",
         "pixels": int(c.size),
+        "samples_per_clock": params.samples_per_clock,
         "compute_cycles_per_pixel": round(float(c.mean()), 3),
-        "wall_cycles_per_pixel": round(float(pixel_wall_cycles(params, c).mean()), 3),
+        "wall_cycles_per_pixel": round(float(pixel_wall_cycles(params, c, timeout).mean()), 3),
     }

@@ -17,13 +17,13 @@ import numpy as np
 
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.engines import EngineBase
-from bayesmachine.sim.results import MachineResult, NumberFeed, check_words, ran_out_error
+from bayesmachine.sim.results import MachineResult, NumberFeed, answered, check_words, ran_out_error
 from bayesmachine.sources.lfsr import MAX_TAPS, LFSRSpec, column_lfsr_specs, lfsr_specs
 from bayesmachine.sources.sobol import sobol_points
 
 __all__ = ["MachineModel", "MachineResult", "check_words"]
 
-_BLOCK = 4096  # rows of random numbers fetched at a time from an off-chip source
+_BLOCK = 4096  # clocks of random numbers fetched at a time from an off-chip source
 
 
 @numba.njit(cache=True, inline="always")
@@ -49,12 +49,30 @@ def _finish_cycle(bits, counts, over, rows, opcols, n_max, nm_index):
 
 
 @numba.njit(cache=True, inline="always")
-def _store(p, counts, k, winner, out_counts, out_map, out_timeout, out_cycles):
-    """Pixel p's result: counters at the stop, MAP (0 on timeout), timeout flag, cycles."""
+def _leading_row(counts, nm_index):
+    """The row with the largest count: the no-match row if it is among them under nomatch-first
+    (``nm_index`` >= 0), else the lowest index (the MAP encoder's tie rule)."""
+    best = counts.max()
+    if nm_index >= 0 and counts[nm_index] == best:
+        return nm_index
+    for r in range(counts.shape[0]):
+        if counts[r] == best:
+            return r
+    return 0
+
+
+@numba.njit(cache=True, inline="always")
+def _store(p, counts, k, winner, samples, leading, nm_index, out_counts, out_map, out_timeout, out_cycles):
+    """Pixel p's result: counters at the stop, MAP, timeout flag, clocks (``k`` samples in clocks of
+    ``samples``). A timeout's MAP is 0, or with ``leading`` the leading row. Returns the MAP (-1 for
+    a timeout without an answer)."""
     out_counts[p, :] = counts
-    out_cycles[p] = k
+    out_cycles[p] = (k + samples - 1) // samples
     out_timeout[p] = winner < 0
+    if winner < 0 and leading:
+        winner = _leading_row(counts, nm_index)
     out_map[p] = max(winner, 0)
+    return winner
 
 
 @numba.njit(cache=True, inline="always")
@@ -73,9 +91,10 @@ def _fill_feedback(qp, prev, start, fb, fb_nm, rows, opcols, nm_row, one):
 
 
 @numba.njit(cache=True, inline="always")
-def _feedback_result(winner, nm_row):
-    """The result a next pixel's feedback prior follows: the winning hypothesis row, else -1."""
-    return winner if winner >= 0 and winner != nm_row else -1
+def _feedback_result(winner, timeout, nm_row):
+    """The result a next pixel's feedback prior follows: the winning hypothesis row, else -1 (no
+    match; a timeout, even one answered by its leading row: no information)."""
+    return winner if winner >= 0 and not timeout and winner != nm_row else -1
 
 
 @numba.njit(cache=True, inline="always")
@@ -90,7 +109,7 @@ def _step_lfsrs(states, t1, t2, t3, t4, t5, mask, w, top, nums):
 
 @numba.njit(cache=True)
 def _run_on_chip(q, states, shifts, points, per_operator, rows, opcols, word_bits, lfsr_bits, n_max,
-                 max_cycles, nm_index, out_counts, out_map, out_timeout, out_cycles,
+                 max_cycles, nm_index, samples, leading, out_counts, out_map, out_timeout, out_cycles,
                  line_start, fb, fb_nm, nm_row, prev):
     """The on-chip sources, cycle by cycle.
 
@@ -100,7 +119,11 @@ def _run_on_chip(q, states, shifts, points, per_operator, rows, opcols, word_bit
     ``points[j, c] ^ shift[c]``, j = (k - 1) mod 2^W; the column LFSRs step once per block (j = 0)
     to give the block's shifts (every pixel starts a block). With a neighbour prior (``line_start``
     not empty) each pixel's feedback column is formed first from ``prev[0]``, which carries the
-    previous result over calls."""
+    previous result over calls.
+
+    Sample by sample: with ``samples`` (B) per clock only ``sobol`` runs, whose pixels start blocks
+    (a multiple of B) and whose blocks are whole clocks, so a clock's samples after the stop draw no
+    shift the next pixel would have used: the numbers, hence the results, are B = 1's."""
     pixels, ops = q.shape
     mask = np.uint64((1 << word_bits) - 1)
     w = np.uint64(word_bits)
@@ -144,8 +167,9 @@ def _run_on_chip(q, states, shifts, points, per_operator, rows, opcols, word_bit
             winner = _finish_cycle(bits, counts, over, rows, opcols, n_max, nm_index)
             if winner >= 0 or k == max_cycles:
                 break
-        _store(p, counts, k, winner, out_counts, out_map, out_timeout, out_cycles)
-        prev[0] = _feedback_result(winner, nm_row)
+        winner = _store(p, counts, k, winner, samples, leading, nm_index, out_counts, out_map, out_timeout,
+                        out_cycles)
+        prev[0] = _feedback_result(winner, out_timeout[p], nm_row)
 
 
 def _lfsr_arrays(specs: list[LFSRSpec]) -> tuple[np.ndarray, np.ndarray]:
@@ -177,7 +201,8 @@ class _OnChipSource:
     def run(self, q: np.ndarray, out: MachineResult, feedback: _Feedback) -> None:
         p = self._params
         args = (p.rows, p.operator_columns, p.word_bits, p.lfsr_bits, p.counter_max, p.max_cycles,
-                _nm_index(p), out.counts, out.map, out.timeout, out.cycles)
+                _nm_index(p), p.samples_per_clock, p.timeout_answer == "leading", out.counts, out.map,
+                out.timeout, out.cycles)
         _run_on_chip(q.astype(np.uint64), self.states, self._shifts, self._points, p.rng == "lfsr", *args,
                      *feedback.args())
 
@@ -220,10 +245,13 @@ def _expand(params: MachineParams, q: np.ndarray) -> np.ndarray:
 
 @numba.njit(cache=True)
 def _run_numbers(q, numbers, first, counts, done, rows, opcols, word_bits, n_max, max_cycles, nm_index,
-                 out_counts, out_map, out_timeout, out_cycles, line_start, fb, fb_nm, nm_row, prev):
-    """Same machine, random numbers from ``numbers[t, o]``, resumable: pixel ``first`` has run
-    ``done[0]`` cycles (its counters in ``counts``). Stops at the end of the pixels or of the
-    numbers, saving the pixel in progress; returns (next pixel, rows of numbers used)."""
+                 samples, leading, out_counts, out_map, out_timeout, out_cycles, line_start, fb, fb_nm,
+                 nm_row, prev):
+    """Same machine, random numbers from ``numbers[t, i * operators + o]`` (clock t, sample i: B =
+    ``samples`` per clock), resumable: pixel ``first`` has run ``done[0]`` samples, whole clocks (its
+    counters in ``counts``). A clock takes its B samples' numbers whole: those after the run's stop
+    are used by no one. Stops at the end of the pixels or of the numbers, saving the pixel in
+    progress; returns (next pixel, clocks of numbers used)."""
     pixels, ops = q.shape
     t = 0
     k = done[0]
@@ -234,19 +262,24 @@ def _run_numbers(q, numbers, first, counts, done, rows, opcols, word_bits, n_max
         qp = q[p]
         if feedback and k == 0:  # a pixel's start (not a resumed one)
             _fill_feedback(qp, prev[0], line_start[p], fb, fb_nm, rows, opcols, nm_row, 1 << word_bits)
+        winner = -1
         while True:
             if t >= numbers.shape[0]:
                 done[0] = k
                 return p, t
-            k += 1
-            for o in range(ops):
-                bits[o] = np.int64(numbers[t, o]) < qp[o]
+            for i in range(samples):
+                k += 1
+                for o in range(ops):
+                    bits[o] = np.int64(numbers[t, i * ops + o]) < qp[o]
+                winner = _finish_cycle(bits, counts, over, rows, opcols, n_max, nm_index)
+                if winner >= 0 or k == max_cycles:
+                    break
             t += 1
-            winner = _finish_cycle(bits, counts, over, rows, opcols, n_max, nm_index)
             if winner >= 0 or k == max_cycles:
                 break
-        _store(p, counts, k, winner, out_counts, out_map, out_timeout, out_cycles)
-        prev[0] = _feedback_result(winner, nm_row)
+        winner = _store(p, counts, k, winner, samples, leading, nm_index, out_counts, out_map, out_timeout,
+                        out_cycles)
+        prev[0] = _feedback_result(winner, out_timeout[p], nm_row)
         counts[:] = 0
         k = 0
     done[0] = 0
@@ -297,14 +330,15 @@ class MachineModel(EngineBase):
             done = np.zeros(1, np.int64)
             first = 0
             while first < n:
-                nums = feed.take(_BLOCK)
-                if not len(nums):
+                clocks = feed.take_clocks(_BLOCK)
+                if not len(clocks):
                     raise ran_out_error(feed.source)
-                first, used = _run_numbers(q, nums, first, counts, done, p.rows, p.operator_columns,
+                first, used = _run_numbers(q, clocks, first, counts, done, p.rows, p.operator_columns,
                                            p.word_bits, p.counter_max, p.max_cycles, self._nm_index,
+                                           p.samples_per_clock, p.timeout_answer == "leading",
                                            out.counts, out.map, out.timeout, out.cycles,
                                            *self._feedback.args())
-                feed.unread(nums[used:])
+                feed.unread_clocks(clocks[used:])
         if p.nomatch_row:
-            out.nomatch[:] = (~out.timeout) & (out.map == p.rows - 1)
+            out.nomatch[:] = answered(p, out.timeout) & (out.map == p.rows - 1)
         return out

@@ -59,9 +59,15 @@ def pack_beats(params: MachineParams, words: np.ndarray, line_start: np.ndarray 
 
 
 def pack_numbers(params: MachineParams, layout: Any, numbers: np.ndarray) -> list[int]:
-    """Rows of random numbers (one per compute cycle) as raw values of the ``entropy`` port of ``layout``."""
-    rows = check_numbers(params, numbers)
+    """Rows of random numbers, one per compute cycle (B = ``samples_per_clock`` samples' numbers per
+    operator: shape (cycles, B * operators), as ``NumberFeed.take_clocks`` gives them), as raw values
+    of the ``entropy`` port of ``layout``."""
+    per_clock = params.operators * params.samples_per_clock
+    numbers = np.asarray(numbers)
+    if numbers.ndim != 2 or numbers.shape[1] != per_clock:
+        raise ValueError(f"random numbers must have shape (cycles, {per_clock}), got {numbers.shape}")
+    rows = check_numbers(params, numbers.reshape(-1, params.operators)).reshape(-1, per_clock)
     offsets = element_offsets(layout)
-    if len(offsets) != params.operators:
-        raise ValueError(f"entropy layout {layout!r} has {len(offsets)} elements, not {params.operators}")
+    if len(offsets) != per_clock:
+        raise ValueError(f"entropy layout {layout!r} has {len(offsets)} elements, not {per_clock}")
     return [_pack(offsets, row) for row in rows]

@@ -29,7 +29,7 @@ from bayesmachine.sim.results import MachineResult, NumberFeed, decode_results, 
 
 __all__ = ["PysimEngine"]
 
-_PREFETCH = 64  # rows of random numbers packed at a time
+_PREFETCH = 64  # compute cycles of random numbers packed at a time
 
 
 class PysimEngine(EngineBase):
@@ -149,7 +149,7 @@ class PysimEngine(EngineBase):
         while True:
             feed = self._entropy_feed
             if not self._entropy_raw and feed is not None:
-                self._entropy_raw.extend(pack_numbers(self.params, layout, feed.take(_PREFETCH)))
+                self._entropy_raw.extend(pack_numbers(self.params, layout, feed.take_clocks(_PREFETCH)))
             if self._entropy_raw:
                 ctx.set(raw_entropy, self._entropy_raw[0])
             _, _, taken = await ctx.tick().sample(dut.entropy_ready)

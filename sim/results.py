@@ -24,11 +24,13 @@ __all__ = [
     "EngineStateError",
     "MachineResult",
     "NumberFeed",
+    "answered",
     "check_numbers",
     "check_line_start", "check_words",
     "decode_results",
     "disparities",
     "layout_fields",
+    "neighbour_answers",
     "ran_out_error",
 ]
 
@@ -75,18 +77,43 @@ class MachineResult:
             return cls.empty(rows)
         return cls(**{f.name: np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(cls)})
 
-    def disparities(self) -> np.ndarray:
-        """:func:`disparities` of these results."""
-        return disparities(self.map, self.nomatch, self.timeout)
+    def disparities(self, params: MachineParams) -> np.ndarray:
+        """:func:`disparities` of these results, from the machine of ``params``."""
+        return disparities(self.map, self.nomatch, self.timeout, params)
+
+    def neighbour_answers(self) -> np.ndarray:
+        """:func:`neighbour_answers` of these results."""
+        return neighbour_answers(self.map, self.nomatch, self.timeout)
 
     def equal(self, other: MachineResult) -> bool:
         return all(np.array_equal(getattr(self, f.name), getattr(other, f.name)) for f in fields(self))
 
 
-def disparities(map_: np.ndarray, nomatch: np.ndarray, timeout: np.ndarray) -> np.ndarray:
-    """The answer of each pixel (int16): its MAP row, -1 where the no-match row won or the watchdog
-    stopped the run (the one rule every engine's caller reads results by)."""
-    return np.where(np.asarray(nomatch, bool) | np.asarray(timeout, bool), -1, map_).astype(np.int16)
+def answered(params: MachineParams, timeout: np.ndarray) -> np.ndarray:
+    """Where a result's ``map`` is the machine's answer: a run that overflowed, and with
+    ``timeout_answer = "leading"`` a run the watchdog stopped too (its leading row)."""
+    timeout = np.asarray(timeout, bool)
+    return np.ones_like(timeout) if params.timeout_answer == "leading" else ~timeout
+
+
+def disparities(map_: np.ndarray, nomatch: np.ndarray, timeout: np.ndarray,
+                params: MachineParams) -> np.ndarray:
+    """The answer of each pixel (int16) of the machine of ``params``: its MAP row, -1 where the
+    no-match row won or the run gave no answer (stopped by the watchdog with ``timeout_answer =
+    "none"``). The one rule every engine's caller reads a pixel's answer by (what a neighbour
+    follows is :func:`neighbour_answers`)."""
+    none = np.asarray(nomatch, bool) | ~answered(params, timeout)
+    return np.where(none, -1, map_).astype(np.int16)
+
+
+def neighbour_answers(map_: np.ndarray, nomatch: np.ndarray, timeout: np.ndarray) -> np.ndarray:
+    """What the neighbours of each pixel follow (int16): the neighbour prior's above column and
+    census-lr's right MAPs, as the machine's feedback column does on chip. The MAP of a run that
+    overflowed; -1 where the no-match row won and for every timeout, answered or not: a timed-out
+    pixel's leading row is its answer, not information for its neighbours (measured on the bundled
+    pair, docs/architecture.md "The watchdog's answer")."""
+    none = np.asarray(nomatch, bool) | np.asarray(timeout, bool)
+    return np.where(none, -1, map_).astype(np.int16)
 
 
 # --- Validation: the same checks, hence the same errors, in every engine ---
@@ -219,6 +246,20 @@ class NumberFeed:
         """Put rows back in front of the stream (fetched but not consumed)."""
         if len(rows):
             self._pending = np.concatenate([rows, self._pending])
+
+    def take_clocks(self, count: int) -> np.ndarray:
+        """Up to ``count`` compute cycles' numbers, whole ones: (clocks, B * operators), clock t's
+        sample i in columns ``i * operators ...`` (B = ``samples_per_clock`` rows of the stream per
+        clock; a partial clock at the stream's end stays pending: fewer than B rows run no clock)."""
+        b = self._params.samples_per_clock
+        rows = self.take(count * b)
+        whole = len(rows) // b * b
+        self.unread(rows[whole:])
+        return rows[:whole].reshape(-1, b * self._operators)
+
+    def unread_clocks(self, clocks: np.ndarray) -> None:
+        """Put :meth:`take_clocks` clocks back in front of the stream."""
+        self.unread(np.asarray(clocks).reshape(-1, self._operators))
 
 
 # --- Decoding raw result payloads, from the layout ---

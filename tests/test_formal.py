@@ -54,6 +54,16 @@ MACHINES = {
 # W = 3, counter max 1, max_cycles 4, feedback words (1.0, 5/8, 2/8) and 4/8 for the no-match row.
 CONTROL = {
     **MACHINES,
+    # B = 2 samples per clock (the stop at its sample; max_cycles 7: the watchdog's clock counts one).
+    "b2-n2-mc7": MachineParams(rows=4, columns=2, word_bits=3, counter_max=2, rng="external", max_cycles=7,
+                               nomatch_row=True, words_per_beat=4, samples_per_clock=2),
+    # The watchdog's leading answer (its search in the bubble), alone and with B = 4.
+    "n2-mc6-leading": MachineParams(rows=4, columns=2, word_bits=3, counter_max=2, rng="external",
+                                    max_cycles=6, nomatch_row=True, words_per_beat=4,
+                                    timeout_answer="leading"),
+    "b4-n3-leading": MachineParams(rows=4, columns=1, word_bits=2, counter_max=3, rng="external",
+                                   max_cycles=9, nomatch_row=True, words_per_beat=4, samples_per_clock=4,
+                                   timeout_answer="leading"),
     "neighbour": MachineParams(rows=4, columns=1, word_bits=3, counter_max=1, rng="external", max_cycles=4,
                                nomatch_row=True, words_per_beat=4, prior="neighbour", feedback_words=(8, 5,
                                                                                                       2),
@@ -62,6 +72,8 @@ CONTROL = {
 # Larger machines the same proof closes on (slow: 15-20 s each): 10 rows x 3 columns, W = 6, counter
 # max 7, max_cycles 40, 5 beats per pixel; a neighbour prior with 8 rows x 2 data columns, W = 5,
 # counter max 3, max_cycles 16, 5 feedback words, lowest-index.
+# The machine the samples mutants are checked on.
+SAMPLES = "b2-n2-mc7"
 CONTROL_LARGER = {
     "10x3-w6-n7": MachineParams(rows=10, columns=3, word_bits=6, counter_max=7, rng="external", max_cycles=40,
                                 nomatch_row=True, words_per_beat=6),
@@ -166,7 +178,8 @@ def test_machine_covers(machine: str) -> None:
 def test_control_proved(machine: str) -> None:
     """Against the reference run: one result per loaded pixel, in order, with the counters at the
     stop; the stop at the first overflow or at max_cycles; no beat lost; the one-cycle bubble; the
-    neighbour prior's feedback words. Proved by k-induction."""
+    neighbour prior's feedback words; with B samples per clock the one-sample reference run (the
+    stop at its sample); with the leading answer its search and result. Proved by k-induction."""
     check(run_formal(ControlProperties(params=CONTROL[machine]), name=f"control-{machine}", mode="prove",
                      depth=CONTROL_PROVE_DEPTH))
 
@@ -236,7 +249,7 @@ def test_fifo_covers() -> None:
 MUTANTS = mutants(MACHINES["n1-mc5"])
 # The mutants of the wrappers of the issue's second part (reference run, miter, front end, FIFO) are
 # slow (5-13 s each): the default suite keeps its formal time small, CI runs them (.ci/run).
-NEW_WRAPPERS = {"control", "miter", "generator", "frontend", "fifo"}
+NEW_WRAPPERS = {"control", "samples", "miter", "generator", "frontend", "fifo"}
 MUTANT_PARAMS = [pytest.param(m, id=m.name, marks=[pytest.mark.slow] if m.wrapper in NEW_WRAPPERS else [])
                  for m in MUTANTS]
 
@@ -252,6 +265,8 @@ def test_mutant_caught(mutant: Mutant) -> None:
                 for tb in ("nomatch-first", "lowest-index")]
     elif mutant.wrapper == "control":
         runs = [(ControlProperties(params=MACHINES["n1-mc5"], **mutant.inject), "bmc", CONTROL_MUTANT_DEPTH)]
+    elif mutant.wrapper == "samples":
+        runs = [(ControlProperties(params=CONTROL[SAMPLES], **mutant.inject), "bmc", CONTROL_MUTANT_DEPTH)]
     elif mutant.wrapper == "miter":
         runs = [(MiterProperties(params=MITER, **mutant.inject), "bmc", MITER_DEPTH)]
     elif mutant.wrapper == "generator":

@@ -201,7 +201,7 @@ def test_stereo_machine_hides_loading_and_filtering() -> None:
     params = stereo_machine_params(dmax, counter_max=16, max_cycles=3000)
     got, wall = run_stereo(StereoMachine(params=params, model=model, width=width), frames)
     compute = int(got.cycles.sum())
-    per_pixel = int(pixel_wall_cycles(params, got.cycles).sum())
+    per_pixel = int(pixel_wall_cycles(params, got.cycles, got.timeout).sum())
     # Lines 0-3 (4 x width pixels) and the first dmax + 4 pixels of a line run no machine; plus
     # the pipeline's latency to the first result (4 front-end stages, the word generator's
     # difference and address registers; the machine writes a beat the cycle after its

@@ -185,7 +185,7 @@ def test_disparity_machine_builds_the_model_s_machine():
     paper = ModelParams(name="paper", dmax=6)
     assert disparity_machine(paper, counter_max=4) == MachineParams.for_disparity(6, counter_max=4)
     no_prior = ModelParams(dmax=6, name="census", neighbour_prior=False)
-    assert disparity_machine(no_prior) == MachineParams.for_disparity(6, columns=4)
+    assert disparity_machine(no_prior) == MachineParams.for_disparity(6, columns=4, timeout_answer="leading")
     census = ModelParams(dmax=80, name="census")
     m = disparity_machine(census, word_bits=10)
     q = census.column(AbovePrior).table(10)

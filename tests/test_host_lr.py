@@ -341,6 +341,7 @@ def _hand_run(prepared, machine, engine="model"):
     right_above = model.pass_named("right").model.column(AbovePrior)
     left_eng, right_eng = get_engine(engine, machine), get_engine(engine, rmachine)
     disp = np.full((ho, wo), -1, np.int64)
+    above_left = np.full((ho, wo), -1, np.int64)  # what the left pass's next row follows
     rmap = np.full((ho, xr.size), -1, np.int64)
     try:
         for y in range(ho):
@@ -354,10 +355,13 @@ def _hand_run(prepared, machine, engine="model"):
             cons = lr.values_of(lr.table(w), ok, unknown)
             lw = memory_words(fl, fr, model, machine, rows=slice(y, y + 1),
                               prior=left_above.loaded(left_above.table(w),
-                                                      disp[y - 1] if y else np.full(wo, -1)),
+                                                      above_left[y - 1] if y else np.full(wo, -1)),
                               fed=cons)
             res = left_eng.run(lw, line_start=np.arange(wo) == 0)
-            disp[y] = np.where(res.nomatch | res.timeout, -1, res.map)
+            # A timeout answers its leading row (the census models' machine), but the row below
+            # follows overflowing runs only.
+            disp[y] = np.where(res.nomatch, -1, res.map)
+            above_left[y] = np.where(res.nomatch | res.timeout, -1, res.map)
     finally:
         left_eng.close()
         right_eng.close()
@@ -411,15 +415,26 @@ def test_census_lr_machine_default_watchdog():
     assert MachineParams.for_disparity(DMAX).max_cycles == DEFAULT_MAX_CYCLES
 
 
-def test_left_watchdog_stops_long_runs_as_no_match(pair):
-    """A short left watchdog turns the long runs into timeouts, reported as no match."""
+@pytest.mark.parametrize("answer", ["none", "leading"])
+def test_left_watchdog_stops_long_runs(pair, answer):
+    """A short left watchdog turns the long runs into timeouts: reported as no match, or (census-lr's
+    default, ``timeout_answer = "leading"``) answered by their leading row, which no neighbour
+    follows (the next row's above column is the same as with "none")."""
     left, right, gt = pair
     model = ModelParams(dmax=DMAX, name="census-lr")
     prepared = prepare(left, right, model, gt)
-    machine = disparity_machine(model, counter_max=8, max_cycles=40)
+    machine = disparity_machine(model, counter_max=8, max_cycles=40, timeout_answer=answer)
     run = run_machine(prepared, machine, "model", progress=False)
     assert run.timeout.any() and (run.cycles <= 40).all()
-    np.testing.assert_array_equal(run.map[run.timeout], -1)
+    if answer == "none":
+        np.testing.assert_array_equal(run.map[run.timeout], -1)
+    else:
+        np.testing.assert_array_equal(run.map < 0, run.nomatch)  # every timeout answered, no match included
+        assert (run.map[run.timeout] >= 0).any()
+        none = run_machine(prepared, disparity_machine(model, counter_max=8, max_cycles=40,
+                                                       timeout_answer="none"), "model", progress=False)
+        np.testing.assert_array_equal(run.cycles, none.cycles)
+        np.testing.assert_array_equal(run.map[~run.timeout], none.map[~run.timeout])
 
 
 def test_machine_near_its_quantized_reference(pair, model):

@@ -107,23 +107,35 @@ def test_rate_equals_p_full_size(q: int) -> None:
         assert abs(ones - n * p) < 5 * math.sqrt(n * p * (1 - p))
 
 
-@pytest.mark.parametrize("w", [1, 3, 4])
-def test_top_bit_pair_compares_both_numbers(w: int) -> None:
-    """``top_bit_pair`` gives ``n < word`` and ``(n ^ 2^(W-1)) < word`` for every number and word."""
+@pytest.mark.parametrize(("w", "samples"), [(1, 1), (3, 1), (4, 1), (3, 2), (4, 4), (5, 4), (5, 8)])
+def test_sample_bits_compare_every_point(w: int, samples: int) -> None:
+    """``sample_bits`` gives ``(n ^ point) < word`` for every number, word and point of a Sobol clock
+    (a clock's B points, and a block's first two clocks' 2B as the machine without a bubble compares
+    them in a swap), equal to its twin."""
     from amaranth.hdl import Module, Signal
 
-    from bayesmachine.hdl.operator import top_bit_pair
+    from bayesmachine.hdl.operator import sample_bits, sample_bits_twin
+    from bayesmachine.sources.sobol import sample_points
 
+    point_sets = [sample_points(c, w, samples) for c in range(3)]
+    if 2 * samples <= 1 << w:
+        point_sets += [sample_points(c, w, 2 * samples) for c in range(3)]
     m = Module()
-    number, word, first, second = Signal(w), Signal(w + 1), Signal(), Signal()
-    a, b = top_bit_pair(number, word)
-    m.d.comb += [first.eq(a), second.eq(b)]
+    number, word = Signal(w), Signal(w + 1)
+    outs = []
+    for points in point_sets:
+        out = Signal(len(points))
+        m.d.comb += out.eq(sample_bits(number, word, points))
+        outs.append(out)
     cases = [(n, q) for n in range(1 << w) for q in range((1 << w) + 1)]
 
     async def bench(ctx):
         for n, q in cases:
             ctx.set(number, n)
             ctx.set(word, q)
-            assert (ctx.get(first), ctx.get(second)) == (int(n < q), int((n ^ (1 << (w - 1))) < q)), (n, q)
+            for out, points in zip(outs, point_sets, strict=True):
+                want = sample_bits_twin(n, q, points)
+                assert want == [int((n ^ p) < q) for p in points]
+                assert [(ctx.get(out) >> i) & 1 for i in range(len(points))] == want, (n, q, points)
 
     run_sim(m, bench, clock=False)

@@ -20,8 +20,10 @@ from bayesmachine.sources.sobol import MAX_DIMENSIONS, SobolTwin, direction_numb
 
 
 def _params(w: int, columns: int = 3, **kwargs: object) -> MachineParams:
+    samples = int(kwargs.get("samples_per_clock", 1))  # type: ignore[call-overload]
     base: dict[str, object] = dict(rows=2, columns=columns, word_bits=w, lfsr_bits=12 if w <= 5 else 31,
-                                   counter_max=1, max_cycles=2, words_per_beat=1, rng="sobol", seed=5)
+                                   counter_max=1, max_cycles=samples + 1, words_per_beat=1, rng="sobol",
+                                   seed=5)
     base.update(kwargs)
     return MachineParams(**base)  # type: ignore[arg-type]
 
@@ -71,6 +73,30 @@ def test_rtl_matches_twin_over_full_index_periods(w: int, columns: int) -> None:
     # The second block: the LFSRs' second numbers, a different shift.
     second = [list(lfsr_numbers(spec, 2))[1] for spec in column_lfsr_specs(params)]
     assert got[1 << w] == second
+
+
+@pytest.mark.parametrize(("w", "samples"), [(3, 2), (4, 4), (5, 8), (5, 16)])
+def test_samples_per_clock_give_the_one_sample_points(w: int, samples: int) -> None:
+    """With B samples per clock the generators give, clock after clock, B consecutive points of the
+    one-sample stream: clock t's sample i is point (tB + i) mod 2^W of its block, XOR the block's
+    shift (the column LFSR's next number, one per block); the RTL equals the twin, also under random
+    enables and restarts (a restart starts a block: a multiple of B)."""
+    params = _params(w, 3, samples_per_clock=samples)
+    clocks = (1 << w) // samples
+    drive = [(1, 0)] * (3 * clocks)
+    rnd = random.Random(w * samples)
+    drive += [(int(rnd.random() < 0.8), int(rnd.random() < 0.1)) for _ in range(6 * clocks)]
+    got = _rtl_numbers(params, drive)
+    assert got == _twin_numbers(params, drive)
+    twin = SobolTwin(params)
+    shifts = [list(lfsr_numbers(spec, 3)) for spec in column_lfsr_specs(params)]
+    for t in range(3 * clocks):
+        block, j = divmod(t * samples, 1 << w)
+        want = [[sobol_points(c, w)[j + i] ^ shifts[c][block] for c in range(3)] for i in range(samples)]
+        assert twin.sample_numbers == want, t
+        rtl = [[n ^ pts[i] for n, pts in zip(got[t], twin.points, strict=True)] for i in range(samples)]
+        assert rtl == want
+        twin.clock(True, False)
 
 
 def test_twin_blocks_do_not_depend_on_stall_timing() -> None:
@@ -174,13 +200,15 @@ def test_sobol_needs_a_dimension_per_column() -> None:
     MachineParams(rows=2, columns=MAX_DIMENSIONS, rng="sobol", words_per_beat=1)
 
 
-@pytest.mark.parametrize(("w", "columns"), [(1, 2), (2, 3), (3, 3), (5, 2)])
-def test_next_and_restart_numbers_predict_the_next_cycle(w: int, columns: int) -> None:
+@pytest.mark.parametrize(("w", "columns", "samples"), [(1, 2, 1), (2, 3, 1), (3, 3, 1), (5, 2, 1), (3, 2, 2),
+                                                        (4, 3, 4), (5, 2, 8)])
+def test_next_and_restart_numbers_predict_the_next_cycle(w: int, columns: int, samples: int) -> None:
     """The machine's prefetched comparators read ``next_numbers`` in a compute cycle and
     ``restart_numbers`` in a run's start (never both in one cycle): each must be the number of the
     following cycle, across block ends (the shift LFSR's turn) and restarts mid-block; and
-    ``following_numbers`` (its per-group copies' input) must be the next cycle's ``next_numbers``."""
-    params = _params(w, columns)
+    ``following_numbers`` (its per-group copies' input) must be the next cycle's ``next_numbers``
+    (with B samples per clock, of the clocks' first numbers)."""
+    params = _params(w, columns, samples_per_clock=samples)
     rnd = random.Random(100 + w)
     drive = [(1, 0)] * (2 << w) + [(0, 1), (1, 0), (1, 0), (0, 0), (1, 0)]
     for _ in range(max(200, 6 << w)):
@@ -216,12 +244,13 @@ def test_next_and_restart_numbers_predict_the_next_cycle(w: int, columns: int) -
 
 
 
-@pytest.mark.parametrize(("w", "columns"), [(1, 2), (2, 3), (3, 3)])
-def test_following_restart_numbers_is_the_next_cycles_restart_numbers(w: int, columns: int) -> None:
+@pytest.mark.parametrize(("w", "columns", "samples"), [(1, 2, 1), (2, 3, 1), (3, 3, 1), (4, 3, 4)])
+def test_following_restart_numbers_is_the_next_cycles_restart_numbers(w: int, columns: int,
+                                                                      samples: int) -> None:
     """A register loaded with ``following_restart_numbers`` every clock (reset to the shift LFSR's
     first number) equals ``restart_numbers`` in every cycle, for random enable and restart
     patterns (all four combinations, so blocks end, restart mid-block and the LFSRs step)."""
-    params = _params(w, columns)
+    params = _params(w, columns, samples_per_clock=samples)
     dut = SobolGenerators(params=params)
     m = Module()
     m.submodules.dut = dut

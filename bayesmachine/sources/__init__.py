@@ -60,17 +60,30 @@ class SourceKind:
     check: Callable[[MachineParams], None] | None = None
 
 
+def _one_sample(params: MachineParams, why: str) -> None:
+    """A kind with one number per operator per clock refuses samples_per_clock > 1, saying why."""
+    if params.samples_per_clock > 1:
+        raise ParameterError(f"samples_per_clock {params.samples_per_clock}: rng = {params.rng!r} gives one "
+                             f"number per operator per clock ({why}); use sobol or external")
+
+
 def _check_lfsr(params: MachineParams) -> None:
     from .lfsr import check_lfsr_params
 
+    _one_sample(params, "B numbers would be B leap-forward steps per LFSR and clock: docs/sources.md")
     check_lfsr_params(params)
 
 
 def _check_sobol(params: MachineParams) -> None:
+    from .lfsr import check_lfsr_params
     from .sobol import check_params
 
     check_params(params)
-    _check_lfsr(params)  # the random digital shifts come from column LFSRs
+    check_lfsr_params(params)  # the random digital shifts come from column LFSRs
+
+
+def _check_smtj(params: MachineParams) -> None:
+    _one_sample(params, "its devices are read once per clock: docs/smtj.md")
 
 
 def _smtj_numbers(params: MachineParams) -> NumberSource:
@@ -102,7 +115,7 @@ SOURCE_KINDS: dict[str, SourceKind] = {
         SourceKind(
             "smtj", False,
             "superparamagnetic tunnel junctions (telegraph-noise device model) on the 'entropy' port",
-            _smtj_numbers,
+            _smtj_numbers, _check_smtj,
         ),
     )
 }

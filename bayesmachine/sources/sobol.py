@@ -35,7 +35,9 @@ __all__ = [
     "JOE_KUO",
     "MAX_DIMENSIONS",
     "SobolTwin",
+    "clock_directions",
     "direction_numbers",
+    "sample_points",
     "sobol_points",
 ]
 
@@ -107,21 +109,52 @@ def sobol_points(dimension: int, bits: int, count: int | None = None) -> list[in
     return out
 
 
+def sample_points(dimension: int, bits: int, samples: int) -> tuple[int, ...]:
+    """The constants a clock's B = ``samples`` points differ from its first one by: point j + i is
+    point j XOR ``sample_points[i]`` (the unrandomized point i) whenever j is a multiple of B.
+
+    The Gray code of j + i is that of j XOR that of i (j's low log2(B) bits are 0), and a point is
+    the XOR of the direction numbers of its index's Gray-code bits. Point i < B has its bits in the
+    top log2(B) bits only, so the B numbers of a clock share their low W - log2(B) bits.
+    """
+    return tuple(sobol_points(dimension, bits, samples))
+
+
+def clock_directions(dimension: int, bits: int, samples: int) -> tuple[int, ...]:
+    """The per-clock direction numbers of a generator that gives B = ``samples`` points per clock: a
+    clock's first point is the previous clock's XOR ``clock_directions[lowest 0 bit of the clock's
+    index in its block - 1]`` (the index counting clocks, W - log2(B) bits).
+
+    Point B(i + 1) = point B(i + 1) - 1 XOR V_(lowest 0 bit of B(i + 1) - 1) = point Bi XOR point
+    B - 1 XOR V_(log2(B) + lowest 0 bit of i): so D_k = point(B - 1) XOR V_(log2(B) + k). For B = 1,
+    D_k = V_k.
+    """
+    b = samples.bit_length() - 1
+    v = direction_numbers(dimension, bits)
+    last = sobol_points(dimension, bits, samples)[-1]
+    return tuple(last ^ v[b + k] for k in range(bits - b))
+
+
 class SobolTwin:
     """Per-cycle Python twin of ``hdl.sources.SobolGenerators`` (all operator columns).
 
-    State: the shared block index ``i`` (W bits), ``fresh`` (the next compute cycle starts a
-    block), per column the register ``y`` and the shift LFSR. Each cycle, :attr:`numbers` are
-    column c's ``lfsr number if fresh else y``; :meth:`clock` applies one clock edge.
+    State: the shared block index ``i`` (counting clocks: W - log2(B) bits, B = samples_per_clock),
+    ``fresh`` (the next compute cycle starts a block), per column the register ``y`` and the shift
+    LFSR. Each cycle, :attr:`numbers` are column c's ``lfsr number if fresh else y`` (the clock's
+    first point), :attr:`sample_numbers` the clock's B numbers (the first XOR
+    :func:`sample_points`); :meth:`clock` applies one clock edge.
     """
 
     def __init__(self, params: MachineParams) -> None:
         # A sobol MachineParams has checked its columns against the table (check_params); for
         # any other rng, direction_numbers refuses a column beyond it.
         self.bits = params.word_bits
+        self.samples = params.samples_per_clock
         self.columns = params.operator_columns
+        self.clocks = (1 << self.bits) // self.samples  # clocks per block
         self.specs: list[LFSRSpec] = column_lfsr_specs(params)
-        self.directions = [direction_numbers(c, self.bits) for c in range(self.columns)]
+        self.directions = [clock_directions(c, self.bits, self.samples) for c in range(self.columns)]
+        self.points = [sample_points(c, self.bits, self.samples) for c in range(self.columns)]
         self.reset()
 
     def reset(self) -> None:
@@ -136,6 +169,12 @@ class SobolTwin:
             return [lfsr_step(s, spec)[0] for s, spec in zip(self.lfsr, self.specs, strict=True)]
         return list(self.y)
 
+    @property
+    def sample_numbers(self) -> list[list[int]]:
+        """This clock's numbers, sample by sample: ``[sample][column]``."""
+        first = self.numbers
+        return [[n ^ pts[i] for n, pts in zip(first, self.points, strict=True)] for i in range(self.samples)]
+
     def clock(self, enable: bool, restart: bool) -> None:
         """One clock edge: ``enable`` = a compute cycle, ``restart`` = a pixel's run starts."""
         if not enable:
@@ -145,7 +184,7 @@ class SobolTwin:
         nums = self.numbers
         if self.fresh:  # the block's shift is consumed: the LFSRs advance, even on a restart
             self.lfsr = [lfsr_step(s, spec)[1] for s, spec in zip(self.lfsr, self.specs, strict=True)]
-        last = self.index == (1 << self.bits) - 1
+        last = self.index == self.clocks - 1
         # y after the block's last cycle is never read (a block starts with the shift): keep it.
         k = _lowest_zero_bit(self.index)
         self.y = [n ^ (0 if last else d[k]) for n, d in zip(nums, self.directions, strict=True)]
@@ -162,4 +201,9 @@ def check_params(params: MachineParams) -> None:
         raise ParameterError(
             f"rng = 'sobol' supports at most {MAX_DIMENSIONS} operator columns (Sobol dimensions "
             f"embedded), this machine has {params.operator_columns}"
+        )
+    if 2 * params.samples_per_clock > 1 << params.word_bits:
+        raise ParameterError(
+            f"samples_per_clock {params.samples_per_clock}: rng = 'sobol' needs a block of 2^W = "
+            f"{1 << params.word_bits} points to span at least two clocks (samples_per_clock <= 2^(W-1))"
         )

@@ -13,9 +13,9 @@ from typing import Any
 
 from amaranth.hdl import Cat, Module, Mux, Signal, Value
 
-from bayesmachine.hdl.counters import overflow_counter_full
+from bayesmachine.hdl.counters import count_ones, overflow_counter_full
 from bayesmachine.hdl.encoder import MAPEncoder, map_encoder
-from bayesmachine.hdl.formal.control import driven
+from bayesmachine.hdl.formal.frontend import driven
 from bayesmachine.hdl.frontend import stereo as _stereo
 from bayesmachine.hdl.frontend.costs import WordGenerator
 from bayesmachine.hdl.frontend.stereo import FeaturePipeline, FrontEnd, StereoMachine
@@ -23,8 +23,9 @@ from bayesmachine.hdl.machine import BayesianMachine
 from bayesmachine.params import MachineParams
 
 __all__ = [
-    "DriftingCountStereoMachine", "EarlyReadStereoMachine", "FirstIgnoredFrontEnd", "HighestIndexEncoder",
-    "LateCountsMachine", "LostBeatMachine", "Mutant", "NoMatchBlindEncoder", "PayloadFollowsEncoderMachine",
+    "CountsPastStopMachine", "DriftingCountStereoMachine", "EarlyReadStereoMachine", "FirstIgnoredFrontEnd",
+    "HighestIndexEncoder", "LateCountsMachine", "LateSampleMachine", "LostBeatMachine", "Mutant",
+    "NoMatchBlindEncoder", "PayloadFollowsEncoderMachine",
     "ShortWordGenerator", "SkippedSwapMachine", "ValidDropMachine", "counter_early_overflow",
     "counter_late_overflow", "counter_wraps", "mutants", "other_tie_rule",
 ]
@@ -109,48 +110,70 @@ class PayloadFollowsEncoderMachine(BayesianMachine):
         return m
 
 
-class _ObservedMachine(BayesianMachine):
-    """Keeps the nets ``elaborate`` shares between its builders (``self._nets``), for the mutants below."""
-
-    def _memories(self):  # type: ignore[no-untyped-def]
-        self._nets = super()._memories()
-        return self._nets
-
-
-class SkippedSwapMachine(_ObservedMachine):
+class SkippedSwapMachine(BayesianMachine):
     """A swap in a bubble starts the next run but leaves the active memory as it was: the pixel
     loaded is skipped and the previous one is run again (an idle machine's swap still copies)."""
 
     def elaborate(self, platform: object) -> Module:
         m = super().elaborate(platform)
-        n = self._nets
+        n = self.nets
         with m.If(n.start_rep[0] & n.stop):
             m.d.sync += [w.eq(w) for w in n.active]  # the last assignment wins
         return m
 
 
-class LostBeatMachine(_ObservedMachine):
+class LostBeatMachine(BayesianMachine):
     """A beat taken right behind another is not written into the shadow memory (its write enable
     is dropped while the previous beat's is up): back-to-back beats lose one."""
 
     def elaborate(self, platform: object) -> Module:
         m = super().elaborate(platform)
-        n = self._nets
+        n = self.nets
         with m.If(n.write_q.any()):
             m.d.sync += n.write_q.eq(0)
         return m
 
 
-class LateCountsMachine(_ObservedMachine):
+class LateCountsMachine(BayesianMachine):
     """The result takes the counters a cycle late: their values before the run's last compute cycle."""
 
     def elaborate(self, platform: object) -> Module:
         m = super().elaborate(platform)
-        n = self._nets
+        n = self.nets
         counts_q = [Signal.like(c, name=f"{c.name}_late") for c in n.counts]
         m.d.sync += [q.eq(c) for q, c in zip(counts_q, n.counts, strict=True)]
         with m.If(n.leave):
             m.d.sync += self.result.payload.counts.eq(Cat(*counts_q))
+        return m
+
+
+class LateSampleMachine(BayesianMachine):
+    """B samples per clock: the stop's rows are those overflowing by the cycle's last sample, not at
+    the first sample where one does (a row overflowing later in the cycle joins the tie)."""
+
+    def elaborate(self, platform: object) -> Module:
+        m = super().elaborate(platform)
+        n = self.nets
+        b = self.params.samples_per_clock
+        for r in range(self.params.rows):
+            with m.If(n.compute_rep[r // n.rows_per_group] & n.G.any()):
+                m.d.sync += n.over_q[r].eq(n.flags[r][b - 1])
+        return m
+
+
+class CountsPastStopMachine(BayesianMachine):
+    """B samples per clock: the counters add the stop cycle's samples after the stop too (capped at
+    n_max), so the losing rows' counts run past the stop."""
+
+    def elaborate(self, platform: object) -> Module:
+        m = super().elaborate(platform)
+        n = self.nets
+        p = self.params
+        b = p.samples_per_clock
+        for r in range(p.rows):
+            total = n.counts[r] + count_ones(n.row[r * b:(r + 1) * b])
+            with m.If(n.compute_rep[r // n.rows_per_group]):
+                m.d.sync += n.counts[r].eq(Mux(total > p.counter_max, p.counter_max, total))
         return m
 
 
@@ -231,7 +254,9 @@ class Mutant:
 
 def mutants(machine_params: MachineParams) -> list[Mutant]:
     """The mutants ``tests/test_formal.py`` checks; ``machine_params`` is the small machine the
-    machine's properties are checked on (the watchdog mutants change its ``max_cycles`` by one)."""
+    machine's properties are checked on (the watchdog mutants change its ``max_cycles`` by one).
+    The ``samples`` ones are checked in the control wrapper on a machine with B samples per clock
+    (``tests/test_formal.py``: ``SAMPLES``)."""
     late = dataclasses.replace(machine_params, max_cycles=machine_params.max_cycles + 1)
     early = dataclasses.replace(machine_params, max_cycles=machine_params.max_cycles - 1)
     swap = {"nomatch-first": "lowest-index", "lowest-index": "nomatch-first"}
@@ -265,6 +290,10 @@ def mutants(machine_params: MachineParams) -> list[Mutant]:
         Mutant("control-valid-drop", "control", {"machine": ValidDropMachine}, "a stalled result is dropped"),
         Mutant("miter-payload-moves", "miter", {"machine": PayloadFollowsEncoderMachine},
                "a stalled result's map changes"),
+        Mutant("samples-late-sample", "samples", {"machine": LateSampleMachine},
+               "the stop's rows are those overflowing by the cycle's last sample"),
+        Mutant("samples-counts-past-stop", "samples", {"machine": CountsPastStopMachine},
+               "the counters add the samples after the stop"),
         Mutant("generator-short", "generator", {"generator": ShortWordGenerator},
                "an output pixel gets beats_per_pixel - 1 beats"),
         Mutant("frontend-first-ignored", "frontend", {"frontend": FirstIgnoredFrontEnd},

@@ -5,7 +5,7 @@
 //
 // Include it after the generated header, which defines BM_TOP, BM_PORT_CLK, BM_PORT_RST,
 // RESULT_WORDS, HANG_CYCLES and BM_EXTERNAL (with an off-chip random source, 1, and the entropy
-// port's BM_PORT_ENTROPY, BM_PORT_ENTROPY_READY, OPERATORS, ENTROPY_BITS, ENTROPY_WORDS,
+// port's BM_PORT_ENTROPY, BM_PORT_ENTROPY_READY, ENTROPY_NUMBERS, ENTROPY_BITS, ENTROPY_WORDS,
 // ENTROPY_OFFSET: the design's entropy port is fed by EntropySupply below, the same way in
 // every harness).
 #pragma once
@@ -117,13 +117,14 @@ static void send_results(const std::vector<uint32_t>& records, uint64_t cycles, 
 }
 
 #if BM_EXTERNAL
-// The random numbers of an off-chip source, one row (a number per operator) per compute cycle,
-// asked from the client in blocks (message 2 NEED NUMBERS: uint64 2, uint64 rows wanted; the
-// client replies uint64 rows n (0 < n <= wanted, or 0: no more), then n * OPERATORS uint16).
+// The random numbers of an off-chip source, one row (a number per operator and sample: ENTROPY_NUMBERS)
+// per compute cycle, asked from the client in blocks (message 2 NEED NUMBERS: uint64 2, uint64 rows
+// wanted; the client replies uint64 rows n (0 < n <= wanted, or 0: no more), then n * ENTROPY_NUMBERS
+// uint16).
 // Rows received and not yet used stay for the next request.
 struct EntropySupply {
     std::deque<std::vector<uint32_t>> rows;  // packed entropy port values
-    std::vector<uint16_t> row = std::vector<uint16_t>(OPERATORS);
+    std::vector<uint16_t> row = std::vector<uint16_t>(ENTROPY_NUMBERS);
 
     void clear() { rows.clear(); }
 
@@ -136,9 +137,9 @@ struct EntropySupply {
         read_exact(&n, sizeof n);
         if (n > 4096) fail("the client sent more rows of random numbers than asked for");
         for (uint64_t t = 0; t < n; ++t) {
-            read_exact(row.data(), OPERATORS * sizeof(uint16_t));
+            read_exact(row.data(), ENTROPY_NUMBERS * sizeof(uint16_t));
             std::vector<uint32_t> packed(ENTROPY_WORDS + 1, 0u);
-            for (unsigned o = 0; o < OPERATORS; ++o) {
+            for (unsigned o = 0; o < ENTROPY_NUMBERS; ++o) {
                 if (row[o] >> ENTROPY_BITS) fail("random number out of range");
                 put_bits(packed.data(), ENTROPY_OFFSET[o], ENTROPY_BITS, row[o]);
             }

@@ -15,8 +15,8 @@
 //        0 DONE: pixels * RESULT_WORDS uint32 raw result payloads, then uint64 wall cycles of this
 //          batch, uint64 wall cycles since reset; the batch is over.
 //        2 NEED NUMBERS (rng off chip only): uint64 rows wanted; the client replies on stdin with
-//          uint64 rows n (0 < n <= wanted, or 0: no more), then n * OPERATORS uint16 numbers, one
-//          row per compute cycle. Rows not used by this batch stay for the next one.
+//          uint64 rows n (0 < n <= wanted, or 0: no more), then n * ENTROPY_NUMBERS uint16 numbers,
+//          one row per compute cycle (a number per operator and sample, sample-major). Rows not used by this batch stay for the next one.
 //        1 RAN OUT: the client had no more numbers; the simulation is abandoned and the process exits.
 // Output is written only while the client waits for it (after it wrote the whole batch), so
 // neither side can block on a full pipe.

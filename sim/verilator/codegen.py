@@ -143,13 +143,14 @@ def entropy_header(params: MachineParams, signature: Any) -> tuple[dict[str, tup
     if "entropy" not in signature.members:
         return {}, "#define BM_EXTERNAL 0\n"
     layout = _shape(signature, "entropy")
-    ent_offsets = _element_offsets(layout, params.operators, params.word_bits, "entropy")
+    numbers = params.operators * params.samples_per_clock  # per compute cycle: B per operator
+    ent_offsets = _element_offsets(layout, numbers, params.word_bits, "entropy")
     ports = {"ENTROPY": ("entropy",), "ENTROPY_READY": ("entropy_ready",)}
     return ports, f"""#define BM_EXTERNAL 1
-static const unsigned OPERATORS = {params.operators};
+static const unsigned ENTROPY_NUMBERS = {numbers};
 static const unsigned ENTROPY_BITS = {params.word_bits};
 static const unsigned ENTROPY_WORDS = {_words32(layout.size)};
-static const unsigned ENTROPY_OFFSET[{params.operators}] = {{{ent_offsets}}};
+static const unsigned ENTROPY_OFFSET[{numbers}] = {{{ent_offsets}}};
 """
 
 

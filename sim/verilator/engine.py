@@ -151,9 +151,9 @@ class HarnessProcess:
             if message == _NEED_NUMBERS:
                 (want,) = struct.unpack("<Q", self._read(proc, 8))
                 if feed is not None:
-                    rows = feed.take(int(want))
+                    rows = feed.take_clocks(int(want))  # a row per compute cycle: B numbers per operator
                 else:
-                    rows = np.zeros((0, self.params.operators), np.uint16)
+                    rows = np.zeros((0, self.params.operators * self.params.samples_per_clock), np.uint16)
                 self._write(proc, struct.pack("<Q", len(rows)),
                             np.ascontiguousarray(rows, dtype="<u2").tobytes())
             elif message == _RAN_OUT:
