@@ -55,6 +55,8 @@ from bayesmachine.params import (
 
 __all__ = [
     "DEFAULT_BAUD",
+    "BAUD_RANGE",
+    "MAX_SILENCE_S",
     "MachineOption",
     "MACHINE_OPTIONS",
     "add_option",
@@ -73,6 +75,8 @@ __all__ = [
     "model_params_from_args",
     "float_arg",
     "positive_float_arg",
+    "positive_float_at_most",
+    "int_in_range",
     "rng_list",
     "runnable_sources",
     "argument_type",
@@ -87,6 +91,10 @@ T = TypeVar("T")
 # The board's serial link: the baud rate ``board build`` builds for and ``run --engine board`` opens
 # the port at, unless told otherwise (here, where both commands' packages can read it).
 DEFAULT_BAUD = 3_000_000
+# ``run --engine board``'s bounds: the serial port's rates (pyserial overflows past 32 bits; USB-serial
+# chips reach 12 Mbaud, the ULX3S's FT231X 3), and seconds of silence before a board is deemed mute.
+BAUD_RANGE = (300, 12_000_000)
+MAX_SILENCE_S = 600.0
 
 
 def int_arg(text: str) -> int:
@@ -145,6 +153,32 @@ def positive_float_arg(text: str) -> float:
     if not value > 0:
         raise argparse.ArgumentTypeError(f"expected a number > 0, got {text!r}")
     return value
+
+
+def int_in_range(lo: int, hi: int) -> Callable[[str], int]:
+    """An argparse type: an integer (:func:`int_arg`'s spellings) in [lo, hi]."""
+
+    def convert(text: str) -> int:
+        value = int_arg(text)
+        if not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"expected an integer in [{lo}, {hi}], got {text!r}")
+        return value
+
+    convert.__name__ = "integer"
+    return convert
+
+
+def positive_float_at_most(hi: float) -> Callable[[str], float]:
+    """An argparse type: a number in (0, hi] (a time out, bounded so that nothing waits for ever)."""
+
+    def convert(text: str) -> float:
+        value = positive_float_arg(text)
+        if value > hi:
+            raise argparse.ArgumentTypeError(f"expected a number in (0, {hi:g}], got {text!r}")
+        return value
+
+    convert.__name__ = "number"
+    return convert
 
 
 _SMTJ_FIELDS = ("smtj_dwell", "smtj_spread", "smtj_share")
@@ -606,6 +640,10 @@ def model_params_from_args(args: argparse.Namespace, name: str | None = None) ->
         flags = [f for fs in refused.values() for f in fs]
         raise ParameterError(f"{', '.join(flags)}: options of --model {' and '.join(owners)}, which do not "
                              f"apply to --model {','.join(names)}")
+    prior = [f"--{k.replace('_', '-')}" for k in ("prior_eps", "prior_s", "prior_nomatch") if k in given]
+    if prior and given.get("neighbour_prior") is False:  # they would be recorded and do nothing
+        raise ParameterError(f"{', '.join(prior)}: options of the neighbour prior, which "
+                             "--no-neighbour-prior turns off; give one or the other")
     try:
         return ModelParams(name=name, dmax=args.dmax, **given)
     except ParameterError as exc:

@@ -6,10 +6,12 @@
   ``synth``). It locks the directory (a second run into it is refused at once), removes the
   command's files of the previous run there, as the directory's manifest
   (``.bayesmachine-manifest.json``) lists them, the final report first (an interrupted rerun
-  never shows an old report beside new files); anything else in the directory is left alone.
-  It stages each new file under a temporary name, and on :meth:`OutputDir.commit` records them
-  in the manifest and renames them into place with the report last: a report's presence means
-  the run is complete. On any exception (KeyboardInterrupt and SIGTERM included) the staged
+  never shows an old report beside new files); anything else in the directory is left alone,
+  and a file under one of the command's names that no manifest lists is refused before any
+  work (it is the user's: never replaced). It stages each new file under a temporary name, and
+  on :meth:`OutputDir.commit` records them in the manifest and moves them into place with the
+  report last, never over a file that appeared meanwhile: a report's presence means the run is
+  complete. On any exception (KeyboardInterrupt and SIGTERM included) the staged
   files are removed.
 * :class:`NpzWriter`: an ``.npz`` written array by array, one array possibly streamed in
   chunks along its first axis, so a volume larger than memory never has to be held.
@@ -42,6 +44,7 @@ __all__ = [
     "OutputBusyError",
     "OutputDir",
     "read_manifest",
+    "require_ours",
     "NpzWriter",
     "available_memory",
     "require_memory",
@@ -190,24 +193,62 @@ def _write_manifest(directory: Path, names: Iterable[str]) -> None:
         raise _named(exc, path) from exc
 
 
+def _foreign(path: Path) -> FileExistsError:
+    return FileExistsError(errno.EEXIST, "exists and bayesmachine did not write it (no manifest of this "
+                           "directory lists it): it is left alone; move it away or choose another output",
+                           str(path))
+
+
+def require_ours(path: str | Path) -> None:
+    """Refuse (FileExistsError naming it) a file at ``path`` that its directory's manifest does not
+    list: a file bayesmachine did not write, which it never replaces."""
+    path = Path(path)
+    if os.path.lexists(path) and path.name not in read_manifest(path.parent):
+        raise _foreign(path)
+
+
+def _place(tmp: Path, final: Path) -> None:
+    """Rename ``tmp`` to ``final`` unless something appeared under that name meanwhile (cleared at the
+    start, so anything there now is not ours): a hard link never replaces; without hard links on this
+    filesystem, look first."""
+    try:
+        os.link(tmp, final)
+    except FileExistsError:
+        raise _foreign(final) from None
+    except OSError:
+        if os.path.lexists(final):
+            raise _foreign(final) from None
+        os.replace(tmp, final)
+        return
+    os.unlink(tmp)
+
+
 class OutputDir:
     """A transaction over the files one command writes into a directory.
 
     ``names``: every file name the command can write there; ``last``: the name committed last
-    (the report). Entering locks the directory (:class:`OutputBusyError` while another run holds
-    it) and removes this command's files of the previous run there, as its manifest
+    (the report); ``writes``: the names this run may write (default: all of ``names``). Entering
+    locks the directory (:class:`OutputBusyError` while another run holds it) and removes this
+    command's files of the previous run there, as its manifest
     (``MANIFEST``) lists them, the report first: only files the project wrote, never anything
-    else in the directory (another command's outputs listed there stay, and stay listed).
-    :meth:`commit` records the new files in the manifest, then renames them into place.
+    else in the directory (another command's outputs listed there stay, and stay listed). A file
+    under one of ``writes`` that the manifest does not list is refused (FileExistsError naming
+    it). :meth:`commit` records the new files in the manifest, then moves them into place (again
+    refusing to replace a file that appeared meanwhile).
     """
 
-    def __init__(self, directory: str | Path, names: Iterable[str], last: str) -> None:
+    def __init__(self, directory: str | Path, names: Iterable[str], last: str,
+                 writes: Iterable[str] | None = None) -> None:
         self.directory = Path(directory)
         self.names = tuple(dict.fromkeys([last, *names]))  # the report first when clearing
         self.last = last
-        bad = [n for n in self.names if not _plain_name(n)]
+        # The names this run may write (default all): a file of the user's under another stays.
+        self.writes = self.names if writes is None else tuple(writes)
+        bad = [n for n in (*self.names, *self.writes) if not _plain_name(n)]
         if bad:
             raise ValueError(f"output names must be plain file names, got {bad}")
+        if not set(self.writes) <= set(self.names):
+            raise ValueError(f"writes {self.writes} must be among the names {self.names}")
         self._staged: dict[str, Path] = {}
         self._committed = False
         self._created: list[Path] = []
@@ -216,6 +257,9 @@ class OutputDir:
 
     def __enter__(self) -> OutputDir:
         d = self.directory
+        if d.is_symlink() and not d.exists():
+            raise FileNotFoundError(errno.ENOENT, f"a symbolic link to {os.readlink(d)}, which does not "
+                                    "exist (create that directory, or choose another output)", str(d))
         if d.exists() and not d.is_dir():
             what = "is a file" if d.is_file() else "exists"
             problem = f"{what}, not a directory (the outputs go into a directory)"
@@ -228,6 +272,9 @@ class OutputDir:
             raise _named(exc, d) from exc
         self._created = missing
         try:
+            if not os.access(d, os.W_OK | os.X_OK):  # refused before any work, not at the first write
+                raise PermissionError(errno.EACCES, "cannot write into this directory (permission denied)",
+                                      str(d))
             self._lock = _lock(d)
             self._clear()
         except BaseException:
@@ -241,6 +288,10 @@ class OutputDir:
             if (d / name).is_dir():
                 raise IsADirectoryError(errno.EISDIR, "is a directory (an output file name)", str(d / name))
         previous = read_manifest(d)
+        # A name this run writes that no run of ours wrote here is the user's: refused before any work.
+        for name in self.writes:
+            if name not in previous and os.path.lexists(d / name):
+                raise _foreign(d / name)
         # This command's files of the previous run go; another command's files listed there (a
         # sweep's in a run's OUT/) are complete outputs of their own: they stay, and stay listed.
         stale = [n for n in previous if n in self.names]
@@ -281,8 +332,8 @@ class OutputDir:
 
     def path(self, name: str) -> Path:
         """The temporary path to write ``name`` to (committed under ``name``)."""
-        if name not in self.names:
-            raise ValueError(f"{name!r} is not one of this command's outputs {self.names}")
+        if name not in self.writes:
+            raise ValueError(f"{name!r} is not one of this run's outputs {self.writes}")
         tmp = self._staged.get(name)
         if tmp is None:
             tmp = self._staged[name] = _temp_name(self.directory / name)
@@ -318,7 +369,9 @@ class OutputDir:
                 _fsync_file(tmp)
                 if name == self.last:
                     _fsync_dir(self.directory)  # everything else is in place before the report appears
-                os.replace(tmp, final)
+                _place(tmp, final)
+            except FileExistsError:
+                raise
             except OSError as exc:
                 raise _named(exc, final) from exc
             done.append(final)

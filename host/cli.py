@@ -19,17 +19,21 @@ from pathlib import Path
 import numpy as np
 
 from bayesmachine.cliargs import (
+    BAUD_RANGE,
     DEFAULT_BAUD,
     MACHINE_OPTIONS,
+    MAX_SILENCE_S,
     add_machine_options,
     add_model_options,
     argument_type,
     float_arg,
     int_arg,
+    int_in_range,
     machine_params_from_args,
     model_params_from_args,
     output_path,
     positive_float_arg,
+    positive_float_at_most,
     runnable_sources,
 )
 from bayesmachine.models import ModelParams
@@ -52,7 +56,16 @@ from .features import model_features
 from .images import Crop, bundled_pair, crop_image, load_gt, load_image, parse_crop, validate_pair
 from .reference import reference_bands, warm_up
 from .run import ENGINES, FEEDS, RunOutcome, result_bytes, run_pair
-from .sweep import SWEEP_OUTPUTS, Point, SweepConfig, list_option_changes, run_sweep, seed_cache, sweep_points
+from .sweep import (
+    SWEEP_OUTPUTS,
+    Point,
+    SweepConfig,
+    list_option_changes,
+    parse_scheduler,
+    run_sweep,
+    seed_cache,
+    sweep_points,
+)
 
 __all__ = ["register", "RUN_OUTPUTS", "SWEEP_OUTPUTS"]
 
@@ -61,6 +74,7 @@ __all__ = ["register", "RUN_OUTPUTS", "SWEEP_OUTPUTS"]
 RUN_OUTPUTS = ("report.json", "result.npz", "disparity.png", "confidence.png", "calibration.png", "depth.npy",
                "cloud.ply", "waves.vcd")
 SWEEP_COUNTER_MAX = [1, 2, 4, 8, 16, 32]
+MAX_CONNECT_S = 600.0  # --connect-timeout: a cluster that takes longer to answer is not coming
 
 
 def _add_input_options(p: argparse.ArgumentParser, optional: bool) -> None:
@@ -122,13 +136,20 @@ def _parse_slice(text: str) -> slice:
     return slice(*values)
 
 
+def _max_workers() -> int:
+    """Local worker processes at most: twice the cores (more only compete for them, and each holds
+    its own pairs and compiled kernels in memory)."""
+    return 2 * (os.cpu_count() or 1)
+
+
 def _parse_workers(text: str) -> int:
     try:
         n = int(text)
     except ValueError:
         raise ValueError(f"expected a number of workers, got {text!r}") from None
-    if n < 0:
-        raise ValueError(f"expected 0 (this process) or more workers, got {n}")
+    if not 0 <= n <= _max_workers():
+        raise ValueError(f"expected 0 (this process) to {_max_workers()} (twice this machine's cores) "
+                         f"workers, got {n}")
     return n
 
 
@@ -177,24 +198,24 @@ def _add_machine_options(p: argparse.ArgumentParser, sweep: bool) -> None:
         g.add_argument("--port", default=None,
                        help="with --engine board: the serial port (/dev/ttyUSB0, or the path board simulate "
                        "printed)")
-        g.add_argument("--baud", type=int_arg, default=None,
+        g.add_argument("--baud", type=int_in_range(*BAUD_RANGE), default=None,
                        help="with --engine board: the baud rate the bitstream was built for "
-                       f"(default {DEFAULT_BAUD})")
+                       f"({BAUD_RANGE[0]} to {BAUD_RANGE[1]}, default {DEFAULT_BAUD})")
         g.add_argument("--board-fields", default=None, metavar="LIST",
                        help="with --engine board: the result fields the board sends, a comma-separated "
                        "list of map, counts, cycles (default all three; the MAP and its flags always "
                        "come). --board-fields map cuts the results' bytes on the link; result.npz then "
                        "has no counts or cycles and report.json's figures of them are null")
-        g.add_argument("--board-timeout", type=positive_float_arg, default=None, metavar="S",
-                       help="with --engine board: seconds of silence before the board is deemed not to "
-                       "answer "
-                       "(default 2)")
+        g.add_argument("--board-timeout", type=positive_float_at_most(MAX_SILENCE_S), default=None,
+                       metavar="S", help="with --engine board: seconds of silence before the board is deemed "
+                       f"not to answer (at most {MAX_SILENCE_S:g}, default 2)")
         g.add_argument(
             "--feed",
             choices=FEEDS,
-            default="words",
+            default=None,
             help="words: the host computes each pixel's likelihood words (default); pixels: the pair "
-            "goes into the on-chip front end + machine (StereoMachine RTL, --engine verilator)",
+            "goes into the on-chip front end + machine (StereoMachine RTL, --engine verilator; what "
+            "--engine board runs)",
         )
         g.add_argument(
             "--machines", type=int_arg, default=None,
@@ -483,6 +504,7 @@ def _check_board_args(args: argparse.Namespace, model: ModelParams) -> None:
     if args.engine != "board":
         if given:
             raise ValueError(f"{', '.join(given)}: only with --engine board")
+        args.feed = args.feed or "words"
         return
     if args.port is None:
         raise ValueError("--engine board needs --port (the board's serial port, or the path "
@@ -494,6 +516,9 @@ def _check_board_args(args: argparse.Namespace, model: ModelParams) -> None:
                          "pixels)")
     if args.waves is not None:
         raise ValueError("--waves is not available with --engine board")
+    if args.feed == "words":
+        raise ValueError("--engine board --feed words: the board takes the pair itself into its on-chip "
+                         "front end (--feed pixels, which it runs); leave --feed out")
     args.feed = "pixels"  # the board takes the pair itself: its machine has the front end's lanes
     check_pixel_engine_options("board", **_board_options(args))  # before any work
 
@@ -528,7 +553,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
     _check_fits(region, machine)
     calib = _run_calibration(args)  # read and checked before the machine runs
     params = ConfidenceParams(t=args.confidence_t, window=args.confidence_window)
-    with OutputDir(args.output, RUN_OUTPUTS, last="report.json") as out:
+    # What this run writes (a user's file under another of the names stays, and does not stop it).
+    optional = {"waves.vcd": waves is not None, "calibration.png": gt is not None,
+                "depth.npy": calib is not None, "cloud.ply": calib is not None}
+    writes = [n for n in RUN_OUTPUTS if optional.get(n, True)]
+    with OutputDir(args.output, RUN_OUTPUTS, last="report.json", writes=writes) as out:
         # The harness writes the trace under its temporary name; commit() renames it with the rest.
         engine_options = {} if waves is None else {"trace": (*waves, str(out.path("waves.vcd")))}
         if args.engine == "board":
@@ -676,6 +705,9 @@ def _sweep_pairs(
     """The pairs of a sweep: ``--dataset``'s, or the one pair of LEFT RIGHT (or the bundled one),
     which is loaded and sized here first so that a bad input is one error line, as for ``run``."""
     if args.dataset is None:
+        given = [f for f, v in (("--pairs", args.pairs), ("--kitti-gt", args.kitti_gt)) if v is not None]
+        if given:
+            raise ValueError(f"{', '.join(given)}: options of --dataset (a sweep of one pair has no others)")
         left, right, gt, source = _load_inputs(args, with_gt=True)
         for point in points:  # each model on its own output region (OutputRegion.of_model)
             _check_fits(OutputRegion.of_model(left.shape, point.model), point.machine)
@@ -694,12 +726,24 @@ def _sweep_pairs(
     # Absolute paths: a worker elsewhere (--scheduler) has its own working directory.
     dataset = resolve_dataset([os.path.abspath(p) for p in args.dataset], gt_scale=args.gt_scale,
                               occluded=args.kitti_gt == "occ")
+    if args.kitti_gt is not None and "kitti" not in dataset.layout.split("+"):
+        raise ValueError(f"--kitti-gt {args.kitti_gt}: the dataset has no KITTI pairs (its layout: "
+                         f"{dataset.layout})")
     pairs = dataset.pairs[args.pairs] if args.pairs is not None else dataset.pairs
     if not pairs:
-        raise ValueError(f"--pairs {args.pairs.start}:{args.pairs.stop}:{args.pairs.step} selects none of "
-                         f"the dataset's {len(dataset.pairs)} pairs")
-    described = {"path": dataset.path, "layout": dataset.layout, "pairs_found": len(dataset.pairs)}
+        raise ValueError(f"--pairs {_slice_text(args.pairs)} selects none of the dataset's "
+                         f"{len(dataset.pairs)} pairs")
+    described: dict[str, object] = {"path": dataset.path, "layout": dataset.layout,
+                                    "pairs_found": len(dataset.pairs)}
+    if dataset.skipped:
+        described["skipped"] = dataset.skipped
+    for why in dataset.skipped:  # never skipped without a word, --quiet or not
+        print(f"note: skipped {why}", file=sys.stderr)
     return pairs, " ".join(args.dataset), described
+
+
+def _slice_text(s: slice | None) -> str:
+    return "(all)" if s is None else ":".join("" if v is None else str(v) for v in (s.start, s.stop, s.step))
 
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
@@ -739,9 +783,11 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     for f in outcome.failures:
         print(f"bayesmachine sweep: task failed: pair {f.pair}, point {f.point}: {f.error}", file=sys.stderr)
     if outcome.failures:
-        print(f"bayesmachine sweep: {len(outcome.failures)} of {len(pairs) * len(points)} tasks failed; the "
-              f"others are in {args.output / 'sweep.json'} (rerun with --resume to retry the failed ones)",
-              file=sys.stderr)
+        tasks, failed = len(pairs) * len(points), len(outcome.failures)
+        what = (f"all {tasks} tasks failed; their reasons are" if failed == tasks
+                else f"{failed} of {tasks} tasks failed; the others are")
+        print(f"bayesmachine sweep: {what} in {args.output / 'sweep.json'} (rerun with --resume to retry the "
+              "failed ones)", file=sys.stderr)
         return 1
     return 0
 
@@ -832,16 +878,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
                    metavar="START:STOP[:STEP]",
                    help="run these of the dataset's pairs (Python slice, in the layout's order), e.g. "
                    "0:6300:50 for every 50th frame")
-    d.add_argument("--kitti-gt", choices=("noc", "occ"), default="noc",
-                   help="KITTI ground truth: disp_noc (non-occluded pixels, default) or disp_occ (all)")
+    d.add_argument("--kitti-gt", choices=("noc", "occ"), default=None,
+                   help="KITTI ground truth: disp_noc (non-occluded pixels, default) or disp_occ (all); "
+                   "refused for a dataset without KITTI pairs")
     d.add_argument("--workers", type=argument_type(_parse_workers, "workers"), default=None, metavar="N",
-                   help="local Dask worker processes (default: one per core with --dataset, 0 = in this "
-                   "process for one pair)")
-    d.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                   help="run the tasks on the Dask cluster whose scheduler is at ADDRESS (tcp://host:8786); "
-                   "the workers need this package, the dataset and OUT at the same paths")
-    d.add_argument("--connect-timeout", type=positive_float_arg, default=5.0, metavar="S",
-                   help="give up on --scheduler after S seconds (default 5)")
+                   help=f"local Dask worker processes, 0 to twice the cores ({_max_workers()} here) "
+                   "(default: one per core with --dataset, 0 = in this process for one pair)")
+    d.add_argument("--scheduler", type=argument_type(parse_scheduler, "scheduler"), default=None,
+                   metavar="ADDRESS",
+                   help="run the tasks on the Dask cluster whose scheduler is at ADDRESS (tcp://HOST:PORT, "
+                   "e.g. tcp://head:8786); the workers need this package, the dataset and OUT at the same "
+                   "paths")
+    d.add_argument("--connect-timeout", type=positive_float_at_most(MAX_CONNECT_S), default=5.0, metavar="S",
+                   help=f"give up on --scheduler after S seconds (at most {MAX_CONNECT_S:g}, default 5; "
+                   "at once when nothing listens at a local address)")
     d.add_argument("--resume", action="store_true",
                    help="keep the tasks whose OUT/runs/.../result.json is complete and of the same pair and "
                    "point (an interrupted or partly failed sweep); run the rest")

@@ -35,6 +35,7 @@ import csv
 import math
 import os
 import re
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -42,7 +43,7 @@ import cv2
 import numpy as np
 
 from .calib import StereoCalibration, bundled_calibration_path, read_calibration
-from .images import Crop, bundled_pair, crop_image, load_gt, load_image, to_gray
+from .images import Crop, bundled_pair, check_readable, crop_image, load_gt, load_image, opencv_quiet, to_gray
 
 __all__ = [
     "PairSpec",
@@ -72,7 +73,10 @@ class PairSpec:
     left and right are video files and this is the frame index. ``dmax_hint``: the largest
     disparity the dataset says to expect (Middlebury ``ndisp`` - 1), if it says. ``calib``: the
     pair's calibration file (:func:`~.calib.read_calibration`; ``"bundled"``: the bundled pair's),
-    ``calib_cameras`` the KITTI cameras it is for.
+    ``calib_cameras`` the KITTI cameras it is for. ``gt_bits``: the depth the layout's ground-truth
+    images have (KITTI: 16); another is refused when loading. ``error``: why the pair cannot be
+    loaded (a directory that cannot be listed), raised by :func:`load_pair`, so that its tasks fail
+    with it.
     """
 
     name: str
@@ -85,10 +89,12 @@ class PairSpec:
     note: str | None = None
     calib: str | None = None
     calib_cameras: tuple[int, int] | None = None
+    gt_bits: int | None = None
+    error: str | None = None
 
     def to_dict(self) -> dict[str, object]:
         d: dict[str, object] = {"name": self.name, "left": self.left, "right": self.right, "gt": self.gt}
-        for key in ("gt_scale", "dmax_hint", "frame", "note", "calib", "calib_cameras"):
+        for key in ("gt_scale", "dmax_hint", "frame", "note", "calib", "calib_cameras", "gt_bits", "error"):
             if getattr(self, key) is not None:
                 d[key] = getattr(self, key)
         return d
@@ -96,11 +102,13 @@ class PairSpec:
 
 @dataclass
 class Dataset:
-    """What :func:`resolve_dataset` found: the layout, the pairs in order, notes per pair."""
+    """What :func:`resolve_dataset` found: the layout, the pairs in order, notes per pair, and the
+    directories not searched (``skipped``: a link back to a directory searched already), each named."""
 
     path: str
     layout: str
     pairs: list[PairSpec] = field(default_factory=list)
+    skipped: list[str] = field(default_factory=list)
 
     @property
     def notes(self) -> list[str]:
@@ -120,13 +128,20 @@ def files_spec(left: str, right: str, gt: str | None = None, gt_scale: float | N
 # --- loading (on the worker) ------------------------------------------------------------------
 
 
+def _open_video(path: Path | str) -> cv2.VideoCapture:
+    """An opened capture of ``path``, or one clear error (not found, permission denied, not a video)."""
+    check_readable(Path(path), "video file")
+    with opencv_quiet():
+        cap = cv2.VideoCapture(str(path))
+    if not cap.isOpened():
+        cap.release()
+        raise ValueError(f"cannot open {path} as a video")
+    return cap
+
+
 def _video_frame(path: str, index: int) -> np.ndarray:
-    if not Path(path).is_file():
-        raise FileNotFoundError(f"video file not found: {path}")
-    cap = cv2.VideoCapture(path)
+    cap = _open_video(path)
     try:
-        if not cap.isOpened():
-            raise ValueError(f"cannot open {path} as a video")
         # Seek (OpenCV's FFmpeg back end decodes forward from the key frame before it); a back end
         # that cannot says so through the position, and then the frames are read up to it.
         skip = index
@@ -151,6 +166,8 @@ def load_pair(spec: PairSpec, crop: Crop | None = None) -> tuple[np.ndarray, np.
     Raises (ValueError / OSError naming the file) for a missing or unreadable file, left and
     right of different sizes, or ground truth of another size."""
     gt = None
+    if spec.error is not None:
+        raise ValueError(spec.error)
     if spec.left == BUNDLED:
         left, right, gt = bundled_pair()
     elif spec.frame is not None:
@@ -158,7 +175,7 @@ def load_pair(spec: PairSpec, crop: Crop | None = None) -> tuple[np.ndarray, np.
     else:
         left, right = load_image(spec.left), load_image(spec.right)
         if spec.gt is not None:
-            gt = load_gt(spec.gt, scale=spec.gt_scale)
+            gt = load_gt(spec.gt, scale=spec.gt_scale, bits=spec.gt_bits)
     if left.shape != right.shape:
         raise ValueError(f"left and right images differ in size: {left.shape[1]}x{left.shape[0]} vs "
                          f"{right.shape[1]}x{right.shape[0]}")
@@ -276,10 +293,12 @@ def _kitti_pairs(directory: Path, prefix: str, gt_scale: float | None, occluded:
         note = None if gt.is_file() else f"no ground truth ({gt_dir.name}/{left.name} missing)"
         frame = left.stem[: -len("_10")]  # calib files are named by the frame: 000000.txt
         calib = next((c for c in (directory / d / f"{frame}.txt" for d in calib_dirs) if c.is_file()), None)
+        # 16-bit PNGs of disparity x 256; --gt-scale reads another file as the user says.
         pairs.append(PairSpec(f"{prefix}{left.stem}", str(left), str(directory / right_dir / left.name),
                               str(gt) if gt.is_file() else None, gt_scale if gt_scale is not None else 256.0,
                               note=note, calib=str(calib) if calib else None,
-                              calib_cameras=cameras if calib else None))
+                              calib_cameras=cameras if calib else None,
+                              gt_bits=16 if gt_scale is None else None))
     return pairs
 
 
@@ -304,10 +323,11 @@ def _frame_pairs(left_dir: Path, right_dir: Path, prefix: str = "") -> list[Pair
 
 
 def _video_frames(path: Path) -> int:
-    cap = cv2.VideoCapture(str(path))
     try:
-        if not cap.isOpened():
-            raise ValueError(f"--dataset: cannot open {path} as a video")
+        cap = _open_video(path)
+    except ValueError as exc:
+        raise ValueError(f"--dataset: {exc}") from None
+    try:
         n = 0
         while cap.grab():  # count by reading: a container's frame count may be missing or wrong
             n += 1
@@ -329,10 +349,23 @@ def _video_pairs(left: Path, right: Path) -> list[PairSpec]:
     return pairs
 
 
+def _strip_comment(line: str) -> str:
+    """``line`` up to its first ``#`` outside double quotes (a quoted path may hold one)."""
+    quoted = False
+    for i, c in enumerate(line):
+        if c == '"':
+            quoted = not quoted
+        elif c == "#" and not quoted:
+            return line[:i]
+    return line
+
+
 def _split_line(line: str) -> list[str]:
+    """The fields of a list line: comma-separated (CSV: an empty field stays in its place) or
+    separated by white space; either way a field may be double-quoted."""
     if "," in line:
-        return [c.strip() for c in next(csv.reader([line]))]
-    return line.split()
+        return [c.strip() for c in next(csv.reader([line], skipinitialspace=True))]
+    return [q if q else w for q, w in re.findall(r'"([^"]*)"|(\S+)', line)]
 
 
 def _list_pairs(path: Path, gt_scale: float | None) -> list[PairSpec]:
@@ -345,15 +378,17 @@ def _list_pairs(path: Path, gt_scale: float | None) -> list[PairSpec]:
     pairs: list[PairSpec] = []
     names: dict[str, int] = {}
     for number, raw in enumerate(lines, 1):
-        line = raw.split("#", 1)[0].strip()
+        line = _strip_comment(raw).strip()
         if not line:
             continue
-        cols = [c for c in _split_line(line) if c != ""]
+        cols = _split_line(line)
+        while len(cols) > 2 and cols[-1] == "":  # trailing empty fields: 'l,r,' or 'l,r,,'
+            cols.pop()
         if number == 1 and cols and cols[0].lower() == "left":
             continue  # a CSV header
-        if not 2 <= len(cols) <= 4:
+        if not 2 <= len(cols) <= 4 or not (cols[0] and cols[1]):
             raise ValueError(f"--dataset {path}, line {number}: expected 'left right [gt [gt_scale]]', "
-                             f"got {len(cols)} fields")
+                             f"got {len(cols)} fields" + ("" if len(cols) < 2 else f": {line!r}"))
         left, right = (str(base / c) for c in cols[:2])
         gt = str(base / cols[2]) if len(cols) > 2 and cols[2] else None
         scale = gt_scale
@@ -368,8 +403,9 @@ def _list_pairs(path: Path, gt_scale: float | None) -> list[PairSpec]:
         stem = Path(cols[0]).stem
         names[stem] = names.get(stem, 0) + 1
         name = stem if names[stem] == 1 else f"{stem}~{names[stem]}"
-        pairs.append(PairSpec(name, left, right, gt, scale if gt else None,
-                              note=None if gt else "no ground truth given"))
+        note = None if gt else "no ground truth given" + (f" (its gt_scale {cols[3]} scales nothing)"
+                                                          if len(cols) == 4 else "")
+        pairs.append(PairSpec(name, left, right, gt, scale if gt else None, note=note))
     if not pairs:
         raise ValueError(f"--dataset {path}: the list names no pair")
     return pairs
@@ -390,9 +426,16 @@ def resolve_dataset(paths: list[str] | tuple[str, ...], gt_scale: float | None =
     shown = " ".join(paths)
     if len(ps) == 2:
         if all(p.is_dir() for p in ps):
-            return Dataset(shown, "frames", _frame_pairs(*ps))
+            pairs = _frame_pairs(*ps)
+            if not pairs:
+                raise ValueError(f"--dataset {shown}: neither directory holds a frame (an image file: "
+                                 f"{' '.join(_IMAGE_SUFFIXES)})")
+            return Dataset(shown, "frames", pairs)
         if all(p.is_file() and p.suffix.lower() in VIDEO_SUFFIXES for p in ps):
-            return Dataset(shown, "video", _video_pairs(*ps))
+            pairs = _video_pairs(*ps)
+            if not pairs:
+                raise ValueError(f"--dataset {shown}: neither video holds a frame")
+            return Dataset(shown, "video", pairs)
         raise ValueError(f"--dataset {shown}: two paths must be two frame directories or two video files "
                          f"({', '.join(VIDEO_SUFFIXES)})")
     root = ps[0]
@@ -400,27 +443,28 @@ def resolve_dataset(paths: list[str] | tuple[str, ...], gt_scale: float | None =
         return Dataset(shown, "list", _list_pairs(root, gt_scale))
     pairs: list[PairSpec] = []
     layouts: set[str] = set()
-    for dirpath, dirnames, _ in os.walk(root):
-        dirnames.sort()
-        d = Path(dirpath)
-        rel = d.relative_to(root).as_posix()
+    skipped: list[str] = []
+    for d, rel, subdirs, unlisted in _walk(root, skipped):
         prefix = "" if rel == "." else f"{rel}/"
         kitti = _kitti_pairs(d, prefix, gt_scale, occluded)
         if kitti:
             pairs += kitti
             layouts.add("kitti")
-            dirnames.clear()  # its image_*/disp_* directories are not scenes
+            subdirs.clear()  # its image_*/disp_* directories are not scenes
             continue
         if (d / "left").is_dir() and (d / "right").is_dir():
             pairs += _frame_pairs(d / "left", d / "right", prefix)
             layouts.add("frames")
-            dirnames.clear()
+            subdirs.clear()
             continue
-        scene = _scene_pair(d, "." if rel == "." else rel, gt_scale)
+        scene = _scene_pair(d, rel, gt_scale)
         if scene is not None:
             pairs.append(scene)
             layouts.add("middlebury2014" if Path(scene.left).name == "im0.png" else "middlebury")
-            dirnames.clear()
+            subdirs.clear()
+        elif unlisted:  # not a scene by its file names, and what it holds cannot be seen: a failed pair
+            pairs.append(PairSpec(rel, str(d), str(d), error=f"{d}: cannot list this directory ({unlisted}); "
+                                  "it may hold a scene"))
     if not pairs:
         raise ValueError(
             f"--dataset {root}: no stereo pair found (looked for Middlebury scenes: im0/im1, view1/view5, "
@@ -428,4 +472,35 @@ def resolve_dataset(paths: list[str] | tuple[str, ...], gt_scale: float | None =
         )
     if pairs[0].name == "." and len(pairs) == 1:
         pairs[0] = PairSpec(**{**pairs[0].__dict__, "name": root.resolve().name or "pair"})
-    return Dataset(shown, "+".join(sorted(layouts)), pairs)
+    return Dataset(shown, "+".join(sorted(layouts)), pairs, skipped)
+
+
+def _walk(root: Path, skipped: list[str]) -> Iterator[tuple[Path, str, list[str], str | None]]:
+    """Every directory under ``root``, depth first in name order, as (path, name under root,
+    subdirectory names: clear them to not descend, why it could not be listed or None). Symbolic
+    links to directories are followed; a directory met again (a link back up: a loop, or a second
+    link to one) is not searched twice and is named in ``skipped``."""
+    seen: dict[str, str] = {}  # real path -> the name it was searched under
+    stack = [(root, ".")]
+    while stack:
+        d, rel = stack.pop()
+        real = os.path.realpath(d)
+        if real in seen:
+            first = seen[real]
+            if first == "." or rel.startswith(f"{first}/"):
+                where = "the dataset directory" if first == "." else first
+                skipped.append(f"{rel}: a link back to {where} (a loop), not followed")
+            else:
+                skipped.append(f"{rel}: the same directory as {first}, searched once")
+            continue
+        seen[real] = rel
+        try:
+            with os.scandir(d) as entries:
+                subdirs, unlisted = sorted(e.name for e in entries if e.is_dir()), None
+        except OSError as exc:
+            if rel == ".":
+                raise OSError(exc.errno, f"cannot list the dataset directory ({exc.strerror})",
+                              str(d)) from None
+            subdirs, unlisted = [], exc.strerror or str(exc)
+        yield d, rel, subdirs, unlisted
+        stack.extend((d / n, n if rel == "." else f"{rel}/{n}") for n in reversed(subdirs))

@@ -11,7 +11,10 @@ error line, not its ``[ WARN ]``/``[ERROR]`` lines first.
 
 from __future__ import annotations
 
+import contextlib
 import os
+import re
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -19,6 +22,10 @@ import cv2
 import numpy as np
 
 from bayesmachine.region import FILTER_SIZE, MARGIN, OutputRegion
+
+# FFmpeg (OpenCV's video back end) logs to stderr by itself ("moov atom not found" before our own
+# error line); it reads this once, at its first use. A user's own setting wins.
+os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
 
 __all__ = [
     "FILTER_SIZE",
@@ -29,6 +36,8 @@ __all__ = [
     "to_gray",
     "load_image",
     "load_gt",
+    "check_readable",
+    "opencv_quiet",
     "decode_disparity",
     "GT_FORMATS",
     "bundled_pair",
@@ -96,7 +105,7 @@ def to_gray(image: np.ndarray, rgb: bool = False) -> np.ndarray:
     raise ValueError(f"unsupported image shape {image.shape}: expected gray, BGR or BGRA")
 
 
-def _check_readable(path: Path, what: str) -> None:
+def check_readable(path: Path, what: str) -> None:
     """A clear error for a path that is not a readable file (before a reader says something vaguer)."""
     if not path.exists():
         raise FileNotFoundError(f"{what} not found: {path}")
@@ -108,23 +117,69 @@ def _check_readable(path: Path, what: str) -> None:
         raise PermissionError(13, "permission denied (cannot read it)", str(path))
 
 
-def _imread(path: Path) -> np.ndarray | None:
-    """``cv2.imread(path, IMREAD_UNCHANGED)`` with OpenCV's log silenced (None if it cannot read it)."""
+@contextlib.contextmanager
+def opencv_quiet() -> Iterator[None]:
+    """OpenCV's own log silenced in the block (its ``[ WARN ]`` lines; FFmpeg's are off from import)."""
     log = getattr(getattr(cv2, "utils", None), "logging", None)
-    if log is None:  # an OpenCV without the logging module: read as is
-        return cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if log is None:  # an OpenCV without the logging module
+        yield
+        return
     previous = log.getLogLevel()
     log.setLogLevel(log.LOG_LEVEL_SILENT)
     try:
-        return cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+        yield
     finally:
         log.setLogLevel(previous)
+
+
+# Netpbm and PFM headers: the magic, then width and height (comments allowed in Netpbm's).
+_PNM_MAGIC = (b"P1", b"P2", b"P3", b"P4", b"P5", b"P6", b"P7", b"PF", b"Pf")
+
+
+def _declared_size(path: Path) -> tuple[int, int] | None:
+    """The width and height a Netpbm/PFM file's header declares (None: another format, or no
+    numbers where they belong)."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(512)
+    except OSError:
+        return None
+    if head[:2] not in _PNM_MAGIC:
+        return None
+    tokens = re.sub(rb"#[^\n]*", b" ", head[2:]).split()[:2]
+    if len(tokens) < 2 or not all(re.fullmatch(rb"[-+]?\d+", t) for t in tokens):
+        return None
+    return int(tokens[0]), int(tokens[1])
+
+
+MAX_PIXELS = 1 << 30  # OpenCV's own limit on an image it reads
+
+
+def _imread(path: Path) -> np.ndarray | None:
+    """``cv2.imread(path, IMREAD_UNCHANGED)`` with OpenCV's log silenced (None if it cannot read it;
+    ValueError naming the file for a header declaring 0, negative or over 2^30 pixels)."""
+    try:
+        with opencv_quiet():
+            image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    except cv2.error:  # OpenCV asserts on some headers instead of returning None
+        image = None
+        refused = True
+    else:
+        refused = False
+    if image is None:
+        size = _declared_size(path)
+        if size is not None and not (size[0] > 0 and size[1] > 0 and size[0] * size[1] <= MAX_PIXELS):
+            raise ValueError(f"cannot read {path}: its header declares {size[0]} x {size[1]} pixels (an "
+                             "image holds 1 to 2^30)")
+        if refused:
+            raise ValueError(f"cannot read {path}: OpenCV refuses its header (a corrupt file?)")
+    return image
 
 
 def load_image(path: str | Path) -> np.ndarray:
     """Read an 8-bit image file with OpenCV and return it as gray (H, W) uint8."""
     path = Path(path)
-    _check_readable(path, "image file")
+    check_readable(path, "image file")
     image = _imread(path)
     if image is None:
         raise ValueError(f"cannot read {path} as an image (not an image, or an unknown or corrupt format)")
@@ -199,22 +254,26 @@ def decode_disparity(
     return np.where(unknown, np.inf, d).astype(np.float32)
 
 
-def load_gt(path: str | Path, scale: float | None = None) -> np.ndarray:
+def load_gt(path: str | Path, scale: float | None = None, bits: int | None = None) -> np.ndarray:
     """Read a ground-truth disparity map as float32, inf = unknown (:func:`decode_disparity`).
 
     ``.npy``: the numbers as stored, non-finite = unknown. ``.pfm`` (Middlebury): floats,
     inf = unknown. Any other image format: one channel (or equal ones) of integer
     disparities with 0 = unknown, 16-bit ones only with a ``scale``. ``scale``: the file
-    stores disparity x ``scale`` (``--gt-scale``).
+    stores disparity x ``scale`` (``--gt-scale``). ``bits``: the depth an image must have (a
+    dataset layout's, KITTI's 16): another is refused, naming the file and its depth.
     """
     path = Path(path)
-    _check_readable(path, "ground-truth file")
+    check_readable(path, "ground-truth file")
     if path.suffix.lower() == ".npy":
         return decode_disparity(_load_npy(path), str(path), image=False, scale=scale)
     raw = _imread(path)
     if raw is None:
         raise ValueError(f"cannot read {path} as a disparity map (not an image, or a corrupt .pfm); "
                          f"{GT_FORMATS}")
+    if bits is not None and raw.dtype.kind in "iu" and 8 * raw.dtype.itemsize != bits:
+        raise ValueError(f"{path}: {8 * raw.dtype.itemsize}-bit ground truth, where this layout's is "
+                         f"{bits}-bit (disparity x {scale or 1:g}); --gt-scale S reads it as disparity x S")
     return decode_disparity(raw, str(path), image=True, scale=scale)
 
 

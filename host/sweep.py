@@ -18,12 +18,14 @@ from __future__ import annotations
 
 import argparse
 import hashlib
+import ipaddress
 import itertools
 import json
 import logging
 import math
 import os
 import re
+import socket
 import sys
 import threading
 import time
@@ -46,7 +48,7 @@ from bayesmachine.cliargs import (
     rng_list,
 )
 from bayesmachine.models import ModelParams
-from bayesmachine.outputs import OutputDir, atomic_file
+from bayesmachine.outputs import OutputDir, require_ours
 from bayesmachine.params import MachineParams
 
 from .datasets import PairSpec, load_pair
@@ -69,6 +71,7 @@ __all__ = [
     "run_task",
     "run_sweep",
     "connect",
+    "parse_scheduler",
     "strip_timings",
 ]
 
@@ -143,7 +146,8 @@ class Point:
 
 
 def _safe(text: str) -> str:
-    return re.sub(r"[^A-Za-z0-9._+-]+", "-", text).strip("-") or "x"
+    """A name safe as one path component: no separator, never ``.`` or ``..``, not hidden."""
+    return re.sub(r"[^A-Za-z0-9._+-]+", "-", text).strip("-.") or "x"
 
 
 def sweep_axes(args: argparse.Namespace) -> dict[str, list[Any]]:
@@ -216,7 +220,8 @@ def _fingerprint(pair: PairSpec, point: Point, crop: Crop | None, engine: str, s
 
 
 def pair_dir_name(name: str) -> str:
-    """A pair's directory under ``runs/``: its name with path separators kept as ``__``."""
+    """A pair's directory under ``runs/``: its name with path separators kept as ``__``, anything else
+    unsafe in a path (``..``, a leading dot, a character outside ``A-Za-z0-9._+-``) replaced."""
     return _safe(name.replace("/", "__"))
 
 
@@ -225,7 +230,7 @@ def make_tasks(pairs: list[PairSpec], points: list[Point], out: Path, crop: Crop
     """Pair-major tasks (a worker meets a pair's points together: its cache serves them); OpenCV's
     SGBM / StereoBM figures with the first point of each pair only."""
     dirs = [pair_dir_name(p.name) for p in pairs]
-    if len(set(dirs)) != len(dirs):
+    if len({d.casefold() for d in dirs}) != len(dirs):  # two names made one (or one on a case-blind disk)
         dirs = [f"{i:04d}_{d}" for i, d in enumerate(dirs)]
     tasks = []
     for pair, d in zip(pairs, dirs, strict=True):
@@ -315,8 +320,11 @@ def run_task(task: Task) -> dict[str, Any]:
     }
     path = Path(task.result)
     path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_file(path) as tmp:
-        tmp.write_text(json.dumps(record, indent=1, allow_nan=False) + "\n")
+    # Its own manifest: a result.json no sweep wrote is never replaced (run_sweep refuses it up front).
+    with OutputDir(path.parent, (RESULT_NAME,), last=RESULT_NAME) as out:
+        text = json.dumps(record, indent=1, allow_nan=False) + "\n"
+        out.write(RESULT_NAME, lambda tmp: tmp.write_text(text))
+        out.commit()
     return record
 
 
@@ -357,14 +365,81 @@ def _describe(exc: BaseException) -> str:
     return text if isinstance(exc, (ValueError, OSError)) and text else f"{name}: {text}"
 
 
+def parse_scheduler(text: str) -> str:
+    """``--scheduler``: ``tcp://HOST:PORT`` or ``HOST:PORT`` (as ``tcp://HOST:PORT``); anything else is
+    one ValueError at once, before any connection is tried."""
+    t = text.strip()
+    if not t:
+        raise ValueError("the scheduler's address is empty (an unset variable?); give tcp://HOST:PORT")
+    m = re.fullmatch(r"(?:([A-Za-z][A-Za-z0-9+.-]*)://)?(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9._-]+)(?::(\d+))?", t)
+    if m is None or (m[1] or "tcp").lower() != "tcp" or m[3] is None or not 1 <= int(m[3]) <= 65535:
+        why = ("not tcp://" if m is not None and (m[1] or "tcp").lower() != "tcp"
+               else "no port" if m is not None and m[3] is None else "not HOST:PORT")
+        raise ValueError(f"expected a Dask scheduler's address tcp://HOST:PORT (port 1 to 65535; Dask's "
+                         f"default is 8786), got {text!r} ({why})")
+    return f"tcp://{m[2]}:{int(m[3])}"
+
+
+def _is_local(host: str) -> bool:
+    """``host`` is this machine (a loopback address, or its own name)."""
+    host = host.strip("[]")
+    if host in ("localhost", socket.gethostname(), socket.getfqdn()):
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:  # a name
+        pass
+    try:
+        return ipaddress.ip_address(socket.gethostbyname(host)).is_loopback
+    except (OSError, ValueError):
+        return False
+
+
+async def _identity(address: str, timeout: float) -> dict[str, Any]:
+    from distributed.comm import connect as comm_connect
+
+    comm = await comm_connect(address, timeout=timeout)  # retries until the timeout
+    try:
+        await comm.write({"op": "identity", "reply": True})
+        return await comm.read()
+    finally:
+        comm.abort()
+
+
+def _check_scheduler(address: str, timeout: float) -> None:
+    """ValueError unless a Dask scheduler answers at ``address`` within ``timeout`` s: at once when
+    nothing listens on this machine (no scheduler can start there meanwhile but the user's own);
+    without building a Dask client, whose failed start leaves noise behind."""
+    import asyncio
+
+    host, port = address[len("tcp://"):].rsplit(":", 1)
+    if _is_local(host):
+        try:
+            socket.create_connection((host.strip("[]"), int(port)), timeout=min(timeout, 2.0)).close()
+        except ConnectionRefusedError:
+            raise ValueError(f"--scheduler {address}: nothing listens there (start one with 'dask scheduler "
+                             f"--port {port}')") from None
+        except OSError:
+            pass  # left to the full attempt below, which says what happened
+    try:
+        reply = asyncio.run(asyncio.wait_for(_identity(address, timeout), timeout + 1.0))
+    except Exception as exc:  # OSError (refused, timeout), garbage from a peer that is not Dask
+        detail = " ".join(str(exc).split()) or type(exc).__name__
+        raise ValueError(f"--scheduler {address}: no Dask scheduler answered within {timeout:g} s "
+                         f"({detail[:200]})") from None
+    if not isinstance(reply, dict) or reply.get("type") != "Scheduler":
+        raise ValueError(f"--scheduler {address}: something answered there, but not a Dask scheduler")
+
+
 def connect(address: str, timeout: float) -> Any:
-    """A Dask client of the scheduler at ``address`` with at least one worker, or ValueError within
-    ``timeout`` seconds per step (never a hang)."""
+    """A Dask client of the scheduler at ``address`` (:func:`parse_scheduler`'s form) with at least one
+    worker, or ValueError within ``timeout`` seconds per step (never a hang)."""
     from distributed import Client
 
+    _check_scheduler(address, timeout)
     try:
         client = Client(address, timeout=f"{timeout}s", set_as_default=False)
-    except Exception as exc:  # OSError on timeout, ValueError/TypeError for a malformed address
+    except Exception as exc:  # the scheduler went away since it answered
         raise ValueError(f"--scheduler {address}: no Dask scheduler answered within {timeout:g} s "
                          f"({' '.join(str(exc).split()) or type(exc).__name__})") from None
     try:
@@ -379,8 +454,9 @@ def connect(address: str, timeout: float) -> Any:
 def _local_cluster(workers: int, processes: bool = True) -> Any:
     from distributed import Client, LocalCluster
 
+    # ":0": its HTTP server on a free port (None means 8787, with a warning when another cluster has it).
     cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=processes,
-                           dashboard_address=None, silence_logs=logging.CRITICAL)
+                           dashboard_address=":0", silence_logs=logging.CRITICAL)
     return Client(cluster, set_as_default=False), cluster
 
 
@@ -565,7 +641,7 @@ def _aggregate(config: SweepConfig, records: dict[tuple[str, str], dict[str, Any
 def _plot(path: Path, sweep: dict[str, Any]) -> None:
     from .plots import save_dataset_sweep_figure, save_sweep_figure
 
-    points = sweep["points"]
+    points = [p for p in sweep["points"] if p["pairs"]]  # a point whose every task failed has no figures
     if len(sweep["pairs"]) > 1:
         save_dataset_sweep_figure(path, points)
         return
@@ -584,6 +660,8 @@ def run_sweep(config: SweepConfig, client: Any = None) -> SweepOutcome:
     records: dict[tuple[str, str], dict[str, Any]] = {}
     failures: list[TaskFailure] = []
     with OutputDir(config.output, SWEEP_OUTPUTS, last="sweep.json") as out:
+        for task in tasks:  # before any work: a result.json no sweep wrote is the user's
+            require_ours(task.result)
         pending = []
         for task in tasks:
             old = _existing(task) if config.resume else None
@@ -618,10 +696,16 @@ def run_sweep(config: SweepConfig, client: Any = None) -> SweepOutcome:
                 own_client.close()
             if own_cluster is not None:
                 own_cluster.close()
+                if config.engine == "verilator":
+                    # Its workers are gone; any killed mid-compile left a temporary build directory.
+                    from bayesmachine.sim.verilator.build import remove_stale_builds
+
+                    remove_stale_builds()
         order = {(t.pair.name, t.point.id): i for i, t in enumerate(tasks)}
         failures.sort(key=lambda f: order[(f.pair, f.point)])
         sweep = _aggregate(config, records, failures, time.perf_counter() - t0)
-        out.write("sweep.png", lambda path: _plot(path, sweep))
+        if records:  # every task failed: sweep.json lists why, and there is nothing to plot
+            out.write("sweep.png", lambda path: _plot(path, sweep))
         out.write("sweep.json",
                   lambda path: path.write_text(json.dumps(sweep, indent=2, allow_nan=False) + "\n"))
         written = out.commit()

@@ -337,3 +337,79 @@ def test_board_build_routes_with_router1_by_default(extra: list[str], router: st
     (cmd,) = seen
     assert cmd[cmd.index("--router") + 1] == router and cmd[cmd.index("--seed") + 1] == str(seed)
     assert not (out / "report.json").exists()  # stopped before the end: nothing half-written
+
+
+def _twin_on_port(monkeypatch) -> None:
+    from bayesmachine.fpga.boards import link as link_mod
+
+    def open_twin(port: str, baud: int, timeout: float = 2.0) -> TwinPort:
+        port = TwinPort(_twin())
+        port.close = lambda: None
+        return port
+
+    monkeypatch.setattr(link_mod, "open_port", open_twin)
+
+
+def test_board_simulate_writes_its_report_and_a_run_names_the_options_that_differ(tmp_path, monkeypatch,
+                                                                                   capsys) -> None:
+    """``board simulate -o OUT`` writes OUT/report.json (the design, its fingerprint) and records the
+    design; a run whose options give another fingerprint names the option that differs. The harness
+    is stood in for (no Verilator): it ends at once, after the report."""
+    import json
+
+    from bayesmachine.fpga.boards import simulate as simulate_mod
+
+    class Harness:
+        def __init__(self, params, model, width, **options) -> None:
+            self.port, self.running = "/dev/pts/stand-in", False
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc) -> None:
+            pass
+
+    monkeypatch.setenv("BAYESMACHINE_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setattr(simulate_mod, "BoardSimulation", Harness)
+    out = tmp_path / "sim"
+    assert main(["board", "simulate", "--dmax", str(DMAX), "--width", str(WIDTH), "--model", "paper",
+                 "--quiet", "-o", str(out)]) == 2  # the stand-in harness ended
+    assert "ended unexpectedly" in capsys.readouterr().err
+    report = json.loads((out / "report.json").read_text())
+    assert report["fingerprint"] == f"{pr.board_fingerprint(PARAMS.to_dict(), MODEL.to_dict(), WIDTH):08x}"
+    assert report["machine"] == PARAMS.to_dict() and report["port"] == "/dev/pts/stand-in"
+    _twin_on_port(monkeypatch)
+    run = ["run", "--crop", f"400,250,{WIDTH},{HEIGHT}", "--dmax", str(DMAX), "--model", "paper", "--no-sgbm",
+           "--quiet", "--engine", "board", "--port", "twin"]
+    assert main([*run, "--counter-max", "4", "--seed", "7", "-o", str(tmp_path / "r")]) == 2
+    err = capsys.readouterr().err
+    assert "built for another machine or model" in err and len(err.strip().splitlines()) == 1
+    assert f"--counter-max 4 here, {PARAMS.counter_max} on the board; --seed 7 here, {PARAMS.seed} on" in err
+    assert main([*run, "-o", str(tmp_path / "r")]) == 0  # the board's own options
+    # A board this machine has no record of: the message says where its options are.
+    monkeypatch.setenv("BAYESMACHINE_CACHE_DIR", str(tmp_path / "elsewhere"))
+    assert main([*run, "--counter-max", "4", "-o", str(tmp_path / "r2")]) == 2
+    assert "no record of the board's design: run with the options it was built with (the report.json" in \
+        capsys.readouterr().err
+
+
+def test_a_port_in_use_is_refused_at_once(tmp_path) -> None:
+    """Two runs on one port (``board simulate``'s pseudo-terminal): the second is told it is in use."""
+    import os
+    import pty
+
+    from bayesmachine.fpga.boards.link import open_port
+
+    pytest.importorskip("serial")
+    master, slave = pty.openpty()
+    try:
+        first = open_port(os.ttyname(slave), 3_000_000)
+        try:
+            with pytest.raises(BoardError, match="is in use: another run is talking to the board on it"):
+                open_port(os.ttyname(slave), 3_000_000)
+        finally:
+            first.close()
+        open_port(os.ttyname(slave), 3_000_000).close()  # free again
+    finally:
+        os.close(master)
+        os.close(slave)

@@ -182,6 +182,8 @@ def test_the_two_commands(tmp_path: Path, model: str) -> None:
             "--sim-timeout-bits",
             str(TIMEOUT_BITS),
             "--quiet",
+            "-o",
+            str(tmp_path / "sim"),
         ],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
@@ -213,6 +215,22 @@ def test_the_two_commands(tmp_path: Path, model: str) -> None:
         report = json.loads((tmp_path / "b" / "report.json").read_text())
         assert report["engine"] == "board" and report["board"]["attempts"] == 1
         assert report["board"]["bytes_sent"] >= 2 * WIDTH * HEIGHT and report["board"]["wall_seconds"] > 0
+        # board simulate -o wrote the design's report; a run of other options is told which differ.
+        simulated = json.loads((tmp_path / "sim" / "report.json").read_text())
+        assert simulated["fingerprint"] == report["board"]["board_fingerprint"] and simulated["port"] == path
+        other = subprocess.run([*exe, *common, "--engine", "board", "--port", path, "--counter-max", "3",
+                                "-o", str(tmp_path / "c")], capture_output=True, text=True, timeout=300)
+        assert other.returncode == 2 and "--counter-max 3 here, 16 on the board" in other.stderr
+        # A second run while one holds the port: refused at once, the first undisturbed.
+        from bayesmachine.fpga.boards.link import open_port
+
+        held = open_port(path, 3_000_000)
+        try:
+            second = subprocess.run([*exe, *common, "--engine", "board", "--port", path, "-o",
+                                     str(tmp_path / "d")], capture_output=True, text=True, timeout=300)
+        finally:
+            held.close()
+        assert second.returncode == 2 and f"{path} is in use" in second.stderr
     finally:
         os.killpg(sim.pid, signal.SIGTERM)
         rc = sim.wait(timeout=30)

@@ -375,7 +375,8 @@ def test_full_lane_on_ecp5_85k(tmp_path: Path) -> None:
     assert report["fmax_mhz"] > 50
     assert report["machines_fit"] >= 1
     tp = report["throughput"]
-    assert tp["wall_cycles_per_pixel"] == pytest.approx(tp["compute_cycles_per_pixel"] + 1, abs=0.01)
+    # Loading and the bubble hide under the runs but for the Sobol block steps (pixel_wall_cycles).
+    assert tp["compute_cycles_per_pixel"] <= tp["wall_cycles_per_pixel"] <= tp["compute_cycles_per_pixel"] + 1
     assert tp["pixels_per_second"] == pytest.approx(report["fmax_mhz"] * 1e6 / tp["wall_cycles_per_pixel"],
                                                     rel=1e-3)
 

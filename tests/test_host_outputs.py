@@ -104,11 +104,18 @@ def test_output_dir_commits_report_last_and_clears_its_own_stale_files(tmp_path:
         renamed.append(Path(dst).name)
         real_replace(src, dst)
 
+    real_link = os.link
+
+    def spy_link(src, dst):
+        renamed.append(Path(dst).name)
+        real_link(src, dst)
+
     def spy_unlink(self, *args, **kwargs):
         removed.append(self.name)
         real_unlink(self, *args, **kwargs)
 
     monkeypatch.setattr(outputs.os, "replace", spy)
+    monkeypatch.setattr(outputs.os, "link", spy_link)
     monkeypatch.setattr(Path, "unlink", spy_unlink)
     with OutputDir(out, ["report.json", "data.npz", "waves.vcd"], last="report.json") as od:
         assert names(out) == ["notes.txt"]  # every stale output of ours is gone before any work
@@ -124,20 +131,38 @@ def test_output_dir_commits_report_last_and_clears_its_own_stale_files(tmp_path:
     np.testing.assert_array_equal(np.load(out / "data.npz")["a"], np.arange(3))
 
 
-def test_output_dir_never_removes_files_it_did_not_write(tmp_path: Path) -> None:
-    """Files under an output's name that no run of ours wrote there (no manifest lists them) stay;
-    one that this run writes is replaced, and from then on it is ours."""
+def test_output_dir_never_replaces_files_it_did_not_write(tmp_path: Path) -> None:
+    """A file under an output's name that no run of ours wrote there (no manifest lists it) is
+    refused before any work, naming it, and stays as it is; files under other names stay too."""
     out = tmp_path
+    (out / "notes.txt").write_text("the user's")
     for name in ("waves.vcd", "report.json", "data.npz"):
         (out / name).write_text("the user's")
-    with OutputDir(out, ["report.json", "data.npz", "waves.vcd"], last="report.json") as od:
-        assert names(out) == ["data.npz", "report.json", "waves.vcd"]
-        od.write("report.json", lambda p: p.write_text("new"))
+        with pytest.raises(FileExistsError, match="bayesmachine did not write it") as info:
+            with OutputDir(out, ["report.json", "data.npz", "waves.vcd"], last="report.json"):
+                raise AssertionError("entered")
+        assert info.value.filename == str(out / name)
+        assert (out / name).read_text() == "the user's"
+        (out / name).unlink()
+    # A run that does not write a name (no --waves): the user's file under it stays, and the run goes.
+    (out / "waves.vcd").write_text("the user's")
+    with OutputDir(out, ["report.json", "waves.vcd"], last="report.json", writes=["report.json"]) as od:
+        with pytest.raises(ValueError, match="not one of this run's outputs"):
+            od.path("waves.vcd")
+        od.write("report.json", lambda p: p.write_text("{}"))
         od.commit()
-    assert (out / "waves.vcd").read_text() == "the user's" and (out / "data.npz").read_text() == "the user's"
-    assert (out / "report.json").read_text() == "new"
+    assert (out / "waves.vcd").read_text() == "the user's" and read_manifest(out) == ["report.json"]
+    (out / "waves.vcd").unlink()
+    (out / "report.json").unlink()
+    # A dangling symbolic link under an output's name is not replaced either.
+    (out / "data.npz").symlink_to(tmp_path / "nowhere")
+    with pytest.raises(FileExistsError):
+        _transaction(out, {"report.json": "new"})
+    (out / "data.npz").unlink()
+    _transaction(out, {"report.json": "new"})
+    assert (out / "notes.txt").read_text() == "the user's" and (out / "report.json").read_text() == "new"
     _transaction(out, {"report.json": "newer"})
-    assert (out / "waves.vcd").read_text() == "the user's" and (out / "data.npz").read_text() == "the user's"
+    assert names(out) == [MANIFEST, "notes.txt", "report.json"]
     # Another command's outputs listed in the manifest (a sweep's, in a run's OUT/) stay, and stay listed.
     with OutputDir(out, ["sweep.json"], last="sweep.json") as od:
         od.write("sweep.json", lambda p: p.write_text("sweep"))
@@ -153,8 +178,27 @@ def test_output_dir_never_removes_files_it_did_not_write(tmp_path: Path) -> None
     # A manifest that is not ours, or names outside the directory, removes nothing.
     (out / MANIFEST).write_text('{"files": ["../x", "/etc/passwd", "waves.vcd/..", ".", 3]}')
     (tmp_path.parent / "x").write_text("outside")
-    _transaction(out, {"report.json": "newest"})
+    (out / "waves.vcd").write_text("the user's")
+    with OutputDir(out, ["other.json"], last="other.json") as od:
+        od.write("other.json", lambda p: p.write_text("{}"))
+        od.commit()
     assert (tmp_path.parent / "x").exists() and (out / "waves.vcd").exists()
+    assert (out / "report.json").exists()
+
+
+def test_output_dir_commit_never_replaces_a_file_that_appeared_meanwhile(tmp_path: Path) -> None:
+    """Checked before any work, and again when committing: a file the user put under an output's
+    name while the run was going stays, the commit stops there with one error naming it."""
+    out = tmp_path / "out"
+    with pytest.raises(FileExistsError, match="did not write it") as info:
+        with OutputDir(out, ["report.json", "data.npz"], last="report.json") as od:
+            od.write("data.npz", lambda p: p.write_text("ours"))
+            od.write("report.json", lambda p: p.write_text("ours"))
+            (out / "report.json").write_text("the user's, written during the run")
+            od.commit()
+    assert info.value.filename == str(out / "report.json")
+    assert (out / "report.json").read_text() == "the user's, written during the run"
+    assert [n for n in names(out) if ".partial-" in n] == []  # the staged report went
 
 
 def test_output_dir_is_held_by_one_run(tmp_path: Path) -> None:

@@ -128,21 +128,35 @@ def test_a_killed_sweep_resumes_to_the_same_sweep_json(tmp_path, capsys) -> None
 
 
 def test_a_scheduler_that_does_not_answer_is_one_error(tmp_path, capsys) -> None:
+    import socket
+
     data = _dataset(tmp_path)
     out = tmp_path / "out"
+    # Nothing listens on this machine's port: at once, whatever the timeout.
     t0 = time.monotonic()
     assert main(["sweep", "--dataset", str(data), *SMALL, "--scheduler", "tcp://127.0.0.1:9",
-                 "--connect-timeout", "1", "-o", str(out)]) == 2
+                 "--connect-timeout", "300", "-o", str(out)]) == 2
     assert time.monotonic() - t0 < 30
     err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["bayesmachine sweep: error: --scheduler tcp://127.0.0.1:9: nothing listens there (start "
+                   "one with 'dask scheduler --port 9')"]
+    # Something listens and never answers: within the timeout.
+    with socket.socket() as silent:
+        silent.bind(("127.0.0.1", 0))
+        silent.listen()
+        address = f"tcp://127.0.0.1:{silent.getsockname()[1]}"
+        t0 = time.monotonic()
+        assert main(["sweep", "--dataset", str(data), *SMALL, "--scheduler", address, "--connect-timeout",
+                     "1", "-o", str(out)]) == 2
+        assert time.monotonic() - t0 < 30
+    err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith(
-        "bayesmachine sweep: error: --scheduler tcp://127.0.0.1:9: no Dask scheduler answered "
-        "within 1 s"), err
+        f"bayesmachine sweep: error: --scheduler {address}: no Dask scheduler answered within 1 s"), err
     assert not (out / "sweep.json").exists()
     # A scheduler without workers would take the tasks and never run them: refused too.
     from distributed import LocalCluster
 
-    with LocalCluster(n_workers=0, processes=False, dashboard_address=None) as cluster:
+    with LocalCluster(n_workers=0, processes=False, dashboard_address=":0", protocol="tcp://") as cluster:
         assert main(["sweep", "--dataset", str(data), *SMALL, "--scheduler", cluster.scheduler_address,
                      "--connect-timeout", "1", "-o", str(out)]) == 2
     assert "the scheduler has no worker (start some with 'dask worker" in capsys.readouterr().err

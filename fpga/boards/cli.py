@@ -15,6 +15,7 @@ from bayesmachine.cliargs import (
     add_model_options,
     float_arg,
     int_arg,
+    int_in_range,
     machine_params_from_args,
     model_params_from_args,
     output_path,
@@ -23,6 +24,7 @@ from bayesmachine.fpga.flow import ROUTERS
 from bayesmachine.hdl.frontend import DEFAULT_WIDTH
 
 from .build import DEFAULT_BOARD_ROUTER, DEFAULT_BOARD_SEED
+from .link import record_design
 from .ulx3s import BOARDS
 
 __all__ = ["register"]
@@ -96,8 +98,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         help="the design's clock from the PLL (default 45: 3 Mbaud in 15 clocks per bit)",
     )
     b.add_argument("--baud", type=int_arg, default=None, help=f"UART baud rate (default {DEFAULT_BAUD})")
-    b.add_argument("--pnr-seed", type=int_arg, default=DEFAULT_BOARD_SEED,
-                   help=f"nextpnr placement seed (default {DEFAULT_BOARD_SEED})")
+    b.add_argument("--pnr-seed", type=int_in_range(0, 2**31 - 1), default=DEFAULT_BOARD_SEED,
+                   help=f"nextpnr placement seed, 0 to 2^31 - 1 (default {DEFAULT_BOARD_SEED})")
     b.add_argument("--router", choices=ROUTERS, default=DEFAULT_BOARD_ROUTER,
                    help=f"nextpnr router (default {DEFAULT_BOARD_ROUTER}: router2 does not converge on the "
                    "census design on the ULX3S-85F, router1 routes it; docs/board.md)")
@@ -130,6 +132,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         "harness has the CPU, so shorter ones may fire while a loaded host is still sending)",
     )
     s.add_argument("--quiet", action="store_true", help="only the path")
+    s.add_argument("-o", "--output", type=output_path, default=None, metavar="OUT/",
+                   help="also write OUT/report.json: the design simulated (machine, model, width, "
+                   "fingerprint), the options `run --engine board` must match")
     s.set_defaults(func=_simulate)
 
 
@@ -154,24 +159,48 @@ def _build(args: argparse.Namespace) -> int:
         f"timing {'met' if report['timing_met'] else 'NOT met'}; {report['baud']} baud"
     )
     print(f"program it: {report['program']}  (or: {report['program_alternative']})")
+    record_design(machine, model, width)
     return 0
 
 
+def _simulation_report(out, args: argparse.Namespace, machine, model, width: int, port: str,  # noqa: ANN001
+                       timeout_bits: int) -> None:
+    """``board simulate -o OUT``: OUT/report.json, the design as ``board build``'s report gives it."""
+    import json
+
+    from . import protocol as pr
+    from .simulate import DEFAULT_SIM_RX_FIFO_LOG2
+
+    report = {
+        "board": args.board, "top": "stereo", "simulated": True, "port": port, "width": width,
+        "model": model.to_dict(), "machine": machine.to_dict(),
+        "fingerprint": f"{pr.board_fingerprint(machine.to_dict(), model.to_dict(), width):08x}",
+        "protocol_version": pr.PROTOCOL_VERSION, "clocks_per_bit": args.sim_clocks_per_bit,
+        "rx_fifo_bytes": 1 << DEFAULT_SIM_RX_FIFO_LOG2, "timeout_bits": timeout_bits,
+    }
+    out.write("report.json", lambda path: path.write_text(json.dumps(report, indent=2) + "\n"))
+    out.commit()
+
+
 def _simulate(args: argparse.Namespace) -> int:
-    from .simulate import BoardSimulation
+    import contextlib
+
+    from bayesmachine.outputs import OutputDir
+
+    from .simulate import DEFAULT_SIM_TIMEOUT_BITS, BoardSimulation
 
     machine, model, width = _design(args)
-    from .simulate import DEFAULT_SIM_TIMEOUT_BITS
-
     timeout_bits = DEFAULT_SIM_TIMEOUT_BITS if args.sim_timeout_bits is None else args.sim_timeout_bits
-    with BoardSimulation(
-        machine,
-        model,
-        width,
-        clocks_per_bit=args.sim_clocks_per_bit,
-        timeout_bits=timeout_bits,
-        verbose=not args.quiet,
-    ) as sim:
+    with contextlib.ExitStack() as stack:
+        # OUT first: a report.json there that is not ours is refused before the harness is built.
+        out = None if args.output is None else stack.enter_context(
+            OutputDir(args.output, ("report.json",), last="report.json"))
+        sim = stack.enter_context(BoardSimulation(
+            machine, model, width, clocks_per_bit=args.sim_clocks_per_bit, timeout_bits=timeout_bits,
+            verbose=not args.quiet))
+        record_design(machine, model, width)
+        if out is not None:
+            _simulation_report(out, args, machine, model, width, sim.port, timeout_bits)
         print(sim.port, flush=True)
         if not args.quiet:
             print(

@@ -109,11 +109,7 @@ class BoardEngine(PixelEngineBase):
                 f"crop it (--crop X,Y,{info.width},H) or build the board with --width {width}"
             )
         if info.fingerprint != expect:
-            raise BoardError(
-                f"the board on {port} was built for another machine or model (fingerprint "
-                f"{info.fingerprint:08x}, these options give {expect:08x}; rows {info.rows} vs {p.rows}): "
-                "run with the options the bitstream was built with (its report.json), or rebuild it"
-            )
+            raise BoardError(link.fingerprint_message(port, info.fingerprint, expect, p, self.model))
         return info
 
     def run(self, left: np.ndarray, right: np.ndarray) -> MachineResult:

@@ -19,10 +19,14 @@ The pixel engine ``board`` (:class:`~.engine.BoardEngine`) runs frames through i
 
 from __future__ import annotations
 
+import contextlib
+import errno
+import json
 import struct
 import sys
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -32,7 +36,8 @@ from bayesmachine.region import OutputRegion
 
 from . import protocol as pr
 
-__all__ = ["BoardError", "BoardLink", "LinkStats", "open_port"]
+__all__ = ["BoardError", "BoardLink", "LinkStats", "design_differences", "design_record",
+           "fingerprint_message", "open_port", "record_design"]
 
 
 class BoardError(RuntimeError):
@@ -283,12 +288,81 @@ class BoardLink:
 
 
 def open_port(port: str, baud: int, timeout: float = 2.0):  # noqa: ANN201
-    """``serial.Serial`` on ``port``, or one clear error."""
+    """``serial.Serial`` on ``port``, held exclusively (a lock on it: a second run on the same port is
+    refused at once, never interleaved with the first), or one clear error."""
     try:
         import serial
     except ImportError:
         raise BoardError("--engine board needs pyserial: pip install 'bayesmachine[board]'") from None
     try:
-        return serial.Serial(port, baud, timeout=timeout, write_timeout=30 * timeout)
-    except (serial.SerialException, OSError, ValueError) as exc:
+        return serial.Serial(port, baud, timeout=timeout, write_timeout=30 * timeout, exclusive=True)
+    except (serial.SerialException, OSError, ValueError, OverflowError) as exc:
+        if getattr(exc, "errno", None) in (errno.EAGAIN, errno.EWOULDBLOCK):
+            raise BoardError(f"{port} is in use: another run is talking to the board on it; wait for it to "
+                             "finish") from None
         raise BoardError(f"cannot open {port} at {baud} baud: {exc}") from None
+
+
+def design_record(fingerprint: int) -> Path:
+    """Where this machine keeps the design a board fingerprint stands for (``board build`` and
+    ``board simulate`` record theirs), so that a run can name the options in which it differs."""
+    from bayesmachine.sim.verilator.build import cache_dir
+
+    return cache_dir().parent / "boards" / f"{fingerprint:08x}.json"
+
+
+def record_design(machine: MachineParams, model: ModelParams, width: int) -> None:
+    """Record the design of a board being built or simulated (:func:`design_record`); a cache, so a
+    file-system problem only costs the run's message its detail."""
+    from bayesmachine.outputs import atomic_write_text
+
+    fingerprint = pr.board_fingerprint(machine.to_dict(), model.to_dict(), width)
+    path = design_record(fingerprint)
+    record = {"fingerprint": f"{fingerprint:08x}", "width": width, "machine": machine.to_dict(),
+              "model": model.to_dict()}
+    with contextlib.suppress(OSError):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(path, json.dumps(record, indent=1) + "\n")
+
+
+# Machine fields that follow from the model's options (its Dmax, columns, prior): named through those.
+_DERIVED = ("rows", "columns", "nomatch_row", "feedback_words", "feedback_nomatch_word", "words_per_beat",
+           "prior")
+
+
+def design_differences(board: dict, machine: MachineParams, model: ModelParams) -> list[str]:
+    """The options in which this run's design differs from ``board``'s (:func:`record_design`'s
+    record), each as ``FLAG: VALUE here, VALUE on the board``."""
+    from bayesmachine.cliargs import flag_of
+
+    def differ(mine: dict, theirs: object, skip: tuple[str, ...] = ()) -> list[str]:
+        theirs = theirs if isinstance(theirs, dict) else {}
+        # A field only one side has follows from another option (--model): that one is named.
+        return [f"{flag_of(k) or k} {mine[k]} here, {theirs[k]} on the board" for k in mine
+                if k in theirs and k not in skip and mine[k] != theirs[k]]
+
+    theirs = board.get("model") if isinstance(board.get("model"), dict) else {}
+    name = theirs.get("name", "paper")  # an older paper model's dict left its name out
+    if name != model.name:  # the other model fields follow from it
+        found = [f"--model {model.name} here, {name} on the board"]
+    else:
+        found = differ(model.to_dict(), theirs)
+    return found + differ(machine.to_dict(), board.get("machine"), _DERIVED if found else ("rows",))
+
+
+def fingerprint_message(port: str, found: int, expect: int, machine: MachineParams,
+                         model: ModelParams) -> str:
+    """Why a board of fingerprint ``found`` is refused for this run (``expect``): the options that
+    differ, when this machine recorded the board's design (:func:`record_design`)."""
+    head = (f"the board on {port} was built for another machine or model (fingerprint {found:08x}, these "
+            f"options give {expect:08x})")
+    record = design_record(found)
+    try:
+        board = json.loads(record.read_text())
+    except (OSError, ValueError):
+        return (f"{head}; this machine has no record of the board's design: run with the options it was "
+                "built with (the report.json of its `board build`, or of `board simulate -o`), or rebuild it")
+    diffs = design_differences(board, machine, model) if isinstance(board, dict) else []
+    if diffs:
+        return f"{head}: {'; '.join(diffs)}; run with the board's options, or rebuild it"
+    return f"{head}: its design is {record}; run with its options, or rebuild it"

@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from amaranth.hdl import ClockDomain, Instance, Module, Signal
-from amaranth.lib import wiring
+from amaranth.lib import io, wiring
 from amaranth.lib.cdc import ResetSynchronizer
 
 from .core import BoardCore
@@ -113,7 +113,8 @@ class ULX3STop(wiring.Component):
     def elaborate(self, platform) -> Module:  # noqa: ANN001 - an amaranth_boards platform
         m = Module()
         pll, freq = self._pll, self._pll.out_mhz
-        clk25 = platform.request("clk25", 0)
+        # The pins as ports (dir="-") behind amaranth.lib.io buffers; a port carries its pin's inversion.
+        m.submodules.clk25 = clk25 = io.Buffer("i", platform.request("clk25", 0, dir="-"))
         locked = Signal()
         m.domains.sync = cd_sync = ClockDomain("sync")
         m.submodules.pll = Instance(
@@ -154,12 +155,14 @@ class ULX3STop(wiring.Component):
             a_MFG_GMCREF_SEL="2",
         )
         platform.add_clock_constraint(cd_sync.clk, freq * 1e6)
-        button = platform.request("button_fire", 0)
+        m.submodules.button = button = io.Buffer("i", platform.request("button_fire", 0, dir="-"))
         m.submodules.reset_sync = ResetSynchronizer(~locked | button.i, domain="sync")
 
         m.submodules.core = core = self._core
-        uart = platform.request("uart", 0)
-        m.d.comb += [core.rx.eq(uart.rx.i), uart.tx.o.eq(core.tx)]
+        uart = platform.request("uart", 0, dir="-")
+        m.submodules.uart_rx = uart_rx = io.Buffer("i", uart.rx)
+        m.submodules.uart_tx = uart_tx = io.Buffer("o", uart.tx)
+        m.d.comb += [core.rx.eq(uart_rx.i), uart_tx.o.eq(core.tx)]
         beat = Signal(range(int(freq * 1e6 / 2) + 1))
         heartbeat = Signal()
         with m.If(beat == int(freq * 1e6 / 2)):
@@ -167,6 +170,6 @@ class ULX3STop(wiring.Component):
         with m.Else():
             m.d.sync += beat.eq(beat + 1)
         for i in range(8):
-            led = platform.request("led", i)
+            m.submodules[f"led{i}"] = led = io.Buffer("o", platform.request("led", i, dir="-"))
             m.d.comb += led.o.eq(heartbeat if i == 7 else core.leds[i])
         return m

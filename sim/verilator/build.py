@@ -9,8 +9,9 @@ Builds live in ``<cache>/<key>/`` (``harness``, the Verilog, ``design.h``, ``bui
 are safe and an entry is complete or absent. An entry whose ``build.json`` is missing or does
 not describe its ``harness`` (size and SHA-256) is rebuilt, with a message. A SIGTERM or
 KeyboardInterrupt during the compile ends the compiler's whole process group and removes the
-temporary directory; temporary directories of processes that died anyway are removed on the
-next build. Verilator's runtime objects, the same for every design, are compiled once per cache
+temporary directory; temporary directories of processes that died anyway (a sweep's workers) are
+removed by :func:`remove_stale_builds` (a sweep calls it once its workers are gone) or by the next
+build. Verilator's runtime objects, the same for every design, are compiled once per cache
 (``<cache>/runtime/``, see :mod:`.objcache`) and copied into later builds.
 """
 
@@ -42,7 +43,8 @@ from .codegen import HARNESS_TOP, design_header, wrapper_verilog
 from .objcache import RUNTIME_DIR, wrapper_script
 from .tools import VerilatorError, find_toolchain
 
-__all__ = ["HARNESS_DIR", "HarnessSources", "VerilatorBuild", "build_design", "build_harness", "cache_dir"]
+__all__ = ["HARNESS_DIR", "HarnessSources", "VerilatorBuild", "build_design", "build_harness", "cache_dir",
+           "remove_stale_builds"]
 
 HARNESS_DIR = Path(__file__).resolve().parent.parent / "harness"
 HARNESS_SOURCES = ("harness.cpp",)
@@ -182,11 +184,36 @@ def _pid_alive(pid: int) -> bool:
     return True
 
 
+def _end_tools_in(directory: Path) -> None:
+    """End the process groups of the processes working in ``directory`` (Linux's /proc; elsewhere
+    nothing): the compile of a process killed outright, whose make and compilers run in a session
+    of their own and outlive it."""
+    proc, inside = Path("/proc"), str(directory)
+    for _ in range(40):
+        groups = set()
+        with contextlib.suppress(OSError):
+            for entry in proc.iterdir():
+                try:
+                    cwd = os.readlink(entry / "cwd") if entry.name.isdigit() else ""
+                    if cwd == inside or cwd.startswith(inside + "/"):
+                        groups.add(os.getpgid(int(entry.name)))
+                except OSError:  # gone meanwhile, or not ours to look at
+                    continue
+        if not groups:
+            return
+        for group in groups:
+            with contextlib.suppress(ProcessLookupError, PermissionError):
+                os.killpg(group, signal.SIGKILL)
+        time.sleep(0.05)
+
+
 def _remove_orphans(root: Path) -> None:
-    """Temporary build directories of processes that no longer exist (killed mid-build)."""
+    """Temporary build directories of processes that no longer exist (killed mid-build), after the
+    compilers still working in them."""
     for tmp in root.glob(".build-*"):
         parts = tmp.name.split("-")  # .build-<key>-<pid>-<random>; a key may hold dashes
         if len(parts) >= 4 and parts[-2].isdigit() and not _pid_alive(int(parts[-2])):
+            _end_tools_in(tmp)
             shutil.rmtree(tmp, ignore_errors=True)
     for tmp in (root / RUNTIME_DIR).glob(".tmp-*"):  # objcache's .tmp-<pid>-<random>
         parts = tmp.name.split("-")
@@ -198,10 +225,22 @@ class _Terminated(SystemExit):
     """SIGTERM during a compile, raised so that the cleanup runs; uncaught, it exits with status 143."""
 
 
+def remove_stale_builds(root: str | os.PathLike[str] | None = None) -> None:
+    """Remove the temporary build directories (and runtime-cache temporaries) of processes that no
+    longer exist, from ``root`` (default :func:`cache_dir`): what a sweep calls once its workers,
+    killed mid-compile, are gone, rather than leaving them to the next build."""
+    root = Path(root) if root is not None else cache_dir()
+    if root.is_dir():
+        _remove_orphans(root)
+
+
 @contextlib.contextmanager
 def _sigterm_raises() -> Iterator[None]:
-    """While compiling, SIGTERM raises (so the compiler group is ended and the directory removed)."""
-    if threading.current_thread() is not threading.main_thread():
+    """While compiling, SIGTERM raises (so the compiler group is ended and the directory removed).
+    A handler of the program's own (``bayesmachine``'s: SIGTERM raised as its ``Terminated``, which
+    says so on the way out) is kept: it raises too."""
+    own = callable(signal.getsignal(signal.SIGTERM))
+    if own or threading.current_thread() is not threading.main_thread():
         yield
         return
 
