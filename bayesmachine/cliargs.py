@@ -328,10 +328,10 @@ add_option(MachineOption("samples_per_clock", "--samples-per-clock",
                          "ceil(cycles / B) clocks (the cycles reported are clocks; --max-cycles counts "
                          "samples); rng sobol or external (default 1)", metavar="B"))
 add_option(MachineOption("normalize", "--normalize-columns",
-                         "per-pixel column normalization: each loaded column's random numbers shifted right "
-                         "so that the column's largest word compares as a word in [2^(W-1), 2^W] (exactly "
-                         "the run on the words shifted left: the same posterior, shorter runs; "
-                         "docs/architecture.md) (default off)", type=bool))
+                         "per-pixel column normalization: each loaded column's random numbers scaled by "
+                         "m / 2^W, m the column's largest word for the pixel (exactly the run on the words "
+                         "w * 2^W / m: the same posterior, shorter runs; docs/architecture.md) "
+                         "(default off)", type=bool))
 add_option(MachineOption("tie_break", "--tie-break",
                          "MAP encoder rule when several counters overflow in one cycle (default %(default)s)",
                          default=DEFAULT_TIE_BREAK, choices=TIE_BREAKS))

@@ -164,12 +164,13 @@ class MachineParams:
         read as no match) or ``"leading"`` (the row with the largest count, the tie rule among equal
         counts; the no-match row's answer is no match).
     normalize
-        Per-pixel column normalization: while a pixel's words are loaded the machine ORs each loaded
-        column's words; with L that OR's bit length, the column's operators compare their words with
-        the random number shifted right by s = max(0, W - L) bits (``word_bits`` W). Exactly the run
-        on the words ``w << s`` (the column's largest word lands in [2^(W-1), 2^W]): each column's
-        factor scaled by a power of two for the pixel, the posterior unchanged, the runs shorter.
-        A neighbour prior's feedback column is formed, not loaded: not shifted.
+        Per-pixel column normalization: while a pixel's words are loaded the machine keeps each loaded
+        column's largest word m (0 .. 2^W); the column's operators compare their words w with
+        ``(r * m) >> W`` instead of the random number r (``word_bits`` W), so w fires when
+        w * 2^W > r * m: exactly the run on the real words w * 2^W / m (each column rescaled so its
+        largest word is 2^W; a column of zeros, m = 0, never fires, as without it). The posterior is
+        unchanged, the runs shorter. A neighbour prior's feedback column is formed, not loaded: not
+        scaled.
 
     The ``smtj_*`` fields belong to ``rng = "smtj"`` (None: the defaults 1.0, 0.0, "operator"); another
     kind refuses them and leaves them None, out of its ``to_dict`` (and fingerprint); the ``feedback_*``

@@ -70,13 +70,10 @@ def _or_all(values: list[Value]) -> Value:
     return out
 
 
-def _normal_shift(params: MachineParams, ored: Value) -> Value:
-    """normalize: s = max(0, W - L), L the bit length of a column's ``ored`` words (a priority encoder)."""
-    w = params.word_bits
-    shift: Value = Const(w, w.bit_length())  # L = 0: a column of zeros (any shift gives the same bits)
-    for bit in range(params.memory_word_width):  # the highest set bit decides (the outermost Mux)
-        shift = Mux(ored[bit], max(0, w - bit - 1), shift)
-    return shift
+def _scaled(params: MachineParams, number: Value, scale: Value) -> Value:
+    """normalize: ``(number * scale) >> W``, a W x (W+1) product's top bits (below 2^W: number < 2^W,
+    scale <= 2^W); a word w > it exactly when w * 2^W > number * scale."""
+    return (number * scale)[params.word_bits:2 * params.word_bits]
 
 
 def hides_bubble(params: MachineParams) -> bool:
@@ -204,15 +201,12 @@ class MachineNets:
     prev_rows: list[Signal] = field(default_factory=list)
     prev_valids: list[Signal] = field(default_factory=list)
     feedback_q: list[Signal] = field(default_factory=list)
-    # normalize: per loaded column the OR of the shadow's words so far; per operator column the
-    # number shift of the shadow's pixel (from that OR) and of the active one (registered at the swap).
-    norm_or: list[Signal] = field(default_factory=list)
-    norm_or_n: list[Value] = field(default_factory=list)  # their next values
-    shift_shadow: list[Value] = field(default_factory=list)
-    shift_active: list[Value] = field(default_factory=list)
-    # The shifts in the next cycle: a shared source's group copies of its numbers are loaded shifted.
-    shift_shadow_n: list[Value] = field(default_factory=list)
-    shift_active_n: list[Value] = field(default_factory=list)
+    # normalize: per loaded column the largest of the shadow's words so far; per operator column the
+    # number scale m of the shadow's pixel (that maximum) and of the active one (registered at the swap).
+    norm_max: list[Signal] = field(default_factory=list)
+    scale_shadow: list[Value] = field(default_factory=list)
+    scale_active: list[Value] = field(default_factory=list)
+    scale_active_n: list[Value] = field(default_factory=list)  # its next value
 
 
 class BayesianMachine(wiring.Component):
@@ -263,7 +257,7 @@ class BayesianMachine(wiring.Component):
     def elaborate(self, platform: object) -> Module:
         m = Module()
         n = self._nets = self._memories()
-        self._column_shifts(m, n)
+        self._column_scales(m, n)
         self._random_numbers(m, n)
         self._operator_matrix(m, n)
         self._overflow_counters(m, n)
@@ -317,29 +311,26 @@ class BayesianMachine(wiring.Component):
             start_rep=[Signal(name=f"start_rep{g}") for g in range(groups)],
         )
 
-    def _column_shifts(self, m: Module, n: MachineNets) -> None:
-        """Per-pixel column normalization (``normalize``): per loaded column a register ORs the shadow's
-        words as they are written (_load; cleared at the swap); its bit length L gives the shadow's
-        shift s = max(0, W - L) (a priority encoder), registered at the swap as the active pixel's.
-        The operators of the column compare their words with their numbers shifted right by s
-        (_operator_matrix): the run on the words ``w << s``. A feedback column is not shifted."""
+    def _column_scales(self, m: Module, n: MachineNets) -> None:
+        """Per-pixel column normalization (``normalize``): per loaded column a register keeps the
+        largest of the shadow's words as they are written (_load; cleared at the swap): the shadow's
+        scale m, registered at the swap as the active pixel's. The operators of the column compare
+        their words with ``(number * m) >> W`` (_operator_matrix): a word w fires when w * 2^W > r * m,
+        the run on the words w * 2^W / m. A feedback column is not scaled (m = 2^W)."""
         p = self._params
         cols, fb = p.operator_columns, p.feedback_columns
         if not p.normalize:
             return
-        width = p.word_bits.bit_length()
-        n.norm_or = [Signal(p.memory_word_width, name=f"norm_or_{c}") for c in range(p.loaded_columns)]
-        n.norm_or_n = [Signal(p.memory_word_width, name=f"norm_or_n_{c}") for c in range(p.loaded_columns)]
+        width = p.memory_word_width
+        n.norm_max = [Signal(width, name=f"norm_max_{c}") for c in range(p.loaded_columns)]
         for c in range(cols):
             if c < fb:
-                for shifts in (n.shift_shadow, n.shift_active, n.shift_shadow_n, n.shift_active_n):
-                    shifts.append(Const(0, width))
+                for scales in (n.scale_shadow, n.scale_active, n.scale_active_n):
+                    scales.append(Const(p.word_one, width))
                 continue
-            n.shift_shadow.append(self._net(m, f"norm_shift_shadow_{c}", _normal_shift(p, n.norm_or[c - fb])))
-            n.shift_shadow_n.append(self._net(m, f"norm_shift_shadow_n_{c}",
-                                              _normal_shift(p, n.norm_or_n[c - fb])))
-            n.shift_active.append(Signal(width, name=f"norm_shift_{c}"))
-            n.shift_active_n.append(Signal(width, name=f"norm_shift_n_{c}"))  # driven by _start
+            n.scale_shadow.append(n.norm_max[c - fb])
+            n.scale_active.append(Signal(width, name=f"norm_scale_{c}"))
+            n.scale_active_n.append(Signal(width, name=f"norm_scale_n_{c}"))  # driven by _start
 
     def _random_numbers(self, m: Module, n: MachineNets) -> None:
         """The random source: advances on compute cycles only, restarts with each pixel's run."""
@@ -385,9 +376,9 @@ class BayesianMachine(wiring.Component):
         n.row = Signal(rows * samples, name="row")
         if source is None:
             # Numbers from a port arrive in their cycle and are compared then (sample i's at i * ops).
-            shifted = [self.entropy[i * ops + o] >> n.shift_active[o % cols] if p.normalize
-                       else self.entropy[i * ops + o] for i in range(samples) for o in range(ops)]
-            bits = [Cat(shifted[i * ops + o] < n.active[o] for i in range(samples)) for o in range(ops)]
+            scaled = [_scaled(p, self.entropy[i * ops + o], n.scale_active[o % cols]) if p.normalize
+                      else self.entropy[i * ops + o] for i in range(samples) for o in range(ops)]
+            bits = [Cat(scaled[i * ops + o] < n.active[o] for i in range(samples)) for o in range(ops)]
             m.d.comb += n.row.eq(bus_rows(bits, rows, cols, samples))
             return
         # Prefetched comparators (on-chip sources): ``bit_q[o]`` holds this compute cycle's
@@ -399,14 +390,13 @@ class BayesianMachine(wiring.Component):
         index, points = source.operator_numbers, source.sample_points
 
         def compare(numbers: list[Value], words: list[Value], kind: str,
-                    at: list[tuple[int, ...]] | None = None, shift: list[Value] | None = None) -> list[Value]:
+                    at: list[tuple[int, ...]] | None = None, scale: list[Value] | None = None) -> list[Value]:
             """Per operator, its B bits (``at``: other points per number entry) from its number; with B
-            samples nets of their own (``<kind>_bits_<r>_<c>``, read in several places); ``shift``:
-            per operator column, the right shift of its numbers (normalize)."""
+            samples nets of their own (``<kind>_bits_<r>_<c>``, read in several places); ``scale``:
+            per operator column, the scale m of its numbers (normalize)."""
             at = points if at is None else at
-            if shift is not None:
-                return self._shifted_bits(m, numbers, words, kind, [at[index[o]] for o in range(ops)], shift,
-                                          shifted=source.shared)
+            if scale is not None:
+                return self._scaled_bits(m, numbers, words, kind, [at[index[o]] for o in range(ops)], scale)
             if samples == 1:
                 if not any(a != (0,) for a in at):
                     return operator_bits(numbers, words, range(ops))
@@ -425,31 +415,22 @@ class BayesianMachine(wiring.Component):
             # every clock from ``following_numbers`` (so equal to ``next_numbers`` in every
             # cycle), and one of its restart numbers, loaded from ``following_restart_numbers``
             # (equal to ``restart_numbers``). The flow keeps these ``_rep`` registers apart too.
-            # normalize: a source copy's numbers are shifted once per column before the group copies,
-            # by the shift of the cycle the copies serve (the shifts' next values).
-            column_of = {index[o]: o % cols for o in range(ops)}
-
-            def group_copies(name: str, attr: str, shift_n: list[Value]) -> list[Value]:
-                copies, shifted = [], {}
+            def group_copies(name: str, attr: str) -> list[Value]:
+                copies = []
                 for g in range(n.groups):
-                    k = g // n.groups_per_source
-                    if k not in shifted:
-                        shifted[k] = [self._net(m, f"{name}_norm{k}_{i}", x >> shift_n[column_of[i]])
-                                      if p.normalize and column_of[i] >= p.feedback_columns else x
-                                      for i, x in enumerate(getattr(n.sources[k], attr))]
-                    following = shifted[k]
+                    following = list(getattr(n.sources[g // n.groups_per_source], attr))
                     copy = [Signal(len(x), name=f"{name}_rep{g}_{i}") for i, x in enumerate(following)]
                     m.d.sync += [c.eq(x) for c, x in zip(copy, following, strict=True)]
                     copies.append(copy)
                 return [copies[o // cols // n.rows_per_group][index[o]] for o in range(ops)]
 
-            next_numbers = group_copies("next_number", "following_numbers", n.shift_active_n)
-            restart = group_copies("restart_number", "following_restart_numbers", n.shift_shadow_n)
+            next_numbers = group_copies("next_number", "following_numbers")
+            restart = group_copies("restart_number", "following_restart_numbers")
         else:
             next_numbers = [source.next_numbers[index[o]] for o in range(ops)]
             restart = [source.restart_numbers[index[o]] for o in range(ops)]
         norm = p.normalize
-        n.next_bits = compare(next_numbers, n.active, "next", shift=n.shift_active if norm else None)
+        n.next_bits = compare(next_numbers, n.active, "next", scale=n.scale_active if norm else None)
         if n.hidden:
             # No bubble (hides_bubble, "Timing" in docs/architecture.md): the swap is the next run's
             # first compute cycle. Its bits (the restart numbers against the shadow words) are
@@ -459,7 +440,7 @@ class BayesianMachine(wiring.Component):
             # from one comparator of the low bits (``sample_bits``: for B = 1 the points 0 and V_0 =
             # 2^(W-1), a comparator of the low W - 1 bits).
             pair = compare(restart, n.incoming, "swap", list(source.swap_points),
-                           shift=n.shift_shadow if norm else None)
+                           scale=n.scale_shadow if norm else None)
             first_bits, swap_bits = [], []
             for o in range(ops):
                 first_bit = Signal(samples, name=f"first_bit_{o // cols}_{o % cols}")
@@ -468,7 +449,7 @@ class BayesianMachine(wiring.Component):
                 swap_bits.append(pair[o][samples:])
             n.first_row = bus_rows(first_bits, rows, cols, samples)
         else:
-            swap_bits = compare(restart, n.incoming, "swap", shift=n.shift_shadow if norm else None)
+            swap_bits = compare(restart, n.incoming, "swap", scale=n.scale_shadow if norm else None)
         n.swap_bits = swap_bits
         bits = []
         for o in range(ops):
@@ -503,32 +484,25 @@ class BayesianMachine(wiring.Component):
             n.next_counts.append(nxt)
             n.next_full.append(nfull)
 
-    def _shifted_bits(self, m: Module, numbers: list[Value], words: list[Value], kind: str,
-                      at: list[tuple[int, ...]], shift: list[Value], shifted: bool) -> list[Value]:
-        """Per operator o, ``Cat((number ^ at[o][i]) >> s < word for i)``, s its column's ``shift``
-        (normalize): ``(r ^ p) >> s = (r >> s) ^ (p >> s)``, so one shifter per number (none if the
-        numbers come ``shifted``: a shared source's, shifted before its group copies) and a shifted
-        constant per point and column; full comparators (the low-bits sharing of ``sample_bits``
-        needs the points in the top bits)."""
+    def _scaled_bits(self, m: Module, numbers: list[Value], words: list[Value], kind: str,
+                     at: list[tuple[int, ...]], scale: list[Value]) -> list[Value]:
+        """Per operator o, ``Cat(((number ^ at[o][i]) * m) >> W < word for i)``, m its column's
+        ``scale`` (normalize): one W x (W+1) multiplier per number, column and point (shared by the
+        column's rows); a feedback column's numbers are compared unscaled."""
         p = self._params
         cols, fb = p.operator_columns, p.feedback_columns
-        moved_numbers: dict[tuple[int, int], Value] = {}
-        moved: dict[tuple[int, int], Value] = {}
+        scaled: dict[tuple[int, int, int], Value] = {}
         out = []
         for o, word in enumerate(words):
             c = o % cols
-            key = (id(numbers[o]), c)
-            if key not in moved_numbers:
-                moved_numbers[key] = (numbers[o] if c < fb or shifted else
-                                      self._net(m, f"{kind}_norm_number_{len(moved_numbers)}",
-                                                numbers[o] >> shift[c]))
             bits = []
             for point in at[o]:
-                if point and (point, c) not in moved:
-                    moved[point, c] = (Const(point, p.word_bits) if c < fb else self._net(
-                        m, f"{kind}_norm_point_{c}_{point}", Const(point, p.word_bits) >> shift[c]))
-                number = moved_numbers[key]
-                bits.append((number ^ moved[point, c] if point else number) < word)
+                key = (id(numbers[o]), c, point)
+                if key not in scaled:
+                    number = numbers[o] ^ Const(point, p.word_bits) if point else numbers[o]
+                    scaled[key] = number if c < fb else self._net(
+                        m, f"{kind}_norm_number_{len(scaled)}", _scaled(p, number, scale[c]))
+                bits.append(scaled[key] < word)
             out.append(Cat(*bits))
         return out
 
@@ -778,8 +752,8 @@ class BayesianMachine(wiring.Component):
                 m.d.comb += start.eq(n.shadow_full & (n.leave | ~n.running))
             with m.If(start):
                 m.d.sync += [n.at_last.eq(0), n.cycles_done.eq(0), n.running.eq(1), n.shadow_full.eq(0)]
-        for a, a_n, s in zip(n.shift_active, n.shift_active_n, n.shift_shadow, strict=True):
-            if isinstance(a, Signal):  # normalize: the active pixel's shifts, taken at the swap
+        for a, a_n, s in zip(n.scale_active, n.scale_active_n, n.scale_shadow, strict=True):
+            if isinstance(a, Signal):  # normalize: the active pixel's scales, taken at the swap
                 m.d.comb += a_n.eq(Mux(start, s, a))
                 m.d.sync += a.eq(a_n)
         b = p.samples_per_clock
@@ -821,14 +795,14 @@ class BayesianMachine(wiring.Component):
                     if w < p.words_per_pixel:  # unused lanes of the last beat are ignored
                         m.d.sync += n.shadow[w].eq(words[lane])
         if p.normalize:
-            self._column_or(m, n, words)
+            self._column_max(m, n, words)
         with m.If(n.write_q[nbeats - 1]):
             m.d.sync += n.shadow_full.eq(1)
             if p.feedback_columns:
                 m.d.sync += n.shadow_line_start.eq(load_q.line_start)
 
-    def _column_or(self, m: Module, n: MachineNets, words: list[Value]) -> None:
-        """normalize: each written beat's words ORed into their loaded column's register; cleared at
+    def _column_max(self, m: Module, n: MachineNets, words: list[Value]) -> None:
+        """normalize: each written beat's words into their loaded column's running maximum; cleared at
         the swap (no beat is written in a swap cycle: the load is not ready while the last beat is
         written, nor, with the bubble, while the shadow is full)."""
         p = self._params
@@ -841,10 +815,15 @@ class BayesianMachine(wiring.Component):
                 if w < p.words_per_pixel:
                     lanes.setdefault(w % loaded, []).append(words[lane])
             for c, v in lanes.items():
-                per_column[c].append(Mux(n.write_q[b], _or_all(v), 0))
+                per_column[c].extend(Mux(n.write_q[b], x, 0) for x in v)
         for c in range(loaded):
-            m.d.comb += n.norm_or_n[c].eq(Mux(n.start, 0, _or_all([n.norm_or[c], *per_column[c]])))
-            m.d.sync += n.norm_or[c].eq(n.norm_or_n[c])
+            top: Value = n.norm_max[c]
+            for x in per_column[c]:
+                top = Mux(x > top, x, top)
+            with m.If(n.start):
+                m.d.sync += n.norm_max[c].eq(0)
+            with m.Else():
+                m.d.sync += n.norm_max[c].eq(top)
 
     def _enables(self, m: Module, n: MachineNets) -> None:
         """The next values of the replicated enables: the registers' updates, one cycle early."""

@@ -21,7 +21,7 @@ from bayesmachine.sim.results import MachineResult, NumberFeed, answered, check_
 from bayesmachine.sources.lfsr import MAX_TAPS, LFSRSpec, column_lfsr_specs, lfsr_specs
 from bayesmachine.sources.sobol import sobol_points
 
-__all__ = ["MachineModel", "MachineResult", "check_words", "column_shifts"]
+__all__ = ["MachineModel", "MachineResult", "check_words", "column_scales"]
 
 _BLOCK = 4096  # clocks of random numbers fetched at a time from an off-chip source
 
@@ -119,7 +119,8 @@ def _run_on_chip(q, norm, states, shifts, points, per_operator, rows, opcols, wo
     ``points[j, c] ^ shift[c]``, j = (k - 1) mod 2^W; the column LFSRs step once per block (j = 0)
     to give the block's shifts (every pixel starts a block). With a neighbour prior (``line_start``
     not empty) each pixel's feedback column is formed first from ``prev[0]``, which carries the
-    previous result over calls. ``norm[p, c]``: column c's number shift for pixel p (normalize).
+    previous result over calls. ``norm[p, c]``: column c's number scale m for pixel p (normalize): its
+    operators compare their words with ``(number * m) >> W`` (m = 2^W: the number itself).
 
     Sample by sample: with ``samples`` (B) per clock only ``sobol`` runs, whose pixels start blocks
     (a multiple of B) and whose blocks are whole clocks, so a clock's samples after the stop draw no
@@ -154,7 +155,7 @@ def _run_on_chip(q, norm, states, shifts, points, per_operator, rows, opcols, wo
             if per_operator:
                 _step_lfsrs(states, t1, t2, t3, t4, t5, mask, w, top, nums)
                 for o in range(ops):
-                    bits[o] = (nums[o] >> sh[o % opcols]) < qp[o]
+                    bits[o] = ((nums[o] * sh[o % opcols]) >> word_bits) < qp[o]
             else:
                 if not sobol:
                     _step_lfsrs(states, t1, t2, t3, t4, t5, mask, w, top, nums)
@@ -164,7 +165,7 @@ def _run_on_chip(q, norm, states, shifts, points, per_operator, rows, opcols, wo
                     for c in range(opcols):
                         nums[c] = points[j, c] ^ shift[c]
                 for c in range(opcols):
-                    col_nums[c] = nums[c] >> sh[c]
+                    col_nums[c] = (nums[c] * sh[c]) >> word_bits
                 for r in range(rows):
                     for c in range(opcols):
                         bits[r * opcols + c] = col_nums[c] < qp[r * opcols + c]
@@ -237,23 +238,18 @@ class _Feedback:
         return self.line_start, self._table, self._nomatch, self._nm_row, self.prev
 
 
-def column_shifts(params: MachineParams, q: np.ndarray) -> np.ndarray:
-    """Per pixel and operator column, the right shift of that column's random numbers
-    (``MachineParams.normalize``): s = max(0, W - L), L the bit length of the OR of the column's
-    words; 0 for a neighbour prior's feedback column and without ``normalize``. ``q``: operator
-    words (P, operators). Comparing ``number >> s`` with w is comparing ``number`` with ``w << s``:
-    w > floor(r / 2^s) exactly when w * 2^s > r."""
-    shifts = np.zeros((q.shape[0], params.operator_columns), np.int64)
-    if not params.normalize:
-        return shifts
-    ored = np.bitwise_or.reduce(q.reshape(q.shape[0], params.rows, params.operator_columns).astype(np.int64),
-                                axis=1)
-    length = np.zeros_like(ored)
-    for bit in range(params.memory_word_width):
-        length += (ored >> bit) > 0
-    shifts[:] = np.maximum(0, params.word_bits - length)
-    shifts[:, :params.feedback_columns] = 0
-    return shifts
+def column_scales(params: MachineParams, q: np.ndarray) -> np.ndarray:
+    """Per pixel and operator column, the scale m of that column's random numbers
+    (``MachineParams.normalize``): m = the column's largest word (0 .. 2^W; 0 only for a column of
+    zeros); 2^W (the numbers unchanged) for a neighbour prior's feedback column and without
+    ``normalize``. ``q``: operator words (P, operators). A word w fires when w > floor(r * m / 2^W),
+    that is when w * 2^W > r * m (w an integer): with probability w / m, the run on the real words
+    w * 2^W / m (each column rescaled so its largest word is 2^W)."""
+    scales = np.full((q.shape[0], params.operator_columns), params.word_one, np.int64)
+    if params.normalize:
+        top = q.reshape(q.shape[0], params.rows, params.operator_columns).astype(np.int64).max(axis=1)
+        scales[:, params.feedback_columns:] = top[:, params.feedback_columns:]
+    return scales
 
 
 def _expand(params: MachineParams, q: np.ndarray) -> np.ndarray:
@@ -293,7 +289,7 @@ def _run_numbers(q, norm, numbers, first, counts, done, rows, opcols, word_bits,
             for i in range(samples):
                 k += 1
                 for o in range(ops):
-                    bits[o] = (np.int64(numbers[t, i * ops + o]) >> norm[p, o % opcols]) < qp[o]
+                    bits[o] = ((np.int64(numbers[t, i * ops + o]) * norm[p, o % opcols]) >> word_bits) < qp[o]
                 winner = _finish_cycle(bits, counts, over, rows, opcols, n_max, nm_index)
                 if winner >= 0 or k == max_cycles:
                     break
@@ -346,7 +342,7 @@ class MachineModel(EngineBase):
         q = _expand(p, q)
         n = q.shape[0]
         out = MachineResult.zeros(n, p.rows)
-        norm = column_shifts(p, q)
+        norm = column_scales(p, q)
         if feed is None:
             self._twin.run(q, norm, out, self._feedback)
         else:

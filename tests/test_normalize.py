@@ -1,8 +1,8 @@
 # amaranth: UnusedElaboratable=no
 """Per-pixel column normalization (``MachineParams.normalize``, ``--normalize-columns``): each loaded
-column's operators compare their words with the random number shifted right by s = max(0, W - L)
-(L: the bit length of the OR of the column's words). That is exactly the machine run on the words
-``w << s`` (the model on host-shifted words), and the RTL (pysim, Verilator) equals the model."""
+column's operators compare their words w with ``(r * m) >> W``, m the column's largest word for the
+pixel: w fires when w * 2^W > r * m, the run on the words w * 2^W / m. The model does so operator by
+operator, and the RTL (pysim, Verilator) equals the model."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ import pytest
 from conftest import assert_same_results, small_params
 
 from bayesmachine.params import MachineParams
-from bayesmachine.sim.model import MachineModel, column_shifts
+from bayesmachine.sim.model import MachineModel, column_scales
 from bayesmachine.sim.pysim import PysimEngine
 
 NEIGHBOUR = dict(prior="neighbour", feedback_words=(16, 10, 4), feedback_nomatch_word=6)
@@ -37,7 +37,7 @@ VARIANTS = list(VARIANT_IDS.values())
 def _weak_words(params: MachineParams, pixels: int, seed: int) -> np.ndarray:
     """Loaded words whose columns are scaled down per pixel by 2^0 .. 2^W (a column of zeros
     included), so most columns shift; some words exactly 2^W (no shift). In every other pixel the
-    last loaded word (the last beat's) sets its column's bit length alone."""
+    last loaded word (the last beat's) is its column's largest alone."""
     rng = np.random.default_rng(seed)
     shape = (pixels, params.rows, params.loaded_columns)
     words = rng.integers(0, params.word_one + 1, size=shape)
@@ -56,47 +56,62 @@ def _line_start(params: MachineParams, pixels: int) -> dict[str, np.ndarray]:
     return {"line_start": flags}
 
 
-def _host_shifted(params: MachineParams, words: np.ndarray) -> np.ndarray:
-    """The loaded words shifted left by their column's shift: what the normalized machine runs."""
-    full = np.zeros((words.shape[0], params.rows, params.operator_columns), np.int64)
-    full[:, :, params.feedback_columns:] = words
-    shifts = column_shifts(params, full.reshape(words.shape[0], -1))[:, params.feedback_columns:]
-    return (words.astype(np.int64) << shifts[:, None, :]).astype(np.int32)
-
-
-def test_shift_puts_the_largest_word_in_the_top_octave() -> None:
+def test_scale_is_the_columns_largest_word() -> None:
     params = small_params(normalize=True)
     words = _weak_words(params, 200, seed=3)
-    shifted = _host_shifted(params, words)
-    top = shifted.max(axis=1)  # per pixel and column
-    w = params.word_bits
-    assert ((top == 0) | ((top >= 1 << (w - 1)) & (top <= 1 << w))).all()
-    assert (shifted <= params.word_one).all() and (shifted != words).any()
-    assert (column_shifts(dataclasses.replace(params, normalize=False), shifted.reshape(200, -1)) == 0).all()
+    scales = column_scales(params, words.reshape(200, -1))
+    np.testing.assert_array_equal(scales, words.max(axis=1))
+    assert (scales == 0).any() and (scales == params.word_one).any()
+    plain = column_scales(dataclasses.replace(params, normalize=False), words.reshape(200, -1))
+    assert (plain == params.word_one).all()  # numbers unchanged
 
 
-@pytest.mark.parametrize(
-    "variant",
-    VARIANTS, ids=list(VARIANT_IDS),
-)
-def test_model_normalized_is_the_model_on_shifted_words(variant: dict[str, object]) -> None:
-    """The exactness claim: comparing w with r >> s is the machine on words w << s."""
+def test_model_fires_when_w_times_2w_exceeds_r_times_m() -> None:
+    """The exactness claim, operator by operator: over T cycles (no counter can overflow earlier;
+    one that fires every cycle reads counter max), each row's count is the number of cycles in which
+    w * 2^W > r * m holds for all its columns (r the operator's number, m its column's largest word);
+    a column of zeros never fires."""
+    t = 40
+    params = small_params(rng="external", normalize=True, counter_max=t - 1, max_cycles=t,
+                          timeout_answer="leading", words_per_beat=10)
+    pixels, w = 50, params.word_bits
+    words = _weak_words(params, pixels, seed=11)
+    numbers = np.random.default_rng(12).integers(0, 1 << w, size=(pixels * t, params.operators))
+    got = MachineModel(params).run(words, numbers)
+    per_pixel = numbers.reshape(pixels, t, params.rows, params.operator_columns).astype(np.int64)
+    scale = words.max(axis=1)[:, None, None, :].astype(np.int64)
+    fires = (words[:, None].astype(np.int64) << w) > per_pixel * scale  # (pixels, t, rows, columns)
+    expected = np.minimum(fires.all(axis=3).sum(axis=1), t - 1)  # an overflowing counter reads t - 1
+    np.testing.assert_array_equal(got.counts, expected)
+    assert (got.cycles == t).all() and (scale == 0).any()
+
+
+@pytest.mark.parametrize("variant", VARIANTS, ids=list(VARIANT_IDS))
+def test_power_of_two_columns_are_the_run_on_shifted_words(variant: dict[str, object]) -> None:
+    """Every on-chip source's kernel: a column whose largest word is 2^(W - s) scales its numbers by
+    2^-s, exactly the plain machine on the words w << s."""
     params = small_params(normalize=True, **variant)
     words = _weak_words(params, 120, seed=4)
+    top = words.max(axis=1, keepdims=True)
+    shift = np.where(top > 0, params.word_bits - np.floor(np.log2(np.maximum(top, 1))).astype(int), 0)
+    words[:, -1:, :] = np.where(top > 0, params.word_one >> shift, 0)  # each column's largest: 2^(W-s)
+    words = np.minimum(words, words[:, -1:, :])
     start = _line_start(params, 120)
-    got = MachineModel(params).run(words, **start)
     plain = dataclasses.replace(params, normalize=False)
-    assert_same_results(got, MachineModel(plain).run(_host_shifted(params, words), **start))
+    got = MachineModel(params).run(words, **start)
+    assert_same_results(got, MachineModel(plain).run(words << shift, **start))
     assert got.cycles.mean() < MachineModel(plain).run(words, **start).cycles.mean()
 
 
-def test_model_normalized_external_numbers() -> None:
-    params = small_params(rng="external", normalize=True)
+def test_model_normalized_external_numbers_b2() -> None:
+    """B = 2 with normalize: the one-sample normalized machine's results, in whole clocks."""
+    params = small_params(rng="sobol", normalize=True, samples_per_clock=2, counter_max=4)
     words = _weak_words(params, 60, seed=5)
-    numbers = np.random.default_rng(6).integers(0, 1 << params.word_bits, size=(4000, params.operators))
-    plain = dataclasses.replace(params, normalize=False)
-    assert_same_results(MachineModel(params).run(words, numbers),
-                        MachineModel(plain).run(_host_shifted(params, words), numbers))
+    one = MachineModel(dataclasses.replace(params, samples_per_clock=1)).run(words)
+    two = MachineModel(params).run(words)
+    for field in ("map", "nomatch", "timeout", "counts"):
+        np.testing.assert_array_equal(getattr(two, field), getattr(one, field), err_msg=field)
+    np.testing.assert_array_equal(two.cycles, (one.cycles + 1) // 2)
 
 
 def test_normalize_off_keeps_fingerprints_and_refuses_a_wrong_type() -> None:
