@@ -103,15 +103,37 @@ def test_power_of_two_columns_are_the_run_on_shifted_words(variant: dict[str, ob
     assert got.cycles.mean() < MachineModel(plain).run(words, **start).cycles.mean()
 
 
-def test_model_normalized_external_numbers_b2() -> None:
-    """B = 2 with normalize: the one-sample normalized machine's results, in whole clocks."""
-    params = small_params(rng="sobol", normalize=True, samples_per_clock=2, counter_max=4)
-    words = _weak_words(params, 60, seed=5)
+@pytest.mark.parametrize("samples", [2, 8])
+def test_model_normalized_b_samples_equal_one_sample(samples: int) -> None:
+    """B samples per clock with normalize: the one-sample normalized machine's results, in whole clocks."""
+    params = small_params(rng="sobol", normalize=True, samples_per_clock=samples, counter_max=12)
+    words = _weak_words(params, 80, seed=5)
     one = MachineModel(dataclasses.replace(params, samples_per_clock=1)).run(words)
-    two = MachineModel(params).run(words)
+    got = MachineModel(params).run(words)
     for field in ("map", "nomatch", "timeout", "counts"):
-        np.testing.assert_array_equal(getattr(two, field), getattr(one, field), err_msg=field)
-    np.testing.assert_array_equal(two.cycles, (one.cycles + 1) // 2)
+        np.testing.assert_array_equal(getattr(got, field), getattr(one, field), err_msg=field)
+    np.testing.assert_array_equal(got.cycles, (one.cycles + samples - 1) // samples)
+
+
+@pytest.mark.slow
+def test_posterior_ratios_unchanged() -> None:
+    """Statistically: over T cycles each row fires in proportion to the product of its words, with
+    or without normalize (the rows' ratios, the posterior, unchanged), while normalize fires more."""
+    t, pixels = 200, 400
+    params = small_params(rng="external", counter_max=t - 1, max_cycles=t, timeout_answer="leading",
+                          words_per_beat=10)
+    rng = np.random.default_rng(13)
+    one = rng.integers(1, params.word_one // 2, size=(1, params.rows, params.loaded_columns))
+    words = np.repeat(one, pixels, axis=0).astype(np.int32)
+    numbers = rng.integers(0, 1 << params.word_bits, size=(pixels * t, params.operators))
+    posterior = one[0].prod(axis=1) / one[0].prod(axis=1).sum()
+    totals = []
+    for normalize in (False, True):
+        run = MachineModel(dataclasses.replace(params, normalize=normalize)).run(words, numbers)
+        counts = run.counts.sum(axis=0)
+        totals.append(counts.sum())
+        np.testing.assert_allclose(counts / counts.sum(), posterior, atol=0.03)
+    assert totals[1] > 2 * totals[0]
 
 
 def test_normalize_off_keeps_fingerprints_and_refuses_a_wrong_type() -> None:
