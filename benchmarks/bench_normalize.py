@@ -1,9 +1,9 @@
-"""Benchmark: per-pixel column normalization (``--normalize-columns``): how often a column shifts, and
-what the shifts cost in generic Yosys LUT4s and flip-flops.
+"""Benchmark: per-pixel column normalization (``--normalize-columns``): how far each column is scaled,
+and what the scaling costs in generic Yosys LUT4s and flip-flops.
 
 1. On the bundled pair (model engine, counter max 16, ``--max-cycles 256``), for census and
-   census-lr's left pass: the fraction of (pixel, operator column) whose shift s = max(0, W - L) is
-   above 0, and the mean s, per operator column, read from the model's own shifts during the run.
+   census-lr's left pass: per operator column, the fraction of pixels whose scale m (the column's
+   largest word) is below 2^W, and the mean m / 2^W, read from the model's own scales during the run.
 2. The census model's machine (``BayesianMachine``, Dmax ``--dmax``) with normalize off and on:
    generic Yosys ``synth -flatten; abc -lut 4`` LUT4s and flip-flops.
 
@@ -24,29 +24,29 @@ from bayesmachine.models import ModelParams, disparity_machine
 from bayesmachine.sim import model as machine_model
 
 
-def shift_statistics(name: str) -> None:
-    """Run the model with normalize on and record the shifts of the model's own pass."""
+def scale_statistics(name: str) -> None:
+    """Run the model with normalize on and record the scales of the model's own pass."""
     left, right, _ = bundled_pair()
     model = ModelParams(name=name)
     machine = disparity_machine(model, normalize=True, max_cycles=256)
     seen: list[np.ndarray] = []
-    original = machine_model.column_shifts
+    original = machine_model.column_scales
 
     def recording(params, q):  # noqa: ANN001, ANN202
-        shifts = original(params, q)
+        scales = original(params, q)
         if params == machine:  # the model's own pass (census-lr's right pass has its own machine)
-            seen.append(shifts)
-        return shifts
+            seen.append(scales)
+        return scales
 
-    machine_model.column_shifts = recording
+    machine_model.column_scales = recording
     try:
         run = run_machine(prepare(left, right, model, reference=False), machine, "model", progress=False)
     finally:
-        machine_model.column_shifts = original
-    shifts = np.concatenate(seen)
-    print(f"{name}: {shifts.shape[0]} pixels, cycles/px {run.cycles.mean():.2f}; per operator column "
-          f"(feedback column first): s > 0 {np.round((shifts > 0).mean(axis=0), 4).tolist()}, "
-          f"mean s {np.round(shifts.mean(axis=0), 4).tolist()}")
+        machine_model.column_scales = original
+    scales = np.concatenate(seen) / machine.word_one
+    print(f"{name}: {scales.shape[0]} pixels, cycles/px {run.cycles.mean():.2f}; per operator column "
+          f"(feedback column first): m < 2^W {np.round((scales < 1).mean(axis=0), 4).tolist()}, "
+          f"mean m / 2^W {np.round(scales.mean(axis=0), 4).tolist()}")
 
 
 def synth_cost(dmax: int) -> None:
@@ -65,7 +65,7 @@ def main() -> None:
     args = ap.parse_args()
     if not args.no_runs:
         for name in ("census", "census-lr"):
-            shift_statistics(name)
+            scale_statistics(name)
     if not args.no_synth:
         synth_cost(args.dmax)
 
