@@ -49,6 +49,7 @@ from bayesmachine.hdl.signatures import (
 )
 from bayesmachine.models import ModelParams, disparity_machine
 from bayesmachine.params import MachineParams, ParameterError, stereo_words_per_beat
+from bayesmachine.region import OutputRegion
 from bayesmachine.sources import source_kind
 
 from . import DEFAULT_FIFO_PIXELS, MAX_MACHINES, MAX_WIDTH
@@ -88,6 +89,13 @@ def _check_width(width: object, model: ModelParams) -> int:
             f"needs one output pixel with all {model.dmax + 1} disparities and its {size}x{size} windows), "
             f"got {width}")
     return width
+
+
+def _line_region(model: ModelParams, width: int) -> OutputRegion:
+    """The host's output region of frames of ``width``-pixel lines: its columns (a frame here has any
+    number of lines, so it is the region of the shortest frame, 2·margin + 1 lines; only its columns
+    are read)."""
+    return OutputRegion.of_model((2 * model.margin + 1, width), model)
 
 
 def check_machines(machines: object, params: MachineParams, model: ModelParams) -> int:
@@ -366,7 +374,8 @@ class FrontEnd(wiring.Component):
         model = self._model
         neighbour = self._params.feedback_columns > 0
         m.submodules.pipeline = pipe = FeaturePipeline(model=model, width=self._width, neighbour=neighbour)
-        output_columns = self._width - 2 * model.margin - model.dmax if neighbour else None
+        region = _line_region(model, self._width)
+        output_columns = region.shape[1] if neighbour else None
         m.submodules.generator = gen = WordGenerator(params=self._params, model=model,
                                                      output_columns=output_columns)
         wiring.connect(m, wiring.flipped(self.pixels), pipe.pixels)
@@ -377,7 +386,7 @@ class FrontEnd(wiring.Component):
                          px.consult.eq(pix.consult), px.line_end.eq(features.payload.line_end)]
             if neighbour:
                 m.d.comb += [px.row_start.eq(pix.row_start), px.first_row.eq(pix.first_row)]
-            ready = lr_split(m, self, gen, px, features.valid, self._width - 2 * model.margin)
+            ready = lr_split(m, self, gen, px, features.valid, region.feature_shape[1])
             m.d.comb += features.ready.eq(ready)
         else:
             m.d.comb += [gen.pixel.valid.eq(features.valid), gen.pixel.payload.eq(features.payload.pixel),
@@ -479,36 +488,11 @@ class StereoMachine(wiring.Component):
         m.submodules.machine = machine = BayesianMachine(params=p)
         if len(self._model.passes) > 1:
             self._lr_right_machine(m, front)
-        beat_bits = Shape.cast(load_layout(p)).width
-        # One entry more than the pixels' beats: the registered ready below keeps one free.
-        depth = self._fifo_pixels * p.beats_per_pixel + 1
-        m.submodules.fifo = buf = fifo.SyncFIFOBuffered(width=beat_bits, depth=depth)
         wiring.connect(m, wiring.flipped(self.pixels), front.pixels)
-        # The front end sees a registered ready (``room``), so no path runs from the FIFO's
-        # level through the pixel take into the front end's thousands of enables. ``used``
-        # counts the beats in the FIFO (its level); room is set while at most depth - 2 are in:
-        # the inner FIFO (depth - 1 entries, holding at most ``used``) then takes the next
-        # beat, and the FIFO fills to depth - 1 = fifo_pixels * beats_per_pixel beats.
-        # (Our own count, not ``buf.level``: see "Back-pressure" in docs/frontend.md.)
-        used = Signal(range(depth + 1))
-        used_next = Signal(range(depth + 1))
-        room = Signal()
-        write = Signal()
-        read = Signal()
-        m.d.comb += [
-            write.eq(front.beats.valid & room),
-            read.eq(buf.r_stream.valid & buf.r_stream.ready),
-            used_next.eq(used + write - read),
-        ]
-        m.d.sync += [used.eq(used_next), room.eq(used_next <= depth - 2)]
-        m.d.comb += [
-            buf.w_stream.payload.eq(front.beats.payload),
-            buf.w_stream.valid.eq(write),
-            front.beats.ready.eq(room),
-            machine.load.payload.eq(buf.r_stream.payload),
-            machine.load.valid.eq(buf.r_stream.valid),
-            buf.r_stream.ready.eq(machine.load.ready),
-        ]
+        # The front end sees the FIFO's registered room, so no path runs from the FIFO's level through
+        # the pixel take into the front end's thousands of enables (see "Back-pressure" in
+        # docs/frontend.md).
+        _load_fifo(m, "fifo", front.beats, machine.load, self._fifo_pixels * p.beats_per_pixel, prefix="")
         wiring.connect(m, machine.result, wiring.flipped(self.result))
         if p.feedback_columns:  # the neighbour prior's line of MAPs: each result as it leaves
             res = machine.result
@@ -531,7 +515,7 @@ class StereoMachine(wiring.Component):
         m = Module()
         p, model, width, k = self._params, self._model, self._width, self._machines
         neighbour = p.feedback_columns > 0
-        wo = width - 2 * model.margin - model.dmax  # output pixels per map row
+        wo = _line_region(model, width).shape[1]  # output pixels per map row
         m.submodules.frontend = pipe = FeaturePipeline(model=model, width=width, neighbour=neighbour)
         wiring.connect(m, wiring.flipped(self.pixels), pipe.pixels)
         fx, w = pipe.features, pipe.features.payload
@@ -565,7 +549,6 @@ class StereoMachine(wiring.Component):
             m.d.sync += lane.eq(following)
 
         # The machines.
-        beat_bits = Shape.cast(load_layout(p)).width
         res_bits = Shape.cast(result_layout(p)).width
         gens, machines, results = [], [], []
         for j in range(k):
@@ -578,14 +561,7 @@ class StereoMachine(wiring.Component):
             m.d.comb += [gen.pixel.valid.eq(line.r_stream.valid),
                          gen.pixel.payload.as_value().eq(line.r_stream.payload),
                          line.r_stream.ready.eq(gen.pixel.ready)]
-            beats, beat_room, beat_write = _room_fifo(m, f"beats{j}", beat_bits,
-                                                      self._fifo_pixels * p.beats_per_pixel)
-            m.d.comb += [beat_write.eq(gen.beats.valid & beat_room),
-                         beats.w_stream.payload.eq(gen.beats.payload.as_value()),
-                         gen.beats.ready.eq(beat_room),
-                         machine.load.payload.as_value().eq(beats.r_stream.payload),
-                         machine.load.valid.eq(beats.r_stream.valid),
-                         beats.r_stream.ready.eq(machine.load.ready)]
+            _load_fifo(m, f"beats{j}", gen.beats, machine.load, self._fifo_pixels * p.beats_per_pixel)
             # A map row's results wait here while the rows dealt before it leave (a row's worth, at
             # most 511: one block RAM deep in its 36-bit-wide mode; a longer row's machine may wait
             # for the row before it to leave).
@@ -623,18 +599,35 @@ class StereoMachine(wiring.Component):
         return m
 
 
-def _room_fifo(m: Module, name: str, width: int,
-               capacity: int) -> tuple[fifo.SyncFIFOBuffered, Signal, Signal]:
+def _room_fifo(m: Module, name: str, width: int, capacity: int,
+               prefix: str | None = None) -> tuple[fifo.SyncFIFOBuffered, Signal, Signal]:
     """A FIFO of ``capacity`` entries whose writer sees a registered ``room`` (no path from the
     FIFO's level into the writer's enables): returns (fifo, room, write); the caller drives ``write``
-    (only while ``room``) and the write stream's payload."""
+    (only while ``room``) and the write stream's payload. Its count signals are ``{prefix}used``,
+    ``{prefix}room``, ... (``prefix`` default ``name_``; the one machine's load FIFO has none: the
+    formal mutants find its ``used``, ``write`` and ``read``)."""
+    prefix = f"{name}_" if prefix is None else prefix
     depth = capacity + 1  # one entry more: room is set while at most capacity - 1 are in
     m.submodules[name] = buf = fifo.SyncFIFOBuffered(width=width, depth=depth)
-    used = Signal(range(depth + 1), name=f"{name}_used")
-    used_next = Signal(range(depth + 1), name=f"{name}_used_next")
-    room = Signal(name=f"{name}_room")
-    write = Signal(name=f"{name}_write")
-    m.d.comb += [used_next.eq(used + write - (buf.r_stream.valid & buf.r_stream.ready)),
+    used = Signal(range(depth + 1), name=f"{prefix}used")
+    used_next = Signal(range(depth + 1), name=f"{prefix}used_next")
+    room = Signal(name=f"{prefix}room")
+    write = Signal(name=f"{prefix}write")
+    read = Signal(name=f"{prefix}read")
+    m.d.comb += [read.eq(buf.r_stream.valid & buf.r_stream.ready), used_next.eq(used + write - read),
                  buf.w_stream.valid.eq(write)]
     m.d.sync += [used.eq(used_next), room.eq(used_next <= depth - 2)]
     return buf, room, write
+
+
+def _load_fifo(m: Module, name: str, beats: stream.Interface, load: stream.Interface, capacity: int,
+               prefix: str | None = None) -> None:
+    """A word generator's load ``beats`` into a machine's ``load`` stream through a :func:`_room_fifo` of
+    ``capacity`` beats (the generator sees its registered room as ``ready``)."""
+    buf, room, write = _room_fifo(m, name, Shape.cast(load.payload.shape()).width, capacity, prefix)
+    m.d.comb += [write.eq(beats.valid & room),
+                 buf.w_stream.payload.eq(beats.payload.as_value()),
+                 beats.ready.eq(room),
+                 load.payload.as_value().eq(buf.r_stream.payload),
+                 load.valid.eq(buf.r_stream.valid),
+                 buf.r_stream.ready.eq(load.ready)]
