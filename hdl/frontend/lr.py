@@ -8,13 +8,13 @@ consistency column of the right MAPs (:func:`~bayesmachine.columns.lr_consistent
 ``bayesmachine.columns.consistency``:
 
 - :class:`RightPassFeeder`: the front end's pixel features in, the right pass's pixels out, for a
-  :class:`~.costs.WordGenerator` built with ``right_pass=True``. The reference (the right features) is
-  delayed by Dmax pixels, so that when left map column x arrives the right pixel x_r = x - Dmax has
-  every left pixel it pairs with (x_r .. x_r + Dmax: the word generator's delay line, read backwards).
-  After a line's last pixel the feeder holds its input for Dmax more right pixels (x_r = W4 - Dmax ..
-  W4 - 1), each with ``flush`` = k: its lanes d > Dmax - k pair it with a left pixel past the last
-  output column (:func:`~bayesmachine.columns.right_lanes_valid`: word 0). So the right pass
-  covers right map columns 0 .. W4 - 1 of every output row, in raster order, as the host's
+  :class:`~.words.WordGenerator` of the right pass (``pass_name="right"``). The reference (the right
+  features) is delayed by Dmax pixels, so that when left map column x arrives the right pixel x_r = x -
+  Dmax has every left pixel it pairs with (x_r .. x_r + Dmax: the word generator's delay line, read
+  backwards). After a line's last pixel the feeder holds its input for Dmax more right pixels (x_r = W4
+  - Dmax .. W4 - 1), each with ``flush`` = k: its lanes d > Dmax - k pair it with a left pixel past the
+  last output column (:func:`~bayesmachine.columns.right_lanes_valid`: word 0). So the right pass covers
+  right map columns 0 .. W4 - 1 of every output row, in raster order, as the host's
   (``host.likelihoods.right_columns``).
 - :class:`ConsistencyTest`: the right MAPs of one map row, shifted in column by column (column x when
   the left pass takes map column x), the last Dmax + 1 of them in a shift register, entry d =
@@ -34,8 +34,8 @@ from bayesmachine.columns import RIGHT_PASS, Census
 from bayesmachine.models import ModelParams, right_machine
 from bayesmachine.params import MachineParams, stereo_words_per_beat
 
-from .costs import WordGenerator, pixel_features_layout
 from .filters import feature_layout
+from .words import WordGenerator, flush_bits, pass_pixel_layout, pixel_features_layout
 
 __all__ = ["ConsistencyTest", "RightPassFeeder", "feeder_in_layout", "flush_bits", "lr_split",
            "right_map_layout", "right_pass_params"]
@@ -78,24 +78,22 @@ def lr_split(m: Module, front: wiring.Component, gen: WordGenerator, px: Value, 
     ``valid``, goes both to the left pass's word generator ``gen``, through a FIFO of Dmax + 4 pixels
     (its pixel at map column x waits for the right MAP of x, which needs the left pixels up to x + Dmax:
     the FIFO lets them pass), and to the right pass (:class:`RightPassFeeder`, a
-    ``WordGenerator(right_pass=True)`` writing ``front.right_beats``); the right results
+    ``WordGenerator(pass_name="right")`` writing ``front.right_beats``); the right results
     (``front.right_take``...) go to that generator's line of MAPs (its above prior) and into a FIFO of
     right MAPs (Dmax + 8: never full while the left pass waits, it holds at most the pixel FIFO's
     pixels' MAPs) that ``gen`` reads. Returns the ready of the stage (both take the pixel together)."""
     model, params = front.model, front.params
     rp = right_pass_params(model, params)
     bits = model.column(Census).bits
-    left_layout = pixel_features_layout(bits, True, consult=True)
+    left_layout = pass_pixel_layout(model, model.passes[-1])
     m.submodules.lr_pixels = pix = fifo.SyncFIFOBuffered(width=Shape.cast(left_layout).width,
                                                          depth=model.dmax + 4)
     m.submodules.lr_feeder = feeder = RightPassFeeder(dmax=model.dmax, census_bits=bits)
-    m.submodules.lr_right_generator = rgen = WordGenerator(
-        params=rp, model=model.pass_named(RIGHT_PASS).model, output_columns=map_columns, right_pass=True,
-        right_nomatch=model.pass_named(RIGHT_PASS).nomatch)
+    m.submodules.lr_right_generator = rgen = WordGenerator(params=rp, model=model, pass_name=RIGHT_PASS,
+                                                           output_columns=map_columns)
     m.submodules.lr_right_maps = maps = fifo.SyncFIFOBuffered(width=rp.map_width + 1, depth=model.dmax + 8)
     lp = Signal(left_layout)
-    m.d.comb += [getattr(lp, f).eq(getattr(px, f)) for f in ("left", "right", "output", "row_start",
-                                                               "first_row", "consult")]
+    m.d.comb += [getattr(lp, f).eq(getattr(px, f)) for f in left_layout.members]
     m.d.comb += [
         pix.w_stream.payload.eq(lp),
         pix.w_stream.valid.eq(valid & feeder.i.ready),
@@ -143,8 +141,9 @@ class RightPassFeeder(wiring.Component):
     ----------
     i : ``In(stream.Signature(feeder_in_layout(census_bits)))``
         Every pixel of the frame, raster order.
-    o : ``Out(stream.Signature(pixel_features_layout(census_bits, neighbour=True, flush_bits=...)))``
-        The right pass's pixels, for ``WordGenerator(..., right_pass=True)``.
+    o : ``Out(stream.Signature(...))``
+        The right pass's pixels (``row_start``, ``first_row``, ``flush`` flags), for
+        ``WordGenerator(..., pass_name="right")``.
     """
 
     def __init__(self, *, dmax: int, census_bits: int) -> None:
@@ -152,8 +151,8 @@ class RightPassFeeder(wiring.Component):
         self._bits = _check_int("census_bits", census_bits, 1, 64)
         super().__init__({
             "i": In(stream.Signature(feeder_in_layout(census_bits))),
-            "o": Out(stream.Signature(pixel_features_layout(census_bits, neighbour=True,
-                                                            flush_bits=flush_bits(dmax)))),
+            "o": Out(stream.Signature(pixel_features_layout(feature_layout(census_bits), {
+                "row_start": unsigned(1), "first_row": unsigned(1), "flush": unsigned(flush_bits(dmax))}))),
         })
 
     @property
@@ -195,11 +194,6 @@ class RightPassFeeder(wiring.Component):
             with m.Elif(i.valid & i.ready & i.payload.output & i.payload.line_end):
                 m.d.sync += [pending.eq(dmax), first_row.eq(i.payload.first_row)]
         return m
-
-
-def flush_bits(dmax: int) -> int:
-    """Width of the right pass's ``flush`` field (0 .. Dmax)."""
-    return max(1, dmax.bit_length())
 
 
 class ConsistencyTest(wiring.Component):

@@ -36,7 +36,7 @@ from amaranth.hdl import Array, Cat, Module, Mux, Shape, Signal, Value, unsigned
 from amaranth.lib import data, fifo, stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from bayesmachine.columns import Census, Consistency
+from bayesmachine.columns import Census
 from bayesmachine.hdl.machine import BayesianMachine
 from bayesmachine.hdl.signatures import (
     ENTROPY_PORTS,
@@ -53,11 +53,16 @@ from bayesmachine.region import OutputRegion
 from bayesmachine.sources import source_kind
 
 from . import DEFAULT_FIFO_PIXELS, MAX_MACHINES, MAX_WIDTH
-from .census import CensusFilter
-from .costs import WordGenerator, check_frontend_params, check_frontend_types, pixel_features_layout
-from .filters import FeatureFilter
-from .linebuffer import WINDOW, LineBuffer
+from .linebuffer import LineBuffer
 from .lr import feeder_in_layout, lr_split, right_pass_params
+from .words import (
+    FLAGS,
+    WordGenerator,
+    check_frontend_params,
+    check_frontend_types,
+    model_filters,
+    pass_pixel_layout,
+)
 
 __all__ = ["MAX_MACHINES", "MAX_WIDTH", "FeaturePipeline", "FrontEnd", "StereoMachine", "check_machines",
            "check_stereo_machine", "pipeline_layout", "pixel_in_layout", "stereo_machine_params",
@@ -146,25 +151,22 @@ def check_stereo_machine(params: MachineParams, model: ModelParams, width: int,
 RESULT_FIFO_MAX = 511  # results buffered per machine of several (one DP16KD deep at 36 bits wide)
 
 
-def pipeline_layout(model: ModelParams, neighbour: bool) -> data.StructLayout:
-    """One pixel out of :class:`FeaturePipeline`: the word generator's pixel (``pixel``,
-    :func:`~.costs.pixel_features_layout`) and where it is: ``line_begin`` (an image line's first
-    pixel), ``output_line`` (a line with output pixels: a map row's), ``first_line`` (the frame's
-    first such line) and ``frame_begin`` (the frame's first pixel). census-lr: the pixel's
-    ``consult`` (see :func:`~.costs.pixel_features_layout`) and ``line_end`` (an output row's last
-    pixel), for :func:`~.lr.lr_split`."""
-    census, lr = model.column(Census), model.column(Consistency) is not None
-    bits = census.bits if census is not None else 0
-    fields = {"pixel": pixel_features_layout(bits, neighbour, consult=lr), "line_begin": unsigned(1),
+def pipeline_layout(model: ModelParams) -> data.StructLayout:
+    """One pixel out of :class:`FeaturePipeline`: the model's own pass's word generator's pixel
+    (``pixel``, :func:`~.words.pass_pixel_layout`) and where it is: ``line_begin`` (an image line's first
+    pixel), ``output_line`` (a line with output pixels: a map row's), ``first_line`` (the frame's first
+    such line) and ``frame_begin`` (the frame's first pixel); with declared passes ``line_end`` (an
+    output row's last pixel), for :func:`~.lr.lr_split`."""
+    fields = {"pixel": pass_pixel_layout(model, model.passes[-1]), "line_begin": unsigned(1),
               "output_line": unsigned(1), "first_line": unsigned(1), "frame_begin": unsigned(1)}
-    if lr:
+    if len(model.passes) > 1:
         fields |= {"line_end": unsigned(1)}
     return data.StructLayout(fields)
 
 
 class FeaturePipeline(wiring.Component):
-    """Pixel pairs in, every pixel's features out (the line buffer and the feature and census
-    filters: stages 0 to 3 of the module's pipeline).
+    """Pixel pairs in, every pixel's features out (the line buffer and the plane filters the model's
+    columns read, :func:`~.words.model_filters`: stages 0 to 3 of the module's pipeline).
 
     Parameters
     ----------
@@ -172,27 +174,22 @@ class FeaturePipeline(wiring.Component):
         The disparity model.
     width : int
         Pixels per image line (dmax + 2·margin + 1 .. ``MAX_WIDTH``).
-    neighbour : bool
-        Whether the pixels carry the neighbour prior's ``row_start`` and ``first_row``.
 
     Attributes
     ----------
     pixels : ``In(pixel_stream())``
         Pixel pairs in raster order.
-    features : ``Out(stream.Signature(pipeline_layout(model, neighbour)))``
+    features : ``Out(stream.Signature(pipeline_layout(model)))``
         Every pixel, in raster order, its features three cycles after its take.
     """
 
-    def __init__(self, *, model: ModelParams, width: int, neighbour: bool) -> None:
+    def __init__(self, *, model: ModelParams, width: int) -> None:
         if not isinstance(model, ModelParams):
-            raise TypeError(f"model must be a host.likelihoods.ModelParams, not {type(model).__name__}")
-        if not isinstance(neighbour, bool):
-            raise TypeError(f"neighbour must be a bool, not {type(neighbour).__name__}")
+            raise TypeError(f"model must be a bayesmachine.models.ModelParams, not {type(model).__name__}")
         self._width = _check_width(width, model)
         self._model = model
-        self._neighbour = neighbour
         super().__init__({"pixels": In(pixel_stream()),
-                          "features": Out(stream.Signature(pipeline_layout(model, neighbour)))})
+                          "features": Out(stream.Signature(pipeline_layout(model)))})
 
     @property
     def model(self) -> ModelParams:
@@ -202,24 +199,16 @@ class FeaturePipeline(wiring.Component):
     def width(self) -> int:
         return self._width
 
-    @property
-    def neighbour(self) -> bool:
-        return self._neighbour
-
     def elaborate(self, platform: object) -> Module:
         m = Module()
         width, model = self._width, self._model
-        dmax, margin = model.dmax, model.margin
-        size = 2 * margin + 1  # the model's windows: line buffer columns of this height
-        lag = margin - WINDOW // 2  # 5x5 features a line and a column behind a 7x7 census window
-        neighbour = self._neighbour
+        size = 2 * model.margin + 1  # the model's windows: line buffer columns of this height
         m.submodules.linebuffer = lines = LineBuffer(width=width, height=size)
-        m.submodules.filter_left = fl = FeatureFilter(lag=lag)
-        m.submodules.filter_right = fr = FeatureFilter(lag=lag)
-        census = model.column(Census)
-        if census is not None:
-            m.submodules.census_left = cl = CensusFilter(window=census.window)
-            m.submodules.census_right = cr = CensusFilter(window=census.window)
+        filters = []
+        for planes in model_filters(model):
+            pair = (planes.build(), planes.build())
+            m.submodules[f"{planes.name}_left"], m.submodules[f"{planes.name}_right"] = pair
+            filters.append((planes, pair))
         out = self.features
 
         # The pipeline advances as a whole whenever its last stage is empty or taken.
@@ -228,9 +217,54 @@ class FeaturePipeline(wiring.Component):
         valid3 = Signal()  # stage 3: the filters hold the pixel's window
         advance = Signal()
         m.d.comb += advance.eq(~valid3 | out.ready)
-        # Stage 0: position of the incoming pixel (restarts at a frame's first pixel). The line
-        # saturates at ``size``: size - 1 is the first line whose windows are complete (the first
-        # output row), size any later one.
+        col1, line1, first1 = self._positions(m, lines, advance, valid1)
+
+        # Stage 1 -> 2: the columns into the filters' first registers (the block RAM's slow
+        # clock-to-output leaves no room for the whole column sum in one cycle): each filter takes the
+        # column's middle ``height`` lines.
+        for planes, (fl, fr) in filters:
+            top = (size - planes.height) // 2
+            m.d.comb += [fl.load.eq(advance), fr.load.eq(advance)]
+            for i in range(planes.height):
+                m.d.comb += [fl.column[i].eq(lines.column[top + i].left),
+                             fr.column[i].eq(lines.column[top + i].right)]
+        # Where the pixel is, carried along with it (the flags its pixel layout has).
+        first_output_col = model.dmax + size - 1
+        output_row = line1 >= size - 1
+        where = {"row_start": col1 == first_output_col,  # the first output pixel of an output row
+                 "first_row": line1 == size - 1,  # a pixel of a frame's first output row
+                 "consult": output_row & (col1 >= size - 1)}  # a map column (>= 0) of an output row
+        px, pay = out.payload.pixel, out.payload
+        pairs = [(px.output, output_row & (col1 >= first_output_col)), (pay.line_begin, col1 == 0),
+                 (pay.output_line, output_row), (pay.first_line, line1 == size - 1),
+                 (pay.frame_begin, first1)]
+        pairs += [(getattr(px, f), where[f]) for f in FLAGS if f in px.shape().members]
+        if "line_end" in pay.shape().members:  # an output row's last pixel
+            pairs.append((pay.line_end, output_row & (col1 == width - 1)))
+        stage2 = Signal(len(pairs))
+        stage3 = Signal(len(pairs))
+        with m.If(advance):
+            m.d.sync += [valid2.eq(valid1), stage2.eq(Cat(*(v for _, v in pairs)))]
+
+        # Stage 2 -> 3: the columns enter the filters' windows.
+        shift = advance & valid2
+        for _, (fl, fr) in filters:
+            m.d.comb += [fl.en.eq(shift), fr.en.eq(shift)]
+        with m.If(advance):
+            m.d.sync += [valid3.eq(valid2), stage3.eq(stage2)]
+
+        # Stage 3 -> out.
+        m.d.comb += [out.valid.eq(valid3), Cat(*(t for t, _ in pairs)).eq(stage3)]
+        for planes, (fl, fr) in filters:
+            for side, filt in ((px.left, fl), (px.right, fr)):
+                m.d.comb += [getattr(side, name).eq(v) for name, v in planes.outputs(filt).items()]
+        return m
+
+    def _positions(self, m: Module, lines: LineBuffer, advance: Value, valid1: Signal) -> tuple[Signal, ...]:
+        """Stage 0: the incoming pixel's column and line (restarting at a frame's first pixel; the line
+        saturates at ``size``: size - 1 is the first line whose windows are complete, the first output
+        row, size any later one) into the line buffer; returns them at stage 1 (column, line, first)."""
+        width, size = self._width, 2 * self._model.margin + 1
         col = Signal(range(width))
         line = Signal(range(size + 1))
         pin = self.pixels.payload
@@ -259,60 +293,7 @@ class FeaturePipeline(wiring.Component):
         with m.If(advance):
             m.d.sync += [valid1.eq(self.pixels.valid), col1.eq(cur_col), line1.eq(cur_line),
                          first1.eq(pin.first)]
-
-        # Stage 1 -> 2: the columns' partial sums into the filters' first registers (the block
-        # RAM's slow clock-to-output leaves no room for the whole column sum in one cycle); the
-        # census filters take the whole column. The 5x5 filters take the column's middle 5 lines.
-        output2, row_start2, first_row2 = Signal(), Signal(), Signal()
-        where2 = Signal(4)  # line_begin, output_line, first_line, frame_begin
-        line_end2, consult2 = Signal(), Signal()  # census-lr's
-        m.d.comb += [fl.load.eq(advance), fr.load.eq(advance)]
-        for i in range(WINDOW):
-            m.d.comb += [fl.column[i].eq(lines.column[lag + i].left),
-                         fr.column[i].eq(lines.column[lag + i].right)]
-        if census is not None:
-            m.d.comb += [cl.load.eq(advance), cr.load.eq(advance)]
-            for i in range(size):
-                m.d.comb += [cl.column[i].eq(lines.column[i].left), cr.column[i].eq(lines.column[i].right)]
-        first_output_col = dmax + size - 1
-        with m.If(advance):
-            m.d.sync += [valid2.eq(valid1),
-                         output2.eq((line1 >= size - 1) & (col1 >= first_output_col)),
-                         row_start2.eq(col1 == first_output_col),
-                         first_row2.eq(line1 == size - 1),
-                         where2.eq(Cat(col1 == 0, line1 >= size - 1, line1 == size - 1, first1)),
-                         # census-lr: an output row's last pixel, and a map column (>= 0) of an output row
-                         line_end2.eq((line1 >= size - 1) & (col1 == width - 1)),
-                         consult2.eq((line1 >= size - 1) & (col1 >= size - 1))]
-
-        # Stage 2 -> 3: the columns' sums enter the filters' windows.
-        output3, row_start3, first_row3 = Signal(), Signal(), Signal()
-        where3 = Signal(4)
-        line_end3, consult3 = Signal(), Signal()
-        shift = advance & valid2
-        m.d.comb += [fl.en.eq(shift), fr.en.eq(shift)]
-        if census is not None:
-            m.d.comb += [cl.en.eq(shift), cr.en.eq(shift)]
-        with m.If(advance):
-            m.d.sync += [valid3.eq(valid2), output3.eq(output2), row_start3.eq(row_start2),
-                         first_row3.eq(first_row2), where3.eq(where2), line_end3.eq(line_end2),
-                         consult3.eq(consult2)]
-
-        # Stage 3 -> out.
-        px = out.payload.pixel
-        m.d.comb += [out.valid.eq(valid3), px.output.eq(output3),
-                     Cat(out.payload.line_begin, out.payload.output_line, out.payload.first_line,
-                         out.payload.frame_begin).eq(where3)]
-        for side, filt in ((px.left, fl), (px.right, fr)):
-            m.d.comb += [side.m25.eq(filt.features.m25), side.gh20.eq(filt.features.gh20),
-                         side.gv20.eq(filt.features.gv20)]
-        if census is not None:
-            m.d.comb += [px.left.census.eq(cl.code), px.right.census.eq(cr.code)]
-        if neighbour:
-            m.d.comb += [px.row_start.eq(row_start3), px.first_row.eq(first_row3)]
-        if model.column(Consistency) is not None:
-            m.d.comb += [px.consult.eq(consult3), out.payload.line_end.eq(line_end3)]
-        return m
+        return col1, line1, first1
 
 
 class FrontEnd(wiring.Component):
@@ -373,7 +354,7 @@ class FrontEnd(wiring.Component):
         m = Module()
         model = self._model
         neighbour = self._params.feedback_columns > 0
-        m.submodules.pipeline = pipe = FeaturePipeline(model=model, width=self._width, neighbour=neighbour)
+        m.submodules.pipeline = pipe = FeaturePipeline(model=model, width=self._width)
         region = _line_region(model, self._width)
         output_columns = region.shape[1] if neighbour else None
         m.submodules.generator = gen = WordGenerator(params=self._params, model=model,
@@ -516,7 +497,7 @@ class StereoMachine(wiring.Component):
         p, model, width, k = self._params, self._model, self._width, self._machines
         neighbour = p.feedback_columns > 0
         wo = _line_region(model, width).shape[1]  # output pixels per map row
-        m.submodules.frontend = pipe = FeaturePipeline(model=model, width=width, neighbour=neighbour)
+        m.submodules.frontend = pipe = FeaturePipeline(model=model, width=width)
         wiring.connect(m, wiring.flipped(self.pixels), pipe.pixels)
         fx, w = pipe.features, pipe.features.payload
 
