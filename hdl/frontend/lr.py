@@ -1,4 +1,4 @@
-"""census-lr on chip (issue 22): the right pass's pixel stream and the consistency column's test.
+"""census-lr on chip: the right pass's pixel stream and the consistency column's test.
 
 The census-lr model runs a right pass (``model.pass_named("right").model``, the
 census model with the right image as reference: lane d pairs right map column x_r with left map column
@@ -30,15 +30,14 @@ from amaranth.hdl import Cat, Const, Module, Mux, Shape, Signal, Value, unsigned
 from amaranth.lib import data, fifo, stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from bayesmachine.columns import RIGHT_PASS, Census
-from bayesmachine.models import ModelParams, right_machine
+from bayesmachine.columns import RIGHT_PASS
+from bayesmachine.models import ModelParams, pass_machine
 from bayesmachine.params import MachineParams, stereo_words_per_beat
 
-from .filters import feature_layout
-from .words import WordGenerator, flush_bits, pass_pixel_layout, pixel_features_layout
+from .words import WordGenerator, features_layout, flush_bits, pass_pixel_layout, pixel_features_layout
 
 __all__ = ["ConsistencyTest", "RightPassFeeder", "feeder_in_layout", "flush_bits", "lr_split",
-           "right_map_layout", "right_pass_params"]
+           "pass_params", "right_map_layout", "right_pass_params"]
 
 
 def _check_int(name: str, value: object, low: int, high: int) -> int:
@@ -54,22 +53,27 @@ def right_map_layout(map_width: int) -> data.StructLayout:
     return data.StructLayout({"map": unsigned(map_width), "hit": unsigned(1)})
 
 
-def feeder_in_layout(census_bits: int) -> data.StructLayout:
-    """A pixel into :class:`RightPassFeeder`: both images' features, ``output`` (left map column >= Dmax
+def feeder_in_layout(features: data.StructLayout) -> data.StructLayout:
+    """A pixel into :class:`RightPassFeeder`: both images' ``features``, ``output`` (left map column >= Dmax
     on an output row: the right pass takes right map column x - Dmax), ``row_start`` (left map column
     Dmax: right map column 0), ``first_row`` (a frame's first output row) and ``line_end`` (the last map
     column of an output row); ``consult`` (for the left pass: a map column >= 0 of an output row)."""
-    side = feature_layout(census_bits)
-    return data.StructLayout({"left": side, "right": side, "output": unsigned(1), "row_start": unsigned(1),
-                              "first_row": unsigned(1), "consult": unsigned(1), "line_end": unsigned(1)})
+    return data.StructLayout({"left": features, "right": features, "output": unsigned(1),
+                              "row_start": unsigned(1), "first_row": unsigned(1), "consult": unsigned(1),
+                              "line_end": unsigned(1)})
+
+
+def pass_params(model: ModelParams, params: MachineParams, name: str) -> MachineParams:
+    """The machine on chip of ``model``'s declared pass ``name``: :func:`~bayesmachine.models.pass_machine`
+    of the own pass's ``params``, with the front end's words per beat
+    (:func:`~bayesmachine.params.stereo_words_per_beat`; they change no result)."""
+    machine = pass_machine(model, params, name)
+    return dataclasses.replace(machine, words_per_beat=stereo_words_per_beat(machine))
 
 
 def right_pass_params(model: ModelParams, params: MachineParams) -> MachineParams:
-    """The right pass's machine on chip: :func:`~bayesmachine.models.right_machine` of the left
-    pass's ``params``, with the front end's words per beat
-    (:func:`~bayesmachine.params.stereo_words_per_beat`; they change no result)."""
-    right = right_machine(model, params)
-    return dataclasses.replace(right, words_per_beat=stereo_words_per_beat(right))
+    """:func:`pass_params` of the right pass (census-lr's second machine)."""
+    return pass_params(model, params, RIGHT_PASS)
 
 
 def lr_split(m: Module, front: wiring.Component, gen: WordGenerator, px: Value, valid: Value,
@@ -84,11 +88,10 @@ def lr_split(m: Module, front: wiring.Component, gen: WordGenerator, px: Value, 
     pixels' MAPs) that ``gen`` reads. Returns the ready of the stage (both take the pixel together)."""
     model, params = front.model, front.params
     rp = right_pass_params(model, params)
-    bits = model.column(Census).bits
     left_layout = pass_pixel_layout(model, model.passes[-1])
     m.submodules.lr_pixels = pix = fifo.SyncFIFOBuffered(width=Shape.cast(left_layout).width,
                                                          depth=model.dmax + 4)
-    m.submodules.lr_feeder = feeder = RightPassFeeder(dmax=model.dmax, census_bits=bits)
+    m.submodules.lr_feeder = feeder = RightPassFeeder(dmax=model.dmax, features=features_layout(model))
     m.submodules.lr_right_generator = rgen = WordGenerator(params=rp, model=model, pass_name=RIGHT_PASS,
                                                            output_columns=map_columns)
     m.submodules.lr_right_maps = maps = fifo.SyncFIFOBuffered(width=rp.map_width + 1, depth=model.dmax + 8)
@@ -134,24 +137,26 @@ class RightPassFeeder(wiring.Component):
     ----------
     dmax : int
         The largest disparity (0 .. 4094).
-    census_bits : int
-        Bits of a census code (24 or 48; the census-lr model always has its census column).
+    features : StructLayout
+        One image's planes (:func:`~.words.features_layout` of the model).
 
     Attributes
     ----------
-    i : ``In(stream.Signature(feeder_in_layout(census_bits)))``
+    i : ``In(stream.Signature(feeder_in_layout(features)))``
         Every pixel of the frame, raster order.
     o : ``Out(stream.Signature(...))``
         The right pass's pixels (``row_start``, ``first_row``, ``flush`` flags), for
         ``WordGenerator(..., pass_name="right")``.
     """
 
-    def __init__(self, *, dmax: int, census_bits: int) -> None:
+    def __init__(self, *, dmax: int, features: data.StructLayout) -> None:
         self._dmax = _check_int("dmax", dmax, 0, 4094)
-        self._bits = _check_int("census_bits", census_bits, 1, 64)
+        if not isinstance(features, data.StructLayout):
+            raise TypeError(f"features must be a StructLayout, not {type(features).__name__}")
+        self._features = features
         super().__init__({
-            "i": In(stream.Signature(feeder_in_layout(census_bits))),
-            "o": Out(stream.Signature(pixel_features_layout(feature_layout(census_bits), {
+            "i": In(stream.Signature(feeder_in_layout(features))),
+            "o": Out(stream.Signature(pixel_features_layout(features, {
                 "row_start": unsigned(1), "first_row": unsigned(1), "flush": unsigned(flush_bits(dmax))}))),
         })
 
@@ -160,13 +165,13 @@ class RightPassFeeder(wiring.Component):
         return self._dmax
 
     @property
-    def census_bits(self) -> int:
-        return self._bits
+    def features(self) -> data.StructLayout:
+        return self._features
 
     def elaborate(self, platform: object) -> Module:
         m = Module()
         dmax = self._dmax
-        side = feature_layout(self._bits)
+        side = self._features
         i, o = self.i, self.o
         # ref[k]: the right features k + 1 pixels back (reset-less: an output pixel is at least Dmax
         # pixels into its line, so no output reads an entry of an earlier line or frame).

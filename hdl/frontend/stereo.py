@@ -36,7 +36,6 @@ from amaranth.hdl import Array, Cat, Module, Mux, Shape, Signal, Value, unsigned
 from amaranth.lib import data, fifo, stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from bayesmachine.columns import Census
 from bayesmachine.hdl.machine import BayesianMachine
 from bayesmachine.hdl.signatures import (
     ENTROPY_PORTS,
@@ -54,12 +53,14 @@ from bayesmachine.sources import source_kind
 
 from . import DEFAULT_FIFO_PIXELS, MAX_MACHINES, MAX_WIDTH
 from .linebuffer import LineBuffer
-from .lr import feeder_in_layout, lr_split, right_pass_params
+from .lr import feeder_in_layout, lr_split, pass_params
 from .words import (
     FLAGS,
     WordGenerator,
     check_frontend_params,
     check_frontend_types,
+    declared_passes,
+    features_layout,
     model_filters,
     pass_pixel_layout,
 )
@@ -117,21 +118,22 @@ def check_machines(machines: object, params: MachineParams, model: ModelParams) 
             raise ParameterError(f"machines = {machines}: rng {params.rng!r} is off chip (one number port, "
                                  "one device stream); several machines need an on-chip source "
                                  "(sobol, lfsr, lfsr-shared)")
-        if len(model.passes) > 1:
+        for p in declared_passes(model):
             raise ParameterError(f"machines = {machines}: --model {model.name} runs with one machine "
-                                 "(its right pass is not dealt to several)")
+                                 f"(its {p.name} pass is not dealt to several)")
     return machines
 
 
 def stereo_signature(params: MachineParams, model: ModelParams) -> wiring.Signature:
-    """:class:`StereoMachine`'s ports: ``StereoSignature(params)``, and with census-lr also
-    ``right_result``: ``valid`` and ``payload`` (``result_layout(right_pass_params(model, params))``),
-    the right pass's results as they leave its machine (observed: no ``ready``, no back-pressure)."""
-    if len(model.passes) == 1:
-        return StereoSignature(params)
-    rp = right_pass_params(model, params)
-    observed = wiring.Signature({"valid": Out(1), "payload": Out(result_layout(rp))})
-    return wiring.Signature(dict(StereoSignature(params).members.items()) | {"right_result": Out(observed)})
+    """:class:`StereoMachine`'s ports: ``StereoSignature(params)``, and per declared pass (census-lr's
+    right pass) ``<pass>_result``: ``valid`` and ``payload`` (``result_layout(pass_params(model, params,
+    name))``), its results as they leave its machine (observed: no ``ready``, no back-pressure)."""
+    members = dict(StereoSignature(params).members.items())
+    for p in declared_passes(model):
+        observed = wiring.Signature({"valid": Out(1),
+                                     "payload": Out(result_layout(pass_params(model, params, p.name)))})
+        members[f"{p.name}_result"] = Out(observed)
+    return wiring.Signature(members) if declared_passes(model) else StereoSignature(params)
 
 
 def check_stereo_machine(params: MachineParams, model: ModelParams, width: int,
@@ -159,7 +161,7 @@ def pipeline_layout(model: ModelParams) -> data.StructLayout:
     output row's last pixel), for :func:`~.lr.lr_split`."""
     fields = {"pixel": pass_pixel_layout(model, model.passes[-1]), "line_begin": unsigned(1),
               "output_line": unsigned(1), "first_line": unsigned(1), "frame_begin": unsigned(1)}
-    if len(model.passes) > 1:
+    if declared_passes(model):
         fields |= {"line_end": unsigned(1)}
     return data.StructLayout(fields)
 
@@ -318,9 +320,10 @@ class FrontEnd(wiring.Component):
         With the neighbour prior only: the machine's results as they leave (see
         :class:`~.costs.WordGenerator`), for the above neighbour's prior column.
     right_beats, right_take, right_map, right_hit, right_room
-        census-lr only: the right pass's load beats (``Out(load_stream(right_pass_params(model,
-        params)))``), and its machine's results as they leave (taken only while ``right_room``: the
-        line of right MAPs the left pass reads has room). See :mod:`.lr`.
+        Per declared pass (census-lr's ``right``), ``<pass>_beats``, ...: its load beats
+        (``Out(load_stream(pass_params(model, params, name)))``), and its machine's results as they
+        leave (taken only while ``<pass>_room``: the line of its MAPs the own pass reads has room).
+        See :mod:`.lr`.
     """
 
     def __init__(self, *, params: MachineParams, model: ModelParams, width: int) -> None:
@@ -332,10 +335,10 @@ class FrontEnd(wiring.Component):
         members = {"pixels": In(pixel_stream()), "beats": Out(load_stream(params))}
         if params.feedback_columns:
             members |= {"result_take": In(1), "result_map": In(params.map_width), "result_hit": In(1)}
-        if len(model.passes) > 1:
-            rp = right_pass_params(model, params)
-            members |= {"right_beats": Out(load_stream(rp)), "right_take": In(1),
-                        "right_map": In(rp.map_width), "right_hit": In(1), "right_room": Out(1)}
+        for p in declared_passes(model):
+            pp, n = pass_params(model, params, p.name), p.name
+            members |= {f"{n}_beats": Out(load_stream(pp)), f"{n}_take": In(1),
+                        f"{n}_map": In(pp.map_width), f"{n}_hit": In(1), f"{n}_room": Out(1)}
         super().__init__(members)
 
     @property
@@ -361,8 +364,8 @@ class FrontEnd(wiring.Component):
                                                      output_columns=output_columns)
         wiring.connect(m, wiring.flipped(self.pixels), pipe.pixels)
         features = pipe.features
-        if len(model.passes) > 1:  # through a FIFO, and to the right pass (lr_split)
-            pix, px = features.payload.pixel, Signal(feeder_in_layout(model.column(Census).bits))
+        if declared_passes(model):  # through a FIFO, and to the right pass (lr_split)
+            pix, px = features.payload.pixel, Signal(feeder_in_layout(features_layout(model)))
             m.d.comb += [px.left.eq(pix.left), px.right.eq(pix.right), px.output.eq(pix.output),
                          px.consult.eq(pix.consult), px.line_end.eq(features.payload.line_end)]
             if neighbour:
@@ -411,7 +414,7 @@ class StereoMachine(wiring.Component):
         (the numbers of every compute cycle come from outside, as for the machine alone).
     right_result
         census-lr only: the right pass's results, raster order of its columns, ``valid`` and
-        ``payload`` (``result_layout(right_pass_params(model, params))``; :func:`stereo_signature`).
+        ``payload`` (:func:`stereo_signature`).
     """
 
     def __init__(self, *, params: MachineParams, model: ModelParams, width: int,
@@ -444,21 +447,23 @@ class StereoMachine(wiring.Component):
     def machines(self) -> int:
         return self._machines
 
-    def _lr_right_machine(self, m: Module, front: FrontEnd) -> None:
-        """census-lr: the right pass's machine beside the left one, fed through its own FIFO; its results
-        go to the front end (taken while the front end's line of right MAPs has room) and out."""
-        rp = right_pass_params(self._model, self._params)
-        m.submodules.right_machine = machine = BayesianMachine(params=rp)
-        m.submodules.right_fifo = buf = fifo.SyncFIFOBuffered(
+    def _pass_machine(self, m: Module, front: FrontEnd, name: str) -> None:
+        """A declared pass's machine (census-lr's right pass) beside the own one, fed through its own
+        FIFO; its results go to the front end (taken while the front end's line of its MAPs has room)
+        and out on ``<name>_result``."""
+        rp = pass_params(self._model, self._params, name)
+        m.submodules[f"{name}_machine"] = machine = BayesianMachine(params=rp)
+        m.submodules[f"{name}_fifo"] = buf = fifo.SyncFIFOBuffered(
             width=Shape.cast(load_layout(rp)).width, depth=self._fifo_pixels * rp.beats_per_pixel + 1)
-        wiring.connect(m, front.right_beats, buf.w_stream)
+        port = {k: getattr(front, f"{name}_{k}") for k in ("beats", "take", "map", "hit", "room")}
+        out = getattr(self, f"{name}_result")
+        wiring.connect(m, port["beats"], buf.w_stream)
         wiring.connect(m, buf.r_stream, machine.load)
         res = machine.result
-        take = res.valid & front.right_room
-        m.d.comb += [res.ready.eq(front.right_room), front.right_take.eq(take),
-                     front.right_map.eq(res.payload.map),
-                     front.right_hit.eq(~res.payload.nomatch & ~res.payload.timeout),
-                     self.right_result.valid.eq(take), self.right_result.payload.eq(res.payload)]
+        take = res.valid & port["room"]
+        m.d.comb += [res.ready.eq(port["room"]), port["take"].eq(take), port["map"].eq(res.payload.map),
+                     port["hit"].eq(~res.payload.nomatch & ~res.payload.timeout),
+                     out.valid.eq(take), out.payload.eq(res.payload)]
 
     def elaborate(self, platform: object) -> Module:
         if self._machines > 1:
@@ -467,8 +472,8 @@ class StereoMachine(wiring.Component):
         p = self._params
         m.submodules.frontend = front = FrontEnd(params=p, model=self._model, width=self._width)
         m.submodules.machine = machine = BayesianMachine(params=p)
-        if len(self._model.passes) > 1:
-            self._lr_right_machine(m, front)
+        for declared in declared_passes(self._model):
+            self._pass_machine(m, front, declared.name)
         wiring.connect(m, wiring.flipped(self.pixels), front.pixels)
         # The front end sees the FIFO's registered room, so no path runs from the FIFO's level through
         # the pixel take into the front end's thousands of enables (see "Back-pressure" in

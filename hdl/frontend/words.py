@@ -55,7 +55,8 @@ from .lanes import Lanes, PlaneFilter, lanes_for
 from .tables import FrontEndTables, frontend_tables
 
 __all__ = ["FLAGS", "Reference", "WordGenerator", "WordNets", "check_frontend_params", "check_frontend_types",
-           "features_layout", "flush_bits", "model_filters", "pass_pixel_layout", "pixel_features_layout"]
+           "declared_passes", "features_layout", "flush_bits", "model_filters", "pass_pixel_layout",
+           "pixel_features_layout"]
 
 # The position flags a lane builder may ask its pixels to carry (computed by the feature pipeline), in
 # the order they sit in a pixel: the first output pixel of an output row; a pixel of a frame's first
@@ -83,6 +84,12 @@ def features_layout(model: ModelParams) -> data.StructLayout:
             for name, shape in lanes_for(term).planes(term, model.margin).items():
                 fields.setdefault(name, shape)
     return data.StructLayout(fields)
+
+
+def declared_passes(model: ModelParams) -> tuple[Pass, ...]:
+    """The passes ``model`` runs before its own (census-lr's right pass), each on a machine of its own
+    beside the own pass's."""
+    return model.passes[:-1]
 
 
 def model_filters(model: ModelParams) -> tuple[PlaneFilter, ...]:
@@ -193,7 +200,7 @@ def check_frontend_params(params: MachineParams, model: ModelParams) -> None:
     if not isinstance(model, ModelParams):
         raise ParameterError(f"model must be a bayesmachine.models.ModelParams, not {type(model).__name__}")
     _check_pass(model, model.passes[-1], params)
-    for p in model.passes[:-1]:
+    for p in declared_passes(model):
         if not source_kind(params.rng).on_chip:
             raise ParameterError(f"rng: --model {model.name} on chip needs an on-chip random source (the "
                                  f"{p.name} pass's machine has no entropy port), got {params.rng!r}", "rng")
