@@ -38,7 +38,8 @@ from bayesmachine.host.reference import (
 from bayesmachine.models import ModelParams, check_disparity_machine, disparity_machine, machine_layout
 from bayesmachine.params import MachineParams, ParameterError
 
-PAPER_KEYS = ["dmax", "name", "p0", "sigma_m", "sigma_gh", "sigma_gv", "p_nm0", "sigma_nm"]
+PAPER_KEYS = ["dmax", "name", "p0", "sigma_m", "sigma_gh", "sigma_gv", "gradient_magnitude", "sigma_g",
+              "p_nm0", "sigma_nm"]
 
 
 # --- Parameters ---
