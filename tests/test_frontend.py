@@ -57,9 +57,9 @@ def test_clamped_tables_give_the_host_word_for_every_difference(model: ModelPara
         table = full[name]
         deltas = np.arange(-len(table) + 1, len(table))
         assert np.array_equal(clamped.lookup(name, deltas), table[np.abs(deltas)]), name
-        assert len(getattr(clamped, name)) <= len(table)
+        assert len(clamped[name]) <= len(table)
     if word_bits == 10 and model == ModelParams(name="paper"):
-        assert len(clamped.m) < len(full["m"]) // 4  # the paper's tables decay well before the end
+        assert len(clamped["m"]) < len(full["m"]) // 4  # the paper's tables decay well before the end
 
 
 def test_clamp_table_edge_cases() -> None:

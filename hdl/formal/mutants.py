@@ -17,8 +17,8 @@ from bayesmachine.hdl.counters import count_ones, overflow_counter_full
 from bayesmachine.hdl.encoder import MAPEncoder, map_encoder
 from bayesmachine.hdl.formal.frontend import driven
 from bayesmachine.hdl.frontend import stereo as _stereo
-from bayesmachine.hdl.frontend.costs import WordGenerator
 from bayesmachine.hdl.frontend.stereo import FeaturePipeline, FrontEnd, StereoMachine
+from bayesmachine.hdl.frontend.words import WordGenerator
 from bayesmachine.hdl.machine import BayesianMachine
 from bayesmachine.params import MachineParams
 
