@@ -22,8 +22,8 @@ MAY_IMPORT = {
     "fpga": {"core", "hdl", "sim"},
     "cli": {"core", "hdl", "sim", "host", "fpga"},
 }
-# The one module that imports by name at run time: the engine registry.
-DYNAMIC_IMPORTS = {"sim/engines.py"}
+# The modules that import by name at run time: the engine registry and the optional dependencies.
+DYNAMIC_IMPORTS = {"sim/engines.py", "bayesmachine/extras.py"}
 
 MAX_LINES = 120
 
