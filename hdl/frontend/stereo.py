@@ -31,6 +31,7 @@ leaves, also goes back into the word generator's line of MAPs (the above neighbo
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import dataclass
 
 from amaranth.hdl import Array, Cat, Module, Mux, Shape, Signal, Value, unsigned
 from amaranth.lib import data, fifo, stream, wiring
@@ -65,7 +66,8 @@ from .words import (
     pass_pixel_layout,
 )
 
-__all__ = ["MAX_MACHINES", "MAX_WIDTH", "FeaturePipeline", "FrontEnd", "StereoMachine", "check_machines",
+__all__ = ["MAX_MACHINES", "MAX_WIDTH", "FeaturePipeline", "FrontEnd", "PipelineNets", "RoomFifo",
+           "StereoMachine", "StereoNets", "check_machines",
            "check_stereo_machine", "pipeline_layout", "pixel_in_layout", "stereo_machine_params",
            "stereo_signature"]
 
@@ -166,6 +168,17 @@ def pipeline_layout(model: ModelParams) -> data.StructLayout:
     return data.StructLayout(fields)
 
 
+@dataclass(frozen=True)
+class PipelineNets:
+    """The position counters of :class:`FeaturePipeline` (``FeaturePipeline.nets``: the formal wrappers of
+    ``hdl.formal`` and their mutants read them, never Amaranth's internals)."""
+
+    col: Signal  # registered: the next pixel's column (unless it starts a frame)
+    line: Signal  # registered: the next pixel's line (saturating at the window's height)
+    cur_col: Signal  # the incoming pixel's column: 0 on a frame's first pixel, else col
+    cur_line: Signal  # the incoming pixel's line: 0 on a frame's first pixel, else line
+
+
 class FeaturePipeline(wiring.Component):
     """Pixel pairs in, every pixel's features out (the line buffer and the plane filters the model's
     columns read, :func:`~.words.model_filters`: stages 0 to 3 of the module's pipeline).
@@ -183,6 +196,8 @@ class FeaturePipeline(wiring.Component):
         Pixel pairs in raster order.
     features : ``Out(stream.Signature(pipeline_layout(model)))``
         Every pixel, in raster order, its features three cycles after its take.
+    nets : PipelineNets
+        After elaboration: the position counters, for the formal wrappers (read-only).
     """
 
     def __init__(self, *, model: ModelParams, width: int) -> None:
@@ -190,6 +205,7 @@ class FeaturePipeline(wiring.Component):
             raise TypeError(f"model must be a bayesmachine.models.ModelParams, not {type(model).__name__}")
         self._width = _check_width(width, model)
         self._model = model
+        self._nets: PipelineNets | None = None
         super().__init__({"pixels": In(pixel_stream()),
                           "features": Out(stream.Signature(pipeline_layout(model)))})
 
@@ -200,6 +216,13 @@ class FeaturePipeline(wiring.Component):
     @property
     def width(self) -> int:
         return self._width
+
+    @property
+    def nets(self) -> PipelineNets:
+        """The :class:`PipelineNets` of the last :meth:`elaborate`; elaborate first."""
+        if self._nets is None:
+            raise RuntimeError("FeaturePipeline.nets: elaborate the pipeline first (Fragment.get)")
+        return self._nets
 
     def elaborate(self, platform: object) -> Module:
         m = Module()
@@ -276,6 +299,7 @@ class FeaturePipeline(wiring.Component):
             m.d.comb += [cur_col.eq(0), cur_line.eq(0)]
         with m.Else():
             m.d.comb += [cur_col.eq(col), cur_line.eq(line)]
+        self._nets = PipelineNets(col=col, line=line, cur_col=cur_col, cur_line=cur_line)
         take = self.pixels.valid & advance
         m.d.comb += [
             self.pixels.ready.eq(advance),
@@ -324,7 +348,12 @@ class FrontEnd(wiring.Component):
         (``Out(load_stream(pass_params(model, params, name)))``), and its machine's results as they
         leave (taken only while ``<pass>_room``: the line of its MAPs the own pass reads has room).
         See :mod:`.lr`.
+    feature_pipeline : type
+        Class attribute: the :class:`FeaturePipeline` class :meth:`elaborate` builds (a subclass may
+        name another with the same constructor: a formal mutant's).
     """
+
+    feature_pipeline: type[FeaturePipeline] = FeaturePipeline
 
     def __init__(self, *, params: MachineParams, model: ModelParams, width: int) -> None:
         check_frontend_types(params, model)
@@ -357,7 +386,7 @@ class FrontEnd(wiring.Component):
         m = Module()
         model = self._model
         neighbour = self._params.feedback_columns > 0
-        m.submodules.pipeline = pipe = FeaturePipeline(model=model, width=self._width)
+        m.submodules.pipeline = pipe = self.feature_pipeline(model=model, width=self._width)
         region = _line_region(model, self._width)
         output_columns = region.shape[1] if neighbour else None
         m.submodules.generator = gen = WordGenerator(params=self._params, model=model,
@@ -380,6 +409,27 @@ class FrontEnd(wiring.Component):
             m.d.comb += [gen.result_take.eq(self.result_take), gen.result_map.eq(self.result_map),
                          gen.result_hit.eq(self.result_hit)]
         return m
+
+
+@dataclass(frozen=True)
+class RoomFifo:
+    """A FIFO whose writer sees a registered ``room`` (:func:`_room_fifo`), and its count nets."""
+
+    buffer: fifo.SyncFIFOBuffered
+    room: Signal  # registered: at most capacity - 1 entries in, a write may follow
+    write: Signal  # driven by the caller, only while room: an entry written this cycle
+    read: Signal  # an entry read this cycle
+    used: Signal  # registered: the entries in the FIFO, counted beside it (write - read)
+
+
+@dataclass(frozen=True)
+class StereoNets:
+    """The blocks of :class:`StereoMachine` a proof watches (``StereoMachine.nets``: the formal wrappers
+    of ``hdl.formal`` and their mutants read them, never Amaranth's internals)."""
+
+    frontend: FrontEnd | FeaturePipeline  # one machine: the front end; several: the one feature pipeline
+    machines: list[BayesianMachine]  # the own pass's machines (machine j runs map rows j mod K)
+    loads: list[RoomFifo]  # machine j's load FIFO: its word generator's beats
 
 
 class StereoMachine(wiring.Component):
@@ -415,6 +465,9 @@ class StereoMachine(wiring.Component):
     right_result
         census-lr only: the right pass's results, raster order of its columns, ``valid`` and
         ``payload`` (:func:`stereo_signature`).
+    nets : StereoNets
+        After elaboration: the front end, the machines and their load FIFOs, for the formal wrappers
+        (read-only).
     """
 
     def __init__(self, *, params: MachineParams, model: ModelParams, width: int,
@@ -425,6 +478,7 @@ class StereoMachine(wiring.Component):
         self._width = width
         self._fifo_pixels = fifo_pixels
         self._machines = machines
+        self._nets: StereoNets | None = None
         super().__init__(stereo_signature(params, model))
 
     @property
@@ -446,6 +500,13 @@ class StereoMachine(wiring.Component):
     @property
     def machines(self) -> int:
         return self._machines
+
+    @property
+    def nets(self) -> StereoNets:
+        """The :class:`StereoNets` of the last :meth:`elaborate`; elaborate first."""
+        if self._nets is None:
+            raise RuntimeError("StereoMachine.nets: elaborate the machine first (Fragment.get)")
+        return self._nets
 
     def _pass_machine(self, m: Module, front: FrontEnd, name: str) -> None:
         """A declared pass's machine (census-lr's right pass) beside the own one, fed through its own
@@ -478,7 +539,9 @@ class StereoMachine(wiring.Component):
         # The front end sees the FIFO's registered room, so no path runs from the FIFO's level through
         # the pixel take into the front end's thousands of enables (see "Back-pressure" in
         # docs/frontend.md).
-        _load_fifo(m, "fifo", front.beats, machine.load, self._fifo_pixels * p.beats_per_pixel, prefix="")
+        beats = self._fifo_pixels * p.beats_per_pixel
+        load = _load_fifo(m, "fifo", front.beats, machine.load, beats, prefix="")
+        self._nets = StereoNets(frontend=front, machines=[machine], loads=[load])
         wiring.connect(m, machine.result, wiring.flipped(self.result))
         if p.feedback_columns:  # the neighbour prior's line of MAPs: each result as it leaves
             res = machine.result
@@ -507,7 +570,8 @@ class StereoMachine(wiring.Component):
         fx, w = pipe.features, pipe.features.payload
 
         # Rows in flight, in dealing order: the lane of each map row dealt and not yet out.
-        rows, row_room, row_write = _room_fifo(m, "rows", Shape.cast(range(k)).width, 4 * k + 4)
+        dealt = _room_fifo(m, "rows", Shape.cast(range(k)).width, 4 * k + 4)
+        rows, row_room, row_write = dealt.buffer, dealt.room, dealt.write
         rows_open = Signal(range(4 * k + 6))
         idle = Signal(init=1)  # registered: no row in flight
 
@@ -520,34 +584,35 @@ class StereoMachine(wiring.Component):
         target = Mux(w.line_begin, following, lane)
         pixel_bits = Shape.cast(w.pixel.shape()).width
         lines = [_room_fifo(m, f"line{j}", pixel_bits, width) for j in range(k)]
-        fits = Array(room for _, room, _ in lines)[target] & (~new_row | row_room)
+        fits = Array(f.room for f in lines)[target] & (~new_row | row_room)
         # Neighbour prior: a frame's first pixel waits until every machine is idle, then the word
         # generators' counts of results above restart (rows of two frames never share a line of MAPs).
         hold = w.frame_begin & ~idle if neighbour else Value.cast(0)
         m.d.comb += fx.ready.eq(~hold & (~w.output_line | fits))
         take = fx.valid & fx.ready
         frame_reset = take & w.frame_begin
-        for j, (buf, _, write) in enumerate(lines):
-            m.d.comb += [write.eq(take & w.output_line & (target == j)),
-                         buf.w_stream.payload.eq(w.pixel.as_value())]
+        for j, f in enumerate(lines):
+            m.d.comb += [f.write.eq(take & w.output_line & (target == j)),
+                         f.buffer.w_stream.payload.eq(w.pixel.as_value())]
         m.d.comb += [row_write.eq(take & new_row), rows.w_stream.payload.eq(target)]
         with m.If(take & new_row):
             m.d.sync += lane.eq(following)
 
         # The machines.
         res_bits = Shape.cast(result_layout(p)).width
-        gens, machines, results = [], [], []
+        gens, machines, loads, results = [], [], [], []
         for j in range(k):
             gen = WordGenerator(params=p, model=model, output_columns=wo if neighbour else None,
                                 leads=j == 0)
             machine = BayesianMachine(params=p)
             m.submodules[f"generator{j}"] = gen
             m.submodules[f"machine{j}"] = machine
-            line = lines[j][0]
+            line = lines[j].buffer
             m.d.comb += [gen.pixel.valid.eq(line.r_stream.valid),
                          gen.pixel.payload.as_value().eq(line.r_stream.payload),
                          line.r_stream.ready.eq(gen.pixel.ready)]
-            _load_fifo(m, f"beats{j}", gen.beats, machine.load, self._fifo_pixels * p.beats_per_pixel)
+            beats = self._fifo_pixels * p.beats_per_pixel
+            loads.append(_load_fifo(m, f"beats{j}", gen.beats, machine.load, beats))
             # A map row's results wait here while the rows dealt before it leave (a row's worth, at
             # most 511: one block RAM deep in its 36-bit-wide mode; a longer row's machine may wait
             # for the row before it to leave).
@@ -555,7 +620,7 @@ class StereoMachine(wiring.Component):
             gens.append(gen)
             machines.append(machine)
         for j, machine in enumerate(machines):
-            buf, room, write = results[j]
+            buf, room, write = results[j].buffer, results[j].room, results[j].write
             below = gens[(j + 1) % k]  # the generator of the map rows below this machine's
             res = machine.result
             accept = room & below.result_room if neighbour else room
@@ -570,11 +635,11 @@ class StereoMachine(wiring.Component):
         col = Signal(range(wo))
         src = rows.r_stream.payload
         out = self.result
-        m.d.comb += [out.valid.eq(rows.r_stream.valid & Array(b.r_stream.valid for b, _, _ in results)[src]),
-                     out.payload.as_value().eq(Array(b.r_stream.payload for b, _, _ in results)[src])]
+        m.d.comb += [out.valid.eq(rows.r_stream.valid & Array(f.buffer.r_stream.valid for f in results)[src]),
+                     out.payload.as_value().eq(Array(f.buffer.r_stream.payload for f in results)[src])]
         sent = out.valid & out.ready
-        for j, (buf, _, _) in enumerate(results):
-            m.d.comb += buf.r_stream.ready.eq(rows.r_stream.valid & (src == j) & out.ready)
+        for j, f in enumerate(results):
+            m.d.comb += f.buffer.r_stream.ready.eq(rows.r_stream.valid & (src == j) & out.ready)
         row_done = sent & (col == wo - 1)
         m.d.comb += rows.r_stream.ready.eq(row_done)
         with m.If(sent):
@@ -582,16 +647,15 @@ class StereoMachine(wiring.Component):
         open_next = Signal.like(rows_open)
         m.d.comb += open_next.eq(rows_open + row_write - row_done)
         m.d.sync += [rows_open.eq(open_next), idle.eq(open_next == 0)]
+        self._nets = StereoNets(frontend=pipe, machines=machines, loads=loads)
         return m
 
 
-def _room_fifo(m: Module, name: str, width: int, capacity: int,
-               prefix: str | None = None) -> tuple[fifo.SyncFIFOBuffered, Signal, Signal]:
+def _room_fifo(m: Module, name: str, width: int, capacity: int, prefix: str | None = None) -> RoomFifo:
     """A FIFO of ``capacity`` entries whose writer sees a registered ``room`` (no path from the
-    FIFO's level into the writer's enables): returns (fifo, room, write); the caller drives ``write``
-    (only while ``room``) and the write stream's payload. Its count signals are ``{prefix}used``,
-    ``{prefix}room``, ... (``prefix`` default ``name_``; the one machine's load FIFO has none: the
-    formal mutants find its ``used``, ``write`` and ``read``)."""
+    FIFO's level into the writer's enables); the caller drives ``write`` (only while ``room``) and the
+    write stream's payload. Its count signals are ``{prefix}used``, ``{prefix}room``, ... (``prefix``
+    default ``name_``; the one machine's load FIFO has none)."""
     prefix = f"{name}_" if prefix is None else prefix
     depth = capacity + 1  # one entry more: room is set while at most capacity - 1 are in
     m.submodules[name] = buf = fifo.SyncFIFOBuffered(width=width, depth=depth)
@@ -603,17 +667,19 @@ def _room_fifo(m: Module, name: str, width: int, capacity: int,
     m.d.comb += [read.eq(buf.r_stream.valid & buf.r_stream.ready), used_next.eq(used + write - read),
                  buf.w_stream.valid.eq(write)]
     m.d.sync += [used.eq(used_next), room.eq(used_next <= depth - 2)]
-    return buf, room, write
+    return RoomFifo(buffer=buf, room=room, write=write, read=read, used=used)
 
 
 def _load_fifo(m: Module, name: str, beats: stream.Interface, load: stream.Interface, capacity: int,
-               prefix: str | None = None) -> None:
+               prefix: str | None = None) -> RoomFifo:
     """A word generator's load ``beats`` into a machine's ``load`` stream through a :func:`_room_fifo` of
-    ``capacity`` beats (the generator sees its registered room as ``ready``)."""
-    buf, room, write = _room_fifo(m, name, Shape.cast(load.payload.shape()).width, capacity, prefix)
+    ``capacity`` beats (the generator sees its registered room as ``ready``); returns the FIFO."""
+    f = _room_fifo(m, name, Shape.cast(load.payload.shape()).width, capacity, prefix)
+    buf, room, write = f.buffer, f.room, f.write
     m.d.comb += [write.eq(beats.valid & room),
                  buf.w_stream.payload.eq(beats.payload.as_value()),
                  beats.ready.eq(room),
                  load.payload.as_value().eq(buf.r_stream.payload),
                  load.valid.eq(buf.r_stream.valid),
                  buf.r_stream.ready.eq(load.ready)]
+    return f

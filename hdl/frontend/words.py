@@ -259,6 +259,9 @@ class WordGenerator(wiring.Component):
         ``beats_per_pixel`` beats per pixel whose ``output`` flag is set.
     pass_ : Pass
         The pass.
+    nets : WordNets
+        After elaboration: the generator's shared pipeline (its beat counter, ``active``, ...), for
+        the formal wrappers of ``hdl.formal`` and their mutants (read-only).
     The lane builders' ports: an ABOVE column's ``result_take``, ``result_map``, ``result_hit``,
     ``result_room``, ``frame_reset`` (:class:`~.lanes.prior.AboveLanes`); a PASS column's
     ``<pass>_map`` (:class:`~.lanes.consistency.ConsistencyLanes`).
@@ -284,6 +287,7 @@ class WordGenerator(wiring.Component):
             raise TypeError(f"leads must be a bool, not {type(leads).__name__}")
         self._output_columns = _check_output_columns(p, output_columns)
         self._leads = leads
+        self._nets: WordNets | None = None
         self._params = params
         self._model = model
         self._pass = p
@@ -318,9 +322,16 @@ class WordGenerator(wiring.Component):
     def output_columns(self) -> int | None:
         return self._output_columns
 
+    @property
+    def nets(self) -> WordNets:
+        """The :class:`WordNets` of the last :meth:`elaborate`; elaborate first."""
+        if self._nets is None:
+            raise RuntimeError("WordGenerator.nets: elaborate the generator first (Fragment.get)")
+        return self._nets
+
     def elaborate(self, platform: object) -> Module:
         m = Module()
-        nets = WordNets(m, self)
+        nets = self._nets = WordNets(m, self)
         columns = [lanes_for(c)(c, nets) for c in self._pass.columns]
         rule = self._pass.model.nomatch
         floor = lanes_for(rule)(rule, nets)
@@ -378,6 +389,8 @@ class WordNets:
     dmax, rows_per_beat, n_beats, one : int
         The largest disparity, lane rows per beat (R), beats per pixel, the word of 1.0.
     take, advance, issue, beat, free : Value
+    active : Signal
+        Writing the words of an output pixel (``beat`` counts its beats).
     left : Signal
         The taken pixel's reference features (its ``left`` field).
     """
@@ -413,6 +426,7 @@ class WordNets:
         m, n_beats = self.m, self.n_beats
         out = self.generator.beats
         active = Signal()  # writing the words of an output pixel
+        self.active = active
         beat_d = Signal(range(max(2, n_beats)))  # the beat in the cost registers
         diff_valid = Signal()
         beat_a = Signal(range(max(2, n_beats)))  # the beat in the address registers
