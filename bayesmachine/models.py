@@ -33,6 +33,7 @@ from bayesmachine.columns import (
     Column,
     Consistency,
     GradH,
+    GradMag,
     GradV,
     LeftPrior,
     Mean,
@@ -159,7 +160,8 @@ class ModelDef:
         return values
 
 
-PAPER = ModelDef("paper", "the paper's m, gH, gV columns", (Mean, GradH, GradV))
+PAPER = ModelDef("paper", "the paper's m, gH, gV columns (and with --gradient-magnitude a gradient-magnitude "
+                 "column)", (Mean, GradH, GradV, GradMag), switches=(("gradient_magnitude", (GradMag,)),))
 CENSUS = ModelDef(
     "census", "+ a census column, a no-match row calibrated for it and the raster-order neighbour prior on "
     "the machine's own results", (LeftPrior, AbovePrior, Mean, GradH, GradV, Census),
@@ -450,8 +452,11 @@ def disparity_machine(model: ModelParams, **machine_kwargs: Any) -> MachineParam
 
 
 def _described(model: ModelParams) -> str:
-    """"the census model with neighbour_prior off": the model and the switches that left columns out."""
-    switched = [option for option, _ in model.definition.switches if not model.parameters[option]]
+    """"the census model with neighbour_prior off": the model and the switches, on by default, that left
+    columns out."""
+    options = model.definition.options
+    switched = [option for option, _ in model.definition.switches
+                if not model.parameters[option] and options[option].default]
     return f"the {model.name} model" + (f" with {', '.join(switched)} off" if switched else "")
 
 

@@ -131,7 +131,7 @@ def _run_biased(q, one, tau, f0, f1, state, counter, rows, opcols, n_max, max_cy
             winner = _finish_cycle(bits, counts, over, rows, opcols, n_max, nm_index)
             if winner >= 0 or k == max_cycles:
                 break
-        _store(p, counts, k, winner, out_counts, out_map, out_timeout, out_cycles)
+        _store(p, counts, k, winner, 1, False, nm_index, out_counts, out_map, out_timeout, out_cycles)
 
 
 def run_biased(

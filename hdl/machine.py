@@ -176,6 +176,7 @@ class MachineNets:
     leave: Signal | None = None  # the bubble hands its result over
     valid_q: Value | None = None  # the encoder: some row overflowed (not a timeout)
     winner: Value | None = None  # the encoder: the winning row
+    encoder: MAPEncoder | None = None  # the MAP encoder (submodule ``encoder``), on over_q
     start: Signal | None = None  # the shadow is swapped in (in a bubble or when idle)
     settle: Value = field(default_factory=lambda: Const(0))  # neighbour prior: feedback words forming
     hidden: bool = False  # no bubble: a run's first compute cycle is its swap (hides_bubble)
@@ -662,7 +663,7 @@ class BayesianMachine(wiring.Component):
                                                     tie_break=p.tie_break)
         m.d.comb += encoder.over.eq(n.over_q)
         valid_q, winner = encoder.valid, encoder.index
-        n.valid_q, n.winner = valid_q, winner
+        n.valid_q, n.winner, n.encoder = valid_q, winner, encoder
         with m.If(leave):
             map_value = Signal(p.map_width)
             m.d.comb += map_value.eq(winner)

@@ -36,6 +36,7 @@ from bayesmachine.cliargs import (
     positive_float_at_most,
     runnable_sources,
 )
+from bayesmachine.extras import needs_host
 from bayesmachine.models import ModelParams
 from bayesmachine.outputs import (
     NpzWriter,
@@ -833,7 +834,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     p.add_argument("-o", "--output", required=True, type=output_path, metavar="REF.npz",
                    help="output .npz file")
     p.add_argument("--quiet", action="store_true", help="no summary line")
-    p.set_defaults(func=_cmd_reference)
+    p.set_defaults(func=needs_host(_cmd_reference))
 
     p = subparsers.add_parser(
         "run",
@@ -850,7 +851,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     _add_input_options(p, optional=True)
     add_model_options(p, census=True, board_engine=True)
     _add_machine_options(p, sweep=False)
-    p.set_defaults(func=_cmd_run)
+    p.set_defaults(func=needs_host(_cmd_run))
 
     p = subparsers.add_parser(
         "sweep",
@@ -895,7 +896,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     d.add_argument("--resume", action="store_true",
                    help="keep the tasks whose OUT/runs/.../result.json is complete and of the same pair and "
                    "point (an interrupted or partly failed sweep); run the rest")
-    p.set_defaults(func=_cmd_sweep)
+    p.set_defaults(func=needs_host(_cmd_sweep))
 
 
 if __name__ == "__main__":  # pragma: no cover

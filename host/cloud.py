@@ -12,13 +12,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import cv2
 import numpy as np
 
+from bayesmachine.extras import optional
 from bayesmachine.region import OutputRegion
 
 from .calib import StereoCalibration
 from .images import Crop, crop_image
+
+cv2 = optional("cv2", "OpenCV")
 
 __all__ = ["PLY_FIELDS", "left_colours", "point_cloud", "write_ply"]
 

@@ -39,11 +39,14 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import cv2
 import numpy as np
+
+from bayesmachine.extras import optional
 
 from .calib import StereoCalibration, bundled_calibration_path, read_calibration
 from .images import Crop, bundled_pair, check_readable, crop_image, load_gt, load_image, opencv_quiet, to_gray
+
+cv2 = optional("cv2", "OpenCV")
 
 __all__ = [
     "PairSpec",

@@ -56,6 +56,11 @@ class FeatureSums:
     def shape(self) -> tuple[int, int]:
         return self.m25.shape  # type: ignore[return-value]
 
+    @property
+    def g20(self) -> np.ndarray:
+        """The gradient magnitude |gh20| + |gv20| (the ``GradMag`` column's plane), int32."""
+        return np.abs(self.gh20) + np.abs(self.gv20)
+
     def as_tuple(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return self.m25, self.gh20, self.gv20
 

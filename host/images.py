@@ -18,10 +18,12 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
-import cv2
 import numpy as np
 
+from bayesmachine.extras import optional, require
 from bayesmachine.region import FILTER_SIZE, MARGIN, OutputRegion
+
+cv2 = optional("cv2", "OpenCV")
 
 # FFmpeg (OpenCV's video back end) logs to stderr by itself ("moov atom not found" before our own
 # error line); it reads this once, at its first use. A user's own setting wins.
@@ -282,8 +284,7 @@ def bundled_pair() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
     Loads offline. gt is float32 with +inf where unknown.
     """
-    from skimage import data
-
+    data = require("skimage.data", "scikit-image")
     left, right, gt = data.stereo_motorcycle()
     gt = decode_disparity(gt, "the bundled Motorcycle ground truth", image=False)
     return to_gray(left, rgb=True), to_gray(right, rgb=True), gt

@@ -21,9 +21,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-import cv2
 import numpy as np
 
+from bayesmachine.extras import optional
 from bayesmachine.region import MARGIN, OutputRegion
 
 from .confidence import (
@@ -38,6 +38,8 @@ from .confidence import (
     ranking_figures,
 )
 from .records import MachineRun, Prepared
+
+cv2 = optional("cv2", "OpenCV")
 
 __all__ = [
     "RunMetrics",

@@ -12,14 +12,22 @@ import random
 
 import numpy as np
 import pytest
+from amaranth.hdl import Fragment, Module
 from conftest import assert_same_results, run_sim
 
 from bayesmachine.columns import GradH, GradV, Mean
 from bayesmachine.hdl.frontend.filters import FeatureFilter
 from bayesmachine.hdl.frontend.linebuffer import LineBuffer, column_windows
-from bayesmachine.hdl.frontend.stereo import MAX_WIDTH, FrontEnd, StereoMachine, stereo_machine_params
+from bayesmachine.hdl.frontend.stereo import (
+    MAX_WIDTH,
+    FeaturePipeline,
+    FrontEnd,
+    StereoMachine,
+    stereo_machine_params,
+)
 from bayesmachine.hdl.frontend.tables import clamp_table, frontend_tables
-from bayesmachine.hdl.machine import LOAD_LATENCY, pixel_wall_cycles
+from bayesmachine.hdl.frontend.words import WordGenerator
+from bayesmachine.hdl.machine import LOAD_LATENCY, BayesianMachine, pixel_wall_cycles
 from bayesmachine.host.features import feature_sums
 from bayesmachine.host.images import bundled_pair, random_dot_stereogram
 from bayesmachine.host.likelihoods import memory_words
@@ -57,9 +65,9 @@ def test_clamped_tables_give_the_host_word_for_every_difference(model: ModelPara
         table = full[name]
         deltas = np.arange(-len(table) + 1, len(table))
         assert np.array_equal(clamped.lookup(name, deltas), table[np.abs(deltas)]), name
-        assert len(getattr(clamped, name)) <= len(table)
+        assert len(clamped[name]) <= len(table)
     if word_bits == 10 and model == ModelParams(name="paper"):
-        assert len(clamped.m) < len(full["m"]) // 4  # the paper's tables decay well before the end
+        assert len(clamped["m"]) < len(full["m"]) // 4  # the paper's tables decay well before the end
 
 
 def test_clamp_table_edge_cases() -> None:
@@ -233,6 +241,46 @@ def test_parameters_are_validated_up_front() -> None:
         StereoMachine(params=ok, model={"dmax": 4}, width=20)  # type: ignore[arg-type]
     top = StereoMachine(params=ok, model=model, width=9)
     assert (top.params, top.model, top.width, top.fifo_pixels) == (ok, model, 9, 8)
+
+
+@pytest.mark.parametrize("machines", [1, 2])
+def test_blocks_expose_their_nets_after_elaboration(machines: int) -> None:
+    """The hooks the formal wrappers read instead of Amaranth's internals: ``nets`` (an error before
+    elaboration, then the blocks' own signals) and the pipeline class ``FrontEnd`` builds."""
+    model = ModelParams(name="paper", dmax=4)
+    params = stereo_machine_params(4)
+    built: list[FeaturePipeline] = []
+
+    class Recorded(FeaturePipeline):
+        def elaborate(self, platform: object) -> Module:
+            built.append(self)
+            return super().elaborate(platform)
+
+    class Front(FrontEnd):
+        feature_pipeline = Recorded
+
+    top = StereoMachine(params=params, model=model, width=20, machines=machines)
+    gen = WordGenerator(params=params, model=model)
+    pipe = FeaturePipeline(model=model, width=20)
+    for block in (top, gen, pipe):
+        with pytest.raises(RuntimeError, match="elaborate"):
+            block.nets  # noqa: B018
+        Fragment.get(block, None)
+    Fragment.get(Front(params=params, model=model, width=20), None)
+    n = top.nets
+    assert len(n.machines) == len(n.loads) == machines
+    assert all(isinstance(mc, BayesianMachine) for mc in n.machines)
+    assert isinstance(n.frontend, FrontEnd if machines == 1 else FeaturePipeline)
+    fifo = n.loads[0]
+    assert fifo.buffer.depth == top.fifo_pixels * params.beats_per_pixel + 1
+    assert [s.name for s in (fifo.used, fifo.write, fifo.read)] == (
+        ["used", "write", "read"] if machines == 1 else ["beats0_used", "beats0_write", "beats0_read"])
+    assert (gen.nets.beat.name, gen.nets.active.name) == ("beat", "active")
+    assert pipe.nets.cur_col.name == "cur_col"
+    assert len(built) == 1
+    pos = built[0].nets
+    names = [s.name for s in (pos.col, pos.line, pos.cur_col, pos.cur_line)]
+    assert names == ["col", "line", "cur_col", "cur_line"]
 
 
 def test_back_pressure_reaches_the_pixel_input() -> None:

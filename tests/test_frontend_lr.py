@@ -17,6 +17,7 @@ import pytest
 from conftest import assert_same_results, run_sim
 
 from bayesmachine.columns import AbovePrior, Consistency, lr_consistent, lr_unknown
+from bayesmachine.hdl.frontend.filters import feature_layout
 from bayesmachine.hdl.frontend.lr import ConsistencyTest, RightPassFeeder, right_pass_params
 from bayesmachine.hdl.frontend.stereo import (
     FrontEnd,
@@ -87,7 +88,7 @@ def test_right_pass_feeder_delays_the_reference_and_flushes_each_output_row() ->
     """Per input pixel one output pixel whose reference (``left``) is the right features Dmax pixels
     back; after an output row's last pixel, Dmax flush pixels k = 1..Dmax continuing the delay line."""
     dmax, bits = 3, 24
-    dut = RightPassFeeder(dmax=dmax, census_bits=bits)
+    dut = RightPassFeeder(dmax=dmax, features=feature_layout(bits))
     n = 14
     line_end = {6, 13}
     rnd = random.Random(1)
@@ -131,9 +132,9 @@ def test_right_pass_feeder_delays_the_reference_and_flushes_each_output_row() ->
         assert w[0] is None or g[0] == w[0]
         assert g[1:] == w[1:]
     with pytest.raises(TypeError, match="dmax"):
-        RightPassFeeder(dmax=2.0, census_bits=24)
-    with pytest.raises(ValueError, match="census_bits"):
-        RightPassFeeder(dmax=2, census_bits=0)
+        RightPassFeeder(dmax=2.0, features=feature_layout(24))
+    with pytest.raises(TypeError, match="features"):
+        RightPassFeeder(dmax=2, features=24)
 
 
 # --- The front end's words of both passes equal the host's ---

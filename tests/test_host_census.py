@@ -38,7 +38,8 @@ from bayesmachine.host.reference import (
 from bayesmachine.models import ModelParams, check_disparity_machine, disparity_machine, machine_layout
 from bayesmachine.params import MachineParams, ParameterError
 
-PAPER_KEYS = ["dmax", "name", "p0", "sigma_m", "sigma_gh", "sigma_gv", "p_nm0", "sigma_nm"]
+PAPER_KEYS = ["dmax", "name", "p0", "sigma_m", "sigma_gh", "sigma_gv", "gradient_magnitude", "sigma_g",
+              "p_nm0", "sigma_nm"]
 
 
 # --- Parameters ---
@@ -343,7 +344,7 @@ def test_machine_checks_are_one_function():
 
 
 def test_front_end_takes_the_census_model_on_whole_rows_per_lane():
-    from bayesmachine.hdl.frontend.costs import check_frontend_params
+    from bayesmachine.hdl.frontend.words import check_frontend_params
 
     model = ModelParams(dmax=6, name="census", neighbour_prior=False)
     check_frontend_params(MachineParams.for_disparity(6, columns=4, words_per_beat=8),

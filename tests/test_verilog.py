@@ -214,8 +214,8 @@ def test_stereo_top_is_lint_clean_and_latch_free(
     text = capsys.readouterr().out
     assert "stereo top: 23-pixel lines, Dmax 6" in text
     assert f"load: {lanes} words per beat, {beats} beats per pixel" in text
-    assert ("census model: 7x7 census" in text) == (model != "paper")
-    assert ("census-lr: a right pass's machine" in text) == (model == "census-lr")
+    assert ("  census: census_window 7" in text) == (model != "paper")
+    assert ("right pass: the census model with the right image" in text) == (model == "census-lr")
     assert re.search(r"in\s+pixels__payload\s+17 bits", text)
     # The machine's waivers alone: their scoped DECLFILENAME rule covers the submodules
     # (``bayesmachine.<path>``) of every top emitted as bayesmachine.v.

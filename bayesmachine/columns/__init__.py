@@ -18,6 +18,7 @@ Each column kind (one module each) defines in one place:
 - its checks against a machine (``check_machine``).
 
 Kinds: :class:`~.features.Mean`, :class:`~.features.GradH`, :class:`~.features.GradV` (the paper's),
+:class:`~.gradient.GradMag` (an option of the paper model),
 :class:`~.census.Census`, :class:`~.prior.LeftPrior` (feedback) and :class:`~.prior.AbovePrior`
 (loaded), :class:`~.consistency.Consistency` (fed by another pass); and the no-match row's floor
 :class:`~.features.NoMatchFloor`. A model (:mod:`bayesmachine.models`) is a list of them.
@@ -37,12 +38,13 @@ from .features import (
     Mean,
     NoMatchFloor,
 )
+from .gradient import GRADIENT_MAGNITUDE, GradMag
 from .prior import NEIGHBOUR_PRIOR, AbovePrior, LeftPrior, NeighbourPrior, neighbour_words
 
 __all__ = [
     "Column", "Option", "Source", "Table", "Term", "likelihood_formula", "quantize",
     "FEATURES", "SCALES", "MAX_ABS", "FeatureColumn", "Mean", "GradH", "GradV", "FEATURE_COLUMNS",
-    "NoMatchFloor",
+    "NoMatchFloor", "GRADIENT_MAGNITUDE", "GradMag",
     "CENSUS_WINDOWS", "CENSUS_SIGMA", "Census", "census_bits", "hamming",
     "NEIGHBOUR_PRIOR", "NeighbourPrior", "LeftPrior", "AbovePrior", "neighbour_words",
     "RIGHT_PASS", "Consistency", "lr_consistent", "lr_unknown", "right_lanes_valid",
@@ -50,4 +52,5 @@ __all__ = [
 ]
 
 # The closed set of column kinds (the numba reference kernels specialize over their sources).
-COLUMN_KINDS: tuple[type[Column], ...] = (Mean, GradH, GradV, Census, LeftPrior, AbovePrior, Consistency)
+COLUMN_KINDS: tuple[type[Column], ...] = (Mean, GradH, GradV, GradMag, Census, LeftPrior, AbovePrior,
+                                          Consistency)

@@ -22,46 +22,16 @@ from amaranth.hdl import Assert, Assume, Cover, Fragment, Module, Mux, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
-from bayesmachine.hdl.frontend.costs import WordGenerator, pixel_features_layout
 from bayesmachine.hdl.frontend.linebuffer import WINDOW
 from bayesmachine.hdl.frontend.stereo import FrontEnd, StereoMachine
+from bayesmachine.hdl.frontend.words import WordGenerator, pixel_features_layout
 from bayesmachine.hdl.signatures import entropy_layout, pixel_in_layout, result_layout
 from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams
 
-__all__ = ["FifoProperties", "FrontEndProperties", "GeneratorProperties", "GENERATOR_LATENCY", "driven"]
+__all__ = ["FifoProperties", "FrontEndProperties", "GeneratorProperties", "GENERATOR_LATENCY"]
 
 GENERATOR_LATENCY = 3  # the word generator's issue -> difference -> address -> beat on the stream
-
-
-def driven(block: Fragment | Module, domain: str | None = None) -> dict[str, Signal]:
-    """The signals an elaborated fragment's (or a module's) own statements drive (in ``domain``, or
-    any), by name: a local register of a front-end block's ``elaborate`` that an invariant or a
-    mutant needs (a name driven twice is left out).
-
-    It reads Amaranth's statement internals (``Module._statements``, ``_lhs_signals``): the front
-    end's blocks expose no hooks yet (the machine does, ``BayesianMachine.nets``, and its proofs
-    use them only)."""
-    found: dict[str, Signal] = {}
-    twice: set[str] = set()
-    statements_of = block.statements if isinstance(block, Fragment) else block._statements
-    for name, statements in statements_of.items():
-        if domain is not None and name != domain:
-            continue
-        for stmt in statements:
-            for sig in stmt._lhs_signals():
-                if sig.name in found and found[sig.name] is not sig:
-                    twice.add(sig.name)
-                found[sig.name] = sig
-    return _Driven({k: v for k, v in found.items() if k not in twice})
-
-
-class _Driven(dict):
-    """A name the block no longer drives (the RTL moved on) is a clear error, not a bare KeyError."""
-
-    def __missing__(self, name: str) -> Signal:
-        raise KeyError(f"no signal named {name!r} is driven (once) by this block: the RTL changed; update "
-                       "the formal wrapper or mutant that watches it (hdl/formal)")
 
 
 def _stream_rule(m: Module, valid: Signal, payload: Signal, ready: Signal) -> None:
@@ -239,11 +209,9 @@ class FifoProperties(wiring.Component):
     def elaborate(self, platform: object) -> Module:
         m = Module()
         dut = self._dut
-        m.submodules.dut = frag = Fragment.get(dut, platform)
-        buf = next(o for o in frag.find_subfragment("fifo").origins if hasattr(o, "w_stream"))
-        front = next(o for o in frag.find_subfragment("frontend").origins if isinstance(o, FrontEnd))
-        machine = next(o for o in frag.find_subfragment("machine").origins if hasattr(o, "load"))
-        used = driven(frag)["used"]
+        m.submodules.dut = Fragment.get(dut, platform)  # elaborated now: its nets are filled in
+        front, machine, load = dut.nets.frontend, dut.nets.machines[0], dut.nets.loads[0]
+        buf, used = load.buffer, load.used
         m.d.comb += [dut.pixels.valid.eq(self.pixels_valid), dut.pixels.payload.eq(self.pixels_payload),
                      dut.result.ready.eq(self.result_ready), dut.entropy.eq(self.entropy),
                      self.result_valid.eq(dut.result.valid), self.result_payload.eq(dut.result.payload)]

@@ -17,7 +17,6 @@ from amaranth.hdl import Assert, Assume, Cover, Fragment, Module, Mux, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
-from bayesmachine.hdl.encoder import MAPEncoder
 from bayesmachine.hdl.machine import BayesianMachine
 from bayesmachine.hdl.signatures import entropy_layout, load_layout, result_layout
 from bayesmachine.params import MachineParams
@@ -88,11 +87,10 @@ class MachineProperties(wiring.Component):
         p = self._params
         m = Module()
         dut = self._dut
-        # Elaborated here so that the properties can watch the MAP encoder it instantiates (its
-        # documented submodule ``encoder``).
-        frag = Fragment.get(dut, platform)
-        m.submodules.dut = frag
-        encoder = next(o for o in frag.find_subfragment("encoder").origins if isinstance(o, MAPEncoder))
+        # Elaborated here so that the properties can watch the MAP encoder it instantiates
+        # (``BayesianMachine.nets.encoder``).
+        m.submodules.dut = Fragment.get(dut, platform)
+        encoder = dut.nets.encoder
         m.d.comb += [
             dut.load.valid.eq(self.load_valid), dut.load.payload.eq(self.load_payload),
             dut.result.ready.eq(self.result_ready), dut.entropy.eq(self.entropy),

@@ -15,10 +15,8 @@ from amaranth.hdl import Cat, Module, Mux, Signal, Value
 
 from bayesmachine.hdl.counters import count_ones, overflow_counter_full
 from bayesmachine.hdl.encoder import MAPEncoder, map_encoder
-from bayesmachine.hdl.formal.frontend import driven
-from bayesmachine.hdl.frontend import stereo as _stereo
-from bayesmachine.hdl.frontend.costs import WordGenerator
 from bayesmachine.hdl.frontend.stereo import FeaturePipeline, FrontEnd, StereoMachine
+from bayesmachine.hdl.frontend.words import WordGenerator
 from bayesmachine.hdl.machine import BayesianMachine
 from bayesmachine.params import MachineParams
 
@@ -184,11 +182,9 @@ class ShortWordGenerator(WordGenerator):
 
     def elaborate(self, platform: object) -> Module:
         m = super().elaborate(platform)
-        local = driven(m)
-        beat, active = local["beat"], local["active"]
-        issue = active & (~self.beats.valid | self.beats.ready)
-        with m.If(issue & (beat == self.params.beats_per_pixel - 2)):
-            m.d.sync += [beat.eq(0), active.eq(0)]
+        n = self.nets
+        with m.If(n.issue & (n.beat == self.params.beats_per_pixel - 2)):
+            m.d.sync += [n.beat.eq(0), n.active.eq(0)]
         return m
 
 
@@ -197,22 +193,16 @@ class FirstIgnoredPipeline(FeaturePipeline):
 
     def elaborate(self, platform: object) -> Module:
         m = super().elaborate(platform)
-        comb, sync = driven(m, "comb"), driven(m, "sync")
-        m.d.comb += [comb["cur_col"].eq(sync["col"]), comb["cur_line"].eq(sync["line"])]
+        n = self.nets
+        m.d.comb += [n.cur_col.eq(n.col), n.cur_line.eq(n.line)]
         return m
 
 
 class FirstIgnoredFrontEnd(FrontEnd):
-    """A front end whose feature pipeline (where the position counters live since the front end
-    was split for K machines) is :class:`FirstIgnoredPipeline`."""
+    """A front end whose feature pipeline (where the position counters live) is
+    :class:`FirstIgnoredPipeline`."""
 
-    def elaborate(self, platform: object) -> Module:
-        saved = _stereo.FeaturePipeline
-        _stereo.FeaturePipeline = FirstIgnoredPipeline  # the class FrontEnd.elaborate instantiates
-        try:
-            return super().elaborate(platform)
-        finally:
-            _stereo.FeaturePipeline = saved
+    feature_pipeline = FirstIgnoredPipeline
 
 
 class EarlyReadStereoMachine(StereoMachine):
@@ -221,9 +211,8 @@ class EarlyReadStereoMachine(StereoMachine):
 
     def elaborate(self, platform: object) -> Module:
         m = super().elaborate(platform)
-        used = driven(m, "sync")["used"]
-        machine = m.submodules.machine
-        m.d.comb += machine.load.valid.eq(used != 0)
+        n = self.nets
+        m.d.comb += n.machines[0].load.valid.eq(n.loads[0].used != 0)
         return m
 
 
@@ -233,10 +222,9 @@ class DriftingCountStereoMachine(StereoMachine):
 
     def elaborate(self, platform: object) -> Module:
         m = super().elaborate(platform)
-        comb, sync = driven(m, "comb"), driven(m, "sync")
-        used = sync["used"]
-        with m.If(comb["write"] & comb["read"]):
-            m.d.sync += used.eq(used + 1)
+        load = self.nets.loads[0]
+        with m.If(load.write & load.read):
+            m.d.sync += load.used.eq(load.used + 1)
         return m
 
 

@@ -7,7 +7,6 @@ import dataclasses
 from typing import TYPE_CHECKING
 
 from bayesmachine.cliargs import MODEL_OPTION_FLAGS, add_model_options, int_arg, model_params_from_args
-from bayesmachine.columns import AbovePrior, Census
 from bayesmachine.params import MachineParams, stereo_words_per_beat
 
 from . import DEFAULT_FIFO_PIXELS, DEFAULT_WIDTH, MAX_WIDTH
@@ -85,34 +84,28 @@ def machines(args: argparse.Namespace) -> int:
 def summary(top: StereoMachine) -> str:
     """What the stereo top is and its ports, for ``emit``'s output."""
     from ..emit import signature_ports
+    from .lr import pass_params
+    from .words import declared_passes
 
     m, p = top.model, top.params
     lines = [
-        f"stereo top: {top.width}-pixel lines, Dmax {m.dmax}, p0 {m.p0}, sigmas m/gh/gv "
-        f"{m.sigma_m}/{m.sigma_gh}/{m.sigma_gv}, p_nm0 {m.p_nm0}, sigma_nm {m.sigma_nm}; "
-        f"FIFO of {top.fifo_pixels} pixels ({top.fifo_pixels * p.beats_per_pixel} beats)"
+        f"stereo top: {top.width}-pixel lines, Dmax {m.dmax}, line buffer of {2 * m.margin} lines, output "
+        f"region margin {m.margin}; FIFO of {top.fifo_pixels} pixels ({top.fifo_pixels * p.beats_per_pixel} "
+        "beats)"
         + (f" per machine; {top.machines} machines (map row r on machine r mod {top.machines}, each with "
            "its own word generator)" if top.machines > 1 else ""),
     ]
-    census = m.column(Census)
-    if census is not None:
-        w = census.window
+    lines.append(f"the {m.name} model's columns in operator order, then its no-match rule:")
+    for term in (*m.columns, m.nomatch):
+        values = ", ".join(f"{k} {v}" for k, v in term.values.items())
+        lines.append(f"  {term.name}" + (f": {values}" if values else ""))
+    for declared in declared_passes(m):
+        dp = pass_params(m, p, declared.name)
         lines.append(
-            f"census model: {w}x{w} census ({census.bits} bits, p0 {m.census_p0}, sigma {m.census_sigma}, "
-            f"no-match at h = {census.nomatch_h}), line buffer of {2 * m.margin} lines, output region margin "
-            f"{m.margin}" + (f"; neighbour prior (eps {m.prior_eps}, s {m.prior_s}): the above factor from "
-                             f"a line of {top.width - 2 * m.margin - m.dmax} MAPs"
-                             if m.column(AbovePrior) else ""))
-    if len(m.passes) > 1:
-        from .lr import right_pass_params
-
-        rp = right_pass_params(m, p)
-        lines.append(
-            f"census-lr: a right pass's machine beside the left one ({rp.columns} data columns, "
-            f"{rp.words_per_beat} words per beat, seed {rp.seed:#x}, watchdog {rp.max_cycles}); "
-            f"consistency column beta {m.lr_beta}, "
-            f"gamma {m.lr_gamma} ({'a' if m.lr_nomatch else 'no'} left no-match row), tolerance "
-            f"{m.lr_tolerance}; right results on right_result")
+            f"{declared.name} pass: the {declared.model.name} model with the {declared.reference} image as "
+            f"reference on a machine beside the own one ({dp.columns} data columns, {dp.words_per_beat} "
+            f"words per beat, seed {dp.seed:#x}, watchdog {dp.max_cycles}); its results on "
+            f"{declared.name}_result")
     lines += [
         "ports (Verilog names; clk and rst as well):",
     ]

@@ -1,4 +1,4 @@
-"""census-lr on chip (issue 22): the right pass's pixel stream and the consistency column's test.
+"""census-lr on chip: the right pass's pixel stream and the consistency column's test.
 
 The census-lr model runs a right pass (``model.pass_named("right").model``, the
 census model with the right image as reference: lane d pairs right map column x_r with left map column
@@ -8,13 +8,13 @@ consistency column of the right MAPs (:func:`~bayesmachine.columns.lr_consistent
 ``bayesmachine.columns.consistency``:
 
 - :class:`RightPassFeeder`: the front end's pixel features in, the right pass's pixels out, for a
-  :class:`~.costs.WordGenerator` built with ``right_pass=True``. The reference (the right features) is
-  delayed by Dmax pixels, so that when left map column x arrives the right pixel x_r = x - Dmax has
-  every left pixel it pairs with (x_r .. x_r + Dmax: the word generator's delay line, read backwards).
-  After a line's last pixel the feeder holds its input for Dmax more right pixels (x_r = W4 - Dmax ..
-  W4 - 1), each with ``flush`` = k: its lanes d > Dmax - k pair it with a left pixel past the last
-  output column (:func:`~bayesmachine.columns.right_lanes_valid`: word 0). So the right pass
-  covers right map columns 0 .. W4 - 1 of every output row, in raster order, as the host's
+  :class:`~.words.WordGenerator` of the right pass (``pass_name="right"``). The reference (the right
+  features) is delayed by Dmax pixels, so that when left map column x arrives the right pixel x_r = x -
+  Dmax has every left pixel it pairs with (x_r .. x_r + Dmax: the word generator's delay line, read
+  backwards). After a line's last pixel the feeder holds its input for Dmax more right pixels (x_r = W4
+  - Dmax .. W4 - 1), each with ``flush`` = k: its lanes d > Dmax - k pair it with a left pixel past the
+  last output column (:func:`~bayesmachine.columns.right_lanes_valid`: word 0). So the right pass covers
+  right map columns 0 .. W4 - 1 of every output row, in raster order, as the host's
   (``host.likelihoods.right_columns``).
 - :class:`ConsistencyTest`: the right MAPs of one map row, shifted in column by column (column x when
   the left pass takes map column x), the last Dmax + 1 of them in a shift register, entry d =
@@ -30,15 +30,14 @@ from amaranth.hdl import Cat, Const, Module, Mux, Shape, Signal, Value, unsigned
 from amaranth.lib import data, fifo, stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from bayesmachine.columns import RIGHT_PASS, Census
-from bayesmachine.models import ModelParams, right_machine
+from bayesmachine.columns import RIGHT_PASS
+from bayesmachine.models import ModelParams, pass_machine
 from bayesmachine.params import MachineParams, stereo_words_per_beat
 
-from .costs import WordGenerator, pixel_features_layout
-from .filters import feature_layout
+from .words import WordGenerator, features_layout, flush_bits, pass_pixel_layout, pixel_features_layout
 
 __all__ = ["ConsistencyTest", "RightPassFeeder", "feeder_in_layout", "flush_bits", "lr_split",
-           "right_map_layout", "right_pass_params"]
+           "pass_params", "right_map_layout", "right_pass_params"]
 
 
 def _check_int(name: str, value: object, low: int, high: int) -> int:
@@ -54,22 +53,27 @@ def right_map_layout(map_width: int) -> data.StructLayout:
     return data.StructLayout({"map": unsigned(map_width), "hit": unsigned(1)})
 
 
-def feeder_in_layout(census_bits: int) -> data.StructLayout:
-    """A pixel into :class:`RightPassFeeder`: both images' features, ``output`` (left map column >= Dmax
+def feeder_in_layout(features: data.StructLayout) -> data.StructLayout:
+    """A pixel into :class:`RightPassFeeder`: both images' ``features``, ``output`` (left map column >= Dmax
     on an output row: the right pass takes right map column x - Dmax), ``row_start`` (left map column
     Dmax: right map column 0), ``first_row`` (a frame's first output row) and ``line_end`` (the last map
     column of an output row); ``consult`` (for the left pass: a map column >= 0 of an output row)."""
-    side = feature_layout(census_bits)
-    return data.StructLayout({"left": side, "right": side, "output": unsigned(1), "row_start": unsigned(1),
-                              "first_row": unsigned(1), "consult": unsigned(1), "line_end": unsigned(1)})
+    return data.StructLayout({"left": features, "right": features, "output": unsigned(1),
+                              "row_start": unsigned(1), "first_row": unsigned(1), "consult": unsigned(1),
+                              "line_end": unsigned(1)})
+
+
+def pass_params(model: ModelParams, params: MachineParams, name: str) -> MachineParams:
+    """The machine on chip of ``model``'s declared pass ``name``: :func:`~bayesmachine.models.pass_machine`
+    of the own pass's ``params``, with the front end's words per beat
+    (:func:`~bayesmachine.params.stereo_words_per_beat`; they change no result)."""
+    machine = pass_machine(model, params, name)
+    return dataclasses.replace(machine, words_per_beat=stereo_words_per_beat(machine))
 
 
 def right_pass_params(model: ModelParams, params: MachineParams) -> MachineParams:
-    """The right pass's machine on chip: :func:`~bayesmachine.models.right_machine` of the left
-    pass's ``params``, with the front end's words per beat
-    (:func:`~bayesmachine.params.stereo_words_per_beat`; they change no result)."""
-    right = right_machine(model, params)
-    return dataclasses.replace(right, words_per_beat=stereo_words_per_beat(right))
+    """:func:`pass_params` of the right pass (census-lr's second machine)."""
+    return pass_params(model, params, RIGHT_PASS)
 
 
 def lr_split(m: Module, front: wiring.Component, gen: WordGenerator, px: Value, valid: Value,
@@ -78,24 +82,21 @@ def lr_split(m: Module, front: wiring.Component, gen: WordGenerator, px: Value, 
     ``valid``, goes both to the left pass's word generator ``gen``, through a FIFO of Dmax + 4 pixels
     (its pixel at map column x waits for the right MAP of x, which needs the left pixels up to x + Dmax:
     the FIFO lets them pass), and to the right pass (:class:`RightPassFeeder`, a
-    ``WordGenerator(right_pass=True)`` writing ``front.right_beats``); the right results
+    ``WordGenerator(pass_name="right")`` writing ``front.right_beats``); the right results
     (``front.right_take``...) go to that generator's line of MAPs (its above prior) and into a FIFO of
     right MAPs (Dmax + 8: never full while the left pass waits, it holds at most the pixel FIFO's
     pixels' MAPs) that ``gen`` reads. Returns the ready of the stage (both take the pixel together)."""
     model, params = front.model, front.params
     rp = right_pass_params(model, params)
-    bits = model.column(Census).bits
-    left_layout = pixel_features_layout(bits, True, consult=True)
+    left_layout = pass_pixel_layout(model, model.passes[-1])
     m.submodules.lr_pixels = pix = fifo.SyncFIFOBuffered(width=Shape.cast(left_layout).width,
                                                          depth=model.dmax + 4)
-    m.submodules.lr_feeder = feeder = RightPassFeeder(dmax=model.dmax, census_bits=bits)
-    m.submodules.lr_right_generator = rgen = WordGenerator(
-        params=rp, model=model.pass_named(RIGHT_PASS).model, output_columns=map_columns, right_pass=True,
-        right_nomatch=model.pass_named(RIGHT_PASS).nomatch)
+    m.submodules.lr_feeder = feeder = RightPassFeeder(dmax=model.dmax, features=features_layout(model))
+    m.submodules.lr_right_generator = rgen = WordGenerator(params=rp, model=model, pass_name=RIGHT_PASS,
+                                                           output_columns=map_columns)
     m.submodules.lr_right_maps = maps = fifo.SyncFIFOBuffered(width=rp.map_width + 1, depth=model.dmax + 8)
     lp = Signal(left_layout)
-    m.d.comb += [getattr(lp, f).eq(getattr(px, f)) for f in ("left", "right", "output", "row_start",
-                                                               "first_row", "consult")]
+    m.d.comb += [getattr(lp, f).eq(getattr(px, f)) for f in left_layout.members]
     m.d.comb += [
         pix.w_stream.payload.eq(lp),
         pix.w_stream.valid.eq(valid & feeder.i.ready),
@@ -136,24 +137,27 @@ class RightPassFeeder(wiring.Component):
     ----------
     dmax : int
         The largest disparity (0 .. 4094).
-    census_bits : int
-        Bits of a census code (24 or 48; the census-lr model always has its census column).
+    features : StructLayout
+        One image's planes (:func:`~.words.features_layout` of the model).
 
     Attributes
     ----------
-    i : ``In(stream.Signature(feeder_in_layout(census_bits)))``
+    i : ``In(stream.Signature(feeder_in_layout(features)))``
         Every pixel of the frame, raster order.
-    o : ``Out(stream.Signature(pixel_features_layout(census_bits, neighbour=True, flush_bits=...)))``
-        The right pass's pixels, for ``WordGenerator(..., right_pass=True)``.
+    o : ``Out(stream.Signature(...))``
+        The right pass's pixels (``row_start``, ``first_row``, ``flush`` flags), for
+        ``WordGenerator(..., pass_name="right")``.
     """
 
-    def __init__(self, *, dmax: int, census_bits: int) -> None:
+    def __init__(self, *, dmax: int, features: data.StructLayout) -> None:
         self._dmax = _check_int("dmax", dmax, 0, 4094)
-        self._bits = _check_int("census_bits", census_bits, 1, 64)
+        if not isinstance(features, data.StructLayout):
+            raise TypeError(f"features must be a StructLayout, not {type(features).__name__}")
+        self._features = features
         super().__init__({
-            "i": In(stream.Signature(feeder_in_layout(census_bits))),
-            "o": Out(stream.Signature(pixel_features_layout(census_bits, neighbour=True,
-                                                            flush_bits=flush_bits(dmax)))),
+            "i": In(stream.Signature(feeder_in_layout(features))),
+            "o": Out(stream.Signature(pixel_features_layout(features, {
+                "row_start": unsigned(1), "first_row": unsigned(1), "flush": unsigned(flush_bits(dmax))}))),
         })
 
     @property
@@ -161,13 +165,13 @@ class RightPassFeeder(wiring.Component):
         return self._dmax
 
     @property
-    def census_bits(self) -> int:
-        return self._bits
+    def features(self) -> data.StructLayout:
+        return self._features
 
     def elaborate(self, platform: object) -> Module:
         m = Module()
         dmax = self._dmax
-        side = feature_layout(self._bits)
+        side = self._features
         i, o = self.i, self.o
         # ref[k]: the right features k + 1 pixels back (reset-less: an output pixel is at least Dmax
         # pixels into its line, so no output reads an entry of an earlier line or frame).
@@ -195,11 +199,6 @@ class RightPassFeeder(wiring.Component):
             with m.Elif(i.valid & i.ready & i.payload.output & i.payload.line_end):
                 m.d.sync += [pending.eq(dmax), first_row.eq(i.payload.first_row)]
         return m
-
-
-def flush_bits(dmax: int) -> int:
-    """Width of the right pass's ``flush`` field (0 .. Dmax)."""
-    return max(1, dmax.bit_length())
 
 
 class ConsistencyTest(wiring.Component):

@@ -31,12 +31,12 @@ leaves, also goes back into the word generator's line of MAPs (the above neighbo
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import dataclass
 
 from amaranth.hdl import Array, Cat, Module, Mux, Shape, Signal, Value, unsigned
 from amaranth.lib import data, fifo, stream, wiring
 from amaranth.lib.wiring import In, Out
 
-from bayesmachine.columns import Census, Consistency
 from bayesmachine.hdl.machine import BayesianMachine
 from bayesmachine.hdl.signatures import (
     ENTROPY_PORTS,
@@ -49,16 +49,25 @@ from bayesmachine.hdl.signatures import (
 )
 from bayesmachine.models import ModelParams, disparity_machine
 from bayesmachine.params import MachineParams, ParameterError, stereo_words_per_beat
+from bayesmachine.region import OutputRegion
 from bayesmachine.sources import source_kind
 
 from . import DEFAULT_FIFO_PIXELS, MAX_MACHINES, MAX_WIDTH
-from .census import CensusFilter
-from .costs import WordGenerator, check_frontend_params, check_frontend_types, pixel_features_layout
-from .filters import FeatureFilter
-from .linebuffer import WINDOW, LineBuffer
-from .lr import feeder_in_layout, lr_split, right_pass_params
+from .linebuffer import LineBuffer
+from .lr import feeder_in_layout, lr_split, pass_params
+from .words import (
+    FLAGS,
+    WordGenerator,
+    check_frontend_params,
+    check_frontend_types,
+    declared_passes,
+    features_layout,
+    model_filters,
+    pass_pixel_layout,
+)
 
-__all__ = ["MAX_MACHINES", "MAX_WIDTH", "FeaturePipeline", "FrontEnd", "StereoMachine", "check_machines",
+__all__ = ["MAX_MACHINES", "MAX_WIDTH", "FeaturePipeline", "FrontEnd", "PipelineNets", "RoomFifo",
+           "StereoMachine", "StereoNets", "check_machines",
            "check_stereo_machine", "pipeline_layout", "pixel_in_layout", "stereo_machine_params",
            "stereo_signature"]
 
@@ -90,6 +99,13 @@ def _check_width(width: object, model: ModelParams) -> int:
     return width
 
 
+def _line_region(model: ModelParams, width: int) -> OutputRegion:
+    """The host's output region of frames of ``width``-pixel lines: its columns (a frame here has any
+    number of lines, so it is the region of the shortest frame, 2·margin + 1 lines; only its columns
+    are read)."""
+    return OutputRegion.of_model((2 * model.margin + 1, width), model)
+
+
 def check_machines(machines: object, params: MachineParams, model: ModelParams) -> int:
     """``machines`` if a ``StereoMachine`` can have that many machines: an integer (``TypeError``
     otherwise) in [1, MAX_MACHINES], more than one only for an on-chip random source (off chip,
@@ -104,21 +120,22 @@ def check_machines(machines: object, params: MachineParams, model: ModelParams) 
             raise ParameterError(f"machines = {machines}: rng {params.rng!r} is off chip (one number port, "
                                  "one device stream); several machines need an on-chip source "
                                  "(sobol, lfsr, lfsr-shared)")
-        if len(model.passes) > 1:
+        for p in declared_passes(model):
             raise ParameterError(f"machines = {machines}: --model {model.name} runs with one machine "
-                                 "(its right pass is not dealt to several)")
+                                 f"(its {p.name} pass is not dealt to several)")
     return machines
 
 
 def stereo_signature(params: MachineParams, model: ModelParams) -> wiring.Signature:
-    """:class:`StereoMachine`'s ports: ``StereoSignature(params)``, and with census-lr also
-    ``right_result``: ``valid`` and ``payload`` (``result_layout(right_pass_params(model, params))``),
-    the right pass's results as they leave its machine (observed: no ``ready``, no back-pressure)."""
-    if len(model.passes) == 1:
-        return StereoSignature(params)
-    rp = right_pass_params(model, params)
-    observed = wiring.Signature({"valid": Out(1), "payload": Out(result_layout(rp))})
-    return wiring.Signature(dict(StereoSignature(params).members.items()) | {"right_result": Out(observed)})
+    """:class:`StereoMachine`'s ports: ``StereoSignature(params)``, and per declared pass (census-lr's
+    right pass) ``<pass>_result``: ``valid`` and ``payload`` (``result_layout(pass_params(model, params,
+    name))``), its results as they leave its machine (observed: no ``ready``, no back-pressure)."""
+    members = dict(StereoSignature(params).members.items())
+    for p in declared_passes(model):
+        observed = wiring.Signature({"valid": Out(1),
+                                     "payload": Out(result_layout(pass_params(model, params, p.name)))})
+        members[f"{p.name}_result"] = Out(observed)
+    return wiring.Signature(members) if declared_passes(model) else StereoSignature(params)
 
 
 def check_stereo_machine(params: MachineParams, model: ModelParams, width: int,
@@ -138,25 +155,33 @@ def check_stereo_machine(params: MachineParams, model: ModelParams, width: int,
 RESULT_FIFO_MAX = 511  # results buffered per machine of several (one DP16KD deep at 36 bits wide)
 
 
-def pipeline_layout(model: ModelParams, neighbour: bool) -> data.StructLayout:
-    """One pixel out of :class:`FeaturePipeline`: the word generator's pixel (``pixel``,
-    :func:`~.costs.pixel_features_layout`) and where it is: ``line_begin`` (an image line's first
-    pixel), ``output_line`` (a line with output pixels: a map row's), ``first_line`` (the frame's
-    first such line) and ``frame_begin`` (the frame's first pixel). census-lr: the pixel's
-    ``consult`` (see :func:`~.costs.pixel_features_layout`) and ``line_end`` (an output row's last
-    pixel), for :func:`~.lr.lr_split`."""
-    census, lr = model.column(Census), model.column(Consistency) is not None
-    bits = census.bits if census is not None else 0
-    fields = {"pixel": pixel_features_layout(bits, neighbour, consult=lr), "line_begin": unsigned(1),
+def pipeline_layout(model: ModelParams) -> data.StructLayout:
+    """One pixel out of :class:`FeaturePipeline`: the model's own pass's word generator's pixel
+    (``pixel``, :func:`~.words.pass_pixel_layout`) and where it is: ``line_begin`` (an image line's first
+    pixel), ``output_line`` (a line with output pixels: a map row's), ``first_line`` (the frame's first
+    such line) and ``frame_begin`` (the frame's first pixel); with declared passes ``line_end`` (an
+    output row's last pixel), for :func:`~.lr.lr_split`."""
+    fields = {"pixel": pass_pixel_layout(model, model.passes[-1]), "line_begin": unsigned(1),
               "output_line": unsigned(1), "first_line": unsigned(1), "frame_begin": unsigned(1)}
-    if lr:
+    if declared_passes(model):
         fields |= {"line_end": unsigned(1)}
     return data.StructLayout(fields)
 
 
+@dataclass(frozen=True)
+class PipelineNets:
+    """The position counters of :class:`FeaturePipeline` (``FeaturePipeline.nets``: the formal wrappers of
+    ``hdl.formal`` and their mutants read them, never Amaranth's internals)."""
+
+    col: Signal  # registered: the next pixel's column (unless it starts a frame)
+    line: Signal  # registered: the next pixel's line (saturating at the window's height)
+    cur_col: Signal  # the incoming pixel's column: 0 on a frame's first pixel, else col
+    cur_line: Signal  # the incoming pixel's line: 0 on a frame's first pixel, else line
+
+
 class FeaturePipeline(wiring.Component):
-    """Pixel pairs in, every pixel's features out (the line buffer and the feature and census
-    filters: stages 0 to 3 of the module's pipeline).
+    """Pixel pairs in, every pixel's features out (the line buffer and the plane filters the model's
+    columns read, :func:`~.words.model_filters`: stages 0 to 3 of the module's pipeline).
 
     Parameters
     ----------
@@ -164,27 +189,25 @@ class FeaturePipeline(wiring.Component):
         The disparity model.
     width : int
         Pixels per image line (dmax + 2·margin + 1 .. ``MAX_WIDTH``).
-    neighbour : bool
-        Whether the pixels carry the neighbour prior's ``row_start`` and ``first_row``.
 
     Attributes
     ----------
     pixels : ``In(pixel_stream())``
         Pixel pairs in raster order.
-    features : ``Out(stream.Signature(pipeline_layout(model, neighbour)))``
+    features : ``Out(stream.Signature(pipeline_layout(model)))``
         Every pixel, in raster order, its features three cycles after its take.
+    nets : PipelineNets
+        After elaboration: the position counters, for the formal wrappers (read-only).
     """
 
-    def __init__(self, *, model: ModelParams, width: int, neighbour: bool) -> None:
+    def __init__(self, *, model: ModelParams, width: int) -> None:
         if not isinstance(model, ModelParams):
-            raise TypeError(f"model must be a host.likelihoods.ModelParams, not {type(model).__name__}")
-        if not isinstance(neighbour, bool):
-            raise TypeError(f"neighbour must be a bool, not {type(neighbour).__name__}")
+            raise TypeError(f"model must be a bayesmachine.models.ModelParams, not {type(model).__name__}")
         self._width = _check_width(width, model)
         self._model = model
-        self._neighbour = neighbour
+        self._nets: PipelineNets | None = None
         super().__init__({"pixels": In(pixel_stream()),
-                          "features": Out(stream.Signature(pipeline_layout(model, neighbour)))})
+                          "features": Out(stream.Signature(pipeline_layout(model)))})
 
     @property
     def model(self) -> ModelParams:
@@ -195,23 +218,22 @@ class FeaturePipeline(wiring.Component):
         return self._width
 
     @property
-    def neighbour(self) -> bool:
-        return self._neighbour
+    def nets(self) -> PipelineNets:
+        """The :class:`PipelineNets` of the last :meth:`elaborate`; elaborate first."""
+        if self._nets is None:
+            raise RuntimeError("FeaturePipeline.nets: elaborate the pipeline first (Fragment.get)")
+        return self._nets
 
     def elaborate(self, platform: object) -> Module:
         m = Module()
         width, model = self._width, self._model
-        dmax, margin = model.dmax, model.margin
-        size = 2 * margin + 1  # the model's windows: line buffer columns of this height
-        lag = margin - WINDOW // 2  # 5x5 features a line and a column behind a 7x7 census window
-        neighbour = self._neighbour
+        size = 2 * model.margin + 1  # the model's windows: line buffer columns of this height
         m.submodules.linebuffer = lines = LineBuffer(width=width, height=size)
-        m.submodules.filter_left = fl = FeatureFilter(lag=lag)
-        m.submodules.filter_right = fr = FeatureFilter(lag=lag)
-        census = model.column(Census)
-        if census is not None:
-            m.submodules.census_left = cl = CensusFilter(window=census.window)
-            m.submodules.census_right = cr = CensusFilter(window=census.window)
+        filters = []
+        for planes in model_filters(model):
+            pair = (planes.build(), planes.build())
+            m.submodules[f"{planes.name}_left"], m.submodules[f"{planes.name}_right"] = pair
+            filters.append((planes, pair))
         out = self.features
 
         # The pipeline advances as a whole whenever its last stage is empty or taken.
@@ -220,9 +242,54 @@ class FeaturePipeline(wiring.Component):
         valid3 = Signal()  # stage 3: the filters hold the pixel's window
         advance = Signal()
         m.d.comb += advance.eq(~valid3 | out.ready)
-        # Stage 0: position of the incoming pixel (restarts at a frame's first pixel). The line
-        # saturates at ``size``: size - 1 is the first line whose windows are complete (the first
-        # output row), size any later one.
+        col1, line1, first1 = self._positions(m, lines, advance, valid1)
+
+        # Stage 1 -> 2: the columns into the filters' first registers (the block RAM's slow
+        # clock-to-output leaves no room for the whole column sum in one cycle): each filter takes the
+        # column's middle ``height`` lines.
+        for planes, (fl, fr) in filters:
+            top = (size - planes.height) // 2
+            m.d.comb += [fl.load.eq(advance), fr.load.eq(advance)]
+            for i in range(planes.height):
+                m.d.comb += [fl.column[i].eq(lines.column[top + i].left),
+                             fr.column[i].eq(lines.column[top + i].right)]
+        # Where the pixel is, carried along with it (the flags its pixel layout has).
+        first_output_col = model.dmax + size - 1
+        output_row = line1 >= size - 1
+        where = {"row_start": col1 == first_output_col,  # the first output pixel of an output row
+                 "first_row": line1 == size - 1,  # a pixel of a frame's first output row
+                 "consult": output_row & (col1 >= size - 1)}  # a map column (>= 0) of an output row
+        px, pay = out.payload.pixel, out.payload
+        pairs = [(px.output, output_row & (col1 >= first_output_col)), (pay.line_begin, col1 == 0),
+                 (pay.output_line, output_row), (pay.first_line, line1 == size - 1),
+                 (pay.frame_begin, first1)]
+        pairs += [(getattr(px, f), where[f]) for f in FLAGS if f in px.shape().members]
+        if "line_end" in pay.shape().members:  # an output row's last pixel
+            pairs.append((pay.line_end, output_row & (col1 == width - 1)))
+        stage2 = Signal(len(pairs))
+        stage3 = Signal(len(pairs))
+        with m.If(advance):
+            m.d.sync += [valid2.eq(valid1), stage2.eq(Cat(*(v for _, v in pairs)))]
+
+        # Stage 2 -> 3: the columns enter the filters' windows.
+        shift = advance & valid2
+        for _, (fl, fr) in filters:
+            m.d.comb += [fl.en.eq(shift), fr.en.eq(shift)]
+        with m.If(advance):
+            m.d.sync += [valid3.eq(valid2), stage3.eq(stage2)]
+
+        # Stage 3 -> out.
+        m.d.comb += [out.valid.eq(valid3), Cat(*(t for t, _ in pairs)).eq(stage3)]
+        for planes, (fl, fr) in filters:
+            for side, filt in ((px.left, fl), (px.right, fr)):
+                m.d.comb += [getattr(side, name).eq(v) for name, v in planes.outputs(filt).items()]
+        return m
+
+    def _positions(self, m: Module, lines: LineBuffer, advance: Value, valid1: Signal) -> tuple[Signal, ...]:
+        """Stage 0: the incoming pixel's column and line (restarting at a frame's first pixel; the line
+        saturates at ``size``: size - 1 is the first line whose windows are complete, the first output
+        row, size any later one) into the line buffer; returns them at stage 1 (column, line, first)."""
+        width, size = self._width, 2 * self._model.margin + 1
         col = Signal(range(width))
         line = Signal(range(size + 1))
         pin = self.pixels.payload
@@ -232,6 +299,7 @@ class FeaturePipeline(wiring.Component):
             m.d.comb += [cur_col.eq(0), cur_line.eq(0)]
         with m.Else():
             m.d.comb += [cur_col.eq(col), cur_line.eq(line)]
+        self._nets = PipelineNets(col=col, line=line, cur_col=cur_col, cur_line=cur_line)
         take = self.pixels.valid & advance
         m.d.comb += [
             self.pixels.ready.eq(advance),
@@ -251,60 +319,7 @@ class FeaturePipeline(wiring.Component):
         with m.If(advance):
             m.d.sync += [valid1.eq(self.pixels.valid), col1.eq(cur_col), line1.eq(cur_line),
                          first1.eq(pin.first)]
-
-        # Stage 1 -> 2: the columns' partial sums into the filters' first registers (the block
-        # RAM's slow clock-to-output leaves no room for the whole column sum in one cycle); the
-        # census filters take the whole column. The 5x5 filters take the column's middle 5 lines.
-        output2, row_start2, first_row2 = Signal(), Signal(), Signal()
-        where2 = Signal(4)  # line_begin, output_line, first_line, frame_begin
-        line_end2, consult2 = Signal(), Signal()  # census-lr's
-        m.d.comb += [fl.load.eq(advance), fr.load.eq(advance)]
-        for i in range(WINDOW):
-            m.d.comb += [fl.column[i].eq(lines.column[lag + i].left),
-                         fr.column[i].eq(lines.column[lag + i].right)]
-        if census is not None:
-            m.d.comb += [cl.load.eq(advance), cr.load.eq(advance)]
-            for i in range(size):
-                m.d.comb += [cl.column[i].eq(lines.column[i].left), cr.column[i].eq(lines.column[i].right)]
-        first_output_col = dmax + size - 1
-        with m.If(advance):
-            m.d.sync += [valid2.eq(valid1),
-                         output2.eq((line1 >= size - 1) & (col1 >= first_output_col)),
-                         row_start2.eq(col1 == first_output_col),
-                         first_row2.eq(line1 == size - 1),
-                         where2.eq(Cat(col1 == 0, line1 >= size - 1, line1 == size - 1, first1)),
-                         # census-lr: an output row's last pixel, and a map column (>= 0) of an output row
-                         line_end2.eq((line1 >= size - 1) & (col1 == width - 1)),
-                         consult2.eq((line1 >= size - 1) & (col1 >= size - 1))]
-
-        # Stage 2 -> 3: the columns' sums enter the filters' windows.
-        output3, row_start3, first_row3 = Signal(), Signal(), Signal()
-        where3 = Signal(4)
-        line_end3, consult3 = Signal(), Signal()
-        shift = advance & valid2
-        m.d.comb += [fl.en.eq(shift), fr.en.eq(shift)]
-        if census is not None:
-            m.d.comb += [cl.en.eq(shift), cr.en.eq(shift)]
-        with m.If(advance):
-            m.d.sync += [valid3.eq(valid2), output3.eq(output2), row_start3.eq(row_start2),
-                         first_row3.eq(first_row2), where3.eq(where2), line_end3.eq(line_end2),
-                         consult3.eq(consult2)]
-
-        # Stage 3 -> out.
-        px = out.payload.pixel
-        m.d.comb += [out.valid.eq(valid3), px.output.eq(output3),
-                     Cat(out.payload.line_begin, out.payload.output_line, out.payload.first_line,
-                         out.payload.frame_begin).eq(where3)]
-        for side, filt in ((px.left, fl), (px.right, fr)):
-            m.d.comb += [side.m25.eq(filt.features.m25), side.gh20.eq(filt.features.gh20),
-                         side.gv20.eq(filt.features.gv20)]
-        if census is not None:
-            m.d.comb += [px.left.census.eq(cl.code), px.right.census.eq(cr.code)]
-        if neighbour:
-            m.d.comb += [px.row_start.eq(row_start3), px.first_row.eq(first_row3)]
-        if model.column(Consistency) is not None:
-            m.d.comb += [px.consult.eq(consult3), out.payload.line_end.eq(line_end3)]
-        return m
+        return col1, line1, first1
 
 
 class FrontEnd(wiring.Component):
@@ -329,10 +344,16 @@ class FrontEnd(wiring.Component):
         With the neighbour prior only: the machine's results as they leave (see
         :class:`~.costs.WordGenerator`), for the above neighbour's prior column.
     right_beats, right_take, right_map, right_hit, right_room
-        census-lr only: the right pass's load beats (``Out(load_stream(right_pass_params(model,
-        params)))``), and its machine's results as they leave (taken only while ``right_room``: the
-        line of right MAPs the left pass reads has room). See :mod:`.lr`.
+        Per declared pass (census-lr's ``right``), ``<pass>_beats``, ...: its load beats
+        (``Out(load_stream(pass_params(model, params, name)))``), and its machine's results as they
+        leave (taken only while ``<pass>_room``: the line of its MAPs the own pass reads has room).
+        See :mod:`.lr`.
+    feature_pipeline : type
+        Class attribute: the :class:`FeaturePipeline` class :meth:`elaborate` builds (a subclass may
+        name another with the same constructor: a formal mutant's).
     """
+
+    feature_pipeline: type[FeaturePipeline] = FeaturePipeline
 
     def __init__(self, *, params: MachineParams, model: ModelParams, width: int) -> None:
         check_frontend_types(params, model)
@@ -343,10 +364,10 @@ class FrontEnd(wiring.Component):
         members = {"pixels": In(pixel_stream()), "beats": Out(load_stream(params))}
         if params.feedback_columns:
             members |= {"result_take": In(1), "result_map": In(params.map_width), "result_hit": In(1)}
-        if len(model.passes) > 1:
-            rp = right_pass_params(model, params)
-            members |= {"right_beats": Out(load_stream(rp)), "right_take": In(1),
-                        "right_map": In(rp.map_width), "right_hit": In(1), "right_room": Out(1)}
+        for p in declared_passes(model):
+            pp, n = pass_params(model, params, p.name), p.name
+            members |= {f"{n}_beats": Out(load_stream(pp)), f"{n}_take": In(1),
+                        f"{n}_map": In(pp.map_width), f"{n}_hit": In(1), f"{n}_room": Out(1)}
         super().__init__(members)
 
     @property
@@ -365,19 +386,20 @@ class FrontEnd(wiring.Component):
         m = Module()
         model = self._model
         neighbour = self._params.feedback_columns > 0
-        m.submodules.pipeline = pipe = FeaturePipeline(model=model, width=self._width, neighbour=neighbour)
-        output_columns = self._width - 2 * model.margin - model.dmax if neighbour else None
+        m.submodules.pipeline = pipe = self.feature_pipeline(model=model, width=self._width)
+        region = _line_region(model, self._width)
+        output_columns = region.shape[1] if neighbour else None
         m.submodules.generator = gen = WordGenerator(params=self._params, model=model,
                                                      output_columns=output_columns)
         wiring.connect(m, wiring.flipped(self.pixels), pipe.pixels)
         features = pipe.features
-        if len(model.passes) > 1:  # through a FIFO, and to the right pass (lr_split)
-            pix, px = features.payload.pixel, Signal(feeder_in_layout(model.column(Census).bits))
+        if declared_passes(model):  # through a FIFO, and to the right pass (lr_split)
+            pix, px = features.payload.pixel, Signal(feeder_in_layout(features_layout(model)))
             m.d.comb += [px.left.eq(pix.left), px.right.eq(pix.right), px.output.eq(pix.output),
                          px.consult.eq(pix.consult), px.line_end.eq(features.payload.line_end)]
             if neighbour:
                 m.d.comb += [px.row_start.eq(pix.row_start), px.first_row.eq(pix.first_row)]
-            ready = lr_split(m, self, gen, px, features.valid, self._width - 2 * model.margin)
+            ready = lr_split(m, self, gen, px, features.valid, region.feature_shape[1])
             m.d.comb += features.ready.eq(ready)
         else:
             m.d.comb += [gen.pixel.valid.eq(features.valid), gen.pixel.payload.eq(features.payload.pixel),
@@ -387,6 +409,27 @@ class FrontEnd(wiring.Component):
             m.d.comb += [gen.result_take.eq(self.result_take), gen.result_map.eq(self.result_map),
                          gen.result_hit.eq(self.result_hit)]
         return m
+
+
+@dataclass(frozen=True)
+class RoomFifo:
+    """A FIFO whose writer sees a registered ``room`` (:func:`_room_fifo`), and its count nets."""
+
+    buffer: fifo.SyncFIFOBuffered
+    room: Signal  # registered: at most capacity - 1 entries in, a write may follow
+    write: Signal  # driven by the caller, only while room: an entry written this cycle
+    read: Signal  # an entry read this cycle
+    used: Signal  # registered: the entries in the FIFO, counted beside it (write - read)
+
+
+@dataclass(frozen=True)
+class StereoNets:
+    """The blocks of :class:`StereoMachine` a proof watches (``StereoMachine.nets``: the formal wrappers
+    of ``hdl.formal`` and their mutants read them, never Amaranth's internals)."""
+
+    frontend: FrontEnd | FeaturePipeline  # one machine: the front end; several: the one feature pipeline
+    machines: list[BayesianMachine]  # the own pass's machines (machine j runs map rows j mod K)
+    loads: list[RoomFifo]  # machine j's load FIFO: its word generator's beats
 
 
 class StereoMachine(wiring.Component):
@@ -421,7 +464,10 @@ class StereoMachine(wiring.Component):
         (the numbers of every compute cycle come from outside, as for the machine alone).
     right_result
         census-lr only: the right pass's results, raster order of its columns, ``valid`` and
-        ``payload`` (``result_layout(right_pass_params(model, params))``; :func:`stereo_signature`).
+        ``payload`` (:func:`stereo_signature`).
+    nets : StereoNets
+        After elaboration: the front end, the machines and their load FIFOs, for the formal wrappers
+        (read-only).
     """
 
     def __init__(self, *, params: MachineParams, model: ModelParams, width: int,
@@ -432,6 +478,7 @@ class StereoMachine(wiring.Component):
         self._width = width
         self._fifo_pixels = fifo_pixels
         self._machines = machines
+        self._nets: StereoNets | None = None
         super().__init__(stereo_signature(params, model))
 
     @property
@@ -454,21 +501,30 @@ class StereoMachine(wiring.Component):
     def machines(self) -> int:
         return self._machines
 
-    def _lr_right_machine(self, m: Module, front: FrontEnd) -> None:
-        """census-lr: the right pass's machine beside the left one, fed through its own FIFO; its results
-        go to the front end (taken while the front end's line of right MAPs has room) and out."""
-        rp = right_pass_params(self._model, self._params)
-        m.submodules.right_machine = machine = BayesianMachine(params=rp)
-        m.submodules.right_fifo = buf = fifo.SyncFIFOBuffered(
+    @property
+    def nets(self) -> StereoNets:
+        """The :class:`StereoNets` of the last :meth:`elaborate`; elaborate first."""
+        if self._nets is None:
+            raise RuntimeError("StereoMachine.nets: elaborate the machine first (Fragment.get)")
+        return self._nets
+
+    def _pass_machine(self, m: Module, front: FrontEnd, name: str) -> None:
+        """A declared pass's machine (census-lr's right pass) beside the own one, fed through its own
+        FIFO; its results go to the front end (taken while the front end's line of its MAPs has room)
+        and out on ``<name>_result``."""
+        rp = pass_params(self._model, self._params, name)
+        m.submodules[f"{name}_machine"] = machine = BayesianMachine(params=rp)
+        m.submodules[f"{name}_fifo"] = buf = fifo.SyncFIFOBuffered(
             width=Shape.cast(load_layout(rp)).width, depth=self._fifo_pixels * rp.beats_per_pixel + 1)
-        wiring.connect(m, front.right_beats, buf.w_stream)
+        port = {k: getattr(front, f"{name}_{k}") for k in ("beats", "take", "map", "hit", "room")}
+        out = getattr(self, f"{name}_result")
+        wiring.connect(m, port["beats"], buf.w_stream)
         wiring.connect(m, buf.r_stream, machine.load)
         res = machine.result
-        take = res.valid & front.right_room
-        m.d.comb += [res.ready.eq(front.right_room), front.right_take.eq(take),
-                     front.right_map.eq(res.payload.map),
-                     front.right_hit.eq(~res.payload.nomatch & ~res.payload.timeout),
-                     self.right_result.valid.eq(take), self.right_result.payload.eq(res.payload)]
+        take = res.valid & port["room"]
+        m.d.comb += [res.ready.eq(port["room"]), port["take"].eq(take), port["map"].eq(res.payload.map),
+                     port["hit"].eq(~res.payload.nomatch & ~res.payload.timeout),
+                     out.valid.eq(take), out.payload.eq(res.payload)]
 
     def elaborate(self, platform: object) -> Module:
         if self._machines > 1:
@@ -477,38 +533,15 @@ class StereoMachine(wiring.Component):
         p = self._params
         m.submodules.frontend = front = FrontEnd(params=p, model=self._model, width=self._width)
         m.submodules.machine = machine = BayesianMachine(params=p)
-        if len(self._model.passes) > 1:
-            self._lr_right_machine(m, front)
-        beat_bits = Shape.cast(load_layout(p)).width
-        # One entry more than the pixels' beats: the registered ready below keeps one free.
-        depth = self._fifo_pixels * p.beats_per_pixel + 1
-        m.submodules.fifo = buf = fifo.SyncFIFOBuffered(width=beat_bits, depth=depth)
+        for declared in declared_passes(self._model):
+            self._pass_machine(m, front, declared.name)
         wiring.connect(m, wiring.flipped(self.pixels), front.pixels)
-        # The front end sees a registered ready (``room``), so no path runs from the FIFO's
-        # level through the pixel take into the front end's thousands of enables. ``used``
-        # counts the beats in the FIFO (its level); room is set while at most depth - 2 are in:
-        # the inner FIFO (depth - 1 entries, holding at most ``used``) then takes the next
-        # beat, and the FIFO fills to depth - 1 = fifo_pixels * beats_per_pixel beats.
-        # (Our own count, not ``buf.level``: see "Back-pressure" in docs/frontend.md.)
-        used = Signal(range(depth + 1))
-        used_next = Signal(range(depth + 1))
-        room = Signal()
-        write = Signal()
-        read = Signal()
-        m.d.comb += [
-            write.eq(front.beats.valid & room),
-            read.eq(buf.r_stream.valid & buf.r_stream.ready),
-            used_next.eq(used + write - read),
-        ]
-        m.d.sync += [used.eq(used_next), room.eq(used_next <= depth - 2)]
-        m.d.comb += [
-            buf.w_stream.payload.eq(front.beats.payload),
-            buf.w_stream.valid.eq(write),
-            front.beats.ready.eq(room),
-            machine.load.payload.eq(buf.r_stream.payload),
-            machine.load.valid.eq(buf.r_stream.valid),
-            buf.r_stream.ready.eq(machine.load.ready),
-        ]
+        # The front end sees the FIFO's registered room, so no path runs from the FIFO's level through
+        # the pixel take into the front end's thousands of enables (see "Back-pressure" in
+        # docs/frontend.md).
+        beats = self._fifo_pixels * p.beats_per_pixel
+        load = _load_fifo(m, "fifo", front.beats, machine.load, beats, prefix="")
+        self._nets = StereoNets(frontend=front, machines=[machine], loads=[load])
         wiring.connect(m, machine.result, wiring.flipped(self.result))
         if p.feedback_columns:  # the neighbour prior's line of MAPs: each result as it leaves
             res = machine.result
@@ -531,13 +564,14 @@ class StereoMachine(wiring.Component):
         m = Module()
         p, model, width, k = self._params, self._model, self._width, self._machines
         neighbour = p.feedback_columns > 0
-        wo = width - 2 * model.margin - model.dmax  # output pixels per map row
-        m.submodules.frontend = pipe = FeaturePipeline(model=model, width=width, neighbour=neighbour)
+        wo = _line_region(model, width).shape[1]  # output pixels per map row
+        m.submodules.frontend = pipe = FeaturePipeline(model=model, width=width)
         wiring.connect(m, wiring.flipped(self.pixels), pipe.pixels)
         fx, w = pipe.features, pipe.features.payload
 
         # Rows in flight, in dealing order: the lane of each map row dealt and not yet out.
-        rows, row_room, row_write = _room_fifo(m, "rows", Shape.cast(range(k)).width, 4 * k + 4)
+        dealt = _room_fifo(m, "rows", Shape.cast(range(k)).width, 4 * k + 4)
+        rows, row_room, row_write = dealt.buffer, dealt.room, dealt.write
         rows_open = Signal(range(4 * k + 6))
         idle = Signal(init=1)  # registered: no row in flight
 
@@ -550,42 +584,35 @@ class StereoMachine(wiring.Component):
         target = Mux(w.line_begin, following, lane)
         pixel_bits = Shape.cast(w.pixel.shape()).width
         lines = [_room_fifo(m, f"line{j}", pixel_bits, width) for j in range(k)]
-        fits = Array(room for _, room, _ in lines)[target] & (~new_row | row_room)
+        fits = Array(f.room for f in lines)[target] & (~new_row | row_room)
         # Neighbour prior: a frame's first pixel waits until every machine is idle, then the word
         # generators' counts of results above restart (rows of two frames never share a line of MAPs).
         hold = w.frame_begin & ~idle if neighbour else Value.cast(0)
         m.d.comb += fx.ready.eq(~hold & (~w.output_line | fits))
         take = fx.valid & fx.ready
         frame_reset = take & w.frame_begin
-        for j, (buf, _, write) in enumerate(lines):
-            m.d.comb += [write.eq(take & w.output_line & (target == j)),
-                         buf.w_stream.payload.eq(w.pixel.as_value())]
+        for j, f in enumerate(lines):
+            m.d.comb += [f.write.eq(take & w.output_line & (target == j)),
+                         f.buffer.w_stream.payload.eq(w.pixel.as_value())]
         m.d.comb += [row_write.eq(take & new_row), rows.w_stream.payload.eq(target)]
         with m.If(take & new_row):
             m.d.sync += lane.eq(following)
 
         # The machines.
-        beat_bits = Shape.cast(load_layout(p)).width
         res_bits = Shape.cast(result_layout(p)).width
-        gens, machines, results = [], [], []
+        gens, machines, loads, results = [], [], [], []
         for j in range(k):
             gen = WordGenerator(params=p, model=model, output_columns=wo if neighbour else None,
                                 leads=j == 0)
             machine = BayesianMachine(params=p)
             m.submodules[f"generator{j}"] = gen
             m.submodules[f"machine{j}"] = machine
-            line = lines[j][0]
+            line = lines[j].buffer
             m.d.comb += [gen.pixel.valid.eq(line.r_stream.valid),
                          gen.pixel.payload.as_value().eq(line.r_stream.payload),
                          line.r_stream.ready.eq(gen.pixel.ready)]
-            beats, beat_room, beat_write = _room_fifo(m, f"beats{j}", beat_bits,
-                                                      self._fifo_pixels * p.beats_per_pixel)
-            m.d.comb += [beat_write.eq(gen.beats.valid & beat_room),
-                         beats.w_stream.payload.eq(gen.beats.payload.as_value()),
-                         gen.beats.ready.eq(beat_room),
-                         machine.load.payload.as_value().eq(beats.r_stream.payload),
-                         machine.load.valid.eq(beats.r_stream.valid),
-                         beats.r_stream.ready.eq(machine.load.ready)]
+            beats = self._fifo_pixels * p.beats_per_pixel
+            loads.append(_load_fifo(m, f"beats{j}", gen.beats, machine.load, beats))
             # A map row's results wait here while the rows dealt before it leave (a row's worth, at
             # most 511: one block RAM deep in its 36-bit-wide mode; a longer row's machine may wait
             # for the row before it to leave).
@@ -593,7 +620,7 @@ class StereoMachine(wiring.Component):
             gens.append(gen)
             machines.append(machine)
         for j, machine in enumerate(machines):
-            buf, room, write = results[j]
+            buf, room, write = results[j].buffer, results[j].room, results[j].write
             below = gens[(j + 1) % k]  # the generator of the map rows below this machine's
             res = machine.result
             accept = room & below.result_room if neighbour else room
@@ -608,11 +635,11 @@ class StereoMachine(wiring.Component):
         col = Signal(range(wo))
         src = rows.r_stream.payload
         out = self.result
-        m.d.comb += [out.valid.eq(rows.r_stream.valid & Array(b.r_stream.valid for b, _, _ in results)[src]),
-                     out.payload.as_value().eq(Array(b.r_stream.payload for b, _, _ in results)[src])]
+        m.d.comb += [out.valid.eq(rows.r_stream.valid & Array(f.buffer.r_stream.valid for f in results)[src]),
+                     out.payload.as_value().eq(Array(f.buffer.r_stream.payload for f in results)[src])]
         sent = out.valid & out.ready
-        for j, (buf, _, _) in enumerate(results):
-            m.d.comb += buf.r_stream.ready.eq(rows.r_stream.valid & (src == j) & out.ready)
+        for j, f in enumerate(results):
+            m.d.comb += f.buffer.r_stream.ready.eq(rows.r_stream.valid & (src == j) & out.ready)
         row_done = sent & (col == wo - 1)
         m.d.comb += rows.r_stream.ready.eq(row_done)
         with m.If(sent):
@@ -620,21 +647,39 @@ class StereoMachine(wiring.Component):
         open_next = Signal.like(rows_open)
         m.d.comb += open_next.eq(rows_open + row_write - row_done)
         m.d.sync += [rows_open.eq(open_next), idle.eq(open_next == 0)]
+        self._nets = StereoNets(frontend=pipe, machines=machines, loads=loads)
         return m
 
 
-def _room_fifo(m: Module, name: str, width: int,
-               capacity: int) -> tuple[fifo.SyncFIFOBuffered, Signal, Signal]:
+def _room_fifo(m: Module, name: str, width: int, capacity: int, prefix: str | None = None) -> RoomFifo:
     """A FIFO of ``capacity`` entries whose writer sees a registered ``room`` (no path from the
-    FIFO's level into the writer's enables): returns (fifo, room, write); the caller drives ``write``
-    (only while ``room``) and the write stream's payload."""
+    FIFO's level into the writer's enables); the caller drives ``write`` (only while ``room``) and the
+    write stream's payload. Its count signals are ``{prefix}used``, ``{prefix}room``, ... (``prefix``
+    default ``name_``; the one machine's load FIFO has none)."""
+    prefix = f"{name}_" if prefix is None else prefix
     depth = capacity + 1  # one entry more: room is set while at most capacity - 1 are in
     m.submodules[name] = buf = fifo.SyncFIFOBuffered(width=width, depth=depth)
-    used = Signal(range(depth + 1), name=f"{name}_used")
-    used_next = Signal(range(depth + 1), name=f"{name}_used_next")
-    room = Signal(name=f"{name}_room")
-    write = Signal(name=f"{name}_write")
-    m.d.comb += [used_next.eq(used + write - (buf.r_stream.valid & buf.r_stream.ready)),
+    used = Signal(range(depth + 1), name=f"{prefix}used")
+    used_next = Signal(range(depth + 1), name=f"{prefix}used_next")
+    room = Signal(name=f"{prefix}room")
+    write = Signal(name=f"{prefix}write")
+    read = Signal(name=f"{prefix}read")
+    m.d.comb += [read.eq(buf.r_stream.valid & buf.r_stream.ready), used_next.eq(used + write - read),
                  buf.w_stream.valid.eq(write)]
     m.d.sync += [used.eq(used_next), room.eq(used_next <= depth - 2)]
-    return buf, room, write
+    return RoomFifo(buffer=buf, room=room, write=write, read=read, used=used)
+
+
+def _load_fifo(m: Module, name: str, beats: stream.Interface, load: stream.Interface, capacity: int,
+               prefix: str | None = None) -> RoomFifo:
+    """A word generator's load ``beats`` into a machine's ``load`` stream through a :func:`_room_fifo` of
+    ``capacity`` beats (the generator sees its registered room as ``ready``); returns the FIFO."""
+    f = _room_fifo(m, name, Shape.cast(load.payload.shape()).width, capacity, prefix)
+    buf, room, write = f.buffer, f.room, f.write
+    m.d.comb += [write.eq(beats.valid & room),
+                 buf.w_stream.payload.eq(beats.payload.as_value()),
+                 beats.ready.eq(room),
+                 load.payload.as_value().eq(buf.r_stream.payload),
+                 load.valid.eq(buf.r_stream.valid),
+                 buf.r_stream.ready.eq(load.ready)]
+    return f

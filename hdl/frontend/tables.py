@@ -1,20 +1,19 @@
-"""The front end's likelihood tables: the host's quantized tables, clamped.
+"""The front end's likelihood tables: the host's quantized column tables, clamped.
 
-The host computes one word per |difference| of feature sums (``QuantizedTables``): for
-|delta| past some point every word equals the last one (the likelihood has decayed to p0, or
-p_nm0). The hardware table stops there and its address is clamped to the last entry, so a
-look-up gives exactly the host's word for every |delta| an 8-bit image can produce, with a
-table about five times smaller (1,165 words instead of 6,376 for m with the paper's
-parameters). The tables come from the host's own code at elaboration: one definition serves both.
+Each term (a column, the no-match rule) has one word per cost (``Term.table(word_bits)``): past some
+cost every word equals the last one (the likelihood has decayed to its floor). The hardware table
+stops there and its address is clamped to the last entry, so a look-up gives exactly the host's word
+for every cost an 8-bit image can produce, with a table about five times smaller (1,165 words instead
+of 6,376 for m with the paper's parameters). The tables come from the columns' own code at
+elaboration: one definition serves both.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Iterator, Mapping
 
 import numpy as np
 
-from bayesmachine.columns import FEATURE_COLUMNS, Census
 from bayesmachine.models import ModelParams
 
 __all__ = ["FrontEndTables", "clamp_table", "frontend_tables"]
@@ -30,32 +29,34 @@ def clamp_table(table: np.ndarray) -> np.ndarray:
     return t[:end].copy()
 
 
-@dataclass(frozen=True)
-class FrontEndTables:
-    """Clamped word tables: ``m``, ``gh``, ``gv`` indexed by |delta|, ``nomatch`` by |gv20|;
-    ``census`` (census model) by the Hamming distance."""
+class FrontEndTables(Mapping[str, np.ndarray]):
+    """Clamped word tables by term name (a column's ``name``: ``m``, ``gh``, ``gv``, ``census``, ...; the
+    no-match rule's ``nomatch``), each indexed by its cost."""
 
-    m: np.ndarray
-    gh: np.ndarray
-    gv: np.ndarray
-    nomatch: np.ndarray
-    census: np.ndarray | None = None
+    def __init__(self, tables: Mapping[str, np.ndarray]) -> None:
+        self._tables = {name: np.asarray(t) for name, t in tables.items()}
 
-    def feature(self, index: int) -> np.ndarray:
-        return (self.m, self.gh, self.gv)[index]
+    def __getitem__(self, name: str) -> np.ndarray:
+        if name not in self._tables:
+            raise KeyError(f"these tables have no {name} table (they have {', '.join(self._tables)})")
+        return self._tables[name]
 
-    def lookup(self, name: str, delta: np.ndarray) -> np.ndarray:
-        """Twin of a table read: the word at min(|delta|, last index)."""
-        t = getattr(self, name)
-        if t is None:
-            raise ValueError(f"these tables have no {name} table (a census model's have one)")
-        return t[np.minimum(np.abs(np.asarray(delta, np.int64)), len(t) - 1)]
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._tables)
+
+    def __len__(self) -> int:
+        return len(self._tables)
+
+    def lookup(self, name: str, cost: np.ndarray) -> np.ndarray:
+        """Twin of a table read: the word at min(|cost|, last index)."""
+        if name not in self._tables:
+            raise ValueError(f"these tables have no {name} table (they have {', '.join(self._tables)})")
+        t = self._tables[name]
+        return t[np.minimum(np.abs(np.asarray(cost, np.int64)), len(t) - 1)]
 
 
 def frontend_tables(model: ModelParams, word_bits: int) -> FrontEndTables:
-    """The clamped tables of ``model`` quantized to ``word_bits``-bit words (host code, then clamped)."""
-    feats = [clamp_table(c.table(word_bits).values) for kind in FEATURE_COLUMNS
-             for c in model.columns if isinstance(c, kind)]
-    census = model.column(Census)
-    return FrontEndTables(*feats, clamp_table(model.nomatch.table(word_bits).values),
-                          clamp_table(census.table(word_bits).values) if census is not None else None)
+    """The clamped tables of ``model``'s own pass's columns and its no-match rule, quantized to
+    ``word_bits``-bit words (host code, then clamped)."""
+    terms = (*model.columns, model.nomatch)
+    return FrontEndTables({t.name: clamp_table(t.table(word_bits).values) for t in terms})

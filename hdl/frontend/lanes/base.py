@@ -1,0 +1,183 @@
+"""The lane builder contract: the RTL of one column kind in a word generator, and the registry that
+chooses it from the column's class.
+
+A word generator (:class:`~bayesmachine.hdl.frontend.words.WordGenerator`) writes a pass's output
+pixels' words; lane L of a beat holds operator column L % C of row b·R + L // C (C loaded columns, R
+rows per beat), so each operator column owns R lanes of every beat. A column kind's lane builder, a
+subclass of :class:`Lanes` registered for the kind with :func:`register`, says in one place:
+
+- what its words need of the pixels: the planes both images give (``filters``: a FEATURES column's
+  :class:`PlaneFilter` of the line buffer's column in the feature pipeline, and the shape of the
+  plane it reads) and the position flags it reads (``flags``: ``row_start``, ``first_row``,
+  ``consult``, which the feature pipeline computes);
+- the ports it adds to the generator (``members``: a line of MAPs' results in, another pass's MAPs in);
+- on the generator's shared pipeline (:class:`~bayesmachine.hdl.frontend.words.WordNets`: issue, cost
+  register, address register, table read, the beat on the stream), per lane row j of the beat on the
+  stream its word (``word(j)``, rows 0..Dmax) and its word in the no-match row (``nomatch()``), and
+  whether a pixel may be taken (``ready()``).
+
+The generator loops over its pass's columns and asks each for these; nothing outside a lane builder
+knows which kinds a model has. The no-match rule (:class:`~bayesmachine.columns.NoMatchFloor`) has a
+lane builder too: its word sits in the no-match row of the pass's first FEATURES column.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+from amaranth.hdl import Const, Value
+from amaranth.lib import wiring
+
+from bayesmachine.columns import Term
+from bayesmachine.errors import ParameterError
+from bayesmachine.params import MachineParams
+
+if TYPE_CHECKING:
+    from ..words import WordNets
+
+__all__ = ["Lanes", "PlaneFilter", "PlaneLanes", "lanes_for", "register"]
+
+
+@dataclass(frozen=True)
+class PlaneFilter:
+    """A filter of one image's windows in the feature pipeline: the ``height`` middle lines of the line
+    buffer's column in, planes out (``shapes``: name -> shape). Equal filters (one kind, one set of
+    parameters) are one filter per image, shared by every column that reads its planes; its submodules
+    are ``{name}_left`` and ``{name}_right``."""
+
+    @property
+    def name(self) -> str:
+        raise NotImplementedError
+
+    @property
+    def height(self) -> int:
+        raise NotImplementedError
+
+    @property
+    def shapes(self) -> dict[str, Any]:
+        raise NotImplementedError
+
+    def build(self) -> wiring.Component:
+        """The filter: ``load`` (``In(1)``: take ``column``), ``column`` (``height`` gray levels, the top
+        line first) and ``en`` (``In(1)``: shift the column loaded earlier into the window)."""
+        raise NotImplementedError
+
+    def outputs(self, filt: Any) -> dict[str, Value]:
+        """The planes of the window last shifted in, from the filter's outputs."""
+        raise NotImplementedError
+
+
+class Lanes:
+    """A column kind's lanes in a word generator (a subclass per kind; see the module's text).
+
+    The class methods declare, from the column alone, what the generator's signature and the pixels
+    need; an instance builds the lanes on one elaboration's nets (``build``, then ``word``,
+    ``nomatch``, ``ready``).
+
+    Parameters
+    ----------
+    term : Term
+        The column (or the no-match rule) whose lanes these are.
+    nets : WordNets
+        The generator's shared pipeline of this elaboration.
+    """
+
+    # --- Declarations ---
+    @classmethod
+    def filters(cls, term: Any, margin: int) -> tuple[PlaneFilter, ...]:
+        """The plane filters its words need, for a model of ``margin`` (the windows' centre line)."""
+        return ()
+
+    @classmethod
+    def planes(cls, term: Any, margin: int) -> dict[str, Any]:
+        """The planes it reads (name -> shape)."""
+        return {}
+
+    @classmethod
+    def flags(cls, term: Any) -> tuple[str, ...]:
+        """The feature pipeline's position flags each pixel must carry for it."""
+        return ()
+
+    @classmethod
+    def members(cls, term: Any, params: MachineParams) -> dict[str, wiring.Member]:
+        """The ports it adds to the generator."""
+        return {}
+
+    # --- One elaboration ---
+    def __init__(self, term: Any, nets: WordNets) -> None:
+        self.term = term
+        self.nets = nets
+
+    def build(self) -> None:
+        """Build the lanes' logic (tables, registers, submodules) in ``nets.m``."""
+
+    def ready(self) -> Value:
+        """High when a pixel may be taken."""
+        return Const(1)
+
+    def word(self, j: int) -> Any:
+        """The word of lane row j (row ``beat * R + j`` <= Dmax) of the beat on the stream."""
+        raise NotImplementedError
+
+    def nomatch(self) -> Any:
+        """The word of the no-match row, with the beat on the stream."""
+        raise NotImplementedError
+
+
+class PlaneLanes(Lanes):
+    """A FEATURES column's lanes: per lane row the cost (``cost``) of the reference pixel's value of the
+    column's plane and the match pixel's (the delay line's entry of the lane), read in the column's
+    clamped table; its no-match entry a constant of its table (``Column.nomatch_entry``). A subclass
+    names the plane's filter (``filter``) and the cost."""
+
+    @classmethod
+    def filter(cls, term: Any, margin: int) -> PlaneFilter:
+        """The filter giving the plane ``term`` reads, for a model of ``margin``."""
+        raise NotImplementedError
+
+    @classmethod
+    def filters(cls, term: Any, margin: int) -> tuple[PlaneFilter, ...]:
+        return (cls.filter(term, margin),)
+
+    @classmethod
+    def planes(cls, term: Any, margin: int) -> dict[str, Any]:
+        return {term.plane: cls.filter(term, margin).shapes[term.plane]}
+
+    def cost(self, ref: Value, match: Value) -> Value:
+        """The cost of the reference pixel's value ``ref`` and the match pixel's ``match`` (its absolute
+        value is the table's address)."""
+        raise NotImplementedError
+
+    def build(self) -> None:
+        n, c = self.nets, self.term
+        costs = [self.cost(getattr(n.left, c.plane), n.entry(c.plane, j)) for j in range(n.rows_per_beat)]
+        self._words = n.lookup(c.name, n.tables[c.name], costs)
+
+    def word(self, j: int) -> Any:
+        return self._words[j]
+
+    def nomatch(self) -> Any:
+        return int(self.term.nomatch_entry(self.term.table(self.nets.params.word_bits)))
+
+
+_LANES: dict[type, type[Lanes]] = {}
+
+
+def register(*kinds: type[Term]) -> Any:
+    """Class decorator: the lane builder of column kinds ``kinds`` (and of their subclasses)."""
+    def wrap(cls: type[Lanes]) -> type[Lanes]:
+        for kind in kinds:
+            _LANES[kind] = cls
+        return cls
+    return wrap
+
+
+def lanes_for(term: Term) -> type[Lanes]:
+    """The lane builder of ``term``'s kind (its class's or its nearest base's); ``ParameterError`` naming
+    the model when the front end has none (a column kind without RTL)."""
+    for kind in type(term).__mro__:
+        if kind in _LANES:
+            return _LANES[kind]
+    raise ParameterError(f"model: the on-chip front end has no lane builder for the {term.name} column "
+                         f"({type(term).__name__}): add one under hdl/frontend/lanes", "model")
