@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from amaranth.hdl import Cat, Const, Module, Value, ValueCastable, unsigned
+from amaranth.hdl import Array, Cat, Const, Module, Value, ValueCastable, unsigned
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
@@ -28,6 +28,8 @@ __all__ = [
     "sample_bits",
     "sample_bits_twin",
     "sample_low",
+    "scaled_numbers",
+    "scaled_numbers_twin",
     "stochastic_operator",
     "stochastic_operator_twin",
 ]
@@ -164,6 +166,31 @@ def sample_bits(number: Value, word: Value, points: Sequence[int], low: Value | 
 def sample_bits_twin(number: int, word: int, points: Sequence[int]) -> list[int]:
     """Python twin of :func:`sample_bits`."""
     return [int((number ^ p) < word) for p in points]
+
+
+def scaled_numbers(number: Value, scale: Value, points: Sequence[int]) -> list[Value]:
+    """``[((number ^ p) * scale) >> W for p in points]`` for a W-bit number and a scale up to 2^W (a
+    normalized column's numbers: docs/architecture.md), from one product of the low bits the points
+    leave alone and one adder per value of the top bits they use.
+
+    With t such top bits, (number ^ p) * scale = k * scale * 2^(W - t) + low * scale, k the top bits
+    XOR p's: the value is (k * scale + (low * scale >> (W - t))) >> t. A clock's B Sobol points (or a
+    block's first 2B) take every k below 2^t once, so the 2^t sums are formed once and each point
+    picks its own by the number's top bits."""
+    w = len(number)
+    t = _top_bits(points, w)
+    product = number[: w - t] * scale
+    if t == 0:
+        return [product[w: 2 * w] for _ in points]
+    part = product[w - t:]
+    sums = Array((k * scale + part)[t: t + w] for k in range(1 << t))
+    top = number[w - t:]
+    return [sums[top ^ (p >> (w - t))] for p in points]
+
+
+def scaled_numbers_twin(number: int, scale: int, points: Sequence[int], w: int) -> list[int]:
+    """Python twin of :func:`scaled_numbers`."""
+    return [((number ^ p) * scale) >> w for p in points]
 
 
 def bus_rows(bits: Sequence[Value], rows: int, columns: int, samples: int = 1) -> Value:

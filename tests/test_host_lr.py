@@ -30,7 +30,8 @@ from bayesmachine.host.reference import (
 )
 from bayesmachine.host.run import prepare, run_machine
 from bayesmachine.models import (
-    LR_WATCHDOG_RUNS,
+    CENSUS_WATCHDOG_RUNS,
+    RIGHT_WATCHDOG_RUNS,
     ModelParams,
     disparity_machine,
     machine_layout,
@@ -397,21 +398,30 @@ def test_right_pass_watchdog(pair):
         disparity_machine(ModelParams(dmax=DMAX, name="census-lr", lr_right_max_cycles=8), counter_max=8)
 
 
-def test_census_lr_machine_default_watchdog():
-    """census-lr's machine stops a run after LR_WATCHDOG_RUNS runs of n_max + 1 cycles by default (both
-    passes); a given max_cycles wins; the other models keep the machine's own default."""
+def test_census_machines_default_watchdog_and_normalization():
+    """The census models' machines stop a run after CENSUS_WATCHDOG_RUNS runs of n_max + 1 cycles by
+    default, census-lr's right pass after RIGHT_WATCHDOG_RUNS; a given max_cycles wins (the right pass
+    keeps its own unless lr_right_max_cycles gives one); both normalize their columns unless told not
+    to; the paper model keeps the machine's own defaults."""
     from bayesmachine.params import DEFAULT_MAX_CYCLES, MachineParams
 
     lr = ModelParams(dmax=DMAX, name="census-lr")
     for n in (1, 8, 16):
         m = disparity_machine(lr, counter_max=n)
-        assert m.max_cycles == LR_WATCHDOG_RUNS * (n + 1) and right_machine(lr, m).max_cycles == m.max_cycles
+        assert m.max_cycles == CENSUS_WATCHDOG_RUNS * (n + 1)
+        assert right_machine(lr, m).max_cycles == RIGHT_WATCHDOG_RUNS * (n + 1)
+        census = disparity_machine(ModelParams(dmax=DMAX, name="census"), counter_max=n)
+        assert census.max_cycles == CENSUS_WATCHDOG_RUNS * (n + 1)
+    assert (CENSUS_WATCHDOG_RUNS * 17, RIGHT_WATCHDOG_RUNS * 17) == (255, 136)  # the documented figures
     m = disparity_machine(lr, counter_max=8, max_cycles=5000)
-    assert m.max_cycles == 5000 and right_machine(lr, m).max_cycles == 5000
+    assert m.max_cycles == 5000 and right_machine(lr, m).max_cycles == RIGHT_WATCHDOG_RUNS * 9
     assert right_machine(ModelParams(dmax=DMAX, name="census-lr", lr_right_max_cycles=100),
                          disparity_machine(lr, counter_max=8)).max_cycles == 100
-    census = ModelParams(dmax=DMAX, name="census")
-    assert disparity_machine(census, counter_max=8).max_cycles == DEFAULT_MAX_CYCLES
+    assert m.normalize and right_machine(lr, m).normalize
+    off = disparity_machine(lr, normalize=False)
+    assert not off.normalize and not right_machine(lr, off).normalize
+    paper = disparity_machine(ModelParams(dmax=DMAX, name="paper"), counter_max=8)
+    assert paper.max_cycles == DEFAULT_MAX_CYCLES and not paper.normalize
     assert MachineParams.for_disparity(DMAX).max_cycles == DEFAULT_MAX_CYCLES
 
 
@@ -511,7 +521,7 @@ def test_cli_run_census_lr(pair_files, pair, tmp_path):
     assert report["right_pass_cycles_per_pixel_mean"] == pytest.approx(want.right.cycles.mean())
     assert report["right_pass_pixels"] == want.right.map.size
     assert report["right_pass_timeouts"] == int(want.right.timeout.sum())
-    assert report["machine"]["max_cycles"] == LR_WATCHDOG_RUNS * 9  # census-lr's default watchdog
+    assert report["machine"]["max_cycles"] == CENSUS_WATCHDOG_RUNS * 9  # census-lr's default watchdog
     assert report["frame_cycles"] == int(want.cycles.sum() + want.right.cycles.sum())
 
 
