@@ -508,8 +508,10 @@ class BayesianMachine(wiring.Component):
             if scale is None or (isinstance(scale, Const) and scale.value == self._params.word_one):
                 out.append(number)
                 continue
-            out.append([self._net(m, f"{name}_{i}_{j}", x)
-                        for j, x in enumerate(scaled_numbers(number, scale, at[i]))])
+            def net(part: str, value: Value, i: int = i) -> Value:
+                return self._net(m, f"{name}_{i}_{part}", value)
+
+            out.append([net(str(j), x) for j, x in enumerate(scaled_numbers(number, scale, at[i], net))])
         return out
 
     @staticmethod
