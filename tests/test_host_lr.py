@@ -378,7 +378,7 @@ def test_run_machine_equals_a_hand_driven_run(pair, model):
     np.testing.assert_array_equal(run.map, want)
     np.testing.assert_array_equal(run.right.map, want_right)
     assert run.right.machine == nth_machine(disparity_machine(model.pass_named("right").model, counter_max=8,
-                                                              max_cycles=machine.max_cycles), 1)
+                                                              max_cycles=RIGHT_WATCHDOG_RUNS * 9), 1)
     assert run.right.cycles.shape == want_right.shape and (run.right.cycles > 8).all()
     assert (run.map >= 0).mean() > 0.5
 
@@ -539,7 +539,8 @@ def test_cli_census_lr_without_its_right_nomatch_neutral_lanes_and_watchdog(pair
     report = json.loads((out / "report.json").read_text())
     model = ModelParams(dmax=DMAX, name="census-lr", lr_right_nomatch=False, lr_neutral=False)
     assert report["model"] == model.to_dict()
-    assert report["machine"]["max_cycles"] == 5000 and report["right_pass_machine"]["max_cycles"] == 5000
+    assert report["machine"]["max_cycles"] == 5000  # the right pass keeps its own watchdog
+    assert report["right_pass_machine"]["max_cycles"] == RIGHT_WATCHDOG_RUNS * 9
 
 
 def test_cli_sweep_three_models(pair_files, tmp_path):

@@ -198,17 +198,23 @@ def test_census_lr_crop_under_verilator(verilator_builds) -> None:  # noqa: ANN0
 
 
 def test_command_line_flag() -> None:
-    """``--normalize-columns`` through the machine-option registry: on when given, the model's
-    machine (both census-lr passes) keeps it; off (left out of the report's machine) otherwise."""
+    """``--normalize-columns`` through the machine-option registry: the census models' default (both
+    census-lr passes), off with ``--no-normalize-columns`` (left out of the report's machine) and for
+    the paper model unless given."""
     from bayesmachine.cli import build_parser
     from bayesmachine.cliargs import machine_params_from_args
     from bayesmachine.models import ModelParams, right_machine
 
     parser = build_parser()
     model = ModelParams(dmax=8)
-    on = machine_params_from_args(parser.parse_args(["run", "--normalize-columns", "-o", "x"]), 8, model)
+    on = machine_params_from_args(parser.parse_args(["run", "-o", "x"]), 8, model)
     assert on.normalize and right_machine(model, on).normalize
-    off = machine_params_from_args(parser.parse_args(["run", "-o", "x"]), 8, model)
-    assert not off.normalize and "normalize" not in off.to_dict()
+    off = machine_params_from_args(parser.parse_args(["run", "--no-normalize-columns", "-o", "x"]), 8, model)
+    assert not off.normalize and "normalize" not in off.to_dict() and not right_machine(model, off).normalize
+    paper = ModelParams(dmax=8, name="paper")
+    assert not machine_params_from_args(parser.parse_args(["run", "--model", "paper", "-o", "x"]), 8,
+                                        paper).normalize
+    assert machine_params_from_args(parser.parse_args(["run", "--model", "paper", "--normalize-columns",
+                                                       "-o", "x"]), 8, paper).normalize
     sweep = parser.parse_args(["sweep", "--normalize-columns", "-o", "x"])
     assert sweep.normalize is True
