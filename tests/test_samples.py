@@ -366,7 +366,7 @@ def test_front_end_at_four_samples_per_clock(verilator_builds, tmp_path) -> None
     from bayesmachine.cli import main
 
     crop = ["--crop", "250,200,40,12", "--dmax", "8", "--quiet", "--no-sgbm", "--model", "census",
-            "--max-cycles", "61"]
+            "--max-cycles", "20"]
     assert main(["run", "--engine", "verilator", "--feed", "pixels", "--samples-per-clock", "4", *crop,
                  "-o", str(tmp_path / "px")]) == 0
     assert main(["run", "--engine", "model", *crop, "-o", str(tmp_path / "model")]) == 0
