@@ -246,7 +246,17 @@ class MachineOption:
     choices: tuple[str, ...] | None = None
     metavar: str | None = None
 
+    @property
+    def is_flag(self) -> bool:
+        """A yes/no option (``type=bool``): ``--flag`` / ``--no-flag``, None unless given."""
+        return self.type is bool
+
     def add_to(self, group: argparse._ActionsContainer, **changes: Any) -> argparse.Action:
+        if self.is_flag:
+            flag_kwargs = {"dest": self.field, "default": self.default, "help": self.help,
+                           "action": argparse.BooleanOptionalAction}
+            flag_kwargs.update(changes)
+            return group.add_argument(self.flag, **flag_kwargs)
         kwargs: dict[str, Any] = {
             "dest": self.field,
             "type": self.type,
@@ -299,13 +309,21 @@ add_option(MachineOption("seed", "--seed",
                          "machine seed: LFSR polynomials and start states; 0x.. accepted "
                          "(default %(default)s)",
                          default=DEFAULT_SEED))
+
+
+def _runs(runs: int) -> str:
+    n = DEFAULT_COUNTER_MAX
+    return f"{runs} x (counter max + 1), {runs * (n + 1)} at counter max {n}"
+
+
 _WATCHDOGS = "; ".join(
-    f"with --model {d.name} {d.watchdog_runs} x (counter max + 1), "
-    f"{d.watchdog_runs * (DEFAULT_COUNTER_MAX + 1)} at counter max {DEFAULT_COUNTER_MAX}, for every pass"
+    f"with --model {d.name} {_runs(d.watchdog_runs)}"
+    + "".join(f", its {p.name} pass {_runs(p.watchdog_runs)}" for p in d.passes if p.watchdog_runs)
     for d in MODELS.values() if d.watchdog_runs)
 add_option(MachineOption("max_cycles", "--max-cycles",
                          "watchdog: a pixel stops as a timeout after this many cycles (samples) "
                          f"(default {DEFAULT_MAX_CYCLES}; {_WATCHDOGS})", metavar="N"))
+_NORMALIZED = " and ".join(d.name for d in MODELS.values() if d.normalize)
 _LEADING = " and ".join(d.name for d in MODELS.values() if d.timeout_answer == "leading")
 add_option(MachineOption("timeout_answer", "--timeout-answer",
                          "what a run stopped by the watchdog answers (still flagged timeout): none (no "
@@ -317,6 +335,11 @@ add_option(MachineOption("samples_per_clock", "--samples-per-clock",
                          f"{', '.join(map(str, SAMPLES_PER_CLOCK))}: the results of B = 1 in "
                          "ceil(cycles / B) clocks (the cycles reported are clocks; --max-cycles counts "
                          "samples); rng sobol or external (default 1)", metavar="B"))
+add_option(MachineOption("normalize", "--normalize-columns",
+                         "per-pixel column normalization: each loaded column's random numbers scaled by "
+                         "m / 2^W, m the column's largest word for the pixel (exactly the run on the words "
+                         "w * 2^W / m: the same posterior, shorter runs; docs/architecture.md) "
+                         f"(default on with --model {_NORMALIZED}, off otherwise)", type=bool))
 add_option(MachineOption("tie_break", "--tie-break",
                          "MAP encoder rule when several counters overflow in one cycle (default %(default)s)",
                          default=DEFAULT_TIE_BREAK, choices=TIE_BREAKS))

@@ -12,7 +12,11 @@ by one of its column kinds (the command line's options are the same declarations
   previous map row's results); ``neighbour_prior=False`` leaves the prior's two columns out.
 * ``census-lr``: census + a left-right consistency column fed by the MAPs of a right pass (the census
   model with the right image as reference, its own machine: seed of machine 1), the no-match factor of
-  its prior 0.1 by default, and a watchdog of :data:`LR_WATCHDOG_RUNS` runs.
+  its prior 0.1 by default.
+
+The census models' machines normalize their columns per pixel, stop a run after
+:data:`CENSUS_WATCHDOG_RUNS` runs (census-lr's right pass after :data:`RIGHT_WATCHDOG_RUNS`) and answer
+a timeout with the leading row; the paper's machine does none of these.
 
 The machine a model's pass needs (:func:`disparity_machine`) follows from its columns: leading
 FEEDBACK and ABOVE columns are the machine's prior columns ("neighbour": feedback then loaded;
@@ -54,7 +58,8 @@ __all__ = [
     "MODEL_NAMES",
     "DEFAULT_MODEL",
     "HARDWARE_MODEL",
-    "LR_WATCHDOG_RUNS",
+    "CENSUS_WATCHDOG_RUNS",
+    "RIGHT_WATCHDOG_RUNS",
     "CENSUS_TIMEOUT_ANSWER",
     "all_options",
     "machine_layout",
@@ -72,11 +77,14 @@ DEFAULT_MODEL = "census-lr"
 # machines): census-lr's StereoMachine does not place on the ECP5-85F (89 % of its flip-flops,
 # docs/fpga.md) and K machines cannot share its right pass; census is the best model that does.
 HARDWARE_MODEL = "census"
-# census-lr's watchdog, in runs of n_max + 1 cycles: max_cycles = LR_WATCHDOG_RUNS * (counter_max + 1)
-# (1088 at counter max 16). A run lasts about (n_max + 1) / p_win cycles, so a pixel stops as a timeout
-# (no match) when its winning row fires less than about once in 64 cycles: every hypothesis explains
-# the pixel badly. It cuts the long tail of the left pass's runs (docs/host.md, "census-lr's cycles").
-LR_WATCHDOG_RUNS = 64
+# The census models' watchdog, in runs of n_max + 1 cycles: max_cycles = CENSUS_WATCHDOG_RUNS *
+# (counter_max + 1) (255 at counter max 16). With normalized columns the winning row of a clear pixel
+# fires almost every cycle (its run ends near n_max + 1 cycles); a pixel still running after 15 such
+# runs is ambiguous, and the leading row answers it. census-lr's right pass, whose MAPs only feed the
+# consistency column (a timeout gives no information), stops after RIGHT_WATCHDOG_RUNS. Chosen from the
+# curve in docs/architecture.md ("The watchdog"), measured on the bundled pair and held-out pairs.
+CENSUS_WATCHDOG_RUNS = 15
+RIGHT_WATCHDOG_RUNS = 8
 # The census models' answer to a timeout: the leading row (the counters hold the partial posterior);
 # the paper's machine keeps "none" (a timeout is no match).
 CENSUS_TIMEOUT_ANSWER = "leading"
@@ -88,7 +96,8 @@ class PassDef:
     right map column x_r with left map column x_r + d) on machine ``machine`` of a row
     (:func:`~bayesmachine.params.nth_machine`). ``nomatch``: the yes/no option giving it ``model``'s
     no-match row (off: word 0, the row never fires); ``watchdog``: the option giving its watchdog in
-    cycles (None: the machine's). ``own_defaults``: options it leaves at ``model``'s defaults."""
+    cycles, by default ``watchdog_runs`` runs of n_max + 1 cycles (None: the machine's).
+    ``own_defaults``: options it leaves at ``model``'s defaults."""
 
     name: str
     model: str
@@ -97,6 +106,7 @@ class PassDef:
     nomatch: str | None = None
     watchdog: str | None = None
     own_defaults: tuple[str, ...] = ()
+    watchdog_runs: int | None = None
 
 
 @dataclass(frozen=True)
@@ -104,8 +114,9 @@ class ModelDef:
     """A model: ``columns`` in operator order, its no-match rule, ``switches`` (a yes/no option and the
     columns present only when it is on), ``passes`` run before its own, ``defaults`` of its own for
     column options, ``requires`` (option values it needs, with the reason), its machine's default
-    watchdog in runs of n_max + 1 cycles and its machine's default answer to a timeout
-    (:data:`~bayesmachine.params.TIMEOUT_ANSWERS`)."""
+    watchdog in runs of n_max + 1 cycles, its machine's default answer to a timeout
+    (:data:`~bayesmachine.params.TIMEOUT_ANSWERS`) and whether its machine normalizes its columns by
+    default (``MachineParams.normalize``)."""
 
     name: str
     description: str
@@ -117,6 +128,7 @@ class ModelDef:
     requires: tuple[tuple[str, Any, str], ...] = ()
     watchdog_runs: int | None = None
     timeout_answer: str = "none"
+    normalize: bool = False
 
     @property
     def options(self) -> dict[str, Option]:
@@ -165,15 +177,17 @@ PAPER = ModelDef("paper", "the paper's m, gH, gV columns (and with --gradient-ma
 CENSUS = ModelDef(
     "census", "+ a census column, a no-match row calibrated for it and the raster-order neighbour prior on "
     "the machine's own results", (LeftPrior, AbovePrior, Mean, GradH, GradV, Census),
-    switches=(("neighbour_prior", (LeftPrior, AbovePrior)),), timeout_answer=CENSUS_TIMEOUT_ANSWER)
+    switches=(("neighbour_prior", (LeftPrior, AbovePrior)),), watchdog_runs=CENSUS_WATCHDOG_RUNS,
+    timeout_answer=CENSUS_TIMEOUT_ANSWER, normalize=True)
 CENSUS_LR = ModelDef(
     "census-lr", "+ a left-right consistency column from a right pass", (*CENSUS.columns, Consistency),
     switches=CENSUS.switches,
     passes=(PassDef(RIGHT_PASS, "census", "right", machine=1, nomatch="lr_right_nomatch",
-                    watchdog="lr_right_max_cycles", own_defaults=("prior_nomatch",)),),
+                    watchdog="lr_right_max_cycles", own_defaults=("prior_nomatch",),
+                    watchdog_runs=RIGHT_WATCHDOG_RUNS),),
     defaults=(("prior_nomatch", 0.1),),
     requires=(("neighbour_prior", True, "both passes use it"),),
-    watchdog_runs=LR_WATCHDOG_RUNS, timeout_answer=CENSUS_TIMEOUT_ANSWER)
+    watchdog_runs=CENSUS_WATCHDOG_RUNS, timeout_answer=CENSUS_TIMEOUT_ANSWER, normalize=True)
 
 MODELS: dict[str, ModelDef] = {d.name: d for d in (PAPER, CENSUS, CENSUS_LR)}
 MODEL_NAMES = tuple(MODELS)
@@ -194,7 +208,8 @@ class Pass:
     """One pass of a model: the columns of ``model`` (the model itself for its own pass, named "left")
     over the pixels of the ``reference`` image, on machine ``machine_index`` of a row. ``nomatch``:
     whether its no-match row holds ``model``'s rule (else every column's entry there is 0, the row never
-    fires); ``max_cycles``: its own watchdog (None: the machine's), given by the option ``watchdog``."""
+    fires); ``max_cycles``: its own watchdog, given by the option ``watchdog`` (None: ``watchdog_runs``
+    runs of n_max + 1 cycles, or, without those, the machine's)."""
 
     name: str
     model: ModelParams = field(repr=False)
@@ -203,6 +218,7 @@ class Pass:
     machine_index: int = 0
     max_cycles: int | None = None
     watchdog: str | None = None
+    watchdog_runs: int | None = None
 
     @property
     def columns(self) -> tuple[Column, ...]:
@@ -277,7 +293,7 @@ class ModelParams:
         max_cycles = self._values[p.watchdog] if p.watchdog else None
         nomatch = bool(self._values[p.nomatch]) if p.nomatch else True
         return Pass(p.name, ModelParams(name=p.model, dmax=self._dmax, **keep), p.reference, nomatch,
-                    p.machine, max_cycles, p.watchdog)
+                    p.machine, max_cycles, p.watchdog, p.watchdog_runs)
 
     # What the model is.
     @property
@@ -441,6 +457,8 @@ def disparity_machine(model: ModelParams, **machine_kwargs: Any) -> MachineParam
                              "no feedback column", "prior")
     if kwargs.get("timeout_answer") is None:
         kwargs["timeout_answer"] = model.definition.timeout_answer
+    if kwargs.get("normalize") is None:
+        kwargs["normalize"] = model.definition.normalize
     runs = model.definition.watchdog_runs
     if runs is not None and kwargs.get("max_cycles") is None:
         kwargs.pop("max_cycles", None)
@@ -464,8 +482,8 @@ def pass_machine(model: ModelParams, machine: MachineParams, name: str) -> Machi
     """The machine of ``model``'s declared pass ``name`` when its own pass runs on ``machine``.
 
     The pass's model's machine (:func:`disparity_machine`) with ``machine``'s word width, counter max,
-    random source, watchdog (the pass's own if its option gives one: a pixel stopped by it has no
-    result) and tie rule, and the seed of machine ``machine_index`` of a row
+    random source, watchdog (the pass's own if its option or its ``watchdog_runs`` gives one: a pixel
+    stopped by it has no result) and tie rule, and the seed of machine ``machine_index`` of a row
     (:func:`~bayesmachine.params.nth_machine`): a machine beside the left one, its own random numbers.
     """
     p = model.pass_named(name)
@@ -474,10 +492,12 @@ def pass_machine(model: ModelParams, machine: MachineParams, name: str) -> Machi
                          "disparity_machine(model)")
     check_disparity_machine(model, machine)
     keep = ("word_bits", "counter_max", "rng", "lfsr_bits", "seed", "max_cycles", "tie_break",
-            "samples_per_clock", "timeout_answer")
+            "samples_per_clock", "timeout_answer", "normalize")
     kwargs: dict[str, Any] = {k: getattr(machine, k) for k in keep}
     if p.max_cycles is not None:
         kwargs["max_cycles"] = p.max_cycles
+    elif p.watchdog_runs is not None:
+        kwargs["max_cycles"] = p.watchdog_runs * (machine.counter_max + 1)
     if machine.rng == "smtj":
         kwargs.update(smtj_dwell=machine.smtj_dwell, smtj_spread=machine.smtj_spread,
                       smtj_share=machine.smtj_share)

@@ -163,6 +163,14 @@ class MachineParams:
         What a run stopped by the watchdog answers (still flagged ``timeout``): ``"none"`` (map 0,
         read as no match) or ``"leading"`` (the row with the largest count, the tie rule among equal
         counts; the no-match row's answer is no match).
+    normalize
+        Per-pixel column normalization: while a pixel's words are loaded the machine keeps each loaded
+        column's largest word m (0 .. 2^W); the column's operators compare their words w with
+        ``(r * m) >> W`` instead of the random number r (``word_bits`` W), so w fires when
+        w * 2^W > r * m: exactly the run on the real words w * 2^W / m (each column rescaled so its
+        largest word is 2^W; a column of zeros, m = 0, never fires, as without it). The posterior is
+        unchanged, the runs shorter. A neighbour prior's feedback column is formed, not loaded: not
+        scaled.
 
     The ``smtj_*`` fields belong to ``rng = "smtj"`` (None: the defaults 1.0, 0.0, "operator"); another
     kind refuses them and leaves them None, out of its ``to_dict`` (and fingerprint); the ``feedback_*``
@@ -188,6 +196,7 @@ class MachineParams:
     feedback_nomatch_word: int | None = None
     samples_per_clock: int = 1
     timeout_answer: str = "none"
+    normalize: bool = False
 
     def __post_init__(self) -> None:
         _check_int("rows", self.rows, 1, 4096)
@@ -229,6 +238,9 @@ class MachineParams:
             raise ParameterError(f"max_cycles ({self.max_cycles}) must exceed samples_per_clock "
                                  f"({self.samples_per_clock}): a run has at least two clocks", "max_cycles")
         _check_choice("timeout_answer", self.timeout_answer, TIMEOUT_ANSWERS)
+        if not isinstance(self.normalize, bool):
+            raise TypeError(f"normalize must be a bool, not {type(self.normalize).__name__} "
+                            f"{self.normalize!r}")
         # Last, what only the random source knows (the Sobol table's size, the LFSR polynomials):
         # the one place it is checked, so every holder of a MachineParams can build its source.
         check_source(self)
@@ -372,6 +384,8 @@ class MachineParams:
             del d["samples_per_clock"]
         if self.timeout_answer == "none":
             del d["timeout_answer"]
+        if not self.normalize:
+            del d["normalize"]
         return d
 
     def fingerprint(self) -> str:

@@ -45,7 +45,7 @@ from bayesmachine.params import MachineParams
 
 from .counters import count_ones, overflow_counter_full, overflow_flags, room_width, sample_counter
 from .encoder import MAPEncoder
-from .operator import bus_rows, operator_bits, sample_bits, sample_low
+from .operator import bus_rows, operator_bits, sample_bits, sample_low, scaled_numbers
 from .signatures import MachineSignature, beat_words, entropy_layout, load_layout, result_layout
 from .sources import OnChipSource, random_source
 
@@ -196,6 +196,14 @@ class MachineNets:
     prev_rows: list[Signal] = field(default_factory=list)
     prev_valids: list[Signal] = field(default_factory=list)
     feedback_q: list[Signal] = field(default_factory=list)
+    # normalize: per loaded column the largest of the shadow's words so far; per operator column the
+    # number scale m of the shadow's pixel (that maximum) and of the active one (registered at the swap).
+    norm_max: list[Signal] = field(default_factory=list)
+    scale_shadow: list[Value] = field(default_factory=list)
+    scale_active: list[Value] = field(default_factory=list)
+    scale_active_n: list[Value] = field(default_factory=list)  # its next value
+    norm_max_n: list[Signal] = field(default_factory=list)  # norm_max's next value
+    scale_shadow_n: list[Value] = field(default_factory=list)  # scale_shadow's next value
 
 
 class BayesianMachine(wiring.Component):
@@ -246,6 +254,7 @@ class BayesianMachine(wiring.Component):
     def elaborate(self, platform: object) -> Module:
         m = Module()
         n = self._nets = self._memories()
+        self._column_scales(m, n)
         self._random_numbers(m, n)
         self._operator_matrix(m, n)
         self._overflow_counters(m, n)
@@ -299,6 +308,29 @@ class BayesianMachine(wiring.Component):
             start_rep=[Signal(name=f"start_rep{g}") for g in range(groups)],
         )
 
+    def _column_scales(self, m: Module, n: MachineNets) -> None:
+        """Per-pixel column normalization (``normalize``): per loaded column a register keeps the
+        largest of the shadow's words as they are written (_load; cleared at the swap): the shadow's
+        scale m, registered at the swap as the active pixel's. The operators of the column compare
+        their words with ``(number * m) >> W`` (_operator_matrix): a word w fires when w * 2^W > r * m,
+        the run on the words w * 2^W / m. A feedback column is not scaled (m = 2^W)."""
+        p = self._params
+        cols, fb = p.operator_columns, p.feedback_columns
+        if not p.normalize:
+            return
+        width = p.memory_word_width
+        n.norm_max = [Signal(width, name=f"norm_max_{c}") for c in range(p.loaded_columns)]
+        n.norm_max_n = [Signal(width, name=f"norm_max_n_{c}") for c in range(p.loaded_columns)]  # _column_max
+        for c in range(cols):
+            if c < fb:
+                for scales in (n.scale_shadow, n.scale_shadow_n, n.scale_active, n.scale_active_n):
+                    scales.append(Const(p.word_one, width))
+                continue
+            n.scale_shadow.append(n.norm_max[c - fb])
+            n.scale_shadow_n.append(n.norm_max_n[c - fb])
+            n.scale_active.append(Signal(width, name=f"norm_scale_{c}"))
+            n.scale_active_n.append(Signal(width, name=f"norm_scale_n_{c}"))  # driven by _start
+
     def _random_numbers(self, m: Module, n: MachineNets) -> None:
         """The random source: advances on compute cycles only, restarts with each pixel's run."""
         p = self._params
@@ -343,7 +375,10 @@ class BayesianMachine(wiring.Component):
         n.row = Signal(rows * samples, name="row")
         if source is None:
             # Numbers from a port arrive in their cycle and are compared then (sample i's at i * ops).
-            bits = [Cat(self.entropy[i * ops + o] < n.active[o] for i in range(samples)) for o in range(ops)]
+            numbers = [self.entropy[i * ops + o] for i in range(samples) for o in range(ops)]
+            scaled = [scaled_numbers(x, n.scale_active[j % ops % cols], (0,))[0] if p.normalize else x
+                      for j, x in enumerate(numbers)]
+            bits = [Cat(scaled[i * ops + o] < n.active[o] for i in range(samples)) for o in range(ops)]
             m.d.comb += n.row.eq(bus_rows(bits, rows, cols, samples))
             return
         # Prefetched comparators (on-chip sources): ``bit_q[o]`` holds this compute cycle's
@@ -354,43 +389,60 @@ class BayesianMachine(wiring.Component):
         # instead of a carry chain.
         index, points = source.operator_numbers, source.sample_points
 
-        def compare(numbers: list[Value], words: list[Value], kind: str,
+        def compare(numbers: list, words: list[Value], kind: str,
                     at: list[tuple[int, ...]] | None = None) -> list[Value]:
-            """Per operator, its B bits (``at``: other points per number entry) from its number; with B
+            """Per operator, its B bits (``at``: other points per number entry) from its number, or
+            from its list of normalized numbers, one per point (compared as they are); with B
             samples nets of their own (``<kind>_bits_<r>_<c>``, read in several places)."""
             at = points if at is None else at
-            if samples == 1:
+            if samples == 1 and not any(isinstance(x, list) for x in numbers):
                 if not any(a != (0,) for a in at):
                     return operator_bits(numbers, words, range(ops))
                 return [sample_bits(numbers[o], words[o], at[index[o]]) for o in range(ops)]
             out = []
             for o in range(ops):
                 name = f"{o // cols}_{o % cols}"
-                low = self._net(m, f"{kind}_low_{name}", sample_low(numbers[o], words[o], at[index[o]]))
-                bits = sample_bits(numbers[o], words[o], at[index[o]], low=low)
-                out.append(self._net(m, f"{kind}_bits_{name}", bits))
+                if isinstance(numbers[o], list):
+                    bits = Cat(*(x < words[o] for x in numbers[o]))
+                else:
+                    low = self._net(m, f"{kind}_low_{name}", sample_low(numbers[o], words[o], at[index[o]]))
+                    bits = sample_bits(numbers[o], words[o], at[index[o]], low=low)
+                out.append(self._net(m, f"{kind}_bits_{name}", bits) if samples > 1 else bits)
             return out
 
+        swap_at = list(source.swap_points) if n.hidden else points
         if source.shared:
             # A number shared by a column's rows would reach all its comparators from one net:
             # each group of rows gets a registered copy of the column's next numbers, loaded
             # every clock from ``following_numbers`` (so equal to ``next_numbers`` in every
             # cycle), and one of its restart numbers, loaded from ``following_restart_numbers``
             # (equal to ``restart_numbers``). The flow keeps these ``_rep`` registers apart too.
-            def group_copies(name: str, attr: str) -> list[Value]:
-                copies = []
+            # Normalized columns copy their scaled numbers (one per point), formed once per source
+            # copy from the scales of the next cycle.
+            def group_copies(name: str, attr: str, scales: list[Value], at: list[tuple[int, ...]]) -> list:
+                copies, per_source = [], {}
                 for g in range(n.groups):
-                    following = list(getattr(n.sources[g // n.groups_per_source], attr))
-                    copy = [Signal(len(x), name=f"{name}_rep{g}_{i}") for i, x in enumerate(following)]
-                    m.d.sync += [c.eq(x) for c, x in zip(copy, following, strict=True)]
-                    copies.append(copy)
+                    k = g // n.groups_per_source
+                    if k not in per_source:
+                        following = list(getattr(n.sources[k], attr))
+                        per_source[k] = self._normalized(m, f"{name}_norm{k}", following, scales, at)
+                    copies.append([self._copy(m, f"{name}_rep{g}_{i}", x)
+                                   for i, x in enumerate(per_source[k])])
                 return [copies[o // cols // n.rows_per_group][index[o]] for o in range(ops)]
 
-            next_numbers = group_copies("next_number", "following_numbers")
-            restart = group_copies("restart_number", "following_restart_numbers")
+            next_numbers = group_copies("next_number", "following_numbers", n.scale_active_n, points)
+            restart = group_copies("restart_number", "following_restart_numbers", n.scale_shadow_n, swap_at)
         else:
-            next_numbers = [source.next_numbers[index[o]] for o in range(ops)]
-            restart = [source.restart_numbers[index[o]] for o in range(ops)]
+            def spread(values: list) -> list:  # per number entry -> per operator
+                return [values[index[o]] for o in range(ops)]
+
+            def by_column(scales: list[Value]) -> list[Value]:
+                return [scales[o % cols] for o in range(ops)] if scales else []
+
+            next_numbers = self._normalized(m, "next_number_norm", spread(list(source.next_numbers)),
+                                            by_column(n.scale_active), spread(list(points)))
+            restart = self._normalized(m, "restart_number_norm", spread(list(source.restart_numbers)),
+                                       by_column(n.scale_shadow), spread(list(swap_at)))
         n.next_bits = compare(next_numbers, n.active, "next")
         if n.hidden:
             # No bubble (hides_bubble, "Timing" in docs/architecture.md): the swap is the next run's
@@ -400,7 +452,7 @@ class BayesianMachine(wiring.Component):
             # cycle's points against the shadow words, which the swap is still reading. Both come
             # from one comparator of the low bits (``sample_bits``: for B = 1 the points 0 and V_0 =
             # 2^(W-1), a comparator of the low W - 1 bits).
-            pair = compare(restart, n.incoming, "swap", list(source.swap_points))
+            pair = compare(restart, n.incoming, "swap", swap_at)
             first_bits, swap_bits = [], []
             for o in range(ops):
                 first_bit = Signal(samples, name=f"first_bit_{o // cols}_{o % cols}")
@@ -443,6 +495,33 @@ class BayesianMachine(wiring.Component):
             m.d.comb += n.over[r].eq(ov)
             n.next_counts.append(nxt)
             n.next_full.append(nfull)
+
+    def _normalized(self, m: Module, name: str, numbers: list[Value], scales: list[Value],
+                    at: list[tuple[int, ...]]) -> list:
+        """``numbers`` (one per column, or per operator for a source of its own) as they are, or,
+        where ``scales`` gives a scale m below 2^W or a signal (a normalized column: ``normalize``), as
+        the list of ``((number ^ point) * m) >> W`` per point of ``at`` (:func:`scaled_numbers`, nets
+        named ``<name>_<i>_<j>``). A feedback column's scale is the constant 2^W: kept as it is."""
+        out: list = []
+        for i, number in enumerate(numbers):
+            scale = scales[i] if scales else None
+            if scale is None or (isinstance(scale, Const) and scale.value == self._params.word_one):
+                out.append(number)
+                continue
+            def net(part: str, value: Value, i: int = i) -> Value:
+                return self._net(m, f"{name}_{i}_{part}", value)
+
+            out.append([net(str(j), x) for j, x in enumerate(scaled_numbers(number, scale, at[i], net))])
+        return out
+
+    @staticmethod
+    def _copy(m: Module, name: str, value: Value | list[Value]) -> Value | list[Value]:
+        """A register loaded every clock with ``value`` (each of a list's values: ``<name>_<j>``)."""
+        if isinstance(value, list):
+            return [BayesianMachine._copy(m, f"{name}_{j}", x) for j, x in enumerate(value)]
+        reg = Signal(len(value), name=name)
+        m.d.sync += reg.eq(value)
+        return reg
 
     @staticmethod
     def _net(m: Module, name: str, value: Value) -> Signal:
@@ -690,6 +769,10 @@ class BayesianMachine(wiring.Component):
                 m.d.comb += start.eq(n.shadow_full & (n.leave | ~n.running))
             with m.If(start):
                 m.d.sync += [n.at_last.eq(0), n.cycles_done.eq(0), n.running.eq(1), n.shadow_full.eq(0)]
+        for a, a_n, s in zip(n.scale_active, n.scale_active_n, n.scale_shadow, strict=True):
+            if isinstance(a, Signal):  # normalize: the active pixel's scales, taken at the swap
+                m.d.comb += a_n.eq(Mux(start, s, a))
+                m.d.sync += a.eq(a_n)
         b = p.samples_per_clock
         for r in range(p.rows):
             with m.If(n.start_rep[r // n.rows_per_group]):
@@ -728,10 +811,38 @@ class BayesianMachine(wiring.Component):
                     w = b * p.words_per_beat + lane
                     if w < p.words_per_pixel:  # unused lanes of the last beat are ignored
                         m.d.sync += n.shadow[w].eq(words[lane])
+        if p.normalize:
+            self._column_max(m, n, words)
         with m.If(n.write_q[nbeats - 1]):
             m.d.sync += n.shadow_full.eq(1)
             if p.feedback_columns:
                 m.d.sync += n.shadow_line_start.eq(load_q.line_start)
+
+    def _column_max(self, m: Module, n: MachineNets, words: list[Value]) -> None:
+        """normalize: each written beat's words into their loaded column's running maximum; cleared at
+        the swap (no beat is written in a swap cycle: the load is not ready while the last beat is
+        written, nor, with the bubble, while the shadow is full). Per beat and column, the largest of
+        its lanes (nets, so that no expression is built twice); the written beat's (``write_q`` is
+        one-hot) is compared with the maximum so far."""
+        p = self._params
+        loaded = p.loaded_columns
+        per_column: list[list[Value]] = [[] for _ in range(loaded)]
+        for b in range(p.beats_per_pixel):
+            lanes: dict[int, list[Value]] = {}
+            for lane in range(p.words_per_beat):
+                w = b * p.words_per_beat + lane
+                if w < p.words_per_pixel:
+                    lanes.setdefault(w % loaded, []).append(words[lane])
+            for c, v in lanes.items():
+                top = v[0]
+                for i, x in enumerate(v[1:]):
+                    top = self._net(m, f"norm_beat{b}_{c}_{i}", Mux(x > top, x, top))
+                per_column[c].append(Mux(n.write_q[b], top, 0))
+        for c in range(loaded):
+            written = self._net(m, f"norm_written_{c}", _or_all(per_column[c]))
+            top = Mux(written > n.norm_max[c], written, n.norm_max[c])
+            m.d.comb += n.norm_max_n[c].eq(Mux(n.start, 0, top))
+            m.d.sync += n.norm_max[c].eq(n.norm_max_n[c])
 
     def _enables(self, m: Module, n: MachineNets) -> None:
         """The next values of the replicated enables: the registers' updates, one cycle early."""

@@ -11,9 +11,9 @@ and :class:`OperatorMatrix`, the component ``tests/test_operator.py`` holds to
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
-from amaranth.hdl import Cat, Const, Module, Value, ValueCastable, unsigned
+from amaranth.hdl import Array, Cat, Const, Module, Value, ValueCastable, unsigned
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
@@ -28,6 +28,8 @@ __all__ = [
     "sample_bits",
     "sample_bits_twin",
     "sample_low",
+    "scaled_numbers",
+    "scaled_numbers_twin",
     "stochastic_operator",
     "stochastic_operator_twin",
 ]
@@ -164,6 +166,39 @@ def sample_bits(number: Value, word: Value, points: Sequence[int], low: Value | 
 def sample_bits_twin(number: int, word: int, points: Sequence[int]) -> list[int]:
     """Python twin of :func:`sample_bits`."""
     return [int((number ^ p) < word) for p in points]
+
+
+def scaled_numbers(number: Value, scale: Value, points: Sequence[int],
+                   net: Callable[[str, Value], Value] | None = None) -> list[Value]:
+    """``[((number ^ p) * scale) >> W for p in points]`` for a W-bit number and a scale up to 2^W (a
+    normalized column's numbers: docs/architecture.md), from one product of the low bits the points
+    leave alone and one adder per value of the top bits they use.
+
+    With t such top bits, (number ^ p) * scale = k * scale * 2^(W - t) + low * scale, k the top bits
+    XOR p's: the value is (k * scale + (low * scale >> (W - t))) >> t. A clock's B Sobol points (or a
+    block's first 2B) take every k below 2^t once, so the 2^t sums are formed once (the multiples
+    k * scale by shifts and one adder each) and each point picks its own by the number's top bits.
+    ``net(name, value)``: the value as a net of the caller's module, for values read in several
+    places (Amaranth builds an expression again wherever it is read)."""
+    net = net or (lambda name, value: value)
+    w = len(number)
+    t = _top_bits(points, w)
+    product = net("product", number[: w - t] * scale)
+    if t == 0:
+        return [product[w: 2 * w] for _ in points]
+    part = product[w - t:]
+    multiples: list[Value] = [Const(0, 1), scale]
+    for k in range(2, 1 << t):
+        value = Cat(Const(0, 1), multiples[k // 2]) if k % 2 == 0 else multiples[k - 1] + scale
+        multiples.append(net(f"multiple{k}", value))
+    sums = Array(net(f"sum{k}", (x + part)[t: t + w]) for k, x in enumerate(multiples))
+    top = number[w - t:]
+    return [sums[top ^ (p >> (w - t))] for p in points]
+
+
+def scaled_numbers_twin(number: int, scale: int, points: Sequence[int], w: int) -> list[int]:
+    """Python twin of :func:`scaled_numbers`."""
+    return [((number ^ p) * scale) >> w for p in points]
 
 
 def bus_rows(bits: Sequence[Value], rows: int, columns: int, samples: int = 1) -> Value:

@@ -183,7 +183,7 @@ def _add_machine_options(p: argparse.ArgumentParser, sweep: bool) -> None:
             f"(default {','.join(map(str, SWEEP_COUNTER_MAX))})"
         )
         for name, option in MACHINE_OPTIONS.items():
-            if name not in ("rng", "counter_max", "columns"):  # every other one: a list, a grid axis
+            if name not in ("rng", "counter_max", "columns") and not option.is_flag:  # a list, a grid axis
                 helps[name] = helps.get(name, option.help) + "; A,B,... sweeps it (a grid axis)"
     g = add_machine_options(p, skip=("columns",), help=helps, **changes)
     if sweep:

@@ -122,7 +122,7 @@ def list_option_changes(counter_max_default: list[int]) -> dict[str, dict[str, A
     given once is a grid axis of one value."""
     changes: dict[str, dict[str, Any]] = {}
     for name, option in MACHINE_OPTIONS.items():
-        if name in _SKIP:
+        if name in _SKIP or option.is_flag:  # a flag: one value, an axis of one point when given
             continue
         metavar = f"{option.metavar or 'V'},..." if option.choices is None else f"{name.upper()},..."
         if name == "counter_max":

@@ -21,7 +21,7 @@ from bayesmachine.sim.results import MachineResult, NumberFeed, answered, check_
 from bayesmachine.sources.lfsr import MAX_TAPS, LFSRSpec, column_lfsr_specs, lfsr_specs
 from bayesmachine.sources.sobol import sobol_points
 
-__all__ = ["MachineModel", "MachineResult", "check_words"]
+__all__ = ["MachineModel", "MachineResult", "check_words", "column_scales"]
 
 _BLOCK = 4096  # clocks of random numbers fetched at a time from an off-chip source
 
@@ -108,7 +108,7 @@ def _step_lfsrs(states, t1, t2, t3, t4, t5, mask, w, top, nums):
 
 
 @numba.njit(cache=True)
-def _run_on_chip(q, states, shifts, points, per_operator, rows, opcols, word_bits, lfsr_bits, n_max,
+def _run_on_chip(q, norm, states, shifts, points, per_operator, rows, opcols, word_bits, lfsr_bits, n_max,
                  max_cycles, nm_index, samples, leading, out_counts, out_map, out_timeout, out_cycles,
                  line_start, fb, fb_nm, nm_row, prev):
     """The on-chip sources, cycle by cycle.
@@ -119,7 +119,8 @@ def _run_on_chip(q, states, shifts, points, per_operator, rows, opcols, word_bit
     ``points[j, c] ^ shift[c]``, j = (k - 1) mod 2^W; the column LFSRs step once per block (j = 0)
     to give the block's shifts (every pixel starts a block). With a neighbour prior (``line_start``
     not empty) each pixel's feedback column is formed first from ``prev[0]``, which carries the
-    previous result over calls.
+    previous result over calls. ``norm[p, c]``: column c's number scale m for pixel p (normalize): its
+    operators compare their words with ``(number * m) >> W`` (m = 2^W: the number itself).
 
     Sample by sample: with ``samples`` (B) per clock only ``sobol`` runs, whose pixels start blocks
     (a multiple of B) and whose blocks are whole clocks, so a clock's samples after the stop draw no
@@ -135,12 +136,14 @@ def _run_on_chip(q, states, shifts, points, per_operator, rows, opcols, word_bit
     t4, t5 = shifts[4].copy(), shifts[5].copy()
     shift = np.zeros(opcols, np.uint64)
     nums = np.zeros(states.shape[0], np.uint64)
+    col_nums = np.zeros(opcols, np.uint64)
     bits = np.zeros(ops, np.uint8)
     counts = np.zeros(rows, np.uint32)
     over = np.zeros(rows, np.uint8)
     feedback = line_start.shape[0] > 0
     for p in range(pixels):
         qp = q[p]
+        sh = norm[p]
         if feedback:
             _fill_feedback(qp, prev[0], line_start[p], fb, fb_nm, rows, opcols, nm_row, 1 << word_bits)
         counts[:] = 0
@@ -152,7 +155,7 @@ def _run_on_chip(q, states, shifts, points, per_operator, rows, opcols, word_bit
             if per_operator:
                 _step_lfsrs(states, t1, t2, t3, t4, t5, mask, w, top, nums)
                 for o in range(ops):
-                    bits[o] = nums[o] < qp[o]
+                    bits[o] = ((nums[o] * sh[o % opcols]) >> word_bits) < qp[o]
             else:
                 if not sobol:
                     _step_lfsrs(states, t1, t2, t3, t4, t5, mask, w, top, nums)
@@ -161,9 +164,11 @@ def _run_on_chip(q, states, shifts, points, per_operator, rows, opcols, word_bit
                         _step_lfsrs(states, t1, t2, t3, t4, t5, mask, w, top, shift)
                     for c in range(opcols):
                         nums[c] = points[j, c] ^ shift[c]
+                for c in range(opcols):
+                    col_nums[c] = (nums[c] * sh[c]) >> word_bits
                 for r in range(rows):
                     for c in range(opcols):
-                        bits[r * opcols + c] = nums[c] < qp[r * opcols + c]
+                        bits[r * opcols + c] = col_nums[c] < qp[r * opcols + c]
             winner = _finish_cycle(bits, counts, over, rows, opcols, n_max, nm_index)
             if winner >= 0 or k == max_cycles:
                 break
@@ -198,13 +203,13 @@ class _OnChipSource:
     def reset(self) -> None:
         self.states = self._init.copy()
 
-    def run(self, q: np.ndarray, out: MachineResult, feedback: _Feedback) -> None:
+    def run(self, q: np.ndarray, norm: np.ndarray, out: MachineResult, feedback: _Feedback) -> None:
         p = self._params
         args = (p.rows, p.operator_columns, p.word_bits, p.lfsr_bits, p.counter_max, p.max_cycles,
                 _nm_index(p), p.samples_per_clock, p.timeout_answer == "leading", out.counts, out.map,
                 out.timeout, out.cycles)
-        _run_on_chip(q.astype(np.uint64), self.states, self._shifts, self._points, p.rng == "lfsr", *args,
-                     *feedback.args())
+        _run_on_chip(q.astype(np.uint64), norm.astype(np.uint64), self.states, self._shifts, self._points,
+                     p.rng == "lfsr", *args, *feedback.args())
 
 
 # The model twin of every on-chip source kind (bayesmachine.sources.SOURCE_KINDS).
@@ -233,6 +238,20 @@ class _Feedback:
         return self.line_start, self._table, self._nomatch, self._nm_row, self.prev
 
 
+def column_scales(params: MachineParams, q: np.ndarray) -> np.ndarray:
+    """Per pixel and operator column, the scale m of that column's random numbers
+    (``MachineParams.normalize``): m = the column's largest word (0 .. 2^W; 0 only for a column of
+    zeros); 2^W (the numbers unchanged) for a neighbour prior's feedback column and without
+    ``normalize``. ``q``: operator words (P, operators). A word w fires when w > floor(r * m / 2^W),
+    that is when w * 2^W > r * m (w an integer): with probability w / m, the run on the real words
+    w * 2^W / m (each column rescaled so its largest word is 2^W)."""
+    scales = np.full((q.shape[0], params.operator_columns), params.word_one, np.int64)
+    if params.normalize:
+        top = q.reshape(q.shape[0], params.rows, params.operator_columns).astype(np.int64).max(axis=1)
+        scales[:, params.feedback_columns:] = top[:, params.feedback_columns:]
+    return scales
+
+
 def _expand(params: MachineParams, q: np.ndarray) -> np.ndarray:
     """Loaded words (P, words_per_pixel) -> operator words (P, operators), the feedback column 0 (to
     be formed by the kernel) zero."""
@@ -244,14 +263,14 @@ def _expand(params: MachineParams, q: np.ndarray) -> np.ndarray:
 
 
 @numba.njit(cache=True)
-def _run_numbers(q, numbers, first, counts, done, rows, opcols, word_bits, n_max, max_cycles, nm_index,
+def _run_numbers(q, norm, numbers, first, counts, done, rows, opcols, word_bits, n_max, max_cycles, nm_index,
                  samples, leading, out_counts, out_map, out_timeout, out_cycles, line_start, fb, fb_nm,
                  nm_row, prev):
     """Same machine, random numbers from ``numbers[t, i * operators + o]`` (clock t, sample i: B =
     ``samples`` per clock), resumable: pixel ``first`` has run ``done[0]`` samples, whole clocks (its
     counters in ``counts``). A clock takes its B samples' numbers whole: those after the run's stop
     are used by no one. Stops at the end of the pixels or of the numbers, saving the pixel in
-    progress; returns (next pixel, clocks of numbers used)."""
+    progress; returns (next pixel, clocks of numbers used). ``norm``: as for :func:`_run_on_chip`."""
     pixels, ops = q.shape
     t = 0
     k = done[0]
@@ -270,7 +289,7 @@ def _run_numbers(q, numbers, first, counts, done, rows, opcols, word_bits, n_max
             for i in range(samples):
                 k += 1
                 for o in range(ops):
-                    bits[o] = np.int64(numbers[t, i * ops + o]) < qp[o]
+                    bits[o] = ((np.int64(numbers[t, i * ops + o]) * norm[p, o % opcols]) >> word_bits) < qp[o]
                 winner = _finish_cycle(bits, counts, over, rows, opcols, n_max, nm_index)
                 if winner >= 0 or k == max_cycles:
                     break
@@ -323,8 +342,9 @@ class MachineModel(EngineBase):
         q = _expand(p, q)
         n = q.shape[0]
         out = MachineResult.zeros(n, p.rows)
+        norm = column_scales(p, q)
         if feed is None:
-            self._twin.run(q, out, self._feedback)
+            self._twin.run(q, norm, out, self._feedback)
         else:
             counts = np.zeros(p.rows, np.uint32)
             done = np.zeros(1, np.int64)
@@ -333,7 +353,7 @@ class MachineModel(EngineBase):
                 clocks = feed.take_clocks(_BLOCK)
                 if not len(clocks):
                     raise ran_out_error(feed.source)
-                first, used = _run_numbers(q, clocks, first, counts, done, p.rows, p.operator_columns,
+                first, used = _run_numbers(q, norm, clocks, first, counts, done, p.rows, p.operator_columns,
                                            p.word_bits, p.counter_max, p.max_cycles, self._nm_index,
                                            p.samples_per_clock, p.timeout_answer == "leading",
                                            out.counts, out.map, out.timeout, out.cycles,

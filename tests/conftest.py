@@ -113,6 +113,15 @@ def verilator_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return tmp_path_factory.mktemp("bm-cache") / "verilator"
 
 
+@pytest.fixture
+def verilator_builds(verilator_cache: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """The session's Verilator build cache, for tests whose engines are built through the host
+    (``BAYESMACHINE_CACHE_DIR`` points at it); skips without Verilator and a C++ toolchain."""
+    require_tool("verilator", "g++", "make")
+    monkeypatch.setenv("BAYESMACHINE_CACHE_DIR", str(verilator_cache.parent))
+    return verilator_cache
+
+
 def run_sim(dut: object, testbench: object, *, clock: bool = True) -> None:
     """Run one async testbench against ``dut`` (with a sync clock unless ``clock=False``)."""
     sim = Simulator(dut)

@@ -35,7 +35,13 @@ from bayesmachine.host.reference import (
     reference_quantized,
     reference_quantized_map,
 )
-from bayesmachine.models import ModelParams, check_disparity_machine, disparity_machine, machine_layout
+from bayesmachine.models import (
+    CENSUS_WATCHDOG_RUNS,
+    ModelParams,
+    check_disparity_machine,
+    disparity_machine,
+    machine_layout,
+)
 from bayesmachine.params import MachineParams, ParameterError
 
 PAPER_KEYS = ["dmax", "name", "p0", "sigma_m", "sigma_gh", "sigma_gv", "gradient_magnitude", "sigma_g",
@@ -186,7 +192,8 @@ def test_disparity_machine_builds_the_model_s_machine():
     paper = ModelParams(name="paper", dmax=6)
     assert disparity_machine(paper, counter_max=4) == MachineParams.for_disparity(6, counter_max=4)
     no_prior = ModelParams(dmax=6, name="census", neighbour_prior=False)
-    assert disparity_machine(no_prior) == MachineParams.for_disparity(6, columns=4, timeout_answer="leading")
+    assert disparity_machine(no_prior) == MachineParams.for_disparity(
+        6, columns=4, timeout_answer="leading", normalize=True, max_cycles=CENSUS_WATCHDOG_RUNS * 17)
     census = ModelParams(dmax=80, name="census")
     m = disparity_machine(census, word_bits=10)
     q = census.column(AbovePrior).table(10)

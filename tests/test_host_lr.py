@@ -30,7 +30,8 @@ from bayesmachine.host.reference import (
 )
 from bayesmachine.host.run import prepare, run_machine
 from bayesmachine.models import (
-    LR_WATCHDOG_RUNS,
+    CENSUS_WATCHDOG_RUNS,
+    RIGHT_WATCHDOG_RUNS,
     ModelParams,
     disparity_machine,
     machine_layout,
@@ -377,7 +378,7 @@ def test_run_machine_equals_a_hand_driven_run(pair, model):
     np.testing.assert_array_equal(run.map, want)
     np.testing.assert_array_equal(run.right.map, want_right)
     assert run.right.machine == nth_machine(disparity_machine(model.pass_named("right").model, counter_max=8,
-                                                              max_cycles=machine.max_cycles), 1)
+                                                              max_cycles=RIGHT_WATCHDOG_RUNS * 9), 1)
     assert run.right.cycles.shape == want_right.shape and (run.right.cycles > 8).all()
     assert (run.map >= 0).mean() > 0.5
 
@@ -397,21 +398,30 @@ def test_right_pass_watchdog(pair):
         disparity_machine(ModelParams(dmax=DMAX, name="census-lr", lr_right_max_cycles=8), counter_max=8)
 
 
-def test_census_lr_machine_default_watchdog():
-    """census-lr's machine stops a run after LR_WATCHDOG_RUNS runs of n_max + 1 cycles by default (both
-    passes); a given max_cycles wins; the other models keep the machine's own default."""
+def test_census_machines_default_watchdog_and_normalization():
+    """The census models' machines stop a run after CENSUS_WATCHDOG_RUNS runs of n_max + 1 cycles by
+    default, census-lr's right pass after RIGHT_WATCHDOG_RUNS; a given max_cycles wins (the right pass
+    keeps its own unless lr_right_max_cycles gives one); both normalize their columns unless told not
+    to; the paper model keeps the machine's own defaults."""
     from bayesmachine.params import DEFAULT_MAX_CYCLES, MachineParams
 
     lr = ModelParams(dmax=DMAX, name="census-lr")
     for n in (1, 8, 16):
         m = disparity_machine(lr, counter_max=n)
-        assert m.max_cycles == LR_WATCHDOG_RUNS * (n + 1) and right_machine(lr, m).max_cycles == m.max_cycles
+        assert m.max_cycles == CENSUS_WATCHDOG_RUNS * (n + 1)
+        assert right_machine(lr, m).max_cycles == RIGHT_WATCHDOG_RUNS * (n + 1)
+        census = disparity_machine(ModelParams(dmax=DMAX, name="census"), counter_max=n)
+        assert census.max_cycles == CENSUS_WATCHDOG_RUNS * (n + 1)
+    assert (CENSUS_WATCHDOG_RUNS * 17, RIGHT_WATCHDOG_RUNS * 17) == (255, 136)  # the documented figures
     m = disparity_machine(lr, counter_max=8, max_cycles=5000)
-    assert m.max_cycles == 5000 and right_machine(lr, m).max_cycles == 5000
+    assert m.max_cycles == 5000 and right_machine(lr, m).max_cycles == RIGHT_WATCHDOG_RUNS * 9
     assert right_machine(ModelParams(dmax=DMAX, name="census-lr", lr_right_max_cycles=100),
                          disparity_machine(lr, counter_max=8)).max_cycles == 100
-    census = ModelParams(dmax=DMAX, name="census")
-    assert disparity_machine(census, counter_max=8).max_cycles == DEFAULT_MAX_CYCLES
+    assert m.normalize and right_machine(lr, m).normalize
+    off = disparity_machine(lr, normalize=False)
+    assert not off.normalize and not right_machine(lr, off).normalize
+    paper = disparity_machine(ModelParams(dmax=DMAX, name="paper"), counter_max=8)
+    assert paper.max_cycles == DEFAULT_MAX_CYCLES and not paper.normalize
     assert MachineParams.for_disparity(DMAX).max_cycles == DEFAULT_MAX_CYCLES
 
 
@@ -511,7 +521,7 @@ def test_cli_run_census_lr(pair_files, pair, tmp_path):
     assert report["right_pass_cycles_per_pixel_mean"] == pytest.approx(want.right.cycles.mean())
     assert report["right_pass_pixels"] == want.right.map.size
     assert report["right_pass_timeouts"] == int(want.right.timeout.sum())
-    assert report["machine"]["max_cycles"] == LR_WATCHDOG_RUNS * 9  # census-lr's default watchdog
+    assert report["machine"]["max_cycles"] == CENSUS_WATCHDOG_RUNS * 9  # census-lr's default watchdog
     assert report["frame_cycles"] == int(want.cycles.sum() + want.right.cycles.sum())
 
 
@@ -529,7 +539,8 @@ def test_cli_census_lr_without_its_right_nomatch_neutral_lanes_and_watchdog(pair
     report = json.loads((out / "report.json").read_text())
     model = ModelParams(dmax=DMAX, name="census-lr", lr_right_nomatch=False, lr_neutral=False)
     assert report["model"] == model.to_dict()
-    assert report["machine"]["max_cycles"] == 5000 and report["right_pass_machine"]["max_cycles"] == 5000
+    assert report["machine"]["max_cycles"] == 5000  # the right pass keeps its own watchdog
+    assert report["right_pass_machine"]["max_cycles"] == RIGHT_WATCHDOG_RUNS * 9
 
 
 def test_cli_sweep_three_models(pair_files, tmp_path):

@@ -36,7 +36,7 @@ def hand_run(prepared, machine, max_rows: int | None = None):
     column = model.column(AbovePrior)
     q = column.table(machine.word_bits)
     eng = get_engine("model", machine)
-    disp = np.full((ho, wo), -1, np.int64)
+    disp = np.full((ho, wo), -1, np.int64)  # what the row below follows
     maps, cycles = [], []
     for y in range(ho if max_rows is None else max_rows):
         above = disp[y - 1] if y > 0 else np.full(wo, -1)
@@ -44,8 +44,8 @@ def hand_run(prepared, machine, max_rows: int | None = None):
         words = memory_words(fl, fr, model, machine, rows=slice(y, y + 1), prior=prior)
         starts = np.arange(wo) == 0
         res = eng.run(words, line_start=starts)
-        disp[y] = np.where(res.nomatch | res.timeout, -1, res.map)
-        maps.append(disp[y].copy())
+        disp[y] = res.neighbour_answers()  # a timeout's leading row is an answer, not a neighbour's MAP
+        maps.append(res.disparities(machine))
         cycles.append(np.asarray(res.cycles))
     return np.array(maps), np.array(cycles)
 

@@ -139,3 +139,34 @@ def test_sample_bits_compare_every_point(w: int, samples: int) -> None:
                 assert [(ctx.get(out) >> i) & 1 for i in range(len(points))] == want, (n, q, points)
 
     run_sim(m, bench, clock=False)
+
+
+@pytest.mark.parametrize(("w", "samples"), [(3, 1), (3, 2), (4, 4), (4, 8)])
+def test_scaled_numbers_for_every_point(w: int, samples: int) -> None:
+    """``scaled_numbers`` gives ``((n ^ point) * m) >> W`` for every number, scale m (0 .. 2^W) and
+    point of a clock's B points and a block's first 2B, exhaustively at small W, equal to its twin."""
+    from amaranth.hdl import Module, Signal
+
+    from bayesmachine.hdl.operator import scaled_numbers, scaled_numbers_twin
+    from bayesmachine.sources.sobol import sample_points
+
+    point_sets = [sample_points(c, w, b) for c in range(3) for b in (samples, 2 * samples) if b <= 1 << w]
+    m = Module()
+    number, scale = Signal(w), Signal(w + 1)
+    outs = []
+    for points in point_sets:
+        values = [Signal(w) for _ in points]
+        m.d.comb += [v.eq(x) for v, x in zip(values, scaled_numbers(number, scale, points), strict=True)]
+        outs.append(values)
+
+    async def bench(ctx):
+        for n in range(1 << w):
+            for s in range((1 << w) + 1):
+                ctx.set(number, n)
+                ctx.set(scale, s)
+                for values, points in zip(outs, point_sets, strict=True):
+                    want = scaled_numbers_twin(n, s, points, w)
+                    assert want == [((n ^ p) * s) >> w for p in points]
+                    assert [ctx.get(v) for v in values] == want, (n, s, points)
+
+    run_sim(m, bench, clock=False)

@@ -251,15 +251,6 @@ def test_defaults_keep_fingerprints_and_census_answers_leading() -> None:
 
 # --- Verilator and the host ---------------------------------------------------------------------
 
-@pytest.fixture
-def cache(verilator_cache, monkeypatch: pytest.MonkeyPatch):  # noqa: ANN001, ANN201
-    from conftest import require_tool
-
-    require_tool("verilator", "g++", "make")
-    monkeypatch.setenv("BAYESMACHINE_CACHE_DIR", str(verilator_cache.parent))  # the session's builds
-    return verilator_cache
-
-
 @pytest.mark.eda
 @pytest.mark.parametrize(
     "variant",
@@ -268,7 +259,7 @@ def cache(verilator_cache, monkeypatch: pytest.MonkeyPatch):  # noqa: ANN001, AN
      dict(rng="external", samples_per_clock=2, counter_max=3, max_cycles=21, timeout_answer="leading")],
     ids=["sobol-b8", "external-b2"],
 )
-def test_verilator_matches_the_model(cache, variant: dict[str, object]) -> None:  # noqa: ANN001
+def test_verilator_matches_the_model(verilator_builds, variant: dict[str, object]) -> None:  # noqa: ANN001
     """The emitted Verilog under Verilator: bit for bit the model, B samples per clock and the leading
     answer; its wall cycles are ``pixel_wall_cycles`` plus the first load and the last hand-over."""
     from bayesmachine.hdl.machine import pixel_wall_cycles
@@ -280,7 +271,7 @@ def test_verilator_matches_the_model(cache, variant: dict[str, object]) -> None:
     if params.rng == "external":
         rows = np.random.default_rng(3).integers(0, 1 << params.word_bits, (30000, params.operators))
         numbers["numbers"] = rows
-    engine = VerilatorEngine(params, build_dir=cache)
+    engine = VerilatorEngine(params, build_dir=verilator_builds)
     try:
         got = engine.run(words, **numbers)
         assert_same_results(got, MachineModel(params).run(words, **numbers))
@@ -292,7 +283,7 @@ def test_verilator_matches_the_model(cache, variant: dict[str, object]) -> None:
 
 
 @pytest.mark.eda
-def test_census_lr_crop_at_eight_samples_per_clock(cache) -> None:  # noqa: ANN001
+def test_census_lr_crop_at_eight_samples_per_clock(verilator_builds) -> None:  # noqa: ANN001
     """The default model (census-lr, both passes) on a crop of the bundled pair at B = 8: the
     Verilator engine equals the model array for array, and both are the B = 1 run's maps, no-match
     flags, timeouts and counts, in ceil(k / 8) clocks."""
@@ -340,7 +331,7 @@ def test_run_command_reports_samples_per_clock(tmp_path, capsys) -> None:  # noq
 
 
 @pytest.mark.slow
-def test_whole_pair_under_verilator_at_eight_samples_per_clock(cache) -> None:  # noqa: ANN001
+def test_whole_pair_under_verilator_at_eight_samples_per_clock(verilator_builds) -> None:  # noqa: ANN001
     """The issue's figure: the default run (census-lr, Dmax 80) on the whole bundled pair with
     ``--samples-per-clock 8`` under Verilator gives exactly the B = 1 model's maps, no-match flags,
     timeouts and counts (both passes), in at most a sixth of its cycles per pixel."""
@@ -368,14 +359,14 @@ def test_whole_pair_under_verilator_at_eight_samples_per_clock(cache) -> None:  
 
 
 @pytest.mark.eda
-def test_front_end_at_four_samples_per_clock(cache, tmp_path) -> None:  # noqa: ANN001
+def test_front_end_at_four_samples_per_clock(verilator_builds, tmp_path) -> None:  # noqa: ANN001
     """``--feed pixels``: the census model's StereoMachine (front end, neighbour prior from its own
     results) at B = 4 with a short watchdog (timeouts answered by their leading row, which the above
     column does not follow) gives the model's B = 1 maps, counts and timeouts, in ceil(k / 4) clocks."""
     from bayesmachine.cli import main
 
     crop = ["--crop", "250,200,40,12", "--dmax", "8", "--quiet", "--no-sgbm", "--model", "census",
-            "--max-cycles", "61"]
+            "--max-cycles", "20"]
     assert main(["run", "--engine", "verilator", "--feed", "pixels", "--samples-per-clock", "4", *crop,
                  "-o", str(tmp_path / "px")]) == 0
     assert main(["run", "--engine", "model", *crop, "-o", str(tmp_path / "model")]) == 0

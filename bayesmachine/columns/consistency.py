@@ -111,7 +111,7 @@ class Consistency(Column):
                "give the right pass its model's no-match row (off: none, word 0)"),
         Option("lr_right_max_cycles", "int", None, _watchdog, "the right pass's watchdog in cycles: a right "
                "pixel stopped by it has no right MAP", optional=True,
-               default_text="the left pass's watchdog"),
+               default_text="the right pass's default watchdog, given with --max-cycles"),
         Option("lr_neutral", "bool", True, _switch, "a lane whose right pixel has no right MAP (the right "
                "pass's no match or a timeout) gets factor 1, no information (off: beta)"),
     )
