@@ -8,9 +8,12 @@ critical path, and the compute cycles per pixel of that B on the bundled pair (m
 model's default machine: ``bench_samples.measure``), its wall cycles per pixel (loading included,
 ``pixel_wall_cycles``) at the machine's load beat and with a pixel's words in one beat, and the pixels
 per second = fmax / wall cycles. A design that does not place, or a run stopped at ``--time-limit``,
-gets a row saying so, with its synthesis resources and the utilisation nextpnr printed. The figures
-also go to ``--json`` (default build/synth_samples.json). Prints figures; asserts nothing.
-Run: python benchmarks/bench_synth_samples.py [--samples 1,4,8] [--reuse] [--time-limit MIN] [synth options]
+gets a row saying so, with its synthesis resources and the utilisation nextpnr printed; a failed
+place and route is retried with the next of ``--pnr-seeds``. The figures also go to ``--json``
+(default build/synth_samples.json; ``--keep`` keeps its rows of the B not run now, each row names
+the commit it was measured on). Prints figures; asserts nothing.
+Run: python benchmarks/bench_synth_samples.py [--samples 1,4,8] [--reuse] [--keep] [--time-limit MIN]
+     [--pnr-seeds 1,2] [synth options]
 """
 
 from __future__ import annotations
@@ -47,33 +50,57 @@ def nextpnr_utilisation(log: str) -> dict[str, dict[str, int]]:
 
 
 def run_synth(b: int, args: argparse.Namespace, extra: list[str]) -> dict:
-    """One synth run at B = ``b`` (or its report, with ``--reuse``): what it measured, or why not."""
+    """The synth run at B = ``b`` (or its report, with ``--reuse``): what it measured, or why not. A
+    place and route that fails is retried with the next of ``--pnr-seeds``; a stopped run is not."""
     out = Path(f"{args.out}-B{b}")
-    cmd = [sys.executable, "-m", "bayesmachine", "synth", "--top", "machine", "--model", args.model,
-           "--target", args.target, "--samples-per-clock", str(b), "-o", str(out), *extra]
-    row: dict = {"samples_per_clock": b, "command": " ".join(["bayesmachine", *cmd[3:]]), "out": str(out)}
-    report = out / "report.json"
-    t0 = time.monotonic()
-    if not (args.reuse and report.exists()):
+    log, report = Path(f"{out}.log"), out / "report.json"
+    row: dict = {"samples_per_clock": b, "out": str(out), "failed_seeds": []}
+    base = ["synth", "--top", "machine", "--model", args.model, "--target", args.target,
+            "--samples-per-clock", str(b), "-o", str(out), *extra]
+    if args.reuse and report.exists():  # the log's first line is the command that wrote the report
+        command = " ".join(["bayesmachine", *base])
+        row["command"] = log.read_text().splitlines()[0] if log.exists() else command
+        return from_report(row, report)
+    for seed in [None] if "--synth-only" in extra else args.pnr_seeds:
+        argv = [*base, *([] if seed is None else ["--pnr-seed", str(seed)])]
+        row["command"] = " ".join(["bayesmachine", *argv])
         print(f"B = {b}: {row['command']}", flush=True)
-        log = Path(f"{out}.log")
-        log.parent.mkdir(parents=True, exist_ok=True)
-        with open(log, "w") as f, subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT) as proc:
+        t0 = time.monotonic()
+        row["status"] = call([sys.executable, "-m", "bayesmachine", *argv], log, row["command"],
+                             args.time_limit)
+        row["seconds"] = round(time.monotonic() - t0, 1)
+        if row["status"] is None:
+            return from_report(row, report)
+        if row["status"].startswith("stopped"):
+            break
+        row["status"] += f": {last_error(log, out)}"
+        row["failed_seeds"].append({"seed": seed, "status": row["status"]})
+    return failed(row, out, get_target(args.target))
+
+
+def call(cmd: list[str], log: Path, command: str, time_limit: float | None) -> str | None:
+    """Run ``cmd`` (its output in ``log``, after the ``command`` line): None, or why it has no report."""
+    log.parent.mkdir(parents=True, exist_ok=True)
+    with open(log, "w") as f:
+        f.write(command + "\n")
+        f.flush()
+        with subprocess.Popen(cmd, stdout=f, stderr=subprocess.STDOUT) as proc:
             try:
-                rc = proc.wait(timeout=args.time_limit * 60 if args.time_limit else None)
+                rc = proc.wait(timeout=time_limit * 60 if time_limit else None)
             except subprocess.TimeoutExpired:
                 proc.send_signal(signal.SIGTERM)  # synth ends its tool's process group with it
-                rc = proc.wait()
-                row["status"] = f"stopped after {args.time_limit:g} min"
-        row["seconds"] = round(time.monotonic() - t0, 1)
-        if rc != 0:
-            row.setdefault("status", f"synth failed (exit {rc}): {last_error(log, out)}")
-            return failed(row, out, get_target(args.target))
+                proc.wait()
+                return f"stopped after {time_limit:g} min"
+    return None if rc == 0 else f"synth failed (exit {rc})"
+
+
+def from_report(row: dict, report: Path) -> dict:
+    """The row's figures from synth's ``report.json``."""
     rep = json.loads(report.read_text())
     row.update({k: rep.get(k) for k in ("machine", "resources", "utilization", "fmax_mhz", "critical_path",
                                         "pnr_utilization", "throughput", "measured")})
     row["status"] = "placed and routed" if rep.get("fmax_mhz") else "synthesis only"
-    row["seconds"] = row.get("seconds", rep.get("seconds"))
+    row.setdefault("seconds", rep.get("seconds"))
     return row
 
 
@@ -148,6 +175,9 @@ def describe(row: dict) -> str:
     elif row.get("pnr_utilization"):
         text += "; nextpnr: " + ", ".join(f"{k} {v['used']:,}/{v['available']:,}"
                                           for k, v in row["pnr_utilization"].items())
+    for f in row.get("failed_seeds", []):
+        if f["status"] != row["status"]:
+            text += f"; with --pnr-seed {f['seed']}: {f['status']}"
     if row.get("same_machine") is False:
         text += "; the synthesized machine is not the model's default machine the cycles are of"
     return text
@@ -174,21 +204,47 @@ def main() -> None:
     ap.add_argument("--reuse", action="store_true",
                     help="take an existing OUT-B<B>/report.json instead of a run")
     ap.add_argument("--time-limit", type=float, default=None, help="stop a synth run after this many minutes")
+    ap.add_argument("--pnr-seeds", default="1",
+                    help="nextpnr seeds, comma-separated: a failed place and route is retried with the next "
+                    "(default 1)")
+    ap.add_argument("--keep", action="store_true",
+                    help="keep the rows of --json's previous figures for the B not run now (same model, "
+                    "target and options)")
     args, extra = ap.parse_known_args()
     samples = [int(b) for b in args.samples.split(",")]
+    args.pnr_seeds = [int(s) for s in args.pnr_seeds.split(",")]
     tree = commit()
     rows = [run_synth(b, args, extra) for b in samples]
     model = ModelParams(name=args.model)
     left, right, gt = bundled_pair()
     prep = prepare(left, right, model, gt, reference=False)
     for row in rows:
+        row["commit"] = tree
         add_cycles(row, prep, model)
+    rows += kept(args, extra, samples) if args.keep else []
+    rows.sort(key=lambda r: r["samples_per_clock"])
     Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.json).write_text(json.dumps({"commit": tree, "model": args.model, "target": args.target,
-                                           "extra_options": extra, "rows": rows}, indent=2) + "\n")
-    print(f"\n{args.model} machine on {args.target}, tree {tree}; figures in {args.json}\n")
+    Path(args.json).write_text(json.dumps({"model": args.model, "target": args.target, "extra_options": extra,
+                                           "rows": rows}, indent=2) + "\n")
+    print(f"\n{args.model} machine on {args.target}, trees {', '.join(sorted({r['commit'] for r in rows}))}; "
+          f"figures in {args.json}\n")
     print(table(rows, args.target))
 
+
+def kept(args: argparse.Namespace, extra: list[str], samples: list[int]) -> list[dict]:
+    """The previous figures' rows (``--json``) of the B not in ``samples``, if they are of the same
+    model, target and options."""
+    path = Path(args.json)
+    if not path.exists():
+        return []
+    old = json.loads(path.read_text())
+    if (old.get("model"), old.get("target"), old.get("extra_options")) != (args.model, args.target, extra):
+        raise SystemExit(f"{path}: figures of other options ({old.get('model')}, {old.get('target')}, "
+                         f"{old.get('extra_options')}): --keep would mix them")
+    rows = [r for r in old["rows"] if r["samples_per_clock"] not in samples]
+    for r in rows:
+        r.setdefault("commit", old.get("commit"))
+    return rows
 
 if __name__ == "__main__":
     main()
