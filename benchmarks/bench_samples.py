@@ -42,6 +42,25 @@ def same(a, b) -> bool:  # noqa: ANN001
     return equal
 
 
+def measure(prep, model: ModelParams, b: int) -> dict:  # noqa: ANN001
+    """One whole run of ``model``'s default machine at B = ``b`` on the prepared pair: its figures and
+    the run (``run``) and machine (``machine``) themselves."""
+    machine = disparity_machine(model, samples_per_clock=b)
+    t0 = time.perf_counter()
+    run = run_machine(prep, machine, "model", progress=False)
+    seconds = time.perf_counter() - t0
+    c, r = run.cycles, run.right
+    both = (c.sum() + (r.cycles.sum() if r is not None else 0)) / c.size
+    walls = wall(machine, c, run.timeout), wall(machine, c, run.timeout, one_beat=True)
+    if r is not None:  # the right pass's wall cycles per output pixel
+        scale = r.cycles.size / c.size
+        walls = (walls[0] + scale * wall(r.machine, r.cycles, r.timeout),
+                 walls[1] + scale * wall(r.machine, r.cycles, r.timeout, one_beat=True))
+    return {"machine": machine, "run": run, "seconds": seconds, "cycles_per_pixel": float(both),
+            "wall_cycles_per_pixel": walls[0], "wall_cycles_per_pixel_one_beat": walls[1],
+            "timeouts": int(run.timeout.sum())}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--models", default="census,census-lr")
@@ -56,26 +75,17 @@ def main() -> None:
         prep = prepare(left, right, model, gt, reference=False)
         base = None
         for b in samples:
-            machine = disparity_machine(model, samples_per_clock=b)
-            t0 = time.perf_counter()
-            run = run_machine(prep, machine, "model", progress=False)
-            seconds = time.perf_counter() - t0
-            base = run if base is None else base
+            m = measure(prep, model, b)
+            run, both = m["run"], m["cycles_per_pixel"]
+            base = base or m
             c, r = run.cycles, run.right
-            both = (c.sum() + (r.cycles.sum() if r is not None else 0)) / c.size
-            walls = wall(machine, c, run.timeout), wall(machine, c, run.timeout, one_beat=True)
-            if r is not None:  # the right pass's wall cycles per output pixel
-                scale = r.cycles.size / c.size
-                walls = (walls[0] + scale * wall(r.machine, r.cycles, r.timeout),
-                         walls[1] + scale * wall(r.machine, r.cycles, r.timeout, one_beat=True))
-            ratio = both / ((base.cycles.sum() + (base.right.cycles.sum() if base.right is not None else 0))
-                            / c.size)
+            ratio = both / base["cycles_per_pixel"]
             passes = f"{c.mean():.2f}, {r.cycles.mean():.2f}" if r is not None else f"{c.mean():.2f}"
             spread = f"{np.median(c):.0f}, {np.percentile(c, 99):.0f}"
             print(f"{name:<10} {b:2d}  {both:7.2f} ({passes}; {spread})"
-                  f"{'':<{max(0, 24 - len(passes))}} {ratio:6.3f}  {walls[0]:7.2f} ({walls[1]:6.2f})  "
-                  f"{int(run.timeout.sum()):8d}  {same(run, base)!s:<5} [{seconds:.0f} s]", flush=True)
-
+                  f"{'':<{max(0, 24 - len(passes))}} {ratio:6.3f}  {m['wall_cycles_per_pixel']:7.2f} "
+                  f"({m['wall_cycles_per_pixel_one_beat']:6.2f})  {m['timeouts']:8d}  "
+                  f"{same(run, base['run'])!s:<5} [{m['seconds']:.0f} s]", flush=True)
 
 if __name__ == "__main__":
     main()
