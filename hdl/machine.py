@@ -812,37 +812,48 @@ class BayesianMachine(wiring.Component):
                     if w < p.words_per_pixel:  # unused lanes of the last beat are ignored
                         m.d.sync += n.shadow[w].eq(words[lane])
         if p.normalize:
-            self._column_max(m, n, words)
+            self._column_max(m, n, beat_words(p, self.load.payload), accept)
         with m.If(n.write_q[nbeats - 1]):
             m.d.sync += n.shadow_full.eq(1)
             if p.feedback_columns:
                 m.d.sync += n.shadow_line_start.eq(load_q.line_start)
 
-    def _column_max(self, m: Module, n: MachineNets, words: list[Value]) -> None:
-        """normalize: each written beat's words into their loaded column's running maximum; cleared at
-        the swap (no beat is written in a swap cycle: the load is not ready while the last beat is
-        written, nor, with the bubble, while the shadow is full). Per beat and column, the largest of
-        its lanes (nets, so that no expression is built twice); the written beat's (``write_q`` is
-        one-hot) is compared with the maximum so far."""
+    def _column_max(self, m: Module, n: MachineNets, words: list[Value], accept: Value) -> None:
+        """normalize: each loaded column's running maximum over the shadow's words, cleared at the swap
+        (no beat is written in a swap cycle: the load is not ready while the last beat is written,
+        nor, with the bubble, while the shadow is full). A beat's largest word per column is formed
+        from the handshake's ``words`` (a tree of compares) and registered with the beat
+        (``norm_beat_<c>``), so that the maximum's update, when the beat is written, is one compare."""
         p = self._params
-        loaded = p.loaded_columns
-        per_column: list[list[Value]] = [[] for _ in range(loaded)]
-        for b in range(p.beats_per_pixel):
-            lanes: dict[int, list[Value]] = {}
-            for lane in range(p.words_per_beat):
-                w = b * p.words_per_beat + lane
-                if w < p.words_per_pixel:
-                    lanes.setdefault(w % loaded, []).append(words[lane])
-            for c, v in lanes.items():
-                top = v[0]
-                for i, x in enumerate(v[1:]):
-                    top = self._net(m, f"norm_beat{b}_{c}_{i}", Mux(x > top, x, top))
-                per_column[c].append(Mux(n.write_q[b], top, 0))
+        loaded, per_beat = p.loaded_columns, p.words_per_beat
+        beat_max = [Signal(p.memory_word_width, name=f"norm_beat_{c}") for c in range(loaded)]
+        trees: dict[tuple[int, ...], Value] = {}  # the lanes of a column in a beat -> their maximum
         for c in range(loaded):
-            written = self._net(m, f"norm_written_{c}", _or_all(per_column[c]))
-            top = Mux(written > n.norm_max[c], written, n.norm_max[c])
-            m.d.comb += n.norm_max_n[c].eq(Mux(n.start, 0, top))
+            picked = []
+            for b in range(p.beats_per_pixel):
+                first = b * per_beat
+                lanes = tuple(lane for lane in range(per_beat)
+                              if first + lane < p.words_per_pixel and (first + lane) % loaded == c)
+                if lanes and lanes not in trees:
+                    trees[lanes] = self._largest(m, f"norm_tree{len(trees)}", [words[lane] for lane in lanes])
+                picked.append(Mux(n.beat[b], trees[lanes], 0) if lanes else Const(0))
+            with m.If(accept):
+                m.d.sync += beat_max[c].eq(_or_all(picked))  # ``beat`` is one-hot
+        written = n.write_q.any()
+        for c in range(loaded):
+            new = Mux(written & (beat_max[c] > n.norm_max[c]), beat_max[c], n.norm_max[c])
+            m.d.comb += n.norm_max_n[c].eq(Mux(n.start, 0, new))
             m.d.sync += n.norm_max[c].eq(n.norm_max_n[c])
+
+    def _largest(self, m: Module, name: str, values: list[Value]) -> Value:
+        """The largest of ``values``, by a tree of compares (nets per level)."""
+        level = 0
+        while len(values) > 1:
+            pairs = [values[i:i + 2] for i in range(0, len(values), 2)]
+            values = [self._net(m, f"{name}_{level}_{i}", Mux(x[1] > x[0], x[1], x[0]))
+                      if len(x) == 2 else x[0] for i, x in enumerate(pairs)]
+            level += 1
+        return values[0]
 
     def _enables(self, m: Module, n: MachineNets) -> None:
         """The next values of the replicated enables: the registers' updates, one cycle early."""
