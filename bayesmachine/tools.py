@@ -17,11 +17,14 @@ import shutil
 import signal
 import subprocess
 import sys
+import threading
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
 __all__ = ["which", "start_tool", "stop_tool", "tool_process", "user_cache_dir"]
+
+_HELD = (signal.SIGINT, signal.SIGTERM)  # the signals a command turns into an exception
 
 
 def which(tool: str) -> str | None:
@@ -37,8 +40,35 @@ def user_cache_dir(*parts: str) -> Path:
 
 
 def start_tool(cmd: Sequence[str], **popen: Any) -> subprocess.Popen:
-    """``subprocess.Popen(cmd, **popen)`` as the leader of a new session (and process group)."""
-    return subprocess.Popen(list(cmd), start_new_session=True, **popen)
+    """``subprocess.Popen(cmd, **popen)`` as the leader of a new session (and process group).
+
+    A SIGINT or SIGTERM that arrives while the tool starts is held until ``Popen`` has returned, then
+    the tool is ended and the signal handled as it would have been: a handler raising inside ``Popen``
+    (the command's Ctrl-C or SIGTERM) would leave the tool running with no one to end it."""
+    if threading.current_thread() is not threading.main_thread():
+        return subprocess.Popen(list(cmd), start_new_session=True, **popen)  # signals reach the main thread
+    pending: list[int] = []
+    previous = {sig: signal.getsignal(sig) for sig in _HELD}
+    # None: a handler not set from Python (left alone); SIG_IGN: nothing to hold.
+    held = [sig for sig, handler in previous.items() if handler not in (None, signal.SIG_IGN)]
+    for sig in held:
+        signal.signal(sig, lambda signum, frame: pending.append(signum))
+    proc = None
+    try:
+        proc = subprocess.Popen(list(cmd), start_new_session=True, **popen)
+    finally:
+        try:
+            for sig in held:
+                signal.signal(sig, previous[sig])
+        except BaseException:  # a signal handled as its handler came back
+            if proc is not None:
+                stop_tool(proc)
+            raise
+        if pending:  # the tool first, then the signal as the command would have had it
+            if proc is not None:
+                stop_tool(proc)
+            signal.raise_signal(pending[0])
+    return proc
 
 
 def stop_tool(proc: subprocess.Popen, grace: float = 2.0) -> None:

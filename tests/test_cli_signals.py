@@ -63,6 +63,38 @@ def test_tool_process_ends_the_whole_group(tmp_path: Path) -> None:
     assert _gone(leader) and _gone(child)
 
 
+class _Raised(Exception):
+    pass
+
+
+def test_signal_while_the_tool_starts_ends_the_tool(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """SIGTERM arriving inside ``Popen`` (after the tool is running, before ``Popen`` returns) is held:
+    the tool's group is ended, then the command's handler raises as it would have."""
+    pids = tmp_path / "pids"
+    _stand_in_tool(tmp_path / "bin", "tool")
+    real_popen = subprocess.Popen
+
+    def popen_then_signal(*args: object, **kwargs: object) -> subprocess.Popen:
+        proc = real_popen(*args, **kwargs)
+        _wait_for(pids, proc, 30)
+        signal.raise_signal(signal.SIGTERM)  # still inside "Popen" as the caller sees it
+        return proc
+
+    def handler(signum: int, frame: object) -> None:
+        raise _Raised
+
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        monkeypatch.setattr(subprocess, "Popen", popen_then_signal)
+        env = {**os.environ, "BM_TEST_PIDS": str(pids)}
+        with pytest.raises(_Raised), tool_process([str(tmp_path / "bin" / "tool")], env=env):
+            pytest.fail("the block ran although SIGTERM came while the tool started")
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    leader, child = (int(p) for p in pids.read_text().split())
+    assert _gone(leader) and _gone(child)
+
+
 def test_sigterm_to_synth_stops_the_tools_and_exits_143(tmp_path: Path) -> None:
     """A stand-in Yosys (found first on PATH, started by the synth flow's own code) and its child are
     gone after SIGTERM to ``synth``; nothing is written into OUT after the command has gone."""
