@@ -38,7 +38,9 @@ def register(subparsers: argparse._SubParsersAction, *, measure: Measure) -> Non
         "StereoMachine (front end + FIFO + machine, pixel pairs in), behind the pin-saving wrapper, run "
         "Yosys and nextpnr (PyPI WebAssembly wheels: pip install 'bayesmachine[fpga]'), and write "
         "OUT/report.json and OUT/report.md: resources (block RAM included), fmax, critical path, machines "
-        "that fit and the throughput measured on the bundled pair. The first call of each tool compiles "
+        "that fit and the throughput measured on the bundled pair (with --top stereo: this design under "
+        "Verilator on a frame of its width and 480 lines cut from the pair, every result checked against "
+        "the model's; frames/s = fmax / the frame's wall cycles). The first call of each tool compiles "
         "it (about a minute); nextpnr takes minutes on a full machine.",
     )
     p.add_argument("--target", required=True, choices=sorted(TARGETS), help="FPGA device")
@@ -69,7 +71,8 @@ def register(subparsers: argparse._SubParsersAction, *, measure: Measure) -> Non
     p.add_argument("--synth-only", action="store_true",
                    help="stop after Yosys: resources only, no fmax (for designs too big to route here)")
     p.add_argument("--no-throughput", action="store_true",
-                   help="skip the model run on the bundled pair (no pixels/s in the report)")
+                   help="skip the throughput measurement (the model on the bundled pair; with --top stereo "
+                   "also the design's frame under Verilator): no pixels/s or frames/s in the report")
     p.add_argument("-o", "--output", type=output_path, default=None,
                    help="output directory (default build/synth-TARGET, build/synth-stereo-TARGET with "
                    "--top stereo)")

@@ -11,7 +11,7 @@ from bayesmachine.region import OutputRegion
 from .targets import Target
 
 __all__ = ["PIXEL_BITS", "VGA_HEIGHT", "VGA_PIXELS", "resources", "machines_that_fit", "stereo_throughput",
-           "throughput", "markdown"]
+           "frame_throughput", "throughput", "markdown"]
 
 VGA_PIXELS = 640 * 480
 VGA_HEIGHT = 480
@@ -116,6 +116,34 @@ def stereo_throughput(fmax_mhz: float | None, wall_cycles_per_pixel: float, widt
     return tp
 
 
+def frame_throughput(fmax_mhz: float | None, frame: dict, width: int,
+                     height: int = VGA_HEIGHT) -> dict[str, object]:
+    """The stereo top's rates from a frame it ran (``host.throughput.measure_frame``): frames per
+    second = fmax / the frame's wall cycles (its first pixel in to its last result out), every pixel
+    pair of the ``width`` x ``height`` frame in (16 bits), ``frame["output_pixels"]`` results out.
+    Without ``fmax_mhz`` only the cycles and the bits per pixel."""
+    in_bits = PIXEL_BITS * width * height
+    out_px, wall = frame["output_pixels"], frame["frame_wall_cycles"]
+    tp: dict[str, object] = {
+        "frame": f"{width}x{height}",
+        "frame_output_pixels": out_px,
+        "input_bits_per_pixel": round(in_bits / out_px, 2),
+        "frame_pair": frame["pair"],
+        "frame_wall_cycles": wall,
+        "frame_wall_cycles_per_pixel": frame["wall_cycles_per_pixel"],
+        "frame_compute_cycles_per_pixel": frame["compute_cycles_per_pixel"],
+        "frame_equals_model": frame["equals_model"],
+    }
+    if fmax_mhz:
+        fps = fmax_mhz * 1e6 / wall
+        tp.update({
+            "pixels_per_second": round(fps * out_px, 1),
+            "vga_fps": round(fps, 2),
+            "input_bits_per_second": round(in_bits * fps, 1),
+        })
+    return tp
+
+
 def _fmt(x: float | int | None, digits: int = 1) -> str:
     if x is None:
         return "—"
@@ -174,16 +202,7 @@ def markdown(report: dict) -> str:
                   f"({cp['logic_ns']:.2f} ns logic, {cp['routing_ns']:.2f} ns routing, "
                   f"{cp['levels']} logic steps)."]
     if tp and stereo:
-        text = (f"Throughput ({tp['pair']}): {tp['compute_cycles_per_pixel']:.2f} compute and "
-                f"{tp['wall_cycles_per_pixel']:.2f} wall cycles per output pixel, the machine's own "
-                f"(loading included), assuming {tp['assumes']}. Input: {PIXEL_BITS}-bit pixel pairs, "
-                f"every pixel of a {tp['frame']} frame ({tp['frame_output_pixels']:,} output pixels): "
-                f"{tp['input_bits_per_pixel']:.2f} bits per output pixel")
-        if tp.get("pixels_per_second") is not None:
-            text += (f"; at {_fmt(fmax)} MHz: {tp['pixels_per_second'] / 1e6:.2f} Mpx/s = "
-                     f"{tp['vga_fps']:.1f} frames/s of {tp['frame']}, input "
-                     f"{tp['input_bits_per_second'] / 1e6:.1f} Mbit/s")
-        lines += ["", text + "."]
+        lines += ["", _stereo_text(tp, fmax) + "."]
     elif tp:
         text = (f"Throughput ({tp['pair']}): {tp['compute_cycles_per_pixel']:.2f} compute and "
                 f"{tp['wall_cycles_per_pixel']:.2f} wall cycles per pixel (loading included)")
@@ -198,6 +217,28 @@ def markdown(report: dict) -> str:
                          f"load stream widened to keep up): {tp['vga_fps_fit']:.1f} VGA fps.")
     lines += ["", f"Figures from: {report['measured']}.", ""]
     return "\n".join(lines)
+
+
+def _stereo_text(tp: dict, fmax: float | None) -> str:
+    """The stereo top's throughput sentence: from the frame it ran, else the machine's own cycles."""
+    if "frame_wall_cycles" in tp:
+        same = "equal to the model's" if tp["frame_equals_model"] else "DIFFERENT from the model's (a bug)"
+        text = (f"Throughput ({tp['frame_pair']}): {tp['frame_wall_cycles']:,} wall cycles for "
+                f"{tp['frame_output_pixels']:,} output pixels ({tp['frame_wall_cycles_per_pixel']:.2f} per "
+                f"pixel, "
+                f"{tp['frame_compute_cycles_per_pixel']:.2f} compute), every result {same}. Input: "
+                f"{PIXEL_BITS}-bit pixel pairs, {tp['input_bits_per_pixel']:.2f} bits per output pixel")
+    else:
+        text = (f"Throughput ({tp['pair']}): {tp['compute_cycles_per_pixel']:.2f} compute and "
+                f"{tp['wall_cycles_per_pixel']:.2f} wall cycles per output pixel, the machine's own "
+                f"(loading included), assuming {tp['assumes']}. Input: {PIXEL_BITS}-bit pixel pairs, "
+                f"every pixel of a {tp['frame']} frame ({tp['frame_output_pixels']:,} output pixels): "
+                f"{tp['input_bits_per_pixel']:.2f} bits per output pixel")
+    if tp.get("pixels_per_second") is not None:
+        text += (f"; at {_fmt(fmax)} MHz: {tp['pixels_per_second'] / 1e6:.2f} Mpx/s = "
+                 f"{tp['vga_fps']:.1f} frames/s of {tp['frame']}, input "
+                 f"{tp['input_bits_per_second'] / 1e6:.1f} Mbit/s")
+    return text
 
 
 def dumps(report: dict) -> str:

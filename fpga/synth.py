@@ -43,7 +43,10 @@ def throughput_model(params: MachineParams, model: ModelParams | None) -> ModelP
     return model
 
 
-Measure = Callable[[MachineParams, ModelParams, bool], dict]
+# measure(params, model, progress, stereo=None): the cycles of the machine on the bundled pair; with
+# ``stereo`` (``width``, ``fifo_pixels``, ``machines``) also the StereoMachine's frame under Verilator
+# (``frame_run``; host.throughput.measure_cycles).
+Measure = Callable[..., dict]
 
 
 def synth(params: MachineParams, target_name: str, out: Path, *, machines: int = 1, pin_width: int = 8,
@@ -76,6 +79,10 @@ def synth(params: MachineParams, target_name: str, out: Path, *, machines: int =
             print(f"[{time.monotonic() - t0:6.0f} s] {msg}", file=sys.stderr, flush=True)
 
     require_tools(target, place)  # a missing tool or an unusable tool cache: said before any work
+    if measure is not None and width is not None:
+        from bayesmachine.sim.verilator.tools import find_toolchain
+
+        find_toolchain()  # the frame is measured under Verilator: a missing tool said before any work
     # The directory is held by this run alone; the previous run's report goes before any new work.
     with OutputDir(out, SYNTH_OUTPUTS, last="report.json") as od:
         report = _synthesize(params, target, out, say, machines=machines, pin_width=pin_width, width=width,
@@ -86,8 +93,14 @@ def synth(params: MachineParams, target_name: str, out: Path, *, machines: int =
             report.update({"fmax_mhz": None, "critical_path": {}})
             report["measured"] = f"Yosys {target.yosys_synth} only (no place and route: no fmax)"
         if measure is not None:
-            say("throughput: running the model on the bundled pair")
-            cycles = measure(params, model, progress)
+            if width is None:
+                say("throughput: running the model on the bundled pair")
+                cycles = measure(params, model, progress)
+            else:
+                say(f"throughput: the model on the bundled pair, then this StereoMachine under Verilator on "
+                    f"a {width}-pixel-wide frame of 480 lines")
+                cycles = measure(params, model, progress,
+                                 stereo={"width": width, "fifo_pixels": fifo_pixels, "machines": machines})
             report["throughput"] = _throughput(report, params, model, cycles, width=width)
         report["seconds"] = round(time.monotonic() - t0, 1)
         od.write("report.md", lambda path: path.write_text(rep.markdown(report)))
@@ -229,14 +242,17 @@ def _throughput(report: dict, params: MachineParams, model: ModelParams, cycles:
 
     tp: dict = dict(cycles)
     machines, fmax = report["machines"], report["fmax_mhz"]
-    if width is not None and machines > 1:
-        # Several machines: the frame's wall cycles are measured in Verilator on a VGA pair
-        # (benchmarks/bench_machines.py), not derived from one machine's cycles per pixel.
+    frame = tp.pop("frame_run", None)
+    if width is not None and frame is not None:
+        # The design itself on a frame: its wall cycles, first pixel in to last result out.
+        tp.update(rep.frame_throughput(fmax, frame, width))
+    elif width is not None and machines > 1:
         tp["assumes"] = ("one machine's cycles per pixel; the K-machine frame rate comes from the "
-                         "wall cycles of run --engine verilator --feed pixels --machines K")
+                         "wall cycles of run --engine verilator --feed pixels --machines K (the bundled "
+                         f"pair is narrower than {width} pixels: no frame measured)")
     elif width is not None:
-        # Pixels in, results out: the front end hides loading (benchmarks/bench_frontend.py), so a
-        # pixel takes the machine's own wall cycles; the input is every pixel pair of the frame.
+        # No frame as wide as the line in the bundled pair: the machine's own wall cycles per pixel
+        # (the front end keeps up: benchmarks/bench_frontend.py); every pixel pair of the frame comes in.
         tp.update(rep.stereo_throughput(fmax, cycles["wall_cycles_per_pixel"], width, params.rows - 2,
                                         margin=model.margin))
     elif fmax:

