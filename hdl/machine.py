@@ -819,36 +819,41 @@ class BayesianMachine(wiring.Component):
 
     def _column_max(self, m: Module, n: MachineNets, words: list[Value], accept: Value) -> None:
         """normalize: each loaded column's running maximum over the shadow's words, taken with each
-        beat's handshake from the handshake's ``words`` (a tree of compares per column, then one compare
-        with the maximum) and cleared at the swap (a beat taken in the swap, without the bubble, is the
-        next pixel's first). So the maxima are final from the cycle the pixel's last beat is written
-        on, a cycle before the earliest swap: the restart numbers' scale is a register
-        (_operator_matrix) and no load cycle is added."""
+        beat's handshake from the handshake's ``words`` and cleared at the swap (a beat taken in the
+        swap, without the bubble, is the next pixel's first). The new maximum is the largest of the
+        column's lanes in the beat (a lane that is not the column's in this beat reads 0) and the
+        maximum so far, by one level of compares (:meth:`_largest`). So the maxima are final from the
+        cycle the pixel's last beat is written on, a cycle before the earliest swap: the restart
+        numbers' scale is a register (_operator_matrix) and no load cycle is added."""
         p = self._params
         loaded, per_beat = p.loaded_columns, p.words_per_beat
-        trees: dict[tuple[int, ...], Value] = {}  # the lanes of a column in a beat -> their maximum
         for c in range(loaded):
-            picked = []
+            # Per lane, the beats in which it carries a word of column c.
+            beats: dict[int, list[int]] = {}
             for b in range(p.beats_per_pixel):
-                first = b * per_beat
-                lanes = tuple(lane for lane in range(per_beat)
-                              if first + lane < p.words_per_pixel and (first + lane) % loaded == c)
-                if lanes and lanes not in trees:
-                    trees[lanes] = self._largest(m, f"norm_tree{len(trees)}", [words[lane] for lane in lanes])
-                picked.append(Mux(n.beat[b], trees[lanes], 0) if lanes else Const(0))
-            beat_max = self._net(m, f"norm_beat_{c}", _or_all(picked))  # ``beat`` is one-hot
-            take = accept & (n.start | (beat_max > n.norm_max[c]))
-            m.d.sync += n.norm_max[c].eq(Mux(take, beat_max, Mux(n.start, 0, n.norm_max[c])))
+                for lane in range(per_beat):
+                    w = b * per_beat + lane
+                    if w < p.words_per_pixel and w % loaded == c:
+                        beats.setdefault(lane, []).append(b)
+            lanes = [words[lane] if len(bs) == p.beats_per_pixel
+                     else Mux(_or_all([n.beat[b] for b in bs]), words[lane], 0) for lane, bs in beats.items()]
+            # Without the bubble a swap may take a beat (the next pixel's first): ``start`` is a register.
+            so_far = Mux(n.start, 0, n.norm_max[c]) if n.hidden else n.norm_max[c]
+            best = self._largest(m, f"norm_beat_{c}", [*lanes, so_far])
+            m.d.sync += n.norm_max[c].eq(Mux(accept, best, Mux(n.start, 0, n.norm_max[c])))
 
     def _largest(self, m: Module, name: str, values: list[Value]) -> Value:
-        """The largest of ``values``, by a tree of compares (nets per level)."""
-        level = 0
-        while len(values) > 1:
-            pairs = [values[i:i + 2] for i in range(0, len(values), 2)]
-            values = [self._net(m, f"{name}_{level}_{i}", Mux(x[1] > x[0], x[1], x[0]))
-                      if len(x) == 2 else x[0] for i, x in enumerate(pairs)]
-            level += 1
-        return values[0]
+        """The largest of ``values`` by one level of compares: every pair compared at once, the first
+        of the largest picked by the AND of its compares (nets ``<name>_<i>``, ``<name>_gt_<i>_<j>``)."""
+        values = [self._net(m, f"{name}_{i}", v) for i, v in enumerate(values)]
+        gt = {(i, j): self._net(m, f"{name}_gt_{i}_{j}", values[i] > values[j])
+              for i in range(len(values)) for j in range(i)}
+        picked = []
+        for i, v in enumerate(values):
+            # v_i is picked if it exceeds every earlier value and is at least every later one.
+            wins = Cat(*(gt[i, j] for j in range(i)), *(~gt[j, i] for j in range(i + 1, len(values))))
+            picked.append(Mux(wins.all(), v, 0))
+        return self._net(m, name, _or_all(picked))
 
     def _enables(self, m: Module, n: MachineNets) -> None:
         """The next values of the replicated enables: the registers' updates, one cycle early."""
