@@ -196,14 +196,13 @@ class MachineNets:
     prev_rows: list[Signal] = field(default_factory=list)
     prev_valids: list[Signal] = field(default_factory=list)
     feedback_q: list[Signal] = field(default_factory=list)
-    # normalize: per loaded column the largest of the shadow's words so far; per operator column the
-    # number scale m of the shadow's pixel (that maximum) and of the active one (registered at the swap).
+    # normalize: per loaded column the largest of the shadow's words so far (taken with each beat's
+    # handshake); per operator column the number scale m of the shadow's pixel (that maximum) and of
+    # the active one (registered at the swap).
     norm_max: list[Signal] = field(default_factory=list)
     scale_shadow: list[Value] = field(default_factory=list)
     scale_active: list[Value] = field(default_factory=list)
     scale_active_n: list[Value] = field(default_factory=list)  # its next value
-    norm_max_n: list[Signal] = field(default_factory=list)  # norm_max's next value
-    scale_shadow_n: list[Value] = field(default_factory=list)  # scale_shadow's next value
 
 
 class BayesianMachine(wiring.Component):
@@ -310,24 +309,22 @@ class BayesianMachine(wiring.Component):
 
     def _column_scales(self, m: Module, n: MachineNets) -> None:
         """Per-pixel column normalization (``normalize``): per loaded column a register keeps the
-        largest of the shadow's words as they are written (_load; cleared at the swap): the shadow's
-        scale m, registered at the swap as the active pixel's. The operators of the column compare
-        their words with ``(number * m) >> W`` (_operator_matrix): a word w fires when w * 2^W > r * m,
-        the run on the words w * 2^W / m. A feedback column is not scaled (m = 2^W)."""
+        largest of the shadow's words, taken with each beat's handshake (_load; cleared at the swap):
+        the shadow's scale m, registered at the swap as the active pixel's. The operators of the
+        column compare their words with ``(number * m) >> W`` (_operator_matrix): a word w fires when
+        w * 2^W > r * m, the run on the words w * 2^W / m. A feedback column is not scaled (m = 2^W)."""
         p = self._params
         cols, fb = p.operator_columns, p.feedback_columns
         if not p.normalize:
             return
         width = p.memory_word_width
-        n.norm_max = [Signal(width, name=f"norm_max_{c}") for c in range(p.loaded_columns)]
-        n.norm_max_n = [Signal(width, name=f"norm_max_n_{c}") for c in range(p.loaded_columns)]  # _column_max
+        n.norm_max = [Signal(width, name=f"norm_max_{c}") for c in range(p.loaded_columns)]  # _column_max
         for c in range(cols):
             if c < fb:
-                for scales in (n.scale_shadow, n.scale_shadow_n, n.scale_active, n.scale_active_n):
+                for scales in (n.scale_shadow, n.scale_active, n.scale_active_n):
                     scales.append(Const(p.word_one, width))
                 continue
             n.scale_shadow.append(n.norm_max[c - fb])
-            n.scale_shadow_n.append(n.norm_max_n[c - fb])
             n.scale_active.append(Signal(width, name=f"norm_scale_{c}"))
             n.scale_active_n.append(Signal(width, name=f"norm_scale_n_{c}"))  # driven by _start
 
@@ -418,7 +415,9 @@ class BayesianMachine(wiring.Component):
             # cycle), and one of its restart numbers, loaded from ``following_restart_numbers``
             # (equal to ``restart_numbers``). The flow keeps these ``_rep`` registers apart too.
             # Normalized columns copy their scaled numbers (one per point), formed once per source
-            # copy from the scales of the next cycle.
+            # copy: the next numbers from the next cycle's scales (the active pixel's, or the shadow's
+            # at a swap), the restart numbers from the shadow's maxima registers, final from the cycle
+            # the pixel's last beat is written on (taken with its handshake), so before any swap.
             def group_copies(name: str, attr: str, scales: list[Value], at: list[tuple[int, ...]]) -> list:
                 copies, per_source = [], {}
                 for g in range(n.groups):
@@ -431,7 +430,7 @@ class BayesianMachine(wiring.Component):
                 return [copies[o // cols // n.rows_per_group][index[o]] for o in range(ops)]
 
             next_numbers = group_copies("next_number", "following_numbers", n.scale_active_n, points)
-            restart = group_copies("restart_number", "following_restart_numbers", n.scale_shadow_n, swap_at)
+            restart = group_copies("restart_number", "following_restart_numbers", n.scale_shadow, swap_at)
         else:
             def spread(values: list) -> list:  # per number entry -> per operator
                 return [values[index[o]] for o in range(ops)]
@@ -819,41 +818,42 @@ class BayesianMachine(wiring.Component):
                 m.d.sync += n.shadow_line_start.eq(load_q.line_start)
 
     def _column_max(self, m: Module, n: MachineNets, words: list[Value], accept: Value) -> None:
-        """normalize: each loaded column's running maximum over the shadow's words, cleared at the swap
-        (no beat is written in a swap cycle: the load is not ready while the last beat is written,
-        nor, with the bubble, while the shadow is full). A beat's largest word per column is formed
-        from the handshake's ``words`` (a tree of compares) and registered with the beat
-        (``norm_beat_<c>``), so that the maximum's update, when the beat is written, is one compare."""
+        """normalize: each loaded column's running maximum over the shadow's words, taken with each
+        beat's handshake from the handshake's ``words`` and cleared at the swap (a beat taken in the
+        swap, without the bubble, is the next pixel's first). The new maximum is the largest of the
+        column's lanes in the beat (a lane that is not the column's in this beat reads 0) and the
+        maximum so far, by one level of compares (:meth:`_largest`). So the maxima are final from the
+        cycle the pixel's last beat is written on, a cycle before the earliest swap: the restart
+        numbers' scale is a register (_operator_matrix) and no load cycle is added."""
         p = self._params
         loaded, per_beat = p.loaded_columns, p.words_per_beat
-        beat_max = [Signal(p.memory_word_width, name=f"norm_beat_{c}") for c in range(loaded)]
-        trees: dict[tuple[int, ...], Value] = {}  # the lanes of a column in a beat -> their maximum
         for c in range(loaded):
-            picked = []
+            # Per lane, the beats in which it carries a word of column c.
+            beats: dict[int, list[int]] = {}
             for b in range(p.beats_per_pixel):
-                first = b * per_beat
-                lanes = tuple(lane for lane in range(per_beat)
-                              if first + lane < p.words_per_pixel and (first + lane) % loaded == c)
-                if lanes and lanes not in trees:
-                    trees[lanes] = self._largest(m, f"norm_tree{len(trees)}", [words[lane] for lane in lanes])
-                picked.append(Mux(n.beat[b], trees[lanes], 0) if lanes else Const(0))
-            with m.If(accept):
-                m.d.sync += beat_max[c].eq(_or_all(picked))  # ``beat`` is one-hot
-        written = n.write_q.any()
-        for c in range(loaded):
-            new = Mux(written & (beat_max[c] > n.norm_max[c]), beat_max[c], n.norm_max[c])
-            m.d.comb += n.norm_max_n[c].eq(Mux(n.start, 0, new))
-            m.d.sync += n.norm_max[c].eq(n.norm_max_n[c])
+                for lane in range(per_beat):
+                    w = b * per_beat + lane
+                    if w < p.words_per_pixel and w % loaded == c:
+                        beats.setdefault(lane, []).append(b)
+            lanes = [words[lane] if len(bs) == p.beats_per_pixel
+                     else Mux(_or_all([n.beat[b] for b in bs]), words[lane], 0) for lane, bs in beats.items()]
+            # Without the bubble a swap may take a beat (the next pixel's first): ``start`` is a register.
+            so_far = Mux(n.start, 0, n.norm_max[c]) if n.hidden else n.norm_max[c]
+            best = self._largest(m, f"norm_beat_{c}", [*lanes, so_far])
+            m.d.sync += n.norm_max[c].eq(Mux(accept, best, Mux(n.start, 0, n.norm_max[c])))
 
     def _largest(self, m: Module, name: str, values: list[Value]) -> Value:
-        """The largest of ``values``, by a tree of compares (nets per level)."""
-        level = 0
-        while len(values) > 1:
-            pairs = [values[i:i + 2] for i in range(0, len(values), 2)]
-            values = [self._net(m, f"{name}_{level}_{i}", Mux(x[1] > x[0], x[1], x[0]))
-                      if len(x) == 2 else x[0] for i, x in enumerate(pairs)]
-            level += 1
-        return values[0]
+        """The largest of ``values`` by one level of compares: every pair compared at once, the first
+        of the largest picked by the AND of its compares (nets ``<name>_<i>``, ``<name>_gt_<i>_<j>``)."""
+        values = [self._net(m, f"{name}_{i}", v) for i, v in enumerate(values)]
+        gt = {(i, j): self._net(m, f"{name}_gt_{i}_{j}", values[i] > values[j])
+              for i in range(len(values)) for j in range(i)}
+        picked = []
+        for i, v in enumerate(values):
+            # v_i is picked if it exceeds every earlier value and is at least every later one.
+            wins = Cat(*(gt[i, j] for j in range(i)), *(~gt[j, i] for j in range(i + 1, len(values))))
+            picked.append(Mux(wins.all(), v, 0))
+        return self._net(m, name, _or_all(picked))
 
     def _enables(self, m: Module, n: MachineNets) -> None:
         """The next values of the replicated enables: the registers' updates, one cycle early."""
