@@ -84,14 +84,16 @@ def test_consistency_test_equals_lr_consistent(dmax: int, tolerance: int) -> Non
     run_sim(dut, bench)
 
 
-def test_right_pass_feeder_delays_the_reference_and_flushes_each_output_row() -> None:
+@pytest.mark.parametrize("dmax", [1, 2, 3, 5])
+def test_right_pass_feeder_delays_the_reference_and_flushes_each_output_row(dmax: int) -> None:
     """Per input pixel one output pixel whose reference (``left``) is the right features Dmax pixels
-    back; after an output row's last pixel, Dmax flush pixels k = 1..Dmax continuing the delay line."""
-    dmax, bits = 3, 24
+    back; after an output row's last pixel, Dmax flush pixels k = 1..Dmax continuing the delay line
+    (its circular buffer wraps several times, write-through at Dmax 1)."""
+    bits = 24
     dut = RightPassFeeder(dmax=dmax, features=feature_layout(bits))
     n = 14
     line_end = {6, 13}
-    rnd = random.Random(1)
+    rnd = random.Random(1 + dmax)
     got: list[tuple[int, int, int, int]] = []
 
     async def feeder(ctx):
