@@ -143,6 +143,7 @@ def test_right_pass_feeder_delays_the_reference_and_flushes_each_output_row(dmax
 
 @pytest.mark.parametrize(("model", "width", "delay"), [
     (_lr(3), 15, 6),
+    (_lr(7), 16, 6),  # Dmax >= 6 lanes: the right pass's entry 0 (its newest pixel) in beat 1
     (_lr(2, lr_right_nomatch=False, lr_neutral=False, lr_nomatch=False, lr_tolerance=0), 11, 25),  # 2 per row
 ])
 def test_lr_frontend_words_equal_host_words(model: ModelParams, width: int, delay: int) -> None:
