@@ -29,10 +29,11 @@ the stream the one after. The registers keep the subtraction (on the reference f
 the absolute value and clamp, and the long route to the block RAM apart. The cost's operands are
 registers: the reference features, and per lane the delay-line entry of the beat, chosen a cycle ahead
 (beat 0's when the pixel is taken, the next beat's at each issue), so no path runs from the beat
-counter through the entry multiplexer into a table address. The delay line shifts a cycle after the
-take (from a register holding the taken match features), its enables on registered copies of the take,
-so the take (which depends on the stream's ready) drives only the entry registers and the reference
-features, not the delay line's thousands of enables.
+counter through the entry multiplexer into a table address. The delay line is a circular buffer in
+distributed RAM, banked so that each lane row of a beat reads a bank of its own
+(:meth:`WordNets._delay_line`); a pixel is written into it a cycle after its take (from a register
+holding the taken match features), so the take (which depends on the stream's ready) drives only the
+entry registers and the reference features, not the buffer's write enables.
 """
 
 from __future__ import annotations
