@@ -461,15 +461,15 @@ class WordNets:
         (``shift_q``) the newest pixel is in ``right_in``. Uninitialized entries: an output pixel is at
         least Dmax pixels into its line, so none reads an entry of an earlier line or frame."""
         m, rows = self.m, self.rows_per_beat
-        self.banks = -(-(self.dmax + 1) // rows)  # M: entries per bank
+        self._bank_depth = -(-(self.dmax + 1) // rows)  # M: entries per bank
         self.right_in = Signal(side, reset_less=True)
         self.shift_q = Signal()
         write_bank = Signal(range(rows))  # the next write's address t mod N, as bank and index
-        write_index = Signal(range(self.banks))
+        write_index = Signal(range(self._bank_depth))
         q, q_wrap, start = self._next_load()
-        self.bank_data = []
+        self._bank_data = []
         for k in range(rows):
-            mem = memory.Memory(shape=side, depth=self.banks, init=[])
+            mem = memory.Memory(shape=side, depth=self._bank_depth, init=[])
             m.submodules[f"line_{k}"] = mem
             write, read = mem.write_port(), mem.read_port(domain="comb")
             # The window runs from bank ``start`` towards lower banks (left reference) or higher ones;
@@ -477,7 +477,7 @@ class WordNets:
             wraps = (k > start[0]) if self._towards < 0 else (k < start[0])
             m.d.comb += [write.addr.eq(write_index), write.data.eq(self.right_in),
                          write.en.eq(self.shift_q & (write_bank == k)), read.addr.eq(Mux(wraps, q_wrap, q))]
-            self.bank_data.append(read.data)
+            self._bank_data.append(read.data)
         m.d.sync += self.shift_q.eq(self.take)
         with m.If(self.shift_q):
             m.d.sync += [write_bank.eq(Mux(write_bank == rows - 1, 0, write_bank + 1)),
@@ -487,7 +487,7 @@ class WordNets:
 
     def _step(self, index: Value, by: int) -> Value:
         """A bank index plus ``by`` (-2 .. 2) modulo M (a compare and a multiplexer a step)."""
-        last = self.banks - 1
+        last = self._bank_depth - 1
         for _ in range(abs(by)):
             index = Mux(index == last, 0, index + 1) if by > 0 else Mux(index == 0, last, index - 1)
         return index
@@ -506,11 +506,11 @@ class WordNets:
         c = self.reference.entry(0, self.dmax)
         g = self.reference.entry(1, self.dmax) - c
         self._towards = -g
-        u0 = (-c) % (rows * self.banks)
-        q0 = Signal(range(self.banks), init=u0 // rows)  # beat 0 of the pixel taken next
+        u0 = (-c) % (rows * self._bank_depth)
+        q0 = Signal(range(self._bank_depth), init=u0 // rows)  # beat 0 of the pixel taken next
         s0 = Signal(range(rows), init=u0 % rows)
-        q = Signal(range(self.banks), init=u0 // rows)  # the next load's window
-        q_wrap = Signal(range(self.banks), init=(u0 // rows - g) % self.banks)
+        q = Signal(range(self._bank_depth), init=u0 // rows)  # the next load's window
+        q_wrap = Signal(range(self._bank_depth), init=(u0 // rows - g) % self._bank_depth)
         start = [Signal(range(rows), init=u0 % rows, name=f"load_start_rep{j}") for j in range(rows)]
         carry = s0 == rows - 1
         q0_next = Mux(carry, self._step(q0, 1), q0)
@@ -598,7 +598,7 @@ class WordNets:
         if key in self._entries:
             return self._entries[key]
         m, rows = self.m, self.rows_per_beat
-        banks = [getattr(d, plane) for d in self.bank_data]
+        banks = [getattr(d, plane) for d in self._bank_data]
         read = Signal(banks[0].shape(), name=f"line_{plane}_{j}")
         with m.Switch(self._start[j]):  # lane j reads bank s - g·j
             for start in range(rows):
