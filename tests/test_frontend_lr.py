@@ -84,14 +84,16 @@ def test_consistency_test_equals_lr_consistent(dmax: int, tolerance: int) -> Non
     run_sim(dut, bench)
 
 
-def test_right_pass_feeder_delays_the_reference_and_flushes_each_output_row() -> None:
+@pytest.mark.parametrize("dmax", [1, 2, 3, 5])
+def test_right_pass_feeder_delays_the_reference_and_flushes_each_output_row(dmax: int) -> None:
     """Per input pixel one output pixel whose reference (``left``) is the right features Dmax pixels
-    back; after an output row's last pixel, Dmax flush pixels k = 1..Dmax continuing the delay line."""
-    dmax, bits = 3, 24
+    back; after an output row's last pixel, Dmax flush pixels k = 1..Dmax continuing the delay line
+    (its circular buffer wraps several times, write-through at Dmax 1)."""
+    bits = 24
     dut = RightPassFeeder(dmax=dmax, features=feature_layout(bits))
     n = 14
     line_end = {6, 13}
-    rnd = random.Random(1)
+    rnd = random.Random(1 + dmax)
     got: list[tuple[int, int, int, int]] = []
 
     async def feeder(ctx):
@@ -141,6 +143,7 @@ def test_right_pass_feeder_delays_the_reference_and_flushes_each_output_row() ->
 
 @pytest.mark.parametrize(("model", "width", "delay"), [
     (_lr(3), 15, 6),
+    (_lr(7), 16, 6),  # Dmax >= 6 lanes: the right pass's entry 0 (its newest pixel) in beat 1
     (_lr(2, lr_right_nomatch=False, lr_neutral=False, lr_nomatch=False, lr_tolerance=0), 11, 25),  # 2 per row
 ])
 def test_lr_frontend_words_equal_host_words(model: ModelParams, width: int, delay: int) -> None:

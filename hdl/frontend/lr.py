@@ -27,7 +27,7 @@ from __future__ import annotations
 import dataclasses
 
 from amaranth.hdl import Cat, Const, Module, Mux, Shape, Signal, Value, unsigned
-from amaranth.lib import data, fifo, stream, wiring
+from amaranth.lib import data, fifo, memory, stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from bayesmachine.columns import RIGHT_PASS
@@ -126,12 +126,13 @@ class RightPassFeeder(wiring.Component):
     and Dmax more after each output row's last pixel).
 
     Output pixel for an input pixel at left map column x: ``left`` (the word generator's reference) =
-    the right features of x - Dmax (a delay line of Dmax pixels), ``right`` (its delay line's input) =
-    the left features of x, ``output``/``row_start``/``first_row`` passed on, ``flush`` 0. After an
-    input pixel with ``output`` and ``line_end``, Dmax flush pixels k = 1 .. Dmax (the input is not
-    ready meanwhile): the right features of the next delay-line entries, left features 0 (they fill
-    lanes past the last output column), ``output`` 1, ``flush`` k. The handshake passes through (no
-    register on the valid path): ``i.ready`` is ``o.ready`` while no flush is pending.
+    the right features of x - Dmax (a delay line of Dmax pixels: a circular buffer in block RAM),
+    ``right`` (its delay line's input) = the left features of x, ``output``/``row_start``/``first_row``
+    passed on, ``flush`` 0. After an input pixel with ``output`` and ``line_end``, Dmax flush pixels k =
+    1 .. Dmax (the input is not ready meanwhile): the right features of the next delay-line entries,
+    left features 0 (they fill lanes past the last output column), ``output`` 1, ``flush`` k. The
+    handshake passes through (no register on the valid path): ``i.ready`` is ``o.ready`` while no flush
+    is pending.
 
     Parameters
     ----------
@@ -171,34 +172,47 @@ class RightPassFeeder(wiring.Component):
     def elaborate(self, platform: object) -> Module:
         m = Module()
         dmax = self._dmax
-        side = self._features
         i, o = self.i, self.o
-        # ref[k]: the right features k + 1 pixels back (reset-less: an output pixel is at least Dmax
-        # pixels into its line, so no output reads an entry of an earlier line or frame).
-        ref = [Signal(side, name=f"ref_{k}", reset_less=True) for k in range(dmax)]
         pending = Signal(range(dmax + 1))  # flush pixels still to write
         first_row = Signal()  # of the row being flushed
         flushing = pending != 0
         m.d.comb += [
             i.ready.eq(~flushing & o.ready),
             o.valid.eq(Mux(flushing, 1, i.valid)),
-            o.payload.left.eq(ref[-1] if dmax else i.payload.right),
             o.payload.right.eq(Mux(flushing, 0, i.payload.left)),
             o.payload.output.eq(flushing | i.payload.output),
             o.payload.row_start.eq(~flushing & i.payload.row_start),
             o.payload.first_row.eq(Mux(flushing, first_row, i.payload.first_row)),
         ]
-        if dmax:
-            m.d.comb += o.payload.flush.eq(Mux(flushing, dmax + 1 - pending, 0))
-            step = o.valid & o.ready
-            with m.If(step):
-                m.d.sync += ref[0].eq(Mux(flushing, 0, i.payload.right))
-                m.d.sync += [ref[k].eq(ref[k - 1]) for k in range(1, dmax)]
-            with m.If(flushing & o.ready):
-                m.d.sync += pending.eq(pending - 1)
-            with m.Elif(i.valid & i.ready & i.payload.output & i.payload.line_end):
-                m.d.sync += [pending.eq(dmax), first_row.eq(i.payload.first_row)]
+        if not dmax:
+            m.d.comb += o.payload.left.eq(i.payload.right)
+            return m
+        step = o.valid & o.ready
+        m.d.comb += [o.payload.flush.eq(Mux(flushing, dmax + 1 - pending, 0)),
+                     o.payload.left.eq(self._delay_line(m, step, Mux(flushing, 0, i.payload.right)))]
+        with m.If(flushing & o.ready):
+            m.d.sync += pending.eq(pending - 1)
+        with m.Elif(i.valid & i.ready & i.payload.output & i.payload.line_end):
+            m.d.sync += [pending.eq(dmax), first_row.eq(i.payload.first_row)]
         return m
+
+    def _delay_line(self, m: Module, step: Value, value: Value) -> Value:
+        """``value`` of Dmax steps back: a circular buffer of Dmax entries (block RAM), written at
+        ``head`` on each step and read one step ahead at the entry after it, so its output register
+        holds entry ``head`` (the oldest) between steps. Uninitialized entries: an output pixel is at
+        least Dmax pixels into its line, so none reads an entry of an earlier line or frame."""
+        dmax = self._dmax
+        m.submodules.line = line = memory.Memory(shape=self._features, depth=dmax, init=[])
+        write = line.write_port()
+        # With one entry the step reads the entry it writes: the new value (write-through).
+        read = line.read_port(transparent_for=(write,) if dmax == 1 else ())
+        head = Signal(range(dmax))
+        after = Signal(range(dmax), init=1 % dmax)  # head + 1 modulo Dmax
+        m.d.comb += [write.addr.eq(head), write.data.eq(value), write.en.eq(step),
+                     read.addr.eq(after), read.en.eq(step)]
+        with m.If(step):
+            m.d.sync += [head.eq(after), after.eq(Mux(after == dmax - 1, 0, after + 1))]
+        return read.data
 
 
 class ConsistencyTest(wiring.Component):

@@ -29,10 +29,11 @@ the stream the one after. The registers keep the subtraction (on the reference f
 the absolute value and clamp, and the long route to the block RAM apart. The cost's operands are
 registers: the reference features, and per lane the delay-line entry of the beat, chosen a cycle ahead
 (beat 0's when the pixel is taken, the next beat's at each issue), so no path runs from the beat
-counter through the entry multiplexer into a table address. The delay line shifts a cycle after the
-take (from a register holding the taken match features), its enables on registered copies of the take,
-so the take (which depends on the stream's ready) drives only the entry registers and the reference
-features, not the delay line's thousands of enables.
+counter through the entry multiplexer into a table address. The delay line is a circular buffer in
+distributed RAM, banked so that each lane row of a beat reads a bank of its own
+(:meth:`WordNets._delay_line`); a pixel is written into it a cycle after its take (from a register
+holding the taken match features), so the take (which depends on the stream's ready) drives only the
+entry registers and the reference features, not the buffer's write enables.
 """
 
 from __future__ import annotations
@@ -395,8 +396,6 @@ class WordNets:
         The taken pixel's reference features (its ``left`` field).
     """
 
-    GROUP = 9  # delay-line entries per registered copy of the shift enable
-
     def __init__(self, m: Module, gen: WordGenerator) -> None:
         p = gen.params
         self.m = m
@@ -450,22 +449,90 @@ class WordNets:
                 m.d.sync += [active.eq(1), self.beat.eq(0)]
 
     def _delay_line(self, side: Any) -> None:
-        """right[d] = the match features d pixels back (reset-less: no output reads a stale entry, since
-        an output pixel is at least Dmax pixels into its line). The line shifts a cycle after the take,
-        from a register holding the taken pixel's match features: its enables hang on registered copies
-        of the take (groups of entries), not on the take itself (FIFO ready -> issue -> take). While a
-        shift is pending (``shift_q``) the line as the words see it is [right_in, right...]."""
-        m, dmax = self.m, self.dmax
-        self.right = [Signal(side, name=f"right_{d}", reset_less=True) for d in range(dmax + 1)]
+        """The match features of the last pixels: pixel t (the t-th taken) at address t mod N of a
+        circular buffer of N = R·M entries (R lane rows per beat, M = ceil((Dmax + 1) / R)), banked by
+        address mod R, bank k holding addresses k, k + R, ... at index address // R (distributed RAM,
+        one combinational read port each). Entry d of pixel t (the match features d pixels back) is at
+        address t - d; a beat's R lanes read R consecutive entries, so R consecutive addresses, one in
+        each bank (:meth:`_next_load`). Entries of a lane row past Dmax read some older pixel (their
+        words are the no-match row's or 0, not a table's). A pixel is written a cycle after its take,
+        from a register holding its match features (``right_in``): the take (FIFO ready -> issue ->
+        take) drives the entry registers, not the buffer's write enables. While that write is pending
+        (``shift_q``) the newest pixel is in ``right_in``. Uninitialized entries: an output pixel is at
+        least Dmax pixels into its line, so none reads an entry of an earlier line or frame."""
+        m, rows = self.m, self.rows_per_beat
+        self._bank_depth = -(-(self.dmax + 1) // rows)  # M: entries per bank
         self.right_in = Signal(side, reset_less=True)
         self.shift_q = Signal()
-        shift_rep = [Signal(name=f"shift_rep{g}") for g in range((dmax + self.GROUP) // self.GROUP)]
-        m.d.sync += [self.shift_q.eq(self.take), *(r.eq(self.take) for r in shift_rep)]
-        for d in range(dmax + 1):
-            with m.If(shift_rep[d // self.GROUP]):
-                m.d.sync += self.right[d].eq(self.right_in if d == 0 else self.right[d - 1])
+        write_bank = Signal(range(rows))  # the next write's address t mod N, as bank and index
+        write_index = Signal(range(self._bank_depth))
+        q, q_wrap, start = self._next_load()
+        self._bank_data = []
+        for k in range(rows):
+            mem = memory.Memory(shape=side, depth=self._bank_depth, init=[])
+            m.submodules[f"line_{k}"] = mem
+            write, read = mem.write_port(), mem.read_port(domain="comb")
+            # The window runs from bank ``start`` towards lower banks (left reference) or higher ones;
+            # the banks it reaches after wrapping around hold its end at the neighbouring index.
+            wraps = (k > start[0]) if self._towards < 0 else (k < start[0])
+            m.d.comb += [write.addr.eq(write_index), write.data.eq(self.right_in),
+                         write.en.eq(self.shift_q & (write_bank == k)), read.addr.eq(Mux(wraps, q_wrap, q))]
+            self._bank_data.append(read.data)
+        m.d.sync += self.shift_q.eq(self.take)
+        with m.If(self.shift_q):
+            m.d.sync += [write_bank.eq(Mux(write_bank == rows - 1, 0, write_bank + 1)),
+                         write_index.eq(Mux(write_bank == rows - 1, self._step(write_index, 1), write_index))]
         with m.If(self.take):
             m.d.sync += self.right_in.eq(self.pixel.right)
+
+    def _step(self, index: Value, by: int) -> Value:
+        """A bank index plus ``by`` (-2 .. 2) modulo M (a compare and a multiplexer a step)."""
+        last = self._bank_depth - 1
+        for _ in range(abs(by)):
+            index = Mux(index == last, 0, index + 1) if by > 0 else Mux(index == 0, last, index - 1)
+        return index
+
+    def _next_load(self) -> tuple[Signal, Signal, list[Signal]]:
+        """Where the next entry load reads: (``q``, ``q_wrap``, ``start``). Beat b of pixel t reads
+        entries c + g·(b·R + j) (lane j; c, g from the pass's reference: entry = c + g·row), addresses
+        u - g·(b·R + j) with u = t - c: its window starts at address u - g·b·R, in bank s = u mod R
+        (fixed for the pixel) at index q (one step of -g a beat), and runs through the banks s - g·j,
+        those past the last bank at index ``q_wrap`` = q - g; lane j reads bank s - g·j (``start``: s, a
+        registered copy per lane row for the rotations' fan-out). The next load is beat 0 of the next
+        pixel until an output pixel's take, then beats 1 .. n - 1 of that pixel at its issues of beats
+        0 .. n - 2, then beat 0 of the pixel after; all in registers, so a bank's address is a
+        multiplexer of registers."""
+        m, rows, n_beats = self.m, self.rows_per_beat, self.n_beats
+        c = self.reference.entry(0, self.dmax)
+        g = self.reference.entry(1, self.dmax) - c
+        self._towards = -g
+        u0 = (-c) % (rows * self._bank_depth)
+        q0 = Signal(range(self._bank_depth), init=u0 // rows)  # beat 0 of the pixel taken next
+        s0 = Signal(range(rows), init=u0 % rows)
+        q = Signal(range(self._bank_depth), init=u0 // rows)  # the next load's window
+        q_wrap = Signal(range(self._bank_depth), init=(u0 // rows - g) % self._bank_depth)
+        start = [Signal(range(rows), init=u0 % rows, name=f"load_start_rep{j}") for j in range(rows)]
+        carry = s0 == rows - 1
+        q0_next = Mux(carry, self._step(q0, 1), q0)
+        s0_next = Mux(carry, 0, s0 + 1)
+        next_pixel = [q.eq(q0_next), q_wrap.eq(self._step(q0_next, -g)), *(r.eq(s0_next) for r in start)]
+        with m.If(self.take):
+            m.d.sync += [q0.eq(q0_next), s0.eq(s0_next)]
+            if n_beats > 1:
+                with m.If(self.pixel.output):  # next: beat 1 of this pixel
+                    m.d.sync += [q.eq(self._step(q0, -g)), q_wrap.eq(self._step(q0, -2 * g))]
+                with m.Else():  # next: beat 0 of the next pixel
+                    m.d.sync += next_pixel
+            else:
+                m.d.sync += next_pixel
+        if n_beats > 1:
+            with m.Elif(self.issue & (self.beat == n_beats - 2)):  # next: beat 0 of the next pixel
+                m.d.sync += [q.eq(q0), q_wrap.eq(self._step(q0, -g)), *(r.eq(s0) for r in start)]
+        if n_beats > 2:
+            with m.Elif(self.issue & (self.beat < n_beats - 2)):  # next: beat b + 2
+                m.d.sync += [q.eq(self._step(q, -g)), q_wrap.eq(self._step(q_wrap, -g))]
+        self._start = start
+        return q, q_wrap, start
 
     def row(self, j: int) -> Value:
         """The row of lane row j of the beat being issued."""
@@ -522,35 +589,32 @@ class WordNets:
 
     def entry(self, plane: str, j: int) -> Signal:
         """The ``plane`` value of lane row j's match pixel for the beat being issued: a register loaded a
-        cycle ahead (the beat counter's multiplexer ends there, not at the table address), with beat 0's
-        entry when a pixel is taken (the line as it is after the shift), the next beat's on an issue."""
+        cycle ahead from the delay line's banks (the beat counter ends there, not at the table address),
+        with beat 0's entry when a pixel is taken, the next beat's on an issue. The newest pixels come
+        from the registers in front of the buffer until they are written: at the take the taken pixel
+        (entry 0) and the one before it (entry 1) while its write is pending; at beat 0's issue the
+        taken pixel while its write is pending."""
         key = (plane, j)
         if key in self._entries:
             return self._entries[key]
-        m, dmax, rows, n_beats = self.m, self.dmax, self.rows_per_beat, self.n_beats
+        m, rows = self.m, self.rows_per_beat
+        banks = [getattr(d, plane) for d in self._bank_data]
+        read = Signal(banks[0].shape(), name=f"line_{plane}_{j}")
+        with m.Switch(self._start[j]):  # lane j reads bank s - g·j
+            for start in range(rows):
+                with m.Case(start):
+                    m.d.comb += read.eq(banks[(start + self._towards * j) % rows])
+        pending = getattr(self.right_in, plane)
 
-        def lane_entry(row: int) -> int:
-            return self.reference.entry(min(row, dmax), dmax)
+        def newest(d: int) -> Value:  # entry d of the pixel being loaded, a pending write included
+            return Mux(self.shift_q, pending, read) if d == 0 else read
 
-        def seen(d: int) -> Value:  # entry d of the line as the words see it (a pending shift included)
-            before = self.right_in if d == 0 else self.right[d - 1]
-            return Mux(self.shift_q, getattr(before, plane), getattr(self.right[d], plane))
-
-        entries = [getattr(self.right[lane_entry(b * rows + j)], plane) for b in range(n_beats)]
-        sel = Signal(entries[0].shape(), name=f"right_{plane}_{j}", reset_less=True)
+        d0 = self.reference.entry(j, self.dmax)
+        sel = Signal(banks[0].shape(), name=f"right_{plane}_{j}", reset_less=True)
         with m.If(self.take):
-            d = lane_entry(j)  # entry d after the take is entry d - 1 now
-            m.d.sync += sel.eq(getattr(self.pixel.right, plane) if d == 0 else seen(d - 1))
-        with m.Elif(self.issue):
-            with m.Switch(self.beat):
-                if n_beats > 1:  # beat 0: the only one issued with a shift pending
-                    with m.Case(0):
-                        m.d.sync += sel.eq(seen(lane_entry(rows + j)))
-                for b in range(1, n_beats - 1):
-                    with m.Case(b):
-                        m.d.sync += sel.eq(entries[b + 1])
-                with m.Default():  # the last beat: the next take reloads it; a complete case
-                    m.d.sync += sel.eq(entries[-1])
+            m.d.sync += sel.eq(getattr(self.pixel.right, plane) if d0 == 0 else newest(d0 - 1))
+        with m.Elif(self.issue):  # beat b + 1's entry; shift_q is set at beat 0's issue at most
+            m.d.sync += sel.eq(newest(self.reference.entry(rows + j, self.dmax)))
         self._entries[key] = sel
         return sel
 
