@@ -585,7 +585,8 @@ def add_census_options(parser: argparse._ActionsContainer, sweep: bool = False, 
     board`` and ``--machines`` (``run``), which :func:`default_model` reads; its help says so."""
     g = parser.add_argument_group(title) if title else parser
     described = "; ".join(f"{d.name}: {d.description}" for d in MODELS.values())
-    why = f"{DEFAULT_MODEL}'s StereoMachine does not place on the ECP5-85F; README, Models"
+    why = f"{DEFAULT_MODEL}'s StereoMachine is not routed on the ECP5-85F at the board's clock; README, " \
+          "Models"
     if hardware:
         default = f"default {HARDWARE_MODEL}: {why}"
         parser.set_defaults(**{_HARDWARE_DEST: True})

@@ -82,7 +82,7 @@ def test_default_model_is_one_rule(pair, tmp_path, monkeypatch):
 
 
 # Without --model: census-lr where the command computes on the host or in simulation, census where it
-# builds or drives an FPGA design (census-lr's StereoMachine does not place on the ECP5-85F) or runs
+# builds or drives an FPGA design (census-lr's StereoMachine is not routed on the ECP5-85F) or runs
 # K > 1 machines (census-lr's right pass runs on one).
 DEFAULTS = [
     (["run", "-o", "x"], "census-lr"),
@@ -130,7 +130,8 @@ def test_help_states_each_commands_default(capsys):
         assert model_help(*command).startswith("census-lr"), command
     assert "census with --engine board or --machines K > 1" in model_help("run")
     for command in (["emit"], ["synth"], ["board", "build"], ["board", "simulate"]):
-        assert model_help(*command).startswith("census: census-lr's StereoMachine does not place"), command
+        want = "census: census-lr's StereoMachine is not routed on the ECP5-85F"
+        assert model_help(*command).startswith(want), command
 
 
 @pytest.mark.parametrize("argv", [["emit", "--top", "stereo", "-o", "{o}"], ["board", "simulate"],
