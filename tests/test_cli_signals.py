@@ -125,11 +125,15 @@ def test_signal_to_run_leaves_no_partial_file(tmp_path: Path, sig: int, code: in
     cv2.imwrite(str(tmp_path / "r.png"), right)
     marker, out = tmp_path / "staged", tmp_path / "out"
     # The real CLI; only the result's writer stops after writing its temporary file.
+    # Ctrl-C as an interactive shell delivers it: a suite started as a background job of a
+    # non-interactive shell hands its children SIGINT ignored, and Python then keeps it ignored.
     script = textwrap.dedent("""
-        import sys, time
+        import signal, sys, time
         from pathlib import Path
         import numpy as np
         from bayesmachine.cli import main
+
+        signal.signal(signal.SIGINT, signal.default_int_handler)
 
         real = np.savez_compressed
 
