@@ -41,7 +41,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any, ClassVar
 
-from amaranth.hdl import Module, Mux, Signal, Value, signed, unsigned
+from amaranth.hdl import Const, Module, Mux, Signal, Value, signed, unsigned
 from amaranth.lib import data, memory, stream, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -474,7 +474,11 @@ class WordNets:
             write, read = mem.write_port(), mem.read_port(domain="comb")
             # The window runs from bank ``start`` towards lower banks (left reference) or higher ones;
             # the banks it reaches after wrapping around hold its end at the neighbouring index.
-            wraps = (k > start[0]) if self._towards < 0 else (k < start[0])
+            # (a bank no window reaches after wrapping is never compared: a constant compare lints)
+            if self._towards < 0:
+                wraps = start[0] < k if k > 0 else Const(0, 1)
+            else:
+                wraps = start[0] > k if k < rows - 1 else Const(0, 1)
             m.d.comb += [write.addr.eq(write_index), write.data.eq(self.right_in),
                          write.en.eq(self.shift_q & (write_bank == k)), read.addr.eq(Mux(wraps, q_wrap, q))]
             self._bank_data.append(read.data)
@@ -600,9 +604,9 @@ class WordNets:
         m, rows = self.m, self.rows_per_beat
         banks = [getattr(d, plane) for d in self._bank_data]
         read = Signal(banks[0].shape(), name=f"line_{plane}_{j}")
-        with m.Switch(self._start[j]):  # lane j reads bank s - g·j
+        with m.Switch(self._start[j]):  # lane j reads bank s - g·j (s < R: the last case is the default)
             for start in range(rows):
-                with m.Case(start):
+                with m.Case(start) if start < rows - 1 else m.Default():
                     m.d.comb += read.eq(banks[(start + self._towards * j) % rows])
         pending = getattr(self.right_in, plane)
 
