@@ -23,12 +23,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["FILTER_SIZE", "MARGIN", "OutputRegion"]
+__all__ = ["FILTER_SIZE", "MARGIN", "VGA_HEIGHT", "VGA_WIDTH", "OutputRegion"]
 
 # The paper's three features are 5x5 correlations: maps lose 2 pixels on every side (the paper
 # model's margin; a model's own is ``ModelParams.margin``).
 FILTER_SIZE = 5
 MARGIN = FILTER_SIZE // 2
+# A VGA frame, the frame the frame rates are given for (synth's report, its measured frame).
+VGA_WIDTH, VGA_HEIGHT = 640, 480
 
 # Output pixels per band when the host streams over rows: a float64 posterior band of
 # Dmax 80 is then ~43 MB, whatever the frame size.

@@ -6,15 +6,14 @@ from __future__ import annotations
 
 import json
 
-from bayesmachine.region import OutputRegion
+from bayesmachine.region import VGA_HEIGHT, VGA_WIDTH, OutputRegion
 
 from .targets import Target
 
 __all__ = ["PIXEL_BITS", "VGA_HEIGHT", "VGA_PIXELS", "resources", "machines_that_fit", "stereo_throughput",
            "frame_throughput", "throughput", "markdown"]
 
-VGA_PIXELS = 640 * 480
-VGA_HEIGHT = 480
+VGA_PIXELS = VGA_WIDTH * VGA_HEIGHT
 PIXEL_BITS = 16  # a pixel pair of the stereo top's input stream: left and right, 8 bits each
 
 

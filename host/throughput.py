@@ -13,12 +13,13 @@ import numpy as np
 
 from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams
+from bayesmachine.region import VGA_HEIGHT
 
 from .records import MachineRun
 
 __all__ = ["FRAME_HEIGHT", "frame_crop", "measure_cycles", "measure_frame"]
 
-FRAME_HEIGHT = 480  # a VGA frame's lines: the StereoMachine's frame rate is measured on frames this tall
+FRAME_HEIGHT = VGA_HEIGHT  # the StereoMachine's frame rate is measured on frames this tall
 
 
 def measure_cycles(params: MachineParams, model: ModelParams, progress: bool = True, *,
