@@ -75,7 +75,7 @@ __all__ = [
 DEFAULT_MODEL = "census-lr"
 # The model of what builds or drives an FPGA design (emit, synth, board, run --engine board, K > 1
 # machines): census-lr's StereoMachine places on the ECP5-85F but is not routed at the board's 45 MHz
-# (post-placement estimate 24.87 MHz, docs/fpga.md) and K machines cannot share its right pass; census
+# (post-placement estimate 28.24 MHz, docs/fpga.md) and K machines cannot share its right pass; census
 # is the best model that meets the board's clock.
 HARDWARE_MODEL = "census"
 # The census models' watchdog, in runs of n_max + 1 cycles: max_cycles = CENSUS_WATCHDOG_RUNS *
