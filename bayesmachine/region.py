@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["FILTER_SIZE", "MARGIN", "VGA_HEIGHT", "VGA_WIDTH", "OutputRegion"]
+__all__ = ["CAMERA_FPS", "FILTER_SIZE", "MARGIN", "VGA_HEIGHT", "VGA_WIDTH", "OutputRegion"]
 
 # The paper's three features are 5x5 correlations: maps lose 2 pixels on every side (the paper
 # model's margin; a model's own is ``ModelParams.margin``).
@@ -31,6 +31,8 @@ FILTER_SIZE = 5
 MARGIN = FILTER_SIZE // 2
 # A VGA frame, the frame the frame rates are given for (synth's report, its measured frame).
 VGA_WIDTH, VGA_HEIGHT = 640, 480
+# Camera rate: the frames per second a design is measured against (synth reports the clock it needs).
+CAMERA_FPS = 60
 
 # Output pixels per band when the host streams over rows: a float64 posterior band of
 # Dmax 80 is then ~43 MB, whatever the frame size.

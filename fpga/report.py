@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import json
 
-from bayesmachine.region import VGA_HEIGHT, VGA_WIDTH, OutputRegion
+from bayesmachine.region import CAMERA_FPS, VGA_HEIGHT, VGA_WIDTH, OutputRegion
 
 from .targets import Target
 
@@ -120,7 +120,8 @@ def frame_throughput(fmax_mhz: float | None, frame: dict, width: int,
     """The stereo top's rates from a frame it ran (``host.throughput.measure_frame``): frames per
     second = fmax / the frame's wall cycles (its first pixel in to its last result out), every pixel
     pair of the ``width`` x ``height`` frame in (16 bits), ``frame["output_pixels"]`` results out.
-    Without ``fmax_mhz`` only the cycles and the bits per pixel."""
+    ``fmax_for_camera_rate_mhz``: the clock at which that frame would take 1 / CAMERA_FPS seconds.
+    Without ``fmax_mhz`` only the cycles, that clock and the bits per pixel."""
     in_bits = PIXEL_BITS * width * height
     out_px, wall = frame["output_pixels"], frame["frame_wall_cycles"]
     tp: dict[str, object] = {
@@ -132,6 +133,8 @@ def frame_throughput(fmax_mhz: float | None, frame: dict, width: int,
         "frame_wall_cycles_per_pixel": frame["wall_cycles_per_pixel"],
         "frame_compute_cycles_per_pixel": frame["compute_cycles_per_pixel"],
         "frame_equals_model": frame["equals_model"],
+        "camera_fps": CAMERA_FPS,
+        "fmax_for_camera_rate_mhz": round(CAMERA_FPS * wall / 1e6, 1),
     }
     if fmax_mhz:
         fps = fmax_mhz * 1e6 / wall
@@ -237,6 +240,8 @@ def _stereo_text(tp: dict, fmax: float | None) -> str:
         text += (f"; at {_fmt(fmax)} MHz: {tp['pixels_per_second'] / 1e6:.2f} Mpx/s = "
                  f"{tp['vga_fps']:.1f} frames/s of {tp['frame']}, input "
                  f"{tp['input_bits_per_second'] / 1e6:.1f} Mbit/s")
+    if "fmax_for_camera_rate_mhz" in tp:
+        text += f"; {tp['camera_fps']} frames/s would need {tp['fmax_for_camera_rate_mhz']:,.1f} MHz"
     return text
 
 

@@ -297,14 +297,18 @@ def test_frame_throughput_figures() -> None:
     assert t["vga_fps"] == pytest.approx(60.0) and t["frame"] == "640x480"
     assert t["pixels_per_second"] == pytest.approx(60.0 * 264_656, rel=1e-6)
     assert t["input_bits_per_second"] == pytest.approx(16 * 640 * 480 * 60.0, rel=1e-6)
-    assert "vga_fps" not in frame_throughput(None, frame, 640)
+    assert t["fmax_for_camera_rate_mhz"] == pytest.approx(120.0)  # the clock that gives 60 fps
+    untimed = frame_throughput(None, frame, 640)
+    assert "vga_fps" not in untimed and untimed["fmax_for_camera_rate_mhz"] == pytest.approx(120.0)
     report = {"target": "ecp5-85k", "device": "LFE5U-85F", "machine_summary": "m", "pin_width": 8,
               "resources": {"lut4": 1, "carry": 1, "ff": 1, "bram": 1, "dsp": 0, "lutram": 0},
               "utilization": {"lut4": 0.1, "ff": 0.1, "bram": 0.1}, "machines_fit": 1, "machines": 1,
               "per_operator": {"lut4": 1.0, "ff": 1.0}, "per_machine": {"lut4": 1.0, "ff": 1.0},
               "stereo": {"fifo_pixels": 8, "fifo_beats": 112, "width": 640, "beat_bits": 330},
               "fmax_mhz": 120.0, "throughput": t, "measured": "a test"}
-    assert "DIFFERENT from the model's" in markdown(report)  # a mismatch is said, not hidden
+    text = markdown(report)
+    assert "DIFFERENT from the model's" in text  # a mismatch is said, not hidden
+    assert "60 frames/s would need 120.0 MHz" in text
 
 
 def test_stereo_throughput_figures() -> None:
