@@ -278,6 +278,9 @@ def test_small_stereo_machine_through_yosys(tmp_path: Path) -> None:
     assert "pixels_per_second" not in tp and "assumes" not in tp  # no fmax, no rate; measured, not assumed
     md = (out / "report.md").read_text()
     assert "StereoMachine" in md and "block RAMs" in md and "equal to the model's" in md
+    # Without an fmax the report still says the clock camera rate needs for this frame.
+    assert tp["fmax_for_camera_rate_mhz"] == pytest.approx(60 * tp["frame_wall_cycles"] / 1e6, abs=0.05)
+    assert "60 frames/s would need" in md
     # The same report with an fmax gives the rates from the frame's wall cycles.
     frame = {"output_pixels": tp["frame_output_pixels"], "frame_wall_cycles": tp["frame_wall_cycles"],
              "pair": tp["frame_pair"], "wall_cycles_per_pixel": tp["frame_wall_cycles_per_pixel"],
