@@ -93,16 +93,16 @@ def main() -> None:
     mhz = " | ".join(f"{c:g} MHz" for c in clocks)
     print(f"| run | output px | operator samples / px (left + right) "
           f"| per clock at {args.fps:g} fps: {mhz} |")
-    for w in works:
-        rate = w["total"] * w["pixels"] * args.fps
-        per_clock = " | ".join(f"{rate / (c * 1e6):,.0f}" for c in clocks)
+    for w in works:  # operator samples per clock at each clock, computed once
+        w["per_clock"] = [w["total"] * w["pixels"] * args.fps / (c * 1e6) for c in clocks]
+        per_clock = " | ".join(f"{n:,.0f}" for n in w["per_clock"])
         print(f"| {w['label']} | {w['pixels']:,} | {w['total']:,.0f} ({w['left']:,.0f} + {w['right']:,.0f}) "
               f"| {per_clock} |")
     for c in costs:
         print(f"\nLUT4 sites at {c['per_sample']:.2f} per operator sample per clock ({c['label']}; "
               f"device {c['device_sites']:,.0f}):")
         for w in works:
-            sites = [w["total"] * w["pixels"] * args.fps / (f * 1e6) * c["per_sample"] for f in clocks]
+            sites = [n * c["per_sample"] for n in w["per_clock"]]
             cells = " | ".join(f"{n:,.0f} ({n / c['device_sites']:.0%})" for n in sites)
             print(f"| {w['label']} | {cells} |")
 
