@@ -240,8 +240,11 @@ def test_min_confidence_blanks_and_reports_the_density(tmp_path) -> None:
 @pytest.mark.parametrize("argv, message", [
     (["--min-confidence", "0"], "expected a probability in (0, 1]"),
     (["--min-confidence", "nan"], "expected a finite number"),
-    (["--confidence-window", "2"], "expected an odd number >= 1"),
-    (["--confidence-t", "-1"], "expected an integer >= 0"),
+    (["--confidence-window", "2"], "window must be odd (a square around its pixel), got 2"),
+    (["--confidence-t", "-1"], "t must be an integer in [0, 4094], got -1"),
+    # Bounded before any work: 2^63 - 1 wrapped in int64, 2^64 overflowed after the run.
+    (["--confidence-t", "9223372036854775807"], "t must be an integer in [0, 4094]"),
+    (["--confidence-window", "18446744073709551617"], "window must be an integer in [1, 4095]"),
 ])
 def test_bad_confidence_options_are_one_error_line(argv, message, tmp_path, capsys) -> None:
     assert main(["run", *CROP, *argv, "-o", str(tmp_path / "o")]) == 2
