@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TypeVar
 
-from bayesmachine.columns import Option
+from bayesmachine.columns import Option, Source
 from bayesmachine.models import (
     DEFAULT_MODEL,
     HARDWARE_MODEL,
@@ -71,8 +71,12 @@ __all__ = [
     "model_list",
     "default_model",
     "output_path",
+    "input_path",
     "machine_params_from_args",
     "model_params_from_args",
+    "options_without_effect",
+    "machine_parameters",
+    "PASS_WATCHDOGS",
     "float_arg",
     "positive_float_arg",
     "positive_float_at_most",
@@ -134,6 +138,15 @@ def output_path(text: str) -> Path:
             "name the output"
         )
     return Path(text)
+
+
+def input_path(text: str) -> str:
+    """A file or directory to read (an image, ``--gt``, ``--calib``, ``--dataset``, ``--port``): never
+    empty or blank, which would name the current directory (``--calib "$CALIB"`` with CALIB unset)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError(
+            f"the path is {'empty' if not text else 'blank'} (an unset variable?); name the file")
+    return text
 
 
 def float_arg(text: str) -> float:
@@ -657,3 +670,33 @@ def model_params_from_args(args: argparse.Namespace, name: str | None = None) ->
         return ModelParams(name=name, dmax=args.dmax, **given)
     except ParameterError as exc:
         raise with_flag(exc) from None
+
+
+# The model parameters that set a declared pass's watchdog (census-lr's lr_right_max_cycles): what only a
+# machine's run reads.
+PASS_WATCHDOGS = frozenset(p.watchdog for d in MODELS.values() for p in d.passes if p.watchdog)
+
+
+def machine_parameters(name: str) -> frozenset[str]:
+    """The parameters of model ``name`` that change its own pass's machine (``emit``/``synth --top
+    machine``): the switches that leave columns out and the options of its feedback column (the table the
+    machine forms its prior from). The others change only the words the host loads, or other passes."""
+    d = MODELS[name]
+    own = {o.name for c in d.columns if c.source is Source.FEEDBACK for o in c.options}
+    return frozenset({switch for switch, _ in d.switches} | own)
+
+
+def options_without_effect(args: argparse.Namespace, effective: Iterable[str]) -> list[str]:
+    """The model options given in ``args`` (an alias counts for each parameter it sets) that set none of
+    the parameters ``effective``, as they were spelt: what a command refuses because it would ignore them."""
+    effective = set(effective)
+    out: list[str] = []
+    for key, (option, _) in all_options().items():
+        value = getattr(args, key, None)
+        if value is not None and key not in effective:
+            out.append(_spelt(option, value))
+    for dest, flag in MODEL_OPTION_FLAGS:
+        sets = [o.name for o in _paper_options() if o.alias == flag]
+        if sets and getattr(args, dest, None) is not None and not effective & set(sets):
+            out.append(flag)
+    return out
