@@ -82,6 +82,7 @@ __all__ = [
     "positive_float_at_most",
     "int_in_range",
     "rng_list",
+    "on_off_list",
     "runnable_sources",
     "argument_type",
     "int_arg",
@@ -213,6 +214,23 @@ def counter_max_list(text: str) -> list[int]:
     return sorted(set(values))
 
 
+_ON_OFF = {"on": True, "true": True, "yes": True, "1": True,
+           "off": False, "false": False, "no": False, "0": False}
+
+
+def on_off_list(text: str) -> bool | list[bool]:
+    """``on``, ``off`` or ``on,off`` (also true/false, yes/no, 1/0): one value, or several (a sweep's grid
+    axis), no repeats."""
+    parts = [p.strip().lower() for p in text.split(",") if p.strip()]
+    if not parts or any(p not in _ON_OFF for p in parts):
+        raise argparse.ArgumentTypeError(f"expected on, off or on,off (or true/false), got {text!r} (give "
+                                         "LEFT RIGHT before this option, or its value after =, as in =on)")
+    values = [_ON_OFF[p] for p in parts]
+    if len(set(values)) != len(values):
+        raise argparse.ArgumentTypeError(f"a value is listed twice: {text!r}")
+    return values if len(values) > 1 else values[0]
+
+
 def source_kinds() -> Mapping[str, Any]:
     """The random-source registry ``bayesmachine.sources.SOURCE_KINDS``."""
     from bayesmachine.sources import SOURCE_KINDS
@@ -265,6 +283,13 @@ class MachineOption:
         return self.type is bool
 
     def add_to(self, group: argparse._ActionsContainer, **changes: Any) -> argparse.Action:
+        if self.is_flag and changes.pop("values", False):
+            # A sweep's axis: --x (on), --x on,off (both: a grid axis) and --no-x (off).
+            text = changes.pop("help", self.help)
+            group.add_argument(self.flag, dest=self.field, nargs="?", const=True, type=on_off_list,
+                               default=None, metavar="on,off", help=f"{text}; {self.flag} on,off sweeps both")
+            return group.add_argument(f"--no-{self.flag[2:]}", dest=self.field, action="store_const",
+                                      const=False, help=f"the same as {self.flag} off")
         if self.is_flag:
             flag_kwargs = {"dest": self.field, "default": self.default, "help": self.help,
                            "action": argparse.BooleanOptionalAction}

@@ -378,7 +378,12 @@ class MachineParams:
     def nomatch_index(self) -> int | None:
         return self.rows - 1 if self.nomatch_row else None
 
-    def to_dict(self) -> dict[str, object]:
+    def to_dict(self, complete: bool = False) -> dict[str, object]:
+        """The fields this machine uses (the ``smtj_*`` ones with rng ``smtj``, the ``feedback_*`` ones with
+        the neighbour prior). Without ``complete``, ``samples_per_clock``, ``timeout_answer`` and
+        ``normalize`` are left out at the values every machine had before they existed (1, 'none', off),
+        so that fingerprints stay; ``complete``: every resolved value, what a report records (a census
+        model's machine with normalize off says so, rather than reading as the model's default, on)."""
         d = asdict(self)
         if self.rng != "smtj":  # device parameters mean nothing to the other sources
             for name in ("smtj_dwell", "smtj_spread", "smtj_share"):
@@ -387,6 +392,8 @@ class MachineParams:
             del d["feedback_words"], d["feedback_nomatch_word"]
         else:
             d["feedback_words"] = list(self.feedback_words)
+        if complete:
+            return d
         # Fields at the value every machine had before them: left out, so fingerprints stay.
         if self.samples_per_clock == 1:
             del d["samples_per_clock"]

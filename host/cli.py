@@ -362,10 +362,10 @@ def _report(outcome: RunOutcome, source: str, crop: Crop | None) -> dict[str, ob
         "ground_truth": prep.gt is not None,
         "model_name": prep.model.name,
         "model": prep.model.to_dict(),
-        "machine": run.machine.to_dict(),
+        "machine": run.machine.to_dict(complete=True),  # every resolved value
     }
     if right is not None:
-        report["right_pass_machine"] = right.machine.to_dict()
+        report["right_pass_machine"] = right.machine.to_dict(complete=True)
         report["right_pass_seconds"] = right.seconds
     return report
 
