@@ -80,6 +80,7 @@ __all__ = [
     "float_arg",
     "positive_float_arg",
     "positive_float_at_most",
+    "float_in_range",
     "int_in_range",
     "rng_list",
     "on_off_list",
@@ -179,6 +180,19 @@ def int_in_range(lo: int, hi: int) -> Callable[[str], int]:
         return value
 
     convert.__name__ = "integer"
+    return convert
+
+
+def float_in_range(lo: float, hi: float) -> Callable[[str], float]:
+    """An argparse type: a finite number in [lo, hi]."""
+
+    def convert(text: str) -> float:
+        value = float_arg(text)
+        if not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"expected a number in [{lo:g}, {hi:g}], got {text!r}")
+        return value
+
+    convert.__name__ = "number"
     return convert
 
 

@@ -35,11 +35,11 @@ from bayesmachine.cliargs import (
     model_params_from_args,
     options_without_effect,
     output_path,
-    positive_float_arg,
     positive_float_at_most,
     runnable_sources,
 )
 from bayesmachine.extras import needs_host
+from bayesmachine.hdl.frontend import MAX_MACHINES
 from bayesmachine.models import ModelParams, all_options
 from bayesmachine.outputs import (
     NpzWriter,
@@ -79,6 +79,7 @@ RUN_OUTPUTS = ("report.json", "result.npz", "disparity.png", "confidence.png", "
                "cloud.ply", "waves.vcd")
 SWEEP_COUNTER_MAX = [1, 2, 4, 8, 16, 32]
 MAX_CONNECT_S = 600.0  # --connect-timeout: a cluster that takes longer to answer is not coming
+MAX_GT_SCALE = 65536.0  # --gt-scale: past it every 16-bit stored disparity is below one pixel
 
 
 def _add_input_options(p: argparse.ArgumentParser, optional: bool) -> None:
@@ -222,9 +223,9 @@ def _add_machine_options(p: argparse.ArgumentParser, sweep: bool) -> None:
             "--engine board runs)",
         )
         g.add_argument(
-            "--machines", type=int_arg, default=None,
-            help="machines behind the one front end (1 .. 16, default 1): map row r runs on machine "
-            "r mod K, each with its own random source and left neighbour (--feed pixels: the "
+            "--machines", type=int_in_range(1, MAX_MACHINES), default=None,
+            help=f"machines behind the one front end (1 .. {MAX_MACHINES}, default 1): map row r runs on "
+            "machine r mod K, each with its own random source and left neighbour (--feed pixels: the "
             "StereoMachine with K machines; --feed words: K engines dealt the rows the same way)",
         )
         g.add_argument(
@@ -241,9 +242,10 @@ def _add_machine_options(p: argparse.ArgumentParser, sweep: bool) -> None:
         "negative disparities are refused",
     )
     p.add_argument(
-        "--gt-scale", type=positive_float_arg, default=None, metavar="S",
+        "--gt-scale", type=positive_float_at_most(MAX_GT_SCALE), default=None, metavar="S",
         help="the --gt file stores disparity x S: divide by S (256 for KITTI's 16-bit PNGs; 4 for "
-        "Middlebury 2003's quarter-size disp*.png); default 1, required for 16-bit images"
+        f"Middlebury 2003's quarter-size disp*.png), at most {MAX_GT_SCALE:g}; default 1, required for "
+        "16-bit images"
         + ("; with --dataset it replaces the layout's scale" if sweep else ""),
     )
     if not sweep:
