@@ -88,6 +88,10 @@ __all__ = [
     "argument_type",
     "int_arg",
     "counter_max_list",
+    "MAX_COUNTER_MAX",
+    "value_list",
+    "choice_of",
+    "int_of",
     "source_kinds",
     "rng_help",
 ]
@@ -212,8 +216,12 @@ def positive_float_at_most(hi: float) -> Callable[[str], float]:
 _SMTJ_FIELDS = ("smtj_dwell", "smtj_spread", "smtj_share")
 
 
+MAX_COUNTER_MAX = (1 << 24) - 1  # MachineParams' bound on counter_max
+
+
 def counter_max_list(text: str) -> list[int]:
-    """``N,N,...`` counter max values, sorted ascending with repeats removed."""
+    """``N,N,...`` counter max values (each 1 .. :data:`MAX_COUNTER_MAX`), sorted ascending with repeats
+    removed."""
     values = []
     for part in text.split(","):
         if part.strip():
@@ -225,7 +233,58 @@ def counter_max_list(text: str) -> list[int]:
                 ) from None
     if not values:
         raise argparse.ArgumentTypeError("give at least one counter max value")
+    bad = [v for v in values if not 1 <= v <= MAX_COUNTER_MAX]
+    if bad:
+        raise argparse.ArgumentTypeError(f"counter max values must be in [1, {MAX_COUNTER_MAX}], "
+                                         f"got {bad[0]}")
     return sorted(set(values))
+
+
+def value_list(parse: Callable[[str], T], what: str = "value") -> Callable[[str], list[T]]:
+    """An argparse type: ``A,B,...``, each value read by the argparse type ``parse`` (its message kept,
+    naming the value), at least one, none twice, in the order given (a benchmark's list option)."""
+
+    def convert(text: str) -> list[T]:
+        parts = [p.strip() for p in text.split(",") if p.strip()]
+        if not parts:
+            raise argparse.ArgumentTypeError(f"give at least one {what} (comma-separated), got {text!r}")
+        try:
+            values = [parse(p) for p in parts]
+        except (argparse.ArgumentTypeError, ValueError) as exc:
+            raise argparse.ArgumentTypeError(f"{what}s {text!r}: {exc}") from None
+        if len(set(values)) != len(values):
+            raise argparse.ArgumentTypeError(f"a {what} is listed twice: {text!r}")
+        return values
+
+    convert.__name__ = f"{what} list"
+    return convert
+
+
+def int_of(choices: Iterable[int]) -> Callable[[str], int]:
+    """An argparse type: an integer among ``choices`` (``--samples-per-clock``'s 1, 2, 4, 8, 16)."""
+    values = tuple(choices)
+
+    def convert(text: str) -> int:
+        value = int_arg(text)
+        if value not in values:
+            raise argparse.ArgumentTypeError(f"expected one of {', '.join(map(str, values))}, got {text!r}")
+        return value
+
+    convert.__name__ = "integer"
+    return convert
+
+
+def choice_of(choices: Iterable[str]) -> Callable[[str], str]:
+    """An argparse type: one of ``choices`` (for :func:`value_list`)."""
+    names = tuple(choices)
+
+    def convert(text: str) -> str:
+        if text not in names:
+            raise argparse.ArgumentTypeError(f"expected one of {', '.join(names)}, got {text!r}")
+        return text
+
+    convert.__name__ = "choice"
+    return convert
 
 
 _ON_OFF = {"on": True, "true": True, "yes": True, "1": True,

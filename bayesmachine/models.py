@@ -47,7 +47,14 @@ from bayesmachine.columns import (
     Source,
     Term,
 )
-from bayesmachine.params import DEFAULT_DMAX, STEREO_ROWS_PER_BEAT, MachineParams, ParameterError, nth_machine
+from bayesmachine.params import (
+    DEFAULT_DMAX,
+    MAX_DMAX,
+    STEREO_ROWS_PER_BEAT,
+    MachineParams,
+    ParameterError,
+    nth_machine,
+)
 
 __all__ = [
     "ModelDef",
@@ -274,7 +281,7 @@ class ModelParams:
             raise TypeError(f"name must be a model name (str), not {type(name).__name__} {name!r}")
         if name not in MODELS:
             raise ParameterError(f"name must be one of {', '.join(MODELS)}, got {name!r}", "name")
-        dmax = as_int("dmax", dmax, 0, 4094)
+        dmax = as_int("dmax", dmax, 0, MAX_DMAX)
         definition = MODELS[name]
         values = definition.resolve(parameters)
         off = {c for option, kinds in definition.switches if not values[option] for c in kinds}

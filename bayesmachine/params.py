@@ -24,6 +24,7 @@ __all__ = [
     "TIE_BREAKS",
     "SMTJ_SHARES",
     "DEFAULT_DMAX",
+    "MAX_DMAX",
     "DEFAULT_COLUMNS",
     "DEFAULT_WORD_BITS",
     "DEFAULT_COUNTER_MAX",
@@ -64,6 +65,7 @@ DEFAULT_WORDS_PER_BEAT = 16
 STEREO_ROWS_PER_BEAT = 6
 # The paper's machine: Dmax 80 (82 rows), three data terms, counter max 16.
 DEFAULT_DMAX = 80
+MAX_DMAX = 4094  # Dmax + 2 rows at most 4096
 DEFAULT_COLUMNS = 3
 DEFAULT_COUNTER_MAX = 16
 DEFAULT_RNG = "sobol"  # measured best on the bundled pair: README "Random sources"
@@ -306,7 +308,7 @@ class MachineParams:
     @classmethod
     def for_disparity(cls, dmax: int = DEFAULT_DMAX, **kwargs: object) -> MachineParams:
         """The disparity machine of the paper: M = Dmax + 2 rows, the last one no-match."""
-        dmax = _check_int("dmax", dmax, 0, 4094)
+        dmax = _check_int("dmax", dmax, 0, MAX_DMAX)
         kwargs.setdefault("columns", DEFAULT_COLUMNS)
         if "words_per_beat" not in kwargs:
             # Small machines get a load stream no wider than one pixel's words.
