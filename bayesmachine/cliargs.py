@@ -251,7 +251,8 @@ def value_list(parse: Callable[[str], T], what: str = "value") -> Callable[[str]
         try:
             values = [parse(p) for p in parts]
         except (argparse.ArgumentTypeError, ValueError) as exc:
-            raise argparse.ArgumentTypeError(f"{what}s {text!r}: {exc}") from None
+            where = f" (in {text!r})" if len(parts) > 1 else ""
+            raise argparse.ArgumentTypeError(f"{exc}{where}") from None
         if len(set(values)) != len(values):
             raise argparse.ArgumentTypeError(f"a {what} is listed twice: {text!r}")
         return values
