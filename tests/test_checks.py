@@ -125,3 +125,24 @@ def test_an_impossible_value_is_a_parameter_error_naming_it(make, parameter) -> 
 def test_public_constructors_take_keyword_arguments_only(make) -> None:
     with pytest.raises(TypeError, match="positional"):
         make()
+
+
+def test_the_hardware_and_engine_constructors_take_numpy_integers_too() -> None:
+    """'machines must be an integer, not int64': the components and engines read integers by the same
+    rule (their values plain ints)."""
+    from bayesmachine.fpga.boards.status import ReceiveTimeout
+    from bayesmachine.fpga.boards.uart import check_clocks_per_bit
+    from bayesmachine.hdl.encoder import MAPEncoder
+    from bayesmachine.hdl.machines import ParallelMachines
+    from bayesmachine.region import OutputRegion
+    from bayesmachine.sim.machines import ParallelMachinesModel
+
+    params = MachineParams.for_disparity(4, rng="lfsr")
+    assert ParallelMachines(params=params, machines=np.int64(2)).machines == 2
+    assert MAPEncoder(rows=np.uint8(6)).rows == 6
+    assert len(ParallelMachinesModel(params, np.int32(3))._models) == 3
+    assert type(OutputRegion(12, 20, 1, np.int64(3)).margin) is int
+    assert check_clocks_per_bit(np.int64(8)) == 8 and ReceiveTimeout(cycles=np.int64(9))
+    for make in (lambda: ParallelMachines(params=params, machines=np.True_), lambda: MAPEncoder(rows=6.0)):
+        with pytest.raises(TypeError, match="must be an integer, not (bool|float)"):
+            make()
