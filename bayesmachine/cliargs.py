@@ -81,6 +81,7 @@ __all__ = [
     "positive_float_arg",
     "positive_float_at_most",
     "float_in_range",
+    "size_pair",
     "int_in_range",
     "rng_list",
     "on_off_list",
@@ -174,29 +175,45 @@ def positive_float_arg(text: str) -> float:
     return value
 
 
-def int_in_range(lo: int, hi: int) -> Callable[[str], int]:
-    """An argparse type: an integer (:func:`int_arg`'s spellings) in [lo, hi]."""
+def _in_range(parse: Callable[[str], T], lo: T, hi: T, what: str) -> Callable[[str], T]:
+    """An argparse type: ``parse``'s value in [lo, hi] (``what``: "an integer", "a number")."""
 
-    def convert(text: str) -> int:
-        value = int_arg(text)
-        if not lo <= value <= hi:
-            raise argparse.ArgumentTypeError(f"expected an integer in [{lo}, {hi}], got {text!r}")
+    def convert(text: str) -> T:
+        value = parse(text)
+        if not lo <= value <= hi:  # type: ignore[operator]
+            bounds = ", ".join(f"{b:g}" if isinstance(b, float) else str(b) for b in (lo, hi))
+            raise argparse.ArgumentTypeError(f"expected {what} in [{bounds}], got {text!r}")
         return value
 
-    convert.__name__ = "integer"
+    convert.__name__ = what.split()[-1]
     return convert
+
+
+def int_in_range(lo: int, hi: int) -> Callable[[str], int]:
+    """An argparse type: an integer (:func:`int_arg`'s spellings) in [lo, hi]."""
+    return _in_range(int_arg, lo, hi, "an integer")
 
 
 def float_in_range(lo: float, hi: float) -> Callable[[str], float]:
     """An argparse type: a finite number in [lo, hi]."""
+    return _in_range(float_arg, lo, hi, "a number")
 
-    def convert(text: str) -> float:
-        value = float_arg(text)
-        if not lo <= value <= hi:
-            raise argparse.ArgumentTypeError(f"expected a number in [{lo:g}, {hi:g}], got {text!r}")
-        return value
 
-    convert.__name__ = "number"
+def size_pair(names: str, lo: tuple[int, int], hi: tuple[int, int]) -> Callable[[str], tuple[int, int]]:
+    """An argparse type: ``AxB`` (``names`` "WxH" or "HxW"), two integers, each in its [lo, hi]."""
+
+    def convert(text: str) -> tuple[int, int]:
+        try:
+            a, b = (int(v) for v in text.lower().split("x"))
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {names}, got {text!r}") from None
+        if not (lo[0] <= a <= hi[0] and lo[1] <= b <= hi[1]):
+            first, second = names.split("x")
+            raise argparse.ArgumentTypeError(f"{first} must be {lo[0]} .. {hi[0]} and {second} {lo[1]} .. "
+                                             f"{hi[1]}, got {text!r}")
+        return a, b
+
+    convert.__name__ = "size"
     return convert
 
 

@@ -20,7 +20,7 @@ from pathlib import Path
 import cv2
 
 from bayesmachine.cli import Parser, run_script
-from bayesmachine.cliargs import MAX_COUNTER_MAX, input_path, int_in_range, value_list
+from bayesmachine.cliargs import MAX_COUNTER_MAX, input_path, int_in_range, size_pair, value_list
 from bayesmachine.host.images import random_dot_stereogram
 from bayesmachine.outputs import format_bytes
 from bayesmachine.params import MAX_DMAX
@@ -43,22 +43,11 @@ def peak_rss(cmd: list[str]) -> tuple[int, int, float]:
     return int(rss), int(rc), seconds
 
 
-def _size(text: str) -> tuple[int, int]:
-    """``WxH``: a stereogram of W x H pixels, 64 .. 16384 each way."""
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WxH, got {text!r}") from None
-    if not (64 <= w <= 16384 and 64 <= h <= 16384):
-        raise argparse.ArgumentTypeError(f"W and H must be 64 .. 16384, got {text!r}")
-    return w, h
-
-
 def main(argv: list[str] | None = None) -> None:
     ap = Parser(prog=Path(__file__).name, description=__doc__,
                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--sizes", type=value_list(_size, "size"), default="640x480,3000x2000",
-                    help="WxH pairs, comma-separated")
+    ap.add_argument("--sizes", type=value_list(size_pair("WxH", (64, 64), (16384, 16384)), "size"),
+                    default="640x480,3000x2000", help="WxH pairs, comma-separated, 64 .. 16384 each way")
     ap.add_argument("--dmax", type=int_in_range(0, MAX_DMAX), default=80)
     ap.add_argument("--counter-max", type=int_in_range(1, MAX_COUNTER_MAX), default=16)
     ap.add_argument("--keep", type=input_path, default=None, help="keep inputs and outputs in this directory")

@@ -35,7 +35,7 @@ import cv2
 import numpy as np
 
 from bayesmachine.cli import Parser, build_parser, run_script
-from bayesmachine.cliargs import counter_max_list, int_in_range, rng_list
+from bayesmachine.cliargs import counter_max_list, int_in_range, rng_list, size_pair
 from bayesmachine.host.datasets import load_pair, resolve_dataset, write_pfm
 from bayesmachine.host.images import bundled_pair
 from bayesmachine.host.reference import warm_up
@@ -84,22 +84,12 @@ def cpu_seconds() -> float:
     return r.ru_utime + r.ru_stime
 
 
-def _size(text: str) -> tuple[int, int]:
-    """``HxW``: the crop of the bundled pair each frame is cut from (its 500 x 741 pixels at most)."""
-    try:
-        h, w = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected HxW, got {text!r}") from None
-    if not (16 <= h <= 500 and 16 <= w <= 741):
-        raise argparse.ArgumentTypeError(f"H must be 16 .. 500 and W 16 .. 741, got {text!r}")
-    return h, w
-
-
 def main(argv: list[str] | None = None) -> None:
     ap = Parser(prog=Path(__file__).name, description=__doc__,
                 formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--pairs", type=int_in_range(1, 1000), default=8)
-    ap.add_argument("--size", type=_size, default="96x160", help="crop HxW")
+    ap.add_argument("--size", type=size_pair("HxW", (16, 16), (500, 741)), default="96x160",
+                    help="crop HxW (the bundled pair's 500 x 741 at most)")
     ap.add_argument("--dmax", type=int_in_range(0, MAX_DMAX), default=40)
     ap.add_argument("--counter-max", type=counter_max_list, default="4,16")
     ap.add_argument("--rng", type=rng_list, default="sobol,lfsr")

@@ -127,6 +127,7 @@ def test_public_constructors_take_keyword_arguments_only(make) -> None:
         make()
 
 
+@pytest.mark.filterwarnings("ignore::amaranth.hdl.UnusedElaboratable")  # built to be checked, not elaborated
 def test_the_hardware_and_engine_constructors_take_numpy_integers_too() -> None:
     """'machines must be an integer, not int64': the components and engines read integers by the same
     rule (their values plain ints)."""
