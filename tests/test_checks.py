@@ -1,3 +1,4 @@
+# amaranth: UnusedElaboratable=no
 """The one rule for a parameter's value (bayesmachine/checks.py) across the public constructors:
 NumPy integer and bool scalars accepted as Python's operator.index takes them (bools as bools, never as
 numbers), plain Python values kept, huge integers refused without an OverflowError, keyword arguments
@@ -127,7 +128,6 @@ def test_public_constructors_take_keyword_arguments_only(make) -> None:
         make()
 
 
-@pytest.mark.filterwarnings("ignore::amaranth.hdl.UnusedElaboratable")  # built to be checked, not elaborated
 def test_the_hardware_and_engine_constructors_take_numpy_integers_too() -> None:
     """'machines must be an integer, not int64': the components and engines read integers by the same
     rule (their values plain ints)."""
