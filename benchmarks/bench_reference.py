@@ -6,14 +6,17 @@ float64 computation on the same frame. Run: python benchmarks/bench_reference.py
 
 from __future__ import annotations
 
-import argparse
 import statistics
+import sys
 import time
+from pathlib import Path
 
 import cv2
 import numba
 import numpy as np
 
+from bayesmachine.cli import Parser, run_script
+from bayesmachine.cliargs import int_in_range
 from bayesmachine.host.features import feature_sums
 from bayesmachine.host.reference import reference_fast, reference_map, reference_plain, warm_up
 from bayesmachine.models import ModelParams
@@ -30,11 +33,11 @@ def vga_pair(seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     return left, np.ascontiguousarray(right[:, 80:])
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--repeats", type=int, default=10)
+def main(argv: list[str] | None = None) -> None:
+    ap = Parser(prog=Path(__file__).name, description=__doc__)
+    ap.add_argument("--repeats", type=int_in_range(1, 1000), default=10)
     ap.add_argument("--no-plain", action="store_true", help="skip the plain-oracle check (needs ~3 GB)")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     left, right = vga_pair()
     model = ModelParams(name="paper")
     t0 = time.perf_counter()
@@ -91,4 +94,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(run_script(Path(__file__).name, main))
