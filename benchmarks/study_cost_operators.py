@@ -7,7 +7,7 @@ matrices of the census machine's size (82 rows x 6 columns, W = 10), their row b
 words or costs and numbers or thresholds on ports (no memories, no source, no counters), through Yosys
 ``synth_ecp5``:
 
-- ``words:B``: the machine's operators (``hdl.operator.sample_bits``: one comparator of the low bits a
+- ``words:B``: the machine's operators (``hdl.machine.operator.sample_bits``: one comparator of the low bits a
   clock's B Sobol numbers share, one small compare of the top bits per sample);
 - ``costs:B:K``: per operator and sample ``cost < G`` with a K-bit cost and the column's (K + 1)-bit
   threshold of that sample.
@@ -28,7 +28,7 @@ from amaranth.back import rtlil
 from amaranth.hdl import Cat, Elaboratable, Module, Signal, Value
 
 from bayesmachine.fpga.flow import run_tool
-from bayesmachine.hdl.operator import bus_rows, sample_bits
+from bayesmachine.hdl.machine.operator import bus_rows, sample_bits
 from bayesmachine.sources.sobol import sample_points
 
 ROWS, COLUMNS, W = 82, 6, 10  # the census machine: Dmax 80 + the no-match row, 6 operator columns
