@@ -86,7 +86,7 @@ class MachineNets:
     source: OnChipSource | None = None
     sources: list[OnChipSource] = field(default_factory=list)  # a shared source's copies (source first)
     groups_per_source: int = SOURCE_GROUPS  # groups of rows fed by one copy of a shared source
-    next_bits: list[Value] = field(default_factory=list)  # see _operator_matrix
+    next_bits: list[Value] = field(default_factory=list)  # see matrix.operator_matrix
     row: Signal | None = None  # this compute cycle's stochastic bus, one bit per row
     full: Signal | None = None  # registered: count == counter max, per row
     over: Signal | None = None  # this cycle's overflows, per row

@@ -5,8 +5,8 @@ stochastic bitstream by comparing a W-bit random number with q each cycle (``num
 is 1 with probability exactly q / 2**W for uniform numbers; q = 0 is never 1 and q = 2**W
 always is), and multiplies it into the stochastic bus signal of its row by an AND gate.
 :func:`operator_rows` builds the whole M x N matrix: the machine builds it from the same two
-functions on its registers (``matrix.py``), and :class:`OperatorMatrix`, the component ``tests/test_operator.py`` holds to
-:func:`operator_matrix_twin`, wraps that same function.
+functions on its registers (``matrix.py``), and :class:`OperatorMatrix`, the component
+``tests/test_operator.py`` holds to :func:`operator_matrix_twin`, wraps that same function.
 """
 
 from __future__ import annotations

@@ -78,7 +78,7 @@ class BayesianMachine(wiring.Component):
     nets : MachineNets
         After elaboration: the internal nets a proof relates to its reference (read-only).
 
-    The ports are :class:`~.signatures.MachineSignature` ``(params)``.
+    The ports are :class:`bayesmachine.hdl.signatures.MachineSignature` ``(params)``.
     """
 
     def __init__(self, *, params: MachineParams) -> None:
@@ -186,7 +186,7 @@ class BayesianMachine(wiring.Component):
         if source.shared:
             # A second level of copies: the source itself is replicated, one identical copy per
             # SOURCE_GROUPS groups of rows, each feeding only its groups' registered copies of the
-            # numbers (_operator_matrix), so the next-number logic's nets stay within a few groups
+            # numbers (matrix.py), so the next-number logic's nets stay within a few groups
             # instead of spanning the matrix (docs/fpga.md). Copy k's flip-flops are named
             # ``source_rep<k>.*`` after flattening, which the flow keeps apart.
             for k in range(1, -(-n.groups // n.groups_per_source)):
