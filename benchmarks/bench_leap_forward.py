@@ -6,7 +6,7 @@ state beyond the first L bits), and advance by exactly the run's stop sample s (
 model's numbers: the next pixel's first number is the one after the stop), a B-way choice of its
 state's next value. And every operator would compare its word with B unrelated numbers: B full
 W-bit comparators, where ``sobol``'s B numbers share their low W - log2(B) bits (one comparator
-and B small compares, ``hdl.operator.sample_bits``). Printed per B: one LFSR's generator (LUT4,
+and B small compares, ``hdl.machine.operator.sample_bits``). Printed per B: one LFSR's generator (LUT4,
 FF), an operator's B comparators (independent numbers, and ``sobol``'s shared form), and the totals
 at Dmax 80, N 3 (246 operators: ``lfsr`` has 246 LFSRs, ``lfsr-shared`` 3). Generic Yosys:
 ``synth -flatten; abc -lut 4``. Prints figures; asserts nothing.
@@ -28,7 +28,7 @@ from amaranth.lib.wiring import In, Out
 
 from bayesmachine.cli import Parser, run_script
 from bayesmachine.cliargs import int_of, value_list
-from bayesmachine.hdl.operator import sample_bits
+from bayesmachine.hdl.machine.operator import sample_bits
 from bayesmachine.hdl.sources import lfsr_next_state_expr
 from bayesmachine.params import SAMPLES_PER_CLOCK, MachineParams
 from bayesmachine.sources.lfsr import column_lfsr_specs

@@ -7,7 +7,7 @@ matrices of the census machine's size (82 rows x 6 columns, W = 10), their row b
 words or costs and numbers or thresholds on ports (no memories, no source, no counters), through Yosys
 ``synth_ecp5``:
 
-- ``words:B``: the machine's operators (``hdl.operator.sample_bits``: one comparator of the low bits a
+- ``words:B``: the machine's operators (``hdl.machine.operator.sample_bits``: one comparator of the low bits a
   clock's B Sobol numbers share, one small compare of the top bits per sample);
 - ``costs:B:K``: per operator and sample ``cost < G`` with a K-bit cost and the column's (K + 1)-bit
   threshold of that sample.
@@ -30,7 +30,7 @@ from amaranth.hdl import Cat, Elaboratable, Module, Signal, Value
 from bayesmachine.cli import Parser, run_script
 from bayesmachine.cliargs import argument_type
 from bayesmachine.fpga.flow import run_tool
-from bayesmachine.hdl.operator import bus_rows, sample_bits
+from bayesmachine.hdl.machine.operator import bus_rows, sample_bits
 from bayesmachine.params import SAMPLES_PER_CLOCK
 from bayesmachine.sources.sobol import sample_points
 

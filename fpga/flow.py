@@ -22,7 +22,7 @@ from .targets import Target
 __all__ = ["KEEP_REGISTER_COPIES", "ROUTERS", "ToolError", "cell_counts", "nextpnr", "parse_nextpnr",
            "place_and_route", "require_tool", "require_tools", "run_tool", "synthesize", "yowasp_cache"]
 
-# Registers named ``*_rep*`` are deliberate copies of a high-fanout signal (hdl/machine.py):
+# Registers named ``*_rep*`` are deliberate copies of a high-fanout signal (hdl/machine/):
 # ``keep`` stops opt_merge from folding them back into one. Two steps of the input cone from the
 # wires: the flip-flop driving a ``_rep`` wire, and the one driving a wire Amaranth aliased it
 # with (the shared source's ``compute_rep_src`` / ``start_rep_src`` come out as the source's

@@ -16,8 +16,8 @@ the numbers of this cycle and, for the machine's prefetched comparators, of the 
 ``following_restart_numbers``: lists of W-bit values, separate signals, since Amaranth's
 simulator updates them far faster than slices of one wide signal), and ``operator_numbers``,
 the entry each operator compares against. ``LFSRBank`` exposes its LFSR registers themselves as
-ports ``state_<i>`` (``numbers[i]`` is the W low bits of ``state_<i>``): a copy of 246 numbers
-into an output port would cost the full machine's simulation a quarter of its speed.
+ports ``state_<i>`` (``numbers[i]`` is the W low bits of ``state_<i>``): a copy of every number
+into an output port would slow the full machine's simulation.
 :func:`random_source` builds the component of a machine. The unit tests (``tests/test_rng.py``,
 ``tests/test_sobol.py``) drive the very components the machine instantiates.
 """
@@ -25,6 +25,7 @@ into an output port would cost the full machine's simulation a quarter of its sp
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 from amaranth.hdl import Cat, Module, Mux, Signal, Value, unsigned
 from amaranth.lib import wiring
@@ -223,6 +224,21 @@ class LFSRBank(OnChipSource):
         return m
 
 
+@dataclass(frozen=True)
+class _BlockIndex:
+    """A Sobol generator's index in the block, as its columns read it (``SobolGenerators._block_index``):
+    ``top`` (the block's last index), ``last`` (registered: i == top), its value with a restart
+    (``_e``) and its next value (``_n``), ``fresh`` likewise, and the one-hot lowest 0 bit of i + 3."""
+
+    top: int
+    last: Signal
+    last_e: Value
+    last_n: Signal
+    fresh_e: Value
+    fresh_n: Signal
+    lowest_zero_3: Signal
+
+
 class SobolGenerators(OnChipSource):
     """One randomized W-bit Sobol generator per operator column (twin: ``sources.sobol.SobolTwin``).
 
@@ -318,19 +334,21 @@ class SobolGenerators(OnChipSource):
 
     def elaborate(self, platform: object) -> Module:
         m = Module()
-        w = self._params.word_bits
+        block = self._block_index(m)
+        for c, spec in enumerate(self._specs):
+            self._column(m, c, spec, block)
+        return m
+
+    def _block_index(self, m: Module) -> _BlockIndex:
+        """The index in the block (cycles: 2^W / B per block) and its registered functions, loaded
+        with their next values, so that the numbers of the next cycle, and of the one after
+        (``following_numbers``), are a few LUTs from flip-flops: ``last`` (i == 2^W - 1), ``penult``
+        (i == 2^W - 2), ``fresh`` (a block's first cycle) and the one-hot lowest 0 bit of i + 3."""
         samples = self._params.samples_per_clock
-        iw = w - (samples.bit_length() - 1)  # the index counts cycles: 2^W / B per block
+        iw = self._params.word_bits - (samples.bit_length() - 1)  # the index counts cycles: 2^W / B per block
         top = (1 << iw) - 1
         index = Signal(iw)
         fresh = self.fresh
-        # Registered functions of the index, loaded with its next value, so that the numbers of
-        # the next cycle, and of the one after (``following_numbers``), are a few LUTs from
-        # flip-flops: ``last`` (i == 2^W - 1), ``penult`` (i == 2^W - 2), and per column the
-        # direction numbers of i's, i + 1's and i + 2's lowest 0 bit (0 for 2^W - 1, a block's last).
-        def lowest_zero_direction(vs: Sequence[int], j: int) -> int:
-            return 0 if j == top else vs[((~j & (j + 1)).bit_length() - 1)]
-
         last, penult = Signal(), Signal(init=int(top == 1))
         # A restart takes effect before the cycle's compute step: the cycle's state is that of a
         # block's start (i = 0, fresh), on which ``enable`` then acts as on any other state.
@@ -353,51 +371,57 @@ class SobolGenerators(OnChipSource):
             fresh_n.eq(Mux(self.enable, last_e, fresh_e)),
         ]
         m.d.sync += [index.eq(index_n), last.eq(last_n), penult.eq(penult_n), fresh.eq(fresh_n)]
-        for c, spec in enumerate(self._specs):
-            state = Signal(spec.length, init=spec.init, name=f"shift_lfsr_{c}")
-            y = Signal(w, name=f"sobol_{c}")
-            vs = clock_directions(c, w, samples)
+        return _BlockIndex(top=top, last=last, last_e=last_e, last_n=last_n, fresh_e=fresh_e, fresh_n=fresh_n,
+                           lowest_zero_3=lowest_zero_3)
 
-            def at(j: int, vs: Sequence[int] = vs) -> int:  # D of j's lowest 0 bit (0 from the block's end)
-                return lowest_zero_direction(vs, j) if j < top else 0
+    def _column(self, m: Module, c: int, spec: LFSRSpec, block: _BlockIndex) -> None:
+        """Column c's numbers: its shift LFSR (stepped at a block's start) XOR the Sobol point, the
+        point kept in ``y`` and stepped by the direction number of the index's lowest 0 bit. The
+        direction numbers of i's, i + 1's and i + 2's lowest 0 bit are registers (0 for 2^W - 1, a
+        block's last): a step shifts them down, the third from i + 3's one-hot (off the numbers'
+        path); a block's start loads those of 0, 1, 2."""
+        w, top, fresh = self._params.word_bits, block.top, self.fresh
+        last_e = block.last_e
+        state = Signal(spec.length, init=spec.init, name=f"shift_lfsr_{c}")
+        y = Signal(w, name=f"sobol_{c}")
+        vs = clock_directions(c, w, self._params.samples_per_clock)
 
-            # The direction numbers of i's, i + 1's and i + 2's lowest 0 bit, registers: a step
-            # shifts them down, the third from i + 3's one-hot (off the numbers' path); a block's
-            # start loads those of 0, 1, 2.
-            direction = Signal(w, init=at(0), name=f"direction_{c}")
-            direction_succ = Signal(w, init=at(1), name=f"direction_succ_{c}")
-            direction_succ2 = Signal(w, init=at(2), name=f"direction_succ2_{c}")
-            direction_3 = 0
-            for k, v in enumerate(vs):
-                direction_3 = direction_3 | Mux(lowest_zero_3[k], v, 0)
-            direction_e = Mux(self.restart, at(0), direction)
-            direction_succ_e = Mux(self.restart, at(1), direction_succ)
-            direction_succ2_e = Mux(self.restart, at(2), direction_succ2)
-            direction_3_e = Mux(self.restart, at(3), direction_3)
-            # The direction of index_n: of 0 after a block's end, of i + 1 after a step.
-            direction_n = Signal(w, name=f"direction_n_{c}")
-            m.d.comb += direction_n.eq(Mux(self.enable, Mux(last_e, at(0), direction_succ_e), direction_e))
-            m.d.sync += [
-                direction.eq(direction_n),
-                direction_succ.eq(Mux(self.enable, Mux(last_e, at(1), direction_succ2_e), direction_succ_e)),
-                direction_succ2.eq(Mux(self.enable, Mux(last_e, at(2), direction_3_e), direction_succ2_e)),
-            ]
-            m.d.comb += self.numbers[c].eq(Mux(fresh_e, state[:w], y))
-            # i == 2^W - 1 implies fresh == 0 (fresh is set with i = 0): the LFSR keeps its state.
-            m.d.comb += [
-                self.next_numbers[c].eq(Mux(last, state[:w], Mux(fresh, state[:w], y) ^ direction)),
-                self.restart_numbers[c].eq(state[:w]),
-            ]
-            # The same rules on the next cycle's registers (y, the LFSR, fresh, last, direction).
-            y_n = Mux(self.enable, self.numbers[c] ^ direction_e, y)
-            state_n = Mux(self.enable & fresh_e, lfsr_next_state_expr(state, spec), state)
-            m.d.sync += [y.eq(y_n), state.eq(state_n)]
-            number_n = Mux(fresh_n, state_n[:w], y_n)
-            m.d.comb += [
-                self.following_numbers[c].eq(Mux(last_n, state_n[:w], number_n ^ direction_n)),
-                self.following_restart_numbers[c].eq(state_n[:w]),
-            ]
-        return m
+        def at(j: int) -> int:  # D of j's lowest 0 bit (0 from the block's end)
+            return vs[((~j & (j + 1)).bit_length() - 1)] if j < top else 0
+
+        direction = Signal(w, init=at(0), name=f"direction_{c}")
+        direction_succ = Signal(w, init=at(1), name=f"direction_succ_{c}")
+        direction_succ2 = Signal(w, init=at(2), name=f"direction_succ2_{c}")
+        direction_3 = 0
+        for k, v in enumerate(vs):
+            direction_3 = direction_3 | Mux(block.lowest_zero_3[k], v, 0)
+        direction_e = Mux(self.restart, at(0), direction)
+        direction_succ_e = Mux(self.restart, at(1), direction_succ)
+        direction_succ2_e = Mux(self.restart, at(2), direction_succ2)
+        direction_3_e = Mux(self.restart, at(3), direction_3)
+        # The direction of index_n: of 0 after a block's end, of i + 1 after a step.
+        direction_n = Signal(w, name=f"direction_n_{c}")
+        m.d.comb += direction_n.eq(Mux(self.enable, Mux(last_e, at(0), direction_succ_e), direction_e))
+        m.d.sync += [
+            direction.eq(direction_n),
+            direction_succ.eq(Mux(self.enable, Mux(last_e, at(1), direction_succ2_e), direction_succ_e)),
+            direction_succ2.eq(Mux(self.enable, Mux(last_e, at(2), direction_3_e), direction_succ2_e)),
+        ]
+        m.d.comb += self.numbers[c].eq(Mux(block.fresh_e, state[:w], y))
+        # i == 2^W - 1 implies fresh == 0 (fresh is set with i = 0): the LFSR keeps its state.
+        m.d.comb += [
+            self.next_numbers[c].eq(Mux(block.last, state[:w], Mux(fresh, state[:w], y) ^ direction)),
+            self.restart_numbers[c].eq(state[:w]),
+        ]
+        # The same rules on the next cycle's registers (y, the LFSR, fresh, last, direction).
+        y_n = Mux(self.enable, self.numbers[c] ^ direction_e, y)
+        state_n = Mux(self.enable & block.fresh_e, lfsr_next_state_expr(state, spec), state)
+        m.d.sync += [y.eq(y_n), state.eq(state_n)]
+        number_n = Mux(block.fresh_n, state_n[:w], y_n)
+        m.d.comb += [
+            self.following_numbers[c].eq(Mux(block.last_n, state_n[:w], number_n ^ direction_n)),
+            self.following_restart_numbers[c].eq(state_n[:w]),
+        ]
 
 
 def random_source(params: MachineParams, operator_groups: Sequence[int] | None = None) -> OnChipSource | None:

@@ -21,7 +21,8 @@ from bayesmachine.sim.results import MachineResult, NumberFeed, answered, check_
 from bayesmachine.sources.lfsr import MAX_TAPS, LFSRSpec, column_lfsr_specs, lfsr_specs
 from bayesmachine.sources.sobol import sobol_points
 
-__all__ = ["MachineModel", "MachineResult", "check_words", "column_scales"]
+__all__ = ["MachineModel", "MachineResult", "check_words", "column_scales", "feedback_result",
+           "fill_feedback"]
 
 _BLOCK = 4096  # clocks of random numbers fetched at a time from an off-chip source
 
@@ -76,10 +77,11 @@ def _store(p, counts, k, winner, samples, leading, nm_index, out_counts, out_map
 
 
 @numba.njit(cache=True, inline="always")
-def _fill_feedback(qp, prev, start, fb, fb_nm, rows, opcols, nm_row, one):
+def fill_feedback(qp, prev, start, fb, fb_nm, rows, opcols, nm_row, one):
     """A neighbour prior's feedback column (operator column 0) of a pixel from the previous result
     ``prev`` (a hypothesis row, or -1: no match, timeout, none yet): flat (every word 1.0) when the
-    pixel starts a line or there is no previous hypothesis."""
+    pixel starts a line or there is no previous hypothesis. With :func:`feedback_result`, the twin of
+    ``hdl.machine.feedback.FeedbackPrior``."""
     last = fb.shape[0] - 1
     for r in range(rows):
         if start or prev < 0:
@@ -91,7 +93,7 @@ def _fill_feedback(qp, prev, start, fb, fb_nm, rows, opcols, nm_row, one):
 
 
 @numba.njit(cache=True, inline="always")
-def _feedback_result(winner, timeout, nm_row):
+def feedback_result(winner, timeout, nm_row):
     """The result a next pixel's feedback prior follows: the winning hypothesis row, else -1 (no
     match; a timeout, even one answered by its leading row: no information)."""
     return winner if winner >= 0 and not timeout and winner != nm_row else -1
@@ -145,7 +147,7 @@ def _run_on_chip(q, norm, states, shifts, points, per_operator, rows, opcols, wo
         qp = q[p]
         sh = norm[p]
         if feedback:
-            _fill_feedback(qp, prev[0], line_start[p], fb, fb_nm, rows, opcols, nm_row, 1 << word_bits)
+            fill_feedback(qp, prev[0], line_start[p], fb, fb_nm, rows, opcols, nm_row, 1 << word_bits)
         counts[:] = 0
         k = 0
         winner = -1
@@ -174,7 +176,7 @@ def _run_on_chip(q, norm, states, shifts, points, per_operator, rows, opcols, wo
                 break
         winner = _store(p, counts, k, winner, samples, leading, nm_index, out_counts, out_map, out_timeout,
                         out_cycles)
-        prev[0] = _feedback_result(winner, out_timeout[p], nm_row)
+        prev[0] = feedback_result(winner, out_timeout[p], nm_row)
 
 
 def _lfsr_arrays(specs: list[LFSRSpec]) -> tuple[np.ndarray, np.ndarray]:
@@ -280,7 +282,7 @@ def _run_numbers(q, norm, numbers, first, counts, done, rows, opcols, word_bits,
     for p in range(first, pixels):
         qp = q[p]
         if feedback and k == 0:  # a pixel's start (not a resumed one)
-            _fill_feedback(qp, prev[0], line_start[p], fb, fb_nm, rows, opcols, nm_row, 1 << word_bits)
+            fill_feedback(qp, prev[0], line_start[p], fb, fb_nm, rows, opcols, nm_row, 1 << word_bits)
         winner = -1
         while True:
             if t >= numbers.shape[0]:
@@ -298,7 +300,7 @@ def _run_numbers(q, norm, numbers, first, counts, done, rows, opcols, word_bits,
                 break
         winner = _store(p, counts, k, winner, samples, leading, nm_index, out_counts, out_map, out_timeout,
                         out_cycles)
-        prev[0] = _feedback_result(winner, out_timeout[p], nm_row)
+        prev[0] = feedback_result(winner, out_timeout[p], nm_row)
         counts[:] = 0
         k = 0
     done[0] = 0

@@ -133,7 +133,7 @@ def test_the_hardware_and_engine_constructors_take_numpy_integers_too() -> None:
     rule (their values plain ints)."""
     from bayesmachine.fpga.boards.status import ReceiveTimeout
     from bayesmachine.fpga.boards.uart import check_clocks_per_bit
-    from bayesmachine.hdl.encoder import MAPEncoder
+    from bayesmachine.hdl.machine.encoder import MAPEncoder
     from bayesmachine.hdl.machines import ParallelMachines
     from bayesmachine.region import OutputRegion
     from bayesmachine.sim.machines import ParallelMachinesModel

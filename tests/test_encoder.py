@@ -8,7 +8,7 @@ import random
 import pytest
 from conftest import run_sim
 
-from bayesmachine.hdl.encoder import MAPEncoder, map_encoder_twin
+from bayesmachine.hdl.machine.encoder import MAPEncoder, map_encoder_twin
 from bayesmachine.params import ParameterError
 
 CONFIGS = [(False, "lowest-index"), (True, "lowest-index"), (True, "nomatch-first"), (False, "nomatch-first")]

@@ -176,7 +176,7 @@ def _require_fpga_tools(target: str) -> None:
 
 
 # The deliberate register copies of the Dmax 14 machine below (16 rows x 3 columns: 4 groups of rows,
-# 2 copies of a shared source), counted by hand from hdl/machine.py and fpga/wrapper.py, one $dff cell
+# 2 copies of a shared source), counted by hand from hdl/machine/ and fpga/wrapper.py, one $dff cell
 # per Amaranth signal: compute_repG and start_repG (8); with a shared source per group and column
 # next_number_repG_C and restart_number_repG_C (24), per source copy compute_rep_src<k> and
 # start_rep_src<k> (4), and the second copy's registers source_rep1 (sobol: index, last, penult, fresh

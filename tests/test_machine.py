@@ -12,7 +12,6 @@ import pytest
 from amaranth.hdl import Module, Shape, Signal
 from conftest import assert_same_results, run_sim, small_params
 
-from bayesmachine.hdl.counters import overflow_counter, overflow_counter_twin
 from bayesmachine.hdl.machine import (
     BayesianMachine,
     hides_bubble,
@@ -20,6 +19,7 @@ from bayesmachine.hdl.machine import (
     pixel_wall_cycles,
     result_layout,
 )
+from bayesmachine.hdl.machine.counters import overflow_counter, overflow_counter_twin
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.model import MachineModel
 from bayesmachine.sim.pysim import PysimEngine

@@ -2,7 +2,8 @@
 """Per-pixel column normalization (``MachineParams.normalize``, ``--normalize-columns``): each loaded
 column's operators compare their words w with ``(r * m) >> W``, m the column's largest word for the
 pixel: w fires when w * 2^W > r * m, the run on the words w * 2^W / m. The model does so operator by
-operator, and the RTL (pysim, Verilator) equals the model."""
+operator, the scales' component (``hdl.machine.ColumnScales``) equals its twin (``column_scales``)
+beat by beat, and the RTL (pysim, Verilator) equals the model."""
 
 from __future__ import annotations
 
@@ -10,9 +11,10 @@ import dataclasses
 
 import numpy as np
 import pytest
-from conftest import assert_same_results, small_params
+from conftest import assert_same_results, run_sim, small_params
 
-from bayesmachine.params import MachineParams
+from bayesmachine.hdl.machine import ColumnScales, hides_bubble
+from bayesmachine.params import MachineParams, ParameterError
 from bayesmachine.sim.model import MachineModel, column_scales
 from bayesmachine.sim.pysim import PysimEngine
 
@@ -64,6 +66,91 @@ def test_scale_is_the_columns_largest_word() -> None:
     assert (scales == 0).any() and (scales == params.word_one).any()
     plain = column_scales(dataclasses.replace(params, normalize=False), words.reshape(200, -1))
     assert (plain == params.word_one).all()  # numbers unchanged
+
+
+SCALE_VARIANTS = {
+    "bubble": dict(rng="lfsr"),
+    "hidden": dict(rng="sobol"),  # a swap may take the next pixel's first beat
+    "neighbour": dict(rng="sobol", **NEIGHBOUR),
+    "one-word-beats": dict(rng="sobol", words_per_beat=1),
+    "four-word-beats": dict(rng="lfsr", words_per_beat=4),  # a column's word in different lanes
+    "loaded-prior": dict(rng="sobol", prior="loaded", words_per_beat=4),
+}
+
+
+@pytest.mark.parametrize("variant", list(SCALE_VARIANTS.values()), ids=list(SCALE_VARIANTS))
+def test_column_scales_component_equals_the_twin(variant: dict[str, object]) -> None:
+    """``ColumnScales`` beat by beat against ``column_scales``: after each beat taken, the shadow's
+    scales are the twin's on the pixel's words so far (the others 0); a cycle without a handshake and
+    the last beat's unused lanes change nothing; the swap takes the pixel's scales as the active ones
+    (``active_next`` in the swap) and clears the shadow; without the bubble a beat taken in the swap is
+    the next pixel's first."""
+    params = small_params(normalize=True, **variant)
+    pixels, per_beat, nbeats = 40, params.words_per_beat, params.beats_per_pixel
+    fb, loaded = params.feedback_columns, params.loaded_columns
+    words = _weak_words(params, pixels, seed=6).reshape(pixels, -1)
+    rng = np.random.default_rng(2)
+    dut = ColumnScales(params=params)
+
+    def twin(pixel: int, beats: int) -> list[int]:  # the scales of the pixel's first ``beats`` beats
+        q = words[pixel].copy()
+        q[beats * per_beat:] = 0
+        ops = np.zeros((params.rows, params.operator_columns), np.int64)  # the feedback column: 0
+        ops[:, fb:] = q.reshape(params.rows, loaded)
+        return column_scales(params, ops.reshape(1, -1))[0, fb:].tolist()
+
+    async def bench(ctx):
+        def scales(port) -> list[int]:  # noqa: ANN001
+            return [ctx.get(x) for x in port]
+
+        async def swap(pixel: int) -> None:
+            ctx.set(dut.start, 1)
+            assert scales(dut.active_next) == twin(pixel, nbeats)
+            await ctx.tick()
+            ctx.set(dut.start, 0)
+            assert scales(dut.active) == twin(pixel, nbeats), f"pixel {pixel}: the active scales"
+
+        assert scales(dut.shadow) == scales(dut.active) == [0] * loaded
+        for i in range(pixels):
+            in_beat = i > 0 and hides_bubble(params) and rng.random() < 0.5
+            if i > 0 and not in_beat:
+                await swap(i - 1)
+                assert scales(dut.shadow) == [0] * loaded, "the swap clears the shadow's scales"
+            for b in range(nbeats):
+                for _ in range(int(rng.integers(0, 2))):  # no handshake: any words
+                    ctx.set(dut.accept, 0)
+                    for lane in range(per_beat):
+                        ctx.set(dut.words[lane], int(rng.integers(params.word_one + 1)))
+                    await ctx.tick()
+                    held = twin(i - 1, nbeats) if in_beat and b == 0 else twin(i, b)  # not swapped yet
+                    assert scales(dut.shadow) == held, f"pixel {i}: a cycle without a handshake"
+                ctx.set(dut.accept, 1)
+                ctx.set(dut.beat, 1 << b)
+                for lane in range(per_beat):
+                    w = b * per_beat + lane
+                    ctx.set(dut.words[lane], int(words[i, w]) if w < params.words_per_pixel
+                            else params.word_one)  # an unused lane of the last beat
+                if in_beat and b == 0:
+                    await swap(i - 1)
+                else:
+                    await ctx.tick()
+                ctx.set(dut.accept, 0)
+                assert scales(dut.shadow) == twin(i, b + 1), f"pixel {i}, beat {b}"
+
+    run_sim(dut, bench)
+
+
+def test_column_scales_checks_its_arguments() -> None:
+    with pytest.raises(TypeError, match="MachineParams"):
+        ColumnScales(params=None)  # type: ignore[arg-type]
+    with pytest.raises(ParameterError, match="normalize") as err:
+        ColumnScales(params=small_params())
+    assert err.value.parameter == "normalize"
+    with pytest.raises(TypeError):
+        ColumnScales(small_params(normalize=True))  # type: ignore[misc]  # keyword-only
+    dut = ColumnScales(params=small_params(normalize=True))
+    with pytest.raises(AttributeError):
+        dut.params = small_params()  # type: ignore[misc]  # read-only
 
 
 def test_model_fires_when_w_times_2w_exceeds_r_times_m() -> None:

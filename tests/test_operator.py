@@ -9,7 +9,7 @@ import random
 import pytest
 from conftest import run_sim
 
-from bayesmachine.hdl.operator import OperatorMatrix, operator_matrix_twin, stochastic_operator_twin
+from bayesmachine.hdl.machine.operator import OperatorMatrix, operator_matrix_twin, stochastic_operator_twin
 from bayesmachine.params import MachineParams, ParameterError
 from bayesmachine.sources.lfsr import LFSRSpec, lfsr_numbers, lfsr_specs
 
@@ -114,7 +114,7 @@ def test_sample_bits_compare_every_point(w: int, samples: int) -> None:
     them in a swap), equal to its twin."""
     from amaranth.hdl import Module, Signal
 
-    from bayesmachine.hdl.operator import sample_bits, sample_bits_twin
+    from bayesmachine.hdl.machine.operator import sample_bits, sample_bits_twin
     from bayesmachine.sources.sobol import sample_points
 
     point_sets = [sample_points(c, w, samples) for c in range(3)]
@@ -147,7 +147,7 @@ def test_scaled_numbers_for_every_point(w: int, samples: int) -> None:
     point of a clock's B points and a block's first 2B, exhaustively at small W, equal to its twin."""
     from amaranth.hdl import Module, Signal
 
-    from bayesmachine.hdl.operator import scaled_numbers, scaled_numbers_twin
+    from bayesmachine.hdl.machine.operator import scaled_numbers, scaled_numbers_twin
     from bayesmachine.sources.sobol import sample_points
 
     point_sets = [sample_points(c, w, b) for c in range(3) for b in (samples, 2 * samples) if b <= 1 << w]

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from conftest import assert_same_results, small_params
 
-from bayesmachine.hdl.counters import (
+from bayesmachine.hdl.machine.counters import (
     overflow_counter_twin,
     overflow_flags_twin,
     sample_counter_twin,

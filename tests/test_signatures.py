@@ -11,14 +11,14 @@ import pytest
 from amaranth.hdl import Fragment
 from amaranth.lib import wiring
 
-from bayesmachine.hdl.encoder import MAPEncoder
 from bayesmachine.hdl.frontend.filters import FeatureFilter
 from bayesmachine.hdl.frontend.linebuffer import LineBuffer
 from bayesmachine.hdl.frontend.stereo import FrontEnd, StereoMachine, stereo_machine_params
 from bayesmachine.hdl.frontend.words import WordGenerator
 from bayesmachine.hdl.machine import BayesianMachine
+from bayesmachine.hdl.machine.encoder import MAPEncoder
+from bayesmachine.hdl.machine.operator import OperatorMatrix
 from bayesmachine.hdl.machines import ParallelMachines
-from bayesmachine.hdl.operator import OperatorMatrix
 from bayesmachine.hdl.signatures import (
     MachineSignature,
     StereoSignature,

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from bayesmachine.hdl.encoder import map_encoder_twin
+from bayesmachine.hdl.machine.encoder import map_encoder_twin
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.model import MachineModel
 from bayesmachine.sim.synthetic import synthetic_disparity_words

@@ -9,8 +9,12 @@ import pytest
 from amaranth.hdl import Module, Signal
 from conftest import run_sim, small_params
 
-from bayesmachine.hdl.counters import overflow_counter_full, overflow_counter_full_twin, overflow_counter_twin
 from bayesmachine.hdl.machine import hides_bubble, pixel_wall_cycles, search_cycles
+from bayesmachine.hdl.machine.counters import (
+    overflow_counter_full,
+    overflow_counter_full_twin,
+    overflow_counter_twin,
+)
 from bayesmachine.sim.model import MachineModel
 from bayesmachine.sim.pysim import PysimEngine
 

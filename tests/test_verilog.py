@@ -12,7 +12,7 @@ from conftest import require_tool
 
 from bayesmachine.hdl import cli as hdl_cli
 from bayesmachine.hdl import emit as hdl_emit
-from bayesmachine.hdl.encoder import MAPEncoder
+from bayesmachine.hdl.machine.encoder import MAPEncoder
 from bayesmachine.params import MachineParams
 
 WAIVERS = Path(hdl_emit.__file__).with_name("bayesmachine.vlt")

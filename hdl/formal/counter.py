@@ -1,5 +1,5 @@
 """Properties of the overflow counter, on the very function the machine instantiates
-(``hdl.counters.overflow_counter_full``), driven as the machine drives it: a ``clear`` (the run's
+(``hdl.machine.counters.overflow_counter_full``), driven as the machine drives it: a ``clear`` (the run's
 start, which empties the counters) and an ``enable`` (a compute cycle) per clock, and the row's
 stochastic bus bit, all three free."""
 
@@ -11,7 +11,7 @@ from amaranth.hdl import Assert, Cover, Module, Mux, Signal, Value
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In
 
-from bayesmachine.hdl.counters import overflow_counter_full
+from bayesmachine.hdl.machine.counters import overflow_counter_full
 
 __all__ = ["CounterFn", "CounterProperties"]
 

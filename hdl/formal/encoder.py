@@ -1,4 +1,4 @@
-"""Properties of the MAP encoder (``hdl.encoder.MAPEncoder``, the machine's submodule), for every
+"""Properties of the MAP encoder (``hdl.machine.encoder.MAPEncoder``, the machine's submodule), for every
 subset of simultaneous overflows: the encoder is combinational, so its ``over`` input is free and
 one step covers every subset (``prove`` closes at once)."""
 
@@ -10,7 +10,7 @@ from amaranth.hdl import Assert, Cover, Module
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
-from bayesmachine.hdl.encoder import MAPEncoder
+from bayesmachine.hdl.machine.encoder import MAPEncoder
 from bayesmachine.params import TIE_BREAKS
 
 __all__ = ["EncoderFactory", "EncoderProperties"]

@@ -13,11 +13,11 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from amaranth.hdl import Assert, Assume, Cover, Fragment, Module, Mux, Signal
+from amaranth.hdl import Assert, Assume, Cover, Fragment, Module, Mux, Signal, Value
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
-from bayesmachine.hdl.machine import BayesianMachine
+from bayesmachine.hdl.machine import BayesianMachine, MAPEncoder
 from bayesmachine.hdl.signatures import entropy_layout, load_layout, result_layout
 from bayesmachine.params import MachineParams
 from bayesmachine.sources import source_kind
@@ -84,63 +84,81 @@ class MachineProperties(wiring.Component):
         return self._params
 
     def elaborate(self, platform: object) -> Module:
-        p = self._params
         m = Module()
         dut = self._dut
         # Elaborated here so that the properties can watch the MAP encoder it instantiates
         # (``BayesianMachine.nets.encoder``).
         m.submodules.dut = Fragment.get(dut, platform)
-        encoder = dut.nets.encoder
         m.d.comb += [
             dut.load.valid.eq(self.load_valid), dut.load.payload.eq(self.load_payload),
             dut.result.ready.eq(self.result_ready), dut.entropy.eq(self.entropy),
             self.result_valid.eq(dut.result.valid), self.result_payload.eq(dut.result.payload),
         ]
-        valid, ready, res = self.result_valid, self.result_ready, self.result_payload
+        self._load_rule(m, dut.load.ready)
+        stall = self._stream(m)
+        if "watchdog" in self._checks:
+            self._watchdog(m)
+        if "result" in self._checks:
+            self._result_fields(m)
+        if "runs" in self._checks:
+            taken = self.result_valid & self.result_ready
+            self._runs(m, dut.entropy_ready, taken, self.result_payload.cycles)
+        rise, enc_tie = self._encoder_choice(m, dut.nets.encoder)
+        self._covers(m, stall, rise, enc_tie)
+        return m
 
-        # The environment: the load stream's source follows the stream rule (and nothing more).
+    def _load_rule(self, m: Module, ready: Signal) -> None:
+        """The environment: the load stream's source follows the stream rule (and nothing more)."""
         load_stall = Signal()
         load_prev = Signal.like(self.load_payload)
-        m.d.sync += [load_stall.eq(self.load_valid & ~dut.load.ready), load_prev.eq(self.load_payload)]
+        m.d.sync += [load_stall.eq(self.load_valid & ~ready), load_prev.eq(self.load_payload)]
         with m.If(load_stall):
             m.d.comb += Assume(self.load_valid & (self.load_payload.as_value() == load_prev.as_value()))
 
+    def _stream(self, m: Module) -> Signal:
+        """``stream``: a result offered and not taken is offered again in the next cycle, unchanged:
+        back-pressure never drops, changes or loses a result (the stream rule, from the source side).
+        Returns the stall flag (a result was offered and not taken in the cycle before)."""
+        valid, ready, res = self.result_valid, self.result_ready, self.result_payload
         stall = Signal()
         prev = Signal.like(res)
         m.d.sync += [stall.eq(valid & ~ready), prev.eq(res)]
         if "stream" in self._checks:
-            # A result offered and not taken is offered again in the next cycle, unchanged: back-
-            # pressure never drops, changes or loses a result (the stream rule, from the source side).
             with m.If(stall):
                 m.d.comb += Assert(valid, "result.valid held until ready")
                 m.d.comb += Assert(res.as_value() == prev.as_value(), "result payload stable until ready")
-        if "watchdog" in self._checks:
-            # The watchdog: a run counts 1 to max_cycles compute cycles, never more, and a timeout is
-            # reported only by a run that reached max_cycles (and then map is 0).
-            with m.If(valid):
-                m.d.comb += Assert((res.cycles >= 1) & (res.cycles <= p.max_cycles),
-                                   "1 <= cycles <= max_cycles")
-                with m.If(res.timeout):
-                    m.d.comb += Assert(res.cycles == p.max_cycles, "timeout only at max_cycles")
-                    m.d.comb += Assert(res.map == 0, "a timeout reports map 0")
-        if "result" in self._checks:
-            # A result's fields agree: the counters never pass n_max, the winning row holds n_max
-            # (it overflowed), and nomatch says the no-match row won.
-            with m.If(valid):
-                for r in range(p.rows):
-                    m.d.comb += Assert(res.counts[r] <= p.counter_max, f"count {r} <= counter max")
-                    m.d.comb += Assert(res.timeout | (res.map != r) | (res.counts[r] == p.counter_max),
-                                       f"the winner {r} holds counter max")
-                m.d.comb += Assert(res.map < p.rows, "map names a row")
-                nomatch = (~res.timeout & (res.map == p.rows - 1)) if p.nomatch_row else 0
-                m.d.comb += Assert(res.nomatch == nomatch, "nomatch iff the no-match row won")
+        return stall
 
-        if "runs" in self._checks:
-            self._runs(m, dut.entropy_ready, valid & ready, res.cycles)
+    def _watchdog(self, m: Module) -> None:
+        """``watchdog``: a run counts 1 to max_cycles compute cycles, never more, and a timeout is
+        reported only by a run that reached max_cycles (and then map is 0)."""
+        p, res = self._params, self.result_payload
+        with m.If(self.result_valid):
+            m.d.comb += Assert((res.cycles >= 1) & (res.cycles <= p.max_cycles), "1 <= cycles <= max_cycles")
+            with m.If(res.timeout):
+                m.d.comb += Assert(res.cycles == p.max_cycles, "timeout only at max_cycles")
+                m.d.comb += Assert(res.map == 0, "a timeout reports map 0")
 
-        # A new result (valid rises: a handshake always leaves a cycle without one) was taken in the
-        # cycle before from the MAP encoder's outputs on the registered overflow flags of the run's
-        # last compute cycle: keep those outputs a cycle.
+    def _result_fields(self, m: Module) -> None:
+        """``result``: a result's fields agree: the counters never pass n_max, the winning row holds
+        n_max (it overflowed), and nomatch says the no-match row won."""
+        p, res = self._params, self.result_payload
+        with m.If(self.result_valid):
+            for r in range(p.rows):
+                m.d.comb += Assert(res.counts[r] <= p.counter_max, f"count {r} <= counter max")
+                m.d.comb += Assert(res.timeout | (res.map != r) | (res.counts[r] == p.counter_max),
+                                   f"the winner {r} holds counter max")
+            m.d.comb += Assert(res.map < p.rows, "map names a row")
+            nomatch = (~res.timeout & (res.map == p.rows - 1)) if p.nomatch_row else 0
+            m.d.comb += Assert(res.nomatch == nomatch, "nomatch iff the no-match row won")
+
+    def _encoder_choice(self, m: Module, encoder: MAPEncoder) -> tuple[Value, Signal]:
+        """A new result (valid rises: a handshake always leaves a cycle without one) was taken in the
+        cycle before from the MAP encoder's outputs on the registered overflow flags of the run's
+        last compute cycle: keep those outputs a cycle. With ``result``: the result is the encoder's
+        choice at the stop (so the machine reports ties by the tie rule proved of the encoder), a
+        timeout exactly when no row overflowed. Returns (the rise, a tie of the no-match row then)."""
+        p, valid, res = self._params, self.result_valid, self.result_payload
         last = p.rows - 1
         was_valid = Signal()
         enc_valid, enc_index, enc_tie = Signal(), Signal.like(encoder.index), Signal()
@@ -149,8 +167,6 @@ class MachineProperties(wiring.Component):
                      enc_tie.eq(tie)]
         rise = valid & ~was_valid
         if "result" in self._checks:
-            # The result is the MAP encoder's choice at the stop (so the machine reports ties by the
-            # tie rule proved of the encoder), a timeout exactly when no row overflowed.
             with m.If(rise):
                 m.d.comb += Assert(res.timeout == ~enc_valid, "timeout iff no row overflowed at the stop")
                 with m.If(~res.timeout):
@@ -161,20 +177,22 @@ class MachineProperties(wiring.Component):
                 with m.If(rise & enc_tie):
                     m.d.comb += Assert(res.nomatch == (p.tie_break == "nomatch-first"),
                                        "the machine's tie rule")
+        return rise, enc_tie
 
-        # Not vacuous: a timeout, a stalled result, a result from a tie of the no-match row with a
-        # disparity row (reported as no match under nomatch-first, as the disparity under
-        # lowest-index), and two results taken.
+    def _covers(self, m: Module, stall: Signal, rise: Value, enc_tie: Signal) -> None:
+        """Not vacuous: a timeout, a stalled result, a result from a tie of the no-match row with a
+        disparity row (reported as no match under nomatch-first, as the disparity under
+        lowest-index), and two results taken."""
+        p, valid, res = self._params, self.result_valid, self.result_payload
         m.d.comb += Cover(valid & res.timeout)
         m.d.comb += Cover(stall & valid & ~res.timeout)
         if p.nomatch_row:
             nomatch_wins = p.tie_break == "nomatch-first"
             m.d.comb += Cover(rise & enc_tie & (res.nomatch if nomatch_wins else ~res.nomatch & ~res.timeout))
         taken = Signal(2)
-        with m.If(valid & ready & (taken != 3)):
+        with m.If(valid & self.result_ready & (taken != 3)):
             m.d.sync += taken.eq(taken + 1)
         m.d.comb += Cover(taken == 2)
-        return m
 
     def _runs(self, m: Module, compute: Signal, taken: Signal, cycles: Signal) -> None:
         """A run's compute cycles are a burst of ``entropy_ready`` (the port is high on compute

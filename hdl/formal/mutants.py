@@ -13,11 +13,11 @@ from typing import Any
 
 from amaranth.hdl import Cat, Module, Mux, Signal, Value
 
-from bayesmachine.hdl.counters import count_ones, overflow_counter_full
-from bayesmachine.hdl.encoder import MAPEncoder, map_encoder
 from bayesmachine.hdl.frontend.stereo import FeaturePipeline, FrontEnd, StereoMachine
 from bayesmachine.hdl.frontend.words import WordGenerator
 from bayesmachine.hdl.machine import BayesianMachine
+from bayesmachine.hdl.machine.counters import count_ones, overflow_counter_full
+from bayesmachine.hdl.machine.encoder import MAPEncoder, map_encoder
 from bayesmachine.params import MachineParams
 
 __all__ = [

@@ -307,53 +307,20 @@ def build_design(
     texts = {name: (HARNESS_DIR / name).read_text()
              for name in (*design.sources, *sorted(p.name for p in HARNESS_DIR.glob("*.h")))}
     flags = [*VERILATOR_FLAGS, *design.extra_flags]
-    h = hashlib.sha256()
-    for part in (design.verilog, design.wrapper, design.header, *texts.values(), " ".join(flags), MAKE_FLAGS,
-                 _verilator_version(tools["verilator"])):
-        h.update(part.encode())
-        h.update(b"\0")
-    key = design.prefix + h.hexdigest()[:20]
+    key = design.prefix + _build_key(design, texts, flags, tools["verilator"])
     final = root / key
-    if final.exists():
-        problem = _entry_problem(final)
-        if problem is None:
-            info = json.loads((final / "build.json").read_text())
-            return VerilatorBuild(final, final / "harness", key, False, float(info.get("seconds", 0.0)))
-        print(f"verilator: the cached build {final} is broken ({problem}): rebuilding it", file=sys.stderr)
-        shutil.rmtree(final, ignore_errors=True)
+    cached = _cached_build(final, key)
+    if cached is not None:
+        return cached
     _remove_orphans(root)
-
     tmp = Path(tempfile.mkdtemp(prefix=f".build-{key}-{os.getpid()}-", dir=root))
     umask = os.umask(0)
     os.umask(umask)
     os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes it private; the cache entry should not be
     try:
-        (tmp / f"{TOP_NAME}.v").write_text(design.verilog)
-        (tmp / f"{HARNESS_TOP}.v").write_text(design.wrapper)
-        (tmp / design.header_name).write_text(design.header)
-        for name, text in texts.items():
-            (tmp / name).write_text(text)
-        make_flags = MAKE_FLAGS + _runtime_cache_flag(root, tmp, tools["verilator"])
-        cmd = [tools["verilator"], *flags, "-j", str(max(1, jobs)), "--top-module", HARNESS_TOP,
-               "-Mdir", str(tmp / "obj"), "-o", str(tmp / "harness"), "-MAKEFLAGS", make_flags,
-               f"{TOP_NAME}.v", f"{HARNESS_TOP}.v", *design.sources]
-        t0 = time.perf_counter()
-        with open(tmp / "build.log", "w") as log:
-            log.write(" ".join(cmd) + "\n")
-            log.flush()
-            if verbose:
-                # A first build takes tens of seconds: say why the command is quiet.
-                print(f"verilator: compiling {design.label} (once; cached in {final})", file=sys.stderr)
-            returncode = _compile(cmd, tmp, log)
-        seconds = time.perf_counter() - t0
+        cmd = _harness_command(design, texts, flags, tools, root, tmp, jobs)
+        seconds = _run_build(cmd, tmp, design.label, final, verbose, error_hint)
         exe = tmp / "harness"
-        if returncode != 0 or not exe.exists():
-            log_text = (tmp / "build.log").read_text()
-            hint = error_hint(log_text) if error_hint is not None else None
-            if hint:
-                raise VerilatorError(hint)
-            raise VerilatorError(f"Verilator build of {design.label} failed (exit {returncode}); "
-                                 f"end of the log:\n{log_text[-3000:]}")
         shutil.rmtree(tmp / "obj", ignore_errors=True)  # objects: hundreds of MB for big designs
         (tmp / "build.json").write_text(json.dumps(
             {"key": key, **(design.info or {}), "seconds": seconds, "flags": flags,
@@ -371,6 +338,66 @@ def build_design(
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+
+
+def _build_key(design: HarnessSources, texts: dict[str, str], flags: list[str], verilator: str) -> str:
+    """The cache key of a build: a hash of every input (design, harness sources, flags, tool version)."""
+    h = hashlib.sha256()
+    for part in (design.verilog, design.wrapper, design.header, *texts.values(), " ".join(flags), MAKE_FLAGS,
+                 _verilator_version(verilator)):
+        h.update(part.encode())
+        h.update(b"\0")
+    return h.hexdigest()[:20]
+
+
+def _cached_build(final: Path, key: str) -> VerilatorBuild | None:
+    """The cache entry ``final`` if it is complete; a broken one is removed (None: build it)."""
+    if not final.exists():
+        return None
+    problem = _entry_problem(final)
+    if problem is None:
+        info = json.loads((final / "build.json").read_text())
+        return VerilatorBuild(final, final / "harness", key, False, float(info.get("seconds", 0.0)))
+    print(f"verilator: the cached build {final} is broken ({problem}): rebuilding it", file=sys.stderr)
+    shutil.rmtree(final, ignore_errors=True)
+    return None
+
+
+def _harness_command(design: HarnessSources, texts: dict[str, str], flags: list[str], tools: dict[str, str],
+                     root: Path, tmp: Path, jobs: int) -> list[str]:
+    """Write the build's inputs into ``tmp`` and return the Verilator command that builds them there."""
+    (tmp / f"{TOP_NAME}.v").write_text(design.verilog)
+    (tmp / f"{HARNESS_TOP}.v").write_text(design.wrapper)
+    (tmp / design.header_name).write_text(design.header)
+    for name, text in texts.items():
+        (tmp / name).write_text(text)
+    make_flags = MAKE_FLAGS + _runtime_cache_flag(root, tmp, tools["verilator"])
+    return [tools["verilator"], *flags, "-j", str(max(1, jobs)), "--top-module", HARNESS_TOP,
+            "-Mdir", str(tmp / "obj"), "-o", str(tmp / "harness"), "-MAKEFLAGS", make_flags,
+            f"{TOP_NAME}.v", f"{HARNESS_TOP}.v", *design.sources]
+
+
+def _run_build(cmd: list[str], tmp: Path, label: str, final: Path, verbose: bool,
+               error_hint: Callable[[str], str | None] | None) -> float:
+    """Run the build ``cmd`` in ``tmp`` (log in ``build.log``); its seconds, or a
+    :class:`VerilatorError` with the hint or the log's end."""
+    t0 = time.perf_counter()
+    with open(tmp / "build.log", "w") as log:
+        log.write(" ".join(cmd) + "\n")
+        log.flush()
+        if verbose:
+            # A first build takes tens of seconds: say why the command is quiet.
+            print(f"verilator: compiling {label} (once; cached in {final})", file=sys.stderr)
+        returncode = _compile(cmd, tmp, log)
+    seconds = time.perf_counter() - t0
+    if returncode != 0 or not (tmp / "harness").exists():
+        log_text = (tmp / "build.log").read_text()
+        hint = error_hint(log_text) if error_hint is not None else None
+        if hint:
+            raise VerilatorError(hint)
+        raise VerilatorError(f"Verilator build of {label} failed (exit {returncode}); "
+                             f"end of the log:\n{log_text[-3000:]}")
+    return seconds
 
 
 def _fst_hint(log_text: str) -> str | None:

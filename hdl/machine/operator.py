@@ -4,9 +4,9 @@ Operator (r, c) turns its likelihood-memory word q (a probability q / 2**W) into
 stochastic bitstream by comparing a W-bit random number with q each cycle (``number < q``
 is 1 with probability exactly q / 2**W for uniform numbers; q = 0 is never 1 and q = 2**W
 always is), and multiplies it into the stochastic bus signal of its row by an AND gate.
-:func:`operator_rows` builds the whole M x N matrix: the machine calls it on its registers,
-and :class:`OperatorMatrix`, the component ``tests/test_operator.py`` holds to
-:func:`operator_matrix_twin`, wraps that same function.
+:func:`operator_rows` builds the whole M x N matrix: the machine builds it from the same two
+functions on its registers (``matrix.py``), and :class:`OperatorMatrix`, the component
+``tests/test_operator.py`` holds to :func:`operator_matrix_twin`, wraps that same function.
 """
 
 from __future__ import annotations
@@ -217,9 +217,9 @@ def operator_rows(numbers: Sequence[Value], words: Sequence[Value], rows: int, c
     """The matrix's logic: the M row bits of the stochastic bus (bit r = row r).
 
     ``bus_rows(operator_bits(...))``. The machine builds its matrix from these two functions on
-    its own likelihood-memory registers and source outputs (a submodule's port copies would slow
-    the simulator by a quarter; with an on-chip source it registers the comparator bits between
-    them, ``hdl/machine.py``), and :class:`OperatorMatrix` wraps this function for
+    its own likelihood-memory registers and source outputs (a submodule's port copies of every word
+    and number would slow Amaranth's simulator; with an on-chip source it registers the comparator
+    bits between them, ``matrix.py``), and :class:`OperatorMatrix` wraps this function for
     ``tests/test_operator.py``.
     """
     return bus_rows(operator_bits(numbers, words, sources), rows, columns)
