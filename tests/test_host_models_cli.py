@@ -10,7 +10,7 @@ import pytest
 
 from bayesmachine import cliargs
 from bayesmachine.cli import build_parser, main
-from bayesmachine.host.features import model_features
+from bayesmachine.host.features import model_planes
 from bayesmachine.host.images import random_dot_stereogram
 from bayesmachine.host.reference import reference_map
 from bayesmachine.host.run import prepare, run_machine
@@ -151,7 +151,7 @@ def test_reference_census(pair, tmp_path):
                  "--quiet", "-o", str(out)]) == 0
     _, left, right, _ = pair
     model = ModelParams(dmax=DMAX, name="census")
-    want = reference_map(model_features(left, model), model_features(right, model), model)
+    want = reference_map(model_planes(left, model), model_planes(right, model), model)
     np.testing.assert_array_equal(np.load(out)["map"], want)
 
 
