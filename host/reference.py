@@ -34,10 +34,14 @@ name. ``reference_plain`` and ``reference_prior_plain`` are the plain oracles of
 from __future__ import annotations
 
 from collections.abc import Iterator, Mapping
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from typing import Any
 
 import numba
 import numpy as np
+from numba import literal_unroll
+from numba.extending import overload
 
 from bayesmachine.columns import AbovePrior, Column, LeftPrior, Source
 from bayesmachine.models import ModelParams, Pass
@@ -106,13 +110,17 @@ def _popcount(x):  # pragma: no cover
     return np.int64((x * _H01) >> np.uint64(56))
 
 
-@numba.njit(cache=True, inline="always")
-def _cost(a, b, hamming):  # pragma: no cover
-    """A FEATURES column's cost of two pixels' values (int64): the Hamming distance of census codes, else
-    the |difference| of sums."""
-    if hamming:
-        return _popcount(np.uint64(a ^ b))
-    return abs(a - b)
+def _cost(a, b):  # pragma: no cover
+    """A FEATURES column's cost of two pixels' values, by their type: census codes (uint64) their
+    Hamming distance, feature sums their |difference| (chosen when numba compiles, no branch)."""
+    raise NotImplementedError("compiled by numba only")
+
+
+@overload(_cost, inline="always")
+def _cost_for(a, b):  # pragma: no cover
+    if a == numba.types.uint64:
+        return lambda a, b: _popcount(a ^ b)
+    return lambda a, b: abs(a - b)
 
 
 @numba.njit(cache=True, inline="always")
@@ -123,112 +131,185 @@ def _lanes(x, step, last, dmax):  # pragma: no cover
     return dmax + 1
 
 
-@numba.njit(parallel=True, cache=True, fastmath=False, boundscheck=False)
-def _data_float(ref, match, tables, hamming, nm_entry, nm_plane, nm_table, has_nm,  # pragma: no cover
-                first, step, last, dmax, data, idx):
-    """data[y, j, h]: the float64 product of the K FEATURES columns of pixel (y, first + j), in operator
-    order ((c0 * c1) * c2) * ...; column k's factor ``tables[k, cost]`` of the reference values
-    ``ref[y, x, k]`` and the match's ``match[y, x + step * d, k]``; a lane past ``last`` gets 0. The
-    no-match row: ``nm_table[|nm_plane|]`` (the pass's rule, in column 0) times the other columns'
-    entries ``nm_entry[1:]``, or 0 without one (``has_nm``). With ``idx`` (not None) also normalize and
-    take the MAP (-1: no match; the lowest index wins exact ties)."""
+@numba.njit(nogil=True, cache=True, fastmath=False, boundscheck=False)
+def _data_float(cols, nm_entry, nm_plane, nm_table, has_nm, first, step, last, dmax,  # pragma: no cover
+                data, idx):
+    """data[y, j, h]: the float64 product of the FEATURES columns ``cols`` of pixel (y, first + j), in
+    operator order ((c0 * c1) * c2) * ...: column k = (reference plane, match plane, table), its factor
+    the table at ``_cost`` of the reference pixel's value and the match's, at column x + step * d; a lane
+    past ``last`` gets 0. The no-match row: ``nm_table[|nm_plane|]`` (the pass's rule, in column 0) times
+    the other columns' entries ``nm_entry[1:]``, or 0 without one (``has_nm``). With ``idx`` (not None)
+    also normalize and take the MAP (-1: no match; the lowest index wins exact ties)."""
     n, wo = data.shape[0], data.shape[1]
-    k_cols = tables.shape[0]
-    for y in numba.prange(n):
+    for y in range(n):
         for j in range(wo):
             x = first + j
             out = data[y, j]
             lanes = _lanes(x, step, last, dmax)
-            a = ref[y, x]
             for d in range(lanes):
-                b = match[y, x + step * d]
-                v = tables[0, _cost(a[0], b[0], hamming[0])]
-                for k in range(1, k_cols):
-                    v = v * tables[k, _cost(a[k], b[k], hamming[k])]
+                xm = x + step * d
+                v = 1.0  # 1.0 * c0 is c0: the product ((c0 * c1) * c2) * ...
+                for col in literal_unroll(cols):
+                    ref, match, table = col
+                    v = v * table[_cost(ref[y, x], match[y, xm])]
                 out[d] = v
             for d in range(lanes, dmax + 1):
                 out[d] = 0.0
             v = 0.0
             if has_nm:
                 v = nm_table[abs(nm_plane[y, x])]
-                for k in range(1, k_cols):
+                for k in range(1, nm_entry.shape[0]):
                     v = v * nm_entry[k]
             out[dmax + 1] = v
             if idx is not None:
                 idx[y, j] = _finish(out)
 
 
+# A pixel's exact values ``v``: (M,) int64 when a product fits one int64, else (M, L) limbs (module text).
+# Each helper is compiled for both, the one-int64 form as plain int64 arithmetic.
+def _store(v, d, value):  # pragma: no cover
+    """v[d] = value (an int64 of up to 62 bits)."""
+    raise NotImplementedError("compiled by numba only")
+
+
+def _times(v, d, word):  # pragma: no cover
+    """v[d] *= word, exactly."""
+    raise NotImplementedError("compiled by numba only")
+
+
+def _float(v, d):  # pragma: no cover
+    """v[d] in float64: one int64, float(v); limbs, the top one first, times 2^32 plus the next..."""
+    raise NotImplementedError("compiled by numba only")
+
+
+def _greater(v, d, e):  # pragma: no cover
+    """Exactly v[d] > v[e]."""
+    raise NotImplementedError("compiled by numba only")
+
+
+# The limbs' arithmetic, inlined into the kernels (an array passed to a call would cost a reference
+# count each time); written without a scalar carried from one iteration to the next.
 @numba.njit(cache=True, inline="always")
-def _set(limbs, word):  # pragma: no cover
-    limbs[:] = 0
-    limbs[0] = word
+def _store_limbs(v, d, value):  # pragma: no cover
+    v[d, 0] = value & _MASK32
+    v[d, 1] = value >> LIMB_BITS
+    for i in range(2, v.shape[1]):
+        v[d, i] = 0
 
 
 @numba.njit(cache=True, inline="always")
-def _times(limbs, word):  # pragma: no cover
-    """limbs *= word, exactly: limbs[i] < 2^32 but the top one (module text)."""
-    top = limbs.shape[0] - 1
-    carry = np.int64(0)
-    for i in range(top):
-        t = limbs[i] * word + carry
-        limbs[i] = t & _MASK32
-        carry = t >> 32
-    limbs[top] = limbs[top] * word + carry
+def _times_limbs(v, d, word):  # pragma: no cover
+    for i in range(v.shape[1]):
+        v[d, i] = v[d, i] * word
+    for i in range(v.shape[1] - 1):  # each limb's bits past 32 go up into the next
+        v[d, i + 1] = v[d, i + 1] + (v[d, i] >> 32)
+        v[d, i] = v[d, i] & _MASK32
 
 
 @numba.njit(cache=True, inline="always")
-def _float(limbs):  # pragma: no cover
-    """The value of the limbs in float64, top limb first (one limb: float(v); two: float(hi) 2^32 + lo)."""
-    top = limbs.shape[0] - 1
-    f = float(limbs[top])
-    for i in range(top - 1, -1, -1):
-        f = f * _BASE + float(limbs[i])
+def _float_limbs(v, d):  # pragma: no cover
+    f = 0.0
+    for i in range(v.shape[1] - 1, -1, -1):
+        f = f * _BASE + float(v[d, i])
     return f
 
 
 @numba.njit(cache=True, inline="always")
-def _greater(a, b):  # pragma: no cover
-    """Exact a > b of two canonical limb values."""
-    for i in range(a.shape[0] - 1, -1, -1):
-        if a[i] != b[i]:
-            return a[i] > b[i]
-    return False
+def _greater_limbs(v, d, e):  # pragma: no cover
+    i = v.shape[1] - 1
+    while i > 0 and v[d, i] == v[e, i]:
+        i -= 1
+    return v[d, i] > v[e, i]
 
 
-@numba.njit(parallel=True, cache=True, boundscheck=False)
-def _data_words(ref, match, tables, hamming, nm_entry, nm_plane, nm_table, has_nm,  # pragma: no cover
-                first, step, last, dmax, data):
-    """The same product on words, exact: data[y, j, h] the limbs (module text) of the product."""
+# Inlined into the kernels: the one-int64 form is a multiply, the limbs' a call.
+@overload(_store, inline="always")
+def _store_for(v, d, value):  # pragma: no cover
+    if v.ndim == 1:
+        def one(v, d, value):
+            v[d] = value
+        return one
+    return lambda v, d, value: _store_limbs(v, d, value)
+
+
+@overload(_times, inline="always")
+def _times_for(v, d, word):  # pragma: no cover
+    if v.ndim == 1:
+        def one(v, d, word):
+            v[d] = v[d] * word
+        return one
+    return lambda v, d, word: _times_limbs(v, d, word)
+
+
+@overload(_float, inline="always")
+def _float_for(v, d):  # pragma: no cover
+    if v.ndim == 1:
+        return lambda v, d: float(v[d])
+    return lambda v, d: _float_limbs(v, d)
+
+
+@overload(_greater, inline="always")
+def _greater_for(v, d, e):  # pragma: no cover
+    if v.ndim == 1:
+        return lambda v, d, e: v[d] > v[e]
+    return lambda v, d, e: _greater_limbs(v, d, e)
+
+
+@numba.njit(nogil=True, cache=True, boundscheck=False)
+def _data_words(cols, nm_entry, nm_plane, nm_table, has_nm, first, step, last, dmax,  # pragma: no cover
+                data, idx):
+    """The same product on words, exact: data[y, j, h] the product of the words of ``cols``, whose product
+    fits one int64, stored in data's form (one int64, or limbs: module text). ``idx``: None (the
+    signature of :func:`_data_float`)."""
     n, wo = data.shape[0], data.shape[1]
-    k_cols = tables.shape[0]
-    for y in numba.prange(n):
+    for y in range(n):
         for j in range(wo):
             x = first + j
             out = data[y, j]
             lanes = _lanes(x, step, last, dmax)
-            a = ref[y, x]
             for d in range(lanes):
-                b = match[y, x + step * d]
-                _set(out[d], tables[0, _cost(a[0], b[0], hamming[0])])
-                for k in range(1, k_cols):
-                    _times(out[d], tables[k, _cost(a[k], b[k], hamming[k])])
+                xm = x + step * d
+                v = np.int64(1)
+                for col in literal_unroll(cols):
+                    ref, match, table = col
+                    v = v * table[_cost(ref[y, x], match[y, xm])]
+                _store(out, d, v)
             for d in range(lanes, dmax + 1):
-                _set(out[d], 0)
-            _set(out[dmax + 1], nm_table[abs(nm_plane[y, x])] if has_nm else 0)
-            if has_nm:
-                for k in range(1, k_cols):
-                    _times(out[dmax + 1], nm_entry[k])
+                _store(out, d, 0)
+            v = nm_table[abs(nm_plane[y, x])] if has_nm else 0
+            for k in range(1, nm_entry.shape[0]):
+                v = v * nm_entry[k]
+            _store(out, dmax + 1, v)
+
+
+def _by_rows(kernel: Any, cols: tuple, rule: tuple, data: np.ndarray, idx: np.ndarray | None) -> None:
+    """``kernel`` (:func:`_data_float` or :func:`_data_words`, which free the GIL) over the band's rows,
+    in as many parts as numba has threads, each on a thread of its own."""
+    n = data.shape[0]
+    parts = max(1, min(numba.get_num_threads(), n))
+    cuts = [n * i // parts for i in range(parts + 1)]
+
+    def part(i: int) -> None:
+        rows = slice(cuts[i], cuts[i + 1])
+        kernel(tuple((ref[rows], match[rows], table) for ref, match, table in cols), rule[0], rule[1][rows],
+               *rule[2:], data[rows], None if idx is None else idx[rows])
+
+    if parts == 1:
+        part(0)
+        return
+    with ThreadPoolExecutor(parts) as pool:
+        list(pool.map(part, range(parts)))
 
 
 @numba.njit(parallel=True, cache=True, boundscheck=False)
-def _times_words(data, factors):  # pragma: no cover
-    """data *= each of ``factors`` (F, n, W, M) words, exactly."""
+def _times_words(data, factor):  # pragma: no cover
+    """data *= ``factor`` (n, W, M) words, exactly."""
     n, wo, m = data.shape[0], data.shape[1], data.shape[2]
     for y in numba.prange(n):
-        for f in range(factors.shape[0]):
-            for j in range(wo):
-                for h in range(m):
-                    _times(data[y, j, h], factors[f, y, j, h])
+        for j in range(wo):
+            v = data[y, j]
+            for h in range(m):
+                _times(v, h, factor[y, j, h])
 
 
 @numba.njit(cache=True, inline="always")
@@ -258,18 +339,17 @@ def _finish_float(data, idx):  # pragma: no cover
 
 
 @numba.njit(cache=True, inline="always")
-def _finish_limbs(values, post, scratch_best):  # pragma: no cover
-    """A pixel's exact values (M, L) to ``post`` (normalized float64); its MAP (-1: no match), the exact
+def _finish_exact(values, post):  # pragma: no cover
+    """A pixel's exact values to ``post`` (normalized float64); its MAP (-1: no match), the exact
     comparison, ties to the lowest index."""
     m = values.shape[0]
     total = 0.0
     arg = 0
     for d in range(m):
-        f = _float(values[d])
+        f = _float(values, d)
         post[d] = f
         total += f
-        if d == 0 or _greater(values[d], scratch_best):  # strict: the lowest index wins exact ties
-            scratch_best[:] = values[d]
+        if d > 0 and _greater(values, d, arg):  # strict: the lowest index wins exact ties
             arg = d
     for d in range(m):
         post[d] = post[d] / total
@@ -278,11 +358,10 @@ def _finish_limbs(values, post, scratch_best):  # pragma: no cover
 
 @numba.njit(parallel=True, cache=True, boundscheck=False)
 def _finish_words(data, post, idx):  # pragma: no cover
-    """Every pixel's :func:`_finish_limbs` (a pass without neighbour columns)."""
+    """Every pixel's :func:`_finish_exact` (a pass without neighbour columns)."""
     for y in numba.prange(data.shape[0]):
-        best = np.empty(data.shape[3], np.int64)
         for j in range(data.shape[1]):
-            idx[y, j] = _finish_limbs(data[y, j], post[y, j], best)
+            idx[y, j] = _finish_exact(data[y, j], post[y, j])
 
 
 @numba.njit(cache=True, inline="always")
@@ -339,21 +418,20 @@ def _raster_float(data, tl, nl, has_left, ta, na, has_above, above, post, idx): 
 @numba.njit(cache=True, fastmath=False, boundscheck=False)
 def _raster_words(data, tl, nl, has_left, ta, na, has_above, above, post, idx, one):  # pragma: no cover
     """The same on words: the left and above factor words (``one``, the word of 1.0, for a neighbour
-    without a MAP) as factors of the exact product (the machine's two prior columns)."""
+    without a MAP) as factors of the exact product (the machine's two prior columns); ``data`` is
+    overwritten."""
     n, wo, m = data.shape[0], data.shape[1], data.shape[2]
     dmax = m - 2
-    values = np.empty((m, data.shape[3]), np.int64)
-    best = np.empty(data.shape[3], np.int64)
     for y in range(n):
         for i in range(wo):
             hl, ha = _neighbours(idx, above, y, i, has_left, has_above)
-            values[:] = data[y, i]
+            values = data[y, i]
             for d in range(m):
                 if has_left:
-                    _times(values[d], ((tl[abs(d - hl)] if d <= dmax else nl) if hl >= 0 else one))
+                    _times(values, d, ((tl[abs(d - hl)] if d <= dmax else nl) if hl >= 0 else one))
                 if has_above:
-                    _times(values[d], ((ta[abs(d - ha)] if d <= dmax else na) if ha >= 0 else one))
-            idx[y, i] = _finish_limbs(values, post[y, i], best)
+                    _times(values, d, ((ta[abs(d - ha)] if d <= dmax else na) if ha >= 0 else one))
+            idx[y, i] = _finish_exact(values, post[y, i])
 
 
 def limbs_for(factors: int, word_bits: int) -> int:
@@ -362,21 +440,23 @@ def limbs_for(factors: int, word_bits: int) -> int:
     return 1 + max(0, -(-(factors * word_bits - TOP_BITS) // LIMB_BITS))
 
 
-def _stacked(cols: list[Column], ref: Mapping[str, np.ndarray], other: Mapping[str, np.ndarray],
-             word_bits: int | None) -> tuple:
-    """The data kernels' FEATURES columns, stacked in operator order: (reference planes, match planes)
-    (rows, W, K) int64, tables (K, longest) (float64, or int64 words), whether each cost is a Hamming
-    distance, their no-match entries."""
+def _kernel_plane(plane: np.ndarray, hamming: bool) -> np.ndarray:
+    """A plane as the data kernels take it: census codes uint64 (their cost a Hamming distance), sums a
+    signed integer type (their cost a |difference|)."""
+    if hamming:
+        return plane.astype(np.uint64, copy=False)
+    return plane if plane.dtype.kind == "i" else plane.astype(np.int64)
+
+
+def _columns(cols: list[Column], ref: Mapping[str, np.ndarray], other: Mapping[str, np.ndarray],
+             word_bits: int | None) -> tuple[tuple, np.ndarray]:
+    """The data kernels' FEATURES columns in operator order, each (reference plane, match plane, table)
+    (float64, or int64 words), and their no-match entries."""
     dtype = np.float64 if word_bits is None else np.int64
     tabs = [c.table(word_bits) for c in cols]
-    tables = np.zeros((len(cols), max(t.values.size for t in tabs)), dtype)
-    for k, t in enumerate(tabs):
-        tables[k, : t.values.size] = t.values
-    ref_planes = np.stack([ref[c.plane] for c in cols], axis=-1).astype(np.int64)
-    match_planes = np.stack([other[c.plane] for c in cols], axis=-1).astype(np.int64)
-    hamming = np.array([c.hamming for c in cols], dtype=np.bool_)
-    entries = np.array([c.nomatch_entry(t) for c, t in zip(cols, tabs, strict=True)], dtype)
-    return ref_planes, match_planes, tables, hamming, entries
+    out = tuple((_kernel_plane(ref[c.plane], c.hamming), _kernel_plane(other[c.plane], c.hamming),
+                 np.asarray(t.values, dtype)) for c, t in zip(cols, tabs, strict=True))
+    return out, np.array([c.nomatch_entry(t) for c, t in zip(cols, tabs, strict=True)], dtype)
 
 
 def _neighbour_args(p: Pass, word_bits: int | None) -> tuple:
@@ -429,35 +509,48 @@ def pass_reference(p: Pass, left: Planes, right: Planes, word_bits: int | None =
         out = np.empty(shape)
     elif out.shape != shape or out.dtype != np.float64:
         raise ValueError(f"out must be float64 of shape {shape}, got {out.dtype} {out.shape}")
-    by = {source: [c for c in p.columns if c.source is source] for source in Source}
-    stacked = _stacked(by[Source.FEATURES], ctx.reference, ctx.match, word_bits)
+    features = [c for c in p.columns if c.source is Source.FEATURES]
+    # The data kernel takes the FEATURES columns whose words' product fits one int64 (on words: four at
+    # least, every one of the package's models); the others are factors as the PASS columns are.
+    kernel = features if word_bits is None else features[: TOP_BITS // word_bits]
+    factors = [c.words(ctx).reshape(shape) for c in p.columns
+               if c.source is Source.PASS or (c.source is Source.FEATURES and c not in kernel)]
+    cols, entries = _columns(kernel, ctx.reference, ctx.match, word_bits)
     floor = model.nomatch.table(word_bits).values.astype(np.float64 if word_bits is None else np.int64)
-    rule = (ctx.reference[model.nomatch.plane], floor, p.nomatch, grid.first, p.step, grid.last, model.dmax)
-    factors = [c.words(ctx).reshape(shape) for c in by[Source.PASS]]
+    rule = (entries, ctx.reference[model.nomatch.plane], floor, p.nomatch, grid.first, p.step, grid.last,
+            model.dmax)
     neighbours = _neighbour_args(p, word_bits)
     top = _above(above, rows, p, shape[1])
     idx = np.empty(shape[:2], dtype=np.int16)
     if word_bits is None:
-        plain = not factors and not (neighbours[2] or neighbours[5])
-        _data_float(*stacked, *rule, out, idx if plain else None)
-        if plain:
-            return Reference(out, idx)
-        for f in factors:  # ((((m * gH) * gV) * census) * lr), then the neighbours
-            out *= f
-        if neighbours[2] or neighbours[5]:
-            _raster_float(out, *neighbours, top, out, idx)
-        else:
-            _finish_float(out, idx)
-        return Reference(out, idx)
-    data = np.empty((*shape, limbs_for(len(p.columns), word_bits)), np.int64)
-    _data_words(*stacked, *rule, data)
-    if factors:
-        _times_words(data, np.stack(factors).astype(np.int64))
-    if neighbours[2] or neighbours[5]:
-        _raster_words(data, *neighbours, top, out, idx, np.int64(1 << word_bits))
+        _float_reference(cols, rule, factors, neighbours, top, out, idx)
     else:
-        _finish_words(data, out, idx)
+        limbs = limbs_for(len(p.columns), word_bits)
+        data = np.empty(shape if limbs == 1 else (*shape, limbs), np.int64)
+        _by_rows(_data_words, cols, rule, data, None)
+        for f in factors:
+            _times_words(data, f)
+        if neighbours[2] or neighbours[5]:
+            _raster_words(data, *neighbours, top, out, idx, np.int64(1 << word_bits))
+        else:
+            _finish_words(data, out, idx)
     return Reference(out, idx)
+
+
+def _float_reference(cols: tuple, rule: tuple, factors: list[np.ndarray], neighbours: tuple, top: np.ndarray,
+                     out: np.ndarray, idx: np.ndarray) -> None:
+    """The float64 reference's kernels: the FEATURES columns' product, then the other factors in operator
+    order ((((m * gH) * gV) * census) * lr), then the neighbours in raster order."""
+    plain = not factors and not (neighbours[2] or neighbours[5])
+    _by_rows(_data_float, cols, rule, out, idx if plain else None)
+    if plain:
+        return
+    for f in factors:
+        out *= f
+    if neighbours[2] or neighbours[5]:
+        _raster_float(out, *neighbours, top, out, idx)
+    else:
+        _finish_float(out, idx)
 
 
 def pass_reference_map(p: Pass, left: Planes, right: Planes, word_bits: int | None = None, *,
