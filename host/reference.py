@@ -20,11 +20,9 @@ posterior volume (H x W x (Dmax+2) x 8 bytes) is never held whole (:func:`refere
 :func:`reference_map`).
 
 ``reference_quantized`` is the same inference on the W-bit words: each factor a word q/2^W, the product
-exact whatever its width, so a MAP is decided exactly. A product of n words of W bits is held in
-:func:`limbs_for` (n, W) limbs: one int64 while nW <= 62 bits, else 32-bit limbs below a top limb of up
-to 62 bits; its float64 value (for the posterior) is the top limb, times 2^32 plus the next, and so on:
-the correctly rounded product up to two limbs (up to 94 bits: any model of the package). It is what the
-machine samples from: the distribution an ideal machine's counters approach.
+exact whatever its width (:mod:`.products`: one int64 while it fits 62 bits, else 32-bit limbs), so a
+MAP is decided exactly. It is what the machine samples from: the distribution an ideal machine's
+counters approach.
 
 A model's declared passes run first (:func:`declared_maps`, e.g. census-lr's right pass over its grid,
 ``host.likelihoods.pass_grid``), their MAPs feeding the PASS columns of the passes after them by pass
@@ -51,6 +49,7 @@ from bayesmachine.region import OutputRegion
 from .features import Planes, model_planes
 from .images import validate_pair
 from .likelihoods import likelihoods_plain, pass_context, pass_grid
+from .products import TOP_BITS, exact_float, exact_greater, exact_store, exact_times, limbs_for
 
 __all__ = [
     "Reference",
@@ -65,7 +64,6 @@ __all__ = [
     "pass_reference",
     "pass_reference_map",
     "declared_maps",
-    "limbs_for",
     "map_from_index",
     "warm_up",
 ]
@@ -94,11 +92,6 @@ _M1 = np.uint64(0x5555555555555555)
 _M2 = np.uint64(0x3333333333333333)
 _M4 = np.uint64(0x0F0F0F0F0F0F0F0F)
 _H01 = np.uint64(0x0101010101010101)
-_MASK32 = np.int64(0xFFFFFFFF)
-_BASE = 4294967296.0  # 2^32: a limb's weight
-# An exact product's top limb holds up to 62 bits (int64, never its sign); the lower limbs 32 each.
-TOP_BITS = 62
-LIMB_BITS = 32
 
 
 @numba.njit(cache=True)
@@ -165,96 +158,6 @@ def _data_float(cols, nm_entry, nm_plane, nm_table, has_nm, first, step, last, d
                 idx[y, j] = _finish(out)
 
 
-# A pixel's exact values ``v``: (M,) int64 when a product fits one int64, else (M, L) limbs (module text).
-# Each helper is compiled for both, the one-int64 form as plain int64 arithmetic.
-def _store(v, d, value):  # pragma: no cover
-    """v[d] = value (an int64 of up to 62 bits)."""
-    raise NotImplementedError("compiled by numba only")
-
-
-def _times(v, d, word):  # pragma: no cover
-    """v[d] *= word, exactly."""
-    raise NotImplementedError("compiled by numba only")
-
-
-def _float(v, d):  # pragma: no cover
-    """v[d] in float64: one int64, float(v); limbs, the top one first, times 2^32 plus the next..."""
-    raise NotImplementedError("compiled by numba only")
-
-
-def _greater(v, d, e):  # pragma: no cover
-    """Exactly v[d] > v[e]."""
-    raise NotImplementedError("compiled by numba only")
-
-
-# The limbs' arithmetic, inlined into the kernels (an array passed to a call would cost a reference
-# count each time); written without a scalar carried from one iteration to the next.
-@numba.njit(cache=True, inline="always")
-def _store_limbs(v, d, value):  # pragma: no cover
-    v[d, 0] = value & _MASK32
-    v[d, 1] = value >> LIMB_BITS
-    for i in range(2, v.shape[1]):
-        v[d, i] = 0
-
-
-@numba.njit(cache=True, inline="always")
-def _times_limbs(v, d, word):  # pragma: no cover
-    for i in range(v.shape[1]):
-        v[d, i] = v[d, i] * word
-    for i in range(v.shape[1] - 1):  # each limb's bits past 32 go up into the next
-        v[d, i + 1] = v[d, i + 1] + (v[d, i] >> 32)
-        v[d, i] = v[d, i] & _MASK32
-
-
-@numba.njit(cache=True, inline="always")
-def _float_limbs(v, d):  # pragma: no cover
-    f = 0.0
-    for i in range(v.shape[1] - 1, -1, -1):
-        f = f * _BASE + float(v[d, i])
-    return f
-
-
-@numba.njit(cache=True, inline="always")
-def _greater_limbs(v, d, e):  # pragma: no cover
-    i = v.shape[1] - 1
-    while i > 0 and v[d, i] == v[e, i]:
-        i -= 1
-    return v[d, i] > v[e, i]
-
-
-# Inlined into the kernels: the one-int64 form is a multiply, the limbs' a call.
-@overload(_store, inline="always")
-def _store_for(v, d, value):  # pragma: no cover
-    if v.ndim == 1:
-        def one(v, d, value):
-            v[d] = value
-        return one
-    return lambda v, d, value: _store_limbs(v, d, value)
-
-
-@overload(_times, inline="always")
-def _times_for(v, d, word):  # pragma: no cover
-    if v.ndim == 1:
-        def one(v, d, word):
-            v[d] = v[d] * word
-        return one
-    return lambda v, d, word: _times_limbs(v, d, word)
-
-
-@overload(_float, inline="always")
-def _float_for(v, d):  # pragma: no cover
-    if v.ndim == 1:
-        return lambda v, d: float(v[d])
-    return lambda v, d: _float_limbs(v, d)
-
-
-@overload(_greater, inline="always")
-def _greater_for(v, d, e):  # pragma: no cover
-    if v.ndim == 1:
-        return lambda v, d, e: v[d] > v[e]
-    return lambda v, d, e: _greater_limbs(v, d, e)
-
-
 @numba.njit(nogil=True, cache=True, boundscheck=False)
 def _data_words(cols, nm_entry, nm_plane, nm_table, has_nm, first, step, last, dmax,  # pragma: no cover
                 data, idx):
@@ -273,13 +176,13 @@ def _data_words(cols, nm_entry, nm_plane, nm_table, has_nm, first, step, last, d
                 for col in literal_unroll(cols):
                     ref, match, table = col
                     v = v * table[_cost(ref[y, x], match[y, xm])]
-                _store(out, d, v)
+                exact_store(out, d, v)
             for d in range(lanes, dmax + 1):
-                _store(out, d, 0)
+                exact_store(out, d, 0)
             v = nm_table[abs(nm_plane[y, x])] if has_nm else 0
             for k in range(1, nm_entry.shape[0]):
                 v = v * nm_entry[k]
-            _store(out, dmax + 1, v)
+            exact_store(out, dmax + 1, v)
 
 
 def _by_rows(kernel: Any, cols: tuple, rule: tuple, data: np.ndarray, idx: np.ndarray | None) -> None:
@@ -309,7 +212,7 @@ def _times_words(data, factor):  # pragma: no cover
         for j in range(wo):
             v = data[y, j]
             for h in range(m):
-                _times(v, h, factor[y, j, h])
+                exact_times(v, h, factor[y, j, h])
 
 
 @numba.njit(cache=True, inline="always")
@@ -346,10 +249,10 @@ def _finish_exact(values, post):  # pragma: no cover
     total = 0.0
     arg = 0
     for d in range(m):
-        f = _float(values, d)
+        f = exact_float(values, d)
         post[d] = f
         total += f
-        if d > 0 and _greater(values, d, arg):  # strict: the lowest index wins exact ties
+        if d > 0 and exact_greater(values, d, arg):  # strict: the lowest index wins exact ties
             arg = d
     for d in range(m):
         post[d] = post[d] / total
@@ -428,16 +331,10 @@ def _raster_words(data, tl, nl, has_left, ta, na, has_above, above, post, idx, o
             values = data[y, i]
             for d in range(m):
                 if has_left:
-                    _times(values, d, ((tl[abs(d - hl)] if d <= dmax else nl) if hl >= 0 else one))
+                    exact_times(values, d, ((tl[abs(d - hl)] if d <= dmax else nl) if hl >= 0 else one))
                 if has_above:
-                    _times(values, d, ((ta[abs(d - ha)] if d <= dmax else na) if ha >= 0 else one))
+                    exact_times(values, d, ((ta[abs(d - ha)] if d <= dmax else na) if ha >= 0 else one))
             idx[y, i] = _finish_exact(values, post[y, i])
-
-
-def limbs_for(factors: int, word_bits: int) -> int:
-    """Limbs of an exact product of ``factors`` words of ``word_bits`` bits (each at most 2^W): one int64
-    while it fits :data:`TOP_BITS`, and a 32-bit limb below it for every 32 bits more."""
-    return 1 + max(0, -(-(factors * word_bits - TOP_BITS) // LIMB_BITS))
 
 
 def _kernel_plane(plane: np.ndarray, hamming: bool) -> np.ndarray:

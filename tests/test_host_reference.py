@@ -144,7 +144,8 @@ def test_five_feature_columns_on_words_are_python_integer_products(rds, five, wo
 
     from bayesmachine.host.features import model_planes
     from bayesmachine.host.likelihoods import memory_words
-    from bayesmachine.host.reference import limbs_for, reference_quantized
+    from bayesmachine.host.products import limbs_for
+    from bayesmachine.host.reference import reference_quantized
     from bayesmachine.models import disparity_machine
 
     assert limbs_for(5, word_bits) == (1 if word_bits == 10 else 2)
@@ -163,7 +164,7 @@ def test_five_feature_columns_on_words_are_python_integer_products(rds, five, wo
 
 
 def test_limbs_for():
-    from bayesmachine.host.reference import limbs_for
+    from bayesmachine.host.products import limbs_for
 
     assert [limbs_for(n, 10) for n in (1, 6, 7, 9, 10)] == [1, 1, 2, 2, 3]  # 62, 94, 126 bits a limb count
     assert limbs_for(4, 15) == 1 and limbs_for(5, 15) == 2 and limbs_for(7, 15) == 3
