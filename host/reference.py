@@ -34,7 +34,6 @@ from __future__ import annotations
 from collections.abc import Iterator, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
-from typing import Any
 
 import numba
 import numpy as np
@@ -125,14 +124,16 @@ def _lanes(x, step, last, dmax):  # pragma: no cover
 
 
 @numba.njit(nogil=True, cache=True, fastmath=False, boundscheck=False)
-def _data_float(cols, nm_entry, nm_plane, nm_table, has_nm, first, step, last, dmax,  # pragma: no cover
-                data, idx):
-    """data[y, j, h]: the float64 product of the FEATURES columns ``cols`` of pixel (y, first + j), in
-    operator order ((c0 * c1) * c2) * ...: column k = (reference plane, match plane, table), its factor
-    the table at ``_cost`` of the reference pixel's value and the match's, at column x + step * d; a lane
-    past ``last`` gets 0. The no-match row: ``nm_table[|nm_plane|]`` (the pass's rule, in column 0) times
-    the other columns' entries ``nm_entry[1:]``, or 0 without one (``has_nm``). With ``idx`` (not None)
-    also normalize and take the MAP (-1: no match; the lowest index wins exact ties)."""
+def _data_kernel(cols, one, nm_entry, nm_plane, nm_table, has_nm, first, step, last, dmax,  # pragma: no cover
+                 data, idx):
+    """data[y, j, h]: the product of the FEATURES columns ``cols`` of pixel (y, first + j), in operator
+    order ((c0 * c1) * c2) * ... (``one``: 1.0, float64 factors; or 1, words, their product fitting one
+    int64, stored exactly in data's form, :mod:`.products`): column k = (reference plane, match plane,
+    table), its factor the table at ``_cost`` of the reference pixel's value and the match's, at column
+    x + step * d; a lane past ``last`` gets 0. The no-match row: ``nm_table[|nm_plane|]`` (the pass's
+    rule, in column 0) times the other columns' entries ``nm_entry[1:]``, or 0 without one (``has_nm``).
+    With ``idx`` (not None: float64) also normalize and take the MAP (-1: no match; the lowest index wins
+    exact ties)."""
     n, wo = data.shape[0], data.shape[1]
     for y in range(n):
         for j in range(wo):
@@ -141,61 +142,32 @@ def _data_float(cols, nm_entry, nm_plane, nm_table, has_nm, first, step, last, d
             lanes = _lanes(x, step, last, dmax)
             for d in range(lanes):
                 xm = x + step * d
-                v = 1.0  # 1.0 * c0 is c0: the product ((c0 * c1) * c2) * ...
-                for col in literal_unroll(cols):
-                    ref, match, table = col
-                    v = v * table[_cost(ref[y, x], match[y, xm])]
-                out[d] = v
-            for d in range(lanes, dmax + 1):
-                out[d] = 0.0
-            v = 0.0
-            if has_nm:
-                v = nm_table[abs(nm_plane[y, x])]
-                for k in range(1, nm_entry.shape[0]):
-                    v = v * nm_entry[k]
-            out[dmax + 1] = v
-            if idx is not None:
-                idx[y, j] = _finish(out)
-
-
-@numba.njit(nogil=True, cache=True, boundscheck=False)
-def _data_words(cols, nm_entry, nm_plane, nm_table, has_nm, first, step, last, dmax,  # pragma: no cover
-                data, idx):
-    """The same product on words, exact: data[y, j, h] the product of the words of ``cols``, whose product
-    fits one int64, stored in data's form (one int64, or limbs: module text). ``idx``: None (the
-    signature of :func:`_data_float`)."""
-    n, wo = data.shape[0], data.shape[1]
-    for y in range(n):
-        for j in range(wo):
-            x = first + j
-            out = data[y, j]
-            lanes = _lanes(x, step, last, dmax)
-            for d in range(lanes):
-                xm = x + step * d
-                v = np.int64(1)
+                v = one  # one * c0 is c0: the product ((c0 * c1) * c2) * ...
                 for col in literal_unroll(cols):
                     ref, match, table = col
                     v = v * table[_cost(ref[y, x], match[y, xm])]
                 exact_store(out, d, v)
             for d in range(lanes, dmax + 1):
                 exact_store(out, d, 0)
-            v = nm_table[abs(nm_plane[y, x])] if has_nm else 0
+            v = nm_table[abs(nm_plane[y, x])] if has_nm else one * 0
             for k in range(1, nm_entry.shape[0]):
                 v = v * nm_entry[k]
             exact_store(out, dmax + 1, v)
+            if idx is not None:
+                idx[y, j] = _finish(out)
 
 
-def _by_rows(kernel: Any, cols: tuple, rule: tuple, data: np.ndarray, idx: np.ndarray | None) -> None:
-    """``kernel`` (:func:`_data_float` or :func:`_data_words`, which free the GIL) over the band's rows,
-    in as many parts as numba has threads, each on a thread of its own."""
+def _by_rows(cols: tuple, one: float | int, rule: tuple, data: np.ndarray, idx: np.ndarray | None) -> None:
+    """:func:`_data_kernel` (which frees the GIL) over the band's rows, in as many parts as numba has
+    threads, each on a thread of its own: a tuple cannot enter a numba parallel loop."""
     n = data.shape[0]
     parts = max(1, min(numba.get_num_threads(), n))
     cuts = [n * i // parts for i in range(parts + 1)]
 
     def part(i: int) -> None:
         rows = slice(cuts[i], cuts[i + 1])
-        kernel(tuple((ref[rows], match[rows], table) for ref, match, table in cols), rule[0], rule[1][rows],
-               *rule[2:], data[rows], None if idx is None else idx[rows])
+        _data_kernel(tuple((ref[rows], match[rows], table) for ref, match, table in cols), one, rule[0],
+                     rule[1][rows], *rule[2:], data[rows], None if idx is None else idx[rows])
 
     if parts == 1:
         part(0)
@@ -424,7 +396,7 @@ def pass_reference(p: Pass, left: Planes, right: Planes, word_bits: int | None =
     else:
         limbs = limbs_for(len(p.columns), word_bits)
         data = np.empty(shape if limbs == 1 else (*shape, limbs), np.int64)
-        _by_rows(_data_words, cols, rule, data, None)
+        _by_rows(cols, np.int64(1), rule, data, None)
         for f in factors:
             _times_words(data, f)
         if neighbours[2] or neighbours[5]:
@@ -439,7 +411,7 @@ def _float_reference(cols: tuple, rule: tuple, factors: list[np.ndarray], neighb
     """The float64 reference's kernels: the FEATURES columns' product, then the other factors in operator
     order ((((m * gH) * gV) * census) * lr), then the neighbours in raster order."""
     plain = not factors and not (neighbours[2] or neighbours[5])
-    _by_rows(_data_float, cols, rule, out, idx if plain else None)
+    _by_rows(cols, 1.0, rule, out, idx if plain else None)
     if plain:
         return
     for f in factors:
