@@ -16,7 +16,7 @@ import re
 import signal
 import sys
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from typing import Any, NoReturn
 
 from bayesmachine.errors import ParameterError
@@ -26,8 +26,9 @@ class Terminated(KeyboardInterrupt):
     """SIGTERM, raised where the command is so that it cleans up as after Ctrl-C."""
 
 
-class _Parser(argparse.ArgumentParser):
-    """argparse with its errors on one line (the usage is one ``--help`` away)."""
+class Parser(argparse.ArgumentParser):
+    """argparse with its errors on one line (the usage is one ``--help`` away): every command's, and
+    every script's of ``benchmarks/``."""
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
@@ -46,7 +47,7 @@ def build_parser() -> argparse.ArgumentParser:
     from bayesmachine.host.cli import register as register_host
     from bayesmachine.host.throughput import measure_cycles
 
-    parser = _Parser(
+    parser = Parser(
         prog="bayesmachine",
         description="Stochastic Bayesian machine for stereo disparity: emit its RTL, "
         "run it (model, Amaranth simulator, Verilator) on stereo pairs, compare with exact inference.",
@@ -92,16 +93,12 @@ def _sigterm_raises() -> Iterator[None]:
         signal.signal(signal.SIGTERM, previous)
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    try:
-        args = parser.parse_args(argv)
-    except SystemExit as exc:  # --help, or a usage error already printed on one line
-        return exc.code if isinstance(exc.code, int) else 2
-    prefix = f"bayesmachine {args.command}"
+def handled(prefix: str, command: Callable[[], int | None]) -> int:
+    """Run ``command``; every failure ends as one line on stderr starting with ``prefix``, and its exit
+    code (the module's docstring): the one rule of the commands and of the benchmark scripts."""
     try:
         with _sigterm_raises():
-            return int(args.func(args) or 0)
+            return int(command() or 0)
     except Terminated:
         print(f"{prefix}: terminated (SIGTERM); no output was left half-written, no tool left running",
               file=sys.stderr)
@@ -125,6 +122,25 @@ def main(argv: list[str] | None = None) -> int:
             exc = with_flag(exc)
         print(f"{prefix}: error: {_one_line(str(exc))}", file=sys.stderr)
         return 2
+
+
+def run_script(prog: str, main: Callable[[list[str] | None], int | None],
+               argv: list[str] | None = None) -> int:
+    """A ``benchmarks/`` script's entry point: ``main(argv)`` (which parses with :class:`Parser`) under
+    :func:`handled`, so that bad input is one line and exit code 2, as for the commands."""
+    try:
+        return handled(prog, lambda: main(argv))
+    except SystemExit as exc:  # --help, or a usage error already printed on one line
+        return exc.code if isinstance(exc.code, int) else 2
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help, or a usage error already printed on one line
+        return exc.code if isinstance(exc.code, int) else 2
+    return handled(f"bayesmachine {args.command}", lambda: args.func(args))
 
 
 if __name__ == "__main__":

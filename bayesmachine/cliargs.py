@@ -8,20 +8,35 @@ is one :func:`add_option` call; commands pick it up through :func:`add_machine_o
 and :func:`machine_params_from_args`.
 
 Type functions raise :class:`argparse.ArgumentTypeError` carrying the project's own
-message, so argparse prints it instead of "invalid value".
+message, so argparse prints it instead of "invalid value"; the generic ones (numbers in ranges,
+lists, paths) live in :mod:`bayesmachine.argtypes` and are re-exported here.
 """
 
 from __future__ import annotations
 
 import argparse
-import math
 import re
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
-from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any
 
-from bayesmachine.columns import Option
+from bayesmachine.argtypes import (
+    argument_type,
+    choice_of,
+    float_arg,
+    float_in_range,
+    input_path,
+    int_arg,
+    int_in_range,
+    int_of,
+    on_off_list,
+    output_path,
+    positive_float_arg,
+    positive_float_at_most,
+    size_pair,
+    value_list,
+)
+from bayesmachine.columns import Option, Source
 from bayesmachine.models import (
     DEFAULT_MODEL,
     HARDWARE_MODEL,
@@ -71,22 +86,31 @@ __all__ = [
     "model_list",
     "default_model",
     "output_path",
+    "input_path",
     "machine_params_from_args",
     "model_params_from_args",
+    "options_without_effect",
+    "machine_parameters",
+    "PASS_WATCHDOGS",
     "float_arg",
     "positive_float_arg",
     "positive_float_at_most",
+    "float_in_range",
+    "size_pair",
     "int_in_range",
     "rng_list",
+    "on_off_list",
     "runnable_sources",
     "argument_type",
     "int_arg",
     "counter_max_list",
+    "MAX_COUNTER_MAX",
+    "value_list",
+    "choice_of",
+    "int_of",
     "source_kinds",
     "rng_help",
 ]
-
-T = TypeVar("T")
 
 # The board's serial link: the baud rate ``board build`` builds for and ``run --engine board`` opens
 # the port at, unless told otherwise (here, where both commands' packages can read it).
@@ -97,95 +121,15 @@ BAUD_RANGE = (300, 12_000_000)
 MAX_SILENCE_S = 600.0
 
 
-def int_arg(text: str) -> int:
-    """An integer in any Python spelling: ``16``, ``0x10``, ``0b10000``, ``0o20`` (and ``010`` = 10)."""
-    s = text.strip().replace("_", "")
-    try:
-        return int(s, 0)
-    except ValueError:
-        pass
-    try:
-        return int(s, 10)  # base 0 refuses leading zeros ("010"); read them as decimal
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer (e.g. 16 or 0x10), got {text!r}") from None
-
-
-def argument_type(parse: Callable[[str], T], name: str | None = None) -> Callable[[str], T]:
-    """Wrap ``parse`` (raising ValueError with a message) as an argparse type keeping that message."""
-
-    def convert(text: str) -> T:
-        try:
-            return parse(text)
-        except argparse.ArgumentTypeError:
-            raise
-        except ValueError as exc:
-            raise argparse.ArgumentTypeError(str(exc)) from None
-
-    convert.__name__ = name or getattr(parse, "__name__", "value")
-    return convert
-
-
-def output_path(text: str) -> Path:
-    """``-o``: a path, never empty or blank (an unset shell variable in ``-o "$OUT"`` would otherwise
-    mean the current directory)."""
-    if not text.strip():
-        raise argparse.ArgumentTypeError(
-            f"the output path is {'empty' if not text else 'blank'} (an unset variable in -o \"$OUT\"?); "
-            "name the output"
-        )
-    return Path(text)
-
-
-def float_arg(text: str) -> float:
-    """A finite float (``nan`` and ``inf`` are refused here, with the option's name)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
-    return value
-
-
-def positive_float_arg(text: str) -> float:
-    """A finite float > 0 (a scale, a divisor)."""
-    value = float_arg(text)
-    if not value > 0:
-        raise argparse.ArgumentTypeError(f"expected a number > 0, got {text!r}")
-    return value
-
-
-def int_in_range(lo: int, hi: int) -> Callable[[str], int]:
-    """An argparse type: an integer (:func:`int_arg`'s spellings) in [lo, hi]."""
-
-    def convert(text: str) -> int:
-        value = int_arg(text)
-        if not lo <= value <= hi:
-            raise argparse.ArgumentTypeError(f"expected an integer in [{lo}, {hi}], got {text!r}")
-        return value
-
-    convert.__name__ = "integer"
-    return convert
-
-
-def positive_float_at_most(hi: float) -> Callable[[str], float]:
-    """An argparse type: a number in (0, hi] (a time out, bounded so that nothing waits for ever)."""
-
-    def convert(text: str) -> float:
-        value = positive_float_arg(text)
-        if value > hi:
-            raise argparse.ArgumentTypeError(f"expected a number in (0, {hi:g}], got {text!r}")
-        return value
-
-    convert.__name__ = "number"
-    return convert
-
-
 _SMTJ_FIELDS = ("smtj_dwell", "smtj_spread", "smtj_share")
 
 
+MAX_COUNTER_MAX = (1 << 24) - 1  # MachineParams' bound on counter_max
+
+
 def counter_max_list(text: str) -> list[int]:
-    """``N,N,...`` counter max values, sorted ascending with repeats removed."""
+    """``N,N,...`` counter max values (each 1 .. :data:`MAX_COUNTER_MAX`), sorted ascending with repeats
+    removed."""
     values = []
     for part in text.split(","):
         if part.strip():
@@ -197,6 +141,10 @@ def counter_max_list(text: str) -> list[int]:
                 ) from None
     if not values:
         raise argparse.ArgumentTypeError("give at least one counter max value")
+    bad = [v for v in values if not 1 <= v <= MAX_COUNTER_MAX]
+    if bad:
+        raise argparse.ArgumentTypeError(f"counter max values must be in [1, {MAX_COUNTER_MAX}], "
+                                         f"got {bad[0]}")
     return sorted(set(values))
 
 
@@ -258,6 +206,13 @@ class MachineOption:
         return self.help() if callable(self.help) else self.help
 
     def add_to(self, group: argparse._ActionsContainer, **changes: Any) -> argparse.Action:
+        if self.is_flag and changes.pop("values", False):
+            # A sweep's axis: --x (on), --x on,off (both: a grid axis) and --no-x (off).
+            text = changes.pop("help", self.help)
+            group.add_argument(self.flag, dest=self.field, nargs="?", const=True, type=on_off_list,
+                               default=None, metavar="on,off", help=f"{text}; {self.flag} on,off sweeps both")
+            return group.add_argument(f"--no-{self.flag[2:]}", dest=self.field, action="store_const",
+                                      const=False, help=f"the same as {self.flag} off")
         if self.is_flag:
             flag_kwargs = {"dest": self.field, "default": self.default, "help": self.help_text,
                            "action": argparse.BooleanOptionalAction}
@@ -670,3 +625,33 @@ def model_params_from_args(args: argparse.Namespace, name: str | None = None) ->
         return ModelParams(name=name, dmax=args.dmax, **given)
     except ParameterError as exc:
         raise with_flag(exc) from None
+
+
+# The model parameters that set a declared pass's watchdog (census-lr's lr_right_max_cycles): what only a
+# machine's run reads.
+PASS_WATCHDOGS = frozenset(p.watchdog for d in MODELS.values() for p in d.passes if p.watchdog)
+
+
+def machine_parameters(name: str) -> frozenset[str]:
+    """The parameters of model ``name`` that change its own pass's machine (``emit``/``synth --top
+    machine``): the switches that leave columns out and the options of its feedback column (the table the
+    machine forms its prior from). The others change only the words the host loads, or other passes."""
+    d = MODELS[name]
+    own = {o.name for c in d.columns if c.source is Source.FEEDBACK for o in c.options}
+    return frozenset({switch for switch, _ in d.switches} | own)
+
+
+def options_without_effect(args: argparse.Namespace, effective: Iterable[str]) -> list[str]:
+    """The model options given in ``args`` (an alias counts for each parameter it sets) that set none of
+    the parameters ``effective``, as they were spelt: what a command refuses because it would ignore them."""
+    effective = set(effective)
+    out: list[str] = []
+    for key, (option, _) in all_options().items():
+        value = getattr(args, key, None)
+        if value is not None and key not in effective:
+            out.append(_spelt(option, value))
+    for dest, flag in MODEL_OPTION_FLAGS:
+        sets = [o.name for o in _paper_options() if o.alias == flag]
+        if sets and getattr(args, dest, None) is not None and not effective & set(sets):
+            out.append(flag)
+    return out

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any
 
+from bayesmachine.checks import plain
 from bayesmachine.columns import Column, NoMatchFloor, Option, Source, Term
 from bayesmachine.params import TIMEOUT_ANSWERS, ParameterError
 
@@ -134,7 +135,7 @@ class ModelDef:
                 v = option.resolve(values)
             if v is not None or not option.optional:
                 option.check(name, v, values)
-            values[name] = v
+            values[name] = plain(v)  # np.int64(7) is 7: the model's values are plain Python values
         for name, (want, why) in self.requires.items():
             if values[name] != want:
                 said = {True: "on", False: "off"}.get(want, repr(want))

@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any
 
+from bayesmachine.checks import as_int, type_name
 from bayesmachine.columns import (
     GRADIENT_MAGNITUDE,
     NEIGHBOUR_PRIOR,
@@ -51,9 +52,15 @@ from bayesmachine.columns import (
     Source,
     Term,
 )
-from bayesmachine.columns.base import check_int
 from bayesmachine.modeldef import OWN_PASS, ModelDef, PassDef, machine_layout
-from bayesmachine.params import DEFAULT_DMAX, STEREO_ROWS_PER_BEAT, MachineParams, ParameterError, nth_machine
+from bayesmachine.params import (
+    DEFAULT_DMAX,
+    MAX_DMAX,
+    STEREO_ROWS_PER_BEAT,
+    MachineParams,
+    ParameterError,
+    nth_machine,
+)
 
 __all__ = [
     "ModelDef",
@@ -293,7 +300,7 @@ class ModelParams:
             raise TypeError(f"name must be a model name (str), not {type(name).__name__} {name!r}")
         if name not in MODELS:
             raise ParameterError(f"name must be one of {', '.join(MODELS)}, got {name!r}", "name")
-        check_int("dmax", dmax, 0, 4094)
+        dmax = as_int("dmax", dmax, 0, MAX_DMAX)
         definition = MODELS[name]
         _check_keys(definition, parameters)
         values = definition.resolve(parameters)
@@ -439,6 +446,7 @@ def disparity_machine(model: ModelParams, **machine_kwargs: Any) -> MachineParam
     ``machine_kwargs`` are the other fields (``word_bits``, ``rng``, ...); a ``columns``, ``prior`` or
     feedback table contradicting the model is a ``ParameterError`` naming it.
     """
+    _check_model(model)
     prior, data = machine_layout(model.columns)
     if "columns" in machine_kwargs and machine_kwargs["columns"] != data:
         raise ParameterError(f"columns: the {model.name} model has {data} data columns, got "
@@ -454,6 +462,8 @@ def disparity_machine(model: ModelParams, **machine_kwargs: Any) -> MachineParam
         # The other fields first, validated as usual (their errors name them), for the word width.
         own = ("prior", "feedback_words", "feedback_nomatch_word")
         rest = {k: v for k, v in kwargs.items() if k not in own}
+        if rest.get("max_cycles") is None and model.definition.watchdog_runs is not None:
+            rest["max_cycles"] = (1 << 32) - 1  # the model's watchdog comes below
         word_bits = MachineParams.for_disparity(model.dmax, **rest).word_bits
         left = model.column(LeftPrior)
         assert left is not None
@@ -474,12 +484,20 @@ def disparity_machine(model: ModelParams, **machine_kwargs: Any) -> MachineParam
         kwargs["normalize"] = model.definition.normalize
     runs = model.definition.watchdog_runs
     if runs is not None and kwargs.get("max_cycles") is None:
-        kwargs.pop("max_cycles", None)
+        # The counter max (checked, its default if not given) under the largest watchdog, not the
+        # machine's default one, which a counter max the model's watchdog covers may exceed.
+        kwargs["max_cycles"] = (1 << 32) - 1
         counter_max = MachineParams.for_disparity(model.dmax, **kwargs).counter_max
         kwargs["max_cycles"] = runs * (counter_max + 1)
     machine = MachineParams.for_disparity(model.dmax, **kwargs)
     check_disparity_machine(model, machine)
     return machine
+
+
+def _check_model(model: object) -> None:
+    if not isinstance(model, ModelParams):
+        raise TypeError(f"model must be a ModelParams (e.g. ModelParams(name='census')), not "
+                        f"{type_name(model)}")
 
 
 def _described(model: ModelParams) -> str:
@@ -499,6 +517,7 @@ def pass_machine(model: ModelParams, machine: MachineParams, name: str) -> Machi
     stopped by it has no result) and tie rule, and the seed of machine ``machine_index`` of a row
     (:func:`~bayesmachine.params.nth_machine`): a machine beside the left one, its own random numbers.
     """
+    _check_model(model)
     p = model.pass_named(name)
     if p.model is model:
         raise ValueError(f"{name} is the {model.name} model's own pass: its machine is "
@@ -514,7 +533,16 @@ def pass_machine(model: ModelParams, machine: MachineParams, name: str) -> Machi
     if machine.rng == "smtj":
         kwargs.update(smtj_dwell=machine.smtj_dwell, smtj_spread=machine.smtj_spread,
                       smtj_share=machine.smtj_share)
-    return nth_machine(disparity_machine(p.model, **kwargs), p.machine_index)
+    try:
+        return nth_machine(disparity_machine(p.model, **kwargs), p.machine_index)
+    except ParameterError as exc:
+        own = p.max_cycles is not None or p.watchdog_runs is not None
+        if exc.parameter != "max_cycles" or not own or p.watchdog_option is None:
+            raise
+        # The pass's own watchdog is at fault, which its option changes (not the machine's max_cycles).
+        how = "" if p.max_cycles is not None else f": by default {p.watchdog_runs} runs of counter max + 1"
+        raise ParameterError(f"the {name} pass's watchdog ({kwargs['max_cycles']} cycles{how}) is too short "
+                             f"({exc}); give a longer {p.watchdog_option}", p.watchdog_option) from None
 
 
 def check_disparity_machine(model: ModelParams, machine: MachineParams) -> int:
@@ -523,6 +551,9 @@ def check_disparity_machine(model: ModelParams, machine: MachineParams) -> int:
     Returns the operator column of the first data column: 1 with a loaded prior (column 0), 2 with
     the neighbour prior (feedback column 0, loaded above column 1), else 0.
     """
+    _check_model(model)
+    if not isinstance(machine, MachineParams):
+        raise TypeError(f"machine must be a MachineParams, not {type_name(machine)}")
     data_prior, data = machine_layout(model.columns)
     if machine.rows != model.hypotheses or not machine.nomatch_row:
         raise ParameterError(

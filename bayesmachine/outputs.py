@@ -12,7 +12,10 @@
   on :meth:`OutputDir.commit` records them in the manifest and moves them into place with the
   report last, never over a file that appeared meanwhile: a report's presence means the run is
   complete. On any exception (KeyboardInterrupt and SIGTERM included) the staged
-  files are removed.
+  files are removed. A temporary name holds a random 128-bit token (``.NAME.partial-TOKEN.EXT``),
+  so it cannot be a user's file, and is listed in the manifest (``staging``) before anything is
+  written under it: a run killed outright (SIGKILL, power loss) leaves its temporary files listed,
+  and the next run removes those, never a file by the look of its name.
 * :class:`NpzWriter`: an ``.npz`` written array by array, one array possibly streamed in
   chunks along its first axis, so a volume larger than memory never has to be held.
 * :func:`require_memory`, :func:`require_disk`: refuse up front, with the size needed.
@@ -25,12 +28,10 @@ from __future__ import annotations
 import contextlib
 import errno
 import fcntl
-import glob
-import itertools
 import json
 import os
+import secrets
 import shutil
-import threading
 import zipfile
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
@@ -53,15 +54,17 @@ __all__ = [
 ]
 
 _TMP_MARK = ".partial-"
-_TMP_SERIAL = itertools.count()
 
 
 def _temp_name(path: Path) -> Path:
     # Hidden, same directory (so os.replace is a rename), same suffix (writers infer formats from
-    # it). Unique per call, not per process: two threads writing the same file (two engines
-    # building one cached design) must not share, and then lose, one temporary file.
-    token = f"{os.getpid()}-{threading.get_ident()}-{next(_TMP_SERIAL)}"
-    return path.with_name(f".{path.stem}{_TMP_MARK}{token}{path.suffix}")
+    # it). A random 128-bit token: unique per call (two threads writing the same file, two engines
+    # building one cached design, never share one), and never the name of a user's file.
+    for _ in range(8):
+        tmp = path.with_name(f".{path.stem}{_TMP_MARK}{secrets.token_hex(16)}{path.suffix}")
+        if not os.path.lexists(tmp):
+            return tmp
+    raise FileExistsError(errno.EEXIST, "no free temporary name beside it", str(path))
 
 
 def _fsync_file(path: Path) -> None:
@@ -162,26 +165,34 @@ def _plain_name(name: object) -> bool:
     return isinstance(name, str) and name not in ("", ".", "..", MANIFEST) and Path(name).name == name
 
 
+def _manifest_list(directory: str | Path, key: str) -> list[str]:
+    """The plain file names under ``key`` of ``directory``'s manifest (none if unreadable or foreign)."""
+    try:
+        data = json.loads((Path(directory) / MANIFEST).read_text())
+    except (OSError, ValueError):
+        return []
+    names = data.get(key) if isinstance(data, dict) else None
+    if not isinstance(names, list):
+        return []
+    return [f for f in names if _plain_name(f)]
+
+
 def read_manifest(directory: str | Path) -> list[str]:
     """The file names ``directory``'s manifest says the project wrote there (none if it has none).
 
     An unreadable or foreign manifest counts as none: then nothing is known to be ours and
     nothing is removed."""
-    try:
-        data = json.loads((Path(directory) / MANIFEST).read_text())
-    except (OSError, ValueError):
-        return []
-    files = data.get("files") if isinstance(data, dict) else None
-    if not isinstance(files, list):
-        return []
-    return [f for f in files if _plain_name(f)]
+    return _manifest_list(directory, "files")
 
 
-def _write_manifest(directory: Path, names: Iterable[str]) -> None:
-    record = {
+def _write_manifest(directory: Path, names: Iterable[str], staging: Iterable[str] = ()) -> None:
+    record: dict[str, object] = {
         "about": "files bayesmachine wrote into this directory; its next run here removes them first",
         "files": list(names),
     }
+    staging = list(staging)
+    if staging:  # temporary files being written: removed by the next run if a killed one left them
+        record["staging"] = staging
     path = directory / MANIFEST
     tmp = _temp_name(path)
     try:
@@ -254,6 +265,7 @@ class OutputDir:
         self._created: list[Path] = []
         self._lock: int | None = None
         self._kept: list[str] = []
+        self._listed: list[str] = []  # the files the manifest lists now
 
     def __enter__(self) -> OutputDir:
         d = self.directory
@@ -305,14 +317,14 @@ class OutputDir:
                     _remove(target)
             except OSError as exc:
                 raise _named(exc, target) from exc
-        # Temporary files a killed earlier run left behind (named by _temp_name: ours by their name).
-        for name in (*self.names, MANIFEST):
-            stem, suffix = Path(name).stem, Path(name).suffix
-            for old in d.glob(f".{glob.escape(stem)}{_TMP_MARK}*{glob.escape(suffix)}"):
+        # Temporary files a run killed outright left behind: the ones its manifest lists, nothing else.
+        for name in _manifest_list(d, "staging"):
+            if name.startswith(".") and _TMP_MARK in name:
                 try:
-                    _remove(old)
+                    _remove(d / name)
                 except OSError as exc:
-                    raise _named(exc, old) from exc
+                    raise _named(exc, d / name) from exc
+        self._listed = list(self._kept)
         if self._kept:
             _write_manifest(d, self._kept)
         else:
@@ -337,7 +349,12 @@ class OutputDir:
         tmp = self._staged.get(name)
         if tmp is None:
             tmp = self._staged[name] = _temp_name(self.directory / name)
+            # Listed before anything is written under it: the next run removes it if this one is killed.
+            _write_manifest(self.directory, self._kept, self._staging())
         return tmp
+
+    def _staging(self) -> list[str]:
+        return [tmp.name for tmp in self._staged.values()]
 
     def write(self, name: str, writer: Callable[[Path], object]) -> Path:
         """Stage ``name`` by calling ``writer(temporary_path)``; an OSError names ``name``'s path."""
@@ -359,7 +376,8 @@ class OutputDir:
         for name in order:
             if not self._staged[name].exists():
                 raise FileNotFoundError(errno.ENOENT, "was never written", str(self.directory / name))
-        _write_manifest(self.directory, [*self._kept, *order])
+        self._listed = [*self._kept, *order]
+        _write_manifest(self.directory, self._listed, self._staging())
         done = []
         for name in order:
             tmp, final = self._staged[name], self.directory / name
@@ -375,6 +393,7 @@ class OutputDir:
             except OSError as exc:
                 raise _named(exc, final) from exc
             done.append(final)
+        _write_manifest(self.directory, self._listed)  # every temporary file is renamed
         _fsync_dir(self.directory)
         self._committed = True
         return done
@@ -385,6 +404,12 @@ class OutputDir:
         # Whatever was not committed goes: never a half-written file under any name.
         for tmp in self._staged.values():
             _remove(tmp)
+        if self._staged and not self._committed:
+            with contextlib.suppress(OSError):  # the temporary files are gone, and so goes their listing
+                if self._listed:
+                    _write_manifest(self.directory, self._listed)
+                else:
+                    _remove(self.directory / MANIFEST)
         self._release()
         if kind is None and not self._committed:
             raise RuntimeError("OutputDir left without commit()")

@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
 from dataclasses import asdict, dataclass, replace
 
+from bayesmachine.checks import as_bool, as_int, as_real, type_name
 from bayesmachine.errors import ParameterError
 from bayesmachine.sources import SMTJ_SHARES, SOURCE_KINDS, check_source, source_kind
 
@@ -24,6 +24,7 @@ __all__ = [
     "TIE_BREAKS",
     "SMTJ_SHARES",
     "DEFAULT_DMAX",
+    "MAX_DMAX",
     "DEFAULT_COLUMNS",
     "DEFAULT_WORD_BITS",
     "DEFAULT_COUNTER_MAX",
@@ -64,6 +65,7 @@ DEFAULT_WORDS_PER_BEAT = 16
 STEREO_ROWS_PER_BEAT = 6
 # The paper's machine: Dmax 80 (82 rows), three data terms, counter max 16.
 DEFAULT_DMAX = 80
+MAX_DMAX = 4094  # Dmax + 2 rows at most 4096
 DEFAULT_COLUMNS = 3
 DEFAULT_COUNTER_MAX = 16
 DEFAULT_RNG = "sobol"  # measured best on the bundled pair: README "Random sources"
@@ -79,24 +81,28 @@ _PRIOR_COLUMNS = {"uniform": 0, "loaded": 1, "neighbour": 2}
 _LOADED_PRIOR_COLUMNS = {"uniform": 0, "loaded": 1, "neighbour": 1}
 
 
-def _check_int(name: str, value: object, lo: int, hi: int | None = None) -> None:
-    if isinstance(value, bool) or not isinstance(value, int):
-        raise TypeError(f"{name} must be an integer, not {type(value).__name__} {value!r}")
-    if value < lo or (hi is not None and value > hi):
+def _check_int(name: str, value: object, lo: int, hi: int | None = None) -> int:
+    """``value`` as an int (NumPy integers too: :func:`~bayesmachine.checks.as_int`) in [lo, hi]."""
+    v = as_int(name, value)
+    if v < lo or (hi is not None and v > hi):
         bound = f"in [{lo}, {hi}]" if hi is not None else f">= {lo}"
-        raise ParameterError(f"{name} must be {bound}, got {value}", name)
+        raise ParameterError(f"{name} must be {bound}, got {v}", name)
+    return v
 
 
 def _check_choice(name: str, value: object, choices: tuple[str, ...]) -> None:
     if not isinstance(value, str):
-        raise TypeError(f"{name} must be one of {choices}, not {type(value).__name__} {value!r}")
+        raise TypeError(f"{name} must be one of {choices}, not {type_name(value)}")
     if value not in choices:
         raise ParameterError(f"{name} must be one of {choices}, got {value!r}", name)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class MachineParams:
-    """Parameters of one stochastic Bayesian machine.
+    """Parameters of one stochastic Bayesian machine, keyword-only.
+
+    Integer fields take what Python's ``operator.index`` takes (NumPy integer scalars too), yes/no
+    fields a bool or a NumPy bool, and hold plain Python values.
 
     rows
         M, the number of rows of the operator matrix (hypotheses of the searched
@@ -198,39 +204,46 @@ class MachineParams:
     timeout_answer: str = "none"
     normalize: bool = False
 
+    def _int(self, name: str, lo: int, hi: int | None = None) -> None:
+        object.__setattr__(self, name, _check_int(name, getattr(self, name), lo, hi))
+
+    def _bool(self, name: str) -> None:
+        object.__setattr__(self, name, as_bool(name, getattr(self, name)))
+
     def __post_init__(self) -> None:
-        _check_int("rows", self.rows, 1, 4096)
-        _check_int("columns", self.columns, 1, 64)
+        self._int("rows", 1, 4096)
+        self._int("columns", 1, 64)
         # <= 15: every word, up to 2**15 = 1.0, fits the 16-bit words of the host and the engines.
-        _check_int("word_bits", self.word_bits, 1, 15)
-        _check_int("counter_max", self.counter_max, 1, (1 << 24) - 1)
+        self._int("word_bits", 1, 15)
+        self._int("counter_max", 1, (1 << 24) - 1)
+        if not isinstance(self.rng, str):
+            raise TypeError(f"rng must be a random source's name (str), not {type_name(self.rng)}")
         source_kind(self.rng)  # a known kind; what the kind needs is checked last (check_source)
-        _check_int("lfsr_bits", self.lfsr_bits, 3, 63)
+        self._int("lfsr_bits", 3, 63)
         if self.lfsr_bits < self.word_bits + 2:
             raise ParameterError(
                 f"lfsr_bits ({self.lfsr_bits}) must be at least word_bits + 2 "
                 f"({self.word_bits + 2}): each LFSR delivers word_bits fresh bits per cycle", "lfsr_bits")
-        _check_int("seed", self.seed, 0, (1 << 64) - 1)
-        _check_int("max_cycles", self.max_cycles, 1, (1 << 32) - 1)
+        self._int("seed", 0, (1 << 64) - 1)
+        self._int("max_cycles", 1, (1 << 32) - 1)
         if self.max_cycles <= self.counter_max:
             raise ParameterError(
                 f"max_cycles ({self.max_cycles}) must exceed counter_max ({self.counter_max}): "
                 f"no counter can overflow in fewer than counter_max + 1 cycles", "max_cycles")
         _check_choice("prior", self.prior, PRIORS)
         self._check_feedback()
-        if not isinstance(self.nomatch_row, bool):
-            raise TypeError(f"nomatch_row must be a bool, not {self.nomatch_row!r}")
+        self._bool("nomatch_row")
         if self.nomatch_row and self.rows < 2:
             raise ParameterError("rows: a machine with a no-match row needs at least 2 rows", "rows")
         _check_choice("tie_break", self.tie_break, TIE_BREAKS)
-        _check_int("words_per_beat", self.words_per_beat, 1)
+        self._int("words_per_beat", 1)
         if self.words_per_beat > self.words_per_pixel:
             raise ParameterError(
                 f"words_per_beat ({self.words_per_beat}) exceeds the words per pixel "
                 f"({self.words_per_pixel})",
                 "words_per_beat")
         self._check_smtj()
-        _check_int("samples_per_clock", self.samples_per_clock, 1)
+        self._int("samples_per_clock", 1)
         if self.samples_per_clock not in SAMPLES_PER_CLOCK:
             raise ParameterError(f"samples_per_clock must be one of {SAMPLES_PER_CLOCK}, "
                                  f"got {self.samples_per_clock}", "samples_per_clock")
@@ -238,9 +251,7 @@ class MachineParams:
             raise ParameterError(f"max_cycles ({self.max_cycles}) must exceed samples_per_clock "
                                  f"({self.samples_per_clock}): a run has at least two clocks", "max_cycles")
         _check_choice("timeout_answer", self.timeout_answer, TIMEOUT_ANSWERS)
-        if not isinstance(self.normalize, bool):
-            raise TypeError(f"normalize must be a bool, not {type(self.normalize).__name__} "
-                            f"{self.normalize!r}")
+        self._bool("normalize")
         # Last, what only the random source knows (the Sobol table's size, the LFSR polynomials):
         # the one place it is checked, so every holder of a MachineParams can build its source.
         check_source(self)
@@ -257,12 +268,8 @@ class MachineParams:
             if getattr(self, name) is None:
                 object.__setattr__(self, name, default)
         for name in ("smtj_dwell", "smtj_spread"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)):
-                raise TypeError(f"{name} must be a number, not {type(v).__name__} {v!r}")
-            if not math.isfinite(v):
-                raise ParameterError(f"{name} must be a finite number, not {v!r}", name)
-            object.__setattr__(self, name, float(v))  # 20 and 20.0: one machine, one fingerprint
+            # A float: 20 and 20.0 are one machine, one fingerprint.
+            object.__setattr__(self, name, as_real(name, getattr(self, name)))
         if not 0 < self.smtj_dwell <= 1e12:  # type: ignore[operator]
             raise ParameterError(f"smtj_dwell (clock cycles) must be in (0, 1e12], got {self.smtj_dwell}",
                                  "smtj_dwell")
@@ -286,13 +293,14 @@ class MachineParams:
         if not 1 <= len(words) <= self.rows:
             raise ParameterError(f"prior = 'neighbour' needs 1 to rows ({self.rows}) feedback_words, "
                                  f"got {len(words)}", "feedback_words")
-        for i, w in enumerate(words):
-            _check_int(f"feedback_words[{i}]", w, 0, 1 << self.word_bits)
+        one = 1 << self.word_bits
+        object.__setattr__(self, "feedback_words",
+                           tuple(_check_int(f"feedback_words[{i}]", w, 0, one) for i, w in enumerate(words)))
         if self.nomatch_row:
             if self.feedback_nomatch_word is None:
                 raise ParameterError("prior = 'neighbour' with a no-match row needs feedback_nomatch_word",
                                      "feedback_nomatch_word")
-            _check_int("feedback_nomatch_word", self.feedback_nomatch_word, 0, 1 << self.word_bits)
+            self._int("feedback_nomatch_word", 0, 1 << self.word_bits)
         elif self.feedback_nomatch_word is not None:
             raise ParameterError("feedback_nomatch_word needs a no-match row (nomatch_row=True)",
                                  "feedback_nomatch_word")
@@ -300,11 +308,13 @@ class MachineParams:
     @classmethod
     def for_disparity(cls, dmax: int = DEFAULT_DMAX, **kwargs: object) -> MachineParams:
         """The disparity machine of the paper: M = Dmax + 2 rows, the last one no-match."""
-        _check_int("dmax", dmax, 0, 4094)
+        dmax = _check_int("dmax", dmax, 0, MAX_DMAX)
         kwargs.setdefault("columns", DEFAULT_COLUMNS)
         if "words_per_beat" not in kwargs:
             # Small machines get a load stream no wider than one pixel's words.
-            columns = int(kwargs["columns"]) + _LOADED_PRIOR_COLUMNS.get(kwargs.get("prior"), 0)  # type: ignore[call-overload, arg-type]
+            prior = kwargs.get("prior")
+            columns = _check_int("columns", kwargs["columns"], 1, 64) + (
+                _LOADED_PRIOR_COLUMNS.get(prior, 0) if isinstance(prior, str) else 0)
             kwargs["words_per_beat"] = min(DEFAULT_WORDS_PER_BEAT, (dmax + 2) * columns)
         return cls(rows=dmax + 2, nomatch_row=True, **kwargs)  # type: ignore[arg-type]
 
@@ -370,7 +380,12 @@ class MachineParams:
     def nomatch_index(self) -> int | None:
         return self.rows - 1 if self.nomatch_row else None
 
-    def to_dict(self) -> dict[str, object]:
+    def to_dict(self, complete: bool = False) -> dict[str, object]:
+        """The fields this machine uses (the ``smtj_*`` ones with rng ``smtj``, the ``feedback_*`` ones with
+        the neighbour prior). Without ``complete``, ``samples_per_clock``, ``timeout_answer`` and
+        ``normalize`` are left out at the values every machine had before they existed (1, 'none', off),
+        so that fingerprints stay; ``complete``: every resolved value, what a report records (a census
+        model's machine with normalize off says so, rather than reading as the model's default, on)."""
         d = asdict(self)
         if self.rng != "smtj":  # device parameters mean nothing to the other sources
             for name in ("smtj_dwell", "smtj_spread", "smtj_share"):
@@ -379,6 +394,8 @@ class MachineParams:
             del d["feedback_words"], d["feedback_nomatch_word"]
         else:
             d["feedback_words"] = list(self.feedback_words)
+        if complete:
+            return d
         # Fields at the value every machine had before them: left out, so fingerprints stay.
         if self.samples_per_clock == 1:
             del d["samples_per_clock"]
@@ -404,7 +421,7 @@ def nth_machine(params: MachineParams, index: int) -> MachineParams:
     Machine 0 is ``params`` itself; machine i has seed ``(seed + i * 0x9E3779B97F4A7C15) mod 2**64``,
     so every machine draws its own LFSR polynomials and start states.
     """
-    _check_int("index", index, 0)
+    index = _check_int("index", index, 0)
     return replace(params, seed=(params.seed + index * _MACHINE_SEED_STEP) % (1 << 64))
 
 

@@ -23,6 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from bayesmachine.checks import as_int
+
 __all__ = ["CAMERA_FPS", "FILTER_SIZE", "MARGIN", "VGA_HEIGHT", "VGA_WIDTH", "OutputRegion"]
 
 # The paper's three features are 5x5 correlations: maps lose 2 pixels on every side (the paper
@@ -50,8 +52,8 @@ class OutputRegion:
     margin: int = MARGIN
 
     def __post_init__(self) -> None:
-        if isinstance(self.margin, bool) or not isinstance(self.margin, int) or self.margin < MARGIN:
-            raise ValueError(f"margin must be an integer >= {MARGIN} (the 5x5 filters'), got {self.margin!r}")
+        # An integer as bayesmachine.checks takes it (np.int64(3) is 3), at least the 5x5 filters'.
+        object.__setattr__(self, "margin", as_int("margin", self.margin, MARGIN))
         size = 2 * self.margin + 1
         if self.image_height < size or self.image_width < size:
             raise ValueError(

@@ -16,23 +16,25 @@ Run: python benchmarks/bench_frontend.py [--counter-max 16] [--dmax 80] [--no-sy
 
 from __future__ import annotations
 
-import argparse
 import re
 import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
+from bayesmachine.cli import Parser, run_script
+from bayesmachine.cliargs import MAX_COUNTER_MAX, argument_type, float_in_range, int_in_range
 from bayesmachine.hdl.emit import emit
 from bayesmachine.hdl.frontend.stereo import StereoMachine, stereo_machine_params
 from bayesmachine.hdl.machine import pixel_wall_cycles
 from bayesmachine.host.features import feature_sums
-from bayesmachine.host.images import Crop, bundled_pair, crop_image
+from bayesmachine.host.images import bundled_pair, crop_image, parse_crop
 from bayesmachine.host.likelihoods import memory_words
 from bayesmachine.models import ModelParams
-from bayesmachine.params import MachineParams
+from bayesmachine.params import MAX_DMAX, MachineParams
 from bayesmachine.sim.model import MachineModel
 from bayesmachine.tools import which
 
@@ -129,19 +131,20 @@ def synth_costs(top: StereoMachine, workdir: Path, generic: bool) -> None:
         print(f"  {name:28} {row[0]:7} {row[1]:6} {row[2]:7} {row[3]:6} {row[4]:7}")
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--dmax", type=int, default=80)
-    ap.add_argument("--counter-max", type=int, default=16)
-    ap.add_argument("--clock-mhz", type=float, default=100.0)
-    ap.add_argument("--crop", default="50,10,640,480", help="X,Y,W,H of the Motorcycle pair")
+def main(argv: list[str] | None = None) -> None:
+    ap = Parser(prog=Path(__file__).name, description=__doc__.splitlines()[0])
+    ap.add_argument("--dmax", type=int_in_range(0, MAX_DMAX), default=80)
+    ap.add_argument("--counter-max", type=int_in_range(1, MAX_COUNTER_MAX), default=16)
+    ap.add_argument("--clock-mhz", type=float_in_range(1, 1000), default=100.0)
+    ap.add_argument("--crop", type=argument_type(parse_crop, "crop"), default="50,10,640,480",
+                    help="X,Y,W,H of the Motorcycle pair")
     ap.add_argument("--no-verilator", action="store_true")
     ap.add_argument("--no-synth", action="store_true")
     ap.add_argument("--no-model", action="store_true", help="skip the check against the model")
     ap.add_argument("--no-generic", action="store_true", help="skip the generic synth per block")
-    args = ap.parse_args()
-    x, y, w, h = (int(v) for v in args.crop.split(","))
-    left, right, _ = (crop_image(a, Crop(x, y, w, h)) for a in bundled_pair())
+    args = ap.parse_args(argv)
+    w, h = args.crop.width, args.crop.height
+    left, right, _ = (crop_image(a, args.crop) for a in bundled_pair())
     left, right = np.ascontiguousarray(left), np.ascontiguousarray(right)
     model = ModelParams(name="paper", dmax=args.dmax)
     params = stereo_machine_params(args.dmax, counter_max=args.counter_max)
@@ -157,4 +160,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(run_script(Path(__file__).name, main))

@@ -15,9 +15,9 @@ Run: python benchmarks/bench_leap_forward.py [--samples 1,2,4,8,16]
 
 from __future__ import annotations
 
-import argparse
 import re
 import subprocess
+import sys
 import tempfile
 from pathlib import Path
 
@@ -26,9 +26,11 @@ from amaranth.hdl import Cat, Module, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
+from bayesmachine.cli import Parser, run_script
+from bayesmachine.cliargs import int_of, value_list
 from bayesmachine.hdl.operator import sample_bits
 from bayesmachine.hdl.sources import lfsr_next_state_expr
-from bayesmachine.params import MachineParams
+from bayesmachine.params import SAMPLES_PER_CLOCK, MachineParams
 from bayesmachine.sources.lfsr import column_lfsr_specs
 from bayesmachine.sources.sobol import sample_points
 from bayesmachine.tools import which
@@ -94,17 +96,18 @@ def yosys_stat(component: wiring.Component) -> tuple[int, int]:
     return luts, ffs
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--samples", default="1,2,4,8,16")
-    args = ap.parse_args()
+def main(argv: list[str] | None = None) -> None:
+    ap = Parser(prog=Path(__file__).name, description=__doc__.splitlines()[0])
+    ap.add_argument("--samples", type=value_list(int_of(SAMPLES_PER_CLOCK), "B"), default="1,2,4,8,16",
+                    help="the B, comma-separated (default 1,2,4,8,16)")
+    args = ap.parse_args(argv)
     params = MachineParams.for_disparity(80, rng="lfsr-shared")
     spec = column_lfsr_specs(params)[0]
     w = params.word_bits
     print(f"L = {spec.length}, W = {w}, taps {spec.taps}; totals at Dmax 80, N 3 ({OPERATORS} operators)")
     print("  B   LFSR gen LUT4/FF   comparators: B full / sobol   lfsr total LUT4   lfsr-shared total LUT4   "
           "sobol comparators")
-    for b in (int(x) for x in args.samples.split(",")):
+    for b in args.samples:
         gen = yosys_stat(LeapGenerator(spec, b))
         full = yosys_stat(Comparators(w, b, shared=False))[0]
         shared = yosys_stat(Comparators(w, b, shared=True))[0]
@@ -115,4 +118,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(run_script(Path(__file__).name, main))

@@ -4,9 +4,9 @@ The machine's run at a pixel lasts about (n_max + 1) / p_win cycles, p_win the w
 probability of firing per cycle: the product over its operator columns of word / 2^W (the data
 columns, the above prior, the consistency column, and the feedback column the machine forms from
 its left neighbour). The estimate takes the MAPs of the 10-bit reference
-(``reference_quantized_map`` and ``right_reference_map(..., word_bits)``: the distribution the
+(``reference_quantized_map`` and ``declared_maps(..., word_bits)["right"]``: the distribution the
 machine samples) for the neighbours' prior words and the right MAPs, builds the words the machine
-would load (``memory_words``, ``right_memory_words``), and caps each pixel at the watchdog
+would load (``memory_words``, ``pass_words`` of the right pass), and caps each pixel at the watchdog
 (``max_cycles``; the right pass's ``lr_right_max_cycles``). It is checked against the machine
 (model engine, sobol, counter max 16, seed 1) on one band with ``--machine``.
 
@@ -25,10 +25,14 @@ Run: python benchmarks/bench_lr_cycles.py [--rows 150,190] [--machine] [--varian
 from __future__ import annotations
 
 import argparse
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
+from bayesmachine.cli import Parser, run_script
+from bayesmachine.cliargs import MAX_COUNTER_MAX, int_in_range
 from bayesmachine.columns import AbovePrior
 from bayesmachine.host.features import model_planes
 from bayesmachine.host.images import bundled_pair
@@ -62,6 +66,35 @@ def variant(spec: str) -> dict[str, object]:
         field, kind = KEYS[key]
         out[field] = bool(int(value)) if kind is bool else kind(value)
     return out
+
+
+def _rows(text: str) -> tuple[int, int] | None:
+    """``--rows START,STOP`` (map rows of the bundled pair, 0 <= START < STOP <= 494), or None for 'all'."""
+    if text == "all":
+        return None
+    try:
+        y0, y1 = (int(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected START,STOP map rows or all, got {text!r}") from None
+    if not 0 <= y0 < y1 <= 494:  # the bundled pair's 500 rows less the census-lr margins
+        raise argparse.ArgumentTypeError(f"expected 0 <= START < STOP <= 494, got {text!r}")
+    return y0, y1
+
+
+def _variants(text: str) -> list[str]:
+    """``--variants``: each one checked (its keys, its values: the model it makes) before any work."""
+    names = [n for n in text.split(";") if n]
+    if not names:
+        raise argparse.ArgumentTypeError("give at least one variant")
+    for name in names:
+        try:
+            ModelParams(name="census-lr").replace(**variant(name))
+        except KeyError as exc:
+            raise argparse.ArgumentTypeError(f"{name!r}: unknown key {exc} (keys: {', '.join(KEYS)})") \
+                from None
+        except (TypeError, ValueError) as exc:
+            raise argparse.ArgumentTypeError(f"{name!r}: {exc}") from None
+    return names
 
 
 def _shifted_left(hat: np.ndarray) -> np.ndarray:
@@ -132,26 +165,27 @@ def accuracy(disp: np.ndarray, gt: np.ndarray, occ: np.ndarray) -> dict[str, flo
             "nm_occ": nomatch_occluded_share(disp, occ)}
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--rows", default="150,190", help="map rows START,STOP of the band (default 150,190); "
-                    "'all' for the whole pair")
-    ap.add_argument("--variants", default=";".join(VARIANTS),
+def main(argv: list[str] | None = None) -> None:
+    ap = Parser(prog=Path(__file__).name, description=__doc__,
+                formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--rows", type=_rows, default="150,190",
+                    help="map rows START,STOP of the band (default 150,190); 'all' for the whole pair")
+    ap.add_argument("--variants", type=_variants, default=";".join(VARIANTS),
                     help="variants separated by ';', each 'default' or comma-separated NAME=VALUE / flags of "
                     + ", ".join(KEYS) + f" (default: {';'.join(VARIANTS)})")
     ap.add_argument("--machine", action="store_true",
                     help="also run the machine (model engine, sobol, counter max 16, seed 1) on the band")
-    ap.add_argument("--counter-max", type=int, default=16)
-    ap.add_argument("--max-cycles", type=int, default=None,
+    ap.add_argument("--counter-max", type=int_in_range(1, MAX_COUNTER_MAX), default=16)
+    ap.add_argument("--max-cycles", type=int_in_range(2, (1 << 32) - 1), default=None,
                     help="the left pass's watchdog (default: disparity_machine's for census-lr)")
-    args = ap.parse_args()
-    names = [n for n in args.variants.split(";") if n]
+    args = ap.parse_args(argv)
+    names = args.variants
     left, right, gt_full = bundled_pair()
     base = ModelParams(name="census-lr")
-    if args.rows != "all":
+    if args.rows is not None:
         # Map rows y0..y1-1 are image rows y0 + margin ..: crop the pair (and the truth) to them, so the
         # machine and the references both start the band afresh (no row above).
-        y0, y1 = map(int, args.rows.split(","))
+        y0, y1 = args.rows
         cut = slice(y0, y1 + 2 * base.margin)
         left, right, gt_full = left[cut], right[cut], gt_full[cut]
     gt = gt_region(gt_full, base.dmax, base.margin)
@@ -198,4 +232,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(run_script(Path(__file__).name, main))

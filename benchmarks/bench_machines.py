@@ -21,19 +21,36 @@ A run report's ``machines`` must match K, and its frame must be 640 x 480.
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
 
+from bayesmachine.cli import Parser, run_script
+from bayesmachine.cliargs import argument_type
+
 PIXEL_BITS = 16  # a pixel pair of the stereo top's input stream
+
+
+def _config(text: str) -> tuple[int, Path | None, Path | None]:
+    """``K:SYNTH_DIR:RUN_DIR`` ('-': none), K machines 1 .. 16."""
+    try:
+        k_text, synth_dir, run_dir = text.split(":")
+        k = int(k_text)
+    except ValueError:
+        raise ValueError(f"{text!r} is not K:SYNTH_DIR:RUN_DIR") from None
+    if not 1 <= k <= 16:
+        raise ValueError(f"{text!r}: K must be 1 .. 16 machines")
+    return k, *(None if d == "-" else Path(d) for d in (synth_dir, run_dir))  # type: ignore[return-value]
 
 
 def _load(path: Path) -> dict:
     report = path / "report.json"
     if not report.is_file():
-        raise SystemExit(f"bench_machines: no report.json in {path}")
-    return json.loads(report.read_text())
+        raise ValueError(f"no report.json in {path}")
+    try:
+        return json.loads(report.read_text())
+    except ValueError as exc:
+        raise ValueError(f"{report}: not JSON ({exc})") from None
 
 
 def row(k: int, synth: dict | None, run: dict | None) -> dict[str, object]:
@@ -41,14 +58,14 @@ def row(k: int, synth: dict | None, run: dict | None) -> dict[str, object]:
     out: dict[str, object] = {"machines": k}
     if synth is not None:
         if synth.get("machines", synth.get("words_per_beat")) != k or synth.get("top") != "stereo":
-            raise SystemExit(f"bench_machines: the synth report is not --top stereo --machines {k}")
+            raise ValueError(f"the synth report is not --top stereo --machines {k}")
         res, util = synth["resources"], synth["utilization"]
         out |= {"lut4": res["lut4"], "ccu2c": res["carry"], "sites": res["lut4"] + 2 * res["carry"],
                 "ff": res["ff"], "dp16kd": res["bram"], "util": util, "fmax": synth.get("fmax_mhz"),
                 "device": synth["device"]}
     if run is not None:
         if run.get("machines", 1) != k or run.get("feed") != "pixels":
-            raise SystemExit(f"bench_machines: the run report is not --feed pixels --machines {k}")
+            raise ValueError(f"the run report is not --feed pixels --machines {k}")
         h, w = run["image_shape"]
         wall = run["wall_cycles"]
         out |= {"frame": f"{w}x{h}", "wall": wall, "pixels": run["pixels"],
@@ -83,23 +100,23 @@ def table(rows: list[dict[str, object]]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = Parser(prog=Path(__file__).name, description=__doc__.splitlines()[0])
     ap.add_argument("configs", nargs="+", metavar="K:SYNTH_DIR:RUN_DIR",
+                    type=argument_type(_config, "config"),
                     help="machines, the synth output directory and the run output directory ('-': none)")
     args = ap.parse_args(argv)
     rows = []
-    for spec in args.configs:
+    for k, synth_dir, run_dir in args.configs:
+        synth = None if synth_dir is None else _load(synth_dir)
+        run = None if run_dir is None else _load(run_dir)
         try:
-            k_text, synth_dir, run_dir = spec.split(":")
-            k = int(k_text)
-        except ValueError:
-            raise SystemExit(f"bench_machines: {spec!r} is not K:SYNTH_DIR:RUN_DIR") from None
-        synth = None if synth_dir == "-" else _load(Path(synth_dir))
-        run = None if run_dir == "-" else _load(Path(run_dir))
-        rows.append(row(k, synth, run))
+            rows.append(row(k, synth, run))
+        except (KeyError, TypeError, ZeroDivisionError) as exc:  # a report of another kind or version
+            raise ValueError(f"K {k}: {synth_dir} / {run_dir} do not hold the synth and run reports this "
+                             f"reads (no {exc})") from None
     print(table(rows))
     return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_script(Path(__file__).name, main))

@@ -19,8 +19,11 @@ from pathlib import Path
 
 import cv2
 
+from bayesmachine.cli import Parser, run_script
+from bayesmachine.cliargs import MAX_COUNTER_MAX, input_path, int_in_range, size_pair, value_list
 from bayesmachine.host.images import random_dot_stereogram
 from bayesmachine.outputs import format_bytes
+from bayesmachine.params import MAX_DMAX
 from bayesmachine.region import OutputRegion
 
 # Runs one command and prints its peak RSS in bytes (ru_maxrss is in KiB on Linux).
@@ -40,20 +43,21 @@ def peak_rss(cmd: list[str]) -> tuple[int, int, float]:
     return int(rss), int(rc), seconds
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--sizes", default="640x480,3000x2000", help="WxH pairs, comma-separated")
-    ap.add_argument("--dmax", type=int, default=80)
-    ap.add_argument("--counter-max", type=int, default=16)
-    ap.add_argument("--keep", type=Path, default=None, help="keep inputs and outputs in this directory")
-    args = ap.parse_args()
-    work = args.keep or Path(tempfile.mkdtemp(prefix="bench_memory_"))
+def main(argv: list[str] | None = None) -> None:
+    ap = Parser(prog=Path(__file__).name, description=__doc__,
+                formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--sizes", type=value_list(size_pair("WxH", (64, 64), (16384, 16384)), "size"),
+                    default="640x480,3000x2000", help="WxH pairs, comma-separated, 64 .. 16384 each way")
+    ap.add_argument("--dmax", type=int_in_range(0, MAX_DMAX), default=80)
+    ap.add_argument("--counter-max", type=int_in_range(1, MAX_COUNTER_MAX), default=16)
+    ap.add_argument("--keep", type=input_path, default=None, help="keep inputs and outputs in this directory")
+    args = ap.parse_args(argv)
+    work = Path(args.keep) if args.keep else Path(tempfile.mkdtemp(prefix="bench_memory_"))
     work.mkdir(parents=True, exist_ok=True)
     cli = [sys.executable, "-m", "bayesmachine"]
     baseline, _, _ = peak_rss([sys.executable, "-c", "import bayesmachine.host.run"])
     print(f"python + imports alone: peak RSS {format_bytes(baseline)}")
-    for size in args.sizes.split(","):
-        w, h = (int(v) for v in size.lower().split("x"))
+    for w, h in args.sizes:
         left, right, _ = random_dot_stereogram(height=h, width=w, background=20, square=50, dot=2, seed=1)
         lp, rp = work / f"l{w}x{h}.png", work / f"r{w}x{h}.png"
         cv2.imwrite(str(lp), left)
@@ -83,4 +87,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(run_script(Path(__file__).name, main))

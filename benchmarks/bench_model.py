@@ -8,21 +8,26 @@ cycles per pixel and the comparison figures. Asserts nothing. Run:
 from __future__ import annotations
 
 import argparse
+import sys
 import time
+from pathlib import Path
 
+from bayesmachine.cli import Parser, run_script
+from bayesmachine.cliargs import counter_max_list, rng_list
 from bayesmachine.host.images import Crop, bundled_pair, crop_image
 from bayesmachine.host.metrics import evaluate
-from bayesmachine.host.run import prepare, run_machine
+from bayesmachine.host.run import ENGINES, prepare, run_machine
 from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--counter-max", default="1,16")
-    ap.add_argument("--engine", default="model")
-    ap.add_argument("--rng", default=MachineParams.rng, help="comma-separated random sources")
-    args = ap.parse_args()
+def main(argv: list[str] | None = None) -> None:
+    ap = Parser(prog=Path(__file__).name, description=__doc__,
+                formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--counter-max", type=counter_max_list, default="1,16")
+    ap.add_argument("--engine", choices=ENGINES, default="model")
+    ap.add_argument("--rng", type=rng_list, default=MachineParams.rng, help="comma-separated random sources")
+    args = ap.parse_args(argv)
     crop = Crop(50, 10, 640, 480)
     left, right, gt = (crop_image(a, crop) for a in bundled_pair())
     model = ModelParams(name="paper")
@@ -32,7 +37,7 @@ def main() -> None:
         f"Motorcycle crop {crop} (640x480), Dmax {model.dmax}: {ho}x{wo} = {ho * wo} output pixels; "
         f"reference {prep.reference_seconds:.3f} s"
     )
-    for kind, n in ((k, int(v)) for k in args.rng.split(",") for v in args.counter_max.split(",")):
+    for kind, n in ((k, v) for k in args.rng for v in args.counter_max):
         machine = MachineParams.for_disparity(model.dmax, counter_max=n, rng=kind)
         t0 = time.perf_counter()
         run = run_machine(prep, machine, args.engine, progress=False)
@@ -55,4 +60,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(run_script(Path(__file__).name, main))

@@ -28,10 +28,14 @@ Run: python benchmarks/bench_models.py [--dmax 80] [--counter-max 1,2,4,8,16] [-
 from __future__ import annotations
 
 import argparse
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
+from bayesmachine.cli import Parser, run_script
+from bayesmachine.cliargs import counter_max_list, int_in_range, output_path
 from bayesmachine.hdl.machine import pixel_wall_cycles
 from bayesmachine.host.features import model_planes
 from bayesmachine.host.images import bundled_pair
@@ -47,6 +51,8 @@ from bayesmachine.host.records import Prepared
 from bayesmachine.host.reference import reference_map, reference_quantized_map, warm_up
 from bayesmachine.host.run import run_machine
 from bayesmachine.models import ModelParams, disparity_machine
+from bayesmachine.outputs import atomic_file
+from bayesmachine.params import MAX_DMAX
 
 
 def figures(disp: np.ndarray, gt: np.ndarray, occluded: np.ndarray) -> dict[str, float]:
@@ -64,19 +70,20 @@ def line(name: str, f: dict[str, float], extra: str = "") -> None:
     print(f"{name:<44} {cells}  {extra}")
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--dmax", type=int, default=80)
-    ap.add_argument("--word-bits", type=int, default=10)
+def main(argv: list[str] | None = None) -> None:
+    ap = Parser(prog=Path(__file__).name, description=__doc__,
+                formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--dmax", type=int_in_range(0, MAX_DMAX), default=80)
+    ap.add_argument("--word-bits", type=int_in_range(1, 15), default=10)
     ap.add_argument("--no-machine", action="store_true", help="skip the machine run")
-    ap.add_argument("--counter-max", default="1,2,4,8,16",
+    ap.add_argument("--counter-max", type=counter_max_list, default="1,2,4,8,16",
                     help="the machine's counter max values, comma-separated (Fig 6 for each model)")
-    ap.add_argument("--lr-counter-max", default="16",
+    ap.add_argument("--lr-counter-max", type=lambda t: counter_max_list(t) if t.strip() else [], default="16",
                     help="counter max values of the census-lr machine, comma-separated ('' for none)")
     ap.add_argument("--no-lr", action="store_true", help="skip the census-lr model")
-    ap.add_argument("--figure", default=None, metavar="PNG",
+    ap.add_argument("--figure", type=output_path, default=None, metavar="PNG",
                     help="write the paper and census machines, SGBM, StereoBM and the ground truth")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     left, right, gt_full = bundled_pair()
     dmax = args.dmax
     # Each model on its own output region (bayesmachine.region: margin 2, or 3 with a 7x7 census).
@@ -135,7 +142,7 @@ def main() -> None:
         return
     figure_maps: dict[str, np.ndarray] = {}
     machine_models = {"paper": "paper", "census + prior": "+ neighbour prior (census model default)"}
-    counters = [int(c) for c in args.counter_max.split(",")]
+    counters = args.counter_max
     print(f"\nThe machine (model engine, sobol, seed 1, W {args.word_bits}): against counter max; agreement "
           "with its float64 / quantized reference; cycles per pixel mean (median); wall cycles per pixel "
           "(hdl.machine timing rule, loading included)")
@@ -150,7 +157,7 @@ def main() -> None:
                 figure_maps[label] = run.map
             machine_line(f"{label}, counter max {counter_max}", run, refs[name], gt, occluded)
     lr_name = "+ left-right column (census-lr default)"
-    lr_counters = [int(c) for c in args.lr_counter_max.split(",") if c.strip()]
+    lr_counters = args.lr_counter_max
     if lr_name in models and lr_counters:
         print("\ncensus-lr machine (both passes, model engine): cycles/px over both passes = all compute "
               "cycles / output pixels; the right pass's own cycles per right pixel and timeouts")
@@ -177,7 +184,8 @@ def main() -> None:
                   ("OpenCV StereoSGBM (block 5)", sgbm_disparity(left, right, dmax, 3)),
                   ("OpenCV StereoBM (block 15)", bm_disparity(left, right, dmax, margin=3)),
                   ("Ground truth", truth[3][0])]
-        save_disparity_figure(args.figure, region.cut(left), panels, dmax)
+        with atomic_file(args.figure) as tmp:  # complete or absent
+            save_disparity_figure(tmp, region.cut(left), panels, dmax)
         print(f"wrote {args.figure}")
 
 
@@ -218,4 +226,4 @@ def machine_line(name: str, run, ref: tuple, gt: np.ndarray, occluded: np.ndarra
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(run_script(Path(__file__).name, main))

@@ -12,15 +12,19 @@ Prints figures; asserts nothing. Run: python benchmarks/bench_normalize.py [--dm
 
 from __future__ import annotations
 
-import argparse
+import sys
+from pathlib import Path
 
 import numpy as np
 from bench_leap_forward import yosys_stat
 
+from bayesmachine.cli import Parser, run_script
+from bayesmachine.cliargs import int_in_range
 from bayesmachine.hdl.machine import BayesianMachine
 from bayesmachine.host.images import bundled_pair
 from bayesmachine.host.run import prepare, run_machine
 from bayesmachine.models import ModelParams, disparity_machine
+from bayesmachine.params import MAX_DMAX
 from bayesmachine.sim import model as machine_model
 
 
@@ -57,12 +61,12 @@ def synth_cost(dmax: int) -> None:
               f"{'on' if normalize else 'off'}: {luts} LUT4, {ffs} FF")
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--dmax", type=int, default=80)
+def main(argv: list[str] | None = None) -> None:
+    ap = Parser(prog=Path(__file__).name, description=__doc__.splitlines()[0])
+    ap.add_argument("--dmax", type=int_in_range(0, MAX_DMAX), default=80)
     ap.add_argument("--no-synth", action="store_true")
     ap.add_argument("--no-runs", action="store_true")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     if not args.no_runs:
         for name in ("census", "census-lr"):
             scale_statistics(name)
@@ -71,4 +75,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(run_script(Path(__file__).name, main))

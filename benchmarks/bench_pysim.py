@@ -12,20 +12,25 @@ from __future__ import annotations
 
 import argparse
 import time
+from pathlib import Path
 
+from bayesmachine.cli import Parser
+from bayesmachine.cliargs import MAX_COUNTER_MAX, int_in_range
 from bayesmachine.host.features import feature_sums
 from bayesmachine.host.images import bundled_pair
 from bayesmachine.host.likelihoods import ModelParams, memory_words
-from bayesmachine.params import MachineParams
+from bayesmachine.params import MAX_DMAX, MachineParams
 from bayesmachine.sim.engines import get_engine
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--dmax", type=int, default=80)
-    ap.add_argument("--counter-max", type=int, default=16)
-    ap.add_argument("--pixels", type=int, default=40, help="pixels to run (default 40)")
-    args = ap.parse_args()
+def main(argv: list[str] | None = None) -> int:
+    ap = Parser(prog=Path(__file__).name, description=__doc__,
+                formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--dmax", type=int_in_range(0, MAX_DMAX), default=80)
+    ap.add_argument("--counter-max", type=int_in_range(1, MAX_COUNTER_MAX), default=16)
+    ap.add_argument("--pixels", type=int_in_range(1, 100_000), default=40,
+                    help="pixels to run, 1 .. 100000 (default 40)")
+    args = ap.parse_args(argv)
 
     machine = MachineParams.for_disparity(args.dmax, counter_max=args.counter_max)
     model = ModelParams(dmax=args.dmax)

@@ -10,14 +10,17 @@ With ``--models paper,census,census-lr``: each model's float64 and ``--word-bits
 
 from __future__ import annotations
 
-import argparse
 import statistics
+import sys
 import time
+from pathlib import Path
 
 import cv2
 import numba
 import numpy as np
 
+from bayesmachine.cli import Parser, run_script
+from bayesmachine.cliargs import int_in_range, model_list
 from bayesmachine.host.features import feature_sums, model_planes
 from bayesmachine.host.images import bundled_pair
 from bayesmachine.host.reference import (
@@ -61,16 +64,17 @@ def models_on_the_bundled_pair(names: list[str], word_bits: int, repeats: int) -
                   f"{min(times) * 1e3:8.1f} ms (MAP sum {int(got.astype(np.int64).sum())})", flush=True)
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--repeats", type=int, default=10)
+def main(argv: list[str] | None = None) -> None:
+    ap = Parser(prog=Path(__file__).name, description=__doc__)
+    ap.add_argument("--repeats", type=int_in_range(1, 1000), default=10)
     ap.add_argument("--no-plain", action="store_true", help="skip the plain-oracle check (needs ~3 GB)")
-    ap.add_argument("--models", default=None, help="comma-separated models: their references on the bundled "
-                    "pair instead")
-    ap.add_argument("--word-bits", type=int, default=10, help="with --models: the word references' W")
-    args = ap.parse_args()
+    ap.add_argument("--models", type=model_list, default=None,
+                    help="comma-separated models: their references on the bundled pair instead")
+    ap.add_argument("--word-bits", type=int_in_range(1, 15), default=10,
+                    help="with --models: the word references' W (default %(default)s)")
+    args = ap.parse_args(argv)
     if args.models:
-        models_on_the_bundled_pair(args.models.split(","), args.word_bits, args.repeats)
+        models_on_the_bundled_pair(args.models, args.word_bits, args.repeats)
         return
     left, right = vga_pair()
     model = ModelParams(name="paper")
@@ -128,4 +132,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(run_script(Path(__file__).name, main))

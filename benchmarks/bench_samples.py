@@ -13,17 +13,21 @@ Run: python benchmarks/bench_samples.py [--models census,census-lr] [--samples 1
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
+from bayesmachine.cli import Parser, run_script
+from bayesmachine.cliargs import int_of, model_list, value_list
 from bayesmachine.hdl.machine import pixel_wall_cycles
 from bayesmachine.host.images import bundled_pair
 from bayesmachine.host.likelihoods import ModelParams
 from bayesmachine.host.run import prepare, run_machine
 from bayesmachine.models import disparity_machine
+from bayesmachine.params import SAMPLES_PER_CLOCK
 
 
 def wall(machine, cycles: np.ndarray, timeout: np.ndarray, one_beat: bool = False) -> float:  # noqa: ANN001
@@ -62,23 +66,27 @@ def measure(prep, model: ModelParams, b: int) -> dict:  # noqa: ANN001
             "timeouts": int(run.timeout.sum())}
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--models", default="census,census-lr")
-    ap.add_argument("--samples", default="1,2,4,8,16")
-    args = ap.parse_args()
-    samples = [int(b) for b in args.samples.split(",")]
+def main(argv: list[str] | None = None) -> None:
+    ap = Parser(prog=Path(__file__).name, description=__doc__.splitlines()[0])
+    ap.add_argument("--models", type=model_list, default="census,census-lr",
+                    help="comma-separated models (default census,census-lr)")
+    ap.add_argument("--samples", type=value_list(int_of(SAMPLES_PER_CLOCK), "B"), default="1,2,4,8,16",
+                    help="the B to compare with B = 1, comma-separated; B = 1 always runs, first: the "
+                    "ratios and the bit-for-bit check are against it (default 1,2,4,8,16)")
+    args = ap.parse_args(argv)
+    samples = sorted({1, *args.samples})
     left, right, gt = bundled_pair()
     print("model      B  cycles/px (left, right; median, p99)             x B=1   wall/px (1 beat)  "
           "timeouts  = B=1")
-    for name in args.models.split(","):
+    for name in args.models:
         model = ModelParams(name=name)
         prep = prepare(left, right, model, gt, reference=False)
         base = None
-        for b in samples:
+        for b in samples:  # ascending: B = 1 first, the base of every ratio and comparison
             m = measure(prep, model, b)
             run, both = m["run"], m["cycles_per_pixel"]
             base = base or m
+            assert base["machine"].samples_per_clock == 1
             c, r = run.cycles, run.passes.get("right")
             ratio = both / base["cycles_per_pixel"]
             passes = f"{c.mean():.2f}, {r.cycles.mean():.2f}" if r is not None else f"{c.mean():.2f}"
@@ -89,4 +97,4 @@ def main() -> None:
                   f"{same(run, base['run'])!s:<5} [{m['seconds']:.0f} s]", flush=True)
 
 if __name__ == "__main__":
-    main()
+    sys.exit(run_script(Path(__file__).name, main))

@@ -17,10 +17,14 @@ Prints cycles per pixel, RMS error, no-match F1 and MAP agreement of each. Asser
 from __future__ import annotations
 
 import argparse
+import sys
+from pathlib import Path
 
 import numba
 import numpy as np
 
+from bayesmachine.cli import Parser, run_script
+from bayesmachine.cliargs import counter_max_list
 from bayesmachine.host.images import bundled_pair
 from bayesmachine.host.likelihoods import memory_words
 from bayesmachine.host.metrics import f1_score, map_agreement, rms_error
@@ -69,16 +73,17 @@ def _run_variant(q, points, shifts, restart, rows, opcols, n_max, max_cycles, nm
         cycles_out[p] = k
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--counter-max", default="16")
-    args = ap.parse_args()
+def main(argv: list[str] | None = None) -> None:
+    ap = Parser(prog=Path(__file__).name, description=__doc__,
+                formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--counter-max", type=counter_max_list, default="16")
+    args = ap.parse_args(argv)
     left, right, gt = bundled_pair()
     model = ModelParams(name="paper")
     prep = prepare(left, right, model, gt)
     ho, wo = prep.shape
     ref = prep.reference
-    for n in (int(v) for v in args.counter_max.split(",")):
+    for n in args.counter_max:
         machine = MachineParams.for_disparity(model.dmax, counter_max=n, rng="sobol")
         q = memory_words(*prep.planes, model, machine, rows=slice(0, ho))
         q = np.ascontiguousarray(q.reshape(q.shape[0], -1), dtype=np.int64)
@@ -113,4 +118,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(run_script(Path(__file__).name, main))

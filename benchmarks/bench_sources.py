@@ -13,9 +13,13 @@ makes fire in the same cycles. Asserts nothing. Run:
 from __future__ import annotations
 
 import argparse
+import sys
+from pathlib import Path
 
 import numpy as np
 
+from bayesmachine.cli import Parser, run_script
+from bayesmachine.cliargs import counter_max_list, float_in_range, rng_list
 from bayesmachine.host.images import bundled_pair
 from bayesmachine.host.likelihoods import memory_words
 from bayesmachine.host.metrics import evaluate
@@ -24,13 +28,14 @@ from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--counter-max", default="16")
-    ap.add_argument("--rng", default="lfsr,lfsr-shared,sobol")
-    ap.add_argument("--near", type=float, default=0.9,
+def main(argv: list[str] | None = None) -> None:
+    ap = Parser(prog=Path(__file__).name, description=__doc__,
+                formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--counter-max", type=counter_max_list, default="16")
+    ap.add_argument("--rng", type=rng_list, default="lfsr,lfsr-shared,sobol")
+    ap.add_argument("--near", type=float_in_range(0, 1), default=0.9,
                     help="near-equal pixels: second-best / best reference posterior above this (and < 1)")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     left, right, gt = bundled_pair()
     model = ModelParams(name="paper")
     prep = prepare(left, right, model, gt)
@@ -52,8 +57,8 @@ def main() -> None:
         top = np.sort(rates, axis=1)[:, -2:]
         equal_best[y * wo : (y + 1) * wo] = top[:, 0] == top[:, 1]
     print(f"{equal_best.sum()} pixels ({100 * equal_best.mean():.1f} %) have two best rows of equal rate")
-    for n in (int(v) for v in args.counter_max.split(",")):
-        for kind in args.rng.split(","):
+    for n in args.counter_max:
+        for kind in args.rng:
             machine = MachineParams.for_disparity(model.dmax, counter_max=n, rng=kind)
             run = run_machine(prep, machine, "model", progress=False)
             r = evaluate(prep, run, sgbm=False).to_report()
@@ -77,4 +82,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(run_script(Path(__file__).name, main))

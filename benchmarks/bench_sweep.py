@@ -34,7 +34,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from bayesmachine.cli import build_parser
+from bayesmachine.cli import Parser, build_parser, run_script
+from bayesmachine.cliargs import counter_max_list, int_in_range, rng_list, size_pair
 from bayesmachine.host.datasets import load_pair, resolve_dataset, write_pfm
 from bayesmachine.host.images import bundled_pair
 from bayesmachine.host.reference import warm_up
@@ -47,6 +48,7 @@ from bayesmachine.host.sweep import (
     strip_timings,
     sweep_points,
 )
+from bayesmachine.params import MAX_DMAX
 
 
 def write_dataset(root: Path, pairs: int, h: int, w: int) -> Path:
@@ -82,23 +84,25 @@ def cpu_seconds() -> float:
     return r.ru_utime + r.ru_stime
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--pairs", type=int, default=8)
-    ap.add_argument("--size", default="96x160", help="crop HxW")
-    ap.add_argument("--dmax", default="40")
-    ap.add_argument("--counter-max", default="4,16")
-    ap.add_argument("--rng", default="sobol,lfsr")
-    ap.add_argument("--workers-max", type=int, default=2)
-    ap.add_argument("--rounds", type=int, default=3,
+def main(argv: list[str] | None = None) -> None:
+    ap = Parser(prog=Path(__file__).name, description=__doc__,
+                formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--pairs", type=int_in_range(1, 1000), default=8)
+    ap.add_argument("--size", type=size_pair("HxW", (16, 16), (500, 741)), default="96x160",
+                    help="crop HxW (the bundled pair's 500 x 741 at most)")
+    ap.add_argument("--dmax", type=int_in_range(0, MAX_DMAX), default=40)
+    ap.add_argument("--counter-max", type=counter_max_list, default="4,16")
+    ap.add_argument("--rng", type=rng_list, default="sobol,lfsr")
+    ap.add_argument("--workers-max", type=int_in_range(1, 2 * (os.cpu_count() or 1)), default=2)
+    ap.add_argument("--rounds", type=int_in_range(1, 100), default=3,
                     help="measure every configuration this many times, interleaved (a shared machine's load "
                     "changes by the minute): the summary takes each one's best and median")
-    a = ap.parse_args()
-    h, w = (int(v) for v in a.size.split("x"))
+    a = ap.parse_args(argv)
+    h, w = a.size
     tmp = Path(tempfile.mkdtemp(prefix="bench-sweep-"))
     data = write_dataset(tmp, a.pairs, h, w)
-    args = build_parser().parse_args(["sweep", "--dmax", a.dmax, "--counter-max", a.counter_max,
-                                      "--rng", a.rng, "-o", "x"])
+    args = build_parser().parse_args(["sweep", "--dmax", str(a.dmax), "--counter-max",
+                                      ",".join(map(str, a.counter_max)), "--rng", ",".join(a.rng), "-o", "x"])
     points = sweep_points(args)
     pairs = resolve_dataset([str(data)]).pairs
     tasks = len(pairs) * len(points)
@@ -214,4 +218,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(run_script(Path(__file__).name, main))

@@ -29,12 +29,25 @@ from pathlib import Path
 
 from bench_samples import measure
 
+from bayesmachine.cli import Parser, build_parser, run_script
+from bayesmachine.cliargs import (
+    int_in_range,
+    int_of,
+    machine_params_from_args,
+    model_params_from_args,
+    output_path,
+    positive_float_at_most,
+    value_list,
+)
 from bayesmachine.fpga.flow import cell_counts
 from bayesmachine.fpga.report import logic_cells, resources
-from bayesmachine.fpga.targets import get_target
+from bayesmachine.fpga.targets import TARGETS, get_target
 from bayesmachine.host.images import bundled_pair
 from bayesmachine.host.likelihoods import ModelParams
 from bayesmachine.host.run import prepare
+from bayesmachine.models import MODEL_NAMES
+from bayesmachine.outputs import atomic_write_text
+from bayesmachine.params import SAMPLES_PER_CLOCK
 
 # nextpnr's "Device utilisation" lines: "Info:     TRELLIS_COMB: 90000/83640   107%".
 UTILISATION = re.compile(r"^Info:\s+(\w+):\s+(\d+)/\s*(\d+)\s+(\d+)%", re.M)
@@ -192,27 +205,33 @@ def commit() -> str:
     return head + (" (uncommitted changes)" if dirty else "")
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False,
-                                 epilog="Other options are passed to every bayesmachine synth run.")
-    ap.add_argument("--samples", default="1,4,8", help="the B to run, comma-separated (default 1,4,8)")
-    ap.add_argument("--model", default="census")
-    ap.add_argument("--target", default="ecp5-85k")
-    ap.add_argument("--out", default="build/synth",
+def main(argv: list[str] | None = None) -> None:
+    ap = Parser(prog=Path(__file__).name, description=__doc__.splitlines()[0], allow_abbrev=False,
+                epilog="Other options are passed to every bayesmachine synth run.")
+    ap.add_argument("--samples", type=value_list(int_of(SAMPLES_PER_CLOCK), "B"), default="1,4,8",
+                    help="the B to run, comma-separated (default 1,4,8)")
+    ap.add_argument("--model", choices=MODEL_NAMES, default="census")
+    ap.add_argument("--target", choices=sorted(TARGETS), default="ecp5-85k")
+    ap.add_argument("--out", type=output_path, default="build/synth",
                     help="output directory prefix: OUT-B<B> (default build/synth)")
-    ap.add_argument("--json", default="build/synth_samples.json")
+    ap.add_argument("--json", type=output_path, default="build/synth_samples.json")
     ap.add_argument("--reuse", action="store_true",
                     help="take an existing OUT-B<B>/report.json instead of a run")
-    ap.add_argument("--time-limit", type=float, default=None, help="stop a synth run after this many minutes")
-    ap.add_argument("--pnr-seeds", default="1",
+    ap.add_argument("--time-limit", type=positive_float_at_most(7 * 24 * 60), default=None,
+                    help="stop a synth run after this many minutes (at most a week)")
+    ap.add_argument("--pnr-seeds", type=value_list(int_in_range(0, 2**31 - 1), "seed"), default="1",
                     help="nextpnr seeds, comma-separated: a failed place and route is retried with the next "
                     "(default 1)")
     ap.add_argument("--keep", action="store_true",
                     help="keep the rows of --json's previous figures for the B not run now (same model, "
                     "target and options)")
-    args, extra = ap.parse_known_args()
-    samples = [int(b) for b in args.samples.split(",")]
-    args.pnr_seeds = [int(s) for s in args.pnr_seeds.split(",")]
+    args, extra = ap.parse_known_args(argv)
+    samples = args.samples
+    # The options passed on to every synth run, checked as synth checks them, before any run.
+    synth_args = build_parser().parse_args(["synth", "--target", args.target, "--model", args.model, *extra])
+    model = model_params_from_args(synth_args)
+    for b in samples:
+        machine_params_from_args(synth_args, synth_args.dmax, model=model, samples_per_clock=b)
     tree = commit()
     rows = [run_synth(b, args, extra) for b in samples]
     model = ModelParams(name=args.model)
@@ -224,8 +243,8 @@ def main() -> None:
     rows += kept(args, extra, samples) if args.keep else []
     rows.sort(key=lambda r: r["samples_per_clock"])
     Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.json).write_text(json.dumps({"model": args.model, "target": args.target, "extra_options": extra,
-                                           "rows": rows}, indent=2) + "\n")
+    record = {"model": args.model, "target": args.target, "extra_options": extra, "rows": rows}
+    atomic_write_text(args.json, json.dumps(record, indent=2) + "\n")
     print(f"\n{args.model} machine on {args.target}, trees {', '.join(sorted({r['commit'] for r in rows}))}; "
           f"figures in {args.json}\n")
     print(table(rows, args.target))
@@ -239,7 +258,7 @@ def kept(args: argparse.Namespace, extra: list[str], samples: list[int]) -> list
         return []
     old = json.loads(path.read_text())
     if (old.get("model"), old.get("target"), old.get("extra_options")) != (args.model, args.target, extra):
-        raise SystemExit(f"{path}: figures of other options ({old.get('model')}, {old.get('target')}, "
+        raise ValueError(f"{path}: figures of other options ({old.get('model')}, {old.get('target')}, "
                          f"{old.get('extra_options')}): --keep would mix them")
     rows = [r for r in old["rows"] if r["samples_per_clock"] not in samples]
     for r in rows:
@@ -247,4 +266,4 @@ def kept(args: argparse.Namespace, extra: list[str], samples: list[int]) -> list
     return rows
 
 if __name__ == "__main__":
-    main()
+    sys.exit(run_script(Path(__file__).name, main))

@@ -14,12 +14,15 @@ the host pipeline) and on synthetic paper-like pixels, and prints:
 
 from __future__ import annotations
 
-import argparse
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
-from bayesmachine.params import MachineParams
+from bayesmachine.cli import Parser, run_script
+from bayesmachine.cliargs import MAX_COUNTER_MAX, int_in_range
+from bayesmachine.params import MAX_DMAX, MachineParams
 from bayesmachine.sim.synthetic import synthetic_disparity_words
 from bayesmachine.sim.ties import measure_ties
 
@@ -55,14 +58,16 @@ def report(name: str, m: dict[str, float], seconds: float) -> None:
         print(f"  timeouts: {m['timeouts']}")
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--rows", type=int, default=12, help="image rows of the bundled pair (default 12)")
-    ap.add_argument("--pixels", type=int, default=20_000, help="synthetic pixels (default 20000)")
-    ap.add_argument("--counter-max", type=int, default=16)
-    ap.add_argument("--dmax", type=int, default=80)
-    ap.add_argument("--seed", type=int, default=1)
-    args = ap.parse_args()
+def main(argv: list[str] | None = None) -> None:
+    ap = Parser(prog=Path(__file__).name, description=__doc__.splitlines()[0])
+    ap.add_argument("--rows", type=int_in_range(1, 490), default=12,
+                    help="image rows of the bundled pair, 1 .. 490 (default 12)")
+    ap.add_argument("--pixels", type=int_in_range(1, 10_000_000), default=20_000,
+                    help="synthetic pixels (default 20000)")
+    ap.add_argument("--counter-max", type=int_in_range(1, MAX_COUNTER_MAX), default=16)
+    ap.add_argument("--dmax", type=int_in_range(0, MAX_DMAX), default=80)
+    ap.add_argument("--seed", type=int_in_range(0, 2**64 - 1), default=1)
+    args = ap.parse_args(argv)
     params = MachineParams.for_disparity(args.dmax, counter_max=args.counter_max)
     rng = np.random.default_rng(args.seed)
     words = real_words(params, args.rows)
@@ -77,4 +82,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(run_script(Path(__file__).name, main))

@@ -16,11 +16,14 @@ import resource
 import sys
 import time
 from collections.abc import Callable, Iterator
+from pathlib import Path
 
 import numpy as np
 
+from bayesmachine.cli import Parser, run_script
+from bayesmachine.cliargs import MAX_COUNTER_MAX, float_in_range, input_path, int_in_range
 from bayesmachine.hdl.machine import pixel_wall_cycles
-from bayesmachine.params import MachineParams
+from bayesmachine.params import MAX_DMAX, MachineParams
 from bayesmachine.sim.model import MachineModel
 from bayesmachine.sim.verilator import VerilatorEngine
 
@@ -68,19 +71,22 @@ def synthetic_frame(machine: MachineParams, chunk_rows: int) -> Frame:
     return "synthetic disparity-like memories", ho * wo, chunks
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--dmax", type=int, default=80)
-    ap.add_argument("--counter-max", type=int, default=16)
-    ap.add_argument("--chunk-rows", type=int, default=8, help="map rows per engine call (host-like chunks)")
-    ap.add_argument("--build-dir", default=None, help="build cache (default: the user cache)")
+def main(argv: list[str] | None = None) -> int:
+    ap = Parser(prog=Path(__file__).name, description=__doc__,
+                formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--dmax", type=int_in_range(0, MAX_DMAX), default=80)
+    ap.add_argument("--counter-max", type=int_in_range(1, MAX_COUNTER_MAX), default=16)
+    ap.add_argument("--chunk-rows", type=int_in_range(1, 4096), default=8,
+                    help="map rows per engine call (host-like chunks)")
+    ap.add_argument("--build-dir", type=input_path, default=None,
+                    help="build cache (default: the user cache)")
     ap.add_argument("--no-model", action="store_true", help="skip the bit-exact comparison with the model")
     ap.add_argument("--synthetic", action="store_true", help="synthetic memories even if the host is there")
-    ap.add_argument("--result-stall", type=float, default=0.0,
+    ap.add_argument("--result-stall", type=float_in_range(0, 0.999), default=0.0,
                     help="probability of a low result.ready per cycle (the back-pressure build; default 0)")
-    ap.add_argument("--load-stall", type=float, default=0.0,
+    ap.add_argument("--load-stall", type=float_in_range(0, 0.999), default=0.0,
                     help="probability of a low load.valid per cycle (default 0)")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
 
     machine = MachineParams.for_disparity(args.dmax, counter_max=args.counter_max)
     t0 = time.perf_counter()
@@ -149,4 +155,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_script(Path(__file__).name, main))

@@ -34,11 +34,13 @@ from typing import Any
 import numpy as np
 from golden_snapshot import CONFIGS, CROPS, RTL_CONFIGS, _pair
 
+from bayesmachine.cli import Parser, run_script
 from bayesmachine.hdl.frontend.stereo import FrontEnd, stereo_machine_params
 from bayesmachine.host.features import model_planes
 from bayesmachine.host.likelihoods import pass_grid, pass_words
 from bayesmachine.host.run import prepare, run_machine
 from bayesmachine.models import ModelParams, pass_machine
+from bayesmachine.outputs import atomic_write_text
 from bayesmachine.region import OutputRegion
 from bayesmachine.sim.stereo_testbench import run_frontend, run_frontend_lr, run_frontend_neighbour
 
@@ -140,18 +142,18 @@ def compute(name: str, pair: tuple[np.ndarray, np.ndarray], model_kw: dict[str, 
     return figures, bad
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def main(argv: list[str] | None = None) -> int:
+    ap = Parser(prog=Path(__file__).name, description=__doc__,
+                formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("action", choices=("save", "check"))
     ap.add_argument("folder", type=Path)
     ap.add_argument("--only", nargs="*", default=None, help="configurations (default all)")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     configs = configurations()
     names = args.only or list(configs)
     unknown = [n for n in names if n not in configs]
     if unknown:
-        print(f"frontend_equivalence: no configuration {', '.join(unknown)}", file=sys.stderr)
-        return 2
+        raise ValueError(f"--only: no configuration {', '.join(unknown)} (they are {', '.join(configs)})")
     path = args.folder / "frontend.json"
     saved = json.loads(path.read_text()) if path.exists() else {}
     problems: list[str] = []
@@ -173,11 +175,11 @@ def main() -> int:
               f"{time.perf_counter() - t0:.0f} s)", flush=True)
     if args.action == "save":
         args.folder.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(saved, indent=1, sort_keys=True) + "\n")
+        atomic_write_text(path, json.dumps(saved, indent=1, sort_keys=True) + "\n")
     for p in problems:
         print(p, file=sys.stderr)
     return 1 if problems else 0
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_script(Path(__file__).name, main))

@@ -28,12 +28,14 @@ from typing import Any
 
 import numpy as np
 
+from bayesmachine.cli import Parser, run_script
 from bayesmachine.host.features import model_planes
 from bayesmachine.host.images import bundled_pair
 from bayesmachine.host.likelihoods import memory_words, pass_words
 from bayesmachine.host.reference import declared_maps, reference_bands, reference_quantized
 from bayesmachine.host.run import prepare, run_machine
 from bayesmachine.models import ModelParams, disparity_machine, pass_machine
+from bayesmachine.outputs import atomic_file, atomic_write_text
 from bayesmachine.region import OutputRegion
 
 # Crops (x, y, width, height, shift) of the bundled Motorcycle pair (500 x 741): the right image's crop
@@ -228,13 +230,18 @@ def _compare(name: str, got: dict[str, np.ndarray], meta: dict[str, Any], folder
     return bad
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def main(argv: list[str] | None = None) -> int:
+    ap = Parser(prog=Path(__file__).name, description=__doc__,
+                formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("action", choices=("save", "check"))
     ap.add_argument("folder", type=Path)
     ap.add_argument("--only", nargs="*", default=None, help="configurations to save or check (default all)")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     names = args.only or [*CONFIGS, *RTL_CONFIGS]
+    unknown = [n for n in names if n not in CONFIGS and n not in RTL_CONFIGS]
+    if unknown:
+        raise ValueError(f"--only: no configuration {', '.join(unknown)} (they are "
+                         f"{', '.join([*CONFIGS, *RTL_CONFIGS])})")
     if args.action == "save":
         args.folder.mkdir(parents=True, exist_ok=True)
     problems: list[str] = []
@@ -243,7 +250,7 @@ def main() -> int:
         if name in RTL_CONFIGS:
             got = compute_rtl(name)
             if args.action == "save":
-                (args.folder / f"{name}.json").write_text(json.dumps(got, indent=1) + "\n")
+                atomic_write_text(args.folder / f"{name}.json", json.dumps(got, indent=1) + "\n")
                 status = "saved"
             else:
                 want = json.loads((args.folder / f"{name}.json").read_text())
@@ -254,8 +261,9 @@ def main() -> int:
             continue
         arrays, meta = compute(name)
         if args.action == "save":
-            np.savez_compressed(args.folder / f"{name}.npz", **arrays)
-            (args.folder / f"{name}.json").write_text(json.dumps(meta, indent=1, sort_keys=True) + "\n")
+            with atomic_file(args.folder / f"{name}.npz") as tmp:  # complete or absent
+                np.savez_compressed(tmp, **arrays)
+            atomic_write_text(args.folder / f"{name}.json", json.dumps(meta, indent=1, sort_keys=True) + "\n")
             status = "saved"
         else:
             found = _compare(name, arrays, meta, args.folder)
@@ -270,4 +278,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(run_script(Path(__file__).name, main))

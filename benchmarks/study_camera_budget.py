@@ -19,12 +19,12 @@ Run: python benchmarks/study_camera_budget.py RUN.json [RUN.json ...] [--synth S
 
 from __future__ import annotations
 
-import argparse
 import json
-import math
 import sys
 from pathlib import Path
 
+from bayesmachine.cli import Parser, run_script
+from bayesmachine.cliargs import float_in_range, input_path, value_list
 from bayesmachine.fpga.targets import get_target
 from bayesmachine.params import MachineParams
 from bayesmachine.region import CAMERA_FPS
@@ -41,12 +41,17 @@ def run_work(report: dict) -> dict[str, float]:
     scaled by its pixels per output pixel."""
     b = report.get("samples_per_clock") or 1
     left = report.get("left_pass_cycles_per_pixel_mean", report["cycles_per_pixel_mean"])
+    right = report.get("right_pass_cycles_per_pixel_mean") if report.get("right_pass_machine") else 0.0
+    if left is None or right is None:  # a board run asked for MAPs only (--board-fields map)
+        raise ValueError("its cycles per pixel are null (a run without cycles, --board-fields map?): "
+                         "give the report of a run that has them")
+    if not report["pixels"]:
+        raise ValueError("it has no output pixel")
     work = {"label": f"{report['model_name']}, B = {b}", "pixels": report["pixels"],
             "left": left * b * _operators(report["machine"]), "right": 0.0}
     if report.get("right_pass_machine"):
         share = report["right_pass_pixels"] / report["pixels"]
-        work["right"] = (report["right_pass_cycles_per_pixel_mean"] * b * share
-                         * _operators(report["right_pass_machine"]))
+        work["right"] = right * b * share * _operators(report["right_pass_machine"])
     work["total"] = work["left"] + work["right"]
     return work
 
@@ -59,35 +64,31 @@ def synth_cost(report: dict) -> dict[str, float]:
             "device_sites": get_target(report["target"]).luts}
 
 
-def _fail(message: str) -> None:
-    print(f"study_camera_budget: {message}", file=sys.stderr)
-    sys.exit(2)
-
-
-def _load(path: str, read, kind: str) -> dict:
-    """``read`` of the JSON at ``path``; one line and exit 2 if it is not such a report."""
+def _load(path: str, read, kind: str) -> dict:  # noqa: ANN001
+    """``read`` of the JSON at ``path``; a ValueError naming it if it is not such a report."""
     try:
-        return read(json.loads(Path(path).read_text()))
-    except (OSError, ValueError) as e:
-        _fail(f"cannot read {path}: {e}")
+        data = json.loads(Path(path).read_text())
+    except ValueError as e:
+        raise ValueError(f"{path}: not JSON ({e})") from None
+    try:
+        return read(data)
+    except ValueError as e:  # a report of this kind that cannot give the figures: why
+        raise ValueError(f"{path}: {e}") from None
     except (KeyError, TypeError, AttributeError) as e:
-        _fail(f"{path} is not a report.json of bayesmachine {kind} (no {e})")
+        raise ValueError(f"{path} is not a report.json of bayesmachine {kind} (no {e})") from None
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("runs", nargs="+", help="report.json files of bayesmachine run")
-    ap.add_argument("--synth", action="append", default=[], help="a report.json of bayesmachine synth")
-    ap.add_argument("--fps", type=float, default=CAMERA_FPS, help=f"frames per second (default {CAMERA_FPS})")
-    ap.add_argument("--clocks", default="25,50,150", help="clock frequencies in MHz (default 25,50,150)")
-    args = ap.parse_args()
-    try:
-        clocks = [float(c) for c in args.clocks.split(",")]
-    except ValueError:
-        clocks = []
-    if not clocks or not all(0 < c < math.inf for c in clocks) or not 0 < args.fps < math.inf:
-        _fail(f"--clocks {args.clocks!r} --fps {args.fps:g}: give positive MHz values separated by commas "
-              "and a positive frame rate")
+def main(argv: list[str] | None = None) -> None:
+    ap = Parser(prog=Path(__file__).name, description=__doc__.split("\n\n")[0])
+    ap.add_argument("runs", nargs="+", type=input_path, help="report.json files of bayesmachine run")
+    ap.add_argument("--synth", action="append", type=input_path, default=[],
+                    help="a report.json of bayesmachine synth")
+    ap.add_argument("--fps", type=float_in_range(0.001, 1e6), default=CAMERA_FPS,
+                    help=f"frames per second (default {CAMERA_FPS})")
+    ap.add_argument("--clocks", type=value_list(float_in_range(0.001, 1e5), "clock"), default="25,50,150",
+                    help="clock frequencies in MHz, comma-separated (default 25,50,150)")
+    args = ap.parse_args(argv)
+    clocks = args.clocks
     works = [_load(p, run_work, "run") for p in args.runs]
     costs = [_load(p, synth_cost, "synth") for p in args.synth]
     mhz = " | ".join(f"{c:g} MHz" for c in clocks)
@@ -108,4 +109,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(run_script(Path(__file__).name, main))

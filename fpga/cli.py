@@ -14,8 +14,8 @@ from bayesmachine.cliargs import (
     add_census_options,
     add_dmax_option,
     add_machine_options,
-    float_arg,
-    int_arg,
+    float_in_range,
+    int_in_range,
     machine_params_from_args,
     model_params_from_args,
     output_path,
@@ -26,6 +26,9 @@ from .synth import Measure
 from .targets import TARGETS
 
 __all__ = ["register"]
+
+MAX_PARALLEL = 256  # --machines with --top machine: bayesmachine.hdl.machines.ParallelMachines' bound
+MAX_FREQ_MHZ = 1000.0  # --freq: no FPGA here comes near a 1 GHz clock
 
 
 def register(subparsers: argparse._SubParsersAction, *, measure: Measure) -> None:
@@ -58,14 +61,18 @@ def register(subparsers: argparse._SubParsersAction, *, measure: Measure) -> Non
     # its neighbour prior), its throughput measured on the census model's words.
     add_census_options(p, title="model (--model census: the census model's machine; with --top stereo its "
                        "front end too)", hardware=True)
-    p.add_argument("--machines", type=int_arg, default=1,
+    p.add_argument("--machines", type=int_in_range(1, MAX_PARALLEL), default=1,
                    help="machines side by side (default 1): --top machine, behind one load and one result "
                    "stream; --top stereo, behind the one feature pipeline, map rows dealt to them, each "
-                   "with its own word generator (1 .. 16; docs/frontend.md)")
-    p.add_argument("--pin-width", type=int_arg, default=8, help="wrapper chunk width in pins (default 8)")
+                   f"with its own word generator (1 .. {MAX_PARALLEL} with --top machine, 1 .. 16 with --top "
+                   "stereo; docs/frontend.md)")
+    p.add_argument("--pin-width", type=int_in_range(1, 64), default=8,
+                   help="wrapper chunk width in pins, 1 .. 64 (default 8)")
     # The place-and-route options stay None unless given: --synth-only refuses them (they would do nothing).
-    p.add_argument("--freq", type=float_arg, default=None, help="nextpnr clock target in MHz (default 150)")
-    p.add_argument("--pnr-seed", type=int_arg, default=None, help="nextpnr placement seed (default 1)")
+    p.add_argument("--freq", type=float_in_range(1, MAX_FREQ_MHZ), default=None,
+                   help=f"nextpnr clock target in MHz, 1 .. {MAX_FREQ_MHZ:g} (default 150)")
+    p.add_argument("--pnr-seed", type=int_in_range(0, 2**31 - 1), default=None,
+                   help="nextpnr placement seed, 0 to 2^31 - 1 (default 1)")
     p.add_argument("--router", choices=ROUTERS, default=None,
                    help="nextpnr router (default router2: much faster than router1 on a full machine)")
     p.add_argument("--synth-only", action="store_true",

@@ -15,6 +15,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from bayesmachine.checks import as_int
 from bayesmachine.hdl.frontend import DEFAULT_FIFO_PIXELS
 from bayesmachine.models import HARDWARE_MODEL, ModelParams
 from bayesmachine.params import MachineParams
@@ -122,8 +123,7 @@ def _check(params: MachineParams, target: Target, *, machines: int, pin_width: i
     default: the hardware model's at Dmax = rows - 2)."""
     from bayesmachine.hdl.frontend.stereo import check_stereo_machine
 
-    if isinstance(machines, bool) or not isinstance(machines, int) or machines < 1:
-        raise ValueError(f"machines must be a positive integer, got {machines!r}")
+    as_int("machines", machines, 1)
     if not freq_mhz > 0:
         raise ValueError(f"freq must be > 0 MHz, got {freq_mhz}")
     if not source_kind(params.rng).on_chip:
@@ -137,8 +137,7 @@ def _check(params: MachineParams, target: Target, *, machines: int, pin_width: i
     if width is not None:
         model = model if model is not None else _default_model(params)
         check_stereo_machine(params, model, width, fifo_pixels, machines)
-    if isinstance(pin_width, bool) or not isinstance(pin_width, int) or not 1 <= pin_width <= 64:
-        raise ValueError(f"pin_width must be an integer in [1, 64], got {pin_width!r}")
+    as_int("pin_width", pin_width, 1, 64)
     return model if model is not None else _default_model(params)
 
 

@@ -30,6 +30,7 @@ from amaranth.hdl import Cat, Const, Module, Mux, Shape, Signal
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
+from bayesmachine.checks import as_int
 from bayesmachine.hdl.signatures import ENTROPY_PORTS
 from bayesmachine.params import ParameterError
 
@@ -67,8 +68,7 @@ class PinWrapper(wiring.Component):
     """``core`` behind ``2 * pin_width + 3`` registered pins (see the module docstring)."""
 
     def __init__(self, core: wiring.Component, pin_width: int = 8) -> None:
-        if isinstance(pin_width, bool) or not isinstance(pin_width, int) or not 1 <= pin_width <= 64:
-            raise ParameterError(f"pin_width must be an integer in [1, 64], got {pin_width!r}")
+        pin_width = as_int("pin_width", pin_width, 1, 64)
         if any(name in core.signature.members for name in ENTROPY_PORTS):
             raise ParameterError("the wrapper needs an on-chip random source (an off-chip one has an "
                                  "entropy port as wide as the matrix)")

@@ -8,13 +8,14 @@ from bayesmachine.cliargs import (
     add_census_options,
     add_dmax_option,
     add_machine_options,
-    int_arg,
+    int_in_range,
     machine_params_from_args,
     model_params_from_args,
     output_path,
 )
 
 from .emit import emit, summary
+from .frontend import MAX_MACHINES
 
 __all__ = ["register"]
 
@@ -36,9 +37,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     from .frontend.cli import add_options as add_stereo_options
 
     add_stereo_options(p)
-    p.add_argument("--machines", type=int_arg, default=None,
+    p.add_argument("--machines", type=int_in_range(1, MAX_MACHINES), default=None,
                    help="--top stereo: machines behind the one feature pipeline, map rows dealt to them "
-                   "(1 .. 16, default 1; docs/frontend.md)")
+                   f"(1 .. {MAX_MACHINES}, default 1; docs/frontend.md)")
     # --model census (the default, cliargs.default_model): the machine the census model needs (4
     # columns and its neighbour prior).
     add_census_options(p, title="model (--model census emits the census model's machine)", hardware=True)

@@ -53,7 +53,7 @@ def summary(params: MachineParams) -> str:
     """A human-readable summary of the machine and its ports."""
     lines = [
         f"machine: {params.rows} rows x {params.operator_columns} operator columns = "
-        f"{params.operators} operators ({'loaded' if params.prior == 'loaded' else 'uniform'} prior"
+        f"{params.operators} operators ({params.prior} prior"
         f"{', last row no-match' if params.nomatch_row else ''}, tie rule {params.tie_break})",
         f"words: {params.word_bits}-bit comparators, {params.memory_word_width}-bit likelihood-memory words; "
         f"counter max {params.counter_max} ({params.counter_width}-bit overflow counters); "

@@ -20,6 +20,7 @@ from amaranth.hdl import Cat, Const, Module, Mux, Value
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
+from bayesmachine.checks import as_int
 from bayesmachine.params import TIE_BREAKS, ParameterError
 
 __all__ = ["MAPEncoder", "map_encoder", "map_encoder_twin"]
@@ -92,10 +93,7 @@ class MAPEncoder(wiring.Component):
     """
 
     def __init__(self, *, rows: int, nomatch_row: bool = False, tie_break: str = "nomatch-first") -> None:
-        if isinstance(rows, bool) or not isinstance(rows, int):
-            raise TypeError(f"rows must be an integer, not {type(rows).__name__}")
-        if rows < 1:
-            raise ParameterError(f"rows must be a positive integer, got {rows!r}")
+        rows = as_int("rows", rows, 1)
         if not isinstance(nomatch_row, bool):
             raise TypeError(f"nomatch_row must be a bool, not {type(nomatch_row).__name__}")
         if not isinstance(tie_break, str):

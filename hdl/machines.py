@@ -16,6 +16,7 @@ from __future__ import annotations
 from amaranth.hdl import Cat, Const, Module, Signal
 from amaranth.lib import wiring
 
+from bayesmachine.checks import as_int
 from bayesmachine.params import MachineParams, ParameterError, nth_machine
 from bayesmachine.sources import source_kind
 
@@ -45,10 +46,7 @@ class ParallelMachines(wiring.Component):
     def __init__(self, *, params: MachineParams, machines: int) -> None:
         if not isinstance(params, MachineParams):
             raise TypeError(f"ParallelMachines takes a MachineParams, not {type(params).__name__}")
-        if isinstance(machines, bool) or not isinstance(machines, int):
-            raise TypeError(f"machines must be an integer, not {type(machines).__name__}")
-        if not 1 <= machines <= 256:
-            raise ParameterError(f"machines must be an integer in [1, 256], got {machines!r}")
+        machines = as_int("machines", machines, 1, 256)
         if not source_kind(params.rng).on_chip:
             raise ParameterError(f"K machines need an on-chip random source, not {params.rng!r}")
         if params.feedback_columns:

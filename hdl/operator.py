@@ -17,6 +17,7 @@ from amaranth.hdl import Array, Cat, Const, Module, Value, ValueCastable, unsign
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
+from bayesmachine.checks import as_int
 from bayesmachine.params import ParameterError
 
 __all__ = [
@@ -84,11 +85,8 @@ class OperatorMatrix(wiring.Component):
     """
 
     def __init__(self, *, rows: int, columns: int, word_bits: int, sources: Sequence[int]) -> None:
-        for name, v in (("rows", rows), ("columns", columns), ("word_bits", word_bits)):
-            if isinstance(v, bool) or not isinstance(v, int):
-                raise TypeError(f"{name} must be an integer, not {type(v).__name__}")
-            if v < 1:
-                raise ParameterError(f"{name} must be a positive integer, got {v!r}")
+        rows, columns, word_bits = (as_int(name, v, 1) for name, v in (("rows", rows), ("columns", columns),
+                                                                         ("word_bits", word_bits)))
         if isinstance(sources, (str, bytes)) or not isinstance(sources, Sequence):
             raise TypeError(f"sources must be a sequence of integers, not {type(sources).__name__}")
         self._rows, self._columns, self._word_bits = rows, columns, word_bits

@@ -23,21 +23,24 @@ from bayesmachine.cliargs import (
     DEFAULT_BAUD,
     MACHINE_OPTIONS,
     MAX_SILENCE_S,
+    PASS_WATCHDOGS,
     add_machine_options,
     add_model_options,
     argument_type,
     float_arg,
+    input_path,
     int_arg,
     int_in_range,
     machine_params_from_args,
     model_params_from_args,
+    options_without_effect,
     output_path,
-    positive_float_arg,
     positive_float_at_most,
     runnable_sources,
 )
 from bayesmachine.extras import needs_host
-from bayesmachine.models import ModelParams
+from bayesmachine.hdl.frontend import MAX_MACHINES
+from bayesmachine.models import ModelParams, all_options
 from bayesmachine.outputs import (
     NpzWriter,
     OutputDir,
@@ -51,7 +54,7 @@ from bayesmachine.region import OutputRegion
 from bayesmachine.sim.engines import check_pixel_engine_options
 
 from .calib import BUNDLED_CALIB, KITTI_CAMERAS, StereoCalibration, bundled_calibration_path, read_calibration
-from .confidence import DEFAULT_T, DEFAULT_WINDOW, ConfidenceParams
+from .confidence import DEFAULT_T, DEFAULT_WINDOW, MAX_T, MAX_WINDOW, ConfidenceParams
 from .datasets import PairSpec, bundled_spec, files_spec, resolve_dataset
 from .features import model_planes
 from .images import Crop, bundled_pair, crop_image, load_gt, load_image, parse_crop, validate_pair
@@ -76,13 +79,14 @@ RUN_OUTPUTS = ("report.json", "result.npz", "disparity.png", "confidence.png", "
                "cloud.ply", "waves.vcd")
 SWEEP_COUNTER_MAX = [1, 2, 4, 8, 16, 32]
 MAX_CONNECT_S = 600.0  # --connect-timeout: a cluster that takes longer to answer is not coming
+MAX_GT_SCALE = 65536.0  # --gt-scale: past it every 16-bit stored disparity is below one pixel
 
 
 def _add_input_options(p: argparse.ArgumentParser, optional: bool) -> None:
     nargs = "?" if optional else None
     extra = " (omit both for the bundled Middlebury Motorcycle pair)" if optional else ""
-    p.add_argument("left", nargs=nargs, help=f"rectified left image{extra}")
-    p.add_argument("right", nargs=nargs, help="rectified right image")
+    p.add_argument("left", nargs=nargs, type=input_path, help=f"rectified left image{extra}")
+    p.add_argument("right", nargs=nargs, type=input_path, help="rectified right image")
     p.add_argument(
         "--crop",
         type=argument_type(parse_crop, "crop"),
@@ -196,7 +200,7 @@ def _add_machine_options(p: argparse.ArgumentParser, sweep: bool) -> None:
             help="how to run the machine (default model); board: the StereoMachine on a board (or "
             "`bayesmachine board simulate`) over a serial port, --port (docs/board.md)",
         )
-        g.add_argument("--port", default=None,
+        g.add_argument("--port", default=None, type=input_path,
                        help="with --engine board: the serial port (/dev/ttyUSB0, or the path board simulate "
                        "printed)")
         g.add_argument("--baud", type=int_in_range(*BAUD_RANGE), default=None,
@@ -219,9 +223,9 @@ def _add_machine_options(p: argparse.ArgumentParser, sweep: bool) -> None:
             "--engine board runs)",
         )
         g.add_argument(
-            "--machines", type=int_arg, default=None,
-            help="machines behind the one front end (1 .. 16, default 1): map row r runs on machine "
-            "r mod K, each with its own random source and left neighbour (--feed pixels: the "
+            "--machines", type=int_in_range(1, MAX_MACHINES), default=None,
+            help=f"machines behind the one front end (1 .. {MAX_MACHINES}, default 1): map row r runs on "
+            "machine r mod K, each with its own random source and left neighbour (--feed pixels: the "
             "StereoMachine with K machines; --feed words: K engines dealt the rows the same way)",
         )
         g.add_argument(
@@ -232,15 +236,16 @@ def _add_machine_options(p: argparse.ArgumentParser, sweep: bool) -> None:
             "(row-major over the output region, from 0) are in the machine",
         )
     p.add_argument(
-        "--gt", default=None,
+        "--gt", default=None, type=input_path,
         help="ground-truth disparity: .pfm (floats, inf = unknown), .npy (numbers, non-finite = unknown) "
         "or a one-channel image (0 = unknown; 8-bit at face value, 16-bit only with --gt-scale); "
         "negative disparities are refused",
     )
     p.add_argument(
-        "--gt-scale", type=positive_float_arg, default=None, metavar="S",
+        "--gt-scale", type=positive_float_at_most(MAX_GT_SCALE), default=None, metavar="S",
         help="the --gt file stores disparity x S: divide by S (256 for KITTI's 16-bit PNGs; 4 for "
-        "Middlebury 2003's quarter-size disp*.png); default 1, required for 16-bit images"
+        f"Middlebury 2003's quarter-size disp*.png), at most {MAX_GT_SCALE:g}; default 1, required for "
+        "16-bit images"
         + ("; with --dataset it replaces the layout's scale" if sweep else ""),
     )
     if not sweep:
@@ -259,11 +264,15 @@ def _parse_probability(text: str) -> float:
     return value
 
 
-def _parse_odd(text: str) -> int:
-    value = int_arg(text)
-    if value < 1 or value % 2 == 0:
-        raise ValueError(f"expected an odd number >= 1, got {text!r}")
-    return value
+def _confidence_parameter(name: str):  # noqa: ANN202
+    """``--confidence-t`` / ``--confidence-window``: an integer ConfidenceParams takes (its bounds)."""
+
+    def parse(text: str) -> int:
+        value = int_arg(text)
+        ConfidenceParams(**{name: value})
+        return value
+
+    return parse
 
 
 def _parse_cameras(text: str) -> tuple[int, int]:
@@ -278,17 +287,18 @@ def _parse_cameras(text: str) -> tuple[int, int]:
 
 def _add_confidence_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("confidence and depth (docs/confidence.md)")
-    g.add_argument("--confidence-t", type=argument_type(_parse_nonnegative, "t"), default=DEFAULT_T,
+    g.add_argument("--confidence-t", type=argument_type(_confidence_parameter("t"), "t"), default=DEFAULT_T,
                    metavar="T", help="a pixel's confidence is the mass of its distribution within +-T "
-                   f"disparities of its MAP: it predicts |d - gt| <= T (default {DEFAULT_T})")
-    g.add_argument("--confidence-window", type=argument_type(_parse_odd, "window"), default=DEFAULT_WINDOW,
-                   metavar="W", help="pool (average) the distributions of the WxW pixels around a pixel "
-                   f"before reading that mass; 1: the pixel's own (default {DEFAULT_WINDOW})")
+                   f"disparities of its MAP: it predicts |d - gt| <= T; 0 .. {MAX_T} (default {DEFAULT_T})")
+    g.add_argument("--confidence-window", type=argument_type(_confidence_parameter("window"), "window"),
+                   default=DEFAULT_WINDOW, metavar="W",
+                   help="pool (average) the distributions of the WxW pixels around a pixel before reading "
+                   f"that mass; odd, 1 (the pixel's own) .. {MAX_WINDOW} (default {DEFAULT_WINDOW})")
     g.add_argument("--min-confidence", type=argument_type(_parse_probability, "probability"), default=None,
                    metavar="P", help="blank the machine's disparity in disparity.png, depth.npy and "
                    "cloud.ply where its confidence is below P; report.json gives the density kept "
                    "(result.npz keeps every MAP)")
-    g.add_argument("--calib", default=None, metavar="FILE",
+    g.add_argument("--calib", default=None, type=input_path, metavar="FILE",
                    help="camera calibration: a Middlebury calib.txt (baseline in mm), a KITTI calib/*.txt "
                    "or calib_cam_to_cam.txt, or JSON {fx, fy, cx, cy, baseline (metres)[, doffs, width, "
                    f"height]}}; '{BUNDLED_CALIB}': the bundled pair's. Writes depth.npy (metres) and "
@@ -296,13 +306,6 @@ def _add_confidence_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--calib-cameras", type=argument_type(_parse_cameras, "cameras"), default=None,
                    metavar="L,R", help="with a KITTI --calib: the left and right cameras' matrices "
                    f"(default {KITTI_CAMERAS[0]},{KITTI_CAMERAS[1]}, the colour pair; 0,1 for the gray one)")
-
-
-def _parse_nonnegative(text: str) -> int:
-    value = int_arg(text)
-    if value < 0:
-        raise ValueError(f"expected an integer >= 0, got {value}")
-    return value
 
 
 def _machine_params(
@@ -365,10 +368,10 @@ def _report(outcome: RunOutcome, source: str, crop: Crop | None) -> dict[str, ob
         "model": prep.model.to_dict(),
         # Every pass in order, the own one last: a declared pass's figures are its name's "NAME_pass_*".
         "passes": [p.name for p in prep.model.passes],
-        "machine": run.machine.to_dict(),
+        "machine": run.machine.to_dict(complete=True),  # every resolved value
     }
     for name, r in run.passes.items():
-        report[f"{name}_pass_machine"] = r.machine.to_dict()
+        report[f"{name}_pass_machine"] = r.machine.to_dict(complete=True)
         report[f"{name}_pass_seconds"] = r.seconds
     return report
 
@@ -402,7 +405,11 @@ def _summary(r: dict[str, object]) -> str:
     if r.get("wall_cycles_per_pixel") is not None:
         line += f"\n  wall cycles per pixel, loading included: {f('wall_cycles_per_pixel', '.2f')}"
 
-    if r.get("machine_bad2") is not None or r.get("ground_truth"):
+    if r.get("ground_truth_pixels") == 0:
+        from .metrics import NO_KNOWN_GT
+
+        line += f"\n  {NO_KNOWN_GT}"
+    elif r.get("machine_bad2") is not None or r.get("ground_truth"):
         line += (
             f"\n  bad-2 (matched / no-match bad): "
             f"machine {f('machine_bad2')} / {f('machine_bad2_nomatch_bad')}, "
@@ -444,6 +451,10 @@ def _confidence_summary(r: dict[str, object], f) -> str:  # noqa: ANN001
 
 def _cmd_reference(args: argparse.Namespace) -> int:
     model = model_params_from_args(args)
+    ignored = options_without_effect(args, set(all_options()) - PASS_WATCHDOGS)
+    if ignored:  # as run refuses board options without --engine board
+        raise ValueError(f"{', '.join(ignored)}: the watchdog of a machine's pass; reference computes the "
+                         "exact float64 posterior and runs no machine")
     left, right, _, _ = _load_inputs(args, with_gt=False)
     region = OutputRegion.of_model(left.shape, model)
     out = Path(args.output)
@@ -555,11 +566,13 @@ def _cmd_run(args: argparse.Namespace) -> int:
             raise ValueError("--waves is not available with --machines")
         check_machines(machines, machine, model)
     _check_confidence_args(args)
+    calib = _run_calibration(args)  # read and checked before any input is read
     left, right, gt, source = _load_inputs(args, with_gt=True)
     region = OutputRegion.of_model(left.shape, model)
     _check_waves(waves, region.pixels)
     _check_fits(region, machine)
-    calib = _run_calibration(args)  # read and checked before the machine runs
+    if calib is not None:  # its image size checked against the input's, its principal point cropped
+        calib = calib.for_input(args.input_shape, args.crop)
     params = ConfidenceParams(t=args.confidence_t, window=args.confidence_window)
     # What this run writes (a user's file under another of the names stays, and does not stop it).
     optional = {"waves.vcd": waves is not None, "calibration.png": gt is not None,
@@ -589,6 +602,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
         report["machines"] = machines
         if outcome.run.engine_figures is not None:
             report[args.engine] = outcome.run.engine_figures  # the board's link: wall time, bytes, attempts
+        if report.get("ground_truth_pixels") == 0 and args.quiet:  # the summary says it otherwise
+            from .metrics import NO_KNOWN_GT
+
+            print(f"bayesmachine run: note: {NO_KNOWN_GT}", file=sys.stderr)
         _write_run_outputs(out, args, outcome, report, left, calib)
         out.write("report.json", lambda path: _write_json(path, report))
         written = out.commit()
@@ -613,12 +630,11 @@ def _check_confidence_args(args: argparse.Namespace) -> None:
 
 
 def _run_calibration(args: argparse.Namespace) -> StereoCalibration | None:
-    """``--calib``'s calibration for the (cropped) input, its image size checked."""
+    """``--calib``'s calibration (its image size is checked against the input's by ``for_input``)."""
     if args.calib is None:
         return None
     path = bundled_calibration_path() if args.calib == BUNDLED_CALIB else Path(args.calib)
-    calib = read_calibration(path, args.calib_cameras)
-    return calib.for_input(args.input_shape, args.crop)
+    return read_calibration(path, args.calib_cameras)
 
 
 def _write_run_outputs(out: OutputDir, args: argparse.Namespace, outcome: RunOutcome,
@@ -672,7 +688,7 @@ def _write_run_outputs(out: OutputDir, args: argparse.Namespace, outcome: RunOut
                 f"{args.confidence_window} pooled)"
         out.write("confidence.png", lambda path: save_confidence_figure(path, cut_left, maps, run.map, label))
     conf = report.get("confidence")
-    if prep.gt is not None and isinstance(conf, dict):
+    if prep.gt is not None and isinstance(conf, dict) and "reference" in conf:  # figures of known pixels
         out.write("calibration.png", lambda path: save_calibration_figure(path, conf))
     if calib is not None:
         _write_cloud(out, args, report, region, shown, maps, calib)
@@ -879,7 +895,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     add_model_options(p, census=True, sweep=True)
     _add_machine_options(p, sweep=True)
     d = p.add_argument_group("dataset and cluster")
-    d.add_argument("--dataset", nargs="+", metavar="PATH", default=None,
+    d.add_argument("--dataset", nargs="+", metavar="PATH", default=None, type=input_path,
                    help="a dataset directory (Middlebury 2001-2006 or 2014/2021/MiddEval3 scenes, KITTI "
                    "2012/2015, left/ and right/ frame directories; searched recursively), a list file "
                    "('left right [gt [gt_scale]]' per line), or two frame directories or two video files")

@@ -4,8 +4,10 @@ The cloud is a binary little-endian PLY (format 1.0, the layout Open3D, MeshLab 
 CloudCompare read): one ``vertex`` element with ``float x, y, z`` (metres, the left camera's
 frame: x right, y down, z forward), ``uchar red, green, blue`` (the left image's colour) and,
 when the run has counts, ``float confidence``. A point is written for every output pixel with a
-finite depth: no-match pixels, blanked ones (``--min-confidence``) and points at infinity are left
-out.
+finite depth whose x, y and z are finite float32 numbers: no-match pixels, blanked ones
+(``--min-confidence``) and points at infinity are left out. A header comment is printable ASCII:
+anything else in it (a newline or a non-ASCII character of a path) is written as its Python escape
+(``\\n``, ``\\xe9``), so that the header stays one comment line.
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ from .images import Crop, crop_image
 
 cv2 = optional("cv2", "OpenCV")
 
-__all__ = ["PLY_FIELDS", "left_colours", "point_cloud", "write_ply"]
+__all__ = ["PLY_FIELDS", "left_colours", "point_cloud", "write_ply", "ply_comment"]
 
 # (name, PLY type, NumPy little-endian type), in file order.
 PLY_FIELDS = (("x", "float", "<f4"), ("y", "float", "<f4"), ("z", "float", "<f4"),
@@ -56,13 +58,14 @@ def point_cloud(depth: np.ndarray, calib: StereoCalibration, region: OutputRegio
     (cropped) input image and ``colours`` that image's RGB; ``region`` places the output pixels on it."""
     rows, cols = np.indices((region.image_height, region.image_width))
     v, u = region.cut(rows), region.cut(cols)
-    keep = np.isfinite(depth)
-    z = depth[keep]
+    z = np.asarray(depth, np.float64)
+    with np.errstate(invalid="ignore", over="ignore"):
+        xyz = np.stack([(u - calib.cx) * z / calib.fx, (v - calib.cy) * z / calib.fy, z])
+    keep = (np.abs(xyz) <= np.finfo(np.float32).max).all(axis=0)  # finite, and finite as float32
     fields = PLY_FIELDS if confidence is not None else PLY_FIELDS[:6]
     points = np.empty(int(keep.sum()), dtype=[(n, t) for n, _, t in fields])
-    points["x"] = (u[keep] - calib.cx) * z / calib.fx
-    points["y"] = (v[keep] - calib.cy) * z / calib.fy
-    points["z"] = z
+    for i, name in enumerate(("x", "y", "z")):
+        points[name] = xyz[i][keep]
     rgb = region.cut(colours)[keep]
     for i, name in enumerate(("red", "green", "blue")):
         points[name] = rgb[:, i]
@@ -71,10 +74,18 @@ def point_cloud(depth: np.ndarray, calib: StereoCalibration, region: OutputRegio
     return points
 
 
+def ply_comment(text: str) -> str:
+    """``text`` as one line of printable ASCII: every other character as its Python escape (a backslash
+    too, so that the escapes read back unambiguously)."""
+    return "".join(c if " " <= c <= "~" and c != "\\" else c.encode("unicode_escape").decode("ascii")
+                   for c in text)
+
+
 def write_ply(path: str | Path, points: np.ndarray, comments: tuple[str, ...] = ()) -> None:
-    """Write ``points`` (a structured array of :data:`PLY_FIELDS`' names) as a binary little-endian PLY."""
+    """Write ``points`` (a structured array of :data:`PLY_FIELDS`' names) as a binary little-endian PLY;
+    each comment as :func:`ply_comment` makes it."""
     types = {n: p for n, p, _ in PLY_FIELDS}
-    header = ["ply", "format binary_little_endian 1.0", *(f"comment {c}" for c in comments),
+    header = ["ply", "format binary_little_endian 1.0", *(f"comment {ply_comment(c)}" for c in comments),
               f"element vertex {len(points)}",
               *(f"property {types[n]} {n}" for n in points.dtype.names or ()), "end_header"]
     with open(path, "wb") as f:

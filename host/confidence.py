@@ -29,9 +29,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from bayesmachine.checks import as_int
+from bayesmachine.errors import ParameterError
+
 __all__ = [
     "DEFAULT_T",
     "DEFAULT_WINDOW",
+    "MAX_T",
+    "MAX_WINDOW",
     "ECE_BINS",
     "FRACTIONS",
     "BAD_THRESHOLD",
@@ -50,6 +55,10 @@ __all__ = [
 
 DEFAULT_T = 2
 DEFAULT_WINDOW = 3
+# The bounds of t and window: t beyond the largest Dmax (4094) adds no disparity; a window is at most
+# MAX_WINDOW pixels wide (bounded, so that no size wraps in the int64 sums).
+MAX_T = 4094
+MAX_WINDOW = 4095
 ECE_BINS = 10
 # Fractions of the pixels removed, least confident first: 0, 0.05, ..., 0.95.
 FRACTIONS = np.arange(20) / 20
@@ -67,10 +76,10 @@ class ConfidenceParams:
     ----------
     t : int
         Half-width, in disparities, of the interval around the MAP whose mass is the confidence
-        (the confidence predicts "|d - gt| <= t"); >= 0, default 2.
+        (the confidence predicts "|d - gt| <= t"); 0 .. :data:`MAX_T`, default 2.
     window : int
         Side of the square of pixels whose distributions are pooled (averaged) before the mass is
-        read; odd, >= 1 (1: the pixel's own distribution), default 3.
+        read; odd, 1 .. :data:`MAX_WINDOW` (1: the pixel's own distribution), default 3.
 
     Attributes
     ----------
@@ -82,15 +91,11 @@ class ConfidenceParams:
     window: int = DEFAULT_WINDOW
 
     def __post_init__(self) -> None:
-        for name in ("t", "window"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-                raise TypeError(f"confidence {name} must be an integer, not {value!r}")
-            object.__setattr__(self, name, int(value))
-        if self.t < 0:
-            raise ValueError(f"confidence t must be >= 0, got {self.t}")
-        if self.window < 1 or self.window % 2 == 0:
-            raise ValueError(f"confidence window must be odd and >= 1, got {self.window}")
+        object.__setattr__(self, "t", as_int("t", self.t, 0, MAX_T))
+        object.__setattr__(self, "window", as_int("window", self.window, 1, MAX_WINDOW))
+        if self.window % 2 == 0:
+            raise ParameterError(f"window must be odd (a square around its pixel), got {self.window}",
+                                 "window")
 
     def to_dict(self) -> dict[str, int]:
         return {"t": self.t, "window": self.window}

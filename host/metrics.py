@@ -60,6 +60,7 @@ __all__ = [
     "evaluate",
     "confidence_report",
     "json_safe",
+    "NO_KNOWN_GT",
 ]
 
 
@@ -280,6 +281,7 @@ class RunMetrics:
     confidence: dict[str, object] | None = None  # the confidence figures (confidence_report)
     maps: ConfidenceMaps | None = field(default=None, repr=False)  # the machine's (None: no counts)
     reference_maps: ConfidenceMaps | None = field(default=None, repr=False)
+    ground_truth_pixels: int | None = None  # output pixels with a known (finite) ground truth
 
     def to_report(self) -> dict[str, object]:
         out: dict[str, object] = {
@@ -309,6 +311,8 @@ class RunMetrics:
             for method, figs in self.bad.items():
                 for k, v in figs.items():
                     out[f"{method}_{k}"] = v
+        if self.ground_truth_pixels is not None:
+            out["ground_truth_pixels"] = self.ground_truth_pixels
         if self.confidence is not None:
             out.update(_confidence_keys(self.confidence))
             out["confidence"] = self.confidence
@@ -387,6 +391,7 @@ def evaluate(prepared: Prepared, run: MachineRun, sgbm: bool | None = None,
                                      lr_conf),
         maps=maps,
         reference_maps=ref_maps,
+        ground_truth_pixels=None if prepared.gt is None else int(np.isfinite(prepared.gt).sum()),
     )
 
 
@@ -394,7 +399,7 @@ def _bad_figures(prepared: Prepared, methods: dict[str, np.ndarray]) -> dict[str
     """bad-1 / bad-2 (matched, no match counted bad), coverage and no match on occluded pixels."""
     assert prepared.gt is not None
     occluded = None
-    if prepared.gt_image is not None:
+    if prepared.gt_image is not None and np.isfinite(prepared.gt).any():  # else no pixel's occlusion is known
         occluded = gt_region(occluded_mask(prepared.gt_image), prepared.model.dmax,
                              prepared.model.margin).astype(bool)
     bad: dict[str, dict[str, float]] = {}
@@ -411,6 +416,11 @@ def _bad_figures(prepared: Prepared, methods: dict[str, np.ndarray]) -> dict[str
         if occluded is not None:
             bad[name]["nomatch_occluded"] = nomatch_occluded_share(disp, occluded)
     return bad
+
+
+# What a report says when the ground truth knows no output pixel (every value NaN, inf or 0 in an image).
+NO_KNOWN_GT = ("the ground truth has no known pixel in the output region (every value unknown): no accuracy, "
+               "occlusion or calibration figures")
 
 
 def confidence_report(
@@ -432,6 +442,9 @@ def confidence_report(
         out["machine"] = None
         out["note"] = "the run has no counts (--board-fields without counts): no machine confidence"
     if gt is None:
+        return out
+    if not np.isfinite(gt).any():  # figures of no pixel would be empty: none, and the reason
+        out["note"] = NO_KNOWN_GT
         return out
     if maps is not None:
         out["machine"] = method_figures(maps, disp, gt, params.t)

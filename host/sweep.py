@@ -118,11 +118,15 @@ def list_option_changes(counter_max_default: list[int]) -> dict[str, dict[str, A
     """argparse changes making every machine option a comma-separated list (for ``sweep``).
 
     ``--counter-max`` is sorted with repeats removed (:func:`counter_max_list`), ``--rng`` takes the
-    sources the host can run (:func:`rng_list`); any other option keeps its type per value. An option
-    given once is a grid axis of one value."""
+    sources the host can run (:func:`rng_list`), a yes/no option ``on,off`` as well as ``--x`` and
+    ``--no-x`` (:func:`~bayesmachine.cliargs.on_off_list`); any other option keeps its type per value. An
+    option given once is a grid axis of one value."""
     changes: dict[str, dict[str, Any]] = {}
     for name, option in MACHINE_OPTIONS.items():
-        if name in _SKIP or option.is_flag:  # a flag: one value, an axis of one point when given
+        if name in _SKIP:
+            continue
+        if option.is_flag:  # --x (on), --no-x (off), --x on,off (a grid axis of both)
+            changes[name] = {"values": True}
             continue
         metavar = f"{option.metavar or 'V'},..." if option.choices is None else f"{name.upper()},..."
         if name == "counter_max":
@@ -178,7 +182,7 @@ def sweep_points(args: argparse.Namespace) -> list[Point]:
         model = models[values["model"]]
         overrides = {k: v for k, v in values.items() if k != "model"}
         machine = machine_params_from_args(args, model.dmax, model=model, **overrides)
-        mdict = machine.to_dict()
+        mdict = machine.to_dict(complete=True)  # every resolved value (normalize off, not left out)
         key = json.dumps([model.name, model.to_dict(), mdict], sort_keys=True, default=str)
         if key in seen:
             continue
@@ -559,7 +563,7 @@ def _aggregate(config: SweepConfig, records: dict[tuple[str, str], dict[str, Any
                failures: list[TaskFailure], seconds: float) -> dict[str, Any]:
     points, pairs = config.points, config.pairs
     own = ("counter_max", "rng", "smtj_dwell", "smtj_spread", "smtj_share")
-    dicts = [p.machine.to_dict() for p in points]
+    dicts = [p.machine.to_dict(complete=True) for p in points]  # what ran, every value resolved
     common = {k: v for k, v in dicts[0].items() if k not in own and all(d.get(k) == v for d in dicts)}
     failed: dict[str, int] = {}
     for f in failures:

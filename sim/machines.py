@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from bayesmachine.params import MachineParams, ParameterError, nth_machine
+from bayesmachine.checks import as_int
+from bayesmachine.params import MachineParams, nth_machine
 
 from .model import MachineModel, MachineResult, check_words
 
@@ -15,8 +16,7 @@ class ParallelMachinesModel:
     """k machine models of ``nth_machine(params, i)``; the round-robin deal carries over between calls."""
 
     def __init__(self, params: MachineParams, machines: int) -> None:
-        if isinstance(machines, bool) or not isinstance(machines, int) or not 1 <= machines <= 256:
-            raise ParameterError(f"machines must be an integer in [1, 256], got {machines!r}")
+        machines = as_int("machines", machines, 1, 256)
         self._params = params
         self._models = [MachineModel(nth_machine(params, i)) for i in range(machines)]
         self._next = 0  # the machine of the next pixel

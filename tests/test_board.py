@@ -247,7 +247,7 @@ def test_pll_config() -> None:
             "the board's link carries one pass's results",
         ),
         (["board", "simulate", "--model", "census-lr"], "--model: the board's link carries one pass's"),
-        (["board", "build", "--baud", "20000000", "--dmax", "4", "--width", "16"], None),
+        (["board", "build", "--baud", "11000000", "--dmax", "4", "--width", "16"], None),
     ],
 )
 def test_cli_errors(argv: list[str], message: str | None, tmp_path, capsys) -> None:

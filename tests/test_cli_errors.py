@@ -98,11 +98,17 @@ def test_rerun_never_mixes_old_and_new_files(tmp_path: Path, pair) -> None:
     # As if that run had had --waves: its manifest lists a trace (the slow test below runs Verilator).
     manifest = json.loads((out / MANIFEST).read_text())
     manifest["files"].insert(0, "waves.vcd")
+    killed = ".result.partial-" + "1" * 32 + ".npz"  # a killed run's temporary file, which it listed
+    manifest["staging"] = [killed]
     (out / MANIFEST).write_text(json.dumps(manifest))
     (out / "waves.vcd").write_text("$date stale $end\n")
-    (out / ".result.partial-1.npz").write_bytes(b"PK")  # a killed run's temporary file
+    (out / killed).write_bytes(b"PK")
+    # The user's, named like temporary files but listed nowhere: they stay.
+    users = [".report.partial-mine.json", ".cloud.partial-keep.ply"]
+    for name in users:
+        (out / name).write_text("mine")
     assert main(["run", *pair, *SMALL, "-o", str(out)]) == 0
-    assert files(out) == ["confidence.png", "disparity.png", "report.json", "result.npz"]
+    assert files(out) == sorted([*users, "confidence.png", "disparity.png", "report.json", "result.npz"])
     assert json.loads((out / "report.json").read_text())["machine"]["seed"] == 1
 
 

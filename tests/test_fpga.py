@@ -345,7 +345,7 @@ def test_synth_command_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]
     from bayesmachine.cli import main
 
     assert main(["synth", "--target", "ecp5-85k", "--machines", "0", "-o", str(tmp_path)]) == 2
-    assert "machines must be a positive integer" in capsys.readouterr().err
+    assert "argument --machines: expected an integer in [1, 256], got '0'" in capsys.readouterr().err
     assert main(["synth", "--target", "virtex-7"]) == 2
     assert "invalid choice" in capsys.readouterr().err
     # The machine options are the shared ones (bayesmachine/cliargs.py); an off-chip source is refused

@@ -5,13 +5,15 @@ PLY parser written here from the spec (not the writer), its depths fx * baseline
 from __future__ import annotations
 
 import json
+import re
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from bayesmachine.cli import main
-from bayesmachine.host.calib import StereoCalibration, bundled_calibration_path, read_calibration
+from bayesmachine.host.calib import RANGES, StereoCalibration, bundled_calibration_path, read_calibration
 from bayesmachine.host.datasets import load_calibration, resolve_dataset
 from bayesmachine.host.images import Crop
 
@@ -63,7 +65,8 @@ MIDDLEBURY = "cam0=[1000 0 300; 0 1000 250; 0 0 1]\ncam1=[1000 0 330; 0 1000 250
     ("calib.txt", MIDDLEBURY.replace("baseline=200\n", ""), "baseline missing"),
     ("calib.txt", MIDDLEBURY.replace("doffs=30", "doffs=7.5"), "doffs=7.5 and cam1 disagree"),
     ("calib.txt", MIDDLEBURY.replace("cam0=[1000 0 300;", "cam0=[1000 0 x;"), "cam0: expected 9 numbers"),
-    ("calib.txt", MIDDLEBURY.replace("baseline=200", "baseline=-200"), "baseline must be > 0"),
+    ("calib.txt", MIDDLEBURY.replace("baseline=200", "baseline=-200"),
+     "baseline must be a finite number in [0.001, 1e+09] mm, got -200"),
     ("calib.txt", f"P2: {KITTI_P2}\n", "without P3"),
     ("calib.txt", f"P2: {KITTI_P3}\nP3: {KITTI_P2}\n", "is not to the right of"),
     ("c.json", '{"fx": 700, "fy": 700, "cx": 300, "cy": 200}', "missing baseline"),
@@ -74,7 +77,7 @@ MIDDLEBURY = "cam0=[1000 0 300; 0 1000 250; 0 0 1]\ncam1=[1000 0 330; 0 1000 250
 ])
 def test_wrong_or_missing_fields_are_named(tmp_path, name, text, message) -> None:
     (tmp_path / name).write_text(text)
-    with pytest.raises(ValueError, match=message.replace("[", r"\[").replace("(", r"\(")):
+    with pytest.raises(ValueError, match=re.escape(message)):
         read_calibration(tmp_path / name)
 
 
@@ -191,3 +194,166 @@ def test_datasets_pass_each_pair_calibration_along(tmp_path) -> None:
     assert pair.calib == str(kitti / "calib" / "000000.txt") and pair.calib_cameras == (0, 1)
     assert load_calibration(pair).fx == pytest.approx(721.5377)
     assert load_calibration(bundled_spec()).width == 741
+
+
+# --- issue 38: every field in its physical range, no repeated key, only regular files ---------------
+
+JSON = {"fx": 700, "fy": 700, "cx": 300, "cy": 200, "baseline": 0.5, "doffs": 0, "width": 640, "height": 480}
+KITTI = f"P0: {KITTI_P2}\nP1: {KITTI_P3}\nP2: {KITTI_P2}\nP3: {KITTI_P3}\n"
+
+
+@pytest.mark.parametrize("field", ["fx", "fy", "cx", "cy", "baseline", "doffs", "width", "height"])
+@pytest.mark.parametrize("value", [10**400, -(10**400), 1e200, 1e-200, 0, -1])
+def test_every_json_field_is_in_its_physical_range(tmp_path, field, value) -> None:
+    """f x baseline that overflowed gave every depth +inf and an empty cloud (exit 0), one that
+    underflowed every point at (0, 0, 0), a 400-digit integer an OverflowError."""
+    data = {**JSON, field: value}
+    (tmp_path / "c.json").write_text(json.dumps(data))
+    lo, hi, unit = RANGES.get(field, (1, 1 << 30, ""))
+    if lo <= value <= hi and field not in ("width", "height"):
+        assert getattr(read_calibration(tmp_path / "c.json"), field) == value
+        return
+    with pytest.raises(ValueError, match=f"c.json: {field} must be") as info:
+        read_calibration(tmp_path / "c.json")
+    assert "\n" not in str(info.value)
+    if field not in ("width", "height") or not isinstance(value, int):
+        assert f"{unit}" in str(info.value)
+
+
+@pytest.mark.parametrize("name, text, message", [
+    # Middlebury: the baseline in mm, as the file says it; the camera matrix's entries by name.
+    ("calib.txt", MIDDLEBURY.replace("baseline=200", "baseline=1e300"),
+     "baseline must be a finite number in [0.001, 1e+09] mm, got 1e+300"),
+    ("calib.txt", MIDDLEBURY.replace("baseline=200", "baseline=0.0001"), "[0.001, 1e+09] mm, got 0.0001"),
+    ("calib.txt", MIDDLEBURY.replace("[1000 0 300; 0 1000 250", "[1e-9 0 300; 0 1e-9 250").replace(
+        "cam1=[1000 0 330; 0 1000 250; 0 0 1]\n", ""), "cam0 f must be a finite number in [1, 1e+06] pixels"),
+    ("calib.txt", MIDDLEBURY.replace("doffs=30", "doffs=1e9").replace("330", "1e9"),
+     "doffs must be a finite"),
+    # KITTI: the matrix entry the value comes from.
+    ("calib.txt", KITTI.replace("P2: 7.215377e+02", "P2: 7.215377e+12").replace("P3: 7.215377e+02",
+                                                                              "P3: 7.215377e+12"),
+     "P2[0,0] (fx) must be a finite number in [1, 1e+06] pixels"),
+    ("calib.txt", KITTI.replace("4.485728e+01", "4.485728e+301"), "baseline (P2[0,3] - P3[0,3]) / fx"),
+])
+def test_physical_ranges_are_said_in_the_files_own_units(tmp_path, name, text, message) -> None:
+    (tmp_path / name).write_text(text)
+    with pytest.raises(ValueError, match=re.escape(message)):
+        read_calibration(tmp_path / name)
+
+
+@pytest.mark.parametrize("name, text, message", [
+    ("calib.txt", MIDDLEBURY + "baseline=100\n", "baseline is given twice (lines 4 and 7): keep one"),
+    ("calib.txt", "doffs=1\n" + MIDDLEBURY, "doffs is given twice (lines 1 and 4)"),
+    ("calib.txt", KITTI + f"P3: {KITTI_P2}\n", "P3 is given twice (lines 4 and 5)"),
+    ("c.json", '{"fx": 700, "fy": 700, "cx": 300, "cy": 200, "baseline": 0.5, "fx": 7}',
+     "the key 'fx' is given twice"),
+    # A rectified pair: cam1 has cam0's focal length and rows; KITTI's right matrix too.
+    ("calib.txt", MIDDLEBURY.replace("cam1=[1000 0 330; 0 1000 250", "cam1=[1000 0 330; 0 1000 251"),
+     "cam1's cy 251 differs from cam0's 250"),
+    ("calib.txt", MIDDLEBURY.replace("cam1=[1000 0 330; 0 1000 250", "cam1=[1000 0 330; 0 999 250"),
+     "cam1's fy 999 differs from cam0's 1000"),
+    ("calib.txt", MIDDLEBURY.replace("cam1=[1000 0 330", "cam1=[999 0 330"), "cam1's f 999 differs"),
+    ("calib.txt", MIDDLEBURY.replace("cam1=[1000 0 330;", "cam1=[1000 1 330;"),
+     "cam1 must be [f 0 cx; 0 f cy; 0 0 1]"),
+    ("calib.txt", KITTI.replace(f"P3: {KITTI_P3}", f"P3: {KITTI_P3.replace('1.728540e+02', '1.8e+02')}"),
+     "P2 and P3 must share [1,2]"),
+])
+def test_repeated_keys_and_an_unrectified_right_camera_are_refused(tmp_path, name, text, message) -> None:
+    (tmp_path / name).write_text(text)
+    with pytest.raises(ValueError, match=re.escape(message)):
+        read_calibration(tmp_path / name)
+
+
+@pytest.mark.parametrize("name, text", [("calib.txt", MIDDLEBURY), ("kitti.txt", KITTI),
+                                        ("c.json", json.dumps(JSON))])
+def test_a_byte_order_mark_is_skipped(tmp_path, name, text) -> None:
+    (tmp_path / name).write_bytes(b"\xef\xbb\xbf" + text.encode())
+    (tmp_path / f"plain-{name}").write_text(text)
+    got, want = read_calibration(tmp_path / name), read_calibration(tmp_path / f"plain-{name}")
+    assert replace(got, source="") == replace(want, source="")
+
+
+def test_only_a_regular_file_is_read_and_at_most_1_mib(tmp_path) -> None:
+    """/dev/zero was read until memory ran out, a FIFO without a writer blocked for ever, a directory
+    said 'Is a directory': each is refused before it is opened."""
+    import os
+    import threading
+
+    fifo = tmp_path / "fifo"
+    os.mkfifo(fifo)
+    (tmp_path / "link").symlink_to(fifo)
+    (tmp_path / "big.txt").write_text(MIDDLEBURY + "#" * (1 << 20))
+    cases = {fifo: "a named pipe", tmp_path / "link": "a named pipe", Path("/dev/zero"): "a device",
+             tmp_path: "a directory", tmp_path / "big.txt": "larger than 1024 KiB"}
+    for path, what in cases.items():
+        done: list[BaseException] = []
+        reader = threading.Thread(target=lambda p=path, d=done: d.append(_refusal(p)), daemon=True)
+        reader.start()
+        reader.join(10)
+        assert done and isinstance(done[0], ValueError), (path, done)
+        assert f"{path}: {what}" in str(done[0])
+
+
+def _refusal(path: Path) -> BaseException:
+    try:
+        read_calibration(path)
+    except BaseException as exc:  # noqa: BLE001 - the test looks at what it was
+        return exc
+    return AssertionError(f"{path} was read")
+
+
+@pytest.mark.parametrize("cameras, error, message", [
+    ("2,3", TypeError, "cameras must be a pair (left, right) of KITTI camera numbers, e.g. (2, 3), not str"),
+    ((2,), TypeError, "cameras must be a pair"),
+    ((2, 2), ValueError, "cameras must be two different KITTI cameras, got (2, 2)"),
+    ((0, 4), ValueError, "cameras[1] must be an integer in [0, 3], got 4"),
+    ((2.0, 3), TypeError, "cameras[0] must be an integer, not float"),
+])
+def test_cameras_say_what_they_take(tmp_path, cameras, error, message) -> None:
+    (tmp_path / "kitti.txt").write_text(KITTI)
+    with pytest.raises(error, match=re.escape(message)):
+        read_calibration(tmp_path / "kitti.txt", cameras=cameras)
+    assert read_calibration(tmp_path / "kitti.txt", cameras=(np.int64(0), np.int64(1))).fx == 721.5377
+
+
+def test_depths_past_float32_are_points_at_infinity(tmp_path) -> None:
+    """A doffs within 1e-26 of -d gives a depth past float32's range: +inf (no NumPy warning when
+    depth.npy is cast), and the cloud leaves out points whose x, y or z are not finite float32s."""
+    import warnings
+
+    from bayesmachine.host.cloud import point_cloud
+    from bayesmachine.region import OutputRegion
+
+    calib = StereoCalibration(fx=1e6, fy=1e6, cx=-1e6, cy=0, baseline=1e6, doffs=1e-30)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        depth = calib.depth(np.array([[0.0, 1.0, -1.0]])).astype(np.float32)
+    assert depth[0, 0] == np.inf and depth[0, 1] == np.float32(1e12) and np.isnan(depth[0, 2])
+    region = OutputRegion.of_image((5, 9), 2, 2)  # one output row of three pixels
+    wide = StereoCalibration(fx=1, fy=1, cx=-1e6, cy=0, baseline=1)
+    depths = np.array([[1e33, 1e12, 1.0]], np.float32)
+    points = point_cloud(depths, wide, region, np.zeros((5, 9, 3), np.uint8))
+    # x = (u + 1e6) z: past float32 (3.4e38) for z = 1e33 only.
+    assert points["z"].tolist() == [np.float32(1e12), 1.0] and np.isfinite(points["x"]).all()
+
+
+@pytest.mark.parametrize("name", ["calib_é.txt", "new\nline.txt", "back\\slash.txt"])
+def test_any_path_makes_a_valid_ply_header(tmp_path, name) -> None:
+    """A non-ASCII path failed after the whole run ('ascii' codec), a newline made an invalid header
+    (exit 0): the comment holds the path's Python escape, one printable ASCII line."""
+    (tmp_path / name).write_text(bundled_calibration_path().read_text())
+    out = tmp_path / "o"
+    assert main(["run", "--crop", "300,150,130,32", "--dmax", "64", "--model", "census", "--no-sgbm",
+                 "--quiet", "--calib", str(tmp_path / name), "-o", str(out)]) == 0
+    header, points = read_ply(out / "cloud.ply")
+    comments = [h for h in header if h.startswith("comment ")]
+    assert len(comments) == 1 and all(" " <= c <= "~" for c in comments[0])
+    escaped = str(tmp_path / name).encode("unicode_escape").decode("ascii")
+    assert comments[0].endswith(f"calibration {escaped}") and len(points) > 0
+
+
+def test_an_empty_calibration_path_is_refused(tmp_path, capsys) -> None:
+    assert main(["run", "--calib", "", "-o", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["bayesmachine run: error: argument --calib: the path is empty (an unset variable?); "
+                   "name the file"]

@@ -90,3 +90,73 @@ def test_a_new_option_is_one_declaration(monkeypatch):
     assert cliargs.machine_params_from_args(args, args.dmax).words_per_beat == 5
     with pytest.raises(ValueError, match="no machine option"):
         cliargs.add_machine_options(argparse.ArgumentParser(), skip=("colour",))
+
+
+# --- every numeric option of every command: out of range, one line and exit 2, before any work -------
+
+_COMMANDS = {  # a command line that parses, before -o; {tmp}: the test's directory, {L} {R}: a tiny pair
+    "emit": ["emit", "--dmax", "4"],
+    "reference": ["reference", "{L}", "{R}", "--dmax", "8"],
+    "run": ["run", "{L}", "{R}", "--dmax", "8", "--no-sgbm", "--quiet"],
+    "sweep": ["sweep", "{L}", "{R}", "--dmax", "8", "--no-sgbm", "--quiet"],
+    "synth": ["synth", "--target", "ecp5-85k", "--dmax", "4"],
+    "board build": ["board", "build", "--dmax", "4", "--width", "32"],
+    "board simulate": ["board", "simulate", "--dmax", "4", "--width", "32"],
+}
+_INTS = ("18446744073709551616", "-18446744073709551617")  # 2^64: one past the largest seed
+_FLOATS = ("1e300", "-1e300", "nan")
+
+
+def _numeric_options(command: str) -> list[tuple[str, str, bool]]:
+    """(flag, dest, integer?) of the command's options whose type takes numbers."""
+    parser = build_parser()
+    for word in command.split():
+        parser = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices[word]
+    out = []
+    for action in parser._actions:
+        if not action.option_strings or action.type is None or action.nargs == 0:
+            continue
+        try:
+            action.type("7")
+        except (argparse.ArgumentTypeError, ValueError, TypeError):
+            continue  # not a number (a crop, a scheduler's address, a path refusing nothing is skipped below)
+        try:
+            action.type("x")
+            continue  # a word too: a path
+        except (argparse.ArgumentTypeError, ValueError, TypeError):
+            pass
+        try:
+            action.type("1.5")
+            integer = False
+        except (argparse.ArgumentTypeError, ValueError, TypeError):
+            integer = True
+        out.append((action.option_strings[-1], action.dest, integer))
+    return out
+
+
+@pytest.mark.parametrize("command", list(_COMMANDS))
+def test_every_numeric_option_of_every_command_is_bounded_before_any_work(command, tmp_path, capsys) -> None:
+    """2^64 (past every integer option: --confidence-t once wrapped in int64 after the run), 1e300 and NaN:
+    one line naming the option, exit 2, and no output (an option accepted would run the command: emit and
+    synth reach Yosys, which the default tier refuses)."""
+    import cv2
+
+    from bayesmachine.cli import main
+    from bayesmachine.host.images import random_dot_stereogram
+
+    left, right, _ = random_dot_stereogram(height=16, width=40, seed=3)
+    cv2.imwrite(str(tmp_path / "l.png"), left)
+    cv2.imwrite(str(tmp_path / "r.png"), right)
+    base = [a.format(L=tmp_path / "l.png", R=tmp_path / "r.png") for a in _COMMANDS[command]]
+    options = _numeric_options(command)
+    assert len(options) >= 5, options
+    capsys.readouterr()
+    for flag, dest, integer in options:
+        for value in _INTS if integer else _FLOATS:
+            out = tmp_path / "out"
+            argv = [*base, f"{flag}={value}"] + ([] if command == "board simulate" else ["-o", str(out)])
+            assert main(argv) == 2, (flag, value)
+            err = capsys.readouterr().err.strip().splitlines()
+            assert len(err) == 1 and "Traceback" not in err[0], err
+            assert flag in err[0] or dest in err[0], (flag, err[0])
+            assert not out.exists(), (flag, value)

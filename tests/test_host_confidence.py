@@ -240,8 +240,11 @@ def test_min_confidence_blanks_and_reports_the_density(tmp_path) -> None:
 @pytest.mark.parametrize("argv, message", [
     (["--min-confidence", "0"], "expected a probability in (0, 1]"),
     (["--min-confidence", "nan"], "expected a finite number"),
-    (["--confidence-window", "2"], "expected an odd number >= 1"),
-    (["--confidence-t", "-1"], "expected an integer >= 0"),
+    (["--confidence-window", "2"], "window must be odd (a square around its pixel), got 2"),
+    (["--confidence-t", "-1"], "t must be an integer in [0, 4094], got -1"),
+    # Bounded before any work: 2^63 - 1 wrapped in int64, 2^64 overflowed after the run.
+    (["--confidence-t", "9223372036854775807"], "t must be an integer in [0, 4094]"),
+    (["--confidence-window", "18446744073709551617"], "window must be an integer in [1, 4095]"),
 ])
 def test_bad_confidence_options_are_one_error_line(argv, message, tmp_path, capsys) -> None:
     assert main(["run", *CROP, *argv, "-o", str(tmp_path / "o")]) == 2
@@ -312,3 +315,30 @@ def test_a_run_without_matched_ground_truth_pixels_has_null_figures(tmp_path) ->
     report = json.loads((out / "report.json").read_text())
     assert report["confidence"]["machine"]["pixels"] == 0 and report["machine_confidence_ece"] is None
     assert (out / "calibration.png").stat().st_size > 0
+
+
+@pytest.mark.parametrize("quiet", [True, False])
+def test_a_ground_truth_without_a_known_pixel_says_so(tmp_path, capsys, quiet) -> None:
+    """All-NaN ground truth gave all-n/a figures with no word, an empty calibration.png and 'no-match
+    calls on occluded pixels: 0.000'."""
+    import cv2
+
+    from bayesmachine.host.images import random_dot_stereogram
+    from bayesmachine.host.metrics import NO_KNOWN_GT
+
+    left, right, _ = random_dot_stereogram(height=16, width=40, seed=3)
+    cv2.imwrite(str(tmp_path / "l.png"), left)
+    cv2.imwrite(str(tmp_path / "r.png"), right)
+    np.save(tmp_path / "gt.npy", np.full(left.shape, np.nan))
+    out = tmp_path / "o"
+    argv = ["run", str(tmp_path / "l.png"), str(tmp_path / "r.png"), "--gt", str(tmp_path / "gt.npy"),
+            "--dmax", "8", "--model", "census", "--no-sgbm", *(["--quiet"] if quiet else []), "-o", str(out)]
+    assert main(argv) == 0
+    said = capsys.readouterr()
+    assert (said.err if quiet else said.out).count(NO_KNOWN_GT) == 1
+    assert "occluded" not in said.out and "bad-2" not in said.out
+    report = json.loads((out / "report.json").read_text())
+    assert report["ground_truth"] is True and report["ground_truth_pixels"] == 0
+    assert report["confidence"]["note"] == NO_KNOWN_GT and "machine" not in report["confidence"]
+    assert report.get("machine_nomatch_occluded") is None and report["machine_bad2"] is None
+    assert not (out / "calibration.png").exists() and (out / "confidence.png").exists()

@@ -514,8 +514,10 @@ def test_cli_run_census_lr(pair_files, pair, tmp_path):
     report = json.loads((out / "report.json").read_text())
     model = ModelParams(dmax=DMAX, name="census-lr", lr_beta=0.2)
     machine = disparity_machine(model, counter_max=8)
-    assert report["model"] == model.to_dict() and report["machine"] == machine.to_dict()
-    assert report["right_pass_machine"] == right_machine(model, machine).to_dict()
+    # Every resolved value, B = 1 included (not left out as in the fingerprint's to_dict()).
+    assert report["model"] == model.to_dict() and report["machine"] == machine.to_dict(complete=True)
+    assert report["machine"]["samples_per_clock"] == 1 and report["machine"]["normalize"] is True
+    assert report["right_pass_machine"] == right_machine(model, machine).to_dict(complete=True)
     left, right, gt = pair
     want = run_machine(prepare(left, right, model, gt), machine, "model", progress=False)
     npz = np.load(out / "result.npz")

@@ -43,7 +43,7 @@ def test_run_census_is_the_neighbour_machine_of_the_model(pair, tmp_path):
     model = ModelParams(dmax=DMAX, name="census", prior_s=3.0)
     machine = disparity_machine(model, counter_max=8)
     assert report["model_name"] == "census" and report["model"] == model.to_dict()
-    assert report["machine"] == machine.to_dict() and report["machine"]["prior"] == "neighbour"
+    assert report["machine"] == machine.to_dict(complete=True) and report["machine"]["prior"] == "neighbour"
     for key in ("machine_bad2", "machine_bad2_nomatch_bad", "sgbm_bad2", "bm_bad2", "bm_bad2_nomatch_bad",
                 "machine_nomatch_occluded", "reference_nomatch_occluded"):
         assert key in report, key
@@ -233,3 +233,79 @@ def test_emit_census_machine(tmp_path, capsys):
     out = tmp_path / "no-prior.v"
     assert main(["emit", "--model", "census", "--no-neighbour-prior", "--dmax", "6", "-o", str(out)]) == 0
     assert "4 operator columns" in capsys.readouterr().out and out.stat().st_size > 0
+
+
+# --- issue 38: the watchdog the user can change; options where they have no effect -----------------
+
+
+def test_a_watchdog_error_names_the_option_that_sets_it(pair, tmp_path, capsys):
+    """census-lr at counter max 1 with B = 16: the right pass's 8 runs x 2 = 16 cycles do not exceed B;
+    the error blamed --max-cycles, which the user never gave and which does not set that watchdog."""
+    from bayesmachine.models import CENSUS_WATCHDOG_RUNS, right_machine
+    from bayesmachine.params import ParameterError
+
+    model = ModelParams(name="census-lr", dmax=DMAX)
+    machine = disparity_machine(model, counter_max=1, samples_per_clock=16)
+    watchdog = r"the right pass's watchdog \(16 cycles: by default 8 runs"
+    with pytest.raises(ParameterError, match=watchdog) as e:
+        right_machine(model, machine)
+    assert e.value.parameter == "lr_right_max_cycles"
+    argv = _args(pair, "--model", "census-lr", "--counter-max", "1", "--samples-per-clock", "16")
+    assert main(["run", *argv, "-o", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1
+    assert err[0].startswith("bayesmachine run: error: --lr-right-max-cycles: the right pass's")
+    assert "give a longer lr_right_max_cycles" in err[0] and not (tmp_path / "o").exists()
+    # A counter max the census watchdog covers was refused for the machine's default one (2^20 - 1).
+    for name in ("census", "census-lr"):
+        big = disparity_machine(ModelParams(name=name, dmax=DMAX), counter_max=(1 << 20) - 1)
+        assert big.max_cycles == CENSUS_WATCHDOG_RUNS << 20
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["reference", "L", "R", "--model", "census-lr", "--lr-right-max-cycles", "100"],
+     "--lr-right-max-cycles: the watchdog of a machine's pass; reference computes the exact float64"),
+    (["emit", "--model", "census-lr", "--lr-right-max-cycles", "100"],
+     "--lr-right-max-cycles: only with --top stereo (got --top machine"),
+    (["synth", "--target", "ecp5-85k", "--model", "census-lr", "--lr-beta", "0.2",
+      "--lr-right-max-cycles", "9"],
+     "--lr-beta, --lr-right-max-cycles: only with --top stereo"),
+    (["emit", "--model", "census", "--census-sigma", "3", "--sigma", "2"],
+     "--census-sigma, --sigma: only with --top stereo"),
+    (["emit", "--model", "paper", "--census-sigma", "3"], "--census-sigma: options of --model census"),
+])
+def test_an_option_where_it_has_no_effect_is_refused(argv, message, tmp_path, capsys):
+    assert main([*argv, "-o", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0], err
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("argv", [
+    ["emit", "--model", "paper", "--gradient-magnitude"],  # a fourth data column: another machine
+    ["emit", "--model", "census", "--prior-eps", "0.2", "--no-neighbour-prior"],
+    ["emit", "--model", "census-lr", "--top", "stereo", "--lr-right-max-cycles", "100", "--lr-beta", "0.2"],
+])
+def test_an_option_that_changes_the_machine_is_taken(argv):
+    from bayesmachine.hdl.frontend.cli import check_top
+
+    args = build_parser().parse_args(argv)
+    if "--prior-eps" in argv:  # the model refuses it for its own reason (the prior it sets is off)
+        with pytest.raises(ValueError, match="--no-neighbour-prior turns off"):
+            check_top(args)
+        return
+    check_top(args)
+    assert cliargs.machine_params_from_args(args, args.dmax, model=cliargs.model_params_from_args(args))
+
+
+@pytest.mark.parametrize("argv, name", [
+    (["run", "", ""], "left"), (["run", "--gt", ""], "--gt"), (["run", "--calib", " "], "--calib"),
+    (["sweep", "--dataset", ""], "--dataset"), (["run", "--engine", "board", "--port", ""], "--port"),
+    (["reference", "l.png", ""], "right"),
+])
+def test_an_empty_input_path_is_refused(argv, name, tmp_path, capsys):
+    """--gt '' was no ground truth, --dataset '' the current directory, LEFT '' and --calib '' said
+    '.: Is a directory'."""
+    assert main([*argv, "-o", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"argument {name}: the path is " in err[0] and "(an unset variable?)" in err[0]

@@ -1,5 +1,6 @@
 """Atomic outputs: a file is complete or absent; an output directory never mixes two runs."""
 
+import json
 import os
 from pathlib import Path
 
@@ -94,8 +95,16 @@ def test_output_dir_commits_report_last_and_clears_its_own_stale_files(tmp_path:
     _transaction(out, {"report.json": "old", "data.npz": "old", "waves.vcd": "old"})
     assert names(out) == [MANIFEST, "data.npz", "report.json", "waves.vcd"]
     assert read_manifest(out) == ["data.npz", "waves.vcd", "report.json"]  # commit order, report last
-    (out / ".data.partial-99.npz").write_text("stale")
+    # A run killed outright listed its temporary file in the manifest before writing it.
+    killed = ".data.partial-" + "0" * 32 + ".npz"
+    record = json.loads((out / MANIFEST).read_text())
+    (out / MANIFEST).write_text(json.dumps({**record, "staging": [killed]}))
+    (out / killed).write_text("stale")
     (out / "notes.txt").write_text("the user's")
+    # The user's files named like temporary files, which no manifest lists: never removed.
+    users = [".report.partial-mine.json", ".data.partial-keep.npz"]
+    for name in users:
+        (out / name).write_text("the user's")
     renamed = []
     removed = []
     real_replace, real_unlink = os.replace, Path.unlink
@@ -118,16 +127,22 @@ def test_output_dir_commits_report_last_and_clears_its_own_stale_files(tmp_path:
     monkeypatch.setattr(outputs.os, "link", spy_link)
     monkeypatch.setattr(Path, "unlink", spy_unlink)
     with OutputDir(out, ["report.json", "data.npz", "waves.vcd"], last="report.json") as od:
-        assert names(out) == ["notes.txt"]  # every stale output of ours is gone before any work
+        assert names(out) == sorted([*users, "notes.txt"])  # every stale output of ours is gone first
         assert removed[0] == "report.json"  # the old report first: never beside a part of its run
         od.write("report.json", lambda p: p.write_text("{}"))  # staged first, still committed last
         od.write("data.npz", lambda p: np.savez(p, a=np.arange(3)))
-        staged = [n for n in names(out) if n != "notes.txt"]
+        staged = [n for n in names(out) if n not in ("notes.txt", MANIFEST, *users)]
         assert len(staged) == 2 and all(n.startswith(".") and ".partial-" in n for n in staged)
+        # Listed before they were written: a run killed now leaves nothing the next one cannot find.
+        assert sorted(json.loads((out / MANIFEST).read_text())["staging"]) == sorted(staged)
         written = od.commit()
-    assert renamed[-2:] == ["data.npz", "report.json"] and [p.name for p in written] == renamed[-2:]
-    assert names(out) == [MANIFEST, "data.npz", "notes.txt", "report.json"]  # no trace of the old run
+    moved = [n for n in renamed if n != MANIFEST]
+    assert moved[-2:] == ["data.npz", "report.json"] and [p.name for p in written] == moved[-2:]
+    # No trace of the old run; the user's hidden files stay.
+    assert names(out) == sorted([MANIFEST, "data.npz", "notes.txt", "report.json", *users])
     assert read_manifest(out) == ["data.npz", "report.json"]
+    assert "staging" not in json.loads((out / MANIFEST).read_text())
+    assert all((out / name).read_text() == "the user's" for name in users)
     np.testing.assert_array_equal(np.load(out / "data.npz")["a"], np.arange(3))
 
 

@@ -239,6 +239,8 @@ def test_params_run_the_sources_own_checks() -> None:
     assert MachineParams(rows=2, columns=16, rng="lfsr", prior="loaded",
                          words_per_beat=2).operator_columns == 17
     with pytest.raises(ParameterError, match="rng must be one of lfsr, lfsr-shared, sobol, external, smtj"):
+        MachineParams(rows=4, rng="sobol2")
+    with pytest.raises(TypeError, match=r"rng must be a random source's name \(str\), not list"):
         MachineParams(rows=4, rng=["sobol"])  # type: ignore[arg-type]
 
 

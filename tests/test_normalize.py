@@ -139,7 +139,7 @@ def test_posterior_ratios_unchanged() -> None:
 def test_normalize_off_keeps_fingerprints_and_refuses_a_wrong_type() -> None:
     assert "normalize" not in small_params().to_dict()
     assert small_params(normalize=True).to_dict()["normalize"] is True
-    with pytest.raises(TypeError, match="normalize must be a bool"):
+    with pytest.raises(TypeError, match="normalize must be True or False"):
         small_params(normalize=1)
 
 

@@ -89,8 +89,8 @@ def test_the_board_engine_refuses_a_board_built_for_something_else() -> None:
 
 @pytest.mark.parametrize(("options", "error", "message"), [
     ({"port": "p", "fields": "map,depth"}, ValueError, "unknown field 'depth'"),
-    ({"port": "p", "fields": 7}, ValueError, r"fields must be in 0\.\.3"),
-    ({"port": "p", "baud": 0}, ValueError, "baud must be positive"),
+    ({"port": "p", "fields": 7}, ValueError, r"fields must be an integer in \[0, 3\], got 7"),
+    ({"port": "p", "baud": 0}, ValueError, "baud must be an integer >= 1, got 0"),
     ({"port": "p", "baud": 1.5}, TypeError, "baud must be an integer"),
     ({"port": "p", "timeout": -1.0}, ValueError, "timeout must be positive"),
     ({"port": "p", "depth": 1}, ValueError, "does not take option.s. depth"),

@@ -102,7 +102,7 @@ def test_verilator_machines_on_a_crop_equal_the_model(machines: int) -> None:
 
 
 @pytest.mark.parametrize(("argv", "message"), [
-    (["emit", "--top", "stereo", "--machines", "0"], "machines must be in [1, 16], got 0"),
+    (["emit", "--top", "stereo", "--machines", "0"], "--machines: expected an integer in [1, 16], got '0'"),
     (["emit", "--machines", "2"], "--machines: only with --top stereo"),
     (["emit", "--top", "stereo", "--machines", "2", "--rng", "smtj"], "rng 'smtj' is off chip"),
     (["synth", "--top", "stereo", "--machines", "17", "--target", "ecp5-85k"], "machines must be in [1, 16]"),

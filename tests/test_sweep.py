@@ -192,3 +192,32 @@ def test_the_points_of_a_pair_share_its_prepared_features_and_reference(tmp_path
     said = capsys.readouterr()
     assert "sweep: 2 pair(s) x 6 point(s) = 12 tasks in this process" in said.out
     assert said.err.splitlines() == [f"note: {n}: no ground truth given" for n in ("l0", "l2")]
+
+
+def test_a_yes_no_option_is_a_grid_axis_and_every_resolved_value_is_recorded(tmp_path, capsys) -> None:
+    """'sweep --normalize-columns true,false' said 'give both LEFT and RIGHT images'; sweep.json said
+    null for B = 1, timeout answer none and normalization off (for census, the opposite of what ran)."""
+    left, right, _ = stereo(1)
+    cv2.imwrite(str(tmp_path / "L.png"), left)
+    cv2.imwrite(str(tmp_path / "R.png"), right)
+    pair = [str(tmp_path / "L.png"), str(tmp_path / "R.png")]
+    small = ["--dmax", "8", "--counter-max", "2", "--no-sgbm", "--quiet"]
+    out = tmp_path / "both"
+    assert main(["sweep", *pair, *small, "--model", "census,paper", "--normalize-columns", "true,false",
+                 "--samples-per-clock", "1", "-o", str(out)]) == 0
+    sweep = json.loads((out / "sweep.json").read_text())
+    assert sweep["grid"]["normalize"] == [True, False] and sweep["grid"]["samples_per_clock"] == [1]
+    got = {(p["model_name"], p["grid"]["normalize"]): p for p in sweep["points"]}
+    assert sorted(got) == [("census", False), ("census", True), ("paper", False), ("paper", True)]
+    assert sweep["machine"]["samples_per_clock"] == 1
+    for (model, _), point in got.items():
+        machine = {**sweep["machine"], **point.get("machine", {})}
+        assert machine["timeout_answer"] == ("leading" if model == "census" else "none")
+        assert machine["normalize"] is point["grid"]["normalize"]
+    out = tmp_path / "off"
+    assert main(["sweep", *pair, *small, "--model", "census", "--no-normalize-columns", "-o", str(out)]) == 0
+    sweep = json.loads((out / "sweep.json").read_text())
+    assert sweep["points"][0]["grid"]["normalize"] is False and sweep["machine"]["normalize"] is False
+    capsys.readouterr()
+    assert main(["sweep", "--normalize-columns", *pair, "-o", str(tmp_path / "x")]) == 2
+    assert "argument --normalize-columns: expected on, off or on,off" in capsys.readouterr().err

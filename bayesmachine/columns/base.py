@@ -10,11 +10,11 @@ import enum
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from numbers import Real
 from typing import Any, ClassVar
 
 import numpy as np
 
+from bayesmachine.checks import as_bool, as_int, as_real, shown
 from bayesmachine.errors import ParameterError
 
 from .planes import Plane
@@ -56,39 +56,35 @@ class Source(enum.Enum):
         return self is not Source.FEATURES
 
 
+# The checks follow bayesmachine.checks: an integer is what operator.index takes (NumPy integers too), a
+# yes/no value a bool or a NumPy bool, a number any real but a bool; a huge integer is refused, never
+# an OverflowError. ModelParams keeps the plain Python value (bayesmachine.checks.plain).
+
+
 def check_int(name: str, value: object, low: int, high: int) -> None:
-    """TypeError unless ``value`` is an int (not a bool); ParameterError outside [low, high]."""
-    if isinstance(value, bool) or not isinstance(value, int):
-        raise TypeError(f"{name} must be an integer, not {type(value).__name__} {value!r}")
-    if not low <= value <= high:
-        raise ParameterError(f"{name} must be an integer in [{low}, {high}], got {value!r}", name)
+    """TypeError unless ``value`` is an integer (not a bool); ParameterError outside [low, high]."""
+    as_int(name, value, low, high)
 
 
 def check_bool(name: str, value: object) -> None:
-    if not isinstance(value, bool):
-        raise TypeError(f"{name} must be True or False, not {type(value).__name__} {value!r}")
-
-
-def _check_real(name: str, value: object) -> None:
-    if isinstance(value, bool) or not isinstance(value, Real):
-        raise TypeError(f"{name} must be a number, not {type(value).__name__} {value!r}")
+    """TypeError unless ``value`` is True or False (a NumPy bool too)."""
+    as_bool(name, value)
 
 
 def check_probability(name: str, value: object, positive: str = "") -> None:
     """A probability in [0, 1]; with ``positive`` (the reason) also > 0."""
-    _check_real(name, value)
-    if not 0.0 <= float(value) <= 1.0:  # type: ignore[arg-type]
-        raise ParameterError(f"{name} must be a probability in [0, 1], got {value!r}", name)
-    if positive and not float(value) > 0:  # type: ignore[arg-type]
+    as_real(name, value)  # the type, and a finite value
+    if not 0 <= value <= 1:  # type: ignore[operator]
+        raise ParameterError(f"{name} must be a probability in [0, 1], got {shown(value)}", name)
+    if positive and not value > 0:  # type: ignore[operator]
         raise ParameterError(f"{name} must be > 0: {positive}", name)
 
 
 def check_sigma(name: str, value: object) -> None:
     """A finite sigma > 0 whose ``2 sigma^2`` is a finite positive float64 (1e-300 would square to 0)."""
-    _check_real(name, value)
-    v = float(value)  # type: ignore[arg-type]
-    if not (math.isfinite(v) and v > 0):
-        raise ParameterError(f"{name} must be a finite number > 0, got {value!r}", name)
+    v = as_real(name, value)  # the type, and a finite value (a huge integer is not)
+    if not v > 0:
+        raise ParameterError(f"{name} must be a finite number > 0, got {shown(value)}", name)
     two_s2 = 2.0 * v * v
     if not (math.isfinite(two_s2) and two_s2 > 0.0):
         raise ParameterError(f"{name} = {value!r}: 2 sigma^2 = {two_s2!r} is not a finite positive float64 "

@@ -21,6 +21,8 @@ from typing import Any
 
 import numpy as np
 
+from bayesmachine.checks import as_int
+
 from .base import Option, PlaneColumn, Table, check_int, check_probability, check_sigma, likelihood_formula
 from .planes import Plane
 
@@ -96,8 +98,7 @@ def _sigma(name: str, value: object, values: Mapping[str, Any]) -> None:
 def _nomatch_h(name: str, value: object, values: Mapping[str, Any]) -> None:
     w = values["census_window"]
     bits = census_bits(w)
-    if isinstance(value, bool) or not isinstance(value, int):
-        raise TypeError(f"{name} must be an integer Hamming distance, not {type(value).__name__} {value!r}")
+    as_int(name, value)  # the type (NumPy integers too)
     if not 0 <= value <= bits:
         from bayesmachine.errors import ParameterError
 

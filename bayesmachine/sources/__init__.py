@@ -125,7 +125,7 @@ def source_kind(name: str) -> SourceKind:
     """The registry entry of a source kind; a clear error for an unknown name."""
     kind = SOURCE_KINDS.get(name) if isinstance(name, str) else None
     if kind is None:
-        raise ParameterError(f"rng must be one of {', '.join(SOURCE_KINDS)}, got {name!r}")
+        raise ParameterError(f"rng must be one of {', '.join(SOURCE_KINDS)}, got {name!r}", "rng")
     return kind
 
 

@@ -9,11 +9,12 @@ import sys
 from pathlib import Path
 
 from bayesmachine.cliargs import (
+    BAUD_RANGE,
     DEFAULT_BAUD,
     add_dmax_option,
     add_machine_options,
     add_model_options,
-    float_arg,
+    float_in_range,
     int_arg,
     int_in_range,
     machine_params_from_args,
@@ -92,12 +93,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     _design_options(b)
     b.add_argument(
         "--clock",
-        type=float_arg,
+        type=float_in_range(10, 200),
         default=None,
         metavar="MHZ",
-        help="the design's clock from the PLL (default 45: 3 Mbaud in 15 clocks per bit)",
+        help="the design's clock from the PLL, 10 .. 200 MHz (default 45: 3 Mbaud in 15 clocks per bit)",
     )
-    b.add_argument("--baud", type=int_arg, default=None, help=f"UART baud rate (default {DEFAULT_BAUD})")
+    b.add_argument("--baud", type=int_in_range(*BAUD_RANGE), default=None,
+                   help=f"UART baud rate, {BAUD_RANGE[0]} .. {BAUD_RANGE[1]} (default {DEFAULT_BAUD})")
     b.add_argument("--pnr-seed", type=int_in_range(0, 2**31 - 1), default=DEFAULT_BOARD_SEED,
                    help=f"nextpnr placement seed, 0 to 2^31 - 1 (default {DEFAULT_BOARD_SEED})")
     b.add_argument("--router", choices=ROUTERS, default=DEFAULT_BOARD_ROUTER,
@@ -120,16 +122,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     _design_options(s)
     s.add_argument(
         "--sim-clocks-per-bit",
-        type=int_arg,
+        type=int_in_range(4, 1 << 16),
         default=4,
-        help="simulated clock cycles per UART bit (default 4: the pty has no baud rate)",
+        help="simulated clock cycles per UART bit, 4 .. 65536 (default 4: the pty has no baud rate)",
     )
     s.add_argument(
         "--sim-timeout-bits",
-        type=int_arg,
+        type=int_in_range(16, 1 << 30),
         default=None,
-        help="the board's receive timeout in bit times (default 131072: simulated time runs only while the "
-        "harness has the CPU, so shorter ones may fire while a loaded host is still sending)",
+        help="the board's receive timeout in bit times, 16 .. 2^30 (default 131072: simulated time runs only "
+        "while the harness has the CPU, so shorter ones may fire while a loaded host is still sending)",
     )
     s.add_argument("--quiet", action="store_true", help="only the path")
     s.add_argument("-o", "--output", type=output_path, default=None, metavar="OUT/",

@@ -27,6 +27,7 @@ from amaranth.hdl import Module, ResetInserter
 from amaranth.lib import fifo, wiring
 from amaranth.lib.wiring import In, Out
 
+from bayesmachine.checks import as_int
 from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams, ParameterError
 from bayesmachine.sources import source_kind
@@ -73,10 +74,7 @@ def check_core_options(clocks_per_bit: int, rx_fifo_log2: int, timeout_bits: int
         ("rx_fifo_log2", rx_fifo_log2, 4, 15),
         ("timeout_bits", timeout_bits, 16, 1 << 30),
     ):
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise TypeError(f"{name} must be an integer, not {type(value).__name__}")
-        if not lo <= value <= hi:
-            raise ValueError(f"{name} must be in [{lo}, {hi}], got {value}")
+        as_int(name, value, lo, hi)
 
 
 def board_signature() -> wiring.Signature:

@@ -16,6 +16,7 @@ import time
 
 import numpy as np
 
+from bayesmachine.checks import as_int
 from bayesmachine.cliargs import DEFAULT_BAUD
 from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams
@@ -86,10 +87,7 @@ class BoardEngine(PixelEngineBase):
                       fields: object = pr.FIELDS_ALL, **others: object) -> None:
         if not isinstance(port, str):
             raise TypeError(f"port must be a path (str), not {type(port).__name__}")
-        if isinstance(baud, bool) or not isinstance(baud, int):
-            raise TypeError(f"baud must be an integer, not {type(baud).__name__}")
-        if baud <= 0:
-            raise ValueError(f"baud must be positive, got {baud}")
+        baud = as_int("baud", baud, 1)
         if isinstance(timeout, bool) or not isinstance(timeout, (int, float)):
             raise TypeError(f"timeout must be a number of seconds, not {type(timeout).__name__}")
         if not timeout > 0:
@@ -164,8 +162,8 @@ def _fields(fields: object) -> int:
     itself, checked (TypeError, ValueError)."""
     if isinstance(fields, str):
         return pr.fields_from_names(fields)
-    if isinstance(fields, bool) or not isinstance(fields, int):
-        raise TypeError(f"fields must be an integer or a list of names, not {type(fields).__name__}")
-    if not 0 <= fields <= pr.FIELDS_ALL:
-        raise ValueError(f"fields must be in 0..{pr.FIELDS_ALL}, got {fields}")
-    return fields
+    try:
+        return as_int("fields", fields, 0, pr.FIELDS_ALL)
+    except TypeError:
+        raise TypeError(f"fields must be an integer or a list of names, not {type(fields).__name__}") \
+            from None

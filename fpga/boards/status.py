@@ -8,6 +8,8 @@ from amaranth.hdl import Cat, Module, Mux, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
+from bayesmachine.checks import as_int
+
 __all__ = ["ReceiveTimeout", "ReceiveTimeoutTwin", "StatusLEDs", "StatusLEDsTwin"]
 
 
@@ -33,10 +35,7 @@ class ReceiveTimeout(wiring.Component):
     """
 
     def __init__(self, *, cycles: int) -> None:
-        if isinstance(cycles, bool) or not isinstance(cycles, int):
-            raise TypeError(f"cycles must be an integer, not {type(cycles).__name__}")
-        if cycles < 2:
-            raise ValueError(f"cycles must be at least 2, got {cycles}")
+        cycles = as_int("cycles", cycles, 2)
         self._cycles = cycles
         super().__init__({"waiting": In(1), "busy": In(1), "fired": Out(1)})
 

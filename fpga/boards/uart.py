@@ -12,15 +12,13 @@ from amaranth.lib import stream, wiring
 from amaranth.lib.cdc import FFSynchronizer
 from amaranth.lib.wiring import In, Out
 
+from bayesmachine.checks import as_int
+
 __all__ = ["UARTRx", "UARTTx", "check_clocks_per_bit"]
 
 
 def check_clocks_per_bit(clocks_per_bit: object) -> int:
-    if isinstance(clocks_per_bit, bool) or not isinstance(clocks_per_bit, int):
-        raise TypeError(f"clocks_per_bit must be an integer, not {type(clocks_per_bit).__name__}")
-    if not 4 <= clocks_per_bit <= 1 << 16:
-        raise ValueError(f"clocks_per_bit must be in [4, 65536], got {clocks_per_bit}")
-    return clocks_per_bit
+    return as_int("clocks_per_bit", clocks_per_bit, 4, 1 << 16)
 
 
 class UARTRx(wiring.Component):

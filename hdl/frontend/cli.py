@@ -6,7 +6,14 @@ import argparse
 import dataclasses
 from typing import TYPE_CHECKING
 
-from bayesmachine.cliargs import MODEL_OPTION_FLAGS, add_model_options, int_arg, model_params_from_args
+from bayesmachine.cliargs import (
+    add_model_options,
+    int_arg,
+    machine_parameters,
+    model_names_from_args,
+    model_params_from_args,
+    options_without_effect,
+)
 from bayesmachine.params import MachineParams, stereo_words_per_beat
 
 from . import DEFAULT_FIFO_PIXELS, DEFAULT_WIDTH, MAX_WIDTH
@@ -17,9 +24,10 @@ if TYPE_CHECKING:
 __all__ = ["DEFAULT_WIDTH", "add_options", "build", "check_top", "fifo_pixels", "machines", "stereo_params",
            "summary", "width"]
 
-# Every option of the stereo top (dest, flag): left at None unless given, so that one given with
-# --top machine, where it would do nothing, is refused (check_top).
-_STEREO_OPTIONS = (("width", "--width"), ("fifo_pixels", "--fifo-pixels"), *MODEL_OPTION_FLAGS)
+# The stereo top's own options (dest, flag): left at None unless given, so that one given with
+# --top machine, where it would do nothing, is refused (check_top), as are the model's options that
+# change only the words the front end computes.
+_STEREO_OPTIONS = (("width", "--width"), ("fifo_pixels", "--fifo-pixels"))
 
 
 def add_options(p: argparse.ArgumentParser) -> None:
@@ -35,10 +43,14 @@ def add_options(p: argparse.ArgumentParser) -> None:
 
 
 def check_top(args: argparse.Namespace) -> None:
-    """Refuse (ValueError) options of the stereo top given with ``--top machine``: they would be ignored."""
+    """Refuse (ValueError) options of the stereo top given with ``--top machine``: they would be ignored
+    (the top's own, and the model's that do not change the machine alone:
+    :func:`~bayesmachine.cliargs.machine_parameters`)."""
     if args.top == "stereo":
         return
     given = [flag for dest, flag in _STEREO_OPTIONS if getattr(args, dest, None) is not None]
+    model_params_from_args(args)  # an option of another model is refused as that first
+    given += options_without_effect(args, machine_parameters(model_names_from_args(args)[0]))
     if given:
         raise ValueError(f"{', '.join(given)}: only with --top stereo (got --top {args.top}, the machine "
                          "alone, which takes likelihood words, not pixels)")
