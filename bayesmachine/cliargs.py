@@ -91,7 +91,7 @@ __all__ = [
     "model_params_from_args",
     "options_without_effect",
     "machine_parameters",
-    "PASS_WATCHDOGS",
+    "pass_watchdogs",
     "float_arg",
     "positive_float_arg",
     "positive_float_at_most",
@@ -627,9 +627,10 @@ def model_params_from_args(args: argparse.Namespace, name: str | None = None) ->
         raise with_flag(exc) from None
 
 
-# The model parameters that set a declared pass's watchdog (census-lr's lr_right_max_cycles): what only a
-# machine's run reads.
-PASS_WATCHDOGS = frozenset(p.watchdog for d in MODELS.values() for p in d.passes if p.watchdog)
+def pass_watchdogs() -> frozenset[str]:
+    """The model parameters that set a declared pass's watchdog (census-lr's lr_right_max_cycles): what
+    only a machine's run reads (the models registered by now)."""
+    return frozenset(p.watchdog_option for d in MODELS.values() for p in d.passes if p.watchdog_option)
 
 
 def machine_parameters(name: str) -> frozenset[str]:
@@ -638,7 +639,7 @@ def machine_parameters(name: str) -> frozenset[str]:
     machine forms its prior from). The others change only the words the host loads, or other passes."""
     d = MODELS[name]
     own = {o.name for c in d.columns if c.source is Source.FEEDBACK for o in c.options}
-    return frozenset({switch for switch, _ in d.switches} | own)
+    return frozenset({switch.name for switch in d.switches} | own)
 
 
 def options_without_effect(args: argparse.Namespace, effective: Iterable[str]) -> list[str]:

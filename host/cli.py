@@ -23,7 +23,6 @@ from bayesmachine.cliargs import (
     DEFAULT_BAUD,
     MACHINE_OPTIONS,
     MAX_SILENCE_S,
-    PASS_WATCHDOGS,
     add_machine_options,
     add_model_options,
     argument_type,
@@ -35,6 +34,7 @@ from bayesmachine.cliargs import (
     model_params_from_args,
     options_without_effect,
     output_path,
+    pass_watchdogs,
     positive_float_at_most,
     runnable_sources,
 )
@@ -451,7 +451,7 @@ def _confidence_summary(r: dict[str, object], f) -> str:  # noqa: ANN001
 
 def _cmd_reference(args: argparse.Namespace) -> int:
     model = model_params_from_args(args)
-    ignored = options_without_effect(args, set(all_options()) - PASS_WATCHDOGS)
+    ignored = options_without_effect(args, set(all_options()) - pass_watchdogs())
     if ignored:  # as run refuses board options without --engine board
         raise ValueError(f"{', '.join(ignored)}: the watchdog of a machine's pass; reference computes the "
                          "exact float64 posterior and runs no machine")

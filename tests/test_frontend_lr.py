@@ -148,7 +148,7 @@ def test_right_pass_feeder_delays_the_reference_and_flushes_each_output_row(dmax
 ])
 def test_lr_frontend_words_equal_host_words(model: ModelParams, width: int, delay: int) -> None:
     """With stand-in results for both machines (given late, up to ``delay`` cycles after a pixel's
-    words), the right pass's words are ``right_memory_words`` (its above column from the stand-in right
+    words), the right pass's words are ``pass_words`` (its above column from the stand-in right
     results of the row before) and the left pass's ``memory_words`` with the consistency column of the
     stand-in right MAPs of its row (``Consistency.loaded``)."""
     params = stereo_machine_params(model.dmax, model=model, counter_max=2)

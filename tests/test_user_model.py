@@ -142,7 +142,7 @@ def test_run_through_the_cli_is_the_model_engines(user_model: ModelParams, crop,
     model = user_model
     machine = disparity_machine(model, counter_max=8)
     assert report["model_name"] == "census-g-lr" and report["passes"] == ["right", "left"]
-    assert report["machine"] == machine.to_dict() and report["model"] == model.to_dict()
+    assert report["machine"] == machine.to_dict(complete=True) and report["model"] == model.to_dict()
     left, right, gt = crop
     want = run_machine(prepare(left, right, model, gt), machine, "model", progress=False)
     for key in ("map", "cycles", "timeout"):
