@@ -40,12 +40,12 @@ from bayesmachine.columns import Option, Source
 from bayesmachine.models import (
     DEFAULT_MODEL,
     HARDWARE_MODEL,
-    MODEL_NAMES,
     MODELS,
     ModelParams,
     all_options,
     disparity_machine,
     machine_layout,
+    model_names,
 )
 from bayesmachine.params import (
     DEFAULT_COUNTER_MAX,
@@ -91,7 +91,7 @@ __all__ = [
     "model_params_from_args",
     "options_without_effect",
     "machine_parameters",
-    "PASS_WATCHDOGS",
+    "pass_watchdogs",
     "float_arg",
     "positive_float_arg",
     "positive_float_at_most",
@@ -188,7 +188,9 @@ class MachineOption:
 
     field: str  # the MachineParams keyword it sets (and the argparse dest)
     flag: str
-    help: str  # may use %(default)s
+    # may use %(default)s; a function when it names the models (read when a parser is built, so that it
+    # lists the models registered by then)
+    help: str | Callable[[], str]
     type: Callable[[str], Any] = int_arg
     default: Any = None  # None: leave the field to MachineParams.for_disparity
     choices: tuple[str, ...] | None = None
@@ -199,6 +201,10 @@ class MachineOption:
         """A yes/no option (``type=bool``): ``--flag`` / ``--no-flag``, None unless given."""
         return self.type is bool
 
+    @property
+    def help_text(self) -> str:
+        return self.help() if callable(self.help) else self.help
+
     def add_to(self, group: argparse._ActionsContainer, **changes: Any) -> argparse.Action:
         if self.is_flag and changes.pop("values", False):
             # A sweep's axis: --x (on), --x on,off (both: a grid axis) and --no-x (off).
@@ -208,7 +214,7 @@ class MachineOption:
             return group.add_argument(f"--no-{self.flag[2:]}", dest=self.field, action="store_const",
                                       const=False, help=f"the same as {self.flag} off")
         if self.is_flag:
-            flag_kwargs = {"dest": self.field, "default": self.default, "help": self.help,
+            flag_kwargs = {"dest": self.field, "default": self.default, "help": self.help_text,
                            "action": argparse.BooleanOptionalAction}
             flag_kwargs.update(changes)
             return group.add_argument(self.flag, **flag_kwargs)
@@ -216,7 +222,7 @@ class MachineOption:
             "dest": self.field,
             "type": self.type,
             "default": self.default,
-            "help": self.help,
+            "help": self.help_text,
             "metavar": self.metavar,
         }
         if self.choices is not None:
@@ -231,8 +237,8 @@ MACHINE_OPTIONS: dict[str, MachineOption] = {}
 
 
 def _machine_layouts() -> dict[str, tuple[str, int]]:
-    """Each model's machine (prior, data columns), for the help texts."""
-    return {name: machine_layout(ModelParams(name=name).columns) for name in MODEL_NAMES}
+    """Each model's machine (prior, data columns) with its defaults, for the help texts."""
+    return {name: machine_layout(ModelParams(name=name).columns) for name in model_names()}
 
 
 def add_option(option: MachineOption) -> MachineOption:
@@ -243,12 +249,11 @@ def add_option(option: MachineOption) -> MachineOption:
     return option
 
 
-_LAYOUTS = _machine_layouts()
 # --columns, --prior and --max-cycles are left at None unless given: the model decides them (its data
 # columns, its prior columns, its watchdog), and a given one that contradicts it is refused.
 add_option(MachineOption(
-    "columns", "--columns", "data-term operator columns N (default the model's: " + ", ".join(
-        f"{data} with --model {name}" for name, (_, data) in _LAYOUTS.items()) + ")", metavar="N"))
+    "columns", "--columns", lambda: "data-term operator columns N (default the model's: " + ", ".join(
+        f"{data} with --model {name}" for name, (_, data) in _machine_layouts().items()) + ")", metavar="N"))
 add_option(MachineOption("word_bits", "--word-bits",
                          "comparator resolution W; likelihood-memory words are W+1 bits "
                          "(default %(default)s)",
@@ -271,19 +276,25 @@ def _runs(runs: int) -> str:
     return f"{runs} x (counter max + 1), {runs * (n + 1)} at counter max {n}"
 
 
-_WATCHDOGS = "; ".join(
-    f"with --model {d.name} {_runs(d.watchdog_runs)}"
-    + "".join(f", its {p.name} pass {_runs(p.watchdog_runs)}" for p in d.passes if p.watchdog_runs)
-    for d in MODELS.values() if d.watchdog_runs)
+def _watchdogs() -> str:
+    return "; ".join(
+        f"with --model {d.name} {_runs(d.watchdog_runs)}"
+        + "".join(f", its {p.name} pass {_runs(p.watchdog_runs)}" for p in d.passes if p.watchdog_runs)
+        for d in MODELS.values() if d.watchdog_runs)
+
+
+def _models_with(test: Callable[[Any], bool]) -> str:
+    return " and ".join(d.name for d in MODELS.values() if test(d))
+
+
 add_option(MachineOption("max_cycles", "--max-cycles",
-                         "watchdog: a pixel stops as a timeout after this many cycles (samples) "
-                         f"(default {DEFAULT_MAX_CYCLES}; {_WATCHDOGS})", metavar="N"))
-_NORMALIZED = " and ".join(d.name for d in MODELS.values() if d.normalize)
-_LEADING = " and ".join(d.name for d in MODELS.values() if d.timeout_answer == "leading")
+                         lambda: "watchdog: a pixel stops as a timeout after this many cycles (samples) "
+                         f"(default {DEFAULT_MAX_CYCLES}; {_watchdogs()})", metavar="N"))
 add_option(MachineOption("timeout_answer", "--timeout-answer",
-                         "what a run stopped by the watchdog answers (still flagged timeout): none (no "
-                         "match) or leading (the row with the largest count, by the tie rule) (default none; "
-                         f"leading with --model {_LEADING})",
+                         lambda: "what a run stopped by the watchdog answers (still flagged timeout): none "
+                         "(no match) or leading (the row with the largest count, by the tie rule) (default "
+                         "none; "
+                         f"leading with --model {_models_with(lambda d: d.timeout_answer == 'leading')})",
                          choices=TIMEOUT_ANSWERS))
 add_option(MachineOption("samples_per_clock", "--samples-per-clock",
                          "B random samples per operator and clock, one of "
@@ -291,21 +302,22 @@ add_option(MachineOption("samples_per_clock", "--samples-per-clock",
                          "ceil(cycles / B) clocks (the cycles reported are clocks; --max-cycles counts "
                          "samples); rng sobol or external (default 1)", metavar="B"))
 add_option(MachineOption("normalize", "--normalize-columns",
-                         "per-pixel column normalization: each loaded column's random numbers scaled by "
-                         "m / 2^W, m the column's largest word for the pixel (exactly the run on the words "
-                         "w * 2^W / m: the same posterior, shorter runs; docs/architecture.md) "
-                         f"(default on with --model {_NORMALIZED}, off otherwise)", type=bool))
+                         lambda: "per-pixel column normalization: each loaded column's random numbers scaled "
+                         "by m / 2^W, m the column's largest word for the pixel (exactly the run on the "
+                         "words w * 2^W / m: the same posterior, shorter runs; docs/architecture.md) "
+                         f"(default on with --model {_models_with(lambda d: d.normalize)}, off otherwise)",
+                         type=bool))
 add_option(MachineOption("tie_break", "--tie-break",
                          "MAP encoder rule when several counters overflow in one cycle (default %(default)s)",
                          default=DEFAULT_TIE_BREAK, choices=TIE_BREAKS))
 add_option(MachineOption("prior", "--prior",
-                         "uniform: always-on 1s enter each row; loaded: an extra operator column 0 holds a "
-                         "prior word per row (the host's: a uniform prior, 1.0); neighbour: the neighbour "
-                         "prior (a feedback column from the "
+                         lambda: "uniform: always-on 1s enter each row; loaded: an extra operator column 0 "
+                         "holds a prior word per row (the host's: a uniform prior, 1.0); neighbour: the "
+                         "neighbour prior (a feedback column from the "
                          "machine's own previous result and a loaded column), whose table is the model's "
                          "(default the model's: " + ", ".join(
-                             f"{prior} with --model {name}" for name, (prior, _) in _LAYOUTS.items()) + ")",
-                         choices=PRIORS))
+                             f"{prior} with --model {name}"
+                             for name, (prior, _) in _machine_layouts().items()) + ")", choices=PRIORS))
 add_option(MachineOption("smtj_dwell", "--smtj-dwell",
                          "--rng smtj: mean dwell time of a device state, in clock cycles (default 1)",
                          type=float_arg, metavar="TAU"))
@@ -413,7 +425,7 @@ def machine_params_from_args(
             raise ParameterError(f"{flags}: device options of --rng smtj (got --rng {got})")
     if kwargs.get("prior") == "neighbour" and (model is None
                                                or machine_layout(model.columns)[0] != "neighbour"):
-        with_prior = [n for n, (prior, _) in _LAYOUTS.items() if prior == "neighbour"]
+        with_prior = [n for n, (prior, _) in _machine_layouts().items() if prior == "neighbour"]
         raise ParameterError(f"--prior neighbour: the neighbour prior's machine takes its feedback table "
                              f"from the model: use --model {' or '.join(with_prior)} (and leave --prior out)")
     try:
@@ -448,8 +460,8 @@ def _default_text(option: Option) -> str:
         text = option.default_text or "none"
     else:
         text = f"{option.default:g}"
-    own = [f"{dict(d.defaults)[option.name]:g} with --model {d.name}" for d in MODELS.values()
-           if option.name in dict(d.defaults)]
+    own = [f"{d.defaults[option.name]:g} with --model {d.name}" for d in MODELS.values()
+           if option.name in d.defaults]
     return "; ".join([text, *own])
 
 
@@ -499,14 +511,14 @@ def _model_groups() -> dict[str, list[Option]]:
 
 
 def model_list(text: str) -> list[str]:
-    """``MODEL,MODEL,...`` models (for sweeps), each one of :data:`~bayesmachine.models.MODEL_NAMES`,
-    no repeats."""
+    """``MODEL,MODEL,...`` models (for sweeps), each one of :data:`~bayesmachine.models.MODELS` (registered
+    ones included), no repeats."""
     names = [v.strip() for v in text.split(",") if v.strip()]
     if not names:
         raise argparse.ArgumentTypeError("give at least one model")
     for n in names:
         if n not in MODELS:
-            raise argparse.ArgumentTypeError(f"unknown model {n!r}; choose from {', '.join(MODEL_NAMES)}")
+            raise argparse.ArgumentTypeError(f"unknown model {n!r}; choose from {', '.join(model_names())}")
     if len(set(names)) != len(names):
         raise argparse.ArgumentTypeError(f"a model is listed twice: {text!r}")
     return names
@@ -555,10 +567,11 @@ def add_census_options(parser: argparse._ActionsContainer, sweep: bool = False, 
                        help=f"comma-separated models to compare side by side, each over every random source "
                        f"and counter max ({described}) ({default})")
     else:
-        g.add_argument("--model", choices=MODEL_NAMES, default=None,
+        g.add_argument("--model", choices=model_names(), default=None,
                        help=f"the disparity model ({described}) ({default})")
     for owner, options in _model_groups().items():
-        others = [n for n in MODEL_NAMES if n != owner and all(o.name in MODELS[n].options for o in options)]
+        others = [n for n in model_names()
+                  if n != owner and all(o.name in MODELS[n].options for o in options)]
         label = f"--model {owner}" + "".join(f", {n}" for n in others)
         group = parser.add_argument_group(f"{owner} model ({label})") if title else parser
         for option in options:
@@ -600,7 +613,7 @@ def model_params_from_args(args: argparse.Namespace, name: str | None = None) ->
         elif name in owners:
             given[key] = value
     if refused:
-        owners = [n for n in MODEL_NAMES if any(n in o.split(", ") for o in refused)]
+        owners = [n for n in model_names() if any(n in o.split(", ") for o in refused)]
         flags = [f for fs in refused.values() for f in fs]
         raise ParameterError(f"{', '.join(flags)}: options of --model {' and '.join(owners)}, which do not "
                              f"apply to --model {','.join(names)}")
@@ -614,9 +627,10 @@ def model_params_from_args(args: argparse.Namespace, name: str | None = None) ->
         raise with_flag(exc) from None
 
 
-# The model parameters that set a declared pass's watchdog (census-lr's lr_right_max_cycles): what only a
-# machine's run reads.
-PASS_WATCHDOGS = frozenset(p.watchdog for d in MODELS.values() for p in d.passes if p.watchdog)
+def pass_watchdogs() -> frozenset[str]:
+    """The model parameters that set a declared pass's watchdog (census-lr's lr_right_max_cycles): what
+    only a machine's run reads (the models registered by now)."""
+    return frozenset(p.watchdog_option for d in MODELS.values() for p in d.passes if p.watchdog_option)
 
 
 def machine_parameters(name: str) -> frozenset[str]:
@@ -625,7 +639,7 @@ def machine_parameters(name: str) -> frozenset[str]:
     machine forms its prior from). The others change only the words the host loads, or other passes."""
     d = MODELS[name]
     own = {o.name for c in d.columns if c.source is Source.FEEDBACK for o in c.options}
-    return frozenset({switch for switch, _ in d.switches} | own)
+    return frozenset({switch.name for switch in d.switches} | own)
 
 
 def options_without_effect(args: argparse.Namespace, effective: Iterable[str]) -> list[str]:

@@ -1,10 +1,12 @@
 """Disparity models as data: a list of evidence columns, a no-match rule and the passes they need.
 
-A model definition (:class:`ModelDef`) names its column kinds in operator order
-(:mod:`bayesmachine.columns`), its no-match rule, the yes/no options that leave columns out, and the
-passes run before its own (:class:`PassDef`: another model with another reference image, whose results
-feed a column). :class:`ModelParams` is one model with its parameter values: flat keywords, each owned
-by one of its column kinds (the command line's options are the same declarations). The three models:
+A model definition (:class:`~bayesmachine.modeldef.ModelDef`) names its column kinds in operator order
+(:mod:`bayesmachine.columns`), its no-match rule, the switches (yes/no options) that leave columns out,
+and the passes run before its own (:class:`~bayesmachine.modeldef.PassDef`: another model with another
+reference image, whose results feed a column). :func:`register_model` makes a definition, from the package
+or from a user's own file, a model of the library and of every command. :class:`ModelParams` is one model
+with its parameter values: flat keywords, each owned by one of its column kinds (the command line's
+options are the same declarations). The three models of the package:
 
 * ``paper``: the paper's columns m, gH, gV; no-match row [P_nm(gV), 1, 1]; a uniform prior.
 * ``census``: + a census column (its no-match entry L_c(h_nm)) and the raster-order neighbour prior (a
@@ -20,7 +22,7 @@ a timeout with the leading row; the paper's machine does none of these.
 
 The machine a model's pass needs (:func:`disparity_machine`) follows from its columns: leading
 FEEDBACK and ABOVE columns are the machine's prior columns ("neighbour": feedback then loaded;
-"loaded": one loaded), the rest its data columns.
+"loaded": one loaded), the rest its data columns (:func:`~bayesmachine.modeldef.machine_layout`).
 """
 
 from __future__ import annotations
@@ -30,8 +32,10 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any
 
-from bayesmachine.checks import as_int, plain, type_name
+from bayesmachine.checks import as_int, type_name
 from bayesmachine.columns import (
+    GRADIENT_MAGNITUDE,
+    NEIGHBOUR_PRIOR,
     RIGHT_PASS,
     AbovePrior,
     Census,
@@ -44,9 +48,11 @@ from bayesmachine.columns import (
     Mean,
     NoMatchFloor,
     Option,
+    Plane,
     Source,
     Term,
 )
+from bayesmachine.modeldef import OWN_PASS, ModelDef, PassDef, machine_layout
 from bayesmachine.params import (
     DEFAULT_DMAX,
     MAX_DMAX,
@@ -62,7 +68,9 @@ __all__ = [
     "Pass",
     "ModelParams",
     "MODELS",
-    "MODEL_NAMES",
+    "OWN_PASS",
+    "model_names",
+    "register_model",
     "DEFAULT_MODEL",
     "HARDWARE_MODEL",
     "CENSUS_WATCHDOG_RUNS",
@@ -72,7 +80,6 @@ __all__ = [
     "machine_layout",
     "disparity_machine",
     "pass_machine",
-    "right_machine",
     "check_disparity_machine",
     "neighbour_words_per_beat",
 ]
@@ -98,107 +105,70 @@ RIGHT_WATCHDOG_RUNS = 8
 CENSUS_TIMEOUT_ANSWER = "leading"
 
 
-@dataclass(frozen=True)
-class PassDef:
-    """A pass a model runs before its own: ``model``'s columns with ``reference`` ("right": lane d pairs
-    right map column x_r with left map column x_r + d) on machine ``machine`` of a row
-    (:func:`~bayesmachine.params.nth_machine`). ``nomatch``: the yes/no option giving it ``model``'s
-    no-match row (off: word 0, the row never fires); ``watchdog``: the option giving its watchdog in
-    cycles, by default ``watchdog_runs`` runs of n_max + 1 cycles (None: the machine's).
-    ``own_defaults``: options it leaves at ``model``'s defaults."""
-
-    name: str
-    model: str
-    reference: str
-    machine: int
-    nomatch: str | None = None
-    watchdog: str | None = None
-    own_defaults: tuple[str, ...] = ()
-    watchdog_runs: int | None = None
-
-
-@dataclass(frozen=True)
-class ModelDef:
-    """A model: ``columns`` in operator order, its no-match rule, ``switches`` (a yes/no option and the
-    columns present only when it is on), ``passes`` run before its own, ``defaults`` of its own for
-    column options, ``requires`` (option values it needs, with the reason), its machine's default
-    watchdog in runs of n_max + 1 cycles, its machine's default answer to a timeout
-    (:data:`~bayesmachine.params.TIMEOUT_ANSWERS`) and whether its machine normalizes its columns by
-    default (``MachineParams.normalize``)."""
-
-    name: str
-    description: str
-    columns: tuple[type[Column], ...]
-    nomatch: type[NoMatchFloor] = NoMatchFloor
-    switches: tuple[tuple[str, tuple[type[Column], ...]], ...] = ()
-    passes: tuple[PassDef, ...] = ()
-    defaults: tuple[tuple[str, Any], ...] = ()
-    requires: tuple[tuple[str, Any, str], ...] = ()
-    watchdog_runs: int | None = None
-    timeout_answer: str = "none"
-    normalize: bool = False
-
-    @property
-    def options(self) -> dict[str, Option]:
-        """Every parameter of the model, in order: its data columns', the no-match rule's, the rest's."""
-        data = [c for c in self.columns if c.source in (Source.FEATURES, Source.PASS)]
-        kinds: list[type[Term]] = [*(c for c in data if c.source is Source.FEATURES), self.nomatch,
-                                   *(c for c in self.columns if c not in data),
-                                   *(c for c in data if c.source is Source.PASS)]
-        out: dict[str, Option] = {}
-        for kind in kinds:
-            for option in kind.options:
-                if out.setdefault(option.name, option) is not option:
-                    raise ValueError(f"{option.name} is declared twice ({kind.__name__})")
-        return out
-
-    def resolve(self, given: Mapping[str, Any]) -> dict[str, Any]:
-        """The values of every option: given ones checked, the others their defaults."""
-        options = self.options
-        for key in given:
-            if key not in options:
-                owners = [d.name for d in MODELS.values() if key in d.options]
-                if not owners:
-                    raise TypeError(f"ModelParams: no parameter named {key!r}")
-                raise ParameterError(f"{key} is not a parameter of the {self.name} model (it is one of "
-                                     f"{', '.join(owners)})", key)
-        defaults = dict(self.defaults)
-        values: dict[str, Any] = {}
-        for name, option in options.items():
-            v = given.get(name)
-            if v is None:
-                v = defaults.get(name, option.default)
-            if v is None and option.resolve is not None:
-                v = option.resolve(values)
-            if v is not None or not option.optional:
-                option.check(name, v, values)
-            values[name] = plain(v)  # np.int64(7) is 7: the model's values are plain Python values
-        for name, want, why in self.requires:
-            if values[name] != want:
-                said = {True: "on", False: "off"}.get(want, repr(want))
-                raise ParameterError(f"{name} must be {said} for the {self.name} model ({why})", name)
-        return values
-
-
-PAPER = ModelDef("paper", "the paper's m, gH, gV columns (and with --gradient-magnitude a gradient-magnitude "
-                 "column)", (Mean, GradH, GradV, GradMag), switches=(("gradient_magnitude", (GradMag,)),))
+PAPER = ModelDef(
+    name="paper", description="the paper's m, gH, gV columns (and with --gradient-magnitude a "
+    "gradient-magnitude column)", columns=(Mean, GradH, GradV, GradMag),
+    switches={GRADIENT_MAGNITUDE: (GradMag,)})
 CENSUS = ModelDef(
-    "census", "+ a census column, a no-match row calibrated for it and the raster-order neighbour prior on "
-    "the machine's own results", (LeftPrior, AbovePrior, Mean, GradH, GradV, Census),
-    switches=(("neighbour_prior", (LeftPrior, AbovePrior)),), watchdog_runs=CENSUS_WATCHDOG_RUNS,
+    name="census", description="+ a census column, a no-match row calibrated for it and the raster-order "
+    "neighbour prior on the machine's own results",
+    columns=(LeftPrior, AbovePrior, Mean, GradH, GradV, Census),
+    switches={NEIGHBOUR_PRIOR: (LeftPrior, AbovePrior)}, watchdog_runs=CENSUS_WATCHDOG_RUNS,
     timeout_answer=CENSUS_TIMEOUT_ANSWER, normalize=True)
 CENSUS_LR = ModelDef(
-    "census-lr", "+ a left-right consistency column from a right pass", (*CENSUS.columns, Consistency),
-    switches=CENSUS.switches,
-    passes=(PassDef(RIGHT_PASS, "census", "right", machine=1, nomatch="lr_right_nomatch",
-                    watchdog="lr_right_max_cycles", own_defaults=("prior_nomatch",),
-                    watchdog_runs=RIGHT_WATCHDOG_RUNS),),
-    defaults=(("prior_nomatch", 0.1),),
-    requires=(("neighbour_prior", True, "both passes use it"),),
+    name="census-lr", description="+ a left-right consistency column from a right pass",
+    columns=(*CENSUS.columns, Consistency), switches=CENSUS.switches,
+    passes=(PassDef(name=RIGHT_PASS, model="census", reference="right", machine_index=1,
+                    nomatch_option="lr_right_nomatch", watchdog_option="lr_right_max_cycles",
+                    not_inherited=("prior_nomatch",), watchdog_runs=RIGHT_WATCHDOG_RUNS),),
+    defaults={"prior_nomatch": 0.1}, requires={"neighbour_prior": (True, "both passes use it")},
     watchdog_runs=CENSUS_WATCHDOG_RUNS, timeout_answer=CENSUS_TIMEOUT_ANSWER, normalize=True)
 
-MODELS: dict[str, ModelDef] = {d.name: d for d in (PAPER, CENSUS, CENSUS_LR)}
-MODEL_NAMES = tuple(MODELS)
+# The models by name: the three above, then those registered by register_model.
+MODELS: dict[str, ModelDef] = {}
+
+
+def model_names() -> tuple[str, ...]:
+    """The names of the models known now (:data:`MODELS`, registered ones included), in order."""
+    return tuple(MODELS)
+
+
+def register_model(definition: ModelDef) -> ModelDef:
+    """Make ``definition`` a model of the library (``ModelParams(name=...)``) and of every command in this
+    process (``--model NAME``, listed by ``--help``); returns it.
+
+    Besides the checks a :class:`ModelDef` makes of itself, one error naming the model for: a name
+    already taken, a pass naming an unknown model, a cycle of passes (a pass of the model itself), a pass
+    of a model with passes of its own (passes do not nest: declare them all in this model), an option
+    spelled like another model's option but declared apart, or defaults that do not give a model (its
+    values checked, its tables built)."""
+    if not isinstance(definition, ModelDef):
+        raise TypeError(f"register_model takes a ModelDef, not {type(definition).__name__}")
+    d = definition
+    if d.name in MODELS:
+        raise ValueError(f"model {d.name!r}: the name is taken (models: {', '.join(MODELS)})")
+    for p in d.passes:
+        if p.model == d.name:
+            raise ValueError(f"model {d.name!r}: a cycle of passes: its pass {p.name!r} runs the model "
+                             "itself")
+        if p.model not in MODELS:
+            raise ValueError(f"model {d.name!r}: pass {p.name!r} names an unknown model {p.model!r} (models: "
+                             f"{', '.join(MODELS)})")
+        if MODELS[p.model].passes:
+            raise ValueError(f"model {d.name!r}: pass {p.name!r} runs model {p.model!r}, which runs passes "
+                             "of its own: passes do not nest, declare them all in this model")
+    known = all_options()
+    for name, option in d.options.items():
+        if name in known and known[name][0] is not option:
+            raise ValueError(f"model {d.name!r}: its option {name} is declared apart from the option of "
+                             f"that name of model {known[name][1][0]}: one name, one option")
+    MODELS[d.name] = d
+    try:
+        ModelParams(name=d.name)
+    except (ValueError, TypeError) as exc:
+        del MODELS[d.name]
+        raise type(exc)(f"model {d.name!r}: its defaults give no model: {exc}") from None
+    return d
 
 
 def all_options() -> dict[str, tuple[Option, tuple[str, ...]]]:
@@ -211,13 +181,14 @@ def all_options() -> dict[str, tuple[Option, tuple[str, ...]]]:
     return out
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class Pass:
-    """One pass of a model: the columns of ``model`` (the model itself for its own pass, named "left")
-    over the pixels of the ``reference`` image, on machine ``machine_index`` of a row. ``nomatch``:
-    whether its no-match row holds ``model``'s rule (else every column's entry there is 0, the row never
-    fires); ``max_cycles``: its own watchdog, given by the option ``watchdog`` (None: ``watchdog_runs``
-    runs of n_max + 1 cycles, or, without those, the machine's)."""
+    """One pass of a model: the columns of ``model`` (the model itself for its own pass, named
+    :data:`~bayesmachine.modeldef.OWN_PASS`) over the pixels of the ``reference`` image, on machine
+    ``machine_index`` of a row. ``nomatch``: whether its no-match row holds ``model``'s rule (else every
+    FEATURES column's entry there is 0, the row never fires); ``max_cycles``: its own watchdog, given by
+    the option ``watchdog_option`` (None: ``watchdog_runs`` runs of n_max + 1 cycles, or, without those,
+    the machine's)."""
 
     name: str
     model: ModelParams = field(repr=False)
@@ -225,7 +196,7 @@ class Pass:
     nomatch: bool = True
     machine_index: int = 0
     max_cycles: int | None = None
-    watchdog: str | None = None
+    watchdog_option: str | None = None
     watchdog_runs: int | None = None
 
     @property
@@ -233,9 +204,51 @@ class Pass:
         return self.model.columns
 
     @property
+    def terms(self) -> tuple[Term, ...]:
+        """Its columns and its no-match rule."""
+        return (*self.model.columns, self.model.nomatch)
+
+    @property
+    def rule_column(self) -> Column:
+        """The column whose no-match row holds the pass's no-match rule: its first FEATURES column."""
+        return next(c for c in self.columns if c.source is Source.FEATURES)
+
+    @property
     def step(self) -> int:
         """Lane d's match column: x - d (the left image as reference) or x + d (the right)."""
         return -1 if self.reference == "left" else 1
+
+    @property
+    def where(self) -> str:
+        """The pass, for messages."""
+        return f"the {self.name} pass (model {self.model.name})"
+
+
+def _check_keys(definition: ModelDef, parameters: Mapping[str, Any]) -> None:
+    """TypeError for a keyword no model has; ParameterError for one of other models only."""
+    options = definition.options
+    for key in parameters:
+        if key not in options:
+            owners = [d.name for d in MODELS.values() if key in d.options]
+            if not owners:
+                raise TypeError(f"ModelParams: no parameter named {key!r}")
+            raise ParameterError(f"{key} is not a parameter of the {definition.name} model (it is one of "
+                                 f"{', '.join(owners)})", key)
+
+
+def _planes(passes: tuple[Pass, ...]) -> dict[str, Plane]:
+    """The planes the passes' terms read, by name; ValueError when two terms read one name of two planes."""
+    out: dict[str, Plane] = {}
+    readers: dict[str, str] = {}
+    for p in passes:
+        for term in p.terms:
+            for name, plane in term.planes().items():
+                if out.setdefault(name, plane) != plane:
+                    raise ValueError(f"plane {name}: {p.where}'s {term.name} reads it of {plane.window}x"
+                                     f"{plane.window} windows, {readers[name]} of {out[name].window}x"
+                                     f"{out[name].window} (or of another filter): one name, one plane")
+                readers.setdefault(name, f"{p.where}'s {term.name}")
+    return out
 
 
 def _rebuild(values: dict[str, Any]) -> ModelParams:
@@ -245,7 +258,8 @@ def _rebuild(values: dict[str, Any]) -> ModelParams:
 class ModelParams:
     """A disparity model with its parameter values, validated up front.
 
-    ``ModelParams(name=DEFAULT_MODEL, dmax=DEFAULT_DMAX, **parameters)``: every keyword is a parameter
+    ``ModelParams(name=DEFAULT_MODEL, dmax=DEFAULT_DMAX, **parameters)`` (keywords only): every keyword is a
+    parameter
     of one of the named model's column kinds (or its no-match rule), read back as an attribute
     (``model.census_sigma``); a parameter left out or None takes its default (the model's own, or the
     kind's, resolved: ``census_sigma`` 6 for 7x7, 3 for 5x5). Wrong types raise TypeError, impossible
@@ -272,9 +286,14 @@ class ModelParams:
         Its no-match rule.
     passes : tuple of Pass
         The passes a run makes, in order: the declared ones, then its own (the output).
+    planes : dict of Plane
+        The planes of both images its passes read, by name (each declared by a column, or the no-match
+        rule, with its filter and window).
+    margin : int
+        Pixels from its largest window's centre to its edge (5x5 windows: 2, a 7x7 census: 3).
     """
 
-    __slots__ = ("_definition", "_dmax", "_given", "_values", "_columns", "_nomatch", "_passes")
+    __slots__ = ("_definition", "_dmax", "_given", "_values", "_columns", "_nomatch", "_passes", "_planes")
 
     def __init__(self, *, name: str = DEFAULT_MODEL, dmax: int = DEFAULT_DMAX, **parameters: Any) -> None:
         if not isinstance(name, str):
@@ -283,25 +302,26 @@ class ModelParams:
             raise ParameterError(f"name must be one of {', '.join(MODELS)}, got {name!r}", "name")
         dmax = as_int("dmax", dmax, 0, MAX_DMAX)
         definition = MODELS[name]
+        _check_keys(definition, parameters)
         values = definition.resolve(parameters)
-        off = {c for option, kinds in definition.switches if not values[option] for c in kinds}
         self._definition = definition
         self._dmax = dmax
         self._given = {k: v for k, v in parameters.items() if v is not None}
         self._values = MappingProxyType(values)
-        self._columns = tuple(kind(values=values, dmax=dmax) for kind in definition.columns
-                              if kind not in off)
+        self._columns = tuple(kind(values=values, dmax=dmax) for kind in definition.present(values))
         self._nomatch = definition.nomatch(values=values, dmax=dmax)
-        declared = tuple(self._declared_pass(p) for p in definition.passes)
-        self._passes = (*declared, Pass("left", self))
+        passes = (*(self._declared_pass(p) for p in definition.passes), Pass(name=OWN_PASS, model=self))
+        self._planes = _planes(passes)
+        self._passes = passes  # the last attribute set: the model is read-only from here
 
     def _declared_pass(self, p: PassDef) -> Pass:
         other = MODELS[p.model].options
-        keep = {k: v for k, v in self._values.items() if k in other and k not in p.own_defaults}
-        max_cycles = self._values[p.watchdog] if p.watchdog else None
-        nomatch = bool(self._values[p.nomatch]) if p.nomatch else True
-        return Pass(p.name, ModelParams(name=p.model, dmax=self._dmax, **keep), p.reference, nomatch,
-                    p.machine, max_cycles, p.watchdog, p.watchdog_runs)
+        keep = {k: v for k, v in self._values.items() if k in other and k not in p.not_inherited}
+        max_cycles = self._values[p.watchdog_option] if p.watchdog_option else None
+        nomatch = bool(self._values[p.nomatch_option]) if p.nomatch_option else True
+        return Pass(name=p.name, model=ModelParams(name=p.model, dmax=self._dmax, **keep),
+                    reference=p.reference, nomatch=nomatch, machine_index=p.machine_index,
+                    max_cycles=max_cycles, watchdog_option=p.watchdog_option, watchdog_runs=p.watchdog_runs)
 
     # What the model is.
     @property
@@ -339,10 +359,15 @@ class ModelParams:
         return self._dmax + 2
 
     @property
+    def planes(self) -> dict[str, Plane]:
+        """The planes of both images every pass reads, by name, in the order its terms read them."""
+        return dict(self._planes)
+
+    @property
     def margin(self) -> int:
-        """Pixels from a window's centre to its edge, for the model's largest window (5x5 filters: 2,
+        """Pixels from a window's centre to its edge, for the largest window of its planes (5x5 filters: 2,
         7x7 census: 3): the output region keeps every window inside the image (``bayesmachine.region``)."""
-        return max(c.margin for c in self._columns)
+        return max(p.margin for p in self._planes.values())
 
     def column(self, kind: type[Column]) -> Column | None:
         """Its own pass's column of ``kind`` (None if it has none)."""
@@ -393,19 +418,6 @@ class ModelParams:
 
     def __reduce__(self) -> tuple[Any, tuple[dict[str, Any]]]:
         return _rebuild, ({"name": self.name, "dmax": self._dmax, **self._given},)
-
-
-def machine_layout(columns: tuple[Column, ...]) -> tuple[str, int]:
-    """(prior, data columns) of the machine that runs ``columns``: its leading FEEDBACK and ABOVE
-    columns are the machine's prior columns (``"neighbour"``: feedback then loaded; ``"loaded"``: one
-    loaded; ``"uniform"``: none), the rest its data columns."""
-    lead = [c.source for c in columns if c.source in (Source.FEEDBACK, Source.ABOVE)]
-    prior = {(): "uniform", (Source.ABOVE,): "loaded", (Source.FEEDBACK, Source.ABOVE): "neighbour"}.get(
-        tuple(lead))
-    if prior is None or tuple(c.source for c in columns[: len(lead)]) != tuple(lead):
-        raise ValueError(f"no machine runs columns {[c.name for c in columns]}: its prior columns lead, "
-                         "a feedback column before a loaded one")
-    return prior, len(columns) - len(lead)
 
 
 def neighbour_words_per_beat(rows: int, loaded_columns: int) -> int:
@@ -492,8 +504,8 @@ def _described(model: ModelParams) -> str:
     """"the census model with neighbour_prior off": the model and the switches, on by default, that left
     columns out."""
     options = model.definition.options
-    switched = [option for option, _ in model.definition.switches
-                if not model.parameters[option] and options[option].default]
+    switched = [option.name for option in model.definition.switches
+                if not model.parameters[option.name] and options[option.name].default]
     return f"the {model.name} model" + (f" with {', '.join(switched)} off" if switched else "")
 
 
@@ -525,17 +537,12 @@ def pass_machine(model: ModelParams, machine: MachineParams, name: str) -> Machi
         return nth_machine(disparity_machine(p.model, **kwargs), p.machine_index)
     except ParameterError as exc:
         own = p.max_cycles is not None or p.watchdog_runs is not None
-        if exc.parameter != "max_cycles" or not own or p.watchdog is None:
+        if exc.parameter != "max_cycles" or not own or p.watchdog_option is None:
             raise
         # The pass's own watchdog is at fault, which its option changes (not the machine's max_cycles).
         how = "" if p.max_cycles is not None else f": by default {p.watchdog_runs} runs of counter max + 1"
         raise ParameterError(f"the {name} pass's watchdog ({kwargs['max_cycles']} cycles{how}) is too short "
-                             f"({exc}); give a longer {p.watchdog}", p.watchdog) from None
-
-
-def right_machine(model: ModelParams, machine: MachineParams) -> MachineParams:
-    """:func:`pass_machine` of the right pass (census-lr's second machine)."""
-    return pass_machine(model, machine, RIGHT_PASS)
+                             f"({exc}); give a longer {p.watchdog_option}", p.watchdog_option) from None
 
 
 def check_disparity_machine(model: ModelParams, machine: MachineParams) -> int:
@@ -568,3 +575,7 @@ def check_disparity_machine(model: ModelParams, machine: MachineParams) -> int:
         term.check_machine(machine)
     return machine.operator_columns - machine.columns
 
+
+
+for _definition in (PAPER, CENSUS, CENSUS_LR):
+    register_model(_definition)

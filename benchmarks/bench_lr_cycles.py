@@ -4,9 +4,9 @@ The machine's run at a pixel lasts about (n_max + 1) / p_win cycles, p_win the w
 probability of firing per cycle: the product over its operator columns of word / 2^W (the data
 columns, the above prior, the consistency column, and the feedback column the machine forms from
 its left neighbour). The estimate takes the MAPs of the 10-bit reference
-(``reference_quantized_map`` and ``right_reference_map(..., word_bits)``: the distribution the
+(``reference_quantized_map`` and ``declared_maps(..., word_bits)["right"]``: the distribution the
 machine samples) for the neighbours' prior words and the right MAPs, builds the words the machine
-would load (``memory_words``, ``right_memory_words``), and caps each pixel at the watchdog
+would load (``memory_words``, ``pass_words`` of the right pass), and caps each pixel at the watchdog
 (``max_cycles``; the right pass's ``lr_right_max_cycles``). It is checked against the machine
 (model engine, sobol, counter max 16, seed 1) on one band with ``--machine``.
 
@@ -33,15 +33,15 @@ import numpy as np
 
 from bayesmachine.cli import Parser, run_script
 from bayesmachine.cliargs import MAX_COUNTER_MAX, int_in_range
-from bayesmachine.columns import AbovePrior, Consistency
-from bayesmachine.host.features import model_features
+from bayesmachine.columns import AbovePrior
+from bayesmachine.host.features import model_planes
 from bayesmachine.host.images import bundled_pair
-from bayesmachine.host.likelihoods import memory_words, right_columns, right_memory_words
+from bayesmachine.host.likelihoods import memory_words, pass_grid, pass_words
 from bayesmachine.host.metrics import bad_rates, gt_region, nomatch_occluded_share, occluded_mask
 from bayesmachine.host.records import Prepared
-from bayesmachine.host.reference import reference_map, reference_quantized_map, right_reference_map
+from bayesmachine.host.reference import declared_maps, reference_map, reference_quantized_map
 from bayesmachine.host.run import run_machine
-from bayesmachine.models import ModelParams, disparity_machine, right_machine
+from bayesmachine.models import ModelParams, disparity_machine, pass_machine
 from bayesmachine.params import MachineParams
 from bayesmachine.region import OutputRegion
 
@@ -118,24 +118,23 @@ def _run_cycles(words: np.ndarray, feedback: np.ndarray, word_bits: int, counter
 def estimate(fl, fr, model: ModelParams, machine: MachineParams) -> dict[str, np.ndarray]:
     """Estimated cycles (Ho, W) of both passes over every map row (from the 10-bit references' MAPs)."""
     w = machine.word_bits
-    rmach = right_machine(model, machine)
-    right_map = right_reference_map(fl, fr, model, w)
+    rmach = pass_machine(model, machine, "right")
+    right_map = declared_maps(model, fl, fr, w)["right"]
     left_map = reference_quantized_map(fl, fr, model, w)
-    above_l, lr = model.column(AbovePrior), model.column(Consistency)
+    above_l = model.column(AbovePrior)
     above_r = model.pass_named("right").model.column(AbovePrior)
-    q, qr, qlr = above_l.table(w), above_r.table(w), lr.table(w)
+    q, qr = above_l.table(w), above_r.table(w)
     region = OutputRegion.of_features(fl.shape, model.dmax)
-    xr = right_columns(region)
+    xr = pass_grid(model.pass_named("right"), region).columns
     left_c, right_c = [], []
     for y in range(left_map.shape[0]):
         row_r = right_map[y - 1] if y > 0 else np.full(xr.size, -1, np.int16)
-        rw = right_memory_words(fl, fr, model, rmach, rows=slice(y, y + 1), prior=above_r.loaded(qr, row_r))
+        rw = pass_words(model.pass_named("right"), fl, fr, rmach, rows=slice(y, y + 1), above=row_r)
         rfb = above_r.loaded(qr, _shifted_left(right_map[y]))
         right_c.append(_run_cycles(rw, rfb, w, rmach.counter_max, rmach.max_cycles))
         above = left_map[y - 1] if y > 0 else np.full(left_map.shape[1], -1, np.int16)
-        cw = lr.loaded(qlr, right_map[y], int(xr[0]), region.map_columns)
-        lw = memory_words(fl, fr, model, machine, rows=slice(y, y + 1), prior=above_l.loaded(q, above),
-                          fed=cw)
+        lw = memory_words(fl, fr, model, machine, rows=slice(y, y + 1), above=above,
+                          results={"right": right_map[y][None]})
         lfb = above_l.loaded(q, _shifted_left(left_map[y]))
         left_c.append(_run_cycles(lw, lfb, w, machine.counter_max, machine.max_cycles))
     return {"left": np.stack(left_c), "right": np.stack(right_c), "right_max": rmach.max_cycles,
@@ -197,7 +196,7 @@ def main(argv: list[str] | None = None) -> None:
     for name in names:
         t0 = time.perf_counter()
         model = base.replace(**variant(name))
-        fl, fr = model_features(left, model), model_features(right, model)
+        fl, fr = model_planes(left, model), model_planes(right, model)
         kw = {} if args.max_cycles is None else {"max_cycles": args.max_cycles}
         machine = disparity_machine(model, counter_max=args.counter_max, rng="sobol", seed=1, **kw)
         ref = reference_map(fl, fr, model)
@@ -219,16 +218,16 @@ def main(argv: list[str] | None = None) -> None:
             t0 = time.perf_counter()
             prep = Prepared(left, right, model, (fl, fr), None, 0.0, None, None)
             run = run_machine(prep, machine, "model", progress=False)
-            assert run.right is not None
+            rp = run.passes["right"]
             lm = run.cycles.astype(np.float64)
-            rm = run.right.cycles.astype(np.float64)
-            m = cycle_figures(lm, rm, machine.max_cycles, run.right.machine.max_cycles)
+            rm = rp.cycles.astype(np.float64)
+            m = cycle_figures(lm, rm, machine.max_cycles, rp.machine.max_cycles)
             acc = accuracy(run.map, gt, occ)
             print(f"{'  machine':<40} {acc['nomatch']:6.3f} {acc['bad2']:6.3f} {acc['bad2_nm']:6.3f} "
                   f"{acc['nm_occ']:6.3f} | {'measured':>15}{m['mean']:8.1f} {m['median']:7.1f} "
                   f"{m['p99']:8.0f} | "
                   f"{m['left']:8.1f} {m['right']:8.1f} {m['right_median']:6.1f} {m['right_p99']:8.0f} "
-                  f"{int(run.timeout.sum()):6d} {int(run.right.timeout.sum()):6d} | "
+                  f"{int(run.timeout.sum()):6d} {int(rp.timeout.sum()):6d} | "
                   f"{time.perf_counter() - t0:.0f}", flush=True)
 
 

@@ -37,7 +37,7 @@ import numpy as np
 from bayesmachine.cli import Parser, run_script
 from bayesmachine.cliargs import counter_max_list, int_in_range, output_path
 from bayesmachine.hdl.machine import pixel_wall_cycles
-from bayesmachine.host.features import model_features
+from bayesmachine.host.features import model_planes
 from bayesmachine.host.images import bundled_pair
 from bayesmachine.host.metrics import (
     bad_rates,
@@ -122,7 +122,7 @@ def main(argv: list[str] | None = None) -> None:
     for name, model in models.items():
         key = model.margin  # the feature grid: the census window decides it
         if key not in feats_cache:
-            feats_cache[key] = (model_features(left, model), model_features(right, model))
+            feats_cache[key] = (model_planes(left, model), model_planes(right, model))
         fl, fr = feats_cache[key]
         t0 = time.perf_counter()
         ref = reference_map(fl, fr, model)
@@ -201,7 +201,7 @@ def lr_machine_line(left, right, gt, gt_full, model, feats_cache, ref, counter_m
     t0 = time.perf_counter()
     run = machine_run(left, right, gt, gt_full, model, feats_cache, ref, counter_max, "sobol", word_bits)
     machine_line(f"census-lr, counter max {counter_max}", run, ref, gt, occluded)
-    r = run.right
+    r = run.passes["right"]
     both = (run.cycles.sum() + r.cycles.sum()) / run.cycles.size
     rwall = pixel_wall_cycles(r.machine, r.cycles, r.timeout)
     lwall = pixel_wall_cycles(run.machine, run.cycles, run.timeout)

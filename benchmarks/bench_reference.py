@@ -2,6 +2,10 @@
 
 Prints figures; asserts nothing. Checks the fast kernel's MAP against the plain vectorized
 float64 computation on the same frame. Run: python benchmarks/bench_reference.py
+
+With ``--models paper,census,census-lr``: each model's float64 and ``--word-bits``-bit references
+(``reference_map``, ``reference_quantized_map``: every pass, band by band) on the bundled Motorcycle pair
+(Dmax 80), median and minimum of ``--repeats`` runs after a warm one, and a checksum of the MAP.
 """
 
 from __future__ import annotations
@@ -16,9 +20,16 @@ import numba
 import numpy as np
 
 from bayesmachine.cli import Parser, run_script
-from bayesmachine.cliargs import int_in_range
-from bayesmachine.host.features import feature_sums
-from bayesmachine.host.reference import reference_fast, reference_map, reference_plain, warm_up
+from bayesmachine.cliargs import int_in_range, model_list
+from bayesmachine.host.features import feature_sums, model_planes
+from bayesmachine.host.images import bundled_pair
+from bayesmachine.host.reference import (
+    reference_fast,
+    reference_map,
+    reference_plain,
+    reference_quantized_map,
+    warm_up,
+)
 from bayesmachine.models import ModelParams
 
 
@@ -33,11 +44,38 @@ def vga_pair(seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     return left, np.ascontiguousarray(right[:, 80:])
 
 
+def models_on_the_bundled_pair(names: list[str], word_bits: int, repeats: int) -> None:
+    """Each model's float64 and word references on the bundled pair (module text)."""
+    left, right, _ = bundled_pair()
+    print(f"bundled pair {left.shape[1]}x{left.shape[0]}, {numba.get_num_threads()} threads")
+    for name in names:
+        model = ModelParams(name=name)
+        warm_up(model)
+        planes = model_planes(left, model), model_planes(right, model)
+        for label, bits in (("float64", None), (f"{word_bits}-bit", word_bits)):
+            times = []
+            for _ in range(repeats + 1):  # the first one warm
+                t0 = time.perf_counter()
+                got = (reference_map(*planes, model) if bits is None
+                       else reference_quantized_map(*planes, model, bits))
+                times.append(time.perf_counter() - t0)
+            times = times[1:]
+            print(f"{name:10s} {label:8s} median {statistics.median(times) * 1e3:8.1f} ms, min "
+                  f"{min(times) * 1e3:8.1f} ms (MAP sum {int(got.astype(np.int64).sum())})", flush=True)
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = Parser(prog=Path(__file__).name, description=__doc__)
     ap.add_argument("--repeats", type=int_in_range(1, 1000), default=10)
     ap.add_argument("--no-plain", action="store_true", help="skip the plain-oracle check (needs ~3 GB)")
+    ap.add_argument("--models", type=model_list, default=None,
+                    help="comma-separated models: their references on the bundled pair instead")
+    ap.add_argument("--word-bits", type=int_in_range(1, 15), default=10,
+                    help="with --models: the word references' W (default %(default)s)")
     args = ap.parse_args(argv)
+    if args.models:
+        models_on_the_bundled_pair(args.models, args.word_bits, args.repeats)
+        return
     left, right = vga_pair()
     model = ModelParams(name="paper")
     t0 = time.perf_counter()

@@ -41,8 +41,9 @@ def same(a, b) -> bool:  # noqa: ANN001
     """Maps, no-match flags, timeouts and counts equal (and the right pass's map)."""
     names = ("map", "nomatch", "timeout", "counts")
     equal = all(np.array_equal(getattr(a, f), getattr(b, f)) for f in names)
-    if a.right is not None:
-        equal &= np.array_equal(a.right.map, b.right.map) and np.array_equal(a.right.timeout, b.right.timeout)
+    for name, r in a.passes.items():
+        other = b.passes[name]
+        equal &= np.array_equal(r.map, other.map) and np.array_equal(r.timeout, other.timeout)
     return equal
 
 
@@ -53,7 +54,7 @@ def measure(prep, model: ModelParams, b: int) -> dict:  # noqa: ANN001
     t0 = time.perf_counter()
     run = run_machine(prep, machine, "model", progress=False)
     seconds = time.perf_counter() - t0
-    c, r = run.cycles, run.right
+    c, r = run.cycles, run.passes.get("right")
     both = (c.sum() + (r.cycles.sum() if r is not None else 0)) / c.size
     walls = wall(machine, c, run.timeout), wall(machine, c, run.timeout, one_beat=True)
     if r is not None:  # the right pass's wall cycles per output pixel
@@ -86,7 +87,7 @@ def main(argv: list[str] | None = None) -> None:
             run, both = m["run"], m["cycles_per_pixel"]
             base = base or m
             assert base["machine"].samples_per_clock == 1
-            c, r = run.cycles, run.right
+            c, r = run.cycles, run.passes.get("right")
             ratio = both / base["cycles_per_pixel"]
             passes = f"{c.mean():.2f}, {r.cycles.mean():.2f}" if r is not None else f"{c.mean():.2f}"
             spread = f"{np.median(c):.0f}, {np.percentile(c, 99):.0f}"

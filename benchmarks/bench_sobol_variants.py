@@ -85,7 +85,7 @@ def main(argv: list[str] | None = None) -> None:
     ref = prep.reference
     for n in args.counter_max:
         machine = MachineParams.for_disparity(model.dmax, counter_max=n, rng="sobol")
-        q = memory_words(*prep.features, model, machine, rows=slice(0, ho))
+        q = memory_words(*prep.planes, model, machine, rows=slice(0, ho))
         q = np.ascontiguousarray(q.reshape(q.shape[0], -1), dtype=np.int64)
         w, cols, rows = machine.word_bits, machine.operator_columns, machine.rows
         points = np.array([sobol_points(c, w) for c in range(cols)], np.int64).T.copy()

@@ -52,7 +52,7 @@ def main(argv: list[str] | None = None) -> None:
     ho, wo = prep.shape
     equal_best = np.zeros(ho * wo, bool)
     for y in range(ho):  # a row of pixels at a time: the words of a frame are large
-        q = memory_words(*prep.features, model, base, rows=slice(y, y + 1)).astype(np.int64)
+        q = memory_words(*prep.planes, model, base, rows=slice(y, y + 1)).astype(np.int64)
         rates = q.prod(axis=2)
         top = np.sort(rates, axis=1)[:, -2:]
         equal_best[y * wo : (y + 1) * wo] = top[:, 0] == top[:, 1]

@@ -45,7 +45,7 @@ from bayesmachine.fpga.targets import TARGETS, get_target
 from bayesmachine.host.images import bundled_pair
 from bayesmachine.host.likelihoods import ModelParams
 from bayesmachine.host.run import prepare
-from bayesmachine.models import MODEL_NAMES
+from bayesmachine.models import model_names
 from bayesmachine.outputs import atomic_write_text
 from bayesmachine.params import SAMPLES_PER_CLOCK
 
@@ -210,7 +210,7 @@ def main(argv: list[str] | None = None) -> None:
                 epilog="Other options are passed to every bayesmachine synth run.")
     ap.add_argument("--samples", type=value_list(int_of(SAMPLES_PER_CLOCK), "B"), default="1,4,8",
                     help="the B to run, comma-separated (default 1,4,8)")
-    ap.add_argument("--model", choices=MODEL_NAMES, default="census")
+    ap.add_argument("--model", choices=model_names(), default="census")
     ap.add_argument("--target", choices=sorted(TARGETS), default="ecp5-85k")
     ap.add_argument("--out", type=output_path, default="build/synth",
                     help="output directory prefix: OUT-B<B> (default build/synth)")

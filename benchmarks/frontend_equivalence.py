@@ -35,9 +35,8 @@ import numpy as np
 from golden_snapshot import CONFIGS, CROPS, RTL_CONFIGS, _pair
 
 from bayesmachine.cli import Parser, run_script
-from bayesmachine.columns import Source
 from bayesmachine.hdl.frontend.stereo import FrontEnd, stereo_machine_params
-from bayesmachine.host.features import model_features
+from bayesmachine.host.features import model_planes
 from bayesmachine.host.likelihoods import pass_grid, pass_words
 from bayesmachine.host.run import prepare, run_machine
 from bayesmachine.models import ModelParams, pass_machine
@@ -75,24 +74,16 @@ def _stand_in(rng: np.random.Generator, rows: int, width: int, dmax: int) -> np.
 def _host_words(model: ModelParams, params: Any, pair: tuple[np.ndarray, np.ndarray],
                 maps: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     """Every pass's words, row by row, each column fed from the stand-in MAPs ``maps`` (by pass name)."""
-    feats = tuple(model_features(image, model) for image in pair)
+    feats = tuple(model_planes(image, model) for image in pair)
     region = OutputRegion.of_features(feats[0].shape, model.dmax, model.margin)
     out: dict[str, np.ndarray] = {}
     for p in model.passes:
         machine = params if p.model is model else pass_machine(model, params, p.name)
         rows = []
         for y in range(region.shape[0]):
-            kw: dict[str, np.ndarray] = {}
-            for c in p.columns:
-                w = machine.word_bits
-                if c.source is Source.ABOVE:
-                    above = np.full(maps[p.name].shape[1], -1) if y == 0 else maps[p.name][y - 1]
-                    kw["prior"] = c.loaded(c.table(w), above)
-                elif c.source is Source.PASS:
-                    fed = maps[c.feeds_from][y]
-                    right_first = int(pass_grid(model.pass_named(c.feeds_from), region).first)
-                    kw["fed"] = c.loaded(c.table(w), fed, right_first, pass_grid(p, region).columns)
-            rows.append(pass_words(p, *feats, machine, rows=slice(y, y + 1), **kw))
+            above = np.full(maps[p.name].shape[1], -1) if y == 0 else maps[p.name][y - 1]
+            results = {name: m[y : y + 1] for name, m in maps.items() if name != p.name}
+            rows.append(pass_words(p, *feats, machine, rows=slice(y, y + 1), above=above, results=results))
         out[p.name] = np.concatenate(rows)
     return out
 
@@ -137,13 +128,12 @@ def compute(name: str, pair: tuple[np.ndarray, np.ndarray], model_kw: dict[str, 
         arrays[field] = b
         if not np.array_equal(a, b):
             bad.append(f"{name}: --feed pixels {field} differs from the model's")
-    right = runs["pixels"].right
-    if right is not None:
+    for pass_name, record in runs["pixels"].passes.items():
         for field in ("map", "cycles", "timeout"):
-            a, b = getattr(runs["words"].right, field), getattr(right, field)
-            arrays[f"right_{field}"] = b
+            a, b = getattr(runs["words"].passes[pass_name], field), getattr(record, field)
+            arrays[f"{pass_name}_{field}"] = b
             if not np.array_equal(a, b):
-                bad.append(f"{name}: --feed pixels right {field} differs from the model's")
+                bad.append(f"{name}: --feed pixels {pass_name} {field} differs from the model's")
     figures = {"words_sha256": _sha(*(got[p] for p in sorted(got))),
                "results_sha256": _sha(*(arrays[k] for k in sorted(arrays))),
                "wall_cycles": int(runs["pixels"].wall_cycles),

@@ -3,11 +3,11 @@
 ``save DIR`` writes, for each configuration of :data:`CONFIGS` (the three models over small crops of
 the bundled pair, Dmax 4..12, word bits 8 and 10, counter max 4 and 16, the census-lr options
 varied, ``neighbour_prior=False``, ``prior="loaded"``, census window 5), one ``NAME.npz`` with:
-the likelihood-memory words of every map row (``memory_words``, and census-lr's
-``right_memory_words``), the float64 and the quantized references' posteriors and MAPs (census-lr:
-the right passes' MAPs too), ``run_machine``'s results on the model engine (counts, map, cycles,
-no match, timeout, the right pass's map, cycles and timeout), and ``NAME.json`` with the model's
-``to_dict()``, the ``MachineParams.to_dict()`` of ``disparity_machine`` and ``right_machine`` (whose
+the likelihood-memory words of every map row (``memory_words``, and of census-lr's right pass,
+``pass_words``), the float64 and the quantized references' posteriors and MAPs (census-lr: the right
+passes' MAPs too), ``run_machine``'s results on the model engine (counts, map, cycles, no match,
+timeout, the right pass's map, cycles and timeout), and ``NAME.json`` with the model's ``to_dict()``,
+the ``MachineParams.to_dict()`` of ``disparity_machine`` and of the right pass's ``pass_machine`` (whose
 feedback tables are their ``feedback_words``/``feedback_nomatch_word``); and for the on-chip front end
 (:data:`RTL_CONFIGS`) the SHA-256 of a small ``StereoMachine``'s RTLIL per model. ``check DIR`` recomputes
 everything with the code installed now and compares it bit for bit (exit 1 naming every difference).
@@ -29,12 +29,12 @@ from typing import Any
 import numpy as np
 
 from bayesmachine.cli import Parser, run_script
-from bayesmachine.host.features import model_features
+from bayesmachine.host.features import model_planes
 from bayesmachine.host.images import bundled_pair
-from bayesmachine.host.likelihoods import memory_words, right_columns, right_memory_words
-from bayesmachine.host.reference import reference_bands, reference_quantized, right_reference_map
+from bayesmachine.host.likelihoods import memory_words, pass_words
+from bayesmachine.host.reference import declared_maps, reference_bands, reference_quantized
 from bayesmachine.host.run import prepare, run_machine
-from bayesmachine.models import ModelParams, disparity_machine, right_machine
+from bayesmachine.models import ModelParams, disparity_machine, pass_machine
 from bayesmachine.outputs import atomic_file, atomic_write_text
 from bayesmachine.region import OutputRegion
 
@@ -84,6 +84,9 @@ BAND_ROWS = 5  # references band by band, each carrying the MAP row above into t
 
 
 # --- The API this script reads (the lines a refactor may have to follow; the data do not change) ---
+RIGHT = "right"  # census-lr's declared pass
+
+
 def has_prior(model: ModelParams, machine: Any) -> bool:
     return machine.prior == "neighbour"
 
@@ -92,24 +95,29 @@ def has_right_pass(model: ModelParams) -> bool:
     return model.name == "census-lr"
 
 
-def prior_words(model: ModelParams, machine: Any, above: np.ndarray) -> np.ndarray:
-    from bayesmachine.columns import AbovePrior
-
-    column = model.column(AbovePrior)
-    return column.loaded(column.table(machine.word_bits), above)
+def right_machine(model: ModelParams, machine: Any) -> Any:
+    return pass_machine(model, machine, RIGHT)
 
 
-def right_prior_words(model: ModelParams, machine: Any, above: np.ndarray) -> np.ndarray:
-    return prior_words(model.pass_named("right").model, machine, above)
+def right_words(model: ModelParams, rmachine: Any, feats: tuple, y: int, above: np.ndarray) -> np.ndarray:
+    return pass_words(model.pass_named(RIGHT), *feats, rmachine, rows=slice(y, y + 1), above=above)
 
 
-def consistency_words(model: ModelParams, machine: Any, right_map_row: np.ndarray,
-                      region: OutputRegion) -> dict[str, np.ndarray]:
-    from bayesmachine.columns import Consistency
+def own_words(model: ModelParams, machine: Any, feats: tuple, y: int, above: np.ndarray | None,
+              right_row: np.ndarray | None) -> np.ndarray:
+    results = None if right_row is None else {RIGHT: right_row[None]}
+    return memory_words(*feats, model, machine, rows=slice(y, y + 1),
+                        above=above if has_prior(model, machine) else None, results=results)
 
-    column = model.column(Consistency)
-    first = int(right_columns(region)[0])
-    return {"fed": column.loaded(column.table(machine.word_bits), right_map_row, first, region.map_columns)}
+
+def right_reference_map(feats: tuple, model: ModelParams, word_bits: int | None) -> np.ndarray:
+    return declared_maps(model, *feats, word_bits, band_rows=BAND_ROWS)[RIGHT]
+
+
+def quantized_band(feats: tuple, model: ModelParams, w: int, rows: slice, above: np.ndarray | None,
+                   right_rows: np.ndarray | None) -> Any:
+    return reference_quantized(*feats, model, w, rows=rows, above=above,
+                               results=None if right_rows is None else {RIGHT: right_rows})
 # ---------------------------------------------------------------------------------------------------
 
 
@@ -137,16 +145,11 @@ def _words(model: ModelParams, machine: Any, feats: tuple, qmap: np.ndarray, rma
     ho, wo = region.shape
     rows, right_rows = [], []
     for y in range(ho):
-        kw: dict[str, Any] = {}
-        if has_prior(model, machine):
-            above = np.full(wo, -1, np.int16) if y == 0 else qmap[y - 1]
-            kw["prior"] = prior_words(model, machine, above)
+        above = np.full(wo, -1, np.int16) if y == 0 else qmap[y - 1]
         if rmap_q is not None:
-            kw |= consistency_words(model, machine, rmap_q[y], region)
             r_above = np.full(rmap_q.shape[1], -1, np.int16) if y == 0 else rmap_q[y - 1]
-            right_rows.append(right_memory_words(*feats, model, rmachine, rows=slice(y, y + 1),
-                                                 prior=right_prior_words(model, rmachine, r_above)))
-        rows.append(memory_words(*feats, model, machine, rows=slice(y, y + 1), **kw))
+            right_rows.append(right_words(model, rmachine, feats, y, r_above))
+        rows.append(own_words(model, machine, feats, y, above, None if rmap_q is None else rmap_q[y]))
     out = {"words": np.stack(rows)}
     if right_rows:
         out["right_words"] = np.stack(right_rows)
@@ -163,13 +166,12 @@ def _references(model: ModelParams, machine: Any, feats: tuple) -> dict[str, np.
     w = machine.word_bits
     rmap_q = None
     if has_right_pass(model):
-        out["ref_right_map"] = right_reference_map(*feats, model, band_rows=BAND_ROWS)
-        rmap_q = out["qref_right_map"] = right_reference_map(*feats, model, w, band_rows=BAND_ROWS)
+        out["ref_right_map"] = right_reference_map(feats, model, None)
+        rmap_q = out["qref_right_map"] = right_reference_map(feats, model, w)
     post, maps = [], []
     above = None
     for rows in region.bands(BAND_ROWS):
-        band = reference_quantized(*feats, model, w, rows=rows, above=above,
-                                   right_map=None if rmap_q is None else rmap_q[rows])
+        band = quantized_band(feats, model, w, rows, above, None if rmap_q is None else rmap_q[rows])
         post.append(band.posterior)
         maps.append(band.map)
         above = band.map[-1].copy()
@@ -183,7 +185,7 @@ def compute(name: str) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     model = ModelParams(**model_kw)
     machine = disparity_machine(model, **machine_kw)
     rmachine = right_machine(model, machine) if has_right_pass(model) else None
-    feats = (model_features(left, model), model_features(right, model))
+    feats = (model_planes(left, model), model_planes(right, model))
     arrays = _references(model, machine, feats)
     arrays |= _words(model, machine, feats, arrays["qref_map"], arrays.get("qref_right_map"), rmachine)
     prepared = prepare(left, right, model, reference=True)
@@ -193,10 +195,10 @@ def compute(name: str) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         arrays[f"run_{field}"] = getattr(run, field)
     meta: dict[str, Any] = {"model": model.to_dict(), "machine": machine.to_dict(),
                             "right_machine": None if rmachine is None else rmachine.to_dict()}
-    if run.right is not None:
+    for name, record in run.passes.items():
         for field in ("map", "cycles", "timeout"):
-            arrays[f"run_right_{field}"] = getattr(run.right, field)
-        meta["run_right_machine"] = run.right.machine.to_dict()
+            arrays[f"run_{name}_{field}"] = getattr(record, field)
+        meta[f"run_{name}_machine"] = record.machine.to_dict()
     return arrays, json.loads(json.dumps(meta))
 
 

@@ -23,7 +23,6 @@ from bayesmachine.cliargs import (
     DEFAULT_BAUD,
     MACHINE_OPTIONS,
     MAX_SILENCE_S,
-    PASS_WATCHDOGS,
     add_machine_options,
     add_model_options,
     argument_type,
@@ -35,6 +34,7 @@ from bayesmachine.cliargs import (
     model_params_from_args,
     options_without_effect,
     output_path,
+    pass_watchdogs,
     positive_float_at_most,
     runnable_sources,
 )
@@ -56,7 +56,7 @@ from bayesmachine.sim.engines import check_pixel_engine_options
 from .calib import BUNDLED_CALIB, KITTI_CAMERAS, StereoCalibration, bundled_calibration_path, read_calibration
 from .confidence import DEFAULT_T, DEFAULT_WINDOW, MAX_T, MAX_WINDOW, ConfidenceParams
 from .datasets import PairSpec, bundled_spec, files_spec, resolve_dataset
-from .features import model_features
+from .features import model_planes
 from .images import Crop, bundled_pair, crop_image, load_gt, load_image, parse_crop, validate_pair
 from .reference import reference_bands, warm_up
 from .run import ENGINES, FEEDS, RunOutcome, result_bytes, run_pair
@@ -188,7 +188,7 @@ def _add_machine_options(p: argparse.ArgumentParser, sweep: bool) -> None:
         )
         for name, option in MACHINE_OPTIONS.items():
             if name not in ("rng", "counter_max", "columns") and not option.is_flag:  # a list, a grid axis
-                helps[name] = helps.get(name, option.help) + "; A,B,... sweeps it (a grid axis)"
+                helps[name] = helps.get(name, option.help_text) + "; A,B,... sweeps it (a grid axis)"
     g = add_machine_options(p, skip=("columns",), help=helps, **changes)
     if sweep:
         g.add_argument(
@@ -337,12 +337,14 @@ def _check_fits(region: OutputRegion, machine: MachineParams) -> None:
 
 def _report(outcome: RunOutcome, source: str, crop: Crop | None) -> dict[str, object]:
     prep, run = outcome.prepared, outcome.run
-    right = run.right  # census-lr's right pass: its cycles count too
+    declared = run.passes.values()  # the passes before the own one (census-lr's right): cycles count too
     frame = None if run.cycles is None else (
-        int(run.cycles.sum()) + (int(right.cycles.sum()) if right is not None else 0))
+        int(run.cycles.sum()) + sum(int(r.cycles.sum()) for r in declared))
     wall = run.wall_cycles
-    if wall is not None and right is not None:
-        wall = None if right.wall_cycles is None else wall + right.wall_cycles
+    if wall is not None and any(r.wall_cycles is None for r in declared):
+        wall = None
+    elif wall is not None:
+        wall += sum(r.wall_cycles for r in declared)
     report: dict[str, object] = {
         "engine": run.engine,
         "rng": run.machine.rng,
@@ -364,11 +366,13 @@ def _report(outcome: RunOutcome, source: str, crop: Crop | None) -> dict[str, ob
         "ground_truth": prep.gt is not None,
         "model_name": prep.model.name,
         "model": prep.model.to_dict(),
+        # Every pass in order, the own one last: a declared pass's figures are its name's "NAME_pass_*".
+        "passes": [p.name for p in prep.model.passes],
         "machine": run.machine.to_dict(complete=True),  # every resolved value
     }
-    if right is not None:
-        report["right_pass_machine"] = right.machine.to_dict(complete=True)
-        report["right_pass_seconds"] = right.seconds
+    for name, r in run.passes.items():
+        report[f"{name}_pass_machine"] = r.machine.to_dict(complete=True)
+        report[f"{name}_pass_seconds"] = r.seconds
     return report
 
 
@@ -391,10 +395,13 @@ def _summary(r: dict[str, object]) -> str:
         f"RMS {f('rms_error')}, no-match F1 {f('nomatch_f1')}, MAP agreement {f('map_agreement')}, "
         f"timeouts {r['timeouts']}, engine {f('seconds', '.2f')} s"
     )
-    if r.get("right_pass_pixels") is not None:
-        line += (f"\n  census-lr: cycles/px over both passes {f('cycles_per_pixel_mean', '.2f')}: left pass "
-                 f"{f('left_pass_cycles_per_pixel_mean', '.2f')}, right pass {r['right_pass_pixels']} px at "
-                 f"{f('right_pass_cycles_per_pixel_mean', '.2f')} (timeouts {r['right_pass_timeouts']})")
+    *declared, own = r.get("passes") or [None]
+    if declared:
+        line += (f"\n  {r['model_name']}: cycles/px over all passes {f('cycles_per_pixel_mean', '.2f')}: "
+                 f"{own} pass {f(f'{own}_pass_cycles_per_pixel_mean', '.2f')}" + "".join(
+                     f", {n} pass {r[f'{n}_pass_pixels']} px at "
+                     f"{f(f'{n}_pass_cycles_per_pixel_mean', '.2f')} (timeouts {r[f'{n}_pass_timeouts']})"
+                     for n in declared))
     if r.get("wall_cycles_per_pixel") is not None:
         line += f"\n  wall cycles per pixel, loading included: {f('wall_cycles_per_pixel', '.2f')}"
 
@@ -444,7 +451,7 @@ def _confidence_summary(r: dict[str, object], f) -> str:  # noqa: ANN001
 
 def _cmd_reference(args: argparse.Namespace) -> int:
     model = model_params_from_args(args)
-    ignored = options_without_effect(args, set(all_options()) - PASS_WATCHDOGS)
+    ignored = options_without_effect(args, set(all_options()) - pass_watchdogs())
     if ignored:  # as run refuses board options without --engine board
         raise ValueError(f"{', '.join(ignored)}: the watchdog of a machine's pass; reference computes the "
                          "exact float64 posterior and runs no machine")
@@ -464,11 +471,11 @@ def _cmd_reference(args: argparse.Namespace) -> int:
     validate_pair(left, right, model.dmax, model.margin)
     warm_up(model)  # numba's cache load stays out of the timing
     t0 = time.perf_counter()
-    features = (model_features(left, model), model_features(right, model))
+    planes = (model_planes(left, model), model_planes(right, model))
     ref_map = np.empty(region.shape, np.int16)
 
     def bands():  # the posterior of each band, in order; the MAP is kept on the way
-        for rows, band in reference_bands(*features, model):
+        for rows, band in reference_bands(*planes, model):
             ref_map[rows] = band.map
             yield band.posterior
 
@@ -639,9 +646,10 @@ def _write_run_outputs(out: OutputDir, args: argparse.Namespace, outcome: RunOut
     run, prep, metrics = outcome.run, outcome.prepared, outcome.metrics
     region, dmax = prep.region, prep.model.dmax
     maps = metrics.maps
-    # census-lr: the right pass's MAPs, cycles and timeouts too (over its own columns).
-    extra = {} if run.right is None else {"right_map": run.right.map, "right_cycles": run.right.cycles,
-                                           "right_timeout": run.right.timeout}
+    # A declared pass's MAPs, cycles and timeouts too (over its own columns), by its name (census-lr's
+    # right_map, right_cycles, right_timeout).
+    extra = {f"{name}_{field}": getattr(r, field) for name, r in run.passes.items()
+             for field in ("map", "cycles", "timeout")}
     if maps is not None:  # a board asked for MAPs only sent no counts: no confidence, none made up
         extra.update(maps.arrays())
     if metrics.reference_maps is not None:

@@ -1,8 +1,9 @@
 """Figures comparing the machine with the reference and the ground truth (paper Fig 6).
 
-* cycles per pixel: mean, std, p99 (timeouts included, at their watchdog count); with census-lr's
-  right pass, the mean counts both passes (all compute cycles over the output pixels), the other
-  figures are the left pass's, and the right pass's own figures are ``right_pass_*``;
+* cycles per pixel: mean, std, p99 (timeouts included, at their watchdog count); with passes run
+  before the model's own (census-lr's right pass), the mean counts every pass (all compute cycles over
+  the output pixels), the other figures are the own pass's (``left_pass_*``), and each declared pass's
+  own figures are ``NAME_pass_*`` (``right_pass_*``);
 * RMS error between counts / n_max and the reference posterior normalized to max 1,
   over the pixels the reference calls matched, all M rows;
 * F1 of no-match detection, positive class = no match (a timeout counts as no match);
@@ -24,6 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from bayesmachine.extras import optional
+from bayesmachine.models import OWN_PASS
 from bayesmachine.region import MARGIN, OutputRegion
 
 from .confidence import (
@@ -274,7 +276,8 @@ class RunMetrics:
     reference_nomatch: int
     bad: dict[str, dict[str, float]] | None = None  # {"machine": {...}, "reference": ..., "sgbm": ...}
     sgbm_map: np.ndarray | None = field(default=None, repr=False)  # SGBM's disparity, when computed
-    right: dict[str, float] | None = None  # census-lr's right pass: pixels, cycles, timeouts
+    # The passes run before the own one (census-lr's "right"), by name: pixels, cycles, timeouts.
+    passes: dict[str, dict[str, float]] = field(default_factory=dict)
     confidence: dict[str, object] | None = None  # the confidence figures (confidence_report)
     maps: ConfidenceMaps | None = field(default=None, repr=False)  # the machine's (None: no counts)
     reference_maps: ConfidenceMaps | None = field(default=None, repr=False)
@@ -297,11 +300,13 @@ class RunMetrics:
             "machine_nomatch_pixels": self.machine_nomatch,
             "reference_nomatch_pixels": self.reference_nomatch,
         }
-        if self.right is not None:
-            # Cycles per pixel count both passes: every compute cycle over the output pixels.
-            out["left_pass_cycles_per_pixel_mean"] = self.cycles["mean"]
-            out["cycles_per_pixel_mean"] = self.cycles["mean"] + self.right["cycles_sum"] / self.pixels
-            out.update({f"right_pass_{k}": v for k, v in self.right.items() if k != "cycles_sum"})
+        if self.passes:
+            # Cycles per pixel count every pass: every compute cycle over the output pixels.
+            out[f"{OWN_PASS}_pass_cycles_per_pixel_mean"] = self.cycles["mean"]
+            out["cycles_per_pixel_mean"] = self.cycles["mean"] + sum(
+                figures["cycles_sum"] for figures in self.passes.values()) / self.pixels
+            for name, figures in self.passes.items():
+                out.update({f"{name}_pass_{k}": v for k, v in figures.items() if k != "cycles_sum"})
         if self.bad is not None:
             for method, figs in self.bad.items():
                 for k, v in figs.items():
@@ -381,7 +386,7 @@ def evaluate(prepared: Prepared, run: MachineRun, sgbm: bool | None = None,
         reference_nomatch=int(ref_nm.sum()),
         bad=bad,
         sgbm_map=sgbm_map,
-        right=None if run.right is None else _right_figures(run),
+        passes={name: _pass_figures(r.cycles, r.timeout) for name, r in run.passes.items()},
         confidence=confidence_report(params, maps, ref_maps, run.map, ref_map, prepared.gt, sgbm_map,
                                      lr_conf),
         maps=maps,
@@ -450,15 +455,14 @@ def confidence_report(
     return out
 
 
-def _right_figures(run: MachineRun) -> dict[str, float]:
-    r = run.right
-    assert r is not None
-    stats = cycle_stats(r.cycles)
+def _pass_figures(cycles: np.ndarray, timeout: np.ndarray) -> dict[str, float]:
+    """A declared pass's own figures (per pixel of its grid)."""
+    stats = cycle_stats(cycles)
     return {
-        "pixels": int(r.cycles.size),
-        "cycles_sum": float(r.cycles.sum()),
-        "cycles_per_pixel_mean": stats["mean"],  # per right-pass pixel
+        "pixels": int(cycles.size),
+        "cycles_sum": float(cycles.sum()),
+        "cycles_per_pixel_mean": stats["mean"],
         "cycles_per_pixel_median": stats["median"],
         "cycles_per_pixel_p99": stats["p99"],
-        "timeouts": int(r.timeout.sum()),
+        "timeouts": int(timeout.sum()),
     }

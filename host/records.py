@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -11,10 +11,10 @@ from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams
 from bayesmachine.region import OutputRegion
 
-from .features import FeatureSums
+from .features import Planes
 from .reference import Reference, reference_bands
 
-__all__ = ["Prepared", "MachineRun", "RightPass", "counts_dtype"]
+__all__ = ["Prepared", "MachineRun", "PassRecord", "counts_dtype"]
 
 
 def counts_dtype(counter_max: int) -> np.dtype:
@@ -36,7 +36,7 @@ class Prepared:
     left: np.ndarray
     right: np.ndarray
     model: ModelParams
-    features: tuple[FeatureSums, FeatureSums]
+    planes: tuple[Planes, Planes]  # both images' planes the model reads (host.features.model_planes)
     reference_map: np.ndarray | None  # (Ho, Wo) int16, -1 = no match; None: prepared without it
     reference_seconds: float
     gt: np.ndarray | None = None  # ground truth cut to the output region (map coordinates)
@@ -53,7 +53,7 @@ class Prepared:
 
     def reference_bands(self, band_rows: int | None = None) -> Iterator[tuple[slice, Reference]]:
         """The float64 reference (posterior and MAP) band by band; see ``reference.reference_bands``."""
-        return reference_bands(*self.features, self.model, band_rows)
+        return reference_bands(*self.planes, self.model, band_rows=band_rows)
 
 
 @dataclass
@@ -71,17 +71,19 @@ class MachineRun:
     seconds: float  # time inside the engine's run calls
     words_seconds: float  # time building likelihood memories
     wall_cycles: int | None = None  # RTL engines: clock cycles including loading (None: model)
-    right: RightPass | None = None  # census-lr: its right pass (the second machine run)
+    # The passes run before the model's own (census-lr's "right"), by pass name, in order.
+    passes: dict[str, PassRecord] = field(default_factory=dict)
     engine_figures: dict[str, object] | None = None  # what the engine says of the run (a board: its link's)
 
 
 @dataclass
-class RightPass:
-    """census-lr's right pass over ``host.likelihoods.right_columns`` (its own machine, run by ``run``)."""
+class PassRecord:
+    """A pass run before the model's own, over its grid (``host.likelihoods.pass_grid``), on its own
+    machine: its MAPs as the passes after it read them."""
 
     machine: MachineParams
-    map: np.ndarray  # (Ho, Wr) int16, -1 = none (its no-match row won, or a timeout)
-    cycles: np.ndarray  # (Ho, Wr) int64
-    timeout: np.ndarray  # (Ho, Wr) bool
+    map: np.ndarray  # (Ho, W) int16, -1 = none (its no-match row won, or a timeout)
+    cycles: np.ndarray  # (Ho, W) int64
+    timeout: np.ndarray  # (Ho, W) bool
     seconds: float
     wall_cycles: int | None = None

@@ -6,32 +6,38 @@ normalized to sum 1. MAP = argmax of the unnormalized products (the same order a
 without a division that could round two close values into a tie); exact ties go to the lowest index,
 so no match wins only when strictly more probable.
 
-The kernels specialize over the closed set of column kinds: the FEATURES columns' product (a feature
-difference or a census Hamming distance per column, in operator order: ((m * gH) * gV) * census) is
-one parallel numba loop over the pass's pixels; a PASS column (census-lr's consistency, from the right
-pass's MAPs) is one more factor; the neighbour prior's left (FEEDBACK) and above (ABOVE) columns make the
-pass sequential in raster order, each pixel's factors from the MAPs already taken: ``p = 1.0;
-p *= f(|d - d_left|); p *= f(|d - d_above|)`` (a factor skipped for a neighbour called no match or
-outside the output region), the unnormalized value ``data * p``. Bands go top to bottom, the last MAP
-row of a band carried into the next (``above``), so the float64 posterior volume (H x W x (Dmax+2) x 8
-bytes) is never held whole (:func:`reference_bands`, :func:`reference_map`).
+The kernels specialize over the closed set of column sources, not over the kinds: a pass's FEATURES
+columns, any number of them, are stacked (their planes (rows, W, K) int64 and their tables (K, longest),
+each cost a Hamming distance of census codes or a |difference| of sums, as its kind says) and their
+product, in operator order (((m * gH) * gV) * census) * ..., is one parallel numba loop over the
+pass's pixels; each PASS column (census-lr's consistency, from the right pass's MAPs) is one more factor,
+its own words (:meth:`~bayesmachine.columns.Column.words`); a FEEDBACK column (the left neighbour's) and
+an ABOVE column (the above neighbour's) make the pass sequential in raster order, each pixel's factors
+from the MAPs already taken: ``p = 1.0; p *= f(|d - d_left|); p *= f(|d - d_above|)`` (a factor skipped
+for a neighbour called no match or outside the output region), the unnormalized value ``data * p``.
+Bands go top to bottom, the last MAP row of a band carried into the next (``above``), so the float64
+posterior volume (H x W x (Dmax+2) x 8 bytes) is never held whole (:func:`reference_bands`,
+:func:`reference_map`).
 
-``reference_quantized`` is the same inference on the W-bit words: each factor a word q/2^W, the
-product exact in int64 (a PASS column's factor past 62 bits as a (high, low) pair), so a MAP is decided
-exactly. It is what the machine samples from: the distribution an ideal machine's counters approach.
+``reference_quantized`` is the same inference on the W-bit words: each factor a word q/2^W, the product
+exact whatever its width (:mod:`.products`: one int64 while it fits 62 bits, else 32-bit limbs), so a
+MAP is decided exactly. It is what the machine samples from: the distribution an ideal machine's
+counters approach.
 
-A model's declared passes run first (:func:`pass_reference_map`, e.g. census-lr's right pass over
-:func:`~host.likelihoods.right_columns`), their MAPs feeding the PASS columns of the passes after them.
-``reference_plain`` and ``reference_prior_plain`` are the plain oracles of the kernels.
+A model's declared passes run first (:func:`declared_maps`, e.g. census-lr's right pass over its grid,
+``host.likelihoods.pass_grid``), their MAPs feeding the PASS columns of the passes after them by pass
+name. ``reference_plain`` and ``reference_prior_plain`` are the plain oracles of the kernels.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterator, Mapping
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numba
 import numpy as np
+from numba import literal_unroll
 from numba.extending import overload
 
 from bayesmachine.columns import AbovePrior, Column, LeftPrior, Source
@@ -39,9 +45,10 @@ from bayesmachine.models import ModelParams, Pass
 from bayesmachine.params import ParameterError
 from bayesmachine.region import OutputRegion
 
-from .features import FeatureSums, model_features
+from .features import Planes, model_planes
 from .images import validate_pair
-from .likelihoods import PassGrid, likelihoods_plain, need_planes, pass_grid
+from .likelihoods import likelihoods_plain, pass_context, pass_grid
+from .products import TOP_BITS, exact_float, exact_greater, exact_store, exact_times, limbs_for
 
 __all__ = [
     "Reference",
@@ -55,7 +62,7 @@ __all__ = [
     "reference_prior_plain",
     "pass_reference",
     "pass_reference_map",
-    "right_reference_map",
+    "declared_maps",
     "map_from_index",
     "warm_up",
 ]
@@ -108,59 +115,76 @@ def _cost_for(a, b):  # pragma: no cover
     return lambda a, b: abs(a - b)
 
 
-# A pass's FEATURES columns the data kernel takes (the closed set's: m, gH, gV and census).
-KERNEL_SLOTS = 4
+@numba.njit(cache=True, inline="always")
+def _lanes(x, step, last, dmax):  # pragma: no cover
+    """Lanes 0 .. lanes - 1 of reference column x have a match pixel (x + step * d <= last)."""
+    if step > 0 and x + dmax > last:
+        return last - x + 1
+    return dmax + 1
 
 
-@numba.njit(parallel=True, cache=True, fastmath=False, boundscheck=False)
-def _data_kernel(r0, o0, t0, r1, o1, t1, r2, o2, t2, r3, o3, t3, nm_entry,  # pragma: no cover
-                 nm_plane, nm_table, has_nm, first, step, last, dmax, data, idx):
-    """data[y, j, h]: the product of the FEATURES columns of pixel (y, first + j), in operator order
-    ((c0 * c1) * c2) * c3; a column slot k is None past the pass's columns.
-
-    Column k: reference plane ``rk``, match plane ``ok``, table ``tk`` at ``_cost`` of the two pixels'
-    values, the match at column x + step * d; a lane past ``last`` gets 0. The no-match row: column 0's
-    ``nm_table[|nm_plane|]`` (the pass's rule) times the other columns' entries ``nm_entry[1:]``, or 0
-    without one (``has_nm``). With ``idx`` (not None: a float pass without a prior or a PASS column)
-    also normalize and take the MAP (-1: no match; the lowest index wins exact ties).
-    """
-    h = data.shape[0]
-    wo = data.shape[1]
-    zero = t0[0] * 0
-    for y in numba.prange(h):
+@numba.njit(nogil=True, cache=True, fastmath=False, boundscheck=False)
+def _data_kernel(cols, one, nm_entry, nm_plane, nm_table, has_nm, first, step, last, dmax,  # pragma: no cover
+                 data, idx):
+    """data[y, j, h]: the product of the FEATURES columns ``cols`` of pixel (y, first + j), in operator
+    order ((c0 * c1) * c2) * ... (``one``: 1.0, float64 factors; or 1, words, their product fitting one
+    int64, stored exactly in data's form, :mod:`.products`): column k = (reference plane, match plane,
+    table), its factor the table at ``_cost`` of the reference pixel's value and the match's, at column
+    x + step * d; a lane past ``last`` gets 0. The no-match row: ``nm_table[|nm_plane|]`` (the pass's
+    rule, in column 0) times the other columns' entries ``nm_entry[1:]``, or 0 without one (``has_nm``).
+    With ``idx`` (not None: float64) also normalize and take the MAP (-1: no match; the lowest index wins
+    exact ties)."""
+    n, wo = data.shape[0], data.shape[1]
+    for y in range(n):
         for j in range(wo):
             x = first + j
             out = data[y, j]
-            lanes = dmax + 1  # lanes 0 .. lanes - 1 have a match pixel (x + step * d <= last)
-            if step > 0 and x + dmax > last:
-                lanes = last - x + 1
-            a0 = r0[y, x]
-            if r1 is not None:
-                a1 = r1[y, x]
-            if r2 is not None:
-                a2 = r2[y, x]
-            if r3 is not None:
-                a3 = r3[y, x]
+            lanes = _lanes(x, step, last, dmax)
             for d in range(lanes):
                 xm = x + step * d
-                v = t0[_cost(a0, o0[y, xm])]
-                if r1 is not None:
-                    v = v * t1[_cost(a1, o1[y, xm])]
-                if r2 is not None:
-                    v = v * t2[_cost(a2, o2[y, xm])]
-                if r3 is not None:
-                    v = v * t3[_cost(a3, o3[y, xm])]
-                out[d] = v
+                v = one  # one * c0 is c0: the product ((c0 * c1) * c2) * ...
+                for col in literal_unroll(cols):
+                    ref, match, table = col
+                    v = v * table[_cost(ref[y, x], match[y, xm])]
+                exact_store(out, d, v)
             for d in range(lanes, dmax + 1):
-                out[d] = zero
-            v = zero
-            if has_nm:
-                v = nm_table[abs(nm_plane[y, x])]
-                for e in nm_entry[1:]:
-                    v = v * e
-            out[dmax + 1] = v
+                exact_store(out, d, 0)
+            v = nm_table[abs(nm_plane[y, x])] if has_nm else one * 0
+            for k in range(1, nm_entry.shape[0]):
+                v = v * nm_entry[k]
+            exact_store(out, dmax + 1, v)
             if idx is not None:
                 idx[y, j] = _finish(out)
+
+
+def _by_rows(cols: tuple, one: float | int, rule: tuple, data: np.ndarray, idx: np.ndarray | None) -> None:
+    """:func:`_data_kernel` (which frees the GIL) over the band's rows, in as many parts as numba has
+    threads, each on a thread of its own: a tuple cannot enter a numba parallel loop."""
+    n = data.shape[0]
+    parts = max(1, min(numba.get_num_threads(), n))
+    cuts = [n * i // parts for i in range(parts + 1)]
+
+    def part(i: int) -> None:
+        rows = slice(cuts[i], cuts[i + 1])
+        _data_kernel(tuple((ref[rows], match[rows], table) for ref, match, table in cols), one, rule[0],
+                     rule[1][rows], *rule[2:], data[rows], None if idx is None else idx[rows])
+
+    if parts == 1:
+        part(0)
+        return
+    with ThreadPoolExecutor(parts) as pool:
+        list(pool.map(part, range(parts)))
+
+
+@numba.njit(parallel=True, cache=True, boundscheck=False)
+def _times_words(data, factor):  # pragma: no cover
+    """data *= ``factor`` (n, W, M) words, exactly."""
+    n, wo, m = data.shape[0], data.shape[1], data.shape[2]
+    for y in numba.prange(n):
+        for j in range(wo):
+            v = data[y, j]
+            for h in range(m):
+                exact_times(v, h, factor[y, j, h])
 
 
 @numba.njit(cache=True, inline="always")
@@ -181,6 +205,40 @@ def _finish(out):  # pragma: no cover
     return arg if arg < m - 1 else -1
 
 
+@numba.njit(parallel=True, cache=True, boundscheck=False)
+def _finish_float(data, idx):  # pragma: no cover
+    """Every pixel's :func:`_finish` (a pass without neighbour columns)."""
+    for y in numba.prange(data.shape[0]):
+        for j in range(data.shape[1]):
+            idx[y, j] = _finish(data[y, j])
+
+
+@numba.njit(cache=True, inline="always")
+def _finish_exact(values, post):  # pragma: no cover
+    """A pixel's exact values to ``post`` (normalized float64); its MAP (-1: no match), the exact
+    comparison, ties to the lowest index."""
+    m = values.shape[0]
+    total = 0.0
+    arg = 0
+    for d in range(m):
+        f = exact_float(values, d)
+        post[d] = f
+        total += f
+        if d > 0 and exact_greater(values, d, arg):  # strict: the lowest index wins exact ties
+            arg = d
+    for d in range(m):
+        post[d] = post[d] / total
+    return arg if arg < m - 1 else -1
+
+
+@numba.njit(parallel=True, cache=True, boundscheck=False)
+def _finish_words(data, post, idx):  # pragma: no cover
+    """Every pixel's :func:`_finish_exact` (a pass without neighbour columns)."""
+    for y in numba.prange(data.shape[0]):
+        for j in range(data.shape[1]):
+            idx[y, j] = _finish_exact(data[y, j], post[y, j])
+
+
 @numba.njit(cache=True, inline="always")
 def _neighbours(idx, above, y, i, has_left, has_above):  # pragma: no cover
     """The MAPs of pixel (y, i)'s left and above neighbours already taken (-1: none, or no such column)."""
@@ -192,7 +250,7 @@ def _neighbours(idx, above, y, i, has_left, has_above):  # pragma: no cover
 
 
 @numba.njit(cache=True, fastmath=False, boundscheck=False)
-def _prior_pass_float(data, tl, nl, has_left, ta, na, has_above, above, post, idx):  # pragma: no cover
+def _raster_float(data, tl, nl, has_left, ta, na, has_above, above, post, idx):  # pragma: no cover
     """Raster order: the left and above factors from the MAPs already taken (``above``: the MAP row
     above the band), then normalize and take the MAP (ties to the lowest index)."""
     n, wo, m = data.shape
@@ -233,71 +291,50 @@ def _prior_pass_float(data, tl, nl, has_left, ta, na, has_above, above, post, id
 
 
 @numba.njit(cache=True, fastmath=False, boundscheck=False)
-def _prior_pass_words(data, tl, nl, has_left, ta, na, has_above, above, post, idx, extra,  # pragma: no cover
-                      one):
+def _raster_words(data, tl, nl, has_left, ta, na, has_above, above, post, idx, one):  # pragma: no cover
     """The same on words: the left and above factor words (``one``, the word of 1.0, for a neighbour
-    without a MAP) as factors of the exact int64 product (the machine's two prior columns).
-
-    ``extra`` (n, wo, m) words, unless empty: one more factor (a PASS column), the product then held as
-    (high, low) = (v * e >> 32, v * e & (2^32 - 1)) and compared exactly."""
-    n, wo, m = data.shape
+    without a MAP) as factors of the exact product (the machine's two prior columns); ``data`` is
+    overwritten."""
+    n, wo, m = data.shape[0], data.shape[1], data.shape[2]
     dmax = m - 2
-    has_extra = extra.shape[0] > 0
-    mask32 = np.int64(0xFFFFFFFF)
     for y in range(n):
         for i in range(wo):
             hl, ha = _neighbours(idx, above, y, i, has_left, has_above)
-            src = data[y, i]
-            out = post[y, i]
-            best = np.int64(-1)
-            best_lo = np.int64(0)
-            arg = 0
-            total = 0.0
+            values = data[y, i]
             for d in range(m):
-                v = src[d]
                 if has_left:
-                    v = v * ((tl[abs(d - hl)] if d <= dmax else nl) if hl >= 0 else one)
+                    exact_times(values, d, ((tl[abs(d - hl)] if d <= dmax else nl) if hl >= 0 else one))
                 if has_above:
-                    v = v * ((ta[abs(d - ha)] if d <= dmax else na) if ha >= 0 else one)
-                lo = np.int64(0)
-                if has_extra:
-                    e = extra[y, i, d]
-                    low = (v & mask32) * e
-                    v = (v >> 32) * e + (low >> 32)
-                    lo = low & mask32
-                    out[d] = float(v) * 4294967296.0 + float(lo)
-                else:
-                    out[d] = float(v)
-                total += out[d]
-                if v > best or (v == best and lo > best_lo):  # strict: the lowest index wins exact ties
-                    best = v
-                    best_lo = lo
-                    arg = d if d <= dmax else -1
-            for d in range(m):
-                out[d] = out[d] / total
-            idx[y, i] = arg
+                    exact_times(values, d, ((ta[abs(d - ha)] if d <= dmax else na) if ha >= 0 else one))
+            idx[y, i] = _finish_exact(values, post[y, i])
 
 
-def _slots(ref: FeatureSums, other: FeatureSums, cols: list[Column], word_bits: int | None) -> tuple:
-    """The data kernel's column slots: (reference plane, match plane, table) of each FEATURES column in
-    operator order (tables float64, or int64 words), None past them, then the no-match entries."""
-    if not 1 <= len(cols) <= KERNEL_SLOTS:
-        raise ValueError(f"the reference kernel takes 1 to {KERNEL_SLOTS} feature columns, got {len(cols)}")
+def _kernel_plane(plane: np.ndarray, hamming: bool) -> np.ndarray:
+    """A plane as the data kernels take it: census codes uint64 (their cost a Hamming distance), sums a
+    signed integer type (their cost a |difference|)."""
+    if hamming:
+        return plane.astype(np.uint64, copy=False)
+    return plane if plane.dtype.kind == "i" else plane.astype(np.int64)
+
+
+def _columns(cols: list[Column], ref: Mapping[str, np.ndarray], other: Mapping[str, np.ndarray],
+             word_bits: int | None) -> tuple[tuple, np.ndarray]:
+    """The data kernels' FEATURES columns in operator order, each (reference plane, match plane, table)
+    (float64, or int64 words), and their no-match entries."""
     dtype = np.float64 if word_bits is None else np.int64
     tabs = [c.table(word_bits) for c in cols]
-    slots: list = []
-    for c, t in zip(cols, tabs, strict=True):
-        slots += [getattr(ref, c.plane), getattr(other, c.plane), np.asarray(t.values, dtype)]
-    slots += [None] * (3 * (KERNEL_SLOTS - len(cols)))
-    return (*slots, np.array([c.nomatch_entry(t) for c, t in zip(cols, tabs, strict=True)], dtype))
+    out = tuple((_kernel_plane(ref[c.plane], c.hamming), _kernel_plane(other[c.plane], c.hamming),
+                 np.asarray(t.values, dtype)) for c, t in zip(cols, tabs, strict=True))
+    return out, np.array([c.nomatch_entry(t) for c, t in zip(cols, tabs, strict=True)], dtype)
 
 
-def _prior_args(p: Pass, word_bits: int | None) -> tuple:
-    """(table, no-match factor, present) of the pass's left column, then of its above column."""
+def _neighbour_args(p: Pass, word_bits: int | None) -> tuple:
+    """(table, no-match factor, present) of the pass's left neighbour's column (its FEEDBACK column), then
+    of its above neighbour's (its ABOVE column): a neighbour's factor is its table at |d - its MAP|."""
     dtype = np.float64 if word_bits is None else np.int64
     out: list = []
-    for kind in (LeftPrior, AbovePrior):
-        c = next((c for c in p.columns if isinstance(c, kind)), None)
+    for source in (Source.FEEDBACK, Source.ABOVE):
+        c = next((c for c in p.columns if c.source is source), None)
         if c is None:
             out += [np.ones(1, dtype), dtype(1), False]
         else:
@@ -306,13 +343,9 @@ def _prior_args(p: Pass, word_bits: int | None) -> tuple:
     return tuple(out)
 
 
-def _check_word_bits(p: Pass, word_bits: int) -> None:
-    # Every column but a PASS column is a factor of the exact int64 product (a PASS column's factor
-    # goes past it as a (high, low) pair).
-    factors = sum(c.source is not Source.PASS for c in p.columns)
-    if not 1 <= word_bits <= 15 or factors * word_bits > 62:
-        raise ParameterError(f"word_bits: {word_bits}-bit words: the exact product of {factors} words "
-                             f"must fit 62 bits (word bits at most {62 // factors})", "word_bits")
+def _check_word_bits(word_bits: int) -> None:
+    if isinstance(word_bits, bool) or not isinstance(word_bits, int) or not 1 <= word_bits <= 15:
+        raise ParameterError(f"word_bits: words of 1 to 15 bits, got {word_bits!r}", "word_bits")
 
 
 def _above(above: np.ndarray | None, rows: slice | None, p: Pass, wo: int) -> np.ndarray:
@@ -328,143 +361,135 @@ def _above(above: np.ndarray | None, rows: slice | None, p: Pass, wo: int) -> np
     return above
 
 
-def _fed_factors(p: Pass, word_bits: int | None, region: OutputRegion, grid: PassGrid,
-                 fed: Mapping[str, np.ndarray], n: int) -> list[np.ndarray]:
-    """Each PASS column's factors (n, W, M) from the MAPs ``fed[its source pass]`` of the band's rows."""
-    out = []
-    for c in p.columns:
-        if c.source is not Source.PASS:
-            continue
-        source = p.model.pass_named(c.feeds_from)
-        src_grid = pass_grid(source, region)
-        got = fed.get(c.feeds_from)
-        if got is None or np.shape(got) != (n, src_grid.width):
-            shape = None if got is None else np.shape(got)
-            raise ValueError(f"the {p.model.name} model's {c.name} column needs the {c.feeds_from} pass's "
-                             f"MAPs of its rows, shape {(n, src_grid.width)}, got {shape}")
-        out.append(c.loaded(c.table(word_bits), np.asarray(got), src_grid.first, grid.columns))
-    return out
-
-
-def pass_reference(p: Pass, left: FeatureSums, right: FeatureSums, word_bits: int | None = None,
+def pass_reference(p: Pass, left: Planes, right: Planes, word_bits: int | None = None, *,
                    out: np.ndarray | None = None, rows: slice | None = None, above: np.ndarray | None = None,
-                   fed: Mapping[str, np.ndarray] | None = None) -> Reference:
+                   results: Mapping[str, np.ndarray] | None = None) -> Reference:
     """The reference of pass ``p`` over map rows ``rows`` (default all): float64 (``word_bits`` None) or
-    on ``word_bits``-bit words. ``out``: the posterior's buffer (float64, (rows, W, Dmax+2)); ``above``:
-    the MAP row above the band (an ABOVE column, rows not starting at 0); ``fed``: the declared passes'
-    MAPs of these rows by name (a PASS column)."""
+    on ``word_bits``-bit words, exact (module text). ``out``: the posterior's buffer (float64, (rows, W,
+    Dmax+2)); ``above``: the MAP row above the band (an ABOVE column, rows not starting at 0);
+    ``results``: the other passes' MAPs of these rows by name (a PASS column)."""
     model = p.model
-    need_planes(p, left, right)
     if word_bits is not None:
-        _check_word_bits(p, word_bits)
-    region = OutputRegion.of_features(left.shape, model.dmax)
-    grid = pass_grid(p, region)
-    if rows is not None:
-        left, right = left.band(rows), right.band(rows)
-    ref, other = (left, right) if p.step < 0 else (right, left)
-    shape = (ref.shape[0], grid.width, model.hypotheses)
+        _check_word_bits(word_bits)
+    ctx = pass_context(p, left, right, word_bits, rows=rows, results=results)
+    grid = pass_grid(p, OutputRegion.of_features(left.shape, model.dmax))
+    shape = (ctx.rows, grid.width, model.hypotheses)
     if out is None:
         out = np.empty(shape)
     elif out.shape != shape or out.dtype != np.float64:
         raise ValueError(f"out must be float64 of shape {shape}, got {out.dtype} {out.shape}")
-    cols = [c for c in p.columns if c.source is Source.FEATURES]
+    features = [c for c in p.columns if c.source is Source.FEATURES]
+    # The data kernel takes the FEATURES columns whose words' product fits one int64 (on words: four at
+    # least, every one of the package's models); the others are factors as the PASS columns are.
+    kernel = features if word_bits is None else features[: TOP_BITS // word_bits]
+    factors = [c.words(ctx).reshape(shape) for c in p.columns
+               if c.source is Source.PASS or (c.source is Source.FEATURES and c not in kernel)]
+    cols, entries = _columns(kernel, ctx.reference, ctx.match, word_bits)
     floor = model.nomatch.table(word_bits).values.astype(np.float64 if word_bits is None else np.int64)
-    factors = _fed_factors(p, word_bits, region, grid, fed or {}, shape[0])
-    priors = _prior_args(p, word_bits)
-    finish = word_bits is None and not factors and not (priors[2] or priors[5])
-    data = out if word_bits is None else np.empty(shape, np.int64)
+    rule = (entries, ctx.reference[model.nomatch.plane], floor, p.nomatch, grid.first, p.step, grid.last,
+            model.dmax)
+    neighbours = _neighbour_args(p, word_bits)
+    top = _above(above, rows, p, shape[1])
     idx = np.empty(shape[:2], dtype=np.int16)
-    _data_kernel(*_slots(ref, other, cols, word_bits), getattr(ref, model.nomatch.plane), floor, p.nomatch,
-                 grid.first, p.step, grid.last, model.dmax, data, idx if finish else None)
-    if finish:
-        return Reference(out, idx)
-    top = _above(above, rows, p, grid.width)
     if word_bits is None:
-        for f in factors:  # ((((m * gH) * gV) * census) * lr), then the prior
-            data *= f
-        _prior_pass_float(data, *priors, top, out, idx)
+        _float_reference(cols, rule, factors, neighbours, top, out, idx)
     else:
-        extra = factors[0].astype(np.int64) if factors else np.zeros((0, 0, 0), np.int64)
-        if len(factors) > 1:
-            raise ValueError("the exact word product takes one PASS column")
-        _prior_pass_words(data, *priors, top, out, idx, extra, np.int64(1 << word_bits))
+        limbs = limbs_for(len(p.columns), word_bits)
+        data = np.empty(shape if limbs == 1 else (*shape, limbs), np.int64)
+        _by_rows(cols, np.int64(1), rule, data, None)
+        for f in factors:
+            _times_words(data, f)
+        if neighbours[2] or neighbours[5]:
+            _raster_words(data, *neighbours, top, out, idx, np.int64(1 << word_bits))
+        else:
+            _finish_words(data, out, idx)
     return Reference(out, idx)
 
 
-def pass_reference_map(p: Pass, left: FeatureSums, right: FeatureSums, word_bits: int | None = None,
+def _float_reference(cols: tuple, rule: tuple, factors: list[np.ndarray], neighbours: tuple, top: np.ndarray,
+                     out: np.ndarray, idx: np.ndarray) -> None:
+    """The float64 reference's kernels: the FEATURES columns' product, then the other factors in operator
+    order ((((m * gH) * gV) * census) * lr), then the neighbours in raster order."""
+    plain = not factors and not (neighbours[2] or neighbours[5])
+    _by_rows(cols, 1.0, rule, out, idx if plain else None)
+    if plain:
+        return
+    for f in factors:
+        out *= f
+    if neighbours[2] or neighbours[5]:
+        _raster_float(out, *neighbours, top, out, idx)
+    else:
+        _finish_float(out, idx)
+
+
+def pass_reference_map(p: Pass, left: Planes, right: Planes, word_bits: int | None = None, *,
                        band_rows: int | None = None,
-                       fed: Mapping[str, np.ndarray] | None = None) -> np.ndarray:
-    """The MAPs (Ho, W) int16 of pass ``p`` over its grid, band by band (-1: its no-match row won)."""
+                       results: Mapping[str, np.ndarray] | None = None) -> np.ndarray:
+    """The MAPs (Ho, W) int16 of pass ``p`` over its grid, band by band (-1: its no-match row won);
+    ``results``: the MAPs of the passes it reads (whole frame), by name."""
     region = OutputRegion.of_features(left.shape, p.model.dmax)
     out = np.empty((region.shape[0], pass_grid(p, region).width), dtype=np.int16)
     above = None
     for rows in region.bands(band_rows):
         band = pass_reference(p, left, right, word_bits, rows=rows, above=above,
-                              fed={k: v[rows] for k, v in (fed or {}).items()})
+                              results={k: v[rows] for k, v in (results or {}).items()})
         out[rows] = band.map
         above = band.map[-1].copy()
     return out
 
 
-def declared_maps(model: ModelParams, left: FeatureSums, right: FeatureSums, word_bits: int | None = None,
+def declared_maps(model: ModelParams, left: Planes, right: Planes, word_bits: int | None = None,
                   band_rows: int | None = None) -> dict[str, np.ndarray]:
-    """Every declared pass's MAPs (whole frame), in order, each fed the ones before it."""
-    fed: dict[str, np.ndarray] = {}
+    """Every declared pass's reference MAPs (whole frame, over its grid), by pass name, in order, each fed
+    the ones before it: what the model's own pass reads (``results``)."""
+    results: dict[str, np.ndarray] = {}
     for p in model.passes[:-1]:
-        fed[p.name] = pass_reference_map(p, left, right, word_bits, band_rows, fed)
-    return fed
+        results[p.name] = pass_reference_map(p, left, right, word_bits, band_rows=band_rows, results=results)
+    return results
 
 
-def right_reference_map(left: FeatureSums, right: FeatureSums, model: ModelParams,
-                        word_bits: int | None = None, band_rows: int | None = None) -> np.ndarray:
-    """census-lr's right pass's MAPs (Ho, Wr) over :func:`~host.likelihoods.right_columns`: float64
-    (``word_bits`` None) or on words. -1 only with ``lr_right_nomatch`` (its no-match row won)."""
-    return pass_reference_map(model.pass_named("right"), left, right, word_bits, band_rows)
-
-
-def _fed(model: ModelParams, right_map: np.ndarray | None) -> dict[str, np.ndarray]:
-    return {} if right_map is None else {"right": right_map}
-
-
-def reference_fast(left: FeatureSums, right: FeatureSums, model: ModelParams, out: np.ndarray | None = None,
+def reference_fast(left: Planes, right: Planes, model: ModelParams, *, out: np.ndarray | None = None,
                    rows: slice | None = None, above: np.ndarray | None = None,
-                   right_map: np.ndarray | None = None) -> Reference:
+                   results: Mapping[str, np.ndarray] | None = None) -> Reference:
     """The float64 reference of output rows ``rows`` (default all) by the compiled kernels.
 
     ``out``, if given, receives the posterior: float64 of shape (rows, Wo, Dmax+2). With the
     neighbour prior, ``above`` is the MAP row (Wo,) above ``rows`` (needed unless rows start at 0).
-    census-lr needs ``right_map``, the right pass's MAPs of ``rows`` (:func:`right_reference_map`'s).
+    A model with declared passes needs their MAPs of ``rows`` by name, ``results`` (:func:`declared_maps`).
     """
-    return pass_reference(model.passes[-1], left, right, None, out, rows, above, _fed(model, right_map))
+    return pass_reference(model.passes[-1], left, right, None, out=out, rows=rows, above=above,
+                          results=results)
 
 
-def reference_quantized(left: FeatureSums, right: FeatureSums, model: ModelParams, word_bits: int,
+def reference_quantized(left: Planes, right: Planes, model: ModelParams, word_bits: int, *,
                         out: np.ndarray | None = None, rows: slice | None = None,
-                        above: np.ndarray | None = None, right_map: np.ndarray | None = None) -> Reference:
+                        above: np.ndarray | None = None,
+                        results: Mapping[str, np.ndarray] | None = None) -> Reference:
     """The exact inference on the ``word_bits``-bit words (any model), rows ``rows``: each hypothesis's
-    value the exact integer product of its words, normalized (float64). census-lr: ``right_map`` the right
-    pass's MAPs on words (:func:`right_reference_map` with ``word_bits``)."""
-    return pass_reference(model.passes[-1], left, right, word_bits, out, rows, above, _fed(model, right_map))
+    value the exact integer product of its words, normalized (float64). ``results``: the declared passes'
+    MAPs on words (:func:`declared_maps` with ``word_bits``)."""
+    return pass_reference(model.passes[-1], left, right, word_bits, out=out, rows=rows, above=above,
+                          results=results)
 
 
-def _bands(left: FeatureSums, right: FeatureSums, model: ModelParams, word_bits: int | None,
+def _bands(left: Planes, right: Planes, model: ModelParams, word_bits: int | None,
            band_rows: int | None) -> Iterator[tuple[slice, Reference]]:
     """The output pass band by band (declared passes first), one posterior buffer reused."""
     region = OutputRegion.of_features(left.shape, model.dmax)
-    fed = declared_maps(model, left, right, word_bits, band_rows)
+    results = declared_maps(model, left, right, word_bits, band_rows)
     buffer: np.ndarray | None = None
     above = None  # an ABOVE column's row above the band: the previous band's last MAP row
     for rows in region.bands(band_rows):
         n = rows.stop - rows.start
         if buffer is None or buffer.shape[0] < n:
             buffer = np.empty((n, region.shape[1], model.hypotheses))
-        band = pass_reference(model.passes[-1], left, right, word_bits, buffer[:n], rows, above,
-                              {k: v[rows] for k, v in fed.items()})
+        band = pass_reference(model.passes[-1], left, right, word_bits, out=buffer[:n], rows=rows,
+                              above=above, results={k: v[rows] for k, v in results.items()})
         above = band.map[-1].copy()
         yield rows, band
 
 
-def reference_bands(left: FeatureSums, right: FeatureSums, model: ModelParams,
+def reference_bands(left: Planes, right: Planes, model: ModelParams,
                     band_rows: int | None = None) -> Iterator[tuple[slice, Reference]]:
     """The float64 reference band by band: (output rows, their Reference), top to bottom.
 
@@ -474,7 +499,7 @@ def reference_bands(left: FeatureSums, right: FeatureSums, model: ModelParams,
     return _bands(left, right, model, None, band_rows)
 
 
-def reference_map(left: FeatureSums, right: FeatureSums, model: ModelParams,
+def reference_map(left: Planes, right: Planes, model: ModelParams,
                   band_rows: int | None = None) -> np.ndarray:
     """The MAP (Ho, Wo) int16 (-1 = no match) of every output pixel, band by band."""
     region = OutputRegion.of_features(left.shape, model.dmax)
@@ -484,7 +509,7 @@ def reference_map(left: FeatureSums, right: FeatureSums, model: ModelParams,
     return out
 
 
-def reference_quantized_map(left: FeatureSums, right: FeatureSums, model: ModelParams, word_bits: int,
+def reference_quantized_map(left: Planes, right: Planes, model: ModelParams, word_bits: int,
                             band_rows: int | None = None) -> np.ndarray:
     """The quantized reference's MAP (Ho, Wo) int16 (-1 = no match), band by band."""
     region = OutputRegion.of_features(left.shape, model.dmax)
@@ -504,8 +529,9 @@ def warm_up(model: ModelParams | None = None) -> None:
     if model.name in _warm:
         return
     small = model.replace(dmax=1)
-    img = np.zeros((8, 9), np.uint8)  # room for a 7x7 census and Dmax 1
-    f = model_features(img, small)
+    k = small.margin
+    img = np.zeros((2 * k + 2, 2 * k + 3), np.uint8)  # room for the largest window and Dmax 1
+    f = model_planes(img, small)
     reference_map(f, f, small)
     reference_quantized_map(f, f, small, 10)
     _warm.add(model.name)
@@ -514,18 +540,17 @@ def warm_up(model: ModelParams | None = None) -> None:
 def reference(left: np.ndarray, right: np.ndarray, model: ModelParams) -> Reference:
     """Validate a gray pair and run the fast reference on it (the declared passes first)."""
     validate_pair(left, right, model.dmax, model.margin)
-    fl, fr = model_features(left, model), model_features(right, model)
-    fed = declared_maps(model, fl, fr)
-    return pass_reference(model.passes[-1], fl, fr, fed=fed)
+    fl, fr = model_planes(left, model), model_planes(right, model)
+    return pass_reference(model.passes[-1], fl, fr, results=declared_maps(model, fl, fr))
 
 
-def reference_plain(left: FeatureSums, right: FeatureSums, model: ModelParams) -> Reference:
+def reference_plain(left: Planes, right: Planes, model: ModelParams) -> Reference:
     """The reference by the plain vectorized float64 formula (memory-hungry: test oracle; a model whose
-    columns all come from the features)."""
+    columns all come from the planes)."""
     lik, nm = likelihoods_plain(left, right, model)
     cols = [c for c in model.columns if c.source is Source.FEATURES]
     if len(cols) != len(model.columns):
-        raise ValueError(f"reference_plain: the {model.name} model has columns not from the features")
+        raise ValueError(f"reference_plain: the {model.name} model has columns not from the planes")
     unnorm = np.empty((*lik.shape[:2], model.hypotheses))
     unnorm[..., :-1] = lik[..., 0]
     unnorm[..., -1] = nm
@@ -537,7 +562,7 @@ def reference_plain(left: FeatureSums, right: FeatureSums, model: ModelParams) -
     return Reference(unnorm / unnorm.sum(axis=-1, keepdims=True), map_from_index(index, model.dmax))
 
 
-def reference_prior_plain(left: FeatureSums, right: FeatureSums, model: ModelParams) -> Reference:
+def reference_prior_plain(left: Planes, right: Planes, model: ModelParams) -> Reference:
     """A model's reference pixel by pixel in plain Python over ``likelihoods_plain`` (test oracle; no PASS
     column). Slow and direct: the raster-order prior from each prior column's formula and the MAPs so far."""
     lik, nm = likelihoods_plain(left, right, model)

@@ -5,13 +5,13 @@ MAP, ground truth cut to the output region); ``run_machine`` streams the likelih
 through an engine one chunk of map rows at a time (engines keep their LFSR state across
 calls, so chunking does not change results); ``run_pair`` does both and the metrics.
 The run makes every pass the model declares (:attr:`~bayesmachine.models.ModelParams.passes`), each on
-its own machine of the same engine kind, and feeds each column from where it says
-(:class:`~bayesmachine.columns.Source`): a FEATURES column from the pair's features, an ABOVE column
-from the pass's own results of map row y - 1 (none for row 0), a PASS column from the results of the
-pass it names for the same row (census-lr's consistency column: the right pass's MAPs, which that
-pass produced just before); a FEEDBACK column is formed by the machine from its previous result, each
-row's first pixel flagged ``line_start``. A pass with such columns runs one map row per call. A
-declared pass's results are kept as ``run.right`` (census-lr's right pass).
+its own machine of the same engine kind, map row by map row in order, and each column builds its words
+from where it says (:meth:`~bayesmachine.columns.Column.words`): a FEATURES column from the pair's
+planes, an ABOVE column from the pass's own results of map row y - 1 (none for row 0), a PASS column
+from the results of the pass it names for the same row (census-lr's consistency column: the right
+pass's MAPs, which that pass produced just before); a FEEDBACK column is formed by the machine from its
+previous result, each row's first pixel flagged ``line_start``. A pass with a column fed by results runs
+one map row per call. The declared passes' results are kept by pass name (``run.passes``).
 Memory grows with the outputs (per-pixel maps and counts), not with frame x Dmax: the
 float64 posterior is only ever computed one band of rows at a time.
 """
@@ -26,7 +26,6 @@ from dataclasses import dataclass, field
 import numpy as np
 from tqdm import tqdm
 
-from bayesmachine.columns import Source
 from bayesmachine.models import ModelParams, Pass, pass_machine
 from bayesmachine.outputs import require_memory
 from bayesmachine.params import MachineParams
@@ -35,11 +34,11 @@ from bayesmachine.sim.engines import ENGINES, PIXEL_ENGINES, get_engine, get_pix
 from bayesmachine.sim.results import MachineResult, disparities
 
 from .confidence import ConfidenceParams
-from .features import FeatureSums, model_features
+from .features import Planes, model_planes
 from .images import validate_pair
 from .likelihoods import pass_grid, pass_words
 from .metrics import RunMetrics, evaluate, gt_region
-from .records import MachineRun, Prepared, RightPass, counts_dtype
+from .records import MachineRun, PassRecord, Prepared, counts_dtype
 from .reference import reference_map, warm_up
 
 __all__ = [
@@ -77,7 +76,7 @@ def prepare(
     left: np.ndarray, right: np.ndarray, model: ModelParams, gt: np.ndarray | None = None,
     reference: bool = True,
 ) -> Prepared:
-    """Validate the pair, compute the features and the float64 reference MAP (band by band).
+    """Validate the pair, compute its planes and the float64 reference MAP (band by band).
 
     ``reference=False`` skips the reference (``reference_map`` is None): enough to run the
     machine (``run_machine``, e.g. to measure its cycles), not to evaluate it."""
@@ -87,43 +86,33 @@ def prepare(
     if reference:
         warm_up(model)  # keep numba's cache load / compilation out of reference_seconds
     t0 = time.perf_counter()
-    feats = (model_features(left, model), model_features(right, model))
-    ref_map = reference_map(*feats, model) if reference else None
+    planes = (model_planes(left, model), model_planes(right, model))
+    ref_map = reference_map(*planes, model) if reference else None
     seconds = time.perf_counter() - t0
     cut = gt_region(gt, model.dmax, model.margin) if gt is not None else None
-    return Prepared(left, right, model, feats, ref_map, seconds, cut, gt)
+    return Prepared(left, right, model, planes, ref_map, seconds, cut, gt)
 
 
 def _want_progress(progress: bool | None) -> bool:
     return sys.stderr.isatty() if progress is None else progress
 
 
-def _row_words(p: Pass, features: tuple[FeatureSums, FeatureSums], machine: MachineParams, rows: slice,
-               above: np.ndarray, fed: Mapping[str, np.ndarray]) -> np.ndarray:
-    """The words of pass ``p``'s map rows ``rows``, each column fed from where it says: an ABOVE column
-    from ``above`` (the pass's own MAP row above: -1 for none), a PASS column from ``fed`` (the MAP row of
-    the pass feeding it, by name)."""
-    region = OutputRegion.of_features(features[0].shape, p.model.dmax)
-    prior = fed_words = None
-    for c in p.columns:
-        if c.source is Source.ABOVE:
-            prior = c.loaded(c.table(machine.word_bits), above)
-        elif c.source is Source.PASS:
-            first = pass_grid(p.model.pass_named(c.feeds_from), region).first
-            fed_words = c.loaded(c.table(machine.word_bits), fed[c.feeds_from], first,
-                                 pass_grid(p, region).columns)
-    return pass_words(p, *features, machine, rows, prior, fed_words)
+def _row_words(p: Pass, planes: tuple[Planes, Planes], machine: MachineParams, rows: slice,
+               above: np.ndarray, results: Mapping[str, np.ndarray]) -> np.ndarray:
+    """The words of pass ``p``'s map rows ``rows``, each column's from where it says: ``above`` (the pass's
+    own MAP row above: -1 for none), ``results`` (the other passes' MAPs of these rows, by name)."""
+    return pass_words(p, *planes, machine, rows=rows, above=above, results=results)
 
 
 def _row_by_row(p: Pass) -> bool:
     """Whether pass ``p`` runs one map row per call: a column fed by the machine's own results (its
     previous result, the row above) or by another pass's row."""
-    return any(c.source is not Source.FEATURES for c in p.columns)
+    return any(c.source.from_results for c in p.columns)
 
 
-def _line_starts(p: Pass, width: int) -> np.ndarray | None:
-    """Each map row's first pixel flagged (no left neighbour), for a pass with a FEEDBACK column."""
-    if not any(c.source is Source.FEEDBACK for c in p.columns):
+def _line_starts(machine: MachineParams, width: int) -> np.ndarray | None:
+    """Each map row's first pixel flagged (no left neighbour), for a machine with a feedback column."""
+    if not machine.feedback_columns:
         return None
     starts = np.zeros(width, bool)
     starts[0] = True
@@ -137,8 +126,8 @@ class _PassRun:
                  engine_options: dict[str, object] | None, machines: int = 1) -> None:
         self.p = p
         self.machine = machine
-        self.features = prepared.features
-        region = OutputRegion.of_features(prepared.features[0].shape, p.model.dmax)
+        self.planes = prepared.planes
+        region = OutputRegion.of_features(prepared.planes[0].shape, p.model.dmax)
         self.width = pass_grid(p, region).width
         ho = region.shape[0]
         self.map = np.full((ho, self.width), -1, np.int16)  # the answers (disparities): -1 no match
@@ -149,15 +138,15 @@ class _PassRun:
         self.wall: int | None = None
         self.engines = [get_engine(engine, machine, **(engine_options or {})) for _ in range(machines)]
 
-    def run(self, rows: slice, fed: Mapping[str, np.ndarray]) -> MachineResult:
-        """Run map rows ``rows`` (one, where the pass's columns need it) and keep their results; ``fed``:
-        the other passes' MAPs so far, by name."""
+    def run(self, rows: slice, results: Mapping[str, np.ndarray]) -> MachineResult:
+        """Run map rows ``rows`` (one, where the pass's columns need it) and keep their results;
+        ``results``: the other passes' MAPs so far, by name."""
         t0 = time.perf_counter()
         y0 = rows.start
         above = np.full(self.width, -1, np.int16) if y0 == 0 else self.follow[y0 - 1]
-        fed_row = {k: v[y0] for k, v in fed.items()}
-        words = _row_words(self.p, self.features, self.machine, rows, above, fed_row)
-        starts = _line_starts(self.p, self.width)
+        words = _row_words(self.p, self.planes, self.machine, rows, above,
+                           {k: v[rows] for k, v in results.items()})
+        starts = _line_starts(self.machine, self.width)
         t1 = time.perf_counter()
         eng = self.engines[y0 % len(self.engines)]
         res = eng.run(words) if starts is None else eng.run(words, line_start=starts)
@@ -175,9 +164,9 @@ class _PassRun:
         for eng in self.engines:
             eng.close()  # the Verilator harness is a process: end it now, not at garbage collection
 
-    def record(self) -> RightPass:
-        # A feeding pass's MAPs are what the pass it feeds followed (timeouts no information).
-        return RightPass(self.machine, self.follow, self.cycles, self.timeout, self.seconds, self.wall)
+    def record(self) -> PassRecord:
+        # A feeding pass's MAPs are what the passes it feeds followed (timeouts no information).
+        return PassRecord(self.machine, self.follow, self.cycles, self.timeout, self.seconds, self.wall)
 
 
 def run_machine(
@@ -236,7 +225,7 @@ def run_machine(
                 rows = slice(y0, min(ho, y0 + chunk_rows))
                 for r in runs:
                     r.run(rows, {q.p.name: q.follow for q in runs})
-                res = own.run(rows, {q.p.name: q.follow for q in runs})
+                res = own.run(rows, {q.p.name: q.follow for q in runs})  # every declared pass's, by name
                 n = rows.stop - rows.start
                 counts[rows] = np.asarray(res.counts).reshape(n, wo, m)
                 nomatch[rows] = np.asarray(res.nomatch).reshape(n, wo)
@@ -244,10 +233,9 @@ def run_machine(
     finally:
         for r in (*runs, own):
             r.close()
-    right = runs[0].record() if runs else None
     # own.map: a timeout is no match unless the machine answers it with its leading row (timeout_answer).
     return MachineRun(engine, machine, own.map, counts, own.cycles, nomatch, own.timeout, own.seconds,
-                      own.words_seconds, own.wall, right)
+                      own.words_seconds, own.wall, {r.p.name: r.record() for r in runs})
 
 
 def _run_pixels(
@@ -278,16 +266,17 @@ def _run_pixels(
     dtype = counts_dtype(machine.counter_max)
     counts = None if res.counts is None else res.counts.reshape(ho, wo, m).astype(dtype)
     cycles = None if res.cycles is None else res.cycles.reshape(ho, wo)
-    right = None
+    passes = {}
     if r is not None:
-        # The right pass ran on chip beside the left one (its own machine, the same clock): it adds no
+        # The declared pass ran on chip beside the own one (its own machine, the same clock): it adds no
         # wall cycles of its own, the frame's (first pixel in to last result out) are both passes'.
-        from bayesmachine.hdl.frontend.lr import right_pass_params
+        from bayesmachine.hdl.frontend.lr import pass_params
 
-        wr = r.map.size // ho
-        right = RightPass(right_pass_params(model, machine), r.neighbour_answers().reshape(ho, wr),
-                          r.cycles.reshape(ho, wr), r.timeout.reshape(ho, wr), seconds, 0)
-    return MachineRun(engine, machine, disp, counts, cycles, nomatch, timeout, seconds, 0.0, wall, right,
+        p = model.passes[0]  # the pixel engines run one declared pass (last_right)
+        w = r.map.size // ho
+        passes[p.name] = PassRecord(pass_params(model, machine, p.name), r.neighbour_answers().reshape(ho, w),
+                                    r.cycles.reshape(ho, w), r.timeout.reshape(ho, w), seconds, 0)
+    return MachineRun(engine, machine, disp, counts, cycles, nomatch, timeout, seconds, 0.0, wall, passes,
                       figures)
 
 
@@ -309,13 +298,13 @@ def machines_model(
     parts: list[MachineResult] = []
     try:
         for left, right in frames:
-            feats = (model_features(left, model), model_features(right, model))
-            ho, wo = OutputRegion.of_features(feats[0].shape, model.dmax).shape
+            planes = (model_planes(left, model), model_planes(right, model))
+            ho, wo = OutputRegion.of_features(planes[0].shape, model.dmax).shape
             above = np.full(wo, -1, np.int16)
-            starts = _line_starts(p, wo)
+            starts = _line_starts(machine, wo)
             for y in range(ho):
                 eng = engines[y % machines]
-                words = _row_words(p, feats, machine, slice(y, y + 1), above, {})
+                words = _row_words(p, planes, machine, slice(y, y + 1), above, {})
                 res = eng.run(words) if starts is None else eng.run(words, line_start=starts)
                 above = res.neighbour_answers()
                 parts.append(res)

@@ -100,12 +100,12 @@ def measure_frame(params: MachineParams, model: ModelParams, *, width: int, fifo
 
 
 def _same_run(got: MachineRun, want: MachineRun) -> bool:
-    """Whether two runs' maps, counts, cycles, timeouts and no-match flags (and census-lr's right
-    pass's MAPs, cycles and timeouts) are equal."""
+    """Whether two runs' maps, counts, cycles, timeouts and no-match flags (and each declared pass's
+    MAPs, cycles and timeouts: census-lr's right pass) are equal."""
     names = ("map", "counts", "cycles", "timeout", "nomatch")
     if not all(np.array_equal(getattr(got, n), getattr(want, n)) for n in names):
         return False
-    if (got.right is None) != (want.right is None):
+    if got.passes.keys() != want.passes.keys():
         return False
-    return got.right is None or all(np.array_equal(getattr(got.right, n), getattr(want.right, n))
-                                    for n in ("map", "cycles", "timeout"))
+    return all(np.array_equal(getattr(got.passes[k], n), getattr(want.passes[k], n))
+               for k in got.passes for n in ("map", "cycles", "timeout"))

@@ -127,7 +127,7 @@ def test_bench_samples_compares_every_b_with_b_1_whatever_the_order(monkeypatch,
 
     def measure(prep, model, b):  # noqa: ANN001, ANN202
         run = SimpleNamespace(map=maps[b], nomatch=maps[b] < 0, timeout=np.zeros(2, bool), counts=maps[b],
-                              cycles=np.full(2, cycles[b]), right=None)
+                              cycles=np.full(2, cycles[b]), passes={})
         return {"machine": SimpleNamespace(samples_per_clock=b), "run": run, "seconds": 0.0,
                 "cycles_per_pixel": cycles[b], "wall_cycles_per_pixel": 0.0,
                 "wall_cycles_per_pixel_one_beat": 0.0, "timeouts": 0}

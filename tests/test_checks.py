@@ -13,7 +13,7 @@ from bayesmachine.checks import as_bool, as_int, as_real, plain
 from bayesmachine.errors import ParameterError
 from bayesmachine.host.calib import StereoCalibration
 from bayesmachine.host.confidence import ConfidenceParams
-from bayesmachine.models import ModelParams, check_disparity_machine, disparity_machine, right_machine
+from bayesmachine.models import ModelParams, check_disparity_machine, disparity_machine, pass_machine
 from bayesmachine.params import MachineParams, nth_machine
 
 HUGE = 10**400  # float(HUGE) is an OverflowError
@@ -85,7 +85,7 @@ def test_numpy_scalars_are_accepted_and_kept_as_python_values(make, want) -> Non
     (lambda: StereoCalibration(fx=1, fy=1, cx=0, cy=0, baseline=1, width=640.0), "width must be an integer"),
     (lambda: disparity_machine("census"),
      r"model must be a ModelParams \(e.g. ModelParams\(name='census'\)\), not str 'census'"),
-    (lambda: right_machine("census-lr", None), "model must be a ModelParams"),
+    (lambda: pass_machine("census-lr", None, "right"), "model must be a ModelParams"),
     (lambda: check_disparity_machine(ModelParams(name="paper", dmax=4), "m"),
      "machine must be a MachineParams"),
 ])

@@ -16,13 +16,13 @@ import numpy as np
 import pytest
 from conftest import assert_same_results, run_sim
 
-from bayesmachine.columns import AbovePrior, Census
+from bayesmachine.columns import Census
 from bayesmachine.hdl.frontend.census import CensusFilter
 from bayesmachine.hdl.frontend.filters import FeatureFilter
 from bayesmachine.hdl.frontend.linebuffer import LineBuffer, column_windows
 from bayesmachine.hdl.frontend.stereo import FrontEnd, StereoMachine, stereo_machine_params
 from bayesmachine.hdl.frontend.tables import frontend_tables
-from bayesmachine.host.features import census_codes, model_features
+from bayesmachine.host.features import census_codes, model_planes
 from bayesmachine.host.images import bundled_pair
 from bayesmachine.host.likelihoods import memory_words
 from bayesmachine.models import ModelParams
@@ -76,10 +76,10 @@ def test_census_filter_equals_host_census_codes(window: int) -> None:
 
 def test_seven_high_line_buffer_and_lagged_filter_give_the_census_grid_features() -> None:
     """The 7-high column's middle 5 lines through a filter with lag 1: the 5x5 sums around the
-    7x7 windows' centres (``model_features`` of a 7x7 census model)."""
+    7x7 windows' centres (``model_planes`` of a 7x7 census model)."""
     height, width = 10, 12
     image = np.random.default_rng(8).integers(0, 256, (height, width), dtype=np.uint8)
-    want = model_features(image, _census(1))
+    want = model_planes(image, _census(1))
     lines, filt = LineBuffer(width=width, height=7), FeatureFilter(lag=1)
     from amaranth.hdl import Module
 
@@ -143,7 +143,7 @@ def test_census_frontend_words_equal_host_memory_words(name: str) -> None:
     frames = [_noisy_pair(h, w, seed=i) for i, (h, w) in enumerate(shapes)]
     got = run_frontend(FrontEnd(params=params, model=model, width=shapes[0][1]), frames,
                        in_stall=0.2, out_stall=0.3, seed=2)
-    want = np.concatenate([memory_words(model_features(lf, model), model_features(rf, model), model, params)
+    want = np.concatenate([memory_words(model_planes(lf, model), model_planes(rf, model), model, params)
                            for lf, rf in frames])
     assert got.shape == want.shape
     assert np.array_equal(got, want), np.argwhere(got != want)[:5]
@@ -164,15 +164,13 @@ def test_neighbour_frontend_words_equal_host_words_with_the_above_prior(width: i
     maps = rng.integers(-1, model.dmax + 1, sum(rows) * wo)
     got, flags = run_frontend_neighbour(FrontEnd(params=params, model=model, width=width), frames, maps,
                                         in_stall=0.2, out_stall=0.2, result_delay=delay, seed=3)
-    prior = model.column(AbovePrior)
-    qt = prior.table(params.word_bits)
     want, starts, k = [], [], 0
     for (lf, rf), h in zip(frames, rows, strict=True):
-        fl, fr = model_features(lf, model), model_features(rf, model)
+        fl, fr = model_planes(lf, model), model_planes(rf, model)
         for y in range(h):
             above = np.full(wo, -1) if y == 0 else maps[k - wo : k]
             want.append(memory_words(fl, fr, model, params, rows=slice(y, y + 1),
-                                     prior=prior.loaded(qt, above)))
+                                     above=above))
             starts += [1] + [0] * (wo - 1)
             k += wo
     want = np.concatenate(want)
@@ -187,15 +185,13 @@ def _model_run(frames: list[tuple[np.ndarray, np.ndarray]], model: ModelParams, 
     """The model fed as ``host.run.run_machine`` feeds it: map row by map row, the above column from
     its own results of the row before, ``line_start`` on each row's first pixel; frames back to back."""
     engine = MachineModel(params)
-    prior = model.column(AbovePrior)
-    qt = prior.table(params.word_bits)
     parts = []
     for lf, rf in frames:
-        fl, fr = model_features(lf, model), model_features(rf, model)
+        fl, fr = model_planes(lf, model), model_planes(rf, model)
         ho, wo = fl.m25.shape[0], fl.m25.shape[1] - model.dmax
         above = np.full(wo, -1)
         for y in range(ho):
-            words = memory_words(fl, fr, model, params, rows=slice(y, y + 1), prior=prior.loaded(qt, above))
+            words = memory_words(fl, fr, model, params, rows=slice(y, y + 1), above=above)
             starts = np.zeros(wo, bool)
             starts[0] = True
             res = engine.run(words, line_start=starts)

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from conftest import assert_same_results, run_sim
 
-from bayesmachine.columns import AbovePrior, Consistency, lr_consistent, lr_unknown
+from bayesmachine.columns import Consistency, lr_consistent, lr_unknown
 from bayesmachine.hdl.frontend.filters import feature_layout
 from bayesmachine.hdl.frontend.lr import ConsistencyTest, RightPassFeeder, right_pass_params
 from bayesmachine.hdl.frontend.stereo import (
@@ -25,10 +25,10 @@ from bayesmachine.hdl.frontend.stereo import (
     check_stereo_machine,
     stereo_machine_params,
 )
-from bayesmachine.host.features import model_features
+from bayesmachine.host.features import model_planes
 from bayesmachine.host.images import bundled_pair
-from bayesmachine.host.likelihoods import memory_words, right_columns, right_memory_words
-from bayesmachine.models import ModelParams, right_machine
+from bayesmachine.host.likelihoods import memory_words, pass_grid, pass_words
+from bayesmachine.models import ModelParams, pass_machine
 from bayesmachine.params import ParameterError
 from bayesmachine.region import OutputRegion
 from bayesmachine.sim.model import MachineModel
@@ -148,7 +148,7 @@ def test_right_pass_feeder_delays_the_reference_and_flushes_each_output_row(dmax
 ])
 def test_lr_frontend_words_equal_host_words(model: ModelParams, width: int, delay: int) -> None:
     """With stand-in results for both machines (given late, up to ``delay`` cycles after a pixel's
-    words), the right pass's words are ``right_memory_words`` (its above column from the stand-in right
+    words), the right pass's words are ``pass_words`` (its above column from the stand-in right
     results of the row before) and the left pass's ``memory_words`` with the consistency column of the
     stand-in right MAPs of its row (``Consistency.loaded``)."""
     params = stereo_machine_params(model.dmax, model=model, counter_max=2)
@@ -163,20 +163,20 @@ def test_lr_frontend_words_equal_host_words(model: ModelParams, width: int, dela
     got, flags, got_r, flags_r = run_frontend_lr(front, frames, maps, right_maps, in_stall=0.2, out_stall=0.2,
                                                  result_delay=delay, seed=3)
     w = params.word_bits
-    above_col, lr = model.column(AbovePrior), model.column(Consistency)
-    right_above_col = model.pass_named("right").model.column(AbovePrior)
+    lr = model.column(Consistency)
     want, want_r, k, kr = [], [], 0, 0
     for (lf, rf), h in zip(frames, rows, strict=True):
-        fl, fr = model_features(lf, model), model_features(rf, model)
-        cols = right_columns(OutputRegion.of_features(fl.shape, model.dmax))
+        fl, fr = model_planes(lf, model), model_planes(rf, model)
+        cols = pass_grid(model.pass_named("right"), OutputRegion.of_features(fl.shape, model.dmax)).columns
         for y in range(h):
             r_above = np.full(wr, -1) if y == 0 else right_maps[kr - wr : kr]
-            want_r.append(right_memory_words(fl, fr, model, rp, rows=slice(y, y + 1),
-                                             prior=right_above_col.loaded(right_above_col.table(w), r_above)))
+            want_r.append(pass_words(model.pass_named("right"), fl, fr, rp, rows=slice(y, y + 1),
+                                     above=r_above))
             column = lr.loaded(lr.table(w), right_maps[kr : kr + wr], int(cols[0]), cols[model.dmax:])
             above = np.full(wo, -1) if y == 0 else maps[k - wo : k]
             want.append(memory_words(fl, fr, model, params, rows=slice(y, y + 1),
-                                     prior=above_col.loaded(above_col.table(w), above), fed=column))
+                                     above=above, results={"right": right_maps[kr : kr + wr][None]}))
+            assert np.array_equal(want[-1][:, :, -1], column)
             k += wo
             kr += wr
     want_r_all, want_all = np.concatenate(want_r), np.concatenate(want)
@@ -195,29 +195,28 @@ def _model_run(frames: list[tuple[np.ndarray, np.ndarray]], model: ModelParams,
     """Both passes on the model as ``host.run.run_machine`` runs census-lr, frames back to back (one
     engine per pass, so the random sources carry over as on chip): per map row, the right pass's row
     (its above column from its own previous row), then the left pass's with the consistency words."""
-    rparams = right_machine(model, params)
+    rparams = pass_machine(model, params, "right")
     left_eng, right_eng = MachineModel(params), MachineModel(rparams)
     w = params.word_bits
-    above_col, lr = model.column(AbovePrior), model.column(Consistency)
-    right_above_col = model.pass_named("right").model.column(AbovePrior)
+    lr = model.column(Consistency)
     left, right = [], []
     for lf, rf in frames:
-        fl, fr = model_features(lf, model), model_features(rf, model)
+        fl, fr = model_planes(lf, model), model_planes(rf, model)
         region = OutputRegion.of_features(fl.shape, model.dmax)
-        cols = right_columns(region)
+        cols = pass_grid(model.pass_named("right"), region).columns
         ho, wo = region.shape
         above, right_above = np.full(wo, -1), np.full(cols.size, -1)
         for y in range(ho):
             rows = slice(y, y + 1)
-            rw = right_memory_words(fl, fr, model, rparams, rows=rows,
-                                    prior=right_above_col.loaded(right_above_col.table(w), right_above))
+            rw = pass_words(model.pass_named("right"), fl, fr, rparams, rows=rows, above=right_above)
             starts = np.zeros(cols.size, bool)
             starts[0] = True
             res_r = right_eng.run(rw, line_start=starts)
             right_above = np.where(res_r.nomatch | res_r.timeout, -1, res_r.map)
             cw = lr.loaded(lr.table(w), right_above, int(cols[0]), region.map_columns)
             words = memory_words(fl, fr, model, params, rows=rows,
-                                 prior=above_col.loaded(above_col.table(w), above), fed=cw)
+                                 above=above, results={"right": right_above[None]})
+            assert np.array_equal(words[:, :, -1], cw)
             starts = np.zeros(wo, bool)
             starts[0] = True
             res = left_eng.run(words, line_start=starts)

@@ -11,7 +11,7 @@ import pytest
 from bayesmachine.cli import main
 from bayesmachine.columns import GradMag, likelihood_formula, quantize
 from bayesmachine.hdl.frontend.stereo import FrontEnd, stereo_machine_params
-from bayesmachine.host.features import feature_sums
+from bayesmachine.host.features import model_planes
 from bayesmachine.host.images import bundled_pair
 from bayesmachine.host.likelihoods import memory_words, memory_words_plain
 from bayesmachine.models import ModelParams, disparity_machine
@@ -40,7 +40,9 @@ def test_table_is_the_formula_of_the_gradient_magnitudes() -> None:
     costs = np.array([0, 1, 20, 77, 5100])
     assert np.array_equal(column.table().values[costs], likelihood_formula(costs, 20, 0.1, 4.0))
     assert len(column.table().values) == 5101  # |g_l - g_r| <= 2 x (2550 + 2550) / 2
-    left = feature_sums(np.random.default_rng(1).integers(0, 256, (9, 9), dtype=np.uint8))
+    image = np.random.default_rng(1).integers(0, 256, (9, 9), dtype=np.uint8)
+    left = model_planes(image, ModelParams(**GRAD))
+    assert set(left) == {"m25", "gh20", "gv20", "g20"}  # the planes its columns declare
     assert np.array_equal(left.g20, np.abs(left.gh20) + np.abs(left.gv20))
 
 
@@ -49,7 +51,7 @@ def test_host_words_equal_the_plain_formula() -> None:
     left, right = (rng.integers(0, 256, (9, 20), dtype=np.uint8) for _ in range(2))
     model = ModelParams(**GRAD, dmax=5, sigma_g=6.0)
     machine = disparity_machine(model)
-    fl, fr = feature_sums(left), feature_sums(right)
+    fl, fr = model_planes(left, model), model_planes(right, model)
     words = memory_words(fl, fr, model, machine)
     assert np.array_equal(words, memory_words_plain(fl, fr, model, machine))
     # Operator column 3 (the g column), row d of the first output pixel: the formula at |g_l - g_r(x-d)|.
@@ -69,7 +71,7 @@ def test_frontend_words_equal_the_host_words(options: dict) -> None:
     params = stereo_machine_params(6, model=model, counter_max=4, **options)
     got = run_frontend(FrontEnd(params=params, model=model, width=w), [(left, right)], in_stall=0.2,
                        out_stall=0.3, seed=2)
-    want = memory_words(feature_sums(left), feature_sums(right), model, params)
+    want = memory_words(model_planes(left, model), model_planes(right, model), model, params)
     assert got.shape == want.shape
     assert np.array_equal(got, want), np.argwhere(got != want)[:5]
 

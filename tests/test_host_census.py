@@ -14,12 +14,12 @@ import pytest
 from bayesmachine.cliargs import with_flag
 from bayesmachine.columns import AbovePrior, Census, neighbour_words, quantize
 from bayesmachine.host.features import (
-    FeatureSums,
+    Planes,
     census_codes,
     census_codes_plain,
     census_offsets,
     feature_sums,
-    model_features,
+    model_planes,
 )
 from bayesmachine.host.images import random_dot_stereogram
 from bayesmachine.host.likelihoods import (
@@ -254,7 +254,7 @@ def test_census_bit_order_is_raster():
     # The features of a 7x7-census model share that grid: the 5x5 sums around the same centres.
     img2 = np.random.default_rng(5).integers(0, 256, (12, 14), dtype=np.uint8)
     census = ModelParams(dmax=2, name="census")
-    f7, f5 = model_features(img2, census), feature_sums(img2)
+    f7, f5 = model_planes(img2, census), feature_sums(img2)
     assert census.margin == 3 and f7.census.shape == f7.m25.shape == (6, 8)
     np.testing.assert_array_equal(f7.m25, f5.m25[1:-1, 1:-1])
     np.testing.assert_array_equal(f7.gv20, f5.gv20[1:-1, 1:-1])
@@ -278,7 +278,7 @@ def _pair(dmax: int, window: int = 7, seed: int = 5, **kw):
     right = right.copy()
     right[4:10, 16:24] = 128
     model = ModelParams(**{"dmax": dmax, "name": "census", "census_window": window, **kw})
-    return model_features(left, model), model_features(right, model), model
+    return model_planes(left, model), model_planes(right, model), model
 
 
 @pytest.mark.parametrize("window", [5, 7])
@@ -302,16 +302,19 @@ def test_census_words_equal_plain_formula(window):
 def test_words_with_the_neighbour_prior():
     fl, fr, model = _pair(6)
     machine = disparity_machine(model)
-    with pytest.raises(ParameterError, match="^prior: .*previous map row"):
-        memory_words(fl, fr, model, machine)  # the above words must come from the machine's results
-    p = fl.shape[0] * (fl.shape[1] - 6)
+    with pytest.raises(ParameterError, match="^above: .*map row above, one map row at a time"):
+        memory_words(fl, fr, model, machine, rows=slice(2, 3))  # the above MAPs: the machine's results
+    with pytest.raises(ParameterError, match="^above: "):
+        memory_words(fl, fr, model, machine, above=np.full(fl.shape[1] - 6, -1))  # all rows: not one
+    wo = fl.shape[1] - 6
     rng = np.random.default_rng(0)
-    pw = neighbour_words(model.column(AbovePrior).table(10), 6, rng.integers(-1, 7, p))
-    words = memory_words(fl, fr, model, machine, prior=pw)
-    assert words.shape == (p, 8, machine.loaded_columns) == (p, 8, 5)  # the feedback column is not loaded
-    np.testing.assert_array_equal(words[:, :, 0], pw)
+    above = rng.integers(-1, 7, wo)
+    words = memory_words(fl, fr, model, machine, rows=slice(2, 3), above=above)
+    assert words.shape == (wo, 8, machine.loaded_columns) == (wo, 8, 5)  # the feedback column is not loaded
+    want = neighbour_words(model.column(AbovePrior).table(10), 6, above)
+    np.testing.assert_array_equal(words[:, :, 0], want)
     no_prior = ModelParams(dmax=6, name="census", neighbour_prior=False)
-    plain = memory_words(fl, fr, no_prior, disparity_machine(no_prior))
+    plain = memory_words(fl, fr, no_prior, disparity_machine(no_prior), rows=slice(2, 3))
     np.testing.assert_array_equal(words[:, :, 1:], plain)
 
 
@@ -346,7 +349,7 @@ def test_machine_checks_are_one_function():
     assert check_disparity_machine(no_prior, MachineParams.for_disparity(6, columns=4, prior="loaded")) == 1
     fl, fr, _ = _pair(6)
     with pytest.raises(ParameterError, match="census column needs the census"):
-        bare = FeatureSums(fl.m25, fl.gh20, fl.gv20)  # no census codes
+        bare = Planes({name: fl[name] for name in ("m25", "gh20", "gv20")})  # no census codes
         memory_words(bare, fr, no_prior, MachineParams.for_disparity(6, columns=4))
 
 
@@ -404,11 +407,9 @@ def _quantized_plain(fl, fr, model, word_bits):
     prior = model.column(AbovePrior)
     fb = machine.feedback_words
     for y in range(ho):
-        if prior is not None:  # the above column: this inference's own previous row
-            above = prior.loaded(prior.table(word_bits), disp[y - 1] if y > 0 else np.full(wo, -1))
-            words = memory_words(fl, fr, model, machine, rows=slice(y, y + 1), prior=above)
-        else:
-            words = memory_words(fl, fr, model, machine, rows=slice(y, y + 1))
+        # the above column: this inference's own previous row
+        above = (disp[y - 1] if y > 0 else np.full(wo, -1)) if prior is not None else None
+        words = memory_words(fl, fr, model, machine, rows=slice(y, y + 1), above=above)
         for x in range(wo):
             w = [[int(v) for v in row] for row in words[x]]
             left = disp[y, x - 1] if x > 0 else -1
@@ -448,8 +449,16 @@ def test_quantized_reference_of_the_paper_model():
     paper = ModelParams(name="paper", dmax=8)
     got = reference_quantized(fl, fr, paper, 6)
     np.testing.assert_array_equal(got.map, _quantized_plain(fl, fr, paper, 6)[0])
-    with pytest.raises(ParameterError, match="^word_bits"):  # 4 data words and 2 prior words of 11 bits
-        reference_quantized(fl, fr, ModelParams(dmax=8, name="census"), 11)
+    census = ModelParams(dmax=8, name="census")
+    with pytest.raises(ParameterError, match="^word_bits: words of 1 to 15 bits, got 16"):
+        reference_quantized(fl, fr, census, 16)
+    # 4 data words and 2 prior words of 11 bits (66 bits) or 15 bits (90 bits): products of two limbs,
+    # exact.
+    for w in (11, 15):
+        want_map, want_post = _quantized_plain(fl, fr, census, w)
+        got = reference_quantized(fl, fr, census, w)
+        np.testing.assert_array_equal(got.map, want_map)
+        np.testing.assert_allclose(got.posterior, want_post, rtol=1e-12, atol=1e-300)
     # The paper model's three words take the widest words (their product fits 62 bits at W = 15).
     wide = reference_quantized(fl, fr, paper, 15)
     np.testing.assert_array_equal(wide.map, _quantized_plain(fl, fr, paper, 15)[0])
@@ -465,7 +474,7 @@ def test_machine_runs_the_census_model_without_the_prior():
     model = ModelParams(dmax=10, name="census", neighbour_prior=False)
     machine = MachineParams.for_disparity(10, columns=4, rng="sobol", counter_max=16)
     out = run_pair(left, right, model, machine, engine="model", gt=gt, sgbm=False)
-    assert out.prepared.features[0].census is not None  # prepare() computed the model's features
+    assert set(out.prepared.planes[0]) == {"m25", "gh20", "gv20", "census"}  # prepare(): the model's planes
     assert out.metrics.map_agreement > 0.9
     assert out.metrics.bad["machine"]["bad2"] < 0.1
     # With the neighbour prior the machine needs its neighbour prior (its feedback column, and the

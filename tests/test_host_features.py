@@ -63,11 +63,73 @@ def test_matches_direct_correlation_on_random_images():
     rng = np.random.default_rng(3)
     img = rng.integers(0, 256, size=(23, 31), dtype=np.uint8)
     fast, plain = feature_sums(img), feature_sums_plain(img)
-    for a, b in zip(fast.as_tuple(), plain.as_tuple(), strict=True):
-        assert a.shape == (19, 27)
-        np.testing.assert_array_equal(a, b)
+    assert list(fast) == list(plain) == ["m25", "gh20", "gv20"]
+    for name in fast:
+        assert fast[name].shape == (19, 27)
+        np.testing.assert_array_equal(fast[name], plain[name])
 
 
 def test_too_small():
     with pytest.raises(ValueError, match="too small"):
         feature_sums(np.zeros((4, 9), np.uint8))
+
+
+# --- Planes declared by the columns ---
+
+def test_a_model_computes_exactly_the_planes_its_columns_declare():
+    from bayesmachine.host.features import census_codes, model_planes
+    from bayesmachine.models import ModelParams
+
+    img = np.random.default_rng(4).integers(0, 256, (15, 21), dtype=np.uint8)
+    sums = ["m25", "gh20", "gv20"]
+    for kwargs, planes, margin in (({"name": "paper"}, sums, 2),
+                                   ({"name": "paper", "gradient_magnitude": True}, [*sums, "g20"], 2),
+                                   ({"name": "census"}, [*sums, "census"], 3),
+                                   ({"name": "census", "census_window": 5}, [*sums, "census"], 2)):
+        model = ModelParams(**kwargs)
+        got = model_planes(img, model)
+        assert list(got) == planes and model.margin == margin, kwargs
+        assert got.shape == (15 - 2 * margin, 21 - 2 * margin)
+        k = margin - 2  # the 5x5 sums cut to the model's grid
+        np.testing.assert_array_equal(got.gv20, feature_sums(img).gv20[k : 11 - k, k : 17 - k])
+    np.testing.assert_array_equal(model_planes(img, ModelParams(name="census")).census, census_codes(img, 7))
+    with pytest.raises(AttributeError, match="no plane 'census' \\(planes: m25, gh20, gv20\\)"):
+        _ = model_planes(img, ModelParams(name="paper")).census
+
+
+def test_two_declarations_of_one_plane_name_are_refused():
+    """The right pass keeping the census model's 5x5 window beside the left pass's 7x7: one name, two
+    planes."""
+    from bayesmachine.columns import AbovePrior, Census, Consistency, LeftPrior, Mean
+    from bayesmachine.models import MODELS, ModelDef, ModelParams, PassDef, register_model
+
+    definition = ModelDef(name="two-windows", description="a right pass of another census window",
+                          columns=(LeftPrior, AbovePrior, Mean, Census, Consistency),
+                          passes=(PassDef(name="right", model="census", reference="right", machine_index=1,
+                                          not_inherited=("census_window",)),),
+                          defaults={"census_window": 5})
+    with pytest.raises(ValueError, match="^model 'two-windows': its defaults give no model: plane census: "
+                       "the left pass \\(model two-windows\\)'s census reads it of 5x5 windows, the right "
+                       "pass \\(model census\\)'s census of 7x7"):
+        register_model(definition)
+    assert "two-windows" not in MODELS
+    assert ModelParams(name="census-lr", census_window=5).margin == 2  # both passes' windows follow
+
+
+def test_planes_are_a_read_only_mapping():
+    from bayesmachine.host.features import Planes
+
+    a = np.zeros((3, 4), np.int32)
+    planes = Planes({"m25": a, "gv20": a + 1})
+    assert planes.shape == (3, 4) and len(planes) == 2 and planes["gv20"][0, 0] == 1
+    assert planes.band(slice(1, 2)).shape == (1, 4)
+    with pytest.raises(AttributeError, match="read-only"):
+        planes.m25 = a
+    with pytest.raises(ValueError, match="2-D arrays of one shape"):
+        Planes({"m25": a, "gv20": np.zeros((2, 4))})
+    with pytest.raises(ValueError, match="at least one"):
+        Planes({})
+    import pickle
+
+    again = pickle.loads(pickle.dumps(planes))
+    assert list(again) == ["m25", "gv20"] and np.array_equal(again.gv20, planes.gv20)

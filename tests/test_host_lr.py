@@ -13,21 +13,16 @@ from conftest import require_tool
 
 from bayesmachine.columns import (
     SCALES,
-    AbovePrior,
     Consistency,
     likelihood_formula,
     lr_consistent,
     lr_unknown,
     quantize,
 )
-from bayesmachine.host.features import model_features
+from bayesmachine.host.features import model_planes
 from bayesmachine.host.images import random_dot_stereogram
-from bayesmachine.host.likelihoods import memory_words, right_columns, right_memory_words
-from bayesmachine.host.reference import (
-    reference_map,
-    reference_quantized_map,
-    right_reference_map,
-)
+from bayesmachine.host.likelihoods import memory_words, pass_grid, pass_words
+from bayesmachine.host.reference import declared_maps, reference_map, reference_quantized_map
 from bayesmachine.host.run import prepare, run_machine
 from bayesmachine.models import (
     CENSUS_WATCHDOG_RUNS,
@@ -35,13 +30,26 @@ from bayesmachine.models import (
     ModelParams,
     disparity_machine,
     machine_layout,
-    right_machine,
+    pass_machine,
 )
 from bayesmachine.params import ParameterError, nth_machine
 from bayesmachine.region import OutputRegion
 from bayesmachine.sim.engines import get_engine
 
 DMAX = 6
+
+
+def right_machine(model, machine):
+    return pass_machine(model, machine, "right")
+
+
+def right_columns(model, region):
+    """The right pass's map columns: every right column an output pixel reads."""
+    return pass_grid(model.pass_named("right"), region).columns
+
+
+def right_reference_map(fl, fr, model, word_bits=None, band_rows=None):
+    return declared_maps(model, fl, fr, word_bits, band_rows)["right"]
 
 
 @pytest.fixture(scope="module")
@@ -155,15 +163,14 @@ def _plain_likelihood(model, fa, fb, ca, cb, a, b):
 def test_right_pass_words_against_the_formula(pair, right_nomatch):
     left, right, _ = pair
     model = ModelParams(dmax=DMAX, name="census-lr", lr_right_nomatch=right_nomatch)
-    fl, fr = model_features(left, model), model_features(right, model)
+    fl, fr = model_planes(left, model), model_planes(right, model)
     machine = right_machine(model, disparity_machine(model))
     region = OutputRegion.of_features(fl.shape, DMAX)
-    xr = right_columns(region)
+    xr = right_columns(model, region)
     assert xr[0] == region.map_columns[0] - DMAX and xr[-1] == region.map_columns[-1]
     y = 3
-    above = model.pass_named("right").model.column(AbovePrior)
-    prior = above.loaded(above.table(machine.word_bits), np.full(xr.size, -1, np.int16))
-    words = right_memory_words(fl, fr, model, machine, rows=slice(y, y + 1), prior=prior)
+    words = pass_words(model.pass_named("right"), fl, fr, machine, rows=slice(y, y + 1),
+                       above=np.full(xr.size, -1, np.int16))
     assert words.shape == (xr.size, DMAX + 2, machine.loaded_columns)
     last = int(region.map_columns[-1])
     for j, x in enumerate(xr):
@@ -188,7 +195,7 @@ def test_right_pass_words_against_the_formula(pair, right_nomatch):
 def _brute_right_pass(model, fl, fr, word_bits=None):
     """The right pass pixel by pixel: float64 (formula) or exact Python-integer products of words."""
     region = OutputRegion.of_features(fl.shape, model.dmax)
-    xr = right_columns(region)
+    xr = right_columns(model, region)
     last = int(region.map_columns[-1])
     out = np.full((region.shape[0], xr.size), -1, np.int64)
     one = 1.0 if word_bits is None else 1 << word_bits
@@ -238,7 +245,7 @@ def _brute_right_pass(model, fl, fr, word_bits=None):
 def test_right_pass_reference_against_brute_force(pair, word_bits, right_nomatch):
     left, right, _ = pair
     model = ModelParams(dmax=DMAX, name="census-lr", lr_right_nomatch=right_nomatch)
-    fl, fr = model_features(left, model), model_features(right, model)
+    fl, fr = model_planes(left, model), model_planes(right, model)
     got = right_reference_map(fl, fr, model, word_bits, band_rows=4)  # bands carry the row above
     want = _brute_right_pass(model, fl, fr, word_bits)
     np.testing.assert_array_equal(got, want)
@@ -247,7 +254,7 @@ def test_right_pass_reference_against_brute_force(pair, word_bits, right_nomatch
 
 def _brute_left_pass(model, fl, fr, right_map, word_bits=None):
     region = OutputRegion.of_features(fl.shape, model.dmax)
-    xr0 = int(right_columns(region)[0])
+    xr0 = int(right_columns(model, region)[0])
     ho, wo = region.shape
     out = np.full((ho, wo), -1, np.int64)
     wb = word_bits
@@ -297,7 +304,7 @@ def test_left_pass_reference_against_brute_force(pair, word_bits, lr_nomatch, ri
     left, right, _ = pair
     model = ModelParams(dmax=DMAX, name="census-lr", lr_nomatch=lr_nomatch, lr_right_nomatch=right_nomatch,
                         lr_neutral=neutral)
-    fl, fr = model_features(left, model), model_features(right, model)
+    fl, fr = model_planes(left, model), model_planes(right, model)
     right_map = _brute_right_pass(model, fl, fr, word_bits)
     want = _brute_left_pass(model, fl, fr, right_map, word_bits)
     if word_bits is None:
@@ -316,7 +323,7 @@ def test_neutral_lanes_change_the_left_pass(pair):
     no-match get 1, not beta) on this pair: the brute-force test above is not vacuous for it."""
     left, right, _ = pair
     base = ModelParams(dmax=DMAX, name="census-lr", lr_right_nomatch=True, lr_neutral=False)
-    fl, fr = model_features(left, base), model_features(right, base)
+    fl, fr = model_planes(left, base), model_planes(right, base)
     neutral = ModelParams(dmax=DMAX, name="census-lr", lr_right_nomatch=True, lr_neutral=True)
     assert (reference_map(fl, fr, base) != reference_map(fl, fr, neutral)).any()
     assert (reference_quantized_map(fl, fr, base, 10) != reference_quantized_map(fl, fr, neutral, 10)).any()
@@ -324,7 +331,7 @@ def test_neutral_lanes_change_the_left_pass(pair):
 
 def test_the_column_changes_the_census_model(pair, model):
     left, right, _ = pair
-    fl, fr = model_features(left, model), model_features(right, model)
+    fl, fr = model_planes(left, model), model_planes(right, model)
     census = ModelParams(dmax=DMAX, name="census")
     assert (reference_map(fl, fr, model) != reference_map(fl, fr, census)).any()
 
@@ -332,14 +339,13 @@ def test_the_column_changes_the_census_model(pair, model):
 def _hand_run(prepared, machine, engine="model"):
     """Both passes driven by hand, row by row: the right pass's row, then the left pass's row."""
     model = prepared.model
-    fl, fr = prepared.features
+    fl, fr = prepared.planes
     ho, wo = prepared.shape
     rmachine = right_machine(model, machine)
     region = OutputRegion.of_features(fl.shape, DMAX)
-    xr = right_columns(region)
+    xr = right_columns(model, region)
     w = machine.word_bits
-    left_above, lr = model.column(AbovePrior), model.column(Consistency)
-    right_above = model.pass_named("right").model.column(AbovePrior)
+    lr = model.column(Consistency)
     left_eng, right_eng = get_engine(engine, machine), get_engine(engine, rmachine)
     disp = np.full((ho, wo), -1, np.int64)
     above_left = np.full((ho, wo), -1, np.int64)  # what the left pass's next row follows
@@ -347,17 +353,16 @@ def _hand_run(prepared, machine, engine="model"):
     try:
         for y in range(ho):
             above = rmap[y - 1] if y else np.full(xr.size, -1)
-            rw = right_memory_words(fl, fr, model, rmachine, rows=slice(y, y + 1),
-                                    prior=right_above.loaded(right_above.table(w), above))
+            rw = pass_words(model.pass_named("right"), fl, fr, rmachine, rows=slice(y, y + 1), above=above)
             res = right_eng.run(rw, line_start=np.arange(xr.size) == 0)
             rmap[y] = np.where(res.nomatch | res.timeout, -1, res.map)
             ok = lr_consistent(rmap[y], int(xr[0]), region.map_columns, DMAX, model.lr_tolerance)
             unknown = lr_unknown(rmap[y], int(xr[0]), region.map_columns, DMAX) if model.lr_neutral else None
             cons = lr.values_of(lr.table(w), ok, unknown)
             lw = memory_words(fl, fr, model, machine, rows=slice(y, y + 1),
-                              prior=left_above.loaded(left_above.table(w),
-                                                      above_left[y - 1] if y else np.full(wo, -1)),
-                              fed=cons)
+                              above=above_left[y - 1] if y else np.full(wo, -1),
+                              results={"right": rmap[y][None]})
+            np.testing.assert_array_equal(lw[:, :, -1], cons)  # the column's words: the test written out
             res = left_eng.run(lw, line_start=np.arange(wo) == 0)
             # A timeout answers its leading row (the census models' machine), but the row below
             # follows overflowing runs only.
@@ -376,10 +381,11 @@ def test_run_machine_equals_a_hand_driven_run(pair, model):
     run = run_machine(prepared, machine, "model", progress=False)
     want, want_right = _hand_run(prepared, machine)
     np.testing.assert_array_equal(run.map, want)
-    np.testing.assert_array_equal(run.right.map, want_right)
-    assert run.right.machine == nth_machine(disparity_machine(model.pass_named("right").model, counter_max=8,
-                                                              max_cycles=RIGHT_WATCHDOG_RUNS * 9), 1)
-    assert run.right.cycles.shape == want_right.shape and (run.right.cycles > 8).all()
+    rp = run.passes["right"]
+    np.testing.assert_array_equal(rp.map, want_right)
+    assert rp.machine == nth_machine(disparity_machine(model.pass_named("right").model, counter_max=8,
+                                                       max_cycles=RIGHT_WATCHDOG_RUNS * 9), 1)
+    assert rp.cycles.shape == want_right.shape and (rp.cycles > 8).all()
     assert (run.map >= 0).mean() > 0.5
 
 
@@ -392,8 +398,8 @@ def test_right_pass_watchdog(pair):
     assert rmachine.max_cycles == 20 and machine.max_cycles == disparity_machine(
         ModelParams(dmax=DMAX, name="census-lr"), counter_max=8).max_cycles
     run = run_machine(prepare(left, right, model, gt), machine, "model", progress=False)
-    assert run.right.timeout.any() and (run.right.cycles <= 20).all()
-    np.testing.assert_array_equal(run.right.map[run.right.timeout], -1)
+    assert run.passes["right"].timeout.any() and (run.passes["right"].cycles <= 20).all()
+    np.testing.assert_array_equal(run.passes["right"].map[run.passes["right"].timeout], -1)
     with pytest.raises(ParameterError, match="^lr_right_max_cycles = 8 must exceed"):
         disparity_machine(ModelParams(dmax=DMAX, name="census-lr", lr_right_max_cycles=8), counter_max=8)
 
@@ -453,10 +459,10 @@ def test_machine_near_its_quantized_reference(pair, model):
     # The references have no watchdog: hold the sampler to them with the machine's long one.
     machine = disparity_machine(model, counter_max=32, max_cycles=(1 << 20) - 1)
     run = run_machine(prepared, machine, "model", progress=False)
-    fl, fr = prepared.features
+    fl, fr = prepared.planes
     q = reference_quantized_map(fl, fr, model, 10)
     assert np.mean(run.map == q) > 0.8
-    assert np.mean(run.right.map == right_reference_map(fl, fr, model, 10)) > 0.8
+    assert np.mean(run.passes["right"].map == right_reference_map(fl, fr, model, 10)) > 0.8
 
 
 @pytest.mark.parametrize("engine", ["pysim", pytest.param("verilator", marks=pytest.mark.eda)])
@@ -471,12 +477,13 @@ def test_engines_equal_the_model(engine, verilator_cache):
     prepared = prepare(left, right, small, gt)
     machine = disparity_machine(small, counter_max=3)
     want = run_machine(prepared, machine, "model", progress=False)
-    assert small.lr_neutral and (want.right.map < 0).any()  # right no-match calls: neutral lanes read
+    assert small.lr_neutral and (want.passes["right"].map < 0).any()  # right no-match calls: neutral lanes
     got = run_machine(prepared, machine, engine, progress=False, engine_options=options)
     for name in ("map", "counts", "cycles", "timeout"):
         np.testing.assert_array_equal(getattr(got, name), getattr(want, name), err_msg=name)
     for name in ("map", "cycles", "timeout"):
-        np.testing.assert_array_equal(getattr(got.right, name), getattr(want.right, name), err_msg=name)
+        np.testing.assert_array_equal(getattr(got.passes["right"], name), getattr(want.passes["right"], name),
+                                      err_msg=name)
 
 
 @pytest.fixture(scope="module")
@@ -515,16 +522,16 @@ def test_cli_run_census_lr(pair_files, pair, tmp_path):
     want = run_machine(prepare(left, right, model, gt), machine, "model", progress=False)
     npz = np.load(out / "result.npz")
     np.testing.assert_array_equal(npz["map"], want.map)
-    np.testing.assert_array_equal(npz["right_map"], want.right.map)
+    np.testing.assert_array_equal(npz["right_map"], want.passes["right"].map)
     # Cycles per pixel count both passes; the right pass's own figures beside them.
-    both = (want.cycles.sum() + want.right.cycles.sum()) / want.map.size
+    both = (want.cycles.sum() + want.passes["right"].cycles.sum()) / want.map.size
     assert report["cycles_per_pixel_mean"] == pytest.approx(both)
     assert report["left_pass_cycles_per_pixel_mean"] == pytest.approx(want.cycles.mean())
-    assert report["right_pass_cycles_per_pixel_mean"] == pytest.approx(want.right.cycles.mean())
-    assert report["right_pass_pixels"] == want.right.map.size
-    assert report["right_pass_timeouts"] == int(want.right.timeout.sum())
+    assert report["right_pass_cycles_per_pixel_mean"] == pytest.approx(want.passes["right"].cycles.mean())
+    assert report["right_pass_pixels"] == want.passes["right"].map.size
+    assert report["right_pass_timeouts"] == int(want.passes["right"].timeout.sum())
     assert report["machine"]["max_cycles"] == CENSUS_WATCHDOG_RUNS * 9  # census-lr's default watchdog
-    assert report["frame_cycles"] == int(want.cycles.sum() + want.right.cycles.sum())
+    assert report["frame_cycles"] == int(want.cycles.sum() + want.passes["right"].cycles.sum())
 
 
 def test_cli_census_lr_without_its_right_nomatch_neutral_lanes_and_watchdog(pair_files, tmp_path):
@@ -623,7 +630,7 @@ def test_whole_bundled_pair_meets_the_issue():
     # pixels than the census model's (22 %) and SGBM's (37 %); the watchdog's calls bring it below 50 %.
     assert bad["machine"]["nomatch_occluded"] > max(0.45, bad["sgbm"]["nomatch_occluded"])
     run = out.run
-    both = (run.cycles.sum() + run.right.cycles.sum()) / run.cycles.size
+    both = (run.cycles.sum() + run.passes["right"].cycles.sum()) / run.cycles.size
     assert both <= 3 * 58.65
 
 
@@ -631,9 +638,11 @@ def test_reference_of_a_pair_runs_the_right_pass_first(pair, model):
     from bayesmachine.host.reference import reference, reference_fast
 
     left, right, _ = pair
-    fl, fr = model_features(left, model), model_features(right, model)
+    fl, fr = model_planes(left, model), model_planes(right, model)
     got = reference(left, right, model)
     np.testing.assert_array_equal(got.map, reference_map(fl, fr, model))
     np.testing.assert_allclose(got.posterior.sum(axis=-1), 1.0)
-    with pytest.raises(ValueError, match="needs the right pass's MAPs"):
+    with pytest.raises(ParameterError, match="^results: the lr column's words come from the right pass's"):
         reference_fast(fl, fr, model)
+    with pytest.raises(ValueError, match=r"right pass's MAPs of its rows, shape \(8, 28\), got \(8, 3\)"):
+        reference_fast(fl, fr, model, results={"right": np.zeros((8, 3), np.int16)})

@@ -10,7 +10,7 @@ import pytest
 
 from bayesmachine import cliargs
 from bayesmachine.cli import build_parser, main
-from bayesmachine.host.features import model_features
+from bayesmachine.host.features import model_planes
 from bayesmachine.host.images import random_dot_stereogram
 from bayesmachine.host.reference import reference_map
 from bayesmachine.host.run import prepare, run_machine
@@ -151,7 +151,7 @@ def test_reference_census(pair, tmp_path):
                  "--quiet", "-o", str(out)]) == 0
     _, left, right, _ = pair
     model = ModelParams(dmax=DMAX, name="census")
-    want = reference_map(model_features(left, model), model_features(right, model), model)
+    want = reference_map(model_planes(left, model), model_planes(right, model), model)
     np.testing.assert_array_equal(np.load(out)["map"], want)
 
 
@@ -241,14 +241,14 @@ def test_emit_census_machine(tmp_path, capsys):
 def test_a_watchdog_error_names_the_option_that_sets_it(pair, tmp_path, capsys):
     """census-lr at counter max 1 with B = 16: the right pass's 8 runs x 2 = 16 cycles do not exceed B;
     the error blamed --max-cycles, which the user never gave and which does not set that watchdog."""
-    from bayesmachine.models import CENSUS_WATCHDOG_RUNS, right_machine
+    from bayesmachine.models import CENSUS_WATCHDOG_RUNS, pass_machine
     from bayesmachine.params import ParameterError
 
     model = ModelParams(name="census-lr", dmax=DMAX)
     machine = disparity_machine(model, counter_max=1, samples_per_clock=16)
     watchdog = r"the right pass's watchdog \(16 cycles: by default 8 runs"
     with pytest.raises(ParameterError, match=watchdog) as e:
-        right_machine(model, machine)
+        pass_machine(model, machine, "right")
     assert e.value.parameter == "lr_right_max_cycles"
     argv = _args(pair, "--model", "census-lr", "--counter-max", "1", "--samples-per-clock", "16")
     assert main(["run", *argv, "-o", str(tmp_path / "o")]) == 2

@@ -31,7 +31,7 @@ def prepared():
 
 def hand_run(prepared, machine, max_rows: int | None = None):
     model = prepared.model
-    fl, fr = prepared.features
+    fl, fr = prepared.planes
     ho, wo = prepared.shape
     column = model.column(AbovePrior)
     q = column.table(machine.word_bits)
@@ -40,8 +40,8 @@ def hand_run(prepared, machine, max_rows: int | None = None):
     maps, cycles = [], []
     for y in range(ho if max_rows is None else max_rows):
         above = disp[y - 1] if y > 0 else np.full(wo, -1)
-        prior = column.loaded(q, above)
-        words = memory_words(fl, fr, model, machine, rows=slice(y, y + 1), prior=prior)
+        words = memory_words(fl, fr, model, machine, rows=slice(y, y + 1), above=above)
+        np.testing.assert_array_equal(words[:, :, 0], column.loaded(q, above))  # the above column
         starts = np.arange(wo) == 0
         res = eng.run(words, line_start=starts)
         disp[y] = res.neighbour_answers()  # a timeout's leading row is an answer, not a neighbour's MAP
@@ -64,24 +64,21 @@ def test_the_prior_changes_the_results(prepared):
     machine = disparity_machine(prepared.model, counter_max=8)
     run = run_machine(prepared, machine, "model", progress=False)
     # The same machine with every pixel a line start and no above neighbour: no prior at all.
-    fl, fr = prepared.features
+    fl, fr = prepared.planes
     ho, wo = prepared.shape
-    words = memory_words(fl, fr, prepared.model, machine,
-                         prior=np.full((ho * wo, DMAX + 2), machine.word_one, np.uint16))
+    words = np.concatenate([memory_words(fl, fr, prepared.model, machine, rows=slice(y, y + 1),
+                                         above=np.full(wo, -1)) for y in range(ho)])
+    assert (words[:, :, 0] == machine.word_one).all()  # no above neighbour: a factor 1
     flat = get_engine("model", machine).run(words, line_start=np.ones(ho * wo, bool))
     flat_map = np.where(flat.nomatch | flat.timeout, -1, flat.map).reshape(ho, wo)
     assert (flat_map != run.map).mean() > 0.02
     # A wrong above column (the row above shifted) changes the results too.
     model = prepared.model
-    column = model.column(AbovePrior)
-    q = column.table(machine.word_bits)
     eng = get_engine("model", machine)
     y = 5
     eng2 = get_engine("model", machine)
-    good = memory_words(fl, fr, model, machine, rows=slice(y, y + 1),
-                        prior=column.loaded(q, run.map[y - 1]))
-    shifted = memory_words(fl, fr, model, machine, rows=slice(y, y + 1),
-                           prior=column.loaded(q, np.roll(run.map[y - 1], 3)))
+    good = memory_words(fl, fr, model, machine, rows=slice(y, y + 1), above=run.map[y - 1])
+    shifted = memory_words(fl, fr, model, machine, rows=slice(y, y + 1), above=np.roll(run.map[y - 1], 3))
     a = eng.run(good, line_start=np.arange(wo) == 0)
     b = eng2.run(shifted, line_start=np.arange(wo) == 0)
     assert not np.array_equal(a.counts, b.counts)
@@ -92,7 +89,7 @@ def test_the_machine_is_close_to_its_references(prepared):
 
     machine = disparity_machine(prepared.model, counter_max=16)
     run = run_machine(prepared, machine, "model", progress=False)
-    fl, fr = prepared.features
+    fl, fr = prepared.planes
     q = reference_quantized_map(fl, fr, prepared.model, machine.word_bits)
     assert np.mean(run.map == q) > 0.85
     assert np.mean(run.map == prepared.reference_map) > 0.85

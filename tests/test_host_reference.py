@@ -103,3 +103,68 @@ def test_bands_equal_the_whole_frame(rds, band_rows):
     np.testing.assert_array_equal(np.concatenate(posts), whole.posterior)
     np.testing.assert_array_equal(np.concatenate(maps), whole.map)
     np.testing.assert_array_equal(reference_map(fl, fr, model, band_rows), whole.map)
+
+
+# --- Any number of FEATURES columns ---
+
+@pytest.fixture(scope="module")
+def five():
+    """A model of five FEATURES columns (the paper's, census, gradient magnitude), registered here."""
+    from bayesmachine.columns import Census, GradH, GradMag, GradV, Mean
+    from bayesmachine.models import MODELS, ModelDef, register_model
+
+    register_model(ModelDef(name="five-columns", description="five FEATURES columns",
+                            columns=(Mean, GradH, GradV, Census, GradMag)))
+    try:
+        yield ModelParams(name="five-columns", dmax=10, census_sigma=4.0)
+    finally:
+        MODELS.pop("five-columns")
+
+
+def test_five_feature_columns_fast_equals_plain(rds, five):
+    from bayesmachine.host.features import model_planes
+
+    left, right, _ = rds
+    fl, fr = model_planes(left, five), model_planes(right, five)
+    fast, plain = reference_fast(fl, fr, five), reference_plain(fl, fr, five)
+    np.testing.assert_array_equal(fast.map, plain.map)
+    np.testing.assert_allclose(fast.posterior, plain.posterior, rtol=1e-13, atol=1e-300)
+    banded = reference_map(fl, fr, five, band_rows=7)
+    np.testing.assert_array_equal(banded, fast.map)
+    # The fifth column changes the paper's answer here and there (it is in the product).
+    paper = ModelParams(name="paper", dmax=10)
+    assert (reference_map(fl, fr, paper) != fast.map).any()
+
+
+@pytest.mark.parametrize("word_bits", [10, 15])
+def test_five_feature_columns_on_words_are_python_integer_products(rds, five, word_bits):
+    """5 words of 10 bits: 50 bits, one int64; of 15 bits: 75 bits, two limbs (the kernel takes the
+    first four columns, the fifth is a factor)."""
+    import math
+
+    from bayesmachine.host.features import model_planes
+    from bayesmachine.host.likelihoods import memory_words
+    from bayesmachine.host.products import limbs_for
+    from bayesmachine.host.reference import reference_quantized
+    from bayesmachine.models import disparity_machine
+
+    assert limbs_for(5, word_bits) == (1 if word_bits == 10 else 2)
+    left, right, _ = rds
+    rows = slice(10, 14)
+    fl, fr = (model_planes(im, five).band(slice(0, 24)) for im in (left, right))
+    machine = disparity_machine(five, word_bits=word_bits)
+    words = memory_words(fl, fr, five, machine, rows=rows)
+    products = [[math.prod(int(v) for v in row) for row in pixel] for pixel in words]
+    want = np.array([max(range(len(p)), key=lambda j: (p[j], -j)) for p in products])
+    want[want == five.dmax + 1] = -1
+    got = reference_quantized(fl, fr, five, word_bits, rows=rows)
+    np.testing.assert_array_equal(got.map.reshape(-1), want)
+    post = np.array([[v / sum(p) for v in p] for p in products])
+    np.testing.assert_allclose(got.posterior.reshape(post.shape), post, rtol=1e-12, atol=1e-300)
+
+
+def test_limbs_for():
+    from bayesmachine.host.products import limbs_for
+
+    assert [limbs_for(n, 10) for n in (1, 6, 7, 9, 10)] == [1, 1, 2, 2, 3]  # 62, 94, 126 bits a limb count
+    assert limbs_for(4, 15) == 1 and limbs_for(5, 15) == 2 and limbs_for(7, 15) == 3

@@ -64,7 +64,7 @@ def test_bad_geometry(shape, dmax, message):
 def test_a_models_margin_keeps_its_windows_inside_the_image():
     """The 7x7 census model's region is one pixel further inside (margin 3); the paper model's and a
     5x5 census's are the 5x5 filters' (margin 2, as before margins existed)."""
-    from bayesmachine.host.features import model_features
+    from bayesmachine.host.features import model_planes
     from bayesmachine.models import ModelParams
 
     img = np.arange(12 * 20).reshape(12, 20)
@@ -75,7 +75,7 @@ def test_a_models_margin_keeps_its_windows_inside_the_image():
     # Output pixel (0, 0) is map pixel (0, dmax), centred on image pixel (3, dmax + 3).
     assert cut[0, 0] == img[3, 8] and cut[-1, -1] == img[8, 16]
     assert OutputRegion.of_features(r.feature_shape, 5, 3) == r
-    assert model_features(img.astype(np.uint8), census).m25.shape == r.feature_shape
+    assert model_planes(img.astype(np.uint8), census).m25.shape == r.feature_shape
     for paper_like in (ModelParams(name="paper", dmax=5),
                        ModelParams(dmax=5, name="census", census_window=5)):
         assert OutputRegion.of_model(img.shape, paper_like) == OutputRegion.of_image(img.shape, 5)

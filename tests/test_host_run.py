@@ -113,7 +113,7 @@ def test_banded_rms_equals_the_whole_posterior(pair, prepared):
     """evaluate() recomputes the posterior band by band; the figure is the one of the whole volume."""
     left, right, _ = pair
     run = run_machine(prepared, MachineParams.for_disparity(DMAX, counter_max=8), progress=False)
-    whole = reference_fast(*prepared.features, prepared.model)
+    whole = reference_fast(*prepared.planes, prepared.model)
     np.testing.assert_array_equal(whole.map, prepared.reference_map)
     expected = rms_error(run.counts, 8, whole.posterior, whole.map >= 0)
     assert evaluate(prepared, run).rms_error == pytest.approx(expected, rel=1e-12)

@@ -42,9 +42,9 @@ def test_same_run_sees_every_difference(name: str) -> None:
         changed.flat[0] = not changed.flat[0] if changed.dtype == bool else changed.flat[0] + 1
         assert not _same_run(run, dataclasses.replace(run, **{field: changed})), field
     if name == "census-lr":
-        assert run.right is not None
-        cycles = run.right.cycles.copy()
+        assert list(run.passes) == ["right"]
+        cycles = run.passes["right"].cycles.copy()
         cycles.flat[-1] += 1
-        other = dataclasses.replace(run.right, cycles=cycles)
-        assert not _same_run(run, dataclasses.replace(run, right=other))
-        assert not _same_run(run, dataclasses.replace(run, right=None))
+        other = dataclasses.replace(run.passes["right"], cycles=cycles)
+        assert not _same_run(run, dataclasses.replace(run, passes={"right": other}))
+        assert not _same_run(run, dataclasses.replace(run, passes={}))

@@ -270,18 +270,18 @@ def test_census_lr_crop_under_verilator(verilator_builds) -> None:  # noqa: ANN0
     array for array."""
     from bayesmachine.host.images import Crop, bundled_pair, crop_image
     from bayesmachine.host.run import prepare, run_machine
-    from bayesmachine.models import ModelParams, disparity_machine, right_machine
+    from bayesmachine.models import ModelParams, disparity_machine, pass_machine
 
     left, right, gt = (crop_image(a, Crop(300, 200, 64, 12)) for a in bundled_pair())
     model = ModelParams(dmax=24, name="census-lr")
     prep = prepare(left, right, model, gt)
     machine = disparity_machine(model, normalize=True, max_cycles=256)
-    assert right_machine(model, machine).normalize
+    assert pass_machine(model, machine, "right").normalize
     runs = [run_machine(prep, machine, engine, progress=False) for engine in ("model", "verilator")]
     for field in ("map", "nomatch", "timeout", "counts", "cycles"):
         np.testing.assert_array_equal(getattr(runs[1], field), getattr(runs[0], field), err_msg=field)
-    np.testing.assert_array_equal(runs[1].right.map, runs[0].right.map)
-    np.testing.assert_array_equal(runs[1].right.cycles, runs[0].right.cycles)
+    np.testing.assert_array_equal(runs[1].passes['right'].map, runs[0].passes['right'].map)
+    np.testing.assert_array_equal(runs[1].passes['right'].cycles, runs[0].passes['right'].cycles)
 
 
 def test_command_line_flag() -> None:
@@ -290,14 +290,15 @@ def test_command_line_flag() -> None:
     the paper model unless given."""
     from bayesmachine.cli import build_parser
     from bayesmachine.cliargs import machine_params_from_args
-    from bayesmachine.models import ModelParams, right_machine
+    from bayesmachine.models import ModelParams, pass_machine
 
     parser = build_parser()
     model = ModelParams(dmax=8)
     on = machine_params_from_args(parser.parse_args(["run", "-o", "x"]), 8, model)
-    assert on.normalize and right_machine(model, on).normalize
+    assert on.normalize and pass_machine(model, on, "right").normalize
     off = machine_params_from_args(parser.parse_args(["run", "--no-normalize-columns", "-o", "x"]), 8, model)
-    assert not off.normalize and "normalize" not in off.to_dict() and not right_machine(model, off).normalize
+    assert not off.normalize and "normalize" not in off.to_dict()
+    assert not pass_machine(model, off, "right").normalize
     paper = ModelParams(dmax=8, name="paper")
     assert not machine_params_from_args(parser.parse_args(["run", "--model", "paper", "-o", "x"]), 8,
                                         paper).normalize

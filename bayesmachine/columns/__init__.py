@@ -3,6 +3,9 @@ operator column, and the AND gates multiply them).
 
 Each column kind (one module each) defines in one place:
 
+- the planes of both images it reads (a FEATURES column, and the no-match rule): each a
+  :class:`~.planes.Plane`, its name, filter and window, so that the host computes exactly the planes a
+  model reads and a model's margin follows from its windows;
 - its options: the model parameters it owns (:class:`~.base.Option`: default, check, help; the
   command line's flag is derived from the name);
 - its cost (a feature difference, a census Hamming distance, a prior distance |d - d_n|, the
@@ -13,8 +16,9 @@ Each column kind (one module each) defines in one place:
 - where its words come from (:class:`~.base.Source`): both images' features, the machine's own
   previous result (feedback), the previous map row's results (a loaded above column), or another
   pass's results;
-- its host words (the twin of the RTL's lane) and its reference factor: the same function of the same
-  cost, on the word table or on the float64 table;
+- its host words (the twin of the RTL's lane) and its reference factor: ``words(ctx)`` from a
+  :class:`~.base.PassContext` (both images' planes, the row above's MAPs, other passes' MAPs by name),
+  on the word table or on the float64 table;
 - its checks against a machine (``check_machine``).
 
 Kinds: :class:`~.features.Mean`, :class:`~.features.GradH`, :class:`~.features.GradV` (the paper's),
@@ -24,8 +28,8 @@ Kinds: :class:`~.features.Mean`, :class:`~.features.GradH`, :class:`~.features.G
 :class:`~.features.NoMatchFloor`. A model (:mod:`bayesmachine.models`) is a list of them.
 """
 
-from .base import Column, Option, Source, Table, Term, likelihood_formula, quantize
-from .census import CENSUS_SIGMA, CENSUS_WINDOWS, Census, census_bits, hamming
+from .base import Column, Option, PassContext, PlaneColumn, Source, Table, Term, likelihood_formula, quantize
+from .census import CENSUS_SIGMA, CENSUS_WINDOWS, Census, census_bits, census_codes, census_offsets, hamming
 from .consistency import RIGHT_PASS, Consistency, lr_consistent, lr_unknown, right_lanes_valid
 from .features import (
     FEATURE_COLUMNS,
@@ -39,18 +43,20 @@ from .features import (
     NoMatchFloor,
 )
 from .gradient import GRADIENT_MAGNITUDE, GradMag
+from .planes import Plane
 from .prior import NEIGHBOUR_PRIOR, AbovePrior, LeftPrior, NeighbourPrior, neighbour_words
 
 __all__ = [
-    "Column", "Option", "Source", "Table", "Term", "likelihood_formula", "quantize",
+    "Column", "PlaneColumn", "PassContext", "Plane", "Option", "Source", "Table", "Term",
+    "likelihood_formula", "quantize",
     "FEATURES", "SCALES", "MAX_ABS", "FeatureColumn", "Mean", "GradH", "GradV", "FEATURE_COLUMNS",
     "NoMatchFloor", "GRADIENT_MAGNITUDE", "GradMag",
-    "CENSUS_WINDOWS", "CENSUS_SIGMA", "Census", "census_bits", "hamming",
+    "CENSUS_WINDOWS", "CENSUS_SIGMA", "Census", "census_bits", "census_codes", "census_offsets", "hamming",
     "NEIGHBOUR_PRIOR", "NeighbourPrior", "LeftPrior", "AbovePrior", "neighbour_words",
     "RIGHT_PASS", "Consistency", "lr_consistent", "lr_unknown", "right_lanes_valid",
     "COLUMN_KINDS",
 ]
 
-# The closed set of column kinds (the numba reference kernels specialize over their sources).
+# The closed set of column kinds the package defines (each with its lane builder on chip).
 COLUMN_KINDS: tuple[type[Column], ...] = (Mean, GradH, GradV, GradMag, Census, LeftPrior, AbovePrior,
                                           Consistency)

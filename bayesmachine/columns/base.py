@@ -9,7 +9,7 @@ from __future__ import annotations
 import enum
 import math
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
@@ -17,12 +17,16 @@ import numpy as np
 from bayesmachine.checks import as_bool, as_int, as_real, shown
 from bayesmachine.errors import ParameterError
 
+from .planes import Plane
+
 __all__ = [
     "Source",
     "Option",
     "Table",
     "Term",
     "Column",
+    "PlaneColumn",
+    "PassContext",
     "likelihood_formula",
     "quantize",
     "check_int",
@@ -35,10 +39,21 @@ __all__ = [
 class Source(enum.Enum):
     """Where a column's words come from."""
 
-    FEATURES = "features"  # both images' features: the reference pixel's and its match's at lane d
+    FEATURES = "features"  # both images' planes: the reference pixel's and its match's at lane d
     FEEDBACK = "feedback"  # the machine's own previous result, formed by the machine (not loaded)
     ABOVE = "above"  # the same pass's results of the map row above: a loaded column
     PASS = "pass"  # another pass's results (census-lr's right MAPs): a loaded column
+
+    @property
+    def loaded(self) -> bool:
+        """Whether the host loads the column's words (a FEEDBACK column is formed by the machine)."""
+        return self is not Source.FEEDBACK
+
+    @property
+    def from_results(self) -> bool:
+        """Whether its words depend on results (the machine's own, or another pass's): a pass with such a
+        column runs one map row at a time."""
+        return self is not Source.FEATURES
 
 
 # The checks follow bayesmachine.checks: an integer is what operator.index takes (NumPy integers too), a
@@ -217,6 +232,15 @@ class Term:
     def nomatch_values(self) -> tuple[float, ...]:
         return ()
 
+    def planes(self) -> dict[str, Plane]:
+        """The planes of both images it reads, by name (none: it reads no image)."""
+        return {}
+
+    @property
+    def margin(self) -> int:
+        """Pixels from its largest window's centre to its edge (0: it reads no image)."""
+        return max((p.margin for p in self.planes().values()), default=0)
+
     def table(self, word_bits: int | None = None) -> Table:
         """The float64 table (``word_bits`` None) or its quantization to W-bit words, built once."""
         if word_bits not in self._tables:
@@ -252,18 +276,33 @@ class Term:
 class Column(Term):
     """One operator column of a pass: a piece of evidence the AND gates multiply in (paper sec. 3).
 
-    ``source`` says where its words come from (:class:`Source`); ``margin`` is the half-size of the
-    largest window its features need (the output region keeps every window inside the image).
-    FEATURES columns read ``plane`` of both images' :class:`~bayesmachine.host.features.FeatureSums`
-    and define ``cost(a, b)`` (reference values, match values) and ``plain_cost`` (an independent
-    computation: the test oracle's); their no-match entry is ``nomatch_entry(table)``. The other
-    kinds define how their words are formed from their source (``loaded`` or ``feedback``).
+    ``source`` says where its words come from (:class:`Source`); ``words(ctx)`` builds them (or their
+    float64 factors) for a pass's pixels from a :class:`PassContext`: the host's twin of its lanes on
+    chip. A FEATURES column is a :class:`PlaneColumn`; the others build their words from results (the
+    row above's MAPs, another pass's MAPs) or are formed by the machine (FEEDBACK: not loaded).
     """
 
     source: ClassVar[Source]
-    margin: ClassVar[int] = 2
-    plane: ClassVar[str] = ""
-    hamming: ClassVar[bool] = False  # FEATURES: the cost is popcount(a xor b), else |a - b|
+    feeds_from: ClassVar[str] = ""  # a PASS column: the name of the pass whose results it reads
+
+    def words(self, ctx: PassContext) -> np.ndarray:
+        """Its words (P, Dmax+2) of the pass's P pixels of ``ctx`` (row-major), in the domain of
+        ``ctx.word_bits`` (uint16 words, or float64 factors with None)."""
+        raise ValueError(f"the {self.name} column's words are formed by the machine, not loaded")
+
+
+class PlaneColumn(Column):
+    """A FEATURES column: its table at the cost of the reference pixel's and the match pixel's values of
+    its plane ``plane`` (declared with its filter and window by :meth:`planes`).
+
+    A subclass defines ``cost(a, b)`` (reference values, match values), ``plain_cost`` (an independent
+    computation: the test oracle's), ``hamming`` (the cost is popcount(a xor b), else |a - b|: what the
+    reference kernel computes) and its no-match entry ``nomatch_entry(table)`` (1 unless it says
+    otherwise)."""
+
+    source = Source.FEATURES
+    plane: ClassVar[str]
+    hamming: ClassVar[bool] = False
 
     def cost(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         raise NotImplementedError
@@ -272,5 +311,94 @@ class Column(Term):
         raise NotImplementedError
 
     def nomatch_entry(self, table: Table) -> float | int:
-        """A FEATURES column's entry in the no-match row: 1 unless its kind says otherwise."""
+        """Its entry in the no-match row: 1 unless its kind says otherwise."""
         return table.one
+
+    def words(self, ctx: PassContext) -> np.ndarray:
+        """Lane d's word: its table at the cost of the two pixels (0 for a lane without a match pixel);
+        the no-match row its entry (0 in a pass without a no-match row)."""
+        table = self.table(ctx.word_bits)
+        a, b = ctx.reference[self.plane], ctx.match[self.plane]
+        values = table.values[self.cost(a[:, ctx.columns, None], b[:, ctx.match_columns])]
+        if ctx.valid is not None:  # a lane without a match pixel never fires
+            values = values * ctx.valid[None]
+        n = values.shape[0] * ctx.columns.size
+        out = np.empty((n, ctx.match_columns.shape[1] + 1), values.dtype)
+        out[:, :-1] = values.reshape(n, -1)
+        out[:, -1] = self.nomatch_entry(table) if ctx.nomatch else 0
+        return out
+
+
+@dataclass(frozen=True, kw_only=True)
+class PassContext:
+    """What a pass's columns build their words from, over a band of ``rows`` map rows.
+
+    Attributes
+    ----------
+    where : str
+        The pass, for messages ("the census-lr model's left pass").
+    reference, match : Mapping[str, ndarray]
+        The planes of the pass's reference image and of the other image, the band's rows, every map column.
+    columns : ndarray
+        (W,) the reference map column of each of the pass's pixels in a row.
+    match_columns : ndarray
+        (W, Dmax+1) the match map column of each lane (clamped inside the map).
+    valid : ndarray or None
+        (W, Dmax+1) bool: the lanes with a match pixel (None: all).
+    nomatch : bool
+        Whether the pass has a no-match row.
+    word_bits : int or None
+        W-bit words, or float64 factors (None).
+    above : ndarray or None
+        (W,) the pass's own MAPs of the map row above (-1: none), for a one-row band.
+    results : Mapping[str, ndarray]
+        Other passes' MAPs (rows, width) of the band's rows, by pass name (-1: none).
+    grids : Mapping[str, tuple[int, int]]
+        Each pass's (first map column, width), by pass name.
+    """
+
+    where: str
+    reference: Mapping[str, np.ndarray]
+    match: Mapping[str, np.ndarray]
+    columns: np.ndarray
+    match_columns: np.ndarray
+    valid: np.ndarray | None
+    nomatch: bool
+    word_bits: int | None
+    above: np.ndarray | None = None
+    results: Mapping[str, np.ndarray] = field(default_factory=dict)
+    grids: Mapping[str, tuple[int, int]] = field(default_factory=dict)
+
+    @property
+    def rows(self) -> int:
+        return int(next(iter(self.reference.values())).shape[0])
+
+    def above_row(self, column: str) -> np.ndarray:
+        """The MAP row above (W,) for ``column``'s words: ``ParameterError`` naming ``above`` unless given
+        for a one-row band."""
+        if self.above is None or self.rows != 1:
+            raise ParameterError(f"above: the {column} column's words come from the pass's own MAPs of the "
+                                 f"map row above, one map row at a time: pass above= (-1: none), for "
+                                 f"{self.where}", "above")
+        above = np.asarray(self.above)
+        if above.shape != self.columns.shape:
+            raise ValueError(f"above must be the MAP row above, shape {self.columns.shape}, got "
+                             f"{above.shape}")
+        return above
+
+    def results_of(self, name: str, column: str) -> tuple[np.ndarray, int]:
+        """The MAPs (rows, width) of pass ``name`` for these rows and its first map column: ``ParameterError``
+        naming ``results`` unless given, ValueError unless of that shape."""
+        if name not in self.grids:
+            raise ValueError(f"the {column} column reads the {name} pass's results, which {self.where}'s "
+                             "model does not run")
+        first, width = self.grids[name]
+        got = self.results.get(name)
+        if got is None:
+            raise ParameterError(f"results: the {column} column's words come from the {name} pass's MAPs: "
+                                 f"pass results={{{name!r}: ...}}, for {self.where}", "results")
+        got = np.asarray(got)
+        if got.shape != (self.rows, width):
+            raise ValueError(f"the {column} column needs the {name} pass's MAPs of its rows, shape "
+                             f"{(self.rows, width)}, got {got.shape}")
+        return got, first

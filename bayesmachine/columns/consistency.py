@@ -24,7 +24,7 @@ import numpy as np
 
 from bayesmachine.errors import ParameterError
 
-from .base import Column, Option, Source, Table, check_bool, check_int, check_probability
+from .base import Column, Option, PassContext, Source, Table, check_bool, check_int, check_probability
 
 __all__ = ["RIGHT_PASS", "Consistency", "lr_consistent", "lr_unknown", "right_lanes_valid"]
 
@@ -169,6 +169,12 @@ class Consistency(Column):
         consistent = lr_consistent(right_map, right_first, columns, self.dmax, self.tolerance)
         unknown = lr_unknown(right_map, right_first, columns, self.dmax) if self.neutral else None
         return self.values_of(table, consistent, unknown)
+
+    def words(self, ctx: PassContext) -> np.ndarray:
+        """From the MAPs of the pass :attr:`feeds_from` of the same map rows (``ctx.results``)."""
+        got, first = ctx.results_of(self.feeds_from, self.name)
+        words = self.loaded(self.table(ctx.word_bits), got, first, ctx.columns)
+        return words.reshape(-1, words.shape[-1])
 
     def check_machine(self, machine: Any) -> None:
         c = self.values["lr_right_max_cycles"]  # the right pass's watchdog runs beside this machine

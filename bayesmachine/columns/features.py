@@ -15,7 +15,17 @@ import numpy as np
 
 from bayesmachine.errors import ParameterError
 
-from .base import Column, Option, Source, Term, check_probability, check_sigma, likelihood_formula, quantize
+from .base import (
+    Option,
+    PassContext,
+    PlaneColumn,
+    Term,
+    check_probability,
+    check_sigma,
+    likelihood_formula,
+    quantize,
+)
+from .planes import SUM_PLANES, Plane
 
 __all__ = ["FEATURES", "SCALES", "MAX_ABS", "FeatureColumn", "Mean", "GradH", "GradV", "NoMatchFloor",
            "FEATURE_COLUMNS"]
@@ -40,21 +50,24 @@ SIGMAS = {f: Option(f"sigma_{f}", "float", 10.0, _sigma, f"sigma of the {what} f
           for f, what in (("m", "mean"), ("gh", "horizontal gradient"), ("gv", "vertical gradient"))}
 
 
-class FeatureColumn(Column):
+class FeatureColumn(PlaneColumn):
     """A 5x5 feature's column: cost |difference of the two pixels' sums|, the paper's likelihood.
 
-    A subclass names its feature (``class Mean(FeatureColumn, feature="m")``): its plane (the
-    ``FeatureSums`` field ``m25``), its options (``p0``, shared by the three, and ``sigma_m``) follow."""
+    A subclass names its feature (``class Mean(FeatureColumn, feature="m")``): its plane
+    (:data:`~.planes.SUM_PLANES`: ``m25``), its options (``p0``, shared by the three, and ``sigma_m``)
+    follow."""
 
-    source = Source.FEATURES
     feature: ClassVar[str]
 
     def __init_subclass__(cls, feature: str, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
         cls.name = cls.feature = feature
-        cls.plane = f"{feature}{SCALES[feature]}"
+        cls.plane = SUM_PLANES[feature].name
         cls.options = (P0, SIGMAS[feature])
         cls.table_parameter = f"sigma_{feature}"
+
+    def planes(self) -> dict[str, Plane]:
+        return {self.plane: SUM_PLANES[self.feature]}
 
     @property
     def scale(self) -> int:
@@ -106,18 +119,27 @@ class NoMatchFloor(Term):
     the other columns' own no-match entries beside it ([P_nm(gV), 1, 1] for the paper's three)."""
 
     name = "nomatch"
-    plane = "gv20"
+    plane = SUM_PLANES["gv"].name
     options = (
         Option("p_nm0", "float", 0.01, _floor, "base no-match probability p_nm0"),
         Option("sigma_nm", "float", 8.0, _sigma, "no-match sigma"),
     )
     table_parameter = "sigma_nm"
 
+    def planes(self) -> dict[str, Plane]:
+        return {self.plane: SUM_PLANES["gv"]}
+
     def costs(self) -> np.ndarray:
         return np.arange(MAX_ABS["gv"] + 1)
 
     def cost(self, gv: np.ndarray) -> np.ndarray:
         return np.abs(gv)
+
+    def floor(self, ctx: PassContext) -> np.ndarray:
+        """Its value (P,) for each of the pass's pixels of ``ctx``: its table at the reference pixel's
+        |gV| (the entry of the pass's first FEATURES column in the no-match row)."""
+        values = self.table(ctx.word_bits).values[self.cost(ctx.reference[self.plane][:, ctx.columns])]
+        return values.reshape(-1)
 
     def likelihood(self, cost: np.ndarray) -> np.ndarray:
         v = self.values

@@ -22,6 +22,7 @@ from bayesmachine.errors import ParameterError
 from .base import (
     Column,
     Option,
+    PassContext,
     Source,
     Table,
     check_bool,
@@ -56,7 +57,8 @@ def _f_at_s(values: Mapping[str, Any]) -> float:
     return float(likelihood_formula(np.int64(1), 1, values["prior_eps"], 1.0))
 
 
-# The yes/no option of a model whose prior columns can be left out (census: --no-neighbour-prior).
+# The switch of a model whose prior columns can be left out (census: --no-neighbour-prior; a model's
+# switch, ModelDef.switches).
 NEIGHBOUR_PRIOR = Option("neighbour_prior", "bool", True, _switch,
                          "the raster-order neighbour prior: a feedback column (the left neighbour's factor) "
                          "and a loaded column (the above neighbour's)")
@@ -67,7 +69,6 @@ class NeighbourPrior(Column):
 
     table_parameter = "prior_s"
     options = (
-        NEIGHBOUR_PRIOR,
         Option("prior_eps", "float", 0.05, _probability,
                "neighbour prior floor eps of f(k) = eps + (1 - eps) exp(-k^2 / (2 s^2)), "
                "k = |d - d_neighbour|"),
@@ -143,3 +144,7 @@ class AbovePrior(NeighbourPrior):
     def loaded(self, table: Table, above: np.ndarray) -> np.ndarray:
         """The words (or float64 factors) of P pixels from the MAPs ``above`` (P,) of the pixels above."""
         return neighbour_words(table, self.dmax, above)
+
+    def words(self, ctx: PassContext) -> np.ndarray:
+        """From the pass's own MAPs of the map row above (``ctx.above``)."""
+        return self.loaded(self.table(ctx.word_bits), ctx.above_row(self.name))

@@ -15,7 +15,7 @@ consistency column of the right MAPs (:func:`~bayesmachine.columns.lr_consistent
   - Dmax .. W4 - 1), each with ``flush`` = k: its lanes d > Dmax - k pair it with a left pixel past the
   last output column (:func:`~bayesmachine.columns.right_lanes_valid`: word 0). So the right pass covers
   right map columns 0 .. W4 - 1 of every output row, in raster order, as the host's
-  (``host.likelihoods.right_columns``).
+  (``host.likelihoods.pass_grid``).
 - :class:`ConsistencyTest`: the right MAPs of one map row, shifted in column by column (column x when
   the left pass takes map column x), the last Dmax + 1 of them in a shift register, entry d =
   d_R(x - d); lane d is consistent when entry d is a MAP and ``|d_R(x - d) - d| <= tolerance`` (a
