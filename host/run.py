@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from tqdm import tqdm
 
-from bayesmachine.columns import Source
+from bayesmachine.columns import RIGHT_PASS, Source
 from bayesmachine.models import ModelParams, Pass, pass_machine
 from bayesmachine.outputs import require_memory
 from bayesmachine.params import MachineParams
@@ -266,7 +266,7 @@ def _run_pixels(
         t0 = time.perf_counter()
         res = eng.run(prepared.left, prepared.right)
         seconds = time.perf_counter() - t0
-        wall, figures, r = eng.wall_cycles, eng.figures, eng.last_right
+        wall, figures, r = eng.wall_cycles, eng.figures, eng.last_passes.get(RIGHT_PASS)
     finally:
         eng.close()
     ho, wo = prepared.shape
@@ -282,10 +282,10 @@ def _run_pixels(
     if r is not None:
         # The right pass ran on chip beside the left one (its own machine, the same clock): it adds no
         # wall cycles of its own, the frame's (first pixel in to last result out) are both passes'.
-        from bayesmachine.hdl.frontend.lr import right_pass_params
+        from bayesmachine.hdl.frontend.words import pass_params
 
         wr = r.map.size // ho
-        right = RightPass(right_pass_params(model, machine), r.neighbour_answers().reshape(ho, wr),
+        right = RightPass(pass_params(model, machine, RIGHT_PASS), r.neighbour_answers().reshape(ho, wr),
                           r.cycles.reshape(ho, wr), r.timeout.reshape(ho, wr), seconds, 0)
     return MachineRun(engine, machine, disp, counts, cycles, nomatch, timeout, seconds, 0.0, wall, right,
                       figures)

@@ -159,3 +159,43 @@ def small_params(**kwargs: object) -> MachineParams:
     )
     base.update(kwargs)
     return MachineParams(**base)  # type: ignore[arg-type]
+
+
+def passes_model(frames: list[tuple[np.ndarray, np.ndarray]], model: object,
+                 params: MachineParams) -> dict[str, MachineResult]:
+    """Every pass of ``model`` on the machine model as the host runs them, frames back to back (one
+    engine per pass, so its random source carries over as on chip), by pass name: per map row each
+    declared pass's row (its above column from its own previous row), then the own pass's (a pass
+    column from the row of the pass it reads). What a ``StereoMachine`` of ``model`` computes."""
+    from bayesmachine.columns import Source
+    from bayesmachine.hdl.frontend.words import pass_params
+    from bayesmachine.host.features import model_features
+    from bayesmachine.host.likelihoods import pass_grid, pass_words
+    from bayesmachine.region import OutputRegion
+    from bayesmachine.sim.model import MachineModel
+
+    passes = model.passes  # type: ignore[attr-defined]
+    machines = {p.name: pass_params(model, params, p.name) for p in passes}  # type: ignore[arg-type]
+    engines = {name: MachineModel(pp) for name, pp in machines.items()}
+    out: dict[str, list[MachineResult]] = {p.name: [] for p in passes}
+    for lf, rf in frames:
+        fl, fr = model_features(lf, model), model_features(rf, model)  # type: ignore[arg-type]
+        region = OutputRegion.of_features(fl.shape, model.dmax)  # type: ignore[attr-defined]
+        grids = {p.name: pass_grid(p, region) for p in passes}
+        latest = {p.name: np.full(grids[p.name].width, -1) for p in passes}  # each pass's last row
+        for y in range(region.shape[0]):
+            for p in passes:
+                pp, kw = machines[p.name], {}
+                for c in p.columns:
+                    if c.source is Source.ABOVE:
+                        kw["prior"] = c.loaded(c.table(pp.word_bits), latest[p.name])
+                    elif c.source is Source.PASS:
+                        kw["fed"] = c.loaded(c.table(pp.word_bits), latest[c.feeds_from],
+                                             grids[c.feeds_from].first, grids[p.name].columns)
+                words = pass_words(p, fl, fr, pp, rows=slice(y, y + 1), **kw)
+                starts = np.zeros(grids[p.name].width, bool)
+                starts[0] = True
+                res = engines[p.name].run(words, line_start=starts if pp.feedback_columns else None)
+                latest[p.name] = np.where(res.nomatch | res.timeout, -1, res.map)
+                out[p.name].append(res)
+    return {p.name: MachineResult.concatenate(out[p.name], machines[p.name].rows) for p in passes}

@@ -284,7 +284,7 @@ def test_census_lr_crop_through_the_front_end_equals_the_model() -> None:
     """census-lr at Dmax 80, counter max 16 on a 140 x 40 crop of Motorcycle through the front end: both
     passes' results equal the model's run as the host runs it (``run_machine``: the right pass's row, then
     the left pass's). 140 pixels: the width of the CLI's crop below (one Verilator build)."""
-    from bayesmachine.hdl.frontend.lr import right_pass_params
+    from bayesmachine.hdl.frontend.words import pass_params
     from bayesmachine.host.run import prepare, run_machine
     from bayesmachine.sim.stereo_engine import StereoVerilatorEngine
 
@@ -295,10 +295,10 @@ def test_census_lr_crop_through_the_front_end_equals_the_model() -> None:
     want = run_machine(prepare(left, right, model, reference=False), params, engine="model", progress=False)
     with StereoVerilatorEngine(params, model, left.shape[1], verbose=False) as engine:
         got = engine.run(left, right)
-        got_right = engine.last_right
+        got_right = engine.last_passes.get("right")
         wall = engine.last_wall_cycles
     assert got_right is not None and want.right is not None
-    rp = right_pass_params(model, params)
+    rp = pass_params(model, params, "right")
     alone = int(pixel_wall_cycles(params, got.cycles, got.timeout).sum())
     right_alone = int(pixel_wall_cycles(rp, got_right.cycles, got_right.timeout).sum())
     print(f"\ncensus-lr through the front end: {wall / len(got):.3f} wall cycles per output pixel "
