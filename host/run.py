@@ -279,7 +279,7 @@ def _run_pixels(
     counts = None if res.counts is None else res.counts.reshape(ho, wo, m).astype(dtype)
     cycles = None if res.cycles is None else res.cycles.reshape(ho, wo)
     right = None
-    if r is not None:
+    if r is not None and r.cycles is not None:  # (a board asked for the MAP alone sent no right cycles)
         # The right pass ran on chip beside the left one (its own machine, the same clock): it adds no
         # wall cycles of its own, the frame's (first pixel in to last result out) are both passes'.
         from bayesmachine.hdl.frontend.words import pass_params

@@ -88,11 +88,11 @@ static const unsigned FIRST_OFFSET = {pix["first"][0]};
 def pass_ports(params: MachineParams, model: ModelParams, width: int) -> list[tuple[str, MachineParams, int]]:
     """Per declared pass of ``model`` (in order): its name (its results on ``<name>_result``), its
     machine on chip and its pixels (results) per map row of ``width``-pixel frames."""
-    from bayesmachine.hdl.frontend.reference import reference_of
+    from bayesmachine.hdl.frontend.passes import pass_row_pixels
     from bayesmachine.hdl.frontend.words import pass_params
 
-    return [(p.name, pass_params(model, params, p.name),
-             reference_of(p).row_pixels(width - 2 * model.margin, model.dmax)) for p in model.passes[:-1]]
+    return [(p.name, pass_params(model, params, p.name), pass_row_pixels(model, p.name, width))
+            for p in model.passes[:-1]]
 
 
 def _passes_header(passes: list[tuple[str, MachineParams, int]]) -> str:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import random
 from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 from amaranth.sim import Simulator, SimulatorContext
@@ -119,10 +120,10 @@ def output_pixels(frames: Sequence[tuple[np.ndarray, np.ndarray]], model: ModelP
 def pass_pixels(frames: Sequence[tuple[np.ndarray, np.ndarray]], model: ModelParams, name: str) -> int:
     """The pixels (results) of ``model``'s pass ``name`` in ``frames``: per output row its reference's
     (the own pass's output pixels; a right-reference pass's every right map column)."""
-    from bayesmachine.hdl.frontend.reference import reference_of
+    from bayesmachine.hdl.frontend.passes import pass_row_pixels
 
-    k, ref = model.margin, reference_of(model.pass_named(name))
-    return sum((lf.shape[0] - 2 * k) * ref.row_pixels(lf.shape[1] - 2 * k, model.dmax) for lf, _ in frames)
+    k = model.margin
+    return sum((lf.shape[0] - 2 * k) * pass_row_pixels(model, name, lf.shape[1]) for lf, _ in frames)
 
 
 def run_frontend(front: FrontEnd, frames: Sequence[tuple[np.ndarray, np.ndarray]], *,
@@ -239,13 +240,24 @@ def run_frontend_passes(front: FrontEnd, frames: Sequence[tuple[np.ndarray, np.n
             if values.shape != (n,):
                 raise ValueError(f"maps[{p.name!r}] must hold one MAP per pixel of the {p.name} pass ({n}), "
                                  f"got {values.shape}")
-            sim.add_testbench(_stand_in(getattr(front, port), values, got[p.name], bpp, rnd, result_delay),
-                              background=True)
+            benches.append(_stand_in(getattr(front, port), values, got[p.name], bpp, rnd, result_delay))
         benches.append(_collector(getattr(front, pass_port(model, p, "beats")), got[p.name], n * bpp, rnd,
                                   out_stall, max_cycles))
-    for bench in benches[:-1]:
-        sim.add_testbench(bench, background=True)
-    sim.add_testbench(benches[-1])
+    done: list[bool] = []
+
+    def finishing(bench: Any) -> Any:
+        async def run(ctx: SimulatorContext) -> None:
+            await bench(ctx)
+            done.append(True)
+        return run
+
+    async def until_all_done(ctx: SimulatorContext) -> None:  # every stand-in given, every beat taken
+        while len(done) < len(benches):
+            await ctx.tick()
+
+    for bench in benches:
+        sim.add_testbench(finishing(bench), background=True)
+    sim.add_testbench(until_all_done)
     sim.run()
     return {name: (words_from_beats(params[name], got[name]), line_starts_from_beats(params[name], got[name]))
             for name in got}

@@ -38,11 +38,18 @@ from bayesmachine.models import ModelParams, Pass
 from bayesmachine.params import MachineParams, ParameterError
 
 from .layouts import FLAGS, declared_passes, features_layout, pass_pixel_layout, pixel_features_layout
-from .reference import REFERENCES, flush_bits
+from .reference import REFERENCES, flush_bits, reference_of
 from .words import WordGenerator, generator_signature, pass_params
 
 __all__ = ["PassFeeder", "feeder_in_layout", "flush_bits", "fork", "frontend_signature", "pass_port",
-           "split_pixels", "watch_passes"]
+           "pass_row_pixels", "split_pixels", "watch_passes"]
+
+
+def pass_row_pixels(model: ModelParams, name: str, width: int) -> int:
+    """The pixels (results) of ``model``'s pass ``name`` per map row of ``width``-pixel frames, by its
+    reference (:meth:`~.reference.Reference.row_pixels`): the own pass's output pixels, W - 2k - Dmax; a
+    right-reference pass's every right map column, W - 2k."""
+    return reference_of(model.pass_named(name)).row_pixels(width - 2 * model.margin, model.dmax)
 
 
 def pass_port(model: ModelParams, p: Pass, what: str) -> str:

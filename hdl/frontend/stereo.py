@@ -51,9 +51,8 @@ from bayesmachine.sources import source_kind
 
 from . import DEFAULT_FIFO_PIXELS, MAX_MACHINES, MAX_WIDTH
 from .layouts import declared_passes
-from .passes import fork, frontend_signature, pass_port, split_pixels, watch_passes
+from .passes import fork, frontend_signature, pass_port, pass_row_pixels, split_pixels, watch_passes
 from .pipeline import FeaturePipeline, PipelineNets, check_width, line_region, pipeline_layout
-from .reference import reference_of
 from .words import WordGenerator, check_frontend_params, check_frontend_types, pass_params
 
 __all__ = ["MAX_MACHINES", "MAX_WIDTH", "FeaturePipeline", "FrontEnd", "PipelineNets", "RoomFifo",
@@ -180,11 +179,10 @@ class FrontEnd(wiring.Component):
         model = self._model
         m.submodules.pipeline = pipe = self.feature_pipeline(model=model, width=self._width)
         wiring.connect(m, wiring.flipped(self.pixels), pipe.pixels)
-        map_columns = line_region(model, self._width).feature_shape[1]
         gens = {}
         for p in model.passes:
             own = p is model.passes[-1]
-            row = reference_of(p).row_pixels(map_columns, model.dmax)  # the length of its line of MAPs
+            row = pass_row_pixels(model, p.name, self._width)  # the length of its line of MAPs
             gen = WordGenerator(params=pass_params(model, self._params, p.name), model=model,
                                 pass_name=None if own else p.name,
                                 output_columns=row if _has_line(p) else None)
