@@ -163,7 +163,7 @@ def test_link_against_the_rtl(board, fault, reason) -> None:
         assert reason in link.stats.failures[0]
 
 
-@pytest.mark.parametrize("model", ["census", "paper"])
+@pytest.mark.parametrize("model", ["census", "paper", "census-lr"])
 def test_the_two_commands(tmp_path: Path, model: str) -> None:
     """``board simulate`` prints the pty first; ``run --engine board`` on a crop writes the same
     result.npz as ``run --engine model``, for the census model (the board's default) and the paper's;
