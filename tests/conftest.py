@@ -199,3 +199,29 @@ def passes_model(frames: list[tuple[np.ndarray, np.ndarray]], model: object,
                 latest[p.name] = np.where(res.nomatch | res.timeout, -1, res.map)
                 out[p.name].append(res)
     return {p.name: MachineResult.concatenate(out[p.name], machines[p.name].rows) for p in passes}
+
+
+def _lr_like() -> object:
+    from bayesmachine.columns import Census, Consistency, GradH, GradV, Mean
+    from bayesmachine.models import ModelDef, PassDef
+
+    return ModelDef(
+        "lr-like", "census + a consistency column of a right pass, and a paper pass beside them",
+        (Mean, GradH, GradV, Census, Consistency),
+        passes=(PassDef("right", "census", "right", machine=1, nomatch="lr_right_nomatch",
+                        watchdog="lr_right_max_cycles", watchdog_runs=8),
+                PassDef("echo", "paper", "left", machine=2)),
+        watchdog_runs=15)
+
+
+@pytest.fixture
+def lr_like(monkeypatch: pytest.MonkeyPatch) -> object:
+    """A census-lr-like model defined here, known by name (``lr-like``) for the test: no neighbour prior
+    in its own pass, the right pass its consistency column reads (the census model, with its neighbour
+    prior), and a pass nothing reads, with the left image as reference (the paper model on a third
+    machine). What runs it runs it from its definition, never its name."""
+    from bayesmachine import models
+
+    definition = _lr_like()
+    monkeypatch.setitem(models.MODELS, "lr-like", definition)
+    return definition

@@ -245,6 +245,27 @@ def test_link_gives_every_pass_of_census_lr(fields: int, fault: dict) -> None:
     assert link.stats.attempts == 1 + bool(fault)
 
 
+@pytest.mark.usefixtures("lr_like")
+def test_link_gives_every_pass_of_a_model_from_its_definition() -> None:
+    """A model defined outside the package (``conftest.lr_like``: a right pass and a left-reference pass
+    beside its own): tags 'a' and 'b' by the passes' order in its definition, every pass's results the
+    model's, the link's frame of every pass's records."""
+    from bayesmachine.fpga.boards.serializer import board_passes
+
+    model = ModelParams(dmax=DMAX, name="lr-like")
+    params = stereo_machine_params(DMAX, model=model)
+    assert [(bp.name, chr(bp.tag)) for bp in board_passes(params, model)] == [("right", "a"), ("echo", "b"),
+                                                                                ("left", "R")]
+    left, right = _crop()
+    twin = BoardTwin(params, model, WIDTH, results=lambda lf, rf: passes_model([(lf, rf)], model, params))
+    got = _link(TwinPort(twin)).run_frame(left, right, params, model)
+    want = passes_model([(left, right)], model, params)
+    assert set(got) == {"right", "echo", "left"} and len(got["echo"]["map"]) == len(got["left"]["map"])
+    for name, res in want.items():
+        for field in ("map", "nomatch", "timeout", "counts", "cycles"):
+            np.testing.assert_array_equal(got[name][field], np.asarray(getattr(res, field)), err_msg=field)
+
+
 def test_board_engine_gives_the_declared_passes_too() -> None:
     """``run --engine board`` of census-lr: the own pass's results and ``last_passes['right']``."""
     from bayesmachine.fpga.boards.engine import BoardEngine

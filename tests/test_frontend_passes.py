@@ -5,9 +5,9 @@ feature pipeline (``hdl.frontend.passes``), and the consistency column's test.
 Blocks against their twins (``ConsistencyTest`` against ``lr_consistent``, ``PassFeeder`` against the
 delay and flush order), the front end's words of every pass against the host's (``pass_words``), and
 ``StereoMachine`` against the model run as the host runs the passes (``conftest.passes_model``), every
-pass's results, with random stalls on every stream: census-lr, and a census-lr-like model defined here
-(its passes and columns from its definition: a right pass its consistency column reads, and a
-left-reference pass nothing reads).
+pass's results, with random stalls on every stream: census-lr, and a census-lr-like model defined in
+the tests (``conftest.lr_like``: its passes and columns from its definition, a right pass its
+consistency column reads and a left-reference pass nothing reads).
 """
 
 from __future__ import annotations
@@ -51,26 +51,19 @@ def _lr(dmax: int, **fields: object) -> ModelParams:
     return ModelParams(dmax=dmax, name="census-lr", **fields)
 
 
-# A census-lr-like model: no neighbour prior in its own pass, the right pass its consistency column reads
-# (the census model, with its neighbour prior), and a pass nothing reads, with the left image as reference
-# (the paper model on a third machine).
-LR_LIKE = ModelDef(
-    "lr-like", "census + a consistency column of a right pass, and a paper pass beside them",
-    (Mean, GradH, GradV, Census, Consistency),
-    passes=(PassDef("right", "census", "right", machine=1, nomatch="lr_right_nomatch",
-                    watchdog="lr_right_max_cycles", watchdog_runs=8),
-            PassDef("echo", "paper", "left", machine=2)),
-    watchdog_runs=15)
-# The same, its consistency column reading a pass with the left image as reference: not on chip.
+# A consistency column reading a pass with the left image as reference: not on chip.
 LEFT_FED = ModelDef("left-fed", "a consistency column of a left-reference pass",
                     (Mean, GradH, GradV, Census, Consistency),
                     passes=(PassDef("right", "census", "left", machine=1),))
+# A declared pass named as the own pass: its ports would be the own pass's.
+SAME_NAME = ModelDef("same-name", "a declared pass named left", (Mean, GradH, GradV),
+                     passes=(PassDef("left", "paper", "right", machine=1),))
 
 
 @pytest.fixture
-def defined(monkeypatch: pytest.MonkeyPatch) -> None:
-    """The models defined here, known by name for the test."""
-    for d in (LR_LIKE, LEFT_FED):
+def defined(lr_like: ModelDef, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The models defined here and ``lr-like`` (conftest), known by name for the test."""
+    for d in (LEFT_FED, SAME_NAME):
         monkeypatch.setitem(models.MODELS, d.name, d)
 
 
@@ -334,6 +327,9 @@ def test_what_the_passes_on_chip_cannot_do_is_one_error_naming_the_pass() -> Non
     lr = ModelParams(name="lr-like", dmax=3)
     with pytest.raises(ParameterError, match="the lr-like model's right pass runs on one machine"):
         check_stereo_machine(stereo_machine_params(3, model=lr), lr, 16, machines=2)
+    same = ModelParams(name="same-name", dmax=3)
+    with pytest.raises(ParameterError, match="the same-name model's passes need distinct names"):
+        check_stereo_machine(stereo_machine_params(3, model=same), same, 16)
     own = lr.passes[-1]
     lanes = own.columns[-1]
     twice = SimpleNamespace(name="left", columns=(*own.columns, lanes), model=lr, reference="left")

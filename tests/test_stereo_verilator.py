@@ -17,7 +17,7 @@ from bayesmachine.host.images import bundled_pair
 from bayesmachine.host.likelihoods import memory_words
 from bayesmachine.models import ModelParams
 from bayesmachine.sim.model import MachineModel
-from bayesmachine.sim.results import EngineClosedError, EngineStateError
+from bayesmachine.sim.results import EngineClosedError, EngineStateError, MachineResult
 from bayesmachine.sim.verilator import VerilatorError
 
 DMAX, WIDTH = 8, 40
@@ -276,6 +276,32 @@ def test_cli_run_feed_pixels_census_lr_gives_the_models_result(tmp_path: Path) -
     assert len(set(want["map"].ravel().tolist())) > 2 and len(set(want["right_map"].ravel().tolist())) > 2
     report = json.loads((tmp_path / "px" / "report.json").read_text())
     assert report["wall_cycles_per_pixel"] > report["left_pass_cycles_per_pixel_mean"]
+
+
+@pytest.mark.eda
+@pytest.mark.usefixtures("verilator_toolchain", "lr_like")
+def test_every_pass_of_a_model_from_its_definition_through_verilator() -> None:
+    """A census-lr-like model defined outside the package (``conftest.lr_like``: a right pass its
+    consistency column reads and a left-reference paper pass nothing reads, on three machines): the
+    harness collects both declared passes' results (``last_passes``), and every pass's equals the model
+    run as the host runs the passes, two frames back to back."""
+    from conftest import passes_model
+
+    from bayesmachine.sim.stereo_engine import StereoVerilatorEngine
+
+    model = ModelParams(name="lr-like", dmax=DMAX)
+    params = stereo_machine_params(DMAX, model=model, counter_max=16)
+    frames = _crops()
+    want = passes_model(frames, model, params)
+    got: dict[str, list] = {name: [] for name in want}
+    with StereoVerilatorEngine(params, model, WIDTH, verbose=False) as engine:
+        for left, right in frames:
+            got["left"].append(engine.run(left, right))
+            assert list(engine.last_passes) == ["right", "echo"]
+            for name, res in engine.last_passes.items():
+                got[name].append(res)
+    for name, res in want.items():
+        assert_same_results(MachineResult.concatenate(got[name], res.counts.shape[1]), res)
 
 
 @pytest.mark.usefixtures("verilator_toolchain")

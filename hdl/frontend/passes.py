@@ -38,11 +38,11 @@ from bayesmachine.models import ModelParams, Pass
 from bayesmachine.params import MachineParams, ParameterError
 
 from .layouts import FLAGS, declared_passes, features_layout, pass_pixel_layout, pixel_features_layout
-from .reference import REFERENCES, flush_bits, reference_of
+from .reference import REFERENCES, reference_of
 from .words import WordGenerator, generator_signature, pass_params
 
-__all__ = ["PassFeeder", "feeder_in_layout", "flush_bits", "fork", "frontend_signature", "pass_port",
-           "pass_row_pixels", "split_pixels", "watch_passes"]
+__all__ = ["PassFeeder", "feeder_in_layout", "fork", "frontend_signature", "pass_port", "pass_row_pixels",
+           "split_pixels", "watch_passes"]
 
 
 def pass_row_pixels(model: ModelParams, name: str, width: int) -> int:
@@ -269,12 +269,14 @@ def watch_passes(m: Module, front: Any, gens: Mapping[str, WordGenerator]) -> No
         if name not in front.signature.members:
             continue
         port, sinks = getattr(front, name), []
+        readers = [(reader, gen) for reader, gen in gens.items() if f"{p.name}_maps" in gen.signature.members]
+        if not readers:  # only its own line of MAPs reads them
+            wiring.connect(m, wiring.flipped(port), gens[p.name].maps)
+            continue
         if "maps" in gens[p.name].signature.members:
             m.d.comb += gens[p.name].maps.payload.eq(port.payload)
             sinks.append(gens[p.name].maps)
-        for reader, gen in gens.items():
-            if f"{p.name}_maps" not in gen.signature.members:
-                continue
+        for reader, gen in readers:
             sink = getattr(gen, f"{p.name}_maps")
             m.submodules[f"{p.name}_maps_{reader}"] = maps = fifo.SyncFIFOBuffered(
                 width=Shape.cast(port.payload.shape()).width, depth=model.dmax + 8)

@@ -99,6 +99,11 @@ def check_frontend_params(params: MachineParams, model: ModelParams) -> None:
         raise ParameterError(f"params must be a MachineParams, not {type(params).__name__}")
     if not isinstance(model, ModelParams):
         raise ParameterError(f"model must be a bayesmachine.models.ModelParams, not {type(model).__name__}")
+    names = [p.name for p in model.passes]
+    for name in names:  # a pass's name names its ports
+        if not name.isidentifier() or names.count(name) > 1:
+            raise ParameterError(f"model: the {model.name} model's passes need distinct names that can name "
+                                 f"ports, got {', '.join(names)}", "model")
     _check_pass(model, model.passes[-1], params)
     for p in declared_passes(model):
         if not source_kind(params.rng).on_chip:
