@@ -274,7 +274,7 @@ CASES = {
     "issue-rules": (("census-lr", {"dmax": 3, "lr_right_nomatch": False, "lr_neutral": False}),
                     [(9, 16)], 2, 6),
     "dmax0": (("census-lr", {"dmax": 0}), [(8, 8)], 2, 4),
-    "lr-like": (("lr-like", {"dmax": 3}), [(9, 16), "noisy"], 2, 5),
+    "lr-like": (("lr-like", {"dmax": 3}), [(8, 14)], 2, 4),
 }
 
 
