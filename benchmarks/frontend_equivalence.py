@@ -42,7 +42,7 @@ from bayesmachine.host.run import prepare, run_machine
 from bayesmachine.models import ModelParams, pass_machine
 from bayesmachine.outputs import atomic_write_text
 from bayesmachine.region import OutputRegion
-from bayesmachine.sim.stereo_testbench import run_frontend, run_frontend_lr, run_frontend_neighbour
+from bayesmachine.sim.stereo_testbench import run_frontend_passes
 
 ARRAYS = ("map", "counts", "cycles", "nomatch", "timeout")
 
@@ -90,19 +90,11 @@ def _host_words(model: ModelParams, params: Any, pair: tuple[np.ndarray, np.ndar
 
 def _frontend_words(model: ModelParams, params: Any, pair: tuple[np.ndarray, np.ndarray],
                     maps: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Every pass's words from the ``FrontEnd`` under pysim, by pass name, each pass whose MAPs it reads
+    fed the stand-ins ``maps``."""
     front = FrontEnd(params=params, model=model, width=pair[0].shape[1])
-    frames = [pair]
-    own = model.passes[-1]
-    members = front.signature.members
-    if "right_beats" in members:
-        words, _, right, _ = run_frontend_lr(front, frames, maps[own.name], maps["right"], in_stall=0.2,
-                                             out_stall=0.2, result_delay=4, seed=1)
-        return {own.name: words, "right": right}
-    if "result_take" in members:
-        words, _ = run_frontend_neighbour(front, frames, maps[own.name], in_stall=0.2, out_stall=0.2,
-                                          result_delay=4, seed=1)
-        return {own.name: words}
-    return {own.name: run_frontend(front, frames, in_stall=0.2, out_stall=0.2, seed=1)}
+    got = run_frontend_passes(front, [pair], maps, in_stall=0.2, out_stall=0.2, result_delay=4, seed=1)
+    return {name: words for name, (words, _) in got.items()}
 
 
 def compute(name: str, pair: tuple[np.ndarray, np.ndarray], model_kw: dict[str, Any],

@@ -21,7 +21,9 @@ Protocol (one clock, ``pin_width`` = P bits per chunk):
 - **Out**: ``dout`` / ``dout_valid`` (registered outputs). Each result is shifted out lowest
   bits first, ``ceil(result_width / P)`` consecutive chunks marked by ``dout_valid``, one per
   cycle; the host takes every chunk (a FIFO or a logic analyser). The core's ``result`` stream
-  waits while the shifter is busy, so the core stalls rather than losing a result.
+  waits while the shifter is busy, so the core stalls rather than losing a result. A stereo top's
+  declared passes' results (``<pass>_result``, census-lr's right pass) are taken as they come and left
+  unconnected (their ``ready`` high: the design the Verilator harness runs).
 """
 
 from __future__ import annotations
@@ -141,6 +143,9 @@ class PinWrapper(wiring.Component):
         out = Signal(n_out * pw)
         busy = Signal(n_out)  # ones for the chunks still to send
         m.d.comb += core.result.ready.eq(~busy[0])
+        for name in core.signature.members:
+            if name.endswith("_result"):  # a declared pass's results: taken as they come
+                m.d.comb += getattr(core, name).ready.eq(1)
         take = core.result.valid & ~busy[0]
         # The take loads the whole shift register (a full machine's result: 440 bits): each group
         # of OUT_GROUP chunks has a registered copy of ``~busy[0]`` (``free_rep<g>``, loaded with

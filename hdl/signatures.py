@@ -4,17 +4,22 @@
   contract's field order; ``sim.packing`` and ``sim.results`` pack and decode from them);
 - :func:`load_stream`, :func:`result_stream`, :func:`pixel_stream`: the streams of those payloads
   (and of the stereo top's pixel pairs, :func:`pixel_in_layout`);
+- :func:`map_layout`, :func:`map_stream`: a machine's MAPs as the front end reads its results (the
+  line of MAPs of an above column, another pass's MAPs for a pass column);
 - :func:`entropy_members`: ``entropy`` / ``entropy_ready``, present exactly when the random source
   is off chip (``source_kind(rng).on_chip`` is false: ``external``, ``smtj``), the one place
   that decides it;
 - :class:`MachineSignature`: ``load``, ``result`` and the entropy members (``BayesianMachine``,
   ``ParallelMachines``, ``SMTJEmulatedMachine``);
-- :class:`StereoSignature`: ``pixels``, ``result`` and the entropy members (``StereoMachine``).
+- :class:`StereoSignature`: ``pixels``, ``result``, the entropy members and each declared pass's
+  ``<pass>_result`` (``StereoMachine``).
 
 Ports and word order: ``docs/architecture.md``.
 """
 
 from __future__ import annotations
+
+from collections.abc import Mapping
 
 from amaranth.hdl import unsigned
 from amaranth.lib import data, stream, wiring
@@ -25,7 +30,8 @@ from bayesmachine.sources import source_kind
 
 __all__ = [
     "ENTROPY_PORTS", "MachineSignature", "StereoSignature", "beat_words", "entropy_layout", "entropy_members",
-    "load_layout", "load_stream", "pixel_in_layout", "pixel_stream", "result_layout", "result_stream",
+    "load_layout", "load_stream", "map_layout", "map_stream", "pixel_in_layout", "pixel_stream",
+    "result_layout", "result_stream",
 ]
 
 ENTROPY_PORTS = ("entropy", "entropy_ready")  # the members of an off-chip source, see entropy_members
@@ -91,6 +97,18 @@ def result_stream(params: MachineParams) -> stream.Signature:
     return stream.Signature(result_layout(params))
 
 
+def map_layout(map_width: int) -> data.StructLayout:
+    """One MAP of a machine's results as the front end reads it: its row (``map``) and whether it is a
+    disparity (``hit``: neither no match nor a timeout)."""
+    return data.StructLayout({"map": unsigned(map_width), "hit": unsigned(1)})
+
+
+def map_stream(params: MachineParams) -> stream.Signature:
+    """A machine's MAPs as its results leave it (seen from the source): one :func:`map_layout` payload
+    per result."""
+    return stream.Signature(map_layout(_check_params(params, "map_stream").map_width))
+
+
 def entropy_members(params: MachineParams) -> dict[str, wiring.Member]:
     """``entropy`` (``In(entropy_layout(params))``, sampled on compute cycles) and ``entropy_ready``
     (``Out(1)``, high on compute cycles: the numbers are consumed at the clock edge) for an
@@ -147,12 +165,14 @@ class MachineSignature(wiring.Signature):
 
 
 class StereoSignature(wiring.Signature):
-    """The stereo top's ports: pixel pairs in, the machine's results out.
+    """The stereo top's ports: pixel pairs in, the machine's results out, and each declared pass's.
 
     Parameters
     ----------
     params : MachineParams
-        The machine's parameters.
+        The machine's parameters (the model's own pass).
+    passes : Mapping[str, MachineParams], optional
+        The machine of each pass the model runs before its own, by pass name (default none).
 
     Members
     -------
@@ -160,24 +180,36 @@ class StereoSignature(wiring.Signature):
         Pixel pairs in raster order, ``first`` set on a frame's first pixel.
     result : ``Out(result_stream(params))``
         One result per output pixel, in raster order of the output region.
+    <pass>_result : ``Out(result_stream(passes[pass]))``
+        Each declared pass's results, in raster order of its columns.
     entropy, entropy_ready
         With an off-chip ``rng``: see :func:`entropy_members`.
     """
 
-    def __init__(self, params: MachineParams) -> None:
+    def __init__(self, params: MachineParams, passes: Mapping[str, MachineParams] | None = None) -> None:
         self._params = _check_params(params, "StereoSignature")
+        self._passes = dict(passes or {})
         members = {"pixels": In(pixel_stream()), "result": Out(result_stream(params))}
+        for name, pp in self._passes.items():
+            if not isinstance(name, str) or not name.isidentifier():
+                raise ValueError(f"passes: a pass's name makes its port's name, got {name!r}")
+            members[f"{name}_result"] = Out(result_stream(_check_params(pp, "StereoSignature")))
         super().__init__(members | entropy_members(params))
 
     @property
     def params(self) -> MachineParams:
         return self._params
 
+    @property
+    def passes(self) -> dict[str, MachineParams]:
+        return dict(self._passes)
+
     def __eq__(self, other: object) -> bool:
-        return type(other) is type(self) and other._params == self._params
+        return type(other) is type(self) and other._params == self._params and other._passes == self._passes
 
     def __hash__(self) -> int:
-        return hash((type(self), self._params))
+        return hash((type(self), self._params, tuple(self._passes.items())))
 
     def __repr__(self) -> str:
-        return f"StereoSignature({self._params.fingerprint()})"
+        passes = "".join(f", {n}={pp.fingerprint()}" for n, pp in self._passes.items())
+        return f"StereoSignature({self._params.fingerprint()}{passes})"

@@ -529,10 +529,6 @@ def _check_board_args(args: argparse.Namespace, model: ModelParams) -> None:
         raise ValueError("--engine board needs --port (the board's serial port, or the path "
                          "`bayesmachine board "
                          "simulate` printed)")
-    if len(model.passes) > 1:
-        raise ValueError(f"--engine board --model {model.name}: the board's link carries one pass's results "
-                         f"(not the {model.passes[0].name} pass's: run it with --engine verilator --feed "
-                         "pixels)")
     if args.waves is not None:
         raise ValueError("--waves is not available with --engine board")
     if args.feed == "words":

@@ -254,7 +254,7 @@ def _run_pixels(
         t0 = time.perf_counter()
         res = eng.run(prepared.left, prepared.right)
         seconds = time.perf_counter() - t0
-        wall, figures, r = eng.wall_cycles, eng.figures, eng.last_right
+        wall, figures, pass_results = eng.wall_cycles, eng.figures, dict(eng.last_passes)
     finally:
         eng.close()
     ho, wo = prepared.shape
@@ -267,15 +267,17 @@ def _run_pixels(
     counts = None if res.counts is None else res.counts.reshape(ho, wo, m).astype(dtype)
     cycles = None if res.cycles is None else res.cycles.reshape(ho, wo)
     passes = {}
-    if r is not None:
-        # The declared pass ran on chip beside the own one (its own machine, the same clock): it adds no
-        # wall cycles of its own, the frame's (first pixel in to last result out) are both passes'.
-        from bayesmachine.hdl.frontend.lr import pass_params
+    # The declared passes ran on chip beside the own one (their own machines, the same clock): they add no
+    # wall cycles of their own, the frame's (first pixel in to last result out) are every pass's. A board
+    # asked for the MAP alone sent no cycles: such a pass is left out, never made up.
+    from bayesmachine.hdl.frontend.words import pass_params
 
-        p = model.passes[0]  # the pixel engines run one declared pass (last_right)
+    for name, r in pass_results.items():
+        if r.cycles is None:
+            continue
         w = r.map.size // ho
-        passes[p.name] = PassRecord(pass_params(model, machine, p.name), r.neighbour_answers().reshape(ho, w),
-                                    r.cycles.reshape(ho, w), r.timeout.reshape(ho, w), seconds, 0)
+        passes[name] = PassRecord(pass_params(model, machine, name), r.neighbour_answers().reshape(ho, w),
+                                  r.cycles.reshape(ho, w), r.timeout.reshape(ho, w), seconds, 0)
     return MachineRun(engine, machine, disp, counts, cycles, nomatch, timeout, seconds, 0.0, wall, passes,
                       figures)
 

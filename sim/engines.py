@@ -31,8 +31,9 @@ itself: the front end on chip computes the words (``--feed pixels``).
 
 - ``run(left, right) -> MachineResult``: one frame ((H, width) uint8 each, H >= 2k + 1 for the
   model's margin k); the results of its output region (:class:`~bayesmachine.region.OutputRegion`),
-  row-major, bit for bit the model's on the host's words of the frame. ``last_right``: census-lr's
-  right pass of the last frame (None without one). ``reset()``, ``close()``, ``wall_cycles`` and the
+  row-major, bit for bit the model's on the host's words of the frame. ``last_passes``: the results
+  of the model's declared passes (census-lr's right pass) of the last frame, by pass name (empty
+  without one). ``reset()``, ``close()``, ``wall_cycles`` and the
   errors as above; ``figures``: what the engine says of its runs beyond the results (None).
 - ``verilator``: the ``StereoMachine`` compiled with Verilator; frames run back to back (the
   machine's random sources carry over).
@@ -248,7 +249,7 @@ class PixelEngine(Protocol):
     def run(self, left: np.ndarray, right: np.ndarray) -> MachineResult: ...
 
     @property
-    def last_right(self) -> MachineResult | None: ...
+    def last_passes(self) -> dict[str, MachineResult]: ...
 
     @property
     def figures(self) -> dict[str, object] | None: ...
@@ -279,7 +280,7 @@ class PixelEngineBase(EngineLifecycle):
             raise TypeError(f"a pixel engine takes a ModelParams, not {type(model).__name__}")
         super().__init__()
         self._params, self._model, self._width = params, model, width
-        self.last_right: MachineResult | None = None
+        self.last_passes: dict[str, MachineResult] = {}
 
     @property
     def params(self) -> MachineParams:

@@ -8,10 +8,10 @@ bit for bit. Frames run back to back in one simulation (the machine's random sou
 as in the model); the front end restarts at each frame's first pixel. ``wall_cycles`` counts
 every clock cycle since reset, filtering and loading included. With ``machines`` = K > 1 the design
 is ``StereoMachine(machines=K)`` and its results are ``host.run.machines_model``'s (map row r on
-machine r mod K, each machine's random source over its own rows). With census-lr (one machine) the
-design has a second machine, the right pass's; the harness also collects its results
-(``right_result``) and the engine keeps the last frame's as ``last_right`` (every right map column of
-every output row, raster order).
+machine r mod K, each machine's random source over its own rows). A model with declared passes
+(census-lr's right pass) has a machine per pass beside the own one; the harness also collects each
+pass's results (``<pass>_result``) and the engine keeps the last frame's as ``last_passes[name]`` (every
+pixel of the pass of every output row, raster order: a right-reference pass's every right map column).
 
 With an off-chip random source (``rng = "smtj"``) the design's ``entropy`` port is fed, one row
 per compute cycle, from the kind's device model, one stream from reset on, exactly as the word
@@ -49,7 +49,7 @@ from bayesmachine.sim.verilator.codegen import entropy_header, header_prologue, 
 from bayesmachine.sim.verilator.engine import HarnessProcess
 from bayesmachine.sources import source_kind
 
-__all__ = ["StereoVerilatorEngine", "build_stereo_harness"]
+__all__ = ["StereoVerilatorEngine", "build_stereo_harness", "pass_ports"]
 
 HEADER = "stereo_design.h"
 _MAGIC_FRAME = 0x46534D42  # "BMSF", see harness/stereo.cpp
@@ -58,8 +58,9 @@ _MAGIC_FRAME = 0x46534D42  # "BMSF", see harness/stereo.cpp
 def stereo_header(params: MachineParams, model: ModelParams, width: int, signature: Any,
                   machines: int = 1) -> str:
     """``stereo_design.h``: the shared prologue (ports, result size), the pixel beat's offsets and,
-    with an off-chip source, the entropy port's (fed as in the machine's harness); census-lr: the
-    right pass's result port and its payload's size (``RIGHT_WORDS``)."""
+    with an off-chip source, the entropy port's (fed as in the machine's harness); per declared pass
+    (:func:`pass_ports`) its results' size and pixels per map row, and ``take_passes``, which collects
+    the results on their ports."""
     ports = {"PIXELS_PAYLOAD": ("pixels", "payload"), "PIXELS_VALID": ("pixels", "valid"),
              "PIXELS_READY": ("pixels", "ready"), "RESULT_PAYLOAD": ("result", "payload"),
              "RESULT_VALID": ("result", "valid")}
@@ -68,15 +69,12 @@ def stereo_header(params: MachineParams, model: ModelParams, width: int, signatu
     # A hung design: no pixel taken and no result for longer than a timed-out run and a line.
     # (K machines: a frame's first pixel may wait for every machine to go idle.)
     hang = machines * (params.max_cycles + 8 * params.words_per_pixel + 2 * model.margin * width + 64)
-    right = ""
-    for _ in model.passes[:-1]:  # the pass declared before the model's own: on chip, the right pass
-        from bayesmachine.hdl.frontend.lr import right_pass_params
-
-        rp = right_pass_params(model, params)
-        ports |= {"RIGHT_PAYLOAD": ("right_result", "payload"), "RIGHT_VALID": ("right_result", "valid")}
-        right = f"static const unsigned RIGHT_WORDS = {result_words(rp)};\n"
-        # The right pass's runs (its own watchdog) and a line's flush of Dmax right pixels.
-        hang += rp.max_cycles + (model.dmax + 1) * 8 * rp.words_per_pixel
+    passes = pass_ports(params, model, width)
+    for i, (name, pp, _) in enumerate(passes):
+        ports |= {f"PASS{i}_PAYLOAD": (f"{name}_result", "payload"),
+                  f"PASS{i}_VALID": (f"{name}_result", "valid")}
+        # The pass's runs (its own watchdog) and a line's flush of Dmax pixels.
+        hang += pp.max_cycles + (model.dmax + 1) * 8 * pp.words_per_pixel
     prologue = header_prologue(signature, params, ports | entropy_ports, hang_cycles=hang,
                                generator="bayesmachine.sim.stereo_engine")
     return prologue + f"""static const unsigned WIDTH = {width};
@@ -84,7 +82,41 @@ static const unsigned DMAX = {model.dmax};
 static const unsigned MARGIN = {model.margin};  // the output region's (bayesmachine.region)
 static const unsigned LEFT_OFFSET = {pix["left"][0]}, RIGHT_OFFSET = {pix["right"][0]};
 static const unsigned FIRST_OFFSET = {pix["first"][0]};
-{right}{external}"""
+{_passes_header(passes)}{external}"""
+
+
+def pass_ports(params: MachineParams, model: ModelParams, width: int) -> list[tuple[str, MachineParams, int]]:
+    """Per declared pass of ``model`` (in order): its name (its results on ``<name>_result``), its
+    machine on chip and its pixels (results) per map row of ``width``-pixel frames."""
+    from bayesmachine.hdl.frontend.passes import pass_row_pixels
+    from bayesmachine.hdl.frontend.words import pass_params
+
+    return [(p.name, pass_params(model, params, p.name), pass_row_pixels(model, p.name, width))
+            for p in model.passes[:-1]]
+
+
+def _passes_header(passes: list[tuple[str, MachineParams, int]]) -> str:
+    """``BM_PASSES``, ``PASS_WORDS``, ``PASS_ROW_PIXELS`` and ``BM_TAKE_PASSES(top, records, collected,
+    expected, any)``: each declared pass's valid result this cycle into its records (a macro: it expands
+    after common.h, whose ``get_port`` it calls)."""
+    words = [result_words(pp) for _, pp, _ in passes]
+    rows = [n for *_, n in passes]
+    takes = "".join(f"""    if ((top).BM_PORT_PASS{i}_VALID) {{ \\
+        if ((collected)[{i}] >= (expected)[{i}]) fail("more {name}-pass results than its pixels"); \\
+        uint32_t buf{i}[{w} + 2] = {{0}}; \\
+        get_port((top).BM_PORT_PASS{i}_PAYLOAD, buf{i}); \\
+        std::memcpy(&(records)[{i}][(collected)[{i}]++ * {w}], buf{i}, {w} * sizeof(uint32_t)); \\
+        (any) = true; \\
+    }} \\
+""" for i, ((name, _, _), w) in enumerate(zip(passes, words, strict=True)))
+    return f"""#define BM_PASSES {len(passes)}
+static const unsigned PASS_WORDS[BM_PASSES + 1] = {{{", ".join(map(str, [*words, 0]))}}};
+static const unsigned PASS_ROW_PIXELS[BM_PASSES + 1] = {{{", ".join(map(str, [*rows, 0]))}}};
+// Each declared pass's result this cycle (observed as it leaves: the wrapper ties its ready high).
+#define BM_TAKE_PASSES(top, records, collected, expected, any) \\
+    do {{ \\
+{takes}    }} while (0)
+"""
 
 
 def build_stereo_harness(
@@ -161,7 +193,7 @@ class StereoVerilatorEngine(HarnessProcess, PixelEngineBase):
         if not kind.on_chip and kind.numbers is None:
             raise ValueError(f"--feed pixels feeds an off-chip source from its device model; rng = "
                              f"{params.rng!r} has none (its numbers come from the caller)")
-        super().__init__(params, model, width)  # last_right: census-lr's last frame's right-pass results
+        super().__init__(params, model, width)  # last_passes: the declared passes' results of the last frame
         self._kind = kind
         self._feed = NumberFeed(params)
         self.machines = machines
@@ -183,8 +215,9 @@ class StereoVerilatorEngine(HarnessProcess, PixelEngineBase):
                 self._write(proc, struct.pack("<IIII", _MAGIC_FRAME, 0, height, width), pairs.tobytes())
                 self._serve_numbers(proc, None if self._kind.on_chip else self._numbers())
                 out = self._read_results(proc, n, t0)
-                for _ in self.model.passes[:-1]:  # then the right pass's results, every right map column
-                    self.last_right = self._read_right(proc, (height - 2 * k) * (width - 2 * k))
+                # then each declared pass's results, every pixel of the pass of every output row
+                self.last_passes = {name: self._read_pass(proc, pp, (height - 2 * k) * row)
+                                    for name, pp, row in pass_ports(self.params, self.model, width)}
                 return out
             except (VerilatorError, ValueError):
                 raise
@@ -192,14 +225,11 @@ class StereoVerilatorEngine(HarnessProcess, PixelEngineBase):
                 self._kill()  # an interrupt leaves the pipes mid-frame
                 raise
 
-    def _read_right(self, proc: Any, n: int) -> MachineResult:
-        """census-lr: the right pass's ``n`` raw payloads after the DONE reply, decoded."""
-        from bayesmachine.hdl.frontend.lr import right_pass_params
-
-        rp = right_pass_params(self.model, self.params)
-        words = result_words(rp)
+    def _read_pass(self, proc: Any, pp: MachineParams, n: int) -> MachineResult:
+        """A declared pass's ``n`` raw payloads (its machine ``pp``'s) after the DONE reply, decoded."""
+        words = result_words(pp)
         raw = self._read(proc, n * words * 4)
-        return decode_results(rp, np.frombuffer(raw, dtype="<u4", count=n * words).reshape(n, words))
+        return decode_results(pp, np.frombuffer(raw, dtype="<u4", count=n * words).reshape(n, words))
 
     def _numbers(self) -> NumberFeed:
         """The device model's stream (one from reset on: a fresh harness holds no rows)."""

@@ -8,7 +8,8 @@ both streams exercise the handshakes (results must not depend on them).
 from __future__ import annotations
 
 import random
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 from amaranth.sim import Simulator, SimulatorContext
@@ -19,8 +20,8 @@ from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.results import MachineResult, decode_results
 
-__all__ = ["frame_beats", "line_starts_from_beats", "output_pixels", "run_frontend", "run_frontend_beats",
-           "run_frontend_lr", "run_frontend_neighbour", "run_stereo", "run_stereo_lr", "words_from_beats"]
+__all__ = ["frame_beats", "line_starts_from_beats", "output_pixels", "pass_pixels", "run_frontend",
+           "run_frontend_beats", "run_frontend_passes", "run_stereo", "run_stereo_passes", "words_from_beats"]
 
 
 async def feed_stream(ctx: SimulatorContext, stream: object, beats: Sequence[int], rnd: random.Random,
@@ -83,10 +84,10 @@ def words_from_beats(params: MachineParams, beats: Sequence[int]) -> np.ndarray:
 
 
 def line_starts_from_beats(params: MachineParams, beats: Sequence[int]) -> np.ndarray:
-    """The ``line_start`` flag of each beat of a neighbour-prior machine's load beats,
-    (P, beats_per_pixel)."""
+    """The ``line_start`` flag of each beat of a machine's load beats, (P, beats_per_pixel) (0 without a
+    neighbour prior: its beats have none)."""
     layout = load_layout(params)
-    flags = [int(layout.from_bits(raw).line_start) for raw in beats]
+    flags = [int(layout.from_bits(raw).line_start) if params.feedback_columns else 0 for raw in beats]
     return np.array(flags, np.int64).reshape(-1, params.beats_per_pixel)
 
 
@@ -113,15 +114,24 @@ def _simulate(dut: object, source: object, sink_stream: object, beats: list[int]
 
 def output_pixels(frames: Sequence[tuple[np.ndarray, np.ndarray]], model: ModelParams) -> int:
     """The output pixels of ``frames`` for ``model`` (its output region's, ``bayesmachine.region``)."""
+    return pass_pixels(frames, model, model.passes[-1].name)
+
+
+def pass_pixels(frames: Sequence[tuple[np.ndarray, np.ndarray]], model: ModelParams, name: str) -> int:
+    """The pixels (results) of ``model``'s pass ``name`` in ``frames``: per output row its reference's
+    (the own pass's output pixels; a right-reference pass's every right map column)."""
+    from bayesmachine.hdl.frontend.passes import pass_row_pixels
+
     k = model.margin
-    return sum((lf.shape[0] - 2 * k) * (lf.shape[1] - 2 * k - model.dmax) for lf, _ in frames)
+    return sum((lf.shape[0] - 2 * k) * pass_row_pixels(model, name, lf.shape[1]) for lf, _ in frames)
 
 
 def run_frontend(front: FrontEnd, frames: Sequence[tuple[np.ndarray, np.ndarray]], *,
                  in_stall: float = 0.0, out_stall: float = 0.0, seed: int = 0,
                  max_cycles: int = 1_000_000) -> np.ndarray:
     """The words the front end writes for ``frames`` (pairs of (H, width) uint8 images), all frames'
-    output pixels in order: (P, rows, loaded_columns)."""
+    output pixels in order: (P, rows, loaded_columns). A front end that reads MAPs (``maps`` ports)
+    needs stand-ins for them: :func:`run_frontend_passes`."""
     beats = [b for lf, rf in frames for b in frame_beats(lf, rf)]
     return run_frontend_beats(front, beats, output_pixels(frames, front.model), in_stall=in_stall,
                               out_stall=out_stall, seed=seed, max_cycles=max_cycles)
@@ -130,6 +140,8 @@ def run_frontend(front: FrontEnd, frames: Sequence[tuple[np.ndarray, np.ndarray]
 def run_frontend_beats(front: FrontEnd, beats: list[int], pixels: int, *, in_stall: float = 0.0,
                        out_stall: float = 0.0, seed: int = 0, max_cycles: int = 1_000_000) -> np.ndarray:
     """The words of the first ``pixels`` output pixels the front end writes for raw pixel ``beats``."""
+    if any(name.endswith("maps") for name in front.signature.members):
+        raise ValueError("this front end reads MAPs (its maps ports): run it with run_frontend_passes")
     expected = pixels * front.params.beats_per_pixel
     got, _ = _simulate(front, front.pixels, front.beats, beats, expected, in_stall, out_stall, seed,
                        max_cycles)
@@ -139,33 +151,28 @@ def run_frontend_beats(front: FrontEnd, beats: list[int], pixels: int, *, in_sta
 def run_stereo(top: StereoMachine, frames: Sequence[tuple[np.ndarray, np.ndarray]], *,
                in_stall: float = 0.0, out_stall: float = 0.0, seed: int = 0,
                max_cycles: int = 1_000_000) -> tuple[MachineResult, int]:
-    """The machine's results for ``frames`` through ``StereoMachine`` and the clock cycles it took."""
-    p = top.params
+    """The machine's results for ``frames`` through ``StereoMachine`` and the clock cycles it took (the
+    declared passes' results are taken too: :func:`run_stereo_passes`)."""
+    results, cycles = run_stereo_passes(top, frames, in_stall=in_stall, out_stall=out_stall, seed=seed,
+                                        max_cycles=max_cycles)
+    return results[top.model.passes[-1].name], cycles
+
+
+def run_stereo_passes(top: StereoMachine, frames: Sequence[tuple[np.ndarray, np.ndarray]], *,
+                      in_stall: float = 0.0, out_stall: float = 0.0, seed: int = 0,
+                      max_cycles: int = 1_000_000) -> tuple[dict[str, MachineResult], int]:
+    """Every pass's results for ``frames`` through ``StereoMachine``, by pass name (the own pass's on
+    ``result``, a declared pass's on ``<pass>_result``: every pixel of the pass of every output row,
+    raster order), each result stream stalled at random (``out_stall``), and the clock cycles it took."""
+    from bayesmachine.hdl.frontend.passes import pass_port
+    from bayesmachine.hdl.frontend.words import pass_params
+
+    model = top.model
     beats = [b for lf, rf in frames for b in frame_beats(lf, rf)]
-    expected = output_pixels(frames, top.model)
-    got, cycles = _simulate(top, top.pixels, top.result, beats, expected, in_stall, out_stall, seed,
-                            max_cycles)
-    res = decode_results(p, got) if got else MachineResult.empty(p.rows)
-    return res, cycles
-
-
-def run_stereo_lr(top: StereoMachine, frames: Sequence[tuple[np.ndarray, np.ndarray]], *,
-                  in_stall: float = 0.0, out_stall: float = 0.0, seed: int = 0,
-                  max_cycles: int = 1_000_000) -> tuple[MachineResult, MachineResult, int]:
-    """A census-lr ``StereoMachine``'s results for ``frames``: the left pass's (the ``result`` stream,
-    as :func:`run_stereo`), the right pass's (``right_result``, every right map column of every output
-    row, raster order) and the clock cycles it took."""
-    from bayesmachine.hdl.frontend.lr import right_pass_params
-
-    p, model = top.params, top.model
-    rp = right_pass_params(model, p)
-    beats = [b for lf, rf in frames for b in frame_beats(lf, rf)]
-    expected = output_pixels(frames, model)
-    k = model.margin
-    right_expected = sum((lf.shape[0] - 2 * k) * (lf.shape[1] - 2 * k) for lf, _ in frames)
+    ports = {p.name: getattr(top, pass_port(model, p, "result")) for p in model.passes}
+    expected = {name: pass_pixels(frames, model, name) for name in ports}
+    got: dict[str, list[int]] = {name: [] for name in ports}
     rnd = random.Random(seed)
-    got: list[int] = []
-    right: list[int] = []
     cycles = 0
 
     async def feeder(ctx: SimulatorContext) -> None:
@@ -173,148 +180,108 @@ def run_stereo_lr(top: StereoMachine, frames: Sequence[tuple[np.ndarray, np.ndar
 
     async def collector(ctx: SimulatorContext) -> None:
         nonlocal cycles
-        raw = top.result.payload.as_value()
-        right_raw = top.right_result.payload.as_value()
-        while len(got) < expected or len(right) < right_expected:
-            ready = not (out_stall and rnd.random() < out_stall)
-            ctx.set(top.result.ready, ready)
-            _, _, valid, payload, r_valid, r_payload = await ctx.tick().sample(
-                top.result.valid, raw, top.right_result.valid, right_raw)
+        names = list(ports)
+        samples = [v for n in names for v in (ports[n].valid, ports[n].payload.as_value())]
+        while any(len(got[n]) < expected[n] for n in names):
+            ready = {n: not (out_stall and rnd.random() < out_stall) for n in names}
+            for n in names:
+                ctx.set(ports[n].ready, ready[n])
+            _, _, *values = await ctx.tick().sample(*samples)
             cycles += 1
-            if valid and ready:
-                got.append(payload)
-            if r_valid:
-                right.append(r_payload)
+            for i, n in enumerate(names):
+                if values[2 * i] and ready[n]:
+                    got[n].append(values[2 * i + 1])
             if cycles > max_cycles:
-                raise RuntimeError(f"no complete output after {max_cycles} cycles ({len(got)}/{expected}, "
-                                   f"right {len(right)}/{right_expected})")
+                raise RuntimeError(f"no complete output after {max_cycles} cycles ("
+                                   + ", ".join(f"{n} {len(got[n])}/{expected[n]}" for n in names) + ")")
 
     sim = Simulator(top)
     sim.add_clock(1e-8)
     sim.add_testbench(feeder, background=True)
     sim.add_testbench(collector)
     sim.run()
-    res = decode_results(p, got) if got else MachineResult.empty(p.rows)
-    res_r = decode_results(rp, right) if right else MachineResult.empty(rp.rows)
-    return res, res_r, cycles
+    out = {}
+    for p in model.passes:
+        pp = pass_params(model, top.params, p.name)
+        out[p.name] = decode_results(pp, got[p.name]) if got[p.name] else MachineResult.empty(pp.rows)
+    return out, cycles
 
 
-def run_frontend_lr(front: FrontEnd, frames: Sequence[tuple[np.ndarray, np.ndarray]], maps: np.ndarray,
-                    right_maps: np.ndarray, *, in_stall: float = 0.0, out_stall: float = 0.0,
-                    result_delay: int = 0, seed: int = 0, max_cycles: int = 1_000_000
-                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """A census-lr front end's words for ``frames``, both passes, with stand-ins for both machines'
-    results: ``maps`` (one per output pixel) and ``right_maps`` (one per right pixel: every map column
-    of every output row), -1 = none; each given after its pixel's last beat left, up to
-    ``result_delay`` random cycles later (a right result only while ``right_room``). Returns the left
-    pass's words and ``line_start`` flags, then the right pass's."""
-    from bayesmachine.hdl.frontend.lr import right_pass_params
+def run_frontend_passes(front: FrontEnd, frames: Sequence[tuple[np.ndarray, np.ndarray]],
+                        maps: Mapping[str, np.ndarray] | None = None, *, in_stall: float = 0.0,
+                        out_stall: float = 0.0, result_delay: int = 0, seed: int = 0,
+                        max_cycles: int = 1_000_000) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Every pass's words and beats' ``line_start`` flags for ``frames``, by pass name: (words (P,
+    rows, loaded_columns), flags (P, beats_per_pixel)), P the pass's pixels (:func:`pass_pixels`).
+    ``maps[name]`` stands in for the results of each pass whose MAPs the front end reads (its ``maps``
+    ports), one per pixel of the pass, -1 = no match: the MAP of pixel i goes in after its last beat
+    left, up to ``result_delay`` random cycles later, when the front end is ready for it."""
+    from bayesmachine.hdl.frontend.passes import pass_port
+    from bayesmachine.hdl.frontend.words import pass_params
 
-    p, model = front.params, front.model
-    rp = right_pass_params(model, p)
+    model, maps = front.model, dict(maps or {})
     beats = [b for lf, rf in frames for b in frame_beats(lf, rf)]
-    n = output_pixels(frames, model)
-    k = model.margin
-    n_right = sum((lf.shape[0] - 2 * k) * (lf.shape[1] - 2 * k) for lf, _ in frames)
-    maps, right_maps = np.asarray(maps).reshape(-1), np.asarray(right_maps).reshape(-1)
-    if maps.shape != (n,) or right_maps.shape != (n_right,):
-        raise ValueError(f"maps must hold one MAP per output pixel ({n}) and right_maps one per right pixel "
-                         f"({n_right}), got {maps.shape} and {right_maps.shape}")
     rnd = random.Random(seed)
-    got: list[int] = []
-    got_right: list[int] = []
-
-    async def feeder(ctx: SimulatorContext) -> None:
-        await feed_stream(ctx, front.pixels, beats, rnd, in_stall)
-
-    def results(sink: list[int], params: MachineParams, values: np.ndarray, take: object, map_: object,
-                hit: object, room: object | None) -> object:
-        async def bench(ctx: SimulatorContext) -> None:
-            for i in range(len(values)):
-                while len(sink) < (i + 1) * params.beats_per_pixel:  # the pixel's words have left
-                    await ctx.tick()
-                for _ in range(rnd.randint(0, result_delay)):
-                    await ctx.tick()
-                if room is not None:
-                    while not ctx.get(room):
-                        await ctx.tick()
-                value = int(values[i])
-                ctx.set(map_, max(0, value))
-                ctx.set(hit, int(value >= 0))
-                ctx.set(take, 1)
-                await ctx.tick()
-                ctx.set(take, 0)
-        return bench
-
-    def collector(stream_: object, sink: list[int], expected: int) -> object:
-        async def bench(ctx: SimulatorContext) -> None:
-            await collect_stream(ctx, stream_, sink, expected, rnd, out_stall, max_cycles)
-        return bench
-
+    got: dict[str, list[int]] = {p.name: [] for p in model.passes}
+    params = {p.name: pass_params(model, front.params, p.name) for p in model.passes}
     sim = Simulator(front)
     sim.add_clock(1e-8)
-    sim.add_testbench(feeder, background=True)
-    sim.add_testbench(results(got, p, maps, front.result_take, front.result_map, front.result_hit, None),
-                      background=True)
-    sim.add_testbench(results(got_right, rp, right_maps, front.right_take, front.right_map, front.right_hit,
-                              front.right_room), background=True)
-    sim.add_testbench(collector(front.right_beats, got_right, n_right * rp.beats_per_pixel), background=True)
-    sim.add_testbench(collector(front.beats, got, n * p.beats_per_pixel))
-    sim.run()
-    return (words_from_beats(p, got), line_starts_from_beats(p, got),
-            words_from_beats(rp, got_right), line_starts_from_beats(rp, got_right))
-
-
-def run_frontend_neighbour(front: FrontEnd, frames: Sequence[tuple[np.ndarray, np.ndarray]], maps: np.ndarray,
-                           *, in_stall: float = 0.0, out_stall: float = 0.0, result_delay: int = 0,
-                           seed: int = 0, max_cycles: int = 1_000_000) -> tuple[np.ndarray, np.ndarray]:
-    """A neighbour-prior front end's words and beats' ``line_start`` flags for ``frames``, with
-    ``maps`` (one per output pixel, -1 = no match) standing in for the machine's results: the
-    result of pixel k is given (``result_*``) after its last beat left, up to ``result_delay``
-    random cycles later. Returns (words (P, rows, loaded_columns), flags (P, beats_per_pixel))."""
-    p = front.params
-    beats = [b for lf, rf in frames for b in frame_beats(lf, rf)]
-    n = output_pixels(frames, front.model)
-    maps = np.asarray(maps).reshape(-1)
-    if maps.shape != (n,):
-        raise ValueError(f"maps must hold one MAP per output pixel ({n}), got {maps.shape}")
-    expected = n * p.beats_per_pixel
-    rnd = random.Random(seed)
-    got: list[int] = []
 
     async def feeder(ctx: SimulatorContext) -> None:
         await feed_stream(ctx, front.pixels, beats, rnd, in_stall)
 
-    async def results(ctx: SimulatorContext) -> None:
-        for k in range(n):
-            while len(got) < (k + 1) * p.beats_per_pixel:  # the pixel's words have left
-                await ctx.tick()
-            for _ in range(rnd.randint(0, result_delay)):
-                await ctx.tick()
-            value = int(maps[k])
-            ctx.set(front.result_map, max(0, value))
-            ctx.set(front.result_hit, int(value >= 0))
-            ctx.set(front.result_take, 1)
+    sim.add_testbench(feeder, background=True)
+    benches = []
+    for p in model.passes:
+        n, bpp = pass_pixels(frames, model, p.name), params[p.name].beats_per_pixel
+        port = pass_port(model, p, "maps")
+        if port in front.signature.members:
+            values = np.asarray(maps.get(p.name, ())).reshape(-1)
+            if values.shape != (n,):
+                raise ValueError(f"maps[{p.name!r}] must hold one MAP per pixel of the {p.name} pass ({n}), "
+                                 f"got {values.shape}")
+            benches.append(_stand_in(getattr(front, port), values, got[p.name], bpp, rnd, result_delay))
+        benches.append(_collector(getattr(front, pass_port(model, p, "beats")), got[p.name], n * bpp, rnd,
+                                  out_stall, max_cycles))
+    done: list[bool] = []
+
+    def finishing(bench: Any) -> Any:
+        async def run(ctx: SimulatorContext) -> None:
+            await bench(ctx)
+            done.append(True)
+        return run
+
+    async def until_all_done(ctx: SimulatorContext) -> None:  # every stand-in given, every beat taken
+        while len(done) < len(benches):
             await ctx.tick()
-            ctx.set(front.result_take, 0)
 
-    async def collector(ctx: SimulatorContext) -> None:
-        raw = front.beats.payload.as_value()
-        cycles = 0
-        while len(got) < expected:
-            ready = not (out_stall and rnd.random() < out_stall)
-            ctx.set(front.beats.ready, ready)
-            _, _, valid, payload = await ctx.tick().sample(front.beats.valid, raw)
-            cycles += 1
-            if valid and ready:
-                got.append(payload)
-            if cycles > max_cycles:
-                raise RuntimeError(f"no complete output after {max_cycles} cycles ({len(got)}/{expected})")
-
-    sim = Simulator(front)
-    sim.add_clock(1e-8)
-    sim.add_testbench(feeder, background=True)
-    sim.add_testbench(results, background=True)
-    sim.add_testbench(collector)
+    for bench in benches:
+        sim.add_testbench(finishing(bench), background=True)
+    sim.add_testbench(until_all_done)
     sim.run()
-    return words_from_beats(p, got), line_starts_from_beats(p, got)
+    return {name: (words_from_beats(params[name], got[name]), line_starts_from_beats(params[name], got[name]))
+            for name in got}
+
+
+def _stand_in(port: object, values: np.ndarray, sink: list[int], bpp: int, rnd: random.Random,
+              delay: int) -> object:
+    """A testbench giving ``values`` as a machine's MAPs on ``port`` (a ``map_stream``), value i once
+    pixel i's ``bpp`` beats are in ``sink``."""
+    async def bench(ctx: SimulatorContext) -> None:
+        for i, value in enumerate(values.tolist()):
+            while len(sink) < (i + 1) * bpp:  # the pixel's words have left
+                await ctx.tick()
+            for _ in range(rnd.randint(0, delay)):
+                await ctx.tick()
+            ctx.set(port.payload, {"map": max(0, value), "hit": int(value >= 0)})  # type: ignore[attr-defined]
+            ctx.set(port.valid, 1)  # type: ignore[attr-defined]
+            await ctx.tick().until(port.ready)  # type: ignore[attr-defined]
+            ctx.set(port.valid, 0)  # type: ignore[attr-defined]
+    return bench
+
+
+def _collector(stream_: object, sink: list[int], expected: int, rnd: random.Random, out_stall: float,
+               max_cycles: int) -> object:
+    async def bench(ctx: SimulatorContext) -> None:
+        await collect_stream(ctx, stream_, sink, expected, rnd, out_stall, max_cycles)
+    return bench

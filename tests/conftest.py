@@ -8,7 +8,9 @@ test that reaches an EDA tool fails (:func:`pytest_runtest_setup`): mark it.
 
 from __future__ import annotations
 
+import contextlib
 import os
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -159,3 +161,78 @@ def small_params(**kwargs: object) -> MachineParams:
     )
     base.update(kwargs)
     return MachineParams(**base)  # type: ignore[arg-type]
+
+
+def passes_model(frames: list[tuple[np.ndarray, np.ndarray]], model: object,
+                 params: MachineParams) -> dict[str, MachineResult]:
+    """Every pass of ``model`` on the machine model as the host runs them, frames back to back (one
+    engine per pass, so its random source carries over as on chip), by pass name: per map row each
+    declared pass's row (its above column from its own previous row), then the own pass's (a pass
+    column from the row of the pass it reads). What a ``StereoMachine`` of ``model`` computes."""
+    from bayesmachine.hdl.frontend.words import pass_params
+    from bayesmachine.host.features import model_planes
+    from bayesmachine.host.likelihoods import pass_grid, pass_words
+    from bayesmachine.region import OutputRegion
+    from bayesmachine.sim.model import MachineModel
+
+    passes = model.passes  # type: ignore[attr-defined]
+    machines = {p.name: pass_params(model, params, p.name) for p in passes}  # type: ignore[arg-type]
+    engines = {name: MachineModel(pp) for name, pp in machines.items()}
+    out: dict[str, list[MachineResult]] = {p.name: [] for p in passes}
+    for lf, rf in frames:
+        fl, fr = model_planes(lf, model), model_planes(rf, model)  # type: ignore[arg-type]
+        region = OutputRegion.of_features(fl.shape, model.dmax)  # type: ignore[attr-defined]
+        grids = {p.name: pass_grid(p, region) for p in passes}
+        latest = {p.name: np.full(grids[p.name].width, -1) for p in passes}  # each pass's last row
+        for y in range(region.shape[0]):
+            for p in passes:
+                pp = machines[p.name]
+                words = pass_words(p, fl, fr, pp, rows=slice(y, y + 1), above=latest[p.name],
+                                   results={k: v[None] for k, v in latest.items() if k != p.name})
+                starts = np.zeros(grids[p.name].width, bool)
+                starts[0] = True
+                res = engines[p.name].run(words, line_start=starts if pp.feedback_columns else None)
+                latest[p.name] = np.where(res.nomatch | res.timeout, -1, res.map)
+                out[p.name].append(res)
+    return {p.name: MachineResult.concatenate(out[p.name], machines[p.name].rows) for p in passes}
+
+
+def _lr_like() -> object:
+    from bayesmachine.columns import Census, Consistency, GradH, GradV, Mean
+    from bayesmachine.models import ModelDef, PassDef
+
+    return ModelDef(
+        name="lr-like",
+        description="census + a consistency column of a right pass, and a paper pass beside them",
+        columns=(Mean, GradH, GradV, Census, Consistency),
+        passes=(PassDef(name="right", model="census", reference="right", machine_index=1,
+                        nomatch_option="lr_right_nomatch", watchdog_option="lr_right_max_cycles",
+                        watchdog_runs=8),
+                PassDef(name="echo", model="paper", reference="left", machine_index=2)),
+        watchdog_runs=15)
+
+
+@pytest.fixture
+def lr_like() -> Iterator[object]:
+    """A census-lr-like model defined here, known by name (``lr-like``) for the test: no neighbour prior
+    in its own pass, the right pass its consistency column reads (the census model, with its neighbour
+    prior), and a pass nothing reads, with the left image as reference (the paper model on a third
+    machine). What runs it runs it from its definition, never its name."""
+    with registered(_lr_like()) as definition:
+        yield definition
+
+
+@contextlib.contextmanager
+def registered(*definitions: object) -> Iterator[object]:
+    """``definitions`` registered (``bayesmachine.models.register_model``) while the block runs, then
+    forgotten; yields the first."""
+    from bayesmachine.models import MODELS, register_model
+
+    done = []
+    try:
+        for d in definitions:
+            done.append(register_model(d))  # type: ignore[arg-type]
+        yield done[0]
+    finally:
+        for d in done:
+            MODELS.pop(d.name, None)

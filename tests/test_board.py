@@ -8,7 +8,7 @@ import struct
 
 import numpy as np
 import pytest
-from conftest import frame_results
+from conftest import assert_same_results, frame_results, passes_model
 
 from bayesmachine.cli import main
 from bayesmachine.fpga.boards import protocol as pr
@@ -95,8 +95,10 @@ def _link(port: TwinPort) -> BoardLink:
 
 
 def _assert_model(
-    out: dict[str, np.ndarray], left: np.ndarray, right: np.ndarray, fields: int = pr.FIELDS_ALL
+    got: dict[str, dict[str, np.ndarray]], left: np.ndarray, right: np.ndarray, fields: int = pr.FIELDS_ALL
 ):
+    assert list(got) == ["left"]  # the paper model: its own pass
+    out = got["left"]
     want = frame_results(PARAMS, MODEL, left, right)
     assert len(out["map"]) == (HEIGHT - 4) * (WIDTH - 4 - DMAX)
     names = (
@@ -221,13 +223,72 @@ def test_link_refuses_a_frame_of_another_width() -> None:
         _link(port).run_frame(left, right, PARAMS, MODEL)
 
 
-def test_board_refuses_census_lr_and_off_chip_sources() -> None:
-    with pytest.raises(ParameterError, match="^the board's link carries one pass's results, not the "
-                       "census-lr model's right pass"):
-        check_board(PARAMS, ModelParams(dmax=DMAX, name="census-lr"), WIDTH)
+@pytest.mark.parametrize(("fields", "fault"), [(pr.FIELDS_ALL, {}), (0, {}),
+                                               (pr.FIELDS_ALL, {"garble_back": [pr.RECORD_BYTES * 2 + 300]})])
+def test_link_gives_every_pass_of_census_lr(fields: int, fault: dict) -> None:
+    """census-lr on a board: the right pass's records (tag 'a') beside the left pass's ('R'), the end
+    record's count and XOR of the two passes' CRCs; every pass's results are the model's (a byte garbled
+    on the way back: the attempt fails, the frame is sent again)."""
+    model = ModelParams(dmax=DMAX, name="census-lr")
+    params = stereo_machine_params(DMAX, model=model)
+    left, right = _crop()
+    twin = BoardTwin(params, model, WIDTH, results=lambda lf, rf: passes_model([(lf, rf)], model, params))
+    link = _link(TwinPort(twin, **fault))
+    link.info()
+    got = link.run_frame(left, right, params, model, fields)
+    want = passes_model([(left, right)], model, params)
+    assert set(got) == {"left", "right"} and len(got["right"]["map"]) == (HEIGHT - 6) * (WIDTH - 6)
+    for name, res in want.items():
+        for field in got[name]:
+            np.testing.assert_array_equal(got[name][field], np.asarray(getattr(res, field)), err_msg=field)
+        assert ("cycles" in got[name]) == bool(fields & pr.FIELD_CYCLES)
+    assert link.stats.attempts == 1 + bool(fault)
+
+
+@pytest.mark.usefixtures("lr_like")
+def test_link_gives_every_pass_of_a_model_from_its_definition() -> None:
+    """A model defined outside the package (``conftest.lr_like``: a right pass and a left-reference pass
+    beside its own): tags 'a' and 'b' by the passes' order in its definition, every pass's results the
+    model's, the link's frame of every pass's records."""
+    from bayesmachine.fpga.boards.serializer import board_passes
+
+    model = ModelParams(dmax=DMAX, name="lr-like")
+    params = stereo_machine_params(DMAX, model=model)
+    assert [(bp.name, chr(bp.tag)) for bp in board_passes(params, model)] == [("right", "a"), ("echo", "b"),
+                                                                                ("left", "R")]
+    left, right = _crop()
+    twin = BoardTwin(params, model, WIDTH, results=lambda lf, rf: passes_model([(lf, rf)], model, params))
+    got = _link(TwinPort(twin)).run_frame(left, right, params, model)
+    want = passes_model([(left, right)], model, params)
+    assert set(got) == {"right", "echo", "left"} and len(got["echo"]["map"]) == len(got["left"]["map"])
+    for name, res in want.items():
+        for field in ("map", "nomatch", "timeout", "counts", "cycles"):
+            np.testing.assert_array_equal(got[name][field], np.asarray(getattr(res, field)), err_msg=field)
+
+
+def test_board_engine_gives_the_declared_passes_too() -> None:
+    """``run --engine board`` of census-lr: the own pass's results and ``last_passes['right']``."""
+    from bayesmachine.fpga.boards.engine import BoardEngine
+
+    model = ModelParams(dmax=DMAX, name="census-lr")
+    params = stereo_machine_params(DMAX, model=model)
+    left, right = _crop()
+    twin = BoardTwin(params, model, WIDTH, results=lambda lf, rf: passes_model([(lf, rf)], model, params))
+    want = passes_model([(left, right)], model, params)
+    with BoardEngine(params, model, WIDTH, port="twin", timeout=0.05, progress=False,
+                     link_port=TwinPort(twin)) as engine:
+        assert_same_results(engine.run(left, right), want["left"])
+        assert list(engine.last_passes) == ["right"]
+        assert_same_results(engine.last_passes["right"], want["right"])
+
+
+def test_board_refuses_off_chip_sources() -> None:
     smtj = stereo_machine_params(DMAX, rng="smtj")
     with pytest.raises(ParameterError, match="on-chip random source"):
         check_board(smtj, MODEL, WIDTH)
+    lr = ModelParams(dmax=DMAX, name="census-lr")
+    with pytest.raises(ParameterError, match="^rng: the census-lr model's right pass runs on chip"):
+        check_board(stereo_machine_params(DMAX, model=lr, rng="smtj"), lr, WIDTH)
 
 
 def test_pll_config() -> None:
@@ -243,10 +304,12 @@ def test_pll_config() -> None:
         (["run", "--engine", "board", "-o", "{out}"], "--engine board needs --port"),
         (["run", "--port", "/dev/null", "-o", "{out}"], "--port: only with --engine board"),
         (
-            ["run", "--engine", "board", "--port", "/dev/null", "--model", "census-lr", "-o", "{out}"],
-            "the board's link carries one pass's results",
+            ["run", "--engine", "board", "--port", "/dev/null", "--model", "census-lr", "--rng", "lfsr",
+             "--dmax", "4", "--crop", "300,200,16,12", "-o", "{out}"],
+            "cannot open /dev/null",
         ),
-        (["board", "simulate", "--model", "census-lr"], "--model: the board's link carries one pass's"),
+        (["board", "simulate", "--model", "census-lr", "--rng", "smtj"],
+         "--rng: rng: the census-lr model's right pass runs on chip on a machine of its own"),
         (["board", "build", "--baud", "11000000", "--dmax", "4", "--width", "16"], None),
     ],
 )

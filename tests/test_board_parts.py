@@ -25,6 +25,7 @@ from bayesmachine.fpga.boards.serializer import ControlSerializer, ResultSeriali
 from bayesmachine.fpga.boards.status import ReceiveTimeout, ReceiveTimeoutTwin, StatusLEDs, StatusLEDsTwin
 from bayesmachine.fpga.boards.streams import CRC16, CRC32
 from bayesmachine.fpga.boards.twin import BoardTwin
+from bayesmachine.hdl.frontend.stereo import stereo_machine_params
 from bayesmachine.models import ModelParams
 from bayesmachine.sim.results import MachineResult
 
@@ -193,9 +194,10 @@ def _random_results(params: object, n: int, seed: int) -> MachineResult:
 def test_result_serializer_is_its_twin(fields: int) -> None:
     params = small_params(counter_max=300, max_cycles=5000)  # two-byte counters and cycles
     res = _random_results(params, 5, fields)
-    twin = ResultSerializerTwin(params)
+    tag = pr.RESULT_TAG if fields % 2 else pr.pass_tag(fields)  # the own pass's records, a declared one's
+    twin = ResultSerializerTwin(params, tag)
     want = twin.send(res, fields)
-    dut = ResultSerializer(params=params)
+    dut = ResultSerializer(params=params, tag=tag)
     got: list = []
     seen: dict[str, int] = {}
     beats = [{"map": int(res.map[i]), "nomatch": int(res.nomatch[i]), "timeout": int(res.timeout[i]),
@@ -218,23 +220,29 @@ def test_result_serializer_is_its_twin(fields: int) -> None:
     assert bytes(b.data for b in got) == want
     record = pr.ResultFormat.of(params, fields).record_bytes
     assert [i for i, b in enumerate(got) if b.last] == [record * k + record - 1 for k in range(len(res))]
+    assert {got[record * k].data for k in range(len(res))} == {tag}
     assert seen == {"taken": 5, "sent": 5, "crc": zlib.crc32(want), "busy": 0} and twin.crc == seen["crc"]
 
 
-def test_transmit_arbiter_is_its_twin_cycle_by_cycle() -> None:
-    dut = TransmitArbiter()
+@pytest.mark.parametrize("streams", [1, 3])
+def test_transmit_arbiter_is_its_twin_cycle_by_cycle(streams: int) -> None:
+    """Control records and ``streams`` result streams (a model's passes) onto one byte stream, whole
+    records, control first, then the result streams in their order."""
+    dut = TransmitArbiter(results=streams)
     twin = TransmitArbiterTwin()
-    rnd = random.Random(5)
+    rnd = random.Random(5 + streams)
+    names = ["control", *(f"results{i}" for i in range(streams))]
+    ports = [dut.control, *dut.results]
     # Records of 1..5 bytes from each side, offered with gaps; the UART ready now and then.
     queues = {name: [(rnd.randrange(256), i == n - 1) for _ in range(12) for n in [rnd.randint(1, 5)]
-                     for i in range(n)] for name in ("control", "results")}
+                     for i in range(n)] for name in names}
     sent: list[int] = []
 
     async def bench(ctx) -> None:  # noqa: ANN001
-        at = {"control": 0, "results": 0}
-        for _ in range(600):
+        at = dict.fromkeys(names, 0)
+        for _ in range(600 * (streams + 1)):
             offers = {}
-            for name, port in (("control", dut.control), ("results", dut.results)):
+            for name, port in zip(names, ports, strict=True):
                 q, i = queues[name], at[name]
                 valid = i < len(q) and rnd.random() < 0.7
                 byte, last = q[i] if i < len(q) else (0, False)
@@ -243,13 +251,17 @@ def test_transmit_arbiter_is_its_twin_cycle_by_cycle() -> None:
                 offers[name] = (valid, byte, last)
             ready = rnd.random() < 0.5
             ctx.set(dut.bytes.ready, ready)
-            want = twin.step(offers["control"], offers["results"], ready)
-            got = {"control_ready": ctx.get(dut.control.ready), "results_ready": ctx.get(dut.results.ready),
+            want = twin.step(offers["control"], [offers[n] for n in names[1:]], ready)
+            got = {"control_ready": ctx.get(dut.control.ready),
+                   "results_ready": [ctx.get(r.ready) for r in dut.results],
                    "valid": ctx.get(dut.bytes.valid), "byte": ctx.get(dut.bytes.payload),
                    "busy": ctx.get(dut.busy)}
-            assert {k: int(v) for k, v in got.items()} == {k: int(v) for k, v in want.items()}
-            for name in at:
-                at[name] += bool(offers[name][0] and want[f"{name}_ready"])
+            want["results_ready"] = [int(r) for r in want["results_ready"]]
+            assert {k: v if isinstance(v, list) else int(v) for k, v in got.items()} == \
+                {k: v if isinstance(v, list) else int(v) for k, v in want.items()}
+            readies = [want["control_ready"], *want["results_ready"]]
+            for name, taken in zip(names, readies, strict=True):
+                at[name] += bool(offers[name][0] and taken)
             if want["valid"] and ready:
                 sent.append(want["byte"])
             await ctx.tick()
@@ -292,12 +304,15 @@ MODEL = ModelParams(name="paper", dmax=DMAX)
 
 
 def _control_run(headers: list[bytes], records: int, *, frame_done: bool = True, crc_ok: bool = True,
-                 dropped_at: int | None = None) -> list[bytes]:
+                 dropped_at: int | None = None, model: ModelParams = MODEL,
+                 row_results: int | None = None) -> list[bytes]:
     """The ``records`` :class:`ProtocolControl` sends for ``headers`` (raw records, parsed by the twin),
-    its frame receiver and result serializer stood in for: a frame's results all sent at once; the
-    frame done (``crc_ok``) or, without ``frame_done``, the receive timeout firing."""
+    its frame receiver and result serializers stood in for: a frame's results all sent at once
+    (``row_results`` per map row: every pass's); the frame done (``crc_ok``) or, without ``frame_done``,
+    the receive timeout firing."""
     info = pr.info_payload(WIDTH, DMAX + 2, 11, 0x1234)
-    dut = ProtocolControl(width=WIDTH, dmax=DMAX, margin=MODEL.margin, info=info)
+    dut = ProtocolControl(width=WIDTH, dmax=DMAX, margin=model.margin, info=info, row_results=row_results)
+    row = dut.row_results
     parser = HeaderParserTwin()
     parsed = [h for raw in headers for b in raw if (h := parser.feed(b)) is not None]
     got: list = []
@@ -317,7 +332,7 @@ def _control_run(headers: list[bytes], records: int, *, frame_done: bool = True,
             while ctx.get(dut.in_frame):  # the frame: its results, then done or the timeout
                 if ctx.get(dut.receiving):
                     await ctx.tick().repeat(3)
-                    ctx.set(dut.results_sent, (ctx.get(dut.height) - 2 * MODEL.margin) * (WIDTH - 4 - DMAX))
+                    ctx.set(dut.results_sent, (ctx.get(dut.height) - 2 * model.margin) * row)
                     ctx.set(dut.results_crc, 0xC0FFEE)
                     ctx.set(dut.frame_done if frame_done else dut.timed_out, 1)
                     ctx.set(dut.crc_ok, crc_ok)
@@ -333,8 +348,9 @@ def _control_run(headers: list[bytes], records: int, *, frame_done: bool = True,
     return [pr.encode_record(r.type, r.seq, r.payload.to_bytes(10, "little")) for r in got]
 
 
-def _control_twin(headers: list[bytes]) -> tuple[BoardTwin, list[bytes]]:
-    twin = BoardTwin(small_params(rows=DMAX + 2), MODEL, WIDTH, results=None, rx_fifo_log2=11)  # type: ignore[arg-type]
+def _control_twin(headers: list[bytes], model: ModelParams = MODEL) -> tuple[BoardTwin, list[bytes]]:
+    params = small_params(rows=DMAX + 2) if model is MODEL else stereo_machine_params(DMAX, model=model)
+    twin = BoardTwin(params, model, WIDTH, results=None, rx_fifo_log2=11)  # type: ignore[arg-type]
     twin.info = pr.info_payload(WIDTH, DMAX + 2, 11, 0x1234)
     parser = HeaderParserTwin()
     answers = [twin.reset()]
@@ -357,6 +373,21 @@ def test_protocol_control_answers_as_the_twin() -> None:
     assert _control_run(headers, len(want)) == want
 
 
+def test_protocol_control_counts_every_pass_results() -> None:
+    """census-lr: the start record announces both passes' results (per map row the output pixels and
+    the right pass's every right map column), and the end record waits until all of them are sent."""
+    lr = ModelParams(name="census-lr", dmax=DMAX)
+    row = (WIDTH - 6 - DMAX) + (WIDTH - 6)
+    headers = [pr.frame_header(6, 2, WIDTH, 9)]
+    _, answers = _control_twin(headers, lr)
+    start = pr.decode_record(answers[-1])
+    assert start.kind == pr.START and struct.unpack("<I", start.payload[5:9])[0] == (9 - 6) * row
+    want = [*answers, BoardTwin.end_record(6, pr.STATUS_OK, (9 - 6) * row, 0xC0FFEE)]
+    assert _control_run(headers, len(want), model=lr, row_results=row) == want
+    with pytest.raises(ValueError, match="row_results"):
+        ProtocolControl(width=WIDTH, dmax=DMAX, margin=3, info=bytes(10), row_results=WIDTH - 7 - DMAX)
+
+
 @pytest.mark.parametrize(("kw", "status"), [({"crc_ok": False}, pr.STATUS_CHECKSUM),
                                             ({"frame_done": False}, pr.STATUS_TIMEOUT),
                                             ({"dropped_at": 0}, pr.STATUS_OVERFLOW),
@@ -374,6 +405,8 @@ def test_protocol_control_ends_a_frame_with_its_status(kw: dict, status: int) ->
 @pytest.mark.parametrize(("cls", "kwargs", "error"), [
     (ReceiveTimeout, {"cycles": 1}, ValueError), (ReceiveTimeout, {"cycles": 2.0}, TypeError),
     (ResultSerializer, {"params": "paper"}, TypeError),
+    (ResultSerializer, {"params": small_params(), "tag": ord("X")}, ValueError),
+    (TransmitArbiter, {"results": 0}, ValueError),
     (FrameReceiver, {"width": 8, "dmax": 4, "margin": 2}, ValueError),
     (ProtocolControl, {"width": 12, "dmax": 2, "margin": 2, "info": b"short"}, ValueError),
 ])

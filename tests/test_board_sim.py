@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import frame_results, require_tool
+from conftest import frame_results, passes_model, require_tool
 
 from bayesmachine.fpga.boards import protocol as pr
 from bayesmachine.fpga.boards.link import BoardLink
@@ -153,7 +153,7 @@ def test_link_against_the_rtl(board, fault, reason) -> None:
         port = raw if fault is None else FaultyPort(raw, board, **fault)
         link = BoardLink(port, timeout=1.5, log=lambda msg: None)
         link.info()
-        out = link.run_frame(left, right, PARAMS, MODEL)
+        out = link.run_frame(left, right, PARAMS, MODEL)["left"]
     for name in ("map", "nomatch", "timeout", "counts", "cycles"):
         np.testing.assert_array_equal(out[name], np.asarray(getattr(want, name)), err_msg=name)
     if fault is None:
@@ -163,7 +163,7 @@ def test_link_against_the_rtl(board, fault, reason) -> None:
         assert reason in link.stats.failures[0]
 
 
-@pytest.mark.parametrize("model", ["census", "paper"])
+@pytest.mark.parametrize("model", ["census", "paper", "census-lr"])
 def test_the_two_commands(tmp_path: Path, model: str) -> None:
     """``board simulate`` prints the pty first; ``run --engine board`` on a crop writes the same
     result.npz as ``run --engine model``, for the census model (the board's default) and the paper's;
@@ -270,8 +270,52 @@ def test_pacing_keeps_the_receive_fifo_from_overflowing(board) -> None:
     with _open(board) as port:
         link = BoardLink(port, timeout=1.5, log=lambda msg: None)
         assert link.info().rx_fifo_bytes < 2 * WIDTH * h  # the frame does not fit in the FIFO
-        out = link.run_frame(left, right, PARAMS, MODEL)
+        out = link.run_frame(left, right, PARAMS, MODEL)["left"]
     assert link.stats.attempts == 1, link.stats.failures
     want = frame_results(PARAMS, MODEL, left, right)
     for name in ("map", "counts", "cycles"):
         np.testing.assert_array_equal(out[name], np.asarray(getattr(want, name)), err_msg=name)
+
+
+def test_census_lr_on_the_simulated_board() -> None:
+    """census-lr on the board: both passes' records come (the right pass's tagged 'a', interleaved with
+    the left pass's as the machines give them), each pass's in order and its bytes the twin's, the end
+    record the twin's (its count and XOR of the passes' CRCs); through the link, every pass's results are
+    the model's."""
+    require_tool("verilator", "g++", "make")
+    from bayesmachine.fpga.boards.simulate import BoardSimulation
+
+    model = ModelParams(name="census-lr", dmax=DMAX)
+    params = stereo_machine_params(DMAX, model=model)
+    left, right = _crop()
+    pixels = np.stack([left, right], -1).tobytes()
+    stream = pr.frame_header(5, 3, WIDTH, HEIGHT) + pixels + pr.crc32(pixels).to_bytes(4, "little")
+    want = passes_model([(left, right)], model, params)
+    twin = BoardTwin(params, model, WIDTH, rx_fifo_log2=11, results=lambda lf, rf: want)
+    expect = twin.feed(stream)
+    with BoardSimulation(params, model, WIDTH, timeout_bits=TIMEOUT_BITS, verbose=False) as sim:
+        with _open(sim) as port:
+            port.write(stream)
+            got = _read_until_quiet(port)
+            link = BoardLink(port, timeout=1.5, log=lambda msg: None)
+            link.info()
+            out = link.run_frame(left, right, params, model)
+    head = pr.RECORD_BYTES
+    assert got[:head] == expect[:head] and got[-head:] == expect[-head:]  # the start and end records
+    sizes = {pr.RESULT_TAG: pr.ResultFormat.of(params, 3).record_bytes}
+    sizes[pr.pass_tag(0)] = pr.ResultFormat.of(twin.passes[0].params, 3).record_bytes
+
+    def by_tag(data: bytes) -> dict[int, bytes]:
+        out: dict[int, bytearray] = {tag: bytearray() for tag in sizes}
+        at = 0
+        while at < len(data):
+            out[data[at]] += data[at : at + sizes[data[at]]]
+            at += sizes[data[at]]
+        return {tag: bytes(b) for tag, b in out.items()}
+
+    records = by_tag(got[head:-head])
+    assert records == by_tag(expect[head:-head]) and all(records.values())
+    assert got[head:-head] != expect[head:-head]  # interleaved on the board, each pass whole in the twin
+    for name, res in want.items():
+        for field in ("map", "nomatch", "timeout", "counts", "cycles"):
+            np.testing.assert_array_equal(out[name][field], np.asarray(getattr(res, field)), err_msg=field)

@@ -29,7 +29,7 @@ from bayesmachine.models import ModelParams
 from bayesmachine.params import ParameterError
 from bayesmachine.sim.model import MachineModel
 from bayesmachine.sim.results import MachineResult
-from bayesmachine.sim.stereo_testbench import run_frontend, run_frontend_neighbour, run_stereo
+from bayesmachine.sim.stereo_testbench import run_frontend, run_frontend_passes, run_stereo
 
 
 def _noisy_pair(height: int, width: int, seed: int, shift: int = 2) -> tuple[np.ndarray, np.ndarray]:
@@ -162,8 +162,9 @@ def test_neighbour_frontend_words_equal_host_words_with_the_above_prior(width: i
     rows = [f[0].shape[0] - 6 for f in frames]
     rng = np.random.default_rng(9)
     maps = rng.integers(-1, model.dmax + 1, sum(rows) * wo)
-    got, flags = run_frontend_neighbour(FrontEnd(params=params, model=model, width=width), frames, maps,
-                                        in_stall=0.2, out_stall=0.2, result_delay=delay, seed=3)
+    front = FrontEnd(params=params, model=model, width=width)
+    got, flags = run_frontend_passes(front, frames, {"left": maps}, in_stall=0.2, out_stall=0.2,
+                                     result_delay=delay, seed=3)["left"]
     want, starts, k = [], [], 0
     for (lf, rf), h in zip(frames, rows, strict=True):
         fl, fr = model_planes(lf, model), model_planes(rf, model)

@@ -40,7 +40,7 @@ def test_the_board_engine_gives_the_model_results() -> None:
     left, right = _crop()
     with _board() as engine:
         assert isinstance(engine, PixelEngineBase)
-        assert engine.wall_cycles is None and engine.last_right is None
+        assert engine.wall_cycles is None and engine.last_passes == {}
         got = engine.run(left, right)
         again = engine.run(left, right)  # the board resets its machine at every frame
         figures = engine.figures

@@ -301,8 +301,8 @@ def test_census_lr_crop_at_eight_samples_per_clock(verilator_builds) -> None:  #
         for field in ("map", "nomatch", "timeout", "counts"):
             np.testing.assert_array_equal(getattr(run, field), getattr(one, field), err_msg=field)
         np.testing.assert_array_equal(run.cycles, -(-one.cycles // 8))
-        np.testing.assert_array_equal(run.right.map, one.right.map)
-        np.testing.assert_array_equal(run.right.cycles, -(-one.right.cycles // 8))
+        np.testing.assert_array_equal(run.passes["right"].map, one.passes["right"].map)
+        np.testing.assert_array_equal(run.passes["right"].cycles, -(-one.passes["right"].cycles // 8))
     assert one.timeout.any() and one.map.size > 100
 
 
@@ -347,11 +347,11 @@ def test_whole_pair_under_verilator_at_eight_samples_per_clock(verilator_builds)
     for field in ("map", "nomatch", "timeout", "counts"):
         np.testing.assert_array_equal(getattr(eight, field), getattr(one, field), err_msg=field)
     np.testing.assert_array_equal(eight.cycles, -(-one.cycles // 8))
-    np.testing.assert_array_equal(eight.right.map, one.right.map)
-    np.testing.assert_array_equal(eight.right.cycles, -(-one.right.cycles // 8))
+    np.testing.assert_array_equal(eight.passes["right"].map, one.passes["right"].map)
+    np.testing.assert_array_equal(eight.passes["right"].cycles, -(-one.passes["right"].cycles // 8))
 
     def per_pixel(run) -> float:  # noqa: ANN001  # both passes' compute cycles per output pixel
-        return (run.cycles.sum() + run.right.cycles.sum()) / run.cycles.size
+        return (run.cycles.sum() + run.passes["right"].cycles.sum()) / run.cycles.size
 
     print(f"\ncensus-lr, whole pair: {per_pixel(one):.2f} cycles per pixel at B = 1, {per_pixel(eight):.2f} "
           f"at B = 8 under Verilator")

@@ -68,6 +68,33 @@ def test_every_machine_top_has_the_declared_ports(rng: str) -> None:
         assert lanes.signature == MachineSignature(p)
 
 
+def test_the_passes_ports_are_declared_once() -> None:
+    """census-lr: the StereoMachine's ``right_result`` is the right machine's result stream (with ready);
+    the front end's ports are its word generators' own members (``maps`` and ``right_maps`` the lane
+    builders', ``right_beats`` the right generator's ``beats``), not declared again."""
+    from bayesmachine.hdl.frontend.words import pass_params
+    from bayesmachine.hdl.signatures import map_stream
+
+    model = ModelParams(name="census-lr", dmax=DMAX)
+    p = stereo_machine_params(DMAX, model=model, counter_max=4)
+    rp = pass_params(model, p, "right")
+    stereo = StereoMachine(params=p, model=model, width=20)
+    assert stereo.signature == StereoSignature(p, {"right": rp}) != StereoSignature(p)
+    assert stereo.signature.members["right_result"] == wiring.Out(result_stream(rp))
+    front = FrontEnd(params=p, model=model, width=20)
+    own, right = (WordGenerator(params=pp, model=model, pass_name=name, output_columns=n)
+                  for name, pp, n in ((None, p, 10), ("right", rp, 14)))
+    members = front.signature.members
+    assert set(members) == {"pixels", "beats", "maps", "right_beats", "right_maps"}
+    assert members["beats"] == own.signature.members["beats"]
+    assert members["maps"] == own.signature.members["maps"]
+    assert members["right_beats"] == right.signature.members["beats"]
+    assert members["right_maps"] == right.signature.members["maps"] == own.signature.members["right_maps"]
+    assert members["maps"] == wiring.In(map_stream(p))
+    with pytest.raises(ValueError, match="a pass's name makes its port's name"):
+        StereoSignature(p, {"right pass": rp})
+
+
 def test_the_front_end_and_the_emulated_machine_use_the_declared_streams() -> None:
     p, model = _params(), ModelParams(name="paper", dmax=DMAX)
     assert WordGenerator(params=p, model=model).signature.members["beats"].signature == load_stream(p)

@@ -107,7 +107,7 @@ def test_verilator_machines_on_a_crop_equal_the_model(machines: int) -> None:
     (["emit", "--top", "stereo", "--machines", "2", "--rng", "smtj"], "rng 'smtj' is off chip"),
     (["synth", "--top", "stereo", "--machines", "17", "--target", "ecp5-85k"], "machines must be in [1, 16]"),
     (["run", "--engine", "model", "--machines", "2", "--model", "census-lr"],
-     "--model census-lr runs with one"),
+     "the census-lr model's right pass runs on one machine"),
     (["run", "--engine", "board", "--port", "/dev/null", "--machines", "2"], "the board carries one machine"),
 ])
 def test_cli_refuses_a_bad_machines_in_one_line(argv: list[str], message: str, tmp_path,

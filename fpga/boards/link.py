@@ -7,8 +7,9 @@
    no answer within ``timeout`` seconds is one clear error.
 2. ``run_frame(left, right)``: the ``F`` header; once the board accepts it (``S``), the pixel
    pairs line by line, paced so the board's receive buffer cannot overflow (line y goes out once
-   the results of image line y - lag are in, lag from the buffer's size), then the CRC-32. The
-   results are accepted only with an ``E`` of status OK whose count and CRC-32 match what came:
+   the own pass's results of image line y - lag are in, lag from the buffer's size), then the CRC-32.
+   Every pass's records come (the declared passes' by their tags, :func:`~.serializer.board_passes`).
+   The results are accepted only with an ``E`` of status OK whose count and CRCs match what came:
    anything else (a refused header, a board reset, a garbled or lost byte either way, silence)
    fails the attempt, and after the board has settled the frame is sent again, under a new
    sequence number, up to ``attempts`` times.
@@ -35,6 +36,7 @@ from bayesmachine.params import MachineParams
 from bayesmachine.region import OutputRegion
 
 from . import protocol as pr
+from .serializer import board_passes
 
 __all__ = ["BoardError", "BoardLink", "LinkStats", "design_differences", "design_record",
            "fingerprint_message", "open_port", "record_design"]
@@ -46,6 +48,40 @@ class BoardError(RuntimeError):
 
 class _AttemptFailed(Exception):
     pass
+
+
+@dataclass(frozen=True)
+class _Frame:
+    """What a frame sends and expects: its lines and the pixels' CRC, the record formats of every pass by
+    tag (with the pass's name), the records to come in all, the own pass's results per output row, the
+    lines before the first output row and the lines the receive buffer holds beyond the one awaited."""
+
+    lines: list[bytes]
+    trailer: bytes
+    width: int
+    fields: int
+    formats: dict[int, tuple[str, pr.ResultFormat]]
+    expected: int
+    out_cols: int
+    edge: int
+    lag: int
+
+    @property
+    def height(self) -> int:
+        return len(self.lines)
+
+
+@dataclass
+class _Attempt:
+    """One attempt at a frame: its sequence number, whether the board accepted it, the lines sent, the
+    records received (every pass's, and the own pass's: they pace the lines) and their bytes by tag."""
+
+    seq: int
+    records: dict[int, bytearray]
+    started: bool = False
+    sent: int = 0
+    count: int = 0
+    own: int = 0
 
 
 @dataclass
@@ -91,16 +127,18 @@ class BoardLink:
         self.stats.bytes_received += len(first) + len(more)
         return True
 
-    def _next_item(self, body_bytes: int):  # noqa: ANN202
-        """The next complete item of the buffer: ("R", record bytes) or ("C", Record), None if incomplete.
-        Bytes that start neither are dropped (counted as garbage)."""
+    def _next_item(self, bodies: dict[int, int]):  # noqa: ANN202
+        """The next complete item of the buffer: ("R", record bytes, its tag first) of a result record
+        whose tag ``bodies`` knows (tag -> body bytes), or ("C", Record); None if incomplete. Bytes that
+        start neither are dropped (counted as garbage)."""
         while self._buf:
             b = self._buf[0]
-            if b == pr.RESULT_TAG:
-                if len(self._buf) < 1 + body_bytes:
+            if b in bodies:
+                size = 1 + bodies[b]
+                if len(self._buf) < size:
                     return None
-                rec = bytes(self._buf[: 1 + body_bytes])
-                del self._buf[: 1 + body_bytes]
+                rec = bytes(self._buf[:size])
+                del self._buf[:size]
                 return ("R", rec)
             if b == pr.SYNC[0]:
                 if len(self._buf) < 2:
@@ -143,7 +181,7 @@ class BoardLink:
             self._write(pr.encode_record(pr.INFO, seq))
             deadline = time.monotonic() + self.timeout
             while time.monotonic() < deadline:
-                item = self._next_item(0)
+                item = self._next_item({})
                 if item is None:
                     self._fill(max(0.0, deadline - time.monotonic()))
                     continue
@@ -169,9 +207,10 @@ class BoardLink:
         model: ModelParams,
         fields: int = pr.FIELDS_ALL,
         progress=None,
-    ) -> dict[str, np.ndarray]:  # noqa: ANN001
-        """One frame's results (the fields of :meth:`ResultFormat.decode`), in raster order of the
-        output region; ``progress(n)`` is called with the results received as they come."""
+    ) -> dict[str, dict[str, np.ndarray]]:  # noqa: ANN001
+        """One frame's results, every pass's by pass name (the fields of :meth:`ResultFormat.decode`),
+        each in raster order of its pixels; ``progress(n)`` is called with the own pass's results
+        received as they come."""
         info = self.board_info or self.info()
         height, width = left.shape
         if width != info.width:
@@ -179,21 +218,24 @@ class BoardLink:
                 f"{self.name} was built for {info.width}-pixel lines, the frame has {width}: crop "
                 f"to width {info.width} (--crop X,Y,{info.width},H) or rebuild with --width {width}"
             )
-        fmt = pr.ResultFormat.of(params, fields)
+        from bayesmachine.hdl.frontend.passes import pass_row_pixels
+
+        passes = board_passes(params, model)
         pixels = np.stack([left, right], axis=-1).astype(np.uint8)
         lines = [pixels[y].tobytes() for y in range(height)]
-        trailer = struct.pack("<I", pr.crc32(b"".join(lines)))
         region = OutputRegion.of_model(left.shape, model)  # census 7x7: margin 3
-        edge, out_cols, expected = 2 * region.margin, region.shape[1], region.pixels
-        # Lines in flight beyond the one whose results are awaited: what the receive buffer holds.
-        lag = max(1, info.rx_fifo_bytes // (2 * width) - 1)
+        frame = _Frame(
+            lines=lines, trailer=struct.pack("<I", pr.crc32(b"".join(lines))), width=width, fields=fields,
+            formats={bp.tag: (bp.name, pr.ResultFormat.of(bp.params, fields, bp.tag)) for bp in passes},
+            expected=region.shape[0] * sum(pass_row_pixels(model, bp.name, width) for bp in passes),
+            out_cols=region.shape[1], edge=2 * region.margin,
+            # Lines in flight beyond the one whose results are awaited: what the receive buffer holds.
+            lag=max(1, info.rx_fifo_bytes // (2 * width) - 1))
         reasons = []
         for _ in range(self.attempts):
             self.stats.attempts += 1
             try:
-                return self._attempt(
-                    lines, trailer, height, width, fields, fmt, expected, out_cols, edge, lag, progress
-                )
+                return self._attempt(frame, progress)
             except _AttemptFailed as exc:
                 reasons.append(str(exc))
                 self.stats.failures.append(str(exc))
@@ -201,90 +243,83 @@ class BoardLink:
                 self._settle()
         raise BoardError(f"{self.name} failed the frame {self.attempts} times: " + "; ".join(reasons))
 
-    def _attempt(
-        self,
-        lines,
-        trailer,
-        height,
-        width,
-        fields,
-        fmt,
-        expected,
-        out_cols,
-        edge,
-        lag,  # noqa: ANN001
-        progress,
-    ) -> dict[str, np.ndarray]:
-        seq = self._new_seq()
+    def _attempt(self, frame: _Frame, progress) -> dict[str, dict[str, np.ndarray]]:  # noqa: ANN001
+        a = _Attempt(self._new_seq(), {tag: bytearray() for tag in frame.formats})
         self._drain()
-        self._write(pr.frame_header(seq, fields, width, height))
-        started = False
-        sent = 0  # lines sent
-        records = bytearray()
-        count = 0
+        self._write(pr.frame_header(a.seq, frame.fields, frame.width, frame.height))
+        bodies = {tag: fmt.body_bytes for tag, (_, fmt) in frame.formats.items()}
         last_heard = time.monotonic()
         while True:
-            # Send what the board can take: line y once image line y - lag is answered.
-            if started:
-                while sent < height and (sent < edge + lag or count >= (sent - edge - lag + 1) * out_cols):
-                    self._write(lines[sent])
-                    sent += 1
-                    if sent == height:
-                        self._write(trailer)
-            item = self._next_item(fmt.body_bytes)
+            if a.started:
+                self._send_lines(frame, a)
+            item = self._next_item(bodies)
             if item is None:
                 if self._fill(0.05):
                     last_heard = time.monotonic()
                 elif time.monotonic() - last_heard > self.timeout:
-                    what = "accept the frame" if not started else f"send results ({count} of {expected} came)"
+                    what = ("accept the frame" if not a.started
+                            else f"send results ({a.count} of {frame.expected} came)")
                     raise _AttemptFailed(f"no answer within {self.timeout:g} s (waiting for it to {what})")
                 continue
             kind, value = item
             if kind == "R":
-                if not started:
+                if not a.started:
                     raise _AttemptFailed("a result came before the frame was accepted")
-                records += value
-                count += 1
-                if progress is not None:
-                    progress(1)
-                continue
-            rec = value
-            if rec.kind == pr.HELLO:
-                raise _AttemptFailed("the board was reset")
-            if rec.kind == pr.ERROR:
-                code = rec.payload[0]
-                detail = struct.unpack("<H", rec.payload[1:3])[0]
-                what = pr.ERROR_NAMES.get(code, f"error {code}")
-                if code == pr.ERR_SIZE:
-                    raise BoardError(
-                        f"{self.name} refused the frame: {what} (it was built for {detail}-pixel lines)"
-                    )
-                raise _AttemptFailed(f"the board refused the header: {what}")
-            if rec.seq != seq:
-                continue  # a record of an earlier attempt
-            if rec.kind == pr.START:
-                fields_b, _w, _h, n = struct.unpack("<BHHI", rec.payload[:9])
-                if n != expected or fields_b != fields:
-                    raise _AttemptFailed(
-                        f"the board accepted a different frame ({n} results, fields {fields_b})"
-                    )
-                started = True
-                continue
-            if rec.kind == pr.END:
-                status, n, crc = struct.unpack("<BII", rec.payload[:9])
-                if status != pr.STATUS_OK:
-                    raise _AttemptFailed(f"the board ended the frame: {pr.STATUS_NAMES.get(status, status)}")
-                if n != expected or count != expected:
-                    raise _AttemptFailed(
-                        f"{count} results came, the board sent {n}, the frame has {expected}"
-                    )
-                if crc != pr.crc32(bytes(records)):
-                    raise _AttemptFailed(
-                        "the results' checksum does not match (a byte garbled on the way back)"
-                    )
-                if sent != height:
-                    raise _AttemptFailed("the board ended the frame before all of it was sent")
-                return fmt.decode(bytes(records))
+                a.records[value[0]] += value
+                a.count += 1
+                if value[0] == pr.RESULT_TAG:
+                    a.own += 1
+                    if progress is not None:
+                        progress(1)
+            elif self._control(frame, a, value):
+                return {name: fmt.decode(bytes(a.records[tag])) for tag, (name, fmt) in frame.formats.items()}
+
+    def _send_lines(self, frame: _Frame, a: _Attempt) -> None:
+        """Send what the board can take: line y once image line y - lag is answered (the own pass's
+        results of its output row), then the pixels' CRC."""
+        while a.sent < frame.height and (a.sent < frame.edge + frame.lag
+                                         or a.own >= (a.sent - frame.edge - frame.lag + 1) * frame.out_cols):
+            self._write(frame.lines[a.sent])
+            a.sent += 1
+            if a.sent == frame.height:
+                self._write(frame.trailer)
+
+    def _control(self, frame: _Frame, a: _Attempt, rec: pr.Record) -> bool:
+        """A control record during an attempt: True for the frame's good end record; the attempt fails
+        (:class:`_AttemptFailed`, the reason) on anything wrong; a refused size is a :class:`BoardError`."""
+        if rec.kind == pr.HELLO:
+            raise _AttemptFailed("the board was reset")
+        if rec.kind == pr.ERROR:
+            code = rec.payload[0]
+            detail = struct.unpack("<H", rec.payload[1:3])[0]
+            what = pr.ERROR_NAMES.get(code, f"error {code}")
+            if code == pr.ERR_SIZE:
+                raise BoardError(f"{self.name} refused the frame: {what} (it was built for {detail}-pixel "
+                                 "lines)")
+            raise _AttemptFailed(f"the board refused the header: {what}")
+        if rec.seq != a.seq:
+            return False  # a record of an earlier attempt
+        if rec.kind == pr.START:
+            fields_b, _w, _h, n = struct.unpack("<BHHI", rec.payload[:9])
+            if n != frame.expected or fields_b != frame.fields:
+                raise _AttemptFailed(f"the board accepted a different frame ({n} results, fields {fields_b})")
+            a.started = True
+        elif rec.kind == pr.END:
+            status, n, crc = struct.unpack("<BII", rec.payload[:9])
+            if status != pr.STATUS_OK:
+                raise _AttemptFailed(f"the board ended the frame: {pr.STATUS_NAMES.get(status, status)}")
+            if n != frame.expected or a.count != frame.expected:
+                raise _AttemptFailed(f"{a.count} results came, the board sent {n}, the frame has "
+                                     f"{frame.expected}")
+            came = 0
+            for records in a.records.values():  # each pass's records' CRC-32, XORed
+                came ^= pr.crc32(bytes(records))
+            if crc != came:
+                raise _AttemptFailed("the results' checksum does not match (a byte garbled on the way back)")
+            if a.sent != frame.height:
+                raise _AttemptFailed("the board ended the frame before all of it was sent")
+            return True
+        return False
 
 
 def open_port(port: str, baud: int, timeout: float = 2.0):  # noqa: ANN201

@@ -7,13 +7,17 @@ Two kinds of traffic share the link (8N1, little-endian fields):
   number, 10 payload bytes, and a CRC-16/CCITT-FALSE of the first 14 bytes (low byte first).
 - **Bulk bytes** inside a frame: host -> board, ``width x height`` pixel pairs (left, right) in
   raster order, then the CRC-32 (zlib's) of those bytes; board -> host, one result record per
-  output pixel: ``'R'`` and a body of the fields asked for (:class:`ResultFormat`).
+  output pixel: ``'R'`` and a body of the fields asked for (:class:`ResultFormat`), and one per pixel
+  of each pass the model runs before its own (census-lr's right pass): the pass's tag
+  (:func:`pass_tag`: ``'a'`` for the first) and its machine's fields. The records of the passes
+  interleave as the machines give them; each pass's records come in its own raster order.
 
 Host -> board: ``F`` (a frame follows: fields, width, height) and ``I`` (ask for the board's info).
 Board -> host: ``H`` (hello: sent after every reset, the info payload), ``I`` (info),
-``S`` (frame accepted: the results that will come), ``R`` result records, ``E`` (frame end: a
-status, the results sent and the CRC-32 of their bytes, tags included) and ``X`` (a header
-refused: bad CRC, unknown type, a size the board was not built for).
+``S`` (frame accepted: the results that will come, every pass's), result records, ``E`` (frame end: a
+status, the records sent and the XOR of each pass's records' CRC-32, tags included: with one pass, the
+CRC-32 of its records) and ``X`` (a header refused: bad CRC, unknown type, a size the board was not
+built for).
 
 A frame's results are accepted only with an ``E`` of status ``OK`` whose count and CRC-32 match
 the records received: a garbled, dropped or extra byte in either direction, or a board reset in
@@ -36,6 +40,7 @@ __all__ = [
     "FIELD_COUNTS",
     "FIELD_CYCLES",
     "FIELDS_ALL",
+    "MAX_PASSES",
     "PROTOCOL_VERSION",
     "RECORD_BYTES",
     "RESULT_TAG",
@@ -52,13 +57,23 @@ __all__ = [
     "frame_header",
     "info_payload",
     "parse_info",
+    "pass_tag",
 ]
 
-PROTOCOL_VERSION = 1
+PROTOCOL_VERSION = 2  # 2: the declared passes' records (their tags), the end record's XOR of CRCs
 SYNC = b"BM"
 RECORD_BYTES = 16  # sync 2, type 1, seq 1, payload 10, crc 2
 PAYLOAD_BYTES = 10
-RESULT_TAG = ord("R")
+RESULT_TAG = ord("R")  # a result record of the model's own pass
+MAX_PASSES = 8  # declared passes a board carries: tags 'a' .. 'h'
+
+
+def pass_tag(index: int) -> int:
+    """The tag of a result record of the model's declared pass ``index`` (0: the first of
+    ``model.passes``): ``'a'``, ``'b'``, ..."""
+    if isinstance(index, bool) or not isinstance(index, int) or not 0 <= index < MAX_PASSES:
+        raise ValueError(f"a board carries at most {MAX_PASSES} declared passes, got pass index {index!r}")
+    return ord("a") + index
 
 # Record types.
 FRAME, INFO, HELLO, START, END, ERROR = (ord(c) for c in "FIHSEX")
@@ -178,21 +193,24 @@ def _bytes_of(bits: int) -> int:
 
 @dataclass(frozen=True)
 class ResultFormat:
-    """The body of an ``R`` record: ``map | nomatch << map_width | timeout << map_width + 1`` in
-    ``head_bytes``; then, if asked for, each counter in ``count_bytes`` and the cycles in
-    ``cycle_bytes`` (the result layout's fields, each byte aligned)."""
+    """A result record: its ``tag`` (``'R'``, or a declared pass's :func:`pass_tag`), then
+    ``map | nomatch << map_width | timeout << map_width + 1`` in ``head_bytes``; then, if asked for, each
+    counter in ``count_bytes`` and the cycles in ``cycle_bytes`` (the result layout's fields, each byte
+    aligned)."""
 
     map_width: int
     counter_width: int
     cycle_width: int
     rows: int
     fields: int
+    tag: int = RESULT_TAG
 
     @classmethod
-    def of(cls, params: object, fields: int) -> ResultFormat:
+    def of(cls, params: object, fields: int, tag: int = RESULT_TAG) -> ResultFormat:
         if not 0 <= fields <= FIELDS_ALL:
             raise ValueError(f"fields must be in 0..{FIELDS_ALL}, got {fields}")
-        return cls(params.map_width, params.counter_width, params.cycle_width, params.rows, fields)  # type: ignore[attr-defined]
+        return cls(params.map_width, params.counter_width, params.cycle_width, params.rows, fields,  # type: ignore[attr-defined]
+                   tag)
 
     @property
     def head_bytes(self) -> int:
@@ -227,9 +245,9 @@ class ResultFormat:
         counts: np.ndarray,
         cycles: np.ndarray,
     ) -> bytes:
-        """The ``R`` records of these results, in order."""
+        """The records of these results, in order."""
         n = len(map_)
-        parts = [np.full((n, 1), RESULT_TAG, np.uint8)]
+        parts = [np.full((n, 1), self.tag, np.uint8)]
         head = (
             np.asarray(map_, np.int64)
             | (np.asarray(nomatch, np.int64) << self.map_width)
@@ -244,13 +262,13 @@ class ResultFormat:
         return np.concatenate(parts, axis=1).tobytes()
 
     def decode(self, records: bytes) -> dict[str, np.ndarray]:
-        """The fields of consecutive ``R`` records (tags checked): ``map``, ``nomatch``, ``timeout``
-        and, when asked for, ``counts`` (P, rows) and ``cycles``."""
+        """The fields of consecutive records of this format (tags checked): ``map``, ``nomatch``,
+        ``timeout`` and, when asked for, ``counts`` (P, rows) and ``cycles``."""
         size = self.record_bytes
         if len(records) % size:
             raise ValueError(f"{len(records)} bytes are not whole {size}-byte result records")
         raw = np.frombuffer(records, np.uint8).reshape(-1, size)
-        if raw.size and not np.all(raw[:, 0] == RESULT_TAG):
+        if raw.size and not np.all(raw[:, 0] == self.tag):
             raise ValueError("a result record does not start with its tag")
         at = 1
         head = _from_le(raw[:, at : at + self.head_bytes])

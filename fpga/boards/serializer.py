@@ -4,27 +4,56 @@ carries (:mod:`.protocol`), one byte per handshake of a :func:`~.streams.packet_
 
 - :class:`ControlSerializer`: ``'B' 'M'``, the record, its CRC-16 computed on the way (its twin:
   :func:`.protocol.encode_record`).
-- :class:`ResultSerializer`: ``'R'`` and the fields a frame asked for (its twin:
-  :class:`ResultSerializerTwin`, on :meth:`.protocol.ResultFormat.encode`); it counts the results it
-  took and sent and keeps the CRC-32 of the bytes sent, for the frame's end record.
+- :class:`ResultSerializer`: one pass's results, its tag (``'R'`` for the model's own pass) and the
+  fields a frame asked for (its twin: :class:`ResultSerializerTwin`, on
+  :meth:`.protocol.ResultFormat.encode`); it counts the results it took and sent and keeps the CRC-32 of
+  the bytes sent, for the frame's end record. :func:`board_passes` says which passes a board sends, on
+  which machine, with which tag.
 """
 
 from __future__ import annotations
 
 import zlib
+from dataclasses import dataclass
 
 from amaranth.hdl import Array, C, Cat, Module, Mux, Signal, Value
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from bayesmachine.hdl.signatures import result_layout
-from bayesmachine.params import MachineParams
+from bayesmachine.models import ModelParams
+from bayesmachine.params import MachineParams, ParameterError
 from bayesmachine.sim.results import MachineResult
 
 from . import protocol as pr
 from .streams import CRC16, CRC32, packet_layout, record_layout
 
-__all__ = ["ControlSerializer", "ResultSerializer", "ResultSerializerTwin"]
+__all__ = ["BoardPass", "ControlSerializer", "ResultSerializer", "ResultSerializerTwin", "board_passes"]
+
+
+@dataclass(frozen=True)
+class BoardPass:
+    """One pass's results on a board: the pass's ``name``, its machine on chip (``params``), its
+    records' ``tag``."""
+
+    name: str
+    params: MachineParams
+    tag: int
+
+
+def board_passes(params: MachineParams, model: ModelParams) -> tuple[BoardPass, ...]:
+    """Every pass of ``model`` whose results a board sends: the declared ones (census-lr's right pass) in
+    the model's order, tags ``'a'``, ``'b'``, ... (:func:`.protocol.pass_tag`), then the own pass (``'R'``):
+    the transmit arbiter's order. ``ParameterError`` naming the model past :data:`.protocol.MAX_PASSES`."""
+    from bayesmachine.hdl.frontend.words import pass_params
+
+    declared = model.passes[:-1]
+    if len(declared) > pr.MAX_PASSES:
+        raise ParameterError(f"model: a board carries at most {pr.MAX_PASSES} declared passes' results, the "
+                             f"{model.name} model declares {len(declared)}", "model")
+    out = [BoardPass(p.name, pass_params(model, params, p.name), pr.pass_tag(i))
+           for i, p in enumerate(declared)]
+    return (*out, BoardPass(model.passes[-1].name, params, pr.RESULT_TAG))
 
 
 class ControlSerializer(wiring.Component):
@@ -76,12 +105,14 @@ def _chunks(value: Value, nbytes: int) -> list[Value]:
 
 
 class ResultSerializer(wiring.Component):
-    """One result at a time into an ``R`` record of the fields asked for (:class:`.protocol.ResultFormat`).
+    """One result at a time into a record of the fields asked for (:class:`.protocol.ResultFormat`).
 
     Parameters
     ----------
     params : MachineParams
         The machine whose results come in (their layout: :func:`~bayesmachine.hdl.signatures.result_layout`).
+    tag : int
+        The records' first byte (``'R'``: the model's own pass; a declared pass's :func:`.protocol.pass_tag`).
 
     Attributes
     ----------
@@ -102,10 +133,15 @@ class ResultSerializer(wiring.Component):
         A result is held (taken, not all sent).
     """
 
-    def __init__(self, *, params: MachineParams) -> None:
+    def __init__(self, *, params: MachineParams, tag: int = pr.RESULT_TAG) -> None:
         if not isinstance(params, MachineParams):
             raise TypeError(f"params must be a MachineParams, not {type(params).__name__}")
+        if isinstance(tag, bool) or not isinstance(tag, int):
+            raise TypeError(f"tag must be an integer, not {type(tag).__name__}")
+        if tag not in (pr.RESULT_TAG, *map(pr.pass_tag, range(pr.MAX_PASSES))):
+            raise ValueError(f"tag must be 'R' or a pass's tag ('a' ...), got {tag!r}")
         self._params = params
+        self._tag = tag
         super().__init__({
             "results": In(stream.Signature(result_layout(params))), "fields": In(2),
             "bytes": Out(stream.Signature(packet_layout())), "clear": In(1),
@@ -116,12 +152,16 @@ class ResultSerializer(wiring.Component):
     def params(self) -> MachineParams:
         return self._params
 
+    @property
+    def tag(self) -> int:
+        return self._tag
+
     def elaborate(self, platform: object) -> Module:
         m = Module()
         p = self._params
         fmt = pr.ResultFormat.of(p, pr.FIELDS_ALL)
         res = Signal(result_layout(p))
-        head = [C(pr.RESULT_TAG, 8), *_chunks(Cat(res.map, res.nomatch, res.timeout), fmt.head_bytes)]
+        head = [C(self._tag, 8), *_chunks(Cat(res.map, res.nomatch, res.timeout), fmt.head_bytes)]
         counts = [b for i in range(p.rows) for b in _chunks(res.counts[i], fmt.count_bytes)]
         body = Array([*head, *counts, *_chunks(res.cycles, fmt.cycle_bytes)])
         end_head, end_counts, end = len(head) - 1, len(head) + len(counts) - 1, len(body) - 1
@@ -161,8 +201,9 @@ class ResultSerializer(wiring.Component):
 class ResultSerializerTwin:
     """:class:`ResultSerializer` record by record: the bytes of each result, the counts, the CRC."""
 
-    def __init__(self, params: MachineParams) -> None:
+    def __init__(self, params: MachineParams, tag: int = pr.RESULT_TAG) -> None:
         self.params = params
+        self.tag = tag
         self.clear()
 
     def clear(self) -> None:
@@ -170,7 +211,7 @@ class ResultSerializerTwin:
 
     def send(self, result: MachineResult, fields: int) -> bytes:
         """The ``R`` records of ``result``'s pixels."""
-        records = pr.ResultFormat.of(self.params, fields).encode(
+        records = pr.ResultFormat.of(self.params, fields, self.tag).encode(
             result.map, result.nomatch, result.timeout, result.counts, result.cycles)
         self.sent += len(result)
         self.crc = zlib.crc32(records, self.crc)

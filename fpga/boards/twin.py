@@ -5,20 +5,24 @@ returns the bytes the board sends back: for headers, info requests, garbage and 
 for byte what the RTL sends for the same input (``tests/test_board_sim.py`` holds the RTL to it).
 It is put together as the RTL is, from its components' twins: the command parser's
 (:class:`~.parser.HeaderParserTwin`), the frame receiver's (:class:`~.receiver.FrameReceiverTwin`),
-the result serializer's (:class:`~.serializer.ResultSerializerTwin`); :meth:`BoardTwin.answer` and
-:meth:`BoardTwin.end_record` are the protocol control's. A frame's results are ``results(left,
-right)``: the machine model's on the host's words of that frame, from reset (the board resets the
-StereoMachine at every frame it accepts). Timing is not modelled: :meth:`silence` is the board's
-receive timeout firing (the host went quiet mid-frame), :meth:`reset` a board reset.
+the result serializers' (:class:`~.serializer.ResultSerializerTwin`, one per pass of the model);
+:meth:`BoardTwin.answer` and :meth:`BoardTwin.end_record` are the protocol control's. A frame's results
+are ``results(left, right)``: the machine model's on the host's words of that frame, from reset (the
+board resets the StereoMachine at every frame it accepts), every pass's by pass name (or, for a model
+without declared passes, the own pass's ``MachineResult``). Timing is not modelled: :meth:`silence` is
+the board's receive timeout firing (the host went quiet mid-frame), :meth:`reset` a board reset; and a
+model with declared passes gets each pass's records whole, the declared passes' first, where the RTL
+interleaves them as its machines give them (each pass's records in its order, the end record the same).
 """
 
 from __future__ import annotations
 
 import struct
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 
 import numpy as np
 
+from bayesmachine.hdl.frontend.passes import pass_row_pixels
 from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams
 from bayesmachine.region import OutputRegion
@@ -27,11 +31,11 @@ from bayesmachine.sim.results import MachineResult
 from . import protocol as pr
 from .parser import Header, HeaderParserTwin
 from .receiver import FrameReceiverTwin
-from .serializer import ResultSerializerTwin
+from .serializer import ResultSerializerTwin, board_passes
 
 __all__ = ["BoardTwin"]
 
-FrameResults = Callable[[np.ndarray, np.ndarray], MachineResult]
+FrameResults = Callable[[np.ndarray, np.ndarray], "MachineResult | Mapping[str, MachineResult]"]
 
 
 class BoardTwin:
@@ -42,6 +46,7 @@ class BoardTwin:
                  rx_fifo_log2: int = 12) -> None:
         self.params, self.model, self.width = params, model, width
         self.results = results
+        self.passes = board_passes(params, model)
         self.fingerprint = pr.board_fingerprint(params.to_dict(), model.to_dict(), width)
         self.info = pr.info_payload(width, params.rows, rx_fifo_log2, self.fingerprint)
         self._parser = HeaderParserTwin()
@@ -97,12 +102,14 @@ class BoardTwin:
         self._frame = (seq, fields)
         self._receiver.start(height)
         self._pairs = []
-        results = OutputRegion(height, width, self.model.dmax, self.model.margin).pixels
+        rows = OutputRegion(height, width, self.model.dmax, self.model.margin).shape[0]
+        results = rows * sum(pass_row_pixels(self.model, bp.name, width) for bp in self.passes)
         return pr.encode_record(pr.START, seq, struct.pack("<BHHI", fields, width, height, results))
 
     @staticmethod
     def end_record(seq: int, status: int, sent: int, crc: int) -> bytes:
-        """A frame's end record: its status, the results sent and the CRC-32 of their bytes."""
+        """A frame's end record: its status, the result records sent (every pass's) and the XOR of each
+        pass's records' CRC-32."""
         return pr.encode_record(pr.END, seq, struct.pack("<BII", status, sent, crc))
 
     def _finish_frame(self) -> bytes:
@@ -111,7 +118,12 @@ class BoardTwin:
         self._frame = None
         pairs = np.array(self._pairs, np.uint8).reshape(-1, self.width, 2)
         res = self.results(pairs[..., 0].copy(), pairs[..., 1].copy())
-        serializer = ResultSerializerTwin(self.params)
-        records = serializer.send(res, fields)
+        if isinstance(res, MachineResult):
+            res = {self.model.passes[-1].name: res}
+        records, sent, crc = b"", 0, 0
+        for bp in self.passes:  # the declared passes' records, then the own pass's
+            serializer = ResultSerializerTwin(bp.params, bp.tag)
+            records += serializer.send(res[bp.name], fields)
+            sent, crc = sent + serializer.sent, crc ^ serializer.crc
         status = pr.STATUS_OK if self._receiver.crc_ok else pr.STATUS_CHECKSUM
-        return records + self.end_record(seq, status, serializer.sent, serializer.crc)
+        return records + self.end_record(seq, status, sent, crc)

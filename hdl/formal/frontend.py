@@ -22,9 +22,10 @@ from amaranth.hdl import Assert, Assume, Cover, Fragment, Module, Mux, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
+from bayesmachine.hdl.frontend.layouts import pixel_features_layout
 from bayesmachine.hdl.frontend.linebuffer import WINDOW
 from bayesmachine.hdl.frontend.stereo import FrontEnd, StereoMachine
-from bayesmachine.hdl.frontend.words import WordGenerator, pixel_features_layout
+from bayesmachine.hdl.frontend.words import WordGenerator
 from bayesmachine.hdl.signatures import entropy_layout, pixel_in_layout, result_layout
 from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams

@@ -8,14 +8,18 @@ Blocks (each a ``wiring.Component`` with a Python twin its tests hold it to):
   ``host.features.feature_sums``).
 - ``census``: the census codes of a 7x7 or 5x5 window (twin: ``host.features.census_codes``).
 - ``tables``: the likelihood tables, clamped, generated from the host's own quantized tables.
-- ``costs``: the right features' delay line of Dmax + 1 pixels, the |difference| of sums, the
-  table look-ups (census: Hamming distance) and the words of a pixel, ``words_per_beat`` per beat, with the
-  neighbour prior's above column from a line of the machine's own MAPs (twin:
-  ``host.likelihoods.memory_words``).
-- ``lr``: census-lr's right pass (``RightPassFeeder`` into a ``WordGenerator(right_pass=True)``) and
-  the consistency column's test (``ConsistencyTest``; twins: ``bayesmachine.columns.consistency``).
-- ``stereo``: ``FrontEnd`` (pixels in, load beats out) and ``StereoMachine`` (pixels in, the
-  machine's results out). Timing and protocol: ``docs/frontend.md``.
+- ``pipeline``: ``FeaturePipeline``, the line buffer and the plane filters every pass reads, with the
+  position counters and flags.
+- ``lanes``: one lane builder per column kind (its planes, flags, ports and words; the consistency
+  column's ``ConsistencyTest``, twins: ``bayesmachine.columns.consistency``).
+- ``layouts``, ``reference``: what a pass's pixels carry, and its reference image (left or right).
+- ``nets``, ``words``: a pass's word generator (``WordGenerator``) on its shared pipeline: the match
+  features' delay line of Dmax + 1 pixels, the lanes' costs and table look-ups, the words of a pixel,
+  ``words_per_beat`` per beat (twin: ``host.likelihoods.pass_words``).
+- ``passes``: the model's declared passes (census-lr's right pass): ``PassFeeder`` by reference image,
+  the pipeline's pixels to every pass, each pass's MAPs to what reads them, the front end's ports.
+- ``stereo``: ``FrontEnd`` (pixels in, every pass's load beats out) and ``StereoMachine`` (pixels in,
+  every pass's results out). Timing and protocol: ``docs/frontend.md``.
 """
 
 # Limits shared by the RTL and the command line (importing them needs no Amaranth).

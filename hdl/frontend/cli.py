@@ -96,8 +96,8 @@ def machines(args: argparse.Namespace) -> int:
 def summary(top: StereoMachine) -> str:
     """What the stereo top is and its ports, for ``emit``'s output."""
     from ..emit import signature_ports
-    from .lr import pass_params
-    from .words import declared_passes
+    from .layouts import declared_passes
+    from .words import pass_params
 
     m, p = top.model, top.params
     lines = [

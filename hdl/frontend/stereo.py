@@ -1,5 +1,5 @@
-"""``FrontEnd`` (pixel pairs in, the machine's load beats out) and ``StereoMachine`` (pixels in,
-disparity results out): the pipeline from a camera to the MAP, on chip.
+"""``FrontEnd`` (pixel pairs in, every pass's load beats out) and ``StereoMachine`` (pixels in, disparity
+results out): the pipeline from a camera to the MAP, on chip.
 
 Pixel stream: one ``pixel_in_layout()`` beat per pixel pair (``left``, ``right``: 8-bit gray;
 ``first``: set on the first pixel of a frame), frames in raster order, ``width`` pixels per line,
@@ -10,61 +10,50 @@ computed for a frame depends on pixels of an earlier one. The output region is t
 2k..H-1, a window's bottom line) and map columns Dmax..W-2k-1 (image columns Dmax+2k..W-1, a
 window's right column); every other pixel passes in one cycle and starts no machine run.
 
-Pipeline (one pixel per cycle when no output pixel holds it):
-
-1. the pixel is taken and its column read from the line buffer (2k lines);
-2. both images' 5-high columns' partial sums enter the feature filters' first registers (the
-   census model: and the 7-high columns the census filters' column registers);
-3. the columns' sums enter the filters' windows (the census filters' windows too);
-4. the word generator takes the features (right ones into the delay line); for an output pixel
-   it writes ``beats_per_pixel`` beats into a FIFO in front of the machine's load stream.
+Pipeline (one pixel per cycle when no output pixel holds it): the feature pipeline
+(:mod:`.pipeline`: stages 0 to 3), then each pass's word generator (:mod:`.words`; a declared pass's
+through its feeder, :mod:`.passes`), which for an output pixel writes ``beats_per_pixel`` beats into a
+FIFO in front of its machine's load stream.
 
 The FIFO (``fifo_pixels`` pixels of beats, block RAM) lets the front end run ahead while the
 machine's runs are long and the line ends' non-output pixels stream in; when it is full,
-back-pressure reaches the pixel input. Its ready toward the word generator is a register (set
-while at most all but one entry is used; the FIFO has one entry more than the pixels' beats), so
-no path runs from its level through the pixel take. Results leave in raster order of the output region, on
-the machine's own result stream. With the census model's neighbour prior each result, as it
-leaves, also goes back into the word generator's line of MAPs (the above neighbour's prior).
+back-pressure reaches the pixel input. The own pass's FIFO's ready toward the word generator is a
+register (set while at most all but one entry is used; the FIFO has one entry more than the pixels'
+beats), so no path runs from its level through the pixel take. Results leave in raster order of the
+output region, on the machine's own result stream, and each declared pass's on ``<pass>_result``. A
+pass whose MAPs something on chip reads (its above neighbour's line of MAPs, another pass's column)
+hands each result, as it leaves, back to the front end (``maps``, ``<pass>_maps``).
 """
 
 from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from types import SimpleNamespace
+from typing import Any
 
-from amaranth.hdl import Array, Cat, Module, Mux, Shape, Signal, Value, unsigned
-from amaranth.lib import data, fifo, stream, wiring
-from amaranth.lib.wiring import In, Out
+from amaranth.hdl import Array, Module, Mux, Shape, Signal, Value
+from amaranth.lib import fifo, stream, wiring
+from amaranth.lib.wiring import In
 
+from bayesmachine.columns import Source
 from bayesmachine.hdl.machine import BayesianMachine
 from bayesmachine.hdl.signatures import (
     ENTROPY_PORTS,
     StereoSignature,
     load_layout,
-    load_stream,
     pixel_in_layout,
-    pixel_stream,
     result_layout,
 )
 from bayesmachine.models import ModelParams, disparity_machine
 from bayesmachine.params import MachineParams, ParameterError, stereo_words_per_beat
-from bayesmachine.region import OutputRegion
 from bayesmachine.sources import source_kind
 
 from . import DEFAULT_FIFO_PIXELS, MAX_MACHINES, MAX_WIDTH
-from .linebuffer import LineBuffer
-from .lr import feeder_in_layout, lr_split, pass_params
-from .words import (
-    FLAGS,
-    WordGenerator,
-    check_frontend_params,
-    check_frontend_types,
-    declared_passes,
-    features_layout,
-    model_filters,
-    pass_pixel_layout,
-)
+from .layouts import declared_passes
+from .passes import fork, frontend_signature, pass_port, pass_row_pixels, split_pixels, watch_passes
+from .pipeline import FeaturePipeline, PipelineNets, check_width, line_region, pipeline_layout
+from .words import WordGenerator, check_frontend_params, check_frontend_types, pass_params
 
 __all__ = ["MAX_MACHINES", "MAX_WIDTH", "FeaturePipeline", "FrontEnd", "PipelineNets", "RoomFifo",
            "StereoMachine", "StereoNets", "check_machines",
@@ -87,30 +76,12 @@ def stereo_machine_params(dmax: int = 80, *, model: ModelParams | None = None,
                                                                          words_per_beat=stereo_words_per_beat(params))
 
 
-def _check_width(width: object, model: ModelParams) -> int:
-    if isinstance(width, bool) or not isinstance(width, int):
-        raise ParameterError(f"width must be an integer, not {width!r}")
-    size = 2 * model.margin + 1  # the model's windows
-    if not model.dmax + size <= width <= MAX_WIDTH:
-        raise ParameterError(
-            f"width must be in [dmax + {size}, {MAX_WIDTH}] = [{model.dmax + size}, {MAX_WIDTH}] (a line "
-            f"needs one output pixel with all {model.dmax + 1} disparities and its {size}x{size} windows), "
-            f"got {width}")
-    return width
-
-
-def _line_region(model: ModelParams, width: int) -> OutputRegion:
-    """The host's output region of frames of ``width``-pixel lines: its columns (a frame here has any
-    number of lines, so it is the region of the shortest frame, 2·margin + 1 lines; only its columns
-    are read)."""
-    return OutputRegion.of_model((2 * model.margin + 1, width), model)
-
-
 def check_machines(machines: object, params: MachineParams, model: ModelParams) -> int:
     """``machines`` if a ``StereoMachine`` can have that many machines: an integer (``TypeError``
     otherwise) in [1, MAX_MACHINES], more than one only for an on-chip random source (off chip,
-    each machine would need its own number port and device stream) and not for census-lr (its
-    right pass is not dealt to several), else ``ParameterError`` naming the parameter."""
+    each machine would need its own number port and device stream) and a model without declared passes
+    (a declared pass runs on one machine beside the own one, not dealt to several), else
+    ``ParameterError`` naming the parameter."""
     if isinstance(machines, bool) or not isinstance(machines, int):
         raise TypeError(f"machines must be an integer, not {type(machines).__name__}")
     if not 1 <= machines <= MAX_MACHINES:
@@ -121,21 +92,17 @@ def check_machines(machines: object, params: MachineParams, model: ModelParams) 
                                  "one device stream); several machines need an on-chip source "
                                  "(sobol, lfsr, lfsr-shared)")
         for p in declared_passes(model):
-            raise ParameterError(f"machines = {machines}: --model {model.name} runs with one machine "
-                                 f"(its {p.name} pass is not dealt to several)")
+            raise ParameterError(f"machines = {machines}: the {model.name} model's {p.name} pass runs on one "
+                                 "machine beside the own pass's (it is not dealt to several); give one "
+                                 "machine")
     return machines
 
 
-def stereo_signature(params: MachineParams, model: ModelParams) -> wiring.Signature:
-    """:class:`StereoMachine`'s ports: ``StereoSignature(params)``, and per declared pass (census-lr's
-    right pass) ``<pass>_result``: ``valid`` and ``payload`` (``result_layout(pass_params(model, params,
-    name))``), its results as they leave its machine (observed: no ``ready``, no back-pressure)."""
-    members = dict(StereoSignature(params).members.items())
-    for p in declared_passes(model):
-        observed = wiring.Signature({"valid": Out(1),
-                                     "payload": Out(result_layout(pass_params(model, params, p.name)))})
-        members[f"{p.name}_result"] = Out(observed)
-    return wiring.Signature(members) if declared_passes(model) else StereoSignature(params)
+def stereo_signature(params: MachineParams, model: ModelParams) -> StereoSignature:
+    """:class:`StereoMachine`'s ports: :class:`~bayesmachine.hdl.signatures.StereoSignature` of ``params``
+    and of each declared pass's machine (:func:`~.words.pass_params`): its results on ``<pass>_result``."""
+    return StereoSignature(params, {p.name: pass_params(model, params, p.name)
+                                    for p in declared_passes(model)})
 
 
 def check_stereo_machine(params: MachineParams, model: ModelParams, width: int,
@@ -147,7 +114,7 @@ def check_stereo_machine(params: MachineParams, model: ModelParams, width: int,
     check_frontend_types(params, model)
     check_machines(machines, params, model)
     check_frontend_params(params, model)
-    _check_width(width, model)
+    check_width(width, model)
     if isinstance(fifo_pixels, bool) or not isinstance(fifo_pixels, int) or not 1 <= fifo_pixels <= 64:
         raise ParameterError(f"fifo_pixels must be an integer in [1, 64], got {fifo_pixels!r}")
 
@@ -155,180 +122,13 @@ def check_stereo_machine(params: MachineParams, model: ModelParams, width: int,
 RESULT_FIFO_MAX = 511  # results buffered per machine of several (one DP16KD deep at 36 bits wide)
 
 
-def pipeline_layout(model: ModelParams) -> data.StructLayout:
-    """One pixel out of :class:`FeaturePipeline`: the model's own pass's word generator's pixel
-    (``pixel``, :func:`~.words.pass_pixel_layout`) and where it is: ``line_begin`` (an image line's first
-    pixel), ``output_line`` (a line with output pixels: a map row's), ``first_line`` (the frame's first
-    such line) and ``frame_begin`` (the frame's first pixel); with declared passes ``line_end`` (an
-    output row's last pixel), for :func:`~.lr.lr_split`."""
-    fields = {"pixel": pass_pixel_layout(model, model.passes[-1]), "line_begin": unsigned(1),
-              "output_line": unsigned(1), "first_line": unsigned(1), "frame_begin": unsigned(1)}
-    if declared_passes(model):
-        fields |= {"line_end": unsigned(1)}
-    return data.StructLayout(fields)
-
-
-@dataclass(frozen=True)
-class PipelineNets:
-    """The position counters of :class:`FeaturePipeline` (``FeaturePipeline.nets``: the formal wrappers of
-    ``hdl.formal`` and their mutants read them, never Amaranth's internals)."""
-
-    col: Signal  # registered: the next pixel's column (unless it starts a frame)
-    line: Signal  # registered: the next pixel's line (saturating at the window's height)
-    cur_col: Signal  # the incoming pixel's column: 0 on a frame's first pixel, else col
-    cur_line: Signal  # the incoming pixel's line: 0 on a frame's first pixel, else line
-
-
-class FeaturePipeline(wiring.Component):
-    """Pixel pairs in, every pixel's features out (the line buffer and the plane filters the model's
-    columns read, :func:`~.words.model_filters`: stages 0 to 3 of the module's pipeline).
-
-    Parameters
-    ----------
-    model : ModelParams
-        The disparity model.
-    width : int
-        Pixels per image line (dmax + 2·margin + 1 .. ``MAX_WIDTH``).
-
-    Attributes
-    ----------
-    pixels : ``In(pixel_stream())``
-        Pixel pairs in raster order.
-    features : ``Out(stream.Signature(pipeline_layout(model)))``
-        Every pixel, in raster order, its features three cycles after its take.
-    nets : PipelineNets
-        After elaboration: the position counters, for the formal wrappers (read-only).
-    """
-
-    def __init__(self, *, model: ModelParams, width: int) -> None:
-        if not isinstance(model, ModelParams):
-            raise TypeError(f"model must be a bayesmachine.models.ModelParams, not {type(model).__name__}")
-        self._width = _check_width(width, model)
-        self._model = model
-        self._nets: PipelineNets | None = None
-        super().__init__({"pixels": In(pixel_stream()),
-                          "features": Out(stream.Signature(pipeline_layout(model)))})
-
-    @property
-    def model(self) -> ModelParams:
-        return self._model
-
-    @property
-    def width(self) -> int:
-        return self._width
-
-    @property
-    def nets(self) -> PipelineNets:
-        """The :class:`PipelineNets` of the last :meth:`elaborate`; elaborate first."""
-        if self._nets is None:
-            raise RuntimeError("FeaturePipeline.nets: elaborate the pipeline first (Fragment.get)")
-        return self._nets
-
-    def elaborate(self, platform: object) -> Module:
-        m = Module()
-        width, model = self._width, self._model
-        size = 2 * model.margin + 1  # the model's windows: line buffer columns of this height
-        m.submodules.linebuffer = lines = LineBuffer(width=width, height=size)
-        filters = []
-        for planes in model_filters(model):
-            pair = (planes.build(), planes.build())
-            m.submodules[f"{planes.name}_left"], m.submodules[f"{planes.name}_right"] = pair
-            filters.append((planes, pair))
-        out = self.features
-
-        # The pipeline advances as a whole whenever its last stage is empty or taken.
-        valid1 = Signal()  # stage 1: the line buffer shows the pixel's column
-        valid2 = Signal()  # stage 2: the filters hold the column's partial sums
-        valid3 = Signal()  # stage 3: the filters hold the pixel's window
-        advance = Signal()
-        m.d.comb += advance.eq(~valid3 | out.ready)
-        col1, line1, first1 = self._positions(m, lines, advance, valid1)
-
-        # Stage 1 -> 2: the columns into the filters' first registers (the block RAM's slow
-        # clock-to-output leaves no room for the whole column sum in one cycle): each filter takes the
-        # column's middle ``height`` lines.
-        for planes, (fl, fr) in filters:
-            top = (size - planes.height) // 2
-            m.d.comb += [fl.load.eq(advance), fr.load.eq(advance)]
-            for i in range(planes.height):
-                m.d.comb += [fl.column[i].eq(lines.column[top + i].left),
-                             fr.column[i].eq(lines.column[top + i].right)]
-        # Where the pixel is, carried along with it (the flags its pixel layout has).
-        first_output_col = model.dmax + size - 1
-        output_row = line1 >= size - 1
-        where = {"row_start": col1 == first_output_col,  # the first output pixel of an output row
-                 "first_row": line1 == size - 1,  # a pixel of a frame's first output row
-                 "consult": output_row & (col1 >= size - 1)}  # a map column (>= 0) of an output row
-        px, pay = out.payload.pixel, out.payload
-        pairs = [(px.output, output_row & (col1 >= first_output_col)), (pay.line_begin, col1 == 0),
-                 (pay.output_line, output_row), (pay.first_line, line1 == size - 1),
-                 (pay.frame_begin, first1)]
-        pairs += [(getattr(px, f), where[f]) for f in FLAGS if f in px.shape().members]
-        if "line_end" in pay.shape().members:  # an output row's last pixel
-            pairs.append((pay.line_end, output_row & (col1 == width - 1)))
-        stage2 = Signal(len(pairs))
-        stage3 = Signal(len(pairs))
-        with m.If(advance):
-            m.d.sync += [valid2.eq(valid1), stage2.eq(Cat(*(v for _, v in pairs)))]
-
-        # Stage 2 -> 3: the columns enter the filters' windows.
-        shift = advance & valid2
-        for _, (fl, fr) in filters:
-            m.d.comb += [fl.en.eq(shift), fr.en.eq(shift)]
-        with m.If(advance):
-            m.d.sync += [valid3.eq(valid2), stage3.eq(stage2)]
-
-        # Stage 3 -> out.
-        m.d.comb += [out.valid.eq(valid3), Cat(*(t for t, _ in pairs)).eq(stage3)]
-        for planes, (fl, fr) in filters:
-            for side, filt in ((px.left, fl), (px.right, fr)):
-                m.d.comb += [getattr(side, name).eq(v) for name, v in planes.outputs(filt).items()]
-        return m
-
-    def _positions(self, m: Module, lines: LineBuffer, advance: Value, valid1: Signal) -> tuple[Signal, ...]:
-        """Stage 0: the incoming pixel's column and line (restarting at a frame's first pixel; the line
-        saturates at ``size``: size - 1 is the first line whose windows are complete, the first output
-        row, size any later one) into the line buffer; returns them at stage 1 (column, line, first)."""
-        width, size = self._width, 2 * self._model.margin + 1
-        col = Signal(range(width))
-        line = Signal(range(size + 1))
-        pin = self.pixels.payload
-        cur_col = Signal(range(width))
-        cur_line = Signal(range(size + 1))
-        with m.If(pin.first):
-            m.d.comb += [cur_col.eq(0), cur_line.eq(0)]
-        with m.Else():
-            m.d.comb += [cur_col.eq(col), cur_line.eq(line)]
-        self._nets = PipelineNets(col=col, line=line, cur_col=cur_col, cur_line=cur_line)
-        take = self.pixels.valid & advance
-        m.d.comb += [
-            self.pixels.ready.eq(advance),
-            lines.en.eq(take),
-            lines.col.eq(cur_col),
-            lines.pixel.left.eq(pin.left),
-            lines.pixel.right.eq(pin.right),
-        ]
-        col1 = Signal(range(width))
-        line1 = Signal(range(size + 1))
-        with m.If(take):
-            with m.If(cur_col == width - 1):
-                m.d.sync += [col.eq(0), line.eq(Mux(cur_line == size, cur_line, cur_line + 1))]
-            with m.Else():
-                m.d.sync += [col.eq(cur_col + 1), line.eq(cur_line)]
-        first1 = Signal()
-        with m.If(advance):
-            m.d.sync += [valid1.eq(self.pixels.valid), col1.eq(cur_col), line1.eq(cur_line),
-                         first1.eq(pin.first)]
-        return col1, line1, first1
-
-
 class FrontEnd(wiring.Component):
-    """Pixel pairs in, the output pixels' likelihood-memory words out (the machine's load beats).
+    """Pixel pairs in, every pass's output pixels' likelihood-memory words out (its machine's load beats).
 
     Parameters
     ----------
     params : MachineParams
-        The machine fed (see :func:`~.costs.check_frontend_params`).
+        The own pass's machine (see :func:`~.words.check_frontend_params`).
     model : ModelParams
         The disparity model.
     width : int
@@ -339,15 +139,14 @@ class FrontEnd(wiring.Component):
     pixels : ``In(pixel_stream())``
         Pixel pairs in raster order.
     beats : ``Out(load_stream(params))``
-        The output pixels' load beats.
-    result_take, result_map, result_hit : ``In(1)``, ``In(params.map_width)``, ``In(1)``
-        With the neighbour prior only: the machine's results as they leave (see
-        :class:`~.costs.WordGenerator`), for the above neighbour's prior column.
-    right_beats, right_take, right_map, right_hit, right_room
-        Per declared pass (census-lr's ``right``), ``<pass>_beats``, ...: its load beats
-        (``Out(load_stream(pass_params(model, params, name)))``), and its machine's results as they
-        leave (taken only while ``<pass>_room``: the line of its MAPs the own pass reads has room).
-        See :mod:`.lr`.
+        The own pass's output pixels' load beats.
+    maps : ``In(map_stream(params))``
+        With an above neighbour's column only: the own machine's MAPs as its results leave, into the
+        word generator's line of MAPs (``ready``: the line has room).
+    <pass>_beats, <pass>_maps
+        Per declared pass (census-lr's ``right``): its load beats, and its machine's MAPs as they leave
+        (``ready`` while its line of MAPs and the FIFO of its MAPs the own pass reads have room).
+        See :mod:`.passes`; the ports are the word generators' (:func:`~.passes.frontend_signature`).
     feature_pipeline : type
         Class attribute: the :class:`FeaturePipeline` class :meth:`elaborate` builds (a subclass may
         name another with the same constructor: a formal mutant's).
@@ -358,17 +157,10 @@ class FrontEnd(wiring.Component):
     def __init__(self, *, params: MachineParams, model: ModelParams, width: int) -> None:
         check_frontend_types(params, model)
         check_frontend_params(params, model)
-        self._width = _check_width(width, model)
+        self._width = check_width(width, model)
         self._params = params
         self._model = model
-        members = {"pixels": In(pixel_stream()), "beats": Out(load_stream(params))}
-        if params.feedback_columns:
-            members |= {"result_take": In(1), "result_map": In(params.map_width), "result_hit": In(1)}
-        for p in declared_passes(model):
-            pp, n = pass_params(model, params, p.name), p.name
-            members |= {f"{n}_beats": Out(load_stream(pp)), f"{n}_take": In(1),
-                        f"{n}_map": In(pp.map_width), f"{n}_hit": In(1), f"{n}_room": Out(1)}
-        super().__init__(members)
+        super().__init__(frontend_signature(params, model))
 
     @property
     def params(self) -> MachineParams:
@@ -385,29 +177,19 @@ class FrontEnd(wiring.Component):
     def elaborate(self, platform: object) -> Module:
         m = Module()
         model = self._model
-        neighbour = self._params.feedback_columns > 0
         m.submodules.pipeline = pipe = self.feature_pipeline(model=model, width=self._width)
-        region = _line_region(model, self._width)
-        output_columns = region.shape[1] if neighbour else None
-        m.submodules.generator = gen = WordGenerator(params=self._params, model=model,
-                                                     output_columns=output_columns)
         wiring.connect(m, wiring.flipped(self.pixels), pipe.pixels)
-        features = pipe.features
-        if declared_passes(model):  # through a FIFO, and to the right pass (lr_split)
-            pix, px = features.payload.pixel, Signal(feeder_in_layout(features_layout(model)))
-            m.d.comb += [px.left.eq(pix.left), px.right.eq(pix.right), px.output.eq(pix.output),
-                         px.consult.eq(pix.consult), px.line_end.eq(features.payload.line_end)]
-            if neighbour:
-                m.d.comb += [px.row_start.eq(pix.row_start), px.first_row.eq(pix.first_row)]
-            ready = lr_split(m, self, gen, px, features.valid, region.feature_shape[1])
-            m.d.comb += features.ready.eq(ready)
-        else:
-            m.d.comb += [gen.pixel.valid.eq(features.valid), gen.pixel.payload.eq(features.payload.pixel),
-                         features.ready.eq(gen.pixel.ready)]
-        wiring.connect(m, gen.beats, wiring.flipped(self.beats))
-        if neighbour:
-            m.d.comb += [gen.result_take.eq(self.result_take), gen.result_map.eq(self.result_map),
-                         gen.result_hit.eq(self.result_hit)]
+        gens = {}
+        for p in model.passes:
+            own = p is model.passes[-1]
+            row = pass_row_pixels(model, p.name, self._width)  # the length of its line of MAPs
+            gen = WordGenerator(params=pass_params(model, self._params, p.name), model=model,
+                                pass_name=None if own else p.name,
+                                output_columns=row if _has_line(p) else None)
+            m.submodules[pass_port(model, p, "generator")] = gens[p.name] = gen
+            wiring.connect(m, gen.beats, wiring.flipped(getattr(self, pass_port(model, p, "beats"))))
+        split_pixels(m, model, pipe.features, gens)
+        watch_passes(m, self, gens)
         return m
 
 
@@ -432,8 +214,19 @@ class StereoNets:
     loads: list[RoomFifo]  # machine j's load FIFO: its word generator's beats
 
 
+def _has_line(p: Any) -> bool:
+    """Whether pass ``p`` has a line of its own MAPs (an above neighbour's column)."""
+    return any(c.source is Source.ABOVE for c in p.columns)
+
+
+def _watched(m: Module, maps: Any, result: Any) -> None:
+    """A result's MAP as the front end reads it (``map_layout``): its row, and whether it is a disparity."""
+    m.d.comb += [maps.map.eq(result.map), maps.hit.eq(~result.nomatch & ~result.timeout)]
+
+
 class StereoMachine(wiring.Component):
-    """Pixel pairs in, one result per output pixel out: the front end, a FIFO and the machine.
+    """Pixel pairs in, one result per output pixel out: the front end, a FIFO and the machine (and one of
+    each per declared pass).
 
     Parameters
     ----------
@@ -441,7 +234,7 @@ class StereoMachine(wiring.Component):
         The machine's parameters (``words_per_beat`` a multiple of the loaded columns: see
         :func:`stereo_machine_params`).
     model : ModelParams
-        The disparity model (Dmax, p0, sigmas, p_nm0, sigma_nm).
+        The disparity model (its columns, its passes).
     width : int
         Pixels per image line (dmax + 2·margin + 1 .. ``MAX_WIDTH``).
     fifo_pixels : int
@@ -453,7 +246,7 @@ class StereoMachine(wiring.Component):
 
     Attributes
     ----------
-    The ports are :class:`~bayesmachine.hdl.signatures.StereoSignature` ``(params)``:
+    The ports are :func:`stereo_signature` (:class:`~bayesmachine.hdl.signatures.StereoSignature`):
 
     pixels : ``In(pixel_stream())``
         Pixel pairs in raster order, ``first`` on a frame's first pixel.
@@ -462,9 +255,9 @@ class StereoMachine(wiring.Component):
     entropy, entropy_ready
         With an off-chip ``rng`` ("external", "smtj"): the machine's own ports, passed through
         (the numbers of every compute cycle come from outside, as for the machine alone).
-    right_result
-        census-lr only: the right pass's results, raster order of its columns, ``valid`` and
-        ``payload`` (:func:`stereo_signature`).
+    <pass>_result : ``Out(result_stream(pass_params(model, params, pass)))``
+        Each declared pass's results (census-lr: ``right_result``), raster order of its columns; a
+        stalled one stalls its machine (and, through the MAPs it hands the front end, the own pass).
     nets : StereoNets
         After elaboration: the front end, the machines and their load FIFOs, for the formal wrappers
         (read-only).
@@ -508,109 +301,116 @@ class StereoMachine(wiring.Component):
             raise RuntimeError("StereoMachine.nets: elaborate the machine first (Fragment.get)")
         return self._nets
 
-    def _pass_machine(self, m: Module, front: FrontEnd, name: str) -> None:
-        """A declared pass's machine (census-lr's right pass) beside the own one, fed through its own
-        FIFO; its results go to the front end (taken while the front end's line of its MAPs has room)
-        and out on ``<name>_result``."""
-        rp = pass_params(self._model, self._params, name)
-        m.submodules[f"{name}_machine"] = machine = BayesianMachine(params=rp)
-        m.submodules[f"{name}_fifo"] = buf = fifo.SyncFIFOBuffered(
-            width=Shape.cast(load_layout(rp)).width, depth=self._fifo_pixels * rp.beats_per_pixel + 1)
-        port = {k: getattr(front, f"{name}_{k}") for k in ("beats", "take", "map", "hit", "room")}
-        out = getattr(self, f"{name}_result")
-        wiring.connect(m, port["beats"], buf.w_stream)
-        wiring.connect(m, buf.r_stream, machine.load)
-        res = machine.result
-        take = res.valid & port["room"]
-        m.d.comb += [res.ready.eq(port["room"]), port["take"].eq(take), port["map"].eq(res.payload.map),
-                     port["hit"].eq(~res.payload.nomatch & ~res.payload.timeout),
-                     out.valid.eq(take), out.payload.eq(res.payload)]
-
     def elaborate(self, platform: object) -> Module:
         if self._machines > 1:
             return self._elaborate_machines()
         m = Module()
-        p = self._params
-        m.submodules.frontend = front = FrontEnd(params=p, model=self._model, width=self._width)
-        m.submodules.machine = machine = BayesianMachine(params=p)
-        for declared in declared_passes(self._model):
-            self._pass_machine(m, front, declared.name)
+        model = self._model
+        m.submodules.frontend = front = FrontEnd(params=self._params, model=model, width=self._width)
         wiring.connect(m, wiring.flipped(self.pixels), front.pixels)
-        # The front end sees the FIFO's registered room, so no path runs from the FIFO's level through
-        # the pixel take into the front end's thousands of enables (see "Back-pressure" in
-        # docs/frontend.md).
-        beats = self._fifo_pixels * p.beats_per_pixel
-        load = _load_fifo(m, "fifo", front.beats, machine.load, beats, prefix="")
-        self._nets = StereoNets(frontend=front, machines=[machine], loads=[load])
-        wiring.connect(m, machine.result, wiring.flipped(self.result))
-        if p.feedback_columns:  # the neighbour prior's line of MAPs: each result as it leaves
-            res = machine.result
-            m.d.comb += [front.result_take.eq(res.valid & self.result.ready),
-                         front.result_map.eq(res.payload.map),
-                         front.result_hit.eq(~res.payload.nomatch & ~res.payload.timeout)]
-        # An off-chip source's ports: the machine's and this top's come from the same
-        # entropy_members(params), so they exist together.
+        for p in model.passes:
+            pp = pass_params(model, self._params, p.name)
+            machine = BayesianMachine(params=pp)
+            m.submodules[pass_port(model, p, "machine")] = machine
+            beats = getattr(front, pass_port(model, p, "beats"))
+            capacity = self._fifo_pixels * pp.beats_per_pixel
+            if p is model.passes[-1]:
+                # The front end sees the FIFO's registered room, so no path runs from the FIFO's level
+                # through the pixel take into the front end's thousands of enables (see "Back-pressure"
+                # in docs/frontend.md).
+                load = _load_fifo(m, "fifo", beats, machine.load, capacity, prefix="")
+                self._nets = StereoNets(frontend=front, machines=[machine], loads=[load])
+                self._entropy(m, machine)
+            else:
+                m.submodules[f"{p.name}_fifo"] = buf = fifo.SyncFIFOBuffered(
+                    width=Shape.cast(load_layout(pp)).width, depth=capacity + 1)
+                wiring.connect(m, beats, buf.w_stream)
+                wiring.connect(m, buf.r_stream, machine.load)
+            self._results(m, front, p, machine.result)
+        return m
+
+    def _results(self, m: Module, front: FrontEnd, p: Any, res: Any) -> None:
+        """Pass ``p``'s results out on its port and, when the front end reads its MAPs, into the front end
+        too (each result leaves when both take it)."""
+        out = getattr(self, pass_port(self._model, p, "result"))
+        name = pass_port(self._model, p, "maps")
+        if name not in front.signature.members:
+            wiring.connect(m, res, wiring.flipped(out))
+            return
+        maps = getattr(front, name)
+        m.d.comb += out.payload.eq(res.payload)
+        _watched(m, maps.payload, res.payload)
+        fork(m, res, [out, maps])
+
+    def _entropy(self, m: Module, machine: BayesianMachine) -> None:
+        """An off-chip source's ports: the machine's and this top's come from the same
+        ``entropy_members(params)``, so they exist together."""
         for name in ENTROPY_PORTS:
             if name in self.signature.members:
                 inner, outer = getattr(machine, name), getattr(self, name)
                 flow = self.signature.members[name].flow
                 m.d.comb += inner.eq(outer) if flow == In else outer.eq(inner)
-        return m
 
     def _elaborate_machines(self) -> Module:
         """K machines: one feature pipeline; a dealer sends the pixels of map row r to lane r mod K
         (a line FIFO, a word generator, a beats FIFO, a machine, a result FIFO); the results leave
         lane by lane, a map row at a time, in the order the rows were dealt."""
         m = Module()
-        p, model, width, k = self._params, self._model, self._width, self._machines
-        neighbour = p.feedback_columns > 0
-        wo = _line_region(model, width).shape[1]  # output pixels per map row
-        m.submodules.frontend = pipe = FeaturePipeline(model=model, width=width)
+        m.submodules.frontend = pipe = FeaturePipeline(model=self._model, width=self._width)
         wiring.connect(m, wiring.flipped(self.pixels), pipe.pixels)
-        fx, w = pipe.features, pipe.features.payload
-
-        # Rows in flight, in dealing order: the lane of each map row dealt and not yet out.
-        dealt = _room_fifo(m, "rows", Shape.cast(range(k)).width, 4 * k + 4)
-        rows, row_room, row_write = dealt.buffer, dealt.room, dealt.write
-        rows_open = Signal(range(4 * k + 6))
         idle = Signal(init=1)  # registered: no row in flight
+        rows, lines, frame_reset = self._deal(m, pipe.features, idle)
+        machines, loads, results = self._lanes(m, lines, frame_reset)
+        self._merge(m, rows, results, idle)
+        self._nets = StereoNets(frontend=pipe, machines=machines, loads=loads)
+        return m
 
-        # The dealer: a map row's pixels go to its lane's line FIFO (a line's worth: the filters
-        # move on to the next rows while a machine works through this one); other lines' pixels
-        # (the first 2k, the frame's top) are dropped.
+    def _deal(self, m: Module, fx: Any, idle: Value) -> tuple[RoomFifo, list[RoomFifo], Value]:
+        """The dealer: a map row's pixels go to its lane's line FIFO (a line's worth: the filters move on
+        to the next rows while a machine works through this one); other lines' pixels (the first 2k, the
+        frame's top) are dropped. Returns the FIFO of the rows in flight (each dealt row's lane, in
+        dealing order), the line FIFOs and the frame reset (a frame's first pixel taken)."""
+        k, w = self._machines, fx.payload
+        rows = _room_fifo(m, "rows", Shape.cast(range(k)).width, 4 * k + 4)
         lane = Signal(range(k))  # the lane of the current map row
         new_row = w.output_line & w.line_begin
         following = Mux(w.first_line | (lane == k - 1), 0, lane + 1)
         target = Mux(w.line_begin, following, lane)
         pixel_bits = Shape.cast(w.pixel.shape()).width
-        lines = [_room_fifo(m, f"line{j}", pixel_bits, width) for j in range(k)]
-        fits = Array(f.room for f in lines)[target] & (~new_row | row_room)
+        lines = [_room_fifo(m, f"line{j}", pixel_bits, self._width) for j in range(k)]
+        fits = Array(f.room for f in lines)[target] & (~new_row | rows.room)
         # Neighbour prior: a frame's first pixel waits until every machine is idle, then the word
         # generators' counts of results above restart (rows of two frames never share a line of MAPs).
-        hold = w.frame_begin & ~idle if neighbour else Value.cast(0)
+        hold = w.frame_begin & ~idle if _has_line(self._model.passes[-1]) else Value.cast(0)
         m.d.comb += fx.ready.eq(~hold & (~w.output_line | fits))
         take = fx.valid & fx.ready
-        frame_reset = take & w.frame_begin
         for j, f in enumerate(lines):
             m.d.comb += [f.write.eq(take & w.output_line & (target == j)),
                          f.buffer.w_stream.payload.eq(w.pixel.as_value())]
-        m.d.comb += [row_write.eq(take & new_row), rows.w_stream.payload.eq(target)]
+        m.d.comb += [rows.write.eq(take & new_row), rows.buffer.w_stream.payload.eq(target)]
         with m.If(take & new_row):
             m.d.sync += lane.eq(following)
+        return rows, lines, take & w.frame_begin
 
-        # The machines.
+    def _lanes(self, m: Module, lines: list[RoomFifo], frame_reset: Value
+               ) -> tuple[list[BayesianMachine], list[RoomFifo], list[RoomFifo]]:
+        """Per lane j a word generator fed from its line FIFO, its beats FIFO, its machine and its result
+        FIFO; with the above neighbour, machine j's results into the line of MAPs of generator j + 1 (the
+        rows below its own) as they leave. Returns the machines, their load FIFOs and result FIFOs."""
+        p, k = self._params, self._machines
+        wo = line_region(self._model, self._width).shape[1]  # output pixels per map row
+        line = _has_line(self._model.passes[-1])
         res_bits = Shape.cast(result_layout(p)).width
         gens, machines, loads, results = [], [], [], []
         for j in range(k):
-            gen = WordGenerator(params=p, model=model, output_columns=wo if neighbour else None,
+            gen = WordGenerator(params=p, model=self._model, output_columns=wo if line else None,
                                 leads=j == 0)
-            machine = BayesianMachine(params=p)
             m.submodules[f"generator{j}"] = gen
-            m.submodules[f"machine{j}"] = machine
-            line = lines[j].buffer
-            m.d.comb += [gen.pixel.valid.eq(line.r_stream.valid),
-                         gen.pixel.payload.as_value().eq(line.r_stream.payload),
-                         line.r_stream.ready.eq(gen.pixel.ready)]
+            m.submodules[f"machine{j}"] = machine = BayesianMachine(params=p)
+            buf = lines[j].buffer
+            m.d.comb += [gen.pixel.valid.eq(buf.r_stream.valid),
+                         gen.pixel.payload.as_value().eq(buf.r_stream.payload),
+                         buf.r_stream.ready.eq(gen.pixel.ready)]
             beats = self._fifo_pixels * p.beats_per_pixel
             loads.append(_load_fifo(m, f"beats{j}", gen.beats, machine.load, beats))
             # A map row's results wait here while the rows dealt before it leave (a row's worth, at
@@ -620,35 +420,40 @@ class StereoMachine(wiring.Component):
             gens.append(gen)
             machines.append(machine)
         for j, machine in enumerate(machines):
-            buf, room, write = results[j].buffer, results[j].room, results[j].write
-            below = gens[(j + 1) % k]  # the generator of the map rows below this machine's
-            res = machine.result
-            accept = room & below.result_room if neighbour else room
-            m.d.comb += [write.eq(res.valid & accept), res.ready.eq(accept),
-                         buf.w_stream.payload.eq(res.payload.as_value())]
-            if neighbour:  # the line of MAPs of the rows below: each result as it leaves
-                m.d.comb += [below.result_take.eq(write), below.result_map.eq(res.payload.map),
-                             below.result_hit.eq(~res.payload.nomatch & ~res.payload.timeout),
-                             below.frame_reset.eq(frame_reset)]
+            res, f = machine.result, results[j]
+            into = SimpleNamespace(valid=Signal(name=f"results{j}_valid"), ready=f.room)
+            m.d.comb += [f.write.eq(into.valid & f.room),
+                         f.buffer.w_stream.payload.eq(res.payload.as_value())]
+            sinks = [into]
+            if line:  # the line of MAPs of the rows below: each result as it leaves
+                below = gens[(j + 1) % k]
+                _watched(m, below.maps.payload, res.payload)
+                m.d.comb += below.frame_reset.eq(frame_reset)
+                sinks.append(below.maps)
+            fork(m, res, sinks)
+        return machines, loads, results
 
-        # The merge: a map row's wo results from its lane, rows in dealing order (raster order).
+    def _merge(self, m: Module, rows: RoomFifo, results: list[RoomFifo], idle: Signal) -> None:
+        """The merge: a map row's results from its lane, rows in dealing order (raster order); ``idle``
+        (registered): no row in flight."""
+        wo = line_region(self._model, self._width).shape[1]
         col = Signal(range(wo))
-        src = rows.r_stream.payload
+        rows_open = Signal(range(4 * self._machines + 6))
+        head = rows.buffer.r_stream  # the lane of the row leaving
         out = self.result
-        m.d.comb += [out.valid.eq(rows.r_stream.valid & Array(f.buffer.r_stream.valid for f in results)[src]),
-                     out.payload.as_value().eq(Array(f.buffer.r_stream.payload for f in results)[src])]
+        lane = [f.buffer.r_stream for f in results]
+        m.d.comb += [out.valid.eq(head.valid & Array(r.valid for r in lane)[head.payload]),
+                     out.payload.as_value().eq(Array(r.payload for r in lane)[head.payload])]
         sent = out.valid & out.ready
         for j, f in enumerate(results):
-            m.d.comb += f.buffer.r_stream.ready.eq(rows.r_stream.valid & (src == j) & out.ready)
+            m.d.comb += f.buffer.r_stream.ready.eq(head.valid & (head.payload == j) & out.ready)
         row_done = sent & (col == wo - 1)
-        m.d.comb += rows.r_stream.ready.eq(row_done)
+        m.d.comb += head.ready.eq(row_done)
         with m.If(sent):
             m.d.sync += col.eq(Mux(col == wo - 1, 0, col + 1))
         open_next = Signal.like(rows_open)
-        m.d.comb += open_next.eq(rows_open + row_write - row_done)
+        m.d.comb += open_next.eq(rows_open + rows.write - row_done)
         m.d.sync += [rows_open.eq(open_next), idle.eq(open_next == 0)]
-        self._nets = StereoNets(frontend=pipe, machines=machines, loads=loads)
-        return m
 
 
 def _room_fifo(m: Module, name: str, width: int, capacity: int, prefix: str | None = None) -> RoomFifo:

@@ -13,8 +13,8 @@
 //        0 DONE: (height - 2 MARGIN) * (width - 2 MARGIN - DMAX) raw result payloads of RESULT_WORDS uint32
 //          each, in raster order of the output region, then uint64 wall cycles of this frame
 //          (first pixel presented to last result taken), uint64 wall cycles since reset;
-//          census-lr (BM_PORT_RIGHT_VALID defined): then (height - 2 MARGIN) * (width - 2 MARGIN) raw
-//          payloads of the right pass's results, RIGHT_WORDS uint32 each, in raster order of its columns;
+//          then for each declared pass i < BM_PASSES (census-lr's right pass) (height - 2 MARGIN) *
+//          PASS_ROW_PIXELS[i] raw payloads of its results, PASS_WORDS[i] uint32 each, in raster order;
 //        2 NEED NUMBERS, 1 RAN OUT (rng off chip only): as in harness.cpp (EntropySupply in
 //          common.h); rows not used by this frame stay for the next one.
 // The frame's first pixel carries the frame-start marker. The simulation persists between frames
@@ -30,16 +30,6 @@
 
 static const uint32_t MAGIC_FRAME = 0x46534d42;  // "BMSF"
 
-#ifdef BM_PORT_RIGHT_VALID
-// census-lr: the right pass's result payload on its port (observed as it leaves; no ready).
-template <typename Port>
-static inline void take_right(const Port& port, uint32_t* record) {
-    uint32_t buf[RIGHT_WORDS + 2] = {0};
-    get_port(port, buf);
-    std::memcpy(record, buf, RIGHT_WORDS * sizeof(uint32_t));
-}
-#endif
-
 int main(int argc, char**) {
     if (argc != 1) fail("usage: harness (frames on stdin)");
     buffer_stdio();
@@ -53,7 +43,7 @@ int main(int argc, char**) {
     EntropySupply supply;  // rows of random numbers received and not yet used (off-chip sources)
     std::vector<uint8_t> pixels;
     std::vector<uint32_t> records;
-    std::vector<uint32_t> right_records;
+    std::vector<uint32_t> pass_records[BM_PASSES + 1];  // each declared pass's results (take_passes)
     for (;;) {
         uint32_t head[4];
         if (!read_request(head, MAGIC_FRAME)) break;
@@ -65,14 +55,15 @@ int main(int argc, char**) {
         const uint64_t n_in = height * width;
         const uint64_t expected = uint64_t(height - 2 * MARGIN) * (width - 2 * MARGIN - DMAX);
         records.assign(expected * RESULT_WORDS, 0);
-#ifdef BM_PORT_RIGHT_VALID
-        const uint64_t right_expected = uint64_t(height - 2 * MARGIN) * (width - 2 * MARGIN);
-        right_records.assign(right_expected * RIGHT_WORDS, 0);
-#else
-        const uint64_t right_expected = 0;
-#endif
-        uint64_t sent = 0, collected = 0, right_collected = 0, cycles = 0, idle = 0;
-        while (collected < expected || right_collected < right_expected) {
+        uint64_t pass_expected[BM_PASSES + 1] = {0}, pass_collected[BM_PASSES + 1] = {0};
+        bool passes_done = true;
+        for (unsigned i = 0; i < BM_PASSES; ++i) {
+            pass_expected[i] = uint64_t(height - 2 * MARGIN) * PASS_ROW_PIXELS[i];
+            pass_records[i].assign(pass_expected[i] * PASS_WORDS[i], 0);
+            passes_done = passes_done && pass_expected[i] == 0;
+        }
+        uint64_t sent = 0, collected = 0, cycles = 0, idle = 0;
+        while (collected < expected || !passes_done) {
             const bool valid = sent < n_in;
             top->BM_PORT_PIXELS_VALID = valid;
             if (valid) {
@@ -85,29 +76,25 @@ int main(int argc, char**) {
             const bool take = valid && top->BM_PORT_PIXELS_READY;
             const bool result = top->BM_PORT_RESULT_VALID;  // the wrapper ties result.ready high
             if (result) take_result(top->BM_PORT_RESULT_PAYLOAD, &records[collected++ * RESULT_WORDS]);
-            bool right = false;
-#ifdef BM_PORT_RIGHT_VALID
-            right = top->BM_PORT_RIGHT_VALID;
-            if (right) {
-                if (right_collected >= right_expected) fail("more right-pass results than right pixels");
-                take_right(top->BM_PORT_RIGHT_PAYLOAD, &right_records[right_collected++ * RIGHT_WORDS]);
-            }
-#endif
+            bool passed = false;
+            BM_TAKE_PASSES(*top, pass_records, pass_collected, pass_expected, passed);
+            passes_done = true;
+            for (unsigned i = 0; i < BM_PASSES; ++i) passes_done = passes_done && pass_collected[i] >= pass_expected[i];
             top->BM_PORT_CLK = 1;
             top->eval();
             ++cycles;
             ++wall_total;
             if (take) ++sent;
-            idle = (take || result || right) ? 0 : idle + 1;
+            idle = (take || result || passed) ? 0 : idle + 1;
             if (idle > HANG_CYCLES) fail("the design made no progress (no pixel taken, no result)");
         }
         send_results(records, cycles, wall_total);
-#ifdef BM_PORT_RIGHT_VALID
-        if (std::fwrite(right_records.data(), sizeof(uint32_t), right_records.size(), stdout) !=
-            right_records.size())
-            fail("cannot write to the client");
+        for (unsigned i = 0; i < BM_PASSES; ++i) {
+            if (std::fwrite(pass_records[i].data(), sizeof(uint32_t), pass_records[i].size(), stdout) !=
+                pass_records[i].size())
+                fail("cannot write to the client");
+        }
         std::fflush(stdout);
-#endif
     }
     top->final();
     return 0;

@@ -54,7 +54,8 @@ def _shape(signature: Any, *path: str) -> Any:
 
 
 def wrapper_verilog(signature: Any, *, tie_ready: bool = True) -> str:
-    """The harness's top module around the design: a registered ``rst``, and ``result.ready`` tied high.
+    """The harness's top module around the design: a registered ``rst``, and ``result.ready`` tied high
+    (and a stereo top's ``<pass>_result.ready``: the harness takes every declared pass's results too).
 
     Amaranth folds the synchronous reset into every flip-flop's next-state logic, and the
     design's compute enable depends on ``result.ready``; as top-level inputs Verilator
@@ -73,7 +74,8 @@ def wrapper_verilog(signature: Any, *, tie_ready: bool = True) -> str:
         kind = "input" if direction == "in" else "output"
         rng = f"[{width - 1}:0] " if width > 1 else ""
         decls.append(f"  {kind} {rng}{name};")
-        value = "1'b1" if tie_ready and path == ("result", "ready") else name
+        tied = len(path) == 2 and path[1] == "ready" and (path[0] == "result" or path[0].endswith("_result"))
+        value = "1'b1" if tie_ready and tied else name
         conns.append(f"    .{name}({value})")
     ports = ", ".join(["clk", "rst"] + [d.split()[-1].rstrip(";") for d in decls])
     return "\n".join([

@@ -10,8 +10,11 @@ subclass of :class:`Lanes` registered for the kind with :func:`register`, says i
   :class:`PlaneFilter` of the line buffer's column in the feature pipeline, and the shape of the
   plane it reads) and the position flags it reads (``flags``: ``row_start``, ``first_row``,
   ``consult``, which the feature pipeline computes);
-- the ports it adds to the generator (``members``: a line of MAPs' results in, another pass's MAPs in);
-- on the generator's shared pipeline (:class:`~bayesmachine.hdl.frontend.words.WordNets`: issue, cost
+- the ports it adds to the generator (``members``: its own pass's MAPs in for a line of MAPs, another
+  pass's MAPs in), each declared here once: the front end takes its ports from them;
+- what it needs of the model beyond its column (``check``: a pass column's pass), a ``ParameterError``
+  naming the model otherwise;
+- on the generator's shared pipeline (:class:`~bayesmachine.hdl.frontend.nets.WordNets`: issue, cost
   register, address register, table read, the beat on the stream), per lane row j of the beat on the
   stream its word (``word(j)``, rows 0..Dmax) and its word in the no-match row (``nomatch()``), and
   whether a pixel may be taken (``ready()``).
@@ -34,7 +37,7 @@ from bayesmachine.errors import ParameterError
 from bayesmachine.params import MachineParams
 
 if TYPE_CHECKING:
-    from ..words import WordNets
+    from ..nets import WordNets
 
 __all__ = ["Lanes", "PlaneFilter", "PlaneLanes", "lanes_for", "register"]
 
@@ -103,6 +106,10 @@ class Lanes:
     def members(cls, term: Any, params: MachineParams) -> dict[str, wiring.Member]:
         """The ports it adds to the generator."""
         return {}
+
+    @classmethod
+    def check(cls, term: Any, model: Any, p: Any) -> None:
+        """``ParameterError`` naming the model unless its lanes can run in pass ``p`` of ``model``."""
 
     # --- One elaboration ---
     def __init__(self, term: Any, nets: WordNets) -> None:

@@ -1,27 +1,112 @@
 """The consistency column (census-lr's left pass): row d 1.0 or beta by lane d's window test on the
-other pass's MAP d_R(x - d) (:class:`~..lr.ConsistencyTest`, fed one MAP per pixel at a map column of an
-output row through the ``<pass>_map`` port), the no-match row gamma when any lane is consistent, else 1.0
-(0 without its no-match entry)."""
+other pass's MAP d_R(x - d) (:class:`ConsistencyTest`, fed one MAP per pixel at a map column of an output
+row through the generator's ``<pass>_maps`` port), the no-match row gamma when any lane is consistent,
+else 1.0 (0 without its no-match entry).
+
+The pass it reads (``Consistency.feeds_from``) must be one the model runs before its own pass, with the
+right image as reference: its MAPs then cover every map column of an output row (0 .. W - 2k - 1), one
+per pixel the own pass consults. Its own pass must be the model's own (a declared pass reading another
+would need that pass's MAPs in its own order)."""
 
 from __future__ import annotations
 
 from typing import Any
 
-from amaranth.hdl import Cat, Const, Mux, Value
-from amaranth.lib import stream, wiring
-from amaranth.lib.wiring import In
+from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value
+from amaranth.lib import wiring
+from amaranth.lib.wiring import In, Out
 
 from bayesmachine.columns import Consistency
+from bayesmachine.columns.base import check_int
+from bayesmachine.errors import ParameterError
+from bayesmachine.hdl.signatures import map_layout, map_stream
 from bayesmachine.params import MachineParams
 
 from .base import Lanes, register
 
-__all__ = ["ConsistencyLanes", "map_port"]
+__all__ = ["ConsistencyLanes", "ConsistencyTest", "map_port"]
 
 
 def map_port(term: Any) -> str:
-    """The generator's port of the MAPs the column reads (``right_map``)."""
-    return f"{term.feeds_from}_map"
+    """The generator's port of the MAPs the column reads: ``<pass>_maps`` (census-lr: ``right_maps``)."""
+    return f"{term.feeds_from}_maps"
+
+
+class ConsistencyTest(wiring.Component):
+    """The own pass's view of the other pass's MAPs: entry d = d_R(x - d), and each lane's window test.
+
+    Parameters
+    ----------
+    dmax : int
+        The largest disparity (0 .. 4094).
+    map_width : int
+        Bits of a MAP (the other pass's machine's ``map_width``).
+    tolerance : int
+        The window's half-width (``ModelParams.lr_tolerance``).
+
+    Attributes
+    ----------
+    shift : ``In(1)``
+        Shift ``entry`` in (as entry 0; entry d moves to d + 1).
+    entry : ``In(map_layout(map_width))``
+        The MAP of the next map column.
+    consistent : ``Out(dmax + 1)``
+        Bit d: entry d is a disparity and ``|entry d - d| <= tolerance`` (combinational from the
+        shift register).
+    any : ``Out(1)``
+        Some lane is consistent.
+    unknown : ``Out(dmax + 1)``
+        Bit d: entry d is no MAP (the other pass's no match or timeout: with ``lr_neutral`` the lane
+        is neutral; twin :func:`~bayesmachine.columns.lr_unknown`).
+    """
+
+    def __init__(self, *, dmax: int, map_width: int, tolerance: int) -> None:
+        for name, value, low, high in (("dmax", dmax, 0, 4094), ("map_width", map_width, 1, 16),
+                                       ("tolerance", tolerance, 0, 4094)):
+            check_int(name, value, low, high)
+        self._dmax, self._map_width, self._tolerance = dmax, map_width, tolerance
+        super().__init__({
+            "shift": In(1),
+            "entry": In(map_layout(map_width)),
+            "consistent": Out(dmax + 1),
+            "any": Out(1),
+            "unknown": Out(dmax + 1),
+        })
+
+    @property
+    def dmax(self) -> int:
+        return self._dmax
+
+    @property
+    def map_width(self) -> int:
+        return self._map_width
+
+    @property
+    def tolerance(self) -> int:
+        return self._tolerance
+
+    def elaborate(self, platform: object) -> Module:
+        m = Module()
+        dmax, t = self._dmax, self._tolerance
+        layout = map_layout(self._map_width)
+        # Reset: no MAP (a frame's first pixels read entries of the row's own other pass only).
+        line = [Signal(layout, name=f"right_map_{d}") for d in range(dmax + 1)]
+        with m.If(self.shift):
+            m.d.sync += line[0].eq(self.entry)
+            m.d.sync += [line[d].eq(line[d - 1]) for d in range(1, dmax + 1)]
+        bits = []
+        for d, e in enumerate(line):
+            # |map - d| <= t as two comparisons against constants (no subtractor), each left out where
+            # the MAP's range makes it always true (verilator -Wall: no constant comparison).
+            inside = Const(1)
+            if d + t < (1 << self._map_width) - 1:
+                inside = inside & (e.map <= d + t)
+            if d - t > 0:
+                inside = inside & (e.map >= d - t)
+            bits.append(e.hit & inside)
+        m.d.comb += [self.consistent.eq(Cat(*bits)), self.any.eq(Cat(*bits).any()),
+                     self.unknown.eq(~Cat(*(e.hit for e in line)))]
+        return m
 
 
 @register(Consistency)
@@ -34,17 +119,28 @@ class ConsistencyLanes(Lanes):
 
     @classmethod
     def members(cls, term: Any, params: MachineParams) -> dict[str, wiring.Member]:
-        from ..lr import right_map_layout
+        return {map_port(term): In(map_stream(params))}
 
-        return {map_port(term): In(stream.Signature(right_map_layout(params.map_width)))}
+    @classmethod
+    def check(cls, term: Any, model: Any, p: Any) -> None:
+        name = term.feeds_from
+        fed = next((q for q in model.passes[:-1] if q.name == name), None)
+        if p is not model.passes[-1]:
+            raise ParameterError(f"model: the {p.name} pass's {term.name} column reads the {name} pass's "
+                                 "MAPs; on chip only the model's own pass reads another pass's", "model")
+        if fed is None:
+            raise ParameterError(f"model: the {term.name} column reads the MAPs of a {name} pass, which the "
+                                 f"{model.name} model does not run before its own", "model")
+        if fed.reference != "right":
+            raise ParameterError(f"model: the {term.name} column reads the {name} pass's MAPs; on chip it "
+                                 f"reads a pass with the right image as reference (one MAP per map column "
+                                 f"of a row), not the {fed.reference!r}", "model")
 
     def build(self) -> None:
-        from ..lr import ConsistencyTest
-
         n, c = self.nets, self.term
         self._maps = maps = getattr(n.generator, map_port(c))
-        n.m.submodules.consistency = test = ConsistencyTest(dmax=n.dmax, map_width=n.params.map_width,
-                                                            tolerance=c.tolerance)
+        n.m.submodules[f"{c.feeds_from}_consistency"] = test = ConsistencyTest(
+            dmax=n.dmax, map_width=n.params.map_width, tolerance=c.tolerance)
         shift = n.take & n.pixel.consult
         n.m.d.comb += [test.shift.eq(shift), test.entry.eq(maps.payload), maps.ready.eq(shift)]
         # Padded with 0 to every row a beat can reach (rows past Dmax are not read). A lane reading a

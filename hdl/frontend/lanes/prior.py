@@ -6,11 +6,12 @@ from __future__ import annotations
 
 from typing import Any
 
-from amaranth.hdl import Module, Mux, Signal, Value, unsigned
-from amaranth.lib import data, memory, wiring
-from amaranth.lib.wiring import In, Out
+from amaranth.hdl import Module, Mux, Signal, Value
+from amaranth.lib import memory, wiring
+from amaranth.lib.wiring import In
 
 from bayesmachine.columns import AbovePrior, LeftPrior
+from bayesmachine.hdl.signatures import map_layout, map_stream
 from bayesmachine.params import MachineParams
 
 from .base import Lanes, register
@@ -36,16 +37,17 @@ class LeftLanes(Lanes):
 @register(AbovePrior)
 class AboveLanes(Lanes):
     """The above neighbour's factor: a line of the machine's own MAPs (a ``Memory`` of the output width,
-    written as results leave through ``result_*``, read when the pixel is taken) through the prior table
-    clamped where it stops changing (the machine's ``feedback_words``); 1.0 in a frame's first output
+    written as results leave through the ``maps`` stream, read when the pixel is taken) through the prior
+    table clamped where it stops changing (the machine's ``feedback_words``); 1.0 in a frame's first output
     row and after a no-match or timeout above.
 
     An output pixel waits until the result above it is in the line of MAPs, and a result is written only
     over an entry already read: ``unread`` = results written - output pixels taken (+ an output row with
     ``leads``: the first map row reads no result). An output pixel is taken while unread >= 1, a result
     written while unread < the row. Both tests are on the counts of the next cycle, registered (a
-    register toward the take, no path from the result). With one machine this is "fewer than an output
-    row's pixels taken and not yet out"."""
+    register toward the take, no path from the result): ``maps.ready``. With one machine this is "fewer
+    than an output row's pixels taken and not yet out", always true when a result leaves. ``frame_reset``
+    (several machines: every machine idle at a frame's first pixel) restarts the counts."""
 
     @classmethod
     def flags(cls, term: Any) -> tuple[str, ...]:
@@ -53,15 +55,16 @@ class AboveLanes(Lanes):
 
     @classmethod
     def members(cls, term: Any, params: MachineParams) -> dict[str, wiring.Member]:
-        return {"result_take": In(1), "result_map": In(params.map_width), "result_hit": In(1),
-                "result_room": Out(1), "frame_reset": In(1)}
+        return {"maps": In(map_stream(params)), "frame_reset": In(1)}
 
     def build(self) -> None:
         n = self.nets
         gen = n.generator
         wo = gen.output_columns
-        self._room = self._counts(n.m, gen, wo)
-        above = self._line(n.m, gen, wo)
+        written = Signal()  # a result into the line of MAPs
+        n.m.d.comb += written.eq(gen.maps.valid & gen.maps.ready)
+        self._room = self._counts(n.m, gen, wo, written)
+        above = self._line(n.m, gen, wo, written)
         first_row = n.at_take(n.pixel.first_row, "first_row")
         # The read data holds from the cycle after the take until the next output pixel's take (in the
         # cycle of this pixel's last issue), so each issue sees this pixel's MAP above.
@@ -69,32 +72,31 @@ class AboveLanes(Lanes):
         table = n.params.feedback_words  # the quantized prior clamped where it stops changing
         self._words = n.lookup("prior", table, [n.row(j) - above.map for j in range(n.rows_per_beat)])
 
-    def _counts(self, m: Module, gen: Any, wo: int) -> Value:
+    def _counts(self, m: Module, gen: Any, wo: int, written: Value) -> Value:
         start = wo if gen.leads else 0
         unread = Signal(range(wo + 1), init=start)
         room = Signal(init=start >= 1)
         write_room = Signal(init=start < wo)
-        m.d.comb += gen.result_room.eq(write_room)
+        m.d.comb += gen.maps.ready.eq(write_room)
         unread_next = Signal.like(unread)
-        m.d.comb += unread_next.eq(unread + gen.result_take - (self.nets.take & self.nets.pixel.output))
+        m.d.comb += unread_next.eq(unread + written - (self.nets.take & self.nets.pixel.output))
         with m.If(gen.frame_reset):  # every machine idle: a frame starts afresh
             m.d.sync += [unread.eq(start), room.eq(start >= 1), write_room.eq(start < wo)]
         with m.Else():
             m.d.sync += [unread.eq(unread_next), room.eq(unread_next >= 1), write_room.eq(unread_next < wo)]
         return room
 
-    def _line(self, m: Module, gen: Any, wo: int) -> Any:
+    def _line(self, m: Module, gen: Any, wo: int, written: Value) -> Any:
         """The line of MAPs: written as results leave, read at an output pixel's take."""
         n = self.nets
-        layout = data.StructLayout({"map": unsigned(n.params.map_width), "hit": unsigned(1)})
+        layout = map_layout(n.params.map_width)
         m.submodules.above_line = line = memory.Memory(shape=layout, depth=wo, init=[])
         wr = line.write_port()
         rd = line.read_port()  # not transparent: a result written this cycle is read the next
         wr_ptr = Signal(range(wo))
         rd_ptr = Signal(range(wo))
-        m.d.comb += [wr.en.eq(gen.result_take), wr.addr.eq(wr_ptr),
-                     wr.data.map.eq(gen.result_map), wr.data.hit.eq(gen.result_hit)]
-        with m.If(gen.result_take):
+        m.d.comb += [wr.en.eq(written), wr.addr.eq(wr_ptr), wr.data.eq(gen.maps.payload)]
+        with m.If(written):
             m.d.sync += wr_ptr.eq(Mux(wr_ptr == wo - 1, 0, wr_ptr + 1))
         out_take = n.take & n.pixel.output
         m.d.comb += [rd.en.eq(out_take), rd.addr.eq(rd_ptr)]

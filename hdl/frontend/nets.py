@@ -1,0 +1,303 @@
+"""The word generator's shared pipeline (:class:`WordNets`), on which every column kind's lane builder
+(:mod:`.lanes`) builds its lanes, for one elaboration of a
+:class:`~bayesmachine.hdl.frontend.words.WordGenerator`.
+
+One beat per cycle, in a four-step pipeline that stalls as a whole while the stream does: in the cycle
+of the beat's issue each lane's cost (a difference, a Hamming distance, row minus the MAP above) goes
+into a register; its absolute value, clamped, into the address register in the next; the look-up
+(block RAM read) in the next; the beat on the stream the one after. The registers keep the subtraction
+(on the reference features' wide fan-out), the absolute value and clamp, and the long route to the
+block RAM apart. The cost's operands are registers: the reference features, and per lane the
+delay-line entry of the beat, chosen a cycle ahead (beat 0's when the pixel is taken, the next beat's
+at each issue), so no path runs from the beat counter through the entry multiplexer into a table
+address. The delay line is a circular buffer in distributed RAM, banked so that each lane row of a
+beat reads a bank of its own (:meth:`WordNets._delay_line`); a pixel is written into it a cycle after
+its take (from a register holding the taken match features), so the take (which depends on the
+stream's ready) drives only the entry registers and the reference features, not the buffer's write
+enables.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from amaranth.hdl import Const, Module, Mux, Signal, Value, signed, unsigned
+from amaranth.lib import memory
+
+from bayesmachine.hdl.signatures import beat_words
+
+__all__ = ["WordNets"]
+
+
+class WordNets:
+    """The word generator's shared pipeline, on which every lane builder builds its lanes.
+
+    One beat per cycle, in four steps that stall together with the stream (``advance``): the beat's
+    issue (``issue``, beat number ``beat``: each lane's cost into a register, :meth:`address`), the
+    cost's clamped absolute value into the address register, the table read (:meth:`table`), the beat
+    on the stream (:meth:`aligned` carries a value of the issue's cycle along). ``take``: a pixel is
+    taken; ``left``: the taken pixel's reference features; :meth:`entry`: a lane's match features.
+
+    Attributes
+    ----------
+    m : Module
+        The generator's module.
+    params : MachineParams
+    pass_ : Pass
+    reference : Reference
+    tables : FrontEndTables
+    pixel, beats : View
+        The pixel stream's and the load stream's payloads.
+    dmax, rows_per_beat, n_beats, one : int
+        The largest disparity, lane rows per beat (R), beats per pixel, the word of 1.0.
+    take, advance, issue, beat, free : Value
+    active : Signal
+        Writing the words of an output pixel (``beat`` counts its beats).
+    left : Signal
+        The taken pixel's reference features (its ``left`` field).
+    """
+
+    def __init__(self, m: Module, gen: Any) -> None:
+        p = gen.params
+        self.m = m
+        self.params = p
+        self.pass_ = gen.pass_
+        self.reference = gen.reference
+        self.tables = gen.tables
+        self.generator = gen
+        self.pixel = gen.pixel.payload
+        self.beats = gen.beats.payload
+        self.dmax = gen.pass_.model.dmax
+        self.rows_per_beat = p.words_per_beat // p.loaded_columns
+        self.n_beats = p.beats_per_pixel
+        self.one = p.word_one
+        self.take = Signal()
+        self.advance = Signal()  # the look-up pipeline (address registers, table reads, stream) moves
+        self.issue = Signal()
+        self.beat = Signal(range(max(2, self.n_beats)))
+        side = gen.pixel.payload.left.shape()
+        self.left = Signal(side, reset_less=True)
+        self._entries: dict[tuple[str, int], Signal] = {}
+        self._pipeline()
+        self._delay_line(side)
+
+    def _pipeline(self) -> None:
+        """The beat counter and the valid flags of the four steps."""
+        m, n_beats = self.m, self.n_beats
+        out = self.generator.beats
+        active = Signal()  # writing the words of an output pixel
+        self.active = active
+        beat_d = Signal(range(max(2, n_beats)))  # the beat in the cost registers
+        diff_valid = Signal()
+        beat_a = Signal(range(max(2, n_beats)))  # the beat in the address registers
+        addr_valid = Signal()
+        self.beat_q = Signal(range(max(2, n_beats)))  # the beat on the stream
+        m.d.comb += [self.advance.eq(~out.valid | out.ready), self.issue.eq(active & self.advance),
+                     self.take.eq(self.generator.pixel.valid & self.generator.pixel.ready)]
+        last = self.beat == n_beats - 1
+        self.free = ~active | (self.issue & last)
+        with m.If(self.advance):
+            m.d.sync += [diff_valid.eq(self.issue), beat_d.eq(self.beat), addr_valid.eq(diff_valid),
+                         beat_a.eq(beat_d), out.valid.eq(addr_valid), self.beat_q.eq(beat_a)]
+        with m.If(self.issue):
+            with m.If(last):
+                m.d.sync += [self.beat.eq(0), active.eq(0)]
+            with m.Else():
+                m.d.sync += self.beat.eq(self.beat + 1)
+        with m.If(self.take):
+            m.d.sync += self.left.eq(self.pixel.left)
+            with m.If(self.pixel.output):
+                m.d.sync += [active.eq(1), self.beat.eq(0)]
+
+    def _delay_line(self, side: Any) -> None:
+        """The match features of the last pixels: pixel t (the t-th taken) at address t mod N of a
+        circular buffer of N = R·M entries (R lane rows per beat, M = ceil((Dmax + 1) / R)), banked by
+        address mod R, bank k holding addresses k, k + R, ... at index address // R (distributed RAM,
+        one combinational read port each). Entry d of pixel t (the match features d pixels back) is at
+        address t - d; a beat's R lanes read R consecutive entries, so R consecutive addresses, one in
+        each bank (:meth:`_next_load`). Entries of a lane row past Dmax read some older pixel (their
+        words are the no-match row's or 0, not a table's). A pixel is written a cycle after its take,
+        from a register holding its match features (``right_in``): the take (FIFO ready -> issue ->
+        take) drives the entry registers, not the buffer's write enables. While that write is pending
+        (``shift_q``) the newest pixel is in ``right_in``. Uninitialized entries: an output pixel is at
+        least Dmax pixels into its line, so none reads an entry of an earlier line or frame."""
+        m, rows = self.m, self.rows_per_beat
+        self._bank_depth = -(-(self.dmax + 1) // rows)  # M: entries per bank
+        self.right_in = Signal(side, reset_less=True)
+        self.shift_q = Signal()
+        write_bank = Signal(range(rows))  # the next write's address t mod N, as bank and index
+        write_index = Signal(range(self._bank_depth))
+        q, q_wrap, start = self._next_load()
+        self._bank_data = []
+        for k in range(rows):
+            mem = memory.Memory(shape=side, depth=self._bank_depth, init=[])
+            m.submodules[f"line_{k}"] = mem
+            write, read = mem.write_port(), mem.read_port(domain="comb")
+            # The window runs from bank ``start`` towards lower banks (left reference) or higher ones;
+            # the banks it reaches after wrapping around hold its end at the neighbouring index.
+            # (a bank no window reaches after wrapping is never compared: a constant compare lints)
+            if self._towards < 0:
+                wraps = start[0] < k if k > 0 else Const(0, 1)
+            else:
+                wraps = start[0] > k if k < rows - 1 else Const(0, 1)
+            m.d.comb += [write.addr.eq(write_index), write.data.eq(self.right_in),
+                         write.en.eq(self.shift_q & (write_bank == k)), read.addr.eq(Mux(wraps, q_wrap, q))]
+            self._bank_data.append(read.data)
+        m.d.sync += self.shift_q.eq(self.take)
+        with m.If(self.shift_q):
+            m.d.sync += [write_bank.eq(Mux(write_bank == rows - 1, 0, write_bank + 1)),
+                         write_index.eq(Mux(write_bank == rows - 1, self._step(write_index, 1), write_index))]
+        with m.If(self.take):
+            m.d.sync += self.right_in.eq(self.pixel.right)
+
+    def _step(self, index: Value, by: int) -> Value:
+        """A bank index plus ``by`` (-2 .. 2) modulo M (a compare and a multiplexer a step)."""
+        last = self._bank_depth - 1
+        for _ in range(abs(by)):
+            index = Mux(index == last, 0, index + 1) if by > 0 else Mux(index == 0, last, index - 1)
+        return index
+
+    def _next_load(self) -> tuple[Signal, Signal, list[Signal]]:
+        """Where the next entry load reads: (``q``, ``q_wrap``, ``start``). Beat b of pixel t reads
+        entries c + g·(b·R + j) (lane j; c, g from the pass's reference: entry = c + g·row), addresses
+        u - g·(b·R + j) with u = t - c: its window starts at address u - g·b·R, in bank s = u mod R
+        (fixed for the pixel) at index q (one step of -g a beat), and runs through the banks s - g·j,
+        those past the last bank at index ``q_wrap`` = q - g; lane j reads bank s - g·j (``start``: s, a
+        registered copy per lane row for the rotations' fan-out). The next load is beat 0 of the next
+        pixel until an output pixel's take, then beats 1 .. n - 1 of that pixel at its issues of beats
+        0 .. n - 2, then beat 0 of the pixel after; all in registers, so a bank's address is a
+        multiplexer of registers."""
+        m, rows, n_beats = self.m, self.rows_per_beat, self.n_beats
+        c = self.reference.entry(0, self.dmax)
+        g = self.reference.entry(1, self.dmax) - c
+        self._towards = -g
+        u0 = (-c) % (rows * self._bank_depth)
+        q0 = Signal(range(self._bank_depth), init=u0 // rows)  # beat 0 of the pixel taken next
+        s0 = Signal(range(rows), init=u0 % rows)
+        q = Signal(range(self._bank_depth), init=u0 // rows)  # the next load's window
+        q_wrap = Signal(range(self._bank_depth), init=(u0 // rows - g) % self._bank_depth)
+        start = [Signal(range(rows), init=u0 % rows, name=f"load_start_rep{j}") for j in range(rows)]
+        carry = s0 == rows - 1
+        q0_next = Mux(carry, self._step(q0, 1), q0)
+        s0_next = Mux(carry, 0, s0 + 1)
+        next_pixel = [q.eq(q0_next), q_wrap.eq(self._step(q0_next, -g)), *(r.eq(s0_next) for r in start)]
+        with m.If(self.take):
+            m.d.sync += [q0.eq(q0_next), s0.eq(s0_next)]
+            if n_beats > 1:
+                with m.If(self.pixel.output):  # next: beat 1 of this pixel
+                    m.d.sync += [q.eq(self._step(q0, -g)), q_wrap.eq(self._step(q0, -2 * g))]
+                with m.Else():  # next: beat 0 of the next pixel
+                    m.d.sync += next_pixel
+            else:
+                m.d.sync += next_pixel
+        if n_beats > 1:
+            with m.Elif(self.issue & (self.beat == n_beats - 2)):  # next: beat 0 of the next pixel
+                m.d.sync += [q.eq(q0), q_wrap.eq(self._step(q0, -g)), *(r.eq(s0) for r in start)]
+        if n_beats > 2:
+            with m.Elif(self.issue & (self.beat < n_beats - 2)):  # next: beat b + 2
+                m.d.sync += [q.eq(self._step(q, -g)), q_wrap.eq(self._step(q_wrap, -g))]
+        self._start = start
+        return q, q_wrap, start
+
+    def row(self, j: int) -> Value:
+        """The row of lane row j of the beat being issued."""
+        return self.beat * self.rows_per_beat + j
+
+    def at_take(self, value: Value, name: str) -> Signal:
+        """``value`` of the pixel taken (registered at the take)."""
+        reg = Signal.like(value, name=name)
+        with self.m.If(self.take):
+            self.m.d.sync += reg.eq(value)
+        return reg
+
+    def aligned(self, value: Value, name: str) -> Signal:
+        """``value`` of the issue's cycle, with its beat on the stream (the three steps' registers)."""
+        stages = [Signal.like(Value.cast(value), name=f"{name}_{s}") for s in "daq"]
+        with self.m.If(self.advance):
+            self.m.d.sync += [stages[0].eq(value), stages[1].eq(stages[0]), stages[2].eq(stages[1])]
+        return stages[2]
+
+    def address(self, value: Value, depth: int, name: str) -> Signal:
+        """The table address of a lane's cost ``value`` (of the issue's cycle): its absolute value clamped
+        to ``depth - 1``, a cycle later (the cost in a register, then the address in one)."""
+        if Value.cast(value).shape().width > 14:
+            raise ValueError(f"{name}: a cost of {Value.cast(value).shape()} does not fit the 14-bit "
+                             "register")
+        diff = Signal(signed(14), name=f"diff_{name}", reset_less=True)  # guarded by the pipeline's valid
+        a = Signal(unsigned(14))
+        # The clamp's test on the difference itself, beside the absolute value, not after it.
+        far = (diff >= depth - 1) | (diff <= -(depth - 1))
+        self.m.d.comb += a.eq(abs(diff))
+        reg = Signal(range(depth), name=f"addr_{name}", reset_less=True)  # guarded by the pipeline's valid
+        with self.m.If(self.advance):
+            self.m.d.sync += [diff.eq(value), reg.eq(Mux(far, depth - 1, a))]
+        return reg
+
+    def table(self, name: str, words: Any) -> memory.Memory:
+        """A read-only table of W + 1-bit words (block RAM), submodule ``table_{name}``."""
+        init = [int(w) for w in words]
+        mem = memory.Memory(shape=unsigned(self.params.memory_word_width), depth=len(init), init=init)
+        self.m.submodules[f"table_{name}"] = mem
+        return mem
+
+    def lookup(self, name: str, words: Any, costs: list[Value]) -> list[Value]:
+        """The words of a table ``words`` at each lane row's cost ``costs[j]``, with the beat on the stream
+        (one read port per lane row)."""
+        mem = self.table(name, words)
+        out = []
+        for j, cost in enumerate(costs):
+            port = mem.read_port()
+            addr = self.address(cost, mem.depth, f"{name}_{j}")
+            self.m.d.comb += [port.en.eq(self.advance), port.addr.eq(addr)]
+            out.append(port.data)
+        return out
+
+    def entry(self, plane: str, j: int) -> Signal:
+        """The ``plane`` value of lane row j's match pixel for the beat being issued: a register loaded a
+        cycle ahead from the delay line's banks (the beat counter ends there, not at the table address),
+        with beat 0's entry when a pixel is taken, the next beat's on an issue. The newest pixels come
+        from the registers in front of the buffer until they are written: at the take the taken pixel
+        (entry 0) and the one before it (entry 1) while its write is pending; at beat 0's issue the
+        taken pixel while its write is pending."""
+        key = (plane, j)
+        if key in self._entries:
+            return self._entries[key]
+        m, rows = self.m, self.rows_per_beat
+        banks = [getattr(d, plane) for d in self._bank_data]
+        read = Signal(banks[0].shape(), name=f"line_{plane}_{j}")
+        with m.Switch(self._start[j]):  # lane j reads bank s - g·j (s < R: the last case is the default)
+            for start in range(rows):
+                with m.Case(start) if start < rows - 1 else m.Default():
+                    m.d.comb += read.eq(banks[(start + self._towards * j) % rows])
+        pending = getattr(self.right_in, plane)
+
+        def newest(d: int) -> Value:  # entry d of the pixel being loaded, a pending write included
+            return Mux(self.shift_q, pending, read) if d == 0 else read
+
+        d0 = self.reference.entry(j, self.dmax)
+        sel = Signal(banks[0].shape(), name=f"right_{plane}_{j}", reset_less=True)
+        with m.If(self.take):
+            m.d.sync += sel.eq(getattr(self.pixel.right, plane) if d0 == 0 else newest(d0 - 1))
+        with m.Elif(self.issue):  # beat b + 1's entry; shift_q is set at beat 0's issue at most
+            m.d.sync += sel.eq(newest(self.reference.entry(rows + j, self.dmax)))
+        self._entries[key] = sel
+        return sel
+
+    def write_beats(self, columns: list[tuple[list[Any], Any]]) -> None:
+        """The beat on the stream: lane L's word by its (row, operator column) from ``columns`` (each
+        loaded column's words of lane rows 0..R-1 and its no-match word); 0 past the last row."""
+        m, dmax, rows = self.m, self.dmax, self.rows_per_beat
+        lc = len(columns)
+        words = beat_words(self.params, self.beats)
+        unused = range(self.n_beats, 1 << len(self.beat_q))  # never occur; in the last case: a complete case
+        with m.Switch(self.beat_q):
+            for b in range(self.n_beats):
+                with m.Case(b, *(unused if b == self.n_beats - 1 else ())):
+                    for lane in range(self.params.words_per_beat):
+                        row, (col_words, nomatch) = b * rows + lane // lc, columns[lane % lc]
+                        if row > dmax + 1:
+                            word: Any = 0  # past the last operator: the machine ignores it
+                        else:
+                            word = col_words[lane // lc] if row <= dmax else nomatch
+                        m.d.comb += words[lane].eq(word)
+

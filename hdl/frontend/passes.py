@@ -1,0 +1,286 @@
+"""A model's passes on chip: every pass a word generator of its own, fed from the one feature pipeline,
+each declared pass (``model.passes`` but the last: census-lr's right pass) on a machine of its own beside
+the own pass's; twins in ``bayesmachine.columns`` and ``host.likelihoods``.
+
+- :class:`PassFeeder` (one per declared pass): the feature pipeline's pixels in, the pass's pixels out,
+  by its reference image (:mod:`.reference`): the left image's pixels as they are; the right image's
+  with the images swapped and the reference delayed by Dmax pixels (a delay line in block RAM), so that
+  when left map column x arrives the right pixel x_r = x - Dmax has every left pixel it pairs with
+  (x_r .. x_r + Dmax: the word generator's delay line, read backwards); after a line's last pixel the
+  feeder holds its input for Dmax more right pixels (x_r = W4 - Dmax .. W4 - 1), each with ``flush`` =
+  k: its lanes d > Dmax - k pair it with a left pixel past the last output column
+  (:func:`~bayesmachine.columns.right_lanes_valid`: word 0). So a right-reference pass covers right map
+  columns 0 .. W4 - 1 of every output row, in raster order, as the host's (``host.likelihoods.pass_grid``).
+- :func:`split_pixels`: the pipeline's pixel goes to every pass together (a broadcast: each takes it
+  when all can); to the own pass through a FIFO of Dmax + 4 pixels when the model declares passes (its
+  pixel at map column x may wait for another pass's MAP of x, which needs the left pixels up to x + Dmax:
+  the FIFO lets them pass).
+- :func:`watch_passes`: each declared pass's results, as they leave its machine (the front end's
+  ``<pass>_maps`` port), into its own generator's line of MAPs (its above prior) and into a FIFO of its
+  MAPs (Dmax + 8: never full while the own pass waits, it holds at most the pixel FIFO's pixels' MAPs)
+  for each generator whose pass column reads them (census-lr's consistency column).
+- :func:`frontend_signature`: the front end's ports, taken from its generators' (each declared once, by
+  the lane builder that reads it).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+from amaranth.hdl import Module, Mux, Shape, Signal, Value, unsigned
+from amaranth.lib import data, fifo, memory, stream, wiring
+from amaranth.lib.wiring import In
+
+from bayesmachine.columns.base import check_int
+from bayesmachine.hdl.signatures import pixel_stream
+from bayesmachine.models import ModelParams, Pass
+from bayesmachine.params import MachineParams, ParameterError
+
+from .layouts import FLAGS, declared_passes, features_layout, pass_pixel_layout, pixel_features_layout
+from .reference import REFERENCES, reference_of
+from .words import WordGenerator, generator_signature, pass_params
+
+__all__ = ["PassFeeder", "feeder_in_layout", "fork", "frontend_signature", "pass_port", "pass_row_pixels",
+           "split_pixels", "watch_passes"]
+
+
+def pass_row_pixels(model: ModelParams, name: str, width: int) -> int:
+    """The pixels (results) of ``model``'s pass ``name`` per map row of ``width``-pixel frames, by its
+    reference (:meth:`~.reference.Reference.row_pixels`): the own pass's output pixels, W - 2k - Dmax; a
+    right-reference pass's every right map column, W - 2k."""
+    return reference_of(model.pass_named(name)).row_pixels(width - 2 * model.margin, model.dmax)
+
+
+def pass_port(model: ModelParams, p: Pass, what: str) -> str:
+    """The front end's (or the stereo top's) port ``what`` of pass ``p``: unprefixed for the model's own
+    pass (``beats``, ``maps``, ``result``), ``<pass>_<what>`` for a declared one (``right_beats``)."""
+    return what if p is model.passes[-1] else f"{p.name}_{what}"
+
+
+def frontend_signature(params: MachineParams, model: ModelParams) -> wiring.Signature:
+    """The front end's ports: ``pixels`` and per pass ``beats`` (its generator's) and, when something on
+    chip reads the pass's MAPs (its own line of MAPs, another pass's pass column), ``maps``: the
+    generator's, or the reading column's (:func:`pass_port` names them)."""
+    sigs = {p.name: generator_signature(pass_params(model, params, p.name), model, p).members
+            for p in model.passes}
+    members: dict[str, wiring.Member] = {"pixels": In(pixel_stream())}
+    for p in model.passes:
+        members[pass_port(model, p, "beats")] = sigs[p.name]["beats"]
+        readers = [sig[f"{p.name}_maps"] for sig in sigs.values() if f"{p.name}_maps" in sig]
+        own = [sigs[p.name]["maps"]] if "maps" in sigs[p.name] else []
+        if own or readers:
+            members[pass_port(model, p, "maps")] = (own + readers)[0]
+    return wiring.Signature(members)
+
+
+def fork(m: Module, source: Any, sinks: Sequence[Any]) -> None:
+    """One stream (``source``: ``valid``, ``ready``) into several (each ``valid``, ``ready``; the caller
+    drives their payloads): a handshake when every sink is ready, each sink's ``valid`` the source's
+    while all the others are ready."""
+    readies = [s.ready for s in sinks]
+    m.d.comb += source.ready.eq(_all(readies))
+    for i, s in enumerate(sinks):
+        m.d.comb += s.valid.eq(source.valid & _all(readies[:i] + readies[i + 1:]))
+
+
+def _all(values: list[Value]) -> Value:
+    out: Value = Value.cast(1)
+    for v in values:
+        out = out & v
+    return out
+
+
+def feeder_in_layout(features: data.StructLayout, flags: Mapping[str, Any]) -> data.StructLayout:
+    """A pixel into :class:`PassFeeder`: both images' ``features``, ``output`` (the pixel is an output
+    pixel: the own pass's), the pass's position ``flags`` and ``line_end`` (the last map column of an
+    output row)."""
+    return pixel_features_layout(features, {**flags, "line_end": unsigned(1)})
+
+
+class PassFeeder(wiring.Component):
+    """The feature pipeline's pixels in, one declared pass's pixels out, by its reference image (see the
+    module text).
+
+    The left image: one output pixel per input pixel, unchanged. The right image: for an input pixel at
+    left map column x, ``left`` (the word generator's reference) = the right features of x - Dmax (a
+    delay line of Dmax pixels: a circular buffer in block RAM), ``right`` (its delay line's input) = the
+    left features of x, ``output`` and the flags passed on, ``flush`` 0; after an input pixel with
+    ``output`` and ``line_end``, Dmax flush pixels k = 1 .. Dmax (the input is not ready meanwhile): the
+    right features of the next delay-line entries, left features 0 (they fill lanes past the last output
+    column), ``output`` 1, ``row_start`` 0, ``first_row`` the row's, ``flush`` k. The handshake passes
+    through (no register on the valid path): ``i.ready`` is ``o.ready`` while no flush is pending.
+
+    Parameters
+    ----------
+    reference : str
+        The pass's reference image, "left" or "right" (``Pass.reference``).
+    dmax : int
+        The largest disparity (0 .. 4094).
+    features : StructLayout
+        One image's planes (:func:`~.layouts.features_layout` of the model).
+    flags : Mapping[str, Shape]
+        The position flags the pass's columns read (of :data:`~.layouts.FLAGS`; a right-reference pass's
+        pixels carry no ``consult``: its MAPs would be read before they exist).
+
+    Attributes
+    ----------
+    i : ``In(stream.Signature(feeder_in_layout(features, flags)))``
+        Every pixel of the frame, raster order.
+    o : ``Out(stream.Signature(...))``
+        The pass's pixels (``flags`` and its reference's: ``flush``), for its ``WordGenerator``.
+    """
+
+    def __init__(self, *, reference: str, dmax: int, features: data.StructLayout,
+                 flags: Mapping[str, Any] | None = None) -> None:
+        if not isinstance(reference, str):
+            raise TypeError(f"reference must be an image's name (str), not {type(reference).__name__}")
+        if reference not in REFERENCES:
+            raise ParameterError(f"reference must be one of {', '.join(REFERENCES)}, got {reference!r}",
+                                 "reference")
+        check_int("dmax", dmax, 0, 4094)
+        if not isinstance(features, data.StructLayout):
+            raise TypeError(f"features must be a StructLayout, not {type(features).__name__}")
+        flags = dict(flags or {})
+        carried = [f for f in FLAGS if f != "consult" or not REFERENCES[reference].swaps]
+        wrong = [f for f in flags if f not in carried]
+        if wrong:
+            raise ParameterError(f"flags: a {reference}-reference pass's pixels carry {', '.join(carried)}, "
+                                 f"not {', '.join(wrong)}", "flags")
+        self._reference, self._dmax, self._features, self._flags = reference, dmax, features, flags
+        out = pixel_features_layout(features, {**flags, **REFERENCES[reference].flags(dmax)})
+        super().__init__({"i": In(stream.Signature(feeder_in_layout(features, flags))),
+                          "o": wiring.Out(stream.Signature(out))})
+
+    @property
+    def reference(self) -> str:
+        return self._reference
+
+    @property
+    def dmax(self) -> int:
+        return self._dmax
+
+    @property
+    def features(self) -> data.StructLayout:
+        return self._features
+
+    @property
+    def flags(self) -> dict[str, Any]:
+        return dict(self._flags)
+
+    def elaborate(self, platform: object) -> Module:
+        m = Module()
+        i, o = self.i, self.o
+        if not REFERENCES[self._reference].swaps:
+            m.d.comb += [o.valid.eq(i.valid), i.ready.eq(o.ready)]
+            m.d.comb += [getattr(o.payload, f).eq(getattr(i.payload, f)) for f in o.payload.shape().members]
+            return m
+        dmax = self._dmax
+        pending = Signal(range(dmax + 1))  # flush pixels still to write
+        first_row = Signal()  # of the row being flushed
+        flushing = pending != 0
+        m.d.comb += [
+            i.ready.eq(~flushing & o.ready),
+            o.valid.eq(Mux(flushing, 1, i.valid)),
+            o.payload.right.eq(Mux(flushing, 0, i.payload.left)),
+            o.payload.output.eq(flushing | i.payload.output),
+        ]
+        if "row_start" in self._flags:
+            m.d.comb += o.payload.row_start.eq(~flushing & i.payload.row_start)
+        if "first_row" in self._flags:
+            m.d.comb += o.payload.first_row.eq(Mux(flushing, first_row, i.payload.first_row))
+        if not dmax:
+            m.d.comb += o.payload.left.eq(i.payload.right)
+            return m
+        step = o.valid & o.ready
+        m.d.comb += [o.payload.flush.eq(Mux(flushing, dmax + 1 - pending, 0)),
+                     o.payload.left.eq(self._delay_line(m, step, Mux(flushing, 0, i.payload.right)))]
+        with m.If(flushing & o.ready):
+            m.d.sync += pending.eq(pending - 1)
+        with m.Elif(i.valid & i.ready & i.payload.output & i.payload.line_end):
+            m.d.sync += pending.eq(dmax)
+            if "first_row" in self._flags:
+                m.d.sync += first_row.eq(i.payload.first_row)
+        return m
+
+    def _delay_line(self, m: Module, step: Value, value: Value) -> Value:
+        """``value`` of Dmax steps back: a circular buffer of Dmax entries (block RAM), written at
+        ``head`` on each step and read one step ahead at the entry after it, so its output register
+        holds entry ``head`` (the oldest) between steps. Uninitialized entries: an output pixel is at
+        least Dmax pixels into its line, so none reads an entry of an earlier line or frame."""
+        dmax = self._dmax
+        m.submodules.line = line = memory.Memory(shape=self._features, depth=dmax, init=[])
+        write = line.write_port()
+        # With one entry the step reads the entry it writes: the new value (write-through).
+        read = line.read_port(transparent_for=(write,) if dmax == 1 else ())
+        head = Signal(range(dmax))
+        after = Signal(range(dmax), init=1 % dmax)  # head + 1 modulo Dmax
+        m.d.comb += [write.addr.eq(head), write.data.eq(value), write.en.eq(step),
+                     read.addr.eq(after), read.en.eq(step)]
+        with m.If(step):
+            m.d.sync += [head.eq(after), after.eq(Mux(after == dmax - 1, 0, after + 1))]
+        return read.data
+
+
+def _fields(m: Module, dst: Any, pixel: Any, line_end: Value | None = None) -> None:
+    """``dst``'s fields from the pipeline's ``pixel`` (and ``line_end``)."""
+    for f in dst.shape().members:
+        m.d.comb += getattr(dst, f).eq(line_end if f == "line_end" else getattr(pixel, f))
+
+
+def split_pixels(m: Module, model: ModelParams, features: Any, gens: Mapping[str, WordGenerator]) -> None:
+    """The feature pipeline's pixels (``features``: a stream of :func:`~.pipeline.pipeline_layout`) to
+    every pass's word generator ``gens`` (by pass name), all taking each pixel together (see the module
+    text)."""
+    pixel, sinks = features.payload.pixel, []
+    own = model.passes[-1]
+    for p in model.passes:
+        gen = gens[p.name]
+        if p is not own:
+            flags = {f: s for f, s in pass_pixel_layout(model, p).members.items() if f in FLAGS}
+            feeder = PassFeeder(reference=p.reference, dmax=model.dmax, features=features_layout(model),
+                                flags=flags)
+            m.submodules[f"{p.name}_feeder"] = feeder
+            wiring.connect(m, feeder.o, gen.pixel)
+            _fields(m, feeder.i.payload, pixel, features.payload.line_end)
+            sinks.append(feeder.i)
+        elif declared_passes(model):
+            layout = gen.pixel.payload.shape()
+            m.submodules.own_pixels = pix = fifo.SyncFIFOBuffered(width=Shape.cast(layout).width,
+                                                                  depth=model.dmax + 4)
+            staged = Signal(layout)
+            _fields(m, staged, pixel)
+            m.d.comb += [pix.w_stream.payload.eq(staged), gen.pixel.valid.eq(pix.r_stream.valid),
+                         gen.pixel.payload.eq(pix.r_stream.payload), pix.r_stream.ready.eq(gen.pixel.ready)]
+            sinks.append(pix.w_stream)
+        else:
+            _fields(m, gen.pixel.payload, pixel)
+            sinks.append(gen.pixel)
+    fork(m, features, sinks)
+
+
+def watch_passes(m: Module, front: Any, gens: Mapping[str, WordGenerator]) -> None:
+    """Each pass's MAPs in on the front end's ``maps`` ports (:func:`frontend_signature`) to what reads
+    them: its own generator's line of MAPs and, through a FIFO of Dmax + 8 MAPs each, every generator
+    whose pass column reads them (see the module text)."""
+    model = front.model
+    for p in model.passes:
+        name = pass_port(model, p, "maps")
+        if name not in front.signature.members:
+            continue
+        port, sinks = getattr(front, name), []
+        readers = [(reader, gen) for reader, gen in gens.items() if f"{p.name}_maps" in gen.signature.members]
+        if not readers:  # only its own line of MAPs reads them
+            wiring.connect(m, wiring.flipped(port), gens[p.name].maps)
+            continue
+        if "maps" in gens[p.name].signature.members:
+            m.d.comb += gens[p.name].maps.payload.eq(port.payload)
+            sinks.append(gens[p.name].maps)
+        for reader, gen in readers:
+            sink = getattr(gen, f"{p.name}_maps")
+            m.submodules[f"{p.name}_maps_{reader}"] = maps = fifo.SyncFIFOBuffered(
+                width=Shape.cast(port.payload.shape()).width, depth=model.dmax + 8)
+            m.d.comb += [maps.w_stream.payload.eq(port.payload), sink.valid.eq(maps.r_stream.valid),
+                         sink.payload.eq(maps.r_stream.payload), maps.r_stream.ready.eq(sink.ready)]
+            sinks.append(maps.w_stream)
+        fork(m, port, sinks)

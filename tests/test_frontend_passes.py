@@ -1,0 +1,335 @@
+# amaranth: UnusedElaboratable=no
+"""A model's passes on chip: every pass a word generator and a machine of its own, fed from the one
+feature pipeline (``hdl.frontend.passes``), and the consistency column's test.
+
+Blocks against their twins (``ConsistencyTest`` against ``lr_consistent``, ``PassFeeder`` against the
+delay and flush order), the front end's words of every pass against the host's (``pass_words``), and
+``StereoMachine`` against the model run as the host runs the passes (``conftest.passes_model``), every
+pass's results, with random stalls on every stream: census-lr, and a census-lr-like model defined in
+the tests (``conftest.lr_like``: its passes and columns from its definition, a right pass its
+consistency column reads and a left-reference pass nothing reads).
+"""
+
+from __future__ import annotations
+
+import random
+from collections.abc import Iterator
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from conftest import assert_same_results, passes_model, registered, run_sim
+
+from bayesmachine.columns import Census, Consistency, GradH, GradV, Mean, lr_consistent, lr_unknown
+from bayesmachine.hdl.frontend.filters import feature_layout
+from bayesmachine.hdl.frontend.lanes.consistency import ConsistencyTest
+from bayesmachine.hdl.frontend.passes import PassFeeder
+from bayesmachine.hdl.frontend.stereo import (
+    FrontEnd,
+    StereoMachine,
+    check_stereo_machine,
+    stereo_machine_params,
+)
+from bayesmachine.hdl.frontend.words import generator_signature, pass_params
+from bayesmachine.host.features import model_planes
+from bayesmachine.host.images import bundled_pair
+from bayesmachine.host.likelihoods import pass_grid, pass_words
+from bayesmachine.models import ModelDef, ModelParams, PassDef
+from bayesmachine.params import ParameterError
+from bayesmachine.region import OutputRegion
+from bayesmachine.sim.stereo_testbench import pass_pixels, run_frontend_passes, run_stereo_passes
+
+
+def _noisy_pair(height: int, width: int, seed: int, shift: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    left = rng.integers(0, 256, (height, width), dtype=np.uint8)
+    right = np.roll(left, -shift, axis=1).astype(np.int64) + rng.integers(-3, 4, (height, width))
+    return left, right.clip(0, 255).astype(np.uint8)
+
+
+def _lr(dmax: int, **fields: object) -> ModelParams:
+    return ModelParams(dmax=dmax, name="census-lr", **fields)
+
+
+# A consistency column reading a pass with the left image as reference: not on chip.
+LEFT_FED = ModelDef(name="left-fed", description="a consistency column of a left-reference pass",
+                    columns=(Mean, GradH, GradV, Census, Consistency),
+                    passes=(PassDef(name="right", model="census", reference="left", machine_index=1),))
+# A declared pass named as the own pass: its ports would be the own pass's.
+SAME_NAME = ModelDef(name="same-name", description="a declared pass named left", columns=(Mean, GradH, GradV),
+                     passes=(PassDef(name="left", model="paper", reference="right", machine_index=1),))
+
+
+@pytest.fixture
+def defined(lr_like: ModelDef) -> Iterator[None]:
+    """The models defined here and ``lr-like`` (conftest), known by name for the test."""
+    with registered(LEFT_FED, SAME_NAME):
+        yield
+
+
+# --- Blocks against their twins ---
+
+@pytest.mark.parametrize(("dmax", "tolerance"), [(6, 1), (4, 0), (0, 2)])
+def test_consistency_test_equals_lr_consistent(dmax: int, tolerance: int) -> None:
+    """Shift in one row of right MAPs (-1: none) column by column; after column x the lanes' bits are
+    ``lr_consistent`` of that row at left map column x (x >= Dmax), and ``any`` their OR."""
+    rng = np.random.default_rng(dmax + 10 * tolerance)
+    width = 3 * dmax + 12
+    row = rng.integers(-1, dmax + 3, width)  # MAPs past Dmax + 1 too: map_width holds them
+    row[rng.random(width) < 0.3] = -1
+    map_width = max(1, (dmax + 4).bit_length())
+    dut = ConsistencyTest(dmax=dmax, map_width=map_width, tolerance=tolerance)
+    want = lr_consistent(row, 0, np.arange(dmax, width), dmax, tolerance)
+    want_unknown = lr_unknown(row, 0, np.arange(dmax, width), dmax)
+    rnd = random.Random(dmax)
+
+    async def bench(ctx):
+        for x in range(width):
+            ctx.set(dut.entry.map, max(0, int(row[x])))
+            ctx.set(dut.entry.hit, int(row[x] >= 0))
+            ctx.set(dut.shift, 1)
+            await ctx.tick()
+            ctx.set(dut.shift, 0)
+            for _ in range(rnd.choice([0, 1])):
+                await ctx.tick()  # no shift: the test holds
+            if x >= dmax:
+                bits = ctx.get(dut.consistent)
+                got = [(bits >> d) & 1 for d in range(dmax + 1)]
+                assert got == want[x - dmax].astype(int).tolist(), x
+                assert ctx.get(dut.any) == int(want[x - dmax].any()), x
+                unknown = ctx.get(dut.unknown)
+                got_unknown = [(unknown >> d) & 1 for d in range(dmax + 1)]
+                assert got_unknown == want_unknown[x - dmax].astype(int).tolist(), x
+
+    run_sim(dut, bench)
+
+
+def _feed(dut: PassFeeder, inputs: list[dict], outputs: int, seed: int) -> list:
+    """``inputs`` through the feeder with random stalls both ways; its first ``outputs`` outputs."""
+    from amaranth.sim import Simulator
+
+    rnd = random.Random(seed)
+    got: list = []
+
+    async def feeder(ctx):
+        for payload in inputs:
+            ctx.set(dut.i.valid, 1)
+            ctx.set(dut.i.payload, payload)
+            await ctx.tick().until(dut.i.ready)
+            ctx.set(dut.i.valid, 0)
+            for _ in range(rnd.choice([0, 0, 1])):
+                await ctx.tick()
+
+    async def sink(ctx):
+        while len(got) < outputs:
+            ready = rnd.random() < 0.7
+            ctx.set(dut.o.ready, ready)
+            _, _, valid, payload = await ctx.tick().sample(dut.o.valid, dut.o.payload)
+            if valid and ready:
+                got.append(payload)
+
+    sim = Simulator(dut)
+    sim.add_clock(1e-8)
+    sim.add_testbench(feeder, background=True)
+    sim.add_testbench(sink)
+    sim.run()
+    return got
+
+
+@pytest.mark.parametrize("dmax", [1, 2, 3, 5])
+def test_right_reference_feeder_delays_the_reference_and_flushes_each_output_row(dmax: int) -> None:
+    """Per input pixel one output pixel whose reference (``left``) is the right features Dmax pixels
+    back; after an output row's last pixel, Dmax flush pixels k = 1..Dmax continuing the delay line
+    (its circular buffer wraps several times, write-through at Dmax 1), ``row_start`` 0 and the row's
+    ``first_row``."""
+    dut = PassFeeder(reference="right", dmax=dmax, features=feature_layout(24),
+                     flags={"row_start": 1, "first_row": 1})
+    n, line_end = 14, {6, 13}
+    inputs = [{"left": {"m25": 100 + k}, "right": {"m25": k + 1, "census": k}, "output": int(k % 7 >= dmax),
+               "line_end": int(k in line_end), "row_start": int(k % 7 == dmax), "first_row": int(k < 7)}
+              for k in range(n)]
+    got = [(p.left.m25, p.right.m25, p.output, p.flush, p.row_start, p.first_row)
+           for p in _feed(dut, inputs, n + 2 * dmax, seed=1 + dmax)]
+    want: list[tuple] = []
+    refs: list[int] = []
+    for k in range(n):
+        refs.append(k + 1)
+        want.append((refs[-1 - dmax] if len(refs) > dmax else None, 100 + k, int(k % 7 >= dmax), 0,
+                     int(k % 7 == dmax), int(k < 7)))
+        if k in line_end:
+            for f in range(1, dmax + 1):
+                refs.append(0)
+                want.append((refs[-1 - dmax], 0, 1, f, 0, int(k < 7)))
+    for g, w in zip(got, want, strict=True):
+        assert w[0] is None or g[0] == w[0]
+        assert g[1:] == w[1:]
+
+
+def test_left_reference_feeder_passes_the_pixels_on() -> None:
+    """The left image as reference: the pixel as it is (combinational), the handshake passed through."""
+    dut = PassFeeder(reference="left", dmax=3, features=feature_layout(24), flags={"first_row": 1})
+    assert "flush" not in dut.o.payload.shape().members
+
+    async def bench(ctx):
+        for k in range(6):
+            ctx.set(dut.i.payload, {"left": {"m25": k}, "right": {"gv20": -k}, "output": k % 2,
+                                    "first_row": k % 3 == 0, "line_end": k == 5})
+            ctx.set(dut.i.valid, k % 4 != 1)
+            ctx.set(dut.o.ready, k % 3 != 2)
+            await ctx.delay(1e-9)
+            o = ctx.get(dut.o.payload)
+            assert (o.left.m25, o.right.gv20, o.output, o.first_row) == (k, -k, k % 2, int(k % 3 == 0))
+            assert (ctx.get(dut.o.valid), ctx.get(dut.i.ready)) == (int(k % 4 != 1), int(k % 3 != 2))
+
+    run_sim(dut, bench, clock=False)
+
+
+@pytest.mark.parametrize(("kwargs", "error", "match"), [
+    ({"reference": "up"}, ParameterError, "reference must be one of left, right"),
+    ({"reference": 1}, TypeError, "reference"),
+    ({"dmax": 2.0}, TypeError, "dmax"),
+    ({"dmax": 4095}, ParameterError, "dmax"),
+    ({"features": 24}, TypeError, "features"),
+    ({"flags": {"consult": 1}}, ParameterError, "flags: a right-reference pass's pixels carry row_start"),
+    ({"flags": {"flush": 1}}, ParameterError, "not flush"),
+])
+def test_pass_feeder_checks_its_parameters(kwargs: dict, error: type, match: str) -> None:
+    with pytest.raises(error, match=match):
+        PassFeeder(**{"reference": "right", "dmax": 2, "features": feature_layout(24), **kwargs})
+
+
+# --- The front end's words of every pass equal the host's ---
+
+def _host_words(model: ModelParams, params, frames, maps: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Every pass's words, row by row, each column fed from the stand-in MAPs ``maps`` (by pass name)."""
+    out: dict[str, list] = {p.name: [] for p in model.passes}
+    at = dict.fromkeys(out, 0)
+    for lf, rf in frames:
+        fl, fr = model_planes(lf, model), model_planes(rf, model)
+        region = OutputRegion.of_features(fl.shape, model.dmax)
+        grids = {p.name: pass_grid(p, region) for p in model.passes}
+        for y in range(region.shape[0]):
+            for p in model.passes:
+                pp, w = pass_params(model, params, p.name), grids[p.name].width
+                above = None if p.name not in maps else (
+                    np.full(w, -1) if y == 0 else maps[p.name][at[p.name] - w: at[p.name]])
+                results = {src: maps[src][at[src]: at[src] + grids[src].width][None]
+                           for src in grids if src != p.name and src in maps}
+                out[p.name].append(pass_words(p, fl, fr, pp, rows=slice(y, y + 1), above=above,
+                                              results=results))
+            for p in model.passes:
+                at[p.name] += grids[p.name].width
+    return {name: np.concatenate(words) for name, words in out.items()}
+
+
+@pytest.mark.parametrize(("name", "fields", "width", "delay"), [
+    ("census-lr", {"dmax": 3}, 15, 6),
+    ("census-lr", {"dmax": 7}, 16, 6),  # Dmax >= 6 lanes: the right pass's entry 0 (newest pixel) in beat 1
+    ("census-lr", {"dmax": 2, "lr_right_nomatch": False, "lr_neutral": False, "lr_nomatch": False,
+                   "lr_tolerance": 0}, 11, 25),  # 2 output pixels per row
+    ("lr-like", {"dmax": 3}, 14, 8),
+])
+@pytest.mark.usefixtures("defined")
+def test_every_pass_words_equal_the_host_words(name: str, fields: dict, width: int, delay: int) -> None:
+    """With stand-in results for every machine whose MAPs the front end reads (given late, up to
+    ``delay`` cycles after a pixel's words), every pass's words are the host's (``pass_words``: an above
+    column from the stand-in MAPs of the pass's row before, a pass column from those of the row of the
+    pass it reads), and a row's first pixel carries ``line_start`` where the machine has a feedback
+    column."""
+    model = ModelParams(name=name, **fields)
+    params = stereo_machine_params(model.dmax, model=model, counter_max=2)
+    frames = [_noisy_pair(9, width, seed=4), _noisy_pair(8, width, seed=5)]
+    rng = np.random.default_rng(3)
+    maps = {p.name: rng.integers(-1, model.dmax + 1, pass_pixels(frames, model, p.name))
+            for p in model.passes}
+    front = FrontEnd(params=params, model=model, width=width)
+    got = run_frontend_passes(front, frames, {n: maps[n] for n in maps if n in ("left", "right")},
+                              in_stall=0.2, out_stall=0.2, result_delay=delay, seed=3)
+    want = _host_words(model, params, frames, maps)
+    assert set(got) == {p.name for p in model.passes}
+    for p in model.passes:
+        words, flags = got[p.name]
+        assert words.shape == want[p.name].shape, p.name
+        assert np.array_equal(words, want[p.name]), (p.name, np.argwhere(words != want[p.name])[:5])
+        if pass_params(model, params, p.name).feedback_columns:
+            row = pass_grid(p, OutputRegion.of_model(frames[0][0].shape, model)).width
+            assert (flags[:, 0] == (np.arange(len(flags)) % row == 0)).all()
+    right = want["right"]
+    assert (right[:, : model.dmax + 1, 1:] == 0).any()  # lanes past the last output column: word 0
+
+
+# --- StereoMachine against the model run as the host runs the passes ---
+
+CASES = {
+    # name: (model, frames (height, width) or "noisy", fifo pixels, counter max)
+    "bundled-crop": (("census-lr", {"dmax": 3}), [(9, 18), "noisy"], 2, 6),
+    "narrow-deep-fifo": (("census-lr", {"dmax": 2, "lr_tolerance": 0}), [(8, 11)], 8, 4),
+    "no-nomatch-row-right-watchdog": (("census-lr", {"dmax": 3, "lr_nomatch": False,
+                                                     "lr_right_max_cycles": 9}), [(8, 14)], 3, 6),
+    "census5": (("census-lr", {"dmax": 2, "census_window": 5}), [(7, 12), "noisy"], 2, 5),
+    # The issue's rules: no right no-match row, a lane without a right MAP gets beta (not neutral).
+    "issue-rules": (("census-lr", {"dmax": 3, "lr_right_nomatch": False, "lr_neutral": False}),
+                    [(9, 16)], 2, 6),
+    "dmax0": (("census-lr", {"dmax": 0}), [(8, 8)], 2, 4),
+    "lr-like": (("lr-like", {"dmax": 3}), [(8, 14)], 2, 4),
+}
+
+
+@pytest.mark.parametrize("case", list(CASES))
+@pytest.mark.usefixtures("defined")
+def test_stereo_machine_passes_equal_the_model(case: str) -> None:
+    (name, fields), shapes, fifo_pixels, counter_max = CASES[case]
+    model = ModelParams(name=name, **fields)
+    height, width = shapes[0]
+    left, right, _ = bundled_pair()
+    crop = (slice(150, 150 + height), slice(400, 400 + width))
+    frames = [(np.ascontiguousarray(left[crop]), np.ascontiguousarray(right[crop]))]
+    if len(shapes) > 1:
+        frames.append(_noisy_pair(height - 1, width, seed=1))
+    params = stereo_machine_params(model.dmax, model=model, counter_max=counter_max, max_cycles=400)
+    top = StereoMachine(params=params, model=model, width=width, fifo_pixels=fifo_pixels)
+    assert set(top.signature.members) >= {f"{p.name}_result" for p in model.passes[:-1]}
+    got, _ = run_stereo_passes(top, frames, in_stall=0.2, out_stall=0.3, seed=6)
+    want = passes_model(frames, model, params)
+    assert set(got) == set(want) == {p.name for p in model.passes}
+    for p in model.passes:
+        assert_same_results(got[p.name], want[p.name])
+    assert want["right"].timeout.any() or case != "no-nomatch-row-right-watchdog"  # the watchdog fires
+
+
+def test_census_lr_on_chip_parameters() -> None:
+    model = _lr(4)
+    params = stereo_machine_params(4, model=model)
+    assert params.columns == 5 and params.loaded_columns == 6 and params.words_per_beat % 6 == 0
+    rp = pass_params(model, params, "right")
+    assert rp.columns == 4 and rp.seed != params.seed and rp.words_per_beat % rp.loaded_columns == 0
+    assert pass_params(model, params, "left") is params
+    check_stereo_machine(params, model, 11)
+    with pytest.raises(ParameterError, match="rng: the census-lr model's right pass runs on chip"):
+        check_stereo_machine(stereo_machine_params(4, model=model, rng="smtj"), model, 11)
+    with pytest.raises(ParameterError, match="width"):
+        FrontEnd(params=params, model=model, width=10)
+
+
+@pytest.mark.usefixtures("defined")
+def test_what_the_passes_on_chip_cannot_do_is_one_error_naming_the_pass() -> None:
+    """A consistency column reading a left-reference pass, several machines with a declared pass, two
+    columns of one pass on one stream: each one ParameterError naming the pass, never a design."""
+    model = ModelParams(name="left-fed", dmax=3)
+    params = stereo_machine_params(3, model=model)
+    with pytest.raises(ParameterError, match="reads the right pass's MAPs; on chip it reads a pass with the "
+                                             "right image as reference") as e:
+        check_stereo_machine(params, model, 16)
+    assert e.value.parameter == "model"
+    lr = ModelParams(name="lr-like", dmax=3)
+    with pytest.raises(ParameterError, match="the lr-like model's right pass runs on one machine"):
+        check_stereo_machine(stereo_machine_params(3, model=lr), lr, 16, machines=2)
+    same = ModelParams(name="same-name", dmax=3)
+    with pytest.raises(ParameterError, match="the same-name model's passes need distinct names"):
+        check_stereo_machine(stereo_machine_params(3, model=same), same, 16)
+    own = lr.passes[-1]
+    lanes = own.columns[-1]
+    twice = SimpleNamespace(name="left", columns=(*own.columns, lanes), model=lr, reference="left")
+    with pytest.raises(ParameterError, match="the left pass's lr column takes the port right_maps, which its "
+                                             "lr column has already"):
+        generator_signature(stereo_machine_params(3, model=lr), lr, twice)
