@@ -55,15 +55,13 @@ def _lr(dmax: int, **fields: object) -> ModelParams:
 LEFT_FED = ModelDef(name="left-fed", description="a consistency column of a left-reference pass",
                     columns=(Mean, GradH, GradV, Census, Consistency),
                     passes=(PassDef(name="right", model="census", reference="left", machine_index=1),))
-# A declared pass named as the own pass: its ports would be the own pass's.
-SAME_NAME = ModelDef(name="same-name", description="a declared pass named left", columns=(Mean, GradH, GradV),
-                     passes=(PassDef(name="left", model="paper", reference="right", machine_index=1),))
+
 
 
 @pytest.fixture
 def defined(lr_like: ModelDef) -> Iterator[None]:
     """The models defined here and ``lr-like`` (conftest), known by name for the test."""
-    with registered(LEFT_FED, SAME_NAME):
+    with registered(LEFT_FED):
         yield
 
 
@@ -324,9 +322,9 @@ def test_what_the_passes_on_chip_cannot_do_is_one_error_naming_the_pass() -> Non
     lr = ModelParams(name="lr-like", dmax=3)
     with pytest.raises(ParameterError, match="the lr-like model's right pass runs on one machine"):
         check_stereo_machine(stereo_machine_params(3, model=lr), lr, 16, machines=2)
-    same = ModelParams(name="same-name", dmax=3)
-    with pytest.raises(ParameterError, match="the same-name model's passes need distinct names"):
-        check_stereo_machine(stereo_machine_params(3, model=same), same, 16)
+    with pytest.raises(ValueError, match="pass name 'left': each pass needs a name of its own"):
+        ModelDef(name="same-name", description="a declared pass named left", columns=(Mean, GradH, GradV),
+                 passes=(PassDef(name="left", model="paper", reference="right", machine_index=1),))
     own = lr.passes[-1]
     lanes = own.columns[-1]
     twice = SimpleNamespace(name="left", columns=(*own.columns, lanes), model=lr, reference="left")
