@@ -31,6 +31,7 @@ Kinds: :class:`~.features.Mean`, :class:`~.features.GradH`, :class:`~.features.G
 from .base import Column, Option, PassContext, PlaneColumn, Source, Table, Term, likelihood_formula, quantize
 from .census import CENSUS_SIGMA, CENSUS_WINDOWS, Census, census_bits, census_codes, census_offsets, hamming
 from .consistency import RIGHT_PASS, Consistency, lr_consistent, lr_unknown, right_lanes_valid
+from .energy import ENERGY_MAX_BITS, ENERGY_STEP, EnergyTable, energy_codes, exp_table
 from .features import (
     FEATURE_COLUMNS,
     FEATURES,
@@ -53,6 +54,7 @@ __all__ = [
     "NoMatchFloor", "GRADIENT_MAGNITUDE", "GradMag",
     "CENSUS_WINDOWS", "CENSUS_SIGMA", "Census", "census_bits", "census_codes", "census_offsets", "hamming",
     "NEIGHBOUR_PRIOR", "NeighbourPrior", "LeftPrior", "AbovePrior", "neighbour_words",
+    "ENERGY_STEP", "ENERGY_MAX_BITS", "EnergyTable", "energy_codes", "exp_table",
     "RIGHT_PASS", "Consistency", "lr_consistent", "lr_unknown", "right_lanes_valid",
     "COLUMN_KINDS",
 ]

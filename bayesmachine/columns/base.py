@@ -10,7 +10,7 @@ import enum
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
@@ -18,6 +18,9 @@ from bayesmachine.checks import as_bool, as_int, as_real, shown
 from bayesmachine.errors import ParameterError
 
 from .planes import Plane
+
+if TYPE_CHECKING:
+    from .energy import EnergyTable
 
 __all__ = [
     "Source",
@@ -218,6 +221,7 @@ class Term:
         self.values = {o.name: values[o.name] for o in self.options}
         self.dmax = dmax
         self._tables: dict[int | None, Table] = {}
+        self._energy: EnergyTable | None = None
 
     def __repr__(self) -> str:
         own = ", ".join(f"{k}={v!r}" for k, v in self.values.items())
@@ -251,6 +255,16 @@ class Term:
             else:
                 self._tables[word_bits] = self.table().quantized(word_bits)
         return self._tables[word_bits]
+
+    def energy(self) -> EnergyTable:
+        """Its table in energy form (:mod:`.energy`: codes of −ln of the float64 table, the no-match
+        entries too), built once."""
+        if self._energy is None:
+            from .energy import EnergyTable  # energy.py quantizes with this module's rule
+
+            table = self.table()
+            self._energy = EnergyTable.of(table.values, table.nomatch)
+        return self._energy
 
     def _check_table(self, values: np.ndarray) -> None:
         name = self.table_parameter
