@@ -236,3 +236,40 @@ def registered(*definitions: object) -> Iterator[object]:
     finally:
         for d in done:
             MODELS.pop(d.name, None)
+
+
+# docs/development.md's "A model of your own": the first Python block after this marker.
+USER_MODEL_DOC = Path(__file__).resolve().parents[1] / "docs" / "development.md"
+USER_MODEL_MARKER = "<!-- the snippet of tests/test_user_model.py -->"
+
+
+def user_model_snippet() -> str:
+    """The snippet of docs/development.md that registers a model of your own, as the page shows it."""
+    import re
+
+    text = USER_MODEL_DOC.read_text()
+    found = re.search(r"```python\n(.*?)```", text[text.index(USER_MODEL_MARKER):], re.S)
+    assert found is not None, "docs/development.md lost its snippet"
+    return found.group(1)
+
+
+@contextlib.contextmanager
+def user_models(directory: Path) -> Iterator[Path]:
+    """The snippet written to ``directory/my_models.py``, a user's own file outside the package, and
+    imported as a user would: the models it registers are known while the block runs, then forgotten.
+    Yields the file."""
+    import importlib.util
+
+    from bayesmachine.models import MODELS
+
+    path = directory / "my_models.py"
+    path.write_text(user_model_snippet())
+    before = set(MODELS)
+    spec = importlib.util.spec_from_file_location("my_models", path)
+    assert spec is not None and spec.loader is not None
+    try:
+        spec.loader.exec_module(importlib.util.module_from_spec(spec))
+        yield path
+    finally:
+        for name in set(MODELS) - before:
+            del MODELS[name]

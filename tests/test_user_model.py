@@ -5,7 +5,6 @@ take it. Bad definitions are one error each, naming the model."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import re
 from pathlib import Path
@@ -13,6 +12,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from conftest import user_models
 
 from bayesmachine.cli import main
 from bayesmachine.columns import (
@@ -37,33 +37,13 @@ from bayesmachine.host.run import prepare, run_machine
 from bayesmachine.models import MODELS, ModelDef, ModelParams, PassDef, disparity_machine, register_model
 from bayesmachine.region import OutputRegion
 
-DOC = Path(__file__).resolve().parents[1] / "docs" / "development.md"
-MARKER = "<!-- the snippet of tests/test_user_model.py -->"
-NAMES = ("census-g", "census-g-lr")
-
-
-def snippet() -> str:
-    """The first Python block after the marker in docs/development.md."""
-    text = DOC.read_text()
-    found = re.search(r"```python\n(.*?)```", text[text.index(MARKER):], re.S)
-    assert found is not None
-    return found.group(1)
-
 
 @pytest.fixture(scope="module")
 def user_model(tmp_path_factory: pytest.TempPathFactory):
     """The snippet, written to a file outside the package and imported; the models it registered are
     taken out of the registry afterwards (the other tests see the package's three)."""
-    path = tmp_path_factory.mktemp("user") / "my_models.py"
-    path.write_text(snippet())
-    spec = importlib.util.spec_from_file_location("my_models", path)
-    assert spec is not None and spec.loader is not None
-    try:
-        spec.loader.exec_module(importlib.util.module_from_spec(spec))
+    with user_models(tmp_path_factory.mktemp("user")):
         yield ModelParams(name="census-g-lr", dmax=8)
-    finally:
-        for name in NAMES:
-            MODELS.pop(name, None)
 
 
 @pytest.fixture(scope="module")
