@@ -1,0 +1,171 @@
+"""The stall pipeline every log block is: stages of logic between registers, one pixel per clock.
+
+A block is a list of *stage functions*; each builds one stage's logic from the previous stage's
+registers (the first from the input stream's payload, the last returns the output payload as one
+flat value). After each stage a register bank, loaded when the pipeline moves and the stage
+before holds a pixel, and a ``valid`` bit per stage:
+
+    enable   = ~out.valid | out.ready        # the pipeline moves unless its last pixel waits
+    in.ready = enable
+    valid[i] <= valid[i - 1]                 # on enable (valid[-1] = in.valid)
+    bank[i]  <= stage_i(bank[i - 1])         # on enable and valid[i - 1]
+
+So a pixel taken at clock t is offered at t + ``latency`` (the number of stages) if the output is
+not held, the output stream holds its pixel while ``out.ready`` is low, and a stall stops every
+stage at once (nothing is dropped, nothing taken twice). The banks of bubbles are not loaded:
+their registers do not toggle. The registers hold no reset: ``valid`` says which hold a pixel.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from functools import reduce
+from typing import Any
+
+from amaranth.hdl import Cat, Const, Module, Shape, Signal, Value
+from amaranth.lib import data, stream, wiring
+from amaranth.lib.wiring import In, Out
+
+__all__ = ["Bank", "PipelineNets", "Stage", "StallPipeline", "Wire", "fit", "pack", "stage_functions",
+           "wires"]
+
+Bank = Any  # a Value, or a list or tuple of banks
+# ``wire(value, name)`` returns a net equal to ``value`` (a comb-driven Signal in the module that
+# builds the stage): a stage names what it reuses, so the netlist and the simulator's code share
+# it rather than repeat its expression at each use.
+Wire = Callable[[Value, str], Value]
+Stage = Callable[[Bank, Wire], Bank]
+
+
+def wires(m: Module) -> Wire:
+    """The ``wire`` of stages built in ``m``."""
+    def wire(value: Value, name: str) -> Value:
+        value = Value.cast(value)
+        net = Signal(value.shape(), name=name)
+        m.d.comb += net.eq(value)
+        return net
+    return wire
+
+
+def _register(bank: Bank, name: str, out: list) -> Bank:
+    """Registers shaped like ``bank``; their loads are appended to ``out``."""
+    if isinstance(bank, (list, tuple)):
+        return type(bank)(_register(b, f"{name}_{i}", out) for i, b in enumerate(bank))
+    value = Value.cast(bank)
+    if len(value) == 0:
+        return value
+    reg = Signal(value.shape(), name=name, reset_less=True)
+    out.append(reg.eq(value))
+    return reg
+
+
+def fit(value: Value, width: int) -> Value:
+    """``value``'s bits cut or zero-extended to ``width``."""
+    value = Value.cast(value)
+    return value[:width] if len(value) >= width else Cat(value, Const(0, width - len(value)))
+
+
+def pack(layout: data.StructLayout, **fields: Value) -> Value:
+    """One flat value of ``layout`` from its fields (each zero-extended or cut to its width)."""
+    parts, offset = [], 0
+    for name, field in layout:
+        assert field.offset == offset, "a struct layout's fields follow each other"
+        width = Shape.cast(field.shape).width
+        parts.append(fit(fields.pop(name), width))
+        offset += width
+    assert not fields, f"fields not in the layout: {sorted(fields)}"
+    return Cat(*parts)
+
+
+def stage_functions(first: Stage, levels: Sequence[Stage], last: Stage, per_stage: int) -> tuple[Stage, ...]:
+    """Stages of ``per_stage`` levels each (the last may have fewer; one stage if there are no
+    levels), ``first`` before the first level and ``last`` after the last."""
+    groups = [list(levels[i:i + per_stage]) for i in range(0, len(levels), per_stage)] or [[]]
+    stages = []
+    for j, group in enumerate(groups):
+        fns = ([first] if j == 0 else []) + group + ([last] if j == len(groups) - 1 else [])
+        stages.append(_compose(fns))
+    return tuple(stages)
+
+
+def _compose(fns: Sequence[Stage]) -> Stage:
+    return lambda bank, wire: reduce(lambda b, f: f(b, wire), fns, bank)
+
+
+@dataclass(frozen=True)
+class PipelineNets:
+    """A pipeline's registers (``StallPipeline.nets``): ``enable``, and per stage i its ``valid[i]``
+    and its register bank ``banks[i]`` (the last bank is the output payload)."""
+
+    enable: Signal
+    valid: tuple[Signal, ...]
+    banks: tuple[Bank, ...]
+
+
+class StallPipeline(wiring.Component):
+    """A stream in, a stream out, the stages between (module docstring).
+
+    Parameters
+    ----------
+    sink, source : str
+        The names of the input and the output stream members.
+    in_layout, out_layout : data.Layout
+        Their payloads.
+    stages : sequence of Stage
+        The stage functions: the first takes the input payload (a view), the last returns a value
+        as wide as ``out_layout``. Each call builds fresh logic (a proof calls them again).
+
+    Attributes
+    ----------
+    latency : int
+        Clocks from a pixel taken to its result offered (the number of stages).
+    nets : PipelineNets
+        After elaboration: the stage registers (read-only).
+    """
+
+    def __init__(self, *, sink: str, source: str, in_layout: data.Layout, out_layout: data.Layout,
+                 stages: Sequence[Stage]) -> None:
+        self._sink, self._source = sink, source
+        self._stages = tuple(stages)
+        self._nets: PipelineNets | None = None
+        super().__init__({sink: In(stream.Signature(in_layout)), source: Out(stream.Signature(out_layout))})
+
+    @property
+    def latency(self) -> int:
+        return len(self._stages)
+
+    @property
+    def nets(self) -> PipelineNets:
+        if self._nets is None:
+            raise RuntimeError(f"{type(self).__name__}.nets: elaborate it first (Fragment.get)")
+        return self._nets
+
+    def remaining(self, m: Module, stage: int, bank: Bank) -> Value:
+        """The output payload (flat) the stages after ``stage`` make of its register ``bank``:
+        logic built anew in ``m``, for a proof's invariants."""
+        wire = wires(m)
+        return Value.cast(reduce(lambda b, f: f(b, wire), self._stages[stage + 1:], bank))
+
+    def elaborate(self, platform: object) -> Module:
+        m = Module()
+        sink, source = getattr(self, self._sink), getattr(self, self._source)
+        enable = Signal(name="enable")
+        m.d.comb += [enable.eq(~source.valid | source.ready), sink.ready.eq(enable)]
+        bank, valid = sink.payload, sink.valid
+        valids, banks = [], []
+        wire = wires(m)
+        for i, stage in enumerate(self._stages):
+            loads: list = []
+            bank = _register(stage(bank, wire), f"stage{i}", loads)
+            with m.If(enable & valid):
+                m.d.sync += loads
+            v = Signal(name=f"stage{i}_valid")
+            with m.If(enable):
+                m.d.sync += v.eq(valid)
+            valid = v
+            valids.append(v)
+            banks.append(bank)
+        m.d.comb += [source.valid.eq(valid), source.payload.eq(bank)]
+        self._nets = PipelineNets(enable=enable, valid=tuple(valids), banks=tuple(banks))
+        return m
