@@ -12,6 +12,8 @@ winner's index and prepends one bit per level (the right child won). Twin: ``rul
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 from amaranth.hdl import Cat, Const, Mux, Value
 
 from .adders import tree_levels
@@ -19,7 +21,7 @@ from .layouts import best_layout, row_sums_layout
 from .pipeline import Bank, Stage, StallPipeline, Wire, fit, pack, stage_functions
 from .rule import LogParams, check_int
 
-__all__ = ["ArgminTree", "argmin_stages", "better"]
+__all__ = ["ArgminTree", "Node", "NodeFunction", "argmin_stages", "better"]
 
 Node = tuple[Value, Value, Value]  # (key, low index bits, excluded)
 
@@ -33,17 +35,22 @@ def better(left: Node, right: Node, wire: Wire, name: str) -> Node:
     return wire(Mux(right_wins, rk, lk), f"{name}_key"), Cat(low, right_wins), lx & rx
 
 
-def _level(nodes: list[Node], wire: Wire, name: str) -> list[Node]:
-    out = [better(nodes[j], nodes[j + 1], wire, f"{name}_{j // 2}") for j in range(0, len(nodes) - 1, 2)]
+NodeFunction = Callable[[Node, Node, Wire, str], Node]
+
+
+def _level(nodes: list[Node], wire: Wire, name: str, node: NodeFunction) -> list[Node]:
+    out = [node(nodes[j], nodes[j + 1], wire, f"{name}_{j // 2}") for j in range(0, len(nodes) - 1, 2)]
     if len(nodes) % 2:  # the odd node out covers the highest rows of its pair: its new bit is 0
         key, low, x = nodes[-1]
         out.append((key, Cat(low, Const(0, 1)), x))
     return out
 
 
-def argmin_stages(params: LogParams, levels_per_stage: int, pass_sums: bool) -> tuple[Stage, ...]:
+def argmin_stages(params: LogParams, levels_per_stage: int, pass_sums: bool,
+                  node: NodeFunction = better) -> tuple[Stage, ...]:
     """The argmin tree's stage functions: ``row_sums_layout`` payload in, ``best_layout(pass_sums)``
-    out. A bank is ``(nodes, carried)``: the level's nodes, and the input payload when it is passed on."""
+    out. A bank is ``(nodes, carried)``: the level's nodes, and the input payload when it is passed on.
+    ``node``: the tree's node (:func:`better`; a proof's mutants give another)."""
     p = params
     layout_in, layout_out = row_sums_layout(p), best_layout(p, pass_sums)
 
@@ -59,7 +66,7 @@ def argmin_stages(params: LogParams, levels_per_stage: int, pass_sums: bool) -> 
 
     def level(bank: Bank, wire: Wire) -> Bank:
         nodes, carried = bank
-        return _level(nodes, wire, f"node{len(nodes)}"), carried
+        return _level(nodes, wire, f"node{len(nodes)}", node), carried
 
     def last(bank: Bank, wire: Wire) -> Bank:
         (key, low, none), carried = bank[0][0], bank[1]
@@ -97,6 +104,8 @@ class ArgminTree(StallPipeline):
         ``max(1, ceil(ceil(log2 rows) / levels_per_stage))`` clocks.
     """
 
+    node: NodeFunction = staticmethod(better)  # the tree's node (a proof's mutant overrides it)
+
     def __init__(self, *, params: LogParams, levels_per_stage: int = 1, pass_sums: bool = False) -> None:
         if not isinstance(params, LogParams):
             raise TypeError(f"params must be a LogParams, not {type(params).__name__}")
@@ -107,7 +116,7 @@ class ArgminTree(StallPipeline):
         self._pass_sums = pass_sums
         super().__init__(sink="sums", source="best", in_layout=row_sums_layout(params),
                          out_layout=best_layout(params, pass_sums),
-                         stages=argmin_stages(params, self._levels, pass_sums))
+                         stages=argmin_stages(params, self._levels, pass_sums, type(self).node))
 
     @property
     def params(self) -> LogParams:

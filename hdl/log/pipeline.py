@@ -118,6 +118,8 @@ class StallPipeline(wiring.Component):
 
     Attributes
     ----------
+    stream_names : tuple of str
+        ``(sink, source)``.
     latency : int
         Clocks from a pixel taken to its result offered (the number of stages).
     nets : PipelineNets
@@ -130,6 +132,11 @@ class StallPipeline(wiring.Component):
         self._stages = tuple(stages)
         self._nets: PipelineNets | None = None
         super().__init__({sink: In(stream.Signature(in_layout)), source: Out(stream.Signature(out_layout))})
+
+    @property
+    def stream_names(self) -> tuple[str, str]:
+        """The names of the input and the output stream members."""
+        return self._sink, self._source
 
     @property
     def latency(self) -> int:
