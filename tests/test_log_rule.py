@@ -139,3 +139,7 @@ def test_bad_codes() -> None:
         log_integrate(np.zeros((3, 4, 2)), p)
     with pytest.raises(TypeError, match="LogParams"):
         log_integrate(np.zeros((3, 4, 2), np.uint8), "p")  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="one shape"):
+        argmin_rows(np.zeros((3, 4)), np.zeros((3, 3), bool), p)
+    with pytest.raises(ValueError, match="one shape"):
+        row_weights(np.zeros((3, 5)), np.zeros((3, 5), bool), np.zeros(3), p)

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
-from amaranth.hdl import Cat, Module, Mux, Value
+from amaranth.hdl import Module, Mux, Value
 
 from bayesmachine.hdl.log import ArgminTree, LogParams
 from bayesmachine.hdl.log.argmin import Node
@@ -24,8 +24,8 @@ __all__ = ["DropsHeld", "LOG_MUTANTS", "LogMutant", "OverwritesHeld", "PhantomPi
 def _node(left: Node, right: Node, wire: Wire, name: str, right_wins: Value) -> Node:
     (lk, li, lx), (rk, ri, rx) = left, right
     right_wins = wire(right_wins, f"{name}_right")
-    low = Mux(right_wins, ri, li) if len(Value.cast(li)) else Cat()
-    return wire(Mux(right_wins, rk, lk), f"{name}_key"), Cat(low, right_wins), lx & rx
+    low = tuple(Mux(right_wins, r, lo) for lo, r in zip(li, ri, strict=True))
+    return wire(Mux(right_wins, rk, lk), f"{name}_key"), (*low, right_wins), lx & rx
 
 
 def _tie_right(left: Node, right: Node, wire: Wire, name: str) -> Node:

@@ -23,7 +23,7 @@ from .rule import LogParams, check_int
 
 __all__ = ["ArgminTree", "Node", "NodeFunction", "argmin_stages", "better"]
 
-Node = tuple[Value, Value, Value]  # (key, low index bits, excluded)
+Node = tuple[Value, tuple[Value, ...], Value]  # (key, low index bits from bit 0, excluded)
 
 
 def better(left: Node, right: Node, wire: Wire, name: str) -> Node:
@@ -31,8 +31,8 @@ def better(left: Node, right: Node, wire: Wire, name: str) -> Node:
     (and is not excluded); the index gains one bit, 1 when the right one won."""
     (lk, li, lx), (rk, ri, rx) = left, right
     right_wins = wire(lx | (~rx & (rk < lk)), f"{name}_right")
-    low = Mux(right_wins, ri, li) if len(Value.cast(li)) else Cat()
-    return wire(Mux(right_wins, rk, lk), f"{name}_key"), Cat(low, right_wins), lx & rx
+    low = tuple(Mux(right_wins, r, lo) for lo, r in zip(li, ri, strict=True))
+    return wire(Mux(right_wins, rk, lk), f"{name}_key"), (*low, right_wins), lx & rx
 
 
 NodeFunction = Callable[[Node, Node, Wire, str], Node]
@@ -42,7 +42,7 @@ def _level(nodes: list[Node], wire: Wire, name: str, node: NodeFunction) -> list
     out = [node(nodes[j], nodes[j + 1], wire, f"{name}_{j // 2}") for j in range(0, len(nodes) - 1, 2)]
     if len(nodes) % 2:  # the odd node out covers the highest rows of its pair: its new bit is 0
         key, low, x = nodes[-1]
-        out.append((key, Cat(low, Const(0, 1)), x))
+        out.append((key, (*low, Const(0, 1)), x))
     return out
 
 
@@ -61,7 +61,7 @@ def argmin_stages(params: LogParams, levels_per_stage: int, pass_sums: bool,
             key = rows.sums[r]
             if p.nomatch_first:
                 key = Cat(Const(int(r != p.rows - 1), 1), key)
-            nodes.append((key, Cat(), rows.excluded[r]))
+            nodes.append((key, (), rows.excluded[r]))
         return nodes, Value.cast(rows) if pass_sums else Cat()
 
     def level(bank: Bank, wire: Wire) -> Bank:
@@ -70,7 +70,7 @@ def argmin_stages(params: LogParams, levels_per_stage: int, pass_sums: bool,
 
     def last(bank: Bank, wire: Wire) -> Bank:
         (key, low, none), carried = bank[0][0], bank[1]
-        map_ = Mux(none, Const(p.none_index, p.map_width), fit(low, p.map_width))
+        map_ = Mux(none, Const(p.none_index, p.map_width), fit(Cat(*low), p.map_width))
         s_min = Mux(none, 0, key[1:] if p.nomatch_first else key)
         nomatch = (map_ == p.rows - 1) if p.nomatch_row else Const(0, 1)
         extra = {}

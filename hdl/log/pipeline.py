@@ -52,6 +52,8 @@ def _register(bank: Bank, name: str, out: list) -> Bank:
     """Registers shaped like ``bank``; their loads are appended to ``out``."""
     if isinstance(bank, (list, tuple)):
         return type(bank)(_register(b, f"{name}_{i}", out) for i, b in enumerate(bank))
+    if isinstance(bank, Const):  # a constant needs no register
+        return bank
     value = Value.cast(bank)
     if len(value) == 0:
         return value
