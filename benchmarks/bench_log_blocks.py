@@ -25,13 +25,29 @@ from bayesmachine.fpga.port_registers import PortRegisters
 from bayesmachine.fpga.report import logic_cells, resources
 from bayesmachine.fpga.targets import get_target
 from bayesmachine.fpga.wrapper import PinWrapper
-from bayesmachine.hdl.log import LogIntegrator, LogParams, exp_table
+from bayesmachine.hdl.log import ArgminTree, LogIntegrator, LogParams, RowAdders, WeightStage, exp_table
 
 CELLS = ("LUT4", "CCU2C", "PFUMX", "L6MUX21", "TRELLIS_FF", "DP16KD", "TRELLIS_DPR16X4")
 
 
 def _ints(text: str) -> list[int]:
     return [int(v) for v in text.split(",")]
+
+
+def block_costs(p: LogParams, levels: int, adder_levels: int, workdir: Path, quiet: bool) -> None:
+    """Each block of the integrator synthesized on its own (behind port registers): where the cells go."""
+    say = (lambda _msg: None) if quiet else print
+    target = get_target("ecp5-85k")
+    blocks = {"row adders": RowAdders(params=p, levels_per_stage=adder_levels),
+              "argmin tree (sums carried)": ArgminTree(params=p, levels_per_stage=levels, pass_sums=True),
+              "weights stage": WeightStage(params=p)}
+    for name, block in blocks.items():
+        ring = PortRegisters(block)
+        out = workdir / name.split()[0]
+        out.mkdir(parents=True, exist_ok=True)
+        res = resources(target, synthesize(rtlil.convert(ring, name="top"), target, out, say))
+        print(f"  {name:28} latency {block.latency}: {res['lut4']:6} LUT4 {res['carry']:5} CCU2C "
+              f"{res['ff'] - ring.boundary_bits:6} FF", flush=True)
 
 
 def measure(p: LogParams, levels: int, adder_levels: int, workdir: Path, pnr: bool, seed: int,
@@ -75,6 +91,7 @@ def main() -> None:
     ap.add_argument("--tie-break", default="nomatch-first")
     ap.add_argument("--pnr", action="store_true", help="also place and route for fmax (minutes each)")
     ap.add_argument("--seed", type=int, default=1, help="nextpnr seed")
+    ap.add_argument("--blocks", action="store_true", help="also each block alone, per setting")
     ap.add_argument("--verbose", action="store_true", help="the tools' progress lines")
     args = ap.parse_args()
     table = exp_table(weight_bits=args.weight_bits, step=args.step)
@@ -95,6 +112,9 @@ def main() -> None:
             path = f"{crit.get('start_net', '')} -> {crit.get('end_net', '')}" if crit else ""
             print(f"{codes:3} {bits:4} {levels:3} {adder:3} {r['latency']:3} {r['lut4']:7} {r['carry']:6} "
                   f"{r['sites']:7} {r['ff']:7} {fmax}  {path}", flush=True)
+            if args.blocks:
+                block_costs(p, levels, adder, Path(tmp) / f"blocks-n{codes}-b{bits}-l{levels}-a{adder}",
+                            not args.verbose)
 
 
 if __name__ == "__main__":

@@ -8,6 +8,7 @@ import time
 
 import pytest
 from conftest import require_tool
+from test_formal import check
 
 from bayesmachine.hdl.formal.log import (
     PipelineProperties,
@@ -18,7 +19,7 @@ from bayesmachine.hdl.formal.log import (
     reference_weights,
 )
 from bayesmachine.hdl.formal.log_mutants import LOG_MUTANTS, LogMutant
-from bayesmachine.hdl.formal.runner import FormalResult, run_formal
+from bayesmachine.hdl.formal.runner import run_formal
 from bayesmachine.hdl.log import ArgminTree, LogIntegrator, LogParams, RowAdders, WeightStage
 
 pytestmark = pytest.mark.formal
@@ -43,14 +44,6 @@ INTEGRATORS = [(3, 2, 2, True, "nomatch-first", 1, 1), (5, 3, 2, True, "lowest-i
 def formal_tools(tmp_path_factory: pytest.TempPathFactory, monkeypatch: pytest.MonkeyPatch) -> None:
     require_tool(*FORMAL_TOOLS)
     monkeypatch.setenv("BAYESMACHINE_FORMAL_DIR", str(tmp_path_factory.mktemp("formal-log")))
-
-
-def check(result: FormalResult) -> FormalResult:
-    print(f"{result.name}: {result.mode} depth {result.depth}: {result.status} in {result.seconds:.1f} s")
-    if not result.passed:
-        pytest.fail(f"{result.name} ({result.mode}, depth {result.depth}): {result.status}; "
-                    f"trace {result.trace}; run in {result.workdir}\n{result.log[-2000:]}")
-    return result
 
 
 def argmin_wrapper(p: LogParams, levels: int, block: type = ArgminTree, built: LogParams | None = None

@@ -10,8 +10,8 @@ from __future__ import annotations
 from amaranth.hdl import Cat, Value
 
 from .layouts import codes_layout, row_sums_layout
-from .pipeline import Bank, Stage, StallPipeline, Wire, fit, pack, stage_functions
-from .rule import LogParams, check_int
+from .pipeline import Bank, LogBlock, Stage, Wire, fit, pack, stage_functions
+from .rule import LogParams, check_int, check_params
 
 __all__ = ["RowAdders", "adder_stages", "tree_levels"]
 
@@ -48,7 +48,7 @@ def adder_stages(params: LogParams, levels_per_stage: int) -> tuple[Stage, ...]:
     return stage_functions(first, [level] * tree_levels(p.codes), last, levels_per_stage)
 
 
-class RowAdders(StallPipeline):
+class RowAdders(LogBlock):
     """Each row's codes summed (``rule.row_sums``), one pixel per clock.
 
     Parameters
@@ -69,16 +69,10 @@ class RowAdders(StallPipeline):
     """
 
     def __init__(self, *, params: LogParams, levels_per_stage: int = 1) -> None:
-        if not isinstance(params, LogParams):
-            raise TypeError(f"params must be a LogParams, not {type(params).__name__}")
-        self._params = params
         self._levels = check_int("levels_per_stage", levels_per_stage, 1, 64)
-        super().__init__(sink="codes", source="sums", in_layout=codes_layout(params),
-                         out_layout=row_sums_layout(params), stages=adder_stages(params, self._levels))
-
-    @property
-    def params(self) -> LogParams:
-        return self._params
+        p = check_params(params)
+        super().__init__(params=p, sink="codes", source="sums", in_layout=codes_layout(p),
+                         out_layout=row_sums_layout(p), stages=adder_stages(p, self._levels))
 
     @property
     def levels_per_stage(self) -> int:

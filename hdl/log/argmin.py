@@ -18,8 +18,8 @@ from amaranth.hdl import Cat, Const, Mux, Value
 
 from .adders import tree_levels
 from .layouts import best_layout, row_sums_layout
-from .pipeline import Bank, Stage, StallPipeline, Wire, fit, pack, stage_functions
-from .rule import LogParams, check_int
+from .pipeline import Bank, LogBlock, Stage, Wire, fit, pack, stage_functions
+from .rule import LogParams, check_int, check_params
 
 __all__ = ["ArgminTree", "Node", "NodeFunction", "argmin_stages", "better"]
 
@@ -82,7 +82,7 @@ def argmin_stages(params: LogParams, levels_per_stage: int, pass_sums: bool,
     return stage_functions(first, [level] * tree_levels(p.rows), last, levels_per_stage)
 
 
-class ArgminTree(StallPipeline):
+class ArgminTree(LogBlock):
     """The MAP of the rows' sums (``rule.argmin_rows``), one pixel per clock.
 
     Parameters
@@ -107,20 +107,14 @@ class ArgminTree(StallPipeline):
     node: NodeFunction = staticmethod(better)  # the tree's node (a proof's mutant overrides it)
 
     def __init__(self, *, params: LogParams, levels_per_stage: int = 1, pass_sums: bool = False) -> None:
-        if not isinstance(params, LogParams):
-            raise TypeError(f"params must be a LogParams, not {type(params).__name__}")
         if not isinstance(pass_sums, bool):
             raise TypeError(f"pass_sums must be a bool, not {type(pass_sums).__name__}")
-        self._params = params
         self._levels = check_int("levels_per_stage", levels_per_stage, 1, 64)
         self._pass_sums = pass_sums
-        super().__init__(sink="sums", source="best", in_layout=row_sums_layout(params),
-                         out_layout=best_layout(params, pass_sums),
-                         stages=argmin_stages(params, self._levels, pass_sums, type(self).node))
-
-    @property
-    def params(self) -> LogParams:
-        return self._params
+        p = check_params(params)
+        super().__init__(params=p, sink="sums", source="best", in_layout=row_sums_layout(p),
+                         out_layout=best_layout(p, pass_sums),
+                         stages=argmin_stages(p, self._levels, pass_sums, type(self).node))
 
     @property
     def levels_per_stage(self) -> int:

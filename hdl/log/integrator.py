@@ -13,14 +13,14 @@ from __future__ import annotations
 from .adders import adder_stages
 from .argmin import argmin_stages
 from .layouts import codes_layout, log_result_layout
-from .pipeline import StallPipeline
-from .rule import LogParams, check_int
+from .pipeline import LogBlock
+from .rule import LogParams, check_int, check_params
 from .weights import weight_stages
 
 __all__ = ["LogIntegrator"]
 
 
-class LogIntegrator(StallPipeline):
+class LogIntegrator(LogBlock):
     """The log integrator (``rule.log_integrate``), one pixel per clock.
 
     Parameters
@@ -44,19 +44,13 @@ class LogIntegrator(StallPipeline):
 
     def __init__(self, *, params: LogParams, levels_per_stage: int = 1,
                  adder_levels_per_stage: int = 1) -> None:
-        if not isinstance(params, LogParams):
-            raise TypeError(f"params must be a LogParams, not {type(params).__name__}")
-        self._params = params
         self._levels = check_int("levels_per_stage", levels_per_stage, 1, 64)
         self._adder_levels = check_int("adder_levels_per_stage", adder_levels_per_stage, 1, 64)
-        stages = (*adder_stages(params, self._adder_levels), *argmin_stages(params, self._levels, True),
-                  *weight_stages(params))
-        super().__init__(sink="codes", source="result", in_layout=codes_layout(params),
-                         out_layout=log_result_layout(params), stages=stages)
-
-    @property
-    def params(self) -> LogParams:
-        return self._params
+        p = check_params(params)
+        stages = (*adder_stages(p, self._adder_levels), *argmin_stages(p, self._levels, True),
+                  *weight_stages(p))
+        super().__init__(params=p, sink="codes", source="result", in_layout=codes_layout(p),
+                         out_layout=log_result_layout(p), stages=stages)
 
     @property
     def levels_per_stage(self) -> int:

@@ -27,8 +27,10 @@ from amaranth.hdl import Cat, Const, Module, Shape, Signal, Value
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
-__all__ = ["Bank", "PipelineNets", "Stage", "StallPipeline", "Wire", "fit", "pack", "stage_functions",
-           "wires"]
+from .rule import LogParams, check_params
+
+__all__ = ["Bank", "LogBlock", "PipelineNets", "Stage", "StallPipeline", "Wire", "fit", "pack",
+           "stage_functions", "wires"]
 
 Bank = Any  # a Value, or a list or tuple of banks
 # ``wire(value, name)`` returns a net equal to ``value`` (a comb-driven Signal in the module that
@@ -178,3 +180,16 @@ class StallPipeline(wiring.Component):
         m.d.comb += [source.valid.eq(valid), source.payload.eq(bank)]
         self._nets = PipelineNets(enable=enable, valid=tuple(valids), banks=tuple(banks))
         return m
+
+
+class LogBlock(StallPipeline):
+    """A stall pipeline of the log integrator, built from a :class:`~.rule.LogParams` (``params``,
+    checked first, read-only); the other arguments are :class:`StallPipeline`'s."""
+
+    def __init__(self, *, params: LogParams, **pipeline: object) -> None:
+        self._params = check_params(params)
+        super().__init__(**pipeline)  # type: ignore[arg-type]
+
+    @property
+    def params(self) -> LogParams:
+        return self._params

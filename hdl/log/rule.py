@@ -32,8 +32,8 @@ import numpy as np
 from bayesmachine.errors import ParameterError
 from bayesmachine.params import DEFAULT_TIE_BREAK, TIE_BREAKS
 
-__all__ = ["LogParams", "LogResult", "argmin_rows", "check_int", "exp_table", "log_integrate", "row_sums",
-           "row_weights"]
+__all__ = ["LogParams", "LogResult", "argmin_rows", "check_int", "check_params", "exp_table", "log_integrate",
+           "row_sums", "row_weights"]
 
 MAX_CODE_BITS = 16
 MAX_WEIGHT_BITS = 16
@@ -260,7 +260,8 @@ def _check_codes(codes: object, params: LogParams) -> np.ndarray:
     return np.ascontiguousarray(codes.reshape(-1, params.rows, params.codes))
 
 
-def _check_params(params: object) -> LogParams:
+def check_params(params: object) -> LogParams:
+    """``params`` if it is a :class:`LogParams`, else a TypeError."""
     if not isinstance(params, LogParams):
         raise TypeError(f"params must be a LogParams, not {type(params).__name__}")
     return params
@@ -277,7 +278,7 @@ def _rows_in(sums: np.ndarray, excluded: np.ndarray, params: LogParams) -> tuple
 
 def row_sums(codes: np.ndarray, params: LogParams) -> tuple[np.ndarray, np.ndarray]:
     """The row adders' part: ``(sums, excluded)`` of ``codes`` (shape ``(..., rows, codes)``)."""
-    flat = _check_codes(codes, _check_params(params))
+    flat = _check_codes(codes, check_params(params))
     sums, excluded = np.empty(flat.shape[:2], np.int32), np.empty(flat.shape[:2], np.bool_)
     _row_sums(flat, params.infinite, sums, excluded)
     return sums.reshape(codes.shape[:-1]), excluded.reshape(codes.shape[:-1])
@@ -287,7 +288,7 @@ def argmin_rows(sums: np.ndarray, excluded: np.ndarray, params: LogParams
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The argmin tree's part: ``(map, nomatch, all_excluded, s_min)`` of the rows' ``sums`` and
     ``excluded`` flags (shape ``(..., rows)``)."""
-    p = _check_params(params)
+    p = check_params(params)
     flat_sums, flat_excluded = _rows_in(sums, excluded, p)
     n = len(flat_sums)
     map_, none, s_min = np.empty(n, np.int32), np.empty(n, np.bool_), np.empty(n, np.int32)
@@ -300,7 +301,7 @@ def argmin_rows(sums: np.ndarray, excluded: np.ndarray, params: LogParams
 def row_weights(sums: np.ndarray, excluded: np.ndarray, s_min: np.ndarray, params: LogParams) -> np.ndarray:
     """The weights stage's part: ``X[min(sums - s_min, len(X) - 1)]`` per row, 0 for an excluded row
     (a sum below ``s_min``, which the rule never gives a row not excluded, reads X[0])."""
-    p = _check_params(params)
+    p = check_params(params)
     flat_sums, flat_excluded = _rows_in(sums, excluded, p)
     flat_s_min = np.ascontiguousarray(np.broadcast_to(s_min, np.shape(sums)[:-1]).reshape(-1), dtype=np.int32)
     out = np.empty(flat_sums.shape, np.int32)
@@ -311,7 +312,7 @@ def row_weights(sums: np.ndarray, excluded: np.ndarray, s_min: np.ndarray, param
 def log_integrate(codes: np.ndarray, params: LogParams) -> LogResult:
     """The rule (module docstring) on ``codes`` of shape ``(..., rows, codes)``, compiled (numba) and
     vectorized over the leading axes (pixels): one pass over each pixel's codes."""
-    p = _check_params(params)
+    p = check_params(params)
     flat = _check_codes(codes, p)
     n, shape, rows_shape = len(flat), codes.shape[:-2], codes.shape[:-1]
     sums, excluded = np.empty((n, p.rows), np.int32), np.empty((n, p.rows), np.bool_)

@@ -11,8 +11,8 @@ from __future__ import annotations
 from amaranth.hdl import Array, Cat, Const, Mux, Value
 
 from .layouts import best_layout, log_result_layout
-from .pipeline import Bank, Stage, StallPipeline, Wire, fit, pack
-from .rule import LogParams
+from .pipeline import Bank, LogBlock, Stage, Wire, fit, pack
+from .rule import LogParams, check_params
 
 __all__ = ["WEIGHT_STAGES", "WeightStage", "weight_stages"]
 
@@ -50,7 +50,7 @@ def weight_stages(params: LogParams) -> tuple[Stage, ...]:
     return distances, lookup
 
 
-class WeightStage(StallPipeline):
+class WeightStage(LogBlock):
     """Each row's weight (``rule.row_weights``), one pixel per clock, latency ``WEIGHT_STAGES`` (2).
 
     Parameters
@@ -69,12 +69,6 @@ class WeightStage(StallPipeline):
     """
 
     def __init__(self, *, params: LogParams) -> None:
-        if not isinstance(params, LogParams):
-            raise TypeError(f"params must be a LogParams, not {type(params).__name__}")
-        self._params = params
-        super().__init__(sink="best", source="result", in_layout=best_layout(params, True),
-                         out_layout=log_result_layout(params), stages=weight_stages(params))
-
-    @property
-    def params(self) -> LogParams:
-        return self._params
+        p = check_params(params)
+        super().__init__(params=p, sink="best", source="result", in_layout=best_layout(p, True),
+                         out_layout=log_result_layout(p), stages=weight_stages(p))
