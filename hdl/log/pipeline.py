@@ -32,7 +32,7 @@ from .rule import LogParams, check_params
 __all__ = ["Bank", "LogBlock", "PipelineNets", "Stage", "StallPipeline", "Wire", "fit", "pack",
            "stage_functions", "wires"]
 
-Bank = Any  # a Value, or a list or tuple of banks
+Bank = Any  # a Value, or a list, tuple or dict (str keys) of banks
 # ``wire(value, name)`` returns a net equal to ``value`` (a comb-driven Signal in the module that
 # builds the stage): a stage names what it reuses, so the netlist and the simulator's code share
 # it rather than repeat its expression at each use.
@@ -54,6 +54,8 @@ def _register(bank: Bank, name: str, out: list) -> Bank:
     """Registers shaped like ``bank``; their loads are appended to ``out``."""
     if isinstance(bank, (list, tuple)):
         return type(bank)(_register(b, f"{name}_{i}", out) for i, b in enumerate(bank))
+    if isinstance(bank, dict):  # named registers: ``<stage>_<key>``
+        return {k: _register(b, f"{name}_{k}", out) for k, b in bank.items()}
     if isinstance(bank, Const):  # a constant needs no register
         return bank
     value = Value.cast(bank)

@@ -1,8 +1,11 @@
 """The weights stage: each row's weight from the exp table, at its sum's distance from the least.
 
-Two register stages: (1) per row ``d = sums[r] - s_min`` clamped to [0, len(X) - 1], an excluded
-row's index set to ``len(X) - 1`` (whose entry is 0, so no mux follows the table); (2) per row
-the table X read at that index (a ROM in logic). The argmin's fields ride along. Twin:
+Three register stages: (1) the argmin's ``s_min`` and ``s_min + len(X) - 1`` copied into one
+register per group of ``ROWS_PER_COPY`` rows (named ``*_rep*``: the FPGA flow keeps such copies
+apart), so that no net fans out to every row; (2) per row ``d = sums[r] - s_min`` clamped to
+[0, len(X) - 1] (the compare with ``s_min + len(X) - 1`` beside the subtraction, not after it), an
+excluded row's index set to ``len(X) - 1`` (whose entry is 0, so no mux follows the table); (3) per
+row the table X read at that index (a ROM in logic). The argmin's fields ride along. Twin:
 ``rule.row_weights``.
 """
 
@@ -14,30 +17,43 @@ from .layouts import best_layout, log_result_layout
 from .pipeline import Bank, LogBlock, Stage, Wire, fit, pack
 from .rule import LogParams, check_params
 
-__all__ = ["WEIGHT_STAGES", "WeightStage", "weight_stages"]
+__all__ = ["ROWS_PER_COPY", "WEIGHT_STAGES", "WeightStage", "weight_stages"]
 
-WEIGHT_STAGES = 2
+WEIGHT_STAGES = 3
+ROWS_PER_COPY = 8  # rows served by one register copy of s_min
 
 
 def weight_stages(params: LogParams) -> tuple[Stage, ...]:
     """The weights stage's functions: ``best_layout(params, pass_sums=True)`` in,
-    ``log_result_layout(params)`` out. The bank between them is ``(indices, best)``: each row's
-    table index and the argmin's fields (flat, ``best_layout(params)``)."""
+    ``log_result_layout(params)`` out. Between them: ``{"rows", "fields", "s_min_rep<g>",
+    "far_rep<g>"}`` (the rows' sums and flags, the argmin's fields, the copies), then
+    ``(indices, fields)``."""
     p = params
     layout_in, layout_best, layout_out = best_layout(p, True), best_layout(p), log_result_layout(p)
     last = len(p.weights) - 1
     width = last.bit_length()
+    copies = -(-p.rows // ROWS_PER_COPY)
 
-    def distances(payload: Bank, wire: Wire) -> Bank:
+    def spread(payload: Bank, wire: Wire) -> Bank:
         best = layout_in(Value.cast(payload))
-        indices = []
+        bank = {"rows": Cat(best.sums.as_value(), best.excluded),
+                "fields": pack(layout_best, map=best.map, nomatch=best.nomatch,
+                               all_excluded=best.all_excluded, s_min=best.s_min)}
+        for g in range(copies):
+            bank[f"s_min_rep{g}"] = best.s_min
+            bank[f"far_rep{g}"] = best.s_min + last  # a row at or beyond it reads X[last]
+        return bank
+
+    def distances(bank: Bank, wire: Wire) -> Bank:
+        sums_bits = p.rows * p.sum_bits
+        rows, indices = bank["rows"], []
         for r in range(p.rows):
-            d = best.sums[r] - best.s_min  # signed: below 0 only for a row the argmin did not weigh
-            index = Mux(best.excluded[r] | (d >= last), last, Mux(d < 0, 0, d[:width]))
+            s = rows[r * p.sum_bits:(r + 1) * p.sum_bits]
+            s_min, far = bank[f"s_min_rep{r // ROWS_PER_COPY}"], bank[f"far_rep{r // ROWS_PER_COPY}"]
+            d = s - s_min  # signed: below 0 only for a row the argmin did not weigh
+            index = Mux(rows[sums_bits + r] | (s >= far), last, Mux(d < 0, 0, d[:width]))
             indices.append(fit(index, width))
-        fields = pack(layout_best, map=best.map, nomatch=best.nomatch, all_excluded=best.all_excluded,
-                      s_min=best.s_min)
-        return indices, fields
+        return indices, bank["fields"]
 
     def lookup(bank: Bank, wire: Wire) -> Bank:
         indices, fields = bank
@@ -47,11 +63,11 @@ def weight_stages(params: LogParams) -> tuple[Stage, ...]:
         return pack(layout_out, map=best.map, nomatch=best.nomatch, all_excluded=best.all_excluded,
                     s_min=best.s_min, weights=Cat(*(table[i] for i in indices)))
 
-    return distances, lookup
+    return spread, distances, lookup
 
 
 class WeightStage(LogBlock):
-    """Each row's weight (``rule.row_weights``), one pixel per clock, latency ``WEIGHT_STAGES`` (2).
+    """Each row's weight (``rule.row_weights``), one pixel per clock, latency ``WEIGHT_STAGES`` (3).
 
     Parameters
     ----------
@@ -65,7 +81,7 @@ class WeightStage(LogBlock):
     result : ``Out(stream.Signature(log_result_layout(params)))``
         The argmin's fields and each row's weight.
     latency : int
-        2 clocks.
+        3 clocks.
     """
 
     def __init__(self, *, params: LogParams) -> None:
