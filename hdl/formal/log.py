@@ -2,10 +2,10 @@
 every back-pressure.
 
 ``PipelineProperties`` puts a block (any ``StallPipeline``: the row adders, the argmin tree, the
-weights stage, the whole ``LogIntegrator``) beside a *reference line*: ``latency`` slots that move
-together whenever the line's last slot is empty or taken (the stall rule of
-``docs/integrators.md``), each holding a pixel's expected result, computed when the pixel is taken
-by a reference written here from the rule alone:
+weights stage, the whole ``LogIntegrator``) beside a *reference line* that follows the pipeline's
+timing rule (``hdl.log.pipeline``, docs/integrators.md): ``latency - 1`` slots moving on a ``go``
+register that says the line's skid is empty, then a head and a skid; each slot holds a pixel's
+expected result, computed when the pixel is taken by a reference written here from the rule alone:
 
 - the argmin: a sequential scan over the rows (a row not excluded replaces the best one so far
   when its sum is lower, or, for the no-match row under ``nomatch-first``, not higher);
@@ -16,15 +16,18 @@ The input stream, ``ready`` of the output and the reset are free (no assumption 
 takes whatever is offered when it is ready). Asserted on the ports: the block takes a pixel exactly
 when the reference line does, offers a result exactly when it does, and that result is the
 reference's (so every pixel taken comes out once, in order, with its result); a result offered and
-not taken is offered again unchanged; the pixels taken and not yet given out are at most
-``latency``. Strengthening invariants, read through the block's ``nets``: each stage's ``valid`` is
-the reference slot's, and each valid stage's registers, finished by the block's remaining stages
-(``StallPipeline.remaining``), give the reference slot's result.
+not taken is offered again unchanged; the pixels taken and not yet given out are those the line
+holds, at most ``latency + 1``; with ``ready`` high the block takes a pixel every clock.
+Strengthening invariants, read through the block's ``nets``: each stage's ``valid`` and the skid's
+are the reference's, every copy of ``go`` is the reference's, and each valid stage's registers,
+finished by the block's remaining stages (``StallPipeline.remaining``), and the skid give the
+reference's results.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 
 from amaranth.hdl import Assert, Const, Cover, Fragment, Module, Mux, Signal, Value
 from amaranth.lib import data, wiring
@@ -115,6 +118,17 @@ def reference_integrator(m: Module, p: LogParams, payload: data.View, out: data.
     m.d.comb += [out.weights[r].eq(table_weight(p, sums[r], excluded[r], s_min)) for r in range(p.rows)]
 
 
+@dataclass
+class _Line:
+    """The reference line: slots (the last the head), the skid, ``go``."""
+
+    valid: list[Signal]
+    data: list[Signal]
+    skid_valid: Signal
+    skid: Signal
+    go: Signal
+
+
 class PipelineProperties(wiring.Component):
     """A formal-only wrapper: a log block against its reference line (module docstring).
 
@@ -156,56 +170,88 @@ class PipelineProperties(wiring.Component):
         m.d.comb += [sink.valid.eq(self.in_valid), sink.payload.eq(self.in_payload),
                      source.ready.eq(self.out_ready), self.out_valid.eq(source.valid),
                      self.out_payload.eq(source.payload)]
-        valid, data_ = self._reference_line(m)
-        self._port_properties(m, valid, data_)
-        # Strengthening invariants: the block's stages are the reference line's slots.
+        line = self._reference_line(m)
+        self._port_properties(m, line)
+        # Strengthening invariants: the block's registers are the reference line's.
         nets = dut.nets
         for i in range(dut.latency):
-            m.d.comb += Assert(nets.valid[i] == valid[i], f"stage {i} holds a pixel iff slot {i} does")
-            with m.If(valid[i]):
+            m.d.comb += Assert(nets.valid[i] == line.valid[i], f"stage {i} holds a pixel iff slot {i} does")
+            with m.If(line.valid[i]):
                 finished = dut.remaining(m, i, nets.banks[i])
-                m.d.comb += Assert(finished == data_[i].as_value(), f"stage {i} finishes as slot {i}")
+                m.d.comb += Assert(finished == line.data[i].as_value(), f"stage {i} finishes as slot {i}")
+        m.d.comb += Assert(nets.skid_valid == line.skid_valid, "the skid holds a pixel iff the line's does")
+        with m.If(line.skid_valid):
+            m.d.comb += Assert(nets.skid == line.skid.as_value(), "the skid's result is the line's")
+        for i, go in enumerate(nets.go):
+            m.d.comb += Assert(go == line.go, f"go copy {i} is the line's go")
         return m
 
-    def _reference_line(self, m: Module) -> tuple[list[Signal], list[Signal]]:
-        """The slots (valid, expected result), moving when the last one is empty or taken."""
+    def _reference_line(self, m: Module) -> _Line:
+        """The slots (valid, expected result), the head (the last slot), the skid and ``go``."""
         expected = Signal(self._out_layout)
         self._reference(m, self._params, self.in_payload, expected)
         latency = self._dut.latency
-        valid = [Signal(name=f"ref_valid{i}") for i in range(latency)]
-        data_ = [Signal(self._out_layout, name=f"ref_data{i}") for i in range(latency)]
-        move = _net(m, ~valid[-1] | self.out_ready, "ref_move")
+        line = _Line(valid=[Signal(name=f"ref_valid{i}") for i in range(latency)],
+                     data=[Signal(self._out_layout, name=f"ref_data{i}") for i in range(latency)],
+                     skid_valid=Signal(name="ref_skid_valid"), skid=Signal(self._out_layout, name="ref_skid"),
+                     go=Signal(name="ref_go", init=1))
         before_v, before_d = self.in_valid, expected
-        for i in range(latency):
-            with m.If(move):
-                m.d.sync += valid[i].eq(before_v)
+        for i in range(latency - 1):
+            with m.If(line.go):
+                m.d.sync += line.valid[i].eq(before_v)
                 with m.If(before_v):
-                    m.d.sync += data_[i].eq(before_d)
-            before_v, before_d = valid[i], data_[i]
-        return valid, data_
+                    m.d.sync += line.data[i].eq(before_d)
+            before_v, before_d = line.valid[i], line.data[i]
+        # The last slot (the head) and the skid: an arriving result goes to the head when it is empty
+        # or taken and the skid is empty, else to the skid; the skid moves up when the head frees.
+        arriving = _net(m, line.go & before_v, "ref_arriving")
+        head_v, head = line.valid[-1], line.data[-1]
+        free = _net(m, ~head_v | self.out_ready, "ref_free")
+        skid_next = Signal(name="ref_skid_next")
+        with m.If(free):
+            m.d.comb += skid_next.eq(line.skid_valid & arriving)
+            m.d.sync += head_v.eq(line.skid_valid | arriving)
+            m.d.sync += head.eq(Mux(line.skid_valid, line.skid, before_d))
+            with m.If(line.skid_valid & arriving):
+                m.d.sync += line.skid.eq(before_d)
+        with m.Else():
+            m.d.comb += skid_next.eq(line.skid_valid | arriving)
+            with m.If(arriving):
+                m.d.sync += line.skid.eq(before_d)
+        m.d.sync += [line.skid_valid.eq(skid_next), line.go.eq(~skid_next)]
+        return line
 
-    def _port_properties(self, m: Module, valid: list[Signal], data_: list[Signal]) -> None:
+    def _port_properties(self, m: Module, line: _Line) -> None:
         dut = self._dut
         sink, source = (getattr(dut, name) for name in dut.stream_names)
         taken_in, taken_out = sink.valid & sink.ready, source.valid & source.ready
-        m.d.comb += Assert(sink.ready == (~valid[-1] | self.out_ready), "takes a pixel iff the line moves")
-        m.d.comb += Assert(source.valid == valid[-1], "offers a result iff the line's last slot holds one")
+        m.d.comb += Assert(sink.ready == line.go, "takes a pixel iff the line moves")
+        m.d.comb += Assert(source.valid == line.valid[-1], "offers a result iff the line's head holds one")
         with m.If(source.valid):
-            m.d.comb += Assert(source.payload.as_value() == data_[-1].as_value(), "the reference's result")
+            m.d.comb += Assert(source.payload.as_value() == line.data[-1].as_value(),
+                               "the reference's result")
         # The stream rule from the source side: a result not taken is offered again, unchanged.
         stall, prev = Signal(), Signal(self._out_layout)
         m.d.sync += [stall.eq(source.valid & ~source.ready), prev.eq(source.payload)]
         with m.If(stall):
             m.d.comb += Assert(source.valid & (source.payload.as_value() == prev.as_value()),
                                "a result offered and not taken is held")
+        # One pixel per clock: a block whose output was taken in the last clock takes the next pixel.
+        flowing = Signal()
+        m.d.sync += flowing.eq(~source.valid | source.ready)
+        with m.If(flowing):
+            m.d.comb += Assert(sink.ready, "ready after a clock whose output was empty or taken")
         # Pixels in flight: taken and not given out, as many as the line holds, at most latency.
         latency = dut.latency
-        inflight = Signal(range(latency + 2))
+        inflight = Signal(range(latency + 3))
         m.d.sync += inflight.eq(inflight + taken_in - taken_out)
-        m.d.comb += Assert(inflight == sum(valid), "pixels in flight: those the line holds")
-        m.d.comb += Assert(inflight <= latency, "at most latency pixels in flight")
-        # Not vacuous: a full pipeline held, then a result taken after a stall.
+        m.d.comb += Assert(inflight == sum(line.valid) + line.skid_valid,
+                           "pixels in flight: those the line holds")
+        m.d.comb += Assert(inflight <= latency + 1, "at most latency + 1 pixels in flight")
+        # Not vacuous: a full pipeline held, then a result taken after a stall; a result taken while
+        # the skid holds the next.
         m.d.comb += Cover((inflight == latency) & stall & taken_out & taken_in)
+        m.d.comb += Cover(line.skid_valid & taken_out)
         m.d.comb += Cover(source.valid & source.payload.as_value().any() & stall)
 
 

@@ -60,24 +60,26 @@ class DropsHeld(StallPipeline):
 
 
 class PhantomPixel(StallPipeline):
-    """Mixin: the first stage's valid follows the input while the pipeline is stalled (a pixel not
-    taken enters, and is then taken again)."""
+    """Mixin (latency >= 2): the first stage's valid follows the input while the pipeline is stopped
+    (a pixel not taken enters, and is then taken again)."""
 
     def elaborate(self, platform: object) -> Module:
         m = super().elaborate(platform)
         sink = getattr(self, self.stream_names[0])
-        with m.If(~self.nets.enable):
+        with m.If(~self.nets.go[0]):
             m.d.sync += self.nets.valid[0].eq(sink.valid)
         return m
 
 
 class OverwritesHeld(StallPipeline):
-    """Mixin (latency >= 2): a held result is overwritten by the pixel in the stage before it."""
+    """Mixin (latency >= 2): a held result is overwritten by the pixel arriving behind it (the skid
+    bypassed)."""
 
     def elaborate(self, platform: object) -> Module:
         m = super().elaborate(platform)
         n = self.nets
-        with m.If(~n.enable & n.valid[-2]):
+        source = getattr(self, self.stream_names[1])
+        with m.If(n.go[-1] & n.valid[-2] & source.valid & ~source.ready):
             m.d.sync += n.banks[-1].eq(self.remaining(m, self.latency - 2, n.banks[-2]))
         return m
 

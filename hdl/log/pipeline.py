@@ -2,18 +2,24 @@
 
 A block is a list of *stage functions*; each builds one stage's logic from the previous stage's
 registers (the first from the input stream's payload, the last returns the output payload as one
-flat value). After each stage a register bank, loaded when the pipeline moves and the stage
-before holds a pixel, and a ``valid`` bit per stage:
+flat value). After each stage a register bank and its ``valid`` bit; the last bank is the output
+(the *head*), and beside it one more bank, the *skid*. The pipeline moves on ``go``, a register
+(with a copy per stage: no logic between ``out.ready`` and the thousands of register enables):
 
-    enable   = ~out.valid | out.ready        # the pipeline moves unless its last pixel waits
-    in.ready = enable
-    valid[i] <= valid[i - 1]                 # on enable (valid[-1] = in.valid)
-    bank[i]  <= stage_i(bank[i - 1])         # on enable and valid[i - 1]
+    go           = ~skid.valid                       # a register: the skid is empty
+    in.ready     = go
+    valid[i]    <= valid[i - 1]                      # on go (valid[-1] = in.valid), i < L - 1
+    bank[i]     <= stage_i(bank[i - 1])              # on go and valid[i - 1] (a bubble loads nothing)
+    arriving     = go & valid[L - 2]                 # a pixel reaches the last stage
+    free         = ~head.valid | out.ready           # the head is empty or taken
+    head        <= skid if skid.valid else stage_L-1(bank[L - 2])    # when free (and one of them is there)
+    skid        <= stage_L-1(bank[L - 2])            # when arriving and (not free, or the skid moves up)
 
 So a pixel taken at clock t is offered at t + ``latency`` (the number of stages) if the output is
-not held, the output stream holds its pixel while ``out.ready`` is low, and a stall stops every
-stage at once (nothing is dropped, nothing taken twice). The banks of bubbles are not loaded:
-their registers do not toggle. The registers hold no reset: ``valid`` says which hold a pixel.
+not held; a held output keeps its pixel, the next pixel to arrive waits in the skid and the
+pipeline stops the clock after (``go`` falls), and resumes the clock after the skid moves up:
+nothing is dropped or taken twice, and with ``out.ready`` high one pixel passes per clock. The
+data registers have no reset (the ``valid`` bits do).
 """
 
 from __future__ import annotations
@@ -23,7 +29,7 @@ from dataclasses import dataclass
 from functools import reduce
 from typing import Any
 
-from amaranth.hdl import Cat, Const, Module, Shape, Signal, Value
+from amaranth.hdl import Cat, Const, Module, Mux, Shape, Signal, Value
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -101,12 +107,15 @@ def _compose(fns: Sequence[Stage]) -> Stage:
 
 @dataclass(frozen=True)
 class PipelineNets:
-    """A pipeline's registers (``StallPipeline.nets``): ``enable``, and per stage i its ``valid[i]``
-    and its register bank ``banks[i]`` (the last bank is the output payload)."""
+    """A pipeline's registers (``StallPipeline.nets``): per stage i its ``valid[i]`` and register bank
+    ``banks[i]`` (the last: the head, the output payload), the skid (``skid_valid``, ``skid``) and
+    ``go`` (the copies of one register, one per stage: stage i moves on ``go[i]``)."""
 
-    enable: Signal
     valid: tuple[Signal, ...]
     banks: tuple[Bank, ...]
+    skid_valid: Signal
+    skid: Signal
+    go: tuple[Signal, ...]
 
 
 class StallPipeline(wiring.Component):
@@ -129,7 +138,7 @@ class StallPipeline(wiring.Component):
     latency : int
         Clocks from a pixel taken to its result offered (the number of stages).
     nets : PipelineNets
-        After elaboration: the stage registers (read-only).
+        After elaboration: the stage registers, the skid and ``go`` (read-only).
     """
 
     def __init__(self, *, sink: str, source: str, in_layout: data.Layout, out_layout: data.Layout,
@@ -163,25 +172,54 @@ class StallPipeline(wiring.Component):
     def elaborate(self, platform: object) -> Module:
         m = Module()
         sink, source = getattr(self, self._sink), getattr(self, self._source)
-        enable = Signal(name="enable")
-        m.d.comb += [enable.eq(~source.valid | source.ready), sink.ready.eq(enable)]
+        last = self.latency - 1
+        # go, and its copies (init 1: the skid is empty); named *_rep*: the FPGA flow keeps them apart.
+        go = tuple(Signal(name=f"go_rep{i}", init=1) for i in range(self.latency))
+        m.d.comb += sink.ready.eq(go[0])
         bank, valid = sink.payload, sink.valid
         valids, banks = [], []
         wire = wires(m)
-        for i, stage in enumerate(self._stages):
+        for i, stage in enumerate(self._stages[:last]):
             loads: list = []
             bank = _register(stage(bank, wire), f"stage{i}", loads)
-            with m.If(enable & valid):
+            with m.If(go[i] & valid):
                 m.d.sync += loads
             v = Signal(name=f"stage{i}_valid")
-            with m.If(enable):
+            with m.If(go[i]):
                 m.d.sync += v.eq(valid)
             valid = v
             valids.append(v)
             banks.append(bank)
-        m.d.comb += [source.valid.eq(valid), source.payload.eq(bank)]
-        self._nets = PipelineNets(enable=enable, valid=tuple(valids), banks=tuple(banks))
+        head, skid_valid, skid = self._head_and_skid(m, self._stages[last](bank, wire), go[last] & valid, go)
+        valids.append(source.valid)
+        banks.append(head)
+        m.d.comb += source.payload.eq(head)
+        self._nets = PipelineNets(valid=tuple(valids), banks=tuple(banks), skid_valid=skid_valid, skid=skid,
+                                  go=go)
         return m
+
+    def _head_and_skid(self, m: Module, value: Value, arriving: Value, go: tuple[Signal, ...]
+                       ) -> tuple[Signal, Signal, Signal]:
+        """The last stage: its value arriving into the head or the skid (module docstring)."""
+        source = getattr(self, self._source)
+        value = Value.cast(value)
+        head = Signal(len(value), name=f"stage{self.latency - 1}", reset_less=True)
+        skid = Signal(len(value), name="skid", reset_less=True)
+        skid_valid = Signal(name="skid_valid")
+        free = ~source.valid | source.ready
+        with m.If(free):
+            m.d.sync += [source.valid.eq(skid_valid | arriving), skid_valid.eq(skid_valid & arriving)]
+            with m.If(skid_valid):
+                m.d.sync += head.eq(skid)
+            with m.Elif(arriving):
+                m.d.sync += head.eq(value)
+        with m.Else():
+            m.d.sync += skid_valid.eq(skid_valid | arriving)
+        with m.If(arriving & (skid_valid | ~free)):
+            m.d.sync += skid.eq(value)
+        skid_next = Mux(free, skid_valid & arriving, skid_valid | arriving)
+        m.d.sync += [g.eq(~skid_next) for g in go]
+        return head, skid_valid, skid
 
 
 class LogBlock(StallPipeline):
