@@ -109,7 +109,8 @@ def main() -> None:
                         args.seed, not args.verbose)
             fmax = f"{r['fmax']:7.2f}" if "fmax" in r else f"{'-':>7}"
             crit = r.get("critical", {})
-            path = f"{crit.get('start_net', '')} -> {crit.get('end_net', '')}" if crit else ""
+            path = (f"{crit['start_net']} -> {crit['end_net']} ({crit['logic_ns']} ns logic, "
+                    f"{crit['routing_ns']} ns routing)" if crit else "")
             print(f"{codes:3} {bits:4} {levels:3} {adder:3} {r['latency']:3} {r['lut4']:7} {r['carry']:6} "
                   f"{r['sites']:7} {r['ff']:7} {fmax}  {path}", flush=True)
             if args.blocks:

@@ -184,6 +184,12 @@ class PipelineProperties(wiring.Component):
             m.d.comb += Assert(nets.skid == line.skid.as_value(), "the skid's result is the line's")
         for i, go in enumerate(nets.go):
             m.d.comb += Assert(go == line.go, f"go copy {i} is the line's go")
+        # The output buffer is a two-entry FIFO: the entry read is the older one, written before the
+        # other; the write pointer is past the valid entries.
+        buf = nets.output
+        m.d.comb += Assert(~nets.skid_valid | nets.valid[-1], "no skid without a head")
+        m.d.comb += Assert((buf.write == buf.read) == (buf.entry_valid[0] == buf.entry_valid[1]),
+                           "the write pointer follows the valid entries")
         return m
 
     def _reference_line(self, m: Module) -> _Line:

@@ -49,13 +49,14 @@ class ExcludedWinsArgmin(ArgminTree):
 
 
 class DropsHeld(StallPipeline):
-    """Mixin (before a block): a result offered and not taken is dropped after one cycle."""
+    """Mixin (before a block): a result offered and not taken is dropped after one cycle (with the
+    pixel waiting behind it)."""
 
     def elaborate(self, platform: object) -> Module:
         m = super().elaborate(platform)
         source = getattr(self, self.stream_names[1])
         with m.If(source.valid & ~source.ready):
-            m.d.sync += self.nets.valid[-1].eq(0)  # the last assignment wins
+            m.d.sync += [v.eq(0) for v in self.nets.output.entry_valid]  # the last assignment wins
         return m
 
 
@@ -72,15 +73,20 @@ class PhantomPixel(StallPipeline):
 
 
 class OverwritesHeld(StallPipeline):
-    """Mixin (latency >= 2): a held result is overwritten by the pixel arriving behind it (the skid
-    bypassed)."""
+    """Mixin (latency >= 2): a held result is overwritten by the pixel arriving behind it (written
+    into the entry being read)."""
 
     def elaborate(self, platform: object) -> Module:
         m = super().elaborate(platform)
         n = self.nets
         source = getattr(self, self.stream_names[1])
+        value = self.remaining(m, self.latency - 2, n.banks[-2])
+        e0, e1 = n.output.entries
         with m.If(n.go[-1] & n.valid[-2] & source.valid & ~source.ready):
-            m.d.sync += n.banks[-1].eq(self.remaining(m, self.latency - 2, n.banks[-2]))
+            with m.If(n.output.read):
+                m.d.sync += e1.eq(value)
+            with m.Else():
+                m.d.sync += e0.eq(value)
         return m
 
 

@@ -2,24 +2,25 @@
 
 A block is a list of *stage functions*; each builds one stage's logic from the previous stage's
 registers (the first from the input stream's payload, the last returns the output payload as one
-flat value). After each stage a register bank and its ``valid`` bit; the last bank is the output
-(the *head*), and beside it one more bank, the *skid*. The pipeline moves on ``go``, a register
-(with a copy per stage: no logic between ``out.ready`` and the thousands of register enables):
+flat value). After each stage but the last a register bank and its ``valid`` bit; the last stage
+writes a two-entry output buffer, in turn, and the output reads it in turn (the entry offered is
+the *head*, the other the *skid*). The pipeline moves on ``go``, a register (with a copy per
+stage) saying an entry is free, so ``out.ready`` reaches only a few registers (the read pointer,
+the entries' valid bits, ``go``), never the thousands of data-register enables:
 
-    go           = ~skid.valid                       # a register: the skid is empty
-    in.ready     = go
+    in.ready     = go                                # a register: an entry is (will be) free
     valid[i]    <= valid[i - 1]                      # on go (valid[-1] = in.valid), i < L - 1
     bank[i]     <= stage_i(bank[i - 1])              # on go and valid[i - 1] (a bubble loads nothing)
     arriving     = go & valid[L - 2]                 # a pixel reaches the last stage
-    free         = ~head.valid | out.ready           # the head is empty or taken
-    head        <= skid if skid.valid else stage_L-1(bank[L - 2])    # when free (and one of them is there)
-    skid        <= stage_L-1(bank[L - 2])            # when arriving and (not free, or the skid moves up)
+    entry[write] <= stage_L-1(bank[L - 2]), write flips      # when arriving
+    out.valid, out.payload = entry_valid[read], entry[read]; read flips when taken
+    go          <= not both entries valid (after this clock's write and read)
 
 So a pixel taken at clock t is offered at t + ``latency`` (the number of stages) if the output is
-not held; a held output keeps its pixel, the next pixel to arrive waits in the skid and the
-pipeline stops the clock after (``go`` falls), and resumes the clock after the skid moves up:
-nothing is dropped or taken twice, and with ``out.ready`` high one pixel passes per clock. The
-data registers have no reset (the ``valid`` bits do).
+not held; a held output keeps its pixel, the next pixel to arrive waits in the other entry and the
+pipeline stops the clock after (``go`` falls) until the head is taken: nothing is dropped or taken
+twice, and with ``out.ready`` high one pixel passes per clock. The data registers have no reset
+(the ``valid`` bits do).
 """
 
 from __future__ import annotations
@@ -35,8 +36,8 @@ from amaranth.lib.wiring import In, Out
 
 from .rule import LogParams, check_params
 
-__all__ = ["Bank", "LogBlock", "PipelineNets", "Stage", "StallPipeline", "Wire", "fit", "pack",
-           "stage_functions", "wires"]
+__all__ = ["Bank", "LogBlock", "OutputBuffer", "PipelineNets", "Stage", "StallPipeline", "Wire", "fit",
+           "pack", "stage_functions", "wires"]
 
 Bank = Any  # a Value, or a list, tuple or dict (str keys) of banks
 # ``wire(value, name)`` returns a net equal to ``value`` (a comb-driven Signal in the module that
@@ -106,16 +107,29 @@ def _compose(fns: Sequence[Stage]) -> Stage:
 
 
 @dataclass(frozen=True)
+class OutputBuffer:
+    """The last stage's two entries (``entries``, ``entry_valid``) and pointers: ``read`` the entry
+    offered (the head), ``write`` the entry the next arriving pixel goes to."""
+
+    entries: tuple[Signal, Signal]
+    entry_valid: tuple[Signal, Signal]
+    read: Signal
+    write: Signal
+
+
+@dataclass(frozen=True)
 class PipelineNets:
     """A pipeline's registers (``StallPipeline.nets``): per stage i its ``valid[i]`` and register bank
-    ``banks[i]`` (the last: the head, the output payload), the skid (``skid_valid``, ``skid``) and
-    ``go`` (the copies of one register, one per stage: stage i moves on ``go[i]``)."""
+    ``banks[i]`` (the last: the head, the entry offered), the skid (``skid_valid``, ``skid``: the
+    other entry), ``go`` (the copies of one register, one per stage: stage i moves on ``go[i]``) and
+    the ``output`` buffer's registers."""
 
-    valid: tuple[Signal, ...]
+    valid: tuple[Value, ...]
     banks: tuple[Bank, ...]
-    skid_valid: Signal
-    skid: Signal
+    skid_valid: Value
+    skid: Value
     go: tuple[Signal, ...]
+    output: OutputBuffer
 
 
 class StallPipeline(wiring.Component):
@@ -190,36 +204,42 @@ class StallPipeline(wiring.Component):
             valid = v
             valids.append(v)
             banks.append(bank)
-        head, skid_valid, skid = self._head_and_skid(m, self._stages[last](bank, wire), go[last] & valid, go)
+        value = self._stages[last](bank, wire)
+        head, skid_valid, skid, buf = self._output_buffer(m, value, go[last] & valid, go)
         valids.append(source.valid)
         banks.append(head)
-        m.d.comb += source.payload.eq(head)
         self._nets = PipelineNets(valid=tuple(valids), banks=tuple(banks), skid_valid=skid_valid, skid=skid,
-                                  go=go)
+                                  go=go, output=buf)
         return m
 
-    def _head_and_skid(self, m: Module, value: Value, arriving: Value, go: tuple[Signal, ...]
-                       ) -> tuple[Signal, Signal, Signal]:
-        """The last stage: its value arriving into the head or the skid (module docstring)."""
+    def _output_buffer(self, m: Module, value: Value, arriving: Value, go: tuple[Signal, ...]
+                       ) -> tuple[Value, Value, Value, OutputBuffer]:
+        """The last stage's two entries, written in turn and read in turn (module docstring): returns
+        the head, the skid's valid, the skid and the buffer's registers."""
         source = getattr(self, self._source)
         value = Value.cast(value)
-        head = Signal(len(value), name=f"stage{self.latency - 1}", reset_less=True)
-        skid = Signal(len(value), name="skid", reset_less=True)
-        skid_valid = Signal(name="skid_valid")
-        free = ~source.valid | source.ready
-        with m.If(free):
-            m.d.sync += [source.valid.eq(skid_valid | arriving), skid_valid.eq(skid_valid & arriving)]
-            with m.If(skid_valid):
-                m.d.sync += head.eq(skid)
-            with m.Elif(arriving):
-                m.d.sync += head.eq(value)
-        with m.Else():
-            m.d.sync += skid_valid.eq(skid_valid | arriving)
-        with m.If(arriving & (skid_valid | ~free)):
-            m.d.sync += skid.eq(value)
-        skid_next = Mux(free, skid_valid & arriving, skid_valid | arriving)
-        m.d.sync += [g.eq(~skid_next) for g in go]
-        return head, skid_valid, skid
+        buf = OutputBuffer(
+            entries=tuple(Signal(len(value), name=f"out{k}", reset_less=True) for k in range(2)),
+            entry_valid=tuple(Signal(name=f"out{k}_valid") for k in range(2)),
+            read=Signal(name="out_read"), write=Signal(name="out_write"))
+        (e0, e1), (v0, v1), read, write = buf.entries, buf.entry_valid, buf.read, buf.write
+        taken = source.valid & source.ready
+        m.d.comb += [source.valid.eq(Mux(read, v1, v0)), source.payload.eq(Mux(read, e1, e0))]
+        with m.If(taken):
+            m.d.sync += read.eq(~read)
+        with m.If(arriving):
+            m.d.sync += write.eq(~write)
+            with m.If(write):
+                m.d.sync += e1.eq(value)
+            with m.Else():
+                m.d.sync += e0.eq(value)
+        nexts = []
+        for k, v in enumerate(buf.entry_valid):
+            nxt = (v & ~(taken & (read == k))) | (arriving & (write == k))
+            m.d.sync += v.eq(nxt)
+            nexts.append(nxt)
+        m.d.sync += [g.eq(~(nexts[0] & nexts[1])) for g in go]  # go: an entry is free
+        return Mux(read, e1, e0), Mux(read, v0, v1), Mux(read, e0, e1), buf
 
 
 class LogBlock(StallPipeline):
