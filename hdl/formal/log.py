@@ -188,8 +188,10 @@ class PipelineProperties(wiring.Component):
         # other; the write pointer is past the valid entries.
         buf = nets.output
         m.d.comb += Assert(~nets.skid_valid | nets.valid[-1], "no skid without a head")
-        m.d.comb += Assert((buf.write == buf.read) == (buf.entry_valid[0] == buf.entry_valid[1]),
+        m.d.comb += Assert((buf.write == buf.reads[0]) == (buf.entry_valid[0] == buf.entry_valid[1]),
                            "the write pointer follows the valid entries")
+        for i, read in enumerate(buf.reads[1:]):
+            m.d.comb += Assert(read == buf.reads[0], f"read pointer copy {i} is the pointer")
         return m
 
     def _reference_line(self, m: Module) -> _Line:

@@ -83,7 +83,7 @@ class OverwritesHeld(StallPipeline):
         value = self.remaining(m, self.latency - 2, n.banks[-2])
         e0, e1 = n.output.entries
         with m.If(n.go[-1] & n.valid[-2] & source.valid & ~source.ready):
-            with m.If(n.output.read):
+            with m.If(n.output.reads[0]):
                 m.d.sync += e1.eq(value)
             with m.Else():
                 m.d.sync += e0.eq(value)

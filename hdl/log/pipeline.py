@@ -36,9 +36,10 @@ from amaranth.lib.wiring import In, Out
 
 from .rule import LogParams, check_params
 
-__all__ = ["Bank", "LogBlock", "OutputBuffer", "PipelineNets", "Stage", "StallPipeline", "Wire", "fit",
-           "pack", "stage_functions", "wires"]
+__all__ = ["ENABLE_GROUP", "Bank", "LogBlock", "OutputBuffer", "PipelineNets", "Stage", "StallPipeline",
+           "Wire", "fit", "pack", "stage_functions", "wires"]
 
+ENABLE_GROUP = 64  # register bits per copy of the pipeline's enable (and of the read pointer)
 Bank = Any  # a Value, or a list, tuple or dict (str keys) of banks
 # ``wire(value, name)`` returns a net equal to ``value`` (a comb-driven Signal in the module that
 # builds the stage): a stage names what it reuses, so the netlist and the simulator's code share
@@ -58,7 +59,7 @@ def wires(m: Module) -> Wire:
 
 
 def _register(bank: Bank, name: str, out: list) -> Bank:
-    """Registers shaped like ``bank``; their loads are appended to ``out``."""
+    """Registers shaped like ``bank``; ``(register, value)`` of each is appended to ``out``."""
     if isinstance(bank, (list, tuple)):
         return type(bank)(_register(b, f"{name}_{i}", out) for i, b in enumerate(bank))
     if isinstance(bank, dict):  # named registers: ``<stage>_<key>``
@@ -69,8 +70,25 @@ def _register(bank: Bank, name: str, out: list) -> Bank:
     if len(value) == 0:
         return value
     reg = Signal(value.shape(), name=name, reset_less=True)
-    out.append(reg.eq(value))
+    out.append((reg, value))
     return reg
+
+
+def _groups(pairs: Sequence[tuple[Value, Value]], bits: int) -> list[list[tuple[Value, Value]]]:
+    """``(register, value)`` pairs cut into slices and grouped, at most ``bits`` register bits a
+    group: each group's enable is a register copy of its own (no enable net fans out further)."""
+    groups: list[list[tuple[Value, Value]]] = [[]]
+    used = 0
+    for reg, value in pairs:
+        value = Value.cast(value)
+        for lo in range(0, len(reg), bits):
+            width = min(bits, len(reg) - lo)
+            if used + width > bits:
+                groups.append([])
+                used = 0
+            groups[-1].append((reg[lo:lo + width], fit(value.as_unsigned(), len(reg))[lo:lo + width]))
+            used += width
+    return [g for g in groups if g]
 
 
 def fit(value: Value, width: int) -> Value:
@@ -108,13 +126,18 @@ def _compose(fns: Sequence[Stage]) -> Stage:
 
 @dataclass(frozen=True)
 class OutputBuffer:
-    """The last stage's two entries (``entries``, ``entry_valid``) and pointers: ``read`` the entry
-    offered (the head), ``write`` the entry the next arriving pixel goes to."""
+    """The last stage's two entries (``entries``, ``entry_valid``) and pointers: ``reads`` (copies of
+    one register, the first for the control) the entry offered, ``write`` the entry the next
+    arriving pixel goes to; ``head`` and ``skid`` the entry offered and the other, ``skid_valid``
+    the other's valid bit."""
 
     entries: tuple[Signal, Signal]
     entry_valid: tuple[Signal, Signal]
-    read: Signal
+    reads: tuple[Signal, ...]
     write: Signal
+    head: Value
+    skid: Value
+    skid_valid: Value
 
 
 @dataclass(frozen=True)
@@ -187,59 +210,69 @@ class StallPipeline(wiring.Component):
         m = Module()
         sink, source = getattr(self, self._sink), getattr(self, self._source)
         last = self.latency - 1
-        # go, and its copies (init 1: the skid is empty); named *_rep*: the FPGA flow keeps them apart.
-        go = tuple(Signal(name=f"go_rep{i}", init=1) for i in range(self.latency))
+        # go and its copies (init 1: the output buffer is empty), one per group of ENABLE_GROUP
+        # register bits; named *_rep*: the FPGA flow keeps them apart.
+        go = [Signal(name="go_rep_in", init=1), Signal(name="go_rep_ctl", init=1)]
         m.d.comb += sink.ready.eq(go[0])
         bank, valid = sink.payload, sink.valid
         valids, banks = [], []
         wire = wires(m)
         for i, stage in enumerate(self._stages[:last]):
-            loads: list = []
-            bank = _register(stage(bank, wire), f"stage{i}", loads)
-            with m.If(go[i] & valid):
-                m.d.sync += loads
+            pairs: list = []
+            bank = _register(stage(bank, wire), f"stage{i}", pairs)
+            for j, group in enumerate(_groups(pairs, ENABLE_GROUP)):
+                go.append(Signal(name=f"go_rep{i}_{j}", init=1))
+                with m.If(go[-1] & valid):
+                    m.d.sync += [reg.eq(value) for reg, value in group]
             v = Signal(name=f"stage{i}_valid")
-            with m.If(go[i]):
+            with m.If(go[1]):
                 m.d.sync += v.eq(valid)
             valid = v
             valids.append(v)
             banks.append(bank)
-        value = self._stages[last](bank, wire)
-        head, skid_valid, skid, buf = self._output_buffer(m, value, go[last] & valid, go)
+        value = Value.cast(self._stages[last](bank, wire))
+        buf = self._output_buffer(m, value, valid, go)
         valids.append(source.valid)
-        banks.append(head)
-        self._nets = PipelineNets(valid=tuple(valids), banks=tuple(banks), skid_valid=skid_valid, skid=skid,
-                                  go=go, output=buf)
+        banks.append(buf.head)
+        self._nets = PipelineNets(valid=tuple(valids), banks=tuple(banks), skid_valid=buf.skid_valid,
+                                  skid=buf.skid, go=tuple(go), output=buf)
         return m
 
-    def _output_buffer(self, m: Module, value: Value, arriving: Value, go: tuple[Signal, ...]
-                       ) -> tuple[Value, Value, Value, OutputBuffer]:
-        """The last stage's two entries, written in turn and read in turn (module docstring): returns
-        the head, the skid's valid, the skid and the buffer's registers."""
+    def _output_buffer(self, m: Module, value: Value, valid: Value, go: list[Signal]) -> OutputBuffer:
+        """The last stage's two entries, written in turn and read in turn (module docstring), by
+        groups of ENABLE_GROUP bits, each group with its own copies of ``go`` and of the read pointer."""
         source = getattr(self, self._source)
-        value = Value.cast(value)
-        buf = OutputBuffer(
-            entries=tuple(Signal(len(value), name=f"out{k}", reset_less=True) for k in range(2)),
-            entry_valid=tuple(Signal(name=f"out{k}_valid") for k in range(2)),
-            read=Signal(name="out_read"), write=Signal(name="out_write"))
-        (e0, e1), (v0, v1), read, write = buf.entries, buf.entry_valid, buf.read, buf.write
+        e0, e1 = (Signal(len(value), name=f"out{k}", reset_less=True) for k in range(2))
+        v0, v1 = (Signal(name=f"out{k}_valid") for k in range(2))
+        write = Signal(name="out_write")
+        reads, head, skid = [Signal(name="out_read_rep")], [], []
+        arriving = go[1] & valid
         taken = source.valid & source.ready
-        m.d.comb += [source.valid.eq(Mux(read, v1, v0)), source.payload.eq(Mux(read, e1, e0))]
+        for j, lo in enumerate(range(0, len(value), ENABLE_GROUP)):
+            part = slice(lo, min(lo + ENABLE_GROUP, len(value)))
+            go.append(Signal(name=f"go_rep_out{j}", init=1))
+            reads.append(Signal(name=f"out_read_rep{j}"))
+            with m.If(go[-1] & valid):
+                with m.If(write):
+                    m.d.sync += e1[part].eq(value[part])
+                with m.Else():
+                    m.d.sync += e0[part].eq(value[part])
+            head.append(Mux(reads[-1], e1[part], e0[part]))
+            skid.append(Mux(reads[-1], e0[part], e1[part]))
+        read = reads[0]
+        m.d.comb += [source.valid.eq(Mux(read, v1, v0)), source.payload.eq(Cat(*head))]
         with m.If(taken):
-            m.d.sync += read.eq(~read)
+            m.d.sync += [r.eq(~r) for r in reads]
         with m.If(arriving):
             m.d.sync += write.eq(~write)
-            with m.If(write):
-                m.d.sync += e1.eq(value)
-            with m.Else():
-                m.d.sync += e0.eq(value)
         nexts = []
-        for k, v in enumerate(buf.entry_valid):
+        for k, v in enumerate((v0, v1)):
             nxt = (v & ~(taken & (read == k))) | (arriving & (write == k))
             m.d.sync += v.eq(nxt)
             nexts.append(nxt)
         m.d.sync += [g.eq(~(nexts[0] & nexts[1])) for g in go]  # go: an entry is free
-        return Mux(read, e1, e0), Mux(read, v0, v1), Mux(read, e0, e1), buf
+        return OutputBuffer(entries=(e0, e1), entry_valid=(v0, v1), reads=tuple(reads), write=write,
+                            head=Cat(*head), skid=Cat(*skid), skid_valid=Mux(read, v0, v1))
 
 
 class LogBlock(StallPipeline):
