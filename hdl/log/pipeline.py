@@ -4,9 +4,11 @@ A block is a list of *stage functions*; each builds one stage's logic from the p
 registers (the first from the input stream's payload, the last returns the output payload as one
 flat value). After each stage but the last a register bank and its ``valid`` bit; the last stage
 writes a two-entry output buffer, in turn, and the output reads it in turn (the entry offered is
-the *head*, the other the *skid*). The pipeline moves on ``go``, a register (with a copy per
-stage) saying an entry is free, so ``out.ready`` reaches only a few registers (the read pointer,
-the entries' valid bits, ``go``), never the thousands of data-register enables:
+the *head*, the other the *skid*). The pipeline moves on ``go``, a register saying an entry is
+free, so ``out.ready`` reaches only a few registers (the read pointer, the entries' valid bits,
+``go``), never the thousands of data-register enables; and ``go`` and the read pointer are copied,
+one copy per ``ENABLE_GROUP`` register bits (``go_rep*``, ``out_read_rep*``: the FPGA flow keeps
+such copies apart), so no enable or select net fans out to more than a group:
 
     in.ready     = go                                # a register: an entry is (will be) free
     valid[i]    <= valid[i - 1]                      # on go (valid[-1] = in.valid), i < L - 1
