@@ -3,9 +3,9 @@
 One stall pipeline (``pipeline.StallPipeline``) made of the three blocks' stages in a row: the
 row adders (``adders.adder_stages``), the argmin tree carrying the sums (``argmin.argmin_stages``)
 and the weights stage (``weights.weight_stages``). One pipeline rather than three components
-connected by streams: one enable for every register, and a stage boundary between blocks costs
-nothing more than a boundary inside one. One pixel per clock; latency
-``RowAdders.latency + ArgminTree.latency + 2``. The definition: ``rule.log_integrate``.
+connected by streams: one ``go`` (and its copies) for every register and one output buffer, and
+a stage boundary between blocks costs nothing more than a boundary inside one. One pixel per clock; latency
+``RowAdders.latency + ArgminTree.latency + WEIGHT_STAGES`` (3). The definition: ``rule.log_integrate``.
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ class LogIntegrator(LogBlock):
     result : ``Out(stream.Signature(log_result_layout(params)))``
         ``map``, ``nomatch``, ``all_excluded``, ``s_min`` and each row's ``weights``.
     latency : int
-        Clocks from a pixel taken to its result offered: the adders' stages, the tree's and 2.
+        Clocks from a pixel taken to its result offered: the adders' stages, the tree's and 3.
     """
 
     def __init__(self, *, params: LogParams, levels_per_stage: int = 1,
