@@ -18,8 +18,8 @@ PIXEL_BITS = 16  # a pixel pair of the stereo top's input stream: left and right
 
 
 # Gowin's block RAM primitives (one 18-kbit BSRAM each), its distributed RAMs (one CFU each: four
-# LUTs hold the memory, nextpnr leaves the CFU's other four LUT sites empty) and its DSP primitives
-# besides the MULT* ones.
+# LUTs hold the memory, nextpnr blocks the CFU's other four LUT sites) and its DSP primitives besides
+# the MULT* ones.
 _GOWIN_BSRAM = frozenset({"SP", "SPX9", "SDP", "SDPX9", "SDPB", "SDPX9B", "DP", "DPX9", "DPB", "DPX9B",
                           "ROM", "ROMX9", "pROM", "pROMX9"})
 _GOWIN_LUTRAM = frozenset({"RAM16S1", "RAM16S2", "RAM16S4", "RAM16SDP1", "RAM16SDP2", "RAM16SDP4"})
@@ -70,20 +70,16 @@ def logic_cells(target: Target, res: dict[str, int]) -> int:
 
 def placed_sites(target: Target, pnr_utilization: dict[str, dict[str, int]]) -> dict[str, tuple[int, int]]:
     """What nextpnr placed, (used, available) per kind of site that can bind before LUTs or flip-flops
-    alone do: ECP5 slice halves (``TRELLIS_COMB``, ``TRELLIS_FF``), iCE40 logic cells; on Gowin the
-    LUT4 sites (its LUT4s, the pass-through LUTs before flip-flops and the four LUTs of each distributed
-    RAM included, its ALUs, and the four LUT sites each distributed RAM leaves empty) and the
-    flip-flops."""
+    alone do: ECP5 slice halves (``TRELLIS_COMB``, ``TRELLIS_FF``), iCE40 logic cells, Gowin LUT4
+    sites and flip-flops. nextpnr-himbaechel-gowin's LUT4 count is every LUT4 site taken: it puts a
+    blocker LUT on each ALU's site, a distributed RAM's four storage and four blocker LUTs on its CFU,
+    and after placement a pass-through LUT on the free site of a flip-flop fed from elsewhere."""
     def get(key: str) -> tuple[int, int]:
         u = pnr_utilization.get(key) or {}
         return u.get("used", 0), u.get("available", 0)
 
-    if target.family == "gowin":
-        luts, alus, rams = get("LUT4")[0], get("ALU")[0], get("RAM16SDP4")[0]
-        sites = {"LUT4 sites": (luts + alus + (GOWIN_LUTRAM_SITES - 4) * rams, target.luts),
-                 "DFF": get("DFF")}
-    else:
-        sites = {k: get(k) for k in ("TRELLIS_COMB", "TRELLIS_FF", "ICESTORM_LC")}
+    keys = ("LUT4", "DFF") if target.family == "gowin" else ("TRELLIS_COMB", "TRELLIS_FF", "ICESTORM_LC")
+    sites = {k: get(k) for k in keys}
     return {k: v for k, v in sites.items() if v[0] and v[1]}
 
 

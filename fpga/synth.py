@@ -222,9 +222,9 @@ def _place(report: dict, target: Target, out: Path, say: Callable[[str], None], 
     pnr = parse_nextpnr(place_and_route(target, out, freq_mhz, seed, say, router))
     report.update(pnr)
     report["fmax_provisional"] = target.fmax_provisional
-    # Placed logic cells (a slice half or an iCE40 logic cell holds a LUT and a flip-flop; a Gowin
-    # flip-flop takes its LUT site) can bind before LUTs or flip-flops alone do: count machines
-    # against them too.
+    # Placed logic cells (a slice half or an iCE40 logic cell holds a LUT and a flip-flop; Gowin's
+    # LUT4 sites, ALUs' and flip-flops' pass-through LUTs included) can bind before LUTs or
+    # flip-flops alone do: count machines against them too.
     for used, available in placed_sites(target, pnr["pnr_utilization"]).values():
         fit = int(0.9 * available // (used / machines))
         report["machines_fit"] = min(report["machines_fit"], fit)
