@@ -40,6 +40,7 @@ from bayesmachine.columns import Option, Source
 from bayesmachine.models import (
     DEFAULT_MODEL,
     HARDWARE_MODEL,
+    HARDWARE_MODEL_WHY,
     MODELS,
     ModelParams,
     all_options,
@@ -60,6 +61,7 @@ from bayesmachine.params import (
     PRIORS,
     RNG_KINDS,
     SAMPLES_PER_CLOCK,
+    SMTJ_DEFAULTS,
     SMTJ_SHARES,
     STEREO_ROWS_PER_BEAT,
     TIE_BREAKS,
@@ -87,6 +89,7 @@ __all__ = [
     "default_model",
     "output_path",
     "input_path",
+    "machine_default",
     "machine_params_from_args",
     "model_params_from_args",
     "options_without_effect",
@@ -287,25 +290,32 @@ def _models_with(test: Callable[[Any], bool]) -> str:
     return " and ".join(d.name for d in MODELS.values() if test(d))
 
 
+def machine_default(field: str) -> Any:
+    """``MachineParams``'s default of ``field``: what the help says and a model that decides nothing gets."""
+    return MachineParams.__dataclass_fields__[field].default
+
+
 add_option(MachineOption("max_cycles", "--max-cycles",
                          lambda: "watchdog: a pixel stops as a timeout after this many cycles (samples) "
                          f"(default {DEFAULT_MAX_CYCLES}; {_watchdogs()})", metavar="N"))
 add_option(MachineOption("timeout_answer", "--timeout-answer",
                          lambda: "what a run stopped by the watchdog answers (still flagged timeout): none "
                          "(no match) or leading (the row with the largest count, by the tie rule) (default "
-                         "none; "
+                         f"{machine_default('timeout_answer')}; "
                          f"leading with --model {_models_with(lambda d: d.timeout_answer == 'leading')})",
                          choices=TIMEOUT_ANSWERS))
 add_option(MachineOption("samples_per_clock", "--samples-per-clock",
                          "B random samples per operator and clock, one of "
                          f"{', '.join(map(str, SAMPLES_PER_CLOCK))}: the results of B = 1 in "
                          "ceil(cycles / B) clocks (the cycles reported are clocks; --max-cycles counts "
-                         "samples); rng sobol or external (default 1)", metavar="B"))
+                         f"samples); rng sobol or external (default {machine_default('samples_per_clock')})",
+                         metavar="B"))
 add_option(MachineOption("normalize", "--normalize-columns",
                          lambda: "per-pixel column normalization: each loaded column's random numbers scaled "
                          "by m / 2^W, m the column's largest word for the pixel (exactly the run on the "
                          "words w * 2^W / m: the same posterior, shorter runs; docs/architecture.md) "
-                         f"(default on with --model {_models_with(lambda d: d.normalize)}, off otherwise)",
+                         f"(default on with --model {_models_with(lambda d: d.normalize)}, "
+                         f"{'on' if machine_default('normalize') else 'off'} otherwise)",
                          type=bool))
 add_option(MachineOption("tie_break", "--tie-break",
                          "MAP encoder rule when several counters overflow in one cycle (default %(default)s)",
@@ -319,14 +329,15 @@ add_option(MachineOption("prior", "--prior",
                              f"{prior} with --model {name}"
                              for name, (prior, _) in _machine_layouts().items()) + ")", choices=PRIORS))
 add_option(MachineOption("smtj_dwell", "--smtj-dwell",
-                         "--rng smtj: mean dwell time of a device state, in clock cycles (default 1)",
+                         f"--rng smtj: mean dwell time of a device state, in clock cycles (default "
+                         f"{SMTJ_DEFAULTS[0]:g})",
                          type=float_arg, metavar="TAU"))
 add_option(MachineOption("smtj_spread", "--smtj-spread",
-                         "--rng smtj: device-to-device spread, log-sd of each dwell time (default 0; "
-                         "0.05 ~ 5 %%)", type=float_arg, metavar="S"))
+                         f"--rng smtj: device-to-device spread, log-sd of each dwell time (default "
+                         f"{SMTJ_DEFAULTS[1]:g}; 0.05 ~ 5 %%)", type=float_arg, metavar="S"))
 add_option(MachineOption("smtj_share", "--smtj-share",
                          "--rng smtj: W devices per operator, or per column shared by its rows "
-                         "(default operator)", type=str, choices=SMTJ_SHARES))
+                         f"(default {SMTJ_DEFAULTS[2]})", type=str, choices=SMTJ_SHARES))
 add_option(MachineOption("words_per_beat", "--words-per-beat",
                          f"likelihood-memory words per load beat (default {DEFAULT_WORDS_PER_BEAT}, "
                          f"or one pixel's words if fewer; {STEREO_ROWS_PER_BEAT} rows' words with the "
@@ -552,14 +563,12 @@ def add_census_options(parser: argparse._ActionsContainer, sweep: bool = False, 
     board`` and ``--machines`` (``run``), which :func:`default_model` reads; its help says so."""
     g = parser.add_argument_group(title) if title else parser
     described = "; ".join(f"{d.name}: {d.description}" for d in MODELS.values())
-    why = f"{DEFAULT_MODEL}'s StereoMachine is not routed on the ECP5-85F at the board's clock; README, " \
-          "Models"
+    why = f"{HARDWARE_MODEL_WHY} (docs/models.md)"
     if hardware:
         default = f"default {HARDWARE_MODEL}: {why}"
         parser.set_defaults(**{_HARDWARE_DEST: True})
     elif board_engine:
-        default = (f"default {DEFAULT_MODEL}; {HARDWARE_MODEL} with --engine board or --machines K > 1: "
-                   f"{why}; its right pass runs on one machine")
+        default = f"default {DEFAULT_MODEL}; {HARDWARE_MODEL} with --engine board or --machines K > 1: {why}"
     else:
         default = f"default {DEFAULT_MODEL}"
     if sweep:

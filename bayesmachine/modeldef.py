@@ -21,7 +21,7 @@ from typing import Any
 
 from bayesmachine.checks import plain
 from bayesmachine.columns import Column, NoMatchFloor, Option, Source, Term
-from bayesmachine.params import TIMEOUT_ANSWERS, ParameterError
+from bayesmachine.params import TIMEOUT_ANSWERS, MachineParams, ParameterError
 
 __all__ = ["PassDef", "ModelDef", "OWN_PASS", "REFERENCES", "machine_layout"]
 
@@ -82,9 +82,11 @@ class ModelDef:
     watchdog_runs : int or None
         Its machine's default watchdog, in runs of n_max + 1 cycles (None: the machine's default).
     timeout_answer : str
-        Its machine's default answer to a timeout (:data:`~bayesmachine.params.TIMEOUT_ANSWERS`).
+        Its machine's default answer to a timeout (:data:`~bayesmachine.params.TIMEOUT_ANSWERS`; default
+        ``MachineParams``'s).
     normalize : bool
-        Whether its machine normalizes its columns by default (``MachineParams.normalize``).
+        Whether its machine normalizes its columns by default (``MachineParams.normalize``; default
+        ``MachineParams``'s).
     """
 
     name: str
@@ -96,8 +98,8 @@ class ModelDef:
     defaults: Mapping[str, Any] = field(default_factory=dict)
     requires: Mapping[str, tuple[Any, str]] = field(default_factory=dict)
     watchdog_runs: int | None = None
-    timeout_answer: str = "none"
-    normalize: bool = False
+    timeout_answer: str = MachineParams.timeout_answer  # the machine's defaults, not a copy of them
+    normalize: bool = MachineParams.normalize
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name or any(c in self.name for c in " ,\t\n"):

@@ -73,6 +73,7 @@ __all__ = [
     "register_model",
     "DEFAULT_MODEL",
     "HARDWARE_MODEL",
+    "HARDWARE_MODEL_WHY",
     "CENSUS_WATCHDOG_RUNS",
     "RIGHT_WATCHDOG_RUNS",
     "CENSUS_TIMEOUT_ANSWER",
@@ -84,14 +85,15 @@ __all__ = [
     "neighbour_words_per_beat",
 ]
 
-# The model of every command and of ModelParams() when none is named: census-lr, the best on the
-# measurements (README, Models), which the host, every engine and the simulated StereoMachine compute.
+# The one default model, of the library (ModelParams()) and of every command when none is named:
+# census-lr, the best on the measurements (docs/models.md). One exception, said here and in
+# docs/models.md#which-model-by-default only: what builds or drives an FPGA design (emit, synth, board,
+# run --engine board, run --machines K > 1; fpga.synth and stereo_machine_params without a model) takes
+# HARDWARE_MODEL, for the reason HARDWARE_MODEL_WHY gives (--help quotes it).
 DEFAULT_MODEL = "census-lr"
-# The model of what builds or drives an FPGA design (emit, synth, board, run --engine board, K > 1
-# machines): census-lr's StereoMachine places on the ECP5-85F but is not routed at the board's 45 MHz
-# (post-placement estimate 28.24 MHz, docs/fpga.md) and K machines cannot share its right pass; census
-# is the best model that meets the board's clock.
 HARDWARE_MODEL = "census"
+HARDWARE_MODEL_WHY = ("census-lr's StereoMachine is not routed on the ECP5-85F at the board's clock "
+                      "and its right pass runs on one machine")
 # The census models' watchdog, in runs of n_max + 1 cycles: max_cycles = CENSUS_WATCHDOG_RUNS *
 # (counter_max + 1) (255 at counter max 16). With normalized columns the winning row of a clear pixel
 # fires almost every cycle (its run ends near n_max + 1 cycles); a pixel still running after 15 such

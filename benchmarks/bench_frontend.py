@@ -147,7 +147,7 @@ def main(argv: list[str] | None = None) -> None:
     left, right, _ = (crop_image(a, args.crop) for a in bundled_pair())
     left, right = np.ascontiguousarray(left), np.ascontiguousarray(right)
     model = ModelParams(name="paper", dmax=args.dmax)
-    params = stereo_machine_params(args.dmax, counter_max=args.counter_max)
+    params = stereo_machine_params(args.dmax, model=model, counter_max=args.counter_max)
     print(f"StereoMachine: {w}-pixel lines, Dmax {args.dmax}, counter max {args.counter_max}, "
           f"{params.words_per_beat} lanes ({params.beats_per_pixel} beats per pixel); "
           f"frame: Motorcycle crop {args.crop}")

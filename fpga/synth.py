@@ -142,7 +142,8 @@ def _check(params: MachineParams, target: Target, *, machines: int, pin_width: i
 
 
 def _default_model(params: MachineParams) -> ModelParams:
-    """What ``bayesmachine synth`` builds without ``--model``: the hardware model, at Dmax = rows - 2."""
+    """What ``bayesmachine synth`` builds without ``--model``: :data:`~bayesmachine.models.HARDWARE_MODEL`
+    (why: beside it), at Dmax = rows - 2."""
     return ModelParams(name=HARDWARE_MODEL, dmax=params.rows - 2)
 
 

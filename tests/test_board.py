@@ -24,8 +24,8 @@ from bayesmachine.params import ParameterError
 DMAX = 4
 WIDTH = DMAX + 12
 HEIGHT = 12
-PARAMS = stereo_machine_params(DMAX)
 MODEL = ModelParams(name="paper", dmax=DMAX)
+PARAMS = stereo_machine_params(DMAX, model=MODEL)
 
 
 def _twin(width: int = WIDTH) -> BoardTwin:
@@ -283,11 +283,12 @@ def test_board_engine_gives_the_declared_passes_too() -> None:
 
 
 def test_board_refuses_off_chip_sources() -> None:
-    smtj = stereo_machine_params(DMAX, rng="smtj")
+    smtj = stereo_machine_params(DMAX, model=MODEL, rng="smtj")
     with pytest.raises(ParameterError, match="on-chip random source"):
         check_board(smtj, MODEL, WIDTH)
     lr = ModelParams(dmax=DMAX, name="census-lr")
-    with pytest.raises(ParameterError, match="^rng: the census-lr model's right pass runs on chip"):
+    with pytest.raises(ParameterError, match="^rng must be an on-chip random source for the census-lr model "
+                       "on chip, got 'smtj': its right pass"):
         check_board(stereo_machine_params(DMAX, model=lr, rng="smtj"), lr, WIDTH)
 
 

@@ -29,8 +29,8 @@ DMAX = 4
 WIDTH = DMAX + 12
 HEIGHT = 12
 TIMEOUT_BITS = 1 << 14  # the board's receive timeout: short, so a dropped byte is reported soon
-PARAMS = stereo_machine_params(DMAX)
 MODEL = ModelParams(name="paper", dmax=DMAX)
+PARAMS = stereo_machine_params(DMAX, model=MODEL)
 CROP = (300, 200)
 
 

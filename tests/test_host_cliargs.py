@@ -7,6 +7,7 @@ import pytest
 
 from bayesmachine import cliargs
 from bayesmachine.cli import build_parser
+from bayesmachine.models import ModelParams, disparity_machine
 from bayesmachine.params import PRIORS, RNG_KINDS, TIE_BREAKS, MachineParams, ParameterError
 
 
@@ -48,6 +49,37 @@ def test_every_option_default_is_the_machine_default():
     assert cliargs.MACHINE_OPTIONS["rng"].choices == RNG_KINDS
     assert cliargs.MACHINE_OPTIONS["tie_break"].choices == TIE_BREAKS
     assert cliargs.MACHINE_OPTIONS["prior"].choices == PRIORS
+
+
+@pytest.mark.parametrize("argv", [[], ["--model", "paper"], ["--model", "census"], ["--model", "census-lr"]])
+def test_the_librarys_machine_is_the_commands(argv):
+    """Without machine options a command runs the library's machine of its model,
+    ``disparity_machine(ModelParams(...))`` (``ModelParams()`` without ``--model``), field by field."""
+    args = build_parser().parse_args(["run", *argv, "-o", "x"])
+    model = cliargs.model_params_from_args(args)
+    assert model == (ModelParams(name=argv[1]) if argv else ModelParams())
+    assert cliargs.machine_params_from_args(args, args.dmax, model) == disparity_machine(model)
+
+
+def test_machine_defaults_are_the_commands(capsys):
+    """MachineParams' defaults are the command's: a model that decides nothing of its machine (the
+    paper's: no watchdog, timeout answer or normalization of its own) gets every one of them, and the
+    help says them where the model may decide (timeout answer, normalization, samples per clock)."""
+    assert (MachineParams.timeout_answer, MachineParams.normalize, MachineParams.samples_per_clock) == (
+        "none", False, 1)
+    args = build_parser().parse_args(["run", "--model", "paper", "-o", "x"])
+    machine = cliargs.machine_params_from_args(args, args.dmax, cliargs.model_params_from_args(args))
+    for f in dataclasses.fields(MachineParams):
+        if f.name not in ("rows", "nomatch_row", "words_per_beat"):  # the disparity machine's own
+            assert getattr(machine, f.name) == f.default, f.name
+    assert machine == MachineParams.for_disparity(args.dmax)
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["run", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "(default none; leading with --model census and census-lr)" in text
+    assert "(default on with --model census and census-lr, off otherwise)" in text
+    assert "rng sobol or external (default 1)" in text
+    assert "(default 1)" in text.split("--smtj-dwell TAU", 2)[2]
 
 
 @pytest.mark.parametrize("command", ["emit", "run", "sweep"])

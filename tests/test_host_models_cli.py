@@ -14,7 +14,13 @@ from bayesmachine.host.features import model_planes
 from bayesmachine.host.images import random_dot_stereogram
 from bayesmachine.host.reference import reference_map
 from bayesmachine.host.run import prepare, run_machine
-from bayesmachine.models import DEFAULT_MODEL, HARDWARE_MODEL, ModelParams, disparity_machine
+from bayesmachine.models import (
+    DEFAULT_MODEL,
+    HARDWARE_MODEL,
+    HARDWARE_MODEL_WHY,
+    ModelParams,
+    disparity_machine,
+)
 
 DMAX = 12
 
@@ -132,6 +138,34 @@ def test_help_states_each_commands_default(capsys):
     for command in (["emit"], ["synth"], ["board", "build"], ["board", "simulate"]):
         want = "census: census-lr's StereoMachine is not routed on the ECP5-85F"
         assert model_help(*command).startswith(want), command
+        assert model_help(*command).startswith(f"{HARDWARE_MODEL}: {HARDWARE_MODEL_WHY} (docs/models.md)")
+    assert f"{HARDWARE_MODEL_WHY} (docs/models.md)" in model_help("run")
+
+
+def test_why_hardware_differs_is_said_once_in_the_code():
+    """The hardware default's reason is HARDWARE_MODEL_WHY (the help quotes it); no other module of the
+    package says it."""
+    from pathlib import Path
+
+    import bayesmachine
+
+    root = Path(bayesmachine.__file__).resolve().parents[1]
+    saying = [p.relative_to(root).as_posix() for d in ("bayesmachine", "hdl", "host", "fpga", "sim")
+              for p in (root / d).rglob("*.py") if "not routed" in p.read_text()]
+    assert saying == ["bayesmachine/models.py"]
+
+
+def test_what_builds_a_design_without_a_model_takes_the_hardware_model():
+    """stereo_machine_params and synth without a model: HARDWARE_MODEL, as the commands' rule."""
+    from bayesmachine.fpga.synth import throughput_model
+    from bayesmachine.hdl.frontend.stereo import stereo_machine_params
+
+    hardware = ModelParams(name=HARDWARE_MODEL, dmax=6)
+    params = stereo_machine_params(6, counter_max=4)
+    assert params == stereo_machine_params(6, model=hardware, counter_max=4) and params.prior == "neighbour"
+    assert throughput_model(params, None) == hardware
+    args = build_parser().parse_args(["synth", "--target", "ecp5-85k", "--dmax", "6"])
+    assert cliargs.model_params_from_args(args) == hardware
 
 
 @pytest.mark.parametrize("argv", [["emit", "--top", "stereo", "-o", "{o}"], ["board", "simulate"],

@@ -266,16 +266,15 @@ def test_sources_do_not_import_params_at_run_time() -> None:
 
 def test_front_end_lanes_are_defined_once() -> None:
     from bayesmachine.hdl.frontend import stereo
+    from bayesmachine.models import ModelParams, disparity_machine
     from bayesmachine.params import stereo_words_per_beat
 
     assert stereo.stereo_words_per_beat is stereo_words_per_beat
     # 6 rows of the operator columns per beat: 18 words, 14 beats per pixel at Dmax 80.
-    p = stereo.stereo_machine_params(80)
+    p = stereo.stereo_machine_params(80, model=ModelParams(name="paper"))
     assert (p.words_per_beat, p.beats_per_pixel) == (18, 14)
     assert stereo_words_per_beat(MachineParams.for_disparity(80, prior="loaded")) == 24
     assert stereo_words_per_beat(MachineParams.for_disparity(2)) == 4 * 3  # fewer rows than 6: all of them
     # A neighbour machine's feedback column is formed on chip: 6 rows of its 5 loaded columns.
-    from bayesmachine.models import ModelParams, disparity_machine
-
     census = disparity_machine(ModelParams(name="census"))
     assert census.operator_columns == 6 and stereo_words_per_beat(census) == 30

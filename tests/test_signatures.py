@@ -37,7 +37,8 @@ DMAX = 4
 
 
 def _params(rng: str = "lfsr", **kwargs: object) -> MachineParams:
-    return stereo_machine_params(DMAX, rng=rng, counter_max=4, **kwargs)
+    return stereo_machine_params(DMAX, model=ModelParams(name="paper", dmax=DMAX), rng=rng, counter_max=4,
+                                 **kwargs)
 
 
 def _members(component: wiring.Component) -> set[str]:

@@ -36,7 +36,7 @@ def test_pixels_through_the_stereo_machine_equal_the_model(counter_max: int, tmp
     from bayesmachine.sim.stereo_engine import StereoVerilatorEngine
 
     model = ModelParams(name="paper", dmax=DMAX)
-    params = stereo_machine_params(DMAX, counter_max=counter_max)
+    params = stereo_machine_params(DMAX, model=model, counter_max=counter_max)
     frames = _crops()
     reference = MachineModel(params)
     with StereoVerilatorEngine(params, model, WIDTH, verbose=False) as engine:
@@ -59,7 +59,7 @@ def test_stereo_engine_follows_the_engine_life_cycle() -> None:
     from bayesmachine.sim.stereo_engine import StereoVerilatorEngine
 
     model = ModelParams(name="paper", dmax=DMAX)
-    params = stereo_machine_params(DMAX, counter_max=16)
+    params = stereo_machine_params(DMAX, model=model, counter_max=16)
     left, right = _crops()[1]
     want = MachineModel(params).run(memory_words(feature_sums(left), feature_sums(right), model, params))
     engine = StereoVerilatorEngine(params, model, WIDTH, verbose=False)
@@ -91,9 +91,10 @@ def test_stereo_engine_follows_the_engine_life_cycle() -> None:
 def test_stereo_engine_refuses_an_off_chip_source_without_a_device_model() -> None:
     from bayesmachine.sim.stereo_engine import StereoVerilatorEngine
 
-    params = stereo_machine_params(DMAX, counter_max=16, rng="external")
+    model = ModelParams(name="paper", dmax=DMAX)
+    params = stereo_machine_params(DMAX, model=model, counter_max=16, rng="external")
     with pytest.raises(ValueError, match="device model"):
-        StereoVerilatorEngine(params, ModelParams(name="paper", dmax=DMAX), WIDTH, verbose=False)
+        StereoVerilatorEngine(params, model, WIDTH, verbose=False)
 
 
 @pytest.mark.eda
@@ -105,7 +106,7 @@ def test_smtj_pixels_through_the_stereo_machine_equal_the_model() -> None:
     from bayesmachine.sim.stereo_engine import StereoVerilatorEngine
 
     model = ModelParams(name="paper", dmax=DMAX)
-    params = stereo_machine_params(DMAX, counter_max=4, rng="smtj", smtj_dwell=3.0)
+    params = stereo_machine_params(DMAX, model=model, counter_max=4, rng="smtj", smtj_dwell=3.0)
     frames = _crops()
     reference = MachineModel(params)  # numbers=None: the kind's device model, one stream from reset
     wants = [reference.run(memory_words(feature_sums(left), feature_sums(right), model, params))
@@ -210,7 +211,7 @@ def test_whole_bundled_pair_through_the_front_end_equals_the_model() -> None:
 
     left, right, _ = bundled_pair()
     model = ModelParams(name="paper", dmax=80)
-    params = stereo_machine_params(80, counter_max=16)
+    params = stereo_machine_params(80, model=model, counter_max=16)
     want = MachineModel(params).run(memory_words(feature_sums(left), feature_sums(right), model, params))
     with StereoVerilatorEngine(params, model, left.shape[1], verbose=False) as engine:
         got = engine.run(left, right)

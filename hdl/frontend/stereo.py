@@ -45,8 +45,8 @@ from bayesmachine.hdl.signatures import (
     pixel_in_layout,
     result_layout,
 )
-from bayesmachine.models import ModelParams, disparity_machine
-from bayesmachine.params import MachineParams, ParameterError, stereo_words_per_beat
+from bayesmachine.models import HARDWARE_MODEL, ModelParams, disparity_machine
+from bayesmachine.params import DEFAULT_DMAX, MachineParams, ParameterError, stereo_words_per_beat
 from bayesmachine.sources import source_kind
 
 from . import DEFAULT_FIFO_PIXELS, MAX_MACHINES, MAX_WIDTH
@@ -61,17 +61,17 @@ __all__ = ["MAX_MACHINES", "MAX_WIDTH", "FeaturePipeline", "FrontEnd", "Pipeline
            "stereo_signature"]
 
 
-def stereo_machine_params(dmax: int = 80, *, model: ModelParams | None = None,
+def stereo_machine_params(dmax: int = DEFAULT_DMAX, *, model: ModelParams | None = None,
                           **kwargs: object) -> MachineParams:
-    """The machine the front end feeds: ``MachineParams.for_disparity`` (the paper model), or with a
-    ``model`` (whose Dmax is ``dmax``) ``disparity_machine(model, ...)``, with the front end's lane
-    count (:func:`stereo_words_per_beat`) unless ``words_per_beat`` is given."""
+    """The machine the front end feeds: ``disparity_machine(model, ...)`` (``model``'s Dmax is ``dmax``;
+    without one, :data:`~bayesmachine.models.HARDWARE_MODEL` at ``dmax``, as every command that builds a
+    design: why, beside it), with the front end's lane count (:func:`stereo_words_per_beat`) unless
+    ``words_per_beat`` is given."""
     if model is None:
-        params = MachineParams.for_disparity(dmax, **kwargs)
-    else:
-        if model.dmax != dmax:
-            raise ParameterError(f"dmax: {dmax} given, the model's is {model.dmax}")
-        params = disparity_machine(model, **kwargs)
+        model = ModelParams(name=HARDWARE_MODEL, dmax=dmax)
+    elif model.dmax != dmax:
+        raise ParameterError(f"dmax: {dmax} given, the model's is {model.dmax}", "dmax")
+    params = disparity_machine(model, **kwargs)
     return params if "words_per_beat" in kwargs else dataclasses.replace(params,
                                                                          words_per_beat=stereo_words_per_beat(params))
 
