@@ -147,3 +147,74 @@ def test_the_hardware_and_engine_constructors_take_numpy_integers_too() -> None:
     for make in (lambda: ParallelMachines(params=params, machines=np.True_), lambda: MAPEncoder(rows=6.0)):
         with pytest.raises(TypeError, match="must be an integer, not (bool|float)"):
             make()
+
+
+# --- The on-chip front end reads its parameters by the same rule ---
+
+def _front_end(name: str, **given: object) -> object:
+    """The front-end component ``name`` with its parameters at valid values, ``given`` replacing them."""
+    from bayesmachine.hdl.frontend.census import CensusFilter
+    from bayesmachine.hdl.frontend.filters import FeatureFilter
+    from bayesmachine.hdl.frontend.lanes.consistency import ConsistencyTest
+    from bayesmachine.hdl.frontend.layouts import features_layout
+    from bayesmachine.hdl.frontend.linebuffer import LineBuffer
+    from bayesmachine.hdl.frontend.passes import PassFeeder
+    from bayesmachine.hdl.frontend.stereo import StereoMachine, stereo_machine_params
+    from bayesmachine.hdl.frontend.words import WordGenerator
+
+    model = ModelParams(name="census", dmax=4)
+    params = stereo_machine_params(4, model=model)
+    kinds = {
+        "census": (CensusFilter, {"window": 7}),
+        "filter": (FeatureFilter, {"lag": 1}),
+        "line": (LineBuffer, {"width": 20, "height": 5}),
+        "consistency": (ConsistencyTest, {"dmax": 4, "map_width": 4, "tolerance": 1}),
+        "feeder": (PassFeeder, {"reference": "right", "dmax": 4, "features": features_layout(model)}),
+        "words": (WordGenerator, {"params": params, "model": model, "output_columns": 6, "leads": True}),
+        "stereo": (StereoMachine, {"params": params, "model": model, "width": 20, "fifo_pixels": 2,
+                                   "machines": 2}),
+    }
+    kind, kwargs = kinds[name]
+    return kind(**{**kwargs, **given})
+
+
+FRONT_END_NUMPY = [("census", "window", np.int64(5), 5), ("filter", "lag", np.uint8(0), 0),
+                   ("line", "width", np.int32(12), 12), ("line", "height", np.int16(7), 7),
+                   ("consistency", "tolerance", np.int64(2), 2), ("feeder", "dmax", np.int64(4), 4),
+                   ("words", "output_columns", np.int64(6), 6), ("words", "leads", np.False_, False),
+                   ("stereo", "width", np.int64(21), 21), ("stereo", "fifo_pixels", np.uint16(3), 3),
+                   ("stereo", "machines", np.int32(3), 3)]
+
+
+@pytest.mark.parametrize(("component", "name", "value", "want"), FRONT_END_NUMPY)
+def test_the_front_end_takes_numpy_scalars_as_plain_values(component, name, value, want) -> None:
+    got = getattr(_front_end(component, **{name: value}), name)
+    assert got == want and type(got) is type(want)
+
+
+@pytest.mark.parametrize(("component", "name", "value", "message"), [
+    ("census", "window", 7.0, "window must be an integer, not float 7.0"),
+    ("filter", "lag", True, "lag must be an integer, not bool True"),
+    ("line", "height", "5", "height must be an integer, not str '5'"),
+    ("consistency", "map_width", np.True_, "map_width must be an integer, not bool"),
+    ("feeder", "dmax", 4.0, "dmax must be an integer, not float"),
+    ("words", "output_columns", 6.0, "output_columns must be an integer, not float"),
+    ("words", "leads", 1, "leads must be True or False, not int 1"),
+    ("stereo", "width", 20.0, "width must be an integer, not float"),
+    ("stereo", "fifo_pixels", True, "fifo_pixels must be an integer, not bool"),
+    ("stereo", "machines", "2", "machines must be an integer, not str"),
+])
+def test_a_wrong_type_for_the_front_end_is_a_type_error(component, name, value, message) -> None:
+    with pytest.raises(TypeError, match=f"^{message}"):
+        _front_end(component, **{name: value})
+
+
+@pytest.mark.parametrize(("component", "name", "value"), [
+    ("census", "window", 6), ("filter", "lag", 2), ("line", "width", 1), ("line", "height", 2),
+    ("consistency", "map_width", 17), ("feeder", "dmax", -1), ("feeder", "dmax", HUGE),
+    ("stereo", "width", 10), ("stereo", "fifo_pixels", 65), ("stereo", "machines", 17),
+])
+def test_an_impossible_value_for_the_front_end_is_a_parameter_error_naming_it(component, name, value) -> None:
+    with pytest.raises(ParameterError) as info:
+        _front_end(component, **{name: value})
+    assert info.value.parameter == name and str(info.value).startswith(name)

@@ -18,7 +18,9 @@ from amaranth.hdl import Module, Signal, unsigned
 from amaranth.lib import data, wiring
 from amaranth.lib.wiring import In, Out
 
+from bayesmachine.checks import as_int
 from bayesmachine.columns import CENSUS_WINDOWS
+from bayesmachine.errors import ParameterError
 
 __all__ = ["CensusFilter", "census_bits"]
 
@@ -49,10 +51,9 @@ class CensusFilter(wiring.Component):
     """
 
     def __init__(self, *, window: int) -> None:
-        if isinstance(window, bool) or not isinstance(window, int):
-            raise TypeError(f"window must be an integer, not {type(window).__name__}")
+        window = as_int("window", window)
         if window not in CENSUS_WINDOWS:
-            raise ValueError(f"window must be one of {CENSUS_WINDOWS}, got {window!r}")
+            raise ParameterError(f"window must be one of {CENSUS_WINDOWS}, got {window}", "window")
         self._window = window
         super().__init__({
             "load": In(1),

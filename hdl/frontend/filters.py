@@ -23,6 +23,8 @@ from amaranth.hdl import Module, Signal, signed, unsigned
 from amaranth.lib import data, wiring
 from amaranth.lib.wiring import In, Out
 
+from bayesmachine.checks import as_int
+
 from .linebuffer import WINDOW
 
 __all__ = ["FeatureFilter", "feature_layout"]
@@ -63,11 +65,7 @@ class FeatureFilter(wiring.Component):
     """
 
     def __init__(self, *, lag: int = 0) -> None:
-        if isinstance(lag, bool) or not isinstance(lag, int):
-            raise TypeError(f"lag must be an integer, not {type(lag).__name__}")
-        if lag not in (0, 1):
-            raise ValueError(f"lag must be 0 or 1, got {lag!r}")
-        self._lag = lag
+        self._lag = as_int("lag", lag, 0, 1)
         super().__init__({
             "load": In(1),
             "column": In(data.ArrayLayout(unsigned(8), WINDOW)),

@@ -15,6 +15,8 @@ from amaranth.hdl import Module, Signal, unsigned
 from amaranth.lib import data, memory, wiring
 from amaranth.lib.wiring import In, Out
 
+from bayesmachine.checks import as_int
+
 __all__ = ["WINDOW", "LineBuffer", "column_windows", "pair_layout"]
 
 WINDOW = 5  # the paper's 5x5 filters
@@ -53,15 +55,8 @@ class LineBuffer(wiring.Component):
     """
 
     def __init__(self, *, width: int, height: int = WINDOW) -> None:
-        for name, value in (("width", width), ("height", height)):
-            if isinstance(value, bool) or not isinstance(value, int):
-                raise TypeError(f"{name} must be an integer, not {type(value).__name__}")
-        if width < 2:
-            raise ValueError(f"width must be an integer >= 2, got {width!r}")
-        if height < 3:
-            raise ValueError(f"height must be an integer >= 3, got {height!r}")
-        self._width = width
-        self._height = height
+        self._width = width = as_int("width", width, 2)
+        self._height = height = as_int("height", height, 3)
         super().__init__({
             "en": In(1),
             "col": In(range(width)),

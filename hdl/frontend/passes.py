@@ -32,7 +32,7 @@ from amaranth.hdl import Module, Mux, Shape, Signal, Value, unsigned
 from amaranth.lib import data, fifo, memory, stream, wiring
 from amaranth.lib.wiring import In
 
-from bayesmachine.columns.base import check_int
+from bayesmachine.checks import as_int
 from bayesmachine.hdl.signatures import pixel_stream
 from bayesmachine.models import ModelParams, Pass
 from bayesmachine.params import MachineParams, ParameterError
@@ -138,7 +138,7 @@ class PassFeeder(wiring.Component):
         if reference not in REFERENCES:
             raise ParameterError(f"reference must be one of {', '.join(REFERENCES)}, got {reference!r}",
                                  "reference")
-        check_int("dmax", dmax, 0, 4094)
+        dmax = as_int("dmax", dmax, 0, 4094)
         if not isinstance(features, data.StructLayout):
             raise TypeError(f"features must be a StructLayout, not {type(features).__name__}")
         flags = dict(flags or {})

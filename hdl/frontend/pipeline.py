@@ -16,6 +16,7 @@ from amaranth.hdl import Cat, Module, Mux, Signal, Value, unsigned
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
+from bayesmachine.checks import as_int
 from bayesmachine.hdl.signatures import pixel_stream
 from bayesmachine.models import ModelParams
 from bayesmachine.params import ParameterError
@@ -36,16 +37,15 @@ __all__ = ["FeaturePipeline", "PipelineNets", "check_width", "line_region", "pip
 
 
 def check_width(width: object, model: ModelParams) -> int:
-    """``width`` if a line of that many pixels has an output pixel with all its disparities and windows;
-    ``ParameterError`` naming it otherwise."""
-    if isinstance(width, bool) or not isinstance(width, int):
-        raise ParameterError(f"width must be an integer, not {width!r}")
+    """``width`` (a plain int) if a line of that many pixels has an output pixel with all its disparities
+    and windows; ``TypeError`` unless an integer, ``ParameterError`` naming it otherwise."""
+    width = as_int("width", width)
     size = 2 * model.margin + 1  # the model's windows
     if not model.dmax + size <= width <= MAX_WIDTH:
         raise ParameterError(
             f"width must be in [dmax + {size}, {MAX_WIDTH}] = [{model.dmax + size}, {MAX_WIDTH}] (a line "
             f"needs one output pixel with all {model.dmax + 1} disparities and its {size}x{size} windows), "
-            f"got {width}")
+            f"got {width}", "width")
     return width
 
 

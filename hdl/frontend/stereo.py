@@ -36,6 +36,7 @@ from amaranth.hdl import Array, Module, Mux, Shape, Signal, Value
 from amaranth.lib import fifo, stream, wiring
 from amaranth.lib.wiring import In
 
+from bayesmachine.checks import as_int
 from bayesmachine.columns import Source
 from bayesmachine.hdl.machine import BayesianMachine
 from bayesmachine.hdl.signatures import (
@@ -82,19 +83,18 @@ def check_machines(machines: object, params: MachineParams, model: ModelParams) 
     each machine would need its own number port and device stream) and a model without declared passes
     (a declared pass runs on one machine beside the own one, not dealt to several), else
     ``ParameterError`` naming the parameter."""
-    if isinstance(machines, bool) or not isinstance(machines, int):
-        raise TypeError(f"machines must be an integer, not {type(machines).__name__}")
+    machines = as_int("machines", machines)
     if not 1 <= machines <= MAX_MACHINES:
-        raise ParameterError(f"machines must be in [1, {MAX_MACHINES}], got {machines}")
+        raise ParameterError(f"machines must be in [1, {MAX_MACHINES}], got {machines}", "machines")
     if machines > 1:
         if not source_kind(params.rng).on_chip:
             raise ParameterError(f"machines = {machines}: rng {params.rng!r} is off chip (one number port, "
                                  "one device stream); several machines need an on-chip source "
-                                 "(sobol, lfsr, lfsr-shared)")
+                                 "(sobol, lfsr, lfsr-shared)", "machines")
         for p in declared_passes(model):
             raise ParameterError(f"machines = {machines}: the {model.name} model's {p.name} pass runs on one "
                                  "machine beside the own pass's (it is not dealt to several); give one "
-                                 "machine")
+                                 "machine", "machines")
     return machines
 
 
@@ -110,13 +110,12 @@ def check_stereo_machine(params: MachineParams, model: ModelParams, width: int,
     """``ParameterError`` naming the parameter unless ``StereoMachine(params=params, model=model,
     width=width, fifo_pixels=fifo_pixels, machines=machines)`` can be built (callers check before
     building anything: a component whose constructor fails would be reported as never elaborated);
-    ``TypeError`` for a ``params``, ``model`` or ``machines`` of the wrong type."""
+    ``TypeError`` for a parameter of the wrong type."""
     check_frontend_types(params, model)
     check_machines(machines, params, model)
     check_frontend_params(params, model)
     check_width(width, model)
-    if isinstance(fifo_pixels, bool) or not isinstance(fifo_pixels, int) or not 1 <= fifo_pixels <= 64:
-        raise ParameterError(f"fifo_pixels must be an integer in [1, 64], got {fifo_pixels!r}")
+    as_int("fifo_pixels", fifo_pixels, 1, 64)
 
 
 RESULT_FIFO_MAX = 511  # results buffered per machine of several (one DP16KD deep at 36 bits wide)
@@ -268,9 +267,9 @@ class StereoMachine(wiring.Component):
         check_stereo_machine(params, model, width, fifo_pixels, machines)
         self._params = params
         self._model = model
-        self._width = width
-        self._fifo_pixels = fifo_pixels
-        self._machines = machines
+        # Plain ints (a NumPy integer is taken as everywhere), their values checked above.
+        self._width, self._fifo_pixels, self._machines = (as_int(name, value) for name, value in (
+            ("width", width), ("fifo_pixels", fifo_pixels), ("machines", machines)))
         self._nets: StereoNets | None = None
         super().__init__(stereo_signature(params, model))
 

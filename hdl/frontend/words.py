@@ -34,6 +34,7 @@ from amaranth.hdl import Module, Mux
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
+from bayesmachine.checks import as_bool, as_int
 from bayesmachine.columns import Source
 from bayesmachine.hdl.signatures import load_stream
 from bayesmachine.models import ModelParams, Pass, check_disparity_machine, pass_machine
@@ -95,10 +96,7 @@ def check_frontend_params(params: MachineParams, model: ModelParams) -> None:
     """``ParameterError`` naming the parameter unless the front end can feed this machine this model
     (its own pass; each declared pass runs on a machine of its own beside it, with an on-chip random
     source: it has no entropy port)."""
-    if not isinstance(params, MachineParams):
-        raise ParameterError(f"params must be a MachineParams, not {type(params).__name__}")
-    if not isinstance(model, ModelParams):
-        raise ParameterError(f"model must be a bayesmachine.models.ModelParams, not {type(model).__name__}")
+    check_frontend_types(params, model)
     names = [p.name for p in model.passes]
     for name in names:  # a pass's name names its ports
         if not name.isidentifier() or names.count(name) > 1:
@@ -125,9 +123,8 @@ def pass_params(model: ModelParams, params: MachineParams, name: str) -> Machine
 
 
 def _check_output_columns(p: Pass, output_columns: object) -> int | None:
-    if output_columns is not None and (isinstance(output_columns, bool)
-                                       or not isinstance(output_columns, int)):
-        raise TypeError(f"output_columns must be an integer, not {type(output_columns).__name__}")
+    if output_columns is not None:
+        output_columns = as_int("output_columns", output_columns)
     # An ABOVE column reads a line of the pass's own MAPs: its length is the output row's.
     line = [c.name for c in p.columns if c.source is Source.ABOVE]
     if line and (output_columns is None or output_columns < 1):
@@ -204,10 +201,8 @@ class WordGenerator(wiring.Component):
             _check_pass(model, p, params)
         if tables is not None and not isinstance(tables, FrontEndTables):
             raise TypeError(f"tables must be a FrontEndTables, not {type(tables).__name__}")
-        if not isinstance(leads, bool):
-            raise TypeError(f"leads must be a bool, not {type(leads).__name__}")
         self._output_columns = _check_output_columns(p, output_columns)
-        self._leads = leads
+        self._leads = as_bool("leads", leads)
         self._nets: WordNets | None = None
         self._params = params
         self._model = model

@@ -16,8 +16,8 @@ from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
+from bayesmachine.checks import as_int
 from bayesmachine.columns import Consistency
-from bayesmachine.columns.base import check_int
 from bayesmachine.errors import ParameterError
 from bayesmachine.hdl.signatures import map_layout, map_stream
 from bayesmachine.params import MachineParams
@@ -61,9 +61,8 @@ class ConsistencyTest(wiring.Component):
     """
 
     def __init__(self, *, dmax: int, map_width: int, tolerance: int) -> None:
-        for name, value, low, high in (("dmax", dmax, 0, 4094), ("map_width", map_width, 1, 16),
-                                       ("tolerance", tolerance, 0, 4094)):
-            check_int(name, value, low, high)
+        dmax, map_width, tolerance = (as_int(name, value, low, high) for name, value, low, high in (
+            ("dmax", dmax, 0, 4094), ("map_width", map_width, 1, 16), ("tolerance", tolerance, 0, 4094)))
         self._dmax, self._map_width, self._tolerance = dmax, map_width, tolerance
         super().__init__({
             "shift": In(1),
