@@ -515,8 +515,9 @@ def test_the_board_top_elaborates_without_deprecated_requests() -> None:
     from bayesmachine.hdl.frontend.stereo import stereo_machine_params
     from bayesmachine.models import ModelParams
 
-    core = BoardCore(params=stereo_machine_params(4), model=ModelParams(name="paper", dmax=4), width=16,
-                     clocks_per_bit=15, rx_fifo_log2=12)
+    model = ModelParams(name="paper", dmax=4)
+    core = BoardCore(params=stereo_machine_params(4, model=model), model=model, width=16, clocks_per_bit=15,
+                     rx_fifo_log2=12)
     with warnings.catch_warnings():
         warnings.simplefilter("error", DeprecationWarning)
         plan = ULX3S_85F_Platform().prepare(ULX3STop(core=core, pll=pll_config(45.0)), name="top")
