@@ -25,6 +25,7 @@ from amaranth.hdl import unsigned
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
+from bayesmachine.checks import as_bool
 from bayesmachine.params import MachineParams
 from bayesmachine.sources import source_kind
 
@@ -141,9 +142,7 @@ class MachineSignature(wiring.Signature):
 
     def __init__(self, params: MachineParams, *, entropy: bool = True) -> None:
         self._params = _check_params(params, "MachineSignature")
-        if not isinstance(entropy, bool):
-            raise TypeError(f"entropy must be a bool, not {type(entropy).__name__}")
-        self._entropy = entropy
+        self._entropy = entropy = as_bool("entropy", entropy)
         members = {"load": In(load_stream(params)), "result": Out(result_stream(params))}
         if entropy:
             members |= entropy_members(params)

@@ -40,6 +40,7 @@ import numpy as np
 from numba import literal_unroll
 from numba.extending import overload
 
+from bayesmachine.checks import as_int
 from bayesmachine.columns import AbovePrior, Column, LeftPrior, Source
 from bayesmachine.models import ModelParams, Pass
 from bayesmachine.params import ParameterError
@@ -344,7 +345,7 @@ def _neighbour_args(p: Pass, word_bits: int | None) -> tuple:
 
 
 def _check_word_bits(word_bits: int) -> None:
-    if isinstance(word_bits, bool) or not isinstance(word_bits, int) or not 1 <= word_bits <= 15:
+    if not 1 <= as_int("word_bits", word_bits) <= 15:
         raise ParameterError(f"word_bits: words of 1 to 15 bits, got {word_bits!r}", "word_bits")
 
 

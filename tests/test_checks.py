@@ -218,3 +218,69 @@ def test_an_impossible_value_for_the_front_end_is_a_parameter_error_naming_it(co
     with pytest.raises(ParameterError) as info:
         _front_end(component, **{name: value})
     assert info.value.parameter == name and str(info.value).startswith(name)
+
+
+# --- The machine's, the board's, the formal wrappers' and the devices' parameters: the same rule ---
+
+def _parts() -> dict[str, object]:
+    from bayesmachine.fpga.boards import protocol as pr
+    from bayesmachine.fpga.boards.arbiter import TransmitArbiter
+    from bayesmachine.fpga.boards.build import uart_clocks_per_bit
+    from bayesmachine.fpga.boards.serializer import ResultSerializer
+    from bayesmachine.hdl.formal.counter import CounterProperties
+    from bayesmachine.hdl.formal.runner import sby_text
+    from bayesmachine.hdl.machine.encoder import MAPEncoder
+    from bayesmachine.hdl.signatures import MachineSignature
+    from bayesmachine.sources.smtj import TelegraphBank
+
+    params = MachineParams.for_disparity(4, rng="lfsr")
+    return {
+        "pass_tag": lambda v: pr.pass_tag(v),
+        "arbiter": lambda v: len(TransmitArbiter(results=v).results),
+        "serializer": lambda v: ResultSerializer(params=params, tag=v).tag,
+        "baud": lambda v: uart_clocks_per_bit(25.0, v),
+        "counter": lambda v: CounterProperties(n_max=v).n_max,
+        "depth": lambda v: sby_text("bmc", v).split("depth ")[1].split()[0],
+        "encoder": lambda v: MAPEncoder(rows=6, nomatch_row=v).nomatch_row,
+        "signature": lambda v: sorted(MachineSignature(params, entropy=v).members),
+        "devices": lambda v: TelegraphBank(v, 3.0).devices,
+        "spread": lambda v: TelegraphBank(2, 3.0, spread=v).tau.tolist(),
+    }
+
+
+@pytest.mark.parametrize(("part", "value", "plain_value"), [
+    ("pass_tag", np.int64(1), 1), ("arbiter", np.uint8(2), 2), ("serializer", np.int32(ord("a")), ord("a")),
+    ("baud", np.int64(115200), 115200), ("counter", np.int16(3), 3), ("depth", np.int64(7), 7),
+    ("encoder", np.True_, True), ("signature", np.True_, True), ("devices", np.int64(3), 3),
+    ("spread", np.float32(0.25), 0.25),
+])
+def test_numpy_scalars_are_taken_as_their_python_values(part, value, plain_value) -> None:
+    read = _parts()[part]
+    assert read(value) == read(plain_value)
+
+
+@pytest.mark.parametrize(("part", "value", "message"), [
+    ("pass_tag", 1.0, "index must be an integer, not float"),
+    ("arbiter", True, "results must be an integer, not bool"),
+    ("serializer", "R", "tag must be an integer, not str"),
+    ("baud", 9600.0, "baud must be an integer, not float"),
+    ("counter", 2.0, "n_max must be an integer, not float"),
+    ("depth", True, "depth must be an integer, not bool"),
+    ("encoder", 1, "nomatch_row must be True or False, not int 1"),
+    ("signature", 0, "entropy must be True or False, not int 0"),
+    ("devices", 2.0, "devices must be an integer, not float"),
+    ("spread", "0.1", "spread must be a number, not str"),
+])
+def test_a_wrong_type_is_a_type_error_in_every_part(part, value, message) -> None:
+    with pytest.raises(TypeError, match=f"^{message}"):
+        _parts()[part](value)
+
+
+@pytest.mark.parametrize(("part", "value", "parameter"), [
+    ("pass_tag", 9, "index"), ("arbiter", 10, "results"), ("serializer", 5, "tag"), ("baud", 0, "baud"),
+    ("counter", 0, "n_max"), ("depth", 0, "depth"), ("devices", 0, "devices"), ("spread", 1.5, "spread"),
+])
+def test_an_impossible_value_is_a_parameter_error_naming_it_in_every_part(part, value, parameter) -> None:
+    with pytest.raises(ParameterError) as info:
+        _parts()[part](value)
+    assert info.value.parameter == parameter and parameter in str(info.value)

@@ -37,12 +37,12 @@ that column (W per column instead of W per operator), like the shared pseudo-ran
 
 from __future__ import annotations
 
-import math
 from typing import TYPE_CHECKING
 
 import numba
 import numpy as np
 
+from bayesmachine.checks import as_int, as_real
 from bayesmachine.errors import ParameterError
 
 if TYPE_CHECKING:
@@ -132,10 +132,8 @@ class TelegraphBank:
         seed: int = 1,
         stream: int = 0,
     ) -> None:
-        if isinstance(devices, bool) or not isinstance(devices, int) or devices < 1:
-            raise ParameterError(f"devices must be a positive integer, got {devices!r}")
-        if not (isinstance(spread, (int, float)) and math.isfinite(spread) and 0 <= spread <= 1):
-            raise ParameterError(f"spread (log-sd of each dwell time) must lie in [0, 1], got {spread!r}")
+        devices = as_int("devices", devices, 1)
+        spread = as_real("spread", spread, 0, 1, " (log-sd of each dwell time)")
         tau0, tau1 = dwells(np.broadcast_to(tau, devices), np.broadcast_to(bias, devices))
         ss = np.random.SeedSequence([int(seed), _TAG_SMTJ, int(stream)])
         gen = np.random.Generator(np.random.PCG64(ss))
@@ -175,6 +173,7 @@ class TelegraphBank:
 
     def take(self, count: int) -> np.ndarray:
         """The next ``count`` cycles' device states, shape (count, devices), uint8."""
+        count = as_int("count", count, 0)
         out = np.empty((count, self.devices), np.uint8)
         self.read(count, np.arange(self.devices, dtype=np.int64)[:, None], out)
         return out
@@ -218,10 +217,9 @@ class SMTJSource:
 
     def take(self, count: int) -> np.ndarray:
         """The next ``count`` compute cycles' numbers: (count, operators) uint16 in [0, 2**W)."""
-        if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 0:
-            raise ValueError(f"count must be a non-negative integer, got {count!r}")
-        out = np.empty((int(count), self.operators), np.uint16)
-        self.bank.read(int(count), self._index, out)
+        count = as_int("count", count, 0)
+        out = np.empty((count, self.operators), np.uint16)
+        self.bank.read(count, self._index, out)
         return out
 
 

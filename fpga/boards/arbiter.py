@@ -12,6 +12,8 @@ from amaranth.hdl import Module, Signal, Value
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
+from bayesmachine.checks import as_int
+
 from .streams import packet_layout
 
 __all__ = ["TransmitArbiter", "TransmitArbiterTwin"]
@@ -38,11 +40,7 @@ class TransmitArbiter(wiring.Component):
     """
 
     def __init__(self, *, results: int = 1) -> None:
-        if isinstance(results, bool) or not isinstance(results, int):
-            raise TypeError(f"results must be an integer, not {type(results).__name__}")
-        if not 1 <= results <= 9:
-            raise ValueError(f"results must be in [1, 9], got {results}")
-        self._results = results
+        self._results = results = as_int("results", results, 1, 9)
         packets = stream.Signature(packet_layout())
         super().__init__({"control": In(packets), "results": In(packets).array(results),
                           "bytes": Out(stream.Signature(8)), "busy": Out(1)})

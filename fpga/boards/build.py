@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from bayesmachine.checks import as_int
 from bayesmachine.cliargs import DEFAULT_BAUD
 from bayesmachine.fpga import flow
 from bayesmachine.fpga.targets import ecp5_device_args
@@ -55,8 +56,7 @@ def _sync_clock(report: dict, freq_mhz: float) -> tuple[str, dict]:
 def uart_clocks_per_bit(freq_mhz: float, baud: int) -> int:
     """The UART's clocks per bit at ``baud`` from a ``freq_mhz`` clock; ValueError unless a UART can
     run there (at least 4 clocks per bit, within 2 % of the baud asked for)."""
-    if isinstance(baud, bool) or not isinstance(baud, int) or baud <= 0:
-        raise ValueError(f"--baud must be a positive integer, got {baud!r}")
+    baud = as_int("baud", baud, 1)
     cpb = round(freq_mhz * 1e6 / baud)
     actual = freq_mhz * 1e6 / max(cpb, 1)
     if cpb < 4 or abs(actual - baud) / baud > 0.02:

@@ -15,6 +15,8 @@ from amaranth.hdl import C, Cat, Const, Module, Mux, Signal, Value
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
+from bayesmachine.checks import as_int
+from bayesmachine.errors import ParameterError
 from bayesmachine.region import OutputRegion
 
 from . import protocol as pr
@@ -85,11 +87,10 @@ class ProtocolControl(wiring.Component):
             raise ValueError(f"info must be {pr.PAYLOAD_BYTES} bytes (protocol.info_payload), got {info!r}")
         own = self._region.shape[1]
         row_results = own if row_results is None else row_results
-        if isinstance(row_results, bool) or not isinstance(row_results, int):
-            raise TypeError(f"row_results must be an integer, not {type(row_results).__name__}")
+        row_results = as_int("row_results", row_results)
         if not own <= row_results < 1 << 16:
-            raise ValueError(f"row_results must be in [{own}, 65535] (the own pass's {own} and the declared "
-                             f"passes'), got {row_results}")
+            raise ParameterError(f"row_results must be in [{own}, 65535] (the own pass's {own} and the "
+                                 f"declared passes'), got {row_results}", "row_results")
         self._row_results = row_results
         self._info = info
         super().__init__({

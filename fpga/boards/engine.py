@@ -17,8 +17,9 @@ import time
 
 import numpy as np
 
-from bayesmachine.checks import as_int
+from bayesmachine.checks import as_int, as_real
 from bayesmachine.cliargs import DEFAULT_BAUD
+from bayesmachine.errors import ParameterError
 from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.engines import PixelEngineBase
@@ -89,10 +90,8 @@ class BoardEngine(PixelEngineBase):
         if not isinstance(port, str):
             raise TypeError(f"port must be a path (str), not {type(port).__name__}")
         baud = as_int("baud", baud, 1)
-        if isinstance(timeout, bool) or not isinstance(timeout, (int, float)):
-            raise TypeError(f"timeout must be a number of seconds, not {type(timeout).__name__}")
-        if not timeout > 0:
-            raise ValueError(f"timeout must be positive, got {timeout}")
+        if not as_real("timeout", timeout) > 0:
+            raise ParameterError(f"timeout must be positive (seconds), got {timeout}", "timeout")
         _fields(fields)
 
     def _check_board(self) -> pr.BoardInfo:

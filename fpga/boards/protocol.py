@@ -34,6 +34,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from bayesmachine.checks import as_int
+from bayesmachine.errors import ParameterError
+
 __all__ = [
     "BoardInfo",
     "CONTROL_TYPES",
@@ -71,8 +74,10 @@ MAX_PASSES = 8  # declared passes a board carries: tags 'a' .. 'h'
 def pass_tag(index: int) -> int:
     """The tag of a result record of the model's declared pass ``index`` (0: the first of
     ``model.passes``): ``'a'``, ``'b'``, ..."""
-    if isinstance(index, bool) or not isinstance(index, int) or not 0 <= index < MAX_PASSES:
-        raise ValueError(f"a board carries at most {MAX_PASSES} declared passes, got pass index {index!r}")
+    index = as_int("index", index)
+    if not 0 <= index < MAX_PASSES:
+        raise ParameterError(f"index: a board carries at most {MAX_PASSES} declared passes, got pass index "
+                             f"{index}", "index")
     return ord("a") + index
 
 # Record types.

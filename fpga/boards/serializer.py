@@ -20,6 +20,7 @@ from amaranth.hdl import Array, C, Cat, Module, Mux, Signal, Value
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
+from bayesmachine.checks import as_int
 from bayesmachine.hdl.signatures import result_layout
 from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams, ParameterError
@@ -136,10 +137,9 @@ class ResultSerializer(wiring.Component):
     def __init__(self, *, params: MachineParams, tag: int = pr.RESULT_TAG) -> None:
         if not isinstance(params, MachineParams):
             raise TypeError(f"params must be a MachineParams, not {type(params).__name__}")
-        if isinstance(tag, bool) or not isinstance(tag, int):
-            raise TypeError(f"tag must be an integer, not {type(tag).__name__}")
+        tag = as_int("tag", tag)
         if tag not in (pr.RESULT_TAG, *map(pr.pass_tag, range(pr.MAX_PASSES))):
-            raise ValueError(f"tag must be 'R' or a pass's tag ('a' ...), got {tag!r}")
+            raise ParameterError(f"tag must be 'R' or a pass's tag ('a' ...), got {tag}", "tag")
         self._params = params
         self._tag = tag
         super().__init__({

@@ -11,6 +11,7 @@ from amaranth.hdl import Assert, Cover, Module, Mux, Signal, Value
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In
 
+from bayesmachine.checks import as_int
 from bayesmachine.hdl.machine.counters import overflow_counter_full
 
 __all__ = ["CounterFn", "CounterProperties"]
@@ -45,10 +46,7 @@ class CounterProperties(wiring.Component):
 
     def __init__(self, *, n_max: int, counter: CounterFn = overflow_counter_full,
                  clear_full: bool = True) -> None:
-        if isinstance(n_max, bool) or not isinstance(n_max, int):
-            raise TypeError(f"n_max must be an integer, not {type(n_max).__name__}")
-        if n_max < 1:
-            raise ValueError(f"n_max must be >= 1, got {n_max}")
+        n_max = as_int("n_max", n_max, 1)
         if not callable(counter):
             raise TypeError("counter must be callable")
         self._n_max = n_max

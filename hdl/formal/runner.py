@@ -21,6 +21,8 @@ from pathlib import Path
 from amaranth.back import rtlil
 from amaranth.lib import wiring
 
+from bayesmachine.checks import as_int
+from bayesmachine.errors import ParameterError
 from bayesmachine.tools import tool_process, user_cache_dir, which
 
 __all__ = [
@@ -78,9 +80,8 @@ def sby_text(mode: str, depth: int, top: str = "top") -> str:
     """The ``.sby`` file of one run: ``mode`` (``bmc``, ``prove`` = k-induction, ``cover``) to
     ``depth`` steps, the ``smtbmc`` engine with Yices, the design in ``top.il``."""
     if mode not in MODES:
-        raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
-    if isinstance(depth, bool) or not isinstance(depth, int) or depth < 1:
-        raise ValueError(f"depth must be a positive integer, got {depth!r}")
+        raise ParameterError(f"mode must be one of {MODES}, got {mode!r}", "mode")
+    depth = as_int("depth", depth, 1)
     return (
         "[options]\n"
         f"mode {mode}\n"

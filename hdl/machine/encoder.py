@@ -20,7 +20,7 @@ from amaranth.hdl import Cat, Const, Module, Mux, Value
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
-from bayesmachine.checks import as_int
+from bayesmachine.checks import as_bool, as_int
 from bayesmachine.params import TIE_BREAKS, ParameterError
 
 __all__ = ["MAPEncoder", "map_encoder", "map_encoder_twin"]
@@ -94,16 +94,15 @@ class MAPEncoder(wiring.Component):
 
     def __init__(self, *, rows: int, nomatch_row: bool = False, tie_break: str = "nomatch-first") -> None:
         rows = as_int("rows", rows, 1)
-        if not isinstance(nomatch_row, bool):
-            raise TypeError(f"nomatch_row must be a bool, not {type(nomatch_row).__name__}")
+        nomatch_row = as_bool("nomatch_row", nomatch_row)
         if not isinstance(tie_break, str):
             raise TypeError(f"tie_break must be a str, not {type(tie_break).__name__}")
         if tie_break not in TIE_BREAKS:
-            raise ParameterError(f"tie_break must be one of {TIE_BREAKS}, got {tie_break!r}")
+            raise ParameterError(f"tie_break must be one of {TIE_BREAKS}, got {tie_break!r}", "tie_break")
         if nomatch_row and rows < 2:
             raise ParameterError("an encoder with a no-match row needs at least 2 rows")
         self._rows = rows
-        self._nomatch_row = bool(nomatch_row)
+        self._nomatch_row = nomatch_row
         self._tie_break = tie_break
         super().__init__({"over": In(rows), "valid": Out(1), "index": Out(_index_width(rows))})
 
