@@ -220,7 +220,7 @@ def _report(outcome: RunOutcome, source: str, crop: Crop | None) -> dict[str, ob
 
 
 def _write_json(path: Path, obj: object) -> None:
-    from .metrics import json_safe
+    from ..metrics import json_safe
 
     path.write_text(json.dumps(json_safe(obj), indent=2, allow_nan=False) + "\n")
 
@@ -249,7 +249,7 @@ def _summary(r: dict[str, object]) -> str:
         line += f"\n  wall cycles per pixel, loading included: {f('wall_cycles_per_pixel', '.2f')}"
 
     if r.get("ground_truth_pixels") == 0:
-        from .metrics import NO_KNOWN_GT
+        from ..metrics import NO_KNOWN_GT
 
         line += f"\n  {NO_KNOWN_GT}"
     elif r.get("machine_bad2") is not None or r.get("ground_truth"):
@@ -400,7 +400,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         if outcome.run.engine_figures is not None:
             report[args.engine] = outcome.run.engine_figures  # the board's link: wall time, bytes, attempts
         if report.get("ground_truth_pixels") == 0 and args.quiet:  # the summary says it otherwise
-            from .metrics import NO_KNOWN_GT
+            from ..metrics import NO_KNOWN_GT
 
             print(f"bayesmachine run: note: {NO_KNOWN_GT}", file=sys.stderr)
         _write_run_outputs(out, args, outcome, report, left, calib)
@@ -438,7 +438,7 @@ def _write_run_outputs(out: OutputDir, args: argparse.Namespace, outcome: RunOut
                        report: dict[str, object], left: np.ndarray, calib: StereoCalibration | None) -> None:
     """Stage result.npz and the figures (and depth.npy, cloud.ply with a calibration); add the
     thresholded density and the cloud's figures to ``report``."""
-    from .plots import save_calibration_figure, save_confidence_figure, save_disparity_figure
+    from ..plots import save_calibration_figure, save_confidence_figure, save_disparity_figure
 
     run, prep, metrics = outcome.run, outcome.prepared, outcome.metrics
     region, dmax = prep.region, prep.model.dmax
@@ -494,8 +494,8 @@ def _write_run_outputs(out: OutputDir, args: argparse.Namespace, outcome: RunOut
 def _kept_figures(shown: np.ndarray, gt: np.ndarray | None, threshold: float) -> dict[str, object]:
     """``--min-confidence``: the density kept (pixels with a disparity over all output pixels) and,
     with ground truth, bad-2 of the kept pixels."""
-    from .confidence import BAD_THRESHOLD
-    from .metrics import bad_rates
+    from ..confidence import BAD_THRESHOLD
+    from ..metrics import bad_rates
 
     kept = shown >= 0
     figures: dict[str, object] = {"threshold": threshold, "density": float(kept.mean()),
@@ -508,7 +508,7 @@ def _kept_figures(shown: np.ndarray, gt: np.ndarray | None, threshold: float) ->
 def _write_cloud(out: OutputDir, args: argparse.Namespace, report: dict[str, object], region: OutputRegion,
                  shown: np.ndarray, maps: object, calib: StereoCalibration) -> None:
     """depth.npy (metres, NaN: no match or blanked, inf: at infinity) and cloud.ply of ``shown``."""
-    from .cloud import left_colours, point_cloud, write_ply
+    from ..cloud import left_colours, point_cloud, write_ply
 
     depth = calib.depth(shown).astype(np.float32)
     colours = left_colours(args.left, args.crop)
