@@ -134,8 +134,8 @@ def test_help_states_each_commands_default(capsys):
         assert model_help(*command).startswith(want), command
 
 
-@pytest.mark.parametrize("command", [["run"], ["reference"], ["sweep"], ["emit"], ["synth"], ["board", "build"],
-                                     ["board", "simulate"]])
+@pytest.mark.parametrize("command", [["run"], ["reference"], ["sweep"], ["emit"], ["synth"],
+                                     ["board", "build"], ["board", "simulate"]])
 def test_help_is_text(command, capsys):
     """Every help text is words: a help given as a function (read when the parser is built) is called,
     never shown as its repr (sweep's --normalize-columns once read "<function <lambda> at 0x...>")."""
