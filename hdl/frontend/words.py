@@ -107,9 +107,9 @@ def check_frontend_params(params: MachineParams, model: ModelParams) -> None:
     _check_pass(model, model.passes[-1], params)
     for p in declared_passes(model):
         if not source_kind(params.rng).on_chip:
-            raise ParameterError(f"rng: the {model.name} model's {p.name} pass runs on chip on a machine of "
-                                 "its own, which has no entropy port: it needs an on-chip random source, "
-                                 f"got {params.rng!r}", "rng")
+            raise ParameterError(f"rng must be an on-chip random source for the {model.name} model on chip, "
+                                 f"got {params.rng!r}: its {p.name} pass runs on a machine of its own, "
+                                 "which has no entropy port", "rng")
         _check_pass(model, p, pass_params(model, params, p.name))
 
 

