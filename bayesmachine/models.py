@@ -110,6 +110,8 @@ PAPER = ModelDef(
     name="paper", description="the paper's m, gH, gV columns (and with --gradient-magnitude a "
     "gradient-magnitude column)", columns=(Mean, GradH, GradV, GradMag),
     switches={GRADIENT_MAGNITUDE: (GradMag,)})
+# census keeps one operator column per piece of evidence by default: it is the design emit, synth and
+# board build, and its fused design has not been placed, routed and measured on the board; census-lr fuses.
 CENSUS = ModelDef(
     name="census", description="+ a census column, a no-match row calibrated for it and the raster-order "
     "neighbour prior on the machine's own results",
@@ -123,7 +125,7 @@ CENSUS_LR = ModelDef(
     passes=(PassDef(name=RIGHT_PASS, model="census", reference="right", machine_index=1,
                     nomatch_option="lr_right_nomatch", watchdog_option="lr_right_max_cycles",
                     not_inherited=("prior_nomatch",), watchdog_runs=RIGHT_WATCHDOG_RUNS),),
-    defaults={"prior_nomatch": 0.1, "fuse_columns": False},
+    defaults={"prior_nomatch": 0.1},
     requires={"neighbour_prior": (True, "both passes use it")},
     watchdog_runs=CENSUS_WATCHDOG_RUNS, timeout_answer=CENSUS_TIMEOUT_ANSWER, normalize=True)
 

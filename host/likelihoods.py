@@ -97,7 +97,8 @@ def pass_context(p: Pass, left: Planes, right: Planes, word_bits: int | None, *,
     grids = {q.name: (g.first, g.width) for q in p.model.passes for g in (pass_grid(q, region),)}
     return PassContext(where=p.where, reference=ref.band(band), match=other.band(band), columns=grid.columns,
                        match_columns=grid.match, valid=grid.valid, nomatch=p.nomatch, word_bits=word_bits,
-                       above=above, results=dict(results or {}), grids=grids, rule=p.model.nomatch)
+                       above=above, results=dict(results or {}), grids=grids, rule=p.model.nomatch,
+                       nomatch_live=p.nomatch and not any(c.zeroes_nomatch for c in p.columns))
 
 
 def _given(words: np.ndarray, shape: tuple[int, int]) -> np.ndarray:

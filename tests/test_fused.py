@@ -10,12 +10,13 @@ import pytest
 
 from bayesmachine.columns import Census, Fused, GradH, GradV, LeftPrior, Mean, energy_codes, exp_table, fused
 from bayesmachine.host.features import model_planes
-from bayesmachine.host.images import random_dot_stereogram
+from bayesmachine.host.images import bundled_pair, random_dot_stereogram
 from bayesmachine.host.likelihoods import likelihoods_plain, memory_words, pass_grid, pass_words
-from bayesmachine.host.reference import reference_fast
+from bayesmachine.host.reference import declared_maps, reference_fast, reference_quantized
 from bayesmachine.host.run import prepare, run_machine
 from bayesmachine.modeldef import ModelDef
 from bayesmachine.models import ModelParams, disparity_machine, pass_machine
+from bayesmachine.params import ParameterError
 from bayesmachine.region import OutputRegion
 
 
@@ -117,3 +118,51 @@ def test_a_fused_column_takes_every_features_column_of_its_pass() -> None:
         ModelDef(name="fused-and-census", description="x", columns=(fused(Mean, GradH, GradV), Census))
     with pytest.raises(ValueError, match="column m is listed twice"):
         ModelDef(name="m-twice", description="x", columns=(Mean, GradH, Mean))
+
+
+# --- The models: census-lr fused by default, census per column (the board's design) ---
+
+def test_defaults_and_the_per_column_option() -> None:
+    assert [c.name for c in ModelParams(name="census-lr").columns] == [
+        "left-prior", "above-prior", "fused", "lr"]
+    assert [c.name for c in ModelParams(name="census-lr").pass_named("right").columns] == [
+        "left-prior", "above-prior", "fused"]
+    assert [c.name for c in ModelParams(name="census-lr", fuse_columns=False).columns] == [
+        "left-prior", "above-prior", "m", "gh", "gv", "census", "lr"]
+    assert [c.name for c in ModelParams(name="census").columns] == [
+        "left-prior", "above-prior", "m", "gh", "gv", "census"]
+    assert ModelParams(name="census-lr").to_dict()["fuse_columns"] is True
+    assert "fuse_columns" not in ModelParams(name="paper").to_dict()
+    with pytest.raises(ParameterError, match="fuse_columns"):
+        ModelParams(name="paper", fuse_columns=True)
+
+
+def _crop() -> tuple[np.ndarray, ...]:
+    left, right, gt = bundled_pair()
+    return tuple(np.ascontiguousarray(a[200:224, 300:420]) for a in (left, right, gt))
+
+
+@pytest.mark.parametrize(("keywords", "left", "right", "nomatch", "timeouts"), [
+    ({}, 35483, 39033, 105, 15),
+    ({"fuse_columns": False}, 46225, 47462, 105, 37),
+    # No no-match row in the left pass: the fused column's minimum leaves it out (else a pixel whose
+    # best row is the no-match row would have every word 0 after the consistency column).
+    ({"lr_nomatch": False}, 34537, 39033, 0, 9),
+])
+def test_census_lr_on_a_crop(keywords: dict, left: int, right: int, nomatch: int, timeouts: int) -> None:
+    """Measured: the bundled pair's rows 200..223, columns 300..419, Dmax 64 (the default's cycles)."""
+    model = ModelParams(name="census-lr", dmax=64, **keywords)
+    left_image, right_image, gt = _crop()
+    prep = prepare(left_image, right_image, model, gt)
+    run = run_machine(prep, disparity_machine(model), progress=False)
+    assert (int(run.cycles.sum()), int(run.passes["right"].cycles.sum())) == (left, right)
+    assert (int(run.nomatch.sum()), int(run.timeout.sum())) == (nomatch, timeouts)
+
+
+def test_no_match_row_that_cannot_win_reads_zero(pair) -> None:
+    model = ModelParams(name="census-lr", dmax=6, lr_nomatch=False)
+    left, right = _planes(pair, model)
+    q = reference_quantized(left, right, model, 8, results={"right": declared_maps(model, left, right, 8)[
+        "right"]})
+    assert np.isfinite(q.posterior).all() and (q.map >= 0).all()
+

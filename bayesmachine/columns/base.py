@@ -313,6 +313,11 @@ class Column(Term):
         """The yes/no options of its own that :meth:`expand` reads."""
         return ()
 
+    @property
+    def zeroes_nomatch(self) -> bool:
+        """Whether its no-match entry is 0 in every pixel: the pass's no-match row never wins."""
+        return False
+
     def factors(self) -> tuple[Column, ...]:
         """The columns whose float64 factors, multiplied in order, are its own (itself; a fused column:
         its members): what the float64 reference multiplies."""
@@ -390,6 +395,9 @@ class PassContext:
         Each pass's (first map column, width), by pass name.
     rule : Term or None
         The pass's no-match rule (what a column whose words hold it reads: the fused column).
+    nomatch_live : bool
+        Whether the pass's no-match row can win: False when a column of the pass zeroes it in every
+        pixel (the consistency column without ``lr_nomatch``).
     """
 
     where: str
@@ -404,6 +412,7 @@ class PassContext:
     results: Mapping[str, np.ndarray] = field(default_factory=dict)
     grids: Mapping[str, tuple[int, int]] = field(default_factory=dict)
     rule: Term | None = None
+    nomatch_live: bool = True
 
     @property
     def rows(self) -> int:

@@ -128,6 +128,10 @@ class Consistency(Column):
     def has_nomatch(self) -> bool:
         return bool(self.values["lr_nomatch"])
 
+    @property
+    def zeroes_nomatch(self) -> bool:
+        return not self.has_nomatch
+
     def costs(self) -> np.ndarray:
         return np.arange(2)  # 0: consistent (or neutral), 1: not
 

@@ -8,11 +8,14 @@ up to a factor common to the pixel's rows:
     S_r    = Σ_k E_k[cost_k(r)]                  member k's code at the row's cost
     S_nm   = E_rule[cost] + Σ_{k ≥ 1} E_k(nm)    the no-match row: the pass's no-match rule in the place
                                                  of the first member's entry, as the per-column machine
-    S_min  = min of S over the pixel's rows with a match pixel, S_nm too when the pass has a no-match row
+    S_min  = min of S over the pixel's rows with a match pixel, S_nm too when the pass's no-match row
+             can win (``PassContext.nomatch_live``: not zeroed by another column, as census-lr's
+             consistency column without ``lr_nomatch``)
     word_r = X[min(S_r − S_min, len(X) − 1)]     X = exp_table(W)
 
 so the best row's word is 2^W and fires every cycle. A lane without a match pixel gets 0; a pass without
-a no-match row has 0 there (as every FEATURES column of the per-column machine). What is dynamic (the
+a no-match row has 0 there (as every FEATURES column of the per-column machine), and so has a pass whose
+no-match row cannot win. What is dynamic (the
 neighbour prior, the left-right column) stays in operator columns of its own: the machine fuses it
 stochastically and its counters keep the distribution.
 
@@ -127,13 +130,13 @@ class Fused(Column):
         valid = (np.ones(s.shape, bool) if ctx.valid is None
                  else np.broadcast_to(ctx.valid[None], (ctx.rows, *ctx.valid.shape)).reshape(s.shape))
         low = np.where(valid, s, np.iinfo(np.int64).max).min(axis=1)
-        if ctx.nomatch:
+        if ctx.nomatch_live:
             low = np.minimum(low, nm)
         x = self.exp_table(ctx.word_bits)
         top = x.size - 1
         out = np.empty((n, s.shape[1] + 1), np.uint16)
         out[:, :-1] = np.where(valid, x[np.clip(s - low[:, None], 0, top)], 0)
-        out[:, -1] = x[np.minimum(nm - low, top)] if ctx.nomatch else 0
+        out[:, -1] = x[np.minimum(nm - low, top)] if ctx.nomatch_live else 0
         return out
 
     def _factors(self, ctx: PassContext) -> np.ndarray:
