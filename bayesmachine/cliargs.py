@@ -208,7 +208,7 @@ class MachineOption:
     def add_to(self, group: argparse._ActionsContainer, **changes: Any) -> argparse.Action:
         if self.is_flag and changes.pop("values", False):
             # A sweep's axis: --x (on), --x on,off (both: a grid axis) and --no-x (off).
-            text = changes.pop("help", self.help)
+            text = changes.pop("help", self.help_text)
             group.add_argument(self.flag, dest=self.field, nargs="?", const=True, type=on_off_list,
                                default=None, metavar="on,off", help=f"{text}; {self.flag} on,off sweeps both")
             return group.add_argument(f"--no-{self.flag[2:]}", dest=self.field, action="store_const",

@@ -18,14 +18,12 @@ from __future__ import annotations
 
 import argparse
 import hashlib
-import ipaddress
 import itertools
 import json
 import logging
 import math
 import os
 import re
-import socket
 import sys
 import threading
 import time
@@ -54,6 +52,7 @@ from bayesmachine.params import MachineParams
 from .datasets import PairSpec, load_pair
 from .images import Crop
 from .run import prepare, run_pair
+from .scheduler import connect
 
 __all__ = [
     "SWEEP_OUTPUTS",
@@ -70,8 +69,6 @@ __all__ = [
     "make_tasks",
     "run_task",
     "run_sweep",
-    "connect",
-    "parse_scheduler",
     "strip_timings",
 ]
 
@@ -370,92 +367,6 @@ def _describe(exc: BaseException) -> str:
     return text if isinstance(exc, (ValueError, OSError)) and text else f"{name}: {text}"
 
 
-def parse_scheduler(text: str) -> str:
-    """``--scheduler``: ``tcp://HOST:PORT`` or ``HOST:PORT`` (as ``tcp://HOST:PORT``); anything else is
-    one ValueError at once, before any connection is tried."""
-    t = text.strip()
-    if not t:
-        raise ValueError("the scheduler's address is empty (an unset variable?); give tcp://HOST:PORT")
-    m = re.fullmatch(r"(?:([A-Za-z][A-Za-z0-9+.-]*)://)?(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9._-]+)(?::(\d+))?", t)
-    if m is None or (m[1] or "tcp").lower() != "tcp" or m[3] is None or not 1 <= int(m[3]) <= 65535:
-        why = ("not tcp://" if m is not None and (m[1] or "tcp").lower() != "tcp"
-               else "no port" if m is not None and m[3] is None else "not HOST:PORT")
-        raise ValueError(f"expected a Dask scheduler's address tcp://HOST:PORT (port 1 to 65535; Dask's "
-                         f"default is 8786), got {text!r} ({why})")
-    return f"tcp://{m[2]}:{int(m[3])}"
-
-
-def _is_local(host: str) -> bool:
-    """``host`` is this machine (a loopback address, or its own name)."""
-    host = host.strip("[]")
-    if host in ("localhost", socket.gethostname(), socket.getfqdn()):
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:  # a name
-        pass
-    try:
-        return ipaddress.ip_address(socket.gethostbyname(host)).is_loopback
-    except (OSError, ValueError):
-        return False
-
-
-async def _identity(address: str, timeout: float) -> dict[str, Any]:
-    from distributed.comm import connect as comm_connect
-
-    comm = await comm_connect(address, timeout=timeout)  # retries until the timeout
-    try:
-        await comm.write({"op": "identity", "reply": True})
-        return await comm.read()
-    finally:
-        comm.abort()
-
-
-def _check_scheduler(address: str, timeout: float) -> None:
-    """ValueError unless a Dask scheduler answers at ``address`` within ``timeout`` s: at once when
-    nothing listens on this machine (no scheduler can start there meanwhile but the user's own);
-    without building a Dask client, whose failed start leaves noise behind."""
-    import asyncio
-
-    host, port = address[len("tcp://"):].rsplit(":", 1)
-    if _is_local(host):
-        try:
-            socket.create_connection((host.strip("[]"), int(port)), timeout=min(timeout, 2.0)).close()
-        except ConnectionRefusedError:
-            raise ValueError(f"--scheduler {address}: nothing listens there (start one with 'dask scheduler "
-                             f"--port {port}')") from None
-        except OSError:
-            pass  # left to the full attempt below, which says what happened
-    try:
-        reply = asyncio.run(asyncio.wait_for(_identity(address, timeout), timeout + 1.0))
-    except Exception as exc:  # OSError (refused, timeout), garbage from a peer that is not Dask
-        detail = " ".join(str(exc).split()) or type(exc).__name__
-        raise ValueError(f"--scheduler {address}: no Dask scheduler answered within {timeout:g} s "
-                         f"({detail[:200]})") from None
-    if not isinstance(reply, dict) or reply.get("type") != "Scheduler":
-        raise ValueError(f"--scheduler {address}: something answered there, but not a Dask scheduler")
-
-
-def connect(address: str, timeout: float) -> Any:
-    """A Dask client of the scheduler at ``address`` (:func:`parse_scheduler`'s form) with at least one
-    worker, or ValueError within ``timeout`` seconds per step (never a hang)."""
-    from distributed import Client
-
-    _check_scheduler(address, timeout)
-    try:
-        client = Client(address, timeout=f"{timeout}s", set_as_default=False)
-    except Exception as exc:  # the scheduler went away since it answered
-        raise ValueError(f"--scheduler {address}: no Dask scheduler answered within {timeout:g} s "
-                         f"({' '.join(str(exc).split()) or type(exc).__name__})") from None
-    try:
-        client.wait_for_workers(1, timeout=timeout)
-    except Exception:
-        client.close()
-        raise ValueError(f"--scheduler {address}: the scheduler has no worker (start some with "
-                         f"'dask worker {address}')") from None
-    return client
-
-
 def _local_cluster(workers: int, processes: bool = True) -> Any:
     from distributed import Client, LocalCluster
 
@@ -560,6 +471,37 @@ def strip_timings(obj: Any) -> Any:
     return obj
 
 
+def _pair_entries(config: SweepConfig, records: dict[tuple[str, str], dict[str, Any]]
+                  ) -> tuple[list[dict[str, Any]], dict[str, float]]:
+    """Each pair's entry of sweep.json (its figures per point) and the reference's seconds per model."""
+    points, pairs = config.points, config.pairs
+    ref_seconds: dict[str, float] = {}
+    pair_entries = []
+    for pr in pairs:
+        results = {}
+        info: dict[str, Any] = {}
+        for point in points:
+            rec = records.get((pr.name, point.id))
+            if rec is None:
+                continue
+            results[point.id] = rec["report"]
+            if not info:
+                info = {k: rec[k] for k in ("image_shape", "output_shape", "ground_truth")}
+            elif rec["output_shape"] != info["output_shape"]:
+                # A model of another margin (census 7x7) has its own output region.
+                results[point.id] = {**rec["report"], "output_shape": rec["output_shape"]}
+            # The reference is computed once per pair and model: count it once.
+            key = f"{pr.name}\0{point.model.name}"
+            if key not in ref_seconds:
+                ref_seconds[key] = rec["report"].get("reference_seconds") or 0.0
+        pair_entries.append({**pr.to_dict(), **info, "results": results})
+    by_model: dict[str, float] = {}
+    for key, s in ref_seconds.items():
+        name = key.split("\0", 1)[1]
+        by_model[name] = by_model.get(name, 0.0) + s
+    return pair_entries, by_model
+
+
 def _aggregate(config: SweepConfig, records: dict[tuple[str, str], dict[str, Any]],
                failures: list[TaskFailure], seconds: float) -> dict[str, Any]:
     points, pairs = config.points, config.pairs
@@ -593,30 +535,7 @@ def _aggregate(config: SweepConfig, records: dict[tuple[str, str], dict[str, Any
         if mine:
             entry["machine"] = mine
         out_points.append(entry)
-    ref_seconds: dict[str, float] = {}
-    pair_entries = []
-    for pr in pairs:
-        results = {}
-        info: dict[str, Any] = {}
-        for point in points:
-            rec = records.get((pr.name, point.id))
-            if rec is None:
-                continue
-            results[point.id] = rec["report"]
-            if not info:
-                info = {k: rec[k] for k in ("image_shape", "output_shape", "ground_truth")}
-            elif rec["output_shape"] != info["output_shape"]:
-                # A model of another margin (census 7x7) has its own output region.
-                results[point.id] = {**rec["report"], "output_shape": rec["output_shape"]}
-            # The reference is computed once per pair and model: count it once.
-            key = f"{pr.name}\0{point.model.name}"
-            if key not in ref_seconds:
-                ref_seconds[key] = rec["report"].get("reference_seconds") or 0.0
-        pair_entries.append({**pr.to_dict(), **info, "results": results})
-    by_model: dict[str, float] = {}
-    for key, s in ref_seconds.items():
-        name = key.split("\0", 1)[1]
-        by_model[name] = by_model.get(name, 0.0) + s
+    pair_entries, by_model = _pair_entries(config, records)
     axes: dict[str, list[Any]] = {}
     for p in points:
         for k, v in p.values.items():

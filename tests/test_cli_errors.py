@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 import bayesmachine.host.cli as host_cli
+import bayesmachine.host.cli.run as host_cli_run
 from bayesmachine import outputs
 from bayesmachine.cli import build_parser, main
 from bayesmachine.host.images import random_dot_stereogram
@@ -85,7 +86,7 @@ def test_interrupt_leaves_no_partial_output(tmp_path: Path, pair, capsys, monkey
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(host_cli, "run_pair", interrupted)
+    monkeypatch.setattr(host_cli_run, "run_pair", interrupted)
     line = one_error_line(capsys, ["run", *pair, *SMALL, "-o", str(out)], code=130)
     assert "interrupted" in line
     # The old run went first: nothing claims a complete run. Files that are not ours stay.

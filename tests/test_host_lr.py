@@ -600,8 +600,8 @@ def test_cli_sweep_three_models(pair_files, tmp_path):
         (["run", "--model", "census-lr", "--lr-right-max-cycles", "16"], "--lr-right-max-cycles: lr_right"),
         (["run", "--model", "census", "--lr-right-max-cycles", "100"], "--lr-right-max-cycles: options of"),
         # On chip the right pass's machine has no entropy port: an off-chip source is refused.
-        pytest.param(["run", "--model", "census-lr", "--no-fuse-columns", "--engine", "verilator", "--feed",
-                      "pixels", "--rng", "smtj"],
+        pytest.param(["run", "--model", "census-lr", "--engine", "verilator", "--feed", "pixels", "--rng",
+                      "smtj"],
                      "--rng: rng must be an on-chip random source for the census-lr model on chip",
                      marks=pytest.mark.eda),
     ],

@@ -134,6 +134,17 @@ def test_help_states_each_commands_default(capsys):
         assert model_help(*command).startswith(want), command
 
 
+@pytest.mark.parametrize("command", [["run"], ["reference"], ["sweep"], ["emit"], ["synth"],
+                                     ["board", "build"], ["board", "simulate"]])
+def test_help_is_text(command, capsys):
+    """Every help text is words: a help given as a function (read when the parser is built) is called,
+    never shown as its repr (sweep's --normalize-columns once read "<function <lambda> at 0x...>")."""
+    with pytest.raises(SystemExit):
+        build_parser().parse_args([*command, "--help"])
+    text = capsys.readouterr().out
+    assert "<function" not in text and " at 0x" not in text, command
+
+
 @pytest.mark.parametrize("argv", [["emit", "--top", "stereo", "-o", "{o}"], ["board", "simulate"],
                                   ["run", "--engine", "board", "--port", "/dev/null", "-o", "{o}"]])
 def test_census_lr_options_are_refused_where_census_is_the_default(argv, tmp_path, capsys):

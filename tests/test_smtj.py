@@ -356,18 +356,18 @@ def test_emulated_machine_equals_the_model_on_the_twin_numbers() -> None:
 def test_run_and_sweep_options_build_smtj_machines() -> None:
     from bayesmachine.cli import build_parser
     from bayesmachine.cliargs import model_params_from_args
-    from bayesmachine.host.cli import _machine_params
+    from bayesmachine.host.cli.options import machine_params
 
     parser = build_parser()
     for cmd in (["run"], ["sweep"]):
         args = parser.parse_args(cmd + ["--rng", "smtj", "--smtj-dwell", "20", "--smtj-spread", "0.05",
                                         "--smtj-share", "column", "-o", "out"])
         rng = args.rng[0] if cmd == ["sweep"] else None  # sweep takes a list of sources
-        p = _machine_params(args, model_params_from_args(args), 16, rng)
+        p = machine_params(args, model_params_from_args(args), 16, rng)
         assert (p.rng, p.smtj_dwell, p.smtj_spread, p.smtj_share) == ("smtj", 20.0, 0.05, "column")
         args = parser.parse_args(cmd + ["--smtj-dwell", "20", "-o", "out"])
         with pytest.raises(ValueError, match="--smtj-dwell: device options of --rng smtj"):
-            _machine_params(args, model_params_from_args(args), 16)
+            machine_params(args, model_params_from_args(args), 16)
 
 
 @pytest.mark.slow  # a benchmark script end to end (20 s)
