@@ -177,25 +177,17 @@ def _by_rows(cols: tuple, one: float | int, rule: tuple, data: np.ndarray, idx: 
 
 
 @numba.njit(parallel=True, cache=True, boundscheck=False)
-def _store_words(data, words):  # pragma: no cover
-    """data = ``words`` (n, W, M), exactly."""
+def _times_words(data, factor, first=False):  # pragma: no cover
+    """data *= ``factor`` (n, W, M) words, exactly (``first``: data = ``factor``)."""
     n, wo, m = data.shape[0], data.shape[1], data.shape[2]
     for y in numba.prange(n):
         for j in range(wo):
             v = data[y, j]
             for h in range(m):
-                exact_store(v, h, np.int64(words[y, j, h]))
-
-
-@numba.njit(parallel=True, cache=True, boundscheck=False)
-def _times_words(data, factor):  # pragma: no cover
-    """data *= ``factor`` (n, W, M) words, exactly."""
-    n, wo, m = data.shape[0], data.shape[1], data.shape[2]
-    for y in numba.prange(n):
-        for j in range(wo):
-            v = data[y, j]
-            for h in range(m):
-                exact_times(v, h, factor[y, j, h])
+                if first:
+                    exact_store(v, h, np.int64(factor[y, j, h]))
+                else:
+                    exact_times(v, h, factor[y, j, h])
 
 
 @numba.njit(cache=True, inline="always")
@@ -414,7 +406,7 @@ def pass_reference(p: Pass, left: Planes, right: Planes, word_bits: int | None =
         if cols:
             _by_rows(cols, np.int64(1), rule, data, None)
         else:  # a fused column: its words are the first factor
-            _store_words(data, factors.pop(0))
+            _times_words(data, factors.pop(0), True)
         for f in factors:
             _times_words(data, f)
         if neighbours[2] or neighbours[5]:

@@ -11,7 +11,7 @@ import pytest
 from bayesmachine.columns import Census, Fused, GradH, GradV, LeftPrior, Mean, energy_codes, exp_table, fused
 from bayesmachine.host.features import model_planes
 from bayesmachine.host.images import bundled_pair, random_dot_stereogram
-from bayesmachine.host.likelihoods import likelihoods_plain, memory_words, pass_grid, pass_words
+from bayesmachine.host.likelihoods import likelihoods_plain, memory_words, pass_context, pass_grid, pass_words
 from bayesmachine.host.reference import declared_maps, reference_fast, reference_quantized
 from bayesmachine.host.run import prepare, run_machine
 from bayesmachine.modeldef import ModelDef
@@ -82,6 +82,19 @@ def test_float_reference_is_the_per_column_posterior(pair) -> None:
     rb = reference_fast(*_planes(pair, b), b)
     np.testing.assert_array_equal(ra.map, rb.map)
     np.testing.assert_allclose(ra.posterior, rb.posterior, rtol=1e-12, atol=1e-300)
+
+
+def test_float_words_are_the_members_product(pair) -> None:
+    """With no word width its words are float64 factors: the members' product, the no-match row the
+    rule's floor times the other members' no-match entries (as the per-column machine's columns)."""
+    model = ModelParams(name="census", dmax=6, neighbour_prior=False, fuse_columns=True)
+    per_column = ModelParams(name="census", dmax=6, neighbour_prior=False)
+    left, right = _planes(pair, model)
+    got = model.column(Fused).words(pass_context(model.passes[-1], left, right, None))
+    ctx = pass_context(per_column.passes[-1], left, right, None)
+    parts = [c.words(ctx) for c in per_column.columns]
+    parts[0][:, -1] = per_column.nomatch.floor(ctx)  # the rule in the first column's no-match row
+    np.testing.assert_allclose(got, np.prod(parts, axis=0), rtol=1e-12)
 
 
 def test_fused_halves_the_operators() -> None:

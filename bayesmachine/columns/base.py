@@ -34,6 +34,7 @@ __all__ = [
     "quantize",
     "check_int",
     "check_bool",
+    "check_switch",
     "check_probability",
     "check_sigma",
 ]
@@ -72,6 +73,11 @@ def check_int(name: str, value: object, low: int, high: int) -> None:
 def check_bool(name: str, value: object) -> None:
     """TypeError unless ``value`` is True or False (a NumPy bool too)."""
     as_bool(name, value)
+
+
+def check_switch(name: str, value: object, values: Mapping[str, Any]) -> None:
+    """A yes/no option's check (``Option.check``): a bool."""
+    check_bool(name, value)
 
 
 def check_probability(name: str, value: object, positive: str = "") -> None:

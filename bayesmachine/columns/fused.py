@@ -32,20 +32,14 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from bayesmachine.checks import as_bool
-
-from .base import Column, Option, PassContext, PlaneColumn, Source, Table, Term
+from .base import Column, Option, PassContext, PlaneColumn, Source, Table, Term, check_switch
 from .energy import EnergyTable, exp_table
 from .planes import Plane
 
 __all__ = ["FUSE_COLUMNS", "Fused", "fused"]
 
 
-def _bool(name: str, value: object, values: Mapping[str, Any]) -> None:
-    as_bool(name, value)
-
-
-FUSE_COLUMNS = Option("fuse_columns", "bool", True, _bool,
+FUSE_COLUMNS = Option("fuse_columns", "bool", True, check_switch,
                       "fuse the image columns into one operator column in the energy form (off: one operator "
                       "column per piece of evidence)")
 
