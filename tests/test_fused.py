@@ -8,14 +8,25 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bayesmachine.columns import Census, Fused, GradH, GradV, LeftPrior, Mean, energy_codes, exp_table, fused
+from bayesmachine.columns import (
+    Census,
+    Fused,
+    GradH,
+    GradMag,
+    GradV,
+    LeftPrior,
+    Mean,
+    energy_codes,
+    exp_table,
+    fused,
+)
 from bayesmachine.host.features import model_planes
 from bayesmachine.host.images import bundled_pair, random_dot_stereogram
 from bayesmachine.host.likelihoods import likelihoods_plain, memory_words, pass_context, pass_grid, pass_words
 from bayesmachine.host.reference import declared_maps, reference_fast, reference_quantized
 from bayesmachine.host.run import prepare, run_machine
 from bayesmachine.modeldef import ModelDef
-from bayesmachine.models import ModelParams, disparity_machine, pass_machine
+from bayesmachine.models import MODELS, ModelParams, disparity_machine, pass_machine, register_model
 from bayesmachine.params import ParameterError
 from bayesmachine.region import OutputRegion
 
@@ -218,3 +229,25 @@ def test_synth_counts_every_machines_operators() -> None:
     assert design_operators(b, per_column, 1, stereo=False) == 82 * 7
     paper = ModelParams(name="paper")
     assert design_operators(stereo_machine_params(80, model=paper), paper, 4, stereo=True) == 4 * 82 * 3
+
+
+@pytest.fixture
+def five_fused():
+    """A model of one's own: census's image columns and the gradient magnitude, fused (five members)."""
+    definition = register_model(ModelDef(
+        name="fused-five", description="five image columns fused",
+        columns=(fused(Mean, GradH, GradV, Census, GradMag),), defaults={"census_window": 5}))
+    yield ModelParams(name=definition.name, dmax=5)
+    MODELS.pop(definition.name, None)
+
+
+def test_a_fused_column_of_ones_own_members(pair, five_fused) -> None:
+    model = five_fused
+    left, right = _planes(pair, model)
+    machine = disparity_machine(model, counter_max=4)
+    assert machine.columns == 1
+    words = memory_words(left, right, model, machine)[..., 0].astype(np.int64)
+    lik, nm = likelihoods_plain(left, right, model)
+    assert lik.shape[-1] == 5
+    census = model.column(Fused).members[3]
+    np.testing.assert_array_equal(words, _oracle(lik, nm, [census.nomatch_values()[0]], 10))
