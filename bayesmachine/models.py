@@ -111,7 +111,8 @@ PAPER = ModelDef(
     "gradient-magnitude column)", columns=(Mean, GradH, GradV, GradMag),
     switches={GRADIENT_MAGNITUDE: (GradMag,)})
 # census keeps one operator column per piece of evidence by default: it is the design emit, synth and
-# board build, and its fused design has not been placed, routed and measured on the board; census-lr fuses.
+# board build, and on chip its fused word generator's scan costs more wall cycles than the runs save
+# (docs/models.md, "The fused column"); census-lr fuses.
 CENSUS = ModelDef(
     name="census", description="+ a census column, a no-match row calibrated for it and the raster-order "
     "neighbour prior on the machine's own results",
