@@ -146,7 +146,8 @@ class WordGenerator(wiring.Component):
     beat's issue: a pixel outside the output region passes in one cycle, an output pixel holds the
     stream for ``beats_per_pixel`` cycles (more if ``beats`` is not ready, or while a lane builder
     holds it: an ABOVE column until the result above has left the machine, a PASS column until the
-    MAP it reads is in).
+    MAP it reads is in; a fused column's pass first scans the pixel's beats, ``beats_per_pixel`` + 4
+    cycles more: ``Lanes.scan_latency``).
 
     Parameters
     ----------
