@@ -471,7 +471,10 @@ def _default_text(option: Option) -> str:
         text = option.default_text or "none"
     else:
         text = f"{option.default:g}"
-    own = [f"{d.defaults[option.name]:g} with --model {d.name}" for d in MODELS.values()
+    def shown(v: object) -> str:
+        return ("on" if v else "off") if option.kind == "bool" else f"{v:g}"
+
+    own = [f"{shown(d.defaults[option.name])} with --model {d.name}" for d in MODELS.values()
            if option.name in d.defaults]
     return "; ".join([text, *own])
 

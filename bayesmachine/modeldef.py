@@ -145,9 +145,17 @@ class ModelDef:
         return values
 
     def present(self, values: Mapping[str, Any]) -> tuple[type[Column], ...]:
-        """Its columns with the switches of ``values``."""
+        """Its columns with the switches of ``values``, each as it expands with them (a fused column with
+        ``fuse_columns`` off: its members)."""
         off = {c for option, kinds in self.switches.items() if not values[option.name] for c in kinds}
-        return tuple(c for c in self.columns if c not in off)
+        return tuple(k for c in self.columns if c not in off for k in c.expand(values))
+
+    @property
+    def layout_options(self) -> tuple[Option, ...]:
+        """The yes/no options that change its columns: its switches, then its columns' own (a fused
+        column's ``fuse_columns``)."""
+        own = {o.name: o for c in self.columns for o in c.layout_options()}
+        return (*self.switches, *own.values())
 
 
 def _collect_options(d: ModelDef) -> dict[str, Option]:
@@ -230,16 +238,26 @@ def machine_layout(columns: tuple[Any, ...]) -> tuple[str, int]:
 
 
 def _check_layouts(d: ModelDef) -> None:
-    """A machine runs the columns with every combination of switches; each keeps a FEATURES column."""
-    for on in itertools.product((True, False), repeat=len(d.switches)):
-        values = {option.name: state for option, state in zip(d.switches, on, strict=True)}
+    """A machine runs the columns with every combination of switches (and layout options); each keeps a
+    FEATURES column, lists no column twice, and a fused column is its pass's only FEATURES column."""
+    options = d.layout_options
+    for on in itertools.product((True, False), repeat=len(options)):
+        values = {option.name: state for option, state in zip(options, on, strict=True)}
         columns = d.present(values)
+        names = [c.name for c in columns]
+        twice = sorted({n for n in names if names.count(n) > 1})
+        if twice:
+            raise d._error(f"column {twice[0]} is listed twice{_switched(values)}")
         try:
             _, data = machine_layout(columns)
         except ValueError as exc:
             raise d._error(f"{exc}{_switched(values)}") from None
-        if not any(c.source is Source.FEATURES for c in columns):
+        features = [c for c in columns if c.source is Source.FEATURES]
+        if not features:
             raise d._error(f"no FEATURES column{_switched(values)}: the no-match rule sits in the first one")
+        if any(c.holds_rule for c in features) and len(features) > 1:
+            raise d._error(f"a fused column beside other FEATURES columns{_switched(values)}: it takes every "
+                           "FEATURES column of its pass (list them among its members)")
         if data > MAX_DATA_COLUMNS:
             raise d._error(f"{data} data columns: a machine takes at most {MAX_DATA_COLUMNS}")
 

@@ -51,6 +51,7 @@ from bayesmachine.columns import (
     Plane,
     Source,
     Term,
+    fused,
 )
 from bayesmachine.modeldef import OWN_PASS, ModelDef, PassDef, machine_layout
 from bayesmachine.params import (
@@ -111,11 +112,15 @@ PAPER = ModelDef(
     name="paper", description="the paper's m, gH, gV columns (and with --gradient-magnitude a "
     "gradient-magnitude column)", columns=(Mean, GradH, GradV, GradMag),
     switches={GRADIENT_MAGNITUDE: (GradMag,)})
+# census keeps one operator column per piece of evidence by default: it is the design emit, synth and
+# board build, and on chip its fused word generator's scan costs more wall cycles than the runs save
+# (docs/models.md, "The fused column"); census-lr fuses.
 CENSUS = ModelDef(
     name="census", description="+ a census column, a no-match row calibrated for it and the raster-order "
     "neighbour prior on the machine's own results",
-    columns=(LeftPrior, AbovePrior, Mean, GradH, GradV, Census),
-    switches={NEIGHBOUR_PRIOR: (LeftPrior, AbovePrior)}, watchdog_runs=CENSUS_WATCHDOG_RUNS,
+    columns=(LeftPrior, AbovePrior, fused(Mean, GradH, GradV, Census)),
+    switches={NEIGHBOUR_PRIOR: (LeftPrior, AbovePrior)}, defaults={"fuse_columns": False},
+    watchdog_runs=CENSUS_WATCHDOG_RUNS,
     timeout_answer=CENSUS_TIMEOUT_ANSWER, normalize=True)
 CENSUS_LR = ModelDef(
     name="census-lr", description="+ a left-right consistency column from a right pass",
@@ -123,7 +128,8 @@ CENSUS_LR = ModelDef(
     passes=(PassDef(name=RIGHT_PASS, model="census", reference="right", machine_index=1,
                     nomatch_option="lr_right_nomatch", watchdog_option="lr_right_max_cycles",
                     not_inherited=("prior_nomatch",), watchdog_runs=RIGHT_WATCHDOG_RUNS),),
-    defaults={"prior_nomatch": 0.1}, requires={"neighbour_prior": (True, "both passes use it")},
+    defaults={"prior_nomatch": 0.1},
+    requires={"neighbour_prior": (True, "both passes use it")},
     watchdog_runs=CENSUS_WATCHDOG_RUNS, timeout_answer=CENSUS_TIMEOUT_ANSWER, normalize=True)
 
 # The models by name: the three above, then those registered by register_model.

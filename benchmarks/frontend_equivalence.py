@@ -19,6 +19,7 @@ clock cycles. Either action fails (exit 1) if the front end disagrees with the h
 
 Run: python benchmarks/frontend_equivalence.py save /work/golden/frontend   (on the code to keep)
      python benchmarks/frontend_equivalence.py check /work/golden/frontend  (after the change)
+     (``--per-column``: the models with a fused column without it, as golden_snapshot.py's)
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from golden_snapshot import CONFIGS, CROPS, RTL_CONFIGS, _pair
+from golden_snapshot import CONFIGS, CROPS, RTL_CONFIGS, _pair, model_of
 
 from bayesmachine.cli import Parser, run_script
 from bayesmachine.hdl.frontend.stereo import FrontEnd, stereo_machine_params
@@ -98,8 +99,8 @@ def _frontend_words(model: ModelParams, params: Any, pair: tuple[np.ndarray, np.
 
 
 def compute(name: str, pair: tuple[np.ndarray, np.ndarray], model_kw: dict[str, Any],
-            machine_kw: dict[str, Any]) -> tuple[dict[str, Any], list[str]]:
-    model = ModelParams(**model_kw)
+            machine_kw: dict[str, Any], per_column: bool = False) -> tuple[dict[str, Any], list[str]]:
+    model = model_of(model_kw, per_column)
     params = stereo_machine_params(model.dmax, model=model, **machine_kw)
     region = OutputRegion.of_model(pair[0].shape, model)
     rng = np.random.default_rng(7)
@@ -140,6 +141,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("action", choices=("save", "check"))
     ap.add_argument("folder", type=Path)
     ap.add_argument("--only", nargs="*", default=None, help="configurations (default all)")
+    ap.add_argument("--per-column", action="store_true",
+                    help="models with a fused column without it (golden_snapshot.py --per-column)")
     args = ap.parse_args(argv)
     configs = configurations()
     names = args.only or list(configs)
@@ -151,7 +154,7 @@ def main(argv: list[str] | None = None) -> int:
     problems: list[str] = []
     for name in names:
         t0 = time.perf_counter()
-        figures, bad = compute(name, *configs[name])
+        figures, bad = compute(name, *configs[name], per_column=args.per_column)
         problems += bad
         if args.action == "save":
             saved[name] = figures

@@ -11,9 +11,12 @@ the ``MachineParams.to_dict()`` of ``disparity_machine`` and of the right pass's
 feedback tables are their ``feedback_words``/``feedback_nomatch_word``); and for the on-chip front end
 (:data:`RTL_CONFIGS`) the SHA-256 of a small ``StereoMachine``'s RTLIL per model. ``check DIR`` recomputes
 everything with the code installed now and compares it bit for bit (exit 1 naming every difference).
+``--per-column`` builds every model that has the fused column (``fuse_columns``) without it: one
+operator column per piece of evidence, the machine the snapshots before the fused column hold.
 
 Run: python benchmarks/golden_snapshot.py save /work/golden/columns    (once, on the code to keep)
      python benchmarks/golden_snapshot.py check /work/golden/columns   (after each refactor step)
+     python benchmarks/golden_snapshot.py check --per-column /work/golden/columns
 """
 
 from __future__ import annotations
@@ -121,6 +124,14 @@ def quantized_band(feats: tuple, model: ModelParams, w: int, rows: slice, above:
 # ---------------------------------------------------------------------------------------------------
 
 
+def model_of(keywords: dict[str, Any], per_column: bool) -> ModelParams:
+    """The model of ``keywords``; ``per_column``: without its fused column if it has one."""
+    model = ModelParams(**keywords)
+    if per_column and "fuse_columns" in model.to_dict():
+        model = ModelParams(**keywords, fuse_columns=False)
+    return model
+
+
 def stereo_rtlil(model: ModelParams, width: int) -> str:
     """The RTLIL without source locations (they move with every edit of the Python)."""
     from amaranth.back import rtlil
@@ -179,10 +190,10 @@ def _references(model: ModelParams, machine: Any, feats: tuple) -> dict[str, np.
     return out
 
 
-def compute(name: str) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+def compute(name: str, per_column: bool = False) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     crop, model_kw, machine_kw = CONFIGS[name]
     left, right = _pair(crop)
-    model = ModelParams(**model_kw)
+    model = model_of(model_kw, per_column)
     machine = disparity_machine(model, **machine_kw)
     rmachine = right_machine(model, machine) if has_right_pass(model) else None
     feats = (model_planes(left, model), model_planes(right, model))
@@ -202,9 +213,9 @@ def compute(name: str) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     return arrays, json.loads(json.dumps(meta))
 
 
-def compute_rtl(name: str) -> dict[str, Any]:
+def compute_rtl(name: str, per_column: bool = False) -> dict[str, Any]:
     model_kw, width = RTL_CONFIGS[name]
-    text = stereo_rtlil(ModelParams(**model_kw), width)
+    text = stereo_rtlil(model_of(model_kw, per_column), width)
     return {"rtlil_sha256": hashlib.sha256(text.encode()).hexdigest(), "rtlil_chars": len(text)}
 
 
@@ -236,6 +247,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("action", choices=("save", "check"))
     ap.add_argument("folder", type=Path)
     ap.add_argument("--only", nargs="*", default=None, help="configurations to save or check (default all)")
+    ap.add_argument("--per-column", action="store_true",
+                    help="models with a fused column without it (fuse_columns off): one operator column per "
+                    "piece of evidence")
     args = ap.parse_args(argv)
     names = args.only or [*CONFIGS, *RTL_CONFIGS]
     unknown = [n for n in names if n not in CONFIGS and n not in RTL_CONFIGS]
@@ -248,7 +262,7 @@ def main(argv: list[str] | None = None) -> int:
     for name in names:
         t0 = time.perf_counter()
         if name in RTL_CONFIGS:
-            got = compute_rtl(name)
+            got = compute_rtl(name, args.per_column)
             if args.action == "save":
                 atomic_write_text(args.folder / f"{name}.json", json.dumps(got, indent=1) + "\n")
                 status = "saved"
@@ -259,7 +273,7 @@ def main(argv: list[str] | None = None) -> int:
                 status = "DIFFERS" if found else "equal"
             print(f"{name:24s} {status} ({time.perf_counter() - t0:.1f} s)")
             continue
-        arrays, meta = compute(name)
+        arrays, meta = compute(name, args.per_column)
         if args.action == "save":
             with atomic_file(args.folder / f"{name}.npz") as tmp:  # complete or absent
                 np.savez_compressed(tmp, **arrays)

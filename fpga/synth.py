@@ -141,6 +141,17 @@ def _check(params: MachineParams, target: Target, *, machines: int, pin_width: i
     return model if model is not None else _default_model(params)
 
 
+def design_operators(params: MachineParams, model: ModelParams, machines: int, *, stereo: bool) -> int:
+    """The operators of a design: ``machines`` machines of ``params``; the stereo top's declared passes'
+    machines too (census-lr's right pass)."""
+    total = machines * params.operators
+    if stereo:
+        from bayesmachine.hdl.frontend.words import pass_params
+
+        total += sum(pass_params(model, params, p.name).operators for p in model.passes[:-1])
+    return total
+
+
 def _default_model(params: MachineParams) -> ModelParams:
     """What ``bayesmachine synth`` builds without ``--model``: :data:`~bayesmachine.models.HARDWARE_MODEL`
     (why: beside it), at Dmax = rows - 2."""
@@ -203,11 +214,12 @@ def _synthesize(params: MachineParams, target: Target, out: Path, say: Callable[
             # The line buffer's word: 2 margin lines of 16-bit pairs (64 bits; 96 with a 7x7 census).
             "line_buffer_bits": rep.PIXEL_BITS * 2 * model.margin,
         }
+    report["operators"] = design_operators(params, model, machines, stereo=width is not None)
     logic = rep.logic_cells(target, res)
     report["per_machine"] = {"lut4": logic / machines, "ff": res["ff"] / machines,
                              "bram": res["bram"] / machines, "dsp": res["dsp"] / machines}
-    report["per_operator"] = {"lut4": round(logic / (machines * params.operators), 2),
-                              "ff": round(res["ff"] / (machines * params.operators), 2)}
+    report["per_operator"] = {"lut4": round(logic / report["operators"], 2),
+                              "ff": round(res["ff"] / report["operators"], 2)}
     report["machines_fit"] = rep.machines_that_fit(target, report["per_machine"], {})
     return report
 

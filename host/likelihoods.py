@@ -9,8 +9,8 @@ words (:meth:`~bayesmachine.columns.Column.words`, the host's twin of the column
 MAPs of the map row above (``above``: an ABOVE column's), the other passes' MAPs of the same rows by
 pass name (``results``: a PASS column's). A FEEDBACK column is formed by the machine, not loaded. The
 pass's no-match rule (P_nm(gV)) sits in the no-match row of its first FEATURES column
-(:attr:`~bayesmachine.models.Pass.rule_column`); a pass without a no-match row has 0 there in every
-FEATURES column.
+(:attr:`~bayesmachine.models.Pass.rule_column`; a fused column's words hold it themselves); a pass
+without a no-match row has 0 there in every FEATURES column.
 """
 
 from __future__ import annotations
@@ -97,7 +97,8 @@ def pass_context(p: Pass, left: Planes, right: Planes, word_bits: int | None, *,
     grids = {q.name: (g.first, g.width) for q in p.model.passes for g in (pass_grid(q, region),)}
     return PassContext(where=p.where, reference=ref.band(band), match=other.band(band), columns=grid.columns,
                        match_columns=grid.match, valid=grid.valid, nomatch=p.nomatch, word_bits=word_bits,
-                       above=above, results=dict(results or {}), grids=grids)
+                       above=above, results=dict(results or {}), grids=grids, rule=p.model.nomatch,
+                       nomatch_live=p.nomatch and not any(c.zeroes_nomatch for c in p.columns))
 
 
 def _given(words: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
@@ -130,7 +131,7 @@ def pass_words(p: Pass, left: Planes, right: Planes, machine: MachineParams, *, 
         words[:, :, 0] = machine.word_one if prior is None else _given(prior, (n, model.hypotheses))
     for k, c in enumerate(loaded, start=own):
         words[:, :, k] = c.words(ctx)
-    if p.nomatch:
+    if p.nomatch and not p.rule_column.holds_rule:
         words[:, -1, own + loaded.index(p.rule_column)] = model.nomatch.floor(ctx)
     return words
 
@@ -146,13 +147,14 @@ def memory_words(left: Planes, right: Planes, model: ModelParams, machine: Machi
 
 
 def likelihoods_plain(left: Planes, right: Planes, model: ModelParams) -> tuple[np.ndarray, np.ndarray]:
-    """All likelihoods of the model's FEATURES columns by each kind's plain cost and formula (the test
-    oracle): ``lik`` (Ho, Wo, Dmax+1, columns) float64 and ``nomatch`` (Ho, Wo), P_nm(gV)."""
+    """All likelihoods of the model's FEATURES columns (a fused column's members) by each kind's plain cost
+    and formula (the test oracle): ``lik`` (Ho, Wo, Dmax+1, columns) float64 and ``nomatch`` (Ho, Wo),
+    P_nm(gV)."""
     p = model.passes[-1]
     need_planes(p, left, right)
     region = OutputRegion.of_features(left.shape, model.dmax)
     x, xr = region.map_slice, region.match_columns
-    cols = [c for c in model.columns if isinstance(c, PlaneColumn)]
+    cols = [f for c in model.columns for f in c.factors() if isinstance(f, PlaneColumn)]
     lik = np.empty((*region.shape, model.dmax + 1, len(cols)))
     for k, c in enumerate(cols):
         a, b = left[c.plane], right[c.plane]

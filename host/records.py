@@ -75,6 +75,17 @@ class MachineRun:
     passes: dict[str, PassRecord] = field(default_factory=dict)
     engine_figures: dict[str, object] | None = None  # what the engine says of the run (a board: its link's)
 
+    @property
+    def operator_samples_per_pixel(self) -> float | None:
+        """The machines' work per output pixel: over every pass, its machine's operators (rows x operator
+        columns) x B x its compute cycles summed over its pixels, divided by the output pixels (a pass of
+        more pixels than the output weighs more); None for a run without cycles or pixels."""
+        if self.cycles is None or not self.map.size:
+            return None
+        runs = [(self.machine, self.cycles), *((r.machine, r.cycles) for r in self.passes.values())]
+        work = sum(m.operators * m.samples_per_clock * float(np.sum(c, dtype=np.float64)) for m, c in runs)
+        return work / self.map.size
+
 
 @dataclass
 class PassRecord:

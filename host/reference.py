@@ -178,14 +178,17 @@ def _by_rows(cols: tuple, one: float | int, rule: tuple, data: np.ndarray, idx: 
 
 
 @numba.njit(parallel=True, cache=True, boundscheck=False)
-def _times_words(data, factor):  # pragma: no cover
-    """data *= ``factor`` (n, W, M) words, exactly."""
+def _times_words(data, factor, first=False):  # pragma: no cover
+    """data *= ``factor`` (n, W, M) words, exactly (``first``: data = ``factor``)."""
     n, wo, m = data.shape[0], data.shape[1], data.shape[2]
     for y in numba.prange(n):
         for j in range(wo):
             v = data[y, j]
             for h in range(m):
-                exact_times(v, h, factor[y, j, h])
+                if first:
+                    exact_store(v, h, np.int64(factor[y, j, h]))
+                else:
+                    exact_times(v, h, factor[y, j, h])
 
 
 @numba.njit(cache=True, inline="always")
@@ -381,10 +384,14 @@ def pass_reference(p: Pass, left: Planes, right: Planes, word_bits: int | None =
         raise ValueError(f"out must be float64 of shape {shape}, got {out.dtype} {out.shape}")
     features = [c for c in p.columns if c.source is Source.FEATURES]
     # The data kernel takes the FEATURES columns whose words' product fits one int64 (on words: four at
-    # least, every one of the package's models); the others are factors as the PASS columns are.
-    kernel = features if word_bits is None else features[: TOP_BITS // word_bits]
-    factors = [c.words(ctx).reshape(shape) for c in p.columns
-               if c.source is Source.PASS or (c.source is Source.FEATURES and c not in kernel)]
+    # least, every one of the package's models); the others are factors as the PASS columns are. In
+    # float64 a fused column is its members' factors; on words its own words (they hold the rule).
+    if word_bits is None:
+        kernel = [f for c in features for f in c.factors()]
+    else:
+        kernel = [c for c in features if not c.holds_rule][: TOP_BITS // word_bits]
+    factors = [c.words(ctx).reshape(shape) for c in p.columns if c.source is Source.PASS or (
+        word_bits is not None and c.source is Source.FEATURES and c not in kernel)]
     cols, entries = _columns(kernel, ctx.reference, ctx.match, word_bits)
     floor = model.nomatch.table(word_bits).values.astype(np.float64 if word_bits is None else np.int64)
     rule = (entries, ctx.reference[model.nomatch.plane], floor, p.nomatch, grid.first, p.step, grid.last,
@@ -397,7 +404,10 @@ def pass_reference(p: Pass, left: Planes, right: Planes, word_bits: int | None =
     else:
         limbs = limbs_for(len(p.columns), word_bits)
         data = np.empty(shape if limbs == 1 else (*shape, limbs), np.int64)
-        _by_rows(cols, np.int64(1), rule, data, None)
+        if cols:
+            _by_rows(cols, np.int64(1), rule, data, None)
+        else:  # a fused column: its words are the first factor
+            _times_words(data, factors.pop(0), True)
         for f in factors:
             _times_words(data, f)
         if neighbours[2] or neighbours[5]:
@@ -549,9 +559,9 @@ def reference_plain(left: Planes, right: Planes, model: ModelParams) -> Referenc
     """The reference by the plain vectorized float64 formula (memory-hungry: test oracle; a model whose
     columns all come from the planes)."""
     lik, nm = likelihoods_plain(left, right, model)
-    cols = [c for c in model.columns if c.source is Source.FEATURES]
-    if len(cols) != len(model.columns):
+    if any(c.source is not Source.FEATURES for c in model.columns):
         raise ValueError(f"reference_plain: the {model.name} model has columns not from the planes")
+    cols = [f for c in model.columns for f in c.factors()]
     unnorm = np.empty((*lik.shape[:2], model.hypotheses))
     unnorm[..., :-1] = lik[..., 0]
     unnorm[..., -1] = nm
@@ -571,8 +581,9 @@ def reference_prior_plain(left: Planes, right: Planes, model: ModelParams) -> Re
     dmax, m = model.dmax, model.hypotheses
     l_nm = 1.0  # the FEATURES columns' no-match entries but the rule's
     for c in model.columns:
-        if c.source is Source.FEATURES and c.nomatch_values():
-            l_nm = l_nm * c.nomatch_values()[0]
+        for f in c.factors() if c.source is Source.FEATURES else ():
+            if f.nomatch_values():
+                l_nm = l_nm * f.nomatch_values()[0]
     left_prior = model.column(LeftPrior)
     above_prior = model.column(AbovePrior)
     post = np.empty((ho, wo, m))

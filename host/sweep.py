@@ -293,6 +293,7 @@ def _task_report(outcome: Any) -> dict[str, Any]:
     run, prep = outcome.run, outcome.prepared
     return {
         **outcome.metrics.to_report(),
+        "operator_samples_per_pixel": run.operator_samples_per_pixel,
         "frame_cycles": int(run.cycles.sum()),
         "wall_cycles": run.wall_cycles,
         "wall_cycles_per_pixel": None if run.wall_cycles is None else run.wall_cycles / run.cycles.size,

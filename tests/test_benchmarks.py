@@ -107,6 +107,7 @@ def test_every_numeric_argument_of_a_script_is_bounded_when_parsed(name, stop_af
     ("bench_machines", ["2:x"], "'2:x' is not K:SYNTH_DIR:RUN_DIR"),
     ("study_cost_operators", ["words:3"], "B must be one of 1, 2, 4, 8, 16"),
     ("study_smtj", ["--baselines", "lfsr,bogus"], "argument --baselines: expected one of lfsr"),
+    ("study_fused", ["--models", "paper"], "argument --models: the paper model has no fused column"),
     ("golden_snapshot", ["check", "x", "--only", "bogus"], "--only: no configuration bogus"),
     ("bench_synth_samples", ["--counter-max", "0"], "--counter-max: counter_max must be in [1, 16777215]"),
     ("bench_synth_samples", ["--frobnicate"], "unrecognized arguments: --frobnicate"),

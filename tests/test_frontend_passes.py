@@ -262,8 +262,10 @@ CASES = {
     # name: (model, frames (height, width) or "noisy", fifo pixels, counter max)
     "bundled-crop": (("census-lr", {"dmax": 3}), [(9, 18), "noisy"], 2, 6),
     "narrow-deep-fifo": (("census-lr", {"dmax": 2, "lr_tolerance": 0}), [(8, 11)], 8, 4),
-    "no-nomatch-row-right-watchdog": (("census-lr", {"dmax": 3, "lr_nomatch": False,
+    # Per column: the fused column's best row fires every cycle, so its right pass never reaches 9 cycles.
+    "no-nomatch-row-right-watchdog": (("census-lr", {"dmax": 3, "lr_nomatch": False, "fuse_columns": False,
                                                      "lr_right_max_cycles": 9}), [(8, 14)], 3, 6),
+    "per-column": (("census-lr", {"dmax": 3, "fuse_columns": False}), [(9, 18), "noisy"], 2, 6),
     "census5": (("census-lr", {"dmax": 2, "census_window": 5}), [(7, 12), "noisy"], 2, 5),
     # The issue's rules: no right no-match row, a lane without a right MAP gets beta (not neutral).
     "issue-rules": (("census-lr", {"dmax": 3, "lr_right_nomatch": False, "lr_neutral": False}),
@@ -298,9 +300,10 @@ def test_stereo_machine_passes_equal_the_model(case: str) -> None:
 def test_census_lr_on_chip_parameters() -> None:
     model = _lr(4)
     params = stereo_machine_params(4, model=model)
-    assert params.columns == 5 and params.loaded_columns == 6 and params.words_per_beat % 6 == 0
+    # Fused: the data columns are the fused column and lr; loaded, the above prior too.
+    assert params.columns == 2 and params.loaded_columns == 3 and params.words_per_beat % 3 == 0
     rp = pass_params(model, params, "right")
-    assert rp.columns == 4 and rp.seed != params.seed and rp.words_per_beat % rp.loaded_columns == 0
+    assert rp.columns == 1 and rp.seed != params.seed and rp.words_per_beat % rp.loaded_columns == 0
     assert pass_params(model, params, "left") is params
     check_stereo_machine(params, model, 11)
     with pytest.raises(ParameterError, match="rng must be an on-chip random source"):

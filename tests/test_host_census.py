@@ -155,7 +155,7 @@ def test_tables_at_known_points():
 def test_every_table_is_checked_nonincreasing_in_its_cost():
     for model in (ModelParams(name="census-lr"), ModelParams(name="census", census_window=5, prior_s=0.5)):
         for p in model.passes:
-            for term in (*p.columns, p.model.nomatch):
+            for term in (*(f for c in p.columns for f in c.factors()), p.model.nomatch):  # fused: members
                 v = term.table().values
                 assert (np.diff(v) <= 0).all(), term
     class Growing(Census):  # a kind whose likelihood grows with the cost: refused when its table is built

@@ -1,4 +1,5 @@
-"""The census-lr model: the left-right consistency column, its right pass, end to end.
+"""The census-lr model: the left-right consistency column, its right pass, end to end (its per-column
+machine, --no-fuse-columns, against the formulas; the fused column: tests/test_fused.py).
 
 Oracles are independent constructions: per-pixel Python loops over ``likelihood_formula`` (float)
 and over Python integers (words), the right pass driven by hand on an engine, the consistency
@@ -62,13 +63,13 @@ def pair():
 
 @pytest.fixture(scope="module")
 def model():
-    return ModelParams(dmax=DMAX, name="census-lr")
+    return ModelParams(dmax=DMAX, name="census-lr", fuse_columns=False)
 
 
 def test_model_fields_and_dict():
     m = ModelParams(name="census-lr")
-    assert ModelParams() == m  # the default model
-    assert machine_layout(m.columns) == ("neighbour", 5) and [p.name for p in m.passes] == ["right", "left"]
+    assert ModelParams() == m  # the default model: its image columns fused
+    assert machine_layout(m.columns) == ("neighbour", 2) and [p.name for p in m.passes] == ["right", "left"]
     right = m.pass_named("right")
     assert (right.reference, right.machine_index, right.nomatch, right.max_cycles) == ("right", 1, True, None)
     assert m.prior_nomatch == 0.1 and right.model.name == "census"
@@ -105,7 +106,7 @@ def test_bad_parameters_are_refused_up_front(kwargs, error, message):
 
 
 def test_beta_that_quantizes_to_zero_is_refused():
-    model = ModelParams(dmax=4, name="census-lr", lr_beta=1e-4)
+    model = ModelParams(dmax=4, name="census-lr", fuse_columns=False, lr_beta=1e-4)
     with pytest.raises(ParameterError, match="^lr_beta = 0.0001 quantizes to 0"):
         disparity_machine(model)
 
@@ -117,8 +118,8 @@ def test_consistency_column_against_its_definition():
     wr = 40
     hat = rng.integers(-1, dmax + 1, size=wr).astype(np.int16)
     for lr_nomatch, neutral in ((True, False), (False, False), (True, True), (False, True)):
-        model = ModelParams(dmax=dmax, name="census-lr", lr_tolerance=tol, lr_nomatch=lr_nomatch,
-                            lr_neutral=neutral)
+        model = ModelParams(dmax=dmax, name="census-lr", fuse_columns=False, lr_tolerance=tol,
+                            lr_nomatch=lr_nomatch, lr_neutral=neutral)
         column = model.column(Consistency)
         got = column.loaded(column.table(10), hat, first, columns)
         assert got.dtype == np.uint16 and got.shape == (columns.size, dmax + 2)
@@ -162,7 +163,7 @@ def _plain_likelihood(model, fa, fb, ca, cb, a, b):
 @pytest.mark.parametrize("right_nomatch", [True, False])
 def test_right_pass_words_against_the_formula(pair, right_nomatch):
     left, right, _ = pair
-    model = ModelParams(dmax=DMAX, name="census-lr", lr_right_nomatch=right_nomatch)
+    model = ModelParams(dmax=DMAX, name="census-lr", fuse_columns=False, lr_right_nomatch=right_nomatch)
     fl, fr = model_planes(left, model), model_planes(right, model)
     machine = right_machine(model, disparity_machine(model))
     region = OutputRegion.of_features(fl.shape, DMAX)
@@ -244,7 +245,7 @@ def _brute_right_pass(model, fl, fr, word_bits=None):
 @pytest.mark.parametrize("right_nomatch", [False, True])
 def test_right_pass_reference_against_brute_force(pair, word_bits, right_nomatch):
     left, right, _ = pair
-    model = ModelParams(dmax=DMAX, name="census-lr", lr_right_nomatch=right_nomatch)
+    model = ModelParams(dmax=DMAX, name="census-lr", fuse_columns=False, lr_right_nomatch=right_nomatch)
     fl, fr = model_planes(left, model), model_planes(right, model)
     got = right_reference_map(fl, fr, model, word_bits, band_rows=4)  # bands carry the row above
     want = _brute_right_pass(model, fl, fr, word_bits)
@@ -302,8 +303,8 @@ def _brute_left_pass(model, fl, fr, right_map, word_bits=None):
                           (True, True, True)])
 def test_left_pass_reference_against_brute_force(pair, word_bits, lr_nomatch, right_nomatch, neutral):
     left, right, _ = pair
-    model = ModelParams(dmax=DMAX, name="census-lr", lr_nomatch=lr_nomatch, lr_right_nomatch=right_nomatch,
-                        lr_neutral=neutral)
+    model = ModelParams(dmax=DMAX, name="census-lr", fuse_columns=False, lr_nomatch=lr_nomatch,
+                        lr_right_nomatch=right_nomatch, lr_neutral=neutral)
     fl, fr = model_planes(left, model), model_planes(right, model)
     right_map = _brute_right_pass(model, fl, fr, word_bits)
     want = _brute_left_pass(model, fl, fr, right_map, word_bits)
@@ -322,9 +323,11 @@ def test_neutral_lanes_change_the_left_pass(pair):
     """With the right pass's no-match row, --lr-neutral changes the left MAPs (its lanes reading a right
     no-match get 1, not beta) on this pair: the brute-force test above is not vacuous for it."""
     left, right, _ = pair
-    base = ModelParams(dmax=DMAX, name="census-lr", lr_right_nomatch=True, lr_neutral=False)
+    base = ModelParams(dmax=DMAX, name="census-lr", fuse_columns=False, lr_right_nomatch=True,
+                       lr_neutral=False)
     fl, fr = model_planes(left, base), model_planes(right, base)
-    neutral = ModelParams(dmax=DMAX, name="census-lr", lr_right_nomatch=True, lr_neutral=True)
+    neutral = ModelParams(dmax=DMAX, name="census-lr", fuse_columns=False, lr_right_nomatch=True,
+                          lr_neutral=True)
     assert (reference_map(fl, fr, base) != reference_map(fl, fr, neutral)).any()
     assert (reference_quantized_map(fl, fr, base, 10) != reference_quantized_map(fl, fr, neutral, 10)).any()
 
@@ -392,16 +395,17 @@ def test_run_machine_equals_a_hand_driven_run(pair, model):
 def test_right_pass_watchdog(pair):
     """``lr_right_max_cycles`` is the right machine's watchdog: its timeouts are "no right MAP"."""
     left, right, gt = pair
-    model = ModelParams(dmax=DMAX, name="census-lr", lr_right_max_cycles=20)
+    model = ModelParams(dmax=DMAX, name="census-lr", fuse_columns=False, lr_right_max_cycles=20)
     machine = disparity_machine(model, counter_max=8)
     rmachine = right_machine(model, machine)
     assert rmachine.max_cycles == 20 and machine.max_cycles == disparity_machine(
-        ModelParams(dmax=DMAX, name="census-lr"), counter_max=8).max_cycles
+        ModelParams(dmax=DMAX, name="census-lr", fuse_columns=False), counter_max=8).max_cycles
     run = run_machine(prepare(left, right, model, gt), machine, "model", progress=False)
     assert run.passes["right"].timeout.any() and (run.passes["right"].cycles <= 20).all()
     np.testing.assert_array_equal(run.passes["right"].map[run.passes["right"].timeout], -1)
     with pytest.raises(ParameterError, match="^lr_right_max_cycles = 8 must exceed"):
-        disparity_machine(ModelParams(dmax=DMAX, name="census-lr", lr_right_max_cycles=8), counter_max=8)
+        disparity_machine(ModelParams(dmax=DMAX, name="census-lr", fuse_columns=False, lr_right_max_cycles=8),
+                          counter_max=8)
 
 
 def test_census_machines_default_watchdog_and_normalization():
@@ -411,7 +415,7 @@ def test_census_machines_default_watchdog_and_normalization():
     to; the paper model keeps the machine's own defaults."""
     from bayesmachine.params import DEFAULT_MAX_CYCLES, MachineParams
 
-    lr = ModelParams(dmax=DMAX, name="census-lr")
+    lr = ModelParams(dmax=DMAX, name="census-lr", fuse_columns=False)
     for n in (1, 8, 16):
         m = disparity_machine(lr, counter_max=n)
         assert m.max_cycles == CENSUS_WATCHDOG_RUNS * (n + 1)
@@ -421,7 +425,8 @@ def test_census_machines_default_watchdog_and_normalization():
     assert (CENSUS_WATCHDOG_RUNS * 17, RIGHT_WATCHDOG_RUNS * 17) == (255, 136)  # the documented figures
     m = disparity_machine(lr, counter_max=8, max_cycles=5000)
     assert m.max_cycles == 5000 and right_machine(lr, m).max_cycles == RIGHT_WATCHDOG_RUNS * 9
-    assert right_machine(ModelParams(dmax=DMAX, name="census-lr", lr_right_max_cycles=100),
+    assert right_machine(ModelParams(dmax=DMAX, name="census-lr", fuse_columns=False,
+                                     lr_right_max_cycles=100),
                          disparity_machine(lr, counter_max=8)).max_cycles == 100
     assert m.normalize and right_machine(lr, m).normalize
     off = disparity_machine(lr, normalize=False)
@@ -437,7 +442,7 @@ def test_left_watchdog_stops_long_runs(pair, answer):
     default, ``timeout_answer = "leading"``) answered by their leading row, which no neighbour
     follows (the next row's above column is the same as with "none")."""
     left, right, gt = pair
-    model = ModelParams(dmax=DMAX, name="census-lr")
+    model = ModelParams(dmax=DMAX, name="census-lr", fuse_columns=False)
     prepared = prepare(left, right, model, gt)
     machine = disparity_machine(model, counter_max=8, max_cycles=40, timeout_answer=answer)
     run = run_machine(prepared, machine, "model", progress=False)
@@ -473,7 +478,7 @@ def test_engines_equal_the_model(engine, verilator_cache):
         require_tool("verilator", "g++", "make")
         options = {"build_dir": verilator_cache, "verbose": False}
     left, right, gt = random_dot_stereogram(height=8, width=16, background=1, square=4, seed=7)
-    small = ModelParams(dmax=3, name="census-lr")
+    small = ModelParams(dmax=3, name="census-lr", fuse_columns=False)
     prepared = prepare(left, right, small, gt)
     machine = disparity_machine(small, counter_max=3)
     want = run_machine(prepared, machine, "model", progress=False)
@@ -509,10 +514,11 @@ def test_cli_run_census_lr(pair_files, pair, tmp_path):
     from bayesmachine.cli import main
 
     out = tmp_path / "run"
-    argv = _argv(pair_files, "--model", "census-lr", "--counter-max", "8", "--lr-beta", "0.2", "--no-sgbm")
+    argv = _argv(pair_files, "--model", "census-lr", "--counter-max", "8", "--lr-beta", "0.2", "--no-sgbm",
+                 "--no-fuse-columns")
     assert main(["run", *argv, "-o", str(out)]) == 0
     report = json.loads((out / "report.json").read_text())
-    model = ModelParams(dmax=DMAX, name="census-lr", lr_beta=0.2)
+    model = ModelParams(dmax=DMAX, name="census-lr", fuse_columns=False, lr_beta=0.2)
     machine = disparity_machine(model, counter_max=8)
     # Every resolved value, B = 1 included (not left out as in the fingerprint's to_dict()).
     assert report["model"] == model.to_dict() and report["machine"] == machine.to_dict(complete=True)
@@ -542,11 +548,12 @@ def test_cli_census_lr_without_its_right_nomatch_neutral_lanes_and_watchdog(pair
     from bayesmachine.cli import main
 
     out = tmp_path / "issue"
-    argv = _argv(pair_files, "--model", "census-lr", "--counter-max", "8", "--no-sgbm",
+    argv = _argv(pair_files, "--model", "census-lr", "--counter-max", "8", "--no-sgbm", "--no-fuse-columns",
                  "--no-lr-right-nomatch", "--no-lr-neutral", "--max-cycles", "5000")
     assert main(["run", *argv, "-o", str(out)]) == 0
     report = json.loads((out / "report.json").read_text())
-    model = ModelParams(dmax=DMAX, name="census-lr", lr_right_nomatch=False, lr_neutral=False)
+    model = ModelParams(dmax=DMAX, name="census-lr", fuse_columns=False, lr_right_nomatch=False,
+                        lr_neutral=False)
     assert report["model"] == model.to_dict()
     assert report["machine"]["max_cycles"] == 5000  # the right pass keeps its own watchdog
     assert report["right_pass_machine"]["max_cycles"] == RIGHT_WATCHDOG_RUNS * 9
@@ -567,7 +574,7 @@ def test_cli_sweep_three_models(pair_files, tmp_path):
     assert points["census-lr"]["model"] == ModelParams(dmax=DMAX, name="census-lr", lr_gamma=0.02,
                                                        prior_s=3.0).to_dict()
     assert points["census"]["model"] == ModelParams(dmax=DMAX, name="census", prior_s=3.0).to_dict()
-    assert points["census-lr"]["machine"]["columns"] == 5
+    assert points["census-lr"]["machine"]["columns"] == 2  # fused: one image column and lr
     assert "right_pass_cycles_per_pixel_mean" in points["census-lr"]
     assert "right_pass_pixels" not in points["census"]
 

@@ -72,7 +72,7 @@ def test_default_model_is_one_rule(pair, tmp_path, monkeypatch):
     report = json.loads((out / "report.json").read_text())
     assert report["model_name"] == "census-lr" and report["model"] == ModelParams(dmax=DMAX,
                                                                                    name="census-lr").to_dict()
-    assert report["machine"]["prior"] == "neighbour" and report["machine"]["columns"] == 5
+    assert report["machine"]["prior"] == "neighbour" and report["machine"]["columns"] == 2  # fused, lr
     assert "right_pass_machine" in report and report["right_pass_pixels"] > 0
     out = tmp_path / "paper"
     argv = _args(pair, "--model", "paper", "--counter-max", "4", "--no-sgbm")

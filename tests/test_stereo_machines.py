@@ -31,11 +31,12 @@ def _crop(y: int, x: int, height: int, width: int) -> tuple[np.ndarray, np.ndarr
             np.ascontiguousarray(right[y:y + height, x:x + width]))
 
 
-@pytest.mark.parametrize("machines", [2, 3])
-def test_census_machines_equal_the_model(machines: int) -> None:
-    """The default census model (neighbour prior on: the above neighbour from another machine)."""
+@pytest.mark.parametrize(("machines", "fused"), [(2, False), (3, False), (2, True)])
+def test_census_machines_equal_the_model(machines: int, fused: bool) -> None:
+    """The default census model (neighbour prior on: the above neighbour from another machine), and with
+    its image columns fused (each machine's word generator scans its pixels' beats)."""
     width = 14
-    model = ModelParams(dmax=2, name="census")
+    model = ModelParams(dmax=2, name="census", fuse_columns=fused)
     params = stereo_machine_params(2, model=model, counter_max=8, max_cycles=3000)
     frames = [_crop(150, 400, 13, width), _noisy_pair(10, width, seed=1)]  # 7 and 4 map rows
     top = StereoMachine(params=params, model=model, width=width, fifo_pixels=2, machines=machines)

@@ -24,8 +24,9 @@ Each column kind (one module each) defines in one place:
 Kinds: :class:`~.features.Mean`, :class:`~.features.GradH`, :class:`~.features.GradV` (the paper's),
 :class:`~.gradient.GradMag` (an option of the paper model),
 :class:`~.census.Census`, :class:`~.prior.LeftPrior` (feedback) and :class:`~.prior.AbovePrior`
-(loaded), :class:`~.consistency.Consistency` (fed by another pass); and the no-match row's floor
-:class:`~.features.NoMatchFloor`. A model (:mod:`bayesmachine.models`) is a list of them.
+(loaded), :class:`~.consistency.Consistency` (fed by another pass), :class:`~.fused.Fused` (FEATURES
+columns as one, in the energy form: :func:`~.fused.fused` makes a kind of its members); and the no-match
+row's floor :class:`~.features.NoMatchFloor`. A model (:mod:`bayesmachine.models`) is a list of them.
 """
 
 from .base import Column, Option, PassContext, PlaneColumn, Source, Table, Term, likelihood_formula, quantize
@@ -43,6 +44,7 @@ from .features import (
     Mean,
     NoMatchFloor,
 )
+from .fused import FUSE_COLUMNS, Fused, fused
 from .gradient import GRADIENT_MAGNITUDE, GradMag
 from .planes import Plane
 from .prior import NEIGHBOUR_PRIOR, AbovePrior, LeftPrior, NeighbourPrior, neighbour_words
@@ -55,10 +57,11 @@ __all__ = [
     "CENSUS_WINDOWS", "CENSUS_SIGMA", "Census", "census_bits", "census_codes", "census_offsets", "hamming",
     "NEIGHBOUR_PRIOR", "NeighbourPrior", "LeftPrior", "AbovePrior", "neighbour_words",
     "ENERGY_STEP", "ENERGY_MAX_BITS", "EnergyTable", "energy_codes", "exp_table",
+    "FUSE_COLUMNS", "Fused", "fused",
     "RIGHT_PASS", "Consistency", "lr_consistent", "lr_unknown", "right_lanes_valid",
     "COLUMN_KINDS",
 ]
 
 # The closed set of column kinds the package defines (each with its lane builder on chip).
 COLUMN_KINDS: tuple[type[Column], ...] = (Mean, GradH, GradV, GradMag, Census, LeftPrior, AbovePrior,
-                                          Consistency)
+                                          Consistency, Fused)

@@ -34,6 +34,7 @@ __all__ = [
     "quantize",
     "check_int",
     "check_bool",
+    "check_switch",
     "check_probability",
     "check_sigma",
 ]
@@ -72,6 +73,11 @@ def check_int(name: str, value: object, low: int, high: int) -> None:
 def check_bool(name: str, value: object) -> None:
     """TypeError unless ``value`` is True or False (a NumPy bool too)."""
     as_bool(name, value)
+
+
+def check_switch(name: str, value: object, values: Mapping[str, Any]) -> None:
+    """A yes/no option's check (``Option.check``): a bool."""
+    check_bool(name, value)
 
 
 def check_probability(name: str, value: object, positive: str = "") -> None:
@@ -298,6 +304,30 @@ class Column(Term):
 
     source: ClassVar[Source]
     feeds_from: ClassVar[str] = ""  # a PASS column: the name of the pass whose results it reads
+    # Its words hold the pass's no-match rule themselves (the fused column); otherwise the rule's value is
+    # put in its no-match row when it is the pass's first FEATURES column.
+    holds_rule: ClassVar[bool] = False
+
+    @classmethod
+    def expand(cls, values: Mapping[str, Any]) -> tuple[type[Column], ...]:
+        """The column kinds it stands for with a model's ``values`` (itself; a fused kind with
+        ``fuse_columns`` off: its members)."""
+        return (cls,)
+
+    @classmethod
+    def layout_options(cls) -> tuple[Option, ...]:
+        """The yes/no options of its own that :meth:`expand` reads."""
+        return ()
+
+    @property
+    def zeroes_nomatch(self) -> bool:
+        """Whether its no-match entry is 0 in every pixel: the pass's no-match row never wins."""
+        return False
+
+    def factors(self) -> tuple[Column, ...]:
+        """The columns whose float64 factors, multiplied in order, are its own (itself; a fused column:
+        its members): what the float64 reference multiplies."""
+        return (self,)
 
     def words(self, ctx: PassContext) -> np.ndarray:
         """Its words (P, Dmax+2) of the pass's P pixels of ``ctx`` (row-major), in the domain of
@@ -369,6 +399,11 @@ class PassContext:
         Other passes' MAPs (rows, width) of the band's rows, by pass name (-1: none).
     grids : Mapping[str, tuple[int, int]]
         Each pass's (first map column, width), by pass name.
+    rule : Term or None
+        The pass's no-match rule (what a column whose words hold it reads: the fused column).
+    nomatch_live : bool
+        Whether the pass's no-match row can win: False when a column of the pass zeroes it in every
+        pixel (the consistency column without ``lr_nomatch``).
     """
 
     where: str
@@ -382,6 +417,8 @@ class PassContext:
     above: np.ndarray | None = None
     results: Mapping[str, np.ndarray] = field(default_factory=dict)
     grids: Mapping[str, tuple[int, int]] = field(default_factory=dict)
+    rule: Term | None = None
+    nomatch_live: bool = True
 
     @property
     def rows(self) -> int:

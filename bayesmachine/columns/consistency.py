@@ -24,7 +24,7 @@ import numpy as np
 
 from bayesmachine.errors import ParameterError
 
-from .base import Column, Option, PassContext, Source, Table, check_bool, check_int, check_probability
+from .base import Column, Option, PassContext, Source, Table, check_int, check_probability, check_switch
 
 __all__ = ["RIGHT_PASS", "Consistency", "lr_consistent", "lr_unknown", "right_lanes_valid"]
 
@@ -38,10 +38,6 @@ def _factor(name: str, value: object, values: Mapping[str, Any]) -> None:
 
 def _tolerance(name: str, value: object, values: Mapping[str, Any]) -> None:
     check_int(name, value, 0, 4094)
-
-
-def _switch(name: str, value: object, values: Mapping[str, Any]) -> None:
-    check_bool(name, value)
 
 
 def _watchdog(name: str, value: object, values: Mapping[str, Any]) -> None:
@@ -105,15 +101,15 @@ class Consistency(Column):
         Option("lr_gamma", "float", 0.01, _factor, "the consistency column's no-match factor gamma when any "
                "lane is consistent (1 when none is)"),
         Option("lr_tolerance", "int", 1, _tolerance, "the left-right test's tolerance in disparities"),
-        Option("lr_nomatch", "bool", True, _switch,
+        Option("lr_nomatch", "bool", True, check_switch,
                "the left pass's no-match row (off: no no-match row at all)"),
-        Option("lr_right_nomatch", "bool", True, _switch,
+        Option("lr_right_nomatch", "bool", True, check_switch,
                "give the right pass its model's no-match row (off: none, word 0)"),
         Option("lr_right_max_cycles", "int", None, _watchdog, "the right pass's watchdog in cycles: a right "
                "pixel stopped by it has no right MAP", optional=True,
                default_text="the right pass's default watchdog, given with --max-cycles"),
-        Option("lr_neutral", "bool", True, _switch, "a lane whose right pixel has no right MAP (the right "
-               "pass's no match or a timeout) gets factor 1, no information (off: beta)"),
+        Option("lr_neutral", "bool", True, check_switch, "a lane whose right pixel has no right MAP (the "
+               "right pass's no match or a timeout) gets factor 1, no information (off: beta)"),
     )
 
     @property
@@ -127,6 +123,10 @@ class Consistency(Column):
     @property
     def has_nomatch(self) -> bool:
         return bool(self.values["lr_nomatch"])
+
+    @property
+    def zeroes_nomatch(self) -> bool:
+        return not self.has_nomatch
 
     def costs(self) -> np.ndarray:
         return np.arange(2)  # 0: consistent (or neutral), 1: not

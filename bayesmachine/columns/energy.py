@@ -67,6 +67,11 @@ class EnergyTable:
     bits: int
     step: float
 
+    @property
+    def one(self) -> int:
+        """The code of a likelihood of 1: a column's no-match entry of 1 reads it, as ``Table.one``."""
+        return 0
+
     @classmethod
     def of(cls, values: np.ndarray, nomatch: tuple[float, ...], step: float = ENERGY_STEP) -> EnergyTable:
         """The energy form of float64 likelihoods ``values`` and no-match entries ``nomatch``."""

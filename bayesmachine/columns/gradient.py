@@ -16,15 +16,11 @@ from typing import Any
 
 import numpy as np
 
-from .base import Option, PlaneColumn, check_bool, check_sigma, likelihood_formula
+from .base import Option, PlaneColumn, check_sigma, check_switch, likelihood_formula
 from .features import MAX_ABS, P0, SCALES
 from .planes import G20, Plane
 
 __all__ = ["GRADIENT_MAGNITUDE", "GradMag"]
-
-
-def _switch(name: str, value: object, values: Mapping[str, Any]) -> None:
-    check_bool(name, value)
 
 
 def _sigma(name: str, value: object, values: Mapping[str, Any]) -> None:
@@ -32,7 +28,7 @@ def _sigma(name: str, value: object, values: Mapping[str, Any]) -> None:
 
 
 # The paper model's switch that adds the column (a model's switch, ModelDef.switches).
-GRADIENT_MAGNITUDE = Option("gradient_magnitude", "bool", False, _switch,
+GRADIENT_MAGNITUDE = Option("gradient_magnitude", "bool", False, check_switch,
                             "a column of the windows' gradient magnitude |gH| + |gV| (off: the model's own "
                             "columns alone)")
 

@@ -25,17 +25,13 @@ from .base import (
     PassContext,
     Source,
     Table,
-    check_bool,
     check_probability,
     check_sigma,
+    check_switch,
     likelihood_formula,
 )
 
 __all__ = ["NEIGHBOUR_PRIOR", "NeighbourPrior", "LeftPrior", "AbovePrior", "neighbour_words"]
-
-
-def _switch(name: str, value: object, values: Mapping[str, Any]) -> None:
-    check_bool(name, value)
 
 
 def _probability(name: str, value: object, values: Mapping[str, Any]) -> None:
@@ -59,7 +55,7 @@ def _f_at_s(values: Mapping[str, Any]) -> float:
 
 # The switch of a model whose prior columns can be left out (census: --no-neighbour-prior; a model's
 # switch, ModelDef.switches).
-NEIGHBOUR_PRIOR = Option("neighbour_prior", "bool", True, _switch,
+NEIGHBOUR_PRIOR = Option("neighbour_prior", "bool", True, check_switch,
                          "the raster-order neighbour prior: a feedback column (the left neighbour's factor) "
                          "and a loaded column (the above neighbour's)")
 

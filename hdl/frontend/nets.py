@@ -21,7 +21,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from amaranth.hdl import Const, Module, Mux, Signal, Value, signed, unsigned
+from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value, signed, unsigned
 from amaranth.lib import memory
 
 from bayesmachine.hdl.signatures import beat_words
@@ -57,7 +57,7 @@ class WordNets:
         The taken pixel's reference features (its ``left`` field).
     """
 
-    def __init__(self, m: Module, gen: Any) -> None:
+    def __init__(self, m: Module, gen: Any, scan_latency: int = 0) -> None:
         p = gen.params
         self.m = m
         self.params = p
@@ -78,7 +78,13 @@ class WordNets:
         side = gen.pixel.payload.left.shape()
         self.left = Signal(side, reset_less=True)
         self._entries: dict[tuple[str, int], Signal] = {}
+        self.scan_latency = scan_latency
         self._pipeline()
+        if scan_latency:
+            self._scan()
+        else:  # the delay line's entries step with the words' issues
+            self.fetch, self.fetch_beat = self.issue, self.beat
+        self.free = ~self.busy | self._last_issue
         self._delay_line(side)
 
     def _pipeline(self) -> None:
@@ -95,7 +101,8 @@ class WordNets:
         m.d.comb += [self.advance.eq(~out.valid | out.ready), self.issue.eq(active & self.advance),
                      self.take.eq(self.generator.pixel.valid & self.generator.pixel.ready)]
         last = self.beat == n_beats - 1
-        self.free = ~active | (self.issue & last)
+        self.busy: Value = active  # a scan's cycles too (_scan)
+        self._last_issue = self.issue & last
         with m.If(self.advance):
             m.d.sync += [diff_valid.eq(self.issue), beat_d.eq(self.beat), addr_valid.eq(diff_valid),
                          beat_a.eq(beat_d), out.valid.eq(addr_valid), self.beat_q.eq(beat_a)]
@@ -106,8 +113,33 @@ class WordNets:
                 m.d.sync += self.beat.eq(self.beat + 1)
         with m.If(self.take):
             m.d.sync += self.left.eq(self.pixel.left)
-            with m.If(self.pixel.output):
-                m.d.sync += [active.eq(1), self.beat.eq(0)]
+            if not self.scan_latency:
+                with m.If(self.pixel.output):
+                    m.d.sync += [active.eq(1), self.beat.eq(0)]
+
+    def _scan(self) -> None:
+        """A pass whose words need every row of the pixel first (a fused column's smallest sum): an output
+        pixel's take starts a scan, a fetch (``fetch``, beat ``fetch_beat``: the delay line's entries) each
+        cycle, whatever the stream does; its words' issues start ``scan_latency`` cycles after the last
+        fetch (what a fetch's results need to be read at an issue), the pixel's next take at the last."""
+        m, n_beats = self.m, self.n_beats
+        self.fetch = Signal()  # scanning: one fetch a cycle
+        self.fetch_beat = Signal(range(max(2, n_beats)))
+        done = Signal()
+        m.d.comb += done.eq(self.fetch & (self.fetch_beat == n_beats - 1))
+        waits = [done]
+        for k in range(self.scan_latency - 1):  # the words' first issue, scan_latency cycles after done
+            waits.append(Signal(name=f"scan_wait{k}"))
+            m.d.sync += waits[-1].eq(waits[-2])
+        self.busy = self.busy | self.fetch | Cat(*waits[1:]).any()
+        with m.If(waits[-1]):
+            m.d.sync += [self.active.eq(1), self.beat.eq(0)]
+        with m.If(self.fetch):
+            m.d.sync += self.fetch_beat.eq(self.fetch_beat + 1)
+            with m.If(done):
+                m.d.sync += [self.fetch.eq(0), self.fetch_beat.eq(0)]
+        with m.If(self.take & self.pixel.output):
+            m.d.sync += [self.fetch.eq(1), self.fetch_beat.eq(0)]
 
     def _delay_line(self, side: Any) -> None:
         """The match features of the last pixels: pixel t (the t-th taken) at address t mod N of a
@@ -191,10 +223,10 @@ class WordNets:
             else:
                 m.d.sync += next_pixel
         if n_beats > 1:
-            with m.Elif(self.issue & (self.beat == n_beats - 2)):  # next: beat 0 of the next pixel
+            with m.Elif(self.fetch & (self.fetch_beat == n_beats - 2)):  # next: beat 0 of the next pixel
                 m.d.sync += [q.eq(q0), q_wrap.eq(self._step(q0, -g)), *(r.eq(s0) for r in start)]
         if n_beats > 2:
-            with m.Elif(self.issue & (self.beat < n_beats - 2)):  # next: beat b + 2
+            with m.Elif(self.fetch & (self.fetch_beat < n_beats - 2)):  # next: beat b + 2
                 m.d.sync += [q.eq(self._step(q, -g)), q_wrap.eq(self._step(q_wrap, -g))]
         self._start = start
         return q, q_wrap, start
@@ -217,9 +249,10 @@ class WordNets:
             self.m.d.sync += [stages[0].eq(value), stages[1].eq(stages[0]), stages[2].eq(stages[1])]
         return stages[2]
 
-    def address(self, value: Value, depth: int, name: str) -> Signal:
+    def address(self, value: Value, depth: int, name: str, en: Value | None = None) -> Signal:
         """The table address of a lane's cost ``value`` (of the issue's cycle): its absolute value clamped
-        to ``depth - 1``, a cycle later (the cost in a register, then the address in one)."""
+        to ``depth - 1``, a cycle later (the cost in a register, then the address in one); the registers
+        load while ``en`` (default ``advance``: a scan's, every cycle)."""
         if Value.cast(value).shape().width > 14:
             raise ValueError(f"{name}: a cost of {Value.cast(value).shape()} does not fit the 14-bit "
                              "register")
@@ -229,26 +262,30 @@ class WordNets:
         far = (diff >= depth - 1) | (diff <= -(depth - 1))
         self.m.d.comb += a.eq(abs(diff))
         reg = Signal(range(depth), name=f"addr_{name}", reset_less=True)  # guarded by the pipeline's valid
-        with self.m.If(self.advance):
+        with self.m.If(self.advance if en is None else en):
             self.m.d.sync += [diff.eq(value), reg.eq(Mux(far, depth - 1, a))]
         return reg
 
-    def table(self, name: str, words: Any) -> memory.Memory:
-        """A read-only table of W + 1-bit words (block RAM), submodule ``table_{name}``."""
+    def table(self, name: str, words: Any, bits: int | None = None) -> memory.Memory:
+        """A read-only table of W + 1-bit words (or of ``bits``-bit values: energy codes; block RAM),
+        submodule ``table_{name}``."""
         init = [int(w) for w in words]
-        mem = memory.Memory(shape=unsigned(self.params.memory_word_width), depth=len(init), init=init)
+        width = self.params.memory_word_width if bits is None else bits
+        mem = memory.Memory(shape=unsigned(width), depth=len(init), init=init)
         self.m.submodules[f"table_{name}"] = mem
         return mem
 
-    def lookup(self, name: str, words: Any, costs: list[Value]) -> list[Value]:
-        """The words of a table ``words`` at each lane row's cost ``costs[j]``, with the beat on the stream
-        (one read port per lane row)."""
-        mem = self.table(name, words)
+    def lookup(self, name: str, words: Any, costs: list[Value], en: Value | None = None,
+               bits: int | None = None) -> list[Value]:
+        """The words of a table ``words`` (``bits``: :meth:`table`) at each lane row's cost ``costs[j]``,
+        with the beat on the stream (one read port per lane row); ``en``: :meth:`address` (the words three
+        cycles after the cost)."""
+        mem = self.table(name, words, bits)
         out = []
         for j, cost in enumerate(costs):
             port = mem.read_port()
-            addr = self.address(cost, mem.depth, f"{name}_{j}")
-            self.m.d.comb += [port.en.eq(self.advance), port.addr.eq(addr)]
+            addr = self.address(cost, mem.depth, f"{name}_{j}", en)
+            self.m.d.comb += [port.en.eq(self.advance if en is None else en), port.addr.eq(addr)]
             out.append(port.data)
         return out
 
@@ -278,7 +315,7 @@ class WordNets:
         sel = Signal(banks[0].shape(), name=f"right_{plane}_{j}", reset_less=True)
         with m.If(self.take):
             m.d.sync += sel.eq(getattr(self.pixel.right, plane) if d0 == 0 else newest(d0 - 1))
-        with m.Elif(self.issue):  # beat b + 1's entry; shift_q is set at beat 0's issue at most
+        with m.Elif(self.fetch):  # beat b + 1's entry; shift_q is set at beat 0's fetch at most
             m.d.sync += sel.eq(newest(self.reference.entry(rows + j, self.dmax)))
         self._entries[key] = sel
         return sel

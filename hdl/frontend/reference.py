@@ -53,6 +53,10 @@ class Reference:
         """Whether lane row j of the beat on the stream has a match pixel (None: always)."""
         return None
 
+    def match_ok(self, nets: Any, row: Value) -> Value | None:
+        """Whether row ``row`` (<= Dmax) of the pixel taken has a match pixel (None: always)."""
+        return None
+
 
 class RightReference(Reference):
     """The right image as reference (see the module text): entry Dmax - d, the ``flush`` flag."""
@@ -74,9 +78,12 @@ class RightReference(Reference):
         return map_columns
 
     def lane_valid(self, nets: Any, j: int) -> Value | None:
+        return nets.aligned(self.match_ok(nets, nets.row(j)), f"lane_ok{j}")
+
+    def match_ok(self, nets: Any, row: Value) -> Value | None:
         if not hasattr(self, "_flush"):
             self._flush = nets.at_take(nets.pixel.flush, "flush")
-        return nets.aligned(nets.row(j) + self._flush <= nets.dmax, f"lane_ok{j}")
+        return row + self._flush <= nets.dmax
 
 
 REFERENCES: dict[str, type[Reference]] = {r.name: r for r in (Reference, RightReference)}

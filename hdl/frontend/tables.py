@@ -14,9 +14,10 @@ from collections.abc import Iterator, Mapping
 
 import numpy as np
 
+from bayesmachine.columns import Fused, Term
 from bayesmachine.models import ModelParams
 
-__all__ = ["FrontEndTables", "clamp_table", "frontend_tables"]
+__all__ = ["FrontEndTables", "clamp_table", "frontend_tables", "term_tables"]
 
 
 def clamp_table(table: np.ndarray) -> np.ndarray:
@@ -55,8 +56,22 @@ class FrontEndTables(Mapping[str, np.ndarray]):
         return t[np.minimum(np.abs(np.asarray(cost, np.int64)), len(t) - 1)]
 
 
+def term_tables(term: Term, rule: Term, word_bits: int) -> dict[str, np.ndarray]:
+    """A term's clamped tables by name: its ``word_bits``-bit words (``{name: ...}``); a fused column's
+    members' energy codes (``{member}_energy``), its pass's no-match rule's (``nomatch_energy``) and its
+    exp table (``fused_exp``, X: ends at its first 0, the clamp)."""
+    if isinstance(term, Fused):
+        out = {f"{m.name}_energy": clamp_table(e.values) for m, e in zip(term.members, term.energies(),
+                                                                         strict=True)}
+        return out | {"nomatch_energy": clamp_table(term.rule_energy(rule).values),
+                      "fused_exp": term.exp_table(word_bits)}
+    return {term.name: clamp_table(term.table(word_bits).values)}
+
+
 def frontend_tables(model: ModelParams, word_bits: int) -> FrontEndTables:
     """The clamped tables of ``model``'s own pass's columns and its no-match rule, quantized to
-    ``word_bits``-bit words (host code, then clamped)."""
-    terms = (*model.columns, model.nomatch)
-    return FrontEndTables({t.name: clamp_table(t.table(word_bits).values) for t in terms})
+    ``word_bits``-bit words (host code, then clamped; :func:`term_tables`)."""
+    out: dict[str, np.ndarray] = {}
+    for t in (*model.columns, model.nomatch):
+        out.update(term_tables(t, model.nomatch, word_bits))
+    return FrontEndTables(out)

@@ -143,7 +143,8 @@ class WordGenerator(wiring.Component):
     beat's issue: a pixel outside the output region passes in one cycle, an output pixel holds the
     stream for ``beats_per_pixel`` cycles (more if ``beats`` is not ready, or while a lane builder
     holds it: an ABOVE column until the result above has left the machine, a PASS column until the
-    MAP it reads is in).
+    MAP it reads is in; a fused column's pass first scans the pixel's beats, ``beats_per_pixel`` + 4
+    cycles more: ``Lanes.scan_latency``).
 
     Parameters
     ----------
@@ -248,11 +249,13 @@ class WordGenerator(wiring.Component):
 
     def elaborate(self, platform: object) -> Module:
         m = Module()
-        nets = self._nets = WordNets(m, self)
+        scan = max(lanes_for(c).scan_latency(c) for c in self._pass.columns)
+        nets = self._nets = WordNets(m, self, scan)
         columns = [lanes_for(c)(c, nets) for c in self._pass.columns]
         rule = self._pass.model.nomatch
-        floor = lanes_for(rule)(rule, nets)
-        for lanes in (*columns, floor):
+        # The rule's floor, unless a column's words hold it (a fused column's no-match row).
+        floor = None if any(c.holds_rule for c in self._pass.columns) else lanes_for(rule)(rule, nets)
+        for lanes in (*columns, *([floor] if floor else [])):
             lanes.build()
         ready = nets.free
         for lanes in columns:
@@ -261,7 +264,8 @@ class WordGenerator(wiring.Component):
         nets.write_beats(self._loaded(nets, columns, floor))
         return m
 
-    def _loaded(self, nets: WordNets, columns: list[Lanes], floor: Lanes) -> list[tuple[list[Any], Any]]:
+    def _loaded(self, nets: WordNets, columns: list[Lanes],
+                floor: Lanes | None) -> list[tuple[list[Any], Any]]:
         """(words of lane rows 0..R-1, no-match word) of each loaded operator column, in operator order:
         the machine's own loaded prior columns (1.0), then every column but a FEEDBACK one (formed by the
         machine). The no-match rule's word sits in the first FEATURES column's no-match row; a pass
@@ -271,7 +275,7 @@ class WordGenerator(wiring.Component):
         loaded = [lanes for lanes in columns if lanes.term.source is not Source.FEEDBACK]
         own = self._params.loaded_columns - len(loaded)
         out: list[tuple[list[Any], Any]] = [([one] * nets.rows_per_beat, one)] * own
-        rule_word = floor.nomatch()
+        rule_word = None if floor is None else floor.nomatch()
         valid = [nets.reference.lane_valid(nets, j) for j in range(nets.rows_per_beat)]
         for lanes in loaded:
             words = [lanes.word(j) for j in range(nets.rows_per_beat)]

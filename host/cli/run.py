@@ -195,6 +195,7 @@ def _report(outcome: RunOutcome, source: str, crop: Crop | None) -> dict[str, ob
         # The cycles below are clocks: B random samples per operator and clock (results: B = 1's).
         "samples_per_clock": run.machine.samples_per_clock,
         **outcome.metrics.to_report(),
+        "operator_samples_per_pixel": run.operator_samples_per_pixel,
         "frame_cycles": frame,
         # Compute cycles count the machine's runs only; wall cycles (RTL engines) add loading.
         "wall_cycles": wall,

@@ -1,10 +1,10 @@
 """One lane builder per column kind (:mod:`.base`: the contract and the registry). Importing the package
 registers every kind's: :mod:`.features` (m, gH, gV and the no-match floor), :mod:`.census`,
 :mod:`.prior` (the left and above neighbours), :mod:`.consistency`, :mod:`.gradient` (the gradient
-magnitude)."""
+magnitude), :mod:`.fused` (the fused column)."""
 
-from . import census, consistency, features, gradient, prior
+from . import census, consistency, features, fused, gradient, prior
 from .base import Lanes, PlaneFilter, PlaneLanes, lanes_for, register
 
-__all__ = ["Lanes", "PlaneFilter", "PlaneLanes", "census", "consistency", "features", "gradient", "lanes_for",
-           "prior", "register"]
+__all__ = ["Lanes", "PlaneFilter", "PlaneLanes", "census", "consistency", "features", "fused", "gradient",
+           "lanes_for", "prior", "register"]

@@ -111,6 +111,13 @@ class Lanes:
     def check(cls, term: Any, model: Any, p: Any) -> None:
         """``ParameterError`` naming the model unless its lanes can run in pass ``p`` of ``model``."""
 
+    @classmethod
+    def scan_latency(cls, term: Any) -> int:
+        """0, or the cycles from a fetch of the delay line's entries to an issue that can read what it
+        gives, when its words need every row of the pixel first: the word generator then scans the pixel's
+        beats before its words (``WordNets.fetch``; a fused column's smallest sum)."""
+        return 0
+
     # --- One elaboration ---
     def __init__(self, term: Any, nets: WordNets) -> None:
         self.term = term
@@ -156,10 +163,15 @@ class PlaneLanes(Lanes):
         value is the table's address)."""
         raise NotImplementedError
 
+    def costs(self) -> list[Value]:
+        """Each lane row's cost, of the delay line's entries of the beat being fetched (a fused column
+        reads its members' costs here)."""
+        n, c = self.nets, self.term
+        return [self.cost(getattr(n.left, c.plane), n.entry(c.plane, j)) for j in range(n.rows_per_beat)]
+
     def build(self) -> None:
         n, c = self.nets, self.term
-        costs = [self.cost(getattr(n.left, c.plane), n.entry(c.plane, j)) for j in range(n.rows_per_beat)]
-        self._words = n.lookup(c.name, n.tables[c.name], costs)
+        self._words = n.lookup(c.name, n.tables[c.name], self.costs())
 
     def word(self, j: int) -> Any:
         return self._words[j]

@@ -37,8 +37,8 @@ class GradMagLanes(PlaneLanes):
         self.nets.m.d.comb += g.eq(abs(planes[0]) + abs(planes[1]))
         return g
 
-    def build(self) -> None:
-        n, c = self.nets, self.term
+    def costs(self) -> list[Value]:
+        n = self.nets
         ref = self._magnitude([getattr(n.left, p) for p in PLANES], "g_ref")
         costs = []
         for j in range(n.rows_per_beat):
@@ -46,4 +46,4 @@ class GradMagLanes(PlaneLanes):
             cost = Signal(signed(G_BITS + 1), name=f"g_cost{j}")
             n.m.d.comb += cost.eq(ref - match)
             costs.append(cost)
-        self._words = n.lookup(c.name, n.tables[c.name], costs)
+        return costs

@@ -1,0 +1,147 @@
+"""The fused column's lanes: its members' costs from the delay line's entries, their energy tables, the
+sums per row, the pixel's smallest sum, and the exp table back to words (the rule of
+``bayesmachine.columns.fused``; docs/architecture.md, "The fused column").
+
+A word needs the pixel's smallest sum, so the word generator scans the pixel's beats first
+(``WordNets.fetch``, one beat of delay-line entries a cycle, whatever the stream does): each lane row's
+member costs (the members' own lane builders' ``costs``) are read in their energy tables (block RAM,
+three cycles: cost, address, read), added, kept per row in a register and folded into a running minimum
+(the no-match row's sum first, when the pass's no-match row can win). Then the beats are issued as any
+pass's: each lane's sum minus the minimum is the address of the exp table X (clamped to its last entry,
+0), and the no-match row's word the same at the no-match sum.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from amaranth.hdl import Const, Mux, Signal, Value, unsigned
+
+from bayesmachine.columns import Fused
+
+from .base import Lanes, PlaneFilter, lanes_for, register
+
+__all__ = ["FusedLanes"]
+
+# From a fetch to the first issue that reads its sums: the cost and address registers and the table
+# read (3), the sum and minimum registers (1).
+SCAN_LATENCY = 4
+
+
+@register(Fused)
+class FusedLanes(Lanes):
+    """A fused column (see the module's text): its members' lane builders give the costs."""
+
+    @classmethod
+    def filters(cls, term: Any, margin: int) -> tuple[PlaneFilter, ...]:
+        out: dict[PlaneFilter, None] = {}
+        for member in term.members:
+            out.update(dict.fromkeys(lanes_for(member).filters(member, margin)))
+        return tuple(out)
+
+    @classmethod
+    def planes(cls, term: Any, margin: int) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        for member in term.members:
+            out.update(lanes_for(member).planes(member, margin))
+        return out
+
+    @classmethod
+    def scan_latency(cls, term: Any) -> int:
+        return SCAN_LATENCY
+
+    def build(self) -> None:
+        n, t = self.nets, self.term
+        rule = n.pass_.model.nomatch
+        sums = self._member_sums()
+        width = self._sum_bits()
+        # The no-match row's sum: the rule's code at the reference pixel's |gV| (stable from the take on)
+        # plus the other members' no-match codes.
+        rule_code = n.lookup("nomatch_energy", n.tables["nomatch_energy"],
+                             [getattr(n.left, rule.plane)], en=Const(1), bits=self._bits("nomatch_energy"))[0]
+        extra = sum(int(m.nomatch_entry(e)) for m, e in zip(t.members[1:], t.energies()[1:], strict=True))
+        self._nm_sum = Signal(unsigned(width), name="fused_nm_sum")
+        n.m.d.comb += self._nm_sum.eq(rule_code + extra)
+        self._live = n.pass_.nomatch and not any(c.zeroes_nomatch for c in n.pass_.columns)
+        self._store_and_min(sums, width)
+        self._words_out(width)
+
+    def _bits(self, name: str) -> int:
+        return max(1, int(max(self.nets.tables[name])).bit_length())
+
+    def _sum_bits(self) -> int:
+        n, t = self.nets, self.term
+        top = sum(int(max(n.tables[f"{m.name}_energy"])) for m in t.members)
+        nm = int(max(n.tables["nomatch_energy"])) + sum(
+            int(m.nomatch_entry(e)) for m, e in zip(t.members[1:], t.energies()[1:], strict=True))
+        return max(top, nm).bit_length()
+
+    def _member_sums(self) -> list[Value]:
+        """Each lane row's sum of its members' codes, three cycles after its fetch."""
+        n = self.nets
+        total: list[Value] = [Const(0)] * n.rows_per_beat
+        for member in self.term.members:
+            costs = lanes_for(member)(member, n).costs()
+            name = f"{member.name}_energy"
+            codes = n.lookup(name, n.tables[name], costs, en=Const(1), bits=self._bits(name))
+            total = [a + b for a, b in zip(total, codes, strict=True)]
+        return total
+
+    def _delayed(self, value: Value, cycles: int, name: str) -> Signal:
+        """``value`` ``cycles`` cycles later (every cycle: the scan runs whatever the stream does)."""
+        out: Value = value
+        for k in range(cycles):
+            reg = Signal.like(Value.cast(value), name=f"{name}_{k}")
+            self.nets.m.d.sync += reg.eq(out)
+            out = reg
+        return out  # type: ignore[return-value]
+
+    def _store_and_min(self, sums: list[Value], width: int) -> None:
+        """The sums of a fetched beat's rows into their registers, three cycles after its fetch, and the
+        running minimum over the rows with a match pixel (the no-match sum at beat 0 when it can win)."""
+        n = self.nets
+        m, rows, dmax = n.m, n.rows_per_beat, n.dmax
+        fetched = self._delayed(n.fetch, 3, "fused_fetched")
+        beat = self._delayed(n.fetch_beat, 3, "fused_beat")
+        top = (1 << width) - 1
+        self._rows = [Signal(unsigned(width), name=f"fused_sum{r}", reset_less=True) for r in range(dmax + 1)]
+        self._min = Signal(unsigned(width), name="fused_min", reset_less=True)
+        low: Value = Mux(beat == 0, self._nm_sum if self._live else top, self._min)
+        for j in range(rows):
+            row = beat * rows + j
+            ok = row <= dmax
+            match = n.reference.match_ok(n, row)
+            if match is not None:
+                ok = ok & match
+            s = sums[j]
+            low = Mux(ok & (s < low), s, low)
+        with m.If(fetched):
+            m.d.sync += self._min.eq(low)
+            with m.Switch(beat):
+                for b in range(n.n_beats):
+                    with m.Case(b):
+                        for j in range(rows):
+                            if b * rows + j <= dmax:
+                                m.d.sync += self._rows[b * rows + j].eq(sums[j])
+
+    def _words_out(self, width: int) -> None:
+        """At each issue, each lane row's sum minus the minimum, read in X (with the beat on the stream)."""
+        n = self.nets
+        m, rows, dmax = n.m, n.rows_per_beat, n.dmax
+        diffs = [Signal(unsigned(width), name=f"fused_diff{j}") for j in range(rows)]
+        with m.Switch(n.beat):
+            for b in range(n.n_beats):
+                with m.Case(b):
+                    for j in range(rows):
+                        r = b * rows + j
+                        m.d.comb += diffs[j].eq(self._rows[r] - self._min if r <= dmax else 0)
+        costs: list[Value] = list(diffs)
+        if self._live:
+            costs.append(self._nm_sum - self._min)
+        self._words = n.lookup("fused_exp", n.tables["fused_exp"], costs)
+
+    def word(self, j: int) -> Any:
+        return self._words[j]
+
+    def nomatch(self) -> Any:
+        return self._words[-1] if self._live else 0
