@@ -20,12 +20,13 @@ from pathlib import Path
 
 from amaranth.back import rtlil
 
+from bayesmachine.columns.energy import exp_table
 from bayesmachine.fpga.flow import parse_nextpnr, place_and_route, synthesize
 from bayesmachine.fpga.port_registers import PortRegisters
 from bayesmachine.fpga.report import logic_cells, resources
 from bayesmachine.fpga.targets import get_target
 from bayesmachine.fpga.wrapper import PinWrapper
-from bayesmachine.hdl.log import ArgminTree, LogIntegrator, LogParams, RowAdders, WeightStage, exp_table
+from bayesmachine.hdl.log import ArgminTree, LogIntegrator, LogParams, RowAdders, WeightStage
 
 CELLS = ("LUT4", "CCU2C", "PFUMX", "L6MUX21", "TRELLIS_FF", "DP16KD", "TRELLIS_DPR16X4")
 
@@ -94,7 +95,7 @@ def main() -> None:
     ap.add_argument("--blocks", action="store_true", help="also each block alone, per setting")
     ap.add_argument("--verbose", action="store_true", help="the tools' progress lines")
     args = ap.parse_args()
-    table = exp_table(weight_bits=args.weight_bits, step=args.step)
+    table = exp_table(args.weight_bits, args.step)
     print(f"LogIntegrator, {args.rows} rows, exp table {len(table)} entries of {args.weight_bits + 1} bits "
           f"(step {args.step:g} nat), {args.tie_break}; Yosys synth_ecp5 (LFE5U-85F)"
           + ("; fmax: nextpnr-ecp5 behind PinWrapper, seed " + str(args.seed) if args.pnr else ""))

@@ -595,7 +595,8 @@ def test_cli_sweep_three_models(pair_files, tmp_path):
         # On chip the right pass's machine has no entropy port: an off-chip source is refused.
         pytest.param(["run", "--model", "census-lr", "--engine", "verilator", "--feed", "pixels", "--rng",
                       "smtj"],
-                     "--rng: rng must be an on-chip random source for the census-lr model on chip", marks=pytest.mark.eda),
+                     "--rng: rng must be an on-chip random source for the census-lr model on chip",
+                     marks=pytest.mark.eda),
     ],
 )
 def test_cli_refusals_are_one_line(pair_files, tmp_path, capsys, argv, message):

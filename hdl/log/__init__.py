@@ -8,11 +8,11 @@ from .argmin import ArgminTree
 from .integrator import LogIntegrator
 from .layouts import best_layout, codes_layout, log_result_layout, row_sums_layout
 from .pipeline import PipelineNets, StallPipeline
-from .rule import LogParams, LogResult, argmin_rows, exp_table, log_integrate, row_sums, row_weights
+from .rule import LogParams, LogResult, argmin_rows, log_integrate, row_sums, row_weights
 from .weights import WeightStage
 
 __all__ = [
     "ArgminTree", "LogIntegrator", "LogParams", "LogResult", "PipelineNets", "RowAdders", "StallPipeline",
-    "WeightStage", "argmin_rows", "best_layout", "codes_layout", "exp_table", "log_integrate",
+    "WeightStage", "argmin_rows", "best_layout", "codes_layout", "log_integrate",
     "log_result_layout", "row_sums", "row_sums_layout", "row_weights",
 ]
