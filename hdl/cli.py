@@ -12,6 +12,7 @@ from bayesmachine.cliargs import (
     machine_params_from_args,
     model_params_from_args,
     output_path,
+    refuse_log_integrator,
 )
 
 from .emit import emit, summary
@@ -56,6 +57,7 @@ def _run(args: argparse.Namespace) -> int:
         raise ValueError(f"--machines: only with --top stereo (got --top {args.top})")
     model = model_params_from_args(args)
     params = machine_params_from_args(args, args.dmax, model=model)
+    refuse_log_integrator(params, "emit")
     if args.top == "stereo":
         from .frontend.cli import build
         from .frontend.cli import summary as stereo_summary

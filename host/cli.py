@@ -36,6 +36,7 @@ from bayesmachine.cliargs import (
     output_path,
     pass_watchdogs,
     positive_float_at_most,
+    refuse_log_integrator,
     runnable_sources,
 )
 from bayesmachine.extras import needs_host
@@ -317,6 +318,8 @@ def _machine_params(
     if rng is not None:
         overrides["rng"] = rng
     machine = machine_params_from_args(args, model.dmax, model=model, **overrides)
+    if getattr(args, "engine", "model") != "model" or getattr(args, "feed", "words") != "words":
+        refuse_log_integrator(machine, f"--engine {args.engine} --feed {getattr(args, 'feed', 'words')}")
     if getattr(args, "feed", "words") == "pixels" and args.words_per_beat is None:
         # The front end writes one feature per lane: lanes a multiple of the loaded columns.
         from bayesmachine.params import stereo_words_per_beat
@@ -347,6 +350,7 @@ def _report(outcome: RunOutcome, source: str, crop: Crop | None) -> dict[str, ob
         wall += sum(r.wall_cycles for r in declared)
     report: dict[str, object] = {
         "engine": run.engine,
+        "integrator": run.machine.integrator,
         "rng": run.machine.rng,
         "counter_max": run.machine.counter_max,
         # The cycles below are clocks: B random samples per operator and clock (results: B = 1's).
@@ -388,7 +392,9 @@ def _summary(r: dict[str, object]) -> str:
         return "n/a" if v is None else format(v, fmt)
 
     line = (
-        f"{r['engine']} model={r['model_name']} rng={r['rng']} counter_max={r['counter_max']}"
+        f"{r['engine']} model={r['model_name']} "
+        + ("integrator=log" if r.get("integrator") == "log"
+           else f"rng={r['rng']} counter_max={r['counter_max']}")
         + (f" samples_per_clock={r['samples_per_clock']}" if r.get("samples_per_clock", 1) != 1 else "")
         + f": {r['pixels']} px, "
         f"{f('cycles_per_pixel_mean', '.2f')} +- {f('cycles_per_pixel_std', '.2f')} cycles/px, "

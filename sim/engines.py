@@ -84,6 +84,8 @@ _PIXEL_ENGINES = {
     "verilator": "bayesmachine.sim.stereo_engine:StereoVerilatorEngine",
     "board": "bayesmachine.fpga.boards.engine:BoardEngine",
 }
+# The engines of a machine with integrator = "log" (docs/integrators.md).
+_LOG_ENGINES = {"model": "bayesmachine.sim.log_model:LogMachineModel"}
 ENGINES = tuple(_WORD_ENGINES)
 PIXEL_ENGINES = tuple(_PIXEL_ENGINES)
 
@@ -340,11 +342,18 @@ def check_engine_options(cls: type, name: str, options: dict[str, object]) -> No
 
 
 def get_engine(name: str, params: MachineParams, **options: object) -> Engine:
-    """A fresh engine (machine state as after reset) by name: one of :data:`ENGINES`.
+    """A fresh engine (machine state as after reset) by name: one of :data:`ENGINES` (with ``integrator =
+    "log"`` the model only: ``sim.log_model.LogMachineModel``).
 
     ``options`` go to the engine's constructor; one it does not take is a ``ValueError``.
     """
-    cls = _load(_WORD_ENGINES, name, "engine")
+    if getattr(params, "integrator", None) == "log":
+        if name not in _LOG_ENGINES:
+            raise ValueError(f"--integrator log runs on the engine(s) {', '.join(_LOG_ENGINES)} only (got "
+                             f"--engine {name}): its RTL top is not built yet")
+        cls = _load(_LOG_ENGINES, name, "engine")
+    else:
+        cls = _load(_WORD_ENGINES, name, "engine")
     check_engine_options(cls, name, options)
     return cls(params, **options)
 

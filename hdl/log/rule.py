@@ -31,8 +31,8 @@ from bayesmachine.checks import as_int
 from bayesmachine.errors import ParameterError
 from bayesmachine.params import DEFAULT_TIE_BREAK, TIE_BREAKS
 
-__all__ = ["LogParams", "LogResult", "argmin_rows", "check_params", "log_integrate", "row_sums",
-           "row_weights"]
+__all__ = ["LogParams", "LogResult", "argmin_rows", "check_params", "integrate_pixel", "log_integrate",
+           "row_sums", "row_weights"]
 
 MAX_CODE_BITS = 16
 MAX_WEIGHT_BITS = 16
@@ -207,18 +207,26 @@ def _row_weights(sums, excluded, s_min, table, out):
         _weights(sums[i], excluded[i], s_min[i], table, out[i])
 
 
+@numba.njit(cache=True, inline="always")
+def integrate_pixel(codes, infinite, nm_first, none_index, table, sums, excluded, weights):
+    """The whole rule for one pixel's ``codes`` (rows, codes), in one pass: fills its ``sums``,
+    ``excluded`` and ``weights`` (per row) and returns ``(map, all_excluded, s_min)``. Compiled (numba):
+    the kernel every caller of the rule per pixel shares (:func:`log_integrate`, the model engine)."""
+    for r in range(codes.shape[0]):
+        sums[r], excluded[r] = _row(codes[r], infinite)
+    best = _argmin(sums, excluded, nm_first)
+    s_min = 0 if best < 0 else sums[best]
+    _weights(sums, excluded, s_min, table, weights)
+    return (none_index if best < 0 else best), best < 0, s_min
+
+
 @numba.njit(cache=True)
 def _integrate(codes, infinite, nm_first, none_index, table, sums, excluded, out_map, out_none, out_s_min,
                weights):
     """The whole rule per pixel, in one pass over its codes."""
     for i in range(codes.shape[0]):
-        for r in range(codes.shape[1]):
-            sums[i, r], excluded[i, r] = _row(codes[i, r], infinite)
-        best = _argmin(sums[i], excluded[i], nm_first)
-        out_none[i] = best < 0
-        out_map[i] = none_index if best < 0 else best
-        out_s_min[i] = 0 if best < 0 else sums[i, best]
-        _weights(sums[i], excluded[i], out_s_min[i], table, weights[i])
+        out_map[i], out_none[i], out_s_min[i] = integrate_pixel(codes[i], infinite, nm_first, none_index,
+                                                                table, sums[i], excluded[i], weights[i])
 
 
 def _check_codes(codes: object, params: LogParams) -> np.ndarray:

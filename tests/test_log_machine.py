@@ -1,0 +1,160 @@
+"""The logarithmic machine on the models (issue 41): MachineParams.integrator, the energy-coded columns,
+the model engine (sim.log_model) against the rule, its clocks against the blocks' latency, the CLI."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from bayesmachine.cli import main
+from bayesmachine.columns import LeftPrior
+from bayesmachine.columns.energy import INFINITE_CODE, log_codes
+from bayesmachine.errors import ParameterError
+from bayesmachine.hdl.log import ArgminTree, RowAdders, log_integrate
+from bayesmachine.host.features import model_planes
+from bayesmachine.host.images import bundled_pair
+from bayesmachine.host.likelihoods import likelihoods_plain, memory_words
+from bayesmachine.models import ModelParams, disparity_machine, pass_machine
+from bayesmachine.params import MachineParams
+from bayesmachine.sim.engines import get_engine
+from bayesmachine.sim.log_model import (
+    ADDER_LEVELS_PER_STAGE,
+    ARGMIN_LEVELS_PER_STAGE,
+    log_params,
+    pixel_clocks,
+)
+
+
+def test_integrator_parameter() -> None:
+    stochastic = MachineParams.for_disparity(8)
+    log = MachineParams.for_disparity(8, integrator="log")
+    assert stochastic.integrator == "stochastic" and "integrator" not in stochastic.to_dict()
+    assert log.to_dict()["integrator"] == "log" and log.fingerprint() != stochastic.fingerprint()
+    assert stochastic.to_dict(complete=True)["integrator"] == "stochastic"
+    assert (stochastic.load_max, stochastic.readout_max) == (1024, 16)
+    assert (log.load_max, log.readout_max) == (INFINITE_CODE, 1024)
+    with pytest.raises(ParameterError, match="integrator") as err:
+        MachineParams.for_disparity(8, integrator="logarithmic")
+    assert err.value.parameter == "integrator"
+    with pytest.raises(TypeError, match="integrator"):
+        MachineParams.for_disparity(8, integrator=1)
+
+
+def test_feedback_table_in_codes() -> None:
+    model = ModelParams(name="census-lr")
+    log = disparity_machine(model, integrator="log")
+    # Measured: the census-lr prior (eps 0.05, s 4, no-match 0.1) in 1/16-nat codes, clamped at 48.
+    assert log.feedback_words == (0, 0, 2, 4, 7, 12, 16, 22, 28, 33, 38, 42, 45, 46, 47, 48)
+    assert log.feedback_nomatch_word == 37
+    left = model.column(LeftPrior)
+    energy = left.energy()
+    assert log.feedback_words == tuple(int(c) for c in energy.values[: len(log.feedback_words)])
+    assert (energy.values[len(log.feedback_words):] == 48).all()
+    assert pass_machine(model, log, "right").integrator == "log"
+    stochastic = disparity_machine(model)
+    with pytest.raises(ParameterError, match="feedback"):
+        disparity_machine(model, integrator="log", feedback_words=stochastic.feedback_words)
+
+
+def test_paper_codes_are_the_energy_form() -> None:
+    """The host's codes of the paper model = log_codes of the plain likelihoods (the oracle's)."""
+    left, right, _ = bundled_pair()
+    left, right = left[200:230, 300:400], right[200:230, 300:400]
+    model = ModelParams(name="paper", dmax=16)
+    planes = (model_planes(left, model), model_planes(right, model))
+    machine = disparity_machine(model, integrator="log")
+    codes = memory_words(*planes, model, machine)
+    lik, nm = likelihoods_plain(*planes, model)
+    n = lik.shape[0] * lik.shape[1]
+    assert np.array_equal(codes[:, :17], log_codes(lik).reshape(n, 17, 3))
+    assert np.array_equal(codes[:, 17, 0], log_codes(nm).reshape(n))
+    assert (codes[:, 17, 1:] == 0).all()  # the other columns' no-match entry is 1.0: code 0
+    assert codes.max() < INFINITE_CODE  # every lane of the left pass has a match pixel
+
+
+def _random_codes(rng: np.random.Generator, machine: MachineParams, pixels: int) -> np.ndarray:
+    codes = rng.integers(0, 40, (pixels, machine.rows, machine.loaded_columns))
+    codes[rng.random(codes.shape) < 0.05] = INFINITE_CODE
+    codes[rng.random(codes.shape[:2]) < 0.02] = 300  # saturated-looking, finite
+    return codes
+
+
+def test_engine_equals_the_rule() -> None:
+    rng = np.random.default_rng(5)
+    machine = disparity_machine(ModelParams(name="paper", dmax=12), integrator="log")
+    codes = _random_codes(rng, machine, 400)
+    codes[0] = INFINITE_CODE  # every row excluded: no answer
+    res = get_engine("model", machine).run(codes)
+    rule = log_integrate(codes, log_params(machine))
+    assert np.array_equal(res.map, rule.map) and np.array_equal(res.counts, rule.weights)
+    assert np.array_equal(res.nomatch, rule.nomatch) and np.array_equal(res.timeout, rule.all_excluded)
+    assert res.timeout[0] and res.timeout.sum() == 1 and (res.cycles == 1).all()
+    assert res.counts.max() == 1024  # the MAP's weight, 2^W
+
+
+def test_engine_feedback_loop() -> None:
+    """With the neighbour prior each pixel's feedback column follows the previous MAP, across calls."""
+    rng = np.random.default_rng(6)
+    machine = disparity_machine(ModelParams(name="census", dmax=10), integrator="log")
+    p = log_params(machine)
+    fb, nm = np.array(machine.feedback_words), machine.feedback_nomatch_word
+    codes = _random_codes(rng, machine, 60)
+    starts = np.zeros(30, bool)
+    starts[[0, 17]] = True
+    eng = get_engine("model", machine)
+    got = [eng.run(codes[:30], line_start=starts), eng.run(codes[30:], line_start=np.zeros(30, bool))]
+    prev = -1
+    for i in range(60):
+        full = np.zeros((1, machine.rows, machine.operator_columns), np.int64)
+        full[0, :, 1:] = codes[i]
+        if not (i < 30 and starts[i]) and prev >= 0:
+            full[0, :-1, 0] = fb[np.minimum(np.abs(np.arange(machine.rows - 1) - prev), len(fb) - 1)]
+            full[0, -1, 0] = nm
+        want = log_integrate(full, p)
+        res = got[i // 30]
+        assert int(res.map[i % 30]) == int(want.map[0])
+        assert np.array_equal(res.counts[i % 30], want.weights[0])
+        prev = -1 if want.nomatch[0] or want.all_excluded[0] else int(want.map[0])
+    bound = RowAdders(params=p, levels_per_stage=ADDER_LEVELS_PER_STAGE).latency + ArgminTree(
+        params=p, levels_per_stage=ARGMIN_LEVELS_PER_STAGE).latency
+    # 6 codes: 3 adder levels, 3 stages; 12 rows: 4 argmin levels, 2 stages at 2 levels per stage.
+    assert pixel_clocks(machine) == (1, bound) == (1, 5)
+    assert got[0].cycles[0] == got[0].cycles[17] == 1 and (np.delete(got[0].cycles, [0, 17]) == 5).all()
+
+
+def test_engine_refusals() -> None:
+    machine = disparity_machine(ModelParams(name="paper", dmax=4), integrator="log")
+    with pytest.raises(ValueError, match="integrator log runs on the engine"):
+        get_engine("pysim", machine)
+    eng = get_engine("model", machine)
+    with pytest.raises(ValueError, match=r"energy codes .* \[0, 511\]"):
+        eng.run(np.full((1, 6, 3), 512))
+    with pytest.raises(ValueError, match="no random numbers"):
+        eng.run(np.zeros((1, 6, 3), np.int64), numbers=np.zeros((4, 18), np.int64))
+
+
+def test_run_cli_log(tmp_path) -> None:
+    out = tmp_path / "out"
+    assert main(["run", "--integrator", "log", "--crop", "200,200,200,60", "--model", "census", "--quiet",
+                 "-o", str(out)]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["integrator"] == "log" and report["machine"]["integrator"] == "log"
+    # Measured on this crop (the model engine, the weights read as the counters are).
+    assert report["pixels"] == 6156
+    assert report["machine_bad2"] == pytest.approx(0.15407, abs=1e-4)
+    assert report["confidence"]["machine"]["ece"] == pytest.approx(0.13309, abs=1e-4)
+    assert report["cycles_per_pixel_mean"] == pytest.approx(6.9474, abs=1e-3)
+    assert (out / "confidence.png").stat().st_size > 0 and (out / "calibration.png").stat().st_size > 0
+    assert np.load(out / "result.npz")["counts"].max() == 1024
+
+
+@pytest.mark.parametrize("argv", [["emit", "-o", "x.v"], ["board", "build", "-o", "b"],
+                                  ["run", "--engine", "pysim", "--crop", "200,200,40,20", "-o", "r"]])
+def test_cli_refuses_log_where_it_does_not_run(tmp_path, capsys, argv) -> None:
+    argv = [a if a not in ("x.v", "b", "r") else str(tmp_path / a) for a in argv]
+    assert main([*argv, "--integrator", "log"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "integrator" in err[0], err
+    assert not (tmp_path / "r" / "report.json").exists()
