@@ -313,8 +313,9 @@ add_option(MachineOption("normalize", "--normalize-columns",
 add_option(MachineOption("integrator", "--integrator",
                          "how a pixel's evidence is integrated: stochastic (the paper's machine: AND "
                          "gates and overflow counters) or log (the logarithmic machine: each row's energy "
-                         "codes summed, the MAP the lowest sum, the rows' weights from an exp table; run "
-                         "and sweep, the model engine only; docs/integrators.md) (default %(default)s)",
+                         "codes summed, the MAP the lowest sum, the rows' weights from an exp table: its "
+                         "words' top, not yet the front end or the board; docs/integrators.md) (default "
+                         "%(default)s)",
                          default=DEFAULT_INTEGRATOR, choices=INTEGRATORS))
 add_option(MachineOption("tie_break", "--tie-break",
                          "MAP encoder rule when several counters overflow in one cycle (default %(default)s)",
@@ -346,8 +347,8 @@ def refuse_log_integrator(machine: MachineParams, command: str) -> None:
     """ParameterError naming ``--integrator`` where the logarithmic machine has no such path yet."""
     if machine.integrator != DEFAULT_INTEGRATOR:
         raise ParameterError(f"--integrator: {command} runs the stochastic machine only; the "
-                             f"{machine.integrator} integrator runs on the host (run, sweep: --engine model "
-                             "--feed words)", "integrator")
+                             f"{machine.integrator} machine is its words' top (run, sweep: --feed words; "
+                             "emit, synth: --top machine)", "integrator")
 
 
 def add_dmax_option(group: argparse._ActionsContainer) -> argparse.Action:

@@ -270,6 +270,13 @@ class MachineParams:
         _check_choice("timeout_answer", self.timeout_answer, TIMEOUT_ANSWERS)
         self._bool("normalize")
         _check_choice("integrator", self.integrator, INTEGRATORS)
+        if self.integrator == "log" and not source_kind(self.rng).on_chip:
+            raise ParameterError(f"rng: the log integrator draws no random numbers, so an off-chip source "
+                                 f"({self.rng!r}) has none to give; leave rng at its default", "rng")
+        if self.integrator == "log" and self.word_bits < 8:
+            raise ParameterError(f"word_bits ({self.word_bits}) must be at least 8 with integrator 'log': "
+                                 "its 9-bit energy codes travel in the load stream's W + 1-bit words",
+                                 "word_bits")
         # Last, what only the random source knows (the Sobol table's size, the LFSR polynomials):
         # the one place it is checked, so every holder of a MachineParams can build its source.
         check_source(self)

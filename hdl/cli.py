@@ -57,8 +57,8 @@ def _run(args: argparse.Namespace) -> int:
         raise ValueError(f"--machines: only with --top stereo (got --top {args.top})")
     model = model_params_from_args(args)
     params = machine_params_from_args(args, args.dmax, model=model)
-    refuse_log_integrator(params, "emit")
     if args.top == "stereo":
+        refuse_log_integrator(params, "emit --top stereo")
         from .frontend.cli import build
         from .frontend.cli import summary as stereo_summary
 

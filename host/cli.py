@@ -318,7 +318,7 @@ def _machine_params(
     if rng is not None:
         overrides["rng"] = rng
     machine = machine_params_from_args(args, model.dmax, model=model, **overrides)
-    if getattr(args, "engine", "model") != "model" or getattr(args, "feed", "words") != "words":
+    if getattr(args, "engine", "model") == "board" or getattr(args, "feed", "words") != "words":
         refuse_log_integrator(machine, f"--engine {args.engine} --feed {getattr(args, 'feed', 'words')}")
     if getattr(args, "feed", "words") == "pixels" and args.words_per_beat is None:
         # The front end writes one feature per lane: lanes a multiple of the loaded columns.

@@ -85,7 +85,8 @@ _PIXEL_ENGINES = {
     "board": "bayesmachine.fpga.boards.engine:BoardEngine",
 }
 # The engines of a machine with integrator = "log" (docs/integrators.md).
-_LOG_ENGINES = {"model": "bayesmachine.sim.log_model:LogMachineModel"}
+_LOG_ENGINES = {"model": "bayesmachine.sim.log_model:LogMachineModel", "pysim": _WORD_ENGINES["pysim"],
+                "verilator": _WORD_ENGINES["verilator"]}
 ENGINES = tuple(_WORD_ENGINES)
 PIXEL_ENGINES = tuple(_PIXEL_ENGINES)
 
@@ -343,14 +344,14 @@ def check_engine_options(cls: type, name: str, options: dict[str, object]) -> No
 
 def get_engine(name: str, params: MachineParams, **options: object) -> Engine:
     """A fresh engine (machine state as after reset) by name: one of :data:`ENGINES` (with ``integrator =
-    "log"`` the model only: ``sim.log_model.LogMachineModel``).
+    "log"`` the model is ``sim.log_model.LogMachineModel``, pysim and verilator run ``hdl.log.machine``).
 
     ``options`` go to the engine's constructor; one it does not take is a ``ValueError``.
     """
     if getattr(params, "integrator", None) == "log":
         if name not in _LOG_ENGINES:
-            raise ValueError(f"--integrator log runs on the engine(s) {', '.join(_LOG_ENGINES)} only (got "
-                             f"--engine {name}): its RTL top is not built yet")
+            raise ValueError(f"--integrator log runs on the engines {', '.join(_LOG_ENGINES)} only (got "
+                             f"--engine {name})")
         cls = _load(_LOG_ENGINES, name, "engine")
     else:
         cls = _load(_WORD_ENGINES, name, "engine")

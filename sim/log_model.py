@@ -10,7 +10,8 @@ stochastic model's :func:`~bayesmachine.sim.model.fill_feedback` with the flat c
 ``counts`` the rows' weights (``exp_table(word_bits)`` at each sum's distance from the least, up to
 ``MachineParams.readout_max``: the distribution the host reads as it reads the counters), ``map``,
 ``nomatch``, ``timeout`` where every row is excluded (no answer, as the stochastic machine whose every
-row has a zero word runs into its watchdog), ``cycles`` the clocks per pixel by :func:`pixel_clocks`.
+row has a zero word runs into its watchdog), ``cycles`` the clocks per pixel by
+:func:`bayesmachine.hdl.log.machine.pixel_clocks`. ``hdl.log.machine.LogMachine`` is its RTL.
 """
 
 from __future__ import annotations
@@ -18,45 +19,15 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from bayesmachine.columns.energy import ENERGY_STEP, INFINITE_CODE, LOG_CODE_BITS, exp_table
-from bayesmachine.hdl.log.rule import LogParams, integrate_pixel
+from bayesmachine.columns.energy import INFINITE_CODE
+from bayesmachine.hdl.log.machine import log_params, pixel_clocks
+from bayesmachine.hdl.log.rule import integrate_pixel
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.engines import EngineBase
 from bayesmachine.sim.model import feedback_result, fill_feedback
 from bayesmachine.sim.results import MachineResult, NumberFeed
 
-__all__ = ["ADDER_LEVELS_PER_STAGE", "ARGMIN_LEVELS_PER_STAGE", "LogMachineModel", "log_params",
-           "pixel_clocks"]
-
-# The log machine's pipeline setting (hdl.log.LogIntegrator): tree levels between two registers.
-ADDER_LEVELS_PER_STAGE = 1
-ARGMIN_LEVELS_PER_STAGE = 2
-
-
-def log_params(params: MachineParams) -> LogParams:
-    """The integrator of ``params`` (``integrator = "log"``): a row per hypothesis, a code per operator
-    column, :data:`LOG_CODE_BITS`-bit codes, the exp table ``exp_table(word_bits)``, its no-match row and
-    tie rule."""
-    return LogParams(rows=params.rows, codes=params.operator_columns, code_bits=LOG_CODE_BITS,
-                     weights=exp_table(params.word_bits, ENERGY_STEP), nomatch_row=params.nomatch_row,
-                     tie_break=params.tie_break)
-
-
-def _stages(leaves: int, levels: int) -> int:
-    """Register stages of a balanced tree over ``leaves`` at ``levels`` per stage (at least 1)."""
-    return max(1, -(-(leaves - 1).bit_length() // levels))
-
-
-def pixel_clocks(params: MachineParams) -> tuple[int, int]:
-    """(clocks per pixel where no feedback column binds, clocks per pixel where one does).
-
-    The pipeline takes a pixel per clock. With a neighbour prior, pixel x's feedback column needs pixel
-    x − 1's MAP, which leaves the argmin tree the row adders' and the tree's latencies after x − 1 went
-    in: the loop's clocks (a line's first pixel, whose feedback is flat, does not wait)."""
-    loop = (_stages(params.operator_columns, ADDER_LEVELS_PER_STAGE)
-            + _stages(params.rows, ARGMIN_LEVELS_PER_STAGE))
-    return 1, loop if params.feedback_columns else 1
-
+__all__ = ["LogMachineModel"]
 
 @numba.njit(cache=True)
 def _run_log(codes, rows, opcols, nm_first, none_index, table, line_start, fb, fb_nm, nm_row, prev,

@@ -1,3 +1,4 @@
+# amaranth: UnusedElaboratable=no
 """The logarithmic machine on the models (issue 41): MachineParams.integrator, the energy-coded columns,
 the model engine (sim.log_model) against the rule, its clocks against the blocks' latency, the CLI."""
 
@@ -13,18 +14,18 @@ from bayesmachine.columns import LeftPrior
 from bayesmachine.columns.energy import INFINITE_CODE, log_codes
 from bayesmachine.errors import ParameterError
 from bayesmachine.hdl.log import ArgminTree, RowAdders, log_integrate
+from bayesmachine.hdl.log.machine import (
+    ADDER_LEVELS_PER_STAGE,
+    ARGMIN_LEVELS_PER_STAGE,
+    log_params,
+    pixel_clocks,
+)
 from bayesmachine.host.features import model_planes
 from bayesmachine.host.images import bundled_pair
 from bayesmachine.host.likelihoods import likelihoods_plain, memory_words
 from bayesmachine.models import ModelParams, disparity_machine, pass_machine
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.engines import get_engine
-from bayesmachine.sim.log_model import (
-    ADDER_LEVELS_PER_STAGE,
-    ARGMIN_LEVELS_PER_STAGE,
-    log_params,
-    pixel_clocks,
-)
 
 
 def test_integrator_parameter() -> None:
@@ -126,8 +127,10 @@ def test_engine_feedback_loop() -> None:
 
 def test_engine_refusals() -> None:
     machine = disparity_machine(ModelParams(name="paper", dmax=4), integrator="log")
-    with pytest.raises(ValueError, match="integrator log runs on the engine"):
-        get_engine("pysim", machine)
+    with pytest.raises(ParameterError, match="rng"):
+        disparity_machine(ModelParams(name="paper", dmax=4), integrator="log", rng="external")
+    with pytest.raises(ParameterError, match="word_bits"):
+        disparity_machine(ModelParams(name="paper", dmax=4), integrator="log", word_bits=7)
     eng = get_engine("model", machine)
     with pytest.raises(ValueError, match=r"energy codes .* \[0, 511\]"):
         eng.run(np.full((1, 6, 3), 512))
@@ -150,11 +153,70 @@ def test_run_cli_log(tmp_path) -> None:
     assert np.load(out / "result.npz")["counts"].max() == 1024
 
 
-@pytest.mark.parametrize("argv", [["emit", "-o", "x.v"], ["board", "build", "-o", "b"],
-                                  ["run", "--engine", "pysim", "--crop", "200,200,40,20", "-o", "r"]])
+@pytest.mark.parametrize("argv", [["emit", "--top", "stereo", "-o", "x.v"], ["board", "build", "-o", "b"],
+                                  ["run", "--engine", "verilator", "--feed", "pixels", "--crop",
+                                   "200,200,40,20", "-o", "r"],
+                                  ["synth", "--target", "ecp5-85k", "--machines", "2", "-o", "r"]])
 def test_cli_refuses_log_where_it_does_not_run(tmp_path, capsys, argv) -> None:
     argv = [a if a not in ("x.v", "b", "r") else str(tmp_path / a) for a in argv]
     assert main([*argv, "--integrator", "log"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "integrator" in err[0], err
-    assert not (tmp_path / "r" / "report.json").exists()
+    assert not (tmp_path / "r" / "report.json").exists() and not (tmp_path / "x.v").exists()
+
+
+def test_emit_log_machine(tmp_path, capsys) -> None:
+    assert main(["emit", "--integrator", "log", "--model", "paper", "--dmax", "4", "-o",
+                 str(tmp_path / "log.il")]) == 0
+    out = capsys.readouterr().out
+    assert "integrator: log" in out and "9-bit energy codes" in out and "random source" not in out
+    assert (tmp_path / "log.il").stat().st_size > 0
+
+
+@pytest.mark.parametrize("name", ["paper", "census"])
+def test_pysim_equals_the_model(name) -> None:
+    """The log machine's RTL (hdl.log.machine.LogMachine) under pysim, with back-pressure on both
+    streams, gives the model engine's results bit for bit (the feedback loop across calls included)."""
+    from bayesmachine.hdl.log.machine import LogMachine
+
+    rng = np.random.default_rng(7)
+    machine = disparity_machine(ModelParams(name=name, dmax=6), integrator="log", word_bits=8)
+    codes = _random_codes(rng, machine, 40)
+    codes[3] = INFINITE_CODE
+    runs = [(codes[:25], np.arange(25) % 9 == 0), (codes[25:], np.zeros(15, bool))]
+    model = get_engine("model", machine)
+    sim = get_engine("pysim", machine, load_stall=0.3, result_stall=0.3, stall_seed=2)
+    for part, starts in runs:
+        kw = {"line_start": starts} if machine.feedback_columns else {}
+        want, got = model.run(part, **kw), sim.run(part, **kw)
+        for field in ("map", "nomatch", "timeout", "cycles", "counts"):
+            assert np.array_equal(getattr(want, field), getattr(got, field)), field
+    assert want.counts.max() == 256 and isinstance(sim.dut, LogMachine)
+
+
+def test_pysim_issue_interval_is_the_loop() -> None:
+    """Without back-pressure and with one beat per pixel, pixels with a left neighbour issue every
+    loop's clocks: the wall cycles of P such pixels grow by loop clocks per pixel."""
+    machine = disparity_machine(ModelParams(name="census", dmax=2), integrator="log", word_bits=8)
+    assert machine.beats_per_pixel == 1
+    codes = np.zeros((40, machine.rows, machine.loaded_columns), np.int64)
+    walls = []
+    for pixels in (20, 40):
+        eng = get_engine("pysim", machine)
+        eng.run(codes[:pixels], line_start=np.arange(pixels) == 0)
+        walls.append(eng.wall_cycles)
+    assert walls[1] - walls[0] == 20 * pixel_clocks(machine)[1]
+
+
+@pytest.mark.eda
+@pytest.mark.slow
+def test_verilator_equals_the_model_on_a_crop(tmp_path) -> None:
+    """run --integrator log: the Verilator engine's results (census-lr's two passes) are the model's."""
+    outs = {}
+    for engine in ("model", "verilator"):
+        out = tmp_path / engine
+        assert main(["run", "--integrator", "log", "--crop", "250,200,80,14", "--dmax", "24", "--model",
+                     "census-lr", "--engine", engine, "--quiet", "--no-sgbm", "-o", str(out)]) == 0
+        outs[engine] = np.load(out / "result.npz")
+    for key in ("map", "counts", "cycles", "timeout", "confidence"):
+        assert np.array_equal(outs["model"][key], outs["verilator"][key]), key
