@@ -287,7 +287,7 @@ def test_board_refuses_off_chip_sources() -> None:
     with pytest.raises(ParameterError, match="on-chip random source"):
         check_board(smtj, MODEL, WIDTH)
     lr = ModelParams(dmax=DMAX, name="census-lr")
-    with pytest.raises(ParameterError, match="^rng: the census-lr model's right pass runs on chip"):
+    with pytest.raises(ParameterError, match="^rng must be an on-chip random source for the census-lr model"):
         check_board(stereo_machine_params(DMAX, model=lr, rng="smtj"), lr, WIDTH)
 
 

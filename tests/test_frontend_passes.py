@@ -303,7 +303,7 @@ def test_census_lr_on_chip_parameters() -> None:
     assert rp.columns == 4 and rp.seed != params.seed and rp.words_per_beat % rp.loaded_columns == 0
     assert pass_params(model, params, "left") is params
     check_stereo_machine(params, model, 11)
-    with pytest.raises(ParameterError, match="rng: the census-lr model's right pass runs on chip"):
+    with pytest.raises(ParameterError, match="rng must be an on-chip random source for the census-lr model"):
         check_stereo_machine(stereo_machine_params(4, model=model, rng="smtj"), model, 11)
     with pytest.raises(ParameterError, match="width"):
         FrontEnd(params=params, model=model, width=10)

@@ -220,3 +220,13 @@ def test_verilator_equals_the_model_on_a_crop(tmp_path) -> None:
         outs[engine] = np.load(out / "result.npz")
     for key in ("map", "counts", "cycles", "timeout", "confidence"):
         assert np.array_equal(outs["model"][key], outs["verilator"][key]), key
+
+
+def test_sweep_integrator_axis(tmp_path) -> None:
+    """sweep --integrator stochastic,log: a grid axis, one point per integrator."""
+    out = tmp_path / "sweep"
+    assert main(["sweep", "--integrator", "stochastic,log", "--counter-max", "8", "--crop", "250,200,80,20",
+                 "--dmax", "16", "--model", "paper", "--quiet", "-o", str(out)]) == 0
+    points = json.loads((out / "sweep.json").read_text())["points"]
+    assert [p["id"] for p in points] == ["paper_sobol_cm8_integratorstochastic",
+                                         "paper_sobol_cm8_integratorlog"]
