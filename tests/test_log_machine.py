@@ -210,13 +210,14 @@ def test_pysim_issue_interval_is_the_loop() -> None:
 
 @pytest.mark.eda
 @pytest.mark.slow
-def test_verilator_equals_the_model_on_a_crop(tmp_path) -> None:
+@pytest.mark.parametrize("name", ["paper", "census", "census-lr"])
+def test_verilator_equals_the_model_on_a_crop(tmp_path, name) -> None:
     """run --integrator log: the Verilator engine's results (census-lr's two passes) are the model's."""
     outs = {}
     for engine in ("model", "verilator"):
         out = tmp_path / engine
         assert main(["run", "--integrator", "log", "--crop", "250,200,80,14", "--dmax", "24", "--model",
-                     "census-lr", "--engine", engine, "--quiet", "--no-sgbm", "-o", str(out)]) == 0
+                     name, "--engine", engine, "--quiet", "--no-sgbm", "-o", str(out)]) == 0
         outs[engine] = np.load(out / "result.npz")
     for key in ("map", "counts", "cycles", "timeout", "confidence"):
         assert np.array_equal(outs["model"][key], outs["verilator"][key]), key
