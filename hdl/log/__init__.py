@@ -1,7 +1,8 @@
 """The logarithmic integrator's blocks (Turck et al. 2025): energy codes summed per row, the MAP as
 the row of the lowest sum, each row's weight from an exp table. ``rule`` is the definition (NumPy);
 ``RowAdders``, ``ArgminTree`` and ``WeightStage`` are its parts and ``LogIntegrator`` the whole, each
-a stall pipeline (``pipeline``) at one pixel per clock. docs/integrators.md."""
+a stall pipeline (``pipeline``) at one pixel per clock; ``machine.LogMachine`` puts them behind the
+machine's ports (``integrator = "log"``). docs/integrators.md."""
 
 from .adders import RowAdders
 from .argmin import ArgminTree

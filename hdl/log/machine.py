@@ -9,17 +9,17 @@ argmin tree and the weights stage (``RowAdders`` → ``ArgminTree`` → ``Weight
 The result stream carries ``map``, ``nomatch``, ``timeout`` (every row excluded), ``cycles`` and
 ``counts`` (the rows' weights): ``sim.log_model.LogMachineModel``'s results, bit for bit.
 
-The feedback loop: a pixel with a left neighbour issues no earlier than the clock its predecessor's MAP
-leaves the argmin tree (the MAP goes straight into its feedback column that clock, and into the
-``prev`` register for later pixels), so such pixels issue every ``RowAdders.latency +
-ArgminTree.latency`` clocks at most (:func:`pixel_clocks`); a line's first pixel and every pixel
-without a neighbour prior issue as soon as they are loaded. ``cycles`` is that issue interval by the
+The feedback loop: as a MAP leaves the argmin tree the next pixel's feedback codes are registered
+from it, and a pixel with a left neighbour issues the clock after its predecessor's MAP left, so such
+pixels issue every ``RowAdders.latency + ArgminTree.latency + 1`` clocks at most
+(:func:`pixel_clocks`); a line's first pixel and every pixel without a neighbour prior issue as soon
+as they are loaded. ``cycles`` is that issue interval by the
 rule (1, or the loop's clocks), which the loading may exceed (the wall cycles count it).
 """
 
 from __future__ import annotations
 
-from amaranth.hdl import Array, Const, Module, Mux, Signal
+from amaranth.hdl import Array, Const, Module, Mux, Signal, Value
 from amaranth.lib import fifo, wiring
 
 from bayesmachine.columns.energy import ENERGY_STEP, LOG_CODE_BITS, exp_table
@@ -54,9 +54,10 @@ def _stages(leaves: int, levels: int) -> int:
 
 def pixel_clocks(params: MachineParams) -> tuple[int, int]:
     """(clocks per pixel where no feedback column binds, clocks per pixel where one does): 1, and with a
-    neighbour prior the loop's ``RowAdders.latency + ArgminTree.latency`` at this machine's setting."""
+    neighbour prior the loop's ``RowAdders.latency + ArgminTree.latency + 1`` at this machine's setting
+    (the feedback codes registered as the MAP leaves the argmin tree)."""
     loop = (_stages(params.operator_columns, ADDER_LEVELS_PER_STAGE)
-            + _stages(params.rows, ARGMIN_LEVELS_PER_STAGE))
+            + _stages(params.rows, ARGMIN_LEVELS_PER_STAGE) + 1)
     return 1, loop if params.feedback_columns else 1
 
 
@@ -107,7 +108,7 @@ class LogMachine(wiring.Component):
         wiring.connect(m, adders.sums, argmin.sums)
         wiring.connect(m, argmin.best, weights.best)
         # pixel_clocks is the blocks' latency (tests/test_log_machine.py holds it too).
-        assert not self._params.feedback_columns or adders.latency + argmin.latency == self.loop
+        assert not self._params.feedback_columns or adders.latency + argmin.latency + 1 == self.loop
         # Pixels in flight, their line_start in order, for their cycles (at most every stage's plus the
         # three output buffers' entries).
         depth = adders.latency + argmin.latency + weights.latency + 6
@@ -146,7 +147,7 @@ class LogMachine(wiring.Component):
                adders: RowAdders, argmin: ArgminTree, starts: fifo.SyncFIFO) -> None:
         """A full buffer issues into the adders when they take it and (a neighbour prior) its feedback
         column is known: a line start, or no pixel before it between the adders' input and the argmin's
-        output (``pending``), or the last one's MAP leaving the argmin this clock."""
+        output (``pending``: the last one's MAP has left it, its feedback codes are registered)."""
         p, lp = self._params, self._log
         issue = Signal()
         passing = Signal()  # a MAP leaves the argmin tree this clock
@@ -154,7 +155,7 @@ class LogMachine(wiring.Component):
         if p.feedback_columns:
             pending = Signal(range(adders.latency + argmin.latency + 8))
             m.d.sync += pending.eq(pending + issue - passing)
-            known = start | (pending == 0) | ((pending == 1) & passing)
+            known = start | (pending == 0)
         else:
             known = 1
         m.d.comb += [
@@ -176,20 +177,15 @@ class LogMachine(wiring.Component):
                 else:
                     m.d.comb += target.eq(codes[r * loaded + c - p.feedback_columns])
 
-    def _feedback(self, m: Module, argmin: ArgminTree, passing: Signal, start: Signal) -> list[Signal]:
-        """Each row's feedback code: 0 at a line start or without a previous hypothesis, else the table at
-        |r − prev| (clamped), the no-match code in the no-match row. ``prev``: the MAP leaving the argmin
-        this clock, else the register of the last one (-1: no match, every row excluded, none yet)."""
+    def _feedback(self, m: Module, argmin: ArgminTree, passing: Signal, start: Signal) -> list[Value]:
+        """Each row's feedback code: a register loaded as a MAP leaves the argmin tree (the table at
+        |r − MAP| clamped, the no-match code in the no-match row; 0 when that pixel's answer is no match or
+        every row was excluded; 0 from reset), read as 0 at a line start. The register keeps the loop's
+        logic (distances, table) out of the path into the adders."""
         p = self._params
         best = argmin.best.payload
         hit = Signal()
         m.d.comb += hit.eq(~best.nomatch & ~best.all_excluded)
-        prev = Signal(p.map_width)
-        prev_ok = Signal()
-        with m.If(passing):
-            m.d.sync += [prev.eq(best.map), prev_ok.eq(hit)]
-        now = Mux(passing, best.map, prev)
-        now_ok = Mux(passing, hit, prev_ok)
         table = Array(Const(w, LOG_CODE_BITS) for w in p.feedback_words)
         last = len(p.feedback_words) - 1
         out = []
@@ -199,10 +195,11 @@ class LogMachine(wiring.Component):
                 value = Const(p.feedback_nomatch_word, LOG_CODE_BITS)
             else:
                 dist = Signal(p.map_width, name=f"distance{r}")
-                m.d.comb += dist.eq(Mux(now > r, now - r, r - now))
+                m.d.comb += dist.eq(Mux(best.map > r, best.map - r, r - best.map))
                 value = table[Mux(dist > last, last, dist)]
-            m.d.comb += code.eq(Mux(start | ~now_ok, 0, value))
-            out.append(code)
+            with m.If(passing):
+                m.d.sync += code.eq(Mux(hit, value, 0))
+            out.append(Mux(start, 0, code))
         return out
 
     def _result(self, m: Module, weights: WeightStage, starts: fifo.SyncFIFO) -> None:
