@@ -51,6 +51,7 @@ from bayesmachine.models import (
 from bayesmachine.params import (
     DEFAULT_COUNTER_MAX,
     DEFAULT_DMAX,
+    DEFAULT_INTEGRATOR,
     DEFAULT_LFSR_BITS,
     DEFAULT_MAX_CYCLES,
     DEFAULT_RNG,
@@ -58,6 +59,7 @@ from bayesmachine.params import (
     DEFAULT_TIE_BREAK,
     DEFAULT_WORD_BITS,
     DEFAULT_WORDS_PER_BEAT,
+    INTEGRATORS,
     PRIORS,
     RNG_KINDS,
     SAMPLES_PER_CLOCK,
@@ -91,6 +93,7 @@ __all__ = [
     "input_path",
     "machine_default",
     "machine_params_from_args",
+    "refuse_log_integrator",
     "model_params_from_args",
     "options_without_effect",
     "machine_parameters",
@@ -317,6 +320,13 @@ add_option(MachineOption("normalize", "--normalize-columns",
                          f"(default on with --model {_models_with(lambda d: d.normalize)}, "
                          f"{'on' if machine_default('normalize') else 'off'} otherwise)",
                          type=bool))
+add_option(MachineOption("integrator", "--integrator",
+                         "how a pixel's evidence is integrated: stochastic (the paper's machine: AND "
+                         "gates and overflow counters) or log (the logarithmic machine: each row's energy "
+                         "codes summed, the MAP the lowest sum, the rows' weights from an exp table: its "
+                         "words' top, not yet the front end or the board; docs/integrators.md) (default "
+                         "%(default)s)",
+                         default=DEFAULT_INTEGRATOR, choices=INTEGRATORS))
 add_option(MachineOption("tie_break", "--tie-break",
                          "MAP encoder rule when several counters overflow in one cycle (default %(default)s)",
                          default=DEFAULT_TIE_BREAK, choices=TIE_BREAKS))
@@ -342,6 +352,14 @@ add_option(MachineOption("words_per_beat", "--words-per-beat",
                          f"likelihood-memory words per load beat (default {DEFAULT_WORDS_PER_BEAT}, "
                          f"or one pixel's words if fewer; {STEREO_ROWS_PER_BEAT} rows' words with the "
                          "front end: --feed pixels, --top stereo)", metavar="N"))
+
+
+def refuse_log_integrator(machine: MachineParams, command: str) -> None:
+    """ParameterError naming ``--integrator`` where the logarithmic machine has no such path yet."""
+    if machine.integrator != DEFAULT_INTEGRATOR:
+        raise ParameterError(f"--integrator: {command} runs the stochastic machine only; the "
+                             f"{machine.integrator} machine is its words' top (run, sweep: --feed words; "
+                             "emit, synth: --top machine)", "integrator")
 
 
 def add_dmax_option(group: argparse._ActionsContainer) -> argparse.Action:

@@ -472,10 +472,11 @@ def disparity_machine(model: ModelParams, **machine_kwargs: Any) -> MachineParam
         rest = {k: v for k, v in kwargs.items() if k not in own}
         if rest.get("max_cycles") is None and model.definition.watchdog_runs is not None:
             rest["max_cycles"] = (1 << 32) - 1  # the model's watchdog comes below
-        word_bits = MachineParams.for_disparity(model.dmax, **rest).word_bits
+        probe = MachineParams.for_disparity(model.dmax, **rest)
+        word_bits = probe.word_bits
         left = model.column(LeftPrior)
         assert left is not None
-        feedback, nm = left.feedback(word_bits)
+        feedback, nm = left.feedback_of(probe)
         for name, want in (("feedback_words", feedback), ("feedback_nomatch_word", nm)):
             got = kwargs.get(name)
             if got is not None and (tuple(got) if name == "feedback_words" else got) != want:
@@ -520,9 +521,9 @@ def _described(model: ModelParams) -> str:
 def pass_machine(model: ModelParams, machine: MachineParams, name: str) -> MachineParams:
     """The machine of ``model``'s declared pass ``name`` when its own pass runs on ``machine``.
 
-    The pass's model's machine (:func:`disparity_machine`) with ``machine``'s word width, counter max,
-    random source, watchdog (the pass's own if its option or its ``watchdog_runs`` gives one: a pixel
-    stopped by it has no result) and tie rule, and the seed of machine ``machine_index`` of a row
+    The pass's model's machine (:func:`disparity_machine`) with ``machine``'s integrator, word width,
+    counter max, random source, watchdog (the pass's own if its option or its ``watchdog_runs`` gives one:
+    a pixel stopped by it has no result) and tie rule, and the seed of machine ``machine_index`` of a row
     (:func:`~bayesmachine.params.nth_machine`): a machine beside the left one, its own random numbers.
     """
     _check_model(model)
@@ -532,7 +533,7 @@ def pass_machine(model: ModelParams, machine: MachineParams, name: str) -> Machi
                          "disparity_machine(model)")
     check_disparity_machine(model, machine)
     keep = ("word_bits", "counter_max", "rng", "lfsr_bits", "seed", "max_cycles", "tie_break",
-            "samples_per_clock", "timeout_answer", "normalize")
+            "samples_per_clock", "timeout_answer", "normalize", "integrator")
     kwargs: dict[str, Any] = {k: getattr(machine, k) for k in keep}
     if p.max_cycles is not None:
         kwargs["max_cycles"] = p.max_cycles

@@ -34,6 +34,8 @@ __all__ = [
     "DEFAULT_MAX_CYCLES",
     "DEFAULT_PRIOR",
     "DEFAULT_TIE_BREAK",
+    "INTEGRATORS",
+    "DEFAULT_INTEGRATOR",
     "SMTJ_DEFAULTS",
     "DEFAULT_WORDS_PER_BEAT",
     "SAMPLES_PER_CLOCK",
@@ -47,6 +49,10 @@ __all__ = [
 RNG_KINDS = tuple(SOURCE_KINDS)
 PRIORS = ("uniform", "loaded", "neighbour")
 TIE_BREAKS = ("nomatch-first", "lowest-index")
+# How a pixel's evidence is integrated: the paper's stochastic machine (AND gates, overflow counters) or
+# the logarithmic one (energy codes summed per row, the MAP the lowest sum: docs/integrators.md).
+INTEGRATORS = ("stochastic", "log")
+DEFAULT_INTEGRATOR = "stochastic"
 # Random samples each operator compares per clock (B): powers of two, so that a Sobol block of 2^W
 # points is whole clocks and a clock's points are its first point XOR constants.
 SAMPLES_PER_CLOCK = (1, 2, 4, 8, 16)
@@ -169,6 +175,15 @@ class MachineParams:
         What a run stopped by the watchdog answers (still flagged ``timeout``): ``"none"`` (map 0,
         read as no match) or ``"leading"`` (the row with the largest count, the tie rule among equal
         counts; the no-match row's answer is no match).
+    integrator
+        One of ``INTEGRATORS``: ``"stochastic"`` (the paper's machine, the default) or ``"log"``: the
+        logarithmic integrator (``docs/integrators.md``): every row's energy codes
+        (``bayesmachine.columns.energy.log_codes``) summed, the MAP the row of the lowest sum by
+        ``tie_break``, each row's weight ``exp_table(word_bits)`` at its sum's distance from the least
+        (the readout where the stochastic machine has its counts, up to :attr:`readout_max`); what is
+        loaded are codes, not words, and the feedback table (``feedback_words``,
+        ``feedback_nomatch_word``) holds the left prior's codes. The random source, the counter max and
+        the watchdog have no part in it.
     normalize
         Per-pixel column normalization: while a pixel's words are loaded the machine keeps each loaded
         column's largest word m (0 .. 2^W); the column's operators compare their words w with
@@ -203,6 +218,7 @@ class MachineParams:
     samples_per_clock: int = 1
     timeout_answer: str = "none"
     normalize: bool = False
+    integrator: str = DEFAULT_INTEGRATOR
 
     def _int(self, name: str, lo: int, hi: int | None = None) -> None:
         object.__setattr__(self, name, _check_int(name, getattr(self, name), lo, hi))
@@ -231,6 +247,7 @@ class MachineParams:
                 f"max_cycles ({self.max_cycles}) must exceed counter_max ({self.counter_max}): "
                 f"no counter can overflow in fewer than counter_max + 1 cycles", "max_cycles")
         _check_choice("prior", self.prior, PRIORS)
+        _check_choice("integrator", self.integrator, INTEGRATORS)  # the feedback table's domain
         self._check_feedback()
         self._bool("nomatch_row")
         if self.nomatch_row and self.rows < 2:
@@ -252,6 +269,14 @@ class MachineParams:
                                  f"({self.samples_per_clock}): a run has at least two clocks", "max_cycles")
         _check_choice("timeout_answer", self.timeout_answer, TIMEOUT_ANSWERS)
         self._bool("normalize")
+        _check_choice("integrator", self.integrator, INTEGRATORS)
+        if self.integrator == "log" and not source_kind(self.rng).on_chip:
+            raise ParameterError(f"rng: the log integrator draws no random numbers, so an off-chip source "
+                                 f"({self.rng!r}) has none to give; leave rng at its default", "rng")
+        if self.integrator == "log" and self.word_bits < 8:
+            raise ParameterError(f"word_bits ({self.word_bits}) must be at least 8 with integrator 'log': "
+                                 "its 9-bit energy codes travel in the load stream's W + 1-bit words",
+                                 "word_bits")
         # Last, what only the random source knows (the Sobol table's size, the LFSR polynomials):
         # the one place it is checked, so every holder of a MachineParams can build its source.
         check_source(self)
@@ -293,14 +318,14 @@ class MachineParams:
         if not 1 <= len(words) <= self.rows:
             raise ParameterError(f"prior = 'neighbour' needs 1 to rows ({self.rows}) feedback_words, "
                                  f"got {len(words)}", "feedback_words")
-        one = 1 << self.word_bits
+        one = self.load_max
         object.__setattr__(self, "feedback_words",
                            tuple(_check_int(f"feedback_words[{i}]", w, 0, one) for i, w in enumerate(words)))
         if self.nomatch_row:
             if self.feedback_nomatch_word is None:
                 raise ParameterError("prior = 'neighbour' with a no-match row needs feedback_nomatch_word",
                                      "feedback_nomatch_word")
-            self._int("feedback_nomatch_word", 0, 1 << self.word_bits)
+            self._int("feedback_nomatch_word", 0, self.load_max)
         elif self.feedback_nomatch_word is not None:
             raise ParameterError("feedback_nomatch_word needs a no-match row (nomatch_row=True)",
                                  "feedback_nomatch_word")
@@ -354,6 +379,22 @@ class MachineParams:
         return 1 << self.word_bits
 
     @property
+    def load_max(self) -> int:
+        """The largest value a loaded entry takes: the word 2^W (stochastic) or the infinite energy code
+        (log: ``bayesmachine.columns.energy.INFINITE_CODE``)."""
+        if self.integrator == "stochastic":
+            return self.word_one
+        from bayesmachine.columns.energy import INFINITE_CODE  # NumPy's: not at import (tests/test_model.py)
+
+        return INFINITE_CODE
+
+    @property
+    def readout_max(self) -> int:
+        """The largest value of a row in the distribution read out: the counter max (stochastic), the
+        weight of the MAP's row, 2^W (log)."""
+        return self.counter_max if self.integrator == "stochastic" else self.word_one
+
+    @property
     def memory_word_width(self) -> int:
         """Stored likelihood-memory word width, W + 1 bits (0 ... 2**W)."""
         return self.word_bits + 1
@@ -382,8 +423,9 @@ class MachineParams:
 
     def to_dict(self, complete: bool = False) -> dict[str, object]:
         """The fields this machine uses (the ``smtj_*`` ones with rng ``smtj``, the ``feedback_*`` ones with
-        the neighbour prior). Without ``complete``, ``samples_per_clock``, ``timeout_answer`` and
-        ``normalize`` are left out at the values every machine had before they existed (1, 'none', off),
+        the neighbour prior). Without ``complete``, ``samples_per_clock``, ``timeout_answer``, ``normalize``
+        and ``integrator`` are left out at the values every machine had before they existed (1, 'none', off,
+        'stochastic'),
         so that fingerprints stay; ``complete``: every resolved value, what a report records (a census
         model's machine with normalize off says so, rather than reading as the model's default, on)."""
         d = asdict(self)
@@ -403,6 +445,8 @@ class MachineParams:
             del d["timeout_answer"]
         if not self.normalize:
             del d["normalize"]
+        if self.integrator == DEFAULT_INTEGRATOR:
+            del d["integrator"]
         return d
 
     def fingerprint(self) -> str:

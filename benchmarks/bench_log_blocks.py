@@ -20,15 +20,16 @@ from pathlib import Path
 
 from amaranth.back import rtlil
 
-from bayesmachine.argtypes import choice_of, float_in_range, int_in_range, value_list
+from bayesmachine.argtypes import float_in_range, int_in_range, value_list
 from bayesmachine.cli import Parser, run_script
+from bayesmachine.columns.energy import exp_table
 from bayesmachine.fpga.flow import parse_nextpnr, place_and_route, synthesize
 from bayesmachine.fpga.port_registers import PortRegisters
 from bayesmachine.fpga.report import logic_cells, resources
 from bayesmachine.fpga.targets import get_target
 from bayesmachine.fpga.wrapper import PinWrapper
-from bayesmachine.hdl.log import ArgminTree, LogIntegrator, LogParams, RowAdders, WeightStage, exp_table
-from bayesmachine.hdl.log.rule import MAX_CODE_BITS, MAX_WEIGHT_BITS
+from bayesmachine.hdl.log import ArgminTree, LogIntegrator, LogParams, RowAdders, WeightStage
+from bayesmachine.hdl.log.rule import MAX_CODE_BITS
 from bayesmachine.params import TIE_BREAKS
 
 CELLS = ("LUT4", "CCU2C", "PFUMX", "L6MUX21", "TRELLIS_FF", "DP16KD", "TRELLIS_DPR16X4")
@@ -78,30 +79,30 @@ def measure(p: LogParams, levels: int, adder_levels: int, workdir: Path, pnr: bo
     return out
 
 
-def main(argv: list[str] | None = None) -> None:
+def main(argv: list[str] | None = None) -> int:
     ap = Parser(prog=Path(__file__).name, description=__doc__.splitlines()[0])
-    ap.add_argument("--rows", type=int_in_range(2, 4096), default=82,
+    ints = value_list
+    ap.add_argument("--rows", type=int_in_range(1, 4096), default=82,
                     help="M (default 82: Dmax 80 and the no-match row)")
-    ap.add_argument("--codes", type=value_list(int_in_range(1, 64), "N"), default=[4, 7],
+    ap.add_argument("--codes", type=ints(int_in_range(1, 64), "N"), default=[4, 7],
                     help="N values, comma-separated (default 4,7)")
-    ap.add_argument("--code-bits", type=value_list(int_in_range(1, MAX_CODE_BITS), "width"),
-                    default=[6, 7, 8], help="code widths (default 6,7,8)")
-    ap.add_argument("--levels", type=value_list(int_in_range(1, 16), "levels"), default=[1, 2, 3, 7],
+    ap.add_argument("--code-bits", type=ints(int_in_range(1, MAX_CODE_BITS), "width"), default=[6, 7, 8],
+                    help="code widths (default 6,7,8)")
+    ap.add_argument("--levels", type=ints(int_in_range(1, 64), "level count"), default=[1, 2, 3, 7],
                     help="argmin-tree levels per register stage (default 1,2,3,7)")
-    ap.add_argument("--adder-levels", type=value_list(int_in_range(1, 16), "levels"), default=[1],
+    ap.add_argument("--adder-levels", type=ints(int_in_range(1, 64), "level count"), default=[1],
                     help="adder-tree levels per stage (default 1)")
-    ap.add_argument("--weight-bits", type=int_in_range(1, MAX_WEIGHT_BITS - 1), default=8,
+    ap.add_argument("--weight-bits", type=int_in_range(1, 15), default=8,
                     help="exp table: X[0] = 2^bits (default 8)")
-    ap.add_argument("--step", type=float_in_range(1 / 1024, 8.0), default=1 / 16,
+    ap.add_argument("--step", type=float_in_range(1e-3, 16.0), default=1 / 16,
                     help="exp table: nats per code (default 1/16)")
-    ap.add_argument("--tie-break", type=choice_of(TIE_BREAKS), default="nomatch-first",
-                    help="the MAP's tie rule (default nomatch-first)")
+    ap.add_argument("--tie-break", default="nomatch-first", choices=TIE_BREAKS)
     ap.add_argument("--pnr", action="store_true", help="also place and route for fmax (minutes each)")
     ap.add_argument("--seed", type=int_in_range(0, (1 << 31) - 1), default=1, help="nextpnr seed")
     ap.add_argument("--blocks", action="store_true", help="also each block alone, per setting")
     ap.add_argument("--verbose", action="store_true", help="the tools' progress lines")
     args = ap.parse_args(argv)
-    table = exp_table(weight_bits=args.weight_bits, step=args.step)
+    table = exp_table(args.weight_bits, args.step)
     print(f"LogIntegrator, {args.rows} rows, exp table {len(table)} entries of {args.weight_bits + 1} bits "
           f"(step {args.step:g} nat), {args.tie_break}; Yosys synth_ecp5 (LFE5U-85F)"
           + ("; fmax: nextpnr-ecp5 behind PinWrapper, seed " + str(args.seed) if args.pnr else ""))
@@ -123,6 +124,7 @@ def main(argv: list[str] | None = None) -> None:
             if args.blocks:
                 block_costs(p, levels, adder, Path(tmp) / f"blocks-n{codes}-b{bits}-l{levels}-a{adder}",
                             not args.verbose)
+    return 0
 
 
 if __name__ == "__main__":

@@ -166,8 +166,7 @@ def _synthesize(params: MachineParams, target: Target, out: Path, say: Callable[
     from amaranth.lib import wiring
 
     from bayesmachine.hdl.frontend.stereo import StereoMachine
-    from bayesmachine.hdl.machine import BayesianMachine
-    from bayesmachine.hdl.machines import ParallelMachines
+    from bayesmachine.hdl.machines import ParallelMachines, machine_top
 
     from . import report as rep
     from .flow import synthesize
@@ -182,7 +181,7 @@ def _synthesize(params: MachineParams, target: Target, out: Path, say: Callable[
         say(f"elaborating the StereoMachine ({width}-pixel lines, {machines} machine(s) of "
             f"{params.operators} operators) for {target.device}")
     else:
-        core = (BayesianMachine(params=params) if machines == 1
+        core = (machine_top(params) if machines == 1
                 else ParallelMachines(params=params, machines=machines))
         say(f"elaborating {machines} machine(s) of {params.operators} operators for {target.device}")
     cells = synthesize(rtlil.convert(PinWrapper(core, pin_width=pin_width), name="top"), target, out, say)

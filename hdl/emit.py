@@ -34,7 +34,7 @@ def _ports(params: MachineParams) -> list[tuple[str, str, int]]:
     """The machine's ports, from its signature (no component is built)."""
     from .signatures import MachineSignature
 
-    return signature_ports(MachineSignature(params))
+    return signature_ports(MachineSignature(params, entropy=params.integrator == "stochastic"))
 
 
 def _source_detail(params: MachineParams) -> str:
@@ -49,16 +49,29 @@ def _source_detail(params: MachineParams) -> str:
     return ""
 
 
+def _integration(params: MachineParams) -> list[str]:
+    """How the machine integrates: its words, counters and random source, or the log machine's codes."""
+    if params.integrator == "log":
+        from .log.machine import log_params, pixel_clocks
+
+        lp = log_params(params)
+        return [f"integrator: log (docs/integrators.md): {lp.code_bits}-bit energy codes in "
+                f"{params.memory_word_width}-bit words, {lp.sum_bits}-bit row sums, {lp.weight_bits}-bit "
+                f"weights ({len(lp.weights)}-entry exp table); {pixel_clocks(params)[1]} clock(s) per pixel "
+                "where a feedback column binds, else 1"]
+    return [f"words: {params.word_bits}-bit comparators, {params.memory_word_width}-bit likelihood-memory "
+            f"words; counter max {params.counter_max} ({params.counter_width}-bit overflow counters); "
+            f"watchdog {params.max_cycles} cycles",
+            f"random source: {params.rng}: {source_kind(params.rng).description}{_source_detail(params)}"]
+
+
 def summary(params: MachineParams) -> str:
     """A human-readable summary of the machine and its ports."""
     lines = [
         f"machine: {params.rows} rows x {params.operator_columns} operator columns = "
         f"{params.operators} operators ({params.prior} prior"
         f"{', last row no-match' if params.nomatch_row else ''}, tie rule {params.tie_break})",
-        f"words: {params.word_bits}-bit comparators, {params.memory_word_width}-bit likelihood-memory words; "
-        f"counter max {params.counter_max} ({params.counter_width}-bit overflow counters); "
-        f"watchdog {params.max_cycles} cycles",
-        f"random source: {params.rng}: {source_kind(params.rng).description}{_source_detail(params)}",
+        *(_integration(params)),
         f"load: {params.words_per_beat} words per beat, {params.beats_per_pixel} beats per pixel",
         "ports (Verilog names; clk and rst as well):",
     ]
@@ -145,9 +158,10 @@ def rtlil_text(top: object) -> str:
 
 
 def emit(params: MachineParams, path: str | Path, top: object | None = None) -> Path:
-    """Write the machine (or ``top``, e.g. a ``StereoMachine``) as Verilog (``.v``/``.sv``) or RTLIL
-    (``.il``), top module ``bayesmachine``."""
-    from .machine import BayesianMachine
+    """Write the machine (``hdl.machines.machine_top``: the log machine with ``integrator = "log"``; or
+    ``top``, e.g. a ``StereoMachine``) as Verilog (``.v``/``.sv``) or RTLIL (``.il``), top module
+    ``bayesmachine``."""
+    from .machines import machine_top
 
     path = Path(path)
     suffix = path.suffix.lower()
@@ -156,7 +170,7 @@ def emit(params: MachineParams, path: str | Path, top: object | None = None) -> 
             f"cannot tell the output format from {path.name!r}: use a .v (Verilog) or .il (RTLIL) name"
         )
     if top is None:
-        top = BayesianMachine(params=params)
+        top = machine_top(params)
     if not path.parent.exists():
         path.parent.mkdir(parents=True)
     # Complete or absent, never a truncated file.

@@ -23,7 +23,17 @@ from bayesmachine.sources import source_kind
 from .machine import BayesianMachine
 from .signatures import MachineSignature
 
-__all__ = ["ParallelMachines"]
+__all__ = ["ParallelMachines", "machine_top"]
+
+
+def machine_top(params: MachineParams) -> wiring.Component:
+    """The one machine of ``params``: ``BayesianMachine``, or with ``integrator = "log"`` the
+    logarithmic one (``hdl.log.machine.LogMachine``), both with the machine's ports."""
+    if isinstance(params, MachineParams) and params.integrator == "log":
+        from .log.machine import LogMachine
+
+        return LogMachine(params=params)
+    return BayesianMachine(params=params)
 
 
 class ParallelMachines(wiring.Component):

@@ -68,7 +68,8 @@ def result_layout(params: MachineParams) -> data.StructLayout:
         "nomatch": unsigned(1),
         "timeout": unsigned(1),
         "cycles": unsigned(params.cycle_width),
-        "counts": data.ArrayLayout(unsigned(params.counter_width), params.rows),
+        # The overflow counters, or a log machine's weights (MachineParams.readout_max).
+        "counts": data.ArrayLayout(unsigned(params.readout_max.bit_length()), params.rows),
     })
 
 

@@ -352,7 +352,7 @@ def evaluate(prepared: Prepared, run: MachineRun, sgbm: bool | None = None,
     params = confidence if confidence is not None else ConfidenceParams()
     machine_nm = run.map < 0  # no-match row won, or watchdog timeout
     ref_nm = ref_map < 0
-    rms = RmsAccumulator(run.machine.counter_max)
+    rms = RmsAccumulator(run.machine.readout_max)
     ref_conf = DistributionMeasures(ref_map, params)
     for rows, band in prepared.reference_bands():
         ref_conf.add(rows, band.posterior)

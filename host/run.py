@@ -68,7 +68,7 @@ class RunOutcome:
 
 def result_bytes(region: OutputRegion, machine: MachineParams) -> int:
     """Bytes of a run's per-pixel results: counts, map, cycles, no-match and timeout flags."""
-    per_pixel = machine.rows * counts_dtype(machine.counter_max).itemsize + 2 + 8 + 1 + 1
+    per_pixel = machine.rows * counts_dtype(machine.readout_max).itemsize + 2 + 8 + 1 + 1
     return region.pixels * per_pixel
 
 
@@ -217,7 +217,7 @@ def run_machine(
     runs = [_PassRun(prepared, p, pass_machine(model, machine, p.name), engine, engine_options)
             for p in declared]
     own = _PassRun(prepared, model.passes[-1], machine, engine, engine_options, machines)
-    counts = np.zeros((ho, wo, m), counts_dtype(machine.counter_max))
+    counts = np.zeros((ho, wo, m), counts_dtype(machine.readout_max))
     nomatch = np.zeros((ho, wo), bool)
     try:
         with tqdm(total=ho * wo, unit="px", disable=not _want_progress(progress), desc=f"{engine}") as bar:
@@ -263,7 +263,7 @@ def _run_pixels(
     nomatch = res.nomatch.reshape(ho, wo)
     disp = disparities(res.map.reshape(ho, wo), nomatch, timeout, machine)
     # A board asked for the MAP alone sent no counts or cycles: absent, never made up.
-    dtype = counts_dtype(machine.counter_max)
+    dtype = counts_dtype(machine.readout_max)
     counts = None if res.counts is None else res.counts.reshape(ho, wo, m).astype(dtype)
     cycles = None if res.cycles is None else res.cycles.reshape(ho, wo)
     passes = {}

@@ -84,6 +84,9 @@ _PIXEL_ENGINES = {
     "verilator": "bayesmachine.sim.stereo_engine:StereoVerilatorEngine",
     "board": "bayesmachine.fpga.boards.engine:BoardEngine",
 }
+# The engines of a machine with integrator = "log" (docs/integrators.md).
+_LOG_ENGINES = {"model": "bayesmachine.sim.log_model:LogMachineModel", "pysim": _WORD_ENGINES["pysim"],
+                "verilator": _WORD_ENGINES["verilator"]}
 ENGINES = tuple(_WORD_ENGINES)
 PIXEL_ENGINES = tuple(_PIXEL_ENGINES)
 
@@ -340,11 +343,18 @@ def check_engine_options(cls: type, name: str, options: dict[str, object]) -> No
 
 
 def get_engine(name: str, params: MachineParams, **options: object) -> Engine:
-    """A fresh engine (machine state as after reset) by name: one of :data:`ENGINES`.
+    """A fresh engine (machine state as after reset) by name: one of :data:`ENGINES` (with ``integrator =
+    "log"`` the model is ``sim.log_model.LogMachineModel``, pysim and verilator run ``hdl.log.machine``).
 
     ``options`` go to the engine's constructor; one it does not take is a ``ValueError``.
     """
-    cls = _load(_WORD_ENGINES, name, "engine")
+    if getattr(params, "integrator", None) == "log":
+        if name not in _LOG_ENGINES:
+            raise ValueError(f"--integrator log runs on the engines {', '.join(_LOG_ENGINES)} only (got "
+                             f"--engine {name})")
+        cls = _load(_LOG_ENGINES, name, "engine")
+    else:
+        cls = _load(_WORD_ENGINES, name, "engine")
     check_engine_options(cls, name, options)
     return cls(params, **options)
 

@@ -21,7 +21,7 @@ from collections import deque
 import numpy as np
 from amaranth.sim import Simulator, SimulatorContext
 
-from bayesmachine.hdl.machine import BayesianMachine
+from bayesmachine.hdl.machines import machine_top
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.engines import EngineBase
 from bayesmachine.sim.packing import pack_beats, pack_numbers
@@ -85,7 +85,7 @@ class PysimEngine(EngineBase):
 
     def _simulator(self) -> Simulator:
         if self._sim is None:
-            self.dut = BayesianMachine(params=self.params)
+            self.dut = machine_top(self.params)
             self._sim = Simulator(self.dut)
             self._sim.add_clock(1e-8)
             self._sim.add_testbench(self._feeder, background=True)

@@ -122,8 +122,8 @@ def check_words(params: MachineParams, words: np.ndarray) -> np.ndarray:
     """Validate a block of pixels' likelihood-memory words; returns them as (P, words_per_pixel) int32.
 
     Accepts shape (P, rows, loaded_columns) or (P, words_per_pixel); values must be integers in
-    [0, 2**word_bits]. The loaded columns are all operator columns but a neighbour prior's
-    feedback column, which the machine forms itself.
+    [0, 2**word_bits] (energy codes in [0, ``load_max``] with ``integrator = "log"``). The loaded columns
+    are all operator columns but a neighbour prior's feedback column, which the machine forms itself.
     """
     w = np.asarray(words)
     n, cols = params.words_per_pixel, params.loaded_columns
@@ -140,11 +140,11 @@ def check_words(params: MachineParams, words: np.ndarray) -> np.ndarray:
         )
     if w.dtype.kind not in "iu":
         raise ValueError(f"likelihood memory words must be integers, got dtype {w.dtype}")
-    if w.size and (w.min() < 0 or w.max() > params.word_one):
-        raise ValueError(
-            f"likelihood memory words must lie in [0, {params.word_one}] (p = q / 2**{params.word_bits}); "
-            f"got [{w.min()}, {w.max()}]"
-        )
+    if w.size and (w.min() < 0 or w.max() > params.load_max):
+        what = (f"likelihood memory words must lie in [0, {params.word_one}] (p = q / 2**{params.word_bits})"
+                if params.integrator == "stochastic" else
+                f"energy codes (integrator = 'log') must lie in [0, {params.load_max}]")
+        raise ValueError(f"{what}; got [{w.min()}, {w.max()}]")
     return np.ascontiguousarray(w, dtype=np.int32)
 
 

@@ -57,3 +57,14 @@ def test_census_lr_energy_tables() -> None:
     assert seen[("left", "nomatch")] == (7, 74, ())
     assert seen[("left", "left-prior")] == (6, 48, (37,))
     assert seen[("right", "left-prior")] == (6, 48, (7,))
+
+
+def test_log_codes_reserve_the_all_ones_code_for_zero() -> None:
+    from bayesmachine.columns.energy import INFINITE_CODE, LOG_CODE_BITS, log_codes
+
+    assert (LOG_CODE_BITS, INFINITE_CODE) == (9, 511)
+    # 1.0 -> 0; exp(-1) -> 16 codes; 1e-9 saturates at 255 (finite); only 0 is the infinite code.
+    got = log_codes(np.array([1.0, np.exp(-1.0), 1e-9, 0.0]))
+    assert got.tolist() == [0, 16, 255, 511]
+    with pytest.raises(ValueError, match="likelihoods"):
+        log_codes(np.array([1.5]))

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from conftest import run_sim
 
+from bayesmachine.columns.energy import exp_table
 from bayesmachine.errors import ParameterError
 from bayesmachine.hdl.log import (
     ArgminTree,
@@ -19,14 +20,13 @@ from bayesmachine.hdl.log import (
     RowAdders,
     WeightStage,
     argmin_rows,
-    exp_table,
     log_integrate,
     row_sums,
     row_weights,
 )
 from bayesmachine.hdl.log.pipeline import StallPipeline
 
-TABLE = exp_table(weight_bits=4, step=0.5)  # (16, 10, 6, 4, 2, 1, 1, 0)
+TABLE = tuple(int(x) for x in exp_table(4, 0.5))  # (16, 10, 6, 4, 2, 1, 1, 0)
 
 
 @dataclass
@@ -127,7 +127,7 @@ def test_integrator_equals_the_rule(case: tuple) -> None:
 def test_integrator_census_lr_rows(codes: int) -> None:
     """82 rows (Dmax 80 and the no-match row), N = 5 and 8 codes of 7 and 8 bits, the default table
     of 1/16-nat steps: large sums and every weight of the table in use."""
-    p = LogParams(rows=82, codes=codes, code_bits=codes, weights=exp_table(weight_bits=8, step=1 / 16))
+    p = LogParams(rows=82, codes=codes, code_bits=codes, weights=exp_table(8, 1 / 16))
     dut = LogIntegrator(params=p, levels_per_stage=3, adder_levels_per_stage=2)
     pix = codes_of(p, 24, seed=codes, high=p.infinite)
     run = drive(dut, "codes", "result", [c.tolist() for c in pix], p_valid=0.9, p_ready=0.7, seed=codes)

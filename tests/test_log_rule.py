@@ -6,10 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from bayesmachine.columns.energy import exp_table
 from bayesmachine.errors import ParameterError
-from bayesmachine.hdl.log import LogParams, argmin_rows, exp_table, log_integrate, row_weights
+from bayesmachine.hdl.log import LogParams, argmin_rows, log_integrate, row_weights
 
-TABLE = (16, 10, 6, 4, 2, 1, 1, 0)  # exp_table(weight_bits=4, step=0.5)
+TABLE = (16, 10, 6, 4, 2, 1, 1, 0)  # exp_table(4, 0.5)
 
 
 def params(**kw: object) -> LogParams:
@@ -44,10 +45,12 @@ def fields(res: object, i: int) -> tuple[int, bool, bool, int, list[int]]:
 
 
 def test_exp_table() -> None:
-    table = exp_table(weight_bits=8, step=1 / 16)
+    # The energy form's exp table (one definition) is what LogParams takes: pinned at the sizes used here.
+    table = tuple(int(x) for x in exp_table(8, 1 / 16))
     assert table[:6] == (256, 240, 226, 212, 199, 187)
     assert len(table) == 101 and table[-2:] == (1, 0)
-    assert exp_table(weight_bits=4, step=0.5) == TABLE
+    assert tuple(int(x) for x in exp_table(4, 0.5)) == TABLE
+    assert LogParams(rows=2, codes=1, code_bits=3, weights=exp_table(4, 0.5)).weights == TABLE
 
 
 def test_hand_worked_pixels() -> None:
@@ -124,9 +127,9 @@ def test_bad_parameters() -> None:
     with pytest.raises(TypeError, match="nomatch_row"):
         params(nomatch_row=1)
     with pytest.raises(ParameterError, match="step"):
-        exp_table(weight_bits=8, step=0.0)
-    with pytest.raises(ParameterError, match="weight_bits"):
-        exp_table(weight_bits=0, step=0.1)
+        exp_table(8, 0.0)
+    with pytest.raises(ParameterError, match="bits"):
+        exp_table(0, 0.1)
 
 
 def test_bad_codes() -> None:

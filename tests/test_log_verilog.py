@@ -11,13 +11,14 @@ from pathlib import Path
 import pytest
 from conftest import require_tool
 
+from bayesmachine.columns.energy import exp_table
 from bayesmachine.fpga.flow import KEEP_REGISTER_COPIES
 from bayesmachine.fpga.port_registers import PortRegisters
 from bayesmachine.hdl import emit as hdl_emit
-from bayesmachine.hdl.log import LogIntegrator, LogParams, exp_table
+from bayesmachine.hdl.log import LogIntegrator, LogParams
 
 WAIVERS = Path(hdl_emit.__file__).with_name("bayesmachine.vlt")
-TABLE = exp_table(weight_bits=8, step=1 / 16)
+TABLE = exp_table(8, 1 / 16)
 
 LINTED = {
     "census-lr": (LogParams(rows=82, codes=4, code_bits=6, weights=TABLE), 2, 1),

@@ -334,6 +334,13 @@ class Column(Term):
         ``ctx.word_bits`` (uint16 words, or float64 factors with None)."""
         raise ValueError(f"the {self.name} column's words are formed by the machine, not loaded")
 
+    def codes(self, ctx: PassContext) -> np.ndarray:
+        """Its logarithmic integrator's codes (P, Dmax+2): ``log_codes`` of its float64 factors
+        (``ctx.word_bits`` None)."""
+        from .energy import log_codes  # energy builds on this module
+
+        return log_codes(self.words(ctx))
+
 
 class PlaneColumn(Column):
     """A FEATURES column: its table at the cost of the reference pixel's and the match pixel's values of

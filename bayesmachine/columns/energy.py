@@ -18,16 +18,23 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bayesmachine.checks import as_int
+from bayesmachine.checks import as_int, as_real
+from bayesmachine.errors import ParameterError
 
 from .base import quantize
 
-__all__ = ["ENERGY_STEP", "ENERGY_MAX_BITS", "EnergyTable", "energy_codes", "exp_table"]
+__all__ = ["ENERGY_STEP", "ENERGY_MAX_BITS", "INFINITE_CODE", "LOG_CODE_BITS", "EnergyTable", "energy_codes",
+           "exp_table", "log_codes"]
 
 # Nats per energy code.
 ENERGY_STEP = 1.0 / 16.0
 # The widest code of one table (codes saturate at 2^ENERGY_MAX_BITS - 1: 15.9 nats at 1/16 nat).
 ENERGY_MAX_BITS = 8
+# The logarithmic integrator's codes are one bit wider than the saturated ones, so that its all-ones code,
+# infinite energy (the row is excluded), stands for a likelihood of exactly 0 only (a lane without a match
+# pixel, the no-match row of a pass without one), never for a saturated one (docs/architecture.md).
+LOG_CODE_BITS = ENERGY_MAX_BITS + 1
+INFINITE_CODE = (1 << LOG_CODE_BITS) - 1
 
 
 def energy_codes(p: np.ndarray | float, step: float = ENERGY_STEP,
@@ -47,10 +54,20 @@ def energy_codes(p: np.ndarray | float, step: float = ENERGY_STEP,
     return np.minimum(codes, top).astype(np.uint16)
 
 
+def log_codes(p: np.ndarray | float, step: float = ENERGY_STEP) -> np.ndarray:
+    """Likelihoods -> the logarithmic integrator's codes (uint16, :data:`LOG_CODE_BITS` bits): the energy
+    code of a likelihood above 0 (:func:`energy_codes`, saturated at ``2^ENERGY_MAX_BITS − 1``) and
+    :data:`INFINITE_CODE` for a likelihood of 0."""
+    arr = np.asarray(p, dtype=np.float64)
+    return np.where(arr == 0.0, INFINITE_CODE, energy_codes(arr, step)).astype(np.uint16)
+
+
 def exp_table(bits: int, step: float = ENERGY_STEP) -> np.ndarray:
     """``X[e] = round(2^bits · exp(−e · step))`` (round half up) for e = 0 up to the first e where it is
     0 (included): uint16, nonincreasing, ``X[0] = 2^bits``, its last entry 0."""
     as_int("bits", bits, 1, 15)
+    if not as_real("step", step) > 0:
+        raise ParameterError(f"step must be a finite number > 0, got {step!r}", "step")
     # exp(-e step) < 2^-(bits+1) from e > (bits + 1) ln 2 / step: one past it is 0.
     n = int(np.ceil((bits + 1) * np.log(2.0) / step)) + 2
     x = quantize(np.exp(-np.arange(n) * step), bits)

@@ -33,7 +33,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from .base import Column, Option, PassContext, PlaneColumn, Source, Table, Term, check_switch
-from .energy import EnergyTable, exp_table
+from .energy import INFINITE_CODE, EnergyTable, exp_table
 from .planes import Plane
 
 __all__ = ["FUSE_COLUMNS", "Fused", "fused"]
@@ -114,23 +114,40 @@ class Fused(Column):
             nm += int(m.nomatch_entry(e))  # type: ignore[arg-type]
         return total.reshape(n, -1), nm
 
-    def words(self, ctx: PassContext) -> np.ndarray:
-        """Its words (module text), or with ``ctx.word_bits`` None its float64 factors: the members'
-        product (((m * gH) * gV) * census) * ..., the no-match row the rule's times the others' entries."""
-        if ctx.word_bits is None:
-            return self._factors(ctx)
+    def _relative(self, ctx: PassContext) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(D, D_nm, valid): each lane's and the no-match row's sum above the pixel's least (the lanes with
+        a match pixel, and the no-match row where it can win), and which lanes have a match pixel."""
         s, nm = self.sums(ctx)
-        n = s.shape[0]
         valid = (np.ones(s.shape, bool) if ctx.valid is None
                  else np.broadcast_to(ctx.valid[None], (ctx.rows, *ctx.valid.shape)).reshape(s.shape))
         low = np.where(valid, s, np.iinfo(np.int64).max).min(axis=1)
         if ctx.nomatch_live:
             low = np.minimum(low, nm)
+        return s - low[:, None], nm - low, valid
+
+    def words(self, ctx: PassContext) -> np.ndarray:
+        """Its words (module text), or with ``ctx.word_bits`` None its float64 factors: the members'
+        product (((m * gH) * gV) * census) * ..., the no-match row the rule's times the others' entries."""
+        if ctx.word_bits is None:
+            return self._factors(ctx)
+        d, d_nm, valid = self._relative(ctx)
         x = self.exp_table(ctx.word_bits)
         top = x.size - 1
-        out = np.empty((n, s.shape[1] + 1), np.uint16)
-        out[:, :-1] = np.where(valid, x[np.clip(s - low[:, None], 0, top)], 0)
-        out[:, -1] = x[np.minimum(nm - low, top)] if ctx.nomatch_live else 0
+        out = np.empty((d.shape[0], d.shape[1] + 1), np.uint16)
+        out[:, :-1] = np.where(valid, x[np.clip(d, 0, top)], 0)
+        out[:, -1] = x[np.minimum(d_nm, top)] if ctx.nomatch_live else 0
+        return out
+
+    def codes(self, ctx: PassContext) -> np.ndarray:
+        """Its logarithmic integrator's codes: the summed codes above the pixel's least (what the
+        integrator's argmin and weights see of its members' codes, less a per-pixel constant), at most
+        ``INFINITE_CODE - 1``; ``INFINITE_CODE`` for a lane without a match pixel and for the no-match
+        row where it cannot win (its word 0)."""
+        d, d_nm, valid = self._relative(ctx)
+        out = np.full((d.shape[0], d.shape[1] + 1), INFINITE_CODE, np.uint16)
+        out[:, :-1] = np.where(valid, np.minimum(d, INFINITE_CODE - 1), INFINITE_CODE)
+        if ctx.nomatch_live:
+            out[:, -1] = np.minimum(d_nm, INFINITE_CODE - 1)
         return out
 
     def _factors(self, ctx: PassContext) -> np.ndarray:

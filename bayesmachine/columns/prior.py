@@ -103,9 +103,25 @@ class LeftPrior(NeighbourPrior):
         t = self.table(word_bits)
         return tuple(int(v) for v in t.values[: t.last_change() + 1]), int(t.nomatch[0])
 
+    def feedback_codes(self) -> tuple[tuple[int, ...], int]:
+        """The logarithmic machine's feedback table: the table's codes (``log_codes``, those of
+        :meth:`energy`) clamped where they stop changing, and the no-match factor's code."""
+        from .energy import log_codes
+
+        t = self.table()
+        codes = log_codes(t.values)
+        changes = np.flatnonzero(codes[1:] != codes[:-1])
+        last = int(changes[-1]) + 1 if changes.size else 0
+        return tuple(int(c) for c in codes[: last + 1]), int(log_codes(t.nomatch[0]))
+
+    def feedback_of(self, machine: Any) -> tuple[tuple[int, ...], int]:
+        """``machine``'s feedback table in its integrator's domain: :meth:`feedback` (words) or
+        :meth:`feedback_codes` (``integrator="log"``)."""
+        return self.feedback_codes() if machine.integrator == "log" else self.feedback(machine.word_bits)
+
     def check_machine(self, machine: Any) -> None:
         super().check_machine(machine)
-        words, nm = self.feedback(machine.word_bits)
+        words, nm = self.feedback_of(machine)
         if machine.feedback_words != words or machine.feedback_nomatch_word != nm:
             raise ParameterError(
                 f"neighbour_prior: the machine's feedback table {machine.feedback_words} / "

@@ -9,9 +9,11 @@ from __future__ import annotations
 
 from amaranth.hdl import Cat, Value
 
+from bayesmachine.checks import as_int
+
 from .layouts import codes_layout, row_sums_layout
 from .pipeline import Bank, LogBlock, Stage, Wire, fit, pack, stage_functions
-from .rule import LogParams, check_int, check_params
+from .rule import LogParams, check_params
 
 __all__ = ["RowAdders", "adder_stages", "tree_levels"]
 
@@ -69,7 +71,7 @@ class RowAdders(LogBlock):
     """
 
     def __init__(self, *, params: LogParams, levels_per_stage: int = 1) -> None:
-        self._levels = check_int("levels_per_stage", levels_per_stage, 1, 64)
+        self._levels = as_int("levels_per_stage", levels_per_stage, 1, 64)
         p = check_params(params)
         super().__init__(params=p, sink="codes", source="sums", in_layout=codes_layout(p),
                          out_layout=row_sums_layout(p), stages=adder_stages(p, self._levels))

@@ -16,10 +16,12 @@ from collections.abc import Callable
 
 from amaranth.hdl import Cat, Const, Mux, Value
 
+from bayesmachine.checks import as_int
+
 from .adders import tree_levels
 from .layouts import best_layout, row_sums_layout
 from .pipeline import Bank, LogBlock, Stage, Wire, fit, pack, stage_functions
-from .rule import LogParams, check_int, check_params
+from .rule import LogParams, check_params
 
 __all__ = ["ArgminTree", "Node", "NodeFunction", "argmin_stages", "better"]
 
@@ -109,7 +111,7 @@ class ArgminTree(LogBlock):
     def __init__(self, *, params: LogParams, levels_per_stage: int = 1, pass_sums: bool = False) -> None:
         if not isinstance(pass_sums, bool):
             raise TypeError(f"pass_sums must be a bool, not {type(pass_sums).__name__}")
-        self._levels = check_int("levels_per_stage", levels_per_stage, 1, 64)
+        self._levels = as_int("levels_per_stage", levels_per_stage, 1, 64)
         self._pass_sums = pass_sums
         p = check_params(params)
         super().__init__(params=p, sink="sums", source="best", in_layout=row_sums_layout(p),

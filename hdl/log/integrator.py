@@ -10,11 +10,13 @@ a stage boundary between blocks costs nothing more than a boundary inside one. O
 
 from __future__ import annotations
 
+from bayesmachine.checks import as_int
+
 from .adders import adder_stages
 from .argmin import argmin_stages
 from .layouts import codes_layout, log_result_layout
 from .pipeline import LogBlock
-from .rule import LogParams, check_int, check_params
+from .rule import LogParams, check_params
 from .weights import weight_stages
 
 __all__ = ["LogIntegrator"]
@@ -44,8 +46,8 @@ class LogIntegrator(LogBlock):
 
     def __init__(self, *, params: LogParams, levels_per_stage: int = 1,
                  adder_levels_per_stage: int = 1) -> None:
-        self._levels = check_int("levels_per_stage", levels_per_stage, 1, 64)
-        self._adder_levels = check_int("adder_levels_per_stage", adder_levels_per_stage, 1, 64)
+        self._levels = as_int("levels_per_stage", levels_per_stage, 1, 64)
+        self._adder_levels = as_int("adder_levels_per_stage", adder_levels_per_stage, 1, 64)
         p = check_params(params)
         stages = (*adder_stages(p, self._adder_levels), *argmin_stages(p, self._levels, True),
                   *weight_stages(p))

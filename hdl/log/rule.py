@@ -22,34 +22,20 @@ the twins of the row adders, the argmin tree and the weights stage.
 
 from __future__ import annotations
 
-import math
-import operator
 from dataclasses import dataclass
 
 import numba
 import numpy as np
 
+from bayesmachine.checks import as_int
 from bayesmachine.errors import ParameterError
 from bayesmachine.params import DEFAULT_TIE_BREAK, TIE_BREAKS
 
-__all__ = ["LogParams", "LogResult", "argmin_rows", "check_int", "check_params", "exp_table", "log_integrate",
+__all__ = ["LogParams", "LogResult", "argmin_rows", "check_params", "integrate_pixel", "log_integrate",
            "row_sums", "row_weights"]
 
 MAX_CODE_BITS = 16
 MAX_WEIGHT_BITS = 16
-
-
-def check_int(name: str, value: object, lo: int, hi: int) -> int:
-    """``value`` as an int (Python's or NumPy's, not a bool) in [lo, hi]."""
-    if isinstance(value, (bool, np.bool_)):
-        raise TypeError(f"{name} must be an integer, not {type(value).__name__}")
-    try:
-        v = operator.index(value)  # type: ignore[arg-type]
-    except TypeError:
-        raise TypeError(f"{name} must be an integer, not {type(value).__name__}") from None
-    if not lo <= v <= hi:
-        raise ParameterError(f"{name} must be in [{lo}, {hi}], got {v}", name)
-    return v
 
 
 def _table(weights: object) -> tuple[int, ...]:
@@ -57,7 +43,7 @@ def _table(weights: object) -> tuple[int, ...]:
     positive and below ``2**(MAX_WEIGHT_BITS + 1)``, the last 0."""
     if isinstance(weights, (str, bytes)) or not hasattr(weights, "__iter__"):
         raise TypeError(f"weights must be a sequence of integers, not {type(weights).__name__}")
-    table = tuple(check_int("weights", w, 0, 1 << MAX_WEIGHT_BITS) for w in weights)  # type: ignore[union-attr]
+    table = tuple(as_int("weights", w, 0, 1 << MAX_WEIGHT_BITS) for w in weights)  # type: ignore[union-attr]
     if len(table) < 2 or table[0] == 0 or table[-1] != 0:
         raise ParameterError(f"weights must have at least 2 entries, the first positive and the last 0, "
                              f"got {table[:4]}...{table[-2:]}", "weights")
@@ -81,7 +67,7 @@ class LogParams:
         Bits of a code, 1 ... 16; the all-ones code is infinite energy.
     weights : sequence of int
         The exp table X: nonincreasing, at least 2 entries, the first positive, the last 0
-        (:func:`exp_table` builds one).
+        (``bayesmachine.columns.energy.exp_table`` builds one).
     nomatch_row : bool
         Whether the last row is the no-match row.
     tie_break : str
@@ -107,9 +93,9 @@ class LogParams:
     tie_break: str = DEFAULT_TIE_BREAK
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "rows", check_int("rows", self.rows, 1, 4096))
-        object.__setattr__(self, "codes", check_int("codes", self.codes, 1, 64))
-        object.__setattr__(self, "code_bits", check_int("code_bits", self.code_bits, 1, MAX_CODE_BITS))
+        object.__setattr__(self, "rows", as_int("rows", self.rows, 1, 4096))
+        object.__setattr__(self, "codes", as_int("codes", self.codes, 1, 64))
+        object.__setattr__(self, "code_bits", as_int("code_bits", self.code_bits, 1, MAX_CODE_BITS))
         object.__setattr__(self, "weights", _table(self.weights))
         if not isinstance(self.nomatch_row, (bool, np.bool_)):
             raise TypeError(f"nomatch_row must be a bool, not {type(self.nomatch_row).__name__}")
@@ -147,21 +133,6 @@ class LogParams:
     def none_index(self) -> int:
         """The ``map`` of a pixel whose rows are all excluded: the no-match row, else row 0."""
         return self.rows - 1 if self.nomatch_row else 0
-
-
-def exp_table(*, weight_bits: int, step: float) -> tuple[int, ...]:
-    """The exp table ``X[e] = floor(2**weight_bits * exp(-e * step) + 1/2)`` for e = 0, 1, ...
-    up to and including its first 0: the weight of a row whose sum exceeds the least by e codes,
-    ``step`` the code's step in nats."""
-    bits = check_int("weight_bits", weight_bits, 1, MAX_WEIGHT_BITS - 1)
-    if isinstance(step, bool) or not isinstance(step, (int, float, np.floating, np.integer)):
-        raise TypeError(f"step must be a number, not {type(step).__name__}")
-    if not (math.isfinite(step) and step > 0):
-        raise ParameterError(f"step must be a positive finite number, got {step}", "step")
-    table = []
-    while not table or table[-1]:
-        table.append(math.floor((1 << bits) * math.exp(-len(table) * float(step)) + 0.5))
-    return tuple(table)
 
 
 @dataclass(frozen=True)
@@ -236,18 +207,26 @@ def _row_weights(sums, excluded, s_min, table, out):
         _weights(sums[i], excluded[i], s_min[i], table, out[i])
 
 
+@numba.njit(cache=True, inline="always")
+def integrate_pixel(codes, infinite, nm_first, none_index, table, sums, excluded, weights):
+    """The whole rule for one pixel's ``codes`` (rows, codes), in one pass: fills its ``sums``,
+    ``excluded`` and ``weights`` (per row) and returns ``(map, all_excluded, s_min)``. Compiled (numba):
+    the kernel every caller of the rule per pixel shares (:func:`log_integrate`, the model engine)."""
+    for r in range(codes.shape[0]):
+        sums[r], excluded[r] = _row(codes[r], infinite)
+    best = _argmin(sums, excluded, nm_first)
+    s_min = 0 if best < 0 else sums[best]
+    _weights(sums, excluded, s_min, table, weights)
+    return (none_index if best < 0 else best), best < 0, s_min
+
+
 @numba.njit(cache=True)
 def _integrate(codes, infinite, nm_first, none_index, table, sums, excluded, out_map, out_none, out_s_min,
                weights):
     """The whole rule per pixel, in one pass over its codes."""
     for i in range(codes.shape[0]):
-        for r in range(codes.shape[1]):
-            sums[i, r], excluded[i, r] = _row(codes[i, r], infinite)
-        best = _argmin(sums[i], excluded[i], nm_first)
-        out_none[i] = best < 0
-        out_map[i] = none_index if best < 0 else best
-        out_s_min[i] = 0 if best < 0 else sums[i, best]
-        _weights(sums[i], excluded[i], out_s_min[i], table, weights[i])
+        out_map[i], out_none[i], out_s_min[i] = integrate_pixel(codes[i], infinite, nm_first, none_index,
+                                                                table, sums[i], excluded[i], weights[i])
 
 
 def _check_codes(codes: object, params: LogParams) -> np.ndarray:

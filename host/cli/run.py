@@ -190,6 +190,7 @@ def _report(outcome: RunOutcome, source: str, crop: Crop | None) -> dict[str, ob
         wall += sum(r.wall_cycles for r in declared)
     report: dict[str, object] = {
         "engine": run.engine,
+        "integrator": run.machine.integrator,
         "rng": run.machine.rng,
         "counter_max": run.machine.counter_max,
         # The cycles below are clocks: B random samples per operator and clock (results: B = 1's).
@@ -232,7 +233,9 @@ def _summary(r: dict[str, object]) -> str:
         return "n/a" if v is None else format(v, fmt)
 
     line = (
-        f"{r['engine']} model={r['model_name']} rng={r['rng']} counter_max={r['counter_max']}"
+        f"{r['engine']} model={r['model_name']} "
+        + ("integrator=log" if r.get("integrator") == "log"
+           else f"rng={r['rng']} counter_max={r['counter_max']}")
         + (f" samples_per_clock={r['samples_per_clock']}" if r.get("samples_per_clock", 1) != 1 else "")
         + f": {r['pixels']} px, "
         f"{f('cycles_per_pixel_mean', '.2f')} +- {f('cycles_per_pixel_std', '.2f')} cycles/px, "

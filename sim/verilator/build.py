@@ -421,17 +421,18 @@ def build_harness(
     ``trace_kind``: 0 none, 1 VCD, 2 FST. ``tie_ready=False``: the back-pressure flavour (the
     harness drives ``result.ready``; slower, see ``wrapper_verilog``).
     """
-    from bayesmachine.hdl.machine import BayesianMachine
+    from bayesmachine.hdl.machines import machine_top
     from bayesmachine.hdl.signatures import MachineSignature
     from bayesmachine.sources import check_source
 
     find_toolchain()  # a missing tool is reported before the seconds of emitting the Verilog
     root = Path(build_dir) if build_dir is not None else cache_dir()
     root.mkdir(parents=True, exist_ok=True)
-    signature = MachineSignature(params)  # the ports; the component is built only to emit Verilog
+    # The ports (a log machine draws no random numbers); the component is built only to emit Verilog.
+    signature = MachineSignature(params, entropy=params.integrator == "stochastic")
     check_source(params)  # as BayesianMachine's constructor does, before any work
     design = HarnessSources(
-        verilog=cached_verilog(params.fingerprint(), lambda: BayesianMachine(params=params), root),
+        verilog=cached_verilog(params.fingerprint(), lambda: machine_top(params), root),
         wrapper=wrapper_verilog(signature, tie_ready=tie_ready),
         header=design_header(params, signature, trace_kind, tie_ready=tie_ready),
         sources=HARNESS_SOURCES,

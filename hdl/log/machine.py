@@ -1,0 +1,219 @@
+"""The logarithmic machine: the log blocks behind the stochastic machine's ports (``MachineSignature``).
+
+A pixel's energy codes come in on the load stream as the stochastic machine's words do (``words_per_beat``
+per beat, ``beats_per_pixel`` beats, a code in the low :data:`~bayesmachine.columns.energy.LOG_CODE_BITS`
+bits of each W + 1-bit word; with a neighbour prior ``line_start`` on its beats) into a pixel buffer;
+the pixel is *issued* into the row adders with its feedback column formed (a neighbour prior: from the
+previous result, :func:`~bayesmachine.sim.model.fill_feedback`'s rule with the flat code 0), then the
+argmin tree and the weights stage (``RowAdders`` → ``ArgminTree`` → ``WeightStage``, streams between).
+The result stream carries ``map``, ``nomatch``, ``timeout`` (every row excluded), ``cycles`` and
+``counts`` (the rows' weights): ``sim.log_model.LogMachineModel``'s results, bit for bit.
+
+The feedback loop: as a MAP leaves the argmin tree the next pixel's feedback codes are registered
+from it, and a pixel with a left neighbour issues the clock after its predecessor's MAP left, so such
+pixels issue every ``RowAdders.latency + ArgminTree.latency + 1`` clocks at most
+(:func:`pixel_clocks`); a line's first pixel and every pixel without a neighbour prior issue as soon
+as they are loaded. ``cycles`` is that issue interval by the
+rule (1, or the loop's clocks), which the loading may exceed (the wall cycles count it).
+"""
+
+from __future__ import annotations
+
+from amaranth.hdl import Array, Const, Module, Mux, Signal, Value
+from amaranth.lib import fifo, wiring
+
+from bayesmachine.columns.energy import ENERGY_STEP, LOG_CODE_BITS, exp_table
+from bayesmachine.hdl.signatures import MachineSignature, beat_words
+from bayesmachine.params import MachineParams
+
+from .adders import RowAdders
+from .argmin import ArgminTree
+from .rule import LogParams
+from .weights import WeightStage
+
+__all__ = ["ADDER_LEVELS_PER_STAGE", "ARGMIN_LEVELS_PER_STAGE", "LogMachine", "log_params", "pixel_clocks"]
+
+# The log machine's pipeline setting: tree levels between two registers (adders, argmin).
+ADDER_LEVELS_PER_STAGE = 1
+ARGMIN_LEVELS_PER_STAGE = 2
+
+
+def log_params(params: MachineParams) -> LogParams:
+    """The integrator of ``params`` (``integrator = "log"``): a row per hypothesis, a code per operator
+    column, :data:`LOG_CODE_BITS`-bit codes, the exp table ``exp_table(word_bits)``, its no-match row and
+    tie rule."""
+    return LogParams(rows=params.rows, codes=params.operator_columns, code_bits=LOG_CODE_BITS,
+                     weights=exp_table(params.word_bits, ENERGY_STEP), nomatch_row=params.nomatch_row,
+                     tie_break=params.tie_break)
+
+
+def _stages(leaves: int, levels: int) -> int:
+    """Register stages of a balanced tree over ``leaves`` at ``levels`` per stage (at least 1)."""
+    return max(1, -(-(leaves - 1).bit_length() // levels))
+
+
+def pixel_clocks(params: MachineParams) -> tuple[int, int]:
+    """(clocks per pixel where no feedback column binds, clocks per pixel where one does): 1, and with a
+    neighbour prior the loop's ``RowAdders.latency + ArgminTree.latency + 1`` at this machine's setting
+    (the feedback codes registered as the MAP leaves the argmin tree)."""
+    loop = (_stages(params.operator_columns, ADDER_LEVELS_PER_STAGE)
+            + _stages(params.rows, ARGMIN_LEVELS_PER_STAGE) + 1)
+    return 1, loop if params.feedback_columns else 1
+
+
+class LogMachine(wiring.Component):
+    """The logarithmic machine (module text).
+
+    Parameters
+    ----------
+    params : MachineParams
+        A machine with ``integrator = "log"`` and ``word_bits`` >= 8 (a code fits a word); an on-chip
+        ``rng`` (it draws no random numbers).
+
+    Attributes
+    ----------
+    load : ``In(load_stream(params))``
+        A pixel's codes in operator order (the loaded columns).
+    result : ``Out(result_stream(params))``
+        One result per pixel, in order.
+    params : MachineParams
+    loop : int
+        Clocks per pixel where the feedback column binds (1 without a neighbour prior).
+    """
+
+    def __init__(self, *, params: MachineParams) -> None:
+        if not isinstance(params, MachineParams):
+            raise TypeError(f"params must be a MachineParams, not {type(params).__name__}")
+        if params.integrator != "log":
+            raise ValueError("LogMachine builds a machine with integrator = 'log'")
+        self._params = params
+        self._log = log_params(params)
+        super().__init__(MachineSignature(params, entropy=False))
+
+    @property
+    def params(self) -> MachineParams:
+        return self._params
+
+    @property
+    def loop(self) -> int:
+        return pixel_clocks(self._params)[1]
+
+    def elaborate(self, platform: object) -> Module:
+        m = Module()
+        lp = self._log
+        m.submodules.adders = adders = RowAdders(params=lp, levels_per_stage=ADDER_LEVELS_PER_STAGE)
+        m.submodules.argmin = argmin = ArgminTree(params=lp, levels_per_stage=ARGMIN_LEVELS_PER_STAGE,
+                                                  pass_sums=True)
+        m.submodules.weights = weights = WeightStage(params=lp)
+        wiring.connect(m, adders.sums, argmin.sums)
+        wiring.connect(m, argmin.best, weights.best)
+        # pixel_clocks is the blocks' latency (tests/test_log_machine.py holds it too).
+        assert not self._params.feedback_columns or adders.latency + argmin.latency + 1 == self.loop
+        # Pixels in flight, their line_start in order, for their cycles (at most every stage's plus the
+        # three output buffers' entries).
+        depth = adders.latency + argmin.latency + weights.latency + 6
+        m.submodules.starts = starts = fifo.SyncFIFO(width=1, depth=depth)
+        codes, full, start, last_taken = self._load(m)
+        self._issue(m, codes, full, start, last_taken, adders, argmin, starts)
+        self._result(m, weights, starts)
+        return m
+
+    def _load(self, m: Module) -> tuple[list[Signal], Signal, Signal, Signal]:
+        """The pixel buffer: a code per loaded word, filled beat by beat; ``full`` once the last beat is
+        in, ``start`` its line_start; and whether a pixel's last beat is taken this clock."""
+        p = self._params
+        codes = [Signal(LOG_CODE_BITS, name=f"code{i}") for i in range(p.words_per_pixel)]
+        full = Signal()
+        start = Signal()
+        beat = Signal(range(max(2, p.beats_per_pixel)))
+        taking, last_taken = Signal(), Signal()
+        last = beat == p.beats_per_pixel - 1
+        m.d.comb += [taking.eq(self.load.valid & self.load.ready), last_taken.eq(taking & last)]
+        words = beat_words(p, self.load.payload)
+        lanes = p.words_per_beat
+        with m.If(taking):
+            for b in range(p.beats_per_pixel):
+                with m.If(beat == b):
+                    for lane in range(min(lanes, p.words_per_pixel - b * lanes)):
+                        m.d.sync += codes[b * lanes + lane].eq(words[lane][:LOG_CODE_BITS])
+            m.d.sync += beat.eq(Mux(last, 0, beat + 1))
+        with m.If(last_taken):
+            m.d.sync += full.eq(1)
+            if p.feedback_columns:
+                m.d.sync += start.eq(self.load.payload.line_start)
+        return codes, full, start, last_taken
+
+    def _issue(self, m: Module, codes: list[Signal], full: Signal, start: Signal, last_taken: Signal,
+               adders: RowAdders, argmin: ArgminTree, starts: fifo.SyncFIFO) -> None:
+        """A full buffer issues into the adders when they take it and (a neighbour prior) its feedback
+        column is known: a line start, or no pixel before it between the adders' input and the argmin's
+        output (``pending``: the last one's MAP has left it, its feedback codes are registered)."""
+        p, lp = self._params, self._log
+        issue = Signal()
+        passing = Signal()  # a MAP leaves the argmin tree this clock
+        m.d.comb += passing.eq(argmin.best.valid & argmin.best.ready)
+        if p.feedback_columns:
+            pending = Signal(range(adders.latency + argmin.latency + 8))
+            m.d.sync += pending.eq(pending + issue - passing)
+            known = start | (pending == 0)
+        else:
+            known = 1
+        m.d.comb += [
+            issue.eq(full & adders.codes.ready & starts.w_rdy & known),
+            adders.codes.valid.eq(full & starts.w_rdy & known),
+            self.load.ready.eq(~full | issue),
+            starts.w_en.eq(issue),
+            starts.w_data.eq(start if p.feedback_columns else 0),
+        ]
+        with m.If(issue & ~last_taken):
+            m.d.sync += full.eq(0)
+        loaded = p.loaded_columns
+        fb = self._feedback(m, argmin, passing, start) if p.feedback_columns else None
+        for r in range(lp.rows):
+            for c in range(lp.codes):
+                target = adders.codes.payload[r][c]
+                if fb is not None and c == 0:
+                    m.d.comb += target.eq(fb[r])
+                else:
+                    m.d.comb += target.eq(codes[r * loaded + c - p.feedback_columns])
+
+    def _feedback(self, m: Module, argmin: ArgminTree, passing: Signal, start: Signal) -> list[Value]:
+        """Each row's feedback code: a register loaded as a MAP leaves the argmin tree (the table at
+        |r − MAP| clamped, the no-match code in the no-match row; 0 when that pixel's answer is no match or
+        every row was excluded; 0 from reset), read as 0 at a line start. The register keeps the loop's
+        logic (distances, table) out of the path into the adders."""
+        p = self._params
+        best = argmin.best.payload
+        hit = Signal()
+        m.d.comb += hit.eq(~best.nomatch & ~best.all_excluded)
+        table = Array(Const(w, LOG_CODE_BITS) for w in p.feedback_words)
+        last = len(p.feedback_words) - 1
+        out = []
+        for r in range(p.rows):
+            code = Signal(LOG_CODE_BITS, name=f"feedback{r}")
+            if p.nomatch_row and r == p.rows - 1:
+                value = Const(p.feedback_nomatch_word, LOG_CODE_BITS)
+            else:
+                dist = Signal(p.map_width, name=f"distance{r}")
+                m.d.comb += dist.eq(Mux(best.map > r, best.map - r, r - best.map))
+                value = table[Mux(dist > last, last, dist)]
+            with m.If(passing):
+                m.d.sync += code.eq(Mux(hit, value, 0))
+            out.append(Mux(start, 0, code))
+        return out
+
+    def _result(self, m: Module, weights: WeightStage, starts: fifo.SyncFIFO) -> None:
+        p = self._params
+        got = weights.result.payload
+        free, bound = pixel_clocks(p)
+        m.d.comb += [
+            self.result.valid.eq(weights.result.valid),
+            weights.result.ready.eq(self.result.ready),
+            starts.r_en.eq(weights.result.valid & self.result.ready),
+            self.result.payload.map.eq(got.map),
+            self.result.payload.nomatch.eq(got.nomatch),
+            self.result.payload.timeout.eq(got.all_excluded),
+            self.result.payload.cycles.eq(Mux(starts.r_data | (bound == free), free, bound)),
+        ]
+        for r in range(p.rows):
+            m.d.comb += self.result.payload.counts[r].eq(got.weights[r])

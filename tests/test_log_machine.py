@@ -1,0 +1,234 @@
+# amaranth: UnusedElaboratable=no
+"""The logarithmic machine on the models (issue 41): MachineParams.integrator, the energy-coded columns,
+the model engine (sim.log_model) against the rule, its clocks against the blocks' latency, the CLI."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from bayesmachine.cli import main
+from bayesmachine.columns import LeftPrior
+from bayesmachine.columns.energy import INFINITE_CODE, log_codes
+from bayesmachine.errors import ParameterError
+from bayesmachine.hdl.log import ArgminTree, RowAdders, log_integrate
+from bayesmachine.hdl.log.machine import (
+    ADDER_LEVELS_PER_STAGE,
+    ARGMIN_LEVELS_PER_STAGE,
+    log_params,
+    pixel_clocks,
+)
+from bayesmachine.host.features import model_planes
+from bayesmachine.host.images import bundled_pair
+from bayesmachine.host.likelihoods import likelihoods_plain, memory_words
+from bayesmachine.models import ModelParams, disparity_machine, pass_machine
+from bayesmachine.params import MachineParams
+from bayesmachine.sim.engines import get_engine
+
+
+def test_integrator_parameter() -> None:
+    stochastic = MachineParams.for_disparity(8)
+    log = MachineParams.for_disparity(8, integrator="log")
+    assert stochastic.integrator == "stochastic" and "integrator" not in stochastic.to_dict()
+    assert log.to_dict()["integrator"] == "log" and log.fingerprint() != stochastic.fingerprint()
+    assert stochastic.to_dict(complete=True)["integrator"] == "stochastic"
+    assert (stochastic.load_max, stochastic.readout_max) == (1024, 16)
+    assert (log.load_max, log.readout_max) == (INFINITE_CODE, 1024)
+    with pytest.raises(ParameterError, match="integrator") as err:
+        MachineParams.for_disparity(8, integrator="logarithmic")
+    assert err.value.parameter == "integrator"
+    with pytest.raises(TypeError, match="integrator"):
+        MachineParams.for_disparity(8, integrator=1)
+
+
+def test_feedback_table_in_codes() -> None:
+    model = ModelParams(name="census-lr")
+    log = disparity_machine(model, integrator="log")
+    # Measured: the census-lr prior (eps 0.05, s 4, no-match 0.1) in 1/16-nat codes, clamped at 48.
+    assert log.feedback_words == (0, 0, 2, 4, 7, 12, 16, 22, 28, 33, 38, 42, 45, 46, 47, 48)
+    assert log.feedback_nomatch_word == 37
+    left = model.column(LeftPrior)
+    energy = left.energy()
+    assert log.feedback_words == tuple(int(c) for c in energy.values[: len(log.feedback_words)])
+    assert (energy.values[len(log.feedback_words):] == 48).all()
+    assert pass_machine(model, log, "right").integrator == "log"
+    stochastic = disparity_machine(model)
+    with pytest.raises(ParameterError, match="feedback"):
+        disparity_machine(model, integrator="log", feedback_words=stochastic.feedback_words)
+
+
+def test_paper_codes_are_the_energy_form() -> None:
+    """The host's codes of the paper model = log_codes of the plain likelihoods (the oracle's)."""
+    left, right, _ = bundled_pair()
+    left, right = left[200:230, 300:400], right[200:230, 300:400]
+    model = ModelParams(name="paper", dmax=16)
+    planes = (model_planes(left, model), model_planes(right, model))
+    machine = disparity_machine(model, integrator="log")
+    codes = memory_words(*planes, model, machine)
+    lik, nm = likelihoods_plain(*planes, model)
+    n = lik.shape[0] * lik.shape[1]
+    assert np.array_equal(codes[:, :17], log_codes(lik).reshape(n, 17, 3))
+    assert np.array_equal(codes[:, 17, 0], log_codes(nm).reshape(n))
+    assert (codes[:, 17, 1:] == 0).all()  # the other columns' no-match entry is 1.0: code 0
+    assert codes.max() < INFINITE_CODE  # every lane of the left pass has a match pixel
+
+
+def _random_codes(rng: np.random.Generator, machine: MachineParams, pixels: int) -> np.ndarray:
+    codes = rng.integers(0, 40, (pixels, machine.rows, machine.loaded_columns))
+    codes[rng.random(codes.shape) < 0.05] = INFINITE_CODE
+    codes[rng.random(codes.shape[:2]) < 0.02] = 300  # saturated-looking, finite
+    return codes
+
+
+def test_engine_equals_the_rule() -> None:
+    rng = np.random.default_rng(5)
+    machine = disparity_machine(ModelParams(name="paper", dmax=12), integrator="log")
+    codes = _random_codes(rng, machine, 400)
+    codes[0] = INFINITE_CODE  # every row excluded: no answer
+    res = get_engine("model", machine).run(codes)
+    rule = log_integrate(codes, log_params(machine))
+    assert np.array_equal(res.map, rule.map) and np.array_equal(res.counts, rule.weights)
+    assert np.array_equal(res.nomatch, rule.nomatch) and np.array_equal(res.timeout, rule.all_excluded)
+    assert res.timeout[0] and res.timeout.sum() == 1 and (res.cycles == 1).all()
+    assert res.counts.max() == 1024  # the MAP's weight, 2^W
+
+
+def test_engine_feedback_loop() -> None:
+    """With the neighbour prior each pixel's feedback column follows the previous MAP, across calls."""
+    rng = np.random.default_rng(6)
+    machine = disparity_machine(ModelParams(name="census", dmax=10), integrator="log")
+    p = log_params(machine)
+    fb, nm = np.array(machine.feedback_words), machine.feedback_nomatch_word
+    codes = _random_codes(rng, machine, 60)
+    starts = np.zeros(30, bool)
+    starts[[0, 17]] = True
+    eng = get_engine("model", machine)
+    got = [eng.run(codes[:30], line_start=starts), eng.run(codes[30:], line_start=np.zeros(30, bool))]
+    prev = -1
+    for i in range(60):
+        full = np.zeros((1, machine.rows, machine.operator_columns), np.int64)
+        full[0, :, 1:] = codes[i]
+        if not (i < 30 and starts[i]) and prev >= 0:
+            full[0, :-1, 0] = fb[np.minimum(np.abs(np.arange(machine.rows - 1) - prev), len(fb) - 1)]
+            full[0, -1, 0] = nm
+        want = log_integrate(full, p)
+        res = got[i // 30]
+        assert int(res.map[i % 30]) == int(want.map[0])
+        assert np.array_equal(res.counts[i % 30], want.weights[0])
+        prev = -1 if want.nomatch[0] or want.all_excluded[0] else int(want.map[0])
+    bound = RowAdders(params=p, levels_per_stage=ADDER_LEVELS_PER_STAGE).latency + ArgminTree(
+        params=p, levels_per_stage=ARGMIN_LEVELS_PER_STAGE).latency + 1
+    # 6 codes: 3 adder levels, 3 stages; 12 rows: 4 argmin levels, 2 stages at 2 levels per stage; the
+    # feedback codes' register: 1.
+    assert pixel_clocks(machine) == (1, bound) == (1, 6)
+    assert got[0].cycles[0] == got[0].cycles[17] == 1 and (np.delete(got[0].cycles, [0, 17]) == 6).all()
+
+
+def test_engine_refusals() -> None:
+    machine = disparity_machine(ModelParams(name="paper", dmax=4), integrator="log")
+    with pytest.raises(ParameterError, match="rng"):
+        disparity_machine(ModelParams(name="paper", dmax=4), integrator="log", rng="external")
+    with pytest.raises(ParameterError, match="word_bits"):
+        disparity_machine(ModelParams(name="paper", dmax=4), integrator="log", word_bits=7)
+    eng = get_engine("model", machine)
+    with pytest.raises(ValueError, match=r"energy codes .* \[0, 511\]"):
+        eng.run(np.full((1, 6, 3), 512))
+    with pytest.raises(ValueError, match="no random numbers"):
+        eng.run(np.zeros((1, 6, 3), np.int64), numbers=np.zeros((4, 18), np.int64))
+
+
+def test_run_cli_log(tmp_path) -> None:
+    out = tmp_path / "out"
+    assert main(["run", "--integrator", "log", "--crop", "200,200,200,60", "--model", "census", "--quiet",
+                 "-o", str(out)]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["integrator"] == "log" and report["machine"]["integrator"] == "log"
+    # Measured on this crop (the model engine, the weights read as the counters are).
+    assert report["pixels"] == 6156
+    assert report["machine_bad2"] == pytest.approx(0.15407, abs=1e-4)
+    assert report["confidence"]["machine"]["ece"] == pytest.approx(0.13309, abs=1e-4)
+    assert report["cycles_per_pixel_mean"] == pytest.approx(7.9386, abs=1e-3)
+    assert (out / "confidence.png").stat().st_size > 0 and (out / "calibration.png").stat().st_size > 0
+    assert np.load(out / "result.npz")["counts"].max() == 1024
+
+
+@pytest.mark.parametrize("argv", [["emit", "--top", "stereo", "-o", "x.v"], ["board", "build", "-o", "b"],
+                                  ["run", "--engine", "verilator", "--feed", "pixels", "--crop",
+                                   "200,200,40,20", "-o", "r"],
+                                  ["synth", "--target", "ecp5-85k", "--machines", "2", "-o", "r"]])
+def test_cli_refuses_log_where_it_does_not_run(tmp_path, capsys, argv) -> None:
+    argv = [a if a not in ("x.v", "b", "r") else str(tmp_path / a) for a in argv]
+    assert main([*argv, "--integrator", "log"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "integrator" in err[0], err
+    assert not (tmp_path / "r" / "report.json").exists() and not (tmp_path / "x.v").exists()
+
+
+def test_emit_log_machine(tmp_path, capsys) -> None:
+    assert main(["emit", "--integrator", "log", "--model", "paper", "--dmax", "4", "-o",
+                 str(tmp_path / "log.il")]) == 0
+    out = capsys.readouterr().out
+    assert "integrator: log" in out and "9-bit energy codes" in out and "random source" not in out
+    assert (tmp_path / "log.il").stat().st_size > 0
+
+
+@pytest.mark.parametrize("name", ["paper", "census"])
+def test_pysim_equals_the_model(name) -> None:
+    """The log machine's RTL (hdl.log.machine.LogMachine) under pysim, with back-pressure on both
+    streams, gives the model engine's results bit for bit (the feedback loop across calls included)."""
+    from bayesmachine.hdl.log.machine import LogMachine
+
+    rng = np.random.default_rng(7)
+    machine = disparity_machine(ModelParams(name=name, dmax=6), integrator="log", word_bits=8)
+    codes = _random_codes(rng, machine, 40)
+    codes[3] = INFINITE_CODE
+    runs = [(codes[:25], np.arange(25) % 9 == 0), (codes[25:], np.zeros(15, bool))]
+    model = get_engine("model", machine)
+    sim = get_engine("pysim", machine, load_stall=0.3, result_stall=0.3, stall_seed=2)
+    for part, starts in runs:
+        kw = {"line_start": starts} if machine.feedback_columns else {}
+        want, got = model.run(part, **kw), sim.run(part, **kw)
+        for field in ("map", "nomatch", "timeout", "cycles", "counts"):
+            assert np.array_equal(getattr(want, field), getattr(got, field)), field
+    assert want.counts.max() == 256 and isinstance(sim.dut, LogMachine)
+
+
+def test_pysim_issue_interval_is_the_loop() -> None:
+    """Without back-pressure and with one beat per pixel, pixels with a left neighbour issue every
+    loop's clocks: the wall cycles of P such pixels grow by loop clocks per pixel."""
+    machine = disparity_machine(ModelParams(name="census", dmax=2), integrator="log", word_bits=8)
+    assert machine.beats_per_pixel == 1
+    codes = np.zeros((40, machine.rows, machine.loaded_columns), np.int64)
+    walls = []
+    for pixels in (20, 40):
+        eng = get_engine("pysim", machine)
+        eng.run(codes[:pixels], line_start=np.arange(pixels) == 0)
+        walls.append(eng.wall_cycles)
+    assert walls[1] - walls[0] == 20 * pixel_clocks(machine)[1]
+
+
+@pytest.mark.eda
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["paper", "census", "census-lr"])
+def test_verilator_equals_the_model_on_a_crop(tmp_path, name) -> None:
+    """run --integrator log: the Verilator engine's results (census-lr's two passes) are the model's."""
+    outs = {}
+    for engine in ("model", "verilator"):
+        out = tmp_path / engine
+        assert main(["run", "--integrator", "log", "--crop", "250,200,80,14", "--dmax", "24", "--model",
+                     name, "--engine", engine, "--quiet", "--no-sgbm", "-o", str(out)]) == 0
+        outs[engine] = np.load(out / "result.npz")
+    for key in ("map", "counts", "cycles", "timeout", "confidence"):
+        assert np.array_equal(outs["model"][key], outs["verilator"][key]), key
+
+
+def test_sweep_integrator_axis(tmp_path) -> None:
+    """sweep --integrator stochastic,log: a grid axis, one point per integrator."""
+    out = tmp_path / "sweep"
+    assert main(["sweep", "--integrator", "stochastic,log", "--counter-max", "8", "--crop", "250,200,80,20",
+                 "--dmax", "16", "--model", "paper", "--quiet", "-o", str(out)]) == 0
+    points = json.loads((out / "sweep.json").read_text())["points"]
+    assert [p["id"] for p in points] == ["paper_sobol_cm8_integratorstochastic",
+                                         "paper_sobol_cm8_integratorlog"]
