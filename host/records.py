@@ -79,8 +79,9 @@ class MachineRun:
     def operator_samples_per_pixel(self) -> float | None:
         """The machines' work per output pixel: over every pass, its machine's operators (rows x operator
         columns) x B x its compute cycles summed over its pixels, divided by the output pixels (a pass of
-        more pixels than the output weighs more); None for a run without cycles or pixels."""
-        if self.cycles is None or not self.map.size:
+        more pixels than the output weighs more); None for a run without cycles or pixels, and for the
+        logarithmic machine, which samples nothing."""
+        if self.cycles is None or not self.map.size or self.machine.integrator == "log":
             return None
         runs = [(self.machine, self.cycles), *((r.machine, r.cycles) for r in self.passes.values())]
         work = sum(m.operators * m.samples_per_clock * float(np.sum(c, dtype=np.float64)) for m, c in runs)

@@ -210,10 +210,12 @@ def test_report_gives_operator_samples_per_pixel(tmp_path) -> None:
 
     crop = ["--crop", "300,200,120,24", "--dmax", "16", "--no-sgbm", "--quiet", "--counter-max", "4"]
     for name, flags in (("fused", []), ("per-column", ["--no-fuse-columns"]),
-                        ("b4", ["--samples-per-clock", "4"])):
+                        ("b4", ["--samples-per-clock", "4"]), ("log", ["--integrator", "log"])):
         assert main(["run", *crop, *flags, "-o", str(tmp_path / name)]) == 0
     got = {n: json.loads((tmp_path / n / "report.json").read_text())["operator_samples_per_pixel"]
-           for n in ("fused", "per-column", "b4")}
+           for n in ("fused", "per-column", "b4", "log")}
+    # The log machine samples nothing: null.
+    assert got.pop("log") is None
     # Measured; B = 4 counts every sample of a run's last clock (4 x its clocks, not its cycles).
     assert got == pytest.approx({"fused": 674.0816, "per-column": 1685.8061, "b4": 1078.5306}, abs=1e-4)
 
