@@ -40,12 +40,14 @@ class HarnessProcess:
     messages from its stderr, ending it; and the cycle statistics.
 
     A subclass sets ``params``, ``build`` (a :class:`~.build.VerilatorBuild`) and ``_args`` (the
-    harness's command line) and calls :meth:`_init_process`.
+    harness's command line), optionally ``_env`` (variables added to the harness's environment), and
+    calls :meth:`_init_process`.
     """
 
     params: MachineParams
     build: VerilatorBuild
     _args: list[str]
+    _env: dict[str, str] | None = None
 
     def _init_process(self) -> None:
         self._proc: subprocess.Popen[bytes] | None = None
@@ -89,6 +91,7 @@ class HarnessProcess:
                 self._proc = subprocess.Popen(
                     [str(self.build.executable), *self._args],
                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._stderr, bufsize=0,
+                    env=None if self._env is None else {**os.environ, **self._env},
                 )
             except OSError as exc:
                 raise VerilatorError(f"cannot start the Verilator harness {self.build.executable} ({exc}); "
