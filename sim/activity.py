@@ -2,8 +2,11 @@
 dynamic energy (docs/integrators.md, "Switching activity").
 
 A harness built with :data:`ACTIVITY_FLAGS` (Verilator's toggle coverage, ``harness/common.h``)
-writes, after each frame, the toggles of every signal bit during that frame to the file its
-environment variable ``BM_ACTIVITY`` names. :func:`read_toggles` reads that file,
+writes the toggles of every signal bit to the file its environment variable ``BM_ACTIVITY`` names:
+the StereoMachine's harness those of each frame, the machine's harness (fed words) those since it
+started. An engine given ``activity=DIR`` (:func:`activity_env`) writes ``DIR/<build>.dat`` beside
+``DIR/<build>.v``, a copy of its design's Verilog, one pair per harness (a pass fed words runs a harness
+of its own); :func:`directory_activity` sums them. :func:`read_toggles` reads one file,
 :func:`register_names` finds which signals are registers in the design's Verilog (the left-hand sides
 of its clocked assignments, memories excluded), and :func:`activity` sums the registers' toggles by
 block (:data:`BLOCKS`). Wires are left out: a net shared by several modules' ports would be counted
@@ -14,11 +17,14 @@ from __future__ import annotations
 
 import os
 import re
+import shutil
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
-__all__ = ["ACTIVITY_FLAGS", "BLOCKS", "Activity", "activity", "block_of", "read_toggles", "register_names"]
+__all__ = ["ACTIVITY_FLAGS", "BLOCKS", "Activity", "activity", "activity_env", "block_of",
+           "directory_activity", "read_toggles", "register_names"]
 
 # Verilator's toggle coverage on every signal, however wide (by default it skips those over 256 bits)
 # and whatever its name (by default it skips names starting with "_", as Yosys names a memory's read
@@ -27,24 +33,28 @@ ACTIVITY_FLAGS = ("--coverage-toggle", "--coverage-max-width", "65536", "--cover
 
 # Where a register belongs, the first rule that matches: (block, module name pattern, register name
 # pattern), matched in full against the Verilog module (``bayesmachine.machine.source``) and the
-# register's name. The machine's operators, counters and encoder registers live in its own module,
-# told apart by their names (hdl/machine: ``word_r_c``/``shadow_r_c`` the likelihood-memory words and
-# ``load_q``/``write_q`` the load path into them, ``bit_r_c`` the operators' outputs, ``count_r`` the
+# register's name (_ANY: any module, the machine's or the top of a harness fed words). The machine's
+# operators, counters and encoder registers live in its own module, told apart by their names
+# (hdl/machine: ``word_r_c``/``shadow_r_c`` the likelihood-memory words and ``load_q``/``write_q`` the
+# load path into them, ``bit_r_c`` the operators' outputs, ``count_r`` the
 # overflow counters, ``over_group_g`` and ``search*`` the MAP encoder's, ``next_number_rep*`` and
-# ``restart_number_rep*`` the sources' copies on the stochastic bus).
+# ``restart_number_rep*`` the sources' copies on the stochastic bus; the log machine's ``code{i}`` its
+# loaded codes, ``feedback{r}`` and ``distance{r}`` its feedback column's).
+_ANY = r"bayesmachine(\..*)?"
 BLOCKS: tuple[tuple[str, str, str], ...] = (
     ("front end", r"bayesmachine\.(frontend|fifo)(\..*)?", r".*"),
     ("sources", r"bayesmachine(\.\w+)*\.(source|column_scales)(\..*)?", r".*"),
-    ("sources", r"bayesmachine(\.\w+)*\.\w*machine\w*", r"(next|restart)_number_rep.*"),
-    ("likelihood memory", r"bayesmachine(\.\w+)*\.\w*machine\w*", r"(word|shadow)_\d+_\d+|load_q|write_q"),
-    ("operators", r"bayesmachine(\.\w+)*\.\w*machine\w*", r"bit_\d+_\d+"),
-    ("counters", r"bayesmachine(\.\w+)*\.\w*machine\w*", r"count_\d+"),
-    ("encoder", r"bayesmachine(\.\w+)*\.\w*machine\w*", r"over_group_\d+|search.*|over\$\d+"),
-    ("encoder", r"bayesmachine(\.\w+)*\.encoder(\..*)?", r".*"),
     ("feedback prior", r"bayesmachine(\.\w+)*\.feedback_prior(\..*)?", r".*"),
+    ("encoder", r"bayesmachine(\.\w+)*\.encoder(\..*)?", r".*"),
     ("adders", r"bayesmachine(\.\w+)*\.(adders|row_adders)(\..*)?", r".*"),
     ("argmin", r"bayesmachine(\.\w+)*\.(argmin|argmin_tree)(\..*)?", r".*"),
     ("weights", r"bayesmachine(\.\w+)*\.(weights|weight_stage)(\..*)?", r".*"),
+    ("sources", _ANY, r"(next|restart)_number_rep.*"),
+    ("likelihood memory", _ANY, r"(word|shadow)_\d+_\d+|load_q|write_q|code\d+"),
+    ("operators", _ANY, r"bit_\d+_\d+"),
+    ("counters", _ANY, r"count_\d+"),
+    ("encoder", _ANY, r"over_group_\d+|search.*|over\$\d+"),
+    ("feedback prior", _ANY, r"feedback\d+|distance\d+"),
 )
 OTHER = "control"  # every other register: the machines' and the top's sequencing
 
@@ -145,3 +155,32 @@ def activity(coverage: str | os.PathLike[str], verilog: str | os.PathLike[str], 
         else:
             out.wire_toggles += n
     return out
+
+
+def activity_env(directory: str | os.PathLike[str] | None, build: Any) -> dict[str, str] | None:
+    """The environment of a harness of ``build`` (a ``VerilatorBuild``) counting into ``directory``:
+    ``BM_ACTIVITY`` = ``directory/<build>.dat``, its design's Verilog copied to ``directory/<build>.v``;
+    None without a directory."""
+    if directory is None:
+        return None
+    d = Path(directory)
+    d.mkdir(parents=True, exist_ok=True)
+    name = Path(build.directory).name
+    shutil.copyfile(Path(build.directory) / "bayesmachine.v", d / f"{name}.v")
+    return {"BM_ACTIVITY": str((d / f"{name}.dat").resolve())}
+
+
+def directory_activity(directory: str | os.PathLike[str], pixels: int,
+                       blocks: Iterable[str] = ()) -> Activity:
+    """Every harness's activity in ``directory`` (:func:`activity_env`) summed, over ``pixels``."""
+    total = Activity(pixels, dict.fromkeys(blocks, 0), dict.fromkeys(blocks, 0))
+    runs = sorted(Path(directory).glob("*.dat"))
+    if not runs:
+        raise ValueError(f"no activity file in {directory}: was the engine given activity={directory}?")
+    for dat in runs:
+        one = activity(dat, dat.with_suffix(".v"), pixels, blocks)
+        for b, n in one.toggles.items():
+            total.toggles[b] = total.toggles.get(b, 0) + n
+            total.registers[b] = total.registers.get(b, 0) + one.registers[b]
+        total.wire_toggles += one.wire_toggles
+    return total

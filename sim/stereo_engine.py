@@ -41,7 +41,7 @@ import numpy as np
 from bayesmachine.hdl.signatures import pixel_in_layout
 from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams
-from bayesmachine.sim.activity import ACTIVITY_FLAGS
+from bayesmachine.sim.activity import ACTIVITY_FLAGS, activity_env
 from bayesmachine.sim.engines import PixelEngineBase
 from bayesmachine.sim.results import MachineResult, NumberFeed, decode_results, layout_fields, result_words
 from bayesmachine.sim.verilator import VerilatorError, cache_dir, find_toolchain
@@ -175,7 +175,8 @@ class StereoVerilatorEngine(HarnessProcess, PixelEngineBase):
     ``run()``/``reset()`` raise ``EngineClosedError``), ``EngineStateError`` after a frame cut
     short, ``wall_cycles`` since reset. After each frame, as the Verilator engine:
     ``last_wall_cycles`` (first pixel presented to last result taken), ``last_compute_cycles``
-    and ``stats``.
+    and ``stats``. ``activity``: a directory where the harness, built to count every signal bit's
+    toggles, writes each frame's (:func:`bayesmachine.sim.activity.activity_env`).
     """
 
     name = "verilator"
@@ -206,8 +207,7 @@ class StereoVerilatorEngine(HarnessProcess, PixelEngineBase):
         self.build = build_stereo_harness(params, model, width, fifo_pixels=fifo_pixels, build_dir=build_dir,
                                           machines=machines, activity=activity is not None, jobs=jobs,
                                           verbose=verbose)
-        if activity is not None:  # each frame's toggle counts, written by the harness (harness/common.h)
-            self._env = {"BM_ACTIVITY": str(Path(activity).resolve())}
+        self._env = activity_env(activity, self.build)  # each frame's toggle counts (harness/common.h)
         self._init_process()
 
     def run(self, left: np.ndarray, right: np.ndarray) -> MachineResult:

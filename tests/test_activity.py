@@ -78,9 +78,9 @@ def test_toggles_read_back_by_signal_unmangled(tmp_path: Path) -> None:
 
 def test_activity_sums_registers_by_block(tmp_path: Path) -> None:
     act = activity(_coverage(tmp_path), VERILOG, pixels=2, blocks=("counters", "front end"))
-    # The top's count_0 and over$3 are not a machine's: control; the machine's by name.
-    assert act.toggles == {"counters": 0, "front end": 0, "control": 12 + 6 + 1, "likelihood memory": 7,
-                           "operators": 6}
+    # Named as the machine's registers in any module: count_0 a counter, over$3 the encoder's.
+    assert act.toggles == {"counters": 10, "front end": 0, "encoder": 2, "control": 6 + 1,
+                           "likelihood memory": 7, "operators": 6}
     assert act.wire_toggles == 100  # the wire $5
     assert act.total == 32 and act.per_pixel()["total"] == 16.0 and act.per_pixel()["operators"] == 3.0
     with pytest.raises(ValueError, match="pixels must be > 0"):
@@ -96,40 +96,46 @@ def test_blocks_of_the_machines_names() -> None:
     assert block_of("bayesmachine.frontend.pipeline.linebuffer", "column") == "front end"
     assert block_of("bayesmachine.fifo", "r_port__addr") == "front end"
     assert block_of("bayesmachine.right.machine", "count_0") == "counters"
-    assert block_of(m, "running") == "control"
+    assert block_of(m, "running") == "control" and block_of("bayesmachine", "count_3") == "counters"
+    assert block_of("bayesmachine", "code7") == "likelihood memory"
+    assert block_of("bayesmachine.argmin", "stage0") == "argmin"
     assert isinstance(Activity(1).per_pixel(), dict)
 
 
 @pytest.mark.eda
-def test_stereo_machine_activity_build_counts_every_register(tmp_path: Path) -> None:
-    """A small census StereoMachine built for activity: its results equal the model's, the coverage
-    file names every register of its Verilog, and the operators, counters and sources toggle."""
+@pytest.mark.parametrize(("integrator", "feed", "blocks"), [
+    ("stochastic", "pixels",
+     ("operators", "counters", "sources", "likelihood memory", "front end", "encoder")),
+    ("log", "words", ("adders", "argmin", "weights")),
+])
+def test_activity_builds_count_every_register(integrator, feed, blocks, tmp_path: Path) -> None:
+    """A small census design built for activity (the StereoMachine fed pixels, the log machine fed
+    words): its results equal the model's, the coverage files name every register of its Verilog, and
+    its blocks' registers toggle."""
     from conftest import require_tool
 
     from bayesmachine.hdl.frontend.stereo import stereo_machine_params
     from bayesmachine.host.images import bundled_pair
     from bayesmachine.host.likelihoods import ModelParams
     from bayesmachine.host.run import prepare, run_machine
-    from bayesmachine.sim.stereo_engine import build_stereo_harness
+    from bayesmachine.sim.activity import directory_activity
 
     require_tool("verilator")
     left, right, _ = bundled_pair()
     model = ModelParams(name="census", dmax=3)
-    machine = stereo_machine_params(3, model=model, counter_max=4)
+    machine = stereo_machine_params(3, model=model, counter_max=4, integrator=integrator)
     crop = (slice(200, 211), slice(300, 324))
     prep = prepare(left[crop], right[crop], model, None, reference=False)
-    coverage = tmp_path / "toggles.dat"
-    run = run_machine(prep, machine, engine="verilator", feed="pixels",
-                      engine_options={"activity": coverage, "verbose": False})
+    run = run_machine(prep, machine, engine="verilator", feed=feed,
+                      engine_options={"activity": tmp_path / "act", "verbose": False})
     want = run_machine(prep, machine, engine="model")
     np.testing.assert_array_equal(run.counts, want.counts)
     np.testing.assert_array_equal(run.cycles, want.cycles)
-    build = build_stereo_harness(machine, model, 24, activity=True)
-    verilog = (build.directory / "bayesmachine.v").read_text()
-    counts = read_toggles(coverage)
-    regs = register_names(verilog)
+    (dat,) = sorted((tmp_path / "act").glob("*.dat"))
+    counts = read_toggles(dat)
+    regs = register_names(dat.with_suffix(".v").read_text())
     missing = [(m, r) for m, names in regs.items() for r in names if (m, r) not in counts]
     assert not missing, missing[:10]
-    act = activity(coverage, verilog, run.map.size)
-    for block in ("operators", "counters", "sources", "likelihood memory", "front end", "encoder"):
+    act = directory_activity(tmp_path / "act", run.map.size)
+    for block in blocks:
         assert act.toggles.get(block, 0) > 0, (block, act.toggles)

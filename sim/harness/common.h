@@ -89,8 +89,9 @@ static void tick(BM_TOP& top) {
 }
 
 // Switching activity (a build with --coverage-toggle, VM_COVERAGE): every signal bit's toggles
-// counted by Verilator, zeroed when a frame starts and written when it ends to the file named by the
-// environment variable BM_ACTIVITY (bayesmachine.sim.activity reads it).
+// counted by Verilator, written to the file named by the environment variable BM_ACTIVITY
+// (bayesmachine.sim.activity reads it): the stereo harness's of each frame (zeroed when it starts),
+// the machine's harness's since it started, after each request.
 #if VM_COVERAGE
 #include "verilated_cov.h"
 static void activity_start(VerilatedContext& ctx) { ctx.coveragep()->zero(); }
