@@ -41,6 +41,7 @@ import numpy as np
 from bayesmachine.hdl.signatures import pixel_in_layout
 from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams
+from bayesmachine.sim.activity import ACTIVITY_FLAGS, activity_env
 from bayesmachine.sim.engines import PixelEngineBase
 from bayesmachine.sim.results import MachineResult, NumberFeed, decode_results, layout_fields, result_words
 from bayesmachine.sim.verilator import VerilatorError, cache_dir, find_toolchain
@@ -126,10 +127,12 @@ def build_stereo_harness(
     fifo_pixels: int = 8,
     build_dir: str | os.PathLike[str] | None = None,
     machines: int = 1,
+    activity: bool = False,
     **options: Any,
 ) -> VerilatorBuild:
     """Compile (or find in the cache) the stereo harness, through the Verilator engine's build cache
-    (``options``: ``jobs``, ``verbose``, as :func:`~bayesmachine.sim.verilator.build.build_design`)."""
+    (``options``: ``jobs``, ``verbose``, as :func:`~bayesmachine.sim.verilator.build.build_design`).
+    ``activity``: a build that counts every signal bit's toggles (:mod:`bayesmachine.sim.activity`)."""
     from bayesmachine.hdl.frontend.stereo import StereoMachine, check_stereo_machine, stereo_signature
 
     find_toolchain()  # a missing tool is reported before the seconds of emitting the Verilog
@@ -152,8 +155,9 @@ def build_stereo_harness(
         sources=("stereo.cpp",),
         label=f"the stereo machine, Dmax {model.dmax}, width {width}, {machines} machine(s),",
         header_name=HEADER,
+        extra_flags=ACTIVITY_FLAGS if activity else (),
         info={"params": params.to_dict(), "model": model.to_dict(), "width": width,
-              "fifo_pixels": fifo_pixels, "machines": machines},
+              "fifo_pixels": fifo_pixels, "machines": machines, "activity": activity},
         prefix="stereo-",
     )
     return build_design(design, build_dir=root, **options)
@@ -171,11 +175,12 @@ class StereoVerilatorEngine(HarnessProcess, PixelEngineBase):
     ``run()``/``reset()`` raise ``EngineClosedError``), ``EngineStateError`` after a frame cut
     short, ``wall_cycles`` since reset. After each frame, as the Verilator engine:
     ``last_wall_cycles`` (first pixel presented to last result taken), ``last_compute_cycles``
-    and ``stats``.
+    and ``stats``. ``activity``: a directory where the harness, built to count every signal bit's
+    toggles, writes each frame's (:func:`bayesmachine.sim.activity.activity_env`).
     """
 
     name = "verilator"
-    OPTIONS = ("fifo_pixels", "build_dir", "jobs", "verbose", "machines")
+    OPTIONS = ("fifo_pixels", "build_dir", "jobs", "verbose", "machines", "activity")
 
     def __init__(
         self,
@@ -188,6 +193,7 @@ class StereoVerilatorEngine(HarnessProcess, PixelEngineBase):
         jobs: int = 2,
         verbose: bool = True,
         machines: int = 1,
+        activity: str | os.PathLike[str] | None = None,
     ) -> None:
         kind = source_kind(params.rng)
         if not kind.on_chip and kind.numbers is None:
@@ -199,7 +205,9 @@ class StereoVerilatorEngine(HarnessProcess, PixelEngineBase):
         self.machines = machines
         self._args: list[str] = []
         self.build = build_stereo_harness(params, model, width, fifo_pixels=fifo_pixels, build_dir=build_dir,
-                                          machines=machines, jobs=jobs, verbose=verbose)
+                                          machines=machines, activity=activity is not None, jobs=jobs,
+                                          verbose=verbose)
+        self._env = activity_env(activity, self.build)  # each frame's toggle counts (harness/common.h)
         self._init_process()
 
     def run(self, left: np.ndarray, right: np.ndarray) -> MachineResult:

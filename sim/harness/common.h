@@ -88,6 +88,22 @@ static void tick(BM_TOP& top) {
     top.eval();
 }
 
+// Switching activity (a build with --coverage-toggle, VM_COVERAGE): every signal bit's toggles
+// counted by Verilator, written to the file named by the environment variable BM_ACTIVITY
+// (bayesmachine.sim.activity reads it): the stereo harness's of each frame (zeroed when it starts),
+// the machine's harness's since it started, after each request.
+#if VM_COVERAGE
+#include "verilated_cov.h"
+static void activity_start(VerilatedContext& ctx) { ctx.coveragep()->zero(); }
+static void activity_write(VerilatedContext& ctx) {
+    const char* path = std::getenv("BM_ACTIVITY");
+    if (path != nullptr) ctx.coveragep()->write(path);
+}
+#else
+static void activity_start(VerilatedContext&) {}
+static void activity_write(VerilatedContext&) {}
+#endif
+
 // Sync reset, held for a few cycles so registered resets inside the design settle too; the
 // wrapper's registered reset is still high for a cycle after the port falls.
 static void reset_design(BM_TOP& top) {

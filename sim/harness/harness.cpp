@@ -187,6 +187,7 @@ int main(int argc, char** argv) {
         if (tfp) tfp->flush();
 #endif
         pixel_base += pixels;
+        activity_write(*ctx);  // the toggles since the harness started (an activity build)
         send_results(records, cycles, wall_total);
     }
 #if BM_TRACE

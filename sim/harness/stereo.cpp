@@ -52,6 +52,7 @@ int main(int argc, char**) {
         if (height < 2 * MARGIN + 1) fail("a frame needs at least 2 MARGIN + 1 lines");
         pixels.resize(height * width * 2);
         read_exact(pixels.data(), pixels.size());
+        activity_start(*ctx);
         const uint64_t n_in = height * width;
         const uint64_t expected = uint64_t(height - 2 * MARGIN) * (width - 2 * MARGIN - DMAX);
         records.assign(expected * RESULT_WORDS, 0);
@@ -88,6 +89,7 @@ int main(int argc, char**) {
             idle = (take || result || passed) ? 0 : idle + 1;
             if (idle > HANG_CYCLES) fail("the design made no progress (no pixel taken, no result)");
         }
+        activity_write(*ctx);
         send_results(records, cycles, wall_total);
         for (unsigned i = 0; i < BM_PASSES; ++i) {
             if (std::fwrite(pass_records[i].data(), sizeof(uint32_t), pass_records[i].size(), stdout) !=

@@ -37,6 +37,7 @@ from typing import Any
 from bayesmachine.hdl.emit import TOP_NAME, verilog_text
 from bayesmachine.outputs import atomic_write_text
 from bayesmachine.params import MachineParams
+from bayesmachine.sim.activity import ACTIVITY_FLAGS
 from bayesmachine.tools import start_tool, stop_tool, user_cache_dir
 
 from .codegen import HARNESS_TOP, design_header, wrapper_verilog
@@ -413,13 +414,15 @@ def build_harness(
     build_dir: str | os.PathLike[str] | None = None,
     trace_kind: int = 0,
     tie_ready: bool = True,
+    activity: bool = False,
     jobs: int = 2,
     verbose: bool = False,
 ) -> VerilatorBuild:
     """Compile (or find in the cache) the machine's harness for ``params``.
 
     ``trace_kind``: 0 none, 1 VCD, 2 FST. ``tie_ready=False``: the back-pressure flavour (the
-    harness drives ``result.ready``; slower, see ``wrapper_verilog``).
+    harness drives ``result.ready``; slower, see ``wrapper_verilog``). ``activity``: a build that
+    counts every signal bit's toggles (:mod:`bayesmachine.sim.activity`).
     """
     from bayesmachine.hdl.machines import machine_top
     from bayesmachine.hdl.signatures import MachineSignature
@@ -437,8 +440,9 @@ def build_harness(
         header=design_header(params, signature, trace_kind, tie_ready=tie_ready),
         sources=HARNESS_SOURCES,
         label=f"the {params.rows}-row machine",
-        extra_flags=((), ("--trace",), ("--trace-fst",))[trace_kind],
-        info={"params": params.to_dict(), "trace_kind": trace_kind, "tie_ready": tie_ready},
+        extra_flags=((), ("--trace",), ("--trace-fst",))[trace_kind] + (ACTIVITY_FLAGS if activity else ()),
+        info={"params": params.to_dict(), "trace_kind": trace_kind, "tie_ready": tie_ready,
+              "activity": activity},
     )
     return build_design(design, build_dir=root, jobs=jobs, verbose=verbose,
                         error_hint=_fst_hint if trace_kind == 2 else None)

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from bayesmachine.params import MachineParams
+from bayesmachine.sim.activity import activity_env
 from bayesmachine.sim.engines import EngineBase
 from bayesmachine.sim.results import MachineResult, NumberFeed, decode_results, ran_out_error, result_words
 
@@ -40,12 +41,14 @@ class HarnessProcess:
     messages from its stderr, ending it; and the cycle statistics.
 
     A subclass sets ``params``, ``build`` (a :class:`~.build.VerilatorBuild`) and ``_args`` (the
-    harness's command line) and calls :meth:`_init_process`.
+    harness's command line), optionally ``_env`` (variables added to the harness's environment), and
+    calls :meth:`_init_process`.
     """
 
     params: MachineParams
     build: VerilatorBuild
     _args: list[str]
+    _env: dict[str, str] | None = None
 
     def _init_process(self) -> None:
         self._proc: subprocess.Popen[bytes] | None = None
@@ -89,6 +92,7 @@ class HarnessProcess:
                 self._proc = subprocess.Popen(
                     [str(self.build.executable), *self._args],
                     stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._stderr, bufsize=0,
+                    env=None if self._env is None else {**os.environ, **self._env},
                 )
             except OSError as exc:
                 raise VerilatorError(f"cannot start the Verilator harness {self.build.executable} ({exc}); "
@@ -211,6 +215,8 @@ class VerilatorEngine(HarnessProcess, EngineBase):
     """The RTL compiled with Verilator; the engines' contract (see :mod:`bayesmachine.sim.engines`).
 
     ``build_dir``: cache directory for builds (default: see :func:`~.build.cache_dir`).
+    ``activity``: a directory where the harness, built to count every signal bit's toggles, writes them
+    (:func:`bayesmachine.sim.activity.activity_env`: since the harness started, after each ``run``).
     ``trace``: ``(first_pixel, last_pixel, path)`` writes a waveform (``.fst`` → FST, else VCD)
     while pixels first..last (inclusive, counted from reset across ``run`` calls) are in flight;
     the file is complete after :meth:`close`. A traced build has its own cache key.
@@ -227,7 +233,8 @@ class VerilatorEngine(HarnessProcess, EngineBase):
 
     name = "verilator"
     FEEDBACK = True
-    OPTIONS = ("build_dir", "trace", "jobs", "verbose", "load_stall", "result_stall", "stall_seed")
+    OPTIONS = ("build_dir", "trace", "jobs", "verbose", "load_stall", "result_stall", "stall_seed",
+               "activity")
 
     def __init__(
         self,
@@ -240,6 +247,7 @@ class VerilatorEngine(HarnessProcess, EngineBase):
         load_stall: float = 0.0,
         result_stall: float = 0.0,
         stall_seed: int = 0,
+        activity: str | os.PathLike[str] | None = None,
     ) -> None:
         super().__init__(params)
         self._args: list[str] = []
@@ -257,7 +265,9 @@ class VerilatorEngine(HarnessProcess, EngineBase):
             permille = [str(min(999, round(v * 1000))) for v in (load_stall, result_stall)]
             self._args += ["--stall", *permille, str(int(stall_seed))]
         self.build = build_harness(params, build_dir=build_dir, trace_kind=trace_kind,
-                                   tie_ready=not result_stall, jobs=jobs, verbose=verbose)
+                                   tie_ready=not result_stall, activity=activity is not None, jobs=jobs,
+                                   verbose=verbose)
+        self._env = activity_env(activity, self.build)
         self._held: object = None  # the number source whose unused rows the harness holds
         self._init_process()
 
