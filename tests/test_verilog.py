@@ -207,7 +207,7 @@ def test_stereo_top_is_lint_clean_and_latch_free(
     hdl_cli.register(parser.add_subparsers())
     out = tmp_path / "bayesmachine.v"
     # 3 (4) beats per pixel: the beat counter's values are not all used (the lint checks complete cases).
-    lanes, beats = {"paper": ("9", 3), "census": ("10", 4), "census-lr": ("12", 4)}[model]
+    lanes, beats = {"paper": ("9", 3), "census": ("10", 4), "census-lr": ("9", 3)}[model]
     args = parser.parse_args(["emit", "--top", "stereo", "--dmax", "6", "--width", "23", "--counter-max", "4",
                               "--words-per-beat", lanes, "--sigma", "12", "--model", model, "-o", str(out)])
     assert args.func(args) == 0
