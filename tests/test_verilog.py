@@ -214,7 +214,8 @@ def test_stereo_top_is_lint_clean_and_latch_free(
     text = capsys.readouterr().out
     assert "stereo top: 23-pixel lines, Dmax 6" in text
     assert f"load: {lanes} words per beat, {beats} beats per pixel" in text
-    assert ("  census: census_window 7" in text) == (model != "paper")
+    assert ("census_window 7" in text) == (model != "paper")  # census's column, or census-lr's fused one
+    assert ("  fused: " in text) == (model == "census-lr")
     assert ("right pass: the census model with the right image" in text) == (model == "census-lr")
     assert re.search(r"in\s+pixels__payload\s+17 bits", text)
     # The machine's waivers alone: their scoped DECLFILENAME rule covers the submodules

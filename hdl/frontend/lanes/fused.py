@@ -117,21 +117,21 @@ class FusedLanes(Lanes):
             low = Mux(ok & (s < low), s, low)
         with m.If(fetched):
             m.d.sync += self._min.eq(low)
-            with m.Switch(beat):
-                for b in range(n.n_beats):
-                    with m.Case(b):
-                        for j in range(rows):
-                            if b * rows + j <= dmax:
-                                m.d.sync += self._rows[b * rows + j].eq(sums[j])
+            for b in range(n.n_beats):  # each row's sum register loads at its own beat
+                for j in range(rows):
+                    if b * rows + j <= dmax:
+                        with m.If(beat == b):
+                            m.d.sync += self._rows[b * rows + j].eq(sums[j])
 
     def _words_out(self, width: int) -> None:
         """At each issue, each lane row's sum minus the minimum, read in X (with the beat on the stream)."""
         n = self.nets
         m, rows, dmax = n.m, n.rows_per_beat, n.dmax
         diffs = [Signal(unsigned(width), name=f"fused_diff{j}") for j in range(rows)]
+        unused = range(n.n_beats, 1 << len(n.beat))  # never occur; in the last case: a complete case
         with m.Switch(n.beat):
             for b in range(n.n_beats):
-                with m.Case(b):
+                with m.Case(b, *(unused if b == n.n_beats - 1 else ())):
                     for j in range(rows):
                         r = b * rows + j
                         m.d.comb += diffs[j].eq(self._rows[r] - self._min if r <= dmax else 0)
