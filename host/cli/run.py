@@ -64,7 +64,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     p = subparsers.add_parser(
         "run",
         help="run the machine on a stereo pair and compare it with the reference",
-        description="Run the stochastic machine on a rectified pair (default: the bundled Motorcycle pair "
+        description="Run the machine (stochastic; --integrator log: the logarithmic one) on a rectified "
+        "pair (default: the bundled Motorcycle pair "
         "with its ground truth); write OUT/report.json, OUT/result.npz, OUT/disparity.png and "
         "OUT/confidence.png (each pixel's confidence; with ground truth also OUT/calibration.png), "
         "OUT/depth.npy and OUT/cloud.ply with --calib, OUT/waves.vcd with --waves. The files of an earlier "
