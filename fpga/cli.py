@@ -105,8 +105,8 @@ def _run(args: argparse.Namespace, *, measure: Measure) -> int:
         raise ValueError(f"{', '.join(pnr)}: options of place and route, which --synth-only skips")
     model = model_params_from_args(args)
     params = machine_params_from_args(args, args.dmax, model=model)
-    if args.top == "stereo" or args.machines != 1:
-        refuse_log_integrator(params, f"synth --top {args.top} --machines {args.machines}")
+    if args.top == "machine" and args.machines != 1:  # ParallelMachines: stochastic machines
+        refuse_log_integrator(params, f"synth --top machine --machines {args.machines}")
     stereo: dict[str, object] = {"model": model}
     if args.top == "stereo":
         from bayesmachine.hdl.frontend.cli import fifo_pixels, stereo_params, width

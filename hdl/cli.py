@@ -12,7 +12,6 @@ from bayesmachine.cliargs import (
     machine_params_from_args,
     model_params_from_args,
     output_path,
-    refuse_log_integrator,
 )
 
 from .emit import emit, summary
@@ -58,7 +57,6 @@ def _run(args: argparse.Namespace) -> int:
     model = model_params_from_args(args)
     params = machine_params_from_args(args, args.dmax, model=model)
     if args.top == "stereo":
-        refuse_log_integrator(params, "emit --top stereo")
         from .frontend.cli import build
         from .frontend.cli import summary as stereo_summary
 

@@ -174,11 +174,11 @@ def passes_model(frames: list[tuple[np.ndarray, np.ndarray]], model: object,
     from bayesmachine.host.features import model_planes
     from bayesmachine.host.likelihoods import pass_grid, pass_words
     from bayesmachine.region import OutputRegion
-    from bayesmachine.sim.model import MachineModel
+    from bayesmachine.sim.engines import get_engine
 
     passes = model.passes  # type: ignore[attr-defined]
     machines = {p.name: pass_params(model, params, p.name) for p in passes}  # type: ignore[arg-type]
-    engines = {name: MachineModel(pp) for name, pp in machines.items()}
+    engines = {name: get_engine("model", pp) for name, pp in machines.items()}  # the integrator's model
     out: dict[str, list[MachineResult]] = {p.name: [] for p in passes}
     for lf, rf in frames:
         fl, fr = model_planes(lf, model), model_planes(rf, model)  # type: ignore[arg-type]

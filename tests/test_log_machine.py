@@ -154,9 +154,9 @@ def test_run_cli_log(tmp_path) -> None:
     assert np.load(out / "result.npz")["counts"].max() == 1024
 
 
-@pytest.mark.parametrize("argv", [["emit", "--top", "stereo", "-o", "x.v"], ["board", "build", "-o", "b"],
-                                  ["run", "--engine", "verilator", "--feed", "pixels", "--crop",
-                                   "200,200,40,20", "-o", "r"],
+@pytest.mark.parametrize("argv", [["board", "build", "-o", "b"],
+                                  ["run", "--engine", "board", "--feed", "pixels", "--port", "/dev/null",
+                                   "--crop", "200,200,40,20", "-o", "r"],
                                   ["synth", "--target", "ecp5-85k", "--machines", "2", "-o", "r"]])
 def test_cli_refuses_log_where_it_does_not_run(tmp_path, capsys, argv) -> None:
     argv = [a if a not in ("x.v", "b", "r") else str(tmp_path / a) for a in argv]

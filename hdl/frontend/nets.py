@@ -26,6 +26,8 @@ from amaranth.lib import memory
 
 from bayesmachine.hdl.signatures import beat_words
 
+from .tables import LoadForm
+
 __all__ = ["WordNets"]
 
 
@@ -48,8 +50,11 @@ class WordNets:
     tables : FrontEndTables
     pixel, beats : View
         The pixel stream's and the load stream's payloads.
-    dmax, rows_per_beat, n_beats, one : int
-        The largest disparity, lane rows per beat (R), beats per pixel, the word of 1.0.
+    form : LoadForm
+        What the machine loads (its integrator's: words or energy codes).
+    dmax, rows_per_beat, n_beats, one, zero : int
+        The largest disparity, lane rows per beat (R), beats per pixel, the loaded value of a factor
+        1.0 and of a factor 0 (``form``'s).
     take, advance, issue, beat, free : Value
     active : Signal
         Writing the words of an output pixel (``beat`` counts its beats).
@@ -70,7 +75,8 @@ class WordNets:
         self.dmax = gen.pass_.model.dmax
         self.rows_per_beat = p.words_per_beat // p.loaded_columns
         self.n_beats = p.beats_per_pixel
-        self.one = p.word_one
+        self.form = LoadForm.of(p)
+        self.one, self.zero = self.form.one, self.form.zero
         self.take = Signal()
         self.advance = Signal()  # the look-up pipeline (address registers, table reads, stream) moves
         self.issue = Signal()

@@ -38,7 +38,7 @@ from amaranth.lib.wiring import In
 
 from bayesmachine.checks import as_int
 from bayesmachine.columns import Source
-from bayesmachine.hdl.machine import BayesianMachine
+from bayesmachine.hdl.machines import machine_top
 from bayesmachine.hdl.signatures import (
     ENTROPY_PORTS,
     StereoSignature,
@@ -209,7 +209,8 @@ class StereoNets:
     of ``hdl.formal`` and their mutants read them, never Amaranth's internals)."""
 
     frontend: FrontEnd | FeaturePipeline  # one machine: the front end; several: the one feature pipeline
-    machines: list[BayesianMachine]  # the own pass's machines (machine j runs map rows j mod K)
+    machines: list[wiring.Component]  # the own pass's machines (BayesianMachine or LogMachine: the
+    # integrator's; machine j runs map rows j mod K)
     loads: list[RoomFifo]  # machine j's load FIFO: its word generator's beats
 
 
@@ -309,7 +310,7 @@ class StereoMachine(wiring.Component):
         wiring.connect(m, wiring.flipped(self.pixels), front.pixels)
         for p in model.passes:
             pp = pass_params(model, self._params, p.name)
-            machine = BayesianMachine(params=pp)
+            machine = machine_top(pp)  # the integrator's machine
             m.submodules[pass_port(model, p, "machine")] = machine
             beats = getattr(front, pass_port(model, p, "beats"))
             capacity = self._fifo_pixels * pp.beats_per_pixel
@@ -341,7 +342,7 @@ class StereoMachine(wiring.Component):
         _watched(m, maps.payload, res.payload)
         fork(m, res, [out, maps])
 
-    def _entropy(self, m: Module, machine: BayesianMachine) -> None:
+    def _entropy(self, m: Module, machine: wiring.Component) -> None:
         """An off-chip source's ports: the machine's and this top's come from the same
         ``entropy_members(params)``, so they exist together."""
         for name in ENTROPY_PORTS:
@@ -392,7 +393,7 @@ class StereoMachine(wiring.Component):
         return rows, lines, take & w.frame_begin
 
     def _lanes(self, m: Module, lines: list[RoomFifo], frame_reset: Value
-               ) -> tuple[list[BayesianMachine], list[RoomFifo], list[RoomFifo]]:
+               ) -> tuple[list[wiring.Component], list[RoomFifo], list[RoomFifo]]:
         """Per lane j a word generator fed from its line FIFO, its beats FIFO, its machine and its result
         FIFO; with the above neighbour, machine j's results into the line of MAPs of generator j + 1 (the
         rows below its own) as they leave. Returns the machines, their load FIFOs and result FIFOs."""
@@ -405,7 +406,7 @@ class StereoMachine(wiring.Component):
             gen = WordGenerator(params=p, model=self._model, output_columns=wo if line else None,
                                 leads=j == 0)
             m.submodules[f"generator{j}"] = gen
-            m.submodules[f"machine{j}"] = machine = BayesianMachine(params=p)
+            m.submodules[f"machine{j}"] = machine = machine_top(p)
             buf = lines[j].buffer
             m.d.comb += [gen.pixel.valid.eq(buf.r_stream.valid),
                          gen.pixel.payload.as_value().eq(buf.r_stream.payload),

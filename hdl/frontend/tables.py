@@ -5,19 +5,68 @@ cost every word equals the last one (the likelihood has decayed to its floor). T
 stops there and its address is clamped to the last entry, so a look-up gives exactly the host's word
 for every cost an 8-bit image can produce, with a table about five times smaller (1,165 words instead
 of 6,376 for m with the paper's parameters). The tables come from the columns' own code at
-elaboration: one definition serves both.
+elaboration: one definition serves both. The machine's integrator chooses the form (:class:`LoadForm`):
+W-bit words for the stochastic machine, energy codes (``Column.codes``) for the logarithmic one.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterator, Mapping
+from dataclasses import dataclass
 
 import numpy as np
 
 from bayesmachine.columns import Fused, Term
+from bayesmachine.columns.energy import INFINITE_CODE, log_codes
 from bayesmachine.models import ModelParams
+from bayesmachine.params import DEFAULT_INTEGRATOR, MachineParams
 
-__all__ = ["FrontEndTables", "clamp_table", "frontend_tables", "term_tables"]
+__all__ = ["FrontEndTables", "LoadForm", "clamp_table", "frontend_tables", "term_tables"]
+
+
+@dataclass(frozen=True)
+class LoadForm:
+    """What a machine loads for a factor: its ``word_bits``-bit word (``integrator`` "stochastic") or its
+    energy code (``"log"``: ``log_codes`` of the float64 factor, what ``Column.codes`` gives the host's
+    log machine)."""
+
+    integrator: str = DEFAULT_INTEGRATOR
+    word_bits: int = 10
+
+    @classmethod
+    def of(cls, params: MachineParams) -> LoadForm:
+        return cls(params.integrator, params.word_bits)
+
+    @property
+    def log(self) -> bool:
+        return self.integrator == "log"
+
+    @property
+    def table_bits(self) -> int | None:
+        """The ``Term.table`` a value comes from: float64 factors (None, coded) or W-bit words."""
+        return None if self.log else self.word_bits
+
+    @property
+    def one(self) -> int:
+        """A factor 1.0: the word 2^W, the code 0."""
+        return 0 if self.log else 1 << self.word_bits
+
+    @property
+    def zero(self) -> int:
+        """A factor 0 (a lane without a match pixel, a no-match row that cannot win): the word 0, the
+        infinite code."""
+        return INFINITE_CODE if self.log else 0
+
+    def values(self, values: np.ndarray | float) -> np.ndarray:
+        """Values of a ``Term.table(self.table_bits)`` in this form."""
+        return log_codes(values) if self.log else np.asarray(values)
+
+    def value(self, value: float | int) -> int:
+        return int(self.values(value))
+
+    def table(self, term: Term) -> np.ndarray:
+        """``term``'s values by cost in this form."""
+        return self.values(term.table(self.table_bits).values)
 
 
 def clamp_table(table: np.ndarray) -> np.ndarray:
@@ -56,22 +105,25 @@ class FrontEndTables(Mapping[str, np.ndarray]):
         return t[np.minimum(np.abs(np.asarray(cost, np.int64)), len(t) - 1)]
 
 
-def term_tables(term: Term, rule: Term, word_bits: int) -> dict[str, np.ndarray]:
-    """A term's clamped tables by name: its ``word_bits``-bit words (``{name: ...}``); a fused column's
-    members' energy codes (``{member}_energy``), its pass's no-match rule's (``nomatch_energy``) and its
-    exp table (``fused_exp``, X: ends at its first 0, the clamp)."""
+def term_tables(term: Term, rule: Term, form: LoadForm) -> dict[str, np.ndarray]:
+    """A term's clamped tables by name: its values in ``form`` (``{name: ...}``); a fused column's
+    members' energy codes (``{member}_energy``), its pass's no-match rule's (``nomatch_energy``) and the
+    way back from a sum above the pixel's least (``fused_exp``: the exp table X to words, ending at its
+    first 0, the clamp; to codes (``Fused.codes``) the sum itself up to ``INFINITE_CODE - 1``)."""
     if isinstance(term, Fused):
         out = {f"{m.name}_energy": clamp_table(e.values) for m, e in zip(term.members, term.energies(),
                                                                          strict=True)}
-        return out | {"nomatch_energy": clamp_table(term.rule_energy(rule).values),
-                      "fused_exp": term.exp_table(word_bits)}
-    return {term.name: clamp_table(term.table(word_bits).values)}
+        back = np.arange(INFINITE_CODE, dtype=np.uint16) if form.log else term.exp_table(form.word_bits)
+        return out | {"nomatch_energy": clamp_table(term.rule_energy(rule).values), "fused_exp": back}
+    return {term.name: clamp_table(form.table(term))}
 
 
-def frontend_tables(model: ModelParams, word_bits: int) -> FrontEndTables:
-    """The clamped tables of ``model``'s own pass's columns and its no-match rule, quantized to
-    ``word_bits``-bit words (host code, then clamped; :func:`term_tables`)."""
+def frontend_tables(model: ModelParams, word_bits: int,
+                    integrator: str = DEFAULT_INTEGRATOR) -> FrontEndTables:
+    """The clamped tables of ``model``'s own pass's columns and its no-match rule in the form of an
+    ``integrator`` machine of ``word_bits``-bit words (host code, then clamped; :func:`term_tables`)."""
+    form = LoadForm(integrator, word_bits)
     out: dict[str, np.ndarray] = {}
     for t in (*model.columns, model.nomatch):
-        out.update(term_tables(t, model.nomatch, word_bits))
+        out.update(term_tables(t, model.nomatch, form))
     return FrontEndTables(out)

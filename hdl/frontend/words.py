@@ -156,7 +156,8 @@ class WordGenerator(wiring.Component):
     pass_name : str, optional
         The pass whose words these are (``model.pass_named``; default the model's own, the last).
     tables : FrontEndTables, optional
-        The clamped word tables (default: ``frontend_tables(pass's model, params.word_bits)``).
+        The clamped tables (default: ``frontend_tables(pass's model, params.word_bits,
+        params.integrator)``: words, or energy codes for a log machine).
     output_columns : int, optional
         Output pixels per row (W - 2·margin - Dmax): the length of an ABOVE column's line of MAPs
         (required with one, refused otherwise).
@@ -208,7 +209,8 @@ class WordGenerator(wiring.Component):
         self._params = params
         self._model = model
         self._pass = p
-        self._tables = tables if tables is not None else frontend_tables(p.model, params.word_bits)
+        self._tables = (tables if tables is not None
+                        else frontend_tables(p.model, params.word_bits, params.integrator))
         self._reference = reference_of(p)
         super().__init__(generator_signature(params, model, p))
 
@@ -281,9 +283,10 @@ class WordGenerator(wiring.Component):
             words = [lanes.word(j) for j in range(nets.rows_per_beat)]
             nomatch = lanes.nomatch()
             if lanes.term.source is Source.FEATURES:
-                words = [w if ok is None else Mux(ok, w, 0) for w, ok in zip(words, valid, strict=True)]
+                words = [w if ok is None else Mux(ok, w, nets.zero)
+                         for w, ok in zip(words, valid, strict=True)]
                 nomatch, rule_word = (nomatch if rule_word is None else rule_word), None
-                nomatch = nomatch if p.nomatch else 0
+                nomatch = nomatch if p.nomatch else nets.zero
             out.append((words, nomatch))
         return out
 

@@ -186,8 +186,11 @@ class LogMachine(wiring.Component):
         best = argmin.best.payload
         hit = Signal()
         m.d.comb += hit.eq(~best.nomatch & ~best.all_excluded)
-        table = Array(Const(w, LOG_CODE_BITS) for w in p.feedback_words)
         last = len(p.feedback_words) - 1
+        # Padded with its last code to a power of two: the clamped index never reaches the padding, and
+        # the read is a complete case (verilator -Wall: CASEINCOMPLETE).
+        padded = [*p.feedback_words, *[p.feedback_words[-1]] * ((1 << last.bit_length()) - last - 1)]
+        table = Array(Const(w, LOG_CODE_BITS) for w in padded)
         out = []
         for r in range(p.rows):
             code = Signal(LOG_CODE_BITS, name=f"feedback{r}")

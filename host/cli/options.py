@@ -133,8 +133,8 @@ def machine_params(
     if rng is not None:
         overrides["rng"] = rng
     machine = machine_params_from_args(args, model.dmax, model=model, **overrides)
-    if getattr(args, "engine", "model") == "board" or getattr(args, "feed", "words") != "words":
-        refuse_log_integrator(machine, f"--engine {args.engine} --feed {getattr(args, 'feed', 'words')}")
+    if getattr(args, "engine", "model") == "board":
+        refuse_log_integrator(machine, f"--engine {args.engine}")
     if getattr(args, "feed", "words") == "pixels" and args.words_per_beat is None:
         # The front end writes one feature per lane: lanes a multiple of the loaded columns.
         from bayesmachine.params import stereo_words_per_beat

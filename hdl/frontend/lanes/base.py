@@ -177,7 +177,8 @@ class PlaneLanes(Lanes):
         return self._words[j]
 
     def nomatch(self) -> Any:
-        return int(self.term.nomatch_entry(self.term.table(self.nets.params.word_bits)))
+        form = self.nets.form
+        return form.value(self.term.nomatch_entry(self.term.table(form.table_bits)))
 
 
 _LANES: dict[type, type[Lanes]] = {}

@@ -149,8 +149,8 @@ class ConsistencyLanes(Lanes):
         self._consistent = [n.aligned(bits.bit_select(n.row(j), 1), f"consistent{j}")
                             for j in range(n.rows_per_beat)]
         self._any = n.aligned(test.any, "any_consistent")
-        q = c.table(n.params.word_bits)
-        self._beta, self._gamma = int(q.values[1]), int(q.nomatch[0])
+        q = c.table(n.form.table_bits)
+        self._beta, self._gamma = n.form.value(q.values[1]), n.form.value(q.nomatch[0])
 
     def ready(self) -> Value:
         return ~self.nets.pixel.consult | self._maps.valid
@@ -159,4 +159,4 @@ class ConsistencyLanes(Lanes):
         return Mux(self._consistent[j], self.nets.one, self._beta)
 
     def nomatch(self) -> Any:
-        return Mux(self._any, self._gamma, self.nets.one) if self.term.has_nomatch else 0
+        return Mux(self._any, self._gamma, self.nets.one) if self.term.has_nomatch else self.nets.zero

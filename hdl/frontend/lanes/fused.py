@@ -144,4 +144,4 @@ class FusedLanes(Lanes):
         return self._words[j]
 
     def nomatch(self) -> Any:
-        return self._words[-1] if self._live else 0
+        return self._words[-1] if self._live else self.nets.zero
