@@ -18,7 +18,7 @@ from typing import TypeVar
 
 __all__ = ["int_arg", "argument_type", "output_path", "input_path", "float_arg", "positive_float_arg",
            "int_in_range", "float_in_range", "size_pair", "positive_float_at_most", "value_list", "int_of",
-           "choice_of", "on_off_list"]
+           "choice_of", "on_off_list", "counter_max_list", "MAX_COUNTER_MAX"]
 
 T = TypeVar("T")
 
@@ -208,3 +208,27 @@ def on_off_list(text: str) -> bool | list[bool]:
     if len(set(values)) != len(values):
         raise argparse.ArgumentTypeError(f"a value is listed twice: {text!r}")
     return values if len(values) > 1 else values[0]
+
+
+MAX_COUNTER_MAX = (1 << 24) - 1  # MachineParams' bound on counter_max
+
+
+def counter_max_list(text: str) -> list[int]:
+    """``N,N,...`` counter max values (each 1 .. :data:`MAX_COUNTER_MAX`), sorted ascending with repeats
+    removed."""
+    values = []
+    for part in text.split(","):
+        if part.strip():
+            try:
+                values.append(int_arg(part))
+            except argparse.ArgumentTypeError:
+                raise argparse.ArgumentTypeError(
+                    f"counter max values must be comma-separated integers, got {text!r}"
+                ) from None
+    if not values:
+        raise argparse.ArgumentTypeError("give at least one counter max value")
+    bad = [v for v in values if not 1 <= v <= MAX_COUNTER_MAX]
+    if bad:
+        raise argparse.ArgumentTypeError(f"counter max values must be in [1, {MAX_COUNTER_MAX}], "
+                                         f"got {bad[0]}")
+    return sorted(set(values))

@@ -21,8 +21,10 @@ from dataclasses import dataclass
 from typing import Any
 
 from bayesmachine.argtypes import (
+    MAX_COUNTER_MAX,
     argument_type,
     choice_of,
+    counter_max_list,
     float_arg,
     float_in_range,
     input_path,
@@ -66,6 +68,7 @@ from bayesmachine.params import (
     SMTJ_DEFAULTS,
     SMTJ_SHARES,
     STEREO_ROWS_PER_BEAT,
+    STOCHASTIC_FIELDS,
     TIE_BREAKS,
     TIMEOUT_ANSWERS,
     MachineParams,
@@ -94,6 +97,7 @@ __all__ = [
     "machine_default",
     "machine_params_from_args",
     "refuse_log_integrator",
+    "refuse_stochastic_options",
     "model_params_from_args",
     "options_without_effect",
     "machine_parameters",
@@ -128,30 +132,6 @@ MAX_SILENCE_S = 600.0
 
 
 _SMTJ_FIELDS = ("smtj_dwell", "smtj_spread", "smtj_share")
-
-
-MAX_COUNTER_MAX = (1 << 24) - 1  # MachineParams' bound on counter_max
-
-
-def counter_max_list(text: str) -> list[int]:
-    """``N,N,...`` counter max values (each 1 .. :data:`MAX_COUNTER_MAX`), sorted ascending with repeats
-    removed."""
-    values = []
-    for part in text.split(","):
-        if part.strip():
-            try:
-                values.append(int_arg(part))
-            except argparse.ArgumentTypeError:
-                raise argparse.ArgumentTypeError(
-                    f"counter max values must be comma-separated integers, got {text!r}"
-                ) from None
-    if not values:
-        raise argparse.ArgumentTypeError("give at least one counter max value")
-    bad = [v for v in values if not 1 <= v <= MAX_COUNTER_MAX]
-    if bad:
-        raise argparse.ArgumentTypeError(f"counter max values must be in [1, {MAX_COUNTER_MAX}], "
-                                         f"got {bad[0]}")
-    return sorted(set(values))
 
 
 def source_kinds() -> Mapping[str, Any]:
@@ -265,16 +245,17 @@ add_option(MachineOption("word_bits", "--word-bits",
                          "(default %(default)s)",
                          default=DEFAULT_WORD_BITS, metavar="W"))
 add_option(MachineOption("counter_max", "--counter-max",
-                         "counter max n_max: a counter overflows on its (n_max+1)-th 1 (default %(default)s)",
-                         default=DEFAULT_COUNTER_MAX, metavar="N"))
-add_option(MachineOption("rng", "--rng", rng_help(), default=DEFAULT_RNG, choices=RNG_KINDS))
+                         "counter max n_max: a counter overflows on its (n_max+1)-th 1 (default "
+                         f"{DEFAULT_COUNTER_MAX})", metavar="N"))
+# The stochastic machine's options are None unless given (their defaults are MachineParams'), so that
+# --integrator log can refuse them when given (refuse_stochastic_options).
+add_option(MachineOption("rng", "--rng", rng_help(), choices=RNG_KINDS))
 add_option(MachineOption("lfsr_bits", "--lfsr-bits",
-                         "length L of each operator's LFSR, period 2^L-1 (default %(default)s)",
-                         default=DEFAULT_LFSR_BITS, metavar="L"))
+                         f"length L of each operator's LFSR, period 2^L-1 (default {DEFAULT_LFSR_BITS})",
+                         metavar="L"))
 add_option(MachineOption("seed", "--seed",
                          "machine seed: LFSR polynomials and start states; 0x.. accepted "
-                         "(default %(default)s)",
-                         default=DEFAULT_SEED))
+                         f"(default {DEFAULT_SEED})"))
 
 
 def _runs(runs: int) -> str:
@@ -424,6 +405,24 @@ def with_flag(exc: ParameterError) -> ParameterError:
     return ParameterError(f"{flag}: {message}", name)
 
 
+def refuse_stochastic_options(args: argparse.Namespace, given: Mapping[str, Any]) -> None:
+    """ParameterError naming every option given (``given``: the machine fields set) that only the
+    stochastic machine reads (:data:`~bayesmachine.params.STOCHASTIC_FIELDS`, and a declared pass's
+    watchdog, census-lr's ``--lr-right-max-cycles``): the logarithmic machine would ignore them."""
+    flags = [_spelt_machine(MACHINE_OPTIONS[f], given[f]) for f in STOCHASTIC_FIELDS
+             if given.get(f) is not None]
+    flags += [all_options()[k][0].flag for k in sorted(pass_watchdogs())
+              if getattr(args, k, None) is not None]
+    if flags:
+        raise ParameterError(f"{', '.join(flags)}: without effect on the logarithmic machine (--integrator "
+                             "log has no counters, random sources or watchdog): leave them out", "integrator")
+
+
+def _spelt_machine(option: MachineOption, value: Any) -> str:
+    """A machine option as it was given (a yes/no option's --x or --no-x)."""
+    return option.flag if not option.is_flag or value else f"--no-{option.flag[2:]}"
+
+
 def machine_params_from_args(
     args: argparse.Namespace, dmax: int, model: ModelParams | None = None, **overrides: Any
 ) -> MachineParams:
@@ -440,6 +439,8 @@ def machine_params_from_args(
         if value is not None and not isinstance(value, list):
             kwargs[field] = value
     kwargs.update(overrides)
+    if kwargs.get("integrator") == "log":
+        refuse_stochastic_options(args, kwargs)
     device = [f for f in _SMTJ_FIELDS if kwargs.get(f) is not None]
     rng = kwargs.get("rng", DEFAULT_RNG)
     if device and rng != "smtj":

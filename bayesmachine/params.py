@@ -36,6 +36,7 @@ __all__ = [
     "DEFAULT_TIE_BREAK",
     "INTEGRATORS",
     "DEFAULT_INTEGRATOR",
+    "STOCHASTIC_FIELDS",
     "SMTJ_DEFAULTS",
     "DEFAULT_WORDS_PER_BEAT",
     "SAMPLES_PER_CLOCK",
@@ -53,6 +54,10 @@ TIE_BREAKS = ("nomatch-first", "lowest-index")
 # the logarithmic one (energy codes summed per row, the MAP the lowest sum: docs/integrators.md).
 INTEGRATORS = ("stochastic", "log")
 DEFAULT_INTEGRATOR = "stochastic"
+# The fields only the stochastic integrator reads (its counters, random sources, watchdog and the scaling
+# of its runs): the log machine has none of them, so a command refuses them with --integrator log.
+STOCHASTIC_FIELDS = ("counter_max", "rng", "lfsr_bits", "seed", "max_cycles", "timeout_answer",
+                     "samples_per_clock", "normalize", "smtj_dwell", "smtj_spread", "smtj_share")
 # Random samples each operator compares per clock (B): powers of two, so that a Sobol block of 2^W
 # points is whole clocks and a clock's points are its first point XOR constants.
 SAMPLES_PER_CLOCK = (1, 2, 4, 8, 16)

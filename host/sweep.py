@@ -40,14 +40,16 @@ from bayesmachine.cliargs import (
     MACHINE_OPTIONS,
     MachineOption,
     counter_max_list,
+    machine_default,
     machine_params_from_args,
     model_names_from_args,
     model_params_from_args,
+    pass_watchdogs,
     rng_list,
 )
 from bayesmachine.models import ModelParams
 from bayesmachine.outputs import OutputDir, require_ours
-from bayesmachine.params import MachineParams
+from bayesmachine.params import STOCHASTIC_FIELDS, MachineParams
 
 from .datasets import PairSpec, load_pair
 from .images import Crop
@@ -81,6 +83,8 @@ TIMING_KEYS = frozenset({"seconds", "words_seconds", "reference_seconds", "total
 # Grid order: these axes first (as the one-pair sweep always did), the counter max innermost.
 _LEADING = ("model", "rng")
 _SKIP = ("columns",)  # the model decides its columns
+# Options a sweep always has as an axis (of their default when not given), as its grid has recorded them.
+_AXES_OF_ONE = ("rng", "lfsr_bits", "seed")
 
 
 # --- the grid ---------------------------------------------------------------------------------
@@ -132,6 +136,8 @@ def list_option_changes(counter_max_default: list[int]) -> dict[str, dict[str, A
             changes[name] = {"type": rng_list, "choices": None, "metavar": "KIND,KIND,..."}
         else:
             changes[name] = {"type": _value_list(option), "choices": None, "metavar": metavar}
+        if name in _AXES_OF_ONE:
+            changes[name]["default"] = machine_default(name)
     return changes
 
 
@@ -167,26 +173,34 @@ def sweep_points(args: argparse.Namespace) -> list[Point]:
     """Every grid point, built and validated (a ParameterError names the option) before any run.
 
     Points whose model and machine equal an earlier one's (a device option of ``--rng smtj`` on a
-    point of another source) are one point."""
+    point of another source; a log machine's over the stochastic machine's options,
+    :data:`~bayesmachine.params.STOCHASTIC_FIELDS`) are one point."""
     axes = sweep_axes(args)
     models = {name: model_params_from_args(args, name) for name in axes["model"]}
     varying = [a for a, v in axes.items() if len(v) > 1 and a not in ("model", "rng", "counter_max")]
     points: list[Point] = []
     seen: set[str] = set()
     names = list(axes)
+    # A log machine's point reads no stochastic option: built without them, its points over their axes
+    # are one point.
+    unread = {*STOCHASTIC_FIELDS, *pass_watchdogs()}
+    log_args = argparse.Namespace(**{k: None if k in unread else v for k, v in vars(args).items()})
     for combo in itertools.product(*axes.values()):
         values = dict(zip(names, combo, strict=True))
         model = models[values["model"]]
-        overrides = {k: v for k, v in values.items() if k != "model"}
-        machine = machine_params_from_args(args, model.dmax, model=model, **overrides)
+        log = values.get("integrator") == "log"
+        overrides = {k: v for k, v in values.items() if k != "model" and not (log and k in unread)}
+        machine = machine_params_from_args(log_args if log else args, model.dmax, model=model, **overrides)
         mdict = machine.to_dict(complete=True)  # every resolved value (normalize off, not left out)
         key = json.dumps([model.name, model.to_dict(), mdict], sort_keys=True, default=str)
         if key in seen:
             continue
         seen.add(key)
-        parts = [model.name, machine.rng, f"cm{machine.counter_max}"]
-        parts += [f"{a}{mdict[a]}" for a in varying if a in mdict]
-        own = {a: mdict.get(a) for a in names if a != "model"}  # None: not this source's option
+        parts = ([model.name, *([] if "integrator" in varying else ["log"])] if log
+                 else [model.name, machine.rng, f"cm{machine.counter_max}"])
+        parts += [f"{a}{mdict[a]}" for a in varying if a in mdict and not (log and a in unread)]
+        # None: not this point's option (another source's, or the stochastic machine's)
+        own = {a: None if log and a in unread else mdict.get(a) for a in names if a != "model"}
         points.append(Point(len(points), _safe("_".join(str(p) for p in parts)), model, machine,
                             {"model": model.name, **own}))
     if len({p.id for p in points}) != len(points):  # an option value that _safe maps onto another's

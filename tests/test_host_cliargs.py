@@ -91,7 +91,9 @@ def test_commands_share_spellings_and_defaults(command):
     assert machine == MachineParams.for_disparity(80, seed=16, max_cycles=1024, counter_max=4)
     # --prior is left to the model unless given (the census model's is 'neighbour'); the machine's is uniform.
     assert args.tie_break == "nomatch-first" and args.prior is None and machine.prior == "uniform"
-    assert args.rng == (["sobol"] if command == "sweep" else "sobol")  # a sweep compares a list of sources
+    # A sweep compares a list of sources; elsewhere --rng is None unless given (--integrator log refuses
+    # it then), the machine's default.
+    assert args.rng == (["sobol"] if command == "sweep" else None) and machine.rng == "sobol"
 
 
 def test_sweep_counter_max_default_and_run_counter_max():

@@ -20,7 +20,7 @@ from bayesmachine.cliargs import (
 )
 from bayesmachine.models import ModelParams
 from bayesmachine.outputs import require_memory
-from bayesmachine.params import MachineParams
+from bayesmachine.params import DEFAULT_RNG, MachineParams
 from bayesmachine.region import OutputRegion
 
 from ..images import Crop, bundled_pair, crop_image, load_gt, load_image, parse_crop
@@ -92,7 +92,7 @@ def add_host_machine_options(p: argparse.ArgumentParser, help: dict[str, str] | 
     """The machine options of a host command (``cliargs.add_machine_options``; ``--rng`` names the
     sources the host can drive), their group returned for the command's engine options."""
     helps = {
-        "rng": host_rng_help() + " (default %(default)s)",
+        "rng": host_rng_help() + f" (default {DEFAULT_RNG})",
         **(help or {}),
     }
     return add_machine_options(p, skip=("columns",), help=helps, **changes)

@@ -239,7 +239,10 @@ def _pooled_summary(p: dict[str, object], pairs: int, varying: list[str]) -> str
         s = std.get(key) if pairs > 1 else None  # type: ignore[union-attr]
         return format(v, fmt) + ("" if s is None else f" +- {format(s, fmt)}")
 
-    line = (f"{p['engine']} model={p['model_name']} rng={p['rng']} counter_max={p['counter_max']}"
+    log = p["grid"].get("integrator") == "log"  # type: ignore[union-attr]  # no source, no counters
+    line = (f"{p['engine']} model={p['model_name']}"
+            + ((" integrator=log" if "integrator" not in varying else "") if log
+               else f" rng={p['rng']} counter_max={p['counter_max']}")
             + "".join(f" {k}={p['grid'][k]}" for k in varying)  # type: ignore[index]
             + (f" ({p['pairs']} pairs)" if pairs > 1 else "")
             + f": {f('cycles_per_pixel_mean', '.2f')} cycles/px, RMS {f('rms_error')}, "
