@@ -79,13 +79,11 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--dmax", type=int_in_range(1, 255), default=80, help="Dmax (default 80)")
     ap.add_argument("--integrators", type=value_list(choice_of(INTEGRATORS), "integrator"),
                     default="stochastic", help=f"comma-separated, of {', '.join(INTEGRATORS)} (default "
-                    "stochastic; log needs --feed words: the StereoMachine has no log machine yet)")
+                    "stochastic)")
     ap.add_argument("--feed", type=choice_of(("pixels", "words")), default="pixels",
                     help="pixels: the StereoMachine, front end included; words: the machines alone "
                     "(default pixels)")
     args = ap.parse_args(argv)
-    if args.feed == "pixels" and "log" in args.integrators:
-        ap.error("--integrators log: the StereoMachine has no log machine yet; measure it with --feed words")
     what = "the StereoMachine" if args.feed == "pixels" else "the machines fed words"
     print(f"register toggles per output pixel, {what} under Verilator (--coverage-toggle), crop "
           f"{','.join(map(str, args.crop))} of the bundled pair, Dmax {args.dmax}")
