@@ -90,3 +90,15 @@ def test_stereo_log_census_lr_equals_the_model(fuse: bool) -> None:
     for name in want:
         assert_same_results(got[name], want[name])
     assert len(np.unique(want["left"].map)) > 3
+
+
+def test_emit_summary_of_a_log_top() -> None:
+    """``emit --top stereo``'s summary: a log machine's declared pass has no seed or watchdog to name."""
+    from bayesmachine.hdl.frontend.cli import summary
+
+    model = ModelParams(name="census-lr", dmax=6)
+    for integrator, named in (("log", False), ("stochastic", True)):
+        params = stereo_machine_params(6, model=model, integrator=integrator)
+        text = summary(StereoMachine(params=params, model=model, width=23))
+        line = next(row for row in text.splitlines() if row.startswith("right pass:"))
+        assert ("seed" in line and "watchdog" in line) == named, line
