@@ -57,4 +57,5 @@ def test_sweep_does_not_multiply_log_points() -> None:
                                "paper_integratorlog"]
     # An axis the log machine reads still multiplies its points.
     assert _ids(["--integrator", "log", "--counter-max", "4,8", "--tie-break", "nomatch-first,lowest-index",
-                 "--model", "paper"]) == ["paper_log_tie_breaknomatch-first", "paper_log_tie_breaklowest-index"]
+                 "--model", "paper"]) == ["paper_log_tie_breaknomatch-first",
+                                          "paper_log_tie_breaklowest-index"]

@@ -1,3 +1,4 @@
+# amaranth: UnusedElaboratable=no
 """The logarithmic machine fed pixels: the on-chip front end writes each column's energy codes
 (``Column.codes``, the host's words path for a log machine) and ``StereoMachine`` runs ``LogMachine``s
 (one per pass, K of them), equal to the log model engine bit for bit."""
@@ -57,7 +58,8 @@ def test_frontend_writes_the_hosts_codes() -> None:
     assert want.max() < INFINITE_CODE and len(np.unique(want)) > 20  # codes, not words
 
 
-@pytest.mark.parametrize(("name", "machines"), [("paper", 1), ("census", 2)])
+@pytest.mark.parametrize(("name", "machines"), [("paper", 1),
+                                                pytest.param("census", 2, marks=pytest.mark.slow)])
 def test_stereo_log_machine_equals_the_model(name: str, machines: int) -> None:
     """StereoMachine with LogMachines (the census model: the above neighbour's codes from another
     machine's MAPs, the left neighbour's formed by the machine) against the log model engine on the host's
@@ -74,7 +76,7 @@ def test_stereo_log_machine_equals_the_model(name: str, machines: int) -> None:
     assert len(np.unique(want.map)) > 3  # disparities, not only no match
 
 
-@pytest.mark.parametrize("fuse", [True, False])
+@pytest.mark.parametrize("fuse", [True, pytest.param(False, marks=pytest.mark.slow)])
 def test_stereo_log_census_lr_equals_the_model(fuse: bool) -> None:
     """census-lr (fused or per column): the right pass's LogMachine, its flush lanes (infinite codes),
     the consistency column's codes; every pass's results equal the log model's run as the host runs it."""
