@@ -232,7 +232,9 @@ class StereoMachine(wiring.Component):
     ----------
     params : MachineParams
         The machine's parameters (``words_per_beat`` a multiple of the loaded columns: see
-        :func:`stereo_machine_params`).
+        :func:`stereo_machine_params`); its ``integrator`` picks every machine
+        (:func:`~bayesmachine.hdl.machines.machine_top`: a ``BayesianMachine``, or a ``LogMachine`` fed
+        its columns' energy codes).
     model : ModelParams
         The disparity model (its columns, its passes).
     width : int
