@@ -191,8 +191,10 @@ def _synthesize(params: MachineParams, target: Target, out: Path, say: Callable[
         "device": target.device,
         "machine": params.to_dict(),
         "machine_summary": f"Dmax {params.rows - 2}, N {params.columns}, "
-        f"counter max {params.counter_max}, W {params.word_bits}, rng {params.rng}, "
-        f"{params.words_per_beat} words per load beat",
+        + ("log integrator" if params.integrator == "log"  # no counters, no random source
+           else f"counter max {params.counter_max}") + f", W {params.word_bits}, "
+        + ("" if params.integrator == "log" else f"rng {params.rng}, ")
+        + f"{params.words_per_beat} words per load beat",
         "top": "stereo" if width is not None else "machine",
         "stereo": None,
         "machines": machines,

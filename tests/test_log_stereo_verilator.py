@@ -68,6 +68,7 @@ def test_small_log_stereo_machine_through_yosys(tmp_path: Path) -> None:
     report = synth(params, "ecp5-25k", tmp_path / "out", place=False, progress=False, width=width,
                    model=model, fifo_pixels=2, measure=measure_cycles)
     assert report["top"] == "stereo" and report["resources"]["bram"] >= 1
+    assert "log integrator" in report["machine_summary"] and "rng" not in report["machine_summary"]
     tp = report["throughput"]
     assert tp["frame_equals_model"] is True
     assert tp["frame_output_pixels"] == (480 - 4) * (width - 4 - dmax)
