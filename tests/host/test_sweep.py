@@ -15,11 +15,12 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from test_datasets import middlebury2014, stereo
 
 from bayesmachine.cli import build_parser, main
 from bayesmachine.host import sweep as sweep_mod
 from bayesmachine.host.sweep import CACHE_STATS, strip_timings, sweep_points
+
+from .test_datasets import middlebury2014, stereo
 
 # The census model: one pass (the default, census-lr, runs two).
 SMALL = ["--dmax", "8", "--model", "census", "--quiet"]

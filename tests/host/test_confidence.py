@@ -276,7 +276,7 @@ def test_sgbm_left_right_baseline(tmp_path) -> None:
 
 
 def test_board_gives_the_model_confidence_or_none(tmp_path, monkeypatch, capsys) -> None:
-    from test_board import DMAX, HEIGHT, WIDTH, TwinPort, _twin
+    from fpga.boards.test_board import DMAX, HEIGHT, WIDTH, TwinPort, _twin
 
     from bayesmachine.fpga.boards import link as link_mod
 

@@ -8,7 +8,6 @@ import time
 
 import pytest
 from conftest import require_tool
-from test_formal import check
 
 from bayesmachine.hdl.formal.log import (
     PipelineProperties,
@@ -21,6 +20,8 @@ from bayesmachine.hdl.formal.log import (
 from bayesmachine.hdl.formal.log_mutants import LOG_MUTANTS, LogMutant
 from bayesmachine.hdl.formal.runner import run_formal
 from bayesmachine.hdl.log import ArgminTree, LogIntegrator, LogParams, RowAdders, WeightStage
+
+from .test_formal import check
 
 pytestmark = pytest.mark.formal
 

@@ -17,7 +17,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from test_datasets import H, W, kitti, middlebury2014, stereo
+from host.test_datasets import H, W, kitti, middlebury2014, stereo
 
 from bayesmachine.cli import main
 from bayesmachine.host import sweep as sweep_mod

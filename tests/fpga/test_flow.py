@@ -113,7 +113,7 @@ GW5AST = TARGETS["gw5ast-138"]
 SMALL_GW5A_CELLS = {"ALU": 180, "DFF": 5, "DFFRE": 622, "DFFSE": 32, "GND": 1, "IBUF": 11, "LUT1": 14,
                     "LUT2": 61, "LUT3": 117, "LUT4": 194, "MUX2_LUT5": 46, "MUX2_LUT6": 3, "OBUF": 10,
                     "VCC": 1}
-SMALL_GW5A_PNR = Path(__file__).parent / "data" / "gw5ast_138_small_pnr.json"
+SMALL_GW5A_PNR = Path(__file__).parents[1] / "data" / "gw5ast_138_small_pnr.json"
 # The wrapper's ports at 8-bit pins, as Yosys writes them (``netlist_ports``).
 WRAPPER_PORTS = {"din_valid": 1, "clk": 1, "rst": 1, "din_ready": 1, "dout": 8, "dout_valid": 1, "din": 8}
 

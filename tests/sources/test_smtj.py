@@ -377,7 +377,7 @@ def test_study_script_runs_and_writes_complete_outputs(tmp_path) -> None:
     import sys
     from pathlib import Path
 
-    script = Path(__file__).resolve().parent.parent / "benchmarks" / "study_smtj.py"
+    script = Path(__file__).resolve().parents[2] / "benchmarks" / "study_smtj.py"
     plot, out = tmp_path / "study.png", tmp_path / "study.json"
     proc = subprocess.run(
         [sys.executable, str(script), "--row-step", "400", "--dwells", "0.5,20", "--spreads", "0,0.1",

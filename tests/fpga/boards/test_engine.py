@@ -7,7 +7,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from conftest import assert_same_results, frame_results
-from test_board import DMAX, HEIGHT, MODEL, PARAMS, WIDTH, TwinPort, _crop, _twin
 
 from bayesmachine.fpga.boards import protocol as pr
 from bayesmachine.fpga.boards.link import BoardError
@@ -19,6 +18,8 @@ from bayesmachine.sim.engines import (
     check_pixel_engine_options,
     get_pixel_engine,
 )
+
+from .test_board import DMAX, HEIGHT, MODEL, PARAMS, WIDTH, TwinPort, _crop, _twin
 
 
 def _board(twin=None, **options):  # noqa: ANN001, ANN202
