@@ -1,6 +1,7 @@
 # amaranth: UnusedElaboratable=no
 """The neighbour prior's feedback column (``prior = "neighbour"``), held to an independent oracle;
-the RTL (pysim and Verilator) held to the model, and what cannot run it refusing it.
+the RTL (pysim and Verilator) held to the model, and what cannot run it refusing it; the above
+column's words (``AbovePrior``, bayesmachine/columns/prior.py) against the formula.
 
 A neighbour-prior machine has the operator matrix of a loaded-prior machine with one more data
 column: its column 0 is formed from its previous result instead of loaded. So the oracle runs
@@ -16,9 +17,14 @@ import dataclasses
 import numpy as np
 import pytest
 
+from bayesmachine.columns import AbovePrior, neighbour_words, quantize
+from bayesmachine.host.likelihoods import memory_words
+from bayesmachine.models import ModelParams, disparity_machine
 from bayesmachine.params import MachineParams, ParameterError
 from bayesmachine.sim.engines import get_engine
 from bayesmachine.sim.results import MachineResult
+
+from .test_census import census_pair
 
 FEEDBACK = (1024, 900, 600, 300, 120, 60)
 NOMATCH = 641
@@ -291,3 +297,43 @@ def test_census_model_on_the_whole_bundled_pair_verilator_equals_the_model(tmp_p
     a, b = np.load(tmp_path / "model" / "result.npz"), np.load(tmp_path / "verilator" / "result.npz")
     for name in ("map", "counts", "cycles", "timeout"):
         np.testing.assert_array_equal(a[name], b[name], err_msg=name)
+
+
+def test_neighbour_words_from_one_neighbour():
+    model = ModelParams(dmax=6, name="census")
+    above = model.column(AbovePrior)
+    q = above.table(10)
+    w = above.loaded(q, np.array([-1, 2, 3, 6], np.int16))
+    assert w.shape == (4, 8)
+    assert (w[0] == 1024).all()  # no matched neighbour: factor 1.0 everywhere, no-match row too
+    d = np.arange(7)
+    eps = model.prior_eps
+    f = [quantize(eps + (1 - eps) * np.exp(-(k * k) / (2 * 16.0)), 10) for k in range(7)]
+    np.testing.assert_array_equal(w[1, :7], [f[abs(k - 2)] for k in d])
+    np.testing.assert_array_equal(w[2, :7], [f[abs(k - 3)] for k in d])
+    np.testing.assert_array_equal(w[3, :7], [f[abs(k - 6)] for k in d])
+    assert (w[1:, 7] == q.nomatch[0]).all()
+    with pytest.raises(ValueError, match="0..6"):
+        neighbour_words(q, 6, np.array([7]))
+    # The float64 factors are the same rule on the float table (the reference's).
+    f = above.loaded(above.table(), np.array([2], np.int16))
+    np.testing.assert_array_equal(quantize(f, 10), w[1:2])
+
+
+def test_words_with_the_neighbour_prior():
+    fl, fr, model = census_pair(6)
+    machine = disparity_machine(model)
+    with pytest.raises(ParameterError, match="^above: .*map row above, one map row at a time"):
+        memory_words(fl, fr, model, machine, rows=slice(2, 3))  # the above MAPs: the machine's results
+    with pytest.raises(ParameterError, match="^above: "):
+        memory_words(fl, fr, model, machine, above=np.full(fl.shape[1] - 6, -1))  # all rows: not one
+    wo = fl.shape[1] - 6
+    rng = np.random.default_rng(0)
+    above = rng.integers(-1, 7, wo)
+    words = memory_words(fl, fr, model, machine, rows=slice(2, 3), above=above)
+    assert words.shape == (wo, 8, machine.loaded_columns) == (wo, 8, 5)  # the feedback column is not loaded
+    want = neighbour_words(model.column(AbovePrior).table(10), 6, above)
+    np.testing.assert_array_equal(words[:, :, 0], want)
+    no_prior = ModelParams(dmax=6, name="census", neighbour_prior=False)
+    plain = memory_words(fl, fr, no_prior, disparity_machine(no_prior), rows=slice(2, 3))
+    np.testing.assert_array_equal(words[:, :, 1:], plain)

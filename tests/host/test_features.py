@@ -1,9 +1,18 @@
-"""The 5x5 feature filters on hand-computed cases (exact integer sums)."""
+"""The 5x5 feature filters on hand-computed cases (exact integer sums); the census codes against a
+plain pixel-by-pixel computation, their bit order and their grid."""
 
 import numpy as np
 import pytest
 
-from bayesmachine.host.features import feature_sums, feature_sums_plain
+from bayesmachine.host.features import (
+    census_codes,
+    census_codes_plain,
+    census_offsets,
+    feature_sums,
+    feature_sums_plain,
+    model_planes,
+)
+from bayesmachine.models import ModelParams
 
 
 def test_horizontal_ramp():
@@ -133,3 +142,41 @@ def test_planes_are_a_read_only_mapping():
 
     again = pickle.loads(pickle.dumps(planes))
     assert list(again) == ["m25", "gv20"] and np.array_equal(again.gv20, planes.gv20)
+
+
+@pytest.mark.parametrize("window", [5, 7])
+@pytest.mark.parametrize("seed", [0, 1])
+def test_census_codes_equal_plain(window, seed):
+    rng = np.random.default_rng(seed)
+    img = rng.integers(0, 256, (15, 19), dtype=np.uint8)
+    img[4:9, 3:10] = 77  # flat patch: equal neighbours give 0 bits
+    img[0, :] = 255  # a bright border row (the 7x7 windows of the grid's first row reach it)
+    codes = census_codes(img, window)
+    k = window // 2  # the map grid's margin: every window inside the image
+    assert codes.dtype == np.uint64 and codes.shape == (15 - 2 * k, 19 - 2 * k)
+    np.testing.assert_array_equal(codes, census_codes_plain(img, window))
+    bits = window * window - 1
+    assert int(codes.max()) < (1 << bits) and int(codes.max()).bit_length() == bits
+
+
+def test_census_bit_order_is_raster():
+    offs = census_offsets(7)
+    assert len(offs) == 48 and offs[0] == (-3, -3) and offs[23] == (0, -1) and offs[24] == (0, 1)
+    img = np.full((9, 9), 100, np.uint8)
+    img[4 - 3, 4 - 3] = 10  # darker top-left neighbour of map pixel (2, 2): bit 0
+    img[4, 5] = 10  # darker right neighbour: bit 24
+    assert int(census_codes(img, 7)[1, 1]) == (1 << 0) | (1 << 24)  # map grid of margin 3
+    # The grid keeps every 7x7 window inside the image: a 7x7 image has one code, all 48 bits read.
+    dark = np.full((7, 7), 50, np.uint8)
+    dark[3, 3] = 200
+    dark[0, 0] = 255  # not darker: bit 0 clear
+    codes = census_codes(dark, 7)
+    assert codes.shape == (1, 1) and int(codes[0, 0]) == ((1 << 48) - 1) & ~1
+    # The features of a 7x7-census model share that grid: the 5x5 sums around the same centres.
+    img2 = np.random.default_rng(5).integers(0, 256, (12, 14), dtype=np.uint8)
+    census = ModelParams(dmax=2, name="census")
+    f7, f5 = model_planes(img2, census), feature_sums(img2)
+    assert census.margin == 3 and f7.census.shape == f7.m25.shape == (6, 8)
+    np.testing.assert_array_equal(f7.m25, f5.m25[1:-1, 1:-1])
+    np.testing.assert_array_equal(f7.gv20, f5.gv20[1:-1, 1:-1])
+    assert ModelParams(dmax=2, name="census", census_window=5).margin == ModelParams(name="paper").margin == 2

@@ -1,4 +1,4 @@
-"""Model parameters, quantization to memory words, and the likelihood-memory layout.
+"""Model parameters, quantization to memory words, the likelihood-memory layout, Hamming distances.
 
 The expected words come from the paper's formulas computed directly in floats on a small
 hand-made pair (window means and gradients, exp, exact round-half-up), not from the
@@ -17,7 +17,7 @@ from bayesmachine.cliargs import with_flag
 from bayesmachine.columns import GradH, GradV, Mean, likelihood_formula, quantize
 from bayesmachine.host.features import feature_sums
 from bayesmachine.host.images import random_dot_stereogram
-from bayesmachine.host.likelihoods import memory_words, memory_words_plain
+from bayesmachine.host.likelihoods import hamming, hamming_plain, memory_words, memory_words_plain
 from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams, ParameterError
 
@@ -211,3 +211,11 @@ def test_words_reject_wrong_machine():
     with pytest.raises(ValueError, match="for_disparity"):
         memory_words(fl, fr, model, MachineParams.for_disparity(6))
 
+
+
+def test_hamming_equals_plain():
+    rng = np.random.default_rng(3)
+    a = rng.integers(0, 1 << 48, (7, 5), dtype=np.uint64)
+    b = rng.integers(0, 1 << 48, (7, 5), dtype=np.uint64)
+    np.testing.assert_array_equal(hamming(a, b), hamming_plain(a, b))
+    assert hamming(np.uint64((1 << 48) - 1), np.uint64(0)) == 48

@@ -1,10 +1,17 @@
-"""The float64 reference: known disparities, fast kernel == plain formula, tie rule."""
+"""The float64 reference: known disparities, fast kernel == plain formula, tie rule; the census
+model's raster-order prior against a plain loop, and the quantized reference against exact Python
+integer products of the machine's own words."""
+
+import math
 
 import numpy as np
 import pytest
+from columns.test_census import census_pair
 
+from bayesmachine.columns import AbovePrior
 from bayesmachine.host.features import feature_sums
 from bayesmachine.host.images import random_dot_stereogram
+from bayesmachine.host.likelihoods import memory_words
 from bayesmachine.host.metrics import gt_region
 from bayesmachine.host.reference import (
     reference,
@@ -12,8 +19,12 @@ from bayesmachine.host.reference import (
     reference_fast,
     reference_map,
     reference_plain,
+    reference_prior_plain,
+    reference_quantized,
+    reference_quantized_map,
 )
-from bayesmachine.models import ModelParams
+from bayesmachine.models import ModelParams, disparity_machine
+from bayesmachine.params import ParameterError
 
 
 @pytest.fixture(scope="module")
@@ -168,3 +179,103 @@ def test_limbs_for():
 
     assert [limbs_for(n, 10) for n in (1, 6, 7, 9, 10)] == [1, 1, 2, 2, 3]  # 62, 94, 126 bits a limb count
     assert limbs_for(4, 15) == 1 and limbs_for(5, 15) == 2 and limbs_for(7, 15) == 3
+
+
+@pytest.mark.parametrize("kw", [
+    {},
+    {"census_window": 5},
+    {"neighbour_prior": False},
+    {"prior_eps": 0.2, "prior_s": 1.5, "prior_nomatch": 0.3},
+    {"census_nomatch_h": 0},
+])
+def test_reference_equals_plain_raster_prior(kw):
+    fl, fr, model = census_pair(8, **kw)
+    fast = reference_fast(fl, fr, model)
+    plain = reference_prior_plain(fl, fr, model)
+    np.testing.assert_array_equal(fast.map, plain.map)
+    np.testing.assert_allclose(fast.posterior, plain.posterior, rtol=1e-13, atol=1e-300)
+    assert (fast.map < 0).any() and (fast.map >= 0).any()
+    # Band by band (the last MAP row carried into the next band) gives the same MAP.
+    for rows in (1, 4):
+        np.testing.assert_array_equal(reference_map(fl, fr, model, band_rows=rows), fast.map)
+
+
+def test_prior_changes_the_map_and_needs_the_row_above():
+    fl, fr, model = census_pair(8)
+    with_prior = reference_fast(fl, fr, model).map
+    without = reference_fast(fl, fr, ModelParams(dmax=8, name="census", neighbour_prior=False)).map
+    assert (with_prior != without).any()
+    with pytest.raises(ValueError, match="above"):
+        reference_fast(fl, fr, model, rows=slice(2, 5))
+    whole = reference_fast(fl, fr, model)
+    part = reference_fast(fl, fr, model, rows=slice(2, 5), above=whole.map[1])
+    np.testing.assert_array_equal(part.map, whole.map[2:5])
+
+
+def _quantized_plain(fl, fr, model, word_bits):
+    """The exact inference on the machine's words: Python-int products of the loaded words and, with
+    the prior, the feedback word the machine forms from the left MAP (its own rule, written out)."""
+    machine = disparity_machine(model, word_bits=word_bits)
+    ho, wo = fl.shape[0], fl.shape[1] - model.dmax
+    m = model.hypotheses
+    disp = np.full((ho, wo), -1, np.int64)
+    post = np.empty((ho, wo, m))
+    prior = model.column(AbovePrior)
+    fb = machine.feedback_words
+    for y in range(ho):
+        # the above column: this inference's own previous row
+        above = (disp[y - 1] if y > 0 else np.full(wo, -1)) if prior is not None else None
+        words = memory_words(fl, fr, model, machine, rows=slice(y, y + 1), above=above)
+        for x in range(wo):
+            w = [[int(v) for v in row] for row in words[x]]
+            left = disp[y, x - 1] if x > 0 else -1
+            if prior is not None:
+                for r in range(m):
+                    if left < 0:
+                        f = 1 << word_bits
+                    elif r == m - 1:
+                        f = machine.feedback_nomatch_word
+                    else:
+                        f = fb[min(abs(r - left), len(fb) - 1)]
+                    w[r].append(f)
+            vals = [math.prod(w[j]) for j in range(m)]
+            best = max(range(m), key=lambda j: (vals[j], -j))
+            disp[y, x] = best if best <= model.dmax else -1
+            post[y, x] = [v / sum(vals) for v in vals]
+    return disp, post
+
+
+@pytest.mark.parametrize("kw", [{}, {"neighbour_prior": False}, {"census_window": 5}])
+def test_quantized_reference_is_the_words_inference(kw):
+    fl, fr, model = census_pair(8, **kw)
+    got = reference_quantized(fl, fr, model, 10)
+    want_map, want_post = _quantized_plain(fl, fr, model, 10)
+    np.testing.assert_array_equal(got.map, want_map)
+    # The weights are the exact products (the two prior factors separately, as the machine's AND
+    # gates multiply them), not a rounded combined prior word.
+    np.testing.assert_allclose(got.posterior, want_post, rtol=1e-12, atol=1e-300)
+    np.testing.assert_allclose(got.posterior.sum(axis=-1), 1.0, rtol=1e-12)
+    np.testing.assert_array_equal(reference_quantized_map(fl, fr, model, 10, band_rows=3), got.map)
+    # Coarse words change some MAPs; the float reference is close to 10-bit words here.
+    assert np.mean(got.map == reference_fast(fl, fr, model).map) > 0.9
+
+
+def test_quantized_reference_of_the_paper_model():
+    fl, fr, _ = census_pair(8)
+    paper = ModelParams(name="paper", dmax=8)
+    got = reference_quantized(fl, fr, paper, 6)
+    np.testing.assert_array_equal(got.map, _quantized_plain(fl, fr, paper, 6)[0])
+    census = ModelParams(dmax=8, name="census")
+    with pytest.raises(ParameterError, match="^word_bits: words of 1 to 15 bits, got 16"):
+        reference_quantized(fl, fr, census, 16)
+    # 4 data words and 2 prior words of 11 bits (66 bits) or 15 bits (90 bits): products of two limbs,
+    # exact.
+    for w in (11, 15):
+        want_map, want_post = _quantized_plain(fl, fr, census, w)
+        got = reference_quantized(fl, fr, census, w)
+        np.testing.assert_array_equal(got.map, want_map)
+        np.testing.assert_allclose(got.posterior, want_post, rtol=1e-12, atol=1e-300)
+    # The paper model's three words take the widest words (their product fits 62 bits at W = 15).
+    wide = reference_quantized(fl, fr, paper, 15)
+    np.testing.assert_array_equal(wide.map, _quantized_plain(fl, fr, paper, 15)[0])
+    assert (wide.posterior >= 0).all()

@@ -1,4 +1,5 @@
-"""The run API with the machine model: layout, chunking, timeouts, agreement with the reference."""
+"""The run API with the machine model: layout, chunking, timeouts, agreement with the reference;
+the census model without its neighbour prior, and refused without the machine it needs."""
 
 import numpy as np
 import pytest
@@ -9,7 +10,7 @@ from bayesmachine.host.records import counts_dtype
 from bayesmachine.host.reference import reference_fast
 from bayesmachine.host.run import prepare, run_machine, run_pair
 from bayesmachine.models import ModelParams
-from bayesmachine.params import MachineParams
+from bayesmachine.params import MachineParams, ParameterError
 
 DMAX = 12
 
@@ -151,3 +152,22 @@ def test_run_never_holds_more_than_a_band_of_posterior(pair, monkeypatch):
     a, b = small.metrics.to_report(), big.metrics.to_report()
     assert a.pop("rms_error") == pytest.approx(b.pop("rms_error"), rel=1e-12)  # summed in another order
     assert a == b
+
+
+def test_machine_runs_the_census_model_without_the_prior():
+    from bayesmachine.host.run import run_pair
+
+    left, right, gt = random_dot_stereogram(height=30, width=70, background=3, square=9, seed=4)
+    model = ModelParams(dmax=10, name="census", neighbour_prior=False)
+    machine = MachineParams.for_disparity(10, columns=4, rng="sobol", counter_max=16)
+    out = run_pair(left, right, model, machine, engine="model", gt=gt, sgbm=False)
+    assert set(out.prepared.planes[0]) == {"m25", "gh20", "gv20", "census"}  # prepare(): the model's planes
+    assert out.metrics.map_agreement > 0.9
+    assert out.metrics.bad["machine"]["bad2"] < 0.1
+    # With the neighbour prior the machine needs its neighbour prior (its feedback column, and the
+    # above column from its own results): refused, never run with a silently uniform prior.
+    with pytest.raises(ParameterError, match="^neighbour_prior"):
+        run_pair(left, right, ModelParams(dmax=10, name="census"), machine)
+    loaded = MachineParams.for_disparity(10, columns=4, prior="loaded")
+    with pytest.raises(ParameterError, match="^neighbour_prior"):
+        run_pair(left, right, ModelParams(dmax=10, name="census"), loaded)
