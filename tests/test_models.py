@@ -1,14 +1,16 @@
 """The models (bayesmachine/models.py): a model's parameters, its dict and ``replace``, and the machine
-it needs (``disparity_machine``, ``check_disparity_machine``)."""
+it needs (``disparity_machine``, ``check_disparity_machine``), census-lr's passes and watchdogs."""
 
 import pytest
 from columns.test_census import census_pair
+from columns.test_consistency import DMAX, right_machine
 
 from bayesmachine.columns import AbovePrior, Census
 from bayesmachine.host.features import Planes
 from bayesmachine.host.likelihoods import memory_words
 from bayesmachine.models import (
     CENSUS_WATCHDOG_RUNS,
+    RIGHT_WATCHDOG_RUNS,
     ModelParams,
     check_disparity_machine,
     disparity_machine,
@@ -115,3 +117,48 @@ def test_machine_checks_are_one_function():
     with pytest.raises(ParameterError, match="census column needs the census"):
         bare = Planes({name: fl[name] for name in ("m25", "gh20", "gv20")})  # no census codes
         memory_words(bare, fr, no_prior, MachineParams.for_disparity(6, columns=4))
+
+
+def test_model_fields_and_dict():
+    m = ModelParams(name="census-lr")
+    assert ModelParams() == m  # the default model: its image columns fused
+    assert machine_layout(m.columns) == ("neighbour", 2) and [p.name for p in m.passes] == ["right", "left"]
+    right = m.pass_named("right")
+    assert (right.reference, right.machine_index, right.nomatch, right.max_cycles) == ("right", 1, True, None)
+    assert m.prior_nomatch == 0.1 and right.model.name == "census"
+    assert right.model.prior_nomatch == pytest.approx(0.626, abs=1e-3)  # the census model's own
+    d = m.to_dict()
+    assert (d["lr_beta"], d["lr_gamma"], d["lr_tolerance"], d["prior_nomatch"]) == (0.1, 0.01, 1, 0.1)
+    assert d["lr_nomatch"] is True and d["lr_right_nomatch"] is True and d["lr_neutral"] is True
+    assert ModelParams(**d).to_dict() == d
+    # The other models' dicts (reports, Verilator design keys) are what they were.
+    assert not any(k.startswith("lr_") for k in ModelParams(name="census").to_dict())
+    assert not any(k.startswith("lr_") for k in ModelParams(name="paper").to_dict())
+
+
+def test_census_machines_default_watchdog_and_normalization():
+    """The census models' machines stop a run after CENSUS_WATCHDOG_RUNS runs of n_max + 1 cycles by
+    default, census-lr's right pass after RIGHT_WATCHDOG_RUNS; a given max_cycles wins (the right pass
+    keeps its own unless lr_right_max_cycles gives one); both normalize their columns unless told not
+    to; the paper model keeps the machine's own defaults."""
+    from bayesmachine.params import DEFAULT_MAX_CYCLES, MachineParams
+
+    lr = ModelParams(dmax=DMAX, name="census-lr", fuse_columns=False)
+    for n in (1, 8, 16):
+        m = disparity_machine(lr, counter_max=n)
+        assert m.max_cycles == CENSUS_WATCHDOG_RUNS * (n + 1)
+        assert right_machine(lr, m).max_cycles == RIGHT_WATCHDOG_RUNS * (n + 1)
+        census = disparity_machine(ModelParams(dmax=DMAX, name="census"), counter_max=n)
+        assert census.max_cycles == CENSUS_WATCHDOG_RUNS * (n + 1)
+    assert (CENSUS_WATCHDOG_RUNS * 17, RIGHT_WATCHDOG_RUNS * 17) == (255, 136)  # the documented figures
+    m = disparity_machine(lr, counter_max=8, max_cycles=5000)
+    assert m.max_cycles == 5000 and right_machine(lr, m).max_cycles == RIGHT_WATCHDOG_RUNS * 9
+    assert right_machine(ModelParams(dmax=DMAX, name="census-lr", fuse_columns=False,
+                                     lr_right_max_cycles=100),
+                         disparity_machine(lr, counter_max=8)).max_cycles == 100
+    assert m.normalize and right_machine(lr, m).normalize
+    off = disparity_machine(lr, normalize=False)
+    assert not off.normalize and not right_machine(lr, off).normalize
+    paper = disparity_machine(ModelParams(dmax=DMAX, name="paper"), counter_max=8)
+    assert paper.max_cycles == DEFAULT_MAX_CYCLES and not paper.normalize
+    assert MachineParams.for_disparity(DMAX).max_cycles == DEFAULT_MAX_CYCLES
