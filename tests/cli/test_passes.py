@@ -10,10 +10,8 @@ from columns.test_consistency import DMAX, lr_pair, right_machine
 from bayesmachine.host.run import prepare, run_machine
 from bayesmachine.models import CENSUS_WATCHDOG_RUNS, RIGHT_WATCHDOG_RUNS, ModelParams, disparity_machine
 
-
-@pytest.fixture(scope="module")
-def pair():
-    return lr_pair()
+# A module-scoped fixture (the census-lr tests of columns/, host/ and cli/ share it).
+pair = pytest.fixture(lr_pair, scope="module", name="pair")
 
 
 @pytest.fixture(scope="module")

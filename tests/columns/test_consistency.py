@@ -50,14 +50,9 @@ def lr_model():
     return ModelParams(dmax=DMAX, name="census-lr", fuse_columns=False)
 
 
-@pytest.fixture(scope="module")
-def pair():
-    return lr_pair()
-
-
-@pytest.fixture(scope="module")
-def model():
-    return lr_model()
+# Module-scoped fixtures (the census-lr tests of columns/, host/ and cli/ share them).
+pair = pytest.fixture(lr_pair, scope="module", name="pair")
+model = pytest.fixture(lr_model, scope="module", name="model")
 
 
 @pytest.mark.parametrize(

@@ -29,15 +29,9 @@ from bayesmachine.params import ParameterError, nth_machine
 from bayesmachine.region import OutputRegion
 from bayesmachine.sim.engines import get_engine
 
-
-@pytest.fixture(scope="module")
-def pair():
-    return lr_pair()
-
-
-@pytest.fixture(scope="module")
-def model():
-    return lr_model()
+# Module-scoped fixtures (the census-lr tests of columns/, host/ and cli/ share them).
+pair = pytest.fixture(lr_pair, scope="module", name="pair")
+model = pytest.fixture(lr_model, scope="module", name="model")
 
 
 def _hand_run(prepared, machine, engine="model"):
