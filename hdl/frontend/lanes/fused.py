@@ -6,9 +6,11 @@ A word needs the pixel's smallest sum, so the word generator scans the pixel's b
 (``WordNets.fetch``, one beat of delay-line entries a cycle, whatever the stream does): each lane row's
 member costs (the members' own lane builders' ``costs``) are read in their energy tables (block RAM,
 three cycles: cost, address, read), added, kept per row in a register and folded into a running minimum
-(the no-match row's sum first, when the pass's no-match row can win). Then the beats are issued as any
-pass's: each lane's sum minus the minimum is the address of the exp table X (clamped to its last entry,
-0), and the no-match row's word the same at the no-match sum.
+(the no-match row's sum first, when the pass's no-match row can win). When the lanes take the scanned
+pixel its sums, minimum and no-match sum move into a second set of registers, from which its beats are
+issued as any pass's while the next pixel's scan fills the first: each lane's sum minus the minimum is
+the address of the exp table X (clamped to its last entry, 0), and the no-match row's word the same at
+the no-match sum.
 """
 
 from __future__ import annotations
@@ -60,10 +62,11 @@ class FusedLanes(Lanes):
         rule_code = n.lookup("nomatch_energy", n.tables["nomatch_energy"],
                              [getattr(n.left, rule.plane)], en=Const(1), bits=self._bits("nomatch_energy"))[0]
         extra = sum(int(m.nomatch_entry(e)) for m, e in zip(t.members[1:], t.energies()[1:], strict=True))
-        self._nm_sum = Signal(unsigned(width), name="fused_nm_sum")
-        n.m.d.comb += self._nm_sum.eq(rule_code + extra)
+        self._scan_nm = Signal(unsigned(width), name="fused_scan_nm_sum")
+        n.m.d.comb += self._scan_nm.eq(rule_code + extra)
         self._live = n.pass_.nomatch and not any(c.zeroes_nomatch for c in n.pass_.columns)
         self._store_and_min(sums, width)
+        self._hand_over(width)
         self._words_out(width)
 
     def _bits(self, name: str) -> int:
@@ -104,24 +107,37 @@ class FusedLanes(Lanes):
         fetched = self._delayed(n.fetch, 3, "fused_fetched")
         beat = self._delayed(n.fetch_beat, 3, "fused_beat")
         top = (1 << width) - 1
-        self._rows = [Signal(unsigned(width), name=f"fused_sum{r}", reset_less=True) for r in range(dmax + 1)]
-        self._min = Signal(unsigned(width), name="fused_min", reset_less=True)
-        low: Value = Mux(beat == 0, self._nm_sum if self._live else top, self._min)
+        self._scan_rows = [Signal(unsigned(width), name=f"fused_scan_sum{r}", reset_less=True)
+                           for r in range(dmax + 1)]
+        self._scan_min = Signal(unsigned(width), name="fused_scan_min", reset_less=True)
+        low: Value = Mux(beat == 0, self._scan_nm if self._live else top, self._scan_min)
         for j in range(rows):
             row = beat * rows + j
             ok = row <= dmax
-            match = n.reference.match_ok(n, row)
+            match = n.reference.match_ok(n, row, scanned=True)
             if match is not None:
                 ok = ok & match
             s = sums[j]
             low = Mux(ok & (s < low), s, low)
         with m.If(fetched):
-            m.d.sync += self._min.eq(low)
+            m.d.sync += self._scan_min.eq(low)
             for b in range(n.n_beats):  # each row's sum register loads at its own beat
                 for j in range(rows):
                     if b * rows + j <= dmax:
                         with m.If(beat == b):
-                            m.d.sync += self._rows[b * rows + j].eq(sums[j])
+                            m.d.sync += self._scan_rows[b * rows + j].eq(sums[j])
+
+    def _hand_over(self, width: int) -> None:
+        """The scanned pixel's sums, minimum and no-match sum into the registers its issues read, when the
+        lanes take it (the next pixel's scan then writes the scan's registers while these issue)."""
+        n = self.nets
+        self._rows = [Signal(unsigned(width), name=f"fused_sum{r}", reset_less=True)
+                      for r in range(n.dmax + 1)]
+        self._min = Signal(unsigned(width), name="fused_min", reset_less=True)
+        self._nm_sum = Signal(unsigned(width), name="fused_nm_sum", reset_less=True)
+        with n.m.If(n.take):
+            n.m.d.sync += [a.eq(b) for a, b in zip(self._rows, self._scan_rows, strict=True)]
+            n.m.d.sync += [self._min.eq(self._scan_min), self._nm_sum.eq(self._scan_nm)]
 
     def _words_out(self, width: int) -> None:
         """At each issue, each lane row's sum minus the minimum, read in X (with the beat on the stream)."""
