@@ -1,6 +1,6 @@
 """The fused column's scan on chip (hdl/frontend/lanes/fused.py, ``WordNets._hold``): the word generator
 scans the next output pixel's beats while the current pixel's words issue, so a fused pass's output
-pixels follow each other every ``beats_per_pixel`` + 4 cycles (the scan and its latency), not the scan
+pixels follow each other every ``beats_per_pixel`` + 6 cycles (the scan and its latency), not the scan
 plus the issues; the words stay the host's."""
 
 from __future__ import annotations
@@ -54,16 +54,16 @@ def _beats_and_cycles(front: FrontEnd, frames: list) -> tuple[list[int], list[in
 
 
 def test_the_next_pixels_scan_runs_beside_the_issues() -> None:
-    model = ModelParams(name="census", dmax=10, fuse_columns=True, neighbour_prior=False)
-    params = stereo_machine_params(10, model=model, counter_max=2, words_per_beat=4)
-    assert params.beats_per_pixel == 3
-    frames = [_noisy_pair(8, 24, seed=3)]
-    got, at = _beats_and_cycles(FrontEnd(params=params, model=model, width=24), frames)
+    model = ModelParams(name="census", dmax=14, fuse_columns=True, neighbour_prior=False)
+    params = stereo_machine_params(14, model=model, counter_max=2, words_per_beat=4)
+    assert params.beats_per_pixel == 4
+    frames = [_noisy_pair(8, 30, seed=3)]
+    got, at = _beats_and_cycles(FrontEnd(params=params, model=model, width=30), frames)
     want = np.concatenate([memory_words(model_planes(lf, model), model_planes(rf, model), model, params)
                            for lf, rf in frames])
     assert np.array_equal(words_from_beats(params, got), want)
     firsts = at[:: params.beats_per_pixel]
     gaps = Counter(np.diff(firsts).tolist())
-    # Two output rows of 8 pixels: within a row one pixel every beats_per_pixel + 4 cycles (scanning
-    # then issuing took 2 x 3 + 3: 9).
-    assert gaps == Counter({7: 14, 25: 1})
+    # Two output rows of 10 pixels: within a row one pixel every beats_per_pixel + 6 cycles (scanning
+    # then issuing took 2 x 4 + 5: 13).
+    assert gaps == Counter({10: 18, 33: 1})

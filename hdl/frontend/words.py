@@ -145,7 +145,7 @@ class WordGenerator(wiring.Component):
     holds it: an ABOVE column until the result above has left the machine, a PASS column until the
     MAP it reads is in). A fused column's pass scans an output pixel's beats before its words issue, the
     next pixel's scan beside the current one's issues: the stream's pixel waits in a register for its scan
-    (``beats_per_pixel`` + 4 cycles: ``Lanes.scan_latency``) and then for the previous pixel's last issue.
+    (``beats_per_pixel`` + 6 cycles: ``Lanes.scan_latency``) and then for the previous pixel's last issue.
 
     Parameters
     ----------
