@@ -51,17 +51,18 @@ PAPER_KEYS = ["dmax", "name", "p0", "sigma_m", "sigma_gh", "sigma_gv", "gradient
 # --- Parameters ---
 
 def test_census_defaults():
-    m = ModelParams(name="census")
+    m = ModelParams(name="census", fuse_columns=False)
     census = m.column(Census)
     assert (m.census_window, census.bits, m.census_sigma, m.census_nomatch_h) == (7, 48, 6.0, 6)
     assert m.census_p0 == 0.02
     assert (m.prior_eps, m.prior_s, machine_layout(m.columns)) == (0.05, 4.0, ("neighbour", 4))
     assert m.prior_nomatch == pytest.approx(0.05 + 0.95 * math.exp(-0.5))
     assert round(m.prior_nomatch, 3) == 0.626
-    five = ModelParams(name="census", census_window=5)
+    five = ModelParams(name="census", fuse_columns=False, census_window=5)
     assert (five.column(Census).bits, five.census_sigma, five.census_nomatch_h) == (24, 3.0, 3)
-    assert ModelParams(name="census", census_window=5, census_sigma=2.5).census_sigma == 2.5
-    wide = ModelParams(name="census", prior_eps=0.2)
+    assert ModelParams(name="census", fuse_columns=False, census_window=5,
+                       census_sigma=2.5).census_sigma == 2.5
+    wide = ModelParams(name="census", fuse_columns=False, prior_eps=0.2)
     assert wide.prior_nomatch == pytest.approx(0.2 + 0.8 * math.exp(-0.5))
 
 
@@ -128,7 +129,7 @@ def test_wrong_census_types_are_type_errors(kwargs, name):
 # --- Tables ---
 
 def test_tables_at_known_points():
-    model = ModelParams(dmax=80, name="census")
+    model = ModelParams(dmax=80, name="census", fuse_columns=False)
     census, prior = model.column(Census), model.column(AbovePrior)
     t, tp = census.table(), prior.table()
     assert t.values.shape == (49,) and t.values[0] == 1.0
@@ -147,9 +148,11 @@ def test_tables_at_known_points():
     assert (qp.values[last:] == quantize(0.05, 10)).all()
     # The paper model has no such columns, nor the census model without its prior a prior column.
     assert ModelParams(name="paper", dmax=8).column(Census) is None
-    assert ModelParams(dmax=8, name="census", neighbour_prior=False).column(AbovePrior) is None
+    assert ModelParams(dmax=8, name="census", fuse_columns=False,
+                       neighbour_prior=False).column(AbovePrior) is None
     # h_nm = 0 leaves the no-match row uncalibrated: its census entry is exactly 1.0.
-    assert ModelParams(dmax=8, name="census", census_nomatch_h=0).column(Census).table().nomatch == (1.0,)
+    assert ModelParams(dmax=8, name="census", fuse_columns=False,
+                       census_nomatch_h=0).column(Census).table().nomatch == (1.0,)
 
 
 def test_every_table_is_checked_nonincreasing_in_its_cost():
@@ -191,10 +194,10 @@ def test_neighbour_words_from_one_neighbour():
 def test_disparity_machine_builds_the_model_s_machine():
     paper = ModelParams(name="paper", dmax=6)
     assert disparity_machine(paper, counter_max=4) == MachineParams.for_disparity(6, counter_max=4)
-    no_prior = ModelParams(dmax=6, name="census", neighbour_prior=False)
+    no_prior = ModelParams(dmax=6, name="census", fuse_columns=False, neighbour_prior=False)
     assert disparity_machine(no_prior) == MachineParams.for_disparity(
         6, columns=4, timeout_answer="leading", normalize=True, max_cycles=CENSUS_WATCHDOG_RUNS * 17)
-    census = ModelParams(dmax=80, name="census")
+    census = ModelParams(dmax=80, name="census", fuse_columns=False)
     m = disparity_machine(census, word_bits=10)
     q = census.column(AbovePrior).table(10)
     assert m.prior == "neighbour" and m.columns == 4
@@ -283,7 +286,7 @@ def _pair(dmax: int, window: int = 7, seed: int = 5, **kw):
 
 @pytest.mark.parametrize("window", [5, 7])
 def test_census_words_equal_plain_formula(window):
-    fl, fr, model = _pair(6, window, neighbour_prior=False)
+    fl, fr, model = _pair(6, window, neighbour_prior=False, fuse_columns=False)
     machine = MachineParams.for_disparity(6, columns=4)
     words = memory_words(fl, fr, model, machine)
     np.testing.assert_array_equal(words, memory_words_plain(fl, fr, model, machine))
@@ -300,7 +303,7 @@ def test_census_words_equal_plain_formula(window):
 
 
 def test_words_with_the_neighbour_prior():
-    fl, fr, model = _pair(6)
+    fl, fr, model = _pair(6, fuse_columns=False)
     machine = disparity_machine(model)
     with pytest.raises(ParameterError, match="^above: .*map row above, one map row at a time"):
         memory_words(fl, fr, model, machine, rows=slice(2, 3))  # the above MAPs: the machine's results
@@ -313,14 +316,14 @@ def test_words_with_the_neighbour_prior():
     assert words.shape == (wo, 8, machine.loaded_columns) == (wo, 8, 5)  # the feedback column is not loaded
     want = neighbour_words(model.column(AbovePrior).table(10), 6, above)
     np.testing.assert_array_equal(words[:, :, 0], want)
-    no_prior = ModelParams(dmax=6, name="census", neighbour_prior=False)
+    no_prior = ModelParams(dmax=6, name="census", fuse_columns=False, neighbour_prior=False)
     plain = memory_words(fl, fr, no_prior, disparity_machine(no_prior), rows=slice(2, 3))
     np.testing.assert_array_equal(words[:, :, 1:], plain)
 
 
 def test_machine_checks_are_one_function():
-    census = ModelParams(dmax=6, name="census")
-    no_prior = ModelParams(dmax=6, name="census", neighbour_prior=False)
+    census = ModelParams(dmax=6, name="census", fuse_columns=False)
+    no_prior = ModelParams(dmax=6, name="census", fuse_columns=False, neighbour_prior=False)
     with pytest.raises(ParameterError, match="^columns: .*4 data columns"):
         check_disparity_machine(no_prior, MachineParams.for_disparity(6))
     with pytest.raises(ParameterError, match="^rows: .*for_disparity"):
@@ -331,7 +334,7 @@ def test_machine_checks_are_one_function():
         check_disparity_machine(census, MachineParams.for_disparity(6, columns=4, prior="loaded"))
     # A neighbour machine with another table (another model's eps) is refused: its feedback would
     # not be the model's prior.
-    other = disparity_machine(ModelParams(dmax=6, name="census", prior_eps=0.2))
+    other = disparity_machine(ModelParams(dmax=6, name="census", fuse_columns=False, prior_eps=0.2))
     with pytest.raises(ParameterError, match="^neighbour_prior: .*feedback table"):
         check_disparity_machine(census, other)
     # A neighbour machine with a model without the prior.
@@ -341,10 +344,11 @@ def test_machine_checks_are_one_function():
         check_disparity_machine(ModelParams(name="paper", dmax=6, p_nm0=1e-4),
                                 MachineParams.for_disparity(6, word_bits=4))
     with pytest.raises(ParameterError, match="^census_nomatch_h = 48: .*quantizes to 0"):
-        far = ModelParams(dmax=6, name="census", census_nomatch_h=48, neighbour_prior=False, p_nm0=0.5)
+        far = ModelParams(dmax=6, name="census", fuse_columns=False, census_nomatch_h=48,
+                          neighbour_prior=False, p_nm0=0.5)
         check_disparity_machine(far, MachineParams.for_disparity(6, columns=4, word_bits=4))
     with pytest.raises(ParameterError, match="^prior_nomatch = 0.0001 quantizes to 0"):
-        disparity_machine(ModelParams(dmax=6, name="census", prior_nomatch=1e-4))
+        disparity_machine(ModelParams(dmax=6, name="census", fuse_columns=False, prior_nomatch=1e-4))
     assert check_disparity_machine(census, disparity_machine(census)) == 2
     assert check_disparity_machine(no_prior, MachineParams.for_disparity(6, columns=4, prior="loaded")) == 1
     fl, fr, _ = _pair(6)
@@ -356,7 +360,7 @@ def test_machine_checks_are_one_function():
 def test_front_end_takes_the_census_model_on_whole_rows_per_lane():
     from bayesmachine.hdl.frontend.words import check_frontend_params
 
-    model = ModelParams(dmax=6, name="census", neighbour_prior=False)
+    model = ModelParams(dmax=6, name="census", fuse_columns=False, neighbour_prior=False)
     check_frontend_params(MachineParams.for_disparity(6, columns=4, words_per_beat=8),
                           model)  # 2 rows per beat
     with pytest.raises(ParameterError, match=r"words_per_beat \(6\) must be a multiple of the loaded"):
@@ -471,7 +475,7 @@ def test_machine_runs_the_census_model_without_the_prior():
     from bayesmachine.host.run import run_pair
 
     left, right, gt = random_dot_stereogram(height=30, width=70, background=3, square=9, seed=4)
-    model = ModelParams(dmax=10, name="census", neighbour_prior=False)
+    model = ModelParams(dmax=10, name="census", fuse_columns=False, neighbour_prior=False)
     machine = MachineParams.for_disparity(10, columns=4, rng="sobol", counter_max=16)
     out = run_pair(left, right, model, machine, engine="model", gt=gt, sgbm=False)
     assert set(out.prepared.planes[0]) == {"m25", "gh20", "gv20", "census"}  # prepare(): the model's planes
@@ -480,7 +484,7 @@ def test_machine_runs_the_census_model_without_the_prior():
     # With the neighbour prior the machine needs its neighbour prior (its feedback column, and the
     # above column from its own results): refused, never run with a silently uniform prior.
     with pytest.raises(ParameterError, match="^neighbour_prior"):
-        run_pair(left, right, ModelParams(dmax=10, name="census"), machine)
+        run_pair(left, right, ModelParams(dmax=10, name="census", fuse_columns=False), machine)
     loaded = MachineParams.for_disparity(10, columns=4, prior="loaded")
     with pytest.raises(ParameterError, match="^neighbour_prior"):
-        run_pair(left, right, ModelParams(dmax=10, name="census"), loaded)
+        run_pair(left, right, ModelParams(dmax=10, name="census", fuse_columns=False), loaded)
