@@ -384,7 +384,8 @@ class MachineParams:
         (log: ``bayesmachine.columns.energy.INFINITE_CODE``)."""
         if self.integrator == "stochastic":
             return self.word_one
-        from bayesmachine.columns.energy import INFINITE_CODE  # NumPy's: not at import (tests/test_model.py)
+        # NumPy's: not at import (tests/sim/test_model.py)
+        from bayesmachine.columns.energy import INFINITE_CODE
 
         return INFINITE_CODE
 

@@ -123,7 +123,7 @@ def synthesize(rtlil: str, target: Target, out_dir: Path, progress: Progress) ->
     # The register copies are kept (``KEEP_REGISTER_COPIES``). The design is flattened first,
     # before synth_*'s own proc and flatten: on the hierarchy Amaranth emits (the machine's source
     # and encoder submodules), Yosys 0.70's ABC9 step failed an assertion on some small machines
-    # (``tests/test_fpga.py``; also with an explicit proc before the flatten), never so far when
+    # (``tests/fpga/test_synth.py``; also with an explicit proc before the flatten), never so far when
     # flattened first.
     script = ("read_rtlil top.il; hierarchy -top top; flatten; "
               f"{KEEP_REGISTER_COPIES}; "

@@ -5,7 +5,7 @@ generator: on each cycle ``advance`` is high, the generator steps and the device
 top 16 bits of the new value are below its state's flip threshold, the device's per-cycle
 P(s -> not s) rounded to 1/65536 (``bayesmachine.sources.smtj.SMTJEmulatorSpec``: the same dwell,
 spread and seed as the device model). ``numbers`` packs the states into each operator's W-bit
-number as ``SMTJSource`` does. The Python twin is ``SMTJEmulatorTwin``; ``tests/test_smtj.py``
+number as ``SMTJSource`` does. The Python twin is ``SMTJEmulatorTwin``; ``tests/sources/test_smtj.py``
 holds this RTL to it.
 
 ``SMTJEmulatedMachine`` puts it in front of a machine's ``entropy`` port, so that the SMTJ

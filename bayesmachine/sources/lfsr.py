@@ -7,7 +7,7 @@ An LFSR is a Fibonacci LFSR of length L whose bit sequence obeys
 (leap-forward), which is cheap because every tap is at most L - W: each new bit is the XOR
 of at most 6 state bits, one LUT6. The LFSR's W-bit random number is its W oldest bits,
 so consecutive numbers are disjoint chunks of the m-sequence: a comparator never re-reads a
-bit, unlike a register that shifts by one bit per cycle (see ``tests/test_rng.py``, which
+bit, unlike a register that shifts by one bit per cycle (see ``tests/sources/test_lfsr.py``, which
 measures both).
 
 The ``lfsr`` source gives every operator its own LFSR (:func:`lfsr_specs`); ``lfsr-shared``

@@ -7,7 +7,7 @@ an XOR per cycle, and all columns share one index counter. Column c is Sobol dim
 those of S. Joe and F. Y. Kuo, "Constructing Sobol sequences with better two-dimensional
 projections", SIAM J. Sci. Comput. 30 (2008) 2635-2654, file ``new-joe-kuo-6.21201``
 (https://web.maths.unsw.edu.au/~fkuo/sobol/), the table SciPy's ``scipy.stats.qmc.Sobol``
-uses too (``tests/test_sobol.py`` checks the points against it).
+uses too (``tests/sources/test_sobol.py`` checks the points against it).
 
 Exact per-cycle rule (``docs/architecture.md``, "Random source"): a pixel's compute cycles
 fall in blocks of 2**W; the j-th cycle of a block (j = 0 ... 2**W - 1) gives column c the number

@@ -2,7 +2,7 @@
 
 ``BoardTwin(params, model, width, results=...).feed(data)`` takes the bytes the host sends and
 returns the bytes the board sends back: for headers, info requests, garbage and whole frames, byte
-for byte what the RTL sends for the same input (``tests/test_board_sim.py`` holds the RTL to it).
+for byte what the RTL sends for the same input (``tests/fpga/boards/test_simulate.py`` holds the RTL to it).
 It is put together as the RTL is, from its components' twins: the command parser's
 (:class:`~.parser.HeaderParserTwin`), the frame receiver's (:class:`~.receiver.FrameReceiverTwin`),
 the result serializers' (:class:`~.serializer.ResultSerializerTwin`, one per pass of the model);

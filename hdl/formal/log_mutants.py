@@ -1,5 +1,5 @@
 """Known bugs of the log blocks, built next to the shipped RTL (never in it), that ``PipelineProperties``
-must catch (``tests/test_formal_log.py`` asserts each proof fails on them).
+must catch (``tests/hdl/formal/test_log.py`` asserts each proof fails on them).
 
 - argmin nodes: ties to the higher index; an excluded right candidate allowed to win;
 - the pipeline (mixins over any block): a held result dropped; a phantom pixel entering a stalled

@@ -1,7 +1,7 @@
 """Known bugs, built next to the shipped RTL (never in it), that the properties must catch.
 
 Each mutant is a drop-in for the block a wrapper checks (``counter=``, ``encoder=``, ``machine=``
-or ``dut_params=`` of the wrappers in this package); ``tests/test_formal.py`` asserts that the
+or ``dut_params=`` of the wrappers in this package); ``tests/hdl/formal/test_formal.py`` asserts that the
 proof fails on every one, so the properties are shown to bite.
 """
 
@@ -241,10 +241,10 @@ class Mutant:
 
 
 def mutants(machine_params: MachineParams) -> list[Mutant]:
-    """The mutants ``tests/test_formal.py`` checks; ``machine_params`` is the small machine the
+    """The mutants ``tests/hdl/formal/test_formal.py`` checks; ``machine_params`` is the small machine the
     machine's properties are checked on (the watchdog mutants change its ``max_cycles`` by one).
     The ``samples`` ones are checked in the control wrapper on a machine with B samples per clock
-    (``tests/test_formal.py``: ``SAMPLES``)."""
+    (``tests/hdl/formal/test_formal.py``: ``SAMPLES``)."""
     late = dataclasses.replace(machine_params, max_cycles=machine_params.max_cycles + 1)
     early = dataclasses.replace(machine_params, max_cycles=machine_params.max_cycles - 1)
     swap = {"nomatch-first": "lowest-index", "lowest-index": "nomatch-first"}

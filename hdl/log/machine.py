@@ -107,7 +107,7 @@ class LogMachine(wiring.Component):
         m.submodules.weights = weights = WeightStage(params=lp)
         wiring.connect(m, adders.sums, argmin.sums)
         wiring.connect(m, argmin.best, weights.best)
-        # pixel_clocks is the blocks' latency (tests/test_log_machine.py holds it too).
+        # pixel_clocks is the blocks' latency (tests/hdl/log/test_machine.py holds it too).
         assert not self._params.feedback_columns or adders.latency + argmin.latency + 1 == self.loop
         # Pixels in flight, their line_start in order, for their cycles (at most every stage's plus the
         # three output buffers' entries).

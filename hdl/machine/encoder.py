@@ -71,7 +71,7 @@ def map_encoder_twin(over: Sequence[int | bool], nomatch_row: bool, tie_break: s
 
 
 class MAPEncoder(wiring.Component):
-    """The MAP encoder (the machine's submodule, and the component ``tests/test_encoder.py`` drives).
+    """The MAP encoder: the machine's submodule, driven alone by ``tests/hdl/machine/test_encoder.py``.
 
     Parameters
     ----------

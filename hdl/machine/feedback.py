@@ -3,7 +3,7 @@ the machine's previous result.
 
 Its Python twin is the model's per-pixel rule, ``sim.model.fill_feedback`` (the column from the
 previous result) after ``sim.model.feedback_result`` (which results are a hypothesis);
-``tests/test_feedback_prior.py`` holds the component to it.
+``tests/hdl/machine/test_feedback.py`` holds the component to it.
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ A normalized column's operators compare their words w with ``(number * m) >> W``
 largest word in the pixel: a word w fires when w * 2^W > r * m, the run on the words w * 2^W / m (the
 operator matrix forms those numbers, ``operator.scaled_numbers``). :class:`ColumnScales` keeps the
 scales m. Its Python twin is ``sim.model.column_scales`` (the scales of a pixel's words);
-``tests/test_normalize.py`` holds the component to it.
+``tests/hdl/machine/test_normalize.py`` holds the component to it.
 """
 
 from __future__ import annotations

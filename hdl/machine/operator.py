@@ -6,7 +6,7 @@ is 1 with probability exactly q / 2**W for uniform numbers; q = 0 is never 1 and
 always is), and multiplies it into the stochastic bus signal of its row by an AND gate.
 :func:`operator_rows` builds the whole M x N matrix: the machine builds it from the same two
 functions on its registers (``matrix.py``), and :class:`OperatorMatrix`, the component
-``tests/test_operator.py`` holds to :func:`operator_matrix_twin`, wraps that same function.
+``tests/hdl/machine/test_operator.py`` holds to :func:`operator_matrix_twin`, wraps that same function.
 """
 
 from __future__ import annotations
@@ -220,7 +220,7 @@ def operator_rows(numbers: Sequence[Value], words: Sequence[Value], rows: int, c
     its own likelihood-memory registers and source outputs (a submodule's port copies of every word
     and number would slow Amaranth's simulator; with an on-chip source it registers the comparator
     bits between them, ``matrix.py``), and :class:`OperatorMatrix` wraps this function for
-    ``tests/test_operator.py``.
+    ``tests/hdl/machine/test_operator.py``.
     """
     return bus_rows(operator_bits(numbers, words, sources), rows, columns)
 

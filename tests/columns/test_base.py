@@ -1,0 +1,24 @@
+"""What every column kind's table is held to (``Column.table``, bayesmachine/columns/base.py):
+values in [0, 1], nonincreasing in the cost; a kind whose likelihood grows is refused."""
+
+import numpy as np
+import pytest
+
+from bayesmachine.columns import Census
+from bayesmachine.models import ModelParams
+from bayesmachine.params import ParameterError
+
+
+def test_every_table_is_checked_nonincreasing_in_its_cost():
+    for model in (ModelParams(name="census-lr"), ModelParams(name="census", census_window=5, prior_s=0.5)):
+        for p in model.passes:
+            for term in (*(f for c in p.columns for f in c.factors()), p.model.nomatch):  # fused: members
+                v = term.table().values
+                assert (np.diff(v) <= 0).all(), term
+    class Growing(Census):  # a kind whose likelihood grows with the cost: refused when its table is built
+        def likelihood(self, cost):
+            return np.linspace(0.5, 1.0, np.size(cost))
+
+    model = ModelParams(name="census")
+    with pytest.raises(ParameterError, match="^census_sigma = 6.0 gives likelihoods that grow with the cost"):
+        Growing(values=model.parameters, dmax=model.dmax).table()

@@ -1,0 +1,1 @@
+"""Tests of fpga/: the synthesis flow and the pin wrapper."""

@@ -1,0 +1,1 @@
+"""Tests of fpga/boards: the board's RTL, its twin and the host link."""

@@ -1,0 +1,1 @@
+"""Tests of hdl/: the RTL, against its Python twins."""

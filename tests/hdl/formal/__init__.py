@@ -1,0 +1,1 @@
+"""Tests of hdl/formal: the formal proofs (SymbiYosys)."""

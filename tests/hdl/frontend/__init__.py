@@ -1,0 +1,1 @@
+"""Tests of hdl/frontend: the on-chip front end (feature pipeline, word generators, passes, StereoMachine)."""

@@ -1,0 +1,1 @@
+"""Tests of hdl/log: the logarithmic integrator and its machine."""

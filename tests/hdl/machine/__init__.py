@@ -1,0 +1,1 @@
+"""Tests of hdl/machine: the Bayesian machine's blocks and the whole machine."""

@@ -1,0 +1,1 @@
+"""Tests of host/: the host pipeline (images, planes, words, references, runs, datasets, sweeps)."""

@@ -1,0 +1,1 @@
+"""Tests of sim/: the machine model and the engines."""
