@@ -112,14 +112,11 @@ PAPER = ModelDef(
     name="paper", description="the paper's m, gH, gV columns (and with --gradient-magnitude a "
     "gradient-magnitude column)", columns=(Mean, GradH, GradV, GradMag),
     switches={GRADIENT_MAGNITUDE: (GradMag,)})
-# census keeps one operator column per piece of evidence by default: it is the design emit, synth and
-# board build, and on chip its fused word generator's scan costs more wall cycles than the runs save
-# (docs/models.md, "The fused column"); census-lr fuses.
 CENSUS = ModelDef(
     name="census", description="+ a census column, a no-match row calibrated for it and the raster-order "
     "neighbour prior on the machine's own results",
     columns=(LeftPrior, AbovePrior, fused(Mean, GradH, GradV, Census)),
-    switches={NEIGHBOUR_PRIOR: (LeftPrior, AbovePrior)}, defaults={"fuse_columns": False},
+    switches={NEIGHBOUR_PRIOR: (LeftPrior, AbovePrior)},
     watchdog_runs=CENSUS_WATCHDOG_RUNS,
     timeout_answer=CENSUS_TIMEOUT_ANSWER, normalize=True)
 CENSUS_LR = ModelDef(

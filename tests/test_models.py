@@ -54,10 +54,10 @@ def test_replace_keeps_the_given_parameters_and_resolves_the_others():
 def test_disparity_machine_builds_the_model_s_machine():
     paper = ModelParams(name="paper", dmax=6)
     assert disparity_machine(paper, counter_max=4) == MachineParams.for_disparity(6, counter_max=4)
-    no_prior = ModelParams(dmax=6, name="census", neighbour_prior=False)
+    no_prior = ModelParams(dmax=6, name="census", fuse_columns=False, neighbour_prior=False)
     assert disparity_machine(no_prior) == MachineParams.for_disparity(
         6, columns=4, timeout_answer="leading", normalize=True, max_cycles=CENSUS_WATCHDOG_RUNS * 17)
-    census = ModelParams(dmax=80, name="census")
+    census = ModelParams(dmax=80, name="census", fuse_columns=False)
     m = disparity_machine(census, word_bits=10)
     q = census.column(AbovePrior).table(10)
     assert m.prior == "neighbour" and m.columns == 4
@@ -85,8 +85,8 @@ def test_disparity_machine_builds_the_model_s_machine():
 
 
 def test_machine_checks_are_one_function():
-    census = ModelParams(dmax=6, name="census")
-    no_prior = ModelParams(dmax=6, name="census", neighbour_prior=False)
+    census = ModelParams(dmax=6, name="census", fuse_columns=False)
+    no_prior = ModelParams(dmax=6, name="census", fuse_columns=False, neighbour_prior=False)
     with pytest.raises(ParameterError, match="^columns: .*4 data columns"):
         check_disparity_machine(no_prior, MachineParams.for_disparity(6))
     with pytest.raises(ParameterError, match="^rows: .*for_disparity"):
@@ -97,7 +97,7 @@ def test_machine_checks_are_one_function():
         check_disparity_machine(census, MachineParams.for_disparity(6, columns=4, prior="loaded"))
     # A neighbour machine with another table (another model's eps) is refused: its feedback would
     # not be the model's prior.
-    other = disparity_machine(ModelParams(dmax=6, name="census", prior_eps=0.2))
+    other = disparity_machine(ModelParams(dmax=6, name="census", fuse_columns=False, prior_eps=0.2))
     with pytest.raises(ParameterError, match="^neighbour_prior: .*feedback table"):
         check_disparity_machine(census, other)
     # A neighbour machine with a model without the prior.
@@ -107,10 +107,11 @@ def test_machine_checks_are_one_function():
         check_disparity_machine(ModelParams(name="paper", dmax=6, p_nm0=1e-4),
                                 MachineParams.for_disparity(6, word_bits=4))
     with pytest.raises(ParameterError, match="^census_nomatch_h = 48: .*quantizes to 0"):
-        far = ModelParams(dmax=6, name="census", census_nomatch_h=48, neighbour_prior=False, p_nm0=0.5)
+        far = ModelParams(dmax=6, name="census", fuse_columns=False, census_nomatch_h=48,
+                          neighbour_prior=False, p_nm0=0.5)
         check_disparity_machine(far, MachineParams.for_disparity(6, columns=4, word_bits=4))
     with pytest.raises(ParameterError, match="^prior_nomatch = 0.0001 quantizes to 0"):
-        disparity_machine(ModelParams(dmax=6, name="census", prior_nomatch=1e-4))
+        disparity_machine(ModelParams(dmax=6, name="census", fuse_columns=False, prior_nomatch=1e-4))
     assert check_disparity_machine(census, disparity_machine(census)) == 2
     assert check_disparity_machine(no_prior, MachineParams.for_disparity(6, columns=4, prior="loaded")) == 1
     fl, fr, _ = census_pair(6)

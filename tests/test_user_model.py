@@ -285,4 +285,4 @@ def test_two_fed_columns_read_two_passes(two_passes: ModelParams, crop) -> None:
     assert list(run.passes) == ["right", "right2"]
     seeds = {name: r.machine.seed for name, r in run.passes.items()}
     assert len({machine.seed, *seeds.values()}) == 3  # each pass on a machine of its own
-    assert run.passes["right2"].machine.columns == 3 and run.passes["right"].machine.columns == 4
+    assert run.passes["right2"].machine.columns == 3 and run.passes["right"].machine.columns == 1  # fused

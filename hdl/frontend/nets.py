@@ -21,7 +21,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value, signed, unsigned
+from amaranth.hdl import Const, Module, Mux, Signal, Value, signed, unsigned
 from amaranth.lib import memory
 
 from bayesmachine.hdl.signatures import beat_words
@@ -37,8 +37,9 @@ class WordNets:
     One beat per cycle, in four steps that stall together with the stream (``advance``): the beat's
     issue (``issue``, beat number ``beat``: each lane's cost into a register, :meth:`address`), the
     cost's clamped absolute value into the address register, the table read (:meth:`table`), the beat
-    on the stream (:meth:`aligned` carries a value of the issue's cycle along). ``take``: a pixel is
-    taken; ``left``: the taken pixel's reference features; :meth:`entry`: a lane's match features.
+    on the stream (:meth:`aligned` carries a value of the issue's cycle along). ``take``: the lanes take
+    a pixel (``pixel``); ``fed_take``: the stream's pixel (``fed``) is taken, the same but in a pass that
+    scans (:meth:`_hold`); ``left``: its reference features; :meth:`entry`: a lane's match features.
 
     Attributes
     ----------
@@ -49,17 +50,19 @@ class WordNets:
     reference : Reference
     tables : FrontEndTables
     pixel, beats : View
-        The pixel stream's and the load stream's payloads.
+        The pixel the lanes take and the load stream's payload.
+    fed : View
+        The pixel stream's payload (``pixel`` unless the pass scans: then ``pixel`` is its register).
     form : LoadForm
         What the machine loads (its integrator's: words or energy codes).
     dmax, rows_per_beat, n_beats, one, zero : int
         The largest disparity, lane rows per beat (R), beats per pixel, the loaded value of a factor
         1.0 and of a factor 0 (``form``'s).
-    take, advance, issue, beat, free : Value
+    take, fed_take, advance, issue, beat, free : Value
     active : Signal
         Writing the words of an output pixel (``beat`` counts its beats).
     left : Signal
-        The taken pixel's reference features (its ``left`` field).
+        The reference features of the pixel taken from the stream (its ``left`` field).
     """
 
     def __init__(self, m: Module, gen: Any, scan_latency: int = 0) -> None:
@@ -85,13 +88,40 @@ class WordNets:
         self.left = Signal(side, reset_less=True)
         self._entries: dict[tuple[str, int], Signal] = {}
         self.scan_latency = scan_latency
+        # The pixel stream's take and payload: the delay line's, the reference features', a scan's.
+        self.fed, self.fed_take = self.pixel, self.take
+        if scan_latency:
+            self._hold()
         self._pipeline()
         if scan_latency:
             self._scan()
         else:  # the delay line's entries step with the words' issues
             self.fetch, self.fetch_beat = self.issue, self.beat
-        self.free = ~self.busy | self._last_issue
+        self.free = ~self.active | self._last_issue
         self._delay_line(side)
+
+    def _hold(self) -> None:
+        """A pass that scans (:meth:`_scan`): the pixel taken from the stream (``fed_take``) waits in a
+        register (``pixel``, ``held``) while its beats are scanned, and is taken by the lanes (``take``)
+        when its scan is done (``scanned``) and the previous pixel's words have issued (:meth:`accept`),
+        so the next pixel's scan runs while this one's words issue."""
+        m = self.m
+        self.fed_take = Signal()
+        self.pixel = Signal(self.fed.shape(), name="held_pixel", reset_less=True)
+        self.held = Signal()  # a pixel waits in ``pixel``
+        self.scanned = Signal()  # and its scan is done (or it has no words)
+        with m.If(self.take):
+            m.d.sync += self.held.eq(0)
+        with m.If(self.fed_take):  # the last assignment wins: a pixel taken as the held one leaves
+            m.d.sync += [self.held.eq(1), self.pixel.eq(self.fed), self.scanned.eq(~self.fed.output)]
+
+    def accept(self, ready: Value) -> Value:
+        """The pixel stream's ``ready``, given ``ready``: the lanes may take a pixel (``free`` and each
+        lane builder's ``ready``); in a pass that scans it drives ``take``."""
+        if not self.scan_latency:
+            return ready
+        self.m.d.comb += self.take.eq(self.held & self.scanned & ready)
+        return ~self.held | self.take
 
     def _pipeline(self) -> None:
         """The beat counter and the valid flags of the four steps."""
@@ -105,9 +135,8 @@ class WordNets:
         addr_valid = Signal()
         self.beat_q = Signal(range(max(2, n_beats)))  # the beat on the stream
         m.d.comb += [self.advance.eq(~out.valid | out.ready), self.issue.eq(active & self.advance),
-                     self.take.eq(self.generator.pixel.valid & self.generator.pixel.ready)]
+                     self.fed_take.eq(self.generator.pixel.valid & self.generator.pixel.ready)]
         last = self.beat == n_beats - 1
-        self.busy: Value = active  # a scan's cycles too (_scan)
         self._last_issue = self.issue & last
         with m.If(self.advance):
             m.d.sync += [diff_valid.eq(self.issue), beat_d.eq(self.beat), addr_valid.eq(diff_valid),
@@ -117,34 +146,36 @@ class WordNets:
                 m.d.sync += [self.beat.eq(0), active.eq(0)]
             with m.Else():
                 m.d.sync += self.beat.eq(self.beat + 1)
-        with m.If(self.take):
-            m.d.sync += self.left.eq(self.pixel.left)
+        with m.If(self.fed_take):
+            m.d.sync += self.left.eq(self.fed.left)
             if not self.scan_latency:
                 with m.If(self.pixel.output):
                     m.d.sync += [active.eq(1), self.beat.eq(0)]
+        if self.scan_latency:  # the lanes take the scanned pixel (_hold)
+            with m.If(self.take & self.pixel.output):
+                m.d.sync += [active.eq(1), self.beat.eq(0)]
 
     def _scan(self) -> None:
         """A pass whose words need every row of the pixel first (a fused column's smallest sum): an output
-        pixel's take starts a scan, a fetch (``fetch``, beat ``fetch_beat``: the delay line's entries) each
-        cycle, whatever the stream does; its words' issues start ``scan_latency`` cycles after the last
-        fetch (what a fetch's results need to be read at an issue), the pixel's next take at the last."""
+        pixel's take from the stream starts its scan, a fetch (``fetch``, beat ``fetch_beat``: the delay
+        line's entries) each cycle, whatever the stream does; ``scan_latency`` cycles after the last fetch
+        (what a fetch's results need to be complete) the pixel is ``scanned``."""
         m, n_beats = self.m, self.n_beats
         self.fetch = Signal()  # scanning: one fetch a cycle
         self.fetch_beat = Signal(range(max(2, n_beats)))
         done = Signal()
         m.d.comb += done.eq(self.fetch & (self.fetch_beat == n_beats - 1))
         waits = [done]
-        for k in range(self.scan_latency - 1):  # the words' first issue, scan_latency cycles after done
+        for k in range(self.scan_latency - 1):  # scanned, scan_latency cycles after done
             waits.append(Signal(name=f"scan_wait{k}"))
             m.d.sync += waits[-1].eq(waits[-2])
-        self.busy = self.busy | self.fetch | Cat(*waits[1:]).any()
         with m.If(waits[-1]):
-            m.d.sync += [self.active.eq(1), self.beat.eq(0)]
+            m.d.sync += self.scanned.eq(1)
         with m.If(self.fetch):
             m.d.sync += self.fetch_beat.eq(self.fetch_beat + 1)
             with m.If(done):
                 m.d.sync += [self.fetch.eq(0), self.fetch_beat.eq(0)]
-        with m.If(self.take & self.pixel.output):
+        with m.If(self.fed_take & self.fed.output):
             m.d.sync += [self.fetch.eq(1), self.fetch_beat.eq(0)]
 
     def _delay_line(self, side: Any) -> None:
@@ -181,12 +212,12 @@ class WordNets:
             m.d.comb += [write.addr.eq(write_index), write.data.eq(self.right_in),
                          write.en.eq(self.shift_q & (write_bank == k)), read.addr.eq(Mux(wraps, q_wrap, q))]
             self._bank_data.append(read.data)
-        m.d.sync += self.shift_q.eq(self.take)
+        m.d.sync += self.shift_q.eq(self.fed_take)
         with m.If(self.shift_q):
             m.d.sync += [write_bank.eq(Mux(write_bank == rows - 1, 0, write_bank + 1)),
                          write_index.eq(Mux(write_bank == rows - 1, self._step(write_index, 1), write_index))]
-        with m.If(self.take):
-            m.d.sync += self.right_in.eq(self.pixel.right)
+        with m.If(self.fed_take):
+            m.d.sync += self.right_in.eq(self.fed.right)
 
     def _step(self, index: Value, by: int) -> Value:
         """A bank index plus ``by`` (-2 .. 2) modulo M (a compare and a multiplexer a step)."""
@@ -219,10 +250,10 @@ class WordNets:
         q0_next = Mux(carry, self._step(q0, 1), q0)
         s0_next = Mux(carry, 0, s0 + 1)
         next_pixel = [q.eq(q0_next), q_wrap.eq(self._step(q0_next, -g)), *(r.eq(s0_next) for r in start)]
-        with m.If(self.take):
+        with m.If(self.fed_take):
             m.d.sync += [q0.eq(q0_next), s0.eq(s0_next)]
             if n_beats > 1:
-                with m.If(self.pixel.output):  # next: beat 1 of this pixel
+                with m.If(self.fed.output):  # next: beat 1 of this pixel
                     m.d.sync += [q.eq(self._step(q0, -g)), q_wrap.eq(self._step(q0, -2 * g))]
                 with m.Else():  # next: beat 0 of the next pixel
                     m.d.sync += next_pixel
@@ -319,8 +350,8 @@ class WordNets:
 
         d0 = self.reference.entry(j, self.dmax)
         sel = Signal(banks[0].shape(), name=f"right_{plane}_{j}", reset_less=True)
-        with m.If(self.take):
-            m.d.sync += sel.eq(getattr(self.pixel.right, plane) if d0 == 0 else newest(d0 - 1))
+        with m.If(self.fed_take):
+            m.d.sync += sel.eq(getattr(self.fed.right, plane) if d0 == 0 else newest(d0 - 1))
         with m.Elif(self.fetch):  # beat b + 1's entry; shift_q is set at beat 0's fetch at most
             m.d.sync += sel.eq(newest(self.reference.entry(rows + j, self.dmax)))
         self._entries[key] = sel

@@ -53,8 +53,10 @@ class Reference:
         """Whether lane row j of the beat on the stream has a match pixel (None: always)."""
         return None
 
-    def match_ok(self, nets: Any, row: Value) -> Value | None:
-        """Whether row ``row`` (<= Dmax) of the pixel taken has a match pixel (None: always)."""
+    def match_ok(self, nets: Any, row: Value, scanned: bool = False) -> Value | None:
+        """Whether row ``row`` (<= Dmax) of the pixel taken has a match pixel (None: always); ``scanned``:
+        of the pixel being scanned instead (``nets.pixel`` while it waits for the lanes:
+        ``WordNets._hold``)."""
         return None
 
 
@@ -80,7 +82,9 @@ class RightReference(Reference):
     def lane_valid(self, nets: Any, j: int) -> Value | None:
         return nets.aligned(self.match_ok(nets, nets.row(j)), f"lane_ok{j}")
 
-    def match_ok(self, nets: Any, row: Value) -> Value | None:
+    def match_ok(self, nets: Any, row: Value, scanned: bool = False) -> Value | None:
+        if scanned:
+            return row + nets.pixel.flush <= nets.dmax
         if not hasattr(self, "_flush"):
             self._flush = nets.at_take(nets.pixel.flush, "flush")
         return row + self._flush <= nets.dmax

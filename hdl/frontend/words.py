@@ -143,8 +143,9 @@ class WordGenerator(wiring.Component):
     beat's issue: a pixel outside the output region passes in one cycle, an output pixel holds the
     stream for ``beats_per_pixel`` cycles (more if ``beats`` is not ready, or while a lane builder
     holds it: an ABOVE column until the result above has left the machine, a PASS column until the
-    MAP it reads is in; a fused column's pass first scans the pixel's beats, ``beats_per_pixel`` + 4
-    cycles more: ``Lanes.scan_latency``).
+    MAP it reads is in). A fused column's pass scans an output pixel's beats before its words issue, the
+    next pixel's scan beside the current one's issues: the stream's pixel waits in a register for its scan
+    (``beats_per_pixel`` + 6 cycles: ``Lanes.scan_latency``) and then for the previous pixel's last issue.
 
     Parameters
     ----------
@@ -262,7 +263,7 @@ class WordGenerator(wiring.Component):
         ready = nets.free
         for lanes in columns:
             ready = ready & lanes.ready()
-        m.d.comb += self.pixel.ready.eq(ready)
+        m.d.comb += self.pixel.ready.eq(nets.accept(ready))
         nets.write_beats(self._loaded(nets, columns, floor))
         return m
 

@@ -216,7 +216,7 @@ def test_sweep_puts_models_side_by_side(pair, tmp_path):
         if p["model_name"] == "census":
             # Its own output region: every 7x7 window inside the image (margin 3).
             assert p["output_shape"] == [h - 6, w - 6 - DMAX]
-            assert p["machine"]["prior"] == "neighbour" and p["machine"]["columns"] == 4
+            assert p["machine"]["prior"] == "neighbour" and p["machine"]["columns"] == 1  # fused
             assert p["machine"]["feedback_words"] == list(census.feedback_words)
         else:
             assert "output_shape" not in p
@@ -249,10 +249,10 @@ def test_sweep_puts_models_side_by_side(pair, tmp_path):
         (["sweep", "--model", "paper,paper"], "listed twice"),
         (["sweep", "--model", "sgbm"], "unknown model"),
         (["run", "--model", "sgbm"], "invalid choice"),
-        (["emit", "--top", "stereo", "--model", "census", "--words-per-beat", "12"],
-         "multiple of the loaded columns (5)"),
+        (["emit", "--top", "stereo", "--model", "census", "--words-per-beat", "13"],
+         "multiple of the loaded columns (2)"),
         (["emit", "--model", "paper", "--census-window", "5"], "--census-window: options of --model census"),
-        (["emit", "--model", "census", "--columns", "3"], "--columns: columns: the census model has 4"),
+        (["emit", "--model", "census", "--columns", "3"], "--columns: columns: the census model has 1"),
         (["emit", "--model", "census", "--prior", "uniform"], "--prior: prior:"),
     ],
 )

@@ -19,17 +19,18 @@ from bayesmachine.params import MachineParams, ParameterError
 
 
 def test_census_defaults():
-    m = ModelParams(name="census")
+    m = ModelParams(name="census", fuse_columns=False)
     census = m.column(Census)
     assert (m.census_window, census.bits, m.census_sigma, m.census_nomatch_h) == (7, 48, 6.0, 6)
     assert m.census_p0 == 0.02
     assert (m.prior_eps, m.prior_s, machine_layout(m.columns)) == (0.05, 4.0, ("neighbour", 4))
     assert m.prior_nomatch == pytest.approx(0.05 + 0.95 * math.exp(-0.5))
     assert round(m.prior_nomatch, 3) == 0.626
-    five = ModelParams(name="census", census_window=5)
+    five = ModelParams(name="census", fuse_columns=False, census_window=5)
     assert (five.column(Census).bits, five.census_sigma, five.census_nomatch_h) == (24, 3.0, 3)
-    assert ModelParams(name="census", census_window=5, census_sigma=2.5).census_sigma == 2.5
-    wide = ModelParams(name="census", prior_eps=0.2)
+    assert ModelParams(name="census", fuse_columns=False, census_window=5,
+                       census_sigma=2.5).census_sigma == 2.5
+    wide = ModelParams(name="census", fuse_columns=False, prior_eps=0.2)
     assert wide.prior_nomatch == pytest.approx(0.2 + 0.8 * math.exp(-0.5))
 
 
@@ -65,7 +66,7 @@ def test_wrong_census_types_are_type_errors(kwargs, name):
 
 
 def test_tables_at_known_points():
-    model = ModelParams(dmax=80, name="census")
+    model = ModelParams(dmax=80, name="census", fuse_columns=False)
     census, prior = model.column(Census), model.column(AbovePrior)
     t, tp = census.table(), prior.table()
     assert t.values.shape == (49,) and t.values[0] == 1.0
@@ -84,9 +85,11 @@ def test_tables_at_known_points():
     assert (qp.values[last:] == quantize(0.05, 10)).all()
     # The paper model has no such columns, nor the census model without its prior a prior column.
     assert ModelParams(name="paper", dmax=8).column(Census) is None
-    assert ModelParams(dmax=8, name="census", neighbour_prior=False).column(AbovePrior) is None
+    assert ModelParams(dmax=8, name="census", fuse_columns=False,
+                       neighbour_prior=False).column(AbovePrior) is None
     # h_nm = 0 leaves the no-match row uncalibrated: its census entry is exactly 1.0.
-    assert ModelParams(dmax=8, name="census", census_nomatch_h=0).column(Census).table().nomatch == (1.0,)
+    assert ModelParams(dmax=8, name="census", fuse_columns=False,
+                       census_nomatch_h=0).column(Census).table().nomatch == (1.0,)
 
 
 def census_pair(dmax: int, window: int = 7, seed: int = 5, **kw):
@@ -101,7 +104,7 @@ def census_pair(dmax: int, window: int = 7, seed: int = 5, **kw):
 
 @pytest.mark.parametrize("window", [5, 7])
 def test_census_words_equal_plain_formula(window):
-    fl, fr, model = census_pair(6, window, neighbour_prior=False)
+    fl, fr, model = census_pair(6, window, neighbour_prior=False, fuse_columns=False)
     machine = MachineParams.for_disparity(6, columns=4)
     words = memory_words(fl, fr, model, machine)
     np.testing.assert_array_equal(words, memory_words_plain(fl, fr, model, machine))

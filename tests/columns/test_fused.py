@@ -99,7 +99,7 @@ def test_float_words_are_the_members_product(pair) -> None:
     """With no word width its words are float64 factors: the members' product, the no-match row the
     rule's floor times the other members' no-match entries (as the per-column machine's columns)."""
     model = ModelParams(name="census", dmax=6, neighbour_prior=False, fuse_columns=True)
-    per_column = ModelParams(name="census", dmax=6, neighbour_prior=False)
+    per_column = ModelParams(name="census", dmax=6, neighbour_prior=False, fuse_columns=False)
     left, right = _planes(pair, model)
     got = model.column(Fused).words(pass_context(model.passes[-1], left, right, None))
     ctx = pass_context(per_column.passes[-1], left, right, None)
@@ -144,7 +144,7 @@ def test_a_fused_column_takes_every_features_column_of_its_pass() -> None:
         ModelDef(name="m-twice", description="x", columns=(Mean, GradH, Mean))
 
 
-# --- The models: census-lr fused by default, census per column (the board's design) ---
+# --- The models: census and census-lr fused by default, per column with fuse_columns off ---
 
 def test_defaults_and_the_per_column_option() -> None:
     assert [c.name for c in ModelParams(name="census-lr").columns] == [
@@ -153,9 +153,11 @@ def test_defaults_and_the_per_column_option() -> None:
         "left-prior", "above-prior", "fused"]
     assert [c.name for c in ModelParams(name="census-lr", fuse_columns=False).columns] == [
         "left-prior", "above-prior", "m", "gh", "gv", "census", "lr"]
-    assert [c.name for c in ModelParams(name="census").columns] == [
+    assert [c.name for c in ModelParams(name="census").columns] == ["left-prior", "above-prior", "fused"]
+    assert [c.name for c in ModelParams(name="census", fuse_columns=False).columns] == [
         "left-prior", "above-prior", "m", "gh", "gv", "census"]
     assert ModelParams(name="census-lr").to_dict()["fuse_columns"] is True
+    assert ModelParams(name="census").to_dict()["fuse_columns"] is True
     assert "fuse_columns" not in ModelParams(name="paper").to_dict()
     with pytest.raises(ParameterError, match="fuse_columns"):
         ModelParams(name="paper", fuse_columns=True)

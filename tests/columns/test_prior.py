@@ -321,7 +321,7 @@ def test_neighbour_words_from_one_neighbour():
 
 
 def test_words_with_the_neighbour_prior():
-    fl, fr, model = census_pair(6)
+    fl, fr, model = census_pair(6, fuse_columns=False)
     machine = disparity_machine(model)
     with pytest.raises(ParameterError, match="^above: .*map row above, one map row at a time"):
         memory_words(fl, fr, model, machine, rows=slice(2, 3))  # the above MAPs: the machine's results
@@ -334,6 +334,6 @@ def test_words_with_the_neighbour_prior():
     assert words.shape == (wo, 8, machine.loaded_columns) == (wo, 8, 5)  # the feedback column is not loaded
     want = neighbour_words(model.column(AbovePrior).table(10), 6, above)
     np.testing.assert_array_equal(words[:, :, 0], want)
-    no_prior = ModelParams(dmax=6, name="census", neighbour_prior=False)
+    no_prior = ModelParams(dmax=6, name="census", fuse_columns=False, neighbour_prior=False)
     plain = memory_words(fl, fr, no_prior, disparity_machine(no_prior), rows=slice(2, 3))
     np.testing.assert_array_equal(words[:, :, 1:], plain)

@@ -170,7 +170,7 @@ def test_synth_command_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]
     (["--dmax", "8", "--width", "12"], "width must be in [dmax + 7, 4096] = [15, 4096]"),
     (["--rng", "external"], "synth needs an on-chip random source, not 'external'"),
     (["--rng", "smtj"], "synth needs an on-chip random source, not 'smtj'"),
-    (["--words-per-beat", "16"], "words_per_beat (16) must be a multiple of the loaded columns (5)"),
+    (["--words-per-beat", "15"], "words_per_beat (15) must be a multiple of the loaded columns (2)"),
     (["--fifo-pixels", "0"], "fifo_pixels must be an integer in [1, 64], got 0"),
     (["--p-nm0", "0.0001", "--word-bits", "4"], "p_nm0: 0.0001 quantizes to 0 with 4-bit words"),
 ])
@@ -270,9 +270,9 @@ def test_synth_census_options_refused_where_they_do_not_apply(tmp_path: Path, ca
     from bayesmachine.cli import main
 
     assert main(["synth", "--target", "ecp5-85k", "--model", "census", "--top", "stereo", "--words-per-beat",
-                 "12",
+                 "13",
                  "-o", str(tmp_path / "a")]) == 2
-    assert "multiple of the loaded columns (5)" in capsys.readouterr().err
+    assert "multiple of the loaded columns (2)" in capsys.readouterr().err
     assert main(["synth", "--target", "ecp5-85k", "--model", "paper", "--census-window", "5",
                  "-o", str(tmp_path / "b")]) == 2
     assert "--model census" in capsys.readouterr().err

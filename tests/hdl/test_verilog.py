@@ -197,7 +197,7 @@ def test_emit_writes_complete_files_or_none(tmp_path: Path, monkeypatch: pytest.
 
 
 @pytest.mark.eda
-@pytest.mark.parametrize("model", ["paper", "census", "census-lr"])
+@pytest.mark.parametrize("model", ["paper", "census", "census-lr", "census --no-fuse-columns"])
 def test_stereo_top_is_lint_clean_and_latch_free(
     verilator: str, yosys: str, tmp_path: Path, capsys: pytest.CaptureFixture[str], model: str
 ) -> None:
@@ -207,15 +207,17 @@ def test_stereo_top_is_lint_clean_and_latch_free(
     hdl_cli.register(parser.add_subparsers())
     out = tmp_path / "bayesmachine.v"
     # 3 (4) beats per pixel: the beat counter's values are not all used (the lint checks complete cases).
-    lanes, beats = {"paper": ("9", 3), "census": ("10", 4), "census-lr": ("9", 3)}[model]
+    lanes, beats = {"paper": ("9", 3), "census": ("6", 3), "census-lr": ("9", 3),
+                    "census --no-fuse-columns": ("10", 4)}[model]
     args = parser.parse_args(["emit", "--top", "stereo", "--dmax", "6", "--width", "23", "--counter-max", "4",
-                              "--words-per-beat", lanes, "--sigma", "12", "--model", model, "-o", str(out)])
+                              "--words-per-beat", lanes, "--sigma", "12", "--model", *model.split(), "-o",
+                              str(out)])
     assert args.func(args) == 0
     text = capsys.readouterr().out
     assert "stereo top: 23-pixel lines, Dmax 6" in text
     assert f"load: {lanes} words per beat, {beats} beats per pixel" in text
     assert ("census_window 7" in text) == (model != "paper")  # census's column, or census-lr's fused one
-    assert ("  fused: " in text) == (model == "census-lr")
+    assert ("  fused: " in text) == (model in ("census", "census-lr"))
     assert ("right pass: the census model with the right image" in text) == (model == "census-lr")
     assert re.search(r"in\s+pixels__payload\s+17 bits", text)
     # The machine's waivers alone: their scoped DECLFILENAME rule covers the submodules

@@ -119,7 +119,7 @@ def test_two_declarations_of_one_plane_name_are_refused():
                           defaults={"census_window": 5})
     with pytest.raises(ValueError, match="^model 'two-windows': its defaults give no model: plane census: "
                        "the left pass \\(model two-windows\\)'s census reads it of 5x5 windows, the right "
-                       "pass \\(model census\\)'s census of 7x7"):
+                       "pass \\(model census\\)'s fused of 7x7"):
         register_model(definition)
     assert "two-windows" not in MODELS
     assert ModelParams(name="census-lr", census_window=5).margin == 2  # both passes' windows follow

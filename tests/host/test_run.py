@@ -158,7 +158,7 @@ def test_machine_runs_the_census_model_without_the_prior():
     from bayesmachine.host.run import run_pair
 
     left, right, gt = random_dot_stereogram(height=30, width=70, background=3, square=9, seed=4)
-    model = ModelParams(dmax=10, name="census", neighbour_prior=False)
+    model = ModelParams(dmax=10, name="census", fuse_columns=False, neighbour_prior=False)
     machine = MachineParams.for_disparity(10, columns=4, rng="sobol", counter_max=16)
     out = run_pair(left, right, model, machine, engine="model", gt=gt, sgbm=False)
     assert set(out.prepared.planes[0]) == {"m25", "gh20", "gv20", "census"}  # prepare(): the model's planes
@@ -167,7 +167,7 @@ def test_machine_runs_the_census_model_without_the_prior():
     # With the neighbour prior the machine needs its neighbour prior (its feedback column, and the
     # above column from its own results): refused, never run with a silently uniform prior.
     with pytest.raises(ParameterError, match="^neighbour_prior"):
-        run_pair(left, right, ModelParams(dmax=10, name="census"), machine)
+        run_pair(left, right, ModelParams(dmax=10, name="census", fuse_columns=False), machine)
     loaded = MachineParams.for_disparity(10, columns=4, prior="loaded")
     with pytest.raises(ParameterError, match="^neighbour_prior"):
-        run_pair(left, right, ModelParams(dmax=10, name="census"), loaded)
+        run_pair(left, right, ModelParams(dmax=10, name="census", fuse_columns=False), loaded)

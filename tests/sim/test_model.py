@@ -276,5 +276,5 @@ def test_front_end_lanes_are_defined_once() -> None:
     assert stereo_words_per_beat(MachineParams.for_disparity(80, prior="loaded")) == 24
     assert stereo_words_per_beat(MachineParams.for_disparity(2)) == 4 * 3  # fewer rows than 6: all of them
     # A neighbour machine's feedback column is formed on chip: 6 rows of its 5 loaded columns.
-    census = disparity_machine(ModelParams(name="census"))
+    census = disparity_machine(ModelParams(name="census", fuse_columns=False))
     assert census.operator_columns == 6 and stereo_words_per_beat(census) == 30

@@ -153,7 +153,7 @@ def test_cli_run_feed_pixels_census_gives_the_models_result(tmp_path: Path) -> N
     its census codes, census words and the above prior from the machine's own results equal the
     host's, so every result is the model's."""
     rows = 12
-    crop = ["--crop", f"250,200,{WIDTH},{rows}", "--dmax", str(DMAX), "--quiet", "--no-sgbm",
+    crop = ["--crop", f"150,350,{WIDTH},{rows}", "--dmax", str(DMAX), "--quiet", "--no-sgbm",
             "--model", "census"]
     assert main(["run", "--engine", "verilator", "--feed", "pixels", *crop, "-o", str(tmp_path / "px")]) == 0
     assert main(["run", "--engine", "model", *crop, "-o", str(tmp_path / "model")]) == 0

@@ -112,7 +112,7 @@ def test_seven_high_line_buffer_and_lagged_filter_give_the_census_grid_features(
 
 
 def test_census_table_is_clamped_host_table() -> None:
-    model = _census(4)
+    model = _census(4, fuse_columns=False)
     census = model.column(Census)
     full = census.table(10).values
     clamped = frontend_tables(model, 10)
@@ -127,9 +127,9 @@ def test_census_table_is_clamped_host_table() -> None:
 
 CASES = {
     # name: (model, machine options, frames (height, width))
-    "census7": (_census(3, neighbour_prior=False), dict(words_per_beat=8), [(9, 14)]),
-    "census7-loaded-prior": (_census(2, neighbour_prior=False), dict(words_per_beat=10, prior="loaded"), [(8,
-                                                                                                           12)]),
+    "census7": (_census(3, neighbour_prior=False, fuse_columns=False), dict(words_per_beat=8), [(9, 14)]),
+    "census7-loaded-prior": (_census(2, neighbour_prior=False, fuse_columns=False),
+                             dict(words_per_beat=10, prior="loaded"), [(8, 12)]),
     "census5-two-frames": (_census(3, window=5, neighbour_prior=False), dict(words_per_beat=4), [(6, 11), (7,
                                                                                                            11)]),
     "census7-dmax0": (_census(0, neighbour_prior=False), {}, [(7, 7)]),
@@ -215,7 +215,7 @@ def test_census_stereo_machine_equals_the_model(width: int, fifo: int) -> None:
 
 
 def test_census_parameters_are_validated() -> None:
-    model = _census(4)
+    model = _census(4, fuse_columns=False)
     ok = stereo_machine_params(4, model=model)
     assert ok.words_per_beat == 30 and ok.beats_per_pixel == 1  # 6 rows of 5 loaded words
     with pytest.raises(ParameterError, match="width"):

@@ -33,8 +33,8 @@ def _crop(y: int, x: int, height: int, width: int) -> tuple[np.ndarray, np.ndarr
 
 @pytest.mark.parametrize(("machines", "fused"), [(2, False), (3, False), (2, True)])
 def test_census_machines_equal_the_model(machines: int, fused: bool) -> None:
-    """The default census model (neighbour prior on: the above neighbour from another machine), and with
-    its image columns fused (each machine's word generator scans its pixels' beats)."""
+    """The census model (neighbour prior on: the above neighbour from another machine) per column, and
+    with its image columns fused, the default (each machine's word generator scans its pixels' beats)."""
     width = 14
     model = ModelParams(dmax=2, name="census", fuse_columns=fused)
     params = stereo_machine_params(2, model=model, counter_max=8, max_cycles=3000)

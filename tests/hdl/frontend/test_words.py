@@ -418,7 +418,7 @@ def test_a_truncated_frame_leaves_nothing_behind() -> None:
 def test_front_end_takes_the_census_model_on_whole_rows_per_lane():
     from bayesmachine.hdl.frontend.words import check_frontend_params
 
-    model = ModelParams(dmax=6, name="census", neighbour_prior=False)
+    model = ModelParams(dmax=6, name="census", fuse_columns=False, neighbour_prior=False)
     check_frontend_params(MachineParams.for_disparity(6, columns=4, words_per_beat=8),
                           model)  # 2 rows per beat
     with pytest.raises(ParameterError, match=r"words_per_beat \(6\) must be a multiple of the loaded"):

@@ -314,7 +314,7 @@ def test_run_command_reports_samples_per_clock(tmp_path, capsys) -> None:  # noq
 
     from bayesmachine.cli import main
 
-    crop = ["--crop", "300,200,64,12", "--model", "census", "--dmax", "24"]
+    crop = ["--crop", "300,200,64,12", "--model", "census", "--no-fuse-columns", "--dmax", "24"]
     for b in (1, 8):
         assert main(["run", *crop, "--samples-per-clock", str(b), "-o", str(tmp_path / f"b{b}")]) == 0
     one, eight = (json.loads((tmp_path / f"b{b}" / "report.json").read_text()) for b in (1, 8))
