@@ -18,13 +18,14 @@ WAIVERS = Path(hdl_emit.__file__).with_name("bayesmachine.vlt")
 
 
 @pytest.mark.eda
-@pytest.mark.parametrize(("model", "lanes"), [("paper", "9"), ("census", "10"), ("census-lr", "9")])
+@pytest.mark.parametrize(("model", "lanes"), [("paper", "9"), ("census", "6"), ("census-lr", "9"),
+                                               ("census --no-fuse-columns", "10")])
 def test_log_stereo_top_is_lint_clean(model: str, lanes: str, tmp_path: Path, capsys) -> None:
     """3 (4) beats per pixel, as the stochastic top's lint test: the beat counter's unused values."""
     verilator = require_tool("verilator")["verilator"]
     out = tmp_path / "bayesmachine.v"  # the waivers apply to the emitted file's name
     assert main(["emit", "--top", "stereo", "--integrator", "log", "--dmax", "6", "--width", "23",
-                 "--words-per-beat", lanes, "--sigma", "12", "--model", model, "-o", str(out)]) == 0
+                 "--words-per-beat", lanes, "--sigma", "12", "--model", *model.split(), "-o", str(out)]) == 0
     assert "integrator: log" in capsys.readouterr().out
     proc = subprocess.run([verilator, "--lint-only", "-Wall", str(WAIVERS), str(out)],
                           capture_output=True, text=True, timeout=900)
