@@ -105,9 +105,22 @@ def _run(cmd: list[str], cwd: Path, log: str, what: str, progress: Progress) -> 
             except subprocess.TimeoutExpired:
                 progress(f"{what}: still running ({time.monotonic() - t0:.0f} s)")
     if rc != 0:
-        tail = (cwd / f"{log}.out").read_text(errors="replace").strip().splitlines()[-3:]
-        raise ToolError(f"{what} failed (exit {rc}); see {cwd / log}.out: " + " | ".join(tail))
+        raise ToolError(_failure(cmd, cwd, log, what, rc))
     progress(f"{what}: done in {time.monotonic() - t0:.0f} s")
+
+
+def _failure(cmd: list[str], cwd: Path, log: str, what: str, rc: int) -> str:
+    """The error line of a tool that failed: its output's last lines, or, where it wrote them only to
+    its own log file (``-l FILE``, as Yosys does with ``-q``), that log's last ``ERROR`` line."""
+    out = cwd / f"{log}.out"
+    tail = out.read_text(errors="replace").strip().splitlines()[-3:]
+    logfile = cwd / cmd[cmd.index("-l") + 1] if "-l" in cmd[:-1] else None
+    if logfile is not None and logfile.is_file():
+        errors = [line.strip() for line in logfile.read_text(errors="replace").splitlines()
+                  if line.startswith("ERROR")]
+        if errors:
+            return f"{what} failed (exit {rc}): {errors[-1]} (see {logfile})"
+    return f"{what} failed (exit {rc}); see {out}: " + " | ".join(tail)
 
 
 def run_tool(name: str, args: Sequence[str], cwd: Path, log: str, what: str, progress: Progress) -> None:

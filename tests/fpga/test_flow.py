@@ -5,6 +5,7 @@ amaranth-boards platform's public ``device``/``package``/``speed``. The tools ar
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 import pytest
@@ -210,3 +211,23 @@ def test_gowin_memories_and_multipliers_counted() -> None:
     res = resources(GW5AST, cells)
     assert res == {"lut4": 10, "carry": 3, "ff": 3, "bram": 6, "dsp": 5, "lutram": 3}
     assert logic_cells(GW5AST, res) == 10 + 3 + 8 * 3
+
+
+@pytest.mark.parametrize("logged", [True, False])
+def test_a_failed_tools_error_line_names_its_error(tmp_path: Path, logged: bool) -> None:
+    """A tool that fails says why in the one error line: its output's last lines, or, when it wrote its
+    error only to its log file (Yosys with ``-q -l``), that log's last ERROR line."""
+    if logged:
+        script = ("import sys; open('tool.log', 'w')"
+                  ".write('4.46.19.7. pass\\nERROR: Assert failed in rtlil.cc\\n'); sys.exit(1)")
+    else:
+        script = "import sys; print('first'); print('Error: no such cell'); sys.exit(3)"
+    cmd = [sys.executable, "-c", script, "-l", "tool.log"]
+    with pytest.raises(flow.ToolError) as err:
+        flow._run(cmd, tmp_path, "tool", "synthesis (synth_ecp5)", lambda line: None)
+    if logged:
+        assert str(err.value) == (f"synthesis (synth_ecp5) failed (exit 1): ERROR: Assert failed in rtlil.cc "
+                                  f"(see {tmp_path / 'tool.log'})")
+    else:
+        assert str(err.value) == (f"synthesis (synth_ecp5) failed (exit 3); see {tmp_path / 'tool.out'}: "
+                                  "first | Error: no such cell")
