@@ -19,6 +19,7 @@ rule (1, or the loop's clocks), which the loading may exceed (the wall cycles co
 
 from __future__ import annotations
 
+import numpy as np
 from amaranth.hdl import Array, Const, Module, Mux, Signal, Value
 from amaranth.lib import fifo, wiring
 
@@ -31,7 +32,8 @@ from .argmin import ArgminTree
 from .rule import LogParams
 from .weights import WeightStage
 
-__all__ = ["ADDER_LEVELS_PER_STAGE", "ARGMIN_LEVELS_PER_STAGE", "LogMachine", "log_params", "pixel_clocks"]
+__all__ = ["ADDER_LEVELS_PER_STAGE", "ARGMIN_LEVELS_PER_STAGE", "LogMachine", "log_params", "pixel_clocks",
+           "pixel_wall_cycles"]
 
 # The log machine's pipeline setting: tree levels between two registers (adders, argmin).
 ADDER_LEVELS_PER_STAGE = 1
@@ -59,6 +61,14 @@ def pixel_clocks(params: MachineParams) -> tuple[int, int]:
     loop = (_stages(params.operator_columns, ADDER_LEVELS_PER_STAGE)
             + _stages(params.rows, ARGMIN_LEVELS_PER_STAGE) + 1)
     return 1, loop if params.feedback_columns else 1
+
+
+def pixel_wall_cycles(params: MachineParams, cycles: np.ndarray) -> np.ndarray:
+    """Clock cycles per pixel in steady state (loads keep coming, results are taken at once), from the
+    results' ``cycles`` (each pixel's issue interval by the rule): a full pixel buffer takes the next
+    pixel's first beat in the clock it issues, so the next issue waits for its ``beats_per_pixel``
+    beats as well as for the loop, ``max(cycles, beats_per_pixel)``."""
+    return np.maximum(np.asarray(cycles), params.beats_per_pixel)
 
 
 class LogMachine(wiring.Component):

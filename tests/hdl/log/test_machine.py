@@ -4,6 +4,7 @@ the model engine (sim.log_model) against the rule, its clocks against the blocks
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -19,6 +20,7 @@ from bayesmachine.hdl.log.machine import (
     ARGMIN_LEVELS_PER_STAGE,
     log_params,
     pixel_clocks,
+    pixel_wall_cycles,
 )
 from bayesmachine.host.features import model_planes
 from bayesmachine.host.images import bundled_pair
@@ -207,6 +209,28 @@ def test_pysim_issue_interval_is_the_loop() -> None:
         eng.run(codes[:pixels], line_start=np.arange(pixels) == 0)
         walls.append(eng.wall_cycles)
     assert walls[1] - walls[0] == 20 * pixel_clocks(machine)[1]
+
+
+@pytest.mark.parametrize("words_per_beat", [None, 1])
+def test_pysim_wall_cycles_are_pixel_wall_cycles(words_per_beat: int | None) -> None:
+    """Fed without stalls, the machine's wall cycles grow per pixel by :func:`pixel_wall_cycles` of the
+    pixels' cycles: the loop where the loading is shorter (one beat), the beats where they are longer
+    (one word per beat), lines of 5 pixels (their first pixels issue without the loop)."""
+    machine = disparity_machine(ModelParams(name="census", dmax=2), integrator="log", word_bits=8)
+    if words_per_beat is not None:
+        machine = dataclasses.replace(machine, words_per_beat=words_per_beat)
+    loop = pixel_clocks(machine)[1]
+    assert (machine.beats_per_pixel < loop) == (words_per_beat is None)
+    rng = np.random.default_rng(3)
+    codes = rng.integers(0, 40, (40, machine.rows, machine.loaded_columns))
+    line_start = np.arange(40) % 5 == 0
+    cycles = get_engine("model", machine).run(codes, line_start=line_start).cycles
+    walls = []
+    for pixels in (20, 40):
+        eng = get_engine("pysim", machine)
+        eng.run(codes[:pixels], line_start=line_start[:pixels])
+        walls.append(eng.wall_cycles)
+    assert walls[1] - walls[0] == int(pixel_wall_cycles(machine, cycles[20:]).sum())
 
 
 @pytest.mark.eda
