@@ -38,7 +38,7 @@ from bayesmachine.argtypes import (
     size_pair,
     value_list,
 )
-from bayesmachine.columns import FUSE_COLUMNS, Fused, Option, Source
+from bayesmachine.columns import Option, Source
 from bayesmachine.models import (
     DEFAULT_MODEL,
     HARDWARE_MODEL,
@@ -666,13 +666,12 @@ def pass_watchdogs() -> frozenset[str]:
 
 def machine_parameters(name: str) -> frozenset[str]:
     """The parameters of model ``name`` that change its own pass's machine (``emit``/``synth --top
-    machine``): the switches that leave columns out, the options of its feedback column (the table the
-    machine forms its prior from) and ``fuse_columns`` where it has a fused column (one operator column
-    or its members'). The others change only the words the host loads, or other passes."""
+    machine``): the options that change its columns (``ModelDef.layout_options``: the switches, a fused
+    column's ``fuse_columns``) and the options of its feedback column (the table the machine forms its
+    prior from). The others change only the words the host loads, or other passes."""
     d = MODELS[name]
     own = {o.name for c in d.columns if c.source is Source.FEEDBACK for o in c.options}
-    fused = {FUSE_COLUMNS.name for c in d.columns if issubclass(c, Fused)}
-    return frozenset({switch.name for switch in d.switches} | own | fused)
+    return frozenset({o.name for o in d.layout_options} | own)
 
 
 def options_without_effect(args: argparse.Namespace, effective: Iterable[str]) -> list[str]:
