@@ -7,7 +7,11 @@ index. The tie rule is in the keys: a row's key is its sum, and under ``nomatch-
 ``2 * sum + 1`` for every row but the no-match row's ``2 * sum``, one lower than any other row
 of the same sum (only the tree's right spine, where the no-match row goes, carries that bit
 past the leaves). Like the MAP encoder's tree, a node at level l holds the low l bits of its
-winner's index and prepends one bit per level (the right child won). Twin: ``rule.argmin_rows``.
+winner's index and prepends one bit per level (the right child won). With ``feedback`` the input
+also holds a code per row (the log machine's feedback column, formed from the previous pixel's MAP)
+that one more level, before the tree's, adds to the row's sum (and an infinite one excludes the row):
+so the machine's loop through the previous MAP is this block alone. Twin: ``rule.argmin_rows`` (of the
+sums with the feedback codes added).
 """
 
 from __future__ import annotations
@@ -19,7 +23,7 @@ from amaranth.hdl import Cat, Const, Mux, Value
 from bayesmachine.checks import as_int
 
 from .adders import tree_levels
-from .layouts import best_layout, row_sums_layout
+from .layouts import best_layout, feedback_sums_layout, row_sums_layout
 from .pipeline import Bank, LogBlock, Stage, Wire, fit, pack, stage_functions
 from .rule import LogParams, check_params
 
@@ -49,22 +53,36 @@ def _level(nodes: list[Node], wire: Wire, name: str, node: NodeFunction) -> list
 
 
 def argmin_stages(params: LogParams, levels_per_stage: int, pass_sums: bool,
-                  node: NodeFunction = better) -> tuple[Stage, ...]:
-    """The argmin tree's stage functions: ``row_sums_layout`` payload in, ``best_layout(pass_sums)``
-    out. A bank is ``(nodes, carried)``: the level's nodes, and the input payload when it is passed on.
+                  node: NodeFunction = better, feedback: bool = False) -> tuple[Stage, ...]:
+    """The argmin tree's stage functions: ``row_sums_layout`` payload in (``feedback_sums_layout`` with
+    ``feedback``: the feedback codes' adders are the first level), ``best_layout(pass_sums)`` out. A bank
+    is ``(nodes, carried)``: the level's nodes, and the rows' sums and flags when they are passed on.
     ``node``: the tree's node (:func:`better`; a proof's mutants give another)."""
     p = params
     layout_in, layout_out = row_sums_layout(p), best_layout(p, pass_sums)
 
-    def first(payload: Bank, wire: Wire) -> Bank:
-        rows = layout_in(Value.cast(payload))
+    def leaves(sums: list[Value], excluded: list[Value], carried: Value) -> Bank:
         nodes = []
         for r in range(p.rows):
-            key = rows.sums[r]
+            key = sums[r]
             if p.nomatch_first:
                 key = Cat(Const(int(r != p.rows - 1), 1), key)
-            nodes.append((key, (), rows.excluded[r]))
-        return nodes, Value.cast(rows) if pass_sums else Cat()
+            nodes.append((key, (), excluded[r]))
+        return nodes, carried if pass_sums else Cat()
+
+    def first(payload: Bank, wire: Wire) -> Bank:
+        if feedback:  # the adders' level reads the payload
+            return payload
+        rows = layout_in(Value.cast(payload))
+        return leaves([rows.sums[r] for r in range(p.rows)], [rows.excluded[r] for r in range(p.rows)],
+                      Value.cast(rows))
+
+    def add(payload: Bank, wire: Wire) -> Bank:
+        # Each row's feedback code added to its sum of the other codes (which leaves room for it).
+        rows = feedback_sums_layout(p)(Value.cast(payload))
+        sums = [wire(fit(rows.sums[r] + rows.feedback[r], p.sum_bits), f"total{r}") for r in range(p.rows)]
+        excluded = [rows.excluded[r] | (rows.feedback[r] == p.infinite) for r in range(p.rows)]
+        return leaves(sums, excluded, pack(layout_in, sums=Cat(*sums), excluded=Cat(*excluded)))
 
     def level(bank: Bank, wire: Wire) -> Bank:
         nodes, carried = bank
@@ -81,7 +99,8 @@ def argmin_stages(params: LogParams, levels_per_stage: int, pass_sums: bool,
             extra = {"sums": Value.cast(rows.sums), "excluded": rows.excluded}
         return pack(layout_out, map=map_, nomatch=nomatch, all_excluded=none, s_min=s_min, **extra)
 
-    return stage_functions(first, [level] * tree_levels(p.rows), last, levels_per_stage)
+    levels = [add] * feedback + [level] * tree_levels(p.rows)
+    return stage_functions(first, levels, last, levels_per_stage)
 
 
 class ArgminTree(LogBlock):
@@ -94,29 +113,38 @@ class ArgminTree(LogBlock):
     levels_per_stage : int
         Tree levels between two registers (1 ... 64); the tree has ceil(log2 rows) levels.
     pass_sums : bool
-        Whether the output carries the input's sums and excluded flags (delayed with the tree).
+        Whether the output carries the input's sums and excluded flags (delayed with the tree; with
+        ``feedback``: the sums with the feedback codes added).
+    feedback : bool
+        Whether the input holds a feedback code per row, added to the row's sum in a level before the
+        tree's (the row's sum of the other codes must leave room for it: the total fits ``sum_bits``).
 
     Attributes
     ----------
     sums : ``In(stream.Signature(row_sums_layout(params)))``
-        Each row's sum and excluded flag.
+        Each row's sum and excluded flag (``feedback_sums_layout(params)`` with ``feedback``: and its
+        feedback code).
     best : ``Out(stream.Signature(best_layout(params, pass_sums)))``
         The MAP: ``map``, ``nomatch``, ``all_excluded``, ``s_min`` (and the sums).
     latency : int
-        ``max(1, ceil(ceil(log2 rows) / levels_per_stage))`` clocks.
+        ``max(1, ceil((ceil(log2 rows) + feedback) / levels_per_stage))`` clocks.
     """
 
     node: NodeFunction = staticmethod(better)  # the tree's node (a proof's mutant overrides it)
 
-    def __init__(self, *, params: LogParams, levels_per_stage: int = 1, pass_sums: bool = False) -> None:
-        if not isinstance(pass_sums, bool):
-            raise TypeError(f"pass_sums must be a bool, not {type(pass_sums).__name__}")
+    def __init__(self, *, params: LogParams, levels_per_stage: int = 1, pass_sums: bool = False,
+                 feedback: bool = False) -> None:
+        for name, flag in (("pass_sums", pass_sums), ("feedback", feedback)):
+            if not isinstance(flag, bool):
+                raise TypeError(f"{name} must be a bool, not {type(flag).__name__}")
         self._levels = as_int("levels_per_stage", levels_per_stage, 1, 64)
         self._pass_sums = pass_sums
+        self._feedback = feedback
         p = check_params(params)
-        super().__init__(params=p, sink="sums", source="best", in_layout=row_sums_layout(p),
+        super().__init__(params=p, sink="sums", source="best",
+                         in_layout=feedback_sums_layout(p) if feedback else row_sums_layout(p),
                          out_layout=best_layout(p, pass_sums),
-                         stages=argmin_stages(p, self._levels, pass_sums, type(self).node))
+                         stages=argmin_stages(p, self._levels, pass_sums, type(self).node, feedback))
 
     @property
     def levels_per_stage(self) -> int:
@@ -125,3 +153,7 @@ class ArgminTree(LogBlock):
     @property
     def pass_sums(self) -> bool:
         return self._pass_sums
+
+    @property
+    def feedback(self) -> bool:
+        return self._feedback

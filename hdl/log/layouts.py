@@ -7,7 +7,7 @@ from amaranth.lib import data
 
 from .rule import LogParams
 
-__all__ = ["best_layout", "codes_layout", "log_result_layout", "row_sums_layout"]
+__all__ = ["best_layout", "codes_layout", "feedback_sums_layout", "log_result_layout", "row_sums_layout"]
 
 
 def codes_layout(params: LogParams) -> data.ArrayLayout:
@@ -19,6 +19,13 @@ def row_sums_layout(params: LogParams) -> data.StructLayout:
     """The row adders' output: each row's sum (``sum_bits``) and its excluded flag (bit r: row r)."""
     return data.StructLayout({"sums": data.ArrayLayout(unsigned(params.sum_bits), params.rows),
                               "excluded": unsigned(params.rows)})
+
+
+def feedback_sums_layout(params: LogParams) -> data.StructLayout:
+    """The feedback argmin's input: each row's sum of its other codes and excluded flag
+    (:func:`row_sums_layout`) and its feedback code (``code_bits``), added to the sum in the tree."""
+    return data.StructLayout({**row_sums_layout(params).members,
+                              "feedback": data.ArrayLayout(unsigned(params.code_bits), params.rows)})
 
 
 def best_layout(params: LogParams, pass_sums: bool = False) -> data.StructLayout:

@@ -2,32 +2,36 @@
 
 A pixel's energy codes come in on the load stream as the stochastic machine's words do (``words_per_beat``
 per beat, ``beats_per_pixel`` beats, a code in the low :data:`~bayesmachine.columns.energy.LOG_CODE_BITS`
-bits of each W + 1-bit word; with a neighbour prior ``line_start`` on its beats) into a pixel buffer;
-the pixel is *issued* into the row adders with its feedback column formed (a neighbour prior: from the
-previous result, :func:`~bayesmachine.sim.model.fill_feedback`'s rule with the flat code 0), then the
-argmin tree and the weights stage (``RowAdders`` → ``ArgminTree`` → ``WeightStage``, streams between).
-The result stream carries ``map``, ``nomatch``, ``timeout`` (every row excluded), ``cycles`` and
-``counts`` (the rows' weights): ``sim.log_model.LogMachineModel``'s results, bit for bit.
+bits of each W + 1-bit word; with a neighbour prior ``line_start`` on its beats) into a pixel buffer,
+whose loaded codes the row adders sum per row (one pixel per clock, ``line_start`` carried along);
+each pixel's sums are then *issued* into the argmin tree, with its feedback column formed (a neighbour
+prior: from the previous result, :func:`~bayesmachine.sim.model.fill_feedback`'s rule with the flat
+code 0) and added to the sums in the tree's first level, and on to the weights stage (``RowAdders`` →
+``ArgminTree(feedback=True)`` → ``WeightStage``, streams between). The result stream carries ``map``,
+``nomatch``, ``timeout`` (every row excluded), ``cycles`` and ``counts`` (the rows' weights):
+``sim.log_model.LogMachineModel``'s results, bit for bit.
 
-The feedback loop: as a MAP leaves the argmin tree the next pixel's feedback codes are registered
-from it, and a pixel with a left neighbour issues the clock after its predecessor's MAP left, so such
-pixels issue every ``RowAdders.latency + ArgminTree.latency + 1`` clocks at most
-(:func:`pixel_clocks`); a line's first pixel and every pixel without a neighbour prior issue as soon
-as they are loaded. ``cycles`` is that issue interval by the
-rule (1, or the loop's clocks), which the loading may exceed (the wall cycles count it).
+The feedback loop is the argmin tree alone: as a MAP leaves it the next pixel's feedback codes are
+registered from it, and a pixel with a left neighbour issues the clock after its predecessor's MAP
+left, so such pixels issue every ``ArgminTree.latency + 1`` clocks at most (:func:`pixel_clocks`);
+a line's first pixel and every pixel without a neighbour prior issue as soon as their sums are
+ready. ``cycles`` is that issue interval by the rule (1, or the loop's clocks), which the loading may
+exceed (the wall cycles count it).
 """
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
-from amaranth.hdl import Array, Const, Module, Mux, Signal, Value
+from amaranth.hdl import Array, Cat, Const, Module, Mux, Signal, Value
 from amaranth.lib import fifo, wiring
 
 from bayesmachine.columns.energy import ENERGY_STEP, LOG_CODE_BITS, exp_table
 from bayesmachine.hdl.signatures import MachineSignature, beat_words
 from bayesmachine.params import MachineParams
 
-from .adders import RowAdders
+from .adders import RowAdders, tree_levels
 from .argmin import ArgminTree
 from .rule import LogParams
 from .weights import WeightStage
@@ -35,7 +39,8 @@ from .weights import WeightStage
 __all__ = ["ADDER_LEVELS_PER_STAGE", "ARGMIN_LEVELS_PER_STAGE", "LogMachine", "log_params", "pixel_clocks",
            "pixel_wall_cycles"]
 
-# The log machine's pipeline setting: tree levels between two registers (adders, argmin).
+# The log machine's pipeline setting: tree levels between two registers, of the row adders (before the
+# issue point, outside the loop) and of the argmin tree (the loop: the feedback codes' adders, the tree).
 ADDER_LEVELS_PER_STAGE = 1
 ARGMIN_LEVELS_PER_STAGE = 2
 
@@ -49,17 +54,13 @@ def log_params(params: MachineParams) -> LogParams:
                      tie_break=params.tie_break)
 
 
-def _stages(leaves: int, levels: int) -> int:
-    """Register stages of a balanced tree over ``leaves`` at ``levels`` per stage (at least 1)."""
-    return max(1, -(-(leaves - 1).bit_length() // levels))
-
-
 def pixel_clocks(params: MachineParams) -> tuple[int, int]:
     """(clocks per pixel where no feedback column binds, clocks per pixel where one does): 1, and with a
-    neighbour prior the loop's ``RowAdders.latency + ArgminTree.latency + 1`` at this machine's setting
-    (the feedback codes registered as the MAP leaves the argmin tree)."""
-    loop = (_stages(params.operator_columns, ADDER_LEVELS_PER_STAGE)
-            + _stages(params.rows, ARGMIN_LEVELS_PER_STAGE) + 1)
+    neighbour prior the loop's ``ArgminTree.latency + 1`` at this machine's setting (the feedback codes'
+    adders and the tree's levels at ``ARGMIN_LEVELS_PER_STAGE``, then the feedback codes registered as
+    the MAP leaves the tree)."""
+    levels = tree_levels(params.rows) + 1
+    loop = max(1, -(-levels // ARGMIN_LEVELS_PER_STAGE)) + 1
     return 1, loop if params.feedback_columns else 1
 
 
@@ -110,21 +111,25 @@ class LogMachine(wiring.Component):
 
     def elaborate(self, platform: object) -> Module:
         m = Module()
-        lp = self._log
-        m.submodules.adders = adders = RowAdders(params=lp, levels_per_stage=ADDER_LEVELS_PER_STAGE)
+        p, lp = self._params, self._log
+        fb = bool(p.feedback_columns)
+        # The loaded columns' codes are summed before the issue point, outside the loop through the
+        # previous MAP: the loop is the argmin tree alone, with the feedback codes' adders as its first level.
+        loaded = dataclasses.replace(lp, codes=p.loaded_columns)
+        m.submodules.adders = adders = RowAdders(params=loaded, levels_per_stage=ADDER_LEVELS_PER_STAGE,
+                                                 carried=int(fb))
         m.submodules.argmin = argmin = ArgminTree(params=lp, levels_per_stage=ARGMIN_LEVELS_PER_STAGE,
-                                                  pass_sums=True)
+                                                  pass_sums=True, feedback=fb)
         m.submodules.weights = weights = WeightStage(params=lp)
-        wiring.connect(m, adders.sums, argmin.sums)
         wiring.connect(m, argmin.best, weights.best)
-        # pixel_clocks is the blocks' latency (tests/hdl/log/test_machine.py holds it too).
-        assert not self._params.feedback_columns or adders.latency + argmin.latency + 1 == self.loop
-        # Pixels in flight, their line_start in order, for their cycles (at most every stage's plus the
-        # three output buffers' entries).
-        depth = adders.latency + argmin.latency + weights.latency + 6
+        # pixel_clocks is the loop's latency (tests/hdl/log/test_machine.py holds it too).
+        assert not fb or argmin.latency + 1 == self.loop
+        # Pixels issued and not yet out, their line_start in order, for their cycles (at most every
+        # stage's plus the two output buffers' entries).
+        depth = argmin.latency + weights.latency + 4
         m.submodules.starts = starts = fifo.SyncFIFO(width=1, depth=depth)
-        codes, full, start, last_taken = self._load(m)
-        self._issue(m, codes, full, start, last_taken, adders, argmin, starts)
+        self._fill(m, adders)
+        self._issue(m, adders, argmin, starts)
         self._result(m, weights, starts)
         return m
 
@@ -153,39 +158,48 @@ class LogMachine(wiring.Component):
                 m.d.sync += start.eq(self.load.payload.line_start)
         return codes, full, start, last_taken
 
-    def _issue(self, m: Module, codes: list[Signal], full: Signal, start: Signal, last_taken: Signal,
-               adders: RowAdders, argmin: ArgminTree, starts: fifo.SyncFIFO) -> None:
-        """A full buffer issues into the adders when they take it and (a neighbour prior) its feedback
-        column is known: a line start, or no pixel before it between the adders' input and the argmin's
-        output (``pending``: the last one's MAP has left it, its feedback codes are registered)."""
-        p, lp = self._params, self._log
+    def _fill(self, m: Module, adders: RowAdders) -> None:
+        """A full pixel buffer passes its codes (and its line_start) to the row adders when they take it,
+        and takes the next pixel's first beat in that clock."""
+        codes, full, start, last_taken = self._load(m)
+        taken = Signal()
+        payload = adders.codes.payload
+        m.d.comb += [adders.codes.valid.eq(full), taken.eq(full & adders.codes.ready),
+                     self.load.ready.eq(~full | taken)]
+        with m.If(taken & ~last_taken):
+            m.d.sync += full.eq(0)
+        if self._params.feedback_columns:
+            m.d.comb += payload.carried.eq(start)
+            payload = payload.codes
+        m.d.comb += Cat(*(payload[r].as_value() for r in range(self._log.rows))).eq(Cat(*codes))
+
+    def _issue(self, m: Module, adders: RowAdders, argmin: ArgminTree, starts: fifo.SyncFIFO) -> None:
+        """A pixel's loaded sums issue into the argmin tree when it takes them and (a neighbour prior)
+        its feedback codes are known: a line start, or no pixel in the argmin tree (``pending``: the last
+        one's MAP has left it, its feedback codes are registered)."""
+        p = self._params
+        sums, into = adders.sums, argmin.sums
         issue = Signal()
         passing = Signal()  # a MAP leaves the argmin tree this clock
         m.d.comb += passing.eq(argmin.best.valid & argmin.best.ready)
+        start = sums.payload.carried if p.feedback_columns else Const(0, 1)
         if p.feedback_columns:
-            pending = Signal(range(adders.latency + argmin.latency + 8))
+            pending = Signal(range(argmin.latency + 8))
             m.d.sync += pending.eq(pending + issue - passing)
             known = start | (pending == 0)
+            fb = self._feedback(m, argmin, passing, start)
+            m.d.comb += [into.payload.feedback[r].eq(fb[r]) for r in range(p.rows)]
         else:
             known = 1
         m.d.comb += [
-            issue.eq(full & adders.codes.ready & starts.w_rdy & known),
-            adders.codes.valid.eq(full & starts.w_rdy & known),
-            self.load.ready.eq(~full | issue),
+            issue.eq(sums.valid & into.ready & starts.w_rdy & known),
+            into.valid.eq(sums.valid & starts.w_rdy & known),
+            sums.ready.eq(into.ready & starts.w_rdy & known),
             starts.w_en.eq(issue),
-            starts.w_data.eq(start if p.feedback_columns else 0),
+            starts.w_data.eq(start),
+            into.payload.excluded.eq(sums.payload.excluded),
+            *(into.payload.sums[r].eq(sums.payload.sums[r]) for r in range(p.rows)),
         ]
-        with m.If(issue & ~last_taken):
-            m.d.sync += full.eq(0)
-        loaded = p.loaded_columns
-        fb = self._feedback(m, argmin, passing, start) if p.feedback_columns else None
-        for r in range(lp.rows):
-            for c in range(lp.codes):
-                target = adders.codes.payload[r][c]
-                if fb is not None and c == 0:
-                    m.d.comb += target.eq(fb[r])
-                else:
-                    m.d.comb += target.eq(codes[r * loaded + c - p.feedback_columns])
 
     def _feedback(self, m: Module, argmin: ArgminTree, passing: Signal, start: Signal) -> list[Value]:
         """Each row's feedback code: a register loaded as a MAP leaves the argmin tree (the table at
