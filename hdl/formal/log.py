@@ -8,7 +8,8 @@ register that says the line's skid is empty, then a head and a skid; each slot h
 expected result, computed when the pixel is taken by a reference written here from the rule alone:
 
 - the argmin: a sequential scan over the rows (a row not excluded replaces the best one so far
-  when its sum is lower, or, for the no-match row under ``nomatch-first``, not higher);
+  when its sum is lower, or, for the no-match row under ``nomatch-first``, not higher); with
+  feedback codes, over the sums with the codes added;
 - the row adders: a chain of additions, and an OR of "code is all-ones";
 - the weights: per row a chain of equality tests against each distance of the table.
 
@@ -37,7 +38,8 @@ from bayesmachine.hdl.log import LogParams
 from bayesmachine.hdl.log.pipeline import StallPipeline
 
 __all__ = ["PipelineProperties", "Reference", "chain_sums", "integrator_params", "reference_argmin",
-           "reference_integrator", "reference_row_sums", "reference_weights", "scan_argmin", "table_weight"]
+           "reference_feedback_argmin", "reference_integrator", "reference_row_sums", "reference_weights",
+           "scan_argmin", "table_weight"]
 
 # ``reference(m, params, payload, out)``: drives the fields of ``out`` (a Signal of the block's
 # output layout, comb) from the input ``payload`` (a view of the block's input layout).
@@ -74,6 +76,19 @@ def reference_argmin(m: Module, p: LogParams, payload: data.View, out: data.View
         m.d.comb += [out.sums.eq(payload.sums), out.excluded.eq(payload.excluded)]
 
 
+def reference_feedback_argmin(m: Module, p: LogParams, payload: data.View, out: data.View) -> None:
+    """``ArgminTree(feedback=True)``: the scan over each row's sum plus its feedback code (cut to
+    ``sum_bits``), a row excluded by its flag or an all-ones feedback code."""
+    sums = [_net(m, (payload.sums[r] + payload.feedback[r])[:p.sum_bits], f"ref_total{r}")
+            for r in range(p.rows)]
+    excluded = [payload.excluded[r] | (payload.feedback[r] == p.infinite) for r in range(p.rows)]
+    map_, nomatch, none, s_min = scan_argmin(m, p, sums, excluded)
+    m.d.comb += [out.map.eq(map_), out.nomatch.eq(nomatch), out.all_excluded.eq(none), out.s_min.eq(s_min)]
+    if "sums" in out.shape().members:
+        m.d.comb += [out.sums[r].eq(x) for r, x in enumerate(sums)]
+        m.d.comb += [out.excluded[r].eq(x) for r, x in enumerate(excluded)]
+
+
 def chain_sums(p: LogParams, codes: data.View) -> tuple[list[Value], list[Value]]:
     """Each row's sum (left to right) and whether one of its codes is all-ones."""
     sums, excluded = [], []
@@ -88,6 +103,9 @@ def chain_sums(p: LogParams, codes: data.View) -> tuple[list[Value], list[Value]
 
 
 def reference_row_sums(m: Module, p: LogParams, payload: data.View, out: data.View) -> None:
+    if "carried" in out.shape().members:  # RowAdders(carried=): the bits come out unchanged
+        m.d.comb += out.carried.eq(payload.carried)
+        payload = payload.codes
     sums, excluded = chain_sums(p, payload)
     m.d.comb += [out.sums[r].eq(s) for r, s in enumerate(sums)]
     m.d.comb += [out.excluded[r].eq(x) for r, x in enumerate(excluded)]

@@ -13,6 +13,7 @@ from bayesmachine.hdl.formal.log import (
     PipelineProperties,
     integrator_params,
     reference_argmin,
+    reference_feedback_argmin,
     reference_integrator,
     reference_row_sums,
     reference_weights,
@@ -34,6 +35,9 @@ MUTANT_DEPTH = 10  # BMC: two pixels through the deepest pipeline checked (6 sta
 # depth it offers), 3-bit sums, both tie rules with a no-match row and none without one.
 RULES = [(True, "nomatch-first"), (True, "lowest-index"), (False, "lowest-index")]
 ARGMIN = [(rows, nm, tie, levels) for rows in (5, 7) for nm, tie in RULES for levels in (1, 2, 3)]
+# The argmin tree with feedback codes: 5 rows (the codes' adders and 3 levels: levels_per_stage 1, 2
+# and 4 give 4, 2 and 1 stages), both tie rules.
+FEEDBACK_ARGMIN = [(tie, levels) for tie in ("nomatch-first", "lowest-index") for levels in (1, 2, 4)]
 # The row adders: 3 rows of 3 codes (2 levels) and of 5 codes (3 levels), 2-bit codes.
 ADDERS = [(3, 1), (3, 2), (5, 1), (5, 2), (5, 3)]
 # The whole integrator: (rows, codes, code_bits, nomatch_row, tie_break, levels, adder levels).
@@ -61,12 +65,22 @@ def test_argmin_tree_proved(rows: int, nomatch_row: bool, tie_break: str, levels
     check(run_formal(argmin_wrapper(p, levels), name=name, mode="prove", depth=PROVE_DEPTH))
 
 
-@pytest.mark.parametrize(("codes", "levels"), ADDERS)
-def test_row_adders_proved(codes: int, levels: int) -> None:
+@pytest.mark.parametrize(("tie_break", "levels"), FEEDBACK_ARGMIN)
+def test_feedback_argmin_proved(tie_break: str, levels: int) -> None:
+    """ArgminTree(feedback=True), the log machine's loop: the scan over the sums with the feedback
+    codes added (the carried totals checked too)."""
+    p = integrator_params(5, 2, 2, tie_break=tie_break)
+    dut = ArgminTree(params=p, levels_per_stage=levels, pass_sums=True, feedback=True)
+    wrapper = PipelineProperties(params=p, dut=dut, reference=reference_feedback_argmin)
+    check(run_formal(wrapper, name=f"feedback-argmin-{tie_break}-l{levels}", mode="prove", depth=PROVE_DEPTH))
+
+
+@pytest.mark.parametrize(("codes", "levels", "carried"), [(*c, 0) for c in ADDERS] + [(3, 1, 2)])
+def test_row_adders_proved(codes: int, levels: int, carried: int) -> None:
     p = integrator_params(3, codes, 2)
-    dut = RowAdders(params=p, levels_per_stage=levels)
+    dut = RowAdders(params=p, levels_per_stage=levels, carried=carried)
     wrapper = PipelineProperties(params=p, dut=dut, reference=reference_row_sums)
-    check(run_formal(wrapper, name=f"adders{codes}-l{levels}", mode="prove", depth=PROVE_DEPTH))
+    check(run_formal(wrapper, name=f"adders{codes}-l{levels}-c{carried}", mode="prove", depth=PROVE_DEPTH))
 
 
 def test_weight_stage_proved() -> None:

@@ -162,6 +162,20 @@ def test_row_adders(codes: int, levels: int) -> None:
         assert [(o.excluded >> r) & 1 for r in range(p.rows)] == excluded[i].astype(int).tolist()
 
 
+def test_row_adders_carry_bits() -> None:
+    """``carried`` bits come out with their pixel's sums, unchanged, under back-pressure."""
+    p = LogParams(rows=3, codes=5, code_bits=3, weights=TABLE)
+    dut = RowAdders(params=p, levels_per_stage=1, carried=2)
+    assert dut.latency == 3 and dut.carried == 2
+    pix = codes_of(p, 60, seed=9, high=p.infinite)
+    tags = np.random.default_rng(9).integers(0, 4, 60)
+    payloads = [{"codes": c.tolist(), "carried": int(t)} for c, t in zip(pix, tags, strict=True)]
+    run = drive(dut, "codes", "sums", payloads, p_valid=0.7, p_ready=0.5, seed=9)
+    sums, _ = row_sums(pix, p)
+    assert [o.carried for o in run.outputs] == tags.tolist()
+    assert [[o.sums[r] for r in range(p.rows)] for o in run.outputs] == sums.tolist()
+
+
 def sums_inputs(p: LogParams, pixels: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """Random sums from a narrow range (many ties, with the no-match row too), random exclusions."""
     rng = np.random.default_rng(seed)
@@ -200,6 +214,30 @@ def test_argmin_tree(rows: int, nomatch_row: bool, tie_break: str, levels: int, 
             assert [o.sums[r] for r in range(rows)] == sums[i].tolist() and o.excluded == flags(excluded[i])
 
 
+@pytest.mark.parametrize(("rows", "tie_break", "levels"), [(1, "lowest-index", 1), (7, "nomatch-first", 1),
+                                                        (7, "lowest-index", 2), (82, "nomatch-first", 4)])
+def test_argmin_tree_feedback(rows: int, tie_break: str, levels: int) -> None:
+    """``feedback``: each row's feedback code added to its sum of the other codes (an infinite one
+    excludes the row) in a level before the tree's: the rule's argmin of the totals, which it carries."""
+    p = LogParams(rows=rows, codes=3, code_bits=3, weights=TABLE, nomatch_row=rows > 1, tie_break=tie_break)
+    dut = ArgminTree(params=p, levels_per_stage=levels, pass_sums=True, feedback=True)
+    assert dut.feedback and dut.latency == max(1, -(-((rows - 1).bit_length() + 1) // levels))
+    rng = np.random.default_rng(rows)
+    others = rng.integers(0, 2 * p.infinite + 1, (100, rows))  # the sum of two codes
+    feedback = rng.integers(0, 4, (100, rows))
+    feedback[rng.random(feedback.shape) < 0.1] = p.infinite
+    excluded = rng.random((100, rows)) < 0.2
+    payloads = [{"sums": s.tolist(), "excluded": flags(x), "feedback": f.tolist()}
+                for s, x, f in zip(others, excluded, feedback, strict=True)]
+    run = drive(dut, "sums", "best", payloads, p_valid=0.8, p_ready=0.5, seed=rows)
+    totals, out = others + feedback, excluded | (feedback == p.infinite)
+    want = argmin_rows(totals, out, p)
+    assert np.any(feedback == p.infinite) and np.unique(want[0]).size > min(rows, 3) - 1
+    for i, o in enumerate(run.outputs):
+        assert (o.map, o.nomatch, o.all_excluded, o.s_min) == tuple(int(a[i]) for a in want), f"pixel {i}"
+        assert [o.sums[r] for r in range(rows)] == totals[i].tolist() and o.excluded == flags(out[i])
+
+
 def test_weight_stage() -> None:
     p = LogParams(rows=9, codes=4, code_bits=3, weights=TABLE)
     dut = WeightStage(params=p)
@@ -227,6 +265,10 @@ def test_bad_block_parameters() -> None:
         LogIntegrator(params=p, adder_levels_per_stage=0)
     with pytest.raises(TypeError, match="pass_sums"):
         ArgminTree(params=p, pass_sums=1)
+    with pytest.raises(TypeError, match="feedback"):
+        ArgminTree(params=p, feedback=1)
+    with pytest.raises(ParameterError, match="carried"):
+        RowAdders(params=p, carried=-1)
     for block in (RowAdders, ArgminTree, WeightStage, LogIntegrator):
         with pytest.raises(TypeError, match="LogParams"):
             block(params=(5, 2, 3))
