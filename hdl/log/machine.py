@@ -66,9 +66,11 @@ def pixel_clocks(params: MachineParams) -> tuple[int, int]:
 
 def pixel_wall_cycles(params: MachineParams, cycles: np.ndarray) -> np.ndarray:
     """Clock cycles per pixel in steady state (loads keep coming, results are taken at once), from the
-    results' ``cycles`` (each pixel's issue interval by the rule): a full pixel buffer takes the next
-    pixel's first beat in the clock it issues, so the next issue waits for its ``beats_per_pixel``
-    beats as well as for the loop, ``max(cycles, beats_per_pixel)``."""
+    results' ``cycles`` (each pixel's issue interval by the rule): a pixel takes ``beats_per_pixel``
+    beats to load and issues ``cycles`` after the one before, ``max(cycles, beats_per_pixel)``. Exact
+    where ``beats_per_pixel`` is 1 or at least the loop's clocks (the models' load streams) or every
+    pixel has the loop's clocks; between them an upper bound: the row adders take a pixel every
+    clock, so a line's first pixel may load during the loops before it and issue sooner."""
     return np.maximum(np.asarray(cycles), params.beats_per_pixel)
 
 

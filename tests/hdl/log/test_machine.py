@@ -219,16 +219,36 @@ def test_pysim_wall_cycles_are_pixel_wall_cycles(words_per_beat: int | None) -> 
         machine = dataclasses.replace(machine, words_per_beat=words_per_beat)
     loop = pixel_clocks(machine)[1]
     assert (machine.beats_per_pixel < loop) == (words_per_beat is None)
+    line_start = np.arange(40) % 5 == 0
+    walls, want = _pysim_walls(machine, line_start)
+    assert walls == int(want.sum())
+
+
+def _pysim_walls(machine: MachineParams, line_start: np.ndarray) -> tuple[int, np.ndarray]:
+    """The wall cycles of pysim's last 20 of 40 pixels, unstalled, and their pixel_wall_cycles."""
     rng = np.random.default_rng(3)
     codes = rng.integers(0, 40, (40, machine.rows, machine.loaded_columns))
-    line_start = np.arange(40) % 5 == 0
     cycles = get_engine("model", machine).run(codes, line_start=line_start).cycles
     walls = []
     for pixels in (20, 40):
         eng = get_engine("pysim", machine)
         eng.run(codes[:pixels], line_start=line_start[:pixels])
         walls.append(eng.wall_cycles)
-    assert walls[1] - walls[0] == int(pixel_wall_cycles(machine, cycles[20:]).sum())
+    return walls[1] - walls[0], pixel_wall_cycles(machine, cycles[20:])
+
+
+def test_pysim_wall_cycles_between_one_beat_and_the_loop() -> None:
+    """With more than one beat per pixel but fewer than the loop's clocks pixel_wall_cycles is exact
+    where every pixel has the loop's clocks, and an upper bound with lines of 5 pixels: a line's first
+    pixel, loaded into the row adders during the loops before it, issues sooner."""
+    machine = disparity_machine(ModelParams(name="census", dmax=10), integrator="log", word_bits=8)
+    loop = pixel_clocks(machine)[1]
+    machine = dataclasses.replace(machine, words_per_beat=-(-machine.words_per_pixel // (loop - 1)))
+    assert 1 < machine.beats_per_pixel < loop
+    walls, want = _pysim_walls(machine, np.arange(40) == 0)
+    assert walls == int(want.sum()) == 20 * loop
+    walls, want = _pysim_walls(machine, np.arange(40) % 5 == 0)
+    assert walls < int(want.sum())
 
 
 @pytest.mark.eda
