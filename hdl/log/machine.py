@@ -176,15 +176,21 @@ class LogMachine(wiring.Component):
         m.d.comb += Cat(*(payload[r].as_value() for r in range(self._log.rows))).eq(Cat(*codes))
 
     def _issue(self, m: Module, adders: RowAdders, argmin: ArgminTree, starts: fifo.SyncFIFO) -> None:
-        """A pixel's loaded sums issue into the argmin tree when it takes them and (a neighbour prior)
-        its feedback codes are known: a line start, or no pixel in the argmin tree (``pending``: the last
-        one's MAP has left it, its feedback codes are registered)."""
+        """The next pixel's loaded sums wait in the issue register (so the loop's first stage starts at
+        registers, not at the row adders' output buffer) and issue into the argmin tree when it takes them
+        and (a neighbour prior) its feedback codes are known: a line start, or no pixel in the argmin tree
+        (``pending``: the last one's MAP has left it, its feedback codes are registered)."""
         p = self._params
         sums, into = adders.sums, argmin.sums
+        held = Signal(sums.payload.shape(), name="issue_sums", reset_less=True)
+        held_valid = Signal(name="issue_valid")
+        view = sums.payload.shape()(held)
         issue = Signal()
         passing = Signal()  # a MAP leaves the argmin tree this clock
-        m.d.comb += passing.eq(argmin.best.valid & argmin.best.ready)
-        start = sums.payload.carried if p.feedback_columns else Const(0, 1)
+        m.d.comb += [passing.eq(argmin.best.valid & argmin.best.ready), sums.ready.eq(~held_valid | issue)]
+        with m.If(sums.ready):
+            m.d.sync += [held.eq(sums.payload), held_valid.eq(sums.valid)]
+        start = view.carried if p.feedback_columns else Const(0, 1)
         if p.feedback_columns:
             pending = Signal(range(argmin.latency + 8))
             m.d.sync += pending.eq(pending + issue - passing)
@@ -194,13 +200,12 @@ class LogMachine(wiring.Component):
         else:
             known = 1
         m.d.comb += [
-            issue.eq(sums.valid & into.ready & starts.w_rdy & known),
-            into.valid.eq(sums.valid & starts.w_rdy & known),
-            sums.ready.eq(into.ready & starts.w_rdy & known),
+            issue.eq(held_valid & into.ready & starts.w_rdy & known),
+            into.valid.eq(held_valid & starts.w_rdy & known),
             starts.w_en.eq(issue),
             starts.w_data.eq(start),
-            into.payload.excluded.eq(sums.payload.excluded),
-            *(into.payload.sums[r].eq(sums.payload.sums[r]) for r in range(p.rows)),
+            into.payload.excluded.eq(view.excluded),
+            *(into.payload.sums[r].eq(view.sums[r]) for r in range(p.rows)),
         ]
 
     def _feedback(self, m: Module, argmin: ArgminTree, passing: Signal, start: Signal) -> list[Value]:
