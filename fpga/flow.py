@@ -19,15 +19,23 @@ from bayesmachine.tools import tool_process, user_cache_dir, which
 
 from .targets import Target
 
-__all__ = ["KEEP_REGISTER_COPIES", "ROUTERS", "ToolError", "cell_counts", "nextpnr", "parse_nextpnr",
-           "place_and_route", "require_tool", "require_tools", "run_tool", "synthesize", "yowasp_cache"]
+__all__ = ["KEEP_REGISTER_COPIES", "KEEP_STEPS", "ROUTERS", "ToolError", "cell_counts", "nextpnr",
+           "parse_nextpnr", "place_and_route", "require_tool", "require_tools", "run_tool", "synthesize",
+           "yowasp_cache"]
 
 # Registers named ``*_rep*`` are deliberate copies of a high-fanout signal (hdl/machine/):
 # ``keep`` stops opt_merge from folding them back into one. Two steps of the input cone from the
 # wires: the flip-flop driving a ``_rep`` wire, and the one driving a wire Amaranth aliased it
 # with (the shared source's ``compute_rep_src`` / ``start_rep_src`` come out as the source's
-# ``enable`` / ``restart``, one connection further).
-KEEP_REGISTER_COPIES = "setattr -set keep 1 w:*_rep* %ci2 t:$dff %i"
+# ``enable`` / ``restart``, one connection further). The copies are marked first (``register_copy``,
+# which does not stop their removal), unused logic is removed without merging anything (proc,
+# opt_expr, opt_clean), then the marked copies left are kept: a kept copy that nothing reads (a log
+# pipeline's read-pointer copy of output bits the top leaves unused) made Yosys 0.70's ABC9 fail an
+# assertion (ABC_OPS_REINTEGRATE, rtlil.cc:3091) on the log census-lr StereoMachine. Marking before
+# the clean-up: it removes the wires Amaranth aliased, through which the cone reaches some copies.
+KEEP_STEPS = ("setattr -set register_copy 1 w:*_rep* %ci2 t:$dff %i", "proc", "opt_expr", "opt_clean",
+              "setattr -set keep 1 a:register_copy t:$dff %i")
+KEEP_REGISTER_COPIES = "; ".join(KEEP_STEPS)
 
 Progress = Callable[[str], None]
 
@@ -133,11 +141,11 @@ def run_tool(name: str, args: Sequence[str], cwd: Path, log: str, what: str, pro
 def synthesize(rtlil: str, target: Target, out_dir: Path, progress: Progress) -> dict[str, int]:
     """Yosys ``synth_<family>`` of ``rtlil`` (top module ``top``) into ``out_dir/synth.json``;
     returns the cell counts by type. Reuses the previous result when the RTLIL is unchanged."""
-    # The register copies are kept (``KEEP_REGISTER_COPIES``). The design is flattened first,
-    # before synth_*'s own proc and flatten: on the hierarchy Amaranth emits (the machine's source
-    # and encoder submodules), Yosys 0.70's ABC9 step failed an assertion on some small machines
-    # (``tests/fpga/test_synth.py``; also with an explicit proc before the flatten), never so far when
-    # flattened first.
+    # The register copies are kept (``KEEP_REGISTER_COPIES``, unused logic removed first). The
+    # design is flattened first, before synth_*'s own flatten: on the hierarchy Amaranth emits (the
+    # machine's source and encoder submodules), Yosys 0.70's ABC9 step failed an assertion on some
+    # small machines (``tests/fpga/test_synth.py``; also with a proc before the flatten), never so
+    # far when flattened first.
     script = ("read_rtlil top.il; hierarchy -top top; flatten; "
               f"{KEEP_REGISTER_COPIES}; "
               f"{target.yosys_synth} -top top -json synth.json; tee -q -o stat.json stat -json")

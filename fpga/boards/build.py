@@ -135,7 +135,7 @@ def _prepare(platform: object, top: object, work: Path) -> None:
         top,
         name="top",
         # As fpga.flow: flattened first (Yosys's ABC9 step), the register copies kept.
-        script_after_read=f"hierarchy -top top\nflatten\n{flow.KEEP_REGISTER_COPIES}",
+        script_after_read="\n".join(("hierarchy -top top", "flatten", *flow.KEEP_STEPS)),
         script_after_synth="tee -q -o stat.json stat -json",
     )
     for name in ("top.il", "top.ys", "top.lpf"):
