@@ -11,10 +11,9 @@ code 0) and added to the sums in the tree's first level, and on to the weights s
 ``nomatch``, ``timeout`` (every row excluded), ``cycles`` and ``counts`` (the rows' weights):
 ``sim.log_model.LogMachineModel``'s results, bit for bit.
 
-The feedback loop is the argmin tree alone: a pixel with a left neighbour issues in the clock its
-predecessor's MAP leaves the tree, its feedback codes formed from that MAP on the way in (and
-registered, for a pixel that comes later), so such pixels issue every ``ArgminTree.latency`` clocks
-at most (:func:`pixel_clocks`);
+The feedback loop is the argmin tree alone: as a MAP leaves it the next pixel's feedback codes are
+registered from it, and a pixel with a left neighbour issues the clock after its predecessor's MAP
+left, so such pixels issue every ``ArgminTree.latency + 1`` clocks at most (:func:`pixel_clocks`);
 a line's first pixel and every pixel without a neighbour prior issue as soon as their sums are
 ready. ``cycles`` is that issue interval by the rule (1, or the loop's clocks), which the loading may
 exceed (the wall cycles count it).
@@ -57,11 +56,11 @@ def log_params(params: MachineParams) -> LogParams:
 
 def pixel_clocks(params: MachineParams) -> tuple[int, int]:
     """(clocks per pixel where no feedback column binds, clocks per pixel where one does): 1, and with a
-    neighbour prior the loop's ``ArgminTree.latency`` at this machine's setting (the feedback codes'
-    adders and the tree's levels at ``ARGMIN_LEVELS_PER_STAGE``; the next pixel issues as the MAP
-    leaves the tree)."""
+    neighbour prior the loop's ``ArgminTree.latency + 1`` at this machine's setting (the feedback codes'
+    adders and the tree's levels at ``ARGMIN_LEVELS_PER_STAGE``, then the feedback codes registered as
+    the MAP leaves the tree)."""
     levels = tree_levels(params.rows) + 1
-    loop = max(1, -(-levels // ARGMIN_LEVELS_PER_STAGE))
+    loop = max(1, -(-levels // ARGMIN_LEVELS_PER_STAGE)) + 1
     return 1, loop if params.feedback_columns else 1
 
 
@@ -126,7 +125,7 @@ class LogMachine(wiring.Component):
         m.submodules.weights = weights = WeightStage(params=lp)
         wiring.connect(m, argmin.best, weights.best)
         # pixel_clocks is the loop's latency (tests/hdl/log/test_machine.py holds it too).
-        assert not fb or argmin.latency == self.loop
+        assert not fb or argmin.latency + 1 == self.loop
         # Pixels issued and not yet out, their line_start in order, for their cycles (at most every
         # stage's plus the two output buffers' entries).
         depth = argmin.latency + weights.latency + 4
@@ -195,8 +194,7 @@ class LogMachine(wiring.Component):
         if p.feedback_columns:
             pending = Signal(range(argmin.latency + 8))
             m.d.sync += pending.eq(pending + issue - passing)
-            # Known: a line start, no pixel in the tree, or the one there (the predecessor) leaving it now.
-            known = start | (pending == 0) | ((pending == 1) & passing)
+            known = start | (pending == 0)
             fb = self._feedback(m, argmin, passing, start)
             m.d.comb += [into.payload.feedback[r].eq(fb[r]) for r in range(p.rows)]
         else:
@@ -211,11 +209,10 @@ class LogMachine(wiring.Component):
         ]
 
     def _feedback(self, m: Module, argmin: ArgminTree, passing: Signal, start: Signal) -> list[Value]:
-        """Each row's feedback code from the MAP leaving the argmin tree this clock (the table at
+        """Each row's feedback code: a register loaded as a MAP leaves the argmin tree (the table at
         |r − MAP| clamped, the no-match code in the no-match row; 0 when that pixel's answer is no match or
-        every row was excluded), or from a register of those codes loaded as the last MAP left (0 from
-        reset) when none leaves now; read as 0 at a line start. A pixel after its predecessor issues in
-        the clock the predecessor's MAP leaves the tree: the loop is the tree's latency alone."""
+        every row was excluded; 0 from reset), read as 0 at a line start. The register keeps the loop's
+        logic (distances, table) out of the path into the adders."""
         p = self._params
         best = argmin.best.payload
         hit = Signal()
@@ -228,17 +225,15 @@ class LogMachine(wiring.Component):
         out = []
         for r in range(p.rows):
             code = Signal(LOG_CODE_BITS, name=f"feedback{r}")
-            now = Signal(LOG_CODE_BITS, name=f"feedback_now{r}")
             if p.nomatch_row and r == p.rows - 1:
                 value = Const(p.feedback_nomatch_word, LOG_CODE_BITS)
             else:
                 dist = Signal(p.map_width, name=f"distance{r}")
                 m.d.comb += dist.eq(Mux(best.map > r, best.map - r, r - best.map))
                 value = table[Mux(dist > last, last, dist)]
-            m.d.comb += now.eq(Mux(hit, value, 0))
             with m.If(passing):
-                m.d.sync += code.eq(now)
-            out.append(Mux(start, 0, Mux(passing, now, code)))
+                m.d.sync += code.eq(Mux(hit, value, 0))
+            out.append(Mux(start, 0, code))
         return out
 
     def _result(self, m: Module, weights: WeightStage, starts: fifo.SyncFIFO) -> None:
