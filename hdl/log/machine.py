@@ -42,7 +42,7 @@ __all__ = ["ADDER_LEVELS_PER_STAGE", "ARGMIN_LEVELS_PER_STAGE", "LogMachine", "l
 # The log machine's pipeline setting: tree levels between two registers, of the row adders (before the
 # issue point, outside the loop) and of the argmin tree (the loop: the feedback codes' adders, the tree).
 ADDER_LEVELS_PER_STAGE = 1
-ARGMIN_LEVELS_PER_STAGE = 2
+ARGMIN_LEVELS_PER_STAGE = 4
 
 
 def log_params(params: MachineParams) -> LogParams:

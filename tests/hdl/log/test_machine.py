@@ -15,6 +15,7 @@ from bayesmachine.columns import LeftPrior
 from bayesmachine.columns.energy import INFINITE_CODE, log_codes
 from bayesmachine.errors import ParameterError
 from bayesmachine.hdl.log import ArgminTree, log_integrate
+from bayesmachine.hdl.log import machine as log_machine
 from bayesmachine.hdl.log.machine import (
     ARGMIN_LEVELS_PER_STAGE,
     log_params,
@@ -120,10 +121,12 @@ def test_engine_feedback_loop() -> None:
         assert np.array_equal(res.counts[i % 30], want.weights[0])
         prev = -1 if want.nomatch[0] or want.all_excluded[0] else int(want.map[0])
     bound = ArgminTree(params=p, levels_per_stage=ARGMIN_LEVELS_PER_STAGE, feedback=True).latency + 1
-    # 12 rows: the feedback codes' adders and 4 argmin levels, 3 stages at 2 levels per stage; the
+    # 12 rows: the feedback codes' adders and 4 argmin levels, 2 stages at 4 levels per stage; the
     # feedback codes' register: 1. The row adders (before the issue point) are not in the loop.
-    assert pixel_clocks(machine) == (1, bound) == (1, 4)
-    assert got[0].cycles[0] == got[0].cycles[17] == 1 and (np.delete(got[0].cycles, [0, 17]) == 4).all()
+    assert pixel_clocks(machine) == (1, bound) == (1, 3)
+    assert got[0].cycles[0] == got[0].cycles[17] == 1 and (np.delete(got[0].cycles, [0, 17]) == 3).all()
+    # Dmax 80 (82 rows: 7 levels and the adders): 3 clocks, the loop of census and census-lr.
+    assert pixel_clocks(disparity_machine(ModelParams(name="census-lr"), integrator="log")) == (1, 3)
 
 
 def test_engine_refusals() -> None:
@@ -149,7 +152,7 @@ def test_run_cli_log(tmp_path) -> None:
     assert report["pixels"] == 6156
     assert report["machine_bad2"] == pytest.approx(0.15407, abs=1e-4)
     assert report["confidence"]["machine"]["ece"] == pytest.approx(0.13309, abs=1e-4)
-    assert report["cycles_per_pixel_mean"] == pytest.approx(4.9649, abs=1e-3)
+    assert report["cycles_per_pixel_mean"] == pytest.approx(2.9825, abs=1e-3)
     assert (out / "confidence.png").stat().st_size > 0 and (out / "calibration.png").stat().st_size > 0
     assert np.load(out / "result.npz")["counts"].max() == 1024
 
@@ -198,8 +201,9 @@ def test_pysim_equals_the_model(name) -> None:
 def test_pysim_issue_interval_is_the_loop() -> None:
     """Without back-pressure and with one beat per pixel, pixels with a left neighbour issue every
     loop's clocks: the wall cycles of P such pixels grow by loop clocks per pixel."""
-    machine = disparity_machine(ModelParams(name="census", dmax=2), integrator="log", word_bits=8)
-    assert machine.beats_per_pixel == 1
+    machine = disparity_machine(ModelParams(name="census", dmax=10), integrator="log", word_bits=8)
+    machine = dataclasses.replace(machine, words_per_beat=machine.words_per_pixel)
+    assert machine.beats_per_pixel == 1 and pixel_clocks(machine)[1] > 1
     codes = np.zeros((40, machine.rows, machine.loaded_columns), np.int64)
     walls = []
     for pixels in (20, 40):
@@ -214,9 +218,8 @@ def test_pysim_wall_cycles_are_pixel_wall_cycles(words_per_beat: int | None) -> 
     """Fed without stalls, the machine's wall cycles grow per pixel by :func:`pixel_wall_cycles` of the
     pixels' cycles: the loop where the loading is shorter (one beat), the beats where they are longer
     (one word per beat), lines of 5 pixels (their first pixels issue without the loop)."""
-    machine = disparity_machine(ModelParams(name="census", dmax=2), integrator="log", word_bits=8)
-    if words_per_beat is not None:
-        machine = dataclasses.replace(machine, words_per_beat=words_per_beat)
+    machine = disparity_machine(ModelParams(name="census", dmax=10), integrator="log", word_bits=8)
+    machine = dataclasses.replace(machine, words_per_beat=words_per_beat or machine.words_per_pixel)
     loop = pixel_clocks(machine)[1]
     assert (machine.beats_per_pixel < loop) == (words_per_beat is None)
     line_start = np.arange(40) % 5 == 0
@@ -237,10 +240,12 @@ def _pysim_walls(machine: MachineParams, line_start: np.ndarray) -> tuple[int, n
     return walls[1] - walls[0], pixel_wall_cycles(machine, cycles[20:])
 
 
-def test_pysim_wall_cycles_between_one_beat_and_the_loop() -> None:
+def test_pysim_wall_cycles_between_one_beat_and_the_loop(monkeypatch: pytest.MonkeyPatch) -> None:
     """With more than one beat per pixel but fewer than the loop's clocks pixel_wall_cycles is exact
     where every pixel has the loop's clocks, and an upper bound with lines of 5 pixels: a line's first
-    pixel, loaded into the row adders during the loops before it, issues sooner."""
+    pixel, loaded into the row adders during the loops before it, issues sooner. (At 1 argmin level
+    per stage: a loop of 6 clocks at Dmax 10, room for 2 to 5 beats.)"""
+    monkeypatch.setattr(log_machine, "ARGMIN_LEVELS_PER_STAGE", 1)
     machine = disparity_machine(ModelParams(name="census", dmax=10), integrator="log", word_bits=8)
     loop = pixel_clocks(machine)[1]
     machine = dataclasses.replace(machine, words_per_beat=-(-machine.words_per_pixel // (loop - 1)))
