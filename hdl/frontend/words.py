@@ -144,8 +144,11 @@ class WordGenerator(wiring.Component):
     stream for ``beats_per_pixel`` cycles (more if ``beats`` is not ready, or while a lane builder
     holds it: an ABOVE column until the result above has left the machine, a PASS column until the
     MAP it reads is in). A fused column's pass scans an output pixel's beats before its words issue, the
-    next pixel's scan beside the current one's issues: the stream's pixel waits in a register for its scan
-    (``beats_per_pixel`` + 6 cycles: ``Lanes.scan_latency``) and then for the previous pixel's last issue.
+    next pixels' scans beside the current one's issues: the stream's pixels wait in a ring of registers
+    for their scans (``beats_per_pixel`` + 6 cycles: ``Lanes.scan_latency``) and then for the previous
+    pixel's last issue; its ``pixel.ready`` is that of the ring (a free slot) and of the scan (an output
+    pixel's scan starts in the cycle of the previous one's last fetch), so in steady state an output pixel
+    is taken every ``beats_per_pixel`` cycles.
 
     Parameters
     ----------
