@@ -38,7 +38,7 @@ from bayesmachine.checks import as_bool, as_int
 from bayesmachine.columns import Source
 from bayesmachine.hdl.signatures import load_stream
 from bayesmachine.models import ModelParams, Pass, check_disparity_machine, pass_machine
-from bayesmachine.params import MachineParams, ParameterError, stereo_words_per_beat
+from bayesmachine.params import MachineParams, ParameterError
 from bayesmachine.sources import source_kind
 
 from .lanes import Lanes, lanes_for
@@ -113,13 +113,16 @@ def check_frontend_params(params: MachineParams, model: ModelParams) -> None:
 
 def pass_params(model: ModelParams, params: MachineParams, name: str) -> MachineParams:
     """The machine on chip of ``model``'s pass ``name`` when its own pass runs on ``params``: ``params``
-    for the own pass; for a declared one :func:`~bayesmachine.models.pass_machine` with the front end's
-    words per beat (:func:`~bayesmachine.params.stereo_words_per_beat`; they change no result)."""
+    for the own pass; for a declared one :func:`~bayesmachine.models.pass_machine` with the own pass's
+    rows per beat (``params.words_per_beat // params.loaded_columns``, at most the pass's rows) times its
+    loaded columns, so that every pass takes a pixel in as many beats (the default: the front end's 6 rows,
+    :func:`~bayesmachine.params.stereo_words_per_beat`; words per beat change no result)."""
     p = model.pass_named(name)
     if p is model.passes[-1]:
         return params
     machine = pass_machine(model, params, name)
-    return dataclasses.replace(machine, words_per_beat=stereo_words_per_beat(machine))
+    rows = max(1, min(params.words_per_beat // params.loaded_columns, machine.rows))
+    return dataclasses.replace(machine, words_per_beat=rows * machine.loaded_columns)
 
 
 def _check_output_columns(p: Pass, output_columns: object) -> int | None:
