@@ -21,14 +21,23 @@ from __future__ import annotations
 
 from typing import Any
 
-from amaranth.hdl import Array, Const, Module, Mux, Signal, Value, signed, unsigned
+from amaranth.hdl import Const, Module, Mux, Signal, Value, signed, unsigned
 from amaranth.lib import memory
 
 from bayesmachine.hdl.signatures import beat_words
 
 from .tables import LoadForm
 
-__all__ = ["WordNets"]
+__all__ = ["WordNets", "pick"]
+
+
+def pick(values: list[Value], index: Value) -> Value:
+    """``values[index]``, by a chain of multiplexers (``index`` < ``len(values)``; a complete choice where an
+    indexed ``Array`` of a length not a power of two would be an incomplete case)."""
+    out = values[-1]
+    for k in reversed(range(len(values) - 1)):
+        out = Mux(index == k, values[k], out)
+    return out
 
 
 class WordNets:
@@ -120,27 +129,36 @@ class WordNets:
         self.fed_take = Signal()
         self.pixel = Signal(self.fed.shape(), name="held_pixel")
         self.scan_pixel = Signal(self.fed.shape(), name="scan_pixel", reset_less=True)  # being scanned
-        held = [Signal(self.fed.shape(), name=f"held_pixel{k}", reset_less=True) for k in range(self.slots)]
-        self.busy = Signal(self.slots)  # a slot holds a pixel, or its scan's results
-        self.waiting = Signal(self.slots)  # a slot's pixel is not taken yet
-        self.scanned = Signal(self.slots)  # and its scan is done (or it has no words)
         self.feed_slot = Signal(range(self.slots))  # the slot a pixel from the stream goes to
         self.take_slot = Signal(range(self.slots))
         self.issue_slot = Signal(range(self.slots))
-        m.d.comb += self.pixel.eq(Array(h.as_value() for h in held)[self.take_slot])
+        self.busy = [Signal(name=f"slot_busy{k}") for k in range(self.slots)]  # a pixel or its results
+        self.waiting = [Signal(name=f"slot_waiting{k}") for k in range(self.slots)]  # its pixel not taken
+        self.scanned = [Signal(name=f"slot_scanned{k}") for k in range(self.slots)]  # (or it has no words)
+        held = [Signal(self.fed.shape(), name=f"held_pixel{k}", reset_less=True) for k in range(self.slots)]
+        m.d.comb += self.pixel.eq(pick([h.as_value() for h in held], self.take_slot))
+        for k in range(self.slots):
+            self._slot(k, held[k])
         with m.If(self.take):
-            m.d.sync += [self.waiting.bit_select(self.take_slot, 1).eq(0), self._next(self.take_slot)]
+            m.d.sync += self._next(self.take_slot)
             with m.If(self.pixel.output):
                 m.d.sync += self.issue_slot.eq(self.take_slot)
-            with m.Else():
-                m.d.sync += self.busy.bit_select(self.take_slot, 1).eq(0)
-        with m.If(self._last_issue):
-            m.d.sync += self.busy.bit_select(self.issue_slot, 1).eq(0)
-        with m.If(self.fed_take):  # into a free slot: neither the one taken nor the one issued
-            slot = self.feed_slot
-            m.d.sync += [self.busy.bit_select(slot, 1).eq(1), self.waiting.bit_select(slot, 1).eq(1),
-                         self.scanned.bit_select(slot, 1).eq(~self.fed.output), self.scan_pixel.eq(self.fed),
-                         Array(h.as_value() for h in held)[slot].eq(self.fed.as_value()), self._next(slot)]
+        with m.If(self.fed_take):
+            m.d.sync += [self.scan_pixel.eq(self.fed), self._next(self.feed_slot)]
+
+    def _slot(self, k: int, held: Any) -> None:
+        """Slot k's flags and pixel (a pixel from the stream goes to a free slot, so a slot is never both
+        freed and filled in one cycle)."""
+        m = self.m
+        with m.If(self.take & (self.take_slot == k)):
+            m.d.sync += self.waiting[k].eq(0)
+            with m.If(~self.pixel.output):
+                m.d.sync += self.busy[k].eq(0)
+        with m.If(self._last_issue & (self.issue_slot == k)):
+            m.d.sync += self.busy[k].eq(0)
+        with m.If(self.fed_take & (self.feed_slot == k)):
+            m.d.sync += [self.busy[k].eq(1), self.waiting[k].eq(1), self.scanned[k].eq(~self.fed.output),
+                         held.eq(self.fed)]
 
     def _next(self, slot: Signal) -> Any:
         """``slot`` to the next slot of the ring."""
@@ -152,10 +170,9 @@ class WordNets:
         of the ring (a free slot) and of the scan (idle, or fetching a pixel's last beat)."""
         if not self.scan_latency:
             return ready
-        slot = self.take_slot
-        ripe = self.waiting.bit_select(slot, 1) & self.scanned.bit_select(slot, 1)
+        ripe = pick(self.waiting, self.take_slot) & pick(self.scanned, self.take_slot)
         self.m.d.comb += self.take.eq(ripe & ready)
-        return ~self.busy.bit_select(self.feed_slot, 1) & (~self.fetch | self._fetch_last)
+        return ~pick(self.busy, self.feed_slot) & (~self.fetch | self._fetch_last)
 
     def _pipeline(self) -> None:
         """The beat counter and the valid flags of the four steps."""
@@ -208,8 +225,9 @@ class WordNets:
             slot_q = Signal.like(self.fetch_slot, name=f"scan_slot{k}")
             m.d.sync += [done_q.eq(done), slot_q.eq(slot)]
             done, slot = done_q, slot_q
-        with m.If(done):
-            m.d.sync += self.scanned.bit_select(slot, 1).eq(1)
+        for k, scanned in enumerate(self.scanned):
+            with m.If(done & (slot == k)):
+                m.d.sync += scanned.eq(1)
         with m.If(self.fetch):
             m.d.sync += self.fetch_beat.eq(self.fetch_beat + 1)
             with m.If(self._fetch_last):

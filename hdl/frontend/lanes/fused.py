@@ -20,11 +20,12 @@ from __future__ import annotations
 
 from typing import Any
 
-from amaranth.hdl import Array, Cat, Const, Mux, Signal, Value, unsigned
+from amaranth.hdl import Cat, Const, Mux, Signal, Value, unsigned
 from amaranth.lib import data, memory
 
 from bayesmachine.columns import Fused
 
+from ..nets import pick
 from .base import Lanes, PlaneFilter, lanes_for, register
 
 __all__ = ["FusedLanes"]
@@ -150,8 +151,9 @@ class FusedLanes(Lanes):
                          for k in range(n.slots)]
         with m.If(fetched):
             m.d.sync += running.eq(least)
-            with m.If(beat == n.n_beats - 1):
-                m.d.sync += [Array(self._mins)[slot].eq(least), Array(self._nm_sums)[slot].eq(nm_sum)]
+            for k, (low_k, nm_k) in enumerate(zip(self._mins, self._nm_sums, strict=True)):
+                with m.If((beat == n.n_beats - 1) & (slot == k)):
+                    m.d.sync += [low_k.eq(least), nm_k.eq(nm_sum)]
 
     def _hand_over(self, width: int) -> None:
         """The minimum and the no-match sum of the pixel the lanes take into the registers its issues read
@@ -160,8 +162,8 @@ class FusedLanes(Lanes):
         self._min = Signal(unsigned(width), name="fused_min", reset_less=True)
         self._nm_sum = Signal(unsigned(width), name="fused_nm_sum", reset_less=True)
         with n.m.If(n.take):
-            n.m.d.sync += [self._min.eq(Array(self._mins)[n.take_slot]),
-                           self._nm_sum.eq(Array(self._nm_sums)[n.take_slot])]
+            n.m.d.sync += [self._min.eq(pick(self._mins, n.take_slot)),
+                           self._nm_sum.eq(pick(self._nm_sums, n.take_slot))]
 
     def _words_out(self, width: int) -> None:
         """At each issue, each lane row's sum (the issued slot's entry of the beat) minus the minimum,
