@@ -332,7 +332,8 @@ add_option(MachineOption("smtj_share", "--smtj-share",
 add_option(MachineOption("words_per_beat", "--words-per-beat",
                          f"likelihood-memory words per load beat (default {DEFAULT_WORDS_PER_BEAT}, "
                          f"or one pixel's words if fewer; {STEREO_ROWS_PER_BEAT} rows' words with the "
-                         "front end: --feed pixels, --top stereo)", metavar="N"))
+                         "front end: --feed pixels, --top stereo; census-lr's right pass takes as many "
+                         "rows per beat)", metavar="N"))
 
 
 def refuse_log_integrator(machine: MachineParams, command: str) -> None:

@@ -464,8 +464,9 @@ def disparity_machine(model: ModelParams, **machine_kwargs: Any) -> MachineParam
                 f"prior: the {model.name} model's neighbour prior needs the machine's prior 'neighbour' "
                 f"(its own feedback column and a loaded above column), not {given!r}; leave prior out, or "
                 "turn neighbour_prior off", "prior")
-        # The other fields first, validated as usual (their errors name them), for the word width.
-        own = ("prior", "feedback_words", "feedback_nomatch_word")
+        # The other fields first, validated as usual (their errors name them), for the word width; not
+        # the words per beat, which count the loaded above column this probe does not have.
+        own = ("prior", "feedback_words", "feedback_nomatch_word", "words_per_beat")
         rest = {k: v for k, v in kwargs.items() if k not in own}
         if rest.get("max_cycles") is None and model.definition.watchdog_runs is not None:
             rest["max_cycles"] = (1 << 32) - 1  # the model's watchdog comes below

@@ -82,6 +82,12 @@ def test_disparity_machine_builds_the_model_s_machine():
     with pytest.raises(ParameterError, match="^prior: 'neighbour'"):
         disparity_machine(paper, prior="neighbour")
     assert disparity_machine(census, prior="neighbour", words_per_beat=7).words_per_beat == 7
+    # A pixel's words in one beat: the loaded above column counts (the probe for the word width without
+    # it refused more than the data columns' words, 328 here).
+    whole = disparity_machine(census, words_per_beat=410)
+    assert (whole.words_per_pixel, whole.beats_per_pixel) == (410, 1)
+    with pytest.raises(ParameterError, match=r"^words_per_beat \(411\) exceeds the words per pixel \(410\)"):
+        disparity_machine(census, words_per_beat=411)
 
 
 def test_machine_checks_are_one_function():

@@ -28,7 +28,16 @@ from bayesmachine.hdl.signatures import beat_words
 
 from .tables import LoadForm
 
-__all__ = ["WordNets"]
+__all__ = ["WordNets", "pick"]
+
+
+def pick(values: list[Value], index: Value) -> Value:
+    """``values[index]``, by a chain of multiplexers (``index`` < ``len(values)``; a complete choice where an
+    indexed ``Array`` of a length not a power of two would be an incomplete case)."""
+    out = values[-1]
+    for k in reversed(range(len(values) - 1)):
+        out = Mux(index == k, values[k], out)
+    return out
 
 
 class WordNets:
@@ -39,7 +48,8 @@ class WordNets:
     cost's clamped absolute value into the address register, the table read (:meth:`table`), the beat
     on the stream (:meth:`aligned` carries a value of the issue's cycle along). ``take``: the lanes take
     a pixel (``pixel``); ``fed_take``: the stream's pixel (``fed``) is taken, the same but in a pass that
-    scans (:meth:`_hold`); ``left``: its reference features; :meth:`entry`: a lane's match features.
+    scans (:meth:`_queue`, :meth:`_scan`); ``left``: its reference features; :meth:`entry`: a lane's match
+    features.
 
     Attributes
     ----------
@@ -52,7 +62,8 @@ class WordNets:
     pixel, beats : View
         The pixel the lanes take and the load stream's payload.
     fed : View
-        The pixel stream's payload (``pixel`` unless the pass scans: then ``pixel`` is its register).
+        The pixel stream's payload (``pixel`` unless the pass scans: then ``pixel`` is the oldest pixel
+        of the ring the lanes have not taken, :meth:`_queue`).
     form : LoadForm
         What the machine loads (its integrator's: words or energy codes).
     dmax, rows_per_beat, n_beats, one, zero : int
@@ -63,6 +74,9 @@ class WordNets:
         Writing the words of an output pixel (``beat`` counts its beats).
     left : Signal
         The reference features of the pixel taken from the stream (its ``left`` field).
+    slots, scan_pixel, fetch, fetch_beat, fetch_slot, take_slot, issue_slot : int, View, Signal
+        A pass that scans: its ring of ``slots`` pixels (:meth:`_queue`), the pixel being scanned, the
+        fetch (:meth:`_scan`), the slots of the pixel fetched, taken next and issued.
     """
 
     def __init__(self, m: Module, gen: Any, scan_latency: int = 0) -> None:
@@ -90,8 +104,9 @@ class WordNets:
         self.scan_latency = scan_latency
         # The pixel stream's take and payload: the delay line's, the reference features', a scan's.
         self.fed, self.fed_take = self.pixel, self.take
+        self._last_issue = Signal()  # the issue of an output pixel's last beat
         if scan_latency:
-            self._hold()
+            self._queue()
         self._pipeline()
         if scan_latency:
             self._scan()
@@ -100,28 +115,64 @@ class WordNets:
         self.free = ~self.active | self._last_issue
         self._delay_line(side)
 
-    def _hold(self) -> None:
-        """A pass that scans (:meth:`_scan`): the pixel taken from the stream (``fed_take``) waits in a
-        register (``pixel``, ``held``) while its beats are scanned, and is taken by the lanes (``take``)
-        when its scan is done (``scanned``) and the previous pixel's words have issued (:meth:`accept`),
-        so the next pixel's scan runs while this one's words issue."""
+    def _queue(self) -> None:
+        """A pass that scans (:meth:`_scan`): the pixels taken from the stream (``fed_take``) wait in a ring
+        of ``slots`` registers, in order, for their scans and for the lanes (``take``, the slot
+        ``take_slot``: the oldest pixel not taken, once its scan is done and the previous pixel's words
+        have issued, :meth:`accept`). A slot is free again when its pixel is taken, or for an output
+        pixel after its last issue (its scan's results in the slot, ``issue_slot``, are read until
+        then); so the scans run up to ``slots`` - 1 pixels ahead of the issues, enough for a pixel every
+        ``beats_per_pixel`` cycles (the slot of a pixel taken at its stream take T is free from
+        T + 2·beats_per_pixel + scan_latency + 1 on)."""
         m = self.m
+        self.slots = 2 + -(-(self.scan_latency + 1) // self.n_beats)
         self.fed_take = Signal()
-        self.pixel = Signal(self.fed.shape(), name="held_pixel", reset_less=True)
-        self.held = Signal()  # a pixel waits in ``pixel``
-        self.scanned = Signal()  # and its scan is done (or it has no words)
+        self.pixel = Signal(self.fed.shape(), name="held_pixel")
+        self.scan_pixel = Signal(self.fed.shape(), name="scan_pixel", reset_less=True)  # being scanned
+        self.feed_slot = Signal(range(self.slots))  # the slot a pixel from the stream goes to
+        self.take_slot = Signal(range(self.slots))
+        self.issue_slot = Signal(range(self.slots))
+        self.busy = [Signal(name=f"slot_busy{k}") for k in range(self.slots)]  # a pixel or its results
+        self.waiting = [Signal(name=f"slot_waiting{k}") for k in range(self.slots)]  # its pixel not taken
+        self.scanned = [Signal(name=f"slot_scanned{k}") for k in range(self.slots)]  # (or it has no words)
+        held = [Signal(self.fed.shape(), name=f"held_pixel{k}", reset_less=True) for k in range(self.slots)]
+        m.d.comb += self.pixel.eq(pick([h.as_value() for h in held], self.take_slot))
+        for k in range(self.slots):
+            self._slot(k, held[k])
         with m.If(self.take):
-            m.d.sync += self.held.eq(0)
-        with m.If(self.fed_take):  # the last assignment wins: a pixel taken as the held one leaves
-            m.d.sync += [self.held.eq(1), self.pixel.eq(self.fed), self.scanned.eq(~self.fed.output)]
+            m.d.sync += self._next(self.take_slot)
+            with m.If(self.pixel.output):
+                m.d.sync += self.issue_slot.eq(self.take_slot)
+        with m.If(self.fed_take):
+            m.d.sync += [self.scan_pixel.eq(self.fed), self._next(self.feed_slot)]
+
+    def _slot(self, k: int, held: Any) -> None:
+        """Slot k's flags and pixel (a pixel from the stream goes to a free slot, so a slot is never both
+        freed and filled in one cycle)."""
+        m = self.m
+        with m.If(self.take & (self.take_slot == k)):
+            m.d.sync += self.waiting[k].eq(0)
+            with m.If(~self.pixel.output):
+                m.d.sync += self.busy[k].eq(0)
+        with m.If(self._last_issue & (self.issue_slot == k)):
+            m.d.sync += self.busy[k].eq(0)
+        with m.If(self.fed_take & (self.feed_slot == k)):
+            m.d.sync += [self.busy[k].eq(1), self.waiting[k].eq(1), self.scanned[k].eq(~self.fed.output),
+                         held.eq(self.fed)]
+
+    def _next(self, slot: Signal) -> Any:
+        """``slot`` to the next slot of the ring."""
+        return slot.eq(Mux(slot == self.slots - 1, 0, slot + 1))
 
     def accept(self, ready: Value) -> Value:
         """The pixel stream's ``ready``, given ``ready``: the lanes may take a pixel (``free`` and each
-        lane builder's ``ready``); in a pass that scans it drives ``take``."""
+        lane builder's ``ready``); in a pass that scans it drives ``take``, and the stream's ready is that
+        of the ring (a free slot) and of the scan (idle, or fetching a pixel's last beat)."""
         if not self.scan_latency:
             return ready
-        self.m.d.comb += self.take.eq(self.held & self.scanned & ready)
-        return ~self.held | self.take
+        ripe = pick(self.waiting, self.take_slot) & pick(self.scanned, self.take_slot)
+        self.m.d.comb += self.take.eq(ripe & ready)
+        return ~pick(self.busy, self.feed_slot) & (~self.fetch | self._fetch_last)
 
     def _pipeline(self) -> None:
         """The beat counter and the valid flags of the four steps."""
@@ -137,7 +188,7 @@ class WordNets:
         m.d.comb += [self.advance.eq(~out.valid | out.ready), self.issue.eq(active & self.advance),
                      self.fed_take.eq(self.generator.pixel.valid & self.generator.pixel.ready)]
         last = self.beat == n_beats - 1
-        self._last_issue = self.issue & last
+        m.d.comb += self._last_issue.eq(self.issue & last)
         with m.If(self.advance):
             m.d.sync += [diff_valid.eq(self.issue), beat_d.eq(self.beat), addr_valid.eq(diff_valid),
                          beat_a.eq(beat_d), out.valid.eq(addr_valid), self.beat_q.eq(beat_a)]
@@ -151,32 +202,38 @@ class WordNets:
             if not self.scan_latency:
                 with m.If(self.pixel.output):
                     m.d.sync += [active.eq(1), self.beat.eq(0)]
-        if self.scan_latency:  # the lanes take the scanned pixel (_hold)
+        if self.scan_latency:  # the lanes take the scanned pixel (_queue)
             with m.If(self.take & self.pixel.output):
                 m.d.sync += [active.eq(1), self.beat.eq(0)]
 
     def _scan(self) -> None:
         """A pass whose words need every row of the pixel first (a fused column's smallest sum): an output
-        pixel's take from the stream starts its scan, a fetch (``fetch``, beat ``fetch_beat``: the delay
-        line's entries) each cycle, whatever the stream does; ``scan_latency`` cycles after the last fetch
-        (what a fetch's results need to be complete) the pixel is ``scanned``."""
+        pixel's take from the stream starts its scan, a fetch (``fetch``, beat ``fetch_beat``, of the slot
+        ``fetch_slot``: the delay line's entries) each cycle, whatever the stream does; the next pixel's
+        take from the stream waits for the last fetch (:meth:`accept`), so the scans follow each other
+        back to back. ``scan_latency`` cycles after the last fetch (what a fetch's results need to be
+        complete) the slot's pixel is ``scanned``."""
         m, n_beats = self.m, self.n_beats
         self.fetch = Signal()  # scanning: one fetch a cycle
         self.fetch_beat = Signal(range(max(2, n_beats)))
-        done = Signal()
-        m.d.comb += done.eq(self.fetch & (self.fetch_beat == n_beats - 1))
-        waits = [done]
-        for k in range(self.scan_latency - 1):  # scanned, scan_latency cycles after done
-            waits.append(Signal(name=f"scan_wait{k}"))
-            m.d.sync += waits[-1].eq(waits[-2])
-        with m.If(waits[-1]):
-            m.d.sync += self.scanned.eq(1)
+        self.fetch_slot = Signal(range(self.slots))
+        self._fetch_last = Signal()
+        m.d.comb += self._fetch_last.eq(self.fetch & (self.fetch_beat == n_beats - 1))
+        done, slot = self._fetch_last, self.fetch_slot
+        for k in range(self.scan_latency - 1):  # scanned, scan_latency cycles after the last fetch
+            done_q = Signal(name=f"scan_done{k}")
+            slot_q = Signal.like(self.fetch_slot, name=f"scan_slot{k}")
+            m.d.sync += [done_q.eq(done), slot_q.eq(slot)]
+            done, slot = done_q, slot_q
+        for k, scanned in enumerate(self.scanned):
+            with m.If(done & (slot == k)):
+                m.d.sync += scanned.eq(1)
         with m.If(self.fetch):
             m.d.sync += self.fetch_beat.eq(self.fetch_beat + 1)
-            with m.If(done):
+            with m.If(self._fetch_last):
                 m.d.sync += [self.fetch.eq(0), self.fetch_beat.eq(0)]
         with m.If(self.fed_take & self.fed.output):
-            m.d.sync += [self.fetch.eq(1), self.fetch_beat.eq(0)]
+            m.d.sync += [self.fetch.eq(1), self.fetch_beat.eq(0), self.fetch_slot.eq(self.feed_slot)]
 
     def _delay_line(self, side: Any) -> None:
         """The match features of the last pixels: pixel t (the t-th taken) at address t mod N of a

@@ -55,8 +55,8 @@ class Reference:
 
     def match_ok(self, nets: Any, row: Value, scanned: bool = False) -> Value | None:
         """Whether row ``row`` (<= Dmax) of the pixel taken has a match pixel (None: always); ``scanned``:
-        of the pixel being scanned instead (``nets.pixel`` while it waits for the lanes:
-        ``WordNets._hold``)."""
+        of the pixel being scanned instead (``nets.scan_pixel``, in the cycles of its fetches:
+        ``WordNets._scan``)."""
         return None
 
 
@@ -84,7 +84,7 @@ class RightReference(Reference):
 
     def match_ok(self, nets: Any, row: Value, scanned: bool = False) -> Value | None:
         if scanned:
-            return row + nets.pixel.flush <= nets.dmax
+            return row + nets.scan_pixel.flush <= nets.dmax
         if not hasattr(self, "_flush"):
             self._flush = nets.at_take(nets.pixel.flush, "flush")
         return row + self._flush <= nets.dmax

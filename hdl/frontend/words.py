@@ -38,7 +38,7 @@ from bayesmachine.checks import as_bool, as_int
 from bayesmachine.columns import Source
 from bayesmachine.hdl.signatures import load_stream
 from bayesmachine.models import ModelParams, Pass, check_disparity_machine, pass_machine
-from bayesmachine.params import MachineParams, ParameterError, stereo_words_per_beat
+from bayesmachine.params import MachineParams, ParameterError
 from bayesmachine.sources import source_kind
 
 from .lanes import Lanes, lanes_for
@@ -113,13 +113,16 @@ def check_frontend_params(params: MachineParams, model: ModelParams) -> None:
 
 def pass_params(model: ModelParams, params: MachineParams, name: str) -> MachineParams:
     """The machine on chip of ``model``'s pass ``name`` when its own pass runs on ``params``: ``params``
-    for the own pass; for a declared one :func:`~bayesmachine.models.pass_machine` with the front end's
-    words per beat (:func:`~bayesmachine.params.stereo_words_per_beat`; they change no result)."""
+    for the own pass; for a declared one :func:`~bayesmachine.models.pass_machine` with the own pass's
+    rows per beat (``params.words_per_beat // params.loaded_columns``, at most the pass's rows) times its
+    loaded columns, so that every pass takes a pixel in as many beats (the default: the front end's 6 rows,
+    :func:`~bayesmachine.params.stereo_words_per_beat`; words per beat change no result)."""
     p = model.pass_named(name)
     if p is model.passes[-1]:
         return params
     machine = pass_machine(model, params, name)
-    return dataclasses.replace(machine, words_per_beat=stereo_words_per_beat(machine))
+    rows = max(1, min(params.words_per_beat // params.loaded_columns, machine.rows))
+    return dataclasses.replace(machine, words_per_beat=rows * machine.loaded_columns)
 
 
 def _check_output_columns(p: Pass, output_columns: object) -> int | None:
@@ -144,8 +147,11 @@ class WordGenerator(wiring.Component):
     stream for ``beats_per_pixel`` cycles (more if ``beats`` is not ready, or while a lane builder
     holds it: an ABOVE column until the result above has left the machine, a PASS column until the
     MAP it reads is in). A fused column's pass scans an output pixel's beats before its words issue, the
-    next pixel's scan beside the current one's issues: the stream's pixel waits in a register for its scan
-    (``beats_per_pixel`` + 6 cycles: ``Lanes.scan_latency``) and then for the previous pixel's last issue.
+    next pixels' scans beside the current one's issues: the stream's pixels wait in a ring of registers
+    for their scans (``beats_per_pixel`` + 6 cycles: ``Lanes.scan_latency``) and then for the previous
+    pixel's last issue; its ``pixel.ready`` is that of the ring (a free slot) and of the scan (an output
+    pixel's scan starts in the cycle of the previous one's last fetch), so in steady state an output pixel
+    is taken every ``beats_per_pixel`` cycles.
 
     Parameters
     ----------

@@ -3,25 +3,29 @@ sums per row, the pixel's smallest sum, and the exp table back to words (the rul
 ``bayesmachine.columns.fused``; docs/architecture.md, "The fused column").
 
 A word needs the pixel's smallest sum, so the word generator scans the pixel's beats first
-(``WordNets.fetch``, one beat of delay-line entries a cycle, whatever the stream does): each lane row's
+(``WordNets.fetch``, one beat of delay-line entries a cycle, whatever the stream does, the pixels' scans
+back to back, each into the pixel's slot of the generator's ring, ``WordNets._queue``): each lane row's
 member costs (the members' own lane builders' ``costs``) are read in their energy tables (block RAM,
-three cycles: cost, address, read), added (a register), kept per row in a register, and the beat's
-minimum (a tree of compares, a register) folded into a running minimum (the no-match row's sum first,
-when the pass's no-match row can win). When the lanes take the scanned
-pixel its sums, minimum and no-match sum move into a second set of registers, from which its beats are
-issued as any pass's while the next pixel's scan fills the first: each lane's sum minus the minimum is
-the address of the exp table X (clamped to its last entry, 0), and the no-match row's word the same at
-the no-match sum.
+three cycles: cost, address, read), added (a register), kept in the slot's entry of the beat (a
+memory of slots × beats entries of a beat's row sums: distributed RAM), and the beat's minimum (a tree
+of compares, a register) folded into a running minimum (the no-match row's sum first, when the pass's
+no-match row can win), at the last beat into the slot's minimum. When the lanes take the scanned pixel
+its minimum and no-match sum move into the registers its issues read, and its beats are issued as any
+pass's from its slot's entries while the next pixels' scans fill other slots: each lane's sum minus the
+minimum is the address of the exp table X (clamped to its last entry, 0), and the no-match row's word
+the same at the no-match sum.
 """
 
 from __future__ import annotations
 
 from typing import Any
 
-from amaranth.hdl import Const, Mux, Signal, Value, unsigned
+from amaranth.hdl import Cat, Const, Mux, Signal, Value, unsigned
+from amaranth.lib import data, memory
 
 from bayesmachine.columns import Fused
 
+from ..nets import pick
 from .base import Lanes, PlaneFilter, lanes_for, register
 
 __all__ = ["FusedLanes"]
@@ -58,15 +62,18 @@ class FusedLanes(Lanes):
         rule = n.pass_.model.nomatch
         sums = self._member_sums()
         width = self._sum_bits()
-        # The no-match row's sum: the rule's code at the reference pixel's |gV| (stable from the take on)
-        # plus the other members' no-match codes.
+        # The no-match row's sum: the rule's code at the reference pixel's |gV| (three cycles after the
+        # take from the stream, beside beat 0's member codes) plus the other members' no-match codes.
         rule_code = n.lookup("nomatch_energy", n.tables["nomatch_energy"],
                              [getattr(n.left, rule.plane)], en=Const(1), bits=self._bits("nomatch_energy"))[0]
         extra = sum(int(m.nomatch_entry(e)) for m, e in zip(t.members[1:], t.energies()[1:], strict=True))
         self._scan_nm = Signal(unsigned(width), name="fused_scan_nm_sum")
         n.m.d.comb += self._scan_nm.eq(rule_code + extra)
         self._live = n.pass_.nomatch and not any(c.zeroes_nomatch for c in n.pass_.columns)
-        self._store_and_min(sums, width)
+        # Each fetch's flag, beat and slot, 1 .. 5 cycles later (element k: k + 1), for the steps after it.
+        self._steps = [self._delayed(v, 5, f"fused_{name}") for v, name in
+                       ((n.fetch, "fetched"), (n.fetch_beat, "beat"), (n.fetch_slot, "slot"))]
+        self._scan_min(self._store(sums, width), width)
         self._hand_over(width)
         self._words_out(width)
 
@@ -101,60 +108,71 @@ class FusedLanes(Lanes):
             out.append(reg)
         return out
 
-    def _store_and_min(self, sums: list[Value], width: int) -> None:
+    def _store(self, sums: list[Value], width: int) -> list[Signal]:
         """A fetched beat's row sums into a register three cycles after its fetch (a row without a match
-        pixel as the largest sum), each into its row's register and the beat's minimum (a tree of
-        compares) the cycle after, and that into the running minimum the next (the no-match sum first at
-        beat 0 when it can win)."""
+        pixel, flagged at its fetch, as the largest sum), and into the slot's row sums (distributed RAM,
+        a beat an entry) the cycle after."""
         n = self.nets
         m, rows, dmax = n.m, n.rows_per_beat, n.dmax
-        fetched = self._delayed(n.fetch, 5, "fused_fetched")
-        beat = self._delayed(n.fetch_beat, 5, "fused_beat")
         top = (1 << width) - 1
-        self._scan_rows = [Signal(unsigned(width), name=f"fused_scan_sum{r}", reset_less=True)
-                           for r in range(dmax + 1)]
-        self._scan_min = Signal(unsigned(width), name="fused_scan_min", reset_less=True)
+        kept = []
+        for j in range(rows):
+            row = n.fetch_beat * rows + j
+            match = n.reference.match_ok(n, row, scanned=True)
+            ok = row <= dmax if match is None else (row <= dmax) & match
+            kept.append(self._delayed(ok, 3, f"fused_kept{j}")[-1])
         sums_q = [Signal(unsigned(width), name=f"fused_beat_sum{j}", reset_less=True) for j in range(rows)]
-        for j, (s, q) in enumerate(zip(sums, sums_q, strict=True)):
-            ok = beat[2] * rows + j <= dmax
-            match = n.reference.match_ok(n, beat[2] * rows + j, scanned=True)
-            m.d.sync += q.eq(Mux(ok if match is None else ok & match, s, top))
+        m.d.sync += [q.eq(Mux(k, s, top)) for q, k, s in zip(sums_q, kept, sums, strict=True)]
+        fetched, beat, slot = (steps[3] for steps in self._steps)
+        self._sums = memory.Memory(shape=data.ArrayLayout(unsigned(width), rows),
+                                   depth=n.slots << len(n.fetch_beat), init=[])
+        m.submodules.fused_sums = self._sums
+        write = self._sums.write_port()
+        m.d.comb += [write.en.eq(fetched), write.addr.eq(Cat(beat, slot)), write.data.eq(Cat(*sums_q))]
+        return sums_q
+
+    def _scan_min(self, sums_q: list[Signal], width: int) -> None:
+        """The beat's minimum (a tree of compares) into a register, four cycles after its fetch, and that
+        into the running minimum the next (the no-match sum first at beat 0 when it can win, carried
+        beside beat 0's sums); at the pixel's last beat the minimum and the no-match sum into its
+        slot's registers."""
+        n = self.nets
+        m = n.m
+        top = (1 << width) - 1
+        fetched, beat, slot = (steps[4] for steps in self._steps)
+        nm_sum = self._delayed(self._scan_nm, 2, "fused_scan_nm")[-1]
         beat_min = Signal(unsigned(width), name="fused_beat_min", reset_less=True)
         m.d.sync += beat_min.eq(_smallest(list(sums_q)))
-        with m.If(fetched[3]):
-            for b in range(n.n_beats):  # each row's sum register loads at its own beat
-                for j in range(rows):
-                    if b * rows + j <= dmax:
-                        with m.If(beat[3] == b):
-                            m.d.sync += self._scan_rows[b * rows + j].eq(sums_q[j])
-        low: Value = Mux(beat[4] == 0, self._scan_nm if self._live else top, self._scan_min)
-        with m.If(fetched[4]):
-            m.d.sync += self._scan_min.eq(_smallest([low, beat_min]))
+        running = Signal(unsigned(width), name="fused_scan_min", reset_less=True)
+        low: Value = Mux(beat == 0, nm_sum if self._live else top, running)
+        least = _smallest([low, beat_min])
+        self._mins = [Signal(unsigned(width), name=f"fused_min{k}", reset_less=True) for k in range(n.slots)]
+        self._nm_sums = [Signal(unsigned(width), name=f"fused_nm_sum{k}", reset_less=True)
+                         for k in range(n.slots)]
+        with m.If(fetched):
+            m.d.sync += running.eq(least)
+            for k, (low_k, nm_k) in enumerate(zip(self._mins, self._nm_sums, strict=True)):
+                with m.If((beat == n.n_beats - 1) & (slot == k)):
+                    m.d.sync += [low_k.eq(least), nm_k.eq(nm_sum)]
 
     def _hand_over(self, width: int) -> None:
-        """The scanned pixel's sums, minimum and no-match sum into the registers its issues read, when the
-        lanes take it (the next pixel's scan then writes the scan's registers while these issue)."""
+        """The minimum and the no-match sum of the pixel the lanes take into the registers its issues read
+        (its row sums stay in its slot until its last issue)."""
         n = self.nets
-        self._rows = [Signal(unsigned(width), name=f"fused_sum{r}", reset_less=True)
-                      for r in range(n.dmax + 1)]
         self._min = Signal(unsigned(width), name="fused_min", reset_less=True)
         self._nm_sum = Signal(unsigned(width), name="fused_nm_sum", reset_less=True)
         with n.m.If(n.take):
-            n.m.d.sync += [a.eq(b) for a, b in zip(self._rows, self._scan_rows, strict=True)]
-            n.m.d.sync += [self._min.eq(self._scan_min), self._nm_sum.eq(self._scan_nm)]
+            n.m.d.sync += [self._min.eq(pick(self._mins, n.take_slot)),
+                           self._nm_sum.eq(pick(self._nm_sums, n.take_slot))]
 
     def _words_out(self, width: int) -> None:
-        """At each issue, each lane row's sum minus the minimum, read in X (with the beat on the stream)."""
+        """At each issue, each lane row's sum (the issued slot's entry of the beat) minus the minimum,
+        read in X (with the beat on the stream); rows past Dmax are not read."""
         n = self.nets
-        m, rows, dmax = n.m, n.rows_per_beat, n.dmax
-        diffs = [Signal(unsigned(width), name=f"fused_diff{j}") for j in range(rows)]
-        unused = range(n.n_beats, 1 << len(n.beat))  # never occur; in the last case: a complete case
-        with m.Switch(n.beat):
-            for b in range(n.n_beats):
-                with m.Case(b, *(unused if b == n.n_beats - 1 else ())):
-                    for j in range(rows):
-                        r = b * rows + j
-                        m.d.comb += diffs[j].eq(self._rows[r] - self._min if r <= dmax else 0)
+        read = self._sums.read_port(domain="comb")
+        n.m.d.comb += read.addr.eq(Cat(n.beat, n.issue_slot))
+        diffs = [Signal(unsigned(width), name=f"fused_diff{j}") for j in range(n.rows_per_beat)]
+        n.m.d.comb += [d.eq(read.data[j] - self._min) for j, d in enumerate(diffs)]
         costs: list[Value] = list(diffs)
         if self._live:
             costs.append(self._nm_sum - self._min)

@@ -271,6 +271,9 @@ CASES = {
     "issue-rules": (("census-lr", {"dmax": 3, "lr_right_nomatch": False, "lr_neutral": False}),
                     [(9, 16)], 2, 6),
     "dmax0": (("census-lr", {"dmax": 0}), [(8, 8)], 2, 4),
+    # Two beats per pixel in both passes (8 rows, 6 a beat: the last beat half empty); the cases above
+    # take a pixel in one beat.
+    "two-beats": (("census-lr", {"dmax": 6}), [(9, 20), "noisy"], 2, 6),
     "lr-like": (("lr-like", {"dmax": 3}), [(8, 14)], 2, 4),
 }
 
@@ -305,6 +308,12 @@ def test_census_lr_on_chip_parameters() -> None:
     rp = pass_params(model, params, "right")
     assert rp.columns == 1 and rp.seed != params.seed and rp.words_per_beat % rp.loaded_columns == 0
     assert pass_params(model, params, "left") is params
+    # The right pass takes the left pass's rows per beat: a pixel in as many beats, one with a whole pixel.
+    for words, right_words, beats in ((6 * 3, 6 * 2, 1), (3 * 3, 3 * 2, 2), (2 * 3, 2 * 2, 3)):
+        left = stereo_machine_params(4, model=model, words_per_beat=words)
+        right = pass_params(model, left, "right")
+        assert (right.words_per_beat, right.beats_per_pixel) == (right_words, beats)
+        assert left.beats_per_pixel == beats
     check_stereo_machine(params, model, 11)
     with pytest.raises(ParameterError, match="rng must be an on-chip random source"):
         check_stereo_machine(stereo_machine_params(4, model=model, rng="smtj"), model, 11)
