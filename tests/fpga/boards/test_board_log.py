@@ -18,7 +18,7 @@ from bayesmachine.fpga.boards.twin import BoardTwin
 from bayesmachine.hdl.frontend.stereo import stereo_machine_params
 from bayesmachine.models import ModelParams
 
-from .test_board import DMAX, HEIGHT, WIDTH, TwinPort, _crop, _link
+from .test_board import DMAX, HEIGHT, WIDTH, StandInHarness, TwinPort, _crop, _link
 
 MODEL = ModelParams(name="census-lr", dmax=DMAX)  # two passes and the neighbour prior's feedback
 PARAMS = stereo_machine_params(DMAX, model=MODEL, integrator="log")
@@ -70,23 +70,13 @@ def test_the_log_board_commands(tmp_path, monkeypatch, capsys) -> None:
     from bayesmachine.fpga.boards import link as link_mod
     from bayesmachine.fpga.boards import simulate as simulate_mod
 
-    class Harness:
-        def __init__(self, params, model, width, **options) -> None:
-            self.port, self.running = "/dev/pts/stand-in", False
-
-        def __enter__(self):
-            return self
-
-        def __exit__(self, *exc) -> None:
-            pass
-
     def open_twin(port: str, baud: int, timeout: float = 2.0) -> TwinPort:
         twin_port = TwinPort(_twin())
         twin_port.close = lambda: None
         return twin_port
 
     monkeypatch.setenv("BAYESMACHINE_CACHE_DIR", str(tmp_path / "cache"))
-    monkeypatch.setattr(simulate_mod, "BoardSimulation", Harness)
+    monkeypatch.setattr(simulate_mod, "BoardSimulation", StandInHarness)
     monkeypatch.setattr(link_mod, "open_port", open_twin)
     design = ["--dmax", str(DMAX), "--model", "census-lr"]
     assert main(["board", "simulate", *design, "--integrator", "log", "--width", str(WIDTH), "--quiet", "-o",
