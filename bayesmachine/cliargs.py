@@ -305,7 +305,7 @@ add_option(MachineOption("integrator", "--integrator",
                          "how a pixel's evidence is integrated: stochastic (the paper's machine: AND "
                          "gates and overflow counters) or log (the logarithmic machine: each row's energy "
                          "codes summed, the MAP the lowest sum, the rows' weights from an exp table: fed "
-                         "words or pixels, not yet on the board; docs/integrators.md) (default "
+                         "words or pixels, or on the board; docs/integrators.md) (default "
                          "%(default)s)",
                          default=DEFAULT_INTEGRATOR, choices=INTEGRATORS))
 add_option(MachineOption("tie_break", "--tie-break",
@@ -341,7 +341,8 @@ def refuse_log_integrator(machine: MachineParams, command: str) -> None:
     if machine.integrator != DEFAULT_INTEGRATOR:
         raise ParameterError(f"--integrator: {command} runs the stochastic machine only; the "
                              f"{machine.integrator} machine runs in run and sweep (--feed words or pixels, "
-                             "not on a board), emit and synth (--top machine, or --top stereo)", "integrator")
+                             "--engine board), emit and synth (--top machine, or --top stereo) and board "
+                             "build|simulate", "integrator")
 
 
 def add_dmax_option(group: argparse._ActionsContainer) -> argparse.Action:

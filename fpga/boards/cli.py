@@ -20,7 +20,6 @@ from bayesmachine.cliargs import (
     machine_params_from_args,
     model_params_from_args,
     output_path,
-    refuse_log_integrator,
 )
 from bayesmachine.fpga.flow import ROUTERS
 from bayesmachine.hdl.frontend import DEFAULT_WIDTH
@@ -66,7 +65,6 @@ def _design(args: argparse.Namespace):  # noqa: ANN202
 
     model = model_params_from_args(args)
     machine = machine_params_from_args(args, args.dmax, model=model)
-    refuse_log_integrator(machine, "board")
     if args.words_per_beat is None:
         machine = dataclasses.replace(machine, words_per_beat=stereo_words_per_beat(machine))
     check_board(machine, model, args.width)

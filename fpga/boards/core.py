@@ -86,7 +86,8 @@ class BoardCore(wiring.Component):
     Parameters
     ----------
     params : MachineParams
-        The machine (``words_per_beat`` a multiple of the operator columns, an on-chip random source).
+        The machine, of either integrator (``words_per_beat`` a multiple of the operator columns; a
+        stochastic one with an on-chip random source).
     model : ModelParams
         The disparity model (paper).
     width : int

@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from bayesmachine.models import ModelParams
-from bayesmachine.params import MachineParams
+from bayesmachine.params import DEFAULT_INTEGRATOR, STOCHASTIC_FIELDS, MachineParams
 from bayesmachine.region import OutputRegion
 
 from . import protocol as pr
@@ -382,7 +382,16 @@ def design_differences(board: dict, machine: MachineParams, model: ModelParams) 
         found = [f"--model {model.name} here, {name} on the board"]
     else:
         found = differ(model.to_dict(), theirs)
-    return found + differ(machine.to_dict(), board.get("machine"), _DERIVED if found else ("rows",))
+    board_machine = board.get("machine") if isinstance(board.get("machine"), dict) else {}
+    # A stochastic machine's dict leaves its integrator out; the feedback words follow from it. A log
+    # machine reads none of the stochastic fields: they differ only through the model, never named.
+    integrator = board_machine.get("integrator", DEFAULT_INTEGRATOR)
+    if integrator != machine.integrator:
+        found.append(f"--integrator {machine.integrator} here, {integrator} on the board")
+    skip = _DERIVED if found else ("rows",)
+    if DEFAULT_INTEGRATOR not in (integrator, machine.integrator):
+        skip += STOCHASTIC_FIELDS
+    return found + differ(machine.to_dict(), board_machine, skip)
 
 
 def fingerprint_message(port: str, found: int, expect: int, machine: MachineParams,

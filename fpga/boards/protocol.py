@@ -200,11 +200,11 @@ def _bytes_of(bits: int) -> int:
 class ResultFormat:
     """A result record: its ``tag`` (``'R'``, or a declared pass's :func:`pass_tag`), then
     ``map | nomatch << map_width | timeout << map_width + 1`` in ``head_bytes``; then, if asked for, each
-    counter in ``count_bytes`` and the cycles in ``cycle_bytes`` (the result layout's fields, each byte
-    aligned)."""
+    row's count (an overflow counter, or a log machine's weight: ``MachineParams.readout_max``) in
+    ``count_bytes`` and the cycles in ``cycle_bytes`` (the result layout's fields, each byte aligned)."""
 
     map_width: int
-    counter_width: int
+    count_width: int
     cycle_width: int
     rows: int
     fields: int
@@ -214,8 +214,8 @@ class ResultFormat:
     def of(cls, params: object, fields: int, tag: int = RESULT_TAG) -> ResultFormat:
         if not 0 <= fields <= FIELDS_ALL:
             raise ValueError(f"fields must be in 0..{FIELDS_ALL}, got {fields}")
-        return cls(params.map_width, params.counter_width, params.cycle_width, params.rows, fields,  # type: ignore[attr-defined]
-                   tag)
+        return cls(params.map_width, params.readout_max.bit_length(), params.cycle_width,  # type: ignore[attr-defined]
+                   params.rows, fields, tag)  # type: ignore[attr-defined]
 
     @property
     def head_bytes(self) -> int:
@@ -223,7 +223,7 @@ class ResultFormat:
 
     @property
     def count_bytes(self) -> int:
-        return _bytes_of(self.counter_width)
+        return _bytes_of(self.count_width)
 
     @property
     def cycle_bytes(self) -> int:

@@ -15,7 +15,6 @@ from bayesmachine.cliargs import (
     machine_params_from_args,
     output_path,
     positive_float_at_most,
-    refuse_log_integrator,
     runnable_sources,
 )
 from bayesmachine.models import ModelParams
@@ -133,8 +132,6 @@ def machine_params(
     if rng is not None:
         overrides["rng"] = rng
     machine = machine_params_from_args(args, model.dmax, model=model, **overrides)
-    if getattr(args, "engine", "model") == "board":
-        refuse_log_integrator(machine, f"--engine {args.engine}")
     if getattr(args, "feed", "words") == "pixels" and args.words_per_beat is None:
         # The front end writes one feature per lane: lanes a multiple of the loaded columns.
         from bayesmachine.params import stereo_words_per_beat

@@ -97,9 +97,10 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
                    f"({BAUD_RANGE[0]} to {BAUD_RANGE[1]}, default {DEFAULT_BAUD})")
     g.add_argument("--board-fields", default=None, metavar="LIST",
                    help="with --engine board: the result fields the board sends, a comma-separated "
-                   "list of map, counts, cycles (default all three; the MAP and its flags always "
-                   "come). --board-fields map cuts the results' bytes on the link; result.npz then "
-                   "has no counts or cycles and report.json's figures of them are null")
+                   "list of map, counts (the counters, or a log machine's weights), cycles (default all "
+                   "three; the MAP and its flags always come). --board-fields map cuts the results' bytes "
+                   "on the link; result.npz then has no counts or cycles and report.json's figures of them "
+                   "are null")
     g.add_argument("--board-timeout", type=positive_float_at_most(MAX_SILENCE_S), default=None,
                    metavar="S", help="with --engine board: seconds of silence before the board is deemed "
                    f"not to answer (at most {MAX_SILENCE_S:g}, default 2)")

@@ -413,6 +413,20 @@ def _twin_on_port(monkeypatch) -> None:
     monkeypatch.setattr(link_mod, "open_port", open_twin)
 
 
+class StandInHarness:
+    """``BoardSimulation`` stood in for: a harness that has ended at once (``board simulate`` then
+    reports and stops)."""
+
+    def __init__(self, params, model, width, **options) -> None:
+        self.port, self.running = "/dev/pts/stand-in", False
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        pass
+
+
 def test_board_simulate_writes_its_report_and_a_run_names_the_options_that_differ(tmp_path, monkeypatch,
                                                                                    capsys) -> None:
     """``board simulate -o OUT`` writes OUT/report.json (the design, its fingerprint) and records the
@@ -422,18 +436,8 @@ def test_board_simulate_writes_its_report_and_a_run_names_the_options_that_diffe
 
     from bayesmachine.fpga.boards import simulate as simulate_mod
 
-    class Harness:
-        def __init__(self, params, model, width, **options) -> None:
-            self.port, self.running = "/dev/pts/stand-in", False
-
-        def __enter__(self):
-            return self
-
-        def __exit__(self, *exc) -> None:
-            pass
-
     monkeypatch.setenv("BAYESMACHINE_CACHE_DIR", str(tmp_path / "cache"))
-    monkeypatch.setattr(simulate_mod, "BoardSimulation", Harness)
+    monkeypatch.setattr(simulate_mod, "BoardSimulation", StandInHarness)
     out = tmp_path / "sim"
     assert main(["board", "simulate", "--dmax", str(DMAX), "--width", str(WIDTH), "--model", "paper",
                  "--quiet", "-o", str(out)]) == 2  # the stand-in harness ended

@@ -186,13 +186,16 @@ def _random_results(params: object, n: int, seed: int) -> MachineResult:
     return MachineResult(
         map=rng.integers(0, params.rows, n).astype(np.int32),  # type: ignore[attr-defined]
         nomatch=rng.integers(0, 2, n).astype(bool), timeout=rng.integers(0, 2, n).astype(bool),
-        counts=rng.integers(0, params.counter_max + 1, (n, params.rows)).astype(np.uint32),  # type: ignore[attr-defined]
+        counts=rng.integers(0, params.readout_max + 1, (n, params.rows)).astype(np.uint32),  # type: ignore[attr-defined]
         cycles=rng.integers(0, params.max_cycles + 1, n).astype(np.int64))  # type: ignore[attr-defined]
 
 
-@pytest.mark.parametrize("fields", [0, 1, 2, 3])
-def test_result_serializer_is_its_twin(fields: int) -> None:
-    params = small_params(counter_max=300, max_cycles=5000)  # two-byte counters and cycles
+@pytest.mark.parametrize(("fields", "integrator"), [(0, "stochastic"), (1, "stochastic"), (2, "stochastic"),
+                                                    (3, "stochastic"), (3, "log"), (1, "log")])
+def test_result_serializer_is_its_twin(fields: int, integrator: str) -> None:
+    # Two-byte counters (a log machine's weights, up to 2^8 at W = 8) and cycles.
+    params = (small_params(counter_max=300, max_cycles=5000) if integrator == "stochastic" else
+              small_params(word_bits=8, lfsr_bits=31, max_cycles=5000, integrator="log"))
     res = _random_results(params, 5, fields)
     tag = pr.RESULT_TAG if fields % 2 else pr.pass_tag(fields)  # the own pass's records, a declared one's
     twin = ResultSerializerTwin(params, tag)

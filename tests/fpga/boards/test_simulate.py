@@ -163,14 +163,15 @@ def test_link_against_the_rtl(board, fault, reason) -> None:
         assert reason in link.stats.failures[0]
 
 
-@pytest.mark.parametrize("model", ["census", "paper", "census-lr"])
-def test_the_two_commands(tmp_path: Path, model: str) -> None:
+@pytest.mark.parametrize(("model", "integrator"), [("census", "stochastic"), ("paper", "stochastic"),
+                                                   ("census-lr", "stochastic"), ("census", "log")])
+def test_the_two_commands(tmp_path: Path, model: str, integrator: str) -> None:
     """``board simulate`` prints the pty first; ``run --engine board`` on a crop writes the same
-    result.npz as ``run --engine model``, for the census model (the board's default) and the paper's;
-    SIGTERM ends the simulation."""
+    result.npz as ``run --engine model``, for the census model (the board's default) and the paper's, and
+    for the log machine (its weights in ``counts``); SIGTERM ends the simulation."""
     require_tool("verilator", "g++", "make")
     exe = [sys.executable, "-m", "bayesmachine"]
-    design = ["--dmax", str(DMAX), "--model", model]
+    design = ["--dmax", str(DMAX), "--model", model, "--integrator", integrator]
     sim = subprocess.Popen(
         [
             *exe,
@@ -218,9 +219,14 @@ def test_the_two_commands(tmp_path: Path, model: str) -> None:
         # board simulate -o wrote the design's report; a run of other options is told which differ.
         simulated = json.loads((tmp_path / "sim" / "report.json").read_text())
         assert simulated["fingerprint"] == report["board"]["board_fingerprint"] and simulated["port"] == path
-        other = subprocess.run([*exe, *common, "--engine", "board", "--port", path, "--counter-max", "3",
+        if integrator == "log":
+            assert want["counts"].max() == 1024  # the MAP's row weighs 2^W
+        other, differs = ((["--counter-max", "3"], "--counter-max 3 here, 16 on the board")
+                          if integrator == "stochastic" else
+                          (["--integrator", "stochastic"], "--integrator stochastic here, log on the board"))
+        other = subprocess.run([*exe, *common, "--engine", "board", "--port", path, *other,
                                 "-o", str(tmp_path / "c")], capture_output=True, text=True, timeout=300)
-        assert other.returncode == 2 and "--counter-max 3 here, 16 on the board" in other.stderr
+        assert other.returncode == 2 and differs in other.stderr
         # A second run while one holds the port: refused at once, the first undisturbed.
         from bayesmachine.fpga.boards.link import open_port
 
@@ -277,16 +283,17 @@ def test_pacing_keeps_the_receive_fifo_from_overflowing(board) -> None:
         np.testing.assert_array_equal(out[name], np.asarray(getattr(want, name)), err_msg=name)
 
 
-def test_census_lr_on_the_simulated_board() -> None:
+@pytest.mark.parametrize("integrator", ["stochastic", "log"])
+def test_census_lr_on_the_simulated_board(integrator: str) -> None:
     """census-lr on the board: both passes' records come (the right pass's tagged 'a', interleaved with
     the left pass's as the machines give them), each pass's in order and its bytes the twin's, the end
     record the twin's (its count and XOR of the passes' CRCs); through the link, every pass's results are
-    the model's."""
+    the model's (the log machine's: its weights where the stochastic machine has its counts)."""
     require_tool("verilator", "g++", "make")
     from bayesmachine.fpga.boards.simulate import BoardSimulation
 
     model = ModelParams(name="census-lr", dmax=DMAX)
-    params = stereo_machine_params(DMAX, model=model)
+    params = stereo_machine_params(DMAX, model=model, integrator=integrator)
     left, right = _crop()
     pixels = np.stack([left, right], -1).tobytes()
     stream = pr.frame_header(5, 3, WIDTH, HEIGHT) + pixels + pr.crc32(pixels).to_bytes(4, "little")
