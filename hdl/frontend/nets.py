@@ -21,6 +21,7 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
 from amaranth.hdl import Const, Module, Mux, Signal, Value, signed, unsigned
 from amaranth.lib import memory
 
@@ -28,7 +29,14 @@ from bayesmachine.hdl.signatures import beat_words
 
 from .tables import LoadForm
 
-__all__ = ["WordNets", "pick"]
+__all__ = ["BLOCK_TABLE_DEPTH", "TABLE_READ_PORTS", "WordNets", "pick"]
+
+# Tables deeper than this go to block RAM (a DP16KD holds 1024 words of up to 18 bits, or 2048 of 9);
+# shallower ones (a census distance's, the prior's) stay logic.
+BLOCK_TABLE_DEPTH = 128
+# Read ports per copy of a table: a block RAM's two. A lookup of more lane rows reads more copies (Yosys's
+# memory mapping searches its port assignments per memory: dozens of ports on one exhaust its memory).
+TABLE_READ_PORTS = 2
 
 
 def pick(values: list[Value], index: Value) -> Value:
@@ -361,27 +369,45 @@ class WordNets:
         return reg
 
     def table(self, name: str, words: Any, bits: int | None = None) -> memory.Memory:
-        """A read-only table of W + 1-bit words (or of ``bits``-bit values: energy codes; block RAM),
-        submodule ``table_{name}``."""
+        """A read-only table of W + 1-bit words (or of ``bits``-bit values: energy codes), submodule
+        ``table_{name}`` (a copy's name, :meth:`lookup`): in block RAM when deeper than
+        :data:`BLOCK_TABLE_DEPTH` (Yosys would otherwise build each read port's multiplexer tree over
+        every entry before mapping it to logic)."""
         init = [int(w) for w in words]
         width = self.params.memory_word_width if bits is None else bits
-        mem = memory.Memory(shape=unsigned(width), depth=len(init), init=init)
+        attrs = {"rom_style": "block"} if len(init) > BLOCK_TABLE_DEPTH else None
+        mem = memory.Memory(shape=unsigned(width), depth=len(init), init=init, attrs=attrs)
         self.m.submodules[f"table_{name}"] = mem
         return mem
 
     def lookup(self, name: str, words: Any, costs: list[Value], en: Value | None = None,
                bits: int | None = None) -> list[Value]:
         """The words of a table ``words`` (``bits``: :meth:`table`) at each lane row's cost ``costs[j]``,
-        with the beat on the stream (one read port per lane row); ``en``: :meth:`address` (the words three
-        cycles after the cost)."""
-        mem = self.table(name, words, bits)
+        with the beat on the stream (one read port per lane row, ``TABLE_READ_PORTS`` per copy of the table:
+        ``table_{name}``, ``table_{name}_1``, ...); ``en``: :meth:`address` (the words three
+        cycles after the cost). A table whose every word is its index (the log machine's way back from a
+        fused sum) is its clamped address, registered as a read would be: no memory."""
+        if np.array_equal(np.asarray(words), np.arange(len(words))):
+            return [self._identity(name, j, cost, len(words), en, bits) for j, cost in enumerate(costs)]
         out = []
         for j, cost in enumerate(costs):
+            if j % TABLE_READ_PORTS == 0:
+                mem = self.table(name if j == 0 else f"{name}_{j // TABLE_READ_PORTS}", words, bits)
             port = mem.read_port()
             addr = self.address(cost, mem.depth, f"{name}_{j}", en)
             self.m.d.comb += [port.en.eq(self.advance if en is None else en), port.addr.eq(addr)]
             out.append(port.data)
         return out
+
+    def _identity(self, name: str, j: int, cost: Value, depth: int, en: Value | None,
+                  bits: int | None) -> Signal:
+        """Lane row j's read of an identity table of ``depth`` words: its address, a cycle later."""
+        width = self.params.memory_word_width if bits is None else bits
+        addr = self.address(cost, depth, f"{name}_{j}", en)
+        data = Signal(unsigned(width), name=f"read_{name}_{j}", reset_less=True)  # as a read port's data
+        with self.m.If(self.advance if en is None else en):
+            self.m.d.sync += data.eq(addr)
+        return data
 
     def entry(self, plane: str, j: int) -> Signal:
         """The ``plane`` value of lane row j's match pixel for the beat being issued: a register loaded a
