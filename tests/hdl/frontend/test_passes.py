@@ -23,6 +23,7 @@ from conftest import assert_same_results, passes_model, registered, run_sim
 from bayesmachine.columns import Census, Consistency, GradH, GradV, Mean, lr_consistent, lr_unknown
 from bayesmachine.hdl.frontend.filters import feature_layout
 from bayesmachine.hdl.frontend.lanes.consistency import ConsistencyTest
+from bayesmachine.hdl.frontend.nets import tapped_line
 from bayesmachine.hdl.frontend.passes import PassFeeder
 from bayesmachine.hdl.frontend.stereo import (
     FrontEnd,
@@ -343,3 +344,33 @@ def test_what_the_passes_on_chip_cannot_do_is_one_error_naming_the_pass() -> Non
     with pytest.raises(ParameterError, match="the left pass's lr column takes the port right_maps, which its "
                                              "lr column has already"):
         generator_signature(stereo_machine_params(3, model=lr), lr, twice)
+
+
+# integrator, words per beat (3 loaded columns) -> lane rows per beat, beats per pixel, the delay line's kind
+BEATS = {("log", 42): (14, 1, True), ("stochastic", 21): (7, 2, True), ("log", 6): (2, 7, False)}
+
+
+@pytest.mark.parametrize(("integrator", "words_per_beat"), list(BEATS))
+def test_census_lr_at_any_words_per_beat_equals_the_model(integrator: str, words_per_beat: int) -> None:
+    """census-lr (fused) with a pixel's every row in one beat, in two beats, or in seven beats of two rows:
+    the word generators' delay lines as taps (wide beats) or as banks (``tapped_line``), the left and
+    the right reference; every pass's results equal the model's, random stalls on both streams."""
+    dmax = 12
+    model = ModelParams(name="census-lr", dmax=dmax)
+    params = stereo_machine_params(dmax, model=model, integrator=integrator, counter_max=6,
+                                   words_per_beat=words_per_beat)
+    rows, beats, tapped = BEATS[integrator, words_per_beat]
+    assert (params.words_per_beat // params.loaded_columns, params.beats_per_pixel) == (rows, beats)
+    assert tapped_line(rows, beats) is tapped
+    width = dmax + 2 * model.margin + 6
+    left, right, _ = bundled_pair()
+    crop = (slice(250, 250 + 2 * model.margin + 3), slice(200, 200 + width))
+    frames = [(np.ascontiguousarray(left[crop]), np.ascontiguousarray(right[crop])),
+              _noisy_pair(2 * model.margin + 2, width, seed=2)]
+    top = StereoMachine(params=params, model=model, width=width, fifo_pixels=2)
+    got, _ = run_stereo_passes(top, frames, in_stall=0.2, out_stall=0.3, seed=2)
+    want = passes_model(frames, model, params)
+    assert set(got) == set(want) == {"right", "left"}
+    for name in want:
+        assert_same_results(got[name], want[name])
+    assert len(np.unique(want["left"].map)) > 3
