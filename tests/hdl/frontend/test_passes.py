@@ -18,7 +18,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from conftest import assert_same_results, passes_model, registered, run_sim
+from conftest import assert_passes_equal_the_model, registered, run_sim
 
 from bayesmachine.columns import Census, Consistency, GradH, GradV, Mean, lr_consistent, lr_unknown
 from bayesmachine.hdl.frontend.filters import feature_layout
@@ -38,7 +38,7 @@ from bayesmachine.host.likelihoods import pass_grid, pass_words
 from bayesmachine.models import ModelDef, ModelParams, PassDef
 from bayesmachine.params import ParameterError
 from bayesmachine.region import OutputRegion
-from bayesmachine.sim.stereo_testbench import pass_pixels, run_frontend_passes, run_stereo_passes
+from bayesmachine.sim.stereo_testbench import pass_pixels, run_frontend_passes
 
 
 def _noisy_pair(height: int, width: int, seed: int, shift: int = 2) -> tuple[np.ndarray, np.ndarray]:
@@ -293,11 +293,7 @@ def test_stereo_machine_passes_equal_the_model(case: str) -> None:
     params = stereo_machine_params(model.dmax, model=model, counter_max=counter_max, max_cycles=400)
     top = StereoMachine(params=params, model=model, width=width, fifo_pixels=fifo_pixels)
     assert set(top.signature.members) >= {f"{p.name}_result" for p in model.passes[:-1]}
-    got, _ = run_stereo_passes(top, frames, in_stall=0.2, out_stall=0.3, seed=6)
-    want = passes_model(frames, model, params)
-    assert set(got) == set(want) == {p.name for p in model.passes}
-    for p in model.passes:
-        assert_same_results(got[p.name], want[p.name])
+    want = assert_passes_equal_the_model(top, frames, model, params, seed=6)
     assert want["right"].timeout.any() or case != "no-nomatch-row-right-watchdog"  # the watchdog fires
 
 
@@ -368,9 +364,5 @@ def test_census_lr_at_any_words_per_beat_equals_the_model(integrator: str, words
     frames = [(np.ascontiguousarray(left[crop]), np.ascontiguousarray(right[crop])),
               _noisy_pair(2 * model.margin + 2, width, seed=2)]
     top = StereoMachine(params=params, model=model, width=width, fifo_pixels=2)
-    got, _ = run_stereo_passes(top, frames, in_stall=0.2, out_stall=0.3, seed=2)
-    want = passes_model(frames, model, params)
-    assert set(got) == set(want) == {"right", "left"}
-    for name in want:
-        assert_same_results(got[name], want[name])
-    assert len(np.unique(want["left"].map)) > 3
+    want = assert_passes_equal_the_model(top, frames, model, params, seed=2)
+    assert set(want) == {"right", "left"} and len(np.unique(want["left"].map)) > 3
