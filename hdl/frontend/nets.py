@@ -85,6 +85,8 @@ class WordNets:
         of the ring the lanes have not taken, :meth:`_queue`).
     form : LoadForm
         What the machine loads (its integrator's: words or energy codes).
+    tapped : bool
+        The delay line is a shift register of taps, not banks (:func:`tapped_line`).
     dmax, rows_per_beat, n_beats, one, zero : int
         The largest disparity, lane rows per beat (R), beats per pixel, the loaded value of a factor
         1.0 and of a factor 0 (``form``'s).
@@ -459,7 +461,8 @@ class WordNets:
         """Lane row j's entry at the take and at a fetch from the taps (:meth:`_tapped_line`): entry d of
         pixel t is pixel t - d, tap d - 1 at its take, tap d at its fetches, one tap nearer while pixel
         t - 1 (at the take) or t (at beat 0's fetch, the latest a write is pending) is in ``right_in``. An
-        entry past Dmax (a lane row past Dmax: its words are the no-match row's or 0) reads 0."""
+        entry past Dmax (a lane row past Dmax: its words are the no-match row's or 0) reads 0 or an older
+        pixel."""
         pending = getattr(self.right_in, plane)
         taps = [pending, *(getattr(t, plane) for t in self._taps)]  # taps[k + 1]: tap k
 
