@@ -198,6 +198,20 @@ def passes_model(frames: list[tuple[np.ndarray, np.ndarray]], model: object,
     return {p.name: MachineResult.concatenate(out[p.name], machines[p.name].rows) for p in passes}
 
 
+def assert_passes_equal_the_model(top: object, frames: list[tuple[np.ndarray, np.ndarray]], model: object,
+                                  params: MachineParams, seed: int) -> dict[str, MachineResult]:
+    """A ``StereoMachine`` ``top`` of ``model`` under pysim (random stalls on both streams) gives every pass's
+    results of ``passes_model``, array by array; returns the model's."""
+    from bayesmachine.sim.stereo_testbench import run_stereo_passes
+
+    got, _ = run_stereo_passes(top, frames, in_stall=0.2, out_stall=0.3, seed=seed)
+    want = passes_model(frames, model, params)
+    assert set(got) == set(want) == {p.name for p in model.passes}  # type: ignore[attr-defined]
+    for name in want:
+        assert_same_results(got[name], want[name])
+    return want
+
+
 def _lr_like() -> object:
     from bayesmachine.columns import Census, Consistency, GradH, GradV, Mean
     from bayesmachine.models import ModelDef, PassDef

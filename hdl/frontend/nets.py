@@ -10,9 +10,10 @@ into a register; its absolute value, clamped, into the address register in the n
 block RAM apart. The cost's operands are registers: the reference features, and per lane the
 delay-line entry of the beat, chosen a cycle ahead (beat 0's when the pixel is taken, the next beat's
 at each issue), so no path runs from the beat counter through the entry multiplexer into a table
-address. The delay line is a circular buffer in distributed RAM, banked so that each lane row of a
-beat reads a bank of its own (:meth:`WordNets._delay_line`); a pixel is written into it a cycle after
-its take (from a register holding the taken match features), so the take (which depends on the
+address. The delay line (:meth:`WordNets._delay_line`) is a circular buffer in distributed RAM, banked
+so that each lane row of a beat reads a bank of its own, or for wide beats a shift register of taps,
+each lane row reading its entry's tap of the beat (:func:`tapped_line`); a pixel is written into it a
+cycle after its take (from a register holding the taken match features), so the take (which depends on the
 stream's ready) drives only the entry registers and the reference features, not the buffer's write
 enables.
 """
@@ -29,7 +30,7 @@ from bayesmachine.hdl.signatures import beat_words
 
 from .tables import LoadForm
 
-__all__ = ["BLOCK_TABLE_DEPTH", "TABLE_READ_PORTS", "WordNets", "pick"]
+__all__ = ["BLOCK_TABLE_DEPTH", "TABLE_READ_PORTS", "WordNets", "pick", "tapped_line"]
 
 # Tables deeper than this go to block RAM (a DP16KD holds 1024 words of up to 18 bits, or 2048 of 9);
 # shallower ones (a census distance's, the prior's) stay logic.
@@ -37,6 +38,16 @@ BLOCK_TABLE_DEPTH = 128
 # Read ports per copy of a table: a block RAM's two. A lookup of more lane rows reads more copies (Yosys's
 # memory mapping searches its port assignments per memory: dozens of ports on one exhaust its memory).
 TABLE_READ_PORTS = 2
+
+
+def tapped_line(rows_per_beat: int, beats_per_pixel: int) -> bool:
+    """Whether a word generator's delay line is a shift register of taps (lane row j of beat b reads the
+    fixed tap of its entry: a multiplexer over the pixel's beats per lane) rather than the circular buffer
+    banked by lane row (lane row j reads bank s - g·j, s the pixel's first bank: a multiplexer over the R
+    banks per lane, so R² multiplexer inputs a plane bit). The taps cost Dmax + 1 registers a plane bit
+    more than the distributed RAM; the banks' multiplexers outgrow them when a pixel has fewer beats than
+    a beat has lane rows (wide beats: a pixel every few clocks)."""
+    return beats_per_pixel < rows_per_beat
 
 
 def pick(values: list[Value], index: Value) -> Value:
@@ -74,6 +85,8 @@ class WordNets:
         of the ring the lanes have not taken, :meth:`_queue`).
     form : LoadForm
         What the machine loads (its integrator's: words or energy codes).
+    tapped : bool
+        The delay line is a shift register of taps, not banks (:func:`tapped_line`).
     dmax, rows_per_beat, n_beats, one, zero : int
         The largest disparity, lane rows per beat (R), beats per pixel, the loaded value of a factor
         1.0 and of a factor 0 (``form``'s).
@@ -244,21 +257,42 @@ class WordNets:
             m.d.sync += [self.fetch.eq(1), self.fetch_beat.eq(0), self.fetch_slot.eq(self.feed_slot)]
 
     def _delay_line(self, side: Any) -> None:
+        """The match features of the last pixels (:func:`tapped_line`: :meth:`_tapped_line` or
+        :meth:`_banked_line`); a pixel enters a cycle after its take, from a register holding its match
+        features (``right_in``): the take (FIFO ready -> issue -> take) drives the entry registers, not
+        the line's write enables. While that write is pending (``shift_q``) the newest pixel is in
+        ``right_in``. Uninitialized entries: an output pixel is at least Dmax pixels into its line, so
+        none reads an entry of an earlier line or frame."""
+        self.right_in = Signal(side, reset_less=True)
+        self.shift_q = Signal()
+        self.m.d.sync += self.shift_q.eq(self.fed_take)
+        with self.m.If(self.fed_take):
+            self.m.d.sync += self.right_in.eq(self.fed.right)
+        self.tapped = tapped_line(self.rows_per_beat, self.n_beats)
+        if self.tapped:
+            self._tapped_line(side)
+        else:
+            self._banked_line(side)
+
+    def _tapped_line(self, side: Any) -> None:
+        """A shift register of Dmax + 1 taps, tap k the match features of the k-th newest pixel written
+        (``_taps``), shifted at each write: the entries of a pixel sit at fixed taps while its beats load
+        (no pixel is taken between its take and its last fetch)."""
+        self._taps = [Signal(side, name=f"tap_{k}", reset_less=True) for k in range(self.dmax + 1)]
+        with self.m.If(self.shift_q):
+            self.m.d.sync += [self._taps[0].eq(self.right_in),
+                              *(self._taps[k].eq(self._taps[k - 1]) for k in range(1, self.dmax + 1))]
+
+    def _banked_line(self, side: Any) -> None:
         """The match features of the last pixels: pixel t (the t-th taken) at address t mod N of a
         circular buffer of N = R·M entries (R lane rows per beat, M = ceil((Dmax + 1) / R)), banked by
         address mod R, bank k holding addresses k, k + R, ... at index address // R (distributed RAM,
         one combinational read port each). Entry d of pixel t (the match features d pixels back) is at
         address t - d; a beat's R lanes read R consecutive entries, so R consecutive addresses, one in
         each bank (:meth:`_next_load`). Entries of a lane row past Dmax read some older pixel (their
-        words are the no-match row's or 0, not a table's). A pixel is written a cycle after its take,
-        from a register holding its match features (``right_in``): the take (FIFO ready -> issue ->
-        take) drives the entry registers, not the buffer's write enables. While that write is pending
-        (``shift_q``) the newest pixel is in ``right_in``. Uninitialized entries: an output pixel is at
-        least Dmax pixels into its line, so none reads an entry of an earlier line or frame."""
+        words are the no-match row's or 0, not a table's)."""
         m, rows = self.m, self.rows_per_beat
         self._bank_depth = -(-(self.dmax + 1) // rows)  # M: entries per bank
-        self.right_in = Signal(side, reset_less=True)
-        self.shift_q = Signal()
         write_bank = Signal(range(rows))  # the next write's address t mod N, as bank and index
         write_index = Signal(range(self._bank_depth))
         q, q_wrap, start = self._next_load()
@@ -277,12 +311,9 @@ class WordNets:
             m.d.comb += [write.addr.eq(write_index), write.data.eq(self.right_in),
                          write.en.eq(self.shift_q & (write_bank == k)), read.addr.eq(Mux(wraps, q_wrap, q))]
             self._bank_data.append(read.data)
-        m.d.sync += self.shift_q.eq(self.fed_take)
         with m.If(self.shift_q):
             m.d.sync += [write_bank.eq(Mux(write_bank == rows - 1, 0, write_bank + 1)),
                          write_index.eq(Mux(write_bank == rows - 1, self._step(write_index, 1), write_index))]
-        with m.If(self.fed_take):
-            m.d.sync += self.right_in.eq(self.fed.right)
 
     def _step(self, index: Value, by: int) -> Value:
         """A bank index plus ``by`` (-2 .. 2) modulo M (a compare and a multiplexer a step)."""
@@ -411,14 +442,49 @@ class WordNets:
 
     def entry(self, plane: str, j: int) -> Signal:
         """The ``plane`` value of lane row j's match pixel for the beat being issued: a register loaded a
-        cycle ahead from the delay line's banks (the beat counter ends there, not at the table address),
-        with beat 0's entry when a pixel is taken, the next beat's on an issue. The newest pixels come
-        from the registers in front of the buffer until they are written: at the take the taken pixel
-        (entry 0) and the one before it (entry 1) while its write is pending; at beat 0's issue the
-        taken pixel while its write is pending."""
+        cycle ahead from the delay line (the beat counter ends there, not at the table address), with
+        beat 0's entry when a pixel is taken, the next beat's on a fetch (:meth:`_tap_reads`,
+        :meth:`_bank_reads`)."""
         key = (plane, j)
-        if key in self._entries:
-            return self._entries[key]
+        if key not in self._entries:
+            at_take, at_fetch = (self._tap_reads if self.tapped else self._bank_reads)(plane, j)
+            sel = Signal(getattr(self.right_in, plane).shape(), name=f"right_{plane}_{j}", reset_less=True)
+            with self.m.If(self.fed_take):
+                self.m.d.sync += sel.eq(at_take)
+            if at_fetch is not None:
+                with self.m.Elif(self.fetch):  # beat b + 1's entry
+                    self.m.d.sync += sel.eq(at_fetch)
+            self._entries[key] = sel
+        return self._entries[key]
+
+    def _tap_reads(self, plane: str, j: int) -> tuple[Value, Value | None]:
+        """Lane row j's entry at the take and at a fetch from the taps (:meth:`_tapped_line`): entry d of
+        pixel t is pixel t - d, tap d - 1 at its take, tap d at its fetches, one tap nearer while pixel
+        t - 1 (at the take) or t (at beat 0's fetch, the latest a write is pending) is in ``right_in``. An
+        entry past Dmax (a lane row past Dmax: its words are the no-match row's or 0) reads 0 or an older
+        pixel."""
+        pending = getattr(self.right_in, plane)
+        taps = [pending, *(getattr(t, plane) for t in self._taps)]  # taps[k + 1]: tap k
+
+        def read(k: int, pend: Value | None) -> Value:  # tap k once a write pending (``pend``) is done
+            if not 0 <= k <= self.dmax:
+                return Const(0, len(pending))
+            return taps[k + 1] if pend is None else Mux(pend, taps[k], taps[k + 1])
+
+        d0 = self.reference.entry(j, self.dmax)
+        at_take = getattr(self.fed.right, plane) if d0 == 0 else read(d0 - 1, self.shift_q)
+        if self.n_beats == 1:
+            return at_take, None
+        fetched = [read(self.reference.entry((b + 1) * self.rows_per_beat + j, self.dmax),
+                        self.shift_q if b == 0 else None) for b in range(self.n_beats - 1)]
+        return at_take, pick(fetched, self.fetch_beat)
+
+    def _bank_reads(self, plane: str, j: int) -> tuple[Value, Value]:
+        """Lane row j's entry at the take and at a fetch from the banks (:meth:`_banked_line`), at the
+        address of the next load (:meth:`_next_load`). The newest pixels come from the registers in front
+        of the buffer until they are written: at the take the taken pixel (entry 0) and the one before it
+        (entry 1) while its write is pending; at beat 0's fetch the taken pixel while its write is
+        pending."""
         m, rows = self.m, self.rows_per_beat
         banks = [getattr(d, plane) for d in self._bank_data]
         read = Signal(banks[0].shape(), name=f"line_{plane}_{j}")
@@ -432,13 +498,8 @@ class WordNets:
             return Mux(self.shift_q, pending, read) if d == 0 else read
 
         d0 = self.reference.entry(j, self.dmax)
-        sel = Signal(banks[0].shape(), name=f"right_{plane}_{j}", reset_less=True)
-        with m.If(self.fed_take):
-            m.d.sync += sel.eq(getattr(self.fed.right, plane) if d0 == 0 else newest(d0 - 1))
-        with m.Elif(self.fetch):  # beat b + 1's entry; shift_q is set at beat 0's fetch at most
-            m.d.sync += sel.eq(newest(self.reference.entry(rows + j, self.dmax)))
-        self._entries[key] = sel
-        return sel
+        at_take = getattr(self.fed.right, plane) if d0 == 0 else newest(d0 - 1)
+        return at_take, newest(self.reference.entry(rows + j, self.dmax))  # shift_q: beat 0's fetch at most
 
     def write_beats(self, columns: list[tuple[list[Any], Any]]) -> None:
         """The beat on the stream: lane L's word by its (row, operator column) from ``columns`` (each

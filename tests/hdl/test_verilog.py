@@ -197,18 +197,19 @@ def test_emit_writes_complete_files_or_none(tmp_path: Path, monkeypatch: pytest.
 
 
 @pytest.mark.eda
-@pytest.mark.parametrize("model", ["paper", "census", "census-lr", "census --no-fuse-columns"])
+@pytest.mark.parametrize(("model", "lanes", "beats"), [
+    ("paper", "9", 3), ("census", "6", 3), ("census-lr", "9", 3), ("census-lr", "18", 2),
+    ("census --no-fuse-columns", "10", 4)])
 def test_stereo_top_is_lint_clean_and_latch_free(
-    verilator: str, yosys: str, tmp_path: Path, capsys: pytest.CaptureFixture[str], model: str
-) -> None:
+    verilator: str, yosys: str, tmp_path: Path, capsys: pytest.CaptureFixture[str], model: str, lanes: str,
+    beats: int) -> None:
     """``emit --top stereo``: the front end + FIFO + machine pass -Wall and synthesize without latches
     (the census model's too: census filters, the neighbour prior's line of MAPs)."""
     parser = argparse.ArgumentParser()
     hdl_cli.register(parser.add_subparsers())
     out = tmp_path / "bayesmachine.v"
-    # 3 (4) beats per pixel: the beat counter's values are not all used (the lint checks complete cases).
-    lanes, beats = {"paper": ("9", 3), "census": ("6", 3), "census-lr": ("9", 3),
-                    "census --no-fuse-columns": ("10", 4)}[model]
+    # 3 (4) beats per pixel: the beat counter's values are not all used (the lint checks complete cases);
+    # 2 beats of 6 rows: the word generators' delay lines as taps (``tapped_line``), else as banks.
     args = parser.parse_args(["emit", "--top", "stereo", "--dmax", "6", "--width", "23", "--counter-max", "4",
                               "--words-per-beat", lanes, "--sigma", "12", "--model", *model.split(), "-o",
                               str(out)])

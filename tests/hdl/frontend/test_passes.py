@@ -18,11 +18,12 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from conftest import assert_same_results, passes_model, registered, run_sim
+from conftest import assert_passes_equal_the_model, registered, run_sim
 
 from bayesmachine.columns import Census, Consistency, GradH, GradV, Mean, lr_consistent, lr_unknown
 from bayesmachine.hdl.frontend.filters import feature_layout
 from bayesmachine.hdl.frontend.lanes.consistency import ConsistencyTest
+from bayesmachine.hdl.frontend.nets import tapped_line
 from bayesmachine.hdl.frontend.passes import PassFeeder
 from bayesmachine.hdl.frontend.stereo import (
     FrontEnd,
@@ -37,7 +38,7 @@ from bayesmachine.host.likelihoods import pass_grid, pass_words
 from bayesmachine.models import ModelDef, ModelParams, PassDef
 from bayesmachine.params import ParameterError
 from bayesmachine.region import OutputRegion
-from bayesmachine.sim.stereo_testbench import pass_pixels, run_frontend_passes, run_stereo_passes
+from bayesmachine.sim.stereo_testbench import pass_pixels, run_frontend_passes
 
 
 def _noisy_pair(height: int, width: int, seed: int, shift: int = 2) -> tuple[np.ndarray, np.ndarray]:
@@ -292,11 +293,7 @@ def test_stereo_machine_passes_equal_the_model(case: str) -> None:
     params = stereo_machine_params(model.dmax, model=model, counter_max=counter_max, max_cycles=400)
     top = StereoMachine(params=params, model=model, width=width, fifo_pixels=fifo_pixels)
     assert set(top.signature.members) >= {f"{p.name}_result" for p in model.passes[:-1]}
-    got, _ = run_stereo_passes(top, frames, in_stall=0.2, out_stall=0.3, seed=6)
-    want = passes_model(frames, model, params)
-    assert set(got) == set(want) == {p.name for p in model.passes}
-    for p in model.passes:
-        assert_same_results(got[p.name], want[p.name])
+    want = assert_passes_equal_the_model(top, frames, model, params, seed=6)
     assert want["right"].timeout.any() or case != "no-nomatch-row-right-watchdog"  # the watchdog fires
 
 
@@ -343,3 +340,29 @@ def test_what_the_passes_on_chip_cannot_do_is_one_error_naming_the_pass() -> Non
     with pytest.raises(ParameterError, match="the left pass's lr column takes the port right_maps, which its "
                                              "lr column has already"):
         generator_signature(stereo_machine_params(3, model=lr), lr, twice)
+
+
+# integrator, words per beat (3 loaded columns) -> lane rows per beat, beats per pixel, the delay line's kind
+BEATS = {("log", 42): (14, 1, True), ("stochastic", 21): (7, 2, True), ("log", 6): (2, 7, False)}
+
+
+@pytest.mark.parametrize(("integrator", "words_per_beat"), list(BEATS))
+def test_census_lr_at_any_words_per_beat_equals_the_model(integrator: str, words_per_beat: int) -> None:
+    """census-lr (fused) with a pixel's every row in one beat, in two beats, or in seven beats of two rows:
+    the word generators' delay lines as taps (wide beats) or as banks (``tapped_line``), the left and
+    the right reference; every pass's results equal the model's, random stalls on both streams."""
+    dmax = 12
+    model = ModelParams(name="census-lr", dmax=dmax)
+    params = stereo_machine_params(dmax, model=model, integrator=integrator, counter_max=6,
+                                   words_per_beat=words_per_beat)
+    rows, beats, tapped = BEATS[integrator, words_per_beat]
+    assert (params.words_per_beat // params.loaded_columns, params.beats_per_pixel) == (rows, beats)
+    assert tapped_line(rows, beats) is tapped
+    width = dmax + 2 * model.margin + 6
+    left, right, _ = bundled_pair()
+    crop = (slice(250, 250 + 2 * model.margin + 3), slice(200, 200 + width))
+    frames = [(np.ascontiguousarray(left[crop]), np.ascontiguousarray(right[crop])),
+              _noisy_pair(2 * model.margin + 2, width, seed=2)]
+    top = StereoMachine(params=params, model=model, width=width, fifo_pixels=2)
+    want = assert_passes_equal_the_model(top, frames, model, params, seed=2)
+    assert set(want) == {"right", "left"} and len(np.unique(want["left"].map)) > 3

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import assert_same_results, passes_model
+from conftest import assert_passes_equal_the_model, assert_same_results
 
 from bayesmachine.columns.energy import INFINITE_CODE, log_codes
 from bayesmachine.hdl.frontend.stereo import FrontEnd, StereoMachine, stereo_machine_params
@@ -17,7 +17,7 @@ from bayesmachine.host.images import bundled_pair
 from bayesmachine.host.likelihoods import memory_words
 from bayesmachine.host.run import machines_model
 from bayesmachine.models import ModelParams
-from bayesmachine.sim.stereo_testbench import run_frontend, run_stereo, run_stereo_passes
+from bayesmachine.sim.stereo_testbench import run_frontend, run_stereo
 
 
 def _crop(y: int, x: int, height: int, width: int) -> tuple[np.ndarray, np.ndarray]:
@@ -86,12 +86,8 @@ def test_stereo_log_census_lr_equals_the_model(fuse: bool) -> None:
     width = dmax + 2 * model.margin + 8
     frames = [_crop(250, 200, 2 * model.margin + 3, width), _crop(150, 400, 2 * model.margin + 2, width)]
     top = StereoMachine(params=params, model=model, width=width, fifo_pixels=2)
-    got, _ = run_stereo_passes(top, frames, in_stall=0.2, out_stall=0.3, seed=1)
-    want = passes_model(frames, model, params)
-    assert set(got) == set(want) == {"right", "left"}
-    for name in want:
-        assert_same_results(got[name], want[name])
-    assert len(np.unique(want["left"].map)) > 3
+    want = assert_passes_equal_the_model(top, frames, model, params, seed=1)
+    assert set(want) == {"right", "left"} and len(np.unique(want["left"].map)) > 3
 
 
 def test_emit_summary_of_a_log_top() -> None:
