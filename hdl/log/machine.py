@@ -217,10 +217,6 @@ class LogMachine(wiring.Component):
         no match or every row was excluded (0 from reset), or at a line start."""
         p = self._params
         last = len(p.feedback_words) - 1
-        # Padded with its last code to a power of two: the clamped index never reaches the padding, and
-        # the read is a complete case (verilator -Wall: CASEINCOMPLETE).
-        padded = [*p.feedback_words, *[p.feedback_words[-1]] * ((1 << last.bit_length()) - last - 1)]
-        table = Array(Const(w, LOG_CODE_BITS) for w in padded)
         out = []
         for r in range(p.rows):
             latest = argmin.latest[r // FEEDBACK_GROUP]
@@ -229,9 +225,11 @@ class LogMachine(wiring.Component):
             if p.nomatch_row and r == p.rows - 1:
                 value = Const(p.feedback_nomatch_word, LOG_CODE_BITS)
             else:
-                dist = Signal(p.map_width, name=f"distance{r}")
-                m.d.comb += dist.eq(Mux(latest.map > r, latest.map - r, r - latest.map))
-                value = table[Mux(dist > last, last, dist)]
+                # The row's code at each MAP, a lookup of the MAP's bits (no distance arithmetic, no
+                # carry chain in the loop); every index of the MAP's width (a complete case: verilator
+                # -Wall CASEINCOMPLETE), the ones past the rows never read (hit is 0 there).
+                at = [p.feedback_words[min(abs(i - r), last)] for i in range(1 << p.map_width)]
+                value = Array(Const(c, LOG_CODE_BITS) for c in at)[latest.map]
             m.d.comb += code.eq(Mux(hit & ~start, value, 0))
             out.append(code)
         return out
