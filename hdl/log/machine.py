@@ -198,11 +198,7 @@ class LogMachine(wiring.Component):
             pending = Signal(range(argmin.latency + 8))
             m.d.sync += pending.eq(pending + issue - argmin.arriving)
             known = start | (pending == 0)
-            # The held line_start, copied per group of rows as the codes read it (``issue_start_rep*``).
-            copies = [Signal(name=f"issue_start_rep{k}") for k in range(argmin.latest_copies)]
-            with m.If(sums.ready):
-                m.d.sync += [c.eq(sums.payload.carried) for c in copies]
-            fb = self._feedback(m, argmin, copies)
+            fb = self._feedback(m, argmin, start)
             m.d.comb += [into.payload.feedback[r].eq(fb[r]) for r in range(p.rows)]
         else:
             known = 1
@@ -215,16 +211,15 @@ class LogMachine(wiring.Component):
             *(into.payload.sums[r].eq(view.sums[r]) for r in range(p.rows)),
         ]
 
-    def _feedback(self, m: Module, argmin: ArgminTree, starts: list[Signal]) -> list[Value]:
+    def _feedback(self, m: Module, argmin: ArgminTree, start: Signal) -> list[Value]:
         """Each row's feedback code from the argmin tree's latest MAP (the copy of the row's group): the
         table at |r − MAP| clamped, the no-match code in the no-match row; 0 when that pixel's answer is
-        no match or every row was excluded (0 from reset), or at a line start (``starts``: the held
-        line_start, the group's copy)."""
+        no match or every row was excluded (0 from reset), or at a line start."""
         p = self._params
         last = len(p.feedback_words) - 1
         out = []
         for r in range(p.rows):
-            latest, start = argmin.latest[r // FEEDBACK_GROUP], starts[r // FEEDBACK_GROUP]
+            latest = argmin.latest[r // FEEDBACK_GROUP]
             hit = ~latest.nomatch & ~latest.all_excluded
             code = Signal(LOG_CODE_BITS, name=f"feedback{r}")
             if p.nomatch_row and r == p.rows - 1:
