@@ -298,7 +298,6 @@ class StallPipeline(wiring.Component):
         return OutputBuffer(entries=(e0, e1), entry_valid=(v0, v1), reads=tuple(reads), write=write,
                             head=Cat(*head), skid=Cat(*skid), skid_valid=Mux(read, v0, v1))
 
-
     def _keep_latest(self, m: Module, value: Value, arriving: Value) -> None:
         """The latest result's copies, each its own register (``latest_rep*``: the FPGA flow keeps them)."""
         source = getattr(self, self._source)
