@@ -118,6 +118,9 @@ class ArgminTree(LogBlock):
     feedback : bool
         Whether the input holds a feedback code per row, added to the row's sum in a level before the
         tree's (the row's sum of the other codes must leave room for it: the total fits ``sum_bits``).
+    latest_copies : int
+        Copies of the latest result's ``map``, ``nomatch`` and ``all_excluded`` (``latest``, loaded as a
+        pixel reaches the output buffer: ``StallPipeline``), 0 ... 64; 0: none (no ``latest`` port).
 
     Attributes
     ----------
@@ -128,23 +131,28 @@ class ArgminTree(LogBlock):
         The MAP: ``map``, ``nomatch``, ``all_excluded``, ``s_min`` (and the sums).
     latency : int
         ``max(1, ceil((ceil(log2 rows) + feedback) / levels_per_stage))`` clocks.
+    latest, arriving
+        With ``latest_copies``: ``StallPipeline``'s (the latest result, a pixel arriving at the output).
     """
 
     node: NodeFunction = staticmethod(better)  # the tree's node (a proof's mutant overrides it)
 
     def __init__(self, *, params: LogParams, levels_per_stage: int = 1, pass_sums: bool = False,
-                 feedback: bool = False) -> None:
+                 feedback: bool = False, latest_copies: int = 0) -> None:
         for name, flag in (("pass_sums", pass_sums), ("feedback", feedback)):
             if not isinstance(flag, bool):
                 raise TypeError(f"{name} must be a bool, not {type(flag).__name__}")
         self._levels = as_int("levels_per_stage", levels_per_stage, 1, 64)
         self._pass_sums = pass_sums
         self._feedback = feedback
+        self._latest_copies = copies = as_int("latest_copies", latest_copies, 0, 64)
         p = check_params(params)
+        latest = {"latest_fields": ("map", "nomatch", "all_excluded"), "latest_copies": copies}
         super().__init__(params=p, sink="sums", source="best",
                          in_layout=feedback_sums_layout(p) if feedback else row_sums_layout(p),
                          out_layout=best_layout(p, pass_sums),
-                         stages=argmin_stages(p, self._levels, pass_sums, type(self).node, feedback))
+                         stages=argmin_stages(p, self._levels, pass_sums, type(self).node, feedback),
+                         **(latest if copies else {}))
 
     @property
     def levels_per_stage(self) -> int:
@@ -157,3 +165,7 @@ class ArgminTree(LogBlock):
     @property
     def feedback(self) -> bool:
         return self._feedback
+
+    @property
+    def latest_copies(self) -> int:
+        return self._latest_copies

@@ -11,10 +11,12 @@ code 0) and added to the sums in the tree's first level, and on to the weights s
 ``nomatch``, ``timeout`` (every row excluded), ``cycles`` and ``counts`` (the rows' weights):
 ``sim.log_model.LogMachineModel``'s results, bit for bit.
 
-The feedback loop is the argmin tree alone: as a MAP leaves it the next pixel's feedback codes are
-registered from it, and a pixel with a left neighbour issues the clock after its predecessor's MAP
-left, so such pixels issue every ``ArgminTree.latency + 1`` clocks at most (:func:`pixel_clocks`);
-a line's first pixel and every pixel without a neighbour prior issue as soon as their sums are
+The feedback loop is the argmin tree alone: as a MAP reaches the tree's output buffer it is registered
+(the tree's ``latest`` result, a copy per :data:`FEEDBACK_GROUP` rows), and a pixel with a left
+neighbour issues the clock after, its feedback codes formed from those registers on the way into the
+tree's first level, so such pixels issue every ``ArgminTree.latency`` clocks at most
+(:func:`pixel_clocks`); a line's first pixel and every pixel without a neighbour prior issue as soon as
+their sums are
 ready. ``cycles`` is that issue interval by the rule (1, or the loop's clocks), which the loading may
 exceed (the wall cycles count it).
 """
@@ -36,13 +38,14 @@ from .argmin import ArgminTree
 from .rule import LogParams
 from .weights import WeightStage
 
-__all__ = ["ADDER_LEVELS_PER_STAGE", "ARGMIN_LEVELS_PER_STAGE", "LogMachine", "log_params", "pixel_clocks",
-           "pixel_wall_cycles"]
+__all__ = ["ADDER_LEVELS_PER_STAGE", "ARGMIN_LEVELS_PER_STAGE", "FEEDBACK_GROUP", "LogMachine", "log_params",
+           "pixel_clocks", "pixel_wall_cycles"]
 
 # The log machine's pipeline setting: tree levels between two registers, of the row adders (before the
 # issue point, outside the loop) and of the argmin tree (the loop: the feedback codes' adders, the tree).
 ADDER_LEVELS_PER_STAGE = 1
 ARGMIN_LEVELS_PER_STAGE = 4
+FEEDBACK_GROUP = 8  # rows whose feedback codes read one copy of the latest MAP (a net's fanout)
 
 
 def log_params(params: MachineParams) -> LogParams:
@@ -56,11 +59,11 @@ def log_params(params: MachineParams) -> LogParams:
 
 def pixel_clocks(params: MachineParams) -> tuple[int, int]:
     """(clocks per pixel where no feedback column binds, clocks per pixel where one does): 1, and with a
-    neighbour prior the loop's ``ArgminTree.latency + 1`` at this machine's setting (the feedback codes'
-    adders and the tree's levels at ``ARGMIN_LEVELS_PER_STAGE``, then the feedback codes registered as
-    the MAP leaves the tree)."""
+    neighbour prior the loop's ``ArgminTree.latency`` at this machine's setting (the feedback codes'
+    adders and the tree's levels at ``ARGMIN_LEVELS_PER_STAGE``; the next pixel issues the clock its
+    predecessor's MAP is registered as the tree's latest result)."""
     levels = tree_levels(params.rows) + 1
-    loop = max(1, -(-levels // ARGMIN_LEVELS_PER_STAGE)) + 1
+    loop = max(1, -(-levels // ARGMIN_LEVELS_PER_STAGE))
     return 1, loop if params.feedback_columns else 1
 
 
@@ -120,12 +123,13 @@ class LogMachine(wiring.Component):
         loaded = dataclasses.replace(lp, codes=p.loaded_columns)
         m.submodules.adders = adders = RowAdders(params=loaded, levels_per_stage=ADDER_LEVELS_PER_STAGE,
                                                  carried=int(fb))
+        copies = -(-lp.rows // FEEDBACK_GROUP) if fb else 0
         m.submodules.argmin = argmin = ArgminTree(params=lp, levels_per_stage=ARGMIN_LEVELS_PER_STAGE,
-                                                  pass_sums=True, feedback=fb)
+                                                  pass_sums=True, feedback=fb, latest_copies=copies)
         m.submodules.weights = weights = WeightStage(params=lp)
         wiring.connect(m, argmin.best, weights.best)
         # pixel_clocks is the loop's latency (tests/hdl/log/test_machine.py holds it too).
-        assert not fb or argmin.latency + 1 == self.loop
+        assert not fb or argmin.latency == self.loop
         # Pixels issued and not yet out, their line_start in order, for their cycles (at most every
         # stage's plus the two output buffers' entries).
         depth = argmin.latency + weights.latency + 4
@@ -179,23 +183,22 @@ class LogMachine(wiring.Component):
         """The next pixel's loaded sums wait in the issue register (so the loop's first stage starts at
         registers, not at the row adders' output buffer) and issue into the argmin tree when it takes them
         and (a neighbour prior) its feedback codes are known: a line start, or no pixel in the argmin tree
-        (``pending``: the last one's MAP has left it, its feedback codes are registered)."""
+        (``pending``: the last one's MAP has reached its output buffer and is its latest result)."""
         p = self._params
         sums, into = adders.sums, argmin.sums
         held = Signal(sums.payload.shape(), name="issue_sums", reset_less=True)
         held_valid = Signal(name="issue_valid")
         view = sums.payload.shape()(held)
         issue = Signal()
-        passing = Signal()  # a MAP leaves the argmin tree this clock
-        m.d.comb += [passing.eq(argmin.best.valid & argmin.best.ready), sums.ready.eq(~held_valid | issue)]
+        m.d.comb += sums.ready.eq(~held_valid | issue)
         with m.If(sums.ready):
             m.d.sync += [held.eq(sums.payload), held_valid.eq(sums.valid)]
         start = view.carried if p.feedback_columns else Const(0, 1)
         if p.feedback_columns:
             pending = Signal(range(argmin.latency + 8))
-            m.d.sync += pending.eq(pending + issue - passing)
+            m.d.sync += pending.eq(pending + issue - argmin.arriving)
             known = start | (pending == 0)
-            fb = self._feedback(m, argmin, passing, start)
+            fb = self._feedback(m, argmin, start)
             m.d.comb += [into.payload.feedback[r].eq(fb[r]) for r in range(p.rows)]
         else:
             known = 1
@@ -208,32 +211,27 @@ class LogMachine(wiring.Component):
             *(into.payload.sums[r].eq(view.sums[r]) for r in range(p.rows)),
         ]
 
-    def _feedback(self, m: Module, argmin: ArgminTree, passing: Signal, start: Signal) -> list[Value]:
-        """Each row's feedback code: a register loaded as a MAP leaves the argmin tree (the table at
-        |r − MAP| clamped, the no-match code in the no-match row; 0 when that pixel's answer is no match or
-        every row was excluded; 0 from reset), read as 0 at a line start. The register keeps the loop's
-        logic (distances, table) out of the path into the adders."""
+    def _feedback(self, m: Module, argmin: ArgminTree, start: Signal) -> list[Value]:
+        """Each row's feedback code from the argmin tree's latest MAP (the copy of the row's group): the
+        table at |r − MAP| clamped, the no-match code in the no-match row; 0 when that pixel's answer is
+        no match or every row was excluded (0 from reset), or at a line start."""
         p = self._params
-        best = argmin.best.payload
-        hit = Signal()
-        m.d.comb += hit.eq(~best.nomatch & ~best.all_excluded)
         last = len(p.feedback_words) - 1
-        # Padded with its last code to a power of two: the clamped index never reaches the padding, and
-        # the read is a complete case (verilator -Wall: CASEINCOMPLETE).
-        padded = [*p.feedback_words, *[p.feedback_words[-1]] * ((1 << last.bit_length()) - last - 1)]
-        table = Array(Const(w, LOG_CODE_BITS) for w in padded)
         out = []
         for r in range(p.rows):
+            latest = argmin.latest[r // FEEDBACK_GROUP]
+            hit = ~latest.nomatch & ~latest.all_excluded
             code = Signal(LOG_CODE_BITS, name=f"feedback{r}")
             if p.nomatch_row and r == p.rows - 1:
                 value = Const(p.feedback_nomatch_word, LOG_CODE_BITS)
             else:
-                dist = Signal(p.map_width, name=f"distance{r}")
-                m.d.comb += dist.eq(Mux(best.map > r, best.map - r, r - best.map))
-                value = table[Mux(dist > last, last, dist)]
-            with m.If(passing):
-                m.d.sync += code.eq(Mux(hit, value, 0))
-            out.append(Mux(start, 0, code))
+                # The row's code at each MAP, a lookup of the MAP's bits (no distance arithmetic, no
+                # carry chain in the loop); every index of the MAP's width (a complete case: verilator
+                # -Wall CASEINCOMPLETE), the ones past the rows never read (hit is 0 there).
+                at = [p.feedback_words[min(abs(i - r), last)] for i in range(1 << p.map_width)]
+                value = Array(Const(c, LOG_CODE_BITS) for c in at)[latest.map]
+            m.d.comb += code.eq(Mux(hit & ~start, value, 0))
+            out.append(code)
         return out
 
     def _result(self, m: Module, weights: WeightStage, starts: fifo.SyncFIFO) -> None:

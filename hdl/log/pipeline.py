@@ -23,6 +23,11 @@ not held; a held output keeps its pixel, the next pixel to arrive waits in the o
 pipeline stops the clock after (``go`` falls) until the head is taken: nothing is dropped or taken
 twice, and with ``out.ready`` high one pixel passes per clock. The data registers have no reset
 (the ``valid`` bits do).
+
+A pipeline may also keep its *latest* result: some fields of the last stage's output, registered
+(``latest_copies`` copies, ``latest_rep*``) as each pixel reaches the output buffer, whether or not
+it is taken, with ``arriving`` high in that clock. A loop through the pipeline's result (the log
+machine's feedback) reads them: in order, the latest is the last pixel's, the clock after it arrived.
 """
 
 from __future__ import annotations
@@ -39,7 +44,7 @@ from amaranth.lib.wiring import In, Out
 from .rule import LogParams, check_params
 
 __all__ = ["ENABLE_GROUP", "Bank", "LogBlock", "OutputBuffer", "PipelineNets", "Stage", "StallPipeline",
-           "Wire", "fit", "pack", "stage_functions", "wires"]
+           "Wire", "fit", "latest_layout", "pack", "stage_functions", "wires"]
 
 ENABLE_GROUP = 64  # register bits per copy of the pipeline's enable (and of the read pointer)
 Bank = Any  # a Value, or a list, tuple or dict (str keys) of banks
@@ -169,6 +174,10 @@ class StallPipeline(wiring.Component):
     stages : sequence of Stage
         The stage functions: the first takes the input payload (a view), the last returns a value
         as wide as ``out_layout``. Each call builds fresh logic (a proof calls them again).
+    latest_fields : sequence of str
+        Fields of ``out_layout`` (a struct layout) the latest result keeps (none: no latest result).
+    latest_copies : int
+        Register copies of the latest result (1 ... 64; with ``latest_fields``).
 
     Attributes
     ----------
@@ -178,14 +187,25 @@ class StallPipeline(wiring.Component):
         Clocks from a pixel taken to its result offered (the number of stages).
     nets : PipelineNets
         After elaboration: the stage registers, the skid and ``go`` (read-only).
+    latest : ``Out(ArrayLayout(latest_layout, latest_copies))``
+        With ``latest_fields``: the copies of the latest result (``latest_layout``: those fields);
+        every field 0 but ``all_excluded`` (1, when it is kept) from reset.
+    arriving : ``Out(1)``
+        With ``latest_fields``: a pixel reaches the output buffer this clock.
     """
 
     def __init__(self, *, sink: str, source: str, in_layout: data.Layout, out_layout: data.Layout,
-                 stages: Sequence[Stage]) -> None:
+                 stages: Sequence[Stage], latest_fields: Sequence[str] = (), latest_copies: int = 1) -> None:
         self._sink, self._source = sink, source
         self._stages = tuple(stages)
         self._nets: PipelineNets | None = None
-        super().__init__({sink: In(stream.Signature(in_layout)), source: Out(stream.Signature(out_layout))})
+        members = {sink: In(stream.Signature(in_layout)), source: Out(stream.Signature(out_layout))}
+        self._latest = latest_layout(out_layout, latest_fields) if latest_fields else None
+        self._latest_n = latest_copies
+        if self._latest is not None:
+            members["latest"] = Out(data.ArrayLayout(self._latest, latest_copies))
+            members["arriving"] = Out(1)
+        super().__init__(members)
 
     @property
     def stream_names(self) -> tuple[str, str]:
@@ -267,6 +287,8 @@ class StallPipeline(wiring.Component):
             m.d.sync += [r.eq(~r) for r in reads]
         with m.If(arriving):
             m.d.sync += write.eq(~write)
+        if self._latest is not None:
+            self._keep_latest(m, value, arriving)
         nexts = []
         for k, v in enumerate((v0, v1)):
             nxt = (v & ~(taken & (read == k))) | (arriving & (write == k))
@@ -275,6 +297,25 @@ class StallPipeline(wiring.Component):
         m.d.sync += [g.eq(~(nexts[0] & nexts[1])) for g in go]  # go: an entry is free
         return OutputBuffer(entries=(e0, e1), entry_valid=(v0, v1), reads=tuple(reads), write=write,
                             head=Cat(*head), skid=Cat(*skid), skid_valid=Mux(read, v0, v1))
+
+    def _keep_latest(self, m: Module, value: Value, arriving: Value) -> None:
+        """The latest result's copies, each its own register (``latest_rep*``: the FPGA flow keeps them)."""
+        source = getattr(self, self._source)
+        got = source.payload.shape()(value)
+        init = {"all_excluded": 1} if "all_excluded" in self._latest.members else {}
+        m.d.comb += self.arriving.eq(arriving)
+        for k in range(self._latest_n):
+            reg = Signal(self._latest, name=f"latest_rep{k}", init=init)
+            with m.If(arriving):
+                m.d.sync += [getattr(reg, f).eq(getattr(got, f)) for f in self._latest.members]
+            m.d.comb += self.latest[k].eq(reg)
+
+
+def latest_layout(layout: data.StructLayout, fields: Sequence[str]) -> data.StructLayout:
+    """The fields ``fields`` of ``layout`` (a pipeline's latest result)."""
+    if not isinstance(layout, data.StructLayout) or not set(fields) <= set(layout.members):
+        raise ValueError(f"latest_fields must be fields of the output layout, not {list(fields)}")
+    return data.StructLayout({f: layout.members[f] for f in fields})
 
 
 class LogBlock(StallPipeline):

@@ -5,7 +5,8 @@ latency at one pixel per clock, and random back-pressure on both streams."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
 
 import numpy as np
 import pytest
@@ -31,18 +32,20 @@ TABLE = tuple(int(x) for x in exp_table(4, 0.5))  # (16, 10, 6, 4, 2, 1, 1, 0)
 
 @dataclass
 class Run:
-    """A stream run: the outputs taken in order, the clocks each input and output was taken at."""
+    """A stream run: the outputs taken in order, the clocks each input and output was taken at, and
+    what ``watch`` read each clock."""
 
     outputs: list
     taken_in: list[int]
     taken_out: list[int]
+    watched: list = field(default_factory=list)
 
 
 def drive(dut: StallPipeline, sink: str, source: str, payloads: list, *, p_valid: float = 1.0,
-          p_ready: float = 1.0, seed: int = 0) -> Run:
+          p_ready: float = 1.0, seed: int = 0, watch: Callable[[object], object] | None = None) -> Run:
     """Offer ``payloads`` in order (valid with probability ``p_valid`` each clock, held until taken)
     and take the outputs (ready with probability ``p_ready``); checks the output stream's rule: a
-    result offered and not taken is offered again unchanged."""
+    result offered and not taken is offered again unchanged. ``watch(ctx)`` each clock, before it ends."""
     rng = np.random.default_rng(seed)
     run = Run([], [], [])
     port_in, port_out = getattr(dut, sink), getattr(dut, source)
@@ -71,6 +74,8 @@ def drive(dut: StallPipeline, sink: str, source: str, payloads: list, *, p_valid
                 run.taken_out.append(clock)
             elif valid:
                 held = ("out", payload)
+            if watch is not None:
+                run.watched.append(watch(ctx))
             await ctx.tick()
             clock += 1
 
@@ -238,6 +243,38 @@ def test_argmin_tree_feedback(rows: int, tie_break: str, levels: int) -> None:
         assert [o.sums[r] for r in range(rows)] == totals[i].tolist() and o.excluded == flags(out[i])
 
 
+def test_argmin_tree_latest() -> None:
+    """``latest_copies``: every copy holds the map, nomatch and all_excluded of the last pixel to reach
+    the output buffer (``arriving`` in that clock) from the clock after, taken or not (it runs ahead
+    of a held output); every row excluded from reset."""
+    p = LogParams(rows=7, codes=3, code_bits=3, weights=TABLE, nomatch_row=True)
+    dut = ArgminTree(params=p, levels_per_stage=1, feedback=True, latest_copies=3)
+    rng = np.random.default_rng(9)
+    sums = rng.integers(0, 2 * p.infinite + 1, (80, p.rows))  # the sum of two codes
+    excluded = rng.random(sums.shape) < 0.3
+    feedback = rng.integers(0, 3, sums.shape)
+    payloads = [{"sums": s.tolist(), "excluded": flags(x), "feedback": f.tolist()}
+                for s, x, f in zip(sums, excluded, feedback, strict=True)]
+
+    def watch(ctx: object) -> tuple:
+        copies = [ctx.get(dut.latest[k]) for k in range(3)]
+        head = ctx.get(dut.best.payload)
+        return (ctx.get(dut.arriving), [(c.map, c.nomatch, c.all_excluded) for c in copies],
+                ctx.get(dut.best.valid) and (head.map, head.nomatch, head.all_excluded))
+
+    run = drive(dut, "sums", "best", payloads, p_valid=0.8, p_ready=0.4, seed=9, watch=watch)
+    want = list(zip(*(a.astype(int).tolist() for a in argmin_rows(sums + feedback, excluded, p)[:3]),
+                    strict=True))
+    latest, arrived, ahead = (0, 0, 1), 0, 0
+    for arriving, copies, head in run.watched:
+        assert copies == [latest] * 3
+        ahead += bool(head) and arrived > 0 and head != latest
+        if arriving:
+            latest, arrived = want[arrived], arrived + 1
+    assert arrived == len(run.outputs) == 80 and ahead > 0
+    assert dut.latest_copies == 3 and ArgminTree(params=p).latest_copies == 0
+
+
 def test_weight_stage() -> None:
     p = LogParams(rows=9, codes=4, code_bits=3, weights=TABLE)
     dut = WeightStage(params=p)
@@ -267,6 +304,8 @@ def test_bad_block_parameters() -> None:
         ArgminTree(params=p, pass_sums=1)
     with pytest.raises(TypeError, match="feedback"):
         ArgminTree(params=p, feedback=1)
+    with pytest.raises(ParameterError, match="latest_copies"):
+        ArgminTree(params=p, latest_copies=65)
     with pytest.raises(ParameterError, match="carried"):
         RowAdders(params=p, carried=-1)
     for block in (RowAdders, ArgminTree, WeightStage, LogIntegrator):
