@@ -93,6 +93,11 @@ def test_blocks_of_the_machines_names() -> None:
     assert block_of(m, "word_0_1") == "likelihood memory" and block_of(m, "shadow_2_0") == "likelihood memory"
     assert block_of(m, "next_number_rep0_5_0") == "sources" and block_of(m, "over_group_1") == "encoder"
     assert block_of("bayesmachine.machine.source", "state") == "sources"
+    # A shared source's copies (hdl/machine/top.py), and the log machine's row sums at its issue point.
+    assert block_of("bayesmachine.source_rep1", "direction_0") == "sources"
+    assert block_of("bayesmachine.right.source_rep12", "index") == "sources"
+    assert block_of("bayesmachine", "issue_sums") == "adders"
+    assert block_of("bayesmachine.right", "issue_sums") == "adders"
     assert block_of("bayesmachine.frontend.pipeline.linebuffer", "column") == "front end"
     assert block_of("bayesmachine.fifo", "r_port__addr") == "front end"
     assert block_of("bayesmachine.right.machine", "count_0") == "counters"
