@@ -112,11 +112,12 @@ def test_blocks_of_the_machines_names() -> None:
     ("stochastic", "pixels",
      ("operators", "counters", "sources", "likelihood memory", "front end", "encoder")),
     ("log", "words", ("adders", "argmin", "weights")),
+    ("log", "pixels", ("front end", "adders", "argmin", "weights", "likelihood memory")),
 ])
 def test_activity_builds_count_every_register(integrator, feed, blocks, tmp_path: Path) -> None:
-    """A small census design built for activity (the StereoMachine fed pixels, the log machine fed
-    words): its results equal the model's, the coverage files name every register of its Verilog, and
-    its blocks' registers toggle."""
+    """A small census design built for activity (the StereoMachine fed pixels with either integrator,
+    the log machine fed words): its results equal the model's, the coverage files name every register
+    of its Verilog, and its blocks' registers toggle."""
     from conftest import require_tool
 
     from bayesmachine.hdl.frontend.stereo import stereo_machine_params
