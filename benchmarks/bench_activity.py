@@ -7,7 +7,8 @@ on-chip front end, every pass), with ``--feed words`` the machines alone on the 
 pass's); the registers' toggles (front end, sources, likelihood memory, operators, counters, encoder,
 the feedback prior, the logarithmic integrator's adders, argmin and weights, control) are divided by
 the crop's output pixels. Each run is checked against the model engine (every result equal) before
-its figures are printed; the crop's cycles per pixel (the own pass's) are printed beside them.
+its figures are printed; beside them the crop's cycles per pixel (the own pass's) and wall cycles per
+output pixel (the StereoMachine's since reset; fed words, the own pass's machine's).
 docs/integrators.md holds the figures measured with the command it names.
 """
 
@@ -66,7 +67,8 @@ def measure(name: str, integrator: str, feed: str, crop: tuple[int, int, int, in
             and np.array_equal(run.cycles, want.cycles)):
         raise ValueError(f"{name}, {integrator}: the activity build's results differ from the model's")
     act = directory_activity(counts, run.map.size, ORDER)
-    return {"activity": act, "cycles": float(run.cycles.mean()), "seconds": seconds}
+    return {"activity": act, "cycles": float(run.cycles.mean()), "wall": run.wall_cycles / run.map.size,
+            "seconds": seconds}
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -87,14 +89,14 @@ def main(argv: list[str] | None = None) -> None:
     what = "the StereoMachine" if args.feed == "pixels" else "the machines fed words"
     print(f"register toggles per output pixel, {what} under Verilator (--coverage-toggle), crop "
           f"{','.join(map(str, args.crop))} of the bundled pair, Dmax {args.dmax}")
-    print(f"{'model':<10} {'integrator':<10} {'cycles/px':>9} {'total':>9}  "
+    print(f"{'model':<10} {'integrator':<10} {'cycles/px':>9} {'wall/px':>8} {'total':>9}  "
           + "  ".join(f"{b:>{len(b)}}" for b in ORDER))
     with tempfile.TemporaryDirectory() as tmp:
         for name in args.models:
             for integrator in args.integrators:
                 m = measure(name, integrator, args.feed, args.crop, args.dmax, Path(tmp))
                 per = m["activity"].per_pixel()
-                print(f"{name:<10} {integrator:<10} {m['cycles']:9.2f} {per['total']:9.0f}  "
+                print(f"{name:<10} {integrator:<10} {m['cycles']:9.2f} {m['wall']:8.2f} {per['total']:9.0f}  "
                       + "  ".join(f"{per.get(b, 0.0):{len(b)}.1f}" for b in ORDER)
                       + f"  [{m['seconds']:.0f} s]", flush=True)
 

@@ -38,15 +38,17 @@ ACTIVITY_FLAGS = ("--coverage-toggle", "--coverage-max-width", "65536", "--cover
 # (hdl/machine: ``word_r_c``/``shadow_r_c`` the likelihood-memory words and ``load_q``/``write_q`` the
 # load path into them, ``bit_r_c`` the operators' outputs, ``count_r`` the
 # overflow counters, ``over_group_g`` and ``search*`` the MAP encoder's, ``next_number_rep*`` and
-# ``restart_number_rep*`` the sources' copies on the stochastic bus; the log machine's ``code{i}`` its
-# loaded codes, ``feedback{r}`` and ``distance{r}`` its feedback column's).
+# ``restart_number_rep*`` the sources' copies on the stochastic bus, ``source_rep<k>`` the copies of a
+# shared source; the log machine's ``code{i}`` its loaded codes, ``issue_sums`` its row adders' sums
+# waiting at the issue point, ``feedback{r}`` and ``distance{r}`` its feedback column's).
 _ANY = r"bayesmachine(\..*)?"
 BLOCKS: tuple[tuple[str, str, str], ...] = (
     ("front end", r"bayesmachine\.(frontend|fifo)(\..*)?", r".*"),
-    ("sources", r"bayesmachine(\.\w+)*\.(source|column_scales)(\..*)?", r".*"),
+    ("sources", r"bayesmachine(\.\w+)*\.(source|source_rep\d+|column_scales)(\..*)?", r".*"),
     ("feedback prior", r"bayesmachine(\.\w+)*\.feedback_prior(\..*)?", r".*"),
     ("encoder", r"bayesmachine(\.\w+)*\.encoder(\..*)?", r".*"),
     ("adders", r"bayesmachine(\.\w+)*\.(adders|row_adders)(\..*)?", r".*"),
+    ("adders", _ANY, r"issue_sums"),
     ("argmin", r"bayesmachine(\.\w+)*\.(argmin|argmin_tree)(\..*)?", r".*"),
     ("weights", r"bayesmachine(\.\w+)*\.(weights|weight_stage)(\..*)?", r".*"),
     ("sources", _ANY, r"(next|restart)_number_rep.*"),

@@ -173,3 +173,21 @@ def test_study_camera_budget_counts_both_passes(tmp_path, capsys) -> None:
     row = capsys.readouterr().out.splitlines()[1]
     # Left 30 cycles x 70 operators (10 rows x 7 columns) + right 20 x 1.5 pixels x 60 operators = 3,900.
     assert "| census-lr, B = 1 | 100 | 3,900 (2,100 + 1,800) |" in row
+
+
+def test_bench_activity_checks_against_the_model_and_divides_by_output_pixels(monkeypatch, tmp_path) -> None:
+    """bench_activity's measure: an activity run whose results differ from the model's is refused; its
+    wall cycles are per output pixel (the crop's 6 here)."""
+    module = load("bench_activity")
+    monkeypatch.setattr(module, "bundled_pair", lambda: (np.zeros((500, 741)), np.zeros((500, 741)), None))
+    monkeypatch.setattr(module, "prepare", lambda *args, **kwargs: None)
+    monkeypatch.setattr(module, "directory_activity", lambda directory, pixels, blocks: pixels)
+    runs = {"verilator": SimpleNamespace(map=np.arange(6).reshape(2, 3), counts=np.ones((2, 3, 4)),
+                                         cycles=np.full((2, 3), 5), wall_cycles=45)}
+    runs["model"] = SimpleNamespace(**{**vars(runs["verilator"]), "wall_cycles": None})
+    monkeypatch.setattr(module, "run_machine", lambda prep, machine, engine, **kwargs: runs[engine])
+    m = module.measure("census", "log", "words", (0, 0, 3, 2), 4, tmp_path)
+    assert (m["activity"], m["cycles"], m["wall"]) == (6, 5.0, 7.5)
+    runs["model"].counts = np.zeros((2, 3, 4))
+    with pytest.raises(ValueError, match="census, log: the activity build's results differ"):
+        module.measure("census", "log", "words", (0, 0, 3, 2), 4, tmp_path)

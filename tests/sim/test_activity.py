@@ -93,6 +93,11 @@ def test_blocks_of_the_machines_names() -> None:
     assert block_of(m, "word_0_1") == "likelihood memory" and block_of(m, "shadow_2_0") == "likelihood memory"
     assert block_of(m, "next_number_rep0_5_0") == "sources" and block_of(m, "over_group_1") == "encoder"
     assert block_of("bayesmachine.machine.source", "state") == "sources"
+    # A shared source's copies (hdl/machine/top.py), and the log machine's row sums at its issue point.
+    assert block_of("bayesmachine.source_rep1", "direction_0") == "sources"
+    assert block_of("bayesmachine.right.source_rep12", "index") == "sources"
+    assert block_of("bayesmachine", "issue_sums") == "adders"
+    assert block_of("bayesmachine.right", "issue_sums") == "adders"
     assert block_of("bayesmachine.frontend.pipeline.linebuffer", "column") == "front end"
     assert block_of("bayesmachine.fifo", "r_port__addr") == "front end"
     assert block_of("bayesmachine.right.machine", "count_0") == "counters"
@@ -107,11 +112,12 @@ def test_blocks_of_the_machines_names() -> None:
     ("stochastic", "pixels",
      ("operators", "counters", "sources", "likelihood memory", "front end", "encoder")),
     ("log", "words", ("adders", "argmin", "weights")),
+    ("log", "pixels", ("front end", "adders", "argmin", "weights", "likelihood memory")),
 ])
 def test_activity_builds_count_every_register(integrator, feed, blocks, tmp_path: Path) -> None:
-    """A small census design built for activity (the StereoMachine fed pixels, the log machine fed
-    words): its results equal the model's, the coverage files name every register of its Verilog, and
-    its blocks' registers toggle."""
+    """A small census design built for activity (the StereoMachine fed pixels with either integrator,
+    the log machine fed words): its results equal the model's, the coverage files name every register
+    of its Verilog, and its blocks' registers toggle."""
     from conftest import require_tool
 
     from bayesmachine.hdl.frontend.stereo import stereo_machine_params
