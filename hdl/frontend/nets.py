@@ -405,7 +405,7 @@ class WordNets:
         :data:`BLOCK_TABLE_DEPTH` (Yosys would otherwise build each read port's multiplexer tree over
         every entry before mapping it to logic)."""
         init = [int(w) for w in words]
-        width = self.params.memory_word_width if bits is None else bits
+        width = self._table_width(bits)
         attrs = {"rom_style": "block"} if len(init) > BLOCK_TABLE_DEPTH else None
         mem = memory.Memory(shape=unsigned(width), depth=len(init), init=init, attrs=attrs)
         self.m.submodules[f"table_{name}"] = mem
@@ -430,12 +430,16 @@ class WordNets:
             out.append(port.data)
         return out
 
+    def _table_width(self, bits: int | None) -> int:
+        """A table's word width: W + 1 (a word), or ``bits`` (energy codes)."""
+        return self.params.memory_word_width if bits is None else bits
+
     def _identity(self, name: str, j: int, cost: Value, depth: int, en: Value | None,
                   bits: int | None) -> Signal:
         """Lane row j's read of an identity table of ``depth`` words: its address, a cycle later."""
-        width = self.params.memory_word_width if bits is None else bits
         addr = self.address(cost, depth, f"{name}_{j}", en)
-        data = Signal(unsigned(width), name=f"read_{name}_{j}", reset_less=True)  # as a read port's data
+        # As a read port's data: loaded on the read's enable, no reset.
+        data = Signal(unsigned(self._table_width(bits)), name=f"read_{name}_{j}", reset_less=True)
         with self.m.If(self.advance if en is None else en):
             self.m.d.sync += data.eq(addr)
         return data

@@ -41,6 +41,8 @@ from amaranth.hdl import Cat, Const, Module, Mux, Shape, Signal, Value
 from amaranth.lib import data, stream, wiring
 from amaranth.lib.wiring import In, Out
 
+from bayesmachine.checks import as_int
+
 from .rule import LogParams, check_params
 
 __all__ = ["ENABLE_GROUP", "Bank", "LogBlock", "OutputBuffer", "PipelineNets", "Stage", "StallPipeline",
@@ -201,7 +203,7 @@ class StallPipeline(wiring.Component):
         self._nets: PipelineNets | None = None
         members = {sink: In(stream.Signature(in_layout)), source: Out(stream.Signature(out_layout))}
         self._latest = latest_layout(out_layout, latest_fields) if latest_fields else None
-        self._latest_n = latest_copies
+        self._latest_n = as_int("latest_copies", latest_copies, 1, 64)
         if self._latest is not None:
             members["latest"] = Out(data.ArrayLayout(self._latest, latest_copies))
             members["arriving"] = Out(1)
