@@ -163,8 +163,9 @@ class FrontEndProperties(wiring.Component):
         output = (cur_line == WINDOW - 1) & (cur_col >= dmax + WINDOW - 1)
         out_taken = taken & output
         beat = dut.beats.valid & dut.beats.ready
-        # Three pipeline stages in front of the word generator.
-        _beats_owed(m, bpp, out_taken, beat, self.beats_ready, bpp + GENERATOR_LATENCY + 3)
+        # Three pipeline stages in front of the word generator, which may take an output pixel a cycle
+        # late (after a take at two beats or more: WordNets.accept).
+        _beats_owed(m, bpp, out_taken, beat, self.beats_ready, bpp + GENERATOR_LATENCY + 4)
         # Not vacuous: all the beats of an output pixel of a frame started again (a ``first`` after
         # another one's pixels) handed over.
         restarted = Signal()

@@ -15,7 +15,14 @@ so that each lane row of a beat reads a bank of its own, or for wide beats a shi
 each lane row reading its entry's tap of the beat (:func:`tapped_line`); a pixel is written into it a
 cycle after its take (from a register holding the taken match features), so the take (which depends on the
 stream's ready) drives only the entry registers and the reference features, not the buffer's write
-enables.
+enables. Each entry register loads from one tap (or bank read) at the take and one at a fetch, not from a
+choice by whether that write is still pending: at two beats or more per pixel an output pixel is not
+taken in the cycle after a take (:meth:`WordNets.accept`; output pixels come every ``beats_per_pixel``
+cycles, so this costs a cycle only for a line's first output pixel, after the pixels outside the output
+region), and in a pass that scans beat 0's fetch is always the cycle after the take, its pixel's write
+pending. The choice remains at one beat per pixel (a take each cycle: waiting would halve the rate) and at
+beat 0's issue in a pass that does not scan (the issue may stall). Shifting the taps at the take would
+leave no write pending but make the take drive the enables of all Dmax + 1 taps.
 """
 
 from __future__ import annotations
@@ -188,12 +195,16 @@ class WordNets:
     def accept(self, ready: Value) -> Value:
         """The pixel stream's ``ready``, given ``ready``: the lanes may take a pixel (``free`` and each
         lane builder's ``ready``); in a pass that scans it drives ``take``, and the stream's ready is that
-        of the ring (a free slot) and of the scan (idle, or fetching a pixel's last beat)."""
+        of the ring (a free slot) and of the scan (idle, or fetching a pixel's last beat). At two beats or
+        more per pixel, not for an output pixel while the previous pixel's delay-line write is pending
+        (``shift_q``), so that its entries read no pending write (:meth:`_delay_line`)."""
+        # No output pixel taken while a write is pending (_delay_line), but at one beat per pixel.
+        settled = ~(self.shift_q & self.fed.output) if self._pending_at_take is None else Const(1, 1)
         if not self.scan_latency:
-            return ready
+            return ready & settled
         ripe = pick(self.waiting, self.take_slot) & pick(self.scanned, self.take_slot)
         self.m.d.comb += self.take.eq(ripe & ready)
-        return ~pick(self.busy, self.feed_slot) & (~self.fetch | self._fetch_last)
+        return ~pick(self.busy, self.feed_slot) & (~self.fetch | self._fetch_last) & settled
 
     def _pipeline(self) -> None:
         """The beat counter and the valid flags of the four steps."""
@@ -261,10 +272,16 @@ class WordNets:
         :meth:`_banked_line`); a pixel enters a cycle after its take, from a register holding its match
         features (``right_in``): the take (FIFO ready -> issue -> take) drives the entry registers, not
         the line's write enables. While that write is pending (``shift_q``) the newest pixel is in
-        ``right_in``. Uninitialized entries: an output pixel is at least Dmax pixels into its line, so
-        none reads an entry of an earlier line or frame."""
+        ``right_in``: where the entry registers load, at an output pixel's take only at one beat per
+        pixel, at beat 0's fetch always in a pass that scans (``_pending_at_take``,
+        ``_pending_at_fetch``: None never, True always, else when). Uninitialized entries: an output
+        pixel is at least Dmax pixels into its line, so none reads an entry of an earlier line or
+        frame."""
         self.right_in = Signal(side, reset_less=True)
         self.shift_q = Signal()
+        # (accept waits a cycle at two beats or more; a scan fetches beat 0 the cycle after the take)
+        self._pending_at_take: Value | None = self.shift_q if self.n_beats == 1 else None
+        self._pending_at_fetch: Value | bool = True if self.scan_latency else self.shift_q
         self.m.d.sync += self.shift_q.eq(self.fed_take)
         with self.m.If(self.fed_take):
             self.m.d.sync += self.right_in.eq(self.fed.right)
@@ -464,31 +481,38 @@ class WordNets:
     def _tap_reads(self, plane: str, j: int) -> tuple[Value, Value | None]:
         """Lane row j's entry at the take and at a fetch from the taps (:meth:`_tapped_line`): entry d of
         pixel t is pixel t - d, tap d - 1 at its take, tap d at its fetches, one tap nearer while pixel
-        t - 1 (at the take) or t (at beat 0's fetch, the latest a write is pending) is in ``right_in``. An
-        entry past Dmax (a lane row past Dmax: its words are the no-match row's or 0) reads 0 or an older
-        pixel."""
+        t - 1 (at the take) or t (at beat 0's fetch, the latest a write is pending) is in ``right_in``
+        (:meth:`_delay_line`: where that may be). An entry past Dmax (a lane row past Dmax: its words are
+        the no-match row's or 0) reads 0 or an older pixel."""
         pending = getattr(self.right_in, plane)
         taps = [pending, *(getattr(t, plane) for t in self._taps)]  # taps[k + 1]: tap k
 
-        def read(k: int, pend: Value | None) -> Value:  # tap k once a write pending (``pend``) is done
+        def read(k: int, pend: Value | bool | None) -> Value:  # tap k once a write pending (``pend``) is done
             if not 0 <= k <= self.dmax:
                 return Const(0, len(pending))
-            return taps[k + 1] if pend is None else Mux(pend, taps[k], taps[k + 1])
+            return self._unless_pending(pend, taps[k], taps[k + 1])
 
         d0 = self.reference.entry(j, self.dmax)
-        at_take = getattr(self.fed.right, plane) if d0 == 0 else read(d0 - 1, self.shift_q)
+        at_take = getattr(self.fed.right, plane) if d0 == 0 else read(d0 - 1, self._pending_at_take)
         if self.n_beats == 1:
             return at_take, None
         fetched = [read(self.reference.entry((b + 1) * self.rows_per_beat + j, self.dmax),
-                        self.shift_q if b == 0 else None) for b in range(self.n_beats - 1)]
+                        self._pending_at_fetch if b == 0 else None) for b in range(self.n_beats - 1)]
         return at_take, pick(fetched, self.fetch_beat)
+
+    @staticmethod
+    def _unless_pending(pend: Value | bool | None, pending: Value, written: Value) -> Value:
+        """``written``, or ``pending`` while a write is pending: ``pend`` (None: never, True: always)."""
+        if pend is None:
+            return written
+        return pending if pend is True else Mux(pend, pending, written)
 
     def _bank_reads(self, plane: str, j: int) -> tuple[Value, Value]:
         """Lane row j's entry at the take and at a fetch from the banks (:meth:`_banked_line`), at the
         address of the next load (:meth:`_next_load`). The newest pixels come from the registers in front
-        of the buffer until they are written: at the take the taken pixel (entry 0) and the one before it
-        (entry 1) while its write is pending; at beat 0's fetch the taken pixel while its write is
-        pending."""
+        of the buffer until they are written (:meth:`_delay_line`: where that may be): at the take the
+        taken pixel (entry 0) and the one before it (entry 1) while its write is pending; at beat 0's
+        fetch the taken pixel while its write is pending."""
         m, rows = self.m, self.rows_per_beat
         banks = [getattr(d, plane) for d in self._bank_data]
         read = Signal(banks[0].shape(), name=f"line_{plane}_{j}")
@@ -498,12 +522,13 @@ class WordNets:
                     m.d.comb += read.eq(banks[(start + self._towards * j) % rows])
         pending = getattr(self.right_in, plane)
 
-        def newest(d: int) -> Value:  # entry d of the pixel being loaded, a pending write included
-            return Mux(self.shift_q, pending, read) if d == 0 else read
+        def newest(d: int, pend: Value | bool | None) -> Value:  # entry d of the pixel being loaded
+            return self._unless_pending(pend, pending, read) if d == 0 else read
 
         d0 = self.reference.entry(j, self.dmax)
-        at_take = getattr(self.fed.right, plane) if d0 == 0 else newest(d0 - 1)
-        return at_take, newest(self.reference.entry(rows + j, self.dmax))  # shift_q: beat 0's fetch at most
+        at_take = getattr(self.fed.right, plane) if d0 == 0 else newest(d0 - 1, self._pending_at_take)
+        # Beat 0's fetch is the latest a write is pending (a lane row of entry 0 at beat 1 is past Dmax after)
+        return at_take, newest(self.reference.entry(rows + j, self.dmax), self._pending_at_fetch)
 
     def write_beats(self, columns: list[tuple[list[Any], Any]]) -> None:
         """The beat on the stream: lane L's word by its (row, operator column) from ``columns`` (each

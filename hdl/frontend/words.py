@@ -151,7 +151,8 @@ class WordGenerator(wiring.Component):
     for their scans (``beats_per_pixel`` + 6 cycles: ``Lanes.scan_latency``) and then for the previous
     pixel's last issue; its ``pixel.ready`` is that of the ring (a free slot) and of the scan (an output
     pixel's scan starts in the cycle of the previous one's last fetch), so in steady state an output pixel
-    is taken every ``beats_per_pixel`` cycles.
+    is taken every ``beats_per_pixel`` cycles. At two beats or more per pixel an output pixel is not taken
+    in the cycle after a take (a cycle at a line's first output pixel: ``WordNets.accept``).
 
     Parameters
     ----------

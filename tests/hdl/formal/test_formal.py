@@ -98,7 +98,7 @@ FRONT_PARAMS = stereo_machine_params(1, model=FRONT_MODEL, counter_max=1, word_b
                                      max_cycles=3, words_per_beat=3)
 FRONT_WIDTH = 6
 GENERATOR_DEPTH = 30
-FRONTEND_DEPTH = 45  # an output pixel's beats after a frame started again (the cover: step 39)
+FRONTEND_DEPTH = 45  # an output pixel's beats after a frame started again (the cover: step 40)
 FIFO_PROVE_DEPTH = 4
 FIFO_COVER_DEPTH = 45
 FIFO_MUTANT_DEPTH = 45  # the first output pixel's beats through the FIFO (read early: step 37)
