@@ -47,18 +47,20 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--model", choices=model_names(), default="census-lr")
     ap.add_argument("--integrator", choices=INTEGRATORS, default="log")
     ap.add_argument("--dmax", type=int_in_range(1, 255), default=80)
-    ap.add_argument("--words-per-beat", type=int_in_range(1, 1 << 16), required=True)
+    ap.add_argument("--words-per-beat", type=int_in_range(1, 1 << 16), default=None,
+                    help="the own pass's words per beat (default the front end's: 6 rows a beat)")
     ap.add_argument("--pass", dest="pass_name", default=None,
                     help="the pass whose generator (default the model's own)")
     ap.add_argument("--width", type=int_in_range(1, 4096), default=640,
                     help="frame width: the output row of a pass with a line of MAPs (default 640)")
     ap.add_argument("--names", type=int_in_range(0, 1000), default=12, help="groups shown per type")
-    ap.add_argument("-o", "--output", type=output_path, required=True, help="output directory")
+    ap.add_argument("-o", "--output", type=output_path, default="build/generator_cells",
+                    help="output directory (default build/generator_cells)")
     args = ap.parse_args(argv)
     model = ModelParams(name=args.model, dmax=args.dmax)
     name = args.pass_name or model.passes[-1].name
-    params = stereo_machine_params(args.dmax, model=model, integrator=args.integrator,
-                                   words_per_beat=args.words_per_beat)
+    wpb = {} if args.words_per_beat is None else {"words_per_beat": args.words_per_beat}
+    params = stereo_machine_params(args.dmax, model=model, integrator=args.integrator, **wpb)
     pp = pass_params(model, params, name)
     line = any(c.source is Source.ABOVE for c in model.pass_named(name).columns)  # a line of its MAPs
     gen = WordGenerator(params=pp, model=model, pass_name=name,
