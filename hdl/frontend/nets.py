@@ -30,14 +30,15 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from amaranth.hdl import Const, Module, Mux, Signal, Value, signed, unsigned
+from amaranth.hdl import Const, Module, Mux, Signal, Value, unsigned
 from amaranth.lib import memory
 
 from bayesmachine.hdl.signatures import beat_words
 
-from .tables import LoadForm
+from .tables import LoadForm, padded_table
 
-__all__ = ["BLOCK_TABLE_DEPTH", "TABLE_READ_PORTS", "WordNets", "pick", "tapped_line"]
+__all__ = ["BLOCK_TABLE_DEPTH", "COST_BITS", "TABLE_READ_PORTS", "WordNets", "clamped_magnitude", "pick",
+           "table_depth", "tapped_line"]
 
 # Tables deeper than this go to block RAM (a DP16KD holds 1024 words of up to 18 bits, or 2048 of 9);
 # shallower ones (a census distance's, the prior's) stay logic.
@@ -45,6 +46,48 @@ BLOCK_TABLE_DEPTH = 128
 # Read ports per copy of a table: a block RAM's two. A lookup of more lane rows reads more copies (Yosys's
 # memory mapping searches its port assignments per memory: dozens of ports on one exhaust its memory).
 TABLE_READ_PORTS = 2
+# The widest cost a lane's table address takes (a difference of two 13-bit feature sums).
+COST_BITS = 14
+# A block RAM's (DP16KD's) shapes, (depth, width): a table takes the fewest blocks of any one of them.
+BLOCK_SHAPES = ((16384, 1), (8192, 2), (4096, 4), (2048, 9), (1024, 18))
+
+
+def _blocks(depth: int, width: int) -> int:
+    """The block RAMs a table of ``depth`` words of ``width`` bits takes."""
+    return min(-(-depth // d) * -(-width // w) for d, w in BLOCK_SHAPES)
+
+
+def table_depth(entries: int, width: int) -> int:
+    """The hardware depth of a table of ``entries`` words of ``width`` bits: the next power of two (the
+    table padded with its last word, so the clamp of its address is an OR of high bits:
+    :func:`clamped_magnitude`) unless that takes more block RAMs (a table in logic is padded while it
+    stays in logic)."""
+    padded = 1 << max(0, entries - 1).bit_length()
+    if entries <= BLOCK_TABLE_DEPTH:
+        return padded if padded <= BLOCK_TABLE_DEPTH else entries
+    return padded if _blocks(padded, width) <= _blocks(entries, width) else entries
+
+
+def clamped_magnitude(x: Value, last: int) -> Value:
+    """min(|x|, ``last``), as ``range(last + 1)``. When ``last`` + 1 is a power of two 2^k the clamp is
+    an OR of x's high bits into its k low ones (x <= -2^k for a negative x: not all of its high bits
+    set, or none of its low ones), and the absolute value negates only the k low bits; otherwise
+    |x| >= ``last`` is two compares on x itself, beside the absolute value."""
+    x = Value.cast(x)
+    signed_, width = x.shape().signed, x.shape().width
+    k = max(1, last.bit_length())
+    if (2 ** (width - 1) if signed_ else 2 ** width - 1) <= last:  # never past the last entry
+        return abs(x) if signed_ else x
+    if (1 << k) != last + 1:
+        far = (x >= last) | (x <= -last) if signed_ else x >= last
+        return Mux(far, last, abs(x) if signed_ else x)
+    low = x[:k]
+    if not signed_:
+        return low | x[k:].any().replicate(k)
+    sign, high = x[-1], x[k:-1]
+    far = Mux(sign, ~high.all() | ~low.any(), high.any())
+    return Mux(sign, (-low)[:k], low) | far.replicate(k)
+
 
 
 def tapped_line(rows_per_beat: int, beats_per_pixel: int) -> bool:
@@ -401,28 +444,26 @@ class WordNets:
 
     def address(self, value: Value, depth: int, name: str, en: Value | None = None) -> Signal:
         """The table address of a lane's cost ``value`` (of the issue's cycle): its absolute value clamped
-        to ``depth - 1``, a cycle later (the cost in a register, then the address in one); the registers
-        load while ``en`` (default ``advance``: a scan's, every cycle)."""
-        if Value.cast(value).shape().width > 14:
-            raise ValueError(f"{name}: a cost of {Value.cast(value).shape()} does not fit the 14-bit "
-                             "register")
-        diff = Signal(signed(14), name=f"diff_{name}", reset_less=True)  # guarded by the pipeline's valid
-        a = Signal(unsigned(14))
-        # The clamp's test on the difference itself, beside the absolute value, not after it.
-        far = (diff >= depth - 1) | (diff <= -(depth - 1))
-        self.m.d.comb += a.eq(abs(diff))
+        to ``depth - 1`` (:func:`clamped_magnitude`), a cycle later (the cost in a register of its own
+        shape, then the address in one); the registers load while ``en`` (default ``advance``: a scan's,
+        every cycle). A cost of an unsigned shape (a Hamming distance, a sum above its least) is its
+        own absolute value."""
+        shape = Value.cast(value).shape()
+        if shape.width > COST_BITS:
+            raise ValueError(f"{name}: a cost of {shape} does not fit the {COST_BITS}-bit register")
+        cost = Signal(shape, name=f"diff_{name}", reset_less=True)  # guarded by the pipeline's valid
         reg = Signal(range(depth), name=f"addr_{name}", reset_less=True)  # guarded by the pipeline's valid
         with self.m.If(self.advance if en is None else en):
-            self.m.d.sync += [diff.eq(value), reg.eq(Mux(far, depth - 1, a))]
+            self.m.d.sync += [cost.eq(value), reg.eq(clamped_magnitude(cost, depth - 1))]
         return reg
 
     def table(self, name: str, words: Any, bits: int | None = None) -> memory.Memory:
         """A read-only table of W + 1-bit words (or of ``bits``-bit values: energy codes), submodule
         ``table_{name}`` (a copy's name, :meth:`lookup`): in block RAM when deeper than
         :data:`BLOCK_TABLE_DEPTH` (Yosys would otherwise build each read port's multiplexer tree over
-        every entry before mapping it to logic)."""
-        init = [int(w) for w in words]
+        every entry before mapping it to logic); padded with its last word to :func:`table_depth`."""
         width = self._table_width(bits)
+        init = [int(w) for w in padded_table(np.asarray(words), table_depth(len(words), width))]
         attrs = {"rom_style": "block"} if len(init) > BLOCK_TABLE_DEPTH else None
         mem = memory.Memory(shape=unsigned(width), depth=len(init), init=init, attrs=attrs)
         self.m.submodules[f"table_{name}"] = mem

@@ -21,7 +21,7 @@ from bayesmachine.columns.energy import INFINITE_CODE, log_codes
 from bayesmachine.models import ModelParams
 from bayesmachine.params import DEFAULT_INTEGRATOR, MachineParams
 
-__all__ = ["FrontEndTables", "LoadForm", "clamp_table", "frontend_tables", "term_tables"]
+__all__ = ["FrontEndTables", "LoadForm", "clamp_table", "frontend_tables", "padded_table", "term_tables"]
 
 
 @dataclass(frozen=True)
@@ -77,6 +77,15 @@ def clamp_table(table: np.ndarray) -> np.ndarray:
     differs = np.flatnonzero(t != t[-1])
     end = int(differs[-1]) + 2 if len(differs) else 1
     return t[:end].copy()
+
+
+def padded_table(table: np.ndarray, depth: int) -> np.ndarray:
+    """A clamped ``table`` (:func:`clamp_table`) padded to ``depth`` entries with its last word: the same
+    word at every address clamped to any entry from its last on (the hardware's, ``nets.table_depth``)."""
+    t = np.asarray(table)
+    if depth < len(t):
+        raise ValueError(f"a table of {len(t)} words cannot be padded to {depth}")
+    return np.concatenate([t, np.full(depth - len(t), t[-1], dtype=t.dtype)])
 
 
 class FrontEndTables(Mapping[str, np.ndarray]):

@@ -174,8 +174,10 @@ class FusedLanes(Lanes):
         diffs = [Signal(unsigned(width), name=f"fused_diff{j}") for j in range(n.rows_per_beat)]
         n.m.d.comb += [d.eq(read.data[j] - self._min) for j, d in enumerate(diffs)]
         costs: list[Value] = list(diffs)
-        if self._live:
-            costs.append(self._nm_sum - self._min)
+        if self._live:  # the no-match sum is among those the minimum is of: an unsigned cost too
+            nm_diff = Signal(unsigned(width), name="fused_nm_diff")
+            n.m.d.comb += nm_diff.eq(self._nm_sum - self._min)
+            costs.append(nm_diff)
         self._words = n.lookup("fused_exp", n.tables["fused_exp"], costs)
 
     def word(self, j: int) -> Any:

@@ -10,15 +10,18 @@ from __future__ import annotations
 
 import dataclasses
 import random
+from typing import Any
 
 import numpy as np
 import pytest
-from amaranth.hdl import Fragment, Module
+from amaranth.hdl import Fragment, Module, Signal, signed, unsigned
+from amaranth.sim import Simulator
 from conftest import assert_same_results, run_sim
 
 from bayesmachine.columns import GradH, GradV, Mean
 from bayesmachine.hdl.frontend.filters import FeatureFilter
 from bayesmachine.hdl.frontend.linebuffer import LineBuffer, column_windows
+from bayesmachine.hdl.frontend.nets import clamped_magnitude, table_depth
 from bayesmachine.hdl.frontend.stereo import (
     MAX_WIDTH,
     FeaturePipeline,
@@ -26,7 +29,7 @@ from bayesmachine.hdl.frontend.stereo import (
     StereoMachine,
     stereo_machine_params,
 )
-from bayesmachine.hdl.frontend.tables import clamp_table, frontend_tables
+from bayesmachine.hdl.frontend.tables import clamp_table, frontend_tables, padded_table
 from bayesmachine.hdl.frontend.words import WordGenerator
 from bayesmachine.hdl.machine import LOAD_LATENCY, BayesianMachine, pixel_wall_cycles
 from bayesmachine.host.features import feature_sums
@@ -77,6 +80,47 @@ def test_clamp_table_edge_cases() -> None:
     assert clamp_table(np.array([9, 3, 5, 5])).tolist() == [9, 3, 5]
     with pytest.raises(ValueError, match="non-empty"):
         clamp_table(np.array([]))
+
+
+def test_padded_table_repeats_the_last_word() -> None:
+    assert padded_table(np.array([9, 3, 5]), 4).tolist() == [9, 3, 5, 5]
+    assert padded_table(np.array([9, 3, 5]), 3).tolist() == [9, 3, 5]
+    with pytest.raises(ValueError, match="cannot be padded"):
+        padded_table(np.array([9, 3, 5]), 2)
+
+
+@pytest.mark.parametrize(("entries", "width", "depth"), [
+    (1065, 6, 2048), (852, 6, 1024), (683, 6, 1024), (1165, 11, 2048),  # block RAM: no more blocks
+    (27, 6, 32), (16, 6, 16), (100, 11, 128), (1, 6, 1),  # logic, staying logic
+    (5000, 9, 5000), (3000, 18, 3000), (129, 11, 256)])  # 3 blocks of 2048x9, not 4; 3 of 1024x18, not 4
+def test_table_depth_pads_to_a_power_of_two_without_more_block_ram(entries: int, width: int,
+                                                                    depth: int) -> None:
+    assert table_depth(entries, width) == depth
+
+
+def test_clamped_magnitude_is_the_absolute_value_clamped() -> None:
+    m = Module()
+    cases = []
+    for shape in (signed(2), signed(4), signed(5), signed(6), unsigned(1), unsigned(3), unsigned(5)):
+        for last in (0, 1, 2, 3, 5, 7, 8, 15, 16, 20, 31):
+            x, y = Signal(shape), Signal(range(last + 1))
+            m.d.comb += y.eq(clamped_magnitude(x, last))
+            cases.append((x, y, last))
+    wrong = []
+
+    async def bench(ctx: Any) -> None:
+        for x, y, last in cases:
+            shape = x.shape()
+            low = -(1 << (shape.width - 1)) if shape.signed else 0
+            for v in range(low, low + (1 << shape.width)):
+                ctx.set(x, v)
+                if ctx.get(y) != min(abs(v), last):
+                    wrong.append((shape, last, v, ctx.get(y)))
+
+    sim = Simulator(m)
+    sim.add_testbench(bench)
+    sim.run()
+    assert wrong == []
 
 
 def test_line_buffer_gives_each_pixels_column() -> None:
