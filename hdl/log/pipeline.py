@@ -299,7 +299,8 @@ class StallPipeline(wiring.Component):
                 with m.If(go[-1] & valid):
                     m.d.sync += [reg.eq(value) for reg, value in group]
             for j, (lookup, words) in enumerate(lookups):
-                go.append(Signal(name=f"go_rep{i}_table{j}", init=1))
+                # Not a kept *_rep* copy: a table whose reads nothing uses is removed with its copy.
+                go.append(Signal(name=f"go_table{i}_{j}", init=1))
                 _read(m, lookup, words, go[-1] & valid, f"stage{i}_table{j}")
             v = Signal(name=f"stage{i}_valid")
             with m.If(go[1]):
