@@ -19,9 +19,9 @@ from bayesmachine.tools import tool_process, user_cache_dir, which
 
 from .targets import Target
 
-__all__ = ["KEEP_REGISTER_COPIES", "KEEP_STEPS", "ROUTERS", "ToolError", "cell_counts", "nextpnr",
-           "parse_nextpnr", "place_and_route", "require_tool", "require_tools", "run_tool", "synthesize",
-           "yowasp_cache"]
+__all__ = ["DROP_ELEMENT_ALIASES", "FLATTENED_STEPS", "KEEP_REGISTER_COPIES", "KEEP_STEPS", "ROUTERS",
+           "ToolError", "cell_counts", "nextpnr", "parse_nextpnr", "place_and_route", "require_tool",
+           "require_tools", "run_tool", "synthesize", "yowasp_cache"]
 
 # Registers named ``*_rep*`` are deliberate copies of a high-fanout signal (hdl/machine/):
 # ``keep`` stops opt_merge from folding them back into one. Two steps of the input cone from the
@@ -36,6 +36,16 @@ __all__ = ["KEEP_REGISTER_COPIES", "KEEP_STEPS", "ROUTERS", "ToolError", "cell_c
 KEEP_STEPS = ("setattr -set register_copy 1 w:*_rep* %ci2 t:$dff %i", "proc", "opt_expr", "opt_clean",
               "setattr -set keep 1 a:register_copy t:$dff %i")
 KEEP_REGISTER_COPIES = "; ".join(KEEP_STEPS)
+# Amaranth gives each element of a signal shaped by an array layout a wire of its own, ``x[3]``: an
+# alias, driven by the signal's bits and read by nothing. Yosys 0.70's ABC9 writes bit 3 of ``x`` as
+# ``x[3]`` too: when it names one of its inputs after an element wire and another after ``x``
+# itself, its reintegration joins the two (ABC_OPS_REINTEGRATE: ``Assert `GetSize(conn.first) ==
+# GetSize(conn.second)' failed``, rtlil.cc:3091). Which names it takes shifts with any change of the
+# design, so the element wires (Amaranth's only names ending in ``]``) are deleted first: names go,
+# no logic.
+DROP_ELEMENT_ALIASES = "delete w:*]"
+# What the flow runs on the flattened design before ``synth_*``.
+FLATTENED_STEPS = (DROP_ELEMENT_ALIASES, *KEEP_STEPS)
 
 Progress = Callable[[str], None]
 
@@ -141,13 +151,13 @@ def run_tool(name: str, args: Sequence[str], cwd: Path, log: str, what: str, pro
 def synthesize(rtlil: str, target: Target, out_dir: Path, progress: Progress) -> dict[str, int]:
     """Yosys ``synth_<family>`` of ``rtlil`` (top module ``top``) into ``out_dir/synth.json``;
     returns the cell counts by type. Reuses the previous result when the RTLIL is unchanged."""
-    # The register copies are kept (``KEEP_REGISTER_COPIES``, unused logic removed first). The
+    # The array elements' alias wires are deleted, the register copies kept (``FLATTENED_STEPS``). The
     # design is flattened first, before synth_*'s own flatten: on the hierarchy Amaranth emits (the
     # machine's source and encoder submodules), Yosys 0.70's ABC9 step failed an assertion on some
     # small machines (``tests/fpga/test_synth.py``; also with a proc before the flatten), never so
     # far when flattened first.
     script = ("read_rtlil top.il; hierarchy -top top; flatten; "
-              f"{KEEP_REGISTER_COPIES}; "
+              f"{'; '.join(FLATTENED_STEPS)}; "
               f"{target.yosys_synth} -top top -json synth.json; tee -q -o stat.json stat -json")
     key = hashlib.sha256((target.family + "\n" + script + "\n" + rtlil).encode()).hexdigest()
     keyfile = out_dir / "synth.key"

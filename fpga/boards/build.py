@@ -134,8 +134,9 @@ def _prepare(platform: object, top: object, work: Path) -> None:
     plan = platform.prepare(  # type: ignore[attr-defined]
         top,
         name="top",
-        # As fpga.flow: flattened first (Yosys's ABC9 step), the register copies kept.
-        script_after_read="\n".join(("hierarchy -top top", "flatten", *flow.KEEP_STEPS)),
+        # As fpga.flow: flattened first (Yosys's ABC9 step), the array elements' alias wires deleted,
+        # the register copies kept.
+        script_after_read="\n".join(("hierarchy -top top", "flatten", *flow.FLATTENED_STEPS)),
         script_after_synth="tee -q -o stat.json stat -json",
     )
     for name in ("top.il", "top.ys", "top.lpf"):

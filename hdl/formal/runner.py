@@ -78,7 +78,8 @@ def find_formal_tools() -> dict[str, str]:
 
 def sby_text(mode: str, depth: int, top: str = "top") -> str:
     """The ``.sby`` file of one run: ``mode`` (``bmc``, ``prove`` = k-induction, ``cover``) to
-    ``depth`` steps, the ``smtbmc`` engine with Yices, the design in ``top.il``."""
+    ``depth`` steps, the ``smtbmc`` engine with Yices, the design in ``top.il`` (its read-only memories
+    mapped to logic)."""
     if mode not in MODES:
         raise ParameterError(f"mode must be one of {MODES}, got {mode!r}", "mode")
     depth = as_int("depth", depth, 1)
@@ -91,6 +92,9 @@ def sby_text(mode: str, depth: int, top: str = "top") -> str:
         "\n[script]\n"
         "read_rtlil top.il\n"
         f"prep -top {top}\n"
+        # A read-only memory's contents as logic: as a memory's state, k-induction would start from
+        # arbitrary contents (only the base case starts from its init).
+        "memory_map -rom-only\n"
         "\n[files]\n"
         "top.il\n"
     )

