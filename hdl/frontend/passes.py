@@ -12,13 +12,13 @@ the own pass's; twins in ``bayesmachine.columns`` and ``host.likelihoods``.
   (:func:`~bayesmachine.columns.right_lanes_valid`: word 0). So a right-reference pass covers right map
   columns 0 .. W4 - 1 of every output row, in raster order, as the host's (``host.likelihoods.pass_grid``).
 - :func:`split_pixels`: the pipeline's pixel goes to every pass together (a broadcast: each takes it
-  when all can); to the own pass through a FIFO of Dmax + 4 pixels when the model declares passes (its
-  pixel at map column x may wait for another pass's MAP of x, which needs the left pixels up to x + Dmax:
-  the FIFO lets them pass).
+  when all can); to the own pass through a FIFO of Dmax + 4 + ``PASS_LAG_PIXELS`` pixels when the model
+  declares passes (its pixel at map column x may wait for another pass's MAP of x, which needs the left
+  pixels up to x + Dmax and the other pass's generator and machine: the FIFO lets them pass).
 - :func:`watch_passes`: each declared pass's results, as they leave its machine (the front end's
   ``<pass>_maps`` port), into its own generator's line of MAPs (its above prior) and into a FIFO of its
-  MAPs (Dmax + 8: never full while the own pass waits, it holds at most the pixel FIFO's pixels' MAPs)
-  for each generator whose pass column reads them (census-lr's consistency column).
+  MAPs (Dmax + 8 + ``PASS_LAG_PIXELS``: never full while the own pass waits, it holds at most the pixel
+  FIFO's pixels' MAPs) for each generator whose pass column reads them (census-lr's consistency column).
 - :func:`frontend_signature`: the front end's ports, taken from its generators' (each declared once, by
   the lane builder that reads it).
 """
@@ -41,8 +41,13 @@ from .layouts import FLAGS, declared_passes, features_layout, pass_pixel_layout,
 from .reference import REFERENCES, reference_of
 from .words import WordGenerator, generator_signature, pass_params
 
-__all__ = ["PassFeeder", "feeder_in_layout", "fork", "frontend_signature", "pass_port", "pass_row_pixels",
-           "split_pixels", "watch_passes"]
+# Pixels the own pass may fall behind the feature pipeline beyond Dmax + 4 while a declared pass's MAP
+# it reads goes through that pass's generator and machine: at a few clocks a pixel (wide beats) their
+# latency is tens of pixels, and a shallower FIFO makes the pipeline wait for it.
+PASS_LAG_PIXELS = 128
+
+__all__ = ["PASS_LAG_PIXELS", "PassFeeder", "feeder_in_layout", "fork", "frontend_signature", "pass_port",
+           "pass_row_pixels", "split_pixels", "watch_passes"]
 
 
 def pass_row_pixels(model: ModelParams, name: str, width: int) -> int:
@@ -247,7 +252,7 @@ def split_pixels(m: Module, model: ModelParams, features: Any, gens: Mapping[str
         elif declared_passes(model):
             layout = gen.pixel.payload.shape()
             m.submodules.own_pixels = pix = fifo.SyncFIFOBuffered(width=Shape.cast(layout).width,
-                                                                  depth=model.dmax + 4)
+                                                                  depth=model.dmax + 4 + PASS_LAG_PIXELS)
             staged = Signal(layout)
             _fields(m, staged, pixel)
             m.d.comb += [pix.w_stream.payload.eq(staged), gen.pixel.valid.eq(pix.r_stream.valid),
@@ -261,8 +266,8 @@ def split_pixels(m: Module, model: ModelParams, features: Any, gens: Mapping[str
 
 def watch_passes(m: Module, front: Any, gens: Mapping[str, WordGenerator]) -> None:
     """Each pass's MAPs in on the front end's ``maps`` ports (:func:`frontend_signature`) to what reads
-    them: its own generator's line of MAPs and, through a FIFO of Dmax + 8 MAPs each, every generator
-    whose pass column reads them (see the module text)."""
+    them: its own generator's line of MAPs and, through a FIFO of Dmax + 8 + ``PASS_LAG_PIXELS`` MAPs each,
+    every generator whose pass column reads them (see the module text)."""
     model = front.model
     for p in model.passes:
         name = pass_port(model, p, "maps")
@@ -279,7 +284,7 @@ def watch_passes(m: Module, front: Any, gens: Mapping[str, WordGenerator]) -> No
         for reader, gen in readers:
             sink = getattr(gen, f"{p.name}_maps")
             m.submodules[f"{p.name}_maps_{reader}"] = maps = fifo.SyncFIFOBuffered(
-                width=Shape.cast(port.payload.shape()).width, depth=model.dmax + 8)
+                width=Shape.cast(port.payload.shape()).width, depth=model.dmax + 8 + PASS_LAG_PIXELS)
             m.d.comb += [maps.w_stream.payload.eq(port.payload), sink.valid.eq(maps.r_stream.valid),
                          sink.payload.eq(maps.r_stream.payload), maps.r_stream.ready.eq(sink.ready)]
             sinks.append(maps.w_stream)

@@ -18,7 +18,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from conftest import assert_passes_equal_the_model, registered, run_sim
+from conftest import assert_passes_equal_the_model, assert_same_results, passes_model, registered, run_sim
 
 from bayesmachine.columns import Census, Consistency, GradH, GradV, Mean, lr_consistent, lr_unknown
 from bayesmachine.hdl.frontend.filters import feature_layout
@@ -38,7 +38,7 @@ from bayesmachine.host.likelihoods import pass_grid, pass_words
 from bayesmachine.models import ModelDef, ModelParams, PassDef
 from bayesmachine.params import ParameterError
 from bayesmachine.region import OutputRegion
-from bayesmachine.sim.stereo_testbench import pass_pixels, run_frontend_passes
+from bayesmachine.sim.stereo_testbench import pass_pixels, run_frontend_passes, run_stereo_passes
 
 
 def _noisy_pair(height: int, width: int, seed: int, shift: int = 2) -> tuple[np.ndarray, np.ndarray]:
@@ -366,3 +366,25 @@ def test_census_lr_at_any_words_per_beat_equals_the_model(integrator: str, words
     top = StereoMachine(params=params, model=model, width=width, fifo_pixels=2)
     want = assert_passes_equal_the_model(top, frames, model, params, seed=2)
     assert set(want) == {"right", "left"} and len(np.unique(want["left"].map)) > 3
+
+
+def test_census_lr_at_one_beat_a_pixel_keeps_the_rate() -> None:
+    """census-lr (log) with a pixel in one beat: the own pass's pixels wait in a FIFO for the right pass's
+    MAPs, which need Dmax pixels more and the right pass's generator and machine; with the FIFO only Dmax
+    + 4 deep the pipeline waited for that latency at every pixel. The frame's clocks (no stalls) against
+    the figure measured with the deeper FIFO (``PASS_LAG_PIXELS``)."""
+    dmax = 4
+    model = ModelParams(name="census-lr", dmax=dmax)
+    params = stereo_machine_params(dmax, model=model, integrator="log", words_per_beat=3 * (dmax + 2))
+    assert params.beats_per_pixel == 1
+    width = dmax + 2 * model.margin + 60
+    left, right, _ = bundled_pair()
+    crop = (slice(250, 250 + 2 * model.margin + 3), slice(200, 200 + width))
+    frame = (np.ascontiguousarray(left[crop]), np.ascontiguousarray(right[crop]))
+    top = StereoMachine(params=params, model=model, width=width, fifo_pixels=2)
+    got, cycles = run_stereo_passes(top, [frame])
+    want = passes_model([frame], model, params)
+    for name in want:
+        assert_same_results(got[name], want[name])
+    print(f"\ncensus-lr, Dmax {dmax}, {width} x {frame[0].shape[0]}, one beat a pixel: {cycles} clocks")
+    assert cycles <= 758  # measured; with the FIFO only Dmax + 4 deep: 848
