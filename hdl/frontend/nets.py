@@ -89,7 +89,6 @@ def clamped_magnitude(x: Value, last: int) -> Value:
     return Mux(sign, (-low)[:k], low) | far.replicate(k)
 
 
-
 def tapped_line(rows_per_beat: int, beats_per_pixel: int) -> bool:
     """Whether a word generator's delay line is a shift register of taps (lane row j of beat b reads the
     fixed tap of its entry: a multiplexer over the pixel's beats per lane) rather than the circular buffer
