@@ -159,11 +159,12 @@ def run_stereo(top: StereoMachine, frames: Sequence[tuple[np.ndarray, np.ndarray
 
 
 def run_stereo_passes(top: StereoMachine, frames: Sequence[tuple[np.ndarray, np.ndarray]], *,
-                      in_stall: float = 0.0, out_stall: float = 0.0, seed: int = 0,
+                      in_stall: float = 0.0, out_stall: float | Mapping[str, float] = 0.0, seed: int = 0,
                       max_cycles: int = 1_000_000) -> tuple[dict[str, MachineResult], int]:
     """Every pass's results for ``frames`` through ``StereoMachine``, by pass name (the own pass's on
     ``result``, a declared pass's on ``<pass>_result``: every pixel of the pass of every output row,
-    raster order), each result stream stalled at random (``out_stall``), and the clock cycles it took."""
+    raster order), each result stream stalled at random (``out_stall``: one probability, or one per pass
+    name, 0 for a pass not named), and the clock cycles it took."""
     from bayesmachine.hdl.frontend.passes import pass_port
     from bayesmachine.hdl.frontend.words import pass_params
 
@@ -172,6 +173,7 @@ def run_stereo_passes(top: StereoMachine, frames: Sequence[tuple[np.ndarray, np.
     ports = {p.name: getattr(top, pass_port(model, p, "result")) for p in model.passes}
     expected = {name: pass_pixels(frames, model, name) for name in ports}
     got: dict[str, list[int]] = {name: [] for name in ports}
+    stalls = out_stall if isinstance(out_stall, Mapping) else dict.fromkeys(ports, out_stall)
     rnd = random.Random(seed)
     cycles = 0
 
@@ -183,7 +185,7 @@ def run_stereo_passes(top: StereoMachine, frames: Sequence[tuple[np.ndarray, np.
         names = list(ports)
         samples = [v for n in names for v in (ports[n].valid, ports[n].payload.as_value())]
         while any(len(got[n]) < expected[n] for n in names):
-            ready = {n: not (out_stall and rnd.random() < out_stall) for n in names}
+            ready = {n: not (stalls.get(n) and rnd.random() < stalls[n]) for n in names}
             for n in names:
                 ctx.set(ports[n].ready, ready[n])
             _, _, *values = await ctx.tick().sample(*samples)

@@ -175,6 +175,7 @@ class WordNets:
         # The pixel stream's take and payload: the delay line's, the reference features', a scan's.
         self.fed, self.fed_take = self.pixel, self.take
         self._last_issue = Signal()  # the issue of an output pixel's last beat
+        self._may_take: Value = Const(1, 1)  # lane builders' conditions on a scan's take (hold_scan)
         if scan_latency:
             self._queue()
         self._pipeline()
@@ -239,14 +240,23 @@ class WordNets:
         lane builder's ``ready``); in a pass that scans it drives ``take``, and the stream's ready is that
         of the ring (a free slot) and of the scan (idle, or fetching a pixel's last beat). At two beats or
         more per pixel, not for an output pixel while the previous pixel's delay-line write is pending
-        (``shift_q``), so that its entries read no pending write (:meth:`_delay_line`)."""
+        (``shift_q``), so that its entries read no pending write (:meth:`_delay_line`); in a pass that scans,
+        not for an output pixel while a lane builder holds the scans (:meth:`hold_scan`)."""
         # No output pixel taken while a write is pending (_delay_line), but at one beat per pixel.
         settled = ~(self.shift_q & self.fed.output) if self._pending_at_take is None else Const(1, 1)
         if not self.scan_latency:
             return ready & settled
         ripe = pick(self.waiting, self.take_slot) & pick(self.scanned, self.take_slot)
         self.m.d.comb += self.take.eq(ripe & ready)
-        return ~pick(self.busy, self.feed_slot) & (~self.fetch | self._fetch_last) & settled
+        held = ~self.fed.output | self._may_take
+        return ~pick(self.busy, self.feed_slot) & (~self.fetch | self._fetch_last) & settled & held
+
+    def hold_scan(self, may: Value) -> None:
+        """In a pass that scans: an output pixel is taken from the stream (its scan starts) only while
+        ``may`` too (a lane builder's condition: the shared fused sums', :mod:`.shared`)."""
+        if not self.scan_latency:
+            raise ValueError("hold_scan: only a pass that scans takes its pixels for a scan")
+        self._may_take = self._may_take & may
 
     def _pipeline(self) -> None:
         """The beat counter and the valid flags of the four steps."""

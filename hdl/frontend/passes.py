@@ -19,6 +19,9 @@ the own pass's; twins in ``bayesmachine.columns`` and ``host.likelihoods``.
   ``<pass>_maps`` port), into its own generator's line of MAPs (its above prior) and into a FIFO of its
   MAPs (Dmax + 8 + ``PASS_LAG_PIXELS``: never full while the own pass waits, it holds at most the pixel
   FIFO's pixels' MAPs) for each generator whose pass column reads them (census-lr's consistency column).
+- :func:`fused_shares`: the passes' parts in sharing a fused column's sums (:mod:`.shared`): census-lr's
+  right pass computes the members' codes of every pair of pixels both passes compare, the own pass reads
+  them; :func:`share_fused_sums` puts the memories between the two generators.
 - :func:`frontend_signature`: the front end's ports, taken from its generators' (each declared once, by
   the lane builder that reads it).
 """
@@ -28,17 +31,23 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+import numpy as np
 from amaranth.hdl import Module, Mux, Shape, Signal, Value, unsigned
 from amaranth.lib import data, fifo, memory, stream, wiring
 from amaranth.lib.wiring import In
 
 from bayesmachine.checks import as_int
+from bayesmachine.columns import Fused
 from bayesmachine.hdl.signatures import pixel_stream
 from bayesmachine.models import ModelParams, Pass
 from bayesmachine.params import MachineParams, ParameterError
 
+from .lanes import lanes_for
+from .lanes.fused import fused_sum_bits
 from .layouts import FLAGS, declared_passes, features_layout, pass_pixel_layout, pixel_features_layout
 from .reference import REFERENCES, reference_of
+from .shared import FusedShare, SharedSums
+from .tables import frontend_tables
 from .words import WordGenerator, generator_signature, pass_params
 
 # Pixels the own pass may fall behind the feature pipeline beyond Dmax + 4 while a declared pass's MAP
@@ -46,8 +55,9 @@ from .words import WordGenerator, generator_signature, pass_params
 # latency is tens of pixels, and a shallower FIFO makes the pipeline wait for it.
 PASS_LAG_PIXELS = 128
 
-__all__ = ["PASS_LAG_PIXELS", "PassFeeder", "feeder_in_layout", "fork", "frontend_signature", "pass_port",
-           "pass_row_pixels", "split_pixels", "watch_passes"]
+__all__ = ["PASS_LAG_PIXELS", "PassFeeder", "feeder_in_layout", "fork", "frontend_signature", "fused_shares",
+           "pass_port", "pass_row_pixels", "share_fused_sums", "shared_sums_depth", "split_pixels",
+           "watch_passes"]
 
 
 def pass_row_pixels(model: ModelParams, name: str, width: int) -> int:
@@ -289,3 +299,65 @@ def watch_passes(m: Module, front: Any, gens: Mapping[str, WordGenerator]) -> No
                          sink.payload.eq(maps.r_stream.payload), maps.r_stream.ready.eq(sink.ready)]
             sinks.append(maps.w_stream)
         fork(m, port, sinks)
+
+
+def shared_sums_depth(reach: int, dmax: int) -> int:
+    """Positions the shared fused sums hold (:class:`~.shared.FusedShare`'s ``depth``): enough that the
+    exporter may run the own pass's whole lag ahead (Dmax + 4 + ``PASS_LAG_PIXELS`` pixels: its pixel
+    FIFO) before it waits for the importer, a pixel's rows (``reach``) and Dmax + 1 beyond."""
+    return 1 << (reach + 2 * dmax + 6 + PASS_LAG_PIXELS).bit_length()
+
+
+def _fused(p: Pass) -> Fused | None:
+    found = [c for c in p.columns if isinstance(c, Fused)]
+    return found[0] if len(found) == 1 else None
+
+
+def _same_codes(model: ModelParams, params: MachineParams, a: Pass, b: Pass) -> bool:
+    """Whether passes ``a`` and ``b`` give a pair of pixels the same fused sums: one fused column each, of
+    one kind and values, members of symmetric costs, the same energy tables."""
+    fa, fb = _fused(a), _fused(b)
+    if fa is None or fb is None or repr(fa) != repr(fb):
+        return False
+    if not all(lanes_for(m).symmetric for m in fa.members):
+        return False
+    tables = [frontend_tables(p.model, pass_params(model, params, p.name).word_bits, params.integrator)
+              for p in (a, b)]
+    names = [f"{m.name}_energy" for m in fa.members] + ["nomatch_energy"]
+    return all(np.array_equal(tables[0][n], tables[1][n]) for n in names)
+
+
+def fused_shares(model: ModelParams, params: MachineParams) -> dict[str, FusedShare]:
+    """Each pass's part in sharing its fused sums (by pass name; empty when none share): the first declared
+    right-reference pass that gives the own (left-reference) pass's pairs the same sums exports them, the
+    own pass imports them, when both take a pixel in as many beats of as many rows and the own pass's
+    pixels carry ``row_start``."""
+    own = model.passes[-1]
+    if reference_of(own).swaps or "row_start" not in pass_pixel_layout(model, own).members:
+        return {}
+    rows = params.words_per_beat // params.loaded_columns
+    for p in declared_passes(model):
+        pp = pass_params(model, params, p.name)
+        beats = params.beats_per_pixel
+        if (not reference_of(p).swaps or _fused(p) is None
+                or (pp.words_per_beat // pp.loaded_columns, pp.beats_per_pixel) != (rows, beats)
+                or not _same_codes(model, params, p, own)):
+            continue
+        tables = frontend_tables(own.model, params.word_bits, params.integrator)
+        geometry = {"rows": rows, "beats": beats, "width": fused_sum_bits(_fused(own), tables),
+                    "dmax": model.dmax, "depth": shared_sums_depth(rows * beats - 1, model.dmax)}
+        return {p.name: FusedShare(role="export", **geometry),
+                own.name: FusedShare(role="import", **geometry)}
+    return {}
+
+
+def share_fused_sums(m: Module, gens: Mapping[str, WordGenerator]) -> None:
+    """The shared fused sums (:class:`~.shared.SharedSums`, submodule ``fused_sums``) between the generators
+    ``gens`` (by pass name) that have a part in them."""
+    parts = {gen.fused_share.role: gen for gen in gens.values() if gen.fused_share is not None}
+    if not parts:
+        return
+    m.submodules.fused_sums = sums = SharedSums(writer=parts["export"].fused_share,
+                                                reader=parts["import"].fused_share)
+    wiring.connect(m, parts["export"].fused_sums, sums.writer)
+    wiring.connect(m, parts["import"].fused_sums, sums.reader)

@@ -52,7 +52,16 @@ from bayesmachine.sources import source_kind
 
 from . import DEFAULT_FIFO_PIXELS, MAX_MACHINES, MAX_WIDTH
 from .layouts import declared_passes
-from .passes import fork, frontend_signature, pass_port, pass_row_pixels, split_pixels, watch_passes
+from .passes import (
+    fork,
+    frontend_signature,
+    fused_shares,
+    pass_port,
+    pass_row_pixels,
+    share_fused_sums,
+    split_pixels,
+    watch_passes,
+)
 from .pipeline import FeaturePipeline, PipelineNets, check_width, line_region, pipeline_layout
 from .words import WordGenerator, check_frontend_params, check_frontend_types, pass_params
 
@@ -179,14 +188,16 @@ class FrontEnd(wiring.Component):
         m.submodules.pipeline = pipe = self.feature_pipeline(model=model, width=self._width)
         wiring.connect(m, wiring.flipped(self.pixels), pipe.pixels)
         gens = {}
+        shares = fused_shares(model, self._params)
         for p in model.passes:
             own = p is model.passes[-1]
             row = pass_row_pixels(model, p.name, self._width)  # the length of its line of MAPs
             gen = WordGenerator(params=pass_params(model, self._params, p.name), model=model,
                                 pass_name=None if own else p.name,
-                                output_columns=row if _has_line(p) else None)
+                                output_columns=row if _has_line(p) else None, fused_share=shares.get(p.name))
             m.submodules[pass_port(model, p, "generator")] = gens[p.name] = gen
             wiring.connect(m, gen.beats, wiring.flipped(getattr(self, pass_port(model, p, "beats"))))
+        share_fused_sums(m, gens)
         split_pixels(m, model, pipe.features, gens)
         watch_passes(m, self, gens)
         return m

@@ -35,7 +35,7 @@ from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from bayesmachine.checks import as_bool, as_int
-from bayesmachine.columns import Source
+from bayesmachine.columns import Fused, Source
 from bayesmachine.hdl.signatures import load_stream
 from bayesmachine.models import ModelParams, Pass, check_disparity_machine, pass_machine
 from bayesmachine.params import MachineParams, ParameterError
@@ -45,17 +45,20 @@ from .lanes import Lanes, lanes_for
 from .layouts import declared_passes, pass_pixel_layout, pass_terms
 from .nets import WordNets
 from .reference import Reference, reference_of
+from .shared import FusedShare
 from .tables import FrontEndTables, frontend_tables
 
 __all__ = ["WordGenerator", "check_frontend_params", "check_frontend_types", "generator_signature",
            "pass_params"]
 
 
-def generator_signature(params: MachineParams, model: ModelParams, p: Pass) -> wiring.Signature:
+def generator_signature(params: MachineParams, model: ModelParams, p: Pass,
+                        fused_share: FusedShare | None = None) -> wiring.Signature:
     """The ports of the word generator of ``model``'s pass ``p`` on the machine ``params``: ``pixel``
-    (``In``: :func:`~.layouts.pass_pixel_layout`), ``beats`` (``Out(load_stream(params))``) and each of its
-    columns' lane builder's (``Lanes.members``); ``ParameterError`` naming the model when two columns of
-    the pass would share one port (two line-of-MAPs columns, two columns reading one pass's MAPs)."""
+    (``In``: :func:`~.layouts.pass_pixel_layout`), ``beats`` (``Out(load_stream(params))``), each of its
+    columns' lane builder's (``Lanes.members``) and with ``fused_share`` ``fused_sums``
+    (``FusedShare.signature``); ``ParameterError`` naming the model when two columns of the pass would
+    share one port (two line-of-MAPs columns, two columns reading one pass's MAPs)."""
     members: dict[str, wiring.Member] = {"pixel": In(stream.Signature(pass_pixel_layout(model, p))),
                                          "beats": Out(load_stream(params))}
     owner: dict[str, str] = {}
@@ -66,6 +69,8 @@ def generator_signature(params: MachineParams, model: ModelParams, p: Pass) -> w
                                      f"which its {owner.get(name, 'word generator')} has already: a word "
                                      "generator feeds one column from each stream", "model")
             members[name], owner[name] = member, f"{c.name} column"
+    if fused_share is not None:
+        members["fused_sums"] = Out(fused_share.signature())
     return wiring.Signature(members)
 
 
@@ -125,6 +130,29 @@ def pass_params(model: ModelParams, params: MachineParams, name: str) -> Machine
     return dataclasses.replace(machine, words_per_beat=rows * machine.loaded_columns)
 
 
+def _check_fused_share(model: ModelParams, p: Pass, params: MachineParams,
+                       share: object) -> FusedShare | None:
+    """``share`` if pass ``p`` on ``params`` can take that part in sharing its fused sums (a fused column,
+    the role of its reference, its rows per beat and beats; an importer's pixels carry ``row_start``)."""
+    if share is None:
+        return None
+    if not isinstance(share, FusedShare):
+        raise TypeError(f"fused_share must be a FusedShare, not {type(share).__name__}")
+    role = "export" if reference_of(p).swaps else "import"
+    rows = params.words_per_beat // params.loaded_columns
+    problems = [
+        *(["a fused column"] if not any(isinstance(c, Fused) for c in p.columns) else []),
+        *([f"role {role!r} (its reference)"] if share.role != role else []),
+        *([f"{rows} rows per beat and {params.beats_per_pixel} beats"]
+          if (share.rows, share.beats) != (rows, params.beats_per_pixel) else []),
+        *(["pixels that carry row_start"] if role == "import"
+          and "row_start" not in pass_pixel_layout(model, p).members else []),
+    ]
+    if problems:
+        raise ParameterError(f"fused_share: the {p.name} pass needs {', '.join(problems)}", "fused_share")
+    return share
+
+
 def _check_output_columns(p: Pass, output_columns: object) -> int | None:
     if output_columns is not None:
         output_columns = as_int("output_columns", output_columns)
@@ -173,6 +201,9 @@ class WordGenerator(wiring.Component):
         An ABOVE column: whether this generator's machine runs a frame's first map row (True: the only
         machine, or machine 0 of several); otherwise its results above come from the machine of the
         map rows just before its own (see ``maps``).
+    fused_share : FusedShare, optional
+        The pass's part in sharing its fused column's sums with another pass's generator (the front end
+        gives census-lr's passes theirs: ``passes.fused_shares``); adds the port ``fused_sums``.
 
     Attributes
     ----------
@@ -197,7 +228,7 @@ class WordGenerator(wiring.Component):
 
     def __init__(self, *, params: MachineParams, model: ModelParams, pass_name: str | None = None,
                  tables: FrontEndTables | None = None, output_columns: int | None = None,
-                 leads: bool = True) -> None:
+                 leads: bool = True, fused_share: FusedShare | None = None) -> None:
         check_frontend_types(params, model)
         if pass_name is not None and not isinstance(pass_name, str):
             raise TypeError(f"pass_name must be a pass's name (str), not {type(pass_name).__name__}")
@@ -213,6 +244,7 @@ class WordGenerator(wiring.Component):
             raise TypeError(f"tables must be a FrontEndTables, not {type(tables).__name__}")
         self._output_columns = _check_output_columns(p, output_columns)
         self._leads = as_bool("leads", leads)
+        self._fused_share = _check_fused_share(model, p, params, fused_share)
         self._nets: WordNets | None = None
         self._params = params
         self._model = model
@@ -220,7 +252,7 @@ class WordGenerator(wiring.Component):
         self._tables = (tables if tables is not None
                         else frontend_tables(p.model, params.word_bits, params.integrator))
         self._reference = reference_of(p)
-        super().__init__(generator_signature(params, model, p))
+        super().__init__(generator_signature(params, model, p, self._fused_share))
 
     @property
     def params(self) -> MachineParams:
@@ -237,6 +269,10 @@ class WordGenerator(wiring.Component):
     @property
     def reference(self) -> Reference:
         return self._reference
+
+    @property
+    def fused_share(self) -> FusedShare | None:
+        return self._fused_share
 
     @property
     def leads(self) -> bool:

@@ -143,7 +143,10 @@ class PlaneLanes(Lanes):
     """A FEATURES column's lanes: per lane row the cost (``cost``) of the reference pixel's value of the
     column's plane and the match pixel's (the delay line's entry of the lane), read in the column's
     clamped table; its no-match entry a constant of its table (``Column.nomatch_entry``). A subclass
-    names the plane's filter (``filter``) and the cost."""
+    names the plane's filter (``filter``) and the cost, and whether the cost is ``symmetric``
+    (|cost(a, b)| = |cost(b, a)|: two passes of opposite references then compare a pair alike)."""
+
+    symmetric = False
 
     @classmethod
     def filter(cls, term: Any, margin: int) -> PlaneFilter:

@@ -56,6 +56,8 @@ class CensusLanes(PlaneLanes):
     """The census column: its table at popcount(reference code xor match code); its no-match entry the
     table at ``census_nomatch_h``."""
 
+    symmetric = True
+
     @classmethod
     def filter(cls, term: Any, margin: int) -> PlaneFilter:
         return CensusPlanes(window=term.window)

@@ -52,6 +52,8 @@ def feature_planes(margin: int) -> FeaturePlanes:
 class FeatureLanes(PlaneLanes):
     """A feature column: its table at |reference sum - match sum|."""
 
+    symmetric = True
+
     @classmethod
     def filter(cls, term: Any, margin: int) -> PlaneFilter:
         return feature_planes(margin)

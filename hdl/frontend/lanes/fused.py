@@ -14,6 +14,12 @@ its minimum and no-match sum move into the registers its issues read, and its be
 pass's from its slot's entries while the next pixels' scans fill other slots: each lane's sum minus the
 minimum is the address of the exp table X (clamped to its last entry, 0), and the no-match row's word
 the same at the no-match sum.
+
+When the model's passes share the sums (:mod:`..shared`: the generator's ``fused_share``), the right pass
+writes each beat's row sums into the shared memories as it stores them, and the own pass reads its beat's
+sums there (a read two cycles after the fetch, its data where the tables' reads would be) instead of
+computing its members' costs and codes; each pass takes an output pixel from its stream only when the
+shared memories allow (``WordNets.hold_scan``).
 """
 
 from __future__ import annotations
@@ -28,11 +34,23 @@ from bayesmachine.columns import Fused
 from ..nets import pick
 from .base import Lanes, PlaneFilter, lanes_for, register
 
-__all__ = ["FusedLanes"]
+__all__ = ["FusedLanes", "fused_sum_bits"]
 
 # From a fetch to the scan's results complete: the cost and address registers and the table read (3),
 # the sums (1), the beat's minimum (1), the running minimum (1); each step a register, for the clock.
 SCAN_LATENCY = 6
+
+
+def _bits(tables: Any, name: str) -> int:
+    return max(1, int(max(tables[name])).bit_length())
+
+
+def fused_sum_bits(term: Any, tables: Any) -> int:
+    """Bits of a fused column ``term``'s row sums and no-match sum, by its pass's ``tables``."""
+    top = sum(int(max(tables[f"{m.name}_energy"])) for m in term.members)
+    nm = int(max(tables["nomatch_energy"])) + sum(
+        int(m.nomatch_entry(e)) for m, e in zip(term.members[1:], term.energies()[1:], strict=True))
+    return max(top, nm).bit_length()
 
 
 @register(Fused)
@@ -60,12 +78,13 @@ class FusedLanes(Lanes):
     def build(self) -> None:
         n, t = self.nets, self.term
         rule = n.pass_.model.nomatch
-        sums = self._member_sums()
-        width = self._sum_bits()
+        share, port = n.generator.fused_share, getattr(n.generator, "fused_sums", None)
+        width = fused_sum_bits(t, n.tables)
         # The no-match row's sum: the rule's code at the reference pixel's |gV| (three cycles after the
         # take from the stream, beside beat 0's member codes) plus the other members' no-match codes.
         rule_code = n.lookup("nomatch_energy", n.tables["nomatch_energy"],
-                             [getattr(n.left, rule.plane)], en=Const(1), bits=self._bits("nomatch_energy"))[0]
+                             [getattr(n.left, rule.plane)], en=Const(1),
+                             bits=_bits(n.tables, "nomatch_energy"))[0]
         extra = sum(int(m.nomatch_entry(e)) for m, e in zip(t.members[1:], t.energies()[1:], strict=True))
         self._scan_nm = Signal(unsigned(width), name="fused_scan_nm_sum")
         n.m.d.comb += self._scan_nm.eq(rule_code + extra)
@@ -73,19 +92,16 @@ class FusedLanes(Lanes):
         # Each fetch's flag, beat and slot, 1 .. 5 cycles later (element k: k + 1), for the steps after it.
         self._steps = [self._delayed(v, 5, f"fused_{name}") for v, name in
                        ((n.fetch, "fetched"), (n.fetch_beat, "beat"), (n.fetch_slot, "slot"))]
-        self._scan_min(self._store(sums, width), width)
+        if share is not None:  # a position is the latest taken pixel's while its beats are fetched
+            self._at = self._delayed(port.position, 4, "fused_at")
+            n.m.d.comb += port.take.eq(n.fed_take & n.fed.output)
+        role = None if share is None else share.role
+        sums_q = self._store(self._read_shared(port) if role == "import" else self._member_sums(), width)
+        if role == "export":
+            self._write_shared(port, sums_q)
+        self._scan_min(sums_q, width)
         self._hand_over(width)
         self._words_out(width)
-
-    def _bits(self, name: str) -> int:
-        return max(1, int(max(self.nets.tables[name])).bit_length())
-
-    def _sum_bits(self) -> int:
-        n, t = self.nets, self.term
-        top = sum(int(max(n.tables[f"{m.name}_energy"])) for m in t.members)
-        nm = int(max(n.tables["nomatch_energy"])) + sum(
-            int(m.nomatch_entry(e)) for m, e in zip(t.members[1:], t.energies()[1:], strict=True))
-        return max(top, nm).bit_length()
 
     def _member_sums(self) -> list[Value]:
         """Each lane row's sum of its members' codes, three cycles after its fetch."""
@@ -94,9 +110,28 @@ class FusedLanes(Lanes):
         for member in self.term.members:
             costs = lanes_for(member)(member, n).costs()
             name = f"{member.name}_energy"
-            codes = n.lookup(name, n.tables[name], costs, en=Const(1), bits=self._bits(name))
+            codes = n.lookup(name, n.tables[name], costs, en=Const(1), bits=_bits(n.tables, name))
             total = [a + b for a, b in zip(total, codes, strict=True)]
         return total
+
+    def _read_shared(self, port: Any) -> list[Value]:
+        """The importer: each lane row's sum from the shared memories, three cycles after its fetch (the
+        read two cycles after, at the pixel's position and the beat); an output pixel is taken only once
+        its sums are all written."""
+        n = self.nets
+        n.hold_scan(port.ready)
+        n.m.d.comb += [port.row_start.eq(n.fed.row_start), port.en.eq(self._steps[0][1]),
+                       port.at.eq(self._at[1]), port.beat.eq(self._steps[1][1])]
+        return [port.sums[j] for j in range(n.rows_per_beat)]
+
+    def _write_shared(self, port: Any, sums_q: list[Signal]) -> None:
+        """The exporter: each fetched beat's row sums into the shared memories as they are stored (four
+        cycles after the fetch); an output pixel is taken only while the memories have room for it."""
+        n = self.nets
+        n.hold_scan(port.room)
+        fetched, beat, _ = (steps[3] for steps in self._steps)
+        n.m.d.comb += [port.en.eq(fetched), port.at.eq(self._at[3]), port.beat.eq(beat),
+                       port.last.eq(beat == n.n_beats - 1), port.sums.eq(Cat(*sums_q))]
 
     def _delayed(self, value: Value, cycles: int, name: str) -> list[Signal]:
         """``value`` 1 .. ``cycles`` cycles later (every cycle: the scan runs whatever the stream does):

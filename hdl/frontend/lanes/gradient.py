@@ -23,6 +23,8 @@ G_BITS = 13  # |gh20| + |gv20| <= 2 x 2550 < 2^13
 class GradMagLanes(PlaneLanes):
     """Per lane row the cost g_ref - g_match, g = |gh20| + |gv20| (a 14-bit signed difference)."""
 
+    symmetric = True
+
     @classmethod
     def filter(cls, term: Any, margin: int) -> PlaneFilter:
         return feature_planes(margin)

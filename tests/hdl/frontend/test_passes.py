@@ -12,30 +12,34 @@ consistency column reads and a left-reference pass nothing reads).
 
 from __future__ import annotations
 
+import dataclasses
 import random
 from collections.abc import Iterator
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from amaranth.hdl import Fragment
 from conftest import assert_passes_equal_the_model, assert_same_results, passes_model, registered, run_sim
 
 from bayesmachine.columns import Census, Consistency, GradH, GradV, Mean, lr_consistent, lr_unknown
+from bayesmachine.hdl.frontend import passes
 from bayesmachine.hdl.frontend.filters import feature_layout
 from bayesmachine.hdl.frontend.lanes.consistency import ConsistencyTest
 from bayesmachine.hdl.frontend.nets import tapped_line
-from bayesmachine.hdl.frontend.passes import PassFeeder
+from bayesmachine.hdl.frontend.passes import PassFeeder, fused_shares
+from bayesmachine.hdl.frontend.shared import SharedSums
 from bayesmachine.hdl.frontend.stereo import (
     FrontEnd,
     StereoMachine,
     check_stereo_machine,
     stereo_machine_params,
 )
-from bayesmachine.hdl.frontend.words import generator_signature, pass_params
+from bayesmachine.hdl.frontend.words import WordGenerator, generator_signature, pass_params
 from bayesmachine.host.features import model_planes
 from bayesmachine.host.images import bundled_pair
 from bayesmachine.host.likelihoods import pass_grid, pass_words
-from bayesmachine.models import ModelDef, ModelParams, PassDef
+from bayesmachine.models import CENSUS, ModelDef, ModelParams, PassDef
 from bayesmachine.params import ParameterError
 from bayesmachine.region import OutputRegion
 from bayesmachine.sim.stereo_testbench import pass_pixels, run_frontend_passes, run_stereo_passes
@@ -57,12 +61,17 @@ LEFT_FED = ModelDef(name="left-fed", description="a consistency column of a left
                     columns=(Mean, GradH, GradV, Census, Consistency),
                     passes=(PassDef(name="right", model="census", reference="left", machine_index=1),))
 
+# census's both ways, nothing reading the right pass's MAPs: the own pass's scans may run right behind the
+# right pass's sums (census-lr's wait for the right pass's MAPs).
+BOTH_WAYS = ModelDef(name="both-ways", description="census with the right image as reference beside it",
+                     columns=CENSUS.columns, switches=CENSUS.switches,
+                     passes=(PassDef(name="right", model="census", reference="right", machine_index=1),))
 
 
 @pytest.fixture
 def defined(lr_like: ModelDef) -> Iterator[None]:
     """The models defined here and ``lr-like`` (conftest), known by name for the test."""
-    with registered(LEFT_FED):
+    with registered(LEFT_FED, BOTH_WAYS):
         yield
 
 
@@ -227,6 +236,7 @@ def _host_words(model: ModelParams, params, frames, maps: dict[str, np.ndarray])
     ("census-lr", {"dmax": 2, "lr_right_nomatch": False, "lr_neutral": False, "lr_nomatch": False,
                    "lr_tolerance": 0}, 11, 25),  # 2 output pixels per row
     ("lr-like", {"dmax": 3}, 14, 8),
+    ("both-ways", {"dmax": 16}, 30, 0),  # the own pass's scans right behind the right pass's sums
 ])
 @pytest.mark.usefixtures("defined")
 def test_every_pass_words_equal_the_host_words(name: str, fields: dict, width: int, delay: int) -> None:
@@ -388,3 +398,76 @@ def test_census_lr_at_one_beat_a_pixel_keeps_the_rate() -> None:
         assert_same_results(got[name], want[name])
     print(f"\ncensus-lr, Dmax {dmax}, {width} x {frame[0].shape[0]}, one beat a pixel: {cycles} clocks")
     assert cycles <= 758  # measured; with the FIFO only Dmax + 4 deep: 848
+
+
+# --- The fused sums computed once (hdl.frontend.shared) ---
+
+def _generator_blocks(gen: WordGenerator) -> set[str]:
+    return {name for _, name, _ in Fragment.get(gen, None).subfragments}
+
+
+@pytest.mark.parametrize("integrator", ["stochastic", "log"])
+def test_census_lr_computes_its_fused_sums_once(integrator: str) -> None:
+    """The right pass computes the members' codes of the pairs both passes compare and writes their sums;
+    the own pass reads them: its generator has no member energy table, the right pass's has every one."""
+    model = _lr(12)
+    params = stereo_machine_params(12, model=model, integrator=integrator, words_per_beat=21)
+    shares = fused_shares(model, params)
+    assert {n: s.role for n, s in shares.items()} == {"right": "export", "left": "import"}
+    assert (shares["left"].rows, shares["left"].beats, shares["left"].dmax) == (7, 2, 12)
+    gens = {p.name: WordGenerator(params=pass_params(model, params, p.name), model=model, pass_name=p.name,
+                                  output_columns=4, fused_share=shares[p.name]) for p in model.passes}
+    tables = {f"table_{m}_energy" for m in ("m", "gh", "gv", "census")}
+    assert tables <= _generator_blocks(gens["right"])
+    assert not tables & _generator_blocks(gens["left"])
+    unfused = _lr(12, fuse_columns=False)
+    assert fused_shares(unfused, stereo_machine_params(12, model=unfused)) == {}
+
+
+def test_fused_share_is_checked() -> None:
+    model = _lr(6)
+    params = stereo_machine_params(6, model=model, words_per_beat=12)
+    share = fused_shares(model, params)
+    right = pass_params(model, params, "right")
+    with pytest.raises(TypeError, match="fused_share must be a FusedShare, not dict"):
+        WordGenerator(params=params, model=model, output_columns=4, fused_share={})
+    with pytest.raises(ParameterError, match="the left pass needs role 'import'") as e:
+        WordGenerator(params=params, model=model, output_columns=4, fused_share=share["right"])
+    assert e.value.parameter == "fused_share"
+    with pytest.raises(ParameterError, match="the right pass needs 4 rows per beat and 2 beats"):
+        WordGenerator(params=right, model=model, pass_name="right", output_columns=4,
+                      fused_share=dataclasses.replace(share["right"], rows=8, beats=1))
+    with pytest.raises(ParameterError, match="role must be one of export, import, got 'both'"):
+        dataclasses.replace(share["right"], role="both")
+    with pytest.raises(ParameterError, match="depth must be a power of two above 21"):
+        dataclasses.replace(share["right"], depth=16)
+    with pytest.raises(ParameterError, match="reader: a FusedShare of role 'import'"):
+        SharedSums(writer=share["right"], reader=share["right"])
+
+
+# left results stalled: the own pass lags, the right pass waits for room; right results stalled: the own
+# pass waits for the right pass's sums
+STALLS = {"own-lags": {"left": 0.97}, "right-lags": {"right": 0.9}, "both": {"left": 0.5, "right": 0.5}}
+
+
+@pytest.mark.parametrize("stalls", list(STALLS))
+def test_shared_sums_in_the_smallest_memory_equal_the_model(monkeypatch: pytest.MonkeyPatch,
+                                                            stalls: str) -> None:
+    """With the shared memories as small as allowed (32 positions at Dmax 6, 2 beats of 4 rows) each pass
+    waits for the other where the memories bind; every pass's results equal the model's."""
+    monkeypatch.setattr(passes, "shared_sums_depth",
+                        lambda reach, dmax: 1 << (reach + 2 * dmax + 2).bit_length())
+    dmax = 6
+    model = _lr(dmax)
+    params = stereo_machine_params(dmax, model=model, integrator="log", words_per_beat=12)
+    assert fused_shares(model, params)["left"].depth == 32
+    width = dmax + 2 * model.margin + 24
+    left, right, _ = bundled_pair()
+    crop = (slice(250, 250 + 2 * model.margin + 3), slice(200, 200 + width))
+    frames = [(np.ascontiguousarray(left[crop]), np.ascontiguousarray(right[crop])),
+              _noisy_pair(2 * model.margin + 2, width, seed=7)]
+    top = StereoMachine(params=params, model=model, width=width, fifo_pixels=2)
+    got, _ = run_stereo_passes(top, frames, in_stall=0.1, out_stall=STALLS[stalls], seed=5)
+    want = passes_model(frames, model, params)
+    for name in want:
+        assert_same_results(got[name], want[name])
