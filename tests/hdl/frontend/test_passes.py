@@ -52,6 +52,14 @@ def _noisy_pair(height: int, width: int, seed: int, shift: int = 2) -> tuple[np.
     return left, right.clip(0, 255).astype(np.uint8)
 
 
+def _crop_and_noise(model: ModelParams, width: int, seed: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Two frames of ``width`` pixels back to back: 3 output rows of the bundled pair, 2 of noise."""
+    left, right, _ = bundled_pair()
+    crop = (slice(250, 250 + 2 * model.margin + 3), slice(200, 200 + width))
+    return [(np.ascontiguousarray(left[crop]), np.ascontiguousarray(right[crop])),
+            _noisy_pair(2 * model.margin + 2, width, seed=seed)]
+
+
 def _lr(dmax: int, **fields: object) -> ModelParams:
     return ModelParams(dmax=dmax, name="census-lr", **fields)
 
@@ -369,10 +377,7 @@ def test_census_lr_at_any_words_per_beat_equals_the_model(integrator: str, words
     assert (params.words_per_beat // params.loaded_columns, params.beats_per_pixel) == (rows, beats)
     assert tapped_line(rows, beats) is tapped
     width = dmax + 2 * model.margin + 6
-    left, right, _ = bundled_pair()
-    crop = (slice(250, 250 + 2 * model.margin + 3), slice(200, 200 + width))
-    frames = [(np.ascontiguousarray(left[crop]), np.ascontiguousarray(right[crop])),
-              _noisy_pair(2 * model.margin + 2, width, seed=2)]
+    frames = _crop_and_noise(model, width, seed=2)
     top = StereoMachine(params=params, model=model, width=width, fifo_pixels=2)
     want = assert_passes_equal_the_model(top, frames, model, params, seed=2)
     assert set(want) == {"right", "left"} and len(np.unique(want["left"].map)) > 3
@@ -462,10 +467,7 @@ def test_shared_sums_in_the_smallest_memory_equal_the_model(monkeypatch: pytest.
     params = stereo_machine_params(dmax, model=model, integrator="log", words_per_beat=12)
     assert fused_shares(model, params)["left"].depth == 32
     width = dmax + 2 * model.margin + 24
-    left, right, _ = bundled_pair()
-    crop = (slice(250, 250 + 2 * model.margin + 3), slice(200, 200 + width))
-    frames = [(np.ascontiguousarray(left[crop]), np.ascontiguousarray(right[crop])),
-              _noisy_pair(2 * model.margin + 2, width, seed=7)]
+    frames = _crop_and_noise(model, width, seed=7)
     top = StereoMachine(params=params, model=model, width=width, fifo_pixels=2)
     got, _ = run_stereo_passes(top, frames, in_stall=0.1, out_stall=STALLS[stalls], seed=5)
     want = passes_model(frames, model, params)
