@@ -223,7 +223,8 @@ class WordGenerator(wiring.Component):
     (``In(map_stream(params))``: the pass's own results as they leave its machine, ``ready`` while the line
     of MAPs has room) and ``frame_reset`` (:class:`~.lanes.prior.AboveLanes`); a PASS column's
     ``<pass>_maps`` (``In(map_stream(...))``: the other pass's MAPs, one taken per pixel it consults,
-    :class:`~.lanes.consistency.ConsistencyLanes`).
+    :class:`~.lanes.consistency.ConsistencyLanes`); with ``fused_share`` ``fused_sums``
+    (``Out(fused_share.signature())``: to :class:`~.shared.SharedSums`'s writer or reader).
     """
 
     def __init__(self, *, params: MachineParams, model: ModelParams, pass_name: str | None = None,
