@@ -302,9 +302,7 @@ class WordNets:
         self.fetch_beat = Signal(range(max(2, n_beats)))
         self.fetch_slot = Signal(range(self.slots))
         self._fetch_last = Signal()
-        self._fetch_more = Signal()  # a fetch with beats to follow
-        m.d.comb += [self._fetch_last.eq(self.fetch & (self.fetch_beat == n_beats - 1)),
-                     self._fetch_more.eq(self.fetch & (self.fetch_beat != n_beats - 1))]
+        m.d.comb += self._fetch_last.eq(self.fetch & (self.fetch_beat == n_beats - 1))
         done, slot = self._fetch_last, self.fetch_slot
         for k in range(self.scan_latency - 1):  # scanned, scan_latency cycles after the last fetch
             done_q = Signal(name=f"scan_done{k}")
@@ -517,19 +515,11 @@ class WordNets:
         """The ``plane`` value of lane row j's match pixel for the beat being issued: a register loaded a
         cycle ahead from the delay line (the beat counter ends there, not at the table address), with
         beat 0's entry when a pixel is taken, the next beat's on a fetch (:meth:`_tap_reads`,
-        :meth:`_bank_reads`). In a pass that scans it loads every cycle, the next beat's entry while a fetch
-        has beats to follow, else the entry at a take (the last load before beat 0's fetch is the take's,
-        which comes when no fetch has beats to follow): the take, a function of the stream's handshake,
-        drives no entry register."""
+        :meth:`_bank_reads`)."""
         key = (plane, j)
         if key not in self._entries:
             at_take, at_fetch = (self._tap_reads if self.tapped else self._bank_reads)(plane, j)
             sel = Signal(getattr(self.right_in, plane).shape(), name=f"right_{plane}_{j}", reset_less=True)
-            if self.scan_latency:
-                load = at_take if at_fetch is None else Mux(self._fetch_more, at_fetch, at_take)
-                self.m.d.sync += sel.eq(load)
-                self._entries[key] = sel
-                return sel
             with self.m.If(self.fed_take):
                 self.m.d.sync += sel.eq(at_take)
             if at_fetch is not None:
