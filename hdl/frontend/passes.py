@@ -7,9 +7,11 @@ the own pass's; twins in ``bayesmachine.columns`` and ``host.likelihoods``.
   with the images swapped and the reference delayed by Dmax pixels (a delay line in block RAM), so that
   when left map column x arrives the right pixel x_r = x - Dmax has every left pixel it pairs with
   (x_r .. x_r + Dmax: the word generator's delay line, read backwards); after a line's last pixel the
-  feeder holds its input for Dmax more right pixels (x_r = W4 - Dmax .. W4 - 1), each with ``flush`` =
-  k: its lanes d > Dmax - k pair it with a left pixel past the last output column
-  (:func:`~bayesmachine.columns.right_lanes_valid`: word 0). So a right-reference pass covers right map
+  feeder writes Dmax more right pixels (x_r = W4 - Dmax .. W4 - 1), each with ``flush`` = k: its lanes
+  d > Dmax - k pair it with a left pixel past the last output column
+  (:func:`~bayesmachine.columns.right_lanes_valid`: word 0), so each takes the next row's pixel outside
+  the output region with it if one is there (that row's first Dmax + 2k pixels: its steps into the
+  delay lines) and the next row starts during the flush. So a right-reference pass covers right map
   columns 0 .. W4 - 1 of every output row, in raster order, as the host's (``host.likelihoods.pass_grid``).
 - :func:`split_pixels`: the pipeline's pixel goes to every pass together (a broadcast: each takes it
   when all can); to the own pass through a FIFO of Dmax + 4 + ``PASS_LAG_PIXELS`` pixels when the model
@@ -121,10 +123,12 @@ class PassFeeder(wiring.Component):
     left map column x, ``left`` (the word generator's reference) = the right features of x - Dmax (a
     delay line of Dmax pixels: a circular buffer in block RAM), ``right`` (its delay line's input) = the
     left features of x, ``output`` and the flags passed on, ``flush`` 0; after an input pixel with
-    ``output`` and ``line_end``, Dmax flush pixels k = 1 .. Dmax (the input is not ready meanwhile): the
-    right features of the next delay-line entries, left features 0 (they fill lanes past the last output
-    column), ``output`` 1, ``row_start`` 0, ``first_row`` the row's, ``flush`` k. The handshake passes
-    through (no register on the valid path): ``i.ready`` is ``o.ready`` while no flush is pending.
+    ``output`` and ``line_end``, Dmax flush pixels k = 1 .. Dmax: the right features of the next
+    delay-line entries, ``output`` 1, ``row_start`` 0, ``first_row`` the row's, ``flush`` k; a flush pixel
+    takes an input pixel outside the output region with it when one is offered (its right features into
+    the delay line, its left features as ``right``: they fill lanes past the last output column), else
+    it writes 0 into both lines. The handshake passes through (no register on the valid path):
+    ``i.ready`` is ``o.ready``, but for an output pixel while a flush is pending.
 
     Parameters
     ----------
@@ -194,10 +198,13 @@ class PassFeeder(wiring.Component):
         pending = Signal(range(dmax + 1))  # flush pixels still to write
         first_row = Signal()  # of the row being flushed
         flushing = pending != 0
+        # A flush pixel steps the delay lines with the next row's pixel outside the output region, if
+        # one is there: the row's start no longer waits for the flush (its lanes past the line are 0).
+        fresh = ~flushing | (i.valid & ~i.payload.output)
         m.d.comb += [
-            i.ready.eq(~flushing & o.ready),
+            i.ready.eq(o.ready & (~flushing | ~i.payload.output)),
             o.valid.eq(Mux(flushing, 1, i.valid)),
-            o.payload.right.eq(Mux(flushing, 0, i.payload.left)),
+            o.payload.right.eq(Mux(fresh, i.payload.left, 0)),
             o.payload.output.eq(flushing | i.payload.output),
         ]
         if "row_start" in self._flags:
@@ -209,7 +216,7 @@ class PassFeeder(wiring.Component):
             return m
         step = o.valid & o.ready
         m.d.comb += [o.payload.flush.eq(Mux(flushing, dmax + 1 - pending, 0)),
-                     o.payload.left.eq(self._delay_line(m, step, Mux(flushing, 0, i.payload.right)))]
+                     o.payload.left.eq(self._delay_line(m, step, Mux(fresh, i.payload.right, 0)))]
         with m.If(flushing & o.ready):
             m.d.sync += pending.eq(pending - 1)
         with m.Elif(i.valid & i.ready & i.payload.output & i.payload.line_end):
