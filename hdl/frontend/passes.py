@@ -14,12 +14,12 @@ the own pass's; twins in ``bayesmachine.columns`` and ``host.likelihoods``.
   delay lines) and the next row starts during the flush. So a right-reference pass covers right map
   columns 0 .. W4 - 1 of every output row, in raster order, as the host's (``host.likelihoods.pass_grid``).
 - :func:`split_pixels`: the pipeline's pixel goes to every pass together (a broadcast: each takes it
-  when all can); to the own pass through a FIFO of Dmax + 4 + ``PASS_LAG_PIXELS`` pixels when the model
+  when all can); to the own pass through a FIFO of Dmax + 4 + :func:`pass_lag_pixels` pixels when the model
   declares passes (its pixel at map column x may wait for another pass's MAP of x, which needs the left
   pixels up to x + Dmax and the other pass's generator and machine: the FIFO lets them pass).
 - :func:`watch_passes`: each declared pass's results, as they leave its machine (the front end's
   ``<pass>_maps`` port), into its own generator's line of MAPs (its above prior) and into a FIFO of its
-  MAPs (Dmax + 8 + ``PASS_LAG_PIXELS``: never full while the own pass waits, it holds at most the pixel
+  MAPs (Dmax + 8 + :func:`pass_lag_pixels`: never full while the own pass waits, it holds at most the pixel
   FIFO's pixels' MAPs) for each generator whose pass column reads them (census-lr's consistency column).
 - :func:`fused_shares`: the passes' parts in sharing a fused column's sums (:mod:`.shared`): census-lr's
   right pass computes the members' codes of every pair of pixels both passes compare, the own pass reads
@@ -57,9 +57,18 @@ from .words import WordGenerator, generator_signature, pass_params
 # latency is tens of pixels, and a shallower FIFO makes the pipeline wait for it.
 PASS_LAG_PIXELS = 128
 
+
 __all__ = ["PASS_LAG_PIXELS", "PassFeeder", "feeder_in_layout", "fork", "frontend_signature", "fused_shares",
-           "pass_port", "pass_row_pixels", "share_fused_sums", "shared_sums_depth", "split_pixels",
-           "watch_passes"]
+           "pass_lag_pixels", "pass_port", "pass_row_pixels", "share_fused_sums", "shared_sums_depth",
+           "split_pixels", "watch_passes"]
+
+
+def pass_lag_pixels(dmax: int) -> int:
+    """Pixels the own pass may lag beyond Dmax + 4: ``PASS_LAG_PIXELS``, and at least Dmax + 4, so that
+    its FIFO is never full while a right-reference pass's flush waits for the next row's pixels
+    (:class:`PassFeeder`): the own pixels then waiting for the flush's MAPs (at most Dmax) and the next
+    row's pixels the flush has taken (fewer than Dmax) fit."""
+    return max(PASS_LAG_PIXELS, dmax + 4)
 
 
 def pass_row_pixels(model: ModelParams, name: str, width: int) -> int:
@@ -200,10 +209,14 @@ class PassFeeder(wiring.Component):
         flushing = pending != 0
         # A flush pixel steps the delay lines with the next row's pixel outside the output region, if
         # one is there: the row's start no longer waits for the flush (its lanes past the line are 0).
-        fresh = ~flushing | (i.valid & ~i.payload.output)
+        # Once one has, every later one waits for one, so that the row's pixels sit in the lines with
+        # no flush entry between them (the row's first output pixel reads the last Dmax + 1).
+        absorbing = Signal()
+        offered = i.valid & ~i.payload.output
+        fresh = ~flushing | offered
         m.d.comb += [
             i.ready.eq(o.ready & (~flushing | ~i.payload.output)),
-            o.valid.eq(Mux(flushing, 1, i.valid)),
+            o.valid.eq(Mux(flushing, ~absorbing | offered, i.valid)),
             o.payload.right.eq(Mux(fresh, i.payload.left, 0)),
             o.payload.output.eq(flushing | i.payload.output),
         ]
@@ -217,8 +230,8 @@ class PassFeeder(wiring.Component):
         step = o.valid & o.ready
         m.d.comb += [o.payload.flush.eq(Mux(flushing, dmax + 1 - pending, 0)),
                      o.payload.left.eq(self._delay_line(m, step, Mux(fresh, i.payload.right, 0)))]
-        with m.If(flushing & o.ready):
-            m.d.sync += pending.eq(pending - 1)
+        with m.If(flushing & o.valid & o.ready):
+            m.d.sync += [pending.eq(pending - 1), absorbing.eq((pending != 1) & (absorbing | offered))]
         with m.Elif(i.valid & i.ready & i.payload.output & i.payload.line_end):
             m.d.sync += pending.eq(dmax)
             if "first_row" in self._flags:
@@ -268,8 +281,8 @@ def split_pixels(m: Module, model: ModelParams, features: Any, gens: Mapping[str
             sinks.append(feeder.i)
         elif declared_passes(model):
             layout = gen.pixel.payload.shape()
-            m.submodules.own_pixels = pix = fifo.SyncFIFOBuffered(width=Shape.cast(layout).width,
-                                                                  depth=model.dmax + 4 + PASS_LAG_PIXELS)
+            depth = model.dmax + 4 + pass_lag_pixels(model.dmax)
+            m.submodules.own_pixels = pix = fifo.SyncFIFOBuffered(width=Shape.cast(layout).width, depth=depth)
             staged = Signal(layout)
             _fields(m, staged, pixel)
             m.d.comb += [pix.w_stream.payload.eq(staged), gen.pixel.valid.eq(pix.r_stream.valid),
@@ -283,7 +296,7 @@ def split_pixels(m: Module, model: ModelParams, features: Any, gens: Mapping[str
 
 def watch_passes(m: Module, front: Any, gens: Mapping[str, WordGenerator]) -> None:
     """Each pass's MAPs in on the front end's ``maps`` ports (:func:`frontend_signature`) to what reads
-    them: its own generator's line of MAPs and, through a FIFO of Dmax + 8 + ``PASS_LAG_PIXELS`` MAPs each,
+    them: its own generator's line of MAPs and, through a FIFO of Dmax + 8 + ``pass_lag_pixels`` MAPs each,
     every generator whose pass column reads them (see the module text)."""
     model = front.model
     for p in model.passes:
@@ -301,7 +314,8 @@ def watch_passes(m: Module, front: Any, gens: Mapping[str, WordGenerator]) -> No
         for reader, gen in readers:
             sink = getattr(gen, f"{p.name}_maps")
             m.submodules[f"{p.name}_maps_{reader}"] = maps = fifo.SyncFIFOBuffered(
-                width=Shape.cast(port.payload.shape()).width, depth=model.dmax + 8 + PASS_LAG_PIXELS)
+                width=Shape.cast(port.payload.shape()).width,
+                depth=model.dmax + 8 + pass_lag_pixels(model.dmax))
             m.d.comb += [maps.w_stream.payload.eq(port.payload), sink.valid.eq(maps.r_stream.valid),
                          sink.payload.eq(maps.r_stream.payload), maps.r_stream.ready.eq(sink.ready)]
             sinks.append(maps.w_stream)
@@ -310,9 +324,9 @@ def watch_passes(m: Module, front: Any, gens: Mapping[str, WordGenerator]) -> No
 
 def shared_sums_depth(reach: int, dmax: int) -> int:
     """Positions the shared fused sums hold (:class:`~.shared.FusedShare`'s ``depth``): enough that the
-    exporter may run the own pass's whole lag ahead (Dmax + 4 + ``PASS_LAG_PIXELS`` pixels: its pixel
+    exporter may run the own pass's whole lag ahead (Dmax + 4 + ``pass_lag_pixels`` pixels: its pixel
     FIFO) before it waits for the importer, a pixel's rows (``reach``) and Dmax + 1 beyond."""
-    return 1 << (reach + 2 * dmax + 6 + PASS_LAG_PIXELS).bit_length()
+    return 1 << (reach + 2 * dmax + 6 + pass_lag_pixels(dmax)).bit_length()
 
 
 def _fused(p: Pass) -> Fused | None:

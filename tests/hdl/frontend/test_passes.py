@@ -162,13 +162,17 @@ def _feeder_twin(inputs: list[dict], got: list, dmax: int) -> int:
     order, each on a step of its own or (outside the output region) with a flush pixel; after an output
     row's last pixel Dmax flush pixels k = 1..Dmax, ``row_start`` 0, the row's ``first_row``; each step
     writes the right features of its pixel (0: a flush pixel alone) into the delay line, and its
-    reference is the entry written Dmax steps back. Returns the pixels that went with a flush pixel."""
+    reference is the entry written Dmax steps back; once a flush pixel has taken a pixel, every later one
+    of the flush does (no flush entry between the next row's pixels). Returns the pixels that went with
+    a flush pixel."""
     refs: list[int] = []
-    k, flush, row_first, absorbed = 0, 0, 0, 0
+    k, flush, row_first, absorbed, taking = 0, 0, 0, 0, False
     for g in got:
         if flush:  # the flush pixel of the row just ended, with the next pixel if one came
             with_pixel = g.right.m25 != 0
             assert (g.output, g.flush, g.row_start, g.first_row) == (1, dmax + 1 - flush, 0, row_first)
+            assert with_pixel or not taking, "a flush pixel without one after one with one"
+            taking = with_pixel
             if with_pixel:
                 assert g.right.m25 == 100 + k and not inputs[k]["output"], k
                 refs.append(inputs[k]["right"]["m25"])
@@ -182,7 +186,7 @@ def _feeder_twin(inputs: list[dict], got: list, dmax: int) -> int:
                 100 + k, x["output"], 0, x["row_start"], x["first_row"]), k
             refs.append(x["right"]["m25"])
             if x["output"] and x["line_end"]:
-                flush, row_first = dmax, x["first_row"]
+                flush, row_first, taking = dmax, x["first_row"], False
             k += 1
         if len(refs) > dmax:
             assert g.left.m25 == refs[-1 - dmax], len(refs)
@@ -457,6 +461,23 @@ def test_census_lr_rows_start_during_the_right_pass_flush() -> None:
         assert_same_results(got[name], want[name])
     print(f"\ncensus-lr, Dmax {dmax}, {width} x {frame[0].shape[0]}, two beats a pixel: {cycles} clocks")
     assert cycles <= 805  # measured
+
+
+def test_census_lr_equals_the_model_while_the_own_pass_lags() -> None:
+    """census-lr (log) with the own pass's results stalled 95 % of the cycles: its FIFO fills, the input
+    stops in the middle of the right pass's flushes, and a flush that has taken a pixel of the next row
+    waits for the next (a flush entry between the row's pixels made its first pixels' words wrong: row
+    5's here). Every result of both passes the model's."""
+    dmax = 16
+    model = ModelParams(name="census-lr", dmax=dmax)
+    params = stereo_machine_params(dmax, model=model, integrator="log", words_per_beat=12)
+    left, right, _ = bundled_pair()
+    frame = (left[150:166, 300:360].copy(), right[150:166, 300:360].copy())
+    top = StereoMachine(params=params, model=model, width=60, fifo_pixels=8)
+    got, _ = run_stereo_passes(top, [frame], out_stall={"left": 0.95}, max_cycles=10_000_000)
+    want = passes_model([frame], model, params)
+    for name in want:
+        assert_same_results(got[name], want[name])
 
 
 # --- The fused sums computed once (hdl.frontend.shared) ---
