@@ -418,49 +418,41 @@ def test_census_lr_at_any_words_per_beat_equals_the_model(integrator: str, words
     assert set(want) == {"right", "left"} and len(np.unique(want["left"].map)) > 3
 
 
-def test_census_lr_at_one_beat_a_pixel_keeps_the_rate() -> None:
-    """census-lr (log) with a pixel in one beat: the own pass's pixels wait in a FIFO for the right pass's
-    MAPs, which need Dmax pixels more and the right pass's generator and machine; with the FIFO only Dmax
-    + 4 deep the pipeline waited for that latency at every pixel. The frame's clocks (no stalls) against
-    the figure measured with the deeper FIFO (``PASS_LAG_PIXELS``)."""
-    dmax = 4
+def _census_lr_clocks(dmax: int, beats: int, extra_width: int, extra_lines: int) -> int:
+    """census-lr (log) at ``beats`` beats a pixel on a crop of the bundled pair (Dmax + 2k + ``extra_width``
+    pixels, 2k + ``extra_lines`` lines) with no stalls: every result of both passes the model's; the
+    frame's clocks."""
     model = ModelParams(name="census-lr", dmax=dmax)
-    params = stereo_machine_params(dmax, model=model, integrator="log", words_per_beat=3 * (dmax + 2))
-    assert params.beats_per_pixel == 1
-    width = dmax + 2 * model.margin + 60
+    wpb = 3 * (dmax + 2) // beats
+    params = stereo_machine_params(dmax, model=model, integrator="log", words_per_beat=wpb)
+    assert params.beats_per_pixel == beats
+    width = dmax + 2 * model.margin + extra_width
     left, right, _ = bundled_pair()
-    crop = (slice(250, 250 + 2 * model.margin + 3), slice(200, 200 + width))
+    crop = (slice(250, 250 + 2 * model.margin + extra_lines), slice(200, 200 + width))
     frame = (np.ascontiguousarray(left[crop]), np.ascontiguousarray(right[crop]))
     top = StereoMachine(params=params, model=model, width=width, fifo_pixels=2)
     got, cycles = run_stereo_passes(top, [frame])
     want = passes_model([frame], model, params)
     for name in want:
         assert_same_results(got[name], want[name])
-    print(f"\ncensus-lr, Dmax {dmax}, {width} x {frame[0].shape[0]}, one beat a pixel: {cycles} clocks")
-    assert cycles <= 758  # measured; with the FIFO only Dmax + 4 deep: 848
+    print(f"\ncensus-lr, Dmax {dmax}, {width} x {frame[0].shape[0]}, {beats} beat(s) a pixel: {cycles}")
+    return cycles
+
+
+def test_census_lr_at_one_beat_a_pixel_keeps_the_rate() -> None:
+    """census-lr (log) with a pixel in one beat: the own pass's pixels wait in a FIFO for the right pass's
+    MAPs, which need Dmax pixels more and the right pass's generator and machine; with the FIFO only Dmax
+    + 4 deep the pipeline waited for that latency at every pixel. The frame's clocks (no stalls) against
+    the figure measured with the deeper FIFO (``PASS_LAG_PIXELS``)."""
+    assert _census_lr_clocks(4, 1, 60, 3) <= 758  # measured; with the FIFO only Dmax + 4 deep: 848
 
 
 def test_census_lr_rows_start_during_the_right_pass_flush() -> None:
     """census-lr (log) at two beats a pixel: the right pass's flush pixels at a row's end take the next
     row's first Dmax pixels (outside the output region) with them, so a row costs the right pass's
     W - 2k pixels of two clocks and about 2k + 5 clocks more, not Dmax + 2k + 5. The frame's clocks (no
-    stalls) against the figure measured (885 when the next row waited for the flush), every result the
-    model's."""
-    dmax = 16
-    model = ModelParams(name="census-lr", dmax=dmax)
-    params = stereo_machine_params(dmax, model=model, integrator="log", words_per_beat=3 * (dmax + 2) // 2)
-    assert params.beats_per_pixel == 2
-    width = dmax + 2 * model.margin + 20
-    left, right, _ = bundled_pair()
-    crop = (slice(250, 250 + 2 * model.margin + 6), slice(200, 200 + width))
-    frame = (np.ascontiguousarray(left[crop]), np.ascontiguousarray(right[crop]))
-    top = StereoMachine(params=params, model=model, width=width, fifo_pixels=2)
-    got, cycles = run_stereo_passes(top, [frame])
-    want = passes_model([frame], model, params)
-    for name in want:
-        assert_same_results(got[name], want[name])
-    print(f"\ncensus-lr, Dmax {dmax}, {width} x {frame[0].shape[0]}, two beats a pixel: {cycles} clocks")
-    assert cycles <= 805  # measured
+    stalls) against the figure measured (885 when the next row waited for the flush)."""
+    assert _census_lr_clocks(16, 2, 20, 6) <= 805  # measured
 
 
 def test_census_lr_equals_the_model_while_the_own_pass_lags() -> None:
