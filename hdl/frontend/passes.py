@@ -57,7 +57,6 @@ from .words import WordGenerator, generator_signature, pass_params
 # latency is tens of pixels, and a shallower FIFO makes the pipeline wait for it.
 PASS_LAG_PIXELS = 128
 
-
 __all__ = ["PASS_LAG_PIXELS", "PassFeeder", "feeder_in_layout", "fork", "frontend_signature", "fused_shares",
            "pass_lag_pixels", "pass_port", "pass_row_pixels", "share_fused_sums", "shared_sums_depth",
            "split_pixels", "watch_passes"]
@@ -136,8 +135,9 @@ class PassFeeder(wiring.Component):
     delay-line entries, ``output`` 1, ``row_start`` 0, ``first_row`` the row's, ``flush`` k; a flush pixel
     takes an input pixel outside the output region with it when one is offered (its right features into
     the delay line, its left features as ``right``: they fill lanes past the last output column), else
-    it writes 0 into both lines. The handshake passes through (no register on the valid path):
-    ``i.ready`` is ``o.ready``, but for an output pixel while a flush is pending.
+    it writes 0 into both lines; once one has taken a pixel, each later one of the flush waits for one
+    (no flush entry between the next row's pixels). The handshake passes through (no register on the
+    valid path): ``i.ready`` is ``o.ready``, but for an output pixel while a flush is pending.
 
     Parameters
     ----------
