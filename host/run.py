@@ -52,6 +52,7 @@ __all__ = [
     "run_pair",
     "result_bytes",
     "machines_model",
+    "stereo_model",
 ]
 
 # How the machine is fed: the host's likelihood words (any engine), or the pixel pairs through the
@@ -207,14 +208,11 @@ def run_machine(
         "use --crop or a smaller --dmax",
     )
     declared = model.passes[:-1]
-    if machines != 1 and declared:
-        raise ValueError(f"--machines {machines}: --model {model.name} runs with one machine (its "
-                         f"{declared[0].name} pass is not dealt to several)")
     if feed == "pixels":
         return _run_pixels(prepared, machine, engine, engine_options, machines)
     if any(_row_by_row(p) for p in model.passes) or machines != 1:
         chunk_rows = 1  # rows fed by the row above or by another pass's row; rows dealt to machines
-    runs = [_PassRun(prepared, p, pass_machine(model, machine, p.name), engine, engine_options)
+    runs = [_PassRun(prepared, p, pass_machine(model, machine, p.name), engine, engine_options, machines)
             for p in declared]
     own = _PassRun(prepared, model.passes[-1], machine, engine, engine_options, machines)
     counts = np.zeros((ho, wo, m), counts_dtype(machine.readout_max))
@@ -282,38 +280,50 @@ def _run_pixels(
                       figures)
 
 
+def stereo_model(
+    frames: list[tuple[np.ndarray, np.ndarray]], model: ModelParams, machine: MachineParams,
+    machines: int = 1, engine: str = "model",
+) -> dict[str, MachineResult]:
+    """What ``StereoMachine(machines=K)`` streams out for ``frames`` (pairs, back to back), every pass's
+    results by pass name, from engines fed with the host's words: map row y of a frame runs, in each pass,
+    on that pass's machine y mod K, each machine an engine of its own from reset, so its random source
+    (every on-chip kind: a ``sobol`` pixel's shift, the LFSRs) and its left neighbour's result run over its
+    own rows only, frame after frame. Per map row each declared pass's row runs first, then the own pass's:
+    an ABOVE column from the pass's row y - 1 (machine (y - 1) mod K), a PASS column from the row y of the
+    pass it reads, and with a FEEDBACK column each row's first pixel is flagged ``line_start``. Results in
+    raster order of each frame's rows of the pass (K = 1: the machine with one machine per pass)."""
+    passes = model.passes
+    params = {p.name: machine if p is passes[-1] else pass_machine(model, machine, p.name) for p in passes}
+    engines = {name: [get_engine(engine, pp) for _ in range(machines)] for name, pp in params.items()}
+    parts: dict[str, list[MachineResult]] = {p.name: [] for p in passes}
+    try:
+        for left, right in frames:
+            planes = (model_planes(left, model), model_planes(right, model))
+            region = OutputRegion.of_features(planes[0].shape, model.dmax)
+            latest = {p.name: np.full(pass_grid(p, region).width, -1, np.int16) for p in passes}
+            for y in range(region.shape[0]):
+                for p in passes:
+                    pp = params[p.name]
+                    others = {k: v[None] for k, v in latest.items() if k != p.name}
+                    words = _row_words(p, planes, pp, slice(y, y + 1), latest[p.name], others)
+                    starts = _line_starts(pp, latest[p.name].size)
+                    eng = engines[p.name][y % machines]
+                    res = eng.run(words) if starts is None else eng.run(words, line_start=starts)
+                    latest[p.name] = res.neighbour_answers()
+                    parts[p.name].append(res)
+    finally:
+        for eng in (e for lane in engines.values() for e in lane):
+            eng.close()
+    return {name: MachineResult.concatenate(parts[name], params[name].rows) for name in parts}
+
+
 def machines_model(
     frames: list[tuple[np.ndarray, np.ndarray]], model: ModelParams, machine: MachineParams,
     machines: int = 1, engine: str = "model",
 ) -> MachineResult:
-    """What ``StereoMachine(machines=K)`` streams out for ``frames`` (pairs, back to back), from an
-    engine fed with the host's words: map row y of a frame runs on machine y mod K, each machine an
-    engine of its own from reset, so its random source (every on-chip kind: a ``sobol`` pixel's
-    shift, the LFSRs) and its left neighbour's result run over its own rows only, frame after frame;
-    an ABOVE column comes from row y - 1's results (machine (y - 1) mod K), and with a FEEDBACK column
-    each row's first pixel is flagged ``line_start``. Results in raster order of each frame's output
-    region (the same as one engine when K = 1). A model of one pass (K machines share no other)."""
-    if len(model.passes) > 1:
-        raise ValueError(f"machines_model: the {model.name} model runs more than one pass")
-    p = model.passes[-1]
-    engines = [get_engine(engine, machine) for _ in range(machines)]
-    parts: list[MachineResult] = []
-    try:
-        for left, right in frames:
-            planes = (model_planes(left, model), model_planes(right, model))
-            ho, wo = OutputRegion.of_features(planes[0].shape, model.dmax).shape
-            above = np.full(wo, -1, np.int16)
-            starts = _line_starts(machine, wo)
-            for y in range(ho):
-                eng = engines[y % machines]
-                words = _row_words(p, planes, machine, slice(y, y + 1), above, {})
-                res = eng.run(words) if starts is None else eng.run(words, line_start=starts)
-                above = res.neighbour_answers()
-                parts.append(res)
-    finally:
-        for eng in engines:
-            eng.close()
-    return MachineResult.concatenate(parts, machine.rows)
+    """The own pass's results of :func:`stereo_model` (what ``StereoMachine(machines=K)`` streams out on
+    ``result``)."""
+    return stereo_model(frames, model, machine, machines, engine)[model.passes[-1].name]
 
 
 def run_pair(

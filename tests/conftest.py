@@ -165,47 +165,23 @@ def small_params(**kwargs: object) -> MachineParams:
 
 
 def passes_model(frames: list[tuple[np.ndarray, np.ndarray]], model: object,
-                 params: MachineParams) -> dict[str, MachineResult]:
-    """Every pass of ``model`` on the machine model as the host runs them, frames back to back (one
-    engine per pass, so its random source carries over as on chip), by pass name: per map row each
-    declared pass's row (its above column from its own previous row), then the own pass's (a pass
-    column from the row of the pass it reads). What a ``StereoMachine`` of ``model`` computes."""
-    from bayesmachine.hdl.frontend.words import pass_params
-    from bayesmachine.host.features import model_planes
-    from bayesmachine.host.likelihoods import pass_grid, pass_words
-    from bayesmachine.region import OutputRegion
-    from bayesmachine.sim.engines import get_engine
+                 params: MachineParams, machines: int = 1) -> dict[str, MachineResult]:
+    """Every pass of ``model`` on the machine model as a ``StereoMachine`` of ``model`` with ``machines``
+    machines per pass computes them, frames back to back, by pass name (``host.run.stereo_model``)."""
+    from bayesmachine.host.run import stereo_model
 
-    passes = model.passes  # type: ignore[attr-defined]
-    machines = {p.name: pass_params(model, params, p.name) for p in passes}  # type: ignore[arg-type]
-    engines = {name: get_engine("model", pp) for name, pp in machines.items()}  # the integrator's model
-    out: dict[str, list[MachineResult]] = {p.name: [] for p in passes}
-    for lf, rf in frames:
-        fl, fr = model_planes(lf, model), model_planes(rf, model)  # type: ignore[arg-type]
-        region = OutputRegion.of_features(fl.shape, model.dmax)  # type: ignore[attr-defined]
-        grids = {p.name: pass_grid(p, region) for p in passes}
-        latest = {p.name: np.full(grids[p.name].width, -1) for p in passes}  # each pass's last row
-        for y in range(region.shape[0]):
-            for p in passes:
-                pp = machines[p.name]
-                words = pass_words(p, fl, fr, pp, rows=slice(y, y + 1), above=latest[p.name],
-                                   results={k: v[None] for k, v in latest.items() if k != p.name})
-                starts = np.zeros(grids[p.name].width, bool)
-                starts[0] = True
-                res = engines[p.name].run(words, line_start=starts if pp.feedback_columns else None)
-                latest[p.name] = np.where(res.nomatch | res.timeout, -1, res.map)
-                out[p.name].append(res)
-    return {p.name: MachineResult.concatenate(out[p.name], machines[p.name].rows) for p in passes}
+    return stereo_model(frames, model, params, machines)  # type: ignore[arg-type]
 
 
 def assert_passes_equal_the_model(top: object, frames: list[tuple[np.ndarray, np.ndarray]], model: object,
                                   params: MachineParams, seed: int) -> dict[str, MachineResult]:
     """A ``StereoMachine`` ``top`` of ``model`` under pysim (random stalls on both streams) gives every pass's
-    results of ``passes_model``, array by array; returns the model's."""
+    results of ``passes_model`` (with ``top.machines`` machines per pass), array by array; returns the
+    model's."""
     from bayesmachine.sim.stereo_testbench import run_stereo_passes
 
     got, _ = run_stereo_passes(top, frames, in_stall=0.2, out_stall=0.3, seed=seed)
-    want = passes_model(frames, model, params)
+    want = passes_model(frames, model, params, top.machines)  # type: ignore[attr-defined]
     assert set(got) == set(want) == {p.name for p in model.passes}  # type: ignore[attr-defined]
     for name in want:
         assert_same_results(got[name], want[name])

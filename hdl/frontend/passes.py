@@ -58,8 +58,8 @@ from .words import WordGenerator, generator_signature, pass_params
 PASS_LAG_PIXELS = 128
 
 __all__ = ["PASS_LAG_PIXELS", "PassFeeder", "feeder_in_layout", "fork", "frontend_signature", "fused_shares",
-           "pass_lag_pixels", "pass_port", "pass_row_pixels", "share_fused_sums", "shared_sums_depth",
-           "split_pixels", "watch_passes"]
+           "map_readers", "pass_lag_pixels", "pass_port", "pass_row_pixels", "share_fused_sums",
+           "shared_sums_depth", "split_pixels", "watch_passes"]
 
 
 def pass_lag_pixels(dmax: int) -> int:
@@ -296,30 +296,41 @@ def split_pixels(m: Module, model: ModelParams, features: Any, gens: Mapping[str
 
 def watch_passes(m: Module, front: Any, gens: Mapping[str, WordGenerator]) -> None:
     """Each pass's MAPs in on the front end's ``maps`` ports (:func:`frontend_signature`) to what reads
-    them: its own generator's line of MAPs and, through a FIFO of Dmax + 8 + ``pass_lag_pixels`` MAPs each,
-    every generator whose pass column reads them (see the module text)."""
+    them: its own generator's line of MAPs and, through :func:`map_readers`, every generator whose pass
+    column reads them (see the module text)."""
     model = front.model
     for p in model.passes:
         name = pass_port(model, p, "maps")
         if name not in front.signature.members:
             continue
-        port, sinks = getattr(front, name), []
-        readers = [(reader, gen) for reader, gen in gens.items() if f"{p.name}_maps" in gen.signature.members]
+        port = getattr(front, name)
+        readers = map_readers(m, model, p, gens, port.payload)
         if not readers:  # only its own line of MAPs reads them
             wiring.connect(m, wiring.flipped(port), gens[p.name].maps)
             continue
+        sinks = []
         if "maps" in gens[p.name].signature.members:
             m.d.comb += gens[p.name].maps.payload.eq(port.payload)
             sinks.append(gens[p.name].maps)
-        for reader, gen in readers:
-            sink = getattr(gen, f"{p.name}_maps")
-            m.submodules[f"{p.name}_maps_{reader}"] = maps = fifo.SyncFIFOBuffered(
-                width=Shape.cast(port.payload.shape()).width,
-                depth=model.dmax + 8 + pass_lag_pixels(model.dmax))
-            m.d.comb += [maps.w_stream.payload.eq(port.payload), sink.valid.eq(maps.r_stream.valid),
-                         sink.payload.eq(maps.r_stream.payload), maps.r_stream.ready.eq(sink.ready)]
-            sinks.append(maps.w_stream)
-        fork(m, port, sinks)
+        fork(m, port, sinks + readers)
+
+
+def map_readers(m: Module, model: ModelParams, p: Pass, gens: Mapping[str, WordGenerator],
+                maps: Value) -> list[Any]:
+    """Pass ``p``'s MAPs (``maps``: a ``map_layout`` value, valid as each result leaves its machine) into a
+    FIFO of Dmax + 8 + ``pass_lag_pixels`` MAPs for each generator of ``gens`` whose pass column reads them
+    (submodule ``<pass>_maps_<reader>``); returns the FIFOs' write streams, for the caller's fork."""
+    sinks = []
+    for reader, gen in gens.items():
+        if f"{p.name}_maps" not in gen.signature.members:
+            continue
+        sink = getattr(gen, f"{p.name}_maps")
+        m.submodules[f"{p.name}_maps_{reader}"] = buf = fifo.SyncFIFOBuffered(
+            width=Shape.cast(sink.payload.shape()).width, depth=model.dmax + 8 + pass_lag_pixels(model.dmax))
+        m.d.comb += [buf.w_stream.payload.eq(maps), sink.valid.eq(buf.r_stream.valid),
+                     sink.payload.eq(buf.r_stream.payload), buf.r_stream.ready.eq(sink.ready)]
+        sinks.append(buf.w_stream)
+    return sinks
 
 
 def shared_sums_depth(reach: int, dmax: int) -> int:

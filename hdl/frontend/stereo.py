@@ -28,12 +28,12 @@ hands each result, as it leaves, back to the front end (``maps``, ``<pass>_maps`
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from types import SimpleNamespace
 from typing import Any
 
 from amaranth.hdl import Array, Module, Mux, Shape, Signal, Value
-from amaranth.lib import fifo, stream, wiring
+from amaranth.lib import data, fifo, stream, wiring
 from amaranth.lib.wiring import In
 
 from bayesmachine.checks import as_int
@@ -43,6 +43,7 @@ from bayesmachine.hdl.signatures import (
     ENTROPY_PORTS,
     StereoSignature,
     load_layout,
+    map_layout,
     pixel_in_layout,
     result_layout,
 )
@@ -56,13 +57,14 @@ from .passes import (
     fork,
     frontend_signature,
     fused_shares,
+    map_readers,
     pass_port,
     pass_row_pixels,
     share_fused_sums,
     split_pixels,
     watch_passes,
 )
-from .pipeline import FeaturePipeline, PipelineNets, check_width, line_region, pipeline_layout
+from .pipeline import FeaturePipeline, PipelineNets, check_width, pipeline_layout
 from .words import WordGenerator, check_frontend_params, check_frontend_types, pass_params
 
 __all__ = ["MAX_MACHINES", "MAX_WIDTH", "FeaturePipeline", "FrontEnd", "PipelineNets", "RoomFifo",
@@ -87,23 +89,17 @@ def stereo_machine_params(dmax: int = DEFAULT_DMAX, *, model: ModelParams | None
 
 
 def check_machines(machines: object, params: MachineParams, model: ModelParams) -> int:
-    """``machines`` if a ``StereoMachine`` can have that many machines: an integer (``TypeError``
-    otherwise) in [1, MAX_MACHINES], more than one only for an on-chip random source (off chip,
-    each machine would need its own number port and device stream) and a model without declared passes
-    (a declared pass runs on one machine beside the own one, not dealt to several), else
-    ``ParameterError`` naming the parameter."""
+    """``machines`` if a ``StereoMachine`` can have that many machines (per pass): an integer (``TypeError``
+    otherwise) in [1, MAX_MACHINES], more than one only for an on-chip random source (off chip, each
+    machine would need its own number port and device stream), else ``ParameterError`` naming the
+    parameter."""
     machines = as_int("machines", machines)
     if not 1 <= machines <= MAX_MACHINES:
         raise ParameterError(f"machines must be in [1, {MAX_MACHINES}], got {machines}", "machines")
-    if machines > 1:
-        if not source_kind(params.rng).on_chip:
-            raise ParameterError(f"machines = {machines}: rng {params.rng!r} is off chip (one number port, "
-                                 "one device stream); several machines need an on-chip source "
-                                 "(sobol, lfsr, lfsr-shared)", "machines")
-        for p in declared_passes(model):
-            raise ParameterError(f"machines = {machines}: the {model.name} model's {p.name} pass runs on one "
-                                 "machine beside the own pass's (it is not dealt to several); give one "
-                                 "machine", "machines")
+    if machines > 1 and not source_kind(params.rng).on_chip:
+        raise ParameterError(f"machines = {machines}: rng {params.rng!r} is off chip (one number port, "
+                             "one device stream); several machines need an on-chip source "
+                             "(sobol, lfsr, lfsr-shared)", "machines")
     return machines
 
 
@@ -365,108 +361,175 @@ class StereoMachine(wiring.Component):
                 m.d.comb += inner.eq(outer) if flow == In else outer.eq(inner)
 
     def _elaborate_machines(self) -> Module:
-        """K machines: one feature pipeline; a dealer sends the pixels of map row r to lane r mod K
-        (a line FIFO, a word generator, a beats FIFO, a machine, a result FIFO); the results leave
-        lane by lane, a map row at a time, in the order the rows were dealt."""
+        """K machines per pass: one feature pipeline; a dealer sends the pixels of map row r to lane r mod
+        K (a line FIFO, then every pass's word generator, beats FIFO, machine and result FIFO); each
+        pass's results leave lane by lane, a map row at a time, in the order the rows were dealt."""
         m = Module()
         m.submodules.frontend = pipe = FeaturePipeline(model=self._model, width=self._width)
         wiring.connect(m, wiring.flipped(self.pixels), pipe.pixels)
-        idle = Signal(init=1)  # registered: no row in flight
+        idle = Signal(init=1)  # registered: no row in flight in any pass
         rows, lines, frame_reset = self._deal(m, pipe.features, idle)
-        machines, loads, results = self._lanes(m, lines, frame_reset)
-        self._merge(m, rows, results, idle)
-        self._nets = StereoNets(frontend=pipe, machines=machines, loads=loads)
+        lanes = [self._lane(m, j, lines[j], frame_reset) for j in range(self._machines)]
+        self._neighbours(m, lanes, frame_reset)
+        self._merge(m, rows, [lane.results for lane in lanes], idle)
+        own = self._model.passes[-1].name
+        self._nets = StereoNets(frontend=pipe, machines=[lane.machines[own] for lane in lanes],
+                                loads=[lane.loads[own] for lane in lanes])
         return m
 
-    def _deal(self, m: Module, fx: Any, idle: Value) -> tuple[RoomFifo, list[RoomFifo], Value]:
+    def _deal(self, m: Module, fx: Any, idle: Value) -> tuple[dict[str, RoomFifo], list[RoomFifo], Value]:
         """The dealer: a map row's pixels go to its lane's line FIFO (a line's worth: the filters move on
-        to the next rows while a machine works through this one); other lines' pixels (the first 2k, the
-        frame's top) are dropped. Returns the FIFO of the rows in flight (each dealt row's lane, in
-        dealing order), the line FIFOs and the frame reset (a frame's first pixel taken)."""
+        to the next rows while the machines work through this one); other lines' pixels (the first 2k, the
+        frame's top) are dropped. Returns, per pass, the FIFO of the rows in flight (each dealt row's lane,
+        in dealing order), the line FIFOs and the frame reset (a frame's first pixel taken)."""
         k, w = self._machines, fx.payload
-        rows = _room_fifo(m, "rows", Shape.cast(range(k)).width, 4 * k + 4)
+        rows = {p.name: _room_fifo(m, pass_port(self._model, p, "rows"), Shape.cast(range(k)).width,
+                                   4 * k + 4) for p in self._model.passes}
         lane = Signal(range(k))  # the lane of the current map row
         new_row = w.output_line & w.line_begin
         following = Mux(w.first_line | (lane == k - 1), 0, lane + 1)
         target = Mux(w.line_begin, following, lane)
-        pixel_bits = Shape.cast(w.pixel.shape()).width
-        lines = [_room_fifo(m, f"line{j}", pixel_bits, self._width) for j in range(k)]
-        fits = Array(f.room for f in lines)[target] & (~new_row | rows.room)
+        lines = [_room_fifo(m, f"line{j}", Shape.cast(_lane_layout(self._model)).width, self._width)
+                 for j in range(k)]
+        fits = Array(f.room for f in lines)[target] & (~new_row | _all_of(r.room for r in rows.values()))
         # Neighbour prior: a frame's first pixel waits until every machine is idle, then the word
         # generators' counts of results above restart (rows of two frames never share a line of MAPs).
-        hold = w.frame_begin & ~idle if _has_line(self._model.passes[-1]) else Value.cast(0)
+        hold = w.frame_begin & ~idle if any(map(_has_line, self._model.passes)) else Value.cast(0)
         m.d.comb += fx.ready.eq(~hold & (~w.output_line | fits))
         take = fx.valid & fx.ready
+        staged = Signal(_lane_layout(self._model))
+        _copy_fields(m, staged, w)
         for j, f in enumerate(lines):
             m.d.comb += [f.write.eq(take & w.output_line & (target == j)),
-                         f.buffer.w_stream.payload.eq(w.pixel.as_value())]
-        m.d.comb += [rows.write.eq(take & new_row), rows.buffer.w_stream.payload.eq(target)]
+                         f.buffer.w_stream.payload.eq(staged)]
+        for r in rows.values():
+            m.d.comb += [r.write.eq(take & new_row), r.buffer.w_stream.payload.eq(target)]
         with m.If(take & new_row):
             m.d.sync += lane.eq(following)
         return rows, lines, take & w.frame_begin
 
-    def _lanes(self, m: Module, lines: list[RoomFifo], frame_reset: Value
-               ) -> tuple[list[wiring.Component], list[RoomFifo], list[RoomFifo]]:
-        """Per lane j a word generator fed from its line FIFO, its beats FIFO, its machine and its result
-        FIFO; with the above neighbour, machine j's results into the line of MAPs of generator j + 1 (the
-        rows below its own) as they leave. Returns the machines, their load FIFOs and result FIFOs."""
-        p, k = self._params, self._machines
-        wo = line_region(self._model, self._width).shape[1]  # output pixels per map row
-        line = _has_line(self._model.passes[-1])
-        res_bits = Shape.cast(result_layout(p)).width
-        gens, machines, loads, results = [], [], [], []
-        for j in range(k):
-            gen = WordGenerator(params=p, model=self._model, output_columns=wo if line else None,
-                                leads=j == 0)
-            m.submodules[f"generator{j}"] = gen
-            m.submodules[f"machine{j}"] = machine = machine_top(p)
-            buf = lines[j].buffer
-            m.d.comb += [gen.pixel.valid.eq(buf.r_stream.valid),
-                         gen.pixel.payload.as_value().eq(buf.r_stream.payload),
-                         buf.r_stream.ready.eq(gen.pixel.ready)]
-            beats = self._fifo_pixels * p.beats_per_pixel
-            loads.append(_load_fifo(m, f"beats{j}", gen.beats, machine.load, beats))
-            # A map row's results wait here while the rows dealt before it leave (a row's worth, at
-            # most 511: one block RAM deep in its 36-bit-wide mode; a longer row's machine may wait
-            # for the row before it to leave).
-            results.append(_room_fifo(m, f"results{j}", res_bits, min(wo, RESULT_FIFO_MAX)))
-            gens.append(gen)
-            machines.append(machine)
-        for j, machine in enumerate(machines):
-            res, f = machine.result, results[j]
-            into = SimpleNamespace(valid=Signal(name=f"results{j}_valid"), ready=f.room)
-            m.d.comb += [f.write.eq(into.valid & f.room),
-                         f.buffer.w_stream.payload.eq(res.payload.as_value())]
-            sinks = [into]
-            if line:  # the line of MAPs of the rows below: each result as it leaves
-                below = gens[(j + 1) % k]
-                _watched(m, below.maps.payload, res.payload)
-                m.d.comb += below.frame_reset.eq(frame_reset)
-                sinks.append(below.maps)
-            fork(m, res, sinks)
-        return machines, loads, results
+    def _lane(self, m: Module, j: int, line: RoomFifo, frame_reset: Value) -> _Lane:
+        """Lane j (submodule ``lane<j>``): from its line FIFO, every pass's word generator (a declared
+        pass's through its feeder, as in :class:`FrontEnd`), beats FIFO, machine and result FIFO (a map
+        row's results wait there while the rows dealt before it leave: a row's worth, at most 511, one
+        block RAM deep in its 36-bit-wide mode; a longer row's machine may wait for the row before it);
+        each pass's MAPs to the generators of this lane that read them."""
+        model = self._model
+        m.submodules[f"lane{j}"] = lm = Module()
+        lane = _Lane()
+        shares = fused_shares(model, self._params)
+        for p in model.passes:
+            own = p is model.passes[-1]
+            row = pass_row_pixels(model, p.name, self._width)
+            gen = WordGenerator(params=pass_params(model, self._params, p.name), model=model,
+                                pass_name=None if own else p.name, leads=j == 0,
+                                output_columns=row if _has_line(p) else None, fused_share=shares.get(p.name))
+            lm.submodules[f"{pass_port(model, p, 'generator')}{j}"] = lane.gens[p.name] = gen
+            if _has_line(p):
+                lm.d.comb += gen.frame_reset.eq(frame_reset)
+        share_fused_sums(lm, lane.gens)
+        features = stream.Signature(_lane_layout(model)).create()
+        buf = line.buffer.r_stream
+        lm.d.comb += [features.valid.eq(buf.valid), features.payload.eq(buf.payload),
+                      buf.ready.eq(features.ready)]
+        split_pixels(lm, model, features, lane.gens)
+        for p in model.passes:
+            pp, name = pass_params(model, self._params, p.name), _prefix(model, p)
+            lm.submodules[f"{pass_port(model, p, 'machine')}{j}"] = machine = machine_top(pp)
+            lane.machines[p.name] = machine
+            lane.loads[p.name] = _load_fifo(lm, f"{name}beats{j}", lane.gens[p.name].beats, machine.load,
+                                            self._fifo_pixels * pp.beats_per_pixel)
+            row = pass_row_pixels(model, p.name, self._width)
+            lane.results[p.name] = _room_fifo(lm, f"{name}results{j}", Shape.cast(result_layout(pp)).width,
+                                              min(row, RESULT_FIFO_MAX))
+            lane.maps[p.name] = watched = Signal(map_layout(pp.map_width), name=f"{name}watched{j}")
+            _watched(lm, watched, machine.result.payload)
+            lane.readers[p.name] = map_readers(lm, model, p, lane.gens, watched)
+        return lane
 
-    def _merge(self, m: Module, rows: RoomFifo, results: list[RoomFifo], idle: Signal) -> None:
-        """The merge: a map row's results from its lane, rows in dealing order (raster order); ``idle``
-        (registered): no row in flight."""
-        wo = line_region(self._model, self._width).shape[1]
-        col = Signal(range(wo))
-        rows_open = Signal(range(4 * self._machines + 6))
-        head = rows.buffer.r_stream  # the lane of the row leaving
-        out = self.result
-        lane = [f.buffer.r_stream for f in results]
-        m.d.comb += [out.valid.eq(head.valid & Array(r.valid for r in lane)[head.payload]),
-                     out.payload.as_value().eq(Array(r.payload for r in lane)[head.payload])]
-        sent = out.valid & out.ready
-        for j, f in enumerate(results):
-            m.d.comb += f.buffer.r_stream.ready.eq(head.valid & (head.payload == j) & out.ready)
-        row_done = sent & (col == wo - 1)
-        m.d.comb += head.ready.eq(row_done)
-        with m.If(sent):
-            m.d.sync += col.eq(Mux(col == wo - 1, 0, col + 1))
-        open_next = Signal.like(rows_open)
-        m.d.comb += open_next.eq(rows_open + rows.write - row_done)
-        m.d.sync += [rows_open.eq(open_next), idle.eq(open_next == 0)]
+    def _neighbours(self, m: Module, lanes: list[_Lane], frame_reset: Value) -> None:
+        """Each pass's results as they leave machine j: into its result FIFO, into the line of MAPs of lane
+        (j + 1) mod K's generator of the pass (the rows below its own) when the pass has an above
+        neighbour's column, and into the FIFOs of lane j's generators that read them."""
+        k = self._machines
+        for j, lane in enumerate(lanes):
+            for p in self._model.passes:
+                res, f = lane.machines[p.name].result, lane.results[p.name]
+                into = SimpleNamespace(valid=Signal(name=f"{_prefix(self._model, p)}results{j}_valid"),
+                                       ready=f.room)
+                m.d.comb += [f.write.eq(into.valid & f.room),
+                             f.buffer.w_stream.payload.eq(res.payload.as_value())]
+                sinks = [into]
+                if _has_line(p):
+                    below = lanes[(j + 1) % k].gens[p.name]
+                    m.d.comb += below.maps.payload.eq(lane.maps[p.name])
+                    sinks.append(below.maps)
+                fork(m, res, sinks + lane.readers[p.name])
+
+    def _merge(self, m: Module, rows: dict[str, RoomFifo], results: list[dict[str, RoomFifo]],
+               idle: Signal) -> None:
+        """The merge, per pass: a map row's results from its lane, rows in dealing order (raster order) on
+        the pass's result port; ``idle`` (registered): no row in flight in any pass."""
+        opens = []
+        for p in self._model.passes:
+            wo = pass_row_pixels(self._model, p.name, self._width)
+            name = _prefix(self._model, p)
+            col = Signal(range(wo), name=f"{name}merge_col")
+            rows_open = Signal(range(4 * self._machines + 6), name=f"{name}rows_open")
+            head = rows[p.name].buffer.r_stream  # the lane of the row leaving
+            out = getattr(self, pass_port(self._model, p, "result"))
+            lane = [r[p.name].buffer.r_stream for r in results]
+            m.d.comb += [out.valid.eq(head.valid & Array(r.valid for r in lane)[head.payload]),
+                         out.payload.as_value().eq(Array(r.payload for r in lane)[head.payload])]
+            sent = out.valid & out.ready
+            for j, r in enumerate(lane):
+                m.d.comb += r.ready.eq(head.valid & (head.payload == j) & out.ready)
+            row_done = sent & (col == wo - 1)
+            m.d.comb += head.ready.eq(row_done)
+            with m.If(sent):
+                m.d.sync += col.eq(Mux(col == wo - 1, 0, col + 1))
+            open_next = Signal.like(rows_open, name=f"{name}rows_open_next")
+            m.d.comb += open_next.eq(rows_open + rows[p.name].write - row_done)
+            m.d.sync += rows_open.eq(open_next)
+            opens.append(open_next == 0)
+        m.d.sync += idle.eq(_all_of(opens))
+
+
+@dataclass
+class _Lane:
+    """One lane of several machines (:meth:`StereoMachine._lane`), its blocks by pass name."""
+
+    gens: dict[str, WordGenerator] = field(default_factory=dict)
+    machines: dict[str, wiring.Component] = field(default_factory=dict)
+    loads: dict[str, RoomFifo] = field(default_factory=dict)
+    results: dict[str, RoomFifo] = field(default_factory=dict)
+    maps: dict[str, Signal] = field(default_factory=dict)  # each result's MAP as its readers see it
+    readers: dict[str, list[Any]] = field(default_factory=dict)  # the FIFOs into this lane's readers
+
+
+def _prefix(model: ModelParams, p: Any) -> str:
+    """The prefix of pass ``p``'s blocks' names among several machines: none for the own pass (``beats0``),
+    ``<pass>_`` for a declared one (``right_beats0``), as :func:`~.passes.pass_port`."""
+    return pass_port(model, p, "")
+
+
+def _lane_layout(model: ModelParams) -> data.StructLayout:
+    """What a lane's line FIFO holds of a pipeline pixel (:func:`~.pipeline.pipeline_layout`): its
+    ``pixel`` and, with declared passes, ``line_end`` (for their feeders: :func:`~.passes.split_pixels`)."""
+    fields = pipeline_layout(model).members
+    return data.StructLayout({f: fields[f] for f in ("pixel", "line_end") if f in fields})
+
+
+def _copy_fields(m: Module, dst: Any, src: Any) -> None:
+    """``dst``'s fields from ``src``'s fields of the same names."""
+    m.d.comb += [getattr(dst, f).eq(getattr(src, f)) for f in dst.shape().members]
+
+
+def _all_of(values: Any) -> Value:
+    out: Value = Value.cast(1)
+    for v in values:
+        out = out & v
+    return out
 
 
 def _room_fifo(m: Module, name: str, width: int, capacity: int, prefix: str | None = None) -> RoomFifo:
