@@ -41,8 +41,6 @@ from bayesmachine.argtypes import (
 from bayesmachine.columns import Option, Source
 from bayesmachine.models import (
     DEFAULT_MODEL,
-    HARDWARE_MODEL,
-    HARDWARE_MODEL_WHY,
     MODELS,
     ModelParams,
     all_options,
@@ -513,12 +511,12 @@ def _add_option(group: argparse._ActionsContainer, option: Option) -> None:
 
 def add_model_options(
     parser: argparse.ArgumentParser, dmax: bool = True, title: str = "model (paper table 1 defaults)",
-    census: bool = False, sweep: bool = False, hardware: bool = False, board_engine: bool = False,
+    census: bool = False, sweep: bool = False,
 ) -> argparse._ActionsContainer:
     """The paper model's options (its columns' parameters, paper table 1 defaults): ``--dmax`` unless
     ``dmax=False``, ``--p0``, ``--sigma`` / ``--sigma-m|gh|gv``, ``--p-nm0``, ``--sigma-nm``; with
-    ``census``, ``--model`` and the other models' options (:func:`add_census_options`; ``sweep``: a list;
-    ``hardware``, ``board_engine``: its default, as there). Every option is None unless given (the model
+    ``census``, ``--model`` and the other models' options (:func:`add_census_options`; ``sweep``: a
+    list). Every option is None unless given (the model
     fills in its defaults), so that a command can refuse one where it does not apply."""
     g = parser.add_argument_group(title)
     if dmax:
@@ -532,7 +530,7 @@ def add_model_options(
                            help=f"sets {', '.join(sharing)} (default {option.default:g})")
         _add_option(g, option)
     if census:
-        add_census_options(parser, sweep=sweep, hardware=hardware, board_engine=board_engine)
+        add_census_options(parser, sweep=sweep)
     return g
 
 
@@ -559,42 +557,21 @@ def model_list(text: str) -> list[str]:
     return names
 
 
-# Set (True) by add_census_options(hardware=True): the command builds or drives an FPGA design.
-_HARDWARE_DEST = "model_default_is_hardware"
-
-
 def default_model(args: argparse.Namespace) -> str:
-    """The model a command runs when ``--model`` is not given, the one rule:
-    :data:`~bayesmachine.models.HARDWARE_MODEL` for what builds or drives an FPGA design (a command that
-    declared ``add_census_options(hardware=True)``: emit, synth, board; ``run --engine board``;
-    ``--machines K`` with K > 1, which a model with more than one pass refuses), else
-    :data:`~bayesmachine.models.DEFAULT_MODEL` (run, reference, sweep: on the host or in simulation)."""
-    machines = getattr(args, "machines", None)
-    if (getattr(args, _HARDWARE_DEST, False) or getattr(args, "engine", None) == "board"
-            or (isinstance(machines, int) and machines > 1)):
-        return HARDWARE_MODEL
+    """The model a command runs when ``--model`` is not given: :data:`~bayesmachine.models.DEFAULT_MODEL`,
+    on the host, in simulation and for what builds or drives an FPGA design."""
     return DEFAULT_MODEL
 
 
-def add_census_options(parser: argparse._ActionsContainer, sweep: bool = False, title: str | None = "model",
-                       hardware: bool = False, board_engine: bool = False) -> None:
+def add_census_options(parser: argparse._ActionsContainer, sweep: bool = False,
+                       title: str | None = "model") -> None:
     """``--model`` and the options of every model but the paper's (each declared by its column kind),
     grouped by model, all None unless given; without ``--model``, :func:`default_model` decides.
 
-    ``sweep``: ``--model`` takes a comma-separated list (:func:`model_list`). ``hardware``: the
-    command builds or drives an FPGA design (its default model is
-    :data:`~bayesmachine.models.HARDWARE_MODEL`). ``board_engine``: the command has ``--engine
-    board`` and ``--machines`` (``run``), which :func:`default_model` reads; its help says so."""
+    ``sweep``: ``--model`` takes a comma-separated list (:func:`model_list`)."""
     g = parser.add_argument_group(title) if title else parser
     described = "; ".join(f"{d.name}: {d.description}" for d in MODELS.values())
-    why = f"{HARDWARE_MODEL_WHY} (docs/models.md)"
-    if hardware:
-        default = f"default {HARDWARE_MODEL}: {why}"
-        parser.set_defaults(**{_HARDWARE_DEST: True})
-    elif board_engine:
-        default = f"default {DEFAULT_MODEL}; {HARDWARE_MODEL} with --engine board or --machines K > 1: {why}"
-    else:
-        default = f"default {DEFAULT_MODEL}"
+    default = f"default {DEFAULT_MODEL}"
     if sweep:
         g.add_argument("--model", type=model_list, default=None, metavar="MODEL,MODEL,...",
                        help=f"comma-separated models to compare side by side, each over every random source "

@@ -73,8 +73,6 @@ __all__ = [
     "model_names",
     "register_model",
     "DEFAULT_MODEL",
-    "HARDWARE_MODEL",
-    "HARDWARE_MODEL_WHY",
     "CENSUS_WATCHDOG_RUNS",
     "RIGHT_WATCHDOG_RUNS",
     "CENSUS_TIMEOUT_ANSWER",
@@ -86,15 +84,9 @@ __all__ = [
     "neighbour_words_per_beat",
 ]
 
-# The one default model, of the library (ModelParams()) and of every command when none is named:
-# census-lr, the best on the measurements (docs/models.md). One exception, said here and in
-# docs/models.md#which-model-by-default only: what builds or drives an FPGA design (emit, synth, board,
-# run --engine board, run --machines K > 1; fpga.synth and stereo_machine_params without a model) takes
-# HARDWARE_MODEL, for the reason HARDWARE_MODEL_WHY gives (--help quotes it).
+# The one default model, of the library (ModelParams()) and of every command when none is named, on the
+# host, in simulation and on chip: census-lr, the best on the measurements (docs/models.md).
 DEFAULT_MODEL = "census-lr"
-HARDWARE_MODEL = "census"
-HARDWARE_MODEL_WHY = ("census-lr's StereoMachine is not routed on the ECP5-85F at the board's clock "
-                      "and its right pass runs on one machine")
 # The census models' watchdog, in runs of n_max + 1 cycles: max_cycles = CENSUS_WATCHDOG_RUNS *
 # (counter_max + 1) (255 at counter max 16). With normalized columns the winning row of a clear pixel
 # fires almost every cycle (its run ends near n_max + 1 cycles); a pixel still running after 15 such

@@ -60,10 +60,9 @@ def register(subparsers: argparse._SubParsersAction, *, measure: Measure) -> Non
     from bayesmachine.hdl.frontend.cli import add_options as add_stereo_options
 
     add_stereo_options(p)
-    # --model census (the default, cliargs.default_model): the census model's machine (4 columns and
-    # its neighbour prior), its throughput measured on the census model's words.
-    add_census_options(p, title="model (--model census: the census model's machine; with --top stereo its "
-                       "front end too)", hardware=True)
+    # --model (default census-lr, cliargs.default_model): the model's machine, its throughput measured on
+    # the model's words.
+    add_census_options(p, title="model (the model's machine; with --top stereo its front end too)")
     p.add_argument("--machines", type=int_in_range(1, MAX_PARALLEL), default=1,
                    help="machines side by side (default 1): --top machine, behind one load and one result "
                    "stream; --top stereo, behind the one feature pipeline, map rows dealt to them, each "

@@ -17,7 +17,7 @@ from pathlib import Path
 
 from bayesmachine.checks import as_int
 from bayesmachine.hdl.frontend import DEFAULT_FIFO_PIXELS
-from bayesmachine.models import HARDWARE_MODEL, ModelParams
+from bayesmachine.models import DEFAULT_MODEL, ModelParams
 from bayesmachine.params import MachineParams
 from bayesmachine.sources import source_kind
 
@@ -153,9 +153,9 @@ def design_operators(params: MachineParams, model: ModelParams, machines: int, *
 
 
 def _default_model(params: MachineParams) -> ModelParams:
-    """What ``bayesmachine synth`` builds without ``--model``: :data:`~bayesmachine.models.HARDWARE_MODEL`
-    (why: beside it), at Dmax = rows - 2."""
-    return ModelParams(name=HARDWARE_MODEL, dmax=params.rows - 2)
+    """What ``bayesmachine synth`` builds without ``--model``: :data:`~bayesmachine.models.DEFAULT_MODEL`,
+    at Dmax = rows - 2."""
+    return ModelParams(name=DEFAULT_MODEL, dmax=params.rows - 2)
 
 
 def _synthesize(params: MachineParams, target: Target, out: Path, say: Callable[[str], None], *,

@@ -52,7 +52,7 @@ def _design_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("machine (the options of emit; --rng: an on-chip source)")
     add_dmax_option(g)
     add_machine_options(g, title=None)
-    add_model_options(p, dmax=False, census=True, title="model (paper table 1 defaults)", hardware=True)
+    add_model_options(p, dmax=False, census=True, title="model (paper table 1 defaults)")
 
 
 def _design(args: argparse.Namespace):  # noqa: ANN202

@@ -47,7 +47,7 @@ from bayesmachine.hdl.signatures import (
     pixel_in_layout,
     result_layout,
 )
-from bayesmachine.models import HARDWARE_MODEL, ModelParams, disparity_machine
+from bayesmachine.models import DEFAULT_MODEL, ModelParams, disparity_machine
 from bayesmachine.params import DEFAULT_DMAX, MachineParams, ParameterError, stereo_words_per_beat
 from bayesmachine.sources import source_kind
 
@@ -76,11 +76,10 @@ __all__ = ["MAX_MACHINES", "MAX_WIDTH", "FeaturePipeline", "FrontEnd", "Pipeline
 def stereo_machine_params(dmax: int = DEFAULT_DMAX, *, model: ModelParams | None = None,
                           **kwargs: object) -> MachineParams:
     """The machine the front end feeds: ``disparity_machine(model, ...)`` (``model``'s Dmax is ``dmax``;
-    without one, :data:`~bayesmachine.models.HARDWARE_MODEL` at ``dmax``, as every command that builds a
-    design: why, beside it), with the front end's lane count (:func:`stereo_words_per_beat`) unless
-    ``words_per_beat`` is given."""
+    without one, :data:`~bayesmachine.models.DEFAULT_MODEL` at ``dmax``, as every command), with the
+    front end's lane count (:func:`stereo_words_per_beat`) unless ``words_per_beat`` is given."""
     if model is None:
-        model = ModelParams(name=HARDWARE_MODEL, dmax=dmax)
+        model = ModelParams(name=DEFAULT_MODEL, dmax=dmax)
     elif model.dmax != dmax:
         raise ParameterError(f"dmax: {dmax} given, the model's is {model.dmax}", "dmax")
     params = disparity_machine(model, **kwargs)

@@ -75,7 +75,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         "while the first is writing.",
     )
     add_input_options(p, optional=True)
-    add_model_options(p, census=True, board_engine=True)
+    add_model_options(p, census=True)
     _add_run_options(p)
     p.set_defaults(func=needs_host(_cmd_run))
 

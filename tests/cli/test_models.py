@@ -16,8 +16,6 @@ from bayesmachine.host.reference import reference_map
 from bayesmachine.host.run import prepare, run_machine
 from bayesmachine.models import (
     DEFAULT_MODEL,
-    HARDWARE_MODEL,
-    HARDWARE_MODEL_WHY,
     ModelParams,
     disparity_machine,
 )
@@ -62,10 +60,9 @@ def test_run_census_is_the_neighbour_machine_of_the_model(pair, tmp_path):
 
 
 def test_default_model_is_one_rule(pair, tmp_path, monkeypatch):
-    # census-lr is the default of what runs on the host or in simulation (it wins on the
-    # measurements: README, Models); the paper's model stays one option away and its report is what
-    # it always was.
-    assert (DEFAULT_MODEL, HARDWARE_MODEL) == ("census-lr", "census")
+    # census-lr is the default of every command (it wins on the measurements: README, Models); the
+    # paper's model stays one option away and its report is what it always was.
+    assert DEFAULT_MODEL == "census-lr"
     assert ModelParams() == ModelParams(name=DEFAULT_MODEL)  # the library's default is the command's
     out = tmp_path / "default"
     assert main(["run", *_args(pair, "--counter-max", "4", "--no-sgbm"), "-o", str(out)]) == 0
@@ -87,24 +84,23 @@ def test_default_model_is_one_rule(pair, tmp_path, monkeypatch):
     assert json.loads((out / "report.json").read_text())["machine"]["prior"] == "uniform"
 
 
-# Without --model: census-lr where the command computes on the host or in simulation, census where it
-# builds or drives an FPGA design (census-lr's StereoMachine is not routed on the ECP5-85F) or runs
-# K > 1 machines (census-lr's right pass runs on one).
+# Without --model: census-lr, on the host, in simulation, on K machines and for what builds or drives a
+# design.
 DEFAULTS = [
     (["run", "-o", "x"], "census-lr"),
     (["run", "--engine", "pysim", "-o", "x"], "census-lr"),
     (["run", "--engine", "verilator", "--feed", "pixels", "-o", "x"], "census-lr"),
     (["run", "--machines", "1", "-o", "x"], "census-lr"),
     (["reference", "l.png", "r.png", "-o", "x"], "census-lr"),
-    (["run", "--engine", "board", "--port", "/dev/null", "-o", "x"], "census"),
-    (["run", "--machines", "2", "-o", "x"], "census"),
-    (["run", "--engine", "verilator", "--feed", "pixels", "--machines", "2", "-o", "x"], "census"),
-    (["emit"], "census"),
-    (["emit", "--top", "stereo"], "census"),
-    (["synth", "--target", "ecp5-85k"], "census"),
-    (["synth", "--target", "ecp5-85k", "--top", "stereo"], "census"),
-    (["board", "build"], "census"),
-    (["board", "simulate"], "census"),
+    (["run", "--engine", "board", "--port", "/dev/null", "-o", "x"], "census-lr"),
+    (["run", "--machines", "2", "-o", "x"], "census-lr"),
+    (["run", "--engine", "verilator", "--feed", "pixels", "--machines", "2", "-o", "x"], "census-lr"),
+    (["emit"], "census-lr"),
+    (["emit", "--top", "stereo"], "census-lr"),
+    (["synth", "--target", "ecp5-85k"], "census-lr"),
+    (["synth", "--target", "ecp5-85k", "--top", "stereo"], "census-lr"),
+    (["board", "build"], "census-lr"),
+    (["board", "simulate"], "census-lr"),
 ]
 
 
@@ -132,40 +128,22 @@ def test_help_states_each_commands_default(capsys):
         text = " ".join(capsys.readouterr().out.split())  # argparse wraps the lines
         return text.split("consistency column from a right pass) (default ", 1)[1]  # --model's
 
-    for command in (["run"], ["reference"], ["sweep"]):
-        assert model_help(*command).startswith("census-lr"), command
-    assert "census with --engine board or --machines K > 1" in model_help("run")
-    for command in (["emit"], ["synth"], ["board", "build"], ["board", "simulate"]):
-        want = "census: census-lr's StereoMachine is not routed on the ECP5-85F"
-        assert model_help(*command).startswith(want), command
-        assert model_help(*command).startswith(f"{HARDWARE_MODEL}: {HARDWARE_MODEL_WHY} (docs/models.md)")
-    assert f"{HARDWARE_MODEL_WHY} (docs/models.md)" in model_help("run")
+    for command in (["run"], ["reference"], ["sweep"], ["emit"], ["synth"], ["board", "build"],
+                    ["board", "simulate"]):
+        assert model_help(*command).startswith("census-lr)"), command
 
 
-def test_why_hardware_differs_is_said_once_in_the_code():
-    """The hardware default's reason is HARDWARE_MODEL_WHY (the help quotes it); no other module of the
-    package says it."""
-    from pathlib import Path
-
-    import bayesmachine
-
-    root = Path(bayesmachine.__file__).resolve().parents[1]
-    saying = [p.relative_to(root).as_posix() for d in ("bayesmachine", "hdl", "host", "fpga", "sim")
-              for p in (root / d).rglob("*.py") if "not routed" in p.read_text()]
-    assert saying == ["bayesmachine/models.py"]
-
-
-def test_what_builds_a_design_without_a_model_takes_the_hardware_model():
-    """stereo_machine_params and synth without a model: HARDWARE_MODEL, as the commands' rule."""
+def test_what_builds_a_design_without_a_model_takes_the_default_model():
+    """stereo_machine_params and synth without a model: DEFAULT_MODEL, as the commands' rule."""
     from bayesmachine.fpga.synth import throughput_model
     from bayesmachine.hdl.frontend.stereo import stereo_machine_params
 
-    hardware = ModelParams(name=HARDWARE_MODEL, dmax=6)
+    default = ModelParams(name=DEFAULT_MODEL, dmax=6)
     params = stereo_machine_params(6, counter_max=4)
-    assert params == stereo_machine_params(6, model=hardware, counter_max=4) and params.prior == "neighbour"
-    assert throughput_model(params, None) == hardware
+    assert params == stereo_machine_params(6, model=default, counter_max=4) and params.prior == "neighbour"
+    assert throughput_model(params, None) == default
     args = build_parser().parse_args(["synth", "--target", "ecp5-85k", "--dmax", "6"])
-    assert cliargs.model_params_from_args(args) == hardware
+    assert cliargs.model_params_from_args(args) == default
 
 
 @pytest.mark.parametrize("command", [["run"], ["reference"], ["sweep"], ["emit"], ["synth"],
@@ -181,9 +159,9 @@ def test_help_is_text(command, capsys):
 
 @pytest.mark.parametrize("argv", [["emit", "--top", "stereo", "-o", "{o}"], ["board", "simulate"],
                                   ["run", "--engine", "board", "--port", "/dev/null", "-o", "{o}"]])
-def test_census_lr_options_are_refused_where_census_is_the_default(argv, tmp_path, capsys):
+def test_census_lr_options_are_refused_for_census_on_hardware(argv, tmp_path, capsys):
     argv = [a.replace("{o}", str(tmp_path / "o")) for a in argv]
-    assert main([*argv, "--lr-beta", "0.2"]) == 2
+    assert main([*argv, "--model", "census", "--lr-beta", "0.2"]) == 2
     assert not (tmp_path / "o").exists()
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--lr-beta: options of --model census-lr, which do not apply to --model census" \

@@ -244,7 +244,7 @@ def test_synth_command_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]
     (["--dmax", "8", "--width", "12"], "width must be in [dmax + 7, 4096] = [15, 4096]"),
     (["--rng", "external"], "synth needs an on-chip random source, not 'external'"),
     (["--rng", "smtj"], "synth needs an on-chip random source, not 'smtj'"),
-    (["--words-per-beat", "15"], "words_per_beat (15) must be a multiple of the loaded columns (2)"),
+    (["--words-per-beat", "16"], "words_per_beat (16) must be a multiple of the loaded columns (3)"),
     (["--fifo-pixels", "0"], "fifo_pixels must be an integer in [1, 64], got 0"),
     (["--p-nm0", "0.0001", "--word-bits", "4"], "p_nm0: 0.0001 quantizes to 0 with 4-bit words"),
 ])
@@ -334,10 +334,11 @@ def test_census_machine_through_yosys_with_its_throughput(tmp_path: Path) -> Non
         synth(params, "ecp5-25k", tmp_path / "bad", place=False, progress=False, measure=measure_cycles,
               model=ModelParams(name="paper", dmax=3))
     assert not (tmp_path / "bad").exists()
-    # Without a model, synth measures the hardware model's words, as `bayesmachine synth` does.
+    # Without a model, synth measures the default model's words (census-lr), as `bayesmachine synth` does.
     from bayesmachine.fpga.synth import throughput_model
 
-    assert throughput_model(params, None) == model
+    lr = ModelParams(name="census-lr", dmax=3)
+    assert throughput_model(disparity_machine(lr, counter_max=3), None) == lr
 
 
 def test_synth_census_options_refused_where_they_do_not_apply(tmp_path: Path, capsys) -> None:

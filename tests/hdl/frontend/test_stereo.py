@@ -177,7 +177,7 @@ def test_model_run_with_machines_deals_rows(tmp_path) -> None:
     StereoMachine's results are held to)."""
     from bayesmachine.cli import main
 
-    crop = ["--crop", "250,200,40,12", "--dmax", "8", "--quiet", "--no-sgbm"]
+    crop = ["--crop", "250,200,40,12", "--dmax", "8", "--model", "census", "--quiet", "--no-sgbm"]
     assert main(["run", "--engine", "model", "--machines", "3", *crop, "-o", str(tmp_path / "k3")]) == 0
     got = np.load(tmp_path / "k3" / "result.npz")
     left, right = _crop(200, 250, 12, 40)
