@@ -30,7 +30,7 @@ the own pass's; twins in ``bayesmachine.columns`` and ``host.likelihoods``.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -57,9 +57,9 @@ from .words import WordGenerator, generator_signature, pass_params
 # latency is tens of pixels, and a shallower FIFO makes the pipeline wait for it.
 PASS_LAG_PIXELS = 128
 
-__all__ = ["PASS_LAG_PIXELS", "PassFeeder", "feeder_in_layout", "fork", "frontend_signature", "fused_shares",
-           "map_readers", "pass_lag_pixels", "pass_port", "pass_row_pixels", "share_fused_sums",
-           "shared_sums_depth", "split_pixels", "watch_passes"]
+__all__ = ["PASS_LAG_PIXELS", "PassFeeder", "all_of", "copy_fields", "feeder_in_layout", "fork",
+           "frontend_signature", "fused_shares", "map_readers", "pass_lag_pixels", "pass_port",
+           "pass_row_pixels", "share_fused_sums", "shared_sums_depth", "split_pixels", "watch_passes"]
 
 
 def pass_lag_pixels(dmax: int) -> int:
@@ -104,12 +104,13 @@ def fork(m: Module, source: Any, sinks: Sequence[Any]) -> None:
     drives their payloads): a handshake when every sink is ready, each sink's ``valid`` the source's
     while all the others are ready."""
     readies = [s.ready for s in sinks]
-    m.d.comb += source.ready.eq(_all(readies))
+    m.d.comb += source.ready.eq(all_of(readies))
     for i, s in enumerate(sinks):
-        m.d.comb += s.valid.eq(source.valid & _all(readies[:i] + readies[i + 1:]))
+        m.d.comb += s.valid.eq(source.valid & all_of(readies[:i] + readies[i + 1:]))
 
 
-def _all(values: list[Value]) -> Value:
+def all_of(values: Iterable[Value]) -> Value:
+    """The AND of ``values`` (1 for none)."""
     out: Value = Value.cast(1)
     for v in values:
         out = out & v
@@ -257,10 +258,11 @@ class PassFeeder(wiring.Component):
         return read.data
 
 
-def _fields(m: Module, dst: Any, pixel: Any, line_end: Value | None = None) -> None:
-    """``dst``'s fields from the pipeline's ``pixel`` (and ``line_end``)."""
+def copy_fields(m: Module, dst: Any, pixel: Any, line_end: Value | None = None) -> None:
+    """``dst``'s fields from ``pixel``'s of the same names (``line_end``, if given, from it)."""
     for f in dst.shape().members:
-        m.d.comb += getattr(dst, f).eq(line_end if f == "line_end" else getattr(pixel, f))
+        given = line_end is not None and f == "line_end"
+        m.d.comb += getattr(dst, f).eq(line_end if given else getattr(pixel, f))
 
 
 def split_pixels(m: Module, model: ModelParams, features: Any, gens: Mapping[str, WordGenerator]) -> None:
@@ -277,19 +279,19 @@ def split_pixels(m: Module, model: ModelParams, features: Any, gens: Mapping[str
                                 flags=flags)
             m.submodules[f"{p.name}_feeder"] = feeder
             wiring.connect(m, feeder.o, gen.pixel)
-            _fields(m, feeder.i.payload, pixel, features.payload.line_end)
+            copy_fields(m, feeder.i.payload, pixel, features.payload.line_end)
             sinks.append(feeder.i)
         elif declared_passes(model):
             layout = gen.pixel.payload.shape()
             depth = model.dmax + 4 + pass_lag_pixels(model.dmax)
             m.submodules.own_pixels = pix = fifo.SyncFIFOBuffered(width=Shape.cast(layout).width, depth=depth)
             staged = Signal(layout)
-            _fields(m, staged, pixel)
+            copy_fields(m, staged, pixel)
             m.d.comb += [pix.w_stream.payload.eq(staged), gen.pixel.valid.eq(pix.r_stream.valid),
                          gen.pixel.payload.eq(pix.r_stream.payload), pix.r_stream.ready.eq(gen.pixel.ready)]
             sinks.append(pix.w_stream)
         else:
-            _fields(m, gen.pixel.payload, pixel)
+            copy_fields(m, gen.pixel.payload, pixel)
             sinks.append(gen.pixel)
     fork(m, features, sinks)
 

@@ -54,6 +54,8 @@ from bayesmachine.sources import source_kind
 from . import DEFAULT_FIFO_PIXELS, MAX_MACHINES, MAX_WIDTH
 from .layouts import declared_passes
 from .passes import (
+    all_of,
+    copy_fields,
     fork,
     frontend_signature,
     fused_shares,
@@ -68,7 +70,7 @@ from .pipeline import FeaturePipeline, PipelineNets, check_width, pipeline_layou
 from .words import WordGenerator, check_frontend_params, check_frontend_types, pass_params
 
 __all__ = ["MAX_MACHINES", "MAX_WIDTH", "FeaturePipeline", "FrontEnd", "PipelineNets", "RoomFifo",
-           "StereoMachine", "StereoNets", "check_machines",
+           "StereoMachine", "StereoNets", "check_machines", "pass_generators",
            "check_stereo_machine", "pipeline_layout", "pixel_in_layout", "stereo_machine_params",
            "stereo_signature"]
 
@@ -182,20 +184,30 @@ class FrontEnd(wiring.Component):
         model = self._model
         m.submodules.pipeline = pipe = self.feature_pipeline(model=model, width=self._width)
         wiring.connect(m, wiring.flipped(self.pixels), pipe.pixels)
-        gens = {}
-        shares = fused_shares(model, self._params)
+        gens = pass_generators(m, model, self._params, self._width)
         for p in model.passes:
-            own = p is model.passes[-1]
-            row = pass_row_pixels(model, p.name, self._width)  # the length of its line of MAPs
-            gen = WordGenerator(params=pass_params(model, self._params, p.name), model=model,
-                                pass_name=None if own else p.name,
-                                output_columns=row if _has_line(p) else None, fused_share=shares.get(p.name))
-            m.submodules[pass_port(model, p, "generator")] = gens[p.name] = gen
-            wiring.connect(m, gen.beats, wiring.flipped(getattr(self, pass_port(model, p, "beats"))))
-        share_fused_sums(m, gens)
+            wiring.connect(m, gens[p.name].beats, wiring.flipped(getattr(self, pass_port(model, p, "beats"))))
         split_pixels(m, model, pipe.features, gens)
         watch_passes(m, self, gens)
         return m
+
+
+def pass_generators(m: Module, model: ModelParams, params: MachineParams, width: int, leads: bool = True,
+                    suffix: str = "") -> dict[str, WordGenerator]:
+    """Every pass's word generator (submodule ``<generator port><suffix>``: ``generator``,
+    ``right_generator``), by pass name, for ``width``-pixel lines (``leads``: their machines run a frame's
+    first map row, see ``WordGenerator``), and the fused sums they share
+    (:func:`~.passes.share_fused_sums`)."""
+    gens = {}
+    shares = fused_shares(model, params)
+    for p in model.passes:
+        row = pass_row_pixels(model, p.name, width)  # the length of its line of MAPs
+        gens[p.name] = m.submodules[f"{pass_port(model, p, 'generator')}{suffix}"] = WordGenerator(
+            params=pass_params(model, params, p.name), model=model,
+            pass_name=None if p is model.passes[-1] else p.name, leads=leads,
+            output_columns=row if _has_line(p) else None, fused_share=shares.get(p.name))
+    share_fused_sums(m, gens)
+    return gens
 
 
 @dataclass(frozen=True)
@@ -369,7 +381,7 @@ class StereoMachine(wiring.Component):
         idle = Signal(init=1)  # registered: no row in flight in any pass
         rows, lines, frame_reset = self._deal(m, pipe.features, idle)
         lanes = [self._lane(m, j, lines[j], frame_reset) for j in range(self._machines)]
-        self._neighbours(m, lanes, frame_reset)
+        self._neighbours(m, lanes)
         self._merge(m, rows, [lane.results for lane in lanes], idle)
         own = self._model.passes[-1].name
         self._nets = StereoNets(frontend=pipe, machines=[lane.machines[own] for lane in lanes],
@@ -390,14 +402,14 @@ class StereoMachine(wiring.Component):
         target = Mux(w.line_begin, following, lane)
         lines = [_room_fifo(m, f"line{j}", Shape.cast(_lane_layout(self._model)).width, self._width)
                  for j in range(k)]
-        fits = Array(f.room for f in lines)[target] & (~new_row | _all_of(r.room for r in rows.values()))
+        fits = Array(f.room for f in lines)[target] & (~new_row | all_of(r.room for r in rows.values()))
         # Neighbour prior: a frame's first pixel waits until every machine is idle, then the word
         # generators' counts of results above restart (rows of two frames never share a line of MAPs).
         hold = w.frame_begin & ~idle if any(map(_has_line, self._model.passes)) else Value.cast(0)
         m.d.comb += fx.ready.eq(~hold & (~w.output_line | fits))
         take = fx.valid & fx.ready
         staged = Signal(_lane_layout(self._model))
-        _copy_fields(m, staged, w)
+        copy_fields(m, staged, w)
         for j, f in enumerate(lines):
             m.d.comb += [f.write.eq(take & w.output_line & (target == j)),
                          f.buffer.w_stream.payload.eq(staged)]
@@ -415,18 +427,10 @@ class StereoMachine(wiring.Component):
         each pass's MAPs to the generators of this lane that read them."""
         model = self._model
         m.submodules[f"lane{j}"] = lm = Module()
-        lane = _Lane()
-        shares = fused_shares(model, self._params)
+        lane = _Lane(gens=pass_generators(lm, model, self._params, self._width, leads=j == 0, suffix=str(j)))
         for p in model.passes:
-            own = p is model.passes[-1]
-            row = pass_row_pixels(model, p.name, self._width)
-            gen = WordGenerator(params=pass_params(model, self._params, p.name), model=model,
-                                pass_name=None if own else p.name, leads=j == 0,
-                                output_columns=row if _has_line(p) else None, fused_share=shares.get(p.name))
-            lm.submodules[f"{pass_port(model, p, 'generator')}{j}"] = lane.gens[p.name] = gen
             if _has_line(p):
-                lm.d.comb += gen.frame_reset.eq(frame_reset)
-        share_fused_sums(lm, lane.gens)
+                lm.d.comb += lane.gens[p.name].frame_reset.eq(frame_reset)
         features = stream.Signature(_lane_layout(model)).create()
         buf = line.buffer.r_stream
         lm.d.comb += [features.valid.eq(buf.valid), features.payload.eq(buf.payload),
@@ -446,7 +450,7 @@ class StereoMachine(wiring.Component):
             lane.readers[p.name] = map_readers(lm, model, p, lane.gens, watched)
         return lane
 
-    def _neighbours(self, m: Module, lanes: list[_Lane], frame_reset: Value) -> None:
+    def _neighbours(self, m: Module, lanes: list[_Lane]) -> None:
         """Each pass's results as they leave machine j: into its result FIFO, into the line of MAPs of lane
         (j + 1) mod K's generator of the pass (the rows below its own) when the pass has an above
         neighbour's column, and into the FIFOs of lane j's generators that read them."""
@@ -491,7 +495,7 @@ class StereoMachine(wiring.Component):
             m.d.comb += open_next.eq(rows_open + rows[p.name].write - row_done)
             m.d.sync += rows_open.eq(open_next)
             opens.append(open_next == 0)
-        m.d.sync += idle.eq(_all_of(opens))
+        m.d.sync += idle.eq(all_of(opens))
 
 
 @dataclass
@@ -517,18 +521,6 @@ def _lane_layout(model: ModelParams) -> data.StructLayout:
     ``pixel`` and, with declared passes, ``line_end`` (for their feeders: :func:`~.passes.split_pixels`)."""
     fields = pipeline_layout(model).members
     return data.StructLayout({f: fields[f] for f in ("pixel", "line_end") if f in fields})
-
-
-def _copy_fields(m: Module, dst: Any, src: Any) -> None:
-    """``dst``'s fields from ``src``'s fields of the same names."""
-    m.d.comb += [getattr(dst, f).eq(getattr(src, f)) for f in dst.shape().members]
-
-
-def _all_of(values: Any) -> Value:
-    out: Value = Value.cast(1)
-    for v in values:
-        out = out & v
-    return out
 
 
 def _room_fifo(m: Module, name: str, width: int, capacity: int, prefix: str | None = None) -> RoomFifo:
