@@ -14,6 +14,15 @@ from dataclasses import asdict, dataclass, replace
 
 from bayesmachine.checks import as_bool, as_int, as_real, type_name
 from bayesmachine.errors import ParameterError
+from bayesmachine.integrators import INTEGRATOR_KINDS, IntegratorKind, integrator_kind
+from bayesmachine.integrators.stochastic import (
+    DEFAULT_COUNTER_MAX,
+    DEFAULT_LFSR_BITS,
+    DEFAULT_MAX_CYCLES,
+    DEFAULT_RNG,
+    DEFAULT_SEED,
+    STOCHASTIC_FIELDS,
+)
 from bayesmachine.sources import SMTJ_SHARES, SOURCE_KINDS, check_source, source_kind
 
 __all__ = [
@@ -50,14 +59,10 @@ __all__ = [
 RNG_KINDS = tuple(SOURCE_KINDS)
 PRIORS = ("uniform", "loaded", "neighbour")
 TIE_BREAKS = ("nomatch-first", "lowest-index")
-# How a pixel's evidence is integrated: the paper's stochastic machine (AND gates, overflow counters) or
-# the logarithmic one (energy codes summed per row, the MAP the lowest sum: docs/integrators.md).
-INTEGRATORS = ("stochastic", "log")
+# How a pixel's evidence is integrated: the names of the one registry, bayesmachine.integrators (the
+# paper's stochastic machine; the logarithmic one, docs/integrators.md).
+INTEGRATORS = tuple(INTEGRATOR_KINDS)
 DEFAULT_INTEGRATOR = "stochastic"
-# The fields only the stochastic integrator reads (its counters, random sources, watchdog and the scaling
-# of its runs): the log machine has none of them, so a command refuses them with --integrator log.
-STOCHASTIC_FIELDS = ("counter_max", "rng", "lfsr_bits", "seed", "max_cycles", "timeout_answer",
-                     "samples_per_clock", "normalize", "smtj_dwell", "smtj_spread", "smtj_share")
 # Random samples each operator compares per clock (B): powers of two, so that a Sobol block of 2^W
 # points is whole clocks and a clock's points are its first point XOR constants.
 SAMPLES_PER_CLOCK = (1, 2, 4, 8, 16)
@@ -69,8 +74,6 @@ TIMEOUT_ANSWERS = ("none", "leading")
 # probability is p_nm0 = 0.01; at 8 bits it quantizes to 3/256 = 0.0117 (+17 %),
 # at 10 bits to 10/1024 = 0.0098 (-2.3 %), and p0 = 0.02 to 20/1024 (-2.3 %).
 DEFAULT_WORD_BITS = 10
-DEFAULT_LFSR_BITS = 31
-DEFAULT_MAX_CYCLES = (1 << 20) - 1
 DEFAULT_WORDS_PER_BEAT = 16
 # The on-chip front end (hdl.frontend) writes 6 rows' words per load beat: see stereo_words_per_beat.
 STEREO_ROWS_PER_BEAT = 6
@@ -78,9 +81,6 @@ STEREO_ROWS_PER_BEAT = 6
 DEFAULT_DMAX = 80
 MAX_DMAX = 4094  # Dmax + 2 rows at most 4096
 DEFAULT_COLUMNS = 3
-DEFAULT_COUNTER_MAX = 16
-DEFAULT_RNG = "sobol"  # measured best on the bundled pair: README "Random sources"
-DEFAULT_SEED = 1
 DEFAULT_PRIOR = "uniform"
 DEFAULT_TIE_BREAK = "nomatch-first"
 # rng = "smtj"'s device parameters when not given: smtj_dwell, smtj_spread, smtj_share.
@@ -275,13 +275,11 @@ class MachineParams:
         _check_choice("timeout_answer", self.timeout_answer, TIMEOUT_ANSWERS)
         self._bool("normalize")
         _check_choice("integrator", self.integrator, INTEGRATORS)
-        if self.integrator == "log" and not source_kind(self.rng).on_chip:
-            raise ParameterError(f"rng: the log integrator draws no random numbers, so an off-chip source "
-                                 f"({self.rng!r}) has none to give; leave rng at its default", "rng")
-        if self.integrator == "log" and self.word_bits < 8:
-            raise ParameterError(f"word_bits ({self.word_bits}) must be at least 8 with integrator 'log': "
-                                 "its 9-bit energy codes travel in the load stream's W + 1-bit words",
-                                 "word_bits")
+        if not self.kind.draws_numbers and not source_kind(self.rng).on_chip:
+            raise ParameterError(f"rng: the {self.integrator} integrator draws no random numbers, so an "
+                                 f"off-chip source ({self.rng!r}) has none to give; leave rng at its default",
+                                 "rng")
+        self.kind.check(self)
         # Last, what only the random source knows (the Sobol table's size, the LFSR polynomials):
         # the one place it is checked, so every holder of a MachineParams can build its source.
         check_source(self)
@@ -384,21 +382,22 @@ class MachineParams:
         return 1 << self.word_bits
 
     @property
+    def kind(self) -> IntegratorKind:
+        """The integrator's kind (``bayesmachine.integrators``): what it loads and reads out, its fields,
+        its machine, engines and cycle formulas."""
+        return integrator_kind(self.integrator)
+
+    @property
     def load_max(self) -> int:
         """The largest value a loaded entry takes: the word 2^W (stochastic) or the infinite energy code
         (log: ``bayesmachine.columns.energy.INFINITE_CODE``)."""
-        if self.integrator == "stochastic":
-            return self.word_one
-        # NumPy's: not at import (tests/sim/test_model.py)
-        from bayesmachine.columns.energy import INFINITE_CODE
-
-        return INFINITE_CODE
+        return self.kind.load_max(self)
 
     @property
     def readout_max(self) -> int:
         """The largest value of a row in the distribution read out: the counter max (stochastic), the
         weight of the MAP's row, 2^W (log)."""
-        return self.counter_max if self.integrator == "stochastic" else self.word_one
+        return self.kind.readout_max(self)
 
     @property
     def memory_word_width(self) -> int:

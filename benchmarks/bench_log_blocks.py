@@ -29,7 +29,7 @@ from bayesmachine.fpga.report import logic_cells, resources
 from bayesmachine.fpga.targets import get_target
 from bayesmachine.fpga.wrapper import PinWrapper
 from bayesmachine.hdl.log import ArgminTree, LogIntegrator, LogParams, RowAdders, WeightStage
-from bayesmachine.hdl.log.rule import MAX_CODE_BITS
+from bayesmachine.integrators.log import MAX_CODE_BITS
 from bayesmachine.params import TIE_BREAKS
 
 CELLS = ("LUT4", "CCU2C", "PFUMX", "L6MUX21", "TRELLIS_FF", "DP16KD", "TRELLIS_DPR16X4")

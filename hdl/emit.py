@@ -8,7 +8,6 @@ from pathlib import Path
 
 from bayesmachine.outputs import atomic_write_text
 from bayesmachine.params import MachineParams
-from bayesmachine.sources import source_kind
 from bayesmachine.tools import user_cache_dir
 
 __all__ = ["TOP_NAME", "emit", "rtlil_text", "signature_ports", "summary", "verilog_text", "yosys_failure"]
@@ -37,41 +36,13 @@ def _ports(params: MachineParams) -> list[tuple[str, str, int]]:
     return signature_ports(MachineSignature(params, entropy=params.integrator == "stochastic"))
 
 
-def _source_detail(params: MachineParams) -> str:
-    if source_kind(params.rng).on_chip:
-        return f" (L = {params.lfsr_bits}, seed {params.seed})"
-    if params.rng == "smtj":
-        from bayesmachine.sources.smtj import smtj_device_count
-
-        return (f"; simulated by {smtj_device_count(params)} SMTJ devices, {params.word_bits} per "
-                f"{params.smtj_share}: dwell {params.smtj_dwell:g} cycles, spread {params.smtj_spread:g}, "
-                f"seed {params.seed}")
-    return ""
-
-
-def _integration(params: MachineParams) -> list[str]:
-    """How the machine integrates: its words, counters and random source, or the log machine's codes."""
-    if params.integrator == "log":
-        from .log.machine import log_params, pixel_clocks
-
-        lp = log_params(params)
-        return [f"integrator: log (docs/integrators.md): {lp.code_bits}-bit energy codes in "
-                f"{params.memory_word_width}-bit words, {lp.sum_bits}-bit row sums, {lp.weight_bits}-bit "
-                f"weights ({len(lp.weights)}-entry exp table); {pixel_clocks(params)[1]} clock(s) per pixel "
-                "where a feedback column binds, else 1"]
-    return [f"words: {params.word_bits}-bit comparators, {params.memory_word_width}-bit likelihood-memory "
-            f"words; counter max {params.counter_max} ({params.counter_width}-bit overflow counters); "
-            f"watchdog {params.max_cycles} cycles",
-            f"random source: {params.rng}: {source_kind(params.rng).description}{_source_detail(params)}"]
-
-
 def summary(params: MachineParams) -> str:
     """A human-readable summary of the machine and its ports."""
     lines = [
         f"machine: {params.rows} rows x {params.operator_columns} operator columns = "
         f"{params.operators} operators ({params.prior} prior"
         f"{', last row no-match' if params.nomatch_row else ''}, tie rule {params.tie_break})",
-        *(_integration(params)),
+        *params.kind.summary_lines(params),
         f"load: {params.words_per_beat} words per beat, {params.beats_per_pixel} beats per pixel",
         "ports (Verilog names; clk and rst as well):",
     ]

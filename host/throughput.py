@@ -31,9 +31,6 @@ def measure_cycles(params: MachineParams, model: ModelParams, progress: bool = T
     ``stereo`` (``width``, ``fifo_pixels``, ``machines``: a StereoMachine's): the frame measured by
     :func:`measure_frame` too, under the key ``"frame_run"`` (None where the pair is narrower than
     the line)."""
-    from bayesmachine.hdl.log.machine import pixel_wall_cycles as log_wall_cycles
-    from bayesmachine.hdl.machine import pixel_wall_cycles
-
     from .images import bundled_pair
     from .run import prepare, run_machine
 
@@ -47,8 +44,7 @@ def measure_cycles(params: MachineParams, model: ModelParams, progress: bool = T
         "pixels": int(c.size),
         "samples_per_clock": params.samples_per_clock,
         "compute_cycles_per_pixel": round(float(c.mean()), 3),
-        "wall_cycles_per_pixel": round(float((log_wall_cycles(params, c) if params.integrator == "log"
-                                              else pixel_wall_cycles(params, c, timeout)).mean()), 3),
+        "wall_cycles_per_pixel": round(float(params.kind.pixel_wall_cycles(params, c, timeout).mean()), 3),
     }
     if stereo is not None:
         out["frame_run"] = measure_frame(params, model, progress=progress, **stereo)

@@ -47,12 +47,12 @@ neither ``fpga`` (the board's engine) nor an engine's tools before they are need
 from __future__ import annotations
 
 import contextlib
-import importlib
 from collections.abc import Iterator
 from typing import TYPE_CHECKING, ClassVar, Protocol, TypeVar
 
 import numpy as np
 
+from bayesmachine.integrators import INTEGRATOR_KINDS, load_named
 from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams
 from bayesmachine.region import OutputRegion
@@ -74,20 +74,13 @@ __all__ = ["ENGINES", "PIXEL_ENGINES", "Engine", "EngineBase", "EngineClosedErro
            "EngineStateError", "PixelEngine", "PixelEngineBase", "check_engine_options",
            "check_pixel_engine_options", "get_engine", "get_pixel_engine"]
 
-# The registry: each engine's class, as "module:Class" (imported when asked for).
-_WORD_ENGINES = {
-    "model": "bayesmachine.sim.model:MachineModel",
-    "pysim": "bayesmachine.sim.pysim:PysimEngine",
-    "verilator": "bayesmachine.sim.verilator:VerilatorEngine",
-}
+# The registry: each engine's class, as "module:Class" (imported when asked for); the engines of a
+# machine are its integrator kind's (bayesmachine.integrators), the pixel engines these.
 _PIXEL_ENGINES = {
     "verilator": "bayesmachine.sim.stereo_engine:StereoVerilatorEngine",
     "board": "bayesmachine.fpga.boards.engine:BoardEngine",
 }
-# The engines of a machine with integrator = "log" (docs/integrators.md).
-_LOG_ENGINES = {"model": "bayesmachine.sim.log_model:LogMachineModel", "pysim": _WORD_ENGINES["pysim"],
-                "verilator": _WORD_ENGINES["verilator"]}
-ENGINES = tuple(_WORD_ENGINES)
+ENGINES = tuple(dict.fromkeys(name for kind in INTEGRATOR_KINDS.values() for name in kind.engines))
 PIXEL_ENGINES = tuple(_PIXEL_ENGINES)
 
 _E = TypeVar("_E", bound="EngineLifecycle")
@@ -330,8 +323,7 @@ class PixelEngineBase(EngineLifecycle):
 def _load(registry: dict[str, str], name: str, kind: str) -> type:
     if name not in registry:
         raise ValueError(f"unknown {kind} {name!r}: choose one of {', '.join(registry)}")
-    module, _, cls = registry[name].partition(":")
-    return getattr(importlib.import_module(module), cls)
+    return load_named(registry[name])
 
 
 def check_engine_options(cls: type, name: str, options: dict[str, object]) -> None:
@@ -343,18 +335,15 @@ def check_engine_options(cls: type, name: str, options: dict[str, object]) -> No
 
 
 def get_engine(name: str, params: MachineParams, **options: object) -> Engine:
-    """A fresh engine (machine state as after reset) by name: one of :data:`ENGINES` (with ``integrator =
-    "log"`` the model is ``sim.log_model.LogMachineModel``, pysim and verilator run ``hdl.log.machine``).
+    """A fresh engine (machine state as after reset) by name: one of the engines of the machine's
+    integrator kind (``params.kind.engines``: e.g. the model of a log machine is
+    ``sim.log_model.LogMachineModel``, its pysim and verilator run ``hdl.log.machine``).
 
     ``options`` go to the engine's constructor; one it does not take is a ``ValueError``.
     """
-    if getattr(params, "integrator", None) == "log":
-        if name not in _LOG_ENGINES:
-            raise ValueError(f"--integrator log runs on the engines {', '.join(_LOG_ENGINES)} only (got "
-                             f"--engine {name})")
-        cls = _load(_LOG_ENGINES, name, "engine")
-    else:
-        cls = _load(_WORD_ENGINES, name, "engine")
+    if not isinstance(params, MachineParams):
+        raise TypeError(f"an engine takes a MachineParams, not {type(params).__name__}")
+    cls = params.kind.engine_class(name)
     check_engine_options(cls, name, options)
     return cls(params, **options)
 

@@ -11,7 +11,7 @@ stochastic model's :func:`~bayesmachine.sim.model.fill_feedback` with the flat c
 ``MachineParams.readout_max``: the distribution the host reads as it reads the counters), ``map``,
 ``nomatch``, ``timeout`` where every row is excluded (no answer, as the stochastic machine whose every
 row has a zero word runs into its watchdog), ``cycles`` the clocks per pixel by
-:func:`bayesmachine.hdl.log.machine.pixel_clocks`. ``hdl.log.machine.LogMachine`` is its RTL.
+:func:`bayesmachine.integrators.log.pixel_clocks`. ``hdl.log.machine.LogMachine`` is its RTL.
 """
 
 from __future__ import annotations
@@ -20,8 +20,8 @@ import numba
 import numpy as np
 
 from bayesmachine.columns.energy import INFINITE_CODE
-from bayesmachine.hdl.log.machine import log_params, pixel_clocks
 from bayesmachine.hdl.log.rule import integrate_pixel
+from bayesmachine.integrators.log import log_params, pixel_clocks
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.engines import EngineBase
 from bayesmachine.sim.model import feedback_result, fill_feedback

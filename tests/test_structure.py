@@ -22,8 +22,9 @@ MAY_IMPORT = {
     "fpga": {"core", "hdl", "sim"},
     "cli": {"core", "hdl", "sim", "host", "fpga"},
 }
-# The modules that import by name at run time: the engine registry and the optional dependencies.
-DYNAMIC_IMPORTS = {"sim/engines.py", "bayesmachine/extras.py"}
+# The modules that import by name at run time: the integrator registry (its kinds' tops, models and
+# engines, and the pixel engines' registry in sim/engines.py through it) and the optional dependencies.
+DYNAMIC_IMPORTS = {"bayesmachine/integrators/__init__.py", "bayesmachine/extras.py"}
 
 MAX_LINES = 80
 MAX_FILE_LINES = 700
@@ -130,13 +131,17 @@ def test_files_are_at_most_700_lines() -> None:
     assert not long, f"files over {MAX_FILE_LINES} lines:\n" + "\n".join(long)
 
 
-def test_the_registry_names_classes_that_exist() -> None:
-    """The registry's import paths are right (the layering test cannot see them)."""
-    from bayesmachine.sim.engines import _PIXEL_ENGINES, _WORD_ENGINES, _load
+def test_the_registries_name_classes_that_exist() -> None:
+    """The registries' import paths are right (the layering test cannot see them): every kind's top,
+    model and engines, and the pixel engines."""
+    from bayesmachine.integrators import INTEGRATOR_KINDS, load_named
+    from bayesmachine.sim.engines import _PIXEL_ENGINES
 
-    for registry in (_WORD_ENGINES, _PIXEL_ENGINES):
-        for engine in registry:
-            assert isinstance(_load(registry, engine, "engine"), type)
+    for kind in INTEGRATOR_KINDS.values():
+        for target in (kind.top, kind.model, *kind.engines.values()):
+            assert isinstance(load_named(target), type), target
+    for target in _PIXEL_ENGINES.values():
+        assert isinstance(load_named(target), type), target
 
 
 

@@ -12,17 +12,13 @@ from amaranth.hdl import Cat, Value, unsigned
 from amaranth.lib import data
 
 from bayesmachine.checks import as_int
+from bayesmachine.integrators.log import tree_levels
 
 from .layouts import codes_layout, row_sums_layout
 from .pipeline import Bank, LogBlock, Stage, Wire, fit, pack, stage_functions
 from .rule import LogParams, check_params
 
-__all__ = ["RowAdders", "adder_stages", "carried_layouts", "tree_levels"]
-
-
-def tree_levels(leaves: int) -> int:
-    """Levels of a balanced binary tree over ``leaves`` leaves: ceil(log2 leaves)."""
-    return (leaves - 1).bit_length()
+__all__ = ["RowAdders", "adder_stages", "carried_layouts"]
 
 
 def _add_level(nodes: list[tuple[Value, Value]], wire: Wire, name: str) -> list[tuple[Value, Value]]:

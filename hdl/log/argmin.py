@@ -21,8 +21,8 @@ from collections.abc import Callable
 from amaranth.hdl import Cat, Const, Mux, Value
 
 from bayesmachine.checks import as_int
+from bayesmachine.integrators.log import tree_levels
 
-from .adders import tree_levels
 from .layouts import best_layout, feedback_sums_layout, row_sums_layout
 from .pipeline import Bank, LogBlock, Stage, Wire, fit, pack, stage_functions
 from .rule import LogParams, check_params

@@ -15,66 +15,35 @@ The feedback loop is the argmin tree alone: as a MAP reaches the tree's output b
 (the tree's ``latest`` result, a copy per :data:`FEEDBACK_GROUP` rows), and a pixel with a left
 neighbour issues the clock after, its feedback codes formed from those registers on the way into the
 tree's first level, so such pixels issue every ``ArgminTree.latency`` clocks at most
-(:func:`pixel_clocks`); a line's first pixel and every pixel without a neighbour prior issue as soon as
-their sums are
-ready. ``cycles`` is that issue interval by the rule (1, or the loop's clocks), which the loading may
-exceed (the wall cycles count it).
+(``bayesmachine.integrators.log.pixel_clocks``); a line's first pixel and every pixel without a
+neighbour prior issue as soon as their sums are ready. ``cycles`` is that issue interval by the rule
+(1, or the loop's clocks), which the loading may exceed (the wall cycles count it).
 """
 
 from __future__ import annotations
 
 import dataclasses
 
-import numpy as np
 from amaranth.hdl import Array, Cat, Const, Module, Mux, Signal, Value
 from amaranth.lib import fifo, wiring
 
-from bayesmachine.columns.energy import ENERGY_STEP, LOG_CODE_BITS, exp_table
+from bayesmachine.columns.energy import LOG_CODE_BITS
 from bayesmachine.hdl.signatures import MachineSignature, beat_words
+from bayesmachine.integrators.log import (
+    ADDER_LEVELS_PER_STAGE,
+    ARGMIN_LEVELS_PER_STAGE,
+    log_params,
+    pixel_clocks,
+)
 from bayesmachine.params import MachineParams
 
-from .adders import RowAdders, tree_levels
+from .adders import RowAdders
 from .argmin import ArgminTree
-from .rule import LogParams
 from .weights import WeightStage
 
-__all__ = ["ADDER_LEVELS_PER_STAGE", "ARGMIN_LEVELS_PER_STAGE", "FEEDBACK_GROUP", "LogMachine", "log_params",
-           "pixel_clocks", "pixel_wall_cycles"]
+__all__ = ["FEEDBACK_GROUP", "LogMachine"]
 
-# The log machine's pipeline setting: tree levels between two registers, of the row adders (before the
-# issue point, outside the loop) and of the argmin tree (the loop: the feedback codes' adders, the tree).
-ADDER_LEVELS_PER_STAGE = 1
-ARGMIN_LEVELS_PER_STAGE = 4
 FEEDBACK_GROUP = 8  # rows whose feedback codes read one copy of the latest MAP (a net's fanout)
-
-
-def log_params(params: MachineParams) -> LogParams:
-    """The integrator of ``params`` (``integrator = "log"``): a row per hypothesis, a code per operator
-    column, :data:`LOG_CODE_BITS`-bit codes, the exp table ``exp_table(word_bits)``, its no-match row and
-    tie rule."""
-    return LogParams(rows=params.rows, codes=params.operator_columns, code_bits=LOG_CODE_BITS,
-                     weights=exp_table(params.word_bits, ENERGY_STEP), nomatch_row=params.nomatch_row,
-                     tie_break=params.tie_break)
-
-
-def pixel_clocks(params: MachineParams) -> tuple[int, int]:
-    """(clocks per pixel where no feedback column binds, clocks per pixel where one does): 1, and with a
-    neighbour prior the loop's ``ArgminTree.latency`` at this machine's setting (the feedback codes'
-    adders and the tree's levels at ``ARGMIN_LEVELS_PER_STAGE``; the next pixel issues the clock its
-    predecessor's MAP is registered as the tree's latest result)."""
-    levels = tree_levels(params.rows) + 1
-    loop = max(1, -(-levels // ARGMIN_LEVELS_PER_STAGE))
-    return 1, loop if params.feedback_columns else 1
-
-
-def pixel_wall_cycles(params: MachineParams, cycles: np.ndarray) -> np.ndarray:
-    """Clock cycles per pixel in steady state (loads keep coming, results are taken at once), from the
-    results' ``cycles`` (each pixel's issue interval by the rule): a pixel takes ``beats_per_pixel``
-    beats to load and issues ``cycles`` after the one before, ``max(cycles, beats_per_pixel)``. Exact
-    where ``beats_per_pixel`` is 1 or at least the loop's clocks (the models' load streams) or every
-    pixel has the loop's clocks; between them an upper bound: the row adders take a pixel every
-    clock, so a line's first pixel may load during the loops before it and issue sooner."""
-    return np.maximum(np.asarray(cycles), params.beats_per_pixel)
 
 
 class LogMachine(wiring.Component):

@@ -27,113 +27,10 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from bayesmachine.checks import as_int
-from bayesmachine.errors import ParameterError
-from bayesmachine.params import DEFAULT_TIE_BREAK, TIE_BREAKS
+from bayesmachine.integrators.log import LogParams, check_params
 
 __all__ = ["LogParams", "LogResult", "argmin_rows", "check_params", "integrate_pixel", "log_integrate",
            "row_sums", "row_weights"]
-
-MAX_CODE_BITS = 16
-MAX_WEIGHT_BITS = 16
-
-
-def _table(weights: object) -> tuple[int, ...]:
-    """The exp table as a tuple of ints, checked: nonincreasing, at least 2 entries, the first
-    positive and below ``2**(MAX_WEIGHT_BITS + 1)``, the last 0."""
-    if isinstance(weights, (str, bytes)) or not hasattr(weights, "__iter__"):
-        raise TypeError(f"weights must be a sequence of integers, not {type(weights).__name__}")
-    table = tuple(as_int("weights", w, 0, 1 << MAX_WEIGHT_BITS) for w in weights)  # type: ignore[union-attr]
-    if len(table) < 2 or table[0] == 0 or table[-1] != 0:
-        raise ParameterError(f"weights must have at least 2 entries, the first positive and the last 0, "
-                             f"got {table[:4]}...{table[-2:]}", "weights")
-    if any(b > a for a, b in zip(table, table[1:], strict=False)):
-        raise ParameterError("weights must be nonincreasing", "weights")
-    return table
-
-
-@dataclass(frozen=True)
-class LogParams:
-    """Parameters of one logarithmic integrator (the rule, the blocks and the top share them).
-
-    Parameters
-    ----------
-    rows : int
-        M, the rows (hypotheses) of a pixel, 1 ... 4096 (>= 2 with a no-match row); Dmax + 2 in
-        disparity use.
-    codes : int
-        N, the energy codes per row, 1 ... 64.
-    code_bits : int
-        Bits of a code, 1 ... 16; the all-ones code is infinite energy.
-    weights : sequence of int
-        The exp table X: nonincreasing, at least 2 entries, the first positive, the last 0
-        (``bayesmachine.columns.energy.exp_table`` builds one).
-    nomatch_row : bool
-        Whether the last row is the no-match row.
-    tie_break : str
-        ``"nomatch-first"`` or ``"lowest-index"`` (``bayesmachine.params.TIE_BREAKS``).
-
-    Attributes
-    ----------
-    sum_bits : int
-        Bits of a row's sum: ``code_bits + ceil(log2 codes)``.
-    map_width : int
-        Bits of a row index: ``max(1, bit_length(rows - 1))``.
-    weight_bits : int
-        Bits of a weight: ``bit_length(weights[0])``.
-    infinite : int
-        The infinite code, ``2**code_bits - 1``.
-    """
-
-    rows: int
-    codes: int
-    code_bits: int
-    weights: tuple[int, ...]
-    nomatch_row: bool = True
-    tie_break: str = DEFAULT_TIE_BREAK
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "rows", as_int("rows", self.rows, 1, 4096))
-        object.__setattr__(self, "codes", as_int("codes", self.codes, 1, 64))
-        object.__setattr__(self, "code_bits", as_int("code_bits", self.code_bits, 1, MAX_CODE_BITS))
-        object.__setattr__(self, "weights", _table(self.weights))
-        if not isinstance(self.nomatch_row, (bool, np.bool_)):
-            raise TypeError(f"nomatch_row must be a bool, not {type(self.nomatch_row).__name__}")
-        object.__setattr__(self, "nomatch_row", bool(self.nomatch_row))
-        if self.nomatch_row and self.rows < 2:
-            raise ParameterError("rows: an integrator with a no-match row needs at least 2 rows", "rows")
-        if not isinstance(self.tie_break, str):
-            raise TypeError(f"tie_break must be a str, not {type(self.tie_break).__name__}")
-        if self.tie_break not in TIE_BREAKS:
-            raise ParameterError(f"tie_break must be one of {TIE_BREAKS}, got {self.tie_break!r}",
-                                 "tie_break")
-
-    @property
-    def sum_bits(self) -> int:
-        return self.code_bits + (self.codes - 1).bit_length()
-
-    @property
-    def map_width(self) -> int:
-        return max(1, (self.rows - 1).bit_length())
-
-    @property
-    def weight_bits(self) -> int:
-        return self.weights[0].bit_length()
-
-    @property
-    def infinite(self) -> int:
-        return (1 << self.code_bits) - 1
-
-    @property
-    def nomatch_first(self) -> bool:
-        """The no-match row wins the ties it is part of."""
-        return self.nomatch_row and self.tie_break == "nomatch-first"
-
-    @property
-    def none_index(self) -> int:
-        """The ``map`` of a pixel whose rows are all excluded: the no-match row, else row 0."""
-        return self.rows - 1 if self.nomatch_row else 0
-
 
 @dataclass(frozen=True)
 class LogResult:
@@ -237,13 +134,6 @@ def _check_codes(codes: object, params: LogParams) -> np.ndarray:
     if codes.size and (codes.min() < 0 or codes.max() > params.infinite):
         raise ValueError(f"codes must be in [0, {params.infinite}] ({params.code_bits} bits)")
     return np.ascontiguousarray(codes.reshape(-1, params.rows, params.codes))
-
-
-def check_params(params: object) -> LogParams:
-    """``params`` if it is a :class:`LogParams`, else a TypeError."""
-    if not isinstance(params, LogParams):
-        raise TypeError(f"params must be a LogParams, not {type(params).__name__}")
-    return params
 
 
 def _rows_in(sums: np.ndarray, excluded: np.ndarray, params: LogParams) -> tuple[np.ndarray, np.ndarray]:

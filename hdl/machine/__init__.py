@@ -9,19 +9,14 @@
 - ``feedback.py``: :class:`FeedbackPrior`, a neighbour prior's feedback column (a component);
 - ``counters.py`` and ``stop.py``: the overflow counters, and the stop decision on them;
 - ``encoder.py``: :class:`MAPEncoder`, which overflowing row wins (a component);
-- ``timing.py``: the timing contract (bubble, load latency, a pixel's wall cycles);
+- the timing contract (bubble, load latency, a pixel's wall cycles): ``bayesmachine.integrators.stochastic``;
 - ``nets.py``: :class:`MachineNets`, the nets the builders share and a proof reads.
 
 ``docs/architecture.md`` describes the blocks, their ports and their timing.
 """
 
 from bayesmachine.hdl.signatures import entropy_layout, load_layout, result_layout
-
-from .encoder import MAPEncoder
-from .feedback import FeedbackPrior
-from .nets import GROUP_OPERATORS, SOURCE_GROUPS, MachineNets
-from .normalize import ColumnScales
-from .timing import (
+from bayesmachine.integrators.stochastic import (
     BUBBLE_CYCLES,
     FEEDBACK_CYCLES,
     LOAD_LATENCY,
@@ -30,6 +25,11 @@ from .timing import (
     pixel_wall_cycles,
     search_cycles,
 )
+
+from .encoder import MAPEncoder
+from .feedback import FeedbackPrior
+from .nets import GROUP_OPERATORS, SOURCE_GROUPS, MachineNets
+from .normalize import ColumnScales
 from .top import BayesianMachine
 
 __all__ = [

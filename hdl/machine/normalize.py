@@ -13,10 +13,10 @@ from amaranth.hdl import Cat, Module, Mux, Value, unsigned
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
+from bayesmachine.integrators.stochastic import hides_bubble
 from bayesmachine.params import MachineParams, ParameterError
 
 from .nets import net, or_all
-from .timing import hides_bubble
 
 __all__ = ["ColumnScales", "largest"]
 

@@ -11,7 +11,7 @@ timed-out run's bubble searches the leading row first. The exact per-sample sema
 word order are in ``docs/architecture.md``; the NumPy model ``bayesmachine.sim.model`` computes the
 same thing bit for bit.
 
-Timing (``timing.py``; ``docs/architecture.md``, "Timing"):
+Timing (``bayesmachine.integrators.stochastic``; ``docs/architecture.md``, "Timing"):
 
 - ``load`` takes one beat per handshake and writes it into the *shadow* likelihood memory the
   cycle after; ``load.ready`` is low while the shadow holds a complete pixel not yet started
@@ -41,6 +41,7 @@ from amaranth.lib import wiring
 
 from bayesmachine.hdl.signatures import MachineSignature, beat_words
 from bayesmachine.hdl.sources import random_source
+from bayesmachine.integrators.stochastic import hides_bubble
 from bayesmachine.params import MachineParams
 
 from .counters import count_ones
@@ -50,7 +51,6 @@ from .matrix import operator_matrix
 from .nets import SOURCE_GROUPS, MachineNets, row_groups
 from .normalize import ColumnScales
 from .stop import overflow_counters, stop_decision
-from .timing import hides_bubble
 
 __all__ = ["BayesianMachine"]
 

@@ -16,15 +16,11 @@ from bayesmachine.columns.energy import INFINITE_CODE, log_codes
 from bayesmachine.errors import ParameterError
 from bayesmachine.hdl.log import ArgminTree, log_integrate
 from bayesmachine.hdl.log import machine as log_machine
-from bayesmachine.hdl.log.machine import (
-    ARGMIN_LEVELS_PER_STAGE,
-    log_params,
-    pixel_clocks,
-    pixel_wall_cycles,
-)
 from bayesmachine.host.features import model_planes
 from bayesmachine.host.images import bundled_pair
 from bayesmachine.host.likelihoods import likelihoods_plain, memory_words
+from bayesmachine.integrators import log as log_definition
+from bayesmachine.integrators.log import ARGMIN_LEVELS_PER_STAGE, log_params, pixel_clocks, pixel_wall_cycles
 from bayesmachine.models import ModelParams, disparity_machine, pass_machine
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.engines import get_engine
@@ -243,7 +239,8 @@ def test_pysim_wall_cycles_between_one_beat_and_the_loop(monkeypatch: pytest.Mon
     where every pixel has the loop's clocks, and an upper bound with lines of 5 pixels: a line's first
     pixel, loaded into the row adders during the loops before it, issues sooner. (At 1 argmin level
     per stage: a loop of 6 clocks at Dmax 10, room for 2 to 5 beats.)"""
-    monkeypatch.setattr(log_machine, "ARGMIN_LEVELS_PER_STAGE", 1)
+    monkeypatch.setattr(log_machine, "ARGMIN_LEVELS_PER_STAGE", 1)  # the RTL's setting and the definition's
+    monkeypatch.setattr(log_definition, "ARGMIN_LEVELS_PER_STAGE", 1)
     machine = disparity_machine(ModelParams(name="census", dmax=10), integrator="log", word_bits=8)
     loop = pixel_clocks(machine)[1]
     machine = dataclasses.replace(machine, words_per_beat=-(-machine.words_per_pixel // (loop - 1)))
