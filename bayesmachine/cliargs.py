@@ -39,6 +39,7 @@ from bayesmachine.argtypes import (
     value_list,
 )
 from bayesmachine.columns import Option, Source
+from bayesmachine.integrators import INTEGRATOR_KINDS, IntegratorKind, integrator_kind, unread_fields
 from bayesmachine.models import (
     DEFAULT_MODEL,
     MODELS,
@@ -66,7 +67,6 @@ from bayesmachine.params import (
     SMTJ_DEFAULTS,
     SMTJ_SHARES,
     STEREO_ROWS_PER_BEAT,
-    STOCHASTIC_FIELDS,
     TIE_BREAKS,
     TIMEOUT_ANSWERS,
     MachineParams,
@@ -94,8 +94,7 @@ __all__ = [
     "input_path",
     "machine_default",
     "machine_params_from_args",
-    "refuse_log_integrator",
-    "refuse_stochastic_options",
+    "refuse_unread_options",
     "model_params_from_args",
     "options_without_effect",
     "machine_parameters",
@@ -246,7 +245,7 @@ add_option(MachineOption("counter_max", "--counter-max",
                          "counter max n_max: a counter overflows on its (n_max+1)-th 1 (default "
                          f"{DEFAULT_COUNTER_MAX})", metavar="N"))
 # The stochastic machine's options are None unless given (their defaults are MachineParams'), so that
-# --integrator log can refuse them when given (refuse_stochastic_options).
+# an integrator that does not read them can refuse them when given (refuse_unread_options).
 add_option(MachineOption("rng", "--rng", rng_help(), choices=RNG_KINDS))
 add_option(MachineOption("lfsr_bits", "--lfsr-bits",
                          f"length L of each operator's LFSR, period 2^L-1 (default {DEFAULT_LFSR_BITS})",
@@ -273,7 +272,11 @@ def _models_with(test: Callable[[Any], bool]) -> str:
 
 
 def machine_default(field: str) -> Any:
-    """``MachineParams``'s default of ``field``: what the help says and a model that decides nothing gets."""
+    """``MachineParams``'s default of ``field`` (an integrator kind's field: that kind's): what the help says
+    and a model that decides nothing gets."""
+    for kind in INTEGRATOR_KINDS.values():
+        if field in kind.defaults:
+            return kind.defaults[field]
     return MachineParams.__dataclass_fields__[field].default
 
 
@@ -332,15 +335,6 @@ add_option(MachineOption("words_per_beat", "--words-per-beat",
                          f"or one pixel's words if fewer; {STEREO_ROWS_PER_BEAT} rows' words with the "
                          "front end: --feed pixels, --top stereo; census-lr's right pass takes as many "
                          "rows per beat)", metavar="N"))
-
-
-def refuse_log_integrator(machine: MachineParams, command: str) -> None:
-    """ParameterError naming ``--integrator`` where the logarithmic machine has no such path yet."""
-    if machine.integrator != DEFAULT_INTEGRATOR:
-        raise ParameterError(f"--integrator: {command} runs the stochastic machine only; the "
-                             f"{machine.integrator} machine runs in run and sweep (--feed words or pixels, "
-                             "--engine board), emit and synth (--top machine, or --top stereo) and board "
-                             "build|simulate", "integrator")
 
 
 def add_dmax_option(group: argparse._ActionsContainer) -> argparse.Action:
@@ -405,17 +399,23 @@ def with_flag(exc: ParameterError) -> ParameterError:
     return ParameterError(f"{flag}: {message}", name)
 
 
-def refuse_stochastic_options(args: argparse.Namespace, given: Mapping[str, Any]) -> None:
-    """ParameterError naming every option given (``given``: the machine fields set) that only the
-    stochastic machine reads (:data:`~bayesmachine.params.STOCHASTIC_FIELDS`, and a declared pass's
-    watchdog, census-lr's ``--lr-right-max-cycles``): the logarithmic machine would ignore them."""
-    flags = [_spelt_machine(MACHINE_OPTIONS[f], given[f]) for f in STOCHASTIC_FIELDS
-             if given.get(f) is not None]
-    flags += [all_options()[k][0].flag for k in sorted(pass_watchdogs())
-              if getattr(args, k, None) is not None]
+def refuse_unread_options(args: argparse.Namespace, given: Mapping[str, Any],
+                          kinds: Iterable[IntegratorKind]) -> None:
+    """ParameterError naming every option given (``given``: the machine fields set) that none of the
+    integrator ``kinds`` reads (another kind's fields, :func:`~bayesmachine.integrators.unread_fields`;
+    and a declared pass's watchdog, census-lr's ``--lr-right-max-cycles``, where none reads
+    ``max_cycles``): the machines would ignore them."""
+    kinds = list(kinds)
+    unread = unread_fields(kinds)
+    flags = [_spelt_machine(MACHINE_OPTIONS[f], given[f]) for f in unread if given.get(f) is not None]
+    if "max_cycles" in unread:
+        flags += [all_options()[k][0].flag for k in sorted(pass_watchdogs())
+                  if getattr(args, k, None) is not None]
     if flags:
-        raise ParameterError(f"{', '.join(flags)}: without effect on the logarithmic machine (--integrator "
-                             "log has no counters, random sources or watchdog): leave them out", "integrator")
+        titles = " or ".join(k.title for k in kinds)
+        names = ",".join(k.name for k in kinds)
+        raise ParameterError(f"{', '.join(flags)}: without effect on the {titles} machine (--integrator "
+                             f"{names} does not read them): leave them out", "integrator")
 
 
 def _spelt_machine(option: MachineOption, value: Any) -> str:
@@ -439,8 +439,7 @@ def machine_params_from_args(
         if value is not None and not isinstance(value, list):
             kwargs[field] = value
     kwargs.update(overrides)
-    if kwargs.get("integrator") == "log":
-        refuse_stochastic_options(args, kwargs)
+    refuse_unread_options(args, kwargs, [integrator_kind(kwargs.get("integrator", DEFAULT_INTEGRATOR))])
     device = [f for f in _SMTJ_FIELDS if kwargs.get(f) is not None]
     rng = kwargs.get("rng", DEFAULT_RNG)
     if device and rng != "smtj":

@@ -21,7 +21,8 @@ from typing import Any
 
 from bayesmachine.checks import plain
 from bayesmachine.columns import Column, NoMatchFloor, Option, Source, Term
-from bayesmachine.params import TIMEOUT_ANSWERS, MachineParams, ParameterError
+from bayesmachine.integrators.stochastic import STOCHASTIC
+from bayesmachine.params import TIMEOUT_ANSWERS, ParameterError
 
 __all__ = ["PassDef", "ModelDef", "OWN_PASS", "REFERENCES", "machine_layout"]
 
@@ -98,8 +99,9 @@ class ModelDef:
     defaults: Mapping[str, Any] = field(default_factory=dict)
     requires: Mapping[str, tuple[Any, str]] = field(default_factory=dict)
     watchdog_runs: int | None = None
-    timeout_answer: str = MachineParams.timeout_answer  # the machine's defaults, not a copy of them
-    normalize: bool = MachineParams.normalize
+    # The stochastic machine's defaults, not a copy of them.
+    timeout_answer: str = STOCHASTIC.defaults["timeout_answer"]  # type: ignore[assignment]
+    normalize: bool = STOCHASTIC.defaults["normalize"]  # type: ignore[assignment]
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name or any(c in self.name for c in " ,\t\n"):

@@ -53,9 +53,11 @@ from bayesmachine.columns import (
     Term,
     fused,
 )
+from bayesmachine.integrators import integrator_kind
 from bayesmachine.modeldef import OWN_PASS, ModelDef, PassDef, machine_layout
 from bayesmachine.params import (
     DEFAULT_DMAX,
+    DEFAULT_INTEGRATOR,
     MAX_DMAX,
     STEREO_ROWS_PER_BEAT,
     MachineParams,
@@ -449,6 +451,7 @@ def disparity_machine(model: ModelParams, **machine_kwargs: Any) -> MachineParam
         raise ParameterError(f"columns: the {model.name} model has {data} data columns, got "
                              f"columns={machine_kwargs['columns']!r}", "columns")
     kwargs = dict(machine_kwargs, columns=data)
+    own_fields = integrator_kind(kwargs.get("integrator", DEFAULT_INTEGRATOR)).fields
     given = kwargs.get("prior")
     if prior == "neighbour":
         if given is not None and given != "neighbour":
@@ -460,7 +463,8 @@ def disparity_machine(model: ModelParams, **machine_kwargs: Any) -> MachineParam
         # the words per beat, which count the loaded above column this probe does not have.
         own = ("prior", "feedback_words", "feedback_nomatch_word", "words_per_beat")
         rest = {k: v for k, v in kwargs.items() if k not in own}
-        if rest.get("max_cycles") is None and model.definition.watchdog_runs is not None:
+        if (rest.get("max_cycles") is None and model.definition.watchdog_runs is not None
+                and "max_cycles" in own_fields):
             rest["max_cycles"] = (1 << 32) - 1  # the model's watchdog comes below
         probe = MachineParams.for_disparity(model.dmax, **rest)
         word_bits = probe.word_bits
@@ -477,12 +481,12 @@ def disparity_machine(model: ModelParams, **machine_kwargs: Any) -> MachineParam
     elif given == "neighbour":
         raise ParameterError(f"prior: 'neighbour' is the neighbour prior's machine; {_described(model)} has "
                              "no feedback column", "prior")
-    if kwargs.get("timeout_answer") is None:
-        kwargs["timeout_answer"] = model.definition.timeout_answer
-    if kwargs.get("normalize") is None:
-        kwargs["normalize"] = model.definition.normalize
+    # The model's machine defaults, where the machine's integrator reads the field.
+    for name in ("timeout_answer", "normalize"):
+        if name in own_fields and kwargs.get(name) is None:
+            kwargs[name] = getattr(model.definition, name)
     runs = model.definition.watchdog_runs
-    if runs is not None and kwargs.get("max_cycles") is None:
+    if runs is not None and "max_cycles" in own_fields and kwargs.get("max_cycles") is None:
         # The counter max (checked, its default if not given) under the largest watchdog, not the
         # machine's default one, which a counter max the model's watchdog covers may exceed.
         kwargs["max_cycles"] = (1 << 32) - 1
@@ -525,10 +529,11 @@ def pass_machine(model: ModelParams, machine: MachineParams, name: str) -> Machi
     keep = ("word_bits", "counter_max", "rng", "lfsr_bits", "seed", "max_cycles", "tie_break",
             "samples_per_clock", "timeout_answer", "normalize", "integrator")
     kwargs: dict[str, Any] = {k: getattr(machine, k) for k in keep}
-    if p.max_cycles is not None:
-        kwargs["max_cycles"] = p.max_cycles
-    elif p.watchdog_runs is not None:
-        kwargs["max_cycles"] = p.watchdog_runs * (machine.counter_max + 1)
+    if "max_cycles" in machine.kind.fields:  # the pass's own watchdog, where the machine has one
+        if p.max_cycles is not None:
+            kwargs["max_cycles"] = p.max_cycles
+        elif p.watchdog_runs is not None:
+            kwargs["max_cycles"] = p.watchdog_runs * (machine.counter_max + 1)
     if machine.rng == "smtj":
         kwargs.update(smtj_dwell=machine.smtj_dwell, smtj_spread=machine.smtj_spread,
                       smtj_share=machine.smtj_share)

@@ -10,11 +10,11 @@ from __future__ import annotations
 
 import hashlib
 import json
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass
 
 from bayesmachine.checks import as_bool, as_int, as_real, type_name
 from bayesmachine.errors import ParameterError
-from bayesmachine.integrators import INTEGRATOR_KINDS, IntegratorKind, integrator_kind
+from bayesmachine.integrators import INTEGRATOR_KINDS, KIND_FIELDS, IntegratorKind, integrator_kind
 from bayesmachine.integrators.stochastic import (
     DEFAULT_COUNTER_MAX,
     DEFAULT_LFSR_BITS,
@@ -23,7 +23,7 @@ from bayesmachine.integrators.stochastic import (
     DEFAULT_SEED,
     STOCHASTIC_FIELDS,
 )
-from bayesmachine.sources import SMTJ_SHARES, SOURCE_KINDS, check_source, source_kind
+from bayesmachine.sources import SMTJ_SHARES, SOURCE_KINDS, SourceKind, check_source, source_kind
 
 __all__ = [
     "MachineParams",
@@ -206,11 +206,11 @@ class MachineParams:
     rows: int
     columns: int = DEFAULT_COLUMNS
     word_bits: int = DEFAULT_WORD_BITS
-    counter_max: int = DEFAULT_COUNTER_MAX
-    rng: str = DEFAULT_RNG
-    lfsr_bits: int = DEFAULT_LFSR_BITS
-    seed: int = DEFAULT_SEED
-    max_cycles: int = DEFAULT_MAX_CYCLES
+    counter_max: int | None = None
+    rng: str | None = None
+    lfsr_bits: int | None = None
+    seed: int | None = None
+    max_cycles: int | None = None
     prior: str = DEFAULT_PRIOR
     nomatch_row: bool = False
     tie_break: str = DEFAULT_TIE_BREAK
@@ -220,9 +220,9 @@ class MachineParams:
     smtj_share: str | None = None
     feedback_words: tuple[int, ...] = ()
     feedback_nomatch_word: int | None = None
-    samples_per_clock: int = 1
-    timeout_answer: str = "none"
-    normalize: bool = False
+    samples_per_clock: int | None = None
+    timeout_answer: str | None = None
+    normalize: bool | None = None
     integrator: str = DEFAULT_INTEGRATOR
 
     def _int(self, name: str, lo: int, hi: int | None = None) -> None:
@@ -236,6 +236,43 @@ class MachineParams:
         self._int("columns", 1, 64)
         # <= 15: every word, up to 2**15 = 1.0, fits the 16-bit words of the host and the engines.
         self._int("word_bits", 1, 15)
+        _check_choice("integrator", self.integrator, INTEGRATORS)
+        kind = self.kind
+        self._kind_fields(kind)
+        if kind.draws_numbers:
+            self._check_counters()
+        _check_choice("prior", self.prior, PRIORS)
+        self._check_feedback()
+        self._bool("nomatch_row")
+        if self.nomatch_row and self.rows < 2:
+            raise ParameterError("rows: a machine with a no-match row needs at least 2 rows", "rows")
+        _check_choice("tie_break", self.tie_break, TIE_BREAKS)
+        self._int("words_per_beat", 1)
+        if self.words_per_beat > self.words_per_pixel:
+            raise ParameterError(
+                f"words_per_beat ({self.words_per_beat}) exceeds the words per pixel "
+                f"({self.words_per_pixel})",
+                "words_per_beat")
+        if kind.draws_numbers:
+            self._check_samples()
+        kind.check(self)
+
+    def _kind_fields(self, kind: IntegratorKind) -> None:
+        """Refuse the fields of another integrator (a ParameterError naming the first given), and fill the
+        kind's own with its defaults."""
+        given = [f for f in KIND_FIELDS if f not in kind.fields and getattr(self, f) is not None]
+        if given:
+            owners = [k.name for k in INTEGRATOR_KINDS.values() if given[0] in k.fields]
+            raise ParameterError(f"{', '.join(given)}: the {' or '.join(owners)} integrator's, not read with "
+                                 f"integrator {self.integrator!r}: leave {'them' if given[1:] else 'it'} out",
+                                 given[0])
+        for name, default in kind.defaults.items():
+            if getattr(self, name) is None:
+                object.__setattr__(self, name, default)
+
+    def _check_counters(self) -> None:
+        """The counters, the random source's kind, the LFSRs and the watchdog of a machine that draws
+        random numbers."""
         self._int("counter_max", 1, (1 << 24) - 1)
         if not isinstance(self.rng, str):
             raise TypeError(f"rng must be a random source's name (str), not {type_name(self.rng)}")
@@ -251,19 +288,10 @@ class MachineParams:
             raise ParameterError(
                 f"max_cycles ({self.max_cycles}) must exceed counter_max ({self.counter_max}): "
                 f"no counter can overflow in fewer than counter_max + 1 cycles", "max_cycles")
-        _check_choice("prior", self.prior, PRIORS)
-        _check_choice("integrator", self.integrator, INTEGRATORS)  # the feedback table's domain
-        self._check_feedback()
-        self._bool("nomatch_row")
-        if self.nomatch_row and self.rows < 2:
-            raise ParameterError("rows: a machine with a no-match row needs at least 2 rows", "rows")
-        _check_choice("tie_break", self.tie_break, TIE_BREAKS)
-        self._int("words_per_beat", 1)
-        if self.words_per_beat > self.words_per_pixel:
-            raise ParameterError(
-                f"words_per_beat ({self.words_per_beat}) exceeds the words per pixel "
-                f"({self.words_per_pixel})",
-                "words_per_beat")
+
+    def _check_samples(self) -> None:
+        """The SMTJ devices, the samples per clock, the timeout's answer and the normalization of a machine
+        that draws random numbers; last, what only its random source knows."""
         self._check_smtj()
         self._int("samples_per_clock", 1)
         if self.samples_per_clock not in SAMPLES_PER_CLOCK:
@@ -274,12 +302,6 @@ class MachineParams:
                                  f"({self.samples_per_clock}): a run has at least two clocks", "max_cycles")
         _check_choice("timeout_answer", self.timeout_answer, TIMEOUT_ANSWERS)
         self._bool("normalize")
-        _check_choice("integrator", self.integrator, INTEGRATORS)
-        if not self.kind.draws_numbers and not source_kind(self.rng).on_chip:
-            raise ParameterError(f"rng: the {self.integrator} integrator draws no random numbers, so an "
-                                 f"off-chip source ({self.rng!r}) has none to give; leave rng at its default",
-                                 "rng")
-        self.kind.check(self)
         # Last, what only the random source knows (the Sobol table's size, the LFSR polynomials):
         # the one place it is checked, so every holder of a MachineParams can build its source.
         check_source(self)
@@ -388,6 +410,18 @@ class MachineParams:
         return integrator_kind(self.integrator)
 
     @property
+    def source(self) -> SourceKind | None:
+        """The random source's kind (``bayesmachine.sources``); None for a machine that draws no random
+        numbers."""
+        return source_kind(self.rng) if self.kind.draws_numbers else None
+
+    @property
+    def takes_numbers(self) -> bool:
+        """Whether random numbers come in from outside (an off-chip source, on the ``entropy`` port)."""
+        source = self.source
+        return source is not None and not source.on_chip
+
+    @property
     def load_max(self) -> int:
         """The largest value a loaded entry takes: the word 2^W (stochastic) or the infinite energy code
         (log: ``bayesmachine.columns.energy.INFINITE_CODE``)."""
@@ -419,8 +453,9 @@ class MachineParams:
 
     @property
     def max_clocks(self) -> int:
-        """The watchdog in clocks: a run's clocks are at most ceil(max_cycles / samples_per_clock)."""
-        return -(-self.max_cycles // self.samples_per_clock)
+        """The largest ``cycles`` of a result, in clocks: the watchdog's, ceil(max_cycles /
+        samples_per_clock) (stochastic), or the loop's clocks (log)."""
+        return self.kind.max_clocks(self)
 
     @property
     def nomatch_index(self) -> int | None:
@@ -434,9 +469,12 @@ class MachineParams:
         so that fingerprints stay; ``complete``: every resolved value, what a report records (a census
         model's machine with normalize off says so, rather than reading as the model's default, on)."""
         d = asdict(self)
+        for name in KIND_FIELDS:  # another integrator's fields: None, and nothing to this machine
+            if name not in self.kind.fields:
+                del d[name]
         if self.rng != "smtj":  # device parameters mean nothing to the other sources
             for name in ("smtj_dwell", "smtj_spread", "smtj_share"):
-                del d[name]
+                d.pop(name, None)
         if self.prior != "neighbour":  # nor the feedback table to the other priors
             del d["feedback_words"], d["feedback_nomatch_word"]
         else:
@@ -444,14 +482,10 @@ class MachineParams:
         if complete:
             return d
         # Fields at the value every machine had before them: left out, so fingerprints stay.
-        if self.samples_per_clock == 1:
-            del d["samples_per_clock"]
-        if self.timeout_answer == "none":
-            del d["timeout_answer"]
-        if not self.normalize:
-            del d["normalize"]
-        if self.integrator == DEFAULT_INTEGRATOR:
-            del d["integrator"]
+        for name, before in (("samples_per_clock", 1), ("timeout_answer", "none"), ("normalize", False),
+                             ("integrator", DEFAULT_INTEGRATOR)):
+            if name in d and d[name] == before:
+                del d[name]
         return d
 
     def fingerprint(self) -> str:
@@ -460,18 +494,16 @@ class MachineParams:
         return hashlib.sha256(blob).hexdigest()[:16]
 
 
-_MACHINE_SEED_STEP = 0x9E3779B97F4A7C15  # odd (2**64 / golden ratio): distinct seeds for 2**64 machines
-
-
 def nth_machine(params: MachineParams, index: int) -> MachineParams:
     """The parameters of machine ``index`` of K machines side by side (``hdl.machines.ParallelMachines``,
     the StereoMachine's ``machines``, census-lr's right pass).
 
-    Machine 0 is ``params`` itself; machine i has seed ``(seed + i * 0x9E3779B97F4A7C15) mod 2**64``,
-    so every machine draws its own LFSR polynomials and start states.
+    Machine 0 is ``params`` itself; machine i is the kind's (``IntegratorKind.nth_machine``): a
+    stochastic machine i has seed ``(seed + i * 0x9E3779B97F4A7C15) mod 2**64``, so every machine draws
+    its own LFSR polynomials and start states; a log machine has no seed, every machine is ``params``.
     """
     index = _check_int("index", index, 0)
-    return replace(params, seed=(params.seed + index * _MACHINE_SEED_STEP) % (1 << 64))
+    return params.kind.nth_machine(params, index) if index else params
 
 
 def stereo_words_per_beat(params: MachineParams) -> int:

@@ -18,7 +18,7 @@ from bayesmachine.host.images import Crop, bundled_pair, crop_image
 from bayesmachine.host.metrics import evaluate
 from bayesmachine.host.run import ENGINES, prepare, run_machine
 from bayesmachine.models import ModelParams
-from bayesmachine.params import MachineParams
+from bayesmachine.params import DEFAULT_RNG, MachineParams
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -26,7 +26,7 @@ def main(argv: list[str] | None = None) -> None:
                 formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--counter-max", type=counter_max_list, default="1,16")
     ap.add_argument("--engine", choices=ENGINES, default="model")
-    ap.add_argument("--rng", type=rng_list, default=MachineParams.rng, help="comma-separated random sources")
+    ap.add_argument("--rng", type=rng_list, default=DEFAULT_RNG, help="comma-separated random sources")
     args = ap.parse_args(argv)
     crop = Crop(50, 10, 640, 480)
     left, right, gt = (crop_image(a, crop) for a in bundled_pair())

@@ -19,7 +19,6 @@ from bayesmachine.cliargs import (
     machine_params_from_args,
     model_params_from_args,
     output_path,
-    refuse_log_integrator,
 )
 
 from .flow import ROUTERS
@@ -104,8 +103,6 @@ def _run(args: argparse.Namespace, *, measure: Measure) -> int:
         raise ValueError(f"{', '.join(pnr)}: options of place and route, which --synth-only skips")
     model = model_params_from_args(args)
     params = machine_params_from_args(args, args.dmax, model=model)
-    if args.top == "machine" and args.machines != 1:  # ParallelMachines: stochastic machines
-        refuse_log_integrator(params, f"synth --top machine --machines {args.machines}")
     stereo: dict[str, object] = {"model": model}
     if args.top == "stereo":
         from bayesmachine.hdl.frontend.cli import fifo_pixels, stereo_params, width

@@ -19,7 +19,6 @@ from bayesmachine.checks import as_int
 from bayesmachine.hdl.frontend import DEFAULT_FIFO_PIXELS
 from bayesmachine.models import DEFAULT_MODEL, ModelParams
 from bayesmachine.params import MachineParams
-from bayesmachine.sources import source_kind
 
 from .targets import Target, get_target
 
@@ -126,7 +125,7 @@ def _check(params: MachineParams, target: Target, *, machines: int, pin_width: i
     as_int("machines", machines, 1)
     if not freq_mhz > 0:
         raise ValueError(f"freq must be > 0 MHz, got {freq_mhz}")
-    if not source_kind(params.rng).on_chip:
+    if params.takes_numbers:
         raise ValueError(f"synth needs an on-chip random source, not {params.rng!r} (numbers on a port "
                          "as wide as the matrix): --rng lfsr, lfsr-shared or sobol")
     if measure is not None and (isinstance(measure, bool) or not callable(measure)):
@@ -190,11 +189,9 @@ def _synthesize(params: MachineParams, target: Target, out: Path, say: Callable[
         "target": target.name,
         "device": target.device,
         "machine": params.to_dict(),
-        "machine_summary": f"Dmax {params.rows - 2}, N {params.columns}, "
-        + ("log integrator" if params.integrator == "log"  # no counters, no random source
-           else f"counter max {params.counter_max}") + f", W {params.word_bits}, "
-        + ("" if params.integrator == "log" else f"rng {params.rng}, ")
-        + f"{params.words_per_beat} words per load beat",
+        "machine_summary": ", ".join([
+            f"Dmax {params.rows - 2}", f"N {params.columns}", *params.kind.brief(params),
+            f"{params.words_per_beat} words per load beat"]),
         "top": "stereo" if width is not None else "machine",
         "stereo": None,
         "machines": machines,

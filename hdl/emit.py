@@ -33,7 +33,7 @@ def _ports(params: MachineParams) -> list[tuple[str, str, int]]:
     """The machine's ports, from its signature (no component is built)."""
     from .signatures import MachineSignature
 
-    return signature_ports(MachineSignature(params, entropy=params.integrator == "stochastic"))
+    return signature_ports(MachineSignature(params))
 
 
 def summary(params: MachineParams) -> str:

@@ -1,10 +1,11 @@
-"""K machines: k ``BayesianMachine`` side by side behind one load stream and one result stream.
+"""K machines: k machines of one integrator (``BayesianMachine``, or ``LogMachine``) side by side behind
+one load stream and one result stream.
 
 Pixels are dealt round-robin: pixel i (counted from reset) goes to machine ``i % k``, and results
 come out in pixel order (machine after machine), so the k machines are a drop-in for one machine
 with k times the compute. Machine i is the machine of ``nth_machine(params, i)`` (its own seed); the
 model twin ``bayesmachine.sim.machines.ParallelMachinesModel`` runs each machine's pixels through
-that machine's model.
+that machine's model (its integrator kind's).
 
 Both streams have the single machine's layouts. The load stream carries one beat per cycle, so k
 machines need ``words_per_beat`` large enough to keep them all busy: with runs of about R cycles,
@@ -18,22 +19,18 @@ from amaranth.lib import wiring
 
 from bayesmachine.checks import as_int
 from bayesmachine.params import MachineParams, ParameterError, nth_machine
-from bayesmachine.sources import source_kind
 
-from .machine import BayesianMachine
 from .signatures import MachineSignature
 
 __all__ = ["ParallelMachines", "machine_top"]
 
 
 def machine_top(params: MachineParams) -> wiring.Component:
-    """The one machine of ``params``: ``BayesianMachine``, or with ``integrator = "log"`` the
-    logarithmic one (``hdl.log.machine.LogMachine``), both with the machine's ports."""
-    if isinstance(params, MachineParams) and params.integrator == "log":
-        from .log.machine import LogMachine
-
-        return LogMachine(params=params)
-    return BayesianMachine(params=params)
+    """The one machine of ``params``: its integrator kind's top (``BayesianMachine``; with ``integrator =
+    "log"`` the logarithmic one, ``hdl.log.machine.LogMachine``), both with the machine's ports."""
+    if not isinstance(params, MachineParams):
+        raise TypeError(f"params must be a MachineParams, not {type(params).__name__}")
+    return params.kind.machine_top(params)  # type: ignore[return-value]
 
 
 class ParallelMachines(wiring.Component):
@@ -57,7 +54,7 @@ class ParallelMachines(wiring.Component):
         if not isinstance(params, MachineParams):
             raise TypeError(f"ParallelMachines takes a MachineParams, not {type(params).__name__}")
         machines = as_int("machines", machines, 1, 256)
-        if not source_kind(params.rng).on_chip:
+        if params.takes_numbers:
             raise ParameterError(f"K machines need an on-chip random source, not {params.rng!r}")
         if params.feedback_columns:
             # Round-robin: each machine's previous result is pixel i - k's, not the left neighbour's.
@@ -80,7 +77,7 @@ class ParallelMachines(wiring.Component):
     def elaborate(self, platform: object) -> Module:
         m = Module()
         p, k = self._params, self._machines
-        machines = [BayesianMachine(params=nth_machine(p, i)) for i in range(k)]
+        machines = [machine_top(nth_machine(p, i)) for i in range(k)]
         for i, machine in enumerate(machines):
             m.submodules[f"machine_{i}"] = machine
 

@@ -27,7 +27,6 @@ from amaranth.lib.wiring import In, Out
 
 from bayesmachine.checks import as_bool
 from bayesmachine.params import MachineParams
-from bayesmachine.sources import source_kind
 
 __all__ = [
     "ENTROPY_PORTS", "MachineSignature", "StereoSignature", "beat_words", "entropy_layout", "entropy_members",
@@ -114,8 +113,8 @@ def map_stream(params: MachineParams) -> stream.Signature:
 def entropy_members(params: MachineParams) -> dict[str, wiring.Member]:
     """``entropy`` (``In(entropy_layout(params))``, sampled on compute cycles) and ``entropy_ready``
     (``Out(1)``, high on compute cycles: the numbers are consumed at the clock edge) for an
-    off-chip random source; nothing for an on-chip one."""
-    if source_kind(params.rng).on_chip:
+    off-chip random source; nothing for an on-chip one, nor for a machine that draws no random numbers."""
+    if not params.takes_numbers:
         return {}
     return {"entropy": In(entropy_layout(params)), "entropy_ready": Out(1)}
 

@@ -22,7 +22,6 @@ import numpy as np
 
 from bayesmachine.columns import PassContext, PlaneColumn, hamming, quantize
 from bayesmachine.columns.census import _hamming_plain as hamming_plain
-from bayesmachine.columns.energy import log_codes
 from bayesmachine.models import ModelParams, Pass, check_disparity_machine
 from bayesmachine.params import MachineParams, ParameterError
 from bayesmachine.region import OutputRegion
@@ -117,15 +116,14 @@ def pass_words(p: Pass, left: Planes, right: Planes, machine: MachineParams, *, 
     (module text). ``above``: the pass's own MAPs of the map row above (W,), -1 for none (an ABOVE
     column's: required then, one row at a time); ``results``: the other passes' MAPs of these rows by
     name (a PASS column's); ``prior``: the words (P, M) of the machine's own loaded prior column
-    (``prior="loaded"``; default 1.0). With ``integrator = "log"`` each column's energy codes instead
+    (``prior="loaded"``; default 1.0). What the machine's integrator kind loads (``kind.column_entries``):
+    with ``integrator = "log"`` each column's energy codes instead
     (``Column.codes``: ``bayesmachine.columns.energy.log_codes`` of its float64 factors, its
     ``Term.energy()`` codes, 511 for a factor of 0; a fused column's summed codes), ``prior`` codes too."""
     model = p.model
     check_disparity_machine(model, machine)
-    log = machine.integrator == "log"  # energy codes of the float64 factors (log_codes), not words
-    code = log_codes if log else np.asarray
-    ctx = pass_context(p, left, right, None if log else machine.word_bits, rows=rows, above=above,
-                       results=results)
+    kind = machine.kind  # what its machine loads: words, or energy codes of the float64 factors
+    ctx = pass_context(p, left, right, kind.table_bits(machine), rows=rows, above=above, results=results)
     loaded = [c for c in p.columns if c.source.loaded]
     own = machine.loaded_columns - len(loaded)  # the machine's own loaded prior column (prior="loaded")
     if prior is not None and not own:
@@ -134,12 +132,12 @@ def pass_words(p: Pass, left: Planes, right: Planes, machine: MachineParams, *, 
     n = ctx.rows * ctx.columns.size
     words = np.empty((n, model.hypotheses, machine.loaded_columns), dtype=np.uint16)
     if own:
-        flat = 0 if log else machine.word_one  # 1.0: the code 0, the word 2^W
+        flat = kind.flat(machine)  # 1.0: the word 2^W, the code 0
         words[:, :, 0] = flat if prior is None else _given(prior, (n, model.hypotheses))
     for k, c in enumerate(loaded, start=own):
-        words[:, :, k] = c.codes(ctx) if log else c.words(ctx)
+        words[:, :, k] = kind.column_entries(c, ctx)
     if p.nomatch and not p.rule_column.holds_rule:
-        words[:, -1, own + loaded.index(p.rule_column)] = code(model.nomatch.floor(ctx))
+        words[:, -1, own + loaded.index(p.rule_column)] = kind.entries(model.nomatch.floor(ctx), machine)
     return words
 
 

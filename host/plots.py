@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -160,7 +161,8 @@ def save_calibration_figure(path: str | Path, report: dict[str, object]) -> None
 
 def save_sweep_figure(path: str | Path, sweep: Sequence[dict[str, object]]) -> None:
     """Fig 6: (a) RMS error, no-match F1 and MAP agreement vs counter max; (b) cycles/pixel (mean,
-    median, 10-90 % band). Points with several random sources (key ``rng``) get one colour each."""
+    median, 10-90 % band). Points with several random sources (key ``rng``) get one colour each; a point
+    without a counter max (a log machine's) is a dotted level across."""
     from matplotlib.lines import Line2D
 
     kinds = list(dict.fromkeys(str(s.get("rng", "")) for s in sweep))
@@ -172,12 +174,19 @@ def save_sweep_figure(path: str | Path, sweep: Sequence[dict[str, object]]) -> N
                ("map_agreement", "^--", "MAP agreement", 0.6)]
     for i, kind in enumerate(kinds):
         pts = [s for s in sweep if str(s.get("rng", "")) == kind]
+        colour = colours[i % len(colours)]
+        flat = [s for s in pts if s.get("counter_max") is None]  # a machine without counters: a level
+        for s, (key, _style, _, alpha) in itertools.product(flat, metrics):
+            if s.get(key) is not None:
+                a.axhline(float(s[key]), color=colour, linestyle=":", alpha=alpha)  # type: ignore[arg-type]
+        for s in flat:
+            b.axhline(float(s["cycles_per_pixel_mean"]), color=colour, linestyle=":")  # type: ignore[arg-type]
+        pts = [s for s in pts if s.get("counter_max") is not None]
         cm = np.array([float(s["counter_max"]) for s in pts])  # type: ignore[arg-type]
 
         def col(key: str, pts: list[dict[str, object]] = pts) -> np.ndarray:
             return np.array([np.nan if s.get(key) is None else float(s[key]) for s in pts])  # type: ignore[arg-type]
 
-        colour = colours[i % len(colours)]
         for key, style, label, alpha in metrics:
             a.plot(cm, col(key), style, color=colour, alpha=alpha, label=None if several else label)
         # The per-pixel distribution is heavy-tailed, so mean +- std would dip below zero: show the

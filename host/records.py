@@ -81,10 +81,15 @@ class MachineRun:
         columns) x B x its compute cycles summed over its pixels, divided by the output pixels (a pass of
         more pixels than the output weighs more); None for a run without cycles or pixels, and for the
         logarithmic machine, which samples nothing."""
-        if self.cycles is None or not self.map.size or self.machine.integrator == "log":
+        if self.cycles is None or not self.map.size:
             return None
         runs = [(self.machine, self.cycles), *((r.machine, r.cycles) for r in self.passes.values())]
-        work = sum(m.operators * m.samples_per_clock * float(np.sum(c, dtype=np.float64)) for m, c in runs)
+        work = 0.0
+        for m, c in runs:
+            samples = m.kind.samples_per_pixel(m, float(np.sum(c, dtype=np.float64)))
+            if samples is None:  # a machine that samples nothing (the logarithmic one)
+                return None
+            work += m.operators * samples
         return work / self.map.size
 
 

@@ -45,11 +45,13 @@ from bayesmachine.cliargs import (
     model_names_from_args,
     model_params_from_args,
     pass_watchdogs,
+    refuse_unread_options,
     rng_list,
 )
+from bayesmachine.integrators import KIND_FIELDS, IntegratorKind, integrator_kind, unread_fields
 from bayesmachine.models import ModelParams
 from bayesmachine.outputs import OutputDir, require_ours
-from bayesmachine.params import STOCHASTIC_FIELDS, MachineParams
+from bayesmachine.params import DEFAULT_INTEGRATOR, MachineParams
 
 from .datasets import PairSpec, load_pair
 from .images import Crop
@@ -88,6 +90,11 @@ _AXES_OF_ONE = ("rng", "lfsr_bits", "seed")
 
 
 # --- the grid ---------------------------------------------------------------------------------
+
+
+class DefaultAxis(list):
+    """The values of an axis whose option was not given (its default): a sweep refuses an option that no
+    point's integrator reads only when it is given."""
 
 
 def _value_list(option: MachineOption) -> Callable[[str], Any]:
@@ -131,13 +138,14 @@ def list_option_changes(counter_max_default: list[int]) -> dict[str, dict[str, A
             continue
         metavar = f"{option.metavar or 'V'},..." if option.choices is None else f"{name.upper()},..."
         if name == "counter_max":
-            changes[name] = {"type": counter_max_list, "default": counter_max_default, "metavar": "N,N,..."}
+            changes[name] = {"type": counter_max_list, "default": DefaultAxis(counter_max_default),
+                             "metavar": "N,N,..."}
         elif name == "rng":
             changes[name] = {"type": rng_list, "choices": None, "metavar": "KIND,KIND,..."}
         else:
             changes[name] = {"type": _value_list(option), "choices": None, "metavar": metavar}
         if name in _AXES_OF_ONE:
-            changes[name]["default"] = machine_default(name)
+            changes[name]["default"] = DefaultAxis([machine_default(name)])
     return changes
 
 
@@ -169,38 +177,49 @@ def sweep_axes(args: argparse.Namespace) -> dict[str, list[Any]]:
     return axes
 
 
+def _unread_args(args: argparse.Namespace, kind: IntegratorKind) -> argparse.Namespace:
+    """``args`` without the options ``kind``'s machine does not read (another kind's fields, a declared
+    pass's watchdog where it has none): its points over their axes are one point."""
+    unread = set(unread_fields([kind]))
+    if "max_cycles" in unread:
+        unread |= pass_watchdogs()
+    return argparse.Namespace(**{k: None if k in unread else v for k, v in vars(args).items()})
+
+
 def sweep_points(args: argparse.Namespace) -> list[Point]:
     """Every grid point, built and validated (a ParameterError names the option) before any run.
 
     Points whose model and machine equal an earlier one's (a device option of ``--rng smtj`` on a
-    point of another source; a log machine's over the stochastic machine's options,
-    :data:`~bayesmachine.params.STOCHASTIC_FIELDS`) are one point."""
+    point of another source; a log machine's over the stochastic machine's options, the fields its
+    integrator kind does not read) are one point. An option that no point's integrator reads is
+    refused, as ``run`` refuses it."""
     axes = sweep_axes(args)
+    kinds = [integrator_kind(name) for name in axes.get("integrator", [DEFAULT_INTEGRATOR])]
+    given = {f: getattr(args, f, None) for f in KIND_FIELDS}
+    refuse_unread_options(args, {f: None if isinstance(v, DefaultAxis) else v[0] if isinstance(v, list) else v
+                                 for f, v in given.items()}, kinds)
     models = {name: model_params_from_args(args, name) for name in axes["model"]}
     varying = [a for a, v in axes.items() if len(v) > 1 and a not in ("model", "rng", "counter_max")]
     points: list[Point] = []
     seen: set[str] = set()
     names = list(axes)
-    # A log machine's point reads no stochastic option: built without them, its points over their axes
-    # are one point.
-    unread = {*STOCHASTIC_FIELDS, *pass_watchdogs()}
-    log_args = argparse.Namespace(**{k: None if k in unread else v for k, v in vars(args).items()})
+    own_args = {kind.name: _unread_args(args, kind) for kind in kinds}
     for combo in itertools.product(*axes.values()):
         values = dict(zip(names, combo, strict=True))
         model = models[values["model"]]
-        log = values.get("integrator") == "log"
-        overrides = {k: v for k, v in values.items() if k != "model" and not (log and k in unread)}
-        machine = machine_params_from_args(log_args if log else args, model.dmax, model=model, **overrides)
+        kind = integrator_kind(values.get("integrator", DEFAULT_INTEGRATOR))
+        overrides = {k: v for k, v in values.items() if k != "model" and (k in kind.fields
+                                                                          or k not in KIND_FIELDS)}
+        machine = machine_params_from_args(own_args[kind.name], model.dmax, model=model, **overrides)
         mdict = machine.to_dict(complete=True)  # every resolved value (normalize off, not left out)
         key = json.dumps([model.name, model.to_dict(), mdict], sort_keys=True, default=str)
         if key in seen:
             continue
         seen.add(key)
-        parts = ([model.name, *([] if "integrator" in varying else ["log"])] if log
-                 else [model.name, machine.rng, f"cm{machine.counter_max}"])
-        parts += [f"{a}{mdict[a]}" for a in varying if a in mdict and not (log and a in unread)]
-        # None: not this point's option (another source's, or the stochastic machine's)
-        own = {a: None if log and a in unread else mdict.get(a) for a in names if a != "model"}
+        parts = [model.name, *([kind.name] if kind.named and "integrator" not in varying else []),
+                 *kind.id_parts(machine), *(f"{a}{mdict[a]}" for a in varying if a in mdict)]
+        # None: not this point's option (another source's, or another integrator's)
+        own = {a: mdict.get(a) for a in names if a != "model"}
         points.append(Point(len(points), _safe("_".join(str(p) for p in parts)), model, machine,
                             {"model": model.name, **own}))
     if len({p.id for p in points}) != len(points):  # an option value that _safe maps onto another's
@@ -586,7 +605,9 @@ def _plot(path: Path, sweep: dict[str, Any]) -> None:
     # One pair: the paper's Fig 6 (cycles with their spread over pixels); several models: one colour
     # per model and source.
     several = len(sweep["models"]) > 1
-    save_sweep_figure(path, [dict(p, rng=f"{p['model_name']} {p['rng']}") if several else p for p in points])
+    # A series per random source, or per integrator where a machine has none (a log machine).
+    series = [dict(p, rng=p["rng"] if p["rng"] is not None else p["grid"].get("integrator")) for p in points]
+    save_sweep_figure(path, [dict(p, rng=f"{p['model_name']} {p['rng']}") if several else p for p in series])
 
 
 def run_sweep(config: SweepConfig, client: Any = None) -> SweepOutcome:

@@ -65,7 +65,6 @@ from bayesmachine.sim.results import (
     check_line_start,
     check_words,
 )
-from bayesmachine.sources import SOURCE_KINDS
 
 if TYPE_CHECKING:
     from bayesmachine.sources import NumberSource
@@ -178,7 +177,7 @@ class EngineBase(EngineLifecycle):
             raise ValueError(f"the {self.name} engine does not run a machine with prior = 'neighbour' yet")
         super().__init__()
         self._params = params
-        self._kind = SOURCE_KINDS[params.rng]
+        self._kind = params.source  # None: the machine draws no random numbers
         self._feed = NumberFeed(params)
         self._device: NumberSource | None = None
         self._new_supply = False  # this run's numbers come from another source than the last run's
@@ -205,10 +204,11 @@ class EngineBase(EngineLifecycle):
 
     def _source(self, numbers: np.ndarray | NumberSource | None) -> NumberSource | None:
         p = self._params
-        if self._kind.on_chip:
+        if self._kind is None or self._kind.on_chip:
             if numbers is not None:
                 raise ValueError(f"random numbers are only taken by an off-chip source; rng = {p.rng!r} "
-                                 "generates them on chip")
+                                 "generates them on chip" if self._kind is not None else
+                                 f"integrator = {p.integrator!r} draws no random numbers: pass none")
             return None
         if numbers is None:
             if self._kind.numbers is None:

@@ -21,7 +21,7 @@ import numpy as np
 
 from bayesmachine.columns.energy import INFINITE_CODE
 from bayesmachine.hdl.log.rule import integrate_pixel
-from bayesmachine.integrators.log import log_params, pixel_clocks
+from bayesmachine.integrators.log import LOG, log_params, pixel_clocks
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.engines import EngineBase
 from bayesmachine.sim.model import feedback_result, fill_feedback
@@ -55,7 +55,7 @@ class LogMachineModel(EngineBase):
     FEEDBACK = True
 
     def __init__(self, params: MachineParams) -> None:
-        if not isinstance(params, MachineParams) or params.integrator != "log":
+        if not isinstance(params, MachineParams) or params.kind is not LOG:
             raise ValueError("LogMachineModel runs a machine with integrator = 'log'")
         super().__init__(params)
         self._log = log_params(params)
@@ -67,11 +67,6 @@ class LogMachineModel(EngineBase):
 
     def _reset(self) -> None:
         self._prev[0] = -1
-
-    def _source(self, numbers: object) -> None:
-        if numbers is not None:
-            raise ValueError("integrator = 'log' draws no random numbers: pass none")
-        return None
 
     def _run(self, words: np.ndarray, feed: NumberFeed | None) -> MachineResult:
         return self._integrate(words, np.zeros(0, np.uint8))

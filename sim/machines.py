@@ -1,4 +1,5 @@
-"""The model twin of ``hdl.machines.ParallelMachines``: pixel i to machine ``i % k``, each a machine model."""
+"""The model twin of ``hdl.machines.ParallelMachines``: pixel i to machine ``i % k``, each its integrator's
+model."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ import numpy as np
 from bayesmachine.checks import as_int
 from bayesmachine.params import MachineParams, nth_machine
 
-from .model import MachineModel, MachineResult, check_words
+from .results import MachineResult, check_words
 
 __all__ = ["ParallelMachinesModel"]
 
@@ -18,7 +19,8 @@ class ParallelMachinesModel:
     def __init__(self, params: MachineParams, machines: int) -> None:
         machines = as_int("machines", machines, 1, 256)
         self._params = params
-        self._models = [MachineModel(nth_machine(params, i)) for i in range(machines)]
+        model = params.kind.engine_class("model")
+        self._models = [model(nth_machine(params, i)) for i in range(machines)]
         self._next = 0  # the machine of the next pixel
 
     @property

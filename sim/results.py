@@ -142,8 +142,8 @@ def check_words(params: MachineParams, words: np.ndarray) -> np.ndarray:
         raise ValueError(f"likelihood memory words must be integers, got dtype {w.dtype}")
     if w.size and (w.min() < 0 or w.max() > params.load_max):
         what = (f"likelihood memory words must lie in [0, {params.word_one}] (p = q / 2**{params.word_bits})"
-                if params.integrator == "stochastic" else
-                f"energy codes (integrator = 'log') must lie in [0, {params.load_max}]")
+                if params.kind.loads == "words" else
+                f"energy codes (integrator = {params.integrator!r}) must lie in [0, {params.load_max}]")
         raise ValueError(f"{what}; got [{w.min()}, {w.max()}]")
     return np.ascontiguousarray(w, dtype=np.int32)
 

@@ -48,7 +48,6 @@ from bayesmachine.sim.verilator import VerilatorError, cache_dir, find_toolchain
 from bayesmachine.sim.verilator.build import HarnessSources, VerilatorBuild, build_design, cached_verilog
 from bayesmachine.sim.verilator.codegen import entropy_header, header_prologue, wrapper_verilog
 from bayesmachine.sim.verilator.engine import HarnessProcess
-from bayesmachine.sources import source_kind
 
 __all__ = ["StereoVerilatorEngine", "build_stereo_harness", "pass_ports"]
 
@@ -195,8 +194,8 @@ class StereoVerilatorEngine(HarnessProcess, PixelEngineBase):
         machines: int = 1,
         activity: str | os.PathLike[str] | None = None,
     ) -> None:
-        kind = source_kind(params.rng)
-        if not kind.on_chip and kind.numbers is None:
+        kind = params.source  # None: the machine draws no random numbers
+        if params.takes_numbers and kind.numbers is None:  # type: ignore[union-attr]
             raise ValueError(f"--feed pixels feeds an off-chip source from its device model; rng = "
                              f"{params.rng!r} has none (its numbers come from the caller)")
         super().__init__(params, model, width)  # last_passes: the declared passes' results of the last frame
@@ -221,7 +220,7 @@ class StereoVerilatorEngine(HarnessProcess, PixelEngineBase):
             t0 = time.perf_counter()
             try:
                 self._write(proc, struct.pack("<IIII", _MAGIC_FRAME, 0, height, width), pairs.tobytes())
-                self._serve_numbers(proc, None if self._kind.on_chip else self._numbers())
+                self._serve_numbers(proc, self._numbers() if self.params.takes_numbers else None)
                 out = self._read_results(proc, n, t0)
                 # then each declared pass's results, every pixel of the pass of every output row
                 self.last_passes = {name: self._read_pass(proc, pp, (height - 2 * k) * row)

@@ -154,6 +154,15 @@ def frame_results(params: MachineParams, model: object, left: np.ndarray, right:
     return machines_model([(left, right)], model, params)  # type: ignore[arg-type]
 
 
+def own_options(integrator: str, **options: object) -> dict[str, object]:
+    """``options`` without the fields ``integrator``'s kind does not read (a log machine takes no counter
+    max): the options of a test run with either integrator."""
+    from bayesmachine.integrators import KIND_FIELDS, integrator_kind
+
+    kind = integrator_kind(integrator)
+    return {k: v for k, v in options.items() if k in kind.fields or k not in KIND_FIELDS}
+
+
 def small_params(**kwargs: object) -> MachineParams:
     """A small machine (5 rows x 2 columns, W = 4, L = 12) that runs fast in the simulator."""
     base: dict[str, object] = dict(

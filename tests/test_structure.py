@@ -186,3 +186,59 @@ def test_the_private_read_check_sees_them() -> None:
            "m.submodules.dut = 1\n")
     assert [what for _, what in sorted(_private_reads(ast.parse(src)))] == [
         "._statements", "._lhs_signals", ".origins", "_stereo.FeaturePipeline ="]
+
+
+# Where an integrator may be named in a comparison: its registry, and each kind's own modules (its blocks,
+# its model).
+INTEGRATOR_HOMES = ("bayesmachine/integrators/", "hdl/log/", "sim/log_model.py")
+
+
+def _names_an_integrator(node: ast.AST, names: frozenset[str]) -> bool:
+    """Whether ``node`` is an integrator's name (a string of ``INTEGRATORS``, ``DEFAULT_INTEGRATOR``), a
+    kind itself (``LOG``) or reads a machine's ``integrator`` (``p.integrator``, ``d["integrator"]``,
+    ``d.get("integrator")``)."""
+    named = {"DEFAULT_INTEGRATOR", "integrator", *(n.upper() for n in names)}
+    if isinstance(node, ast.Constant):
+        return node.value in names
+    if isinstance(node, ast.Name):
+        return node.id in named
+    if isinstance(node, ast.Attribute):
+        return node.attr in named
+    key = None
+    if isinstance(node, ast.Subscript):
+        key = node.slice
+    elif isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "get":
+        key = node.args[0] if node.args else None
+    return isinstance(key, ast.Constant) and key.value == "integrator"
+
+
+def integrator_branches(tree: ast.AST, names: frozenset[str]) -> Iterator[int]:
+    """The lines of ``tree`` that compare with an integrator's name (``==``, ``!=``, ``in``) or key a
+    mapping on one: a choice the integrator kind should make."""
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Compare):
+            if any(_names_an_integrator(n, names) for n in (node.left, *node.comparators)):
+                yield node.lineno
+        elif isinstance(node, ast.Dict):
+            if any(k is not None and isinstance(k, ast.Constant) and k.value in names for k in node.keys):
+                yield node.lineno
+
+
+def test_the_branch_scan_sees_a_branch() -> None:
+    names = frozenset(("stochastic", "log"))
+    code = ("a = p.integrator == 'log'\nb = d.get('integrator') != x\nc = 'log' in kinds\n"
+            "e = {'stochastic': 1}\nf = p.kind is LOG\ng = p.kind.loads == 'codes'\n"
+            "h = 'integrator' in axes\n")
+    assert list(integrator_branches(ast.parse(code), names)) == [1, 2, 3, 4, 5]
+
+
+def test_no_branch_on_an_integrator_s_name_outside_its_kind() -> None:
+    """Commands, engines, the front end and the host ask the integrator's kind (``MachineParams.kind``),
+    never compare its name: a new integrator is its kind's module and its blocks."""
+    from bayesmachine.params import INTEGRATORS
+
+    names = frozenset(INTEGRATORS)
+    found = [f"{rel}:{line}" for path, rel in _sources("__pycache__", "tests")
+             if not str(rel).startswith(INTEGRATOR_HOMES)
+             for line in integrator_branches(ast.parse(path.read_text()), names)]
+    assert not found, "branches on an integrator's name:\n" + "\n".join(found)

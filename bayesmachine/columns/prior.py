@@ -115,9 +115,9 @@ class LeftPrior(NeighbourPrior):
         return tuple(int(c) for c in codes[: last + 1]), int(log_codes(t.nomatch[0]))
 
     def feedback_of(self, machine: Any) -> tuple[tuple[int, ...], int]:
-        """``machine``'s feedback table in its integrator's domain: :meth:`feedback` (words) or
-        :meth:`feedback_codes` (``integrator="log"``)."""
-        return self.feedback_codes() if machine.integrator == "log" else self.feedback(machine.word_bits)
+        """``machine``'s feedback table in its integrator's domain (``IntegratorKind.feedback_table``):
+        :meth:`feedback` (words) or :meth:`feedback_codes` (``integrator="log"``)."""
+        return machine.kind.feedback_table(self, machine)
 
     def check_machine(self, machine: Any) -> None:
         super().check_machine(machine)

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import importlib
 from abc import ABC, abstractmethod
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from typing import TYPE_CHECKING, ClassVar
 
 from bayesmachine.checks import type_name
@@ -31,9 +31,8 @@ if TYPE_CHECKING:  # params imports this package: no import of params (or numpy)
     from bayesmachine.columns.base import Column, PassContext
     from bayesmachine.params import MachineParams
 
-__all__ = ["INTEGRATOR_KINDS", "IntegratorKind", "integrator_kind", "load_named"]
-
-LOADS = ("words", "codes")
+__all__ = ["INTEGRATOR_KINDS", "KIND_FIELDS", "IntegratorKind", "integrator_kind", "load_named",
+           "unread_fields"]
 
 
 def load_named(target: str) -> type:
@@ -52,6 +51,11 @@ class IntegratorKind(ABC):
         The ``MachineParams.integrator`` that selects it.
     description : str
         One line for ``--help`` and reports.
+    title : str
+        Its machine's adjective in messages ("the logarithmic machine").
+    named : bool
+        Whether a one-line summary and a sweep point's id name the integrator where it does not vary
+        (the paper's machine, the default, goes unnamed).
     loads : str
         ``"words"`` (W-bit likelihood words, 2^W the factor 1.0) or ``"codes"`` (energy codes,
         ``bayesmachine.columns.energy.log_codes``, 0 the factor 1.0).
@@ -72,6 +76,8 @@ class IntegratorKind(ABC):
 
     name: ClassVar[str]
     description: ClassVar[str]
+    title: ClassVar[str]
+    named: ClassVar[bool]
     loads: ClassVar[str]
     fields: ClassVar[tuple[str, ...]]
     defaults: ClassVar[Mapping[str, object]]
@@ -165,12 +171,17 @@ class IntegratorKind(ABC):
         """How the machine integrates, for ``emit``'s summary."""
 
     @abstractmethod
-    def label(self, params: MachineParams) -> str:
-        """A short label of the machine for a one-line summary (``rng=... counter_max=...``)."""
+    def brief(self, params: MachineParams) -> list[str]:
+        """The parts of a one-line description of the machine after its rows and columns (synth's
+        ``machine_summary``: ``counter max 16``, ``W 10``, ...)."""
+
+    @abstractmethod
+    def label_parts(self, values: Mapping[str, object]) -> list[str]:
+        """What a one-line summary says of the machine of a report's ``values`` (``rng=...``)."""
 
     @abstractmethod
     def id_parts(self, params: MachineParams) -> list[str]:
-        """The parts of a sweep point's id this kind names (after the model's)."""
+        """The parts of a sweep point's id this kind's fields give (after the model's)."""
 
 
 def _kinds() -> dict[str, IntegratorKind]:
@@ -181,6 +192,16 @@ def _kinds() -> dict[str, IntegratorKind]:
 
 
 INTEGRATOR_KINDS: dict[str, IntegratorKind] = _kinds()
+
+
+# Every kind's own fields (None for the other kinds' machines).
+KIND_FIELDS = tuple(dict.fromkeys(f for kind in INTEGRATOR_KINDS.values() for f in kind.fields))
+
+
+def unread_fields(kinds: Iterable[IntegratorKind]) -> tuple[str, ...]:
+    """The kinds' own fields (:data:`KIND_FIELDS`) that none of ``kinds`` reads."""
+    read = {f for kind in kinds for f in kind.fields}
+    return tuple(f for f in KIND_FIELDS if f not in read)
 
 
 def integrator_kind(name: str) -> IntegratorKind:

@@ -9,6 +9,7 @@ its top).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -187,6 +188,8 @@ class LogKind(IntegratorKind):
 
     name = "log"
     description = "energy codes summed per row, the MAP the lowest sum (docs/integrators.md)"
+    title = "logarithmic"
+    named = True
     loads = "codes"
     fields = ()
     defaults = {}
@@ -217,7 +220,12 @@ class LogKind(IntegratorKind):
         return self.load_max(params)
 
     def max_clocks(self, params: MachineParams) -> int:
-        return pixel_clocks(params)[1]
+        """The cycles field's range: the default stochastic machine's watchdog (20 bits), so that a log
+        machine's results have the result layout of the stochastic machine's defaults (its ports, the
+        board's records); its cycles are at most :func:`pixel_clocks`' loop."""
+        from .stochastic import DEFAULT_MAX_CYCLES
+
+        return DEFAULT_MAX_CYCLES
 
     def nth_machine(self, params: MachineParams, index: int) -> MachineParams:
         return params  # no seed: K log machines are one machine K times
@@ -249,11 +257,14 @@ class LogKind(IntegratorKind):
                 f"weights ({len(lp.weights)}-entry exp table); {pixel_clocks(params)[1]} clock(s) per pixel "
                 "where a feedback column binds, else 1"]
 
-    def label(self, params: MachineParams) -> str:
-        return "integrator=log"
+    def brief(self, params: MachineParams) -> list[str]:
+        return ["log integrator", f"W {params.word_bits}"]  # no counters, no random source
+
+    def label_parts(self, values: Mapping[str, object]) -> list[str]:
+        return []  # no source, no counters
 
     def id_parts(self, params: MachineParams) -> list[str]:
-        return ["log"]
+        return []
 
 
 LOG = LogKind()

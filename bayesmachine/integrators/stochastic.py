@@ -8,6 +8,7 @@ ports: ``docs/architecture.md`` ("Timing").
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
@@ -121,6 +122,8 @@ class StochasticKind(IntegratorKind):
 
     name = "stochastic"
     description = "the paper's machine: AND gates and overflow counters on random numbers"
+    title = "stochastic"
+    named = False
     loads = "words"
     fields = STOCHASTIC_FIELDS
     defaults = {"counter_max": DEFAULT_COUNTER_MAX, "rng": DEFAULT_RNG, "lfsr_bits": DEFAULT_LFSR_BITS,
@@ -185,8 +188,11 @@ class StochasticKind(IntegratorKind):
                 f"watchdog {params.max_cycles} cycles",
                 f"random source: {params.rng}: {source_kind(params.rng).description}{_source_detail(params)}"]
 
-    def label(self, params: MachineParams) -> str:
-        return f"rng={params.rng} counter_max={params.counter_max}"
+    def brief(self, params: MachineParams) -> list[str]:
+        return [f"counter max {params.counter_max}", f"W {params.word_bits}", f"rng {params.rng}"]
+
+    def label_parts(self, values: Mapping[str, object]) -> list[str]:
+        return [f"rng={values['rng']}", f"counter_max={values['counter_max']}"]
 
     def id_parts(self, params: MachineParams) -> list[str]:
         return [params.rng, f"cm{params.counter_max}"]

@@ -31,7 +31,6 @@ from amaranth.lib.wiring import In, Out
 from bayesmachine.checks import as_int
 from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams, ParameterError
-from bayesmachine.sources import source_kind
 
 from . import protocol as pr
 from .arbiter import TransmitArbiter
@@ -58,7 +57,7 @@ def check_board(params: MachineParams, model: ModelParams, width: int) -> None:
 
     check_stereo_machine(params, model, width)
     board_passes(params, model)
-    if not source_kind(params.rng).on_chip:
+    if params.takes_numbers:
         raise ParameterError(
             f"--rng {params.rng}: a board needs an on-chip random source (its numbers "
             "would have to come from outside the board)"

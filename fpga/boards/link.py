@@ -31,8 +31,9 @@ from pathlib import Path
 
 import numpy as np
 
+from bayesmachine.integrators import INTEGRATOR_KINDS
 from bayesmachine.models import ModelParams
-from bayesmachine.params import DEFAULT_INTEGRATOR, STOCHASTIC_FIELDS, MachineParams
+from bayesmachine.params import DEFAULT_INTEGRATOR, MachineParams
 from bayesmachine.region import OutputRegion
 
 from . import protocol as pr
@@ -383,14 +384,12 @@ def design_differences(board: dict, machine: MachineParams, model: ModelParams) 
     else:
         found = differ(model.to_dict(), theirs)
     board_machine = board.get("machine") if isinstance(board.get("machine"), dict) else {}
-    # A stochastic machine's dict leaves its integrator out; the feedback words follow from it. A log
-    # machine reads none of the stochastic fields: they differ only through the model, never named.
-    integrator = board_machine.get("integrator", DEFAULT_INTEGRATOR)
-    if integrator != machine.integrator:
-        found.append(f"--integrator {machine.integrator} here, {integrator} on the board")
+    # A stochastic machine's dict leaves its integrator out; the feedback words follow from it. Only the
+    # fields this machine's integrator reads are compared (a log machine's dict has no stochastic one).
+    theirs_integrator = board_machine.get("integrator", DEFAULT_INTEGRATOR)
+    if INTEGRATOR_KINDS.get(theirs_integrator) is not machine.kind:
+        found.append(f"--integrator {machine.integrator} here, {theirs_integrator} on the board")
     skip = _DERIVED if found else ("rows",)
-    if DEFAULT_INTEGRATOR not in (integrator, machine.integrator):
-        skip += STOCHASTIC_FIELDS
     return found + differ(machine.to_dict(), board_machine, skip)
 
 

@@ -113,8 +113,8 @@ def summary(top: StereoMachine) -> str:
         lines.append(f"  {term.name}" + (f": {values}" if values else ""))
     for declared in declared_passes(m):
         dp = pass_params(m, p, declared.name)
-        # The log machine has no random source or watchdog.
-        own = "" if dp.integrator == "log" else f", seed {dp.seed:#x}, watchdog {dp.max_cycles}"
+        # A machine's own random source and watchdog (the log machine has neither).
+        own = "" if dp.seed is None else f", seed {dp.seed:#x}, watchdog {dp.max_cycles}"
         lines.append(
             f"{declared.name} pass: the {declared.model.name} model with the {declared.reference} image as "
             f"reference on a machine beside the own one ({dp.columns} data columns, {dp.words_per_beat} "

@@ -49,7 +49,6 @@ from bayesmachine.hdl.signatures import (
 )
 from bayesmachine.models import DEFAULT_MODEL, ModelParams, disparity_machine
 from bayesmachine.params import DEFAULT_DMAX, MachineParams, ParameterError, stereo_words_per_beat
-from bayesmachine.sources import source_kind
 
 from . import DEFAULT_FIFO_PIXELS, MAX_MACHINES, MAX_WIDTH
 from .layouts import declared_passes
@@ -97,7 +96,7 @@ def check_machines(machines: object, params: MachineParams, model: ModelParams) 
     machines = as_int("machines", machines)
     if not 1 <= machines <= MAX_MACHINES:
         raise ParameterError(f"machines must be in [1, {MAX_MACHINES}], got {machines}", "machines")
-    if machines > 1 and not source_kind(params.rng).on_chip:
+    if machines > 1 and params.takes_numbers:
         raise ParameterError(f"machines = {machines}: rng {params.rng!r} is off chip (one number port, "
                              "one device stream); several machines need an on-chip source "
                              "(sobol, lfsr, lfsr-shared)", "machines")

@@ -18,6 +18,7 @@ import numpy as np
 
 from bayesmachine.columns import Fused, Term
 from bayesmachine.columns.energy import INFINITE_CODE, log_codes
+from bayesmachine.integrators import integrator_kind
 from bayesmachine.models import ModelParams
 from bayesmachine.params import DEFAULT_INTEGRATOR, MachineParams
 
@@ -39,7 +40,8 @@ class LoadForm:
 
     @property
     def log(self) -> bool:
-        return self.integrator == "log"
+        """Whether the machine loads energy codes (``IntegratorKind.loads``), not words."""
+        return integrator_kind(self.integrator).loads == "codes"
 
     @property
     def table_bits(self) -> int | None:

@@ -39,7 +39,6 @@ from bayesmachine.columns import Fused, Source
 from bayesmachine.hdl.signatures import load_stream
 from bayesmachine.models import ModelParams, Pass, check_disparity_machine, pass_machine
 from bayesmachine.params import MachineParams, ParameterError
-from bayesmachine.sources import source_kind
 
 from .lanes import Lanes, lanes_for
 from .layouts import declared_passes, pass_pixel_layout, pass_terms
@@ -109,7 +108,7 @@ def check_frontend_params(params: MachineParams, model: ModelParams) -> None:
                                  f"ports, got {', '.join(names)}", "model")
     _check_pass(model, model.passes[-1], params)
     for p in declared_passes(model):
-        if not source_kind(params.rng).on_chip:
+        if params.takes_numbers:
             raise ParameterError(f"rng must be an on-chip random source for the {model.name} model on chip, "
                                  f"got {params.rng!r}: its {p.name} pass runs on a machine of its own, "
                                  "which has no entropy port", "rng")

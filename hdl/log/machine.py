@@ -32,6 +32,7 @@ from bayesmachine.hdl.signatures import MachineSignature, beat_words
 from bayesmachine.integrators.log import (
     ADDER_LEVELS_PER_STAGE,
     ARGMIN_LEVELS_PER_STAGE,
+    LOG,
     log_params,
     pixel_clocks,
 )
@@ -69,11 +70,11 @@ class LogMachine(wiring.Component):
     def __init__(self, *, params: MachineParams) -> None:
         if not isinstance(params, MachineParams):
             raise TypeError(f"params must be a MachineParams, not {type(params).__name__}")
-        if params.integrator != "log":
+        if params.kind is not LOG:
             raise ValueError("LogMachine builds a machine with integrator = 'log'")
         self._params = params
         self._log = log_params(params)
-        super().__init__(MachineSignature(params, entropy=False))
+        super().__init__(MachineSignature(params))
 
     @property
     def params(self) -> MachineParams:

@@ -79,7 +79,7 @@ def host_rng_help() -> str:
 
 def _check_host_rng(machine: MachineParams) -> None:
     """The host drives on-chip sources and off-chip ones with a device model; not bare ``external``."""
-    if machine.rng not in runnable_sources():
+    if machine.source is not None and machine.rng not in runnable_sources():
         raise ValueError(
             f"--rng {machine.rng}: the machine takes its random numbers on the entropy port and "
             f"this source has no model the host can run; use it with 'bayesmachine emit'"

@@ -26,8 +26,10 @@ from bayesmachine.cliargs import (
 )
 from bayesmachine.extras import needs_host
 from bayesmachine.hdl.frontend import MAX_MACHINES
+from bayesmachine.integrators import integrator_kind
 from bayesmachine.models import ModelParams
 from bayesmachine.outputs import OutputDir
+from bayesmachine.params import DEFAULT_INTEGRATOR
 from bayesmachine.region import OutputRegion
 from bayesmachine.sim.engines import check_pixel_engine_options
 
@@ -229,6 +231,13 @@ def _write_json(path: Path, obj: object) -> None:
     path.write_text(json.dumps(json_safe(obj), indent=2, allow_nan=False) + "\n")
 
 
+def _machine_label(r: dict[str, object]) -> list[str]:
+    """What a summary line says of a report's machine: its integrator unless the default one, its kind's
+    fields."""
+    kind = integrator_kind(str(r.get("integrator", DEFAULT_INTEGRATOR)))
+    return [*([f"integrator={kind.name}"] if kind.named else []), *kind.label_parts(r)]
+
+
 def _summary(r: dict[str, object]) -> str:
     def f(key: str, fmt: str = ".4f") -> str:
         v = r.get(key)
@@ -236,8 +245,7 @@ def _summary(r: dict[str, object]) -> str:
 
     line = (
         f"{r['engine']} model={r['model_name']} "
-        + ("integrator=log" if r.get("integrator") == "log"
-           else f"rng={r['rng']} counter_max={r['counter_max']}")
+        + " ".join(_machine_label(r))
         + (f" samples_per_clock={r['samples_per_clock']}" if r.get("samples_per_clock", 1) != 1 else "")
         + f": {r['pixels']} px, "
         f"{f('cycles_per_pixel_mean', '.2f')} +- {f('cycles_per_pixel_std', '.2f')} cycles/px, "

@@ -14,7 +14,8 @@ from bayesmachine.cliargs import (
     positive_float_at_most,
 )
 from bayesmachine.extras import needs_host
-from bayesmachine.params import DEFAULT_RNG
+from bayesmachine.integrators import integrator_kind
+from bayesmachine.params import DEFAULT_INTEGRATOR, DEFAULT_RNG
 from bayesmachine.region import OutputRegion
 
 from ..datasets import PairSpec, bundled_spec, files_spec, resolve_dataset
@@ -239,10 +240,10 @@ def _pooled_summary(p: dict[str, object], pairs: int, varying: list[str]) -> str
         s = std.get(key) if pairs > 1 else None  # type: ignore[union-attr]
         return format(v, fmt) + ("" if s is None else f" +- {format(s, fmt)}")
 
-    log = p["grid"].get("integrator") == "log"  # type: ignore[union-attr]  # no source, no counters
+    kind = integrator_kind(p["grid"].get("integrator", DEFAULT_INTEGRATOR))  # type: ignore[union-attr]
     line = (f"{p['engine']} model={p['model_name']}"
-            + ((" integrator=log" if "integrator" not in varying else "") if log
-               else f" rng={p['rng']} counter_max={p['counter_max']}")
+            + (f" integrator={kind.name}" if kind.named and "integrator" not in varying else "")
+            + "".join(f" {part}" for part in kind.label_parts(p))
             + "".join(f" {k}={p['grid'][k]}" for k in varying)  # type: ignore[index]
             + (f" ({p['pairs']} pairs)" if pairs > 1 else "")
             + f": {f('cycles_per_pixel_mean', '.2f')} cycles/px, RMS {f('rms_error')}, "

@@ -431,8 +431,8 @@ def build_harness(
     find_toolchain()  # a missing tool is reported before the seconds of emitting the Verilog
     root = Path(build_dir) if build_dir is not None else cache_dir()
     root.mkdir(parents=True, exist_ok=True)
-    # The ports (a log machine draws no random numbers); the component is built only to emit Verilog.
-    signature = MachineSignature(params, entropy=params.integrator == "stochastic")
+    # The ports; the component is built only to emit Verilog.
+    signature = MachineSignature(params)
     check_source(params)  # as BayesianMachine's constructor does, before any work
     design = HarnessSources(
         verilog=cached_verilog(params.fingerprint(), lambda: machine_top(params), root),

@@ -48,14 +48,25 @@ def _ids(argv: list[str]) -> list[str]:
 
 
 def test_sweep_does_not_multiply_log_points() -> None:
-    """A log point over counter max, sources and seeds is one point; the stochastic points keep their
-    grid (and their ids)."""
-    assert _ids(["--integrator", "log", "--counter-max", "4,8,16", "--rng", "sobol,lfsr", "--model",
-                 "paper,census"]) == ["paper_log", "census_log"]
+    """A log point over the stochastic points' counter max, sources and seeds is one point; the stochastic
+    points keep their grid (and their ids)."""
     assert _ids(["--integrator", "stochastic,log", "--counter-max", "4,8", "--seed", "2", "--model",
                  "paper"]) == ["paper_sobol_cm4_integratorstochastic", "paper_sobol_cm8_integratorstochastic",
                                "paper_integratorlog"]
     # An axis the log machine reads still multiplies its points.
-    assert _ids(["--integrator", "log", "--counter-max", "4,8", "--tie-break", "nomatch-first,lowest-index",
-                 "--model", "paper"]) == ["paper_log_tie_breaknomatch-first",
-                                          "paper_log_tie_breaklowest-index"]
+    assert _ids(["--integrator", "log", "--tie-break", "nomatch-first,lowest-index", "--model", "paper"]) == [
+        "paper_log_tie_breaknomatch-first", "paper_log_tie_breaklowest-index"]
+
+
+@pytest.mark.parametrize("options", [["--counter-max", "2"], ["--rng", "lfsr,sobol"], ["--max-cycles", "40"],
+                                     ["--no-normalize-columns"], ["--counter-max", "4,8", "--seed", "3"]])
+def test_sweep_refuses_them_where_no_point_is_stochastic(options, tmp_path, capsys) -> None:
+    """As run does: one line naming the option, exit 2, nothing written."""
+    out = tmp_path / "s"
+    argv = ["sweep", "--integrator", "log", "--crop", "250,200,60,12", "--dmax", "8", *options, "-o",
+            str(out)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and options[0] in err[0], err
+    assert "without effect on the logarithmic machine" in err[0], err
+    assert not out.exists()

@@ -12,7 +12,7 @@ from bayesmachine.host.features import feature_sums
 from bayesmachine.host.images import bundled_pair, crop_image, parse_crop
 from bayesmachine.host.likelihoods import memory_words
 from bayesmachine.models import ModelParams
-from bayesmachine.params import MachineParams
+from bayesmachine.params import DEFAULT_RNG, MachineParams
 from bayesmachine.sim.model import MachineModel
 
 # The paper model (its words computed below without the command line): 12 x 40 output pixels.
@@ -66,9 +66,9 @@ def test_sources_give_different_results(runs) -> None:
 
 def test_run_defaults_to_the_default_source(runs) -> None:
     report, result = runs["default"]
-    assert report["rng"] == MachineParams.rng
+    assert report["rng"] == DEFAULT_RNG
     for field in ("map", "cycles", "counts"):
-        assert np.array_equal(result[field], runs[MachineParams.rng][1][field]), field
+        assert np.array_equal(result[field], runs[DEFAULT_RNG][1][field]), field
 
 
 def test_sweep_compares_sources_side_by_side(tmp_path, runs) -> None:

@@ -154,3 +154,21 @@ def test_machines_through_wrapper_match_their_model(machines: int) -> None:
     else:  # machines have their own seeds: machine 1's pixels differ from one machine's
         one = MachineModel(params).run(words)
         assert not np.array_equal(one.counts, ParallelMachinesModel(params, machines).run(words).counts)
+
+
+def test_log_machines_through_wrapper_match_the_log_model() -> None:
+    """K log machines dealt pixels round-robin: each machine is the log machine (no seed), results in
+    pixel order equal to the log model's on all the pixels."""
+    from bayesmachine.hdl.machines import ParallelMachines
+    from bayesmachine.sim.log_model import LogMachineModel
+    from bayesmachine.sim.machines import ParallelMachinesModel
+
+    params = MachineParams(rows=5, columns=2, word_bits=8, words_per_beat=3, nomatch_row=True,
+                           integrator="log")
+    codes = np.random.default_rng(7).integers(0, params.load_max + 1, (14, params.words_per_pixel))
+    beats = [b for pixel in codes for b in pack_beats(params, pixel)]
+    raw = _through_wrapper(ParallelMachines(params=params, machines=2), beats, len(codes),
+                           _result_width(params), 8, 0.2, seed=3)
+    want = LogMachineModel(params).run(codes)
+    assert ParallelMachinesModel(params, 2).run(codes).equal(want)
+    assert decode_results(params, raw).equal(want)

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import own_options
 
 from bayesmachine.sim.activity import Activity, activity, block_of, read_toggles, register_names
 
@@ -129,7 +130,8 @@ def test_activity_builds_count_every_register(integrator, feed, blocks, tmp_path
     require_tool("verilator")
     left, right, _ = bundled_pair()
     model = ModelParams(name="census", dmax=3)
-    machine = stereo_machine_params(3, model=model, counter_max=4, integrator=integrator)
+    machine = stereo_machine_params(3, model=model, integrator=integrator,
+                                    **own_options(integrator, counter_max=4))
     crop = (slice(200, 211), slice(300, 324))
     prep = prepare(left[crop], right[crop], model, None, reference=False)
     run = run_machine(prep, machine, engine="verilator", feed=feed,

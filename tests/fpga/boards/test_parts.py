@@ -27,6 +27,7 @@ from bayesmachine.fpga.boards.streams import CRC16, CRC32
 from bayesmachine.fpga.boards.twin import BoardTwin
 from bayesmachine.hdl.frontend.stereo import stereo_machine_params
 from bayesmachine.models import ModelParams
+from bayesmachine.params import MachineParams
 from bayesmachine.sim.results import MachineResult
 
 
@@ -187,7 +188,7 @@ def _random_results(params: object, n: int, seed: int) -> MachineResult:
         map=rng.integers(0, params.rows, n).astype(np.int32),  # type: ignore[attr-defined]
         nomatch=rng.integers(0, 2, n).astype(bool), timeout=rng.integers(0, 2, n).astype(bool),
         counts=rng.integers(0, params.readout_max + 1, (n, params.rows)).astype(np.uint32),  # type: ignore[attr-defined]
-        cycles=rng.integers(0, params.max_cycles + 1, n).astype(np.int64))  # type: ignore[attr-defined]
+        cycles=rng.integers(0, params.max_clocks + 1, n).astype(np.int64))  # type: ignore[attr-defined]
 
 
 @pytest.mark.parametrize(("fields", "integrator"), [(0, "stochastic"), (1, "stochastic"), (2, "stochastic"),
@@ -195,7 +196,8 @@ def _random_results(params: object, n: int, seed: int) -> MachineResult:
 def test_result_serializer_is_its_twin(fields: int, integrator: str) -> None:
     # Two-byte counters (a log machine's weights, up to 2^8 at W = 8) and cycles.
     params = (small_params(counter_max=300, max_cycles=5000) if integrator == "stochastic" else
-              small_params(word_bits=8, lfsr_bits=31, max_cycles=5000, integrator="log"))
+              MachineParams(rows=5, columns=2, word_bits=8, words_per_beat=3, nomatch_row=True,
+                            integrator="log"))
     res = _random_results(params, 5, fields)
     tag = pr.RESULT_TAG if fields % 2 else pr.pass_tag(fields)  # the own pass's records, a declared one's
     twin = ResultSerializerTwin(params, tag)

@@ -20,7 +20,14 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 from amaranth.hdl import Fragment
-from conftest import assert_passes_equal_the_model, assert_same_results, passes_model, registered, run_sim
+from conftest import (
+    assert_passes_equal_the_model,
+    assert_same_results,
+    own_options,
+    passes_model,
+    registered,
+    run_sim,
+)
 
 from bayesmachine.columns import Census, Consistency, GradH, GradV, Mean, lr_consistent, lr_unknown
 from bayesmachine.hdl.frontend import passes
@@ -406,8 +413,8 @@ def test_census_lr_at_any_words_per_beat_equals_the_model(integrator: str, words
     the right reference; every pass's results equal the model's, random stalls on both streams."""
     dmax = 12
     model = ModelParams(name="census-lr", dmax=dmax)
-    params = stereo_machine_params(dmax, model=model, integrator=integrator, counter_max=6,
-                                   words_per_beat=words_per_beat)
+    params = stereo_machine_params(dmax, model=model, integrator=integrator, words_per_beat=words_per_beat,
+                                   **own_options(integrator, counter_max=6))
     rows, beats, tapped = BEATS[integrator, words_per_beat]
     assert (params.words_per_beat // params.loaded_columns, params.beats_per_pixel) == (rows, beats)
     assert tapped_line(rows, beats) is tapped

@@ -8,7 +8,7 @@ import gc
 
 import numpy as np
 import pytest
-from conftest import assert_passes_equal_the_model, assert_same_results, passes_model
+from conftest import assert_passes_equal_the_model, assert_same_results, own_options, passes_model
 
 from bayesmachine.hdl.frontend.stereo import StereoMachine, stereo_machine_params
 from bayesmachine.host.images import bundled_pair
@@ -64,7 +64,8 @@ def test_census_lr_machines_equal_the_model(machines: int, integrator: str) -> N
     K machines per pass; the dealing shows in the cycles (each machine its own random stream)."""
     dmax = 8
     model = ModelParams(name="census-lr", dmax=dmax)
-    params = stereo_machine_params(dmax, model=model, integrator=integrator, counter_max=6)
+    params = stereo_machine_params(dmax, model=model, integrator=integrator,
+                                   **own_options(integrator, counter_max=6))
     width = dmax + 2 * model.margin + 6
     left, right = _crop(100, 100, 2 * model.margin + 4, width)  # where Dmax 8 finds matches
     frames = [(left, right), _noisy_pair(2 * model.margin + 3, width, seed=machines)]

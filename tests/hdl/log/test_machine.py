@@ -153,16 +153,6 @@ def test_run_cli_log(tmp_path) -> None:
     assert np.load(out / "result.npz")["counts"].max() == 1024
 
 
-def test_cli_refuses_log_where_it_does_not_run(tmp_path, capsys) -> None:
-    """K log machines side by side are not built yet (one runs on the board: test_board_log.py)."""
-    argv = ["synth", "--target", "ecp5-85k", "--machines", "2", "-o", str(tmp_path / "r")]
-    assert main([*argv, "--integrator", "log"]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1, err
-    assert "--integrator: synth --top machine --machines 2 runs the stochastic machine only" in err[0]
-    assert not (tmp_path / "r").exists()
-
-
 def test_emit_log_machine(tmp_path, capsys) -> None:
     assert main(["emit", "--integrator", "log", "--model", "paper", "--dmax", "4", "-o",
                  str(tmp_path / "log.il")]) == 0

@@ -230,7 +230,7 @@ def test_samples_per_clock_of_a_wrong_type(value: object) -> None:
 
 def test_timeout_answer_of_a_wrong_type() -> None:
     with pytest.raises(TypeError, match="timeout_answer must be one of"):
-        small_params(timeout_answer=None)
+        small_params(timeout_answer=1)
 
 
 def test_defaults_keep_fingerprints_and_census_answers_leading() -> None:
