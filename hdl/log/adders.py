@@ -2,7 +2,7 @@
 
 Per row a balanced tree of ceil(log2 N) levels of adders (each node also ORs its children's
 "infinite" flags), cut into register stages of ``levels_per_stage`` levels
-(``pipeline.stage_functions``). Twin: ``rule.row_sums``. ``carried`` bits ride along with a pixel's
+(``pipeline.stage_functions``). Twin: ``sim.log_model.row_sums``. ``carried`` bits ride along with a pixel's
 codes, unchanged (the log machine's ``line_start``).
 """
 
@@ -12,11 +12,10 @@ from amaranth.hdl import Cat, Value, unsigned
 from amaranth.lib import data
 
 from bayesmachine.checks import as_int
-from bayesmachine.integrators.log import tree_levels
+from bayesmachine.integrators.log import LogParams, check_params, tree_levels
 
 from .layouts import codes_layout, row_sums_layout
 from .pipeline import Bank, LogBlock, Stage, Wire, fit, pack, stage_functions
-from .rule import LogParams, check_params
 
 __all__ = ["RowAdders", "adder_stages", "carried_layouts"]
 
@@ -63,7 +62,7 @@ def adder_stages(params: LogParams, levels_per_stage: int, carried: int = 0) -> 
 
 
 class RowAdders(LogBlock):
-    """Each row's codes summed (``rule.row_sums``), one pixel per clock.
+    """Each row's codes summed (``sim.log_model.row_sums``), one pixel per clock.
 
     Parameters
     ----------

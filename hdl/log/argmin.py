@@ -10,8 +10,8 @@ past the leaves). Like the MAP encoder's tree, a node at level l holds the low l
 winner's index and prepends one bit per level (the right child won). With ``feedback`` the input
 also holds a code per row (the log machine's feedback column, formed from the previous pixel's MAP)
 that one more level, before the tree's, adds to the row's sum (and an infinite one excludes the row):
-so the machine's loop through the previous MAP is this block alone. Twin: ``rule.argmin_rows`` (of the
-sums with the feedback codes added).
+so the machine's loop through the previous MAP is this block alone. Twin: ``sim.log_model.argmin_rows``
+(of the sums with the feedback codes added).
 """
 
 from __future__ import annotations
@@ -21,11 +21,10 @@ from collections.abc import Callable
 from amaranth.hdl import Cat, Const, Mux, Value
 
 from bayesmachine.checks import as_int
-from bayesmachine.integrators.log import tree_levels
+from bayesmachine.integrators.log import LogParams, check_params, tree_levels
 
 from .layouts import best_layout, feedback_sums_layout, row_sums_layout
 from .pipeline import Bank, LogBlock, Stage, Wire, fit, pack, stage_functions
-from .rule import LogParams, check_params
 
 __all__ = ["ArgminTree", "Node", "NodeFunction", "argmin_stages", "better"]
 
@@ -104,7 +103,7 @@ def argmin_stages(params: LogParams, levels_per_stage: int, pass_sums: bool,
 
 
 class ArgminTree(LogBlock):
-    """The MAP of the rows' sums (``rule.argmin_rows``), one pixel per clock.
+    """The MAP of the rows' sums (``sim.log_model.argmin_rows``), one pixel per clock.
 
     Parameters
     ----------

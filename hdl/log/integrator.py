@@ -5,25 +5,26 @@ row adders (``adders.adder_stages``), the argmin tree carrying the sums (``argmi
 and the weights stage (``weights.weight_stages``). One pipeline rather than three components
 connected by streams: one ``go`` (and its copies) for every register and one output buffer, and
 a stage boundary between blocks costs nothing more than a boundary inside one. One pixel per clock; latency
-``RowAdders.latency + ArgminTree.latency + WEIGHT_STAGES`` (3). The definition: ``rule.log_integrate``.
+``RowAdders.latency + ArgminTree.latency + WEIGHT_STAGES`` (3). The definition:
+``sim.log_model.log_integrate``.
 """
 
 from __future__ import annotations
 
 from bayesmachine.checks import as_int
+from bayesmachine.integrators.log import LogParams, check_params
 
 from .adders import adder_stages
 from .argmin import argmin_stages
 from .layouts import codes_layout, log_result_layout
 from .pipeline import LogBlock
-from .rule import LogParams, check_params
 from .weights import weight_stages
 
 __all__ = ["LogIntegrator"]
 
 
 class LogIntegrator(LogBlock):
-    """The log integrator (``rule.log_integrate``), one pixel per clock.
+    """The log integrator (``sim.log_model.log_integrate``), one pixel per clock.
 
     Parameters
     ----------

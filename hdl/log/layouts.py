@@ -5,7 +5,7 @@ from __future__ import annotations
 from amaranth.hdl import unsigned
 from amaranth.lib import data
 
-from .rule import LogParams
+from bayesmachine.integrators.log import LogParams
 
 __all__ = ["best_layout", "codes_layout", "feedback_sums_layout", "log_result_layout", "row_sums_layout"]
 

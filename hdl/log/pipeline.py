@@ -42,8 +42,7 @@ from amaranth.lib import data, memory, stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from bayesmachine.checks import as_int
-
-from .rule import LogParams, check_params
+from bayesmachine.integrators.log import LogParams, check_params
 
 __all__ = ["ENABLE_GROUP", "LOOKUP_PORTS", "Bank", "LogBlock", "Lookup", "OutputBuffer", "PipelineNets",
            "Stage", "StallPipeline", "Wire", "fit", "latest_layout", "pack", "stage_functions", "wires"]

@@ -8,16 +8,17 @@ excluded row's index set to ``len(X) - 1`` (whose entry is 0, so no mux follows 
 the table X read at that index, registered as a block RAM's read (``pipeline.Lookup``: two rows per
 block RAM; as a ROM in logic each row's table took more logic than the rest of the stage); (3) the
 result packed. The argmin's fields ride along. Twin:
-``rule.row_weights``.
+``sim.log_model.row_weights``.
 """
 
 from __future__ import annotations
 
 from amaranth.hdl import Cat, Mux, Value
 
+from bayesmachine.integrators.log import LogParams, check_params
+
 from .layouts import best_layout, log_result_layout
 from .pipeline import Bank, LogBlock, Lookup, Stage, Wire, fit, pack
-from .rule import LogParams, check_params
 
 __all__ = ["ROWS_PER_COPY", "WEIGHT_STAGES", "WeightStage", "weight_stages"]
 
@@ -69,7 +70,7 @@ def weight_stages(params: LogParams) -> tuple[Stage, ...]:
 
 
 class WeightStage(LogBlock):
-    """Each row's weight (``rule.row_weights``), one pixel per clock, latency ``WEIGHT_STAGES`` (3).
+    """Each row's weight (``sim.log_model.row_weights``), one pixel per clock, latency ``WEIGHT_STAGES`` (3).
 
     Parameters
     ----------

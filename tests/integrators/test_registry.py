@@ -42,3 +42,28 @@ def test_the_registry_imports_without_numpy_or_amaranth() -> None:
             "bayesmachine.integrators.stochastic, bayesmachine.params; "
             "assert 'numpy' not in sys.modules and 'amaranth' not in sys.modules, sorted(sys.modules)")
     subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_either_kind_s_model_runs_without_amaranth() -> None:
+    """The definitions and the host need no RTL package: the model engine of each kind on a crop of the
+    bundled pair, with Amaranth's import refused."""
+    code = """
+import sys
+class Refuse:
+    def find_spec(self, name, path=None, target=None):
+        if name.split(".")[0] == "amaranth":
+            raise ImportError(name)
+sys.meta_path.insert(0, Refuse())
+from bayesmachine.host.images import bundled_pair
+from bayesmachine.host.run import prepare, run_machine
+from bayesmachine.models import ModelParams, disparity_machine
+left, right, _ = bundled_pair()
+model = ModelParams(name="census", dmax=8)
+prep = prepare(left[200:206, 250:290], right[200:206, 250:290], model, reference=False)
+for integrator in ("stochastic", "log"):
+    machine = disparity_machine(model, integrator=integrator)
+    run = run_machine(prep, machine, "model", progress=False)
+    assert run.map.size and machine.kind.pixel_wall_cycles(machine, run.cycles, run.timeout).size
+assert "amaranth" not in sys.modules
+"""
+    subprocess.run([sys.executable, "-c", code], check=True)

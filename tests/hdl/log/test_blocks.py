@@ -1,5 +1,5 @@
 # amaranth: UnusedElaboratable=no
-"""The log integrator's blocks under pysim against the rule (``bayesmachine.hdl.log.rule``): random
+"""The log integrator's blocks under pysim against the rule (``bayesmachine.sim.log_model``): random
 pixels and edge cases (ties everywhere, every row excluded, one row, census-lr's 82 rows), the
 latency at one pixel per clock, and random back-pressure on both streams."""
 
@@ -20,12 +20,9 @@ from bayesmachine.hdl.log import (
     LogParams,
     RowAdders,
     WeightStage,
-    argmin_rows,
-    log_integrate,
-    row_sums,
-    row_weights,
 )
 from bayesmachine.hdl.log.pipeline import StallPipeline
+from bayesmachine.sim.log_model import argmin_rows, log_integrate, row_sums, row_weights
 
 TABLE = tuple(int(x) for x in exp_table(4, 0.5))  # (16, 10, 6, 4, 2, 1, 1, 0)
 

@@ -14,7 +14,7 @@ from bayesmachine.cli import main
 from bayesmachine.columns import LeftPrior
 from bayesmachine.columns.energy import INFINITE_CODE, log_codes
 from bayesmachine.errors import ParameterError
-from bayesmachine.hdl.log import ArgminTree, log_integrate
+from bayesmachine.hdl.log import ArgminTree
 from bayesmachine.hdl.log import machine as log_machine
 from bayesmachine.host.features import model_planes
 from bayesmachine.host.images import bundled_pair
@@ -24,6 +24,7 @@ from bayesmachine.integrators.log import ARGMIN_LEVELS_PER_STAGE, log_params, pi
 from bayesmachine.models import ModelParams, disparity_machine, pass_machine
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.engines import get_engine
+from bayesmachine.sim.log_model import log_integrate
 
 
 def test_integrator_parameter() -> None:

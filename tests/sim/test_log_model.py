@@ -1,5 +1,6 @@
-"""The log integrator's rule (``bayesmachine.hdl.log.rule``): hand-worked pixels, a plain Python scan
-as an independent oracle over random pixels, the exp table, the parameters' checks."""
+"""The log integrator's rule (``bayesmachine.sim.log_model``; its parameters
+``bayesmachine.integrators.log``): hand-worked pixels, a plain Python scan as an independent oracle over
+random pixels, the exp table, the parameters' checks."""
 
 from __future__ import annotations
 
@@ -8,7 +9,8 @@ import pytest
 
 from bayesmachine.columns.energy import exp_table
 from bayesmachine.errors import ParameterError
-from bayesmachine.hdl.log import LogParams, argmin_rows, log_integrate, row_weights
+from bayesmachine.integrators.log import LogParams
+from bayesmachine.sim.log_model import argmin_rows, log_integrate, row_weights
 
 TABLE = (16, 10, 6, 4, 2, 1, 1, 0)  # exp_table(4, 0.5)
 
