@@ -59,7 +59,7 @@ from bayesmachine.host.run import prepare, run_machine
 from bayesmachine.models import ModelParams, disparity_machine
 left, right, _ = bundled_pair()
 model = ModelParams(name="census", dmax=8)
-prep = prepare(left[200:206, 250:290], right[200:206, 250:290], model, reference=False)
+prep = prepare(left[200:210, 250:290], right[200:210, 250:290], model, reference=False)
 for integrator in ("stochastic", "log"):
     machine = disparity_machine(model, integrator=integrator)
     run = run_machine(prep, machine, "model", progress=False)
