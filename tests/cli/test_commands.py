@@ -8,6 +8,7 @@ import pytest
 
 from bayesmachine.cli import main
 from bayesmachine.host.images import random_dot_stereogram
+from bayesmachine.params import STOCHASTIC_FIELDS
 
 REPORT_KEYS = set(
     "engine counter_max pixels cycles_per_pixel_mean cycles_per_pixel_std cycles_per_pixel_p99 rms_error "
@@ -146,3 +147,45 @@ def test_errors_are_one_clear_line(tmp_path, capsys, argv, message):
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0]
+
+
+def test_run_cli_log(tmp_path) -> None:
+    out = tmp_path / "out"
+    assert main(["run", "--integrator", "log", "--crop", "200,200,200,60", "--model", "census", "--quiet",
+                 "-o", str(out)]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["integrator"] == "log" and report["machine"]["integrator"] == "log"
+    # No stochastic field with a value: none in its machine, null where a report names one.
+    assert not set(STOCHASTIC_FIELDS) & set(report["machine"]), report["machine"]
+    assert (report["rng"], report["counter_max"], report["samples_per_clock"]) == (None, None, None)
+    # Measured on this crop (the model engine, the weights read as the counters are).
+    assert report["pixels"] == 6156
+    assert report["machine_bad2"] == pytest.approx(0.15407, abs=1e-4)
+    assert report["confidence"]["machine"]["ece"] == pytest.approx(0.13309, abs=1e-4)
+    assert report["cycles_per_pixel_mean"] == pytest.approx(1.9912, abs=1e-3)
+    assert (out / "confidence.png").stat().st_size > 0 and (out / "calibration.png").stat().st_size > 0
+    assert np.load(out / "result.npz")["counts"].max() == 1024
+
+
+def test_emit_log_machine(tmp_path, capsys) -> None:
+    assert main(["emit", "--integrator", "log", "--model", "paper", "--dmax", "4", "-o",
+                 str(tmp_path / "log.il")]) == 0
+    out = capsys.readouterr().out
+    assert "integrator: log" in out and "9-bit energy codes" in out and "random source" not in out
+    assert (tmp_path / "log.il").stat().st_size > 0
+
+
+def test_sweep_integrator_axis(tmp_path) -> None:
+    """sweep --integrator stochastic,log: a grid axis, one point per integrator."""
+    out = tmp_path / "sweep"
+    assert main(["sweep", "--integrator", "stochastic,log", "--counter-max", "8", "--crop", "250,200,80,20",
+                 "--dmax", "16", "--model", "paper", "--quiet", "-o", str(out)]) == 0
+    sweep = json.loads((out / "sweep.json").read_text())
+    points = sweep["points"]
+    # The log machine's id names no random source or counter max: it has neither.
+    assert [p["id"] for p in points] == ["paper_sobol_cm8_integratorstochastic", "paper_integratorlog"]
+    # What every point shares: no stochastic field (the log point has none), each the stochastic point's.
+    assert not set(STOCHASTIC_FIELDS) & set(sweep["machine"]), sweep["machine"]
+    assert not set(STOCHASTIC_FIELDS) & set(points[1].get("machine", {}))
+    assert {"seed", "lfsr_bits", "max_cycles"} <= set(points[0]["machine"])
+    assert points[1]["grid"]["seed"] is None and points[1]["grid"]["lfsr_bits"] is None

@@ -5,8 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from bayesmachine.columns import LeftPrior
 from bayesmachine.columns.energy import INFINITE_CODE, log_codes
+from bayesmachine.errors import ParameterError
 from bayesmachine.integrators.log import LOG, LogParams, log_params, pixel_clocks, pixel_wall_cycles
+from bayesmachine.models import ModelParams, disparity_machine, pass_machine
 from bayesmachine.params import MachineParams
 
 
@@ -46,3 +49,55 @@ def test_its_engines_are_the_log_machine_s() -> None:
     assert LOG.engine_class("model") is LogMachineModel
     with pytest.raises(ValueError, match="'board': the log integrator runs on model, pysim, verilator"):
         LOG.engine_class("board")
+
+
+def test_integrator_parameter() -> None:
+    stochastic = MachineParams.for_disparity(8)
+    log = MachineParams.for_disparity(8, integrator="log")
+    assert stochastic.integrator == "stochastic" and "integrator" not in stochastic.to_dict()
+    assert log.to_dict()["integrator"] == "log" and log.fingerprint() != stochastic.fingerprint()
+    assert stochastic.to_dict(complete=True)["integrator"] == "stochastic"
+    assert (stochastic.load_max, stochastic.readout_max) == (1024, 16)
+    assert (log.load_max, log.readout_max) == (INFINITE_CODE, 1024)
+    with pytest.raises(ParameterError, match="integrator") as err:
+        MachineParams.for_disparity(8, integrator="logarithmic")
+    assert err.value.parameter == "integrator"
+    with pytest.raises(TypeError, match="integrator"):
+        MachineParams.for_disparity(8, integrator=1)
+
+
+def test_feedback_table_in_codes() -> None:
+    model = ModelParams(name="census-lr")
+    log = disparity_machine(model, integrator="log")
+    # Measured: the census-lr prior (eps 0.05, s 4, no-match 0.1) in 1/16-nat codes, clamped at 48.
+    assert log.feedback_words == (0, 0, 2, 4, 7, 12, 16, 22, 28, 33, 38, 42, 45, 46, 47, 48)
+    assert log.feedback_nomatch_word == 37
+    left = model.column(LeftPrior)
+    energy = left.energy()
+    assert log.feedback_words == tuple(int(c) for c in energy.values[: len(log.feedback_words)])
+    assert (energy.values[len(log.feedback_words):] == 48).all()
+    assert pass_machine(model, log, "right").integrator == "log"
+    stochastic = disparity_machine(model)
+    with pytest.raises(ParameterError, match="feedback"):
+        disparity_machine(model, integrator="log", feedback_words=stochastic.feedback_words)
+
+
+@pytest.mark.parametrize(("field", "value"), [("counter_max", 2), ("rng", "lfsr"), ("samples_per_clock", 8),
+                                              ("seed", 3), ("max_cycles", 40), ("normalize", False),
+                                              ("timeout_answer", "leading"), ("smtj_dwell", 2.0)])
+def test_a_log_machine_refuses_the_stochastic_fields(field: str, value: object) -> None:
+    """None for a log machine, refused naming the field when given, absent from its dict."""
+    with pytest.raises(ParameterError, match=f"^{field}: the stochastic integrator's") as err:
+        MachineParams.for_disparity(8, integrator="log", **{field: value})
+    assert err.value.parameter == field
+    log = MachineParams.for_disparity(8, integrator="log")
+    assert getattr(log, field) is None
+    assert field not in log.to_dict(complete=True) and field not in log.to_dict()
+
+
+def test_the_stochastic_machine_fills_its_defaults() -> None:
+    p = MachineParams.for_disparity(8)
+    assert {f: getattr(p, f) for f in p.kind.defaults} == dict(p.kind.defaults)
+    # Its dict, hence its fingerprint, is the one it had before the kinds (the build caches key on it).
+    assert p.fingerprint() == MachineParams.for_disparity(8, counter_max=16, rng="sobol").fingerprint()
+    assert MachineParams.for_disparity(80).fingerprint() == "24c0655939c1f9ce"

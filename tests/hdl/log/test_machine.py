@@ -5,13 +5,11 @@ the model engine (sim.log_model) against the rule, its clocks against the blocks
 from __future__ import annotations
 
 import dataclasses
-import json
 
 import numpy as np
 import pytest
 
 from bayesmachine.cli import main
-from bayesmachine.columns import LeftPrior
 from bayesmachine.columns.energy import INFINITE_CODE, log_codes
 from bayesmachine.errors import ParameterError
 from bayesmachine.hdl.log import ArgminTree
@@ -21,41 +19,10 @@ from bayesmachine.host.images import bundled_pair
 from bayesmachine.host.likelihoods import likelihoods_plain, memory_words
 from bayesmachine.integrators import log as log_definition
 from bayesmachine.integrators.log import ARGMIN_LEVELS_PER_STAGE, log_params, pixel_clocks, pixel_wall_cycles
-from bayesmachine.models import ModelParams, disparity_machine, pass_machine
+from bayesmachine.models import ModelParams, disparity_machine
 from bayesmachine.params import MachineParams
 from bayesmachine.sim.engines import get_engine
 from bayesmachine.sim.log_model import log_integrate
-
-
-def test_integrator_parameter() -> None:
-    stochastic = MachineParams.for_disparity(8)
-    log = MachineParams.for_disparity(8, integrator="log")
-    assert stochastic.integrator == "stochastic" and "integrator" not in stochastic.to_dict()
-    assert log.to_dict()["integrator"] == "log" and log.fingerprint() != stochastic.fingerprint()
-    assert stochastic.to_dict(complete=True)["integrator"] == "stochastic"
-    assert (stochastic.load_max, stochastic.readout_max) == (1024, 16)
-    assert (log.load_max, log.readout_max) == (INFINITE_CODE, 1024)
-    with pytest.raises(ParameterError, match="integrator") as err:
-        MachineParams.for_disparity(8, integrator="logarithmic")
-    assert err.value.parameter == "integrator"
-    with pytest.raises(TypeError, match="integrator"):
-        MachineParams.for_disparity(8, integrator=1)
-
-
-def test_feedback_table_in_codes() -> None:
-    model = ModelParams(name="census-lr")
-    log = disparity_machine(model, integrator="log")
-    # Measured: the census-lr prior (eps 0.05, s 4, no-match 0.1) in 1/16-nat codes, clamped at 48.
-    assert log.feedback_words == (0, 0, 2, 4, 7, 12, 16, 22, 28, 33, 38, 42, 45, 46, 47, 48)
-    assert log.feedback_nomatch_word == 37
-    left = model.column(LeftPrior)
-    energy = left.energy()
-    assert log.feedback_words == tuple(int(c) for c in energy.values[: len(log.feedback_words)])
-    assert (energy.values[len(log.feedback_words):] == 48).all()
-    assert pass_machine(model, log, "right").integrator == "log"
-    stochastic = disparity_machine(model)
-    with pytest.raises(ParameterError, match="feedback"):
-        disparity_machine(model, integrator="log", feedback_words=stochastic.feedback_words)
 
 
 def test_paper_codes_are_the_energy_form() -> None:
@@ -139,27 +106,8 @@ def test_engine_refusals() -> None:
         eng.run(np.zeros((1, 6, 3), np.int64), numbers=np.zeros((4, 18), np.int64))
 
 
-def test_run_cli_log(tmp_path) -> None:
-    out = tmp_path / "out"
-    assert main(["run", "--integrator", "log", "--crop", "200,200,200,60", "--model", "census", "--quiet",
-                 "-o", str(out)]) == 0
-    report = json.loads((out / "report.json").read_text())
-    assert report["integrator"] == "log" and report["machine"]["integrator"] == "log"
-    # Measured on this crop (the model engine, the weights read as the counters are).
-    assert report["pixels"] == 6156
-    assert report["machine_bad2"] == pytest.approx(0.15407, abs=1e-4)
-    assert report["confidence"]["machine"]["ece"] == pytest.approx(0.13309, abs=1e-4)
-    assert report["cycles_per_pixel_mean"] == pytest.approx(1.9912, abs=1e-3)
-    assert (out / "confidence.png").stat().st_size > 0 and (out / "calibration.png").stat().st_size > 0
-    assert np.load(out / "result.npz")["counts"].max() == 1024
 
 
-def test_emit_log_machine(tmp_path, capsys) -> None:
-    assert main(["emit", "--integrator", "log", "--model", "paper", "--dmax", "4", "-o",
-                 str(tmp_path / "log.il")]) == 0
-    out = capsys.readouterr().out
-    assert "integrator: log" in out and "9-bit energy codes" in out and "random source" not in out
-    assert (tmp_path / "log.il").stat().st_size > 0
 
 
 @pytest.mark.parametrize("name", ["paper", "census"])
@@ -257,11 +205,3 @@ def test_verilator_equals_the_model_on_a_crop(tmp_path, name) -> None:
         assert np.array_equal(outs["model"][key], outs["verilator"][key]), key
 
 
-def test_sweep_integrator_axis(tmp_path) -> None:
-    """sweep --integrator stochastic,log: a grid axis, one point per integrator."""
-    out = tmp_path / "sweep"
-    assert main(["sweep", "--integrator", "stochastic,log", "--counter-max", "8", "--crop", "250,200,80,20",
-                 "--dmax", "16", "--model", "paper", "--quiet", "-o", str(out)]) == 0
-    points = json.loads((out / "sweep.json").read_text())["points"]
-    # The log machine's id names no random source or counter max: it has neither.
-    assert [p["id"] for p in points] == ["paper_sobol_cm8_integratorstochastic", "paper_integratorlog"]
