@@ -220,12 +220,8 @@ class LogKind(IntegratorKind):
         return self.load_max(params)
 
     def max_clocks(self, params: MachineParams) -> int:
-        """The cycles field's range: the default stochastic machine's watchdog (20 bits), so that a log
-        machine's results have the result layout of the stochastic machine's defaults (its ports, the
-        board's records); its cycles are at most :func:`pixel_clocks`' loop."""
-        from .stochastic import DEFAULT_MAX_CYCLES
-
-        return DEFAULT_MAX_CYCLES
+        """A pixel's issue interval at most: the loop's clocks (:func:`pixel_clocks`)."""
+        return pixel_clocks(params)[1]
 
     def nth_machine(self, params: MachineParams, index: int) -> MachineParams:
         return params  # no seed: K log machines are one machine K times

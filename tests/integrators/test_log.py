@@ -27,7 +27,7 @@ def test_it_loads_codes_and_reads_weights() -> None:
 
 def test_its_pixel_clocks_and_wall_cycles() -> None:
     flat = MachineParams.for_disparity(80, integrator="log")
-    assert pixel_clocks(flat) == (1, 1) and LOG.max_clocks(flat) == (1 << 20) - 1  # a 20-bit cycles field
+    assert pixel_clocks(flat) == (1, 1) and LOG.max_clocks(flat) == 1 and flat.cycle_width == 1
     cycles = np.ones(5, np.int64)
     assert np.array_equal(pixel_wall_cycles(flat, cycles), np.full(5, flat.beats_per_pixel))
     assert np.array_equal(LOG.pixel_wall_cycles(flat, cycles), pixel_wall_cycles(flat, cycles))

@@ -496,13 +496,13 @@ def _log_twin() -> BoardTwin:
 
 def test_a_log_machines_records_carry_its_weights() -> None:
     """A weight is up to 2^W = 1024 (11 bits, where the stochastic machine's counter max 16 takes 5):
-    two bytes per row. The record's size is the one the simulated board sent (1120 bytes for a 16 x 12
-    frame of the paper model at Dmax 4: 64 records and the start and end records)."""
+    two bytes per row; the cycles (1 clock a pixel without the neighbour prior) one byte. A 16 x 12
+    frame of the paper model at Dmax 4 is 64 records and the start and end records, 992 bytes."""
     paper = ModelParams(name="paper", dmax=DMAX)
     params = stereo_machine_params(DMAX, model=paper, integrator="log")
     fmt = pr.ResultFormat.of(params, pr.FIELDS_ALL)
-    assert (fmt.count_width, fmt.count_bytes, fmt.record_bytes) == (11, 2, 17)
-    assert 64 * fmt.record_bytes + 2 * pr.RECORD_BYTES == 1120
+    assert (fmt.count_width, fmt.count_bytes, fmt.record_bytes) == (11, 2, 15)
+    assert 64 * fmt.record_bytes + 2 * pr.RECORD_BYTES == 992
     weights = np.array([[1024, 0, 37, 1023, 1, 512], [0, 0, 0, 0, 0, 1024]])
     raw = fmt.encode(np.array([0, 5]), np.array([False, True]), np.array([False, False]), weights,
                      np.array([1, 5]))
