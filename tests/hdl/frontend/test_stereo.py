@@ -1,3 +1,4 @@
+# amaranth: UnusedElaboratable=no
 """``StereoMachine(machines=K)``: one feature pipeline, map rows dealt to K machines, results in
 raster order, bit for bit the model's (``host.run.machines_model``: each machine's random source and
 left neighbour run over its own rows)."""
