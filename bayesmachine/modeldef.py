@@ -14,6 +14,7 @@ by ``register_model``.
 from __future__ import annotations
 
 import itertools
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
@@ -22,9 +23,10 @@ from typing import Any
 from bayesmachine.checks import plain
 from bayesmachine.columns import Column, NoMatchFloor, Option, Source, Term
 from bayesmachine.integrators.stochastic import STOCHASTIC
-from bayesmachine.params import TIMEOUT_ANSWERS, ParameterError
+from bayesmachine.params import DEFAULT_COUNTER_MAX, TIMEOUT_ANSWERS, ParameterError
 
-__all__ = ["PassDef", "ModelDef", "OWN_PASS", "REFERENCES", "machine_layout"]
+__all__ = ["PassDef", "ModelDef", "OWN_PASS", "REFERENCES", "MODEL_NAME", "MAX_WATCHDOG", "MAX_WATCHDOG_RUNS",
+           "check_model_name", "machine_layout"]
 
 # The model's own pass (its output: the left image as reference) is named so.
 OWN_PASS = "left"
@@ -32,6 +34,13 @@ OWN_PASS = "left"
 REFERENCES = ("left", "right")
 # Data columns a machine takes (MachineParams.columns).
 MAX_DATA_COLUMNS = 64
+# The largest watchdog a machine counts (MachineParams.max_cycles), and a model's or a pass's largest
+# watchdog_runs: the runs of n_max + 1 cycles that fit it at the default counter max.
+MAX_WATCHDOG = (1 << 32) - 1
+MAX_WATCHDOG_RUNS = MAX_WATCHDOG // (DEFAULT_COUNTER_MAX + 1)
+# A model's name: a value of --model and of a comma-separated list of models (sweep's), so no comma,
+# space or leading "-" (argparse would read it as an option).
+MODEL_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_-]*")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -59,6 +68,32 @@ def _frozen(value: Any) -> Mapping[Any, Any]:
     return MappingProxyType(dict(value))
 
 
+def check_model_name(name: object) -> None:
+    """TypeError unless ``name`` is a string; ValueError unless it spells a model name
+    (:data:`MODEL_NAME`): a value of ``--model`` and of a comma-separated list of models."""
+    if not isinstance(name, str):
+        raise TypeError(f"ModelDef: name must be a string, got {type(name).__name__} {name!r}")
+    if not MODEL_NAME.fullmatch(name):
+        raise ValueError(f"ModelDef: name {name!r} is not a model name: a letter, then letters, digits, '-' "
+                         "or '_' (no spaces, commas or leading '-': it is a value of --model)")
+
+
+def _sequence(d: ModelDef, field: str, value: Any, of: str) -> tuple[Any, ...]:
+    """``value`` (a tuple or list) as a tuple; TypeError naming the model and the field otherwise (a
+    single column kind or PassDef among them)."""
+    if not isinstance(value, (tuple, list)):
+        what = value.__name__ if isinstance(value, type) else repr(value)
+        raise TypeError(f"model {d.name!r}: {field} must be a tuple (or list) of {of}, got {what}")
+    return tuple(value)
+
+
+def _mapping(d: ModelDef, field: str, value: Any) -> Mapping[Any, Any]:
+    """``value`` if a mapping; TypeError naming the model and the field otherwise."""
+    if not isinstance(value, Mapping):
+        raise TypeError(f"model {d.name!r}: {field} must be a mapping (a dict), got {value!r}")
+    return value
+
+
 @dataclass(frozen=True, kw_only=True, eq=False)
 class ModelDef:
     """A model as data (module text): columns in operator order and their no-match rule.
@@ -66,7 +101,8 @@ class ModelDef:
     Parameters
     ----------
     name, description : str
-        The model's name (``--model NAME``) and one line for ``--help``.
+        The model's name (``--model NAME``: a letter, then letters, digits, ``-`` or ``_``,
+        :data:`MODEL_NAME`) and one line for ``--help``.
     columns : sequence of Column kinds
         Its own pass's operator columns, in order: FEEDBACK then ABOVE columns first (the machine's prior
         columns), at least one FEATURES column.
@@ -81,7 +117,8 @@ class ModelDef:
     requires : Mapping[str, (value, reason)]
         Option values it needs, with the reason.
     watchdog_runs : int or None
-        Its machine's default watchdog, in runs of n_max + 1 cycles (None: the machine's default).
+        Its machine's default watchdog, in runs of n_max + 1 cycles, 1 .. :data:`MAX_WATCHDOG_RUNS` (None:
+        the machine's default).
     timeout_answer : str
         Its machine's default answer to a timeout (:data:`~bayesmachine.params.TIMEOUT_ANSWERS`; default
         ``MachineParams``'s).
@@ -104,12 +141,15 @@ class ModelDef:
     normalize: bool = STOCHASTIC.defaults["normalize"]  # type: ignore[assignment]
 
     def __post_init__(self) -> None:
-        if not isinstance(self.name, str) or not self.name or any(c in self.name for c in " ,\t\n"):
-            raise TypeError(f"ModelDef: name must be a non-empty string without spaces or commas, got "
-                            f"{self.name!r}")
-        for name, value in (("columns", tuple(self.columns)), ("passes", tuple(self.passes)),
-                            ("switches", _frozen({k: tuple(v) for k, v in dict(self.switches).items()})),
-                            ("defaults", _frozen(self.defaults)), ("requires", _frozen(self.requires))):
+        check_model_name(self.name)
+        switches = _mapping(self, "switches", self.switches)
+        for name, value in (("columns", _sequence(self, "columns", self.columns, "column kinds")),
+                            ("passes", _sequence(self, "passes", self.passes, "PassDef")),
+                            ("switches", _frozen({k: _sequence(self, f"switches[{getattr(k, 'name', k)}]", v,
+                                                               "column kinds")
+                                                  for k, v in switches.items()})),
+                            ("defaults", _frozen(_mapping(self, "defaults", self.defaults))),
+                            ("requires", _frozen(_mapping(self, "requires", self.requires)))):
             object.__setattr__(self, name, value)
         _check_kinds(self)
         _check_switches(self)
@@ -196,14 +236,24 @@ def _check_kinds(d: ModelDef) -> None:
     if not (isinstance(d.nomatch, type) and issubclass(d.nomatch, NoMatchFloor)):
         raise TypeError(f"model {d.name!r}: nomatch = {d.nomatch!r} is not a no-match rule (a subclass of "
                         "bayesmachine.columns.NoMatchFloor)")
-    runs = d.watchdog_runs
-    if runs is not None and (isinstance(runs, bool) or not isinstance(runs, int) or runs < 1):
-        raise d._error(f"watchdog_runs must be a positive integer or None, got {runs!r}")
+    _check_watchdog_runs(d, "watchdog_runs", d.watchdog_runs)
     if not isinstance(d.normalize, bool):
         raise d._error(f"normalize must be True or False, got {d.normalize!r}")
     if d.timeout_answer not in TIMEOUT_ANSWERS:
         raise d._error(f"timeout_answer must be one of {', '.join(TIMEOUT_ANSWERS)}, got "
                        f"{d.timeout_answer!r}")
+
+
+def _check_watchdog_runs(d: ModelDef, field: str, runs: object) -> None:
+    """None, or runs whose watchdog a machine counts at the default counter max."""
+    if runs is None:
+        return
+    if isinstance(runs, bool) or not isinstance(runs, int):
+        raise d._error(f"{field} must be an integer or None, got {runs!r}")
+    if not 1 <= runs <= MAX_WATCHDOG_RUNS:
+        raise d._error(f"{field} must be in [1, {MAX_WATCHDOG_RUNS}] runs of counter max + 1 cycles (a "
+                       f"machine's watchdog counts at most {MAX_WATCHDOG} cycles: {MAX_WATCHDOG_RUNS} runs "
+                       f"at the default counter max {DEFAULT_COUNTER_MAX}), got {runs}")
 
 
 def _check_switches(d: ModelDef) -> None:
@@ -219,6 +269,10 @@ def _check_switches(d: ModelDef) -> None:
 
 def _check_names(d: ModelDef) -> None:
     options = d.options
+    for name, need in d.requires.items():
+        if not (isinstance(need, tuple) and len(need) == 2 and isinstance(need[1], str)):
+            raise TypeError(f"model {d.name!r}: requires[{name!r}] must be a (value, reason) pair, got "
+                            f"{need!r}")
     for what, names in (("defaults", d.defaults), ("requires", d.requires)):
         for name in names:
             if name not in options:
@@ -291,7 +345,9 @@ def _check_passes(d: ModelDef) -> None:
                                    ("watchdog_option", p.watchdog_option, "int")):
             if option is not None and (option not in options or options[option].kind != kind):
                 raise d._error(f"pass {p.name}: {what} {option!r} is not a {kind} option of the model")
-        stray = [o for o in p.not_inherited if o not in options]
+        _check_watchdog_runs(d, f"pass {p.name}: watchdog_runs", p.watchdog_runs)
+        stray = [o for o in _sequence(d, f"pass {p.name}: not_inherited", p.not_inherited, "option names")
+                 if o not in options]
         if stray:
             raise d._error(f"pass {p.name}: not_inherited names {stray[0]!r}, not an option of the model")
     indices = [p.machine_index for p in d.passes]

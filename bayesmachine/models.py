@@ -54,7 +54,7 @@ from bayesmachine.columns import (
     fused,
 )
 from bayesmachine.integrators import integrator_kind
-from bayesmachine.modeldef import OWN_PASS, ModelDef, PassDef, machine_layout
+from bayesmachine.modeldef import MAX_WATCHDOG, OWN_PASS, ModelDef, PassDef, machine_layout
 from bayesmachine.params import (
     DEFAULT_DMAX,
     DEFAULT_INTEGRATOR,
@@ -465,7 +465,7 @@ def disparity_machine(model: ModelParams, **machine_kwargs: Any) -> MachineParam
         rest = {k: v for k, v in kwargs.items() if k not in own}
         if (rest.get("max_cycles") is None and model.definition.watchdog_runs is not None
                 and "max_cycles" in own_fields):
-            rest["max_cycles"] = (1 << 32) - 1  # the model's watchdog comes below
+            rest["max_cycles"] = MAX_WATCHDOG  # the model's watchdog comes below
         probe = MachineParams.for_disparity(model.dmax, **rest)
         word_bits = probe.word_bits
         left = model.column(LeftPrior)
@@ -489,12 +489,23 @@ def disparity_machine(model: ModelParams, **machine_kwargs: Any) -> MachineParam
     if runs is not None and "max_cycles" in own_fields and kwargs.get("max_cycles") is None:
         # The counter max (checked, its default if not given) under the largest watchdog, not the
         # machine's default one, which a counter max the model's watchdog covers may exceed.
-        kwargs["max_cycles"] = (1 << 32) - 1
+        kwargs["max_cycles"] = MAX_WATCHDOG
         counter_max = MachineParams.for_disparity(model.dmax, **kwargs).counter_max
-        kwargs["max_cycles"] = runs * (counter_max + 1)
+        kwargs["max_cycles"] = _watchdog(f"the {model.name} model's", runs, counter_max)
     machine = MachineParams.for_disparity(model.dmax, **kwargs)
     check_disparity_machine(model, machine)
     return machine
+
+
+def _watchdog(whose: str, runs: int, counter_max: int) -> int:
+    """``runs`` runs of ``counter_max`` + 1 cycles; ParameterError naming counter_max when a machine's
+    watchdog cannot count that many (a definition's runs fit at the default counter max only)."""
+    cycles = runs * (counter_max + 1)
+    if cycles > MAX_WATCHDOG:
+        raise ParameterError(f"counter_max {counter_max}: {whose} watchdog, {runs} runs of counter max + 1 "
+                             f"cycles, is {cycles} cycles, more than a machine counts ({MAX_WATCHDOG}): "
+                             "give a smaller counter_max or a max_cycles", "counter_max")
+    return cycles
 
 
 def _check_model(model: object) -> None:
@@ -533,7 +544,7 @@ def pass_machine(model: ModelParams, machine: MachineParams, name: str) -> Machi
         if p.max_cycles is not None:
             kwargs["max_cycles"] = p.max_cycles
         elif p.watchdog_runs is not None:
-            kwargs["max_cycles"] = p.watchdog_runs * (machine.counter_max + 1)
+            kwargs["max_cycles"] = _watchdog(f"the {name} pass's", p.watchdog_runs, machine.counter_max)
     if machine.rng == "smtj":
         kwargs.update(smtj_dwell=machine.smtj_dwell, smtj_spread=machine.smtj_spread,
                       smtj_share=machine.smtj_share)

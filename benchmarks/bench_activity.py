@@ -72,7 +72,7 @@ def measure(name: str, integrator: str, feed: str, crop: tuple[int, int, int, in
 
 
 def main(argv: list[str] | None = None) -> None:
-    ap = Parser(prog=Path(__file__).name, description=__doc__.splitlines()[0])
+    ap = Parser(prog=Path(__file__).name, description=__doc__.split("\n\n")[0])
     ap.add_argument("--models", type=model_list, default="paper,census,census-lr",
                     help="comma-separated models (default paper,census,census-lr)")
     ap.add_argument("--crop", type=crop_arg, default="50,200,640,24",

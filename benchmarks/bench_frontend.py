@@ -132,7 +132,7 @@ def synth_costs(top: StereoMachine, workdir: Path, generic: bool) -> None:
 
 
 def main(argv: list[str] | None = None) -> None:
-    ap = Parser(prog=Path(__file__).name, description=__doc__.splitlines()[0])
+    ap = Parser(prog=Path(__file__).name, description=__doc__.split("\n\n")[0])
     ap.add_argument("--dmax", type=int_in_range(0, MAX_DMAX), default=80)
     ap.add_argument("--counter-max", type=int_in_range(1, MAX_COUNTER_MAX), default=16)
     ap.add_argument("--clock-mhz", type=float_in_range(1, 1000), default=100.0)

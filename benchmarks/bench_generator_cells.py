@@ -43,7 +43,7 @@ def group(name: str) -> str:
 
 
 def main(argv: list[str] | None = None) -> None:
-    ap = Parser(prog=Path(__file__).name, description=__doc__.splitlines()[0], allow_abbrev=False)
+    ap = Parser(prog=Path(__file__).name, description=__doc__.split("\n\n")[0], allow_abbrev=False)
     ap.add_argument("--model", choices=model_names(), default="census-lr")
     ap.add_argument("--integrator", choices=INTEGRATORS, default="log")
     ap.add_argument("--dmax", type=int_in_range(1, 255), default=80)

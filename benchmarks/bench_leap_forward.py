@@ -97,7 +97,7 @@ def yosys_stat(component: wiring.Component) -> tuple[int, int]:
 
 
 def main(argv: list[str] | None = None) -> None:
-    ap = Parser(prog=Path(__file__).name, description=__doc__.splitlines()[0])
+    ap = Parser(prog=Path(__file__).name, description=__doc__.split("\n\n")[0])
     ap.add_argument("--samples", type=value_list(int_of(SAMPLES_PER_CLOCK), "B"), default="1,2,4,8,16",
                     help="the B, comma-separated (default 1,2,4,8,16)")
     args = ap.parse_args(argv)

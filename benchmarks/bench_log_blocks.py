@@ -80,7 +80,7 @@ def measure(p: LogParams, levels: int, adder_levels: int, workdir: Path, pnr: bo
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = Parser(prog=Path(__file__).name, description=__doc__.splitlines()[0])
+    ap = Parser(prog=Path(__file__).name, description=__doc__.split("\n\n")[0])
     ints = value_list
     ap.add_argument("--rows", type=int_in_range(1, 4096), default=82,
                     help="M (default 82: Dmax 80 and the no-match row)")

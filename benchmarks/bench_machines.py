@@ -1,4 +1,4 @@
-"""K machines behind one front end (issue 18): the table of docs/fpga.md from measured reports.
+"""K machines behind one front end: the table of docs/fpga.md from measured reports.
 
 Each configuration is a place-and-route report and a Verilator run of the same design on a
 640 x 480 pair (measured; nothing here is derived from one lane):
@@ -100,7 +100,7 @@ def table(rows: list[dict[str, object]]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = Parser(prog=Path(__file__).name, description=__doc__.splitlines()[0])
+    ap = Parser(prog=Path(__file__).name, description=__doc__.split("\n\n")[0])
     ap.add_argument("configs", nargs="+", metavar="K:SYNTH_DIR:RUN_DIR",
                     type=argument_type(_config, "config"),
                     help="machines, the synth output directory and the run output directory ('-': none)")

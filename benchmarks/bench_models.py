@@ -1,4 +1,4 @@
-"""Benchmark: the paper model, the census model (issue 17) and census-lr (issue 22) on the bundled pair.
+"""Benchmark: the paper model, the census model and census-lr on the bundled pair.
 
 Float64 reference of: the paper model; + a 7x7 census column with the no-match row left
 uncalibrated (h_nm = 0: its census entry is L_c(0) = 1); + the no-match row calibrated

@@ -62,7 +62,7 @@ def synth_cost(dmax: int) -> None:
 
 
 def main(argv: list[str] | None = None) -> None:
-    ap = Parser(prog=Path(__file__).name, description=__doc__.splitlines()[0])
+    ap = Parser(prog=Path(__file__).name, description=__doc__.split("\n\n")[0])
     ap.add_argument("--dmax", type=int_in_range(0, MAX_DMAX), default=80)
     ap.add_argument("--no-synth", action="store_true")
     ap.add_argument("--no-runs", action="store_true")

@@ -67,7 +67,7 @@ def measure(prep, model: ModelParams, b: int) -> dict:  # noqa: ANN001
 
 
 def main(argv: list[str] | None = None) -> None:
-    ap = Parser(prog=Path(__file__).name, description=__doc__.splitlines()[0])
+    ap = Parser(prog=Path(__file__).name, description=__doc__.split("\n\n")[0])
     ap.add_argument("--models", type=model_list, default="census,census-lr",
                     help="comma-separated models (default census,census-lr)")
     ap.add_argument("--samples", type=value_list(int_of(SAMPLES_PER_CLOCK), "B"), default="1,2,4,8,16",

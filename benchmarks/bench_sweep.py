@@ -1,4 +1,4 @@
-"""Benchmark: a dataset sweep on Dask (issue 20) against direct runs, on this machine.
+"""Benchmark: a dataset sweep on Dask against direct runs, on this machine.
 
 The dataset: NPAIRS crops (H x W, disjoint rows x columns) of the bundled Middlebury Motorcycle pair
 with their ground truth, written as a list dataset (PNG + PFM) in a temporary directory. The grid:

@@ -206,7 +206,7 @@ def commit() -> str:
 
 
 def main(argv: list[str] | None = None) -> None:
-    ap = Parser(prog=Path(__file__).name, description=__doc__.splitlines()[0], allow_abbrev=False,
+    ap = Parser(prog=Path(__file__).name, description=__doc__.split("\n\n")[0], allow_abbrev=False,
                 epilog="Other options are passed to every bayesmachine synth run.")
     ap.add_argument("--samples", type=value_list(int_of(SAMPLES_PER_CLOCK), "B"), default="1,4,8",
                     help="the B to run, comma-separated (default 1,4,8)")

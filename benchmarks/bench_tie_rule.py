@@ -59,7 +59,7 @@ def report(name: str, m: dict[str, float], seconds: float) -> None:
 
 
 def main(argv: list[str] | None = None) -> None:
-    ap = Parser(prog=Path(__file__).name, description=__doc__.splitlines()[0])
+    ap = Parser(prog=Path(__file__).name, description=__doc__.split("\n\n")[0])
     ap.add_argument("--rows", type=int_in_range(1, 490), default=12,
                     help="image rows of the bundled pair, 1 .. 490 (default 12)")
     ap.add_argument("--pixels", type=int_in_range(1, 10_000_000), default=20_000,

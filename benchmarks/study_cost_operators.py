@@ -98,7 +98,7 @@ def _design(spec: str) -> str:
 
 
 def main(argv: list[str] | None = None) -> None:
-    ap = Parser(prog=Path(__file__).name, description=__doc__.splitlines()[0])
+    ap = Parser(prog=Path(__file__).name, description=__doc__.split("\n\n")[0])
     ap.add_argument("designs", nargs="+", type=argument_type(_design, "design"),
                     help="words:B or costs:B:K (B one of 1, 2, 4, 8, 16; K cost bits 1 .. 16)")
     ap.add_argument("--dir", type=Path, default=Path("build/cost-study"), help="work directory")

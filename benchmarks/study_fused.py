@@ -50,7 +50,7 @@ def _row(label: str, r: dict[str, Any]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = Parser(prog=Path(__file__).name, description=__doc__.splitlines()[0])
+    ap = Parser(prog=Path(__file__).name, description=__doc__.split("\n\n")[0])
     ap.add_argument("--models", type=model_list, default=["census", "census-lr"],
                     help="models with a fused column (default census,census-lr)")
     ap.add_argument("--counter-max", type=int_in_range(1, MAX_COUNTER_MAX), default=16,

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import json
+import re
 import sys
 from pathlib import Path
 from types import ModuleType, SimpleNamespace
@@ -88,6 +89,19 @@ def test_every_numeric_argument_of_a_script_is_bounded_when_parsed(name, stop_af
             assert cli.run_script(name, module.main, argv) == 2, (said, value)
             err = capsys.readouterr().err.strip().splitlines()
             assert len(err) == 1 and f"argument {said}" in err[0] and "Traceback" not in err[0], err
+
+
+@pytest.mark.parametrize("name", SCRIPTS)
+def test_a_script_s_help_says_its_whole_summary(name, capsys) -> None:
+    """``--help`` gives at least the docstring's first paragraph, whole: bench_activity's stopped at its
+    first line's end, mid-sentence ("... on a crop of the")."""
+    module = load(name)
+    assert cli.run_script(name, module.main, ["--help"]) == 0
+    summary = " ".join(module.__doc__.split("\n\n")[0].split())
+    assert summary[-1] in ".?:", summary
+    shown = " ".join(capsys.readouterr().out.split())
+    assert summary in shown, summary
+    assert not re.search(r"\bissues? \d", shown), "history belongs in docs/changelog.md"
 
 
 @pytest.mark.parametrize("name, argv, message", [

@@ -1,9 +1,12 @@
 """The code's shape, read from its syntax trees: the packages' layers point one way, no function
-outside tests/ and benchmarks/ is longer than 80 lines and no such file longer than 700."""
+outside tests/ and benchmarks/ is longer than 80 lines and no such file longer than 700. And the docs
+that mirror it: README's layout table names every module, and no page but the changelog names a
+commit (a figure says what tree it is of in words or a date)."""
 
 from __future__ import annotations
 
 import ast
+import re
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -242,3 +245,63 @@ def test_no_branch_on_an_integrator_s_name_outside_its_kind() -> None:
              if not str(rel).startswith(INTEGRATOR_HOMES)
              for line in integrator_branches(ast.parse(path.read_text()), names)]
     assert not found, "branches on an integrator's name:\n" + "\n".join(found)
+
+
+# A commit hash as the docs once wrote them ("on the tree of commit 9ee8a11", a table's "| 2968a37 |"):
+# 7 to 40 hex digits with a letter and a digit, or digits alone after "commit", "main", "tree of" or
+# "at" (a count such as 1048575 is not one).
+HASH = re.compile(r"\b(?=[0-9a-f]*[a-f])(?=[0-9a-f]*[0-9])[0-9a-f]{7,40}\b"
+                  r"|\b(?:commits?|main|tree of|at) [0-9]{7,40}\b")
+
+
+def _pages() -> list[Path]:
+    return [ROOT / "README.md", *sorted(p for p in (ROOT / "docs").glob("*.md") if p.name != "changelog.md")]
+
+
+def test_no_page_but_the_changelog_names_a_commit() -> None:
+    """A figure says what it was measured on (this tree, a date, a condition), not a hash a reader of a
+    clone without that history cannot read; history is the changelog's."""
+    found = [f"{page.relative_to(ROOT)}:{i}: {m.group(0)}" for page in _pages()
+             for i, line in enumerate(page.read_text().splitlines(), 1) for m in HASH.finditer(line)]
+    assert not found, found
+
+
+def test_the_hash_check_sees_them() -> None:
+    hits = [bool(HASH.search(text)) for text in (
+        "on the tree of commit 9ee8a11,", "| 2968a37 |", "(main 3458695, the same", "commit 4198060)",
+        "6414948 clock cycles", "max_cycles 1048575", "on the tree of 2026-11-24", "a deadbeef word")]
+    assert hits == [True, True, True, True, False, False, False, False]
+
+
+def _layout_rows() -> dict[str, set[str]]:
+    """README's layout table: each directory a row names (``hdl/log``) -> the names in backticks of its
+    row (``rule``, ``adders``, ``lanes``: a trailing "/" dropped)."""
+    text = (ROOT / "README.md").read_text()
+    section = text.split("\n## Layout\n", 1)[1].split("\n## ", 1)[0]
+    rows: dict[str, set[str]] = {}
+    for line in section.splitlines():
+        cells = line.split(" | ")
+        if not line.startswith("| `") or len(cells) < 2:
+            continue
+        named = {t.rstrip("/") for t in re.findall(r"`([^`]+)`", cells[1])}
+        for path in re.findall(r"`([^`]+)/`", cells[0]):
+            rows[path] = named
+    return rows
+
+
+def test_the_readme_layout_names_every_module() -> None:
+    """Every module of a package directory with a row of its own is named in that row; every package
+    directory has a row or is named in its parent's (``lanes/``, ``columns``)."""
+    rows = _layout_rows()
+    missing = []
+    for package in PACKAGES:
+        for directory in sorted({p.parent for p in (ROOT / package).rglob("*.py")}):
+            rel = directory.relative_to(ROOT).as_posix()
+            if any(part.startswith(".") or part == "__pycache__" for part in directory.parts):
+                continue
+            if rel in rows:
+                missing += [f"{rel}/{m.name}" for m in sorted(directory.glob("*.py"))
+                            if not m.stem.startswith("__") and m.stem not in rows[rel]]
+            elif directory.name not in rows.get(directory.parent.relative_to(ROOT).as_posix(), set()):
+                missing.append(f"{rel}/")
+    assert not missing, f"README's layout table does not name {missing}"

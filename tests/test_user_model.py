@@ -205,11 +205,63 @@ class _Nameless(Consistency):
     ({"columns": FEATURES, "passes": (PassDef(name="r", model="census", reference="up", machine_index=1),)},
      ValueError, "model 'bad': pass r: reference must be one of left, right, got 'up'"),
     ({"columns": FEATURES, "timeout_answer": "later"}, ValueError, "model 'bad': timeout_answer must be one"),
+    # A field given one item instead of a tuple of them, a mapping as something else.
+    ({"columns": Mean}, TypeError,
+     r"model 'bad': columns must be a tuple \(or list\) of column kinds, got Mean$"),
+    ({"columns": FEATURES, "passes": PassDef(name="r", model="census", reference="right", machine_index=1)},
+     TypeError, r"model 'bad': passes must be a tuple \(or list\) of PassDef, got PassDef\(name='r'"),
+    ({"columns": (LeftPrior, AbovePrior, Mean), "switches": {NEIGHBOUR_PRIOR: LeftPrior}}, TypeError,
+     r"model 'bad': switches\[neighbour_prior\] must be a tuple \(or list\) of column kinds, got LeftPrior"),
+    ({"columns": FEATURES, "defaults": ("p0", 0.5)}, TypeError, "model 'bad': defaults must be a mapping"),
+    ({"columns": FEATURES, "requires": {"p0": 0.5}}, TypeError,
+     r"model 'bad': requires\['p0'\] must be a \(value, reason\) pair, got 0.5"),
+    ({"columns": FEATURES, "passes": (PassDef(name="r", model="census", reference="right", machine_index=1,
+                                              not_inherited="p0"),)}, TypeError,
+     r"model 'bad': pass r: not_inherited must be a tuple \(or list\) of option names, got 'p0'"),
+    # A watchdog no machine counts at the default counter max (once a --max-cycles error at run time).
+    ({"columns": FEATURES, "watchdog_runs": 10**12}, ValueError,
+     r"model 'bad': watchdog_runs must be in \[1, 252645135\] runs of counter max \+ 1 cycles"),
+    ({"columns": FEATURES, "passes": (PassDef(name="r", model="census", reference="right", machine_index=1,
+                                              watchdog_runs=0),)}, ValueError,
+     r"model 'bad': pass r: watchdog_runs must be in \[1, 252645135\]"),
 ])
 def test_a_bad_definition_is_one_error(kwargs: dict, error: type, message: str) -> None:
     with pytest.raises(error, match=f"^{message}"):
         ModelDef(name="bad", description="a bad model", **kwargs)
     assert "bad" not in MODELS
+
+
+@pytest.mark.parametrize("name", ["-x", "a,b", "a b", "", "1x", "x/y", "census:lr"])
+def test_a_model_name_is_a_value_of_model(name: str) -> None:
+    """A name that ``--model`` (or a list of models, ``sweep --model A,B``) could not take is refused
+    where the model is defined: ``-x`` once registered and made ``sweep --model -x,paper`` an argparse
+    error ("expected one argument")."""
+    with pytest.raises(ValueError, match=f"^ModelDef: name {re.escape(repr(name))} is not a model name: a "
+                       "letter, then letters, digits, '-' or '_'"):
+        ModelDef(name=name, description="a model", columns=FEATURES)
+    with pytest.raises(TypeError, match="^ModelDef: name must be a string, got int 3"):
+        ModelDef(name=3, description="a model", columns=FEATURES)  # type: ignore[arg-type]
+
+
+def test_a_model_watchdog_beyond_the_machine_names_counter_max(capsys: pytest.CaptureFixture[str]) -> None:
+    """The largest watchdog_runs fits at the default counter max; a larger counter max is refused naming
+    it (not --max-cycles, which was not given)."""
+    from bayesmachine.modeldef import MAX_WATCHDOG, MAX_WATCHDOG_RUNS
+
+    register_model(ModelDef(name="long-watch", description="a long watchdog", columns=FEATURES,
+                            watchdog_runs=MAX_WATCHDOG_RUNS))
+    try:
+        model = ModelParams(name="long-watch", dmax=4)
+        assert disparity_machine(model).max_cycles == MAX_WATCHDOG_RUNS * 17 <= MAX_WATCHDOG
+        assert disparity_machine(model, counter_max=17, max_cycles=1000).max_cycles == 1000
+        assert main(["run", "--model", "long-watch", "--dmax", "4", "--counter-max", "17", "-o", "x"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert err == [f"bayesmachine run: error: --counter-max: counter_max 17: the long-watch model's "
+                       f"watchdog, {MAX_WATCHDOG_RUNS} runs of counter max + 1 cycles, is "
+                       f"{MAX_WATCHDOG_RUNS * 18} cycles, more than a machine counts ({MAX_WATCHDOG}): "
+                       "give a smaller counter_max or a max_cycles"]
+    finally:
+        del MODELS["long-watch"]
 
 
 def _lr(name: str, model: str) -> ModelDef:

@@ -193,35 +193,7 @@ def test_no_match_row_that_cannot_win_reads_zero(pair) -> None:
     assert np.isfinite(q.posterior).all() and (q.map >= 0).all()
 
 
-# --- What the work costs: operator samples per output pixel (report.json), operators (synth) ---
-
-@pytest.mark.parametrize(("keywords", "want"), [({}, 18995.6067), ({"fuse_columns": False}, 44612.1133)])
-def test_operator_samples_per_pixel(keywords: dict, want: float) -> None:
-    """Every pass's operators x its cycles summed over its pixels, per output pixel: on the crop above,
-    (35483 x 66 x 4 + 39033 x 66 x 3) / 900 fused, (46225 x 66 x 7 + 47462 x 66 x 6) / 900 per column."""
-    model = ModelParams(name="census-lr", dmax=64, **keywords)
-    left_image, right_image, gt = _crop()
-    run = run_machine(prepare(left_image, right_image, model, gt), disparity_machine(model), progress=False)
-    assert run.operator_samples_per_pixel == pytest.approx(want, abs=1e-4)
-
-
-def test_report_gives_operator_samples_per_pixel(tmp_path) -> None:
-    import json
-
-    from bayesmachine.cli import main
-
-    crop = ["--crop", "300,200,120,24", "--dmax", "16", "--no-sgbm", "--quiet"]
-    cm = ["--counter-max", "4"]  # the stochastic machine's (the log machine refuses it)
-    for name, flags in (("fused", cm), ("per-column", [*cm, "--no-fuse-columns"]),
-                        ("b4", [*cm, "--samples-per-clock", "4"]), ("log", ["--integrator", "log"])):
-        assert main(["run", *crop, *flags, "-o", str(tmp_path / name)]) == 0
-    got = {n: json.loads((tmp_path / n / "report.json").read_text())["operator_samples_per_pixel"]
-           for n in ("fused", "per-column", "b4", "log")}
-    # The log machine samples nothing: null.
-    assert got.pop("log") is None
-    # Measured; B = 4 counts every sample of a run's last clock (4 x its clocks, not its cycles).
-    assert got == pytest.approx({"fused": 674.0816, "per-column": 1685.8061, "b4": 1078.5306}, abs=1e-4)
-
+# --- What the work costs on chip: operators (synth); operator samples: tests/host/test_records.py ---
 
 def test_synth_counts_every_machines_operators() -> None:
     from bayesmachine.fpga.synth import design_operators
