@@ -117,7 +117,8 @@ def _tempered(column: SemiGlobal, ctx) -> tuple[np.ndarray, np.ndarray]:
     return (a * (s - low[:, None]) + 128) >> 8, (a * (s_nm - low) + 128) >> 8
 
 
-@pytest.mark.parametrize(("keywords", "word_bits"), [({}, 10), ({"sgm_paths": 2, "sgm_temperature": 0.4}, 8)])
+@pytest.mark.parametrize(("keywords", "word_bits"), [({}, 10), ({"sgm_paths": 4, "sgm_temperature": 0.4}, 8),
+                                                    ({"sgm_paths": 3}, 10)])
 def test_words_and_codes_are_the_rule(pair, keywords: dict, word_bits: int) -> None:
     model = _model(**keywords)
     column = model.column(SemiGlobal)
@@ -179,10 +180,11 @@ def test_float_factors_and_the_reference(pair) -> None:
     energy = -np.log(f)
     low = energy.min(axis=1)
     e = (energy[:, :-1] - low[:, None]).reshape(ctx.rows, ctx.columns.size, -1)
-    s = _twin(e, 4, 1.0, 6.0, math.inf).reshape(energy[:, :-1].shape)
-    s_nm = 4 * (energy[:, -1] - low)
+    n = len(column.paths)
+    s = _twin(e, n, 1.0, 6.0, math.inf).reshape(energy[:, :-1].shape)
+    s_nm = n * (energy[:, -1] - low)
     s_min = np.minimum(s.min(axis=1), s_nm)
-    want = np.exp(-0.25 * (np.concatenate([s, s_nm[:, None]], axis=1) - s_min[:, None]))
+    want = np.exp(-(1 / n) * (np.concatenate([s, s_nm[:, None]], axis=1) - s_min[:, None]))
     np.testing.assert_allclose(column.words(ctx), want, rtol=1e-9)
     ref = reference_fast(left, right, model)
     np.testing.assert_allclose(ref.posterior.reshape(want.shape), want / want.sum(axis=1, keepdims=True),
@@ -228,5 +230,6 @@ def test_the_kind_and_its_options() -> None:
         assert err.value.parameter == parameter
     with pytest.raises(TypeError):
         _model(sgm_paths=2.5)
-    assert _model(sgm_paths=2).sgm_temperature == 0.5  # 1 / paths by default
+    assert _model().sgm_paths == 2 and _model().sgm_temperature == 0.5  # 1 / paths by default
+    assert _model(sgm_paths=4).sgm_temperature == 0.25
     assert _model().column(SemiGlobal).penalties == (16, 96)
