@@ -52,6 +52,7 @@ from bayesmachine.columns import (
     Source,
     Term,
     fused,
+    semiglobal,
 )
 from bayesmachine.integrators import integrator_kind
 from bayesmachine.modeldef import MAX_WATCHDOG, OWN_PASS, ModelDef, PassDef, machine_layout
@@ -123,7 +124,22 @@ CENSUS_LR = ModelDef(
     requires={"neighbour_prior": (True, "both passes use it")},
     watchdog_runs=CENSUS_WATCHDOG_RUNS, timeout_answer=CENSUS_TIMEOUT_ANSWER, normalize=True)
 
-# The models by name: the three above, then those registered by register_model.
+CENSUS_SG = ModelDef(
+    name="census-sg", description="census with its fused column's energies aggregated along causal scanline "
+    "paths (the semi-global column; census-sgm's right pass)",
+    columns=(LeftPrior, AbovePrior, semiglobal(fused(Mean, GradH, GradV, Census))),
+    switches={NEIGHBOUR_PRIOR: (LeftPrior, AbovePrior)},
+    watchdog_runs=CENSUS_WATCHDOG_RUNS, timeout_answer=CENSUS_TIMEOUT_ANSWER, normalize=True)
+CENSUS_SGM = ModelDef(
+    name="census-sgm", description="census-lr with the semi-global column over its fused column, both passes",
+    columns=(*CENSUS_SG.columns, Consistency), switches=CENSUS_SG.switches,
+    passes=(PassDef(name=RIGHT_PASS, model="census-sg", reference="right", machine_index=1,
+                    nomatch_option="lr_right_nomatch", watchdog_option="lr_right_max_cycles",
+                    not_inherited=("prior_nomatch",), watchdog_runs=RIGHT_WATCHDOG_RUNS),),
+    defaults={"prior_nomatch": 0.1},
+    watchdog_runs=CENSUS_WATCHDOG_RUNS, timeout_answer=CENSUS_TIMEOUT_ANSWER, normalize=True)
+
+# The models by name: the ones above, then those registered by register_model.
 MODELS: dict[str, ModelDef] = {}
 
 
@@ -592,5 +608,5 @@ def check_disparity_machine(model: ModelParams, machine: MachineParams) -> int:
 
 
 
-for _definition in (PAPER, CENSUS, CENSUS_LR):
+for _definition in (PAPER, CENSUS, CENSUS_LR, CENSUS_SG, CENSUS_SGM):
     register_model(_definition)

@@ -15,8 +15,9 @@ without a no-match row has 0 there in every FEATURES column.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, MutableMapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -85,10 +86,12 @@ def need_planes(p: Pass, left: Planes, right: Planes) -> None:
 
 def pass_context(p: Pass, left: Planes, right: Planes, word_bits: int | None, *, rows: slice | None = None,
                  above: np.ndarray | None = None,
-                 results: Mapping[str, np.ndarray] | None = None) -> PassContext:
+                 results: Mapping[str, np.ndarray] | None = None,
+                 carry: MutableMapping[str, Any] | None = None) -> PassContext:
     """What pass ``p``'s columns build their words (``word_bits``; None: float64 factors) from, for map
     rows ``rows`` (default all): its reference image's planes and the other's, its grid, ``above`` (its
-    own MAPs of the row above) and ``results`` (the other passes' MAPs of these rows, by name)."""
+    own MAPs of the row above), ``results`` (the other passes' MAPs of these rows, by name) and ``carry``
+    (what its columns carry from band to band: one dict per pass and frame, the bands in order)."""
     need_planes(p, left, right)
     region = OutputRegion.of_features(left.shape, p.model.dmax)
     grid = pass_grid(p, region)
@@ -98,7 +101,8 @@ def pass_context(p: Pass, left: Planes, right: Planes, word_bits: int | None, *,
     return PassContext(where=p.where, reference=ref.band(band), match=other.band(band), columns=grid.columns,
                        match_columns=grid.match, valid=grid.valid, nomatch=p.nomatch, word_bits=word_bits,
                        above=above, results=dict(results or {}), grids=grids, rule=p.model.nomatch,
-                       nomatch_live=p.nomatch and not any(c.zeroes_nomatch for c in p.columns))
+                       nomatch_live=p.nomatch and not any(c.zeroes_nomatch for c in p.columns),
+                       first_row=band.start or 0, carry=carry)
 
 
 def _given(words: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
@@ -110,20 +114,23 @@ def _given(words: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
 
 def pass_words(p: Pass, left: Planes, right: Planes, machine: MachineParams, *, rows: slice | None = None,
                above: np.ndarray | None = None, results: Mapping[str, np.ndarray] | None = None,
-               prior: np.ndarray | None = None) -> np.ndarray:
+               prior: np.ndarray | None = None, carry: MutableMapping[str, Any] | None = None) -> np.ndarray:
     """The likelihood-memory words (P, M, loaded columns) of pass ``p``'s pixels of map rows ``rows``
     (default: all), row-major over its grid (:func:`pass_grid`), on ``machine``: each loaded column's
     (module text). ``above``: the pass's own MAPs of the map row above (W,), -1 for none (an ABOVE
     column's: required then, one row at a time); ``results``: the other passes' MAPs of these rows by
     name (a PASS column's); ``prior``: the words (P, M) of the machine's own loaded prior column
-    (``prior="loaded"``; default 1.0). What the machine's integrator kind loads (``kind.column_entries``):
-    with ``integrator = "log"`` each column's energy codes instead
+    (``prior="loaded"``; default 1.0); ``carry``: what its columns carry from band to band (a semi-global
+    column's path costs: one dict per pass and frame, the bands in order from row 0). What the machine's
+    integrator kind loads (``kind.column_entries``): with ``integrator = "log"`` each column's energy codes
+    instead
     (``Column.codes``: ``bayesmachine.columns.energy.log_codes`` of its float64 factors, its
     ``Term.energy()`` codes, 511 for a factor of 0; a fused column's summed codes), ``prior`` codes too."""
     model = p.model
     check_disparity_machine(model, machine)
     kind = machine.kind  # what its machine loads: words, or energy codes of the float64 factors
-    ctx = pass_context(p, left, right, kind.table_bits(machine), rows=rows, above=above, results=results)
+    ctx = pass_context(p, left, right, kind.table_bits(machine), rows=rows, above=above, results=results,
+                       carry=carry)
     loaded = [c for c in p.columns if c.source.loaded]
     own = machine.loaded_columns - len(loaded)  # the machine's own loaded prior column (prior="loaded")
     if prior is not None and not own:
@@ -144,11 +151,12 @@ def pass_words(p: Pass, left: Planes, right: Planes, machine: MachineParams, *, 
 def memory_words(left: Planes, right: Planes, model: ModelParams, machine: MachineParams, *,
                  rows: slice | None = None, above: np.ndarray | None = None,
                  results: Mapping[str, np.ndarray] | None = None,
-                 prior: np.ndarray | None = None) -> np.ndarray:
+                 prior: np.ndarray | None = None,
+                 carry: MutableMapping[str, Any] | None = None) -> np.ndarray:
     """The words (P, M, loaded columns) of ``model``'s own pass (the output pixels of map rows ``rows``,
     row-major): :func:`pass_words` (``results``: e.g. census-lr's right pass's MAPs, ``{"right": ...}``)."""
     return pass_words(model.passes[-1], left, right, machine, rows=rows, above=above, results=results,
-                      prior=prior)
+                      prior=prior, carry=carry)
 
 
 def likelihoods_plain(left: Planes, right: Planes, model: ModelParams) -> tuple[np.ndarray, np.ndarray]:

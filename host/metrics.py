@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -41,6 +42,9 @@ from .confidence import (
 )
 from .records import MachineRun, Prepared
 
+if TYPE_CHECKING:
+    from .fill import Fill
+
 cv2 = optional("cv2", "OpenCV")
 
 __all__ = [
@@ -52,6 +56,7 @@ __all__ = [
     "map_agreement",
     "bad_rates",
     "gt_region",
+    "SGBM_TUNED",
     "sgbm_disparity",
     "sgbm_lr_confidence",
     "bm_disparity",
@@ -170,10 +175,21 @@ def sgbm_numdisparities(dmax: int) -> int:
     return -(-(dmax + 1) // 16) * 16
 
 
-def _sgbm_image(left: np.ndarray, right: np.ndarray, dmax: int) -> np.ndarray | None:
-    """OpenCV StereoSGBM (blockSize 5) over the whole image, float, -1 = invalid; None when OpenCV
-    cannot run it (an image barely wider than numDisparities)."""
-    sgbm = cv2.StereoSGBM_create(minDisparity=0, numDisparities=sgbm_numdisparities(dmax), blockSize=5)
+# A tuned StereoSGBM, as the FPGA stereo literature runs it: 3-way, block 5, P1 = 8·3·25, P2 = 32·3·25,
+# uniqueness 10, speckle window 100 / range 2, disp12MaxDiff 1, preFilterCap 63.
+SGBM_TUNED = {"blockSize": 5, "P1": 8 * 3 * 25, "P2": 32 * 3 * 25, "uniquenessRatio": 10,
+              "speckleWindowSize": 100, "speckleRange": 2, "disp12MaxDiff": 1, "preFilterCap": 63}
+
+
+def _sgbm_image(left: np.ndarray, right: np.ndarray, dmax: int, tuned: bool = False) -> np.ndarray | None:
+    """OpenCV StereoSGBM (blockSize 5; ``tuned``: :data:`SGBM_TUNED`, mode SGBM_3WAY) over the whole image,
+    float, -1 = invalid; None when OpenCV cannot run it (an image barely wider than numDisparities)."""
+    n = sgbm_numdisparities(dmax)
+    if tuned:
+        sgbm = cv2.StereoSGBM_create(minDisparity=0, numDisparities=n, mode=cv2.STEREO_SGBM_MODE_SGBM_3WAY,
+                                     **SGBM_TUNED)
+    else:
+        sgbm = cv2.StereoSGBM_create(minDisparity=0, numDisparities=n, blockSize=5)
     try:
         raw = sgbm.compute(np.ascontiguousarray(left), np.ascontiguousarray(right))
     except cv2.error:
@@ -183,12 +199,14 @@ def _sgbm_image(left: np.ndarray, right: np.ndarray, dmax: int) -> np.ndarray | 
     return disp
 
 
-def sgbm_disparity(left: np.ndarray, right: np.ndarray, dmax: int, margin: int = MARGIN) -> np.ndarray | None:
-    """OpenCV StereoSGBM (blockSize 5) on the full pair, cut to the output region; -1 = invalid.
+def sgbm_disparity(left: np.ndarray, right: np.ndarray, dmax: int, margin: int = MARGIN,
+                   tuned: bool = False) -> np.ndarray | None:
+    """OpenCV StereoSGBM (blockSize 5, its defaults; ``tuned``: :data:`SGBM_TUNED`) on the full pair, cut to
+    the output region; -1 = invalid.
 
     None when OpenCV cannot run it: an image barely wider than numDisparities (a narrow crop).
     """
-    disp = _sgbm_image(left, right, dmax)
+    disp = _sgbm_image(left, right, dmax, tuned)
     return None if disp is None else OutputRegion.of_image(disp.shape, dmax, margin).cut(disp)
 
 
@@ -279,6 +297,8 @@ class RunMetrics:
     # The passes run before the own one (census-lr's "right"), by name: pixels, cycles, timeouts.
     passes: dict[str, dict[str, float]] = field(default_factory=dict)
     confidence: dict[str, object] | None = None  # the confidence figures (confidence_report)
+    fill: Fill | None = field(default=None, repr=False)  # the filled map (None: not filled)
+    fill_maps: ConfidenceMaps | None = field(default=None, repr=False)  # its confidence (None: no counts)
     maps: ConfidenceMaps | None = field(default=None, repr=False)  # the machine's (None: no counts)
     reference_maps: ConfidenceMaps | None = field(default=None, repr=False)
     ground_truth_pixels: int | None = None  # output pixels with a known (finite) ground truth
@@ -313,6 +333,10 @@ class RunMetrics:
                     out[f"{method}_{k}"] = v
         if self.ground_truth_pixels is not None:
             out["ground_truth_pixels"] = self.ground_truth_pixels
+        if self.fill is not None:
+            out["fill"] = self.fill.rule
+            out["fill_holes"] = int(self.fill.holes.sum())
+            out["filled_pixels"] = int(self.fill.filled.sum())
         if self.confidence is not None:
             out.update(_confidence_keys(self.confidence))
             out["confidence"] = self.confidence
@@ -326,7 +350,7 @@ _POOLED = ("ece", "auc", "auc_random", "auc_perfect")
 def _confidence_keys(conf: dict[str, object]) -> dict[str, object]:
     """The confidence figures as flat report keys: ``machine_confidence_ece``, ``sgbm_lr_auc``, ..."""
     out: dict[str, object] = {"mean_confidence": conf.get("mean_confidence")}
-    for method in ("machine", "reference"):
+    for method in ("machine", "reference", "filled"):
         figs = conf.get(method)
         if isinstance(figs, dict):
             out.update({f"{method}_confidence_{k}": figs.get(k) for k in _POOLED})
@@ -338,12 +362,14 @@ def _confidence_keys(conf: dict[str, object]) -> dict[str, object]:
 
 
 def evaluate(prepared: Prepared, run: MachineRun, sgbm: bool | None = None,
-             confidence: ConfidenceParams | None = None) -> RunMetrics:
+             confidence: ConfidenceParams | None = None, fill: Fill | None = None) -> RunMetrics:
     """All figures of one machine run against the prepared reference (and gt).
 
     The RMS error and the reference's confidence need the float64 posterior: it is recomputed
     band by band and accumulated, so memory stays at one band whatever the frame size.
     ``confidence``: how confidence is read from a distribution (default ``ConfidenceParams()``).
+    ``fill``: the run's filled map (:mod:`.fill`; its figures are the method ``filled``'s, a filled
+    pixel's confidence that of the pixel whose disparity it took).
     """
     ref_map = prepared.reference_map
     if ref_map is None:
@@ -359,18 +385,25 @@ def evaluate(prepared: Prepared, run: MachineRun, sgbm: bool | None = None,
         if run.counts is not None:  # a board asked for MAPs only has no counts: no RMS error (null)
             rms.add(run.counts[rows], band.posterior, band.map >= 0)
     maps = None if run.counts is None else measure_counts(run.counts, run.map, params)
+    filled = fill is not None and fill.rule != "none"
+    fill_maps = None if maps is None or not filled else _carried(maps, fill)
     ref_maps = ref_conf.result()
     bad = None
     sgbm_map = None
     lr_conf = None
     if prepared.gt is not None:
         methods = {"machine": run.map, "reference": ref_map}
+        if filled:
+            methods["filled"] = fill.map
         if sgbm is None or sgbm:  # OpenCV's block matchers: SGBM (block 5) and StereoBM (block 15)
             dmax, margin = prepared.model.dmax, prepared.model.margin
             sgbm_map = sgbm_disparity(prepared.left, prepared.right, dmax, margin)
             if sgbm_map is not None:  # too narrow for SGBM: the report simply has no SGBM figures
                 methods["sgbm"] = sgbm_map
                 lr_conf = sgbm_lr_confidence(prepared.left, prepared.right, dmax, margin)
+                tuned = sgbm_disparity(prepared.left, prepared.right, dmax, margin, tuned=True)
+                if tuned is not None:
+                    methods["sgbm_tuned"] = tuned
             bm_map = bm_disparity(prepared.left, prepared.right, dmax, margin=margin)
             if bm_map is not None:
                 methods["bm"] = bm_map
@@ -388,11 +421,19 @@ def evaluate(prepared: Prepared, run: MachineRun, sgbm: bool | None = None,
         sgbm_map=sgbm_map,
         passes={name: _pass_figures(r.cycles, r.timeout) for name, r in run.passes.items()},
         confidence=confidence_report(params, maps, ref_maps, run.map, ref_map, prepared.gt, sgbm_map,
-                                     lr_conf),
+                                     lr_conf, (fill_maps, fill.map) if fill_maps is not None else None),
         maps=maps,
         reference_maps=ref_maps,
         ground_truth_pixels=None if prepared.gt is None else int(np.isfinite(prepared.gt).sum()),
+        fill=fill if filled else None,
+        fill_maps=fill_maps,
     )
+
+
+def _carried(maps: ConfidenceMaps, fill: Fill) -> ConfidenceMaps:
+    """The filled map's measures: a filled pixel's are those of the pixel whose disparity it took."""
+    return ConfidenceMaps(*(fill.carried(getattr(maps, k))
+                            for k in ("mass", "confidence", "entropy", "nomatch_mass")))
 
 
 def _bad_figures(prepared: Prepared, methods: dict[str, np.ndarray]) -> dict[str, dict[str, float]]:
@@ -426,10 +467,11 @@ NO_KNOWN_GT = ("the ground truth has no known pixel in the output region (every 
 def confidence_report(
     params: ConfidenceParams, maps: ConfidenceMaps | None, ref_maps: ConfidenceMaps, disp: np.ndarray,
     ref_map: np.ndarray, gt: np.ndarray | None, sgbm_map: np.ndarray | None = None,
-    lr_conf: np.ndarray | None = None,
+    lr_conf: np.ndarray | None = None, filled: tuple[ConfidenceMaps, np.ndarray] | None = None,
 ) -> dict[str, object]:
     """The report's ``confidence`` entry: the parameters, the machine's mean confidence over its
-    matched pixels and, with ground truth, each method's calibration and sparsification figures.
+    matched pixels and, with ground truth, each method's calibration and sparsification figures (the
+    filled map's, ``filled``: its confidence maps and its map, over every pixel it gives a disparity).
     Without counts (a board asked for MAPs only) the machine has no confidence: None, never made up."""
     matched = np.asarray(disp) >= 0
     out: dict[str, object] = {
@@ -449,6 +491,8 @@ def confidence_report(
     if maps is not None:
         out["machine"] = method_figures(maps, disp, gt, params.t)
     out["reference"] = method_figures(ref_maps, ref_map, gt, params.t)
+    if filled is not None:
+        out["filled"] = method_figures(filled[0], filled[1], gt, params.t)
     if sgbm_map is not None and lr_conf is not None:
         sel = np.isfinite(gt) & (sgbm_map >= 0)
         out["sgbm_lr"] = ranking_figures(lr_conf[sel], np.abs(sgbm_map[sel] - gt[sel]) > BAD_THRESHOLD)

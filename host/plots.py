@@ -57,11 +57,12 @@ def _no_match_legend(fig, label: str) -> None:  # noqa: ANN001
 def save_disparity_figure(
     path: str | Path,
     left: np.ndarray,
-    panels: Sequence[tuple[str, np.ndarray]],
+    panels: Sequence[tuple[str, np.ndarray] | tuple[str, np.ndarray, np.ndarray]],
     dmax: int,
 ) -> None:
-    """The left image, then each (title, disparity map) panel, coloured on one scale 0..Dmax with its
-    colour bar; no match (< 0) and unknown (non-finite) in :data:`NO_MATCH_COLOUR`."""
+    """The left image, then each (title, disparity map[, marked]) panel, coloured on one scale 0..Dmax with
+    its colour bar; no match (< 0) and unknown (non-finite) in :data:`NO_MATCH_COLOUR`; a panel's
+    ``marked`` pixels (bool, e.g. those an occlusion fill gave a value) lightened by a white veil."""
     from matplotlib.cm import ScalarMappable
     from matplotlib.colors import Normalize
 
@@ -70,8 +71,12 @@ def save_disparity_figure(
     norm = Normalize(0, max(dmax, 1))
     axes.flat[0].imshow(left, cmap="gray", vmin=0, vmax=255, interpolation="nearest")
     axes.flat[0].set_title("Left image", fontsize=9)
-    for ax, (title, disp) in zip(list(axes.flat)[1:], panels, strict=False):
+    for ax, (title, disp, *marked) in zip(list(axes.flat)[1:], panels, strict=False):
         ax.imshow(_masked(disp), cmap=cmap, norm=norm, interpolation="nearest")
+        if marked:
+            veil = np.zeros((*np.shape(disp), 4))
+            veil[np.asarray(marked[0], bool)] = (1.0, 1.0, 1.0, 0.55)
+            ax.imshow(veil, interpolation="nearest")
         ax.set_title(title, fontsize=9)
     for ax in axes.flat:
         ax.set_axis_off()

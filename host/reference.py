@@ -31,9 +31,10 @@ name. ``reference_plain`` and ``reference_prior_plain`` are the plain oracles of
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, MutableMapping
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from typing import Any
 
 import numba
 import numpy as np
@@ -367,15 +368,17 @@ def _above(above: np.ndarray | None, rows: slice | None, p: Pass, wo: int) -> np
 
 def pass_reference(p: Pass, left: Planes, right: Planes, word_bits: int | None = None, *,
                    out: np.ndarray | None = None, rows: slice | None = None, above: np.ndarray | None = None,
-                   results: Mapping[str, np.ndarray] | None = None) -> Reference:
+                   results: Mapping[str, np.ndarray] | None = None,
+                   carry: MutableMapping[str, Any] | None = None) -> Reference:
     """The reference of pass ``p`` over map rows ``rows`` (default all): float64 (``word_bits`` None) or
     on ``word_bits``-bit words, exact (module text). ``out``: the posterior's buffer (float64, (rows, W,
     Dmax+2)); ``above``: the MAP row above the band (an ABOVE column, rows not starting at 0);
-    ``results``: the other passes' MAPs of these rows by name (a PASS column)."""
+    ``results``: the other passes' MAPs of these rows by name (a PASS column); ``carry``: what its columns
+    carry from band to band (one dict per pass and frame, the bands in order: a semi-global column's)."""
     model = p.model
     if word_bits is not None:
         _check_word_bits(word_bits)
-    ctx = pass_context(p, left, right, word_bits, rows=rows, results=results)
+    ctx = pass_context(p, left, right, word_bits, rows=rows, results=results, carry=carry)
     grid = pass_grid(p, OutputRegion.of_features(left.shape, model.dmax))
     shape = (ctx.rows, grid.width, model.hypotheses)
     if out is None:
@@ -385,13 +388,14 @@ def pass_reference(p: Pass, left: Planes, right: Planes, word_bits: int | None =
     features = [c for c in p.columns if c.source is Source.FEATURES]
     # The data kernel takes the FEATURES columns whose words' product fits one int64 (on words: four at
     # least, every one of the package's models); the others are factors as the PASS columns are. In
-    # float64 a fused column is its members' factors; on words its own words (they hold the rule).
+    # float64 a fused column is its members' factors; on words its own words (they hold the rule), and so
+    # are a semi-global column's in both (its factor is its own).
     if word_bits is None:
-        kernel = [f for c in features for f in c.factors()]
+        kernel = [f for c in features if not _own_factor(c) for f in c.factors()]
     else:
         kernel = [c for c in features if not c.holds_rule][: TOP_BITS // word_bits]
     factors = [c.words(ctx).reshape(shape) for c in p.columns if c.source is Source.PASS or (
-        word_bits is not None and c.source is Source.FEATURES and c not in kernel)]
+        c.source is Source.FEATURES and c not in kernel and (word_bits is not None or _own_factor(c)))]
     cols, entries = _columns(kernel, ctx.reference, ctx.match, word_bits)
     floor = model.nomatch.table(word_bits).values.astype(np.float64 if word_bits is None else np.int64)
     rule = (entries, ctx.reference[model.nomatch.plane], floor, p.nomatch, grid.first, p.step, grid.last,
@@ -417,14 +421,24 @@ def pass_reference(p: Pass, left: Planes, right: Planes, word_bits: int | None =
     return Reference(out, idx)
 
 
+def _own_factor(c: Column) -> bool:
+    """Whether a FEATURES column's float64 factor is its own words (it holds the rule, and has no members
+    the data kernel multiplies: a semi-global column)."""
+    return c.holds_rule and c.factors() == (c,)
+
+
 def _float_reference(cols: tuple, rule: tuple, factors: list[np.ndarray], neighbours: tuple, top: np.ndarray,
                      out: np.ndarray, idx: np.ndarray) -> None:
     """The float64 reference's kernels: the FEATURES columns' product, then the other factors in operator
     order ((((m * gH) * gV) * census) * lr), then the neighbours in raster order."""
+    own = not cols  # a column whose factor is its own holds the rule: its factors come first
+    if own:
+        out[...] = factors.pop(0)
     plain = not factors and not (neighbours[2] or neighbours[5])
-    _by_rows(cols, 1.0, rule, out, idx if plain else None)
-    if plain:
-        return
+    if not own:
+        _by_rows(cols, 1.0, rule, out, idx if plain else None)
+        if plain:
+            return
     for f in factors:
         out *= f
     if neighbours[2] or neighbours[5]:
@@ -441,9 +455,10 @@ def pass_reference_map(p: Pass, left: Planes, right: Planes, word_bits: int | No
     region = OutputRegion.of_features(left.shape, p.model.dmax)
     out = np.empty((region.shape[0], pass_grid(p, region).width), dtype=np.int16)
     above = None
+    carry: dict[str, Any] = {}
     for rows in region.bands(band_rows):
         band = pass_reference(p, left, right, word_bits, rows=rows, above=above,
-                              results={k: v[rows] for k, v in (results or {}).items()})
+                              results={k: v[rows] for k, v in (results or {}).items()}, carry=carry)
         out[rows] = band.map
         above = band.map[-1].copy()
     return out
@@ -490,12 +505,13 @@ def _bands(left: Planes, right: Planes, model: ModelParams, word_bits: int | Non
     results = declared_maps(model, left, right, word_bits, band_rows)
     buffer: np.ndarray | None = None
     above = None  # an ABOVE column's row above the band: the previous band's last MAP row
+    carry: dict[str, Any] = {}
     for rows in region.bands(band_rows):
         n = rows.stop - rows.start
         if buffer is None or buffer.shape[0] < n:
             buffer = np.empty((n, region.shape[1], model.hypotheses))
         band = pass_reference(model.passes[-1], left, right, word_bits, out=buffer[:n], rows=rows,
-                              above=above, results={k: v[rows] for k, v in results.items()})
+                              above=above, results={k: v[rows] for k, v in results.items()}, carry=carry)
         above = band.map[-1].copy()
         yield rows, band
 

@@ -35,6 +35,7 @@ from bayesmachine.sim.results import MachineResult, disparities
 
 from .confidence import ConfidenceParams
 from .features import Planes, model_planes
+from .fill import DEFAULT_FILL, Fill, run_fill
 from .images import validate_pair
 from .likelihoods import pass_grid, pass_words
 from .metrics import RunMetrics, evaluate, gt_region
@@ -65,6 +66,7 @@ class RunOutcome:
     prepared: Prepared
     run: MachineRun
     metrics: RunMetrics = field(repr=False)
+    fill: Fill | None = field(default=None, repr=False)  # the run's map filled (host.fill; None: not)
 
 
 def result_bytes(region: OutputRegion, machine: MachineParams) -> int:
@@ -99,10 +101,11 @@ def _want_progress(progress: bool | None) -> bool:
 
 
 def _row_words(p: Pass, planes: tuple[Planes, Planes], machine: MachineParams, rows: slice,
-               above: np.ndarray, results: Mapping[str, np.ndarray]) -> np.ndarray:
+               above: np.ndarray, results: Mapping[str, np.ndarray], carry: dict[str, object]) -> np.ndarray:
     """The words of pass ``p``'s map rows ``rows``, each column's from where it says: ``above`` (the pass's
-    own MAP row above: -1 for none), ``results`` (the other passes' MAPs of these rows, by name)."""
-    return pass_words(p, *planes, machine, rows=rows, above=above, results=results)
+    own MAP row above: -1 for none), ``results`` (the other passes' MAPs of these rows, by name), ``carry``
+    (what its columns carry from the rows before: the pass's own, rows in order)."""
+    return pass_words(p, *planes, machine, rows=rows, above=above, results=results, carry=carry)
 
 
 def _row_by_row(p: Pass) -> bool:
@@ -137,6 +140,7 @@ class _PassRun:
         self.timeout = np.zeros((ho, self.width), bool)
         self.seconds = self.words_seconds = 0.0
         self.wall: int | None = None
+        self.carry: dict[str, object] = {}
         self.engines = [get_engine(engine, machine, **(engine_options or {})) for _ in range(machines)]
 
     def run(self, rows: slice, results: Mapping[str, np.ndarray]) -> MachineResult:
@@ -146,7 +150,7 @@ class _PassRun:
         y0 = rows.start
         above = np.full(self.width, -1, np.int16) if y0 == 0 else self.follow[y0 - 1]
         words = _row_words(self.p, self.planes, self.machine, rows, above,
-                           {k: v[rows] for k, v in results.items()})
+                           {k: v[rows] for k, v in results.items()}, self.carry)
         starts = _line_starts(self.machine, self.width)
         t1 = time.perf_counter()
         eng = self.engines[y0 % len(self.engines)]
@@ -301,11 +305,12 @@ def stereo_model(
             planes = (model_planes(left, model), model_planes(right, model))
             region = OutputRegion.of_features(planes[0].shape, model.dmax)
             latest = {p.name: np.full(pass_grid(p, region).width, -1, np.int16) for p in passes}
+            carry: dict[str, dict[str, object]] = {p.name: {} for p in passes}
             for y in range(region.shape[0]):
                 for p in passes:
                     pp = params[p.name]
                     others = {k: v[None] for k, v in latest.items() if k != p.name}
-                    words = _row_words(p, planes, pp, slice(y, y + 1), latest[p.name], others)
+                    words = _row_words(p, planes, pp, slice(y, y + 1), latest[p.name], others, carry[p.name])
                     starts = _line_starts(pp, latest[p.name].size)
                     eng = engines[p.name][y % machines]
                     res = eng.run(words) if starts is None else eng.run(words, line_start=starts)
@@ -340,16 +345,20 @@ def run_pair(
     feed: str = "words",
     machines: int = 1,
     confidence: ConfidenceParams | None = None,
+    fill: str = DEFAULT_FILL,
 ) -> RunOutcome:
     """Run the machine on a gray pair and compare it with the reference (and gt, if given).
 
     ``prepared`` reuses an earlier ``prepare`` of the same pair (sweeps). ``sgbm``: also
     evaluate OpenCV StereoSGBM (default: when ground truth is given). ``confidence``: how the
     per-pixel confidence is read (:class:`~.confidence.ConfidenceParams`, default its defaults).
+    ``fill``: how the pixels without a disparity are filled from their row (:mod:`.fill`: ``background``,
+    ``left`` or ``none``); the machine's own map stays ``run.map``.
     """
     if prepared is None:
         prepared = prepare(left, right, model_params, gt)
     run = run_machine(prepared, machine_params, engine, progress, engine_options=engine_options, feed=feed,
                       machines=machines)
-    metrics = evaluate(prepared, run, sgbm=sgbm, confidence=confidence)
-    return RunOutcome(prepared, run, metrics)
+    filled = run_fill(prepared, run, fill)
+    metrics = evaluate(prepared, run, sgbm=sgbm, confidence=confidence, fill=filled)
+    return RunOutcome(prepared, run, metrics, filled if fill != "none" else None)

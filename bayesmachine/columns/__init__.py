@@ -25,8 +25,10 @@ Kinds: :class:`~.features.Mean`, :class:`~.features.GradH`, :class:`~.features.G
 :class:`~.gradient.GradMag` (an option of the paper model),
 :class:`~.census.Census`, :class:`~.prior.LeftPrior` (feedback) and :class:`~.prior.AbovePrior`
 (loaded), :class:`~.consistency.Consistency` (fed by another pass), :class:`~.fused.Fused` (FEATURES
-columns as one, in the energy form: :func:`~.fused.fused` makes a kind of its members); and the no-match
-row's floor :class:`~.features.NoMatchFloor`. A model (:mod:`bayesmachine.models`) is a list of them.
+columns as one, in the energy form: :func:`~.fused.fused` makes a kind of its members),
+:class:`~.semiglobal.SemiGlobal` (a fused column's energies aggregated along causal scanline paths:
+:func:`~.semiglobal.semiglobal` makes a kind of its member); and the no-match row's floor
+:class:`~.features.NoMatchFloor`. A model (:mod:`bayesmachine.models`) is a list of them.
 """
 
 from .base import Column, Option, PassContext, PlaneColumn, Source, Table, Term, likelihood_formula, quantize
@@ -48,6 +50,7 @@ from .fused import FUSE_COLUMNS, Fused, fused
 from .gradient import GRADIENT_MAGNITUDE, GradMag
 from .planes import Plane
 from .prior import NEIGHBOUR_PRIOR, AbovePrior, LeftPrior, NeighbourPrior, neighbour_words
+from .semiglobal import PATHS, SEMIGLOBAL, SemiGlobal, semiglobal
 
 __all__ = [
     "Column", "PlaneColumn", "PassContext", "Plane", "Option", "Source", "Table", "Term",
@@ -58,10 +61,12 @@ __all__ = [
     "NEIGHBOUR_PRIOR", "NeighbourPrior", "LeftPrior", "AbovePrior", "neighbour_words",
     "ENERGY_STEP", "ENERGY_MAX_BITS", "EnergyTable", "energy_codes", "exp_table",
     "FUSE_COLUMNS", "Fused", "fused",
+    "PATHS", "SEMIGLOBAL", "SemiGlobal", "semiglobal",
     "RIGHT_PASS", "Consistency", "lr_consistent", "lr_unknown", "right_lanes_valid",
     "COLUMN_KINDS",
 ]
 
-# The closed set of column kinds the package defines (each with its lane builder on chip).
+# The closed set of column kinds the package defines (each with its lane builder on chip but SemiGlobal, which
+# has none yet: the front end refuses it).
 COLUMN_KINDS: tuple[type[Column], ...] = (Mean, GradH, GradV, GradMag, Census, LeftPrior, AbovePrior,
-                                          Consistency, Fused)
+                                          Consistency, Fused, SemiGlobal)

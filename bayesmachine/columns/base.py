@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import enum
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, MutableMapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, ClassVar
 
@@ -411,6 +411,11 @@ class PassContext:
     nomatch_live : bool
         Whether the pass's no-match row can win: False when a column of the pass zeroes it in every
         pixel (the consistency column without ``lr_nomatch``).
+    first_row : int
+        The band's first map row (0: the frame's first).
+    carry : MutableMapping or None
+        What a column carries from one band to the next, by key (the semi-global column's path costs of
+        the band's last row); the caller keeps one per pass and frame and gives the bands in order.
     """
 
     where: str
@@ -426,6 +431,8 @@ class PassContext:
     grids: Mapping[str, tuple[int, int]] = field(default_factory=dict)
     rule: Term | None = None
     nomatch_live: bool = True
+    first_row: int = 0
+    carry: MutableMapping[str, Any] | None = None
 
     @property
     def rows(self) -> int:

@@ -170,6 +170,21 @@ class Consistency(Column):
         unknown = lr_unknown(right_map, right_first, columns, self.dmax) if self.neutral else None
         return self.values_of(table, consistent, unknown)
 
+    def rejects(self, disp: np.ndarray, right_map: np.ndarray, right_first: int,
+                columns: np.ndarray) -> np.ndarray:
+        """(Ho, Wo) bool: the pixels with a disparity d (``disp`` (Ho, Wo) >= 0) whose lane d this column
+        gives beta: inconsistent, and not neutral (``lr_neutral``: a right pixel without a right MAP is)."""
+        d = np.asarray(disp)
+        lanes = np.clip(d, 0, self.dmax).astype(np.int64)
+        at = np.arange(d.shape[-1])
+        out = np.zeros(d.shape, bool)
+        for y in range(d.shape[0]):
+            ok = lr_consistent(right_map[y], right_first, columns, self.dmax, self.tolerance)
+            if self.neutral:
+                ok |= lr_unknown(right_map[y], right_first, columns, self.dmax)
+            out[y] = (d[y] >= 0) & ~ok[at, lanes[y]]
+        return out
+
     def words(self, ctx: PassContext) -> np.ndarray:
         """From the MAPs of the pass :attr:`feeds_from` of the same map rows (``ctx.results``)."""
         got, first = ctx.results_of(self.feeds_from, self.name)

@@ -41,6 +41,7 @@ from ..calib import (
     read_calibration,
 )
 from ..confidence import DEFAULT_T, DEFAULT_WINDOW, MAX_T, MAX_WINDOW, ConfidenceParams
+from ..fill import DEFAULT_FILL, FILLS
 from ..images import Crop
 from ..run import ENGINES, FEEDS, RunOutcome, run_pair
 from .options import (
@@ -127,6 +128,12 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
         help="with --engine verilator: write OUT/waves.vcd while output pixels FIRST..LAST "
         "(row-major over the output region, from 0) are in the machine",
     )
+    g.add_argument("--fill", choices=FILLS, default=DEFAULT_FILL,
+                   help="give the pixels the machine calls no match, or whose MAP the left-right test "
+                   "rejects, a disparity from their row: background, the lower of the nearest matched ones "
+                   "left and right; left, the nearest matched one to the left; none (default "
+                   f"{DEFAULT_FILL}). result.npz keeps the machine's own map beside filled_map; report.json "
+                   "gives both maps' figures (filled_*)")
     add_gt_options(p)
     _add_confidence_options(p)
     add_output_options(p)
@@ -274,12 +281,21 @@ def _summary(r: dict[str, object]) -> str:
         )
         if "sgbm_bad2" in r:
             line += f", SGBM {f('sgbm_bad2')} / {f('sgbm_bad2_nomatch_bad')}"
+        if "sgbm_tuned_bad2" in r:
+            line += f", tuned SGBM {f('sgbm_tuned_bad2')} / {f('sgbm_tuned_bad2_nomatch_bad')}"
         if "bm_bad2" in r:
             line += f", StereoBM {f('bm_bad2')} / {f('bm_bad2_nomatch_bad')}"
         if r.get("machine_nomatch_occluded") is not None:
             line += f"\n  no-match calls on occluded pixels: machine {f('machine_nomatch_occluded', '.3f')}"
             if r.get("sgbm_nomatch_occluded") is not None:
                 line += f", SGBM {f('sgbm_nomatch_occluded', '.3f')}"
+    if r.get("fill") is not None:
+        line += (f"\n  {r['fill']} fill of {r['fill_holes']} pixels ({r['filled_pixels']} filled)")
+        if r.get("filled_bad2") is not None:
+            line += f": bad-2 {f('filled_bad2')} / {f('filled_bad2_nomatch_bad')}"
+        if r.get("filled_confidence_ece") is not None:
+            line += (f", confidence ECE {f('filled_confidence_ece')}, AUC {f('filled_confidence_auc')} "
+                     f"(random {f('filled_confidence_auc_random')})")
     return line + _confidence_summary(r, f)
 
 
@@ -407,6 +423,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
             feed=args.feed,
             machines=machines,
             confidence=params,
+            fill=args.fill,
         )
         report = _report(outcome, source, args.crop)
         report["feed"] = args.feed
@@ -467,6 +484,11 @@ def _write_run_outputs(out: OutputDir, args: argparse.Namespace, outcome: RunOut
         extra["reference_confidence"] = metrics.reference_maps.confidence.astype(np.float32)
     if prep.gt is not None:
         extra["gt"] = prep.gt.astype(np.float32)
+    fill = outcome.fill
+    if fill is not None:  # the machine's own map and no-match flags stay beside the filled map
+        extra.update(filled_map=fill.map, filled=fill.filled, nomatch=run.nomatch)
+        if metrics.fill_maps is not None:
+            extra["filled_confidence"] = metrics.fill_maps.confidence.astype(np.float32)
     out.write(
         "result.npz",
         lambda path: np.savez_compressed(
@@ -487,7 +509,9 @@ def _write_run_outputs(out: OutputDir, args: argparse.Namespace, outcome: RunOut
         shown = np.where(kept, run.map, np.int16(-1))
         title += f", confidence >= {args.min_confidence:g}"
         report["min_confidence"] = _kept_figures(shown, prep.gt, args.min_confidence)
-    panels = [("Reference (float64)", prep.reference_map), (title, shown)]
+    panels: list[tuple] = [("Reference (float64)", prep.reference_map), (title, shown)]
+    if fill is not None:
+        panels.append((f"Machine, {fill.rule} fill (filled pixels veiled)", fill.map, fill.filled))
     if prep.gt is not None:
         panels.append(("Ground truth", prep.gt))
         if metrics.sgbm_map is not None:  # computed once, for the report's bad-pixel rates

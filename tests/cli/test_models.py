@@ -126,7 +126,8 @@ def test_help_states_each_commands_default(capsys):
         with pytest.raises(SystemExit):
             build_parser().parse_args([*command, "--help"])
         text = " ".join(capsys.readouterr().out.split())  # argparse wraps the lines
-        return text.split("consistency column from a right pass) (default ", 1)[1]  # --model's
+        # --model's: the last model's description, then its default
+        return text.split("over its fused column, both passes", 1)[1].split("(default ", 1)[1]
 
     for command in (["run"], ["reference"], ["sweep"], ["emit"], ["synth"], ["board", "build"],
                     ["board", "simulate"]):
@@ -164,8 +165,8 @@ def test_census_lr_options_are_refused_for_census_on_hardware(argv, tmp_path, ca
     assert main([*argv, "--model", "census", "--lr-beta", "0.2"]) == 2
     assert not (tmp_path / "o").exists()
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "--lr-beta: options of --model census-lr, which do not apply to --model census" \
-        in err[0], err
+    assert len(err) == 1 and ("--lr-beta: options of --model census-lr and census-sgm, which do not apply to "
+                              "--model census") in err[0], err
 
 
 def test_reference_census(pair, tmp_path):
