@@ -51,12 +51,16 @@ MACHINE_FIELDS = ("integrator", "word_bits", "counter_max", "rng", "lfsr_bits", 
 class _Integrator:
     words: bool  # it loads W-bit words (else energy codes)
     overflow: int  # what the MAP row's readout lacks: a stochastic counter's overflowing 1
+    fixed: tuple[tuple[str, Any], ...]  # machine fields it sets whatever the options
 
 
 def _integrator(integrator: str) -> _Integrator:
-    """The one integrator-dependent choice of the classifier: what the machine loads and reads out."""
+    """The one integrator-dependent choice of the classifier: what the machine loads and reads out, and
+    what it fixes (the log machine draws no random number, yet MachineParams checks its source: one
+    without sobol's limit of 16 operator columns)."""
     stochastic = integrator == "stochastic"
-    return _Integrator(words=stochastic, overflow=1 if stochastic else 0)
+    return _Integrator(words=stochastic, overflow=1 if stochastic else 0,
+                       fixed=() if stochastic else (("rng", "lfsr-shared"),))
 
 
 @dataclass(frozen=True, eq=False)
@@ -139,23 +143,22 @@ class ClassifierMachine:
             raise ParameterError(f"{unknown[0]}: not a machine option of the classifier (its options: "
                                  f"{', '.join(MACHINE_FIELDS)})", unknown[0])
         integrator = options.get("integrator", "stochastic")
-        if isinstance(integrator, str) and not _integrator(integrator).words:
-            options = {k: v for k, v in options.items() if k not in STOCHASTIC_FIELDS}
-        features = self._tables.features
-        if self._fuse is None:
-            layout: dict[str, Any] = {"columns": features, "prior": "loaded"}
-            if features + 1 > MAX_OPERATOR_COLUMNS:
-                raise ParameterError(f"fuse: one column per feature needs {features + 1} operator columns "
-                                     f"(the features and the prior), more than the machine's "
-                                     f"{MAX_OPERATOR_COLUMNS}; fuse them (fuse=1)", "fuse")
-        else:
-            layout = {"columns": self._fuse, "prior": "uniform"}
-        classes = self._tables.classes
+        kind = _integrator(integrator if isinstance(integrator, str) else "")  # MachineParams checks the type
+        features, classes = self._tables.features, self._tables.classes
+        if self._fuse is None and features + 1 > MAX_OPERATOR_COLUMNS:
+            raise ParameterError(f"fuse: one column per feature needs {features + 1} operator columns (the "
+                                 f"features and the prior), more than the machine's {MAX_OPERATOR_COLUMNS}; "
+                                 "fuse them (fuse=1)", "fuse")
+        layout: dict[str, Any] = ({"columns": features, "prior": "loaded"} if self._fuse is None
+                                  else {"columns": self._fuse, "prior": "uniform"})
         loaded = layout["columns"] + (layout["prior"] == "loaded")
         layout["words_per_beat"] = min(DEFAULT_WORDS_PER_BEAT, classes * loaded)
-        if isinstance(integrator, str) and _integrator(integrator).words:
+        if kind.words:
             layout["timeout_answer"] = "leading"
             layout["normalize"] = self._fuse is None  # the fused columns' best class is 2^W already
+        else:
+            options = {k: v for k, v in options.items() if k not in STOCHASTIC_FIELDS}
+            options.update(kind.fixed)
         return MachineParams(rows=classes, **options, **layout)
 
     def entries(self, bins: np.ndarray) -> np.ndarray:
