@@ -110,7 +110,7 @@ def split_folds(y: np.ndarray, folds: int | None, test_size: float | None,
 def _fold(data: Dataset, train: np.ndarray, test: np.ndarray, options: Mapping[str, Any]) -> dict[str, Any]:
     from sklearn.naive_bayes import CategoricalNB, GaussianNB
 
-    from .classifier import BayesianMachineClassifier
+    from bayesmachine.classify.estimator import BayesianMachineClassifier
 
     est = BayesianMachineClassifier(**options).fit(data.x[train], data.y[train])
     labels = np.searchsorted(est.classes_, data.y[test])

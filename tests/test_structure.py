@@ -22,9 +22,6 @@ MAY_IMPORT = {
     "fpga": {"core", "hdl", "sim"},
     "cli": {"core", "hdl", "sim", "host", "fpga"},
 }
-# The package's front door names the host's scikit-learn estimator lazily (bayesmachine.__getattr__: a
-# plain `import bayesmachine` imports neither the host nor scikit-learn).
-LAZY_EXPORTS = {"bayesmachine/__init__.py": {"bayesmachine.host.classifier"}}
 # The modules that import by name at run time: the integrator registry (its kinds' tops, models and
 # engines, and the pixel engines' registry in sim/engines.py through it) and the optional dependencies.
 DYNAMIC_IMPORTS = {"bayesmachine/integrators/__init__.py", "bayesmachine/extras.py"}
@@ -96,8 +93,6 @@ def test_layers_point_one_way() -> None:
         layer = _layer(rel)
         for line, module in imports(path, _package_parts(rel)):
             target = _module_layer(module)
-            if module in LAZY_EXPORTS.get(str(rel), ()):
-                continue
             if target is not None and target != layer and target not in MAY_IMPORT[layer]:
                 wrong.append(f"{rel}:{line}: {layer} imports {module}")
     assert not wrong, "imports against the layers:\n" + "\n".join(wrong)

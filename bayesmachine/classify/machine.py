@@ -31,10 +31,10 @@ from typing import Any
 import numpy as np
 
 from bayesmachine.checks import as_int, type_name
-from bayesmachine.columns.base import quantize
-from bayesmachine.columns.energy import INFINITE_CODE, energy_codes, exp_table, log_codes
+from bayesmachine.columns.energy import INFINITE_CODE, energy_codes, exp_table
 from bayesmachine.errors import ParameterError
-from bayesmachine.params import DEFAULT_WORDS_PER_BEAT, STOCHASTIC_FIELDS, MachineParams
+from bayesmachine.integrators import INTEGRATOR_KINDS, IntegratorKind, integrator_kind
+from bayesmachine.params import DEFAULT_INTEGRATOR, DEFAULT_WORDS_PER_BEAT, MachineParams
 
 from .tables import NaiveBayesTables
 
@@ -47,20 +47,11 @@ MACHINE_FIELDS = ("integrator", "word_bits", "counter_max", "rng", "lfsr_bits", 
                   "tie_break", "samples_per_clock")
 
 
-@dataclass(frozen=True)
-class _Integrator:
-    words: bool  # it loads W-bit words (else energy codes)
-    overflow: int  # what the MAP row's readout lacks: a stochastic counter's overflowing 1
-    fixed: tuple[tuple[str, Any], ...]  # machine fields it sets whatever the options
-
-
-def _integrator(integrator: str) -> _Integrator:
-    """The one integrator-dependent choice of the classifier: what the machine loads and reads out, and
-    what it fixes (the log machine draws no random number, yet MachineParams checks its source: one
-    without sobol's limit of 16 operator columns)."""
-    stochastic = integrator == "stochastic"
-    return _Integrator(words=stochastic, overflow=1 if stochastic else 0,
-                       fixed=() if stochastic else (("rng", "lfsr-shared"),))
+def _fixed(kind: IntegratorKind) -> dict[str, Any]:
+    """The machine fields the classifier sets for a kind whatever its options: a machine that draws no
+    random number gets a source without sobol's limit of 16 operator columns (MachineParams checks the
+    default source of every machine)."""
+    return {} if kind.draws_numbers else {"rng": "lfsr-shared"}
 
 
 @dataclass(frozen=True, eq=False)
@@ -126,7 +117,9 @@ class ClassifierMachine:
         self._tables = tables
         self._fuse = _fuse(fuse, tables.features)
         self._params = self._machine_params(dict(machine or {}))
-        self._kind = _integrator(self._params.integrator)
+        self._kind = self._params.kind
+        # A stochastic run's MAP row held counter max + 1 ones, its counter only counter max.
+        self._overflow = 1 if self._kind.draws_numbers else 0
         k = self._fuse
         self._groups = () if k is None else tuple(np.array_split(np.arange(tables.features), k))
         self._codes = tuple(energy_codes(t).astype(np.int64) for t in tables.likelihoods)
@@ -142,8 +135,12 @@ class ClassifierMachine:
         if unknown:
             raise ParameterError(f"{unknown[0]}: not a machine option of the classifier (its options: "
                                  f"{', '.join(MACHINE_FIELDS)})", unknown[0])
-        integrator = options.get("integrator", "stochastic")
-        kind = _integrator(integrator if isinstance(integrator, str) else "")  # MachineParams checks the type
+        kind = integrator_kind(options.get("integrator", DEFAULT_INTEGRATOR))
+        foreign = [f for k in INTEGRATOR_KINDS.values() if k is not kind for f in k.fields
+                   if f in options and f not in kind.fields]
+        if foreign:
+            raise ParameterError(f"{foreign[0]}: a parameter of another integrator; the {kind.name} machine "
+                                 "does not read it", foreign[0])
         features, classes = self._tables.features, self._tables.classes
         if self._fuse is None and features + 1 > MAX_OPERATOR_COLUMNS:
             raise ParameterError(f"fuse: one column per feature needs {features + 1} operator columns (the "
@@ -153,21 +150,20 @@ class ClassifierMachine:
                                   else {"columns": self._fuse, "prior": "uniform"})
         loaded = layout["columns"] + (layout["prior"] == "loaded")
         layout["words_per_beat"] = min(DEFAULT_WORDS_PER_BEAT, classes * loaded)
-        if kind.words:
-            layout["timeout_answer"] = "leading"
-            layout["normalize"] = self._fuse is None  # the fused columns' best class is 2^W already
-        else:
-            options = {k: v for k, v in options.items() if k not in STOCHASTIC_FIELDS}
-            options.update(kind.fixed)
-        return MachineParams(rows=classes, **options, **layout)
+        # A run the watchdog stops answers its leading class; per-feature words are normalized per
+        # decision (a fused column's best class is 2^W already): the fields of the kinds that read them.
+        wanted = {"timeout_answer": "leading", "normalize": self._fuse is None}
+        layout.update({f: v for f, v in wanted.items() if f in kind.fields})
+        return MachineParams(rows=classes, **options, **layout, **_fixed(kind))
 
     def entries(self, bins: np.ndarray) -> np.ndarray:
         """(n, classes, loaded columns) uint16: what the machine loads for each decision of ``bins``."""
         b = np.asarray(bins, np.int64)
         if self._fuse is None:
             f = self._tables.factors(b)
-            return quantize(f, self._params.word_bits) if self._kind.words else log_codes(f)
+            return self._kind.load(f, self._params)
         out = np.empty((b.shape[0], self._tables.classes, self._fuse), np.uint16)
+        words = self._kind.loads == "words"
         x = exp_table(self._params.word_bits).astype(np.uint16)
         for k, group in enumerate(self._groups):
             s = np.zeros((b.shape[0], self._tables.classes), np.int64)
@@ -176,8 +172,7 @@ class ClassifierMachine:
             for j in group:
                 s += self._codes[j][:, b[:, j]].T
             d = s - s.min(axis=1, keepdims=True)
-            top = x.size - 1 if self._kind.words else INFINITE_CODE - 1
-            out[:, :, k] = x[np.minimum(d, top)] if self._kind.words else np.minimum(d, top)
+            out[:, :, k] = x[np.minimum(d, x.size - 1)] if words else np.minimum(d, INFINITE_CODE - 1)
         return out
 
     def energy_decision(self, bins: np.ndarray) -> np.ndarray:
@@ -189,6 +184,13 @@ class ClassifierMachine:
             s += c[:, b[:, j]].T
         return np.argmin(s, axis=1)
 
+    def run(self, bins: np.ndarray, engine: str = "model", **options: Any) -> Decisions:
+        """The decisions of ``bins`` (n, features) on a fresh ``engine`` (as after reset): one of the
+        integrator kind's engines (``MachineParams.kind.engines``), ``options`` its constructor's."""
+        with self._kind.engine_class(engine)(self._params, **options) as e:
+            r = e.run(self.entries(bins))
+        return self.readout(r.map, r.counts, r.cycles, r.timeout)
+
     def readout(self, map_: np.ndarray, counts: np.ndarray, cycles: np.ndarray,
                 timeout: np.ndarray) -> Decisions:
         """:class:`Decisions` of a machine result's fields."""
@@ -196,7 +198,7 @@ class ClassifierMachine:
         t = np.asarray(timeout, bool)
         dist = np.asarray(counts, np.float64).copy()
         n = np.arange(m.size)
-        dist[n[~t], m[~t]] += self._kind.overflow
+        dist[n[~t], m[~t]] += self._overflow
         total = dist.sum(axis=1, keepdims=True)
         proba = np.divide(dist, total, out=np.full(dist.shape, 1.0 / dist.shape[1]), where=total > 0)
         return Decisions(map=m, readout=np.asarray(counts).copy(), proba=proba, confidence=proba[n, m],

@@ -57,6 +57,9 @@ def test_one_column_per_feature_quantizes_each_table() -> None:
     assert (p.columns, p.prior, p.normalize, p.timeout_answer) == (3, "loaded", True, "leading")
     log = ClassifierMachine(tables=t, fuse=None, machine={"integrator": "log"})
     np.testing.assert_array_equal(log.entries(bins)[0, :, 1], energy_codes(t.likelihoods[0][:, 0]))
+    # the log machine draws no random number: more than sobol's 16 operator columns
+    wide = ClassifierMachine(tables=_tables(features=40), fuse=None, machine={"integrator": "log"})
+    assert wide.params.operator_columns == 41
 
 
 def test_layout_limits() -> None:
@@ -70,6 +73,8 @@ def test_layout_limits() -> None:
         ClassifierMachine(tables=_tables(features=2), fuse=1.5)
     with pytest.raises(ParameterError, match="normalize"):
         ClassifierMachine(tables=_tables(), machine={"normalize": True})
+    with pytest.raises(ParameterError, match="seed: a parameter of another integrator"):
+        ClassifierMachine(tables=_tables(), machine={"integrator": "log", "seed": 3})
     with pytest.raises(TypeError, match="tables"):
         ClassifierMachine(tables=None)
 

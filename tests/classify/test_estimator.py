@@ -1,4 +1,4 @@
-"""bayesmachine.host.classifier: the scikit-learn estimator (check_estimator, Pipeline, cross_val_score,
+"""bayesmachine.classify.estimator: the scikit-learn estimator (check_estimator, Pipeline, cross_val_score,
 its checks in fit) and the engines' decisions bit for bit alike (pysim on a few decisions of a held-out
 fold; Verilator on a whole fold, eda tier)."""
 
@@ -16,8 +16,8 @@ from sklearn.preprocessing import StandardScaler
 from sklearn.utils.estimator_checks import check_estimator
 
 from bayesmachine import BayesianMachineClassifier
+from bayesmachine.classify.estimator import expected_failed_checks
 from bayesmachine.errors import ParameterError
-from bayesmachine.host.classifier import decide, expected_failed_checks
 
 
 @pytest.mark.parametrize("options", [{}, {"integrator": "log"}, {"fuse": None, "rng": "lfsr"}])
@@ -72,9 +72,12 @@ def test_the_fused_log_machine_is_the_argmin_of_the_codes() -> None:
     ({"bins": 0}, 4, ParameterError, "bins"),
     ({"alpha": 0.0}, 4, ParameterError, "alpha"),
     ({"counter_max": 0}, 4, ParameterError, "counter_max"),
+    ({"integrator": "log", "counter_max": 8}, 4, ParameterError, "counter_max: a parameter of another"),
+    ({"integrator": "log", "rng": "lfsr"}, 4, ParameterError, "rng"),
     ({"fuse": 5}, 4, ParameterError, "fuse"),
     ({"fuse": None}, 20, ParameterError, "16 operator columns"),  # sobol's limit: 20 features + the prior
     ({"fuse": None, "rng": "lfsr"}, 64, ParameterError, "65 operator columns"),
+    ({"fuse": None, "integrator": "log"}, 64, ParameterError, "65 operator columns"),
 ])
 def test_fit_checks_its_parameters(options: dict, features: int, error: type, match: str) -> None:
     rng = np.random.default_rng(0)
@@ -101,7 +104,7 @@ def _same(a, b) -> None:  # noqa: ANN001
 def test_pysim_decides_as_the_model(options: dict) -> None:
     est, bins = _held_out(load_iris, options)
     bins = bins[:4]  # pysim is slow: four decisions of the held-out fold
-    _same(decide(est.machine_, bins, "pysim"), decide(est.machine_, bins, "model"))
+    _same(est.machine_.run(bins, "pysim"), est.machine_.run(bins, "model"))
 
 
 @pytest.mark.eda
@@ -111,5 +114,5 @@ def test_pysim_decides_as_the_model(options: dict) -> None:
 def test_verilator_decides_as_the_model(load, options: dict, verilator_toolchain: dict,  # noqa: ANN001
                                         verilator_cache: Path) -> None:
     est, bins = _held_out(load, options)
-    got = decide(est.machine_, bins, "verilator", build_dir=verilator_cache)
-    _same(got, decide(est.machine_, bins, "model"))
+    got = est.machine_.run(bins, "verilator", build_dir=verilator_cache)
+    _same(got, est.machine_.run(bins, "model"))

@@ -1,7 +1,8 @@
 """``BayesianMachineClassifier``: the machine as a scikit-learn classifier (docs/classifier.md).
 
-``fit`` bins the features (``bayesmachine.classify.QuantileBins``), counts the tables
-(``NaiveBayesTables``, ``CategoricalNB``'s smoothing) and builds the machine (``ClassifierMachine``);
+``fit`` bins the features (:class:`~.bins.QuantileBins`), counts the tables
+(:class:`~.tables.NaiveBayesTables`, ``CategoricalNB``'s smoothing) and builds the machine
+(:class:`~.machine.ClassifierMachine`);
 ``predict`` and ``predict_proba`` run the samples through a fresh engine (as after reset), so that the
 same samples in the same order give the same decisions. Every parameter is checked in ``fit``
 (scikit-learn's convention): a TypeError for a type, a ``ParameterError`` (a ValueError) naming the
@@ -18,27 +19,14 @@ from sklearn.utils.multiclass import check_classification_targets
 from sklearn.utils.validation import check_is_fitted, validate_data
 
 from bayesmachine.checks import type_name
-from bayesmachine.classify import (
-    DEFAULT_ALPHA,
-    DEFAULT_BINS,
-    ClassifierMachine,
-    Decisions,
-    NaiveBayesTables,
-    QuantileBins,
-)
 from bayesmachine.errors import ParameterError
-from bayesmachine.params import DEFAULT_COUNTER_MAX, DEFAULT_RNG, DEFAULT_SEED, DEFAULT_WORD_BITS
-from bayesmachine.sim.engines import ENGINES, get_engine
+from bayesmachine.params import DEFAULT_WORD_BITS
 
-__all__ = ["BayesianMachineClassifier", "decide", "expected_failed_checks"]
+from .bins import DEFAULT_BINS, QuantileBins
+from .machine import ClassifierMachine, Decisions
+from .tables import DEFAULT_ALPHA, NaiveBayesTables
 
-
-def decide(machine: ClassifierMachine, bins: np.ndarray, engine: str = "model", **options: Any) -> Decisions:
-    """The decisions of ``bins`` (n, features) by ``machine`` on a fresh ``engine`` (as after reset; one of
-    ``bayesmachine.sim.engines.ENGINES``, ``options`` its constructor's)."""
-    with get_engine(engine, machine.params, **options) as e:
-        r = e.run(machine.entries(bins))
-    return machine.readout(r.map, r.counts, r.cycles, r.timeout)
+__all__ = ["BayesianMachineClassifier", "expected_failed_checks"]
 
 
 def expected_failed_checks(estimator: BayesianMachineClassifier) -> dict[str, str]:
@@ -58,9 +46,11 @@ class BayesianMachineClassifier(ClassifierMixin, BaseEstimator):
     ----------
     integrator : str
         ``"stochastic"`` (overflow counters) or ``"log"`` (energy sums, argmin).
-    counter_max, word_bits, rng, seed, max_cycles : machine options
-        As ``MachineParams``'s (the stochastic integrator's only: counter max, random source, seed,
-        watchdog; None: its default).
+    counter_max, rng, seed, max_cycles : int, str, int, int or None
+        The stochastic integrator's (``MachineParams``'s fields: counter max, random source, seed,
+        watchdog); None: its default. Given to another integrator, refused in ``fit``.
+    word_bits : int
+        W, the comparator resolution (the words' and the exp table's).
     bins : int
         The most quantile bins per feature (1 .. 256).
     alpha : float
@@ -81,8 +71,8 @@ class BayesianMachineClassifier(ClassifierMixin, BaseEstimator):
     machine_ : ClassifierMachine
     """
 
-    def __init__(self, *, integrator: str = "stochastic", counter_max: int = DEFAULT_COUNTER_MAX,
-                 word_bits: int = DEFAULT_WORD_BITS, rng: str = DEFAULT_RNG, seed: int = DEFAULT_SEED,
+    def __init__(self, *, integrator: str = "stochastic", counter_max: int | None = None,
+                 word_bits: int = DEFAULT_WORD_BITS, rng: str | None = None, seed: int | None = None,
                  max_cycles: int | None = None, bins: int = DEFAULT_BINS, alpha: float = DEFAULT_ALPHA,
                  fuse: int | None = 1, engine: str = "model") -> None:
         self.integrator = integrator
@@ -98,18 +88,13 @@ class BayesianMachineClassifier(ClassifierMixin, BaseEstimator):
 
 
     def _machine_options(self) -> dict[str, Any]:
-        options = {"integrator": self.integrator, "counter_max": self.counter_max,
-                   "word_bits": self.word_bits, "rng": self.rng, "seed": self.seed}
-        if self.max_cycles is not None:
-            options["max_cycles"] = self.max_cycles
-        return options
+        given = {"counter_max": self.counter_max, "rng": self.rng, "seed": self.seed,
+                 "max_cycles": self.max_cycles}
+        return {"integrator": self.integrator, "word_bits": self.word_bits,
+                **{k: v for k, v in given.items() if v is not None}}
 
     def fit(self, X: Any, y: Any) -> BayesianMachineClassifier:
         """Bin ``X`` (n, features), count the tables of labels ``y`` and build the machine."""
-        if not isinstance(self.engine, str):
-            raise TypeError(f"engine must be one of {ENGINES}, not {type_name(self.engine)}")
-        if self.engine not in ENGINES:
-            raise ParameterError(f"engine must be one of {ENGINES}, got {self.engine!r}", "engine")
         X, y = validate_data(self, X, y, dtype=np.float64)
         check_classification_targets(y)
         self.classes_, labels = np.unique(y, return_inverse=True)
@@ -118,14 +103,19 @@ class BayesianMachineClassifier(ClassifierMixin, BaseEstimator):
                                                     self.bins_.counts, self.alpha)
         self.machine_ = ClassifierMachine(tables=self.tables_, fuse=self.fuse,
                                           machine=self._machine_options())
+        engines = tuple(self.machine_.params.kind.engines)
+        if not isinstance(self.engine, str):
+            raise TypeError(f"engine must be one of {engines}, not {type_name(self.engine)}")
+        if self.engine not in engines:
+            raise ParameterError(f"engine must be one of {engines}, got {self.engine!r}", "engine")
         return self
 
     def decide(self, X: Any) -> Decisions:
-        """The machine's ``Decisions`` of ``X``: MAP, readout, distribution, confidence,
+        """The machine's :class:`~.machine.Decisions` of ``X``: MAP, readout, distribution, confidence,
         cycles."""
         check_is_fitted(self)
         X = validate_data(self, X, dtype=np.float64, reset=False)
-        return decide(self.machine_, self.bins_.transform(X), self.engine)
+        return self.machine_.run(self.bins_.transform(X), self.engine)
 
     def predict(self, X: Any) -> np.ndarray:
         """The MAP class of each sample."""
