@@ -16,7 +16,7 @@ from bayesmachine.argtypes import (
     int_arg,
     int_in_range,
     output_path,
-    positive_float_arg,
+    positive_float_at_most,
 )
 from bayesmachine.classify import DEFAULT_ALPHA, DEFAULT_BINS, MAX_BINS
 from bayesmachine.cliargs import add_machine_options, refuse_stochastic_options, with_flag
@@ -35,6 +35,7 @@ _MACHINE = ("integrator", "word_bits", "counter_max", "rng", "seed", "max_cycles
 _SKIPPED = ("columns", "lfsr_bits", "timeout_answer", "samples_per_clock", "normalize", "tie_break", "prior",
             "smtj_dwell", "smtj_spread", "smtj_share", "words_per_beat")
 MAX_FOLDS = 100
+MAX_ALPHA = 1e6  # the option's bound: with a million pseudo-counts per bin, counts barely move a table
 
 
 def _fuse(text: str) -> int | None:
@@ -71,8 +72,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     c = p.add_argument_group("classifier")
     c.add_argument("--bins", type=int_in_range(1, MAX_BINS), default=DEFAULT_BINS, metavar="B",
                    help=f"the most quantile bins per feature (1 .. {MAX_BINS}, default %(default)s)")
-    c.add_argument("--alpha", type=positive_float_arg, default=DEFAULT_ALPHA, metavar="A",
-                   help="additive smoothing of the tables, > 0: CategoricalNB's rule (default %(default)s)")
+    c.add_argument("--alpha", type=positive_float_at_most(MAX_ALPHA), default=DEFAULT_ALPHA, metavar="A",
+                   help=f"additive smoothing of the tables, 0 < A <= {MAX_ALPHA:g}: CategoricalNB's rule "
+                   "(default %(default)s)")
     c.add_argument("--fuse", type=argument_type(_fuse, "fuse"), default=1, metavar="K|none",
                    help="fuse the features into K energy-domain operator columns (default 1), or none: one "
                    "operator column per feature and a loaded prior column (at most 63 features; more than "
