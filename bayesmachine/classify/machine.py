@@ -38,7 +38,7 @@ from bayesmachine.params import DEFAULT_INTEGRATOR, DEFAULT_WORDS_PER_BEAT, Mach
 
 from .tables import NaiveBayesTables
 
-__all__ = ["MAX_OPERATOR_COLUMNS", "ClassifierMachine", "Decisions"]
+__all__ = ["MACHINE_FIELDS", "MAX_OPERATOR_COLUMNS", "ClassifierMachine", "Decisions", "classifier_params"]
 
 MAX_OPERATOR_COLUMNS = 64
 # The machine options a classifier passes on (MachineParams fields); the layout fields (rows, columns,
@@ -92,6 +92,40 @@ def _fuse(fuse: object, features: int) -> int | None:
     return k
 
 
+def classifier_params(*, classes: int, features: int, fuse: int | None = 1,
+                      machine: Mapping[str, Any] | None = None) -> MachineParams:
+    """The machine of a classifier of ``classes`` and ``features`` in the layout ``fuse`` (K fused
+    columns, or None: one per feature and a loaded prior column) from the machine options ``machine``
+    (MachineParams fields of ``MACHINE_FIELDS``): what :class:`ClassifierMachine` runs and the classifier
+    top (``hdl.classifier``) is built for."""
+    options = dict(machine or {})
+    unknown = sorted(set(options) - set(MACHINE_FIELDS))
+    if unknown:
+        raise ParameterError(f"{unknown[0]}: not a machine option of the classifier (its options: "
+                             f"{', '.join(MACHINE_FIELDS)})", unknown[0])
+    kind = integrator_kind(options.get("integrator", DEFAULT_INTEGRATOR))
+    foreign = [f for k in INTEGRATOR_KINDS.values() if k is not kind for f in k.fields
+               if f in options and f not in kind.fields]
+    if foreign:
+        raise ParameterError(f"{foreign[0]}: a parameter of another integrator; the {kind.name} machine "
+                             "does not read it", foreign[0])
+    classes = as_int("classes", classes, 1)
+    fuse = _fuse(fuse, as_int("features", features, 1))
+    if fuse is None and features + 1 > MAX_OPERATOR_COLUMNS:
+        raise ParameterError(f"fuse: one column per feature needs {features + 1} operator columns (the "
+                             f"features and the prior), more than the machine's {MAX_OPERATOR_COLUMNS}; "
+                             "fuse them (fuse=1)", "fuse")
+    layout: dict[str, Any] = ({"columns": features, "prior": "loaded"} if fuse is None
+                              else {"columns": fuse, "prior": "uniform"})
+    loaded = layout["columns"] + (layout["prior"] == "loaded")
+    layout["words_per_beat"] = min(DEFAULT_WORDS_PER_BEAT, classes * loaded)
+    # A run the watchdog stops answers its leading class; per-feature words are normalized per decision
+    # (a fused column's best class is 2^W already): the fields of the kinds that read them.
+    wanted = {"timeout_answer": "leading", "normalize": fuse is None}
+    layout.update({f: v for f, v in wanted.items() if f in kind.fields})
+    return MachineParams(rows=classes, **options, **layout, **_fixed(kind))
+
+
 class ClassifierMachine:
     """The machine of a classifier's tables (module text).
 
@@ -116,7 +150,8 @@ class ClassifierMachine:
             raise TypeError(f"tables must be NaiveBayesTables, not {type_name(tables)}")
         self._tables = tables
         self._fuse = _fuse(fuse, tables.features)
-        self._params = self._machine_params(dict(machine or {}))
+        self._params = classifier_params(classes=tables.classes, features=tables.features, fuse=self._fuse,
+                                         machine=machine)
         self._kind = self._params.kind
         # A stochastic run's MAP row held counter max + 1 ones, its counter only counter max.
         self._overflow = 1 if self._kind.draws_numbers else 0
@@ -129,32 +164,6 @@ class ClassifierMachine:
     fuse = property(lambda self: self._fuse)
     params = property(lambda self: self._params)
     groups = property(lambda self: self._groups)
-
-    def _machine_params(self, options: dict[str, Any]) -> MachineParams:
-        unknown = sorted(set(options) - set(MACHINE_FIELDS))
-        if unknown:
-            raise ParameterError(f"{unknown[0]}: not a machine option of the classifier (its options: "
-                                 f"{', '.join(MACHINE_FIELDS)})", unknown[0])
-        kind = integrator_kind(options.get("integrator", DEFAULT_INTEGRATOR))
-        foreign = [f for k in INTEGRATOR_KINDS.values() if k is not kind for f in k.fields
-                   if f in options and f not in kind.fields]
-        if foreign:
-            raise ParameterError(f"{foreign[0]}: a parameter of another integrator; the {kind.name} machine "
-                                 "does not read it", foreign[0])
-        features, classes = self._tables.features, self._tables.classes
-        if self._fuse is None and features + 1 > MAX_OPERATOR_COLUMNS:
-            raise ParameterError(f"fuse: one column per feature needs {features + 1} operator columns (the "
-                                 f"features and the prior), more than the machine's {MAX_OPERATOR_COLUMNS}; "
-                                 "fuse them (fuse=1)", "fuse")
-        layout: dict[str, Any] = ({"columns": features, "prior": "loaded"} if self._fuse is None
-                                  else {"columns": self._fuse, "prior": "uniform"})
-        loaded = layout["columns"] + (layout["prior"] == "loaded")
-        layout["words_per_beat"] = min(DEFAULT_WORDS_PER_BEAT, classes * loaded)
-        # A run the watchdog stops answers its leading class; per-feature words are normalized per
-        # decision (a fused column's best class is 2^W already): the fields of the kinds that read them.
-        wanted = {"timeout_answer": "leading", "normalize": self._fuse is None}
-        layout.update({f: v for f, v in wanted.items() if f in kind.fields})
-        return MachineParams(rows=classes, **options, **layout, **_fixed(kind))
 
     def entries(self, bins: np.ndarray) -> np.ndarray:
         """(n, classes, loaded columns) uint16: what the machine loads for each decision of ``bins``."""
