@@ -111,3 +111,31 @@ def test_the_top_holds_one_fused_column() -> None:
         ClassifierTop(params=None, features=1, bins=2)
     with pytest.raises(ParameterError, match="bins"):
         ClassifierTop(params=ClassifierMachine(tables=t).params, features=1, bins=0)
+
+
+def test_emit_the_classifier_top(tmp_path, capsys) -> None:  # noqa: ANN001
+    from bayesmachine.cli import main
+
+    out = tmp_path / "classifier.il"
+    assert main(["emit", "--top", "classifier", "--classes", "10", "--features", "64", "--bins", "8",
+                 "-o", str(out)]) == 0
+    text = out.read_text()
+    assert "likelihood63" in text and "exp_table" in text
+    assert "64 likelihood memories of 8 rows x 10 classes" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(("argv", "words"), [
+    (["--top", "classifier", "--classes", "3", "--features", "4"], "needs --bins"),
+    (["--top", "classifier", "--classes", "3", "--features", "4", "--bins", "4", "--prior", "loaded"],
+     "--prior: the classifier top decides"),
+    (["--classes", "3"], "--classes: only with --top classifier"),
+    (["--top", "classifier", "--classes", "3", "--features", "4", "--bins", "300"], "--bins"),
+])
+def test_emit_refuses(tmp_path, capsys, argv: list[str], words: str) -> None:  # noqa: ANN001
+    from bayesmachine.cli import main
+
+    out = tmp_path / "x.il"
+    assert main(["emit", *argv, "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and words in err[0], err
+    assert not out.exists()
