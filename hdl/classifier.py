@@ -11,12 +11,12 @@ table (``exp_table(W)``), the log machine's codes ``min(S_c - S_min, INFINITE_CO
 (``params.kind.machine_top``) and its result stream are unchanged. Its twin is
 ``ClassifierMachine.entries`` (the words) and ``ClassifierMachine.run`` (the decisions).
 
-Ports: ``tables`` (a load stream: one row per beat, ``feature`` j < features and ``bin`` t its
-memory's row, ``feature == features`` the prior; a beat waits while a decision is being formed, so
-tables sent before the observations that need them are in place for them), ``observations`` (one
-decision per beat: ``bins`` bits per feature) and ``result`` (the machine's). A decision takes four
-clocks to form (read, sum, least, words) plus the machine's load beats; the machine's own double
-buffer overlaps the next decision's forming with a run.
+Ports: ``load``, one stream of beats in order (:func:`beat_layout`): a table row (``table`` set:
+``feature`` j < features and ``bin`` t, the row of memory j; ``feature == features``, the prior's) or an
+observation (``table`` clear: every feature's bin, one decision), so a table row takes effect for every
+observation after it, and one bitstream serves any task of its size; ``result``, the machine's. A
+decision takes four clocks to form (take, sum, least, words) plus one per further load beat of the
+machine; the machine's own double buffer overlaps the next decision's forming with a run.
 """
 
 from __future__ import annotations
@@ -32,7 +32,8 @@ from bayesmachine.params import MachineParams
 
 from .signatures import beat_words, result_layout
 
-__all__ = ["ClassifierTop", "add_emit_options", "build_from_args", "observation_layout", "table_layout"]
+__all__ = ["ClassifierTop", "add_emit_options", "beat_layout", "build_from_args", "observation_layout",
+           "table_layout"]
 
 # emit --top classifier: the top's size options (the tables are loaded, so one design serves any task of
 # its size) and the machine options it passes on (classify.machine.MACHINE_FIELDS).
@@ -48,7 +49,8 @@ def _bits(n: int) -> int:
 
 
 def table_layout(classes: int, features: int, bins: int) -> data.StructLayout:
-    """One beat of the tables' load stream: a memory row (``feature == features``: the prior's)."""
+    """A table row of the load stream: memory ``feature``'s row ``bin`` (``feature == features``: the
+    prior's)."""
     return data.StructLayout({"feature": unsigned(_bits(features + 1)), "bin": unsigned(_bits(bins)),
                               "codes": data.ArrayLayout(unsigned(CODE_BITS), classes)})
 
@@ -56,6 +58,12 @@ def table_layout(classes: int, features: int, bins: int) -> data.StructLayout:
 def observation_layout(features: int, bins: int) -> data.ArrayLayout:
     """One decision's observation: every feature's bin, feature 0 from bit 0."""
     return data.ArrayLayout(unsigned(_bits(bins)), features)
+
+
+def beat_layout(classes: int, features: int, bins: int) -> data.StructLayout:
+    """One beat of the top's ``load`` stream: ``table`` set, a table row; clear, an observation."""
+    return data.StructLayout({"table": unsigned(1), "data": data.UnionLayout({
+        "row": table_layout(classes, features, bins), "bins": observation_layout(features, bins)})})
 
 
 class ClassifierTop(wiring.Component):
@@ -73,8 +81,7 @@ class ClassifierTop(wiring.Component):
 
     Attributes
     ----------
-    tables : ``In(stream.Signature(table_layout(classes, features, bins)))``
-    observations : ``In(stream.Signature(observation_layout(features, bins)))``
+    load : ``In(stream.Signature(beat_layout(classes, features, bins)))``
     result : ``Out(stream.Signature(result_layout(params)))``
     params, features, bins : as given (read-only).
     """
@@ -90,8 +97,7 @@ class ClassifierTop(wiring.Component):
         self._bins = as_int("bins", bins, 1, 256)
         c = params.rows
         super().__init__({
-            "tables": In(stream.Signature(table_layout(c, self._features, self._bins))),
-            "observations": In(stream.Signature(observation_layout(self._features, self._bins))),
+            "load": In(stream.Signature(beat_layout(c, self._features, self._bins))),
             "result": Out(stream.Signature(result_layout(params))),
         })
 
@@ -106,29 +112,31 @@ class ClassifierTop(wiring.Component):
         m.submodules.machine = machine = p.kind.machine_top(p)
         wiring.connect(m, machine.result, wiring.flipped(self.result))
 
+        beat, row = self.load.payload, self.load.payload.data.row
+        taken = self.load.valid & self.load.ready
+        writing = taken & beat.table
         taking = Signal()  # an observation is taken this clock: the memories read at its bins
+        m.d.comb += taking.eq(taken & ~beat.table)
         reads = []
         for j in range(f):
             m.submodules[f"likelihood{j}"] = mem = memory.Memory(shape=codes, depth=self._bins, init=[])
             w, r = mem.write_port(), mem.read_port()
-            m.d.comb += [w.addr.eq(self.tables.payload.bin), w.data.eq(self.tables.payload.codes),
-                         w.en.eq(self.tables.valid & self.tables.ready & (self.tables.payload.feature == j)),
-                         r.addr.eq(self.observations.payload[j]), r.en.eq(taking)]
+            m.d.comb += [w.addr.eq(row.bin), w.data.eq(row.codes), w.en.eq(writing & (row.feature == j)),
+                         r.addr.eq(beat.data.bins[j]), r.en.eq(taking)]
             reads.append(r.data)
         prior = Signal(codes)
-        with m.If(self.tables.valid & self.tables.ready & (self.tables.payload.feature == f)):
-            m.d.sync += prior.eq(self.tables.payload.codes)
+        with m.If(writing & (row.feature == f)):
+            m.d.sync += prior.eq(row.codes)
 
         sum_shape = unsigned(CODE_BITS + _bits(f + 2))
         sums = Signal(data.ArrayLayout(sum_shape, c))
         entries = Signal(data.ArrayLayout(unsigned(p.memory_word_width), c))
-        beat = Signal(range(p.beats_per_pixel))
+        sent = Signal(range(p.beats_per_pixel))
         lanes = p.words_per_beat
         words = beat_words(p, machine.load.payload)
         with m.FSM():
             with m.State("idle"):
-                m.d.comb += [self.tables.ready.eq(1), self.observations.ready.eq(~self.tables.valid),
-                             taking.eq(self.observations.valid & ~self.tables.valid)]
+                m.d.comb += self.load.ready.eq(1)
                 with m.If(taking):
                     m.next = "sum"
             with m.State("sum"):  # the memories' rows of the observation's bins
@@ -137,7 +145,7 @@ class ClassifierTop(wiring.Component):
                 m.next = "least"
             with m.State("least"):
                 m.d.sync += [entries[k].eq(e) for k, e in enumerate(self._entries(m, sums, sum_shape))]
-                m.d.sync += beat.eq(0)
+                m.d.sync += sent.eq(0)
                 m.next = "send"
             with m.State("send"):
                 m.d.comb += machine.load.valid.eq(1)
@@ -145,11 +153,11 @@ class ClassifierTop(wiring.Component):
                     for b in range(p.beats_per_pixel):
                         o = b * lanes + lane
                         if o < c:
-                            with m.If(beat == b):
+                            with m.If(sent == b):
                                 m.d.comb += words[lane].eq(entries[o])
                 with m.If(machine.load.ready):
-                    m.d.sync += beat.eq(beat + 1)
-                    with m.If(beat == p.beats_per_pixel - 1):
+                    m.d.sync += sent.eq(sent + 1)
+                    with m.If(sent == p.beats_per_pixel - 1):
                         m.next = "idle"
         return m
 

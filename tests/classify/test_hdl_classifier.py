@@ -1,74 +1,25 @@
 # amaranth: UnusedElaboratable=no
-"""bayesmachine.hdl.classifier: the classifier top under pysim decides as the model (its twin,
-ClassifierMachine.run) with the tables loaded through its load stream and the bins streamed in."""
+"""bayesmachine.hdl.classifier (and sim/classifier_top.py, its simulation): the classifier top under pysim
+decides as the model (its twin, ClassifierMachine.run), its tables and then the bins in its load stream;
+emit --top classifier."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from amaranth.sim import Simulator
 from sklearn.datasets import load_digits, load_iris
 from sklearn.model_selection import StratifiedKFold
 
 from bayesmachine import BayesianMachineClassifier
 from bayesmachine.classify.machine import ClassifierMachine
 from bayesmachine.classify.tables import NaiveBayesTables
-from bayesmachine.columns.energy import energy_codes
 from bayesmachine.errors import ParameterError
-from bayesmachine.hdl.classifier import ClassifierTop, observation_layout, table_layout
-from bayesmachine.sim.results import decode_results
-
-
-def _table_beats(machine: ClassifierMachine, bins: int) -> list[int]:
-    t = machine.tables
-    layout = table_layout(t.classes, t.features, bins)
-    beats = []
-    for j, table in enumerate(t.likelihoods):
-        codes = energy_codes(table)
-        for b in range(bins):
-            row = codes[:, b] if b < codes.shape[1] else np.zeros(t.classes, np.uint16)
-            beats.append(layout.const({"feature": j, "bin": b, "codes": row.tolist()}).as_bits())
-    prior = energy_codes(t.prior).tolist()
-    beats.append(layout.const({"feature": t.features, "bin": 0, "codes": prior}).as_bits())
-    return beats
+from bayesmachine.hdl.classifier import ClassifierTop
+from bayesmachine.sim.classifier_top import run_classifier_top
 
 
 def run_top(machine: ClassifierMachine, observed: np.ndarray, bins: int):  # noqa: ANN201
-    """The top's results of ``observed`` (n, features) bins, its tables loaded first."""
-    top = ClassifierTop(params=machine.params, features=machine.tables.features, bins=bins)
-    tables = _table_beats(machine, bins)
-    obs_layout = observation_layout(machine.tables.features, bins)
-    observations = [obs_layout.const(row.tolist()).as_bits() for row in observed]
-    results: list[int] = []
-
-    async def feed(ctx, port, beats):  # noqa: ANN001, ANN202
-        for beat in beats:
-            ctx.set(port.valid, 1)
-            ctx.set(port.payload.as_value(), beat)
-            await ctx.tick().until(port.ready)
-        ctx.set(port.valid, 0)
-
-    async def tables_in(ctx):  # noqa: ANN001, ANN202
-        await feed(ctx, top.tables, tables)
-
-    async def observations_in(ctx):  # noqa: ANN001, ANN202
-        await ctx.tick().repeat(len(tables) + 2)  # the tables first
-        await feed(ctx, top.observations, observations)
-
-    async def collect(ctx):  # noqa: ANN001, ANN202
-        ctx.set(top.result.ready, 1)
-        while len(results) < len(observations):
-            _, _, valid, payload = await ctx.tick().sample(top.result.valid, top.result.payload.as_value())
-            if valid:
-                results.append(payload)
-
-    sim = Simulator(top)
-    sim.add_clock(1e-8)
-    sim.add_testbench(tables_in, background=True)
-    sim.add_testbench(observations_in, background=True)
-    sim.add_testbench(collect)
-    sim.run()
-    return decode_results(machine.params, results)
+    return run_classifier_top(machine, observed, bins).result
 
 
 def _held_out(load, options: dict, n: int):  # noqa: ANN001, ANN202
