@@ -14,7 +14,7 @@ from bayesmachine.columns.energy import energy_codes
 from bayesmachine.hdl.classifier import ClassifierTop, beat_layout
 from bayesmachine.sim.results import MachineResult, decode_results
 
-__all__ = ["TopRun", "load_beats", "run_classifier_top"]
+__all__ = ["TopRun", "load_beats", "run_beats", "run_classifier_top"]
 
 
 @dataclass(frozen=True)
@@ -44,33 +44,38 @@ def load_beats(machine: ClassifierMachine, bins: int, observed: np.ndarray) -> t
 
 def run_classifier_top(machine: ClassifierMachine, observed: np.ndarray, bins: int) -> TopRun:
     """``observed`` (n, features) bins through the top of ``machine`` (its fused layout, memories of
-    ``bins`` rows), from reset."""
-    top = ClassifierTop(params=machine.params, features=machine.tables.features, bins=bins)
+    ``bins`` rows), its tables loaded first, from reset."""
     beats, rows = load_beats(machine, bins, observed)
+    top = ClassifierTop(params=machine.params, features=machine.tables.features, bins=bins)
+    return run_beats(top, beats, len(beats) - rows, first=rows)
+
+
+def run_beats(top: ClassifierTop, beats: list[int], decisions: int, first: int = 0) -> TopRun:
+    """Raw load ``beats`` (table rows and observations in any order) through ``top`` from reset until
+    ``decisions`` results came; the wall cycles counted from beat ``first`` taken."""
     results: list[int] = []
-    clocks = {"first": -1, "last": -1, "now": 0}
+    clocks = {"first": 0, "now": 0}
 
     async def feed(ctx: SimulatorContext) -> None:
         for i, beat in enumerate(beats):
             ctx.set(top.load.valid, 1)
             ctx.set(top.load.payload.as_value(), beat)
             await ctx.tick().until(top.load.ready)
-            if i == rows:
+            if i == first:
                 clocks["first"] = clocks["now"]
         ctx.set(top.load.valid, 0)
 
     async def collect(ctx: SimulatorContext) -> None:
         ctx.set(top.result.ready, 1)
-        while len(results) < len(beats) - rows:
+        while len(results) < decisions:
             _, _, valid, payload = await ctx.tick().sample(top.result.valid, top.result.payload.as_value())
             clocks["now"] += 1
             if valid:
                 results.append(payload)
-        clocks["last"] = clocks["now"]
 
     sim = Simulator(top)
     sim.add_clock(1e-8)
     sim.add_testbench(feed, background=True)
     sim.add_testbench(collect)
     sim.run()
-    return TopRun(decode_results(machine.params, results), clocks["last"] - clocks["first"])
+    return TopRun(decode_results(top.params, results), clocks["now"] - clocks["first"])

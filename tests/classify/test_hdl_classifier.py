@@ -15,7 +15,7 @@ from bayesmachine.classify.machine import ClassifierMachine
 from bayesmachine.classify.tables import NaiveBayesTables
 from bayesmachine.errors import ParameterError
 from bayesmachine.hdl.classifier import ClassifierTop
-from bayesmachine.sim.classifier_top import run_classifier_top
+from bayesmachine.sim.classifier_top import load_beats, run_beats, run_classifier_top
 
 
 def run_top(machine: ClassifierMachine, observed: np.ndarray, bins: int):  # noqa: ANN201
@@ -38,6 +38,24 @@ def test_the_top_decides_as_the_model(load, options: dict, n: int) -> None:  # n
     np.testing.assert_array_equal(got.map, want.map)
     np.testing.assert_array_equal(got.counts, want.readout)
     np.testing.assert_array_equal(got.cycles, want.cycles)
+
+
+def test_tables_loaded_again_hold_for_the_observations_after_them() -> None:
+    x, y = load_iris(return_X_y=True)
+    (a_train, test), (b_train, _) = list(StratifiedKFold(5, shuffle=True, random_state=0).split(x, y))[:2]
+    a = BayesianMachineClassifier().fit(x[a_train], y[a_train])
+    b = BayesianMachineClassifier(alpha=5.0).fit(x[b_train], y[b_train])
+    assert a.machine_.params == b.machine_.params and (a.bins_.counts == b.bins_.counts).all()
+    observed = a.bins_.transform(x[test][:4])
+    beats = load_beats(a.machine_, 4, observed)[0] + load_beats(b.machine_, 4, observed)[0]
+    top = ClassifierTop(params=a.machine_.params, features=4, bins=4)
+    got = run_beats(top, beats, 8).result
+    # the machine's random source runs on across the second table set, as in one model run
+    engine = a.machine_.params.kind.engine_class("model")(a.machine_.params)
+    want = engine.run(np.concatenate([a.machine_.entries(observed), b.machine_.entries(observed)]))
+    np.testing.assert_array_equal(got.map, want.map)
+    np.testing.assert_array_equal(got.counts, want.counts)
+    assert not (a.machine_.entries(observed) == b.machine_.entries(observed)).all()
 
 
 def test_more_classes_than_a_beat_holds() -> None:
