@@ -33,7 +33,7 @@ import numpy as np
 from bayesmachine.checks import as_int, type_name
 from bayesmachine.columns.energy import INFINITE_CODE, energy_codes, exp_table
 from bayesmachine.errors import ParameterError
-from bayesmachine.integrators import INTEGRATOR_KINDS, IntegratorKind, integrator_kind
+from bayesmachine.integrators import integrator_kind
 from bayesmachine.params import DEFAULT_INTEGRATOR, DEFAULT_WORDS_PER_BEAT, MachineParams
 
 from .tables import NaiveBayesTables
@@ -45,13 +45,6 @@ MAX_OPERATOR_COLUMNS = 64
 # prior, normalize, words_per_beat, nomatch_row) are the classifier's own.
 MACHINE_FIELDS = ("integrator", "word_bits", "counter_max", "rng", "lfsr_bits", "seed", "max_cycles",
                   "tie_break", "samples_per_clock")
-
-
-def _fixed(kind: IntegratorKind) -> dict[str, Any]:
-    """The machine fields the classifier sets for a kind whatever its options: a machine that draws no
-    random number gets a source without sobol's limit of 16 operator columns (MachineParams checks the
-    default source of every machine)."""
-    return {} if kind.draws_numbers else {"rng": "lfsr-shared"}
 
 
 @dataclass(frozen=True, eq=False)
@@ -103,12 +96,7 @@ def classifier_params(*, classes: int, features: int, fuse: int | None = 1,
     if unknown:
         raise ParameterError(f"{unknown[0]}: not a machine option of the classifier (its options: "
                              f"{', '.join(MACHINE_FIELDS)})", unknown[0])
-    kind = integrator_kind(options.get("integrator", DEFAULT_INTEGRATOR))
-    foreign = [f for k in INTEGRATOR_KINDS.values() if k is not kind for f in k.fields
-               if f in options and f not in kind.fields]
-    if foreign:
-        raise ParameterError(f"{foreign[0]}: a parameter of another integrator; the {kind.name} machine "
-                             "does not read it", foreign[0])
+    kind = integrator_kind(options.get("integrator", DEFAULT_INTEGRATOR))  # another kind's fields: refused
     classes = as_int("classes", classes, 1)
     fuse = _fuse(fuse, as_int("features", features, 1))
     if fuse is None and features + 1 > MAX_OPERATOR_COLUMNS:
@@ -123,7 +111,7 @@ def classifier_params(*, classes: int, features: int, fuse: int | None = 1,
     # (a fused column's best class is 2^W already): the fields of the kinds that read them.
     wanted = {"timeout_answer": "leading", "normalize": fuse is None}
     layout.update({f: v for f, v in wanted.items() if f in kind.fields})
-    return MachineParams(rows=classes, **options, **layout, **_fixed(kind))
+    return MachineParams(rows=classes, **options, **layout)
 
 
 class ClassifierMachine:

@@ -19,9 +19,10 @@ from bayesmachine.argtypes import (
     positive_float_at_most,
 )
 from bayesmachine.classify import DEFAULT_ALPHA, DEFAULT_BINS, MAX_BINS
-from bayesmachine.cliargs import add_machine_options, refuse_stochastic_options, with_flag
+from bayesmachine.cliargs import add_machine_options, refuse_unread_options, with_flag
 from bayesmachine.errors import ParameterError
 from bayesmachine.extras import needs_host, require
+from bayesmachine.integrators import integrator_kind
 from bayesmachine.outputs import OutputDir
 from bayesmachine.sim.engines import ENGINES
 
@@ -91,8 +92,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
 
 def _options(args: argparse.Namespace) -> dict[str, Any]:
     given = {f: getattr(args, f) for f in _MACHINE if getattr(args, f) is not None}
-    if given.get("integrator") == "log":
-        refuse_stochastic_options(args, given)
+    refuse_unread_options(args, given, [integrator_kind(given["integrator"])])
     return {"bins": args.bins, "alpha": args.alpha, "fuse": args.fuse, "engine": args.engine, **given}
 
 
@@ -139,8 +139,7 @@ def summary(r: dict[str, Any]) -> str:
     m = r["machine"]
     split = r["split"]
     how = f"{split['folds']}-fold" if split["kind"] == "k-fold" else f"test size {split['test_size']}"
-    machine = ("log" if m["integrator"] == "log"
-               else f"stochastic counter max {m['counter_max']} rng {m['rng']}")
+    machine = " ".join([m["integrator"], *integrator_kind(m["integrator"]).label_parts(m)])
     cycles, conf = r["cycles_per_decision"], r["confidence"]
     return (f"{r['data']}: {r['samples']} samples, {r['features']} features, {r['classes']} classes, {how}; "
             f"{machine}, {r['operator_columns']} operator columns\n"

@@ -72,7 +72,7 @@ def test_the_fused_log_machine_is_the_argmin_of_the_codes() -> None:
     ({"bins": 0}, 4, ParameterError, "bins"),
     ({"alpha": 0.0}, 4, ParameterError, "alpha"),
     ({"counter_max": 0}, 4, ParameterError, "counter_max"),
-    ({"integrator": "log", "counter_max": 8}, 4, ParameterError, "counter_max: a parameter of another"),
+    ({"integrator": "log", "counter_max": 8}, 4, ParameterError, "counter_max: the stochastic integrator's"),
     ({"integrator": "log", "rng": "lfsr"}, 4, ParameterError, "rng"),
     ({"fuse": 5}, 4, ParameterError, "fuse"),
     ({"fuse": None}, 20, ParameterError, "16 operator columns"),  # sobol's limit: 20 features + the prior

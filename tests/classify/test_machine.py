@@ -73,7 +73,7 @@ def test_layout_limits() -> None:
         ClassifierMachine(tables=_tables(features=2), fuse=1.5)
     with pytest.raises(ParameterError, match="normalize"):
         ClassifierMachine(tables=_tables(), machine={"normalize": True})
-    with pytest.raises(ParameterError, match="seed: a parameter of another integrator"):
+    with pytest.raises(ParameterError, match="seed: the stochastic integrator's"):
         ClassifierMachine(tables=_tables(), machine={"integrator": "log", "seed": 3})
     with pytest.raises(TypeError, match="tables"):
         ClassifierMachine(tables=None)
