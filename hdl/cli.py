@@ -31,12 +31,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     g = p.add_argument_group("machine")
     add_dmax_option(g)
     add_machine_options(g, title=None)
-    p.add_argument("--top", choices=("machine", "stereo"), default="machine",
+    p.add_argument("--top", choices=("machine", "stereo", "classifier"), default="machine",
                    help="machine: likelihood words in (default); stereo: pixel pairs in, the front end on "
-                   "chip (docs/frontend.md)")
+                   "chip (docs/frontend.md); classifier: feature bins in, each feature's likelihood memory "
+                   "read at its bin, its tables loaded on a stream (--classes, --features, --bins; "
+                   "docs/classifier.md)")
+    from .classifier import add_emit_options as add_classifier_options
     from .frontend.cli import add_options as add_stereo_options
 
     add_stereo_options(p)
+    add_classifier_options(p)
     p.add_argument("--machines", type=int_in_range(1, MAX_MACHINES), default=None,
                    help="--top stereo: machines behind the one feature pipeline, map rows dealt to them "
                    f"(1 .. {MAX_MACHINES}, default 1; docs/frontend.md)")
@@ -53,6 +57,16 @@ def _run(args: argparse.Namespace) -> int:
     check_top(args)  # stereo options with --top machine would do nothing: refused
     if args.machines is not None and args.top != "stereo":
         raise ValueError(f"--machines: only with --top stereo (got --top {args.top})")
+    from .classifier import build_from_args
+
+    classifier = build_from_args(args)  # None for another top (its options refused there)
+    if classifier is not None:
+        path = emit(classifier.params, args.output, classifier)
+        print(summary(classifier.params).split("\nports")[0])
+        print(f"classifier: {classifier.features} likelihood memories of {classifier.bins} rows x "
+              f"{classifier.params.rows} classes' energy codes, read at the observed bins")
+        print(f"wrote {path}")
+        return 0
     model = model_params_from_args(args)
     params = machine_params_from_args(args, args.dmax, model=model)
     if args.top == "stereo":

@@ -1,4 +1,4 @@
-"""Host subcommands of ``bayesmachine``: reference, run, sweep, one module each.
+"""Host subcommands of ``bayesmachine``: reference, run, sweep, classify, one module each.
 
 ``bayesmachine/cli.py`` calls :func:`register`; every ValueError or OSError raised here
 (bad input, impossible parameters, file-system problems) ends as one error line there.
@@ -12,7 +12,7 @@ from __future__ import annotations
 import argparse
 
 from ..sweep import SWEEP_OUTPUTS
-from . import reference, run, sweep
+from . import classify, reference, run, sweep
 from .run import RUN_OUTPUTS
 
 __all__ = ["register", "RUN_OUTPUTS", "SWEEP_OUTPUTS"]
@@ -23,3 +23,4 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
     reference.register(subparsers)
     run.register(subparsers)
     sweep.register(subparsers)
+    classify.register(subparsers)

@@ -433,7 +433,8 @@ def build_harness(
     root.mkdir(parents=True, exist_ok=True)
     # The ports; the component is built only to emit Verilog.
     signature = MachineSignature(params)
-    check_source(params)  # as BayesianMachine's constructor does, before any work
+    if params.kind.draws_numbers:  # a log machine has no source (rng None) to check
+        check_source(params)  # as BayesianMachine's constructor does, before any work
     design = HarnessSources(
         verilog=cached_verilog(params.fingerprint(), lambda: machine_top(params), root),
         wrapper=wrapper_verilog(signature, tie_ready=tie_ready),

@@ -144,6 +144,7 @@ _COMMANDS = {  # a command line that parses, before -o; {tmp}: the test's direct
     "synth": ["synth", "--target", "ecp5-85k", "--dmax", "4"],
     "board build": ["board", "build", "--dmax", "4", "--width", "32"],
     "board simulate": ["board", "simulate", "--dmax", "4", "--width", "32"],
+    "classify": ["classify", "iris", "--quiet"],
 }
 _INTS = ("18446744073709551616", "-18446744073709551617")  # 2^64: one past the largest seed
 _FLOATS = ("1e300", "-1e300", "nan")
