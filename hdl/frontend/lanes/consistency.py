@@ -1,12 +1,12 @@
-"""The consistency column (census-lr's left pass): row d 1.0 or beta by lane d's window test on the
-other pass's MAP d_R(x - d) (:class:`ConsistencyTest`, fed one MAP per pixel at a map column of an output
-row through the generator's ``<pass>_maps`` port), the no-match row gamma when any lane is consistent,
-else 1.0 (0 without its no-match entry).
+"""The consistency column (a ``consistency(name)`` kind: census-lr's ``consistency("right")``): row d
+1.0 or beta by lane d's window test on the other pass's MAP d_R(x - d) (:class:`ConsistencyTest`, fed one
+MAP per pixel at a map column of an output row through the generator's ``<pass>_maps`` port), the
+no-match row gamma when any lane is consistent, else 1.0 (0 without its no-match entry).
 
-The pass it reads (``Consistency.feeds_from``) must be one the model runs before its own pass, with the
-right image as reference: its MAPs then cover every map column of an output row (0 .. W - 2k - 1), one
-per pixel the own pass consults. Its own pass must be the model's own (a declared pass reading another
-would need that pass's MAPs in its own order)."""
+The pass it reads (``Consistency.feeds_from``: a pass of any name the model declares) must be one the
+model runs before its own pass, with the right image as reference: its MAPs then cover every map column
+of an output row (0 .. W - 2k - 1), one per pixel the own pass consults. Its own pass must be the model's
+own (a declared pass reading another would need that pass's MAPs in its own order)."""
 
 from __future__ import annotations
 
