@@ -40,9 +40,9 @@ from bayesmachine.columns import (
     lr_unknown,
 )
 from bayesmachine.hdl.frontend import passes
+from bayesmachine.hdl.frontend.delayline import tapped_line
 from bayesmachine.hdl.frontend.filters import feature_layout
 from bayesmachine.hdl.frontend.lanes.consistency import ConsistencyTest
-from bayesmachine.hdl.frontend.nets import tapped_line
 from bayesmachine.hdl.frontend.passes import PassFeeder, fused_shares
 from bayesmachine.hdl.frontend.shared import SharedSums
 from bayesmachine.hdl.frontend.stereo import (
