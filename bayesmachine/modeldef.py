@@ -52,7 +52,10 @@ class PassDef:
     ``nomatch_option``: the model's yes/no option giving the pass ``model``'s no-match row (off: word 0,
     the row never fires; None: always); ``watchdog_option``: the model's option giving its watchdog in
     cycles (None left there: ``watchdog_runs`` runs of n_max + 1 cycles, or the machine's);
-    ``not_inherited``: the model's options the pass does not take (it keeps ``model``'s defaults)."""
+    ``not_inherited``: the model's options the pass does not take (it keeps ``model``'s defaults);
+    ``options``: options of the pass's own (census-lr's ``lr_right_nomatch``, ``lr_right_max_cycles``),
+    options of the model as its columns' are, which ``nomatch_option`` and ``watchdog_option`` may name. A
+    column reads the pass by its ``name`` (:func:`~bayesmachine.columns.consistency`)."""
 
     name: str
     model: str
@@ -62,6 +65,7 @@ class PassDef:
     watchdog_option: str | None = None
     not_inherited: tuple[str, ...] = ()
     watchdog_runs: int | None = None
+    options: tuple[Option, ...] = ()
 
 
 def _frozen(value: Any) -> Mapping[Any, Any]:
@@ -164,7 +168,8 @@ class ModelDef:
     @property
     def options(self) -> dict[str, Option]:
         """Every parameter of the model, in order: its FEATURES columns', the no-match rule's, the other
-        columns', its PASS columns'; a switch just before the options of the first column it switches."""
+        columns', its PASS columns', its passes' own; a switch just before the options of the first
+        column it switches."""
         return dict(self._options)  # type: ignore[attr-defined]
 
     def resolve(self, given: Mapping[str, Any]) -> dict[str, Any]:
@@ -209,15 +214,27 @@ def _collect_options(d: ModelDef) -> dict[str, Option]:
     for switch, switched in d.switches.items():
         lead = next((k for k in kinds if k in switched), None)
         before.setdefault(lead, []).append(switch)  # type: ignore[arg-type]
+    owners: list[tuple[str, tuple[Option, ...]]] = [
+        (kind.__name__, (*before.get(kind, ()), *kind.options)) for kind in kinds]
+    owners += [(f"pass {p.name}", _pass_options(d, p)) for p in d.passes if isinstance(p, PassDef)]
     out: dict[str, Option] = {}
     owner: dict[str, str] = {}
-    for kind in kinds:
-        for option in (*before.get(kind, ()), *kind.options):
+    for who, options in owners:
+        for option in options:
             if out.setdefault(option.name, option) is not option:
                 raise d._error(f"option {option.name} is declared twice (by {owner[option.name]} and "
-                               f"{kind.__name__}): one option, one owner")
-            owner.setdefault(option.name, kind.__name__)
+                               f"{who}): one option, one owner")
+            owner.setdefault(option.name, who)
     return out
+
+
+def _pass_options(d: ModelDef, p: PassDef) -> tuple[Option, ...]:
+    """A pass's own options, each an :class:`~bayesmachine.columns.Option` (TypeError naming the model)."""
+    options = p.options if isinstance(p.options, (tuple, list)) else None
+    if options is None or not all(isinstance(o, Option) for o in options):
+        raise TypeError(f"model {d.name!r}: pass {p.name}: options must be a tuple of Options "
+                        f"(bayesmachine.columns.Option), got {p.options!r}")
+    return tuple(options)
 
 
 def _check_kinds(d: ModelDef) -> None:
@@ -354,6 +371,9 @@ def _check_passes(d: ModelDef) -> None:
     if len(set(indices)) != len(indices):
         raise d._error(f"two passes on one machine (machine_index {indices}): each pass runs on its own")
     for c in d.columns:
+        if c.source is Source.PASS and not c.feeds_from:
+            raise d._error(f"column {c.name} reads no pass: make its kind for the pass it reads "
+                           "(consistency(pass name))")
         if c.source is Source.PASS and c.feeds_from not in names:
             raise d._error(f"column {c.name} reads the results of pass {c.feeds_from!r}, which the model "
                            f"does not declare (passes: {', '.join(names) or 'none'})")

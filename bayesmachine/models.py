@@ -36,11 +36,9 @@ from bayesmachine.checks import as_int, type_name
 from bayesmachine.columns import (
     GRADIENT_MAGNITUDE,
     NEIGHBOUR_PRIOR,
-    RIGHT_PASS,
     AbovePrior,
     Census,
     Column,
-    Consistency,
     GradH,
     GradMag,
     GradV,
@@ -51,9 +49,11 @@ from bayesmachine.columns import (
     Plane,
     Source,
     Term,
+    consistency,
     fused,
     semiglobal,
 )
+from bayesmachine.columns.base import check_int, check_switch
 from bayesmachine.integrators import integrator_kind
 from bayesmachine.modeldef import MAX_WATCHDOG, OWN_PASS, ModelDef, PassDef, machine_layout
 from bayesmachine.params import (
@@ -78,6 +78,8 @@ __all__ = [
     "DEFAULT_MODEL",
     "CENSUS_WATCHDOG_RUNS",
     "RIGHT_WATCHDOG_RUNS",
+    "RIGHT_PASS",
+    "RIGHT_PASS_OPTIONS",
     "CENSUS_TIMEOUT_ANSWER",
     "all_options",
     "machine_layout",
@@ -101,6 +103,22 @@ RIGHT_WATCHDOG_RUNS = 8
 # The census models' answer to a timeout: the leading row (the counters hold the partial posterior);
 # the paper's machine keeps "none" (a timeout is no match).
 CENSUS_TIMEOUT_ANSWER = "leading"
+# census-lr's right pass: its name (the key of its results, the consistency column's pass) and its options.
+RIGHT_PASS = "right"
+
+
+def _right_watchdog(name: str, value: object, values: Mapping[str, Any]) -> None:
+    if value is not None:
+        check_int(name, value, 2, (1 << 32) - 1)
+
+
+RIGHT_PASS_OPTIONS = (
+    Option("lr_right_nomatch", "bool", True, check_switch,
+           "give the right pass its model's no-match row (off: none, word 0)"),
+    Option("lr_right_max_cycles", "int", None, _right_watchdog, "the right pass's watchdog in cycles: a "
+           "right pixel stopped by it has no right MAP", optional=True,
+           default_text="the right pass's default watchdog, given with --max-cycles"),
+)
 
 
 PAPER = ModelDef(
@@ -116,10 +134,11 @@ CENSUS = ModelDef(
     timeout_answer=CENSUS_TIMEOUT_ANSWER, normalize=True)
 CENSUS_LR = ModelDef(
     name="census-lr", description="+ a left-right consistency column from a right pass",
-    columns=(*CENSUS.columns, Consistency), switches=CENSUS.switches,
+    columns=(*CENSUS.columns, consistency(RIGHT_PASS)), switches=CENSUS.switches,
     passes=(PassDef(name=RIGHT_PASS, model="census", reference="right", machine_index=1,
-                    nomatch_option="lr_right_nomatch", watchdog_option="lr_right_max_cycles",
-                    not_inherited=("prior_nomatch",), watchdog_runs=RIGHT_WATCHDOG_RUNS),),
+                    options=RIGHT_PASS_OPTIONS, nomatch_option="lr_right_nomatch",
+                    watchdog_option="lr_right_max_cycles", not_inherited=("prior_nomatch",),
+                    watchdog_runs=RIGHT_WATCHDOG_RUNS),),
     defaults={"prior_nomatch": 0.1},
     requires={"neighbour_prior": (True, "both passes use it")},
     watchdog_runs=CENSUS_WATCHDOG_RUNS, timeout_answer=CENSUS_TIMEOUT_ANSWER, normalize=True)
@@ -132,11 +151,13 @@ CENSUS_SG = ModelDef(
     watchdog_runs=CENSUS_WATCHDOG_RUNS, timeout_answer=CENSUS_TIMEOUT_ANSWER, normalize=True)
 CENSUS_SGM = ModelDef(
     name="census-sgm", description="census-lr with the semi-global column over its fused column, both passes",
-    columns=(*CENSUS_SG.columns, Consistency), switches=CENSUS_SG.switches,
+    columns=(*CENSUS_SG.columns, consistency(RIGHT_PASS)), switches=CENSUS_SG.switches,
     passes=(PassDef(name=RIGHT_PASS, model="census-sg", reference="right", machine_index=1,
-                    nomatch_option="lr_right_nomatch", watchdog_option="lr_right_max_cycles",
-                    not_inherited=("prior_nomatch",), watchdog_runs=RIGHT_WATCHDOG_RUNS),),
+                    options=RIGHT_PASS_OPTIONS, nomatch_option="lr_right_nomatch",
+                    watchdog_option="lr_right_max_cycles", not_inherited=("prior_nomatch",),
+                    watchdog_runs=RIGHT_WATCHDOG_RUNS),),
     defaults={"prior_nomatch": 0.1},
+    requires={"neighbour_prior": (True, "both passes use it")},
     watchdog_runs=CENSUS_WATCHDOG_RUNS, timeout_answer=CENSUS_TIMEOUT_ANSWER, normalize=True)
 
 # The models by name: the ones above, then those registered by register_model.
@@ -604,6 +625,11 @@ def check_disparity_machine(model: ModelParams, machine: MachineParams) -> int:
                              f"{_described(model)} has none", "prior")
     for term in (model.nomatch, *model.columns):
         term.check_machine(machine)
+    for p in model.passes[:-1]:  # a declared pass's watchdog runs beside this machine
+        if p.max_cycles is not None and p.max_cycles <= machine.counter_max:
+            raise ParameterError(f"{p.watchdog_option} = {p.max_cycles} must exceed the counter max "
+                                 f"({machine.counter_max}): no counter can overflow in fewer than counter "
+                                 "max + 1 cycles", p.watchdog_option)
     return machine.operator_columns - machine.columns
 
 

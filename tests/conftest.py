@@ -198,16 +198,14 @@ def assert_passes_equal_the_model(top: object, frames: list[tuple[np.ndarray, np
 
 
 def _lr_like() -> object:
-    from bayesmachine.columns import Census, Consistency, GradH, GradV, Mean
+    from bayesmachine.columns import Census, GradH, GradV, Mean, consistency
     from bayesmachine.models import ModelDef, PassDef
 
     return ModelDef(
         name="lr-like",
-        description="census + a consistency column of a right pass, and a paper pass beside them",
-        columns=(Mean, GradH, GradV, Census, Consistency),
-        passes=(PassDef(name="right", model="census", reference="right", machine_index=1,
-                        nomatch_option="lr_right_nomatch", watchdog_option="lr_right_max_cycles",
-                        watchdog_runs=8),
+        description="census + a consistency column of a mirror pass, and a paper pass beside them",
+        columns=(Mean, GradH, GradV, Census, consistency("mirror")),
+        passes=(PassDef(name="mirror", model="census", reference="right", machine_index=1, watchdog_runs=8),
                 PassDef(name="echo", model="paper", reference="left", machine_index=2)),
         watchdog_runs=15)
 
@@ -215,9 +213,10 @@ def _lr_like() -> object:
 @pytest.fixture
 def lr_like() -> Iterator[object]:
     """A census-lr-like model defined here, known by name (``lr-like``) for the test: no neighbour prior
-    in its own pass, the right pass its consistency column reads (the census model, with its neighbour
-    prior), and a pass nothing reads, with the left image as reference (the paper model on a third
-    machine). What runs it runs it from its definition, never its name."""
+    in its own pass, the pass its consistency column reads (named ``mirror``: the census model with the
+    right image as reference and its neighbour prior), and a pass nothing reads, with the left image as
+    reference (the paper model on a third machine). What runs it runs it from its definition, never its
+    name."""
     with registered(_lr_like()) as definition:
         yield definition
 

@@ -1,7 +1,7 @@
 """A model defined outside the package: the snippet of docs/development.md ("A model of your own"),
 written to a file of its own and imported, registers census-lr's columns plus the gradient-magnitude
-column (five FEATURES columns) with a right pass of its own; the library and ``bayesmachine.cli.main``
-take it. Bad definitions are one error each, naming the model."""
+column (five FEATURES columns) with a pass of its own, "mirror" (the right image as reference); the
+library and ``bayesmachine.cli.main`` take it. Bad definitions are one error each, naming the model."""
 
 from __future__ import annotations
 
@@ -28,6 +28,7 @@ from bayesmachine.columns import (
     Mean,
     Option,
     Source,
+    consistency,
 )
 from bayesmachine.host.features import model_planes
 from bayesmachine.host.images import bundled_pair
@@ -61,9 +62,10 @@ def test_the_snippet_makes_a_model_of_five_feature_columns_and_a_fed_pass(user_m
     assert [c.name for c in model.columns] == ["left-prior", "above-prior", "m", "gh", "gv", "census", "g",
                                                "lr"]
     assert sum(c.source is Source.FEATURES for c in model.columns) == 5
-    assert [p.name for p in model.passes] == ["right", "left"]
-    right = model.pass_named("right")
-    assert right.reference == "right" and right.model.name == "census-g" and right.machine_index == 1
+    assert [p.name for p in model.passes] == ["mirror", "left"]
+    mirror = model.pass_named("mirror")
+    assert mirror.reference == "right" and mirror.model.name == "census-g" and mirror.machine_index == 1
+    assert not any(name.startswith("lr_right") for name in model.definition.options)
     assert set(model.planes) == {"m25", "gh20", "gv20", "census", "g20"} and model.margin == 3
     assert model.replace(census_window=5).margin == 2
     machine = disparity_machine(model)
@@ -121,14 +123,14 @@ def test_run_through_the_cli_is_the_model_engines(user_model: ModelParams, crop,
     npz = np.load(out / "result.npz")
     model = user_model
     machine = disparity_machine(model, counter_max=8)
-    assert report["model_name"] == "census-g-lr" and report["passes"] == ["right", "left"]
+    assert report["model_name"] == "census-g-lr" and report["passes"] == ["mirror", "left"]
     assert report["machine"] == machine.to_dict(complete=True) and report["model"] == model.to_dict()
     left, right, gt = crop
     want = run_machine(prepare(left, right, model, gt), machine, "model", progress=False)
     for key in ("map", "cycles", "timeout"):
         np.testing.assert_array_equal(npz[key], getattr(want, key), err_msg=key)
-        np.testing.assert_array_equal(npz[f"right_{key}"], getattr(want.passes["right"], key), err_msg=key)
-    assert report["right_pass_pixels"] == want.passes["right"].map.size
+        np.testing.assert_array_equal(npz[f"mirror_{key}"], getattr(want.passes["mirror"], key), err_msg=key)
+    assert report["mirror_pass_pixels"] == want.passes["mirror"].map.size
     # Sensible (measured: 0.939, 0.004): the machine near its quantized reference (its words' exact
     # inference, 80-bit products), few bad pixels.
     fl, fr = model_planes(left, model), model_planes(right, model)
@@ -138,7 +140,7 @@ def test_run_through_the_cli_is_the_model_engines(user_model: ModelParams, crop,
 
 def test_each_column_builds_its_own_words_from_its_source(user_model: ModelParams, crop) -> None:
     """The words of a map row: the above column from the row above's MAPs, the consistency column from
-    the right pass's MAPs of the row, by name; the right pass's own words beside them."""
+    the mirror pass's MAPs of the row, by name; the mirror pass's own words beside them."""
     model = user_model
     machine = disparity_machine(model)
     left, right, _ = crop
@@ -148,20 +150,21 @@ def test_each_column_builds_its_own_words_from_its_source(user_model: ModelParam
     region = OutputRegion.of_features(fl.shape, model.dmax)
     above = np.arange(region.shape[1]) % (model.dmax + 2) - 1  # MAPs -1 (none) .. Dmax
     words = memory_words(fl, fr, model, machine, rows=slice(4, 5), above=above,
-                         results={"right": maps["right"][4:5]})
+                         results={"mirror": maps["mirror"][4:5]})
     assert words.shape == (above.size, model.hypotheses, 7)
     prior, lr = model.column(AbovePrior), model.column(Consistency)
     np.testing.assert_array_equal(words[:, :, 0], prior.loaded(prior.table(w), above))
-    first = pass_grid(model.pass_named("right"), region).first
-    np.testing.assert_array_equal(words[:, :, 6], lr.loaded(lr.table(w), maps["right"][4], first,
+    first = pass_grid(model.pass_named("mirror"), region).first
+    np.testing.assert_array_equal(words[:, :, 6], lr.loaded(lr.table(w), maps["mirror"][4], first,
                                                             region.map_columns))
     g = words[:, :, 5]  # the g column: its table at |g_l(x) - g_r(x - d)|
     x, d = 3, 2
     table = model.column(GradMag).table(w).values
     assert g[x, d] == table[abs(int(fl.g20[4, model.dmax + x]) - int(fr.g20[4, model.dmax + x - d]))]
-    right = model.pass_named("right")
-    rw = pass_words(right, fl, fr, disparity_machine(right.model), rows=slice(4, 5), above=maps["right"][3])
-    assert rw.shape == (pass_grid(right, region).width, model.hypotheses, 6)
+    mirror = model.pass_named("mirror")
+    rw = pass_words(mirror, fl, fr, disparity_machine(mirror.model), rows=slice(4, 5),
+                    above=maps["mirror"][3])
+    assert rw.shape == (pass_grid(mirror, region).width, model.hypotheses, 6)
 
 
 # --- Bad definitions: one error each, naming the model and the problem ---
@@ -177,11 +180,7 @@ class _OtherP0(Column):
     options = (Option("p0", "float", 0.5, lambda n, v, vs: None, "another p0"),)
 
 
-class _Nameless(Consistency):
-    """A consistency column reading a pass no model declares."""
-
-    name = "lr2"
-    feeds_from = "nowhere"
+_Nameless = consistency("nowhere", name="lr2")  # a consistency column reading a pass no model declares
 
 
 @pytest.mark.parametrize(("kwargs", "error", "message"), [
@@ -265,7 +264,8 @@ def test_a_model_watchdog_beyond_the_machine_names_counter_max(capsys: pytest.Ca
 
 
 def _lr(name: str, model: str) -> ModelDef:
-    return ModelDef(name=name, description="a model with a right pass", columns=(*FEATURES, Consistency),
+    return ModelDef(name=name, description="a model with a right pass",
+                    columns=(*FEATURES, consistency("right")),
                     passes=(PassDef(name="right", model=model, reference="right", machine_index=1),))
 
 
@@ -296,18 +296,14 @@ def test_register_takes_a_definition() -> None:
 
 # --- Two passes, two fed columns: each column reads its own pass's results, kept by pass name ---
 
-class _Consistency2(Consistency):
-    """The consistency column, fed by the pass named "right2"."""
-
-    name = "lr2"
-    feeds_from = "right2"
+_Consistency2 = consistency("right2", name="lr2")  # the consistency column fed by the pass "right2"
 
 
 @pytest.fixture(scope="module")
 def two_passes():
     definition = ModelDef(
         name="census-lr2", description="census-lr with a second right pass and its own consistency column",
-        columns=(LeftPrior, AbovePrior, Mean, GradH, GradV, Census, Consistency, _Consistency2),
+        columns=(LeftPrior, AbovePrior, Mean, GradH, GradV, Census, consistency("right"), _Consistency2),
         passes=(PassDef(name="right", model="census", reference="right", machine_index=1),
                 PassDef(name="right2", model="paper", reference="right", machine_index=2)))
     register_model(definition)
@@ -328,7 +324,7 @@ def test_two_fed_columns_read_two_passes(two_passes: ModelParams, crop) -> None:
     assert list(maps) == ["right", "right2"] and not np.array_equal(maps["right"], maps["right2"])
     words = memory_words(fl, fr, model, machine, rows=slice(5, 6), above=np.full(region.shape[1], -1),
                          results={name: m[5:6] for name, m in maps.items()})
-    fed = ((model.column(Consistency), "right"), (model.column(_Consistency2), "right2"))
+    fed = ((model.column(consistency("right")), "right"), (model.column(_Consistency2), "right2"))
     for k, (c, name) in enumerate(fed):
         first = pass_grid(model.pass_named(name), region).first
         np.testing.assert_array_equal(words[:, :, 5 + k], c.loaded(c.table(w), maps[name][5], first,

@@ -1,9 +1,10 @@
 # amaranth: UnusedElaboratable=no
 """A model of your own in every engine: docs/development.md's snippet (census-lr's columns and a
-gradient-magnitude column, five FEATURES columns, and a right pass of its own), in a file outside the
-package, imported as a user would, then used through ``bayesmachine.cli.main``. On a crop, ``run`` with
-pysim and Verilator fed words, Verilator fed pixels and the simulated board write every array of the
-model engine's run (its right pass's too); ``emit --top stereo`` builds its StereoMachine, lint clean."""
+gradient-magnitude column, five FEATURES columns, and a pass of its own named ``mirror``, which its
+consistency column reads), in a file outside the package, imported as a user would, then used through
+``bayesmachine.cli.main``. On a crop, ``run`` with pysim and Verilator fed words, Verilator fed pixels and
+the simulated board write every array of the model engine's run (its mirror pass's too); ``emit --top
+stereo`` builds its StereoMachine, lint clean."""
 
 from __future__ import annotations
 
@@ -48,23 +49,23 @@ def _run(directory: Path, out: str, *options: str) -> int:
 
 
 def assert_same_as_the_model(directory: Path, out: str) -> None:
-    """Every array of ``out``'s result.npz is the model engine's, the right pass's among them."""
+    """Every array of ``out``'s result.npz is the model engine's, the mirror pass's among them."""
     got, want = np.load(directory / out / "result.npz"), np.load(directory / "model" / "result.npz")
     assert sorted(got.files) == sorted(want.files)
-    passes = {"right_map", "right_cycles", "right_timeout"}
+    passes = {"mirror_map", "mirror_cycles", "mirror_timeout"}
     assert {"map", "counts", "cycles", "timeout", *passes} <= set(want.files)
     for name in want.files:
         np.testing.assert_array_equal(got[name], want[name], err_msg=name)
     report = json.loads((directory / out / "report.json").read_text())
-    assert report["model_name"] == "census-g-lr" and report["passes"] == ["right", "left"]
+    assert report["model_name"] == "census-g-lr" and report["passes"] == ["mirror", "left"]
 
 
 def test_the_model_engines_run_is_the_models(user: Path) -> None:
     """The run the others are held to: both passes, with matches (measured: all 72 output pixels matched,
-    85 of the right pass's 108)."""
+    85 of the mirror pass's 108)."""
     npz = np.load(user / "model" / "result.npz")
-    assert npz["map"].shape == (6, 12) and npz["right_map"].shape == (6, 18)
-    assert np.all(npz["map"] >= 0) and np.sum(npz["right_map"] >= 0) > 70
+    assert npz["map"].shape == (6, 12) and npz["mirror_map"].shape == (6, 18)
+    assert np.all(npz["map"] >= 0) and np.sum(npz["mirror_map"] >= 0) > 70
 
 
 def test_pysim_fed_words(user: Path) -> None:
@@ -91,7 +92,7 @@ def test_emit_builds_its_stereo_machine_lint_clean(user: Path, tmp_path: Path,
     out = tmp_path / "bayesmachine.v"  # named after the module, as Verilator's DECLFILENAME wants
     assert main(["emit", "--top", "stereo", *MODEL, "--width", str(WIDTH), "-o", str(out)]) == 0
     text = " ".join(capsys.readouterr().out.split())
-    assert "right pass: the census-g model with the right image" in text and "right_result__payload" in text
+    assert "mirror pass: the census-g model with the right image" in text and "mirror_result__payload" in text
     proc = subprocess.run([verilator, "--lint-only", "-Wall", str(Path(hdl_emit.__file__).with_name(
         "bayesmachine.vlt")), str(out)], capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0 and "%Warning" not in proc.stderr, proc.stderr[:3000]

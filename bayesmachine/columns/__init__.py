@@ -24,16 +24,17 @@ Each column kind (one module each) defines in one place:
 Kinds: :class:`~.features.Mean`, :class:`~.features.GradH`, :class:`~.features.GradV` (the paper's),
 :class:`~.gradient.GradMag` (an option of the paper model),
 :class:`~.census.Census`, :class:`~.prior.LeftPrior` (feedback) and :class:`~.prior.AbovePrior`
-(loaded), :class:`~.consistency.Consistency` (fed by another pass), :class:`~.fused.Fused` (FEATURES
-columns as one, in the energy form: :func:`~.fused.fused` makes a kind of its members),
-:class:`~.semiglobal.SemiGlobal` (a fused column's energies aggregated along causal scanline paths:
-:func:`~.semiglobal.semiglobal` makes a kind of its member); and the no-match row's floor
-:class:`~.features.NoMatchFloor`. A model (:mod:`bayesmachine.models`) is a list of them.
+(loaded), :class:`~.consistency.Consistency` (fed by another pass: :func:`~.consistency.consistency` makes
+the kind of a pass), :class:`~.fused.Fused` (FEATURES columns as one, in the energy form:
+:func:`~.fused.fused` makes a kind of its members), :class:`~.semiglobal.SemiGlobal` (a fused column's
+energies aggregated along causal scanline paths: :func:`~.semiglobal.semiglobal` makes a kind of its
+member); and the no-match row's floor :class:`~.features.NoMatchFloor`. A model
+(:mod:`bayesmachine.models`) is a list of them.
 """
 
 from .base import Column, Option, PassContext, PlaneColumn, Source, Table, Term, likelihood_formula, quantize
 from .census import CENSUS_SIGMA, CENSUS_WINDOWS, Census, census_bits, census_codes, census_offsets, hamming
-from .consistency import RIGHT_PASS, Consistency, lr_consistent, lr_unknown, right_lanes_valid
+from .consistency import Consistency, consistency, lr_consistent, lr_unknown, right_lanes_valid
 from .energy import ENERGY_MAX_BITS, ENERGY_STEP, EnergyTable, energy_codes, exp_table
 from .features import (
     FEATURE_COLUMNS,
@@ -62,7 +63,7 @@ __all__ = [
     "ENERGY_STEP", "ENERGY_MAX_BITS", "EnergyTable", "energy_codes", "exp_table",
     "FUSE_COLUMNS", "Fused", "fused",
     "PATHS", "SEMIGLOBAL", "SemiGlobal", "semiglobal",
-    "RIGHT_PASS", "Consistency", "lr_consistent", "lr_unknown", "right_lanes_valid",
+    "Consistency", "consistency", "lr_consistent", "lr_unknown", "right_lanes_valid",
     "COLUMN_KINDS",
 ]
 

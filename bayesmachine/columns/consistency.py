@@ -8,9 +8,10 @@ pass's no match or its watchdog) is neutral: factor 1, no information either way
 right pass's columns gets beta. The no-match row gets ``lr_gamma`` when any lane is consistent (a
 neutral lane does not count), 1 when none is, and 0 with ``lr_nomatch`` off (no no-match row at all).
 
-Where its words come from is declared here too: the pass named :data:`RIGHT_PASS`, whose own
-options are ``lr_right_nomatch`` (its model's no-match row, else none: word 0) and
-``lr_right_max_cycles`` (its watchdog; None: the left machine's). :func:`lr_consistent`,
+Where its words come from is a parameter of its kind: :func:`consistency` makes the kind reading the
+MAPs of the pass of a given name (census-lr's ``consistency("right")``), as :func:`~.fused.fused` makes a
+fused kind of its members. What the pass itself is (its model, its no-match row, its watchdog) is the
+model's :class:`~bayesmachine.modeldef.PassDef`'s, not the column's. :func:`lr_consistent`,
 :func:`lr_unknown` and :meth:`Consistency.loaded` are the one definition the host, the references and
 the runs read.
 """
@@ -22,13 +23,9 @@ from typing import Any
 
 import numpy as np
 
-from bayesmachine.errors import ParameterError
-
 from .base import Column, Option, PassContext, Source, Table, check_int, check_probability, check_switch
 
-__all__ = ["RIGHT_PASS", "Consistency", "lr_consistent", "lr_unknown", "right_lanes_valid"]
-
-RIGHT_PASS = "right"  # the pass whose MAPs feed the consistency column
+__all__ = ["Consistency", "consistency", "lr_consistent", "lr_unknown", "right_lanes_valid"]
 
 
 def _factor(name: str, value: object, values: Mapping[str, Any]) -> None:
@@ -38,11 +35,6 @@ def _factor(name: str, value: object, values: Mapping[str, Any]) -> None:
 
 def _tolerance(name: str, value: object, values: Mapping[str, Any]) -> None:
     check_int(name, value, 0, 4094)
-
-
-def _watchdog(name: str, value: object, values: Mapping[str, Any]) -> None:
-    if value is not None:
-        check_int(name, value, 2, (1 << 32) - 1)
 
 
 def _maps(right_map: np.ndarray) -> np.ndarray:
@@ -89,11 +81,11 @@ def right_lanes_valid(right_columns: np.ndarray, dmax: int, last: int) -> np.nda
 
 
 class Consistency(Column):
-    """The consistency column (source PASS: the MAPs of the pass :data:`RIGHT_PASS`)."""
+    """The consistency column (source PASS: the MAPs of the pass ``feeds_from``). A kind reads one pass:
+    :func:`consistency` makes it (this class reads none and is in no model)."""
 
     name = "lr"
     source = Source.PASS
-    feeds_from = RIGHT_PASS
     table_parameter = "lr_beta"
     options = (
         Option("lr_beta", "float", 0.1, _factor,
@@ -103,11 +95,6 @@ class Consistency(Column):
         Option("lr_tolerance", "int", 1, _tolerance, "the left-right test's tolerance in disparities"),
         Option("lr_nomatch", "bool", True, check_switch,
                "the left pass's no-match row (off: no no-match row at all)"),
-        Option("lr_right_nomatch", "bool", True, check_switch,
-               "give the right pass its model's no-match row (off: none, word 0)"),
-        Option("lr_right_max_cycles", "int", None, _watchdog, "the right pass's watchdog in cycles: a right "
-               "pixel stopped by it has no right MAP", optional=True,
-               default_text="the right pass's default watchdog, given with --max-cycles"),
         Option("lr_neutral", "bool", True, check_switch, "a lane whose right pixel has no right MAP (the "
                "right pass's no match or a timeout) gets factor 1, no information (off: beta)"),
     )
@@ -192,11 +179,31 @@ class Consistency(Column):
         return words.reshape(-1, words.shape[-1])
 
     def check_machine(self, machine: Any) -> None:
-        c = self.values["lr_right_max_cycles"]  # the right pass's watchdog runs beside this machine
-        if c is not None and c <= machine.counter_max:
-            raise ParameterError(f"lr_right_max_cycles = {c} must exceed the counter max "
-                                 f"({machine.counter_max}): no counter can overflow in fewer than counter "
-                                 "max + 1 cycles",
-                                 "lr_right_max_cycles")
         for name in ("lr_beta", "lr_gamma"):
             self._nonzero_word(name, float(self.values[name]), machine, "a consistency factor of 0")
+
+
+_KINDS: dict[tuple[str, str], type[Consistency]] = {}
+
+
+def consistency(pass_name: str, *, name: str = "lr") -> type[Consistency]:
+    """The consistency kind reading the MAPs of the pass named ``pass_name`` (one the model declares and
+    runs before its own), as column ``name`` (two consistency columns of a model need two names); one
+    kind per (pass, name). ``TypeError`` for a name that is not a string, ``ValueError`` for an empty
+    one."""
+    for what, value in (("pass_name", pass_name), ("name", name)):
+        if not isinstance(value, str):
+            raise TypeError(f"consistency: {what} must be a string, not {type(value).__name__}")
+        if not value:
+            raise ValueError(f"consistency: {what} must not be empty")
+    key = (pass_name, name)
+    if key not in _KINDS:
+        kind = "Consistency_" + "".join(ch if ch.isalnum() else "_" for ch in f"{pass_name}_{name}")
+        while kind in globals():  # (another pair spelt alike)
+            kind += "_"
+        doc = f"The consistency column {name}, fed by the MAPs of the pass {pass_name!r}."
+        cls = type(kind, (Consistency,), {"name": name, "feeds_from": pass_name, "__module__": __name__,
+                                          "__doc__": doc})
+        globals()[kind] = cls  # pickled by name, as any column kind
+        _KINDS[key] = cls
+    return _KINDS[key]

@@ -1,3 +1,4 @@
+# amaranth: UnusedElaboratable=no
 """The machine's control, checked against a reference run beside it (a scoreboard), from its ports only.
 
 ``ControlProperties`` puts a small ``BayesianMachine`` (numbers on the ``entropy`` port, free) next
@@ -12,7 +13,8 @@ sample. It queues the result the machine must give: its map (a timeout's: 0, or 
 compute cycles (clocks). Every property is stated on ports (load, entropy, result), none on the
 machine's internal registers, so it holds for any implementation of the same timing contract
 (``docs/architecture.md``, "Timing"); the strengthening invariants that let k-induction close read
-the machine's internal registers through its public :attr:`~bayesmachine.hdl.machine.BayesianMachine.nets`.
+the machine's internal registers through the nets its builder returns
+(:meth:`~bayesmachine.hdl.machine.BayesianMachine.build`).
 
 With a neighbour prior (``prior = "neighbour"``) the reference forms the feedback column itself
 from its own previous result (``feedback_words[min(|r - map|, last)]``, the no-match row's
@@ -29,7 +31,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from amaranth.hdl import Array, Assert, Assume, Cat, Const, Cover, Fragment, Module, Mux, Shape, Signal, Value
+from amaranth.hdl import Array, Assert, Assume, Cat, Const, Cover, Module, Mux, Shape, Signal, Value
 from amaranth.lib import data, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -168,9 +170,8 @@ class ControlProperties(wiring.Component):
     def elaborate(self, platform: object) -> Module:
         m = Module()
         dut = self._dut
-        # Elaborated here, so that its nets (``dut.nets``, the machine's public hook) exist for the
-        # strengthening invariants below.
-        m.submodules.dut = Fragment.get(dut, platform)
+        # Built here, with the nets the strengthening invariants below read.
+        m.submodules.dut, nets = dut.build(platform)
         m.d.comb += [
             dut.load.valid.eq(self.load_valid), dut.load.payload.eq(self.load_payload),
             dut.result.ready.eq(self.result_ready), dut.entropy.eq(self.entropy),
@@ -180,8 +181,8 @@ class ControlProperties(wiring.Component):
         ref = self._assemble(m, dut.load.ready)
         self._reference_run(m, ref)
         self._port_properties(m, ref)
-        self._load_invariants(m, ref, dut.nets)
-        self._run_invariants(m, ref, dut.nets)
+        self._load_invariants(m, ref, nets)
+        self._run_invariants(m, ref, nets)
         self._covers(m, ref)
         return m
 

@@ -1,3 +1,4 @@
+# amaranth: UnusedElaboratable=no
 """Properties of the on-chip front end, stated on its interfaces: the pixel stream in, the load
 beats out (``WordGenerator``, ``FrontEnd``), and the FIFO between the front end and the machine
 inside ``StereoMachine`` (its write and read streams and the beat count it keeps).
@@ -18,7 +19,7 @@ pixel source follows the stream rule.
 
 from __future__ import annotations
 
-from amaranth.hdl import Assert, Assume, Cover, Fragment, Module, Mux, Signal
+from amaranth.hdl import Assert, Assume, Cover, Module, Mux, Signal
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
@@ -164,7 +165,7 @@ class FrontEndProperties(wiring.Component):
         out_taken = taken & output
         beat = dut.beats.valid & dut.beats.ready
         # Three pipeline stages in front of the word generator, which may take an output pixel a cycle
-        # late (after a take at two beats or more: WordNets.accept).
+        # late (after a take at two beats or more: WordPipeline.accept).
         _beats_owed(m, bpp, out_taken, beat, self.beats_ready, bpp + GENERATOR_LATENCY + 4)
         # Not vacuous: all the beats of an output pixel of a frame started again (a ``first`` after
         # another one's pixels) handed over.
@@ -211,8 +212,8 @@ class FifoProperties(wiring.Component):
     def elaborate(self, platform: object) -> Module:
         m = Module()
         dut = self._dut
-        m.submodules.dut = Fragment.get(dut, platform)  # elaborated now: its nets are filled in
-        front, machine, load = dut.nets.frontend, dut.nets.machines[0], dut.nets.loads[0]
+        m.submodules.dut, nets = dut.build(platform)  # built here, with the blocks watched below
+        front, machine, load = nets.frontend, nets.machines[0], nets.loads[0]
         buf, used = load.buffer, load.used
         m.d.comb += [dut.pixels.valid.eq(self.pixels_valid), dut.pixels.payload.eq(self.pixels_payload),
                      dut.result.ready.eq(self.result_ready), dut.entropy.eq(self.entropy),

@@ -19,10 +19,10 @@ when the reference line does, offers a result exactly when it does, and that res
 reference's (so every pixel taken comes out once, in order, with its result); a result offered and
 not taken is offered again unchanged; the pixels taken and not yet given out are those the line
 holds, at most ``latency + 1``; with ``ready`` high the block takes a pixel every clock.
-Strengthening invariants, read through the block's ``nets``: each stage's ``valid`` and the skid's
-are the reference's, every copy of ``go`` is the reference's, and each valid stage's registers,
-finished by the block's remaining stages (``StallPipeline.remaining``), and the skid give the
-reference's results.
+Strengthening invariants, read through the nets its builder returns (``StallPipeline.build``): each
+stage's ``valid`` and the skid's are the reference's, every copy of ``go`` is the reference's, and each
+valid stage's registers, finished by the block's remaining stages (``StallPipeline.remaining``), and the
+skid give the reference's results.
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from amaranth.hdl import Assert, Const, Cover, Fragment, Module, Mux, Signal, Value
+from amaranth.hdl import Assert, Const, Cover, Module, Mux, Signal, Value
 from amaranth.lib import data, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -183,7 +183,7 @@ class PipelineProperties(wiring.Component):
     def elaborate(self, platform: object) -> Module:
         m = Module()
         dut = self._dut
-        m.submodules.dut = Fragment.get(dut, platform)  # elaborated here: its nets are read below
+        m.submodules.dut, nets = dut.build(platform)  # built here: its nets are read below
         sink, source = (getattr(dut, name) for name in dut.stream_names)
         m.d.comb += [sink.valid.eq(self.in_valid), sink.payload.eq(self.in_payload),
                      source.ready.eq(self.out_ready), self.out_valid.eq(source.valid),
@@ -191,7 +191,6 @@ class PipelineProperties(wiring.Component):
         line = self._reference_line(m)
         self._port_properties(m, line)
         # Strengthening invariants: the block's registers are the reference line's.
-        nets = dut.nets
         for i in range(dut.latency):
             m.d.comb += Assert(nets.valid[i] == line.valid[i], f"stage {i} holds a pixel iff slot {i} does")
             with m.If(line.valid[i]):

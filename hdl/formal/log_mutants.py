@@ -15,7 +15,7 @@ from amaranth.hdl import Module, Mux, Value
 
 from bayesmachine.hdl.log import ArgminTree, LogParams
 from bayesmachine.hdl.log.argmin import Node
-from bayesmachine.hdl.log.pipeline import StallPipeline, Wire
+from bayesmachine.hdl.log.pipeline import PipelineNets, StallPipeline, Wire
 
 __all__ = ["DropsHeld", "LOG_MUTANTS", "LogMutant", "OverwritesHeld", "PhantomPixel", "TieRightArgmin",
            "ExcludedWinsArgmin", "other_table", "other_tie_rule"]
@@ -52,33 +52,33 @@ class DropsHeld(StallPipeline):
     """Mixin (before a block): a result offered and not taken is dropped after one cycle (with the
     pixel waiting behind it)."""
 
-    def elaborate(self, platform: object) -> Module:
-        m = super().elaborate(platform)
+    def build(self, platform: object) -> tuple[Module, PipelineNets]:
+        m, nets = super().build(platform)
         source = getattr(self, self.stream_names[1])
         with m.If(source.valid & ~source.ready):
-            m.d.sync += [v.eq(0) for v in self.nets.output.entry_valid]  # the last assignment wins
-        return m
+            m.d.sync += [v.eq(0) for v in nets.output.entry_valid]  # the last assignment wins
+        return m, nets
 
 
 class PhantomPixel(StallPipeline):
     """Mixin (latency >= 2): the first stage's valid follows the input while the pipeline is stopped
     (a pixel not taken enters, and is then taken again)."""
 
-    def elaborate(self, platform: object) -> Module:
-        m = super().elaborate(platform)
+    def build(self, platform: object) -> tuple[Module, PipelineNets]:
+        m, nets = super().build(platform)
         sink = getattr(self, self.stream_names[0])
-        with m.If(~self.nets.go[0]):
-            m.d.sync += self.nets.valid[0].eq(sink.valid)
-        return m
+        with m.If(~nets.go[0]):
+            m.d.sync += nets.valid[0].eq(sink.valid)
+        return m, nets
 
 
 class OverwritesHeld(StallPipeline):
     """Mixin (latency >= 2): a held result is overwritten by the pixel arriving behind it (written
     into the entry being read)."""
 
-    def elaborate(self, platform: object) -> Module:
-        m = super().elaborate(platform)
-        n = self.nets
+    def build(self, platform: object) -> tuple[Module, PipelineNets]:
+        m, nets = super().build(platform)
+        n = nets
         source = getattr(self, self.stream_names[1])
         value = self.remaining(m, self.latency - 2, n.banks[-2])
         e0, e1 = n.output.entries
@@ -87,7 +87,7 @@ class OverwritesHeld(StallPipeline):
                 m.d.sync += e1.eq(value)
             with m.Else():
                 m.d.sync += e0.eq(value)
-        return m
+        return m, nets
 
 
 def other_tie_rule(params: LogParams) -> LogParams:

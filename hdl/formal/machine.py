@@ -1,3 +1,4 @@
+# amaranth: UnusedElaboratable=no
 """Properties of a small ``BayesianMachine`` seen from its ports (and its documented MAP encoder
 submodule): the result stream, the watchdog, the fields of a result, and one result per run.
 
@@ -13,7 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from amaranth.hdl import Assert, Assume, Cover, Fragment, Module, Mux, Signal, Value
+from amaranth.hdl import Assert, Assume, Cover, Module, Mux, Signal, Value
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
@@ -86,9 +87,8 @@ class MachineProperties(wiring.Component):
     def elaborate(self, platform: object) -> Module:
         m = Module()
         dut = self._dut
-        # Elaborated here so that the properties can watch the MAP encoder it instantiates
-        # (``BayesianMachine.nets.encoder``).
-        m.submodules.dut = Fragment.get(dut, platform)
+        # Built here so that the properties can watch the MAP encoder it instantiates (its nets' encoder).
+        m.submodules.dut, nets = dut.build(platform)
         m.d.comb += [
             dut.load.valid.eq(self.load_valid), dut.load.payload.eq(self.load_payload),
             dut.result.ready.eq(self.result_ready), dut.entropy.eq(self.entropy),
@@ -103,7 +103,7 @@ class MachineProperties(wiring.Component):
         if "runs" in self._checks:
             taken = self.result_valid & self.result_ready
             self._runs(m, dut.entropy_ready, taken, self.result_payload.cycles)
-        rise, enc_tie = self._encoder_choice(m, dut.nets.encoder)
+        rise, enc_tie = self._encoder_choice(m, nets.encoder)
         self._covers(m, stall, rise, enc_tie)
         return m
 

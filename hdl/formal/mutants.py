@@ -2,7 +2,9 @@
 
 Each mutant is a drop-in for the block a wrapper checks (``counter=``, ``encoder=``, ``machine=``
 or ``dut_params=`` of the wrappers in this package); ``tests/hdl/formal/test_formal.py`` asserts that the
-proof fails on every one, so the properties are shown to bite.
+proof fails on every one, so the properties are shown to bite. A mutant of a block with a builder
+(``build``: the module and the nets a proof reads, what ``elaborate`` gives) changes what ``build``
+returns, so that a wrapper building it and the design elaborating it both get the mutant.
 """
 
 from __future__ import annotations
@@ -13,9 +15,10 @@ from typing import Any
 
 from amaranth.hdl import Cat, Module, Mux, Signal, Value
 
-from bayesmachine.hdl.frontend.stereo import FeaturePipeline, FrontEnd, StereoMachine
-from bayesmachine.hdl.frontend.words import WordGenerator
-from bayesmachine.hdl.machine import BayesianMachine
+from bayesmachine.hdl.frontend.pipeline import PipelineNets
+from bayesmachine.hdl.frontend.stereo import FeaturePipeline, FrontEnd, StereoMachine, StereoNets
+from bayesmachine.hdl.frontend.words import WordGenerator, WordPipeline
+from bayesmachine.hdl.machine import BayesianMachine, MachineNets
 from bayesmachine.hdl.machine.counters import count_ones, overflow_counter_full
 from bayesmachine.hdl.machine.encoder import MAPEncoder, map_encoder
 from bayesmachine.params import MachineParams
@@ -91,88 +94,83 @@ class NoMatchBlindEncoder(MAPEncoder):
 class ValidDropMachine(BayesianMachine):
     """``result.valid`` is a one-cycle pulse: a result not taken at once is lost."""
 
-    def elaborate(self, platform: object) -> Module:
-        m = super().elaborate(platform)
+    def build(self, platform: object) -> tuple[Module, MachineNets]:
+        m, n = super().build(platform)
         with m.If(self.result.valid & ~self.result.ready):
             m.d.sync += self.result.valid.eq(0)  # the last assignment wins
-        return m
+        return m, n
 
 
 class PayloadFollowsEncoderMachine(BayesianMachine):
     """The held result's ``map`` follows the MAP encoder, whose flags the next run already changes."""
 
-    def elaborate(self, platform: object) -> Module:
-        m = super().elaborate(platform)
+    def build(self, platform: object) -> tuple[Module, MachineNets]:
+        m, n = super().build(platform)
         with m.If(self.result.valid):
             m.d.sync += self.result.payload.map.eq(m.submodules.encoder.index)
-        return m
+        return m, n
 
 
 class SkippedSwapMachine(BayesianMachine):
     """A swap in a bubble starts the next run but leaves the active memory as it was: the pixel
     loaded is skipped and the previous one is run again (an idle machine's swap still copies)."""
 
-    def elaborate(self, platform: object) -> Module:
-        m = super().elaborate(platform)
-        n = self.nets
+    def build(self, platform: object) -> tuple[Module, MachineNets]:
+        m, n = super().build(platform)
         with m.If(n.start_rep[0] & n.stop):
             m.d.sync += [w.eq(w) for w in n.active]  # the last assignment wins
-        return m
+        return m, n
 
 
 class LostBeatMachine(BayesianMachine):
     """A beat taken right behind another is not written into the shadow memory (its write enable
     is dropped while the previous beat's is up): back-to-back beats lose one."""
 
-    def elaborate(self, platform: object) -> Module:
-        m = super().elaborate(platform)
-        n = self.nets
+    def build(self, platform: object) -> tuple[Module, MachineNets]:
+        m, n = super().build(platform)
         with m.If(n.write_q.any()):
             m.d.sync += n.write_q.eq(0)
-        return m
+        return m, n
 
 
 class LateCountsMachine(BayesianMachine):
     """The result takes the counters a cycle late: their values before the run's last compute cycle."""
 
-    def elaborate(self, platform: object) -> Module:
-        m = super().elaborate(platform)
-        n = self.nets
+    def build(self, platform: object) -> tuple[Module, MachineNets]:
+        m, n = super().build(platform)
         counts_q = [Signal.like(c, name=f"{c.name}_late") for c in n.counts]
         m.d.sync += [q.eq(c) for q, c in zip(counts_q, n.counts, strict=True)]
         with m.If(n.leave):
             m.d.sync += self.result.payload.counts.eq(Cat(*counts_q))
-        return m
+        return m, n
 
 
 class LateSampleMachine(BayesianMachine):
     """B samples per clock: the stop's rows are those overflowing by the cycle's last sample, not at
     the first sample where one does (a row overflowing later in the cycle joins the tie)."""
 
-    def elaborate(self, platform: object) -> Module:
-        m = super().elaborate(platform)
-        n = self.nets
+    def build(self, platform: object) -> tuple[Module, MachineNets]:
+        m, n = super().build(platform)
         b = self.params.samples_per_clock
         for r in range(self.params.rows):
             with m.If(n.compute_rep[r // n.rows_per_group] & n.G.any()):
                 m.d.sync += n.over_q[r].eq(n.flags[r][b - 1])
-        return m
+        return m, n
 
 
 class CountsPastStopMachine(BayesianMachine):
     """B samples per clock: the counters add the stop cycle's samples after the stop too (capped at
     n_max), so the losing rows' counts run past the stop."""
 
-    def elaborate(self, platform: object) -> Module:
-        m = super().elaborate(platform)
-        n = self.nets
+    def build(self, platform: object) -> tuple[Module, MachineNets]:
+        m, n = super().build(platform)
         p = self.params
         b = p.samples_per_clock
         for r in range(p.rows):
             total = n.counts[r] + count_ones(n.row[r * b:(r + 1) * b])
             with m.If(n.compute_rep[r // n.rows_per_group]):
                 m.d.sync += n.counts[r].eq(Mux(total > p.counter_max, p.counter_max, total))
-        return m
+        return m, n
 
 
 # --- front end -------------------------------------------------------------------------------
@@ -180,22 +178,20 @@ class CountsPastStopMachine(BayesianMachine):
 class ShortWordGenerator(WordGenerator):
     """Off by one: an output pixel's last beat is never issued (the pixel ends a beat early)."""
 
-    def elaborate(self, platform: object) -> Module:
-        m = super().elaborate(platform)
-        n = self.nets
+    def build(self, platform: object) -> tuple[Module, WordPipeline]:
+        m, n = super().build(platform)
         with m.If(n.issue & (n.beat == self.params.beats_per_pixel - 2)):
             m.d.sync += [n.beat.eq(0), n.active.eq(0)]
-        return m
+        return m, n
 
 
 class FirstIgnoredPipeline(FeaturePipeline):
     """The frame-start marker is ignored: the position counters run on across frames."""
 
-    def elaborate(self, platform: object) -> Module:
-        m = super().elaborate(platform)
-        n = self.nets
+    def build(self, platform: object) -> tuple[Module, PipelineNets]:
+        m, n = super().build(platform)
         m.d.comb += [n.cur_col.eq(n.col), n.cur_line.eq(n.line)]
-        return m
+        return m, n
 
 
 class FirstIgnoredFrontEnd(FrontEnd):
@@ -209,23 +205,22 @@ class EarlyReadStereoMachine(StereoMachine):
     """The machine's load ``valid`` from the beat count ``StereoMachine`` keeps instead of the FIFO's
     read side: a beat just written (not yet readable) is read, an underflow."""
 
-    def elaborate(self, platform: object) -> Module:
-        m = super().elaborate(platform)
-        n = self.nets
+    def build(self, platform: object) -> tuple[Module, StereoNets]:
+        m, n = super().build(platform)
         m.d.comb += n.machines[0].load.valid.eq(n.loads[0].used != 0)
-        return m
+        return m, n
 
 
 class DriftingCountStereoMachine(StereoMachine):
     """The beat count ``StereoMachine`` keeps misses a read in a cycle with a write: it drifts above
     the FIFO's level (and its registered ready falls too early)."""
 
-    def elaborate(self, platform: object) -> Module:
-        m = super().elaborate(platform)
-        load = self.nets.loads[0]
+    def build(self, platform: object) -> tuple[Module, StereoNets]:
+        m, n = super().build(platform)
+        load = n.loads[0]
         with m.If(load.write & load.read):
             m.d.sync += load.used.eq(load.used + 1)
-        return m
+        return m, n
 
 
 @dataclass(frozen=True)

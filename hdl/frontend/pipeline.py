@@ -75,8 +75,8 @@ def pipeline_layout(model: ModelParams) -> data.StructLayout:
 
 @dataclass(frozen=True)
 class PipelineNets:
-    """The position counters of :class:`FeaturePipeline` (``FeaturePipeline.nets``: the formal wrappers of
-    ``hdl.formal`` and their mutants read them, never Amaranth's internals)."""
+    """The position counters of :class:`FeaturePipeline` (what ``FeaturePipeline.build`` returns beside its
+    module: the mutants of ``hdl.formal`` read them, never Amaranth's internals)."""
 
     col: Signal  # registered: the next pixel's column (unless it starts a frame)
     line: Signal  # registered: the next pixel's line (saturating at the window's height)
@@ -101,8 +101,6 @@ class FeaturePipeline(wiring.Component):
         Pixel pairs in raster order.
     features : ``Out(stream.Signature(pipeline_layout(model)))``
         Every pixel, in raster order, its features three cycles after its take.
-    nets : PipelineNets
-        After elaboration: the position counters, for the formal wrappers (read-only).
     """
 
     def __init__(self, *, model: ModelParams, width: int) -> None:
@@ -110,7 +108,6 @@ class FeaturePipeline(wiring.Component):
             raise TypeError(f"model must be a bayesmachine.models.ModelParams, not {type(model).__name__}")
         self._width = check_width(width, model)
         self._model = model
-        self._nets: PipelineNets | None = None
         super().__init__({"pixels": In(pixel_stream()),
                           "features": Out(stream.Signature(pipeline_layout(model)))})
 
@@ -122,14 +119,11 @@ class FeaturePipeline(wiring.Component):
     def width(self) -> int:
         return self._width
 
-    @property
-    def nets(self) -> PipelineNets:
-        """The :class:`PipelineNets` of the last :meth:`elaborate`; elaborate first."""
-        if self._nets is None:
-            raise RuntimeError("FeaturePipeline.nets: elaborate the pipeline first (Fragment.get)")
-        return self._nets
-
     def elaborate(self, platform: object) -> Module:
+        return self.build(platform)[0]
+
+    def build(self, platform: object) -> tuple[Module, PipelineNets]:
+        """The pipeline's module (what :meth:`elaborate` gives) and its position counters."""
         m = Module()
         width, model = self._width, self._model
         size = 2 * model.margin + 1  # the model's windows: line buffer columns of this height
@@ -147,7 +141,7 @@ class FeaturePipeline(wiring.Component):
         valid3 = Signal()  # stage 3: the filters hold the pixel's window
         advance = Signal()
         m.d.comb += advance.eq(~valid3 | out.ready)
-        col1, line1, first1 = self._positions(m, lines, advance, valid1)
+        col1, line1, first1, nets = self._positions(m, lines, advance, valid1)
 
         # Stage 1 -> 2: the columns into the filters' first registers (the block RAM's slow
         # clock-to-output leaves no room for the whole column sum in one cycle): each filter takes the
@@ -188,12 +182,14 @@ class FeaturePipeline(wiring.Component):
         for planes, (fl, fr) in filters:
             for side, filt in ((px.left, fl), (px.right, fr)):
                 m.d.comb += [getattr(side, name).eq(v) for name, v in planes.outputs(filt).items()]
-        return m
+        return m, nets
 
-    def _positions(self, m: Module, lines: LineBuffer, advance: Value, valid1: Signal) -> tuple[Signal, ...]:
+    def _positions(self, m: Module, lines: LineBuffer, advance: Value,
+                   valid1: Signal) -> tuple[Signal, Signal, Signal, PipelineNets]:
         """Stage 0: the incoming pixel's column and line (restarting at a frame's first pixel; the line
         saturates at ``size``: size - 1 is the first line whose windows are complete, the first output
-        row, size any later one) into the line buffer; returns them at stage 1 (column, line, first)."""
+        row, size any later one) into the line buffer; returns them at stage 1 (column, line, first) and
+        the counters."""
         width, size = self._width, 2 * self._model.margin + 1
         col = Signal(range(width))
         line = Signal(range(size + 1))
@@ -204,7 +200,6 @@ class FeaturePipeline(wiring.Component):
             m.d.comb += [cur_col.eq(0), cur_line.eq(0)]
         with m.Else():
             m.d.comb += [cur_col.eq(col), cur_line.eq(line)]
-        self._nets = PipelineNets(col=col, line=line, cur_col=cur_col, cur_line=cur_line)
         take = self.pixels.valid & advance
         m.d.comb += [
             self.pixels.ready.eq(advance),
@@ -224,4 +219,4 @@ class FeaturePipeline(wiring.Component):
         with m.If(advance):
             m.d.sync += [valid1.eq(self.pixels.valid), col1.eq(cur_col), line1.eq(cur_line),
                          first1.eq(pin.first)]
-        return col1, line1, first1
+        return col1, line1, first1, PipelineNets(col=col, line=line, cur_col=cur_col, cur_line=cur_line)

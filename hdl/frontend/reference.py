@@ -14,11 +14,16 @@ pixels (``Pass.reference``: "left" or "right").
 
 from __future__ import annotations
 
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
-from amaranth.hdl import Value, unsigned
+from amaranth.hdl import ShapeLike, Value, unsigned
 
 from bayesmachine.errors import ParameterError
+
+if TYPE_CHECKING:
+    from bayesmachine.models import Pass
+
+    from .lanes.context import LaneContext
 
 __all__ = ["REFERENCES", "Reference", "RightReference", "flush_bits", "reference_of"]
 
@@ -40,7 +45,7 @@ class Reference:
         return d
 
     @staticmethod
-    def flags(dmax: int) -> dict[str, Any]:
+    def flags(dmax: int) -> dict[str, ShapeLike]:
         return {}
 
     @staticmethod
@@ -49,14 +54,14 @@ class Reference:
         output pixels, map columns Dmax .."""
         return map_columns - dmax
 
-    def lane_valid(self, nets: Any, j: int) -> Value | None:
+    def lane_valid(self, ctx: LaneContext, j: int) -> Value | None:
         """Whether lane row j of the beat on the stream has a match pixel (None: always)."""
         return None
 
-    def match_ok(self, nets: Any, row: Value, scanned: bool = False) -> Value | None:
+    def match_ok(self, ctx: LaneContext, row: Value, scanned: bool = False) -> Value | None:
         """Whether row ``row`` (<= Dmax) of the pixel taken has a match pixel (None: always); ``scanned``:
-        of the pixel being scanned instead (``nets.scan_pixel``, in the cycles of its fetches:
-        ``WordNets._scan``)."""
+        of the pixel being scanned instead (``ctx.scan_pixel``, in the cycles of its fetches:
+        ``ScanRing``)."""
         return None
 
 
@@ -71,7 +76,7 @@ class RightReference(Reference):
         return dmax - d
 
     @staticmethod
-    def flags(dmax: int) -> dict[str, Any]:
+    def flags(dmax: int) -> dict[str, ShapeLike]:
         return {"flush": unsigned(flush_bits(dmax))}
 
     @staticmethod
@@ -79,21 +84,19 @@ class RightReference(Reference):
         """Every right map column an output pixel reads: 0 .. W - 2k - 1."""
         return map_columns
 
-    def lane_valid(self, nets: Any, j: int) -> Value | None:
-        return nets.aligned(self.match_ok(nets, nets.row(j)), f"lane_ok{j}")
+    def lane_valid(self, ctx: LaneContext, j: int) -> Value | None:
+        return ctx.aligned(self.match_ok(ctx, ctx.row(j)), f"lane_ok{j}")
 
-    def match_ok(self, nets: Any, row: Value, scanned: bool = False) -> Value | None:
+    def match_ok(self, ctx: LaneContext, row: Value, scanned: bool = False) -> Value | None:
         if scanned:
-            return row + nets.scan_pixel.flush <= nets.dmax
-        if not hasattr(self, "_flush"):
-            self._flush = nets.at_take(nets.pixel.flush, "flush")
-        return row + self._flush <= nets.dmax
+            return row + ctx.scan_pixel.flush <= ctx.dmax
+        return row + ctx.taken("flush") <= ctx.dmax
 
 
 REFERENCES: dict[str, type[Reference]] = {r.name: r for r in (Reference, RightReference)}
 
 
-def reference_of(p: Any) -> Reference:
+def reference_of(p: Pass) -> Reference:
     """The reference of pass ``p``; ``ParameterError`` naming the pass for an image the front end has none
     for."""
     if p.reference not in REFERENCES:

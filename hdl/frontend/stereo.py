@@ -222,8 +222,9 @@ class RoomFifo:
 
 @dataclass(frozen=True)
 class StereoNets:
-    """The blocks of :class:`StereoMachine` a proof watches (``StereoMachine.nets``: the formal wrappers
-    of ``hdl.formal`` and their mutants read them, never Amaranth's internals)."""
+    """The blocks of :class:`StereoMachine` a proof watches (what ``StereoMachine.build`` returns beside
+    its module: the formal wrappers of ``hdl.formal`` and their mutants read them, never Amaranth's
+    internals)."""
 
     frontend: FrontEnd | FeaturePipeline  # one machine: the front end; several: the one feature pipeline
     machines: list[wiring.Component]  # the own pass's machines (BayesianMachine or LogMachine: the
@@ -277,9 +278,6 @@ class StereoMachine(wiring.Component):
     <pass>_result : ``Out(result_stream(pass_params(model, params, pass)))``
         Each declared pass's results (census-lr: ``right_result``), raster order of its columns; a
         stalled one stalls its machine (and, through the MAPs it hands the front end, the own pass).
-    nets : StereoNets
-        After elaboration: the front end, the machines and their load FIFOs, for the formal wrappers
-        (read-only).
     """
 
     def __init__(self, *, params: MachineParams, model: ModelParams, width: int,
@@ -290,7 +288,6 @@ class StereoMachine(wiring.Component):
         # Plain ints (a NumPy integer is taken as everywhere), their values checked above.
         self._width, self._fifo_pixels, self._machines = (as_int(name, value) for name, value in (
             ("width", width), ("fifo_pixels", fifo_pixels), ("machines", machines)))
-        self._nets: StereoNets | None = None
         super().__init__(stereo_signature(params, model))
 
     @property
@@ -313,16 +310,13 @@ class StereoMachine(wiring.Component):
     def machines(self) -> int:
         return self._machines
 
-    @property
-    def nets(self) -> StereoNets:
-        """The :class:`StereoNets` of the last :meth:`elaborate`; elaborate first."""
-        if self._nets is None:
-            raise RuntimeError("StereoMachine.nets: elaborate the machine first (Fragment.get)")
-        return self._nets
-
     def elaborate(self, platform: object) -> Module:
+        return self.build(platform)[0]
+
+    def build(self, platform: object) -> tuple[Module, StereoNets]:
+        """The top's module (what :meth:`elaborate` gives) and the blocks a proof watches."""
         if self._machines > 1:
-            return self._elaborate_machines()
+            return self._build_machines()
         m = Module()
         model = self._model
         m.submodules.frontend = front = FrontEnd(params=self._params, model=model, width=self._width)
@@ -338,7 +332,7 @@ class StereoMachine(wiring.Component):
                 # through the pixel take into the front end's thousands of enables (see "Back-pressure"
                 # in docs/frontend.md).
                 load = _load_fifo(m, "fifo", beats, machine.load, capacity, prefix="")
-                self._nets = StereoNets(frontend=front, machines=[machine], loads=[load])
+                nets = StereoNets(frontend=front, machines=[machine], loads=[load])
                 self._entropy(m, machine)
             else:
                 m.submodules[f"{p.name}_fifo"] = buf = fifo.SyncFIFOBuffered(
@@ -346,7 +340,7 @@ class StereoMachine(wiring.Component):
                 wiring.connect(m, beats, buf.w_stream)
                 wiring.connect(m, buf.r_stream, machine.load)
             self._results(m, front, p, machine.result)
-        return m
+        return m, nets
 
     def _results(self, m: Module, front: FrontEnd, p: Any, res: Any) -> None:
         """Pass ``p``'s results out on its port and, when the front end reads its MAPs, into the front end
@@ -370,7 +364,7 @@ class StereoMachine(wiring.Component):
                 flow = self.signature.members[name].flow
                 m.d.comb += inner.eq(outer) if flow == In else outer.eq(inner)
 
-    def _elaborate_machines(self) -> Module:
+    def _build_machines(self) -> tuple[Module, StereoNets]:
         """K machines per pass: one feature pipeline; a dealer sends the pixels of map row r to lane r mod
         K (a line FIFO, then every pass's word generator, beats FIFO, machine and result FIFO); each
         pass's results leave lane by lane, a map row at a time, in the order the rows were dealt."""
@@ -383,9 +377,8 @@ class StereoMachine(wiring.Component):
         self._neighbours(m, lanes)
         self._merge(m, rows, [lane.results for lane in lanes], idle)
         own = self._model.passes[-1].name
-        self._nets = StereoNets(frontend=pipe, machines=[lane.machines[own] for lane in lanes],
-                                loads=[lane.loads[own] for lane in lanes])
-        return m
+        return m, StereoNets(frontend=pipe, machines=[lane.machines[own] for lane in lanes],
+                             loads=[lane.loads[own] for lane in lanes])
 
     def _deal(self, m: Module, fx: Any, idle: Value) -> tuple[dict[str, RoomFifo], list[RoomFifo], Value]:
         """The dealer: a map row's pixels go to its lane's line FIFO (a line's worth: the filters move on

@@ -83,7 +83,7 @@ def clamp_table(table: np.ndarray) -> np.ndarray:
 
 def padded_table(table: np.ndarray, depth: int) -> np.ndarray:
     """A clamped ``table`` (:func:`clamp_table`) padded to ``depth`` entries with its last word: the same
-    word at every address clamped to any entry from its last on (the hardware's, ``nets.table_depth``)."""
+    word at every address clamped to any entry from its last on (the hardware's, ``lookup.table_depth``)."""
     t = np.asarray(table)
     if depth < len(t):
         raise ValueError(f"a table of {len(t)} words cannot be padded to {depth}")

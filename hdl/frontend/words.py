@@ -10,8 +10,9 @@ order (word o in lane o % words_per_beat of beat o // words_per_beat, row o // l
 column o % loaded_columns), exactly the words ``host.likelihoods.pass_words`` computes (its twin).
 
 Each operator column's words come from its column kind's lane builder (:mod:`.lanes`, one per kind,
-chosen from the column's class), built on the generator's shared pipeline (:class:`~.nets.WordNets`):
-a FEATURES column's table at its cost (a feature difference, a census Hamming distance), an ABOVE
+chosen from the column's class), built on the generator's shared pipeline
+(:class:`~.wordpipe.WordPipeline`, which lane builders see as a :class:`~.lanes.context.LaneContext`): a
+FEATURES column's table at its cost (a feature difference, a census Hamming distance), an ABOVE
 column's prior from a line of the pass's own MAPs, a PASS column's consistency test of another pass's
 MAPs; a FEEDBACK column is formed by the machine (its lane builder flags each beat of a row's first
 output pixel ``line_start``); the machine's own loaded prior column (``prior="loaded"`` without an ABOVE
@@ -28,9 +29,8 @@ loaded columns, so each lane (word position of a beat) always holds the same ope
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
 
-from amaranth.hdl import Module, Mux
+from amaranth.hdl import Module, Mux, ValueLike
 from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
@@ -42,13 +42,13 @@ from bayesmachine.params import MachineParams, ParameterError
 
 from .lanes import Lanes, lanes_for
 from .layouts import declared_passes, pass_pixel_layout, pass_terms
-from .nets import WordNets
 from .reference import Reference, reference_of
 from .shared import FusedShare
 from .tables import FrontEndTables, frontend_tables
+from .wordpipe import WordPipeline, word_pipeline
 
-__all__ = ["WordGenerator", "check_frontend_params", "check_frontend_types", "generator_signature",
-           "pass_params"]
+__all__ = ["WordGenerator", "WordPipeline", "check_frontend_params", "check_frontend_types",
+           "generator_signature", "pass_params"]
 
 
 def generator_signature(params: MachineParams, model: ModelParams, p: Pass,
@@ -179,7 +179,7 @@ class WordGenerator(wiring.Component):
     pixel's last issue; its ``pixel.ready`` is that of the ring (a free slot) and of the scan (an output
     pixel's scan starts in the cycle of the previous one's last fetch), so in steady state an output pixel
     is taken every ``beats_per_pixel`` cycles. At two beats or more per pixel an output pixel is not taken
-    in the cycle after a take (a cycle at a line's first output pixel: ``WordNets.accept``).
+    in the cycle after a take (a cycle at a line's first output pixel: ``WordPipeline.accept``).
 
     Parameters
     ----------
@@ -215,9 +215,6 @@ class WordGenerator(wiring.Component):
         The pass.
     reference : Reference
         Its reference image's entries and flags (:mod:`.reference`).
-    nets : WordNets
-        After elaboration: the generator's shared pipeline (its beat counter, ``active``, ...), for
-        the formal wrappers of ``hdl.formal`` and their mutants (read-only).
     The lane builders' ports (:func:`generator_signature`): an ABOVE column's ``maps``
     (``In(map_stream(params))``: the pass's own results as they leave its machine, ``ready`` while the line
     of MAPs has room) and ``frame_reset`` (:class:`~.lanes.prior.AboveLanes`); a PASS column's
@@ -245,7 +242,6 @@ class WordGenerator(wiring.Component):
         self._output_columns = _check_output_columns(p, output_columns)
         self._leads = as_bool("leads", leads)
         self._fused_share = _check_fused_share(model, p, params, fused_share)
-        self._nets: WordNets | None = None
         self._params = params
         self._model = model
         self._pass = p
@@ -286,17 +282,15 @@ class WordGenerator(wiring.Component):
     def output_columns(self) -> int | None:
         return self._output_columns
 
-    @property
-    def nets(self) -> WordNets:
-        """The :class:`WordNets` of the last :meth:`elaborate`; elaborate first."""
-        if self._nets is None:
-            raise RuntimeError("WordGenerator.nets: elaborate the generator first (Fragment.get)")
-        return self._nets
-
     def elaborate(self, platform: object) -> Module:
+        return self.build(platform)[0]
+
+    def build(self, platform: object) -> tuple[Module, WordPipeline]:
+        """The generator's module (what :meth:`elaborate` gives) and its shared pipeline (its beat
+        counter, ``active``, ...: a mutant of ``hdl.formal`` changes them)."""
         m = Module()
         scan = max(lanes_for(c).scan_latency(c) for c in self._pass.columns)
-        nets = self._nets = WordNets(m, self, scan)
+        nets = word_pipeline(m, self, scan)
         columns = [lanes_for(c)(c, nets) for c in self._pass.columns]
         rule = self._pass.model.nomatch
         # The rule's floor, unless a column's words hold it (a fused column's no-match row).
@@ -308,10 +302,10 @@ class WordGenerator(wiring.Component):
             ready = ready & lanes.ready()
         m.d.comb += self.pixel.ready.eq(nets.accept(ready))
         nets.write_beats(self._loaded(nets, columns, floor))
-        return m
+        return m, nets
 
-    def _loaded(self, nets: WordNets, columns: list[Lanes],
-                floor: Lanes | None) -> list[tuple[list[Any], Any]]:
+    def _loaded(self, nets: WordPipeline, columns: list[Lanes],
+                floor: Lanes | None) -> list[tuple[list[ValueLike], ValueLike]]:
         """(words of lane rows 0..R-1, no-match word) of each loaded operator column, in operator order:
         the machine's own loaded prior columns (1.0), then every column but a FEEDBACK one (formed by the
         machine). The no-match rule's word sits in the first FEATURES column's no-match row; a pass
@@ -320,7 +314,7 @@ class WordGenerator(wiring.Component):
         p, one = self._pass, nets.one
         loaded = [lanes for lanes in columns if lanes.term.source is not Source.FEEDBACK]
         own = self._params.loaded_columns - len(loaded)
-        out: list[tuple[list[Any], Any]] = [([one] * nets.rows_per_beat, one)] * own
+        out: list[tuple[list[ValueLike], ValueLike]] = [([one] * nets.rows_per_beat, one)] * own
         rule_word = None if floor is None else floor.nomatch()
         valid = [nets.reference.lane_valid(nets, j) for j in range(nets.rows_per_beat)]
         for lanes in loaded:

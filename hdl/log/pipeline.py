@@ -199,9 +199,10 @@ class OutputBuffer:
 
 @dataclass(frozen=True)
 class PipelineNets:
-    """A pipeline's registers (``StallPipeline.nets``): per stage i its ``valid[i]`` and register bank
-    ``banks[i]`` (the last: the head, the entry offered), the skid (``skid_valid``, ``skid``: the
-    other entry), ``go`` (the copies of one register, one per stage: stage i moves on ``go[i]``) and
+    """A pipeline's registers (what ``StallPipeline.build`` returns beside its module): per stage i its
+    ``valid[i]`` and register bank ``banks[i]`` (the last: the head, the entry offered), the skid
+    (``skid_valid``, ``skid``: the other entry), ``go`` (the copies of one register, one per stage: stage i
+    moves on ``go[i]``) and
     the ``output`` buffer's registers."""
 
     valid: tuple[Value, ...]
@@ -235,8 +236,6 @@ class StallPipeline(wiring.Component):
         ``(sink, source)``.
     latency : int
         Clocks from a pixel taken to its result offered (the number of stages).
-    nets : PipelineNets
-        After elaboration: the stage registers, the skid and ``go`` (read-only).
     latest : ``Out(ArrayLayout(latest_layout, latest_copies))``
         With ``latest_fields``: the copies of the latest result (``latest_layout``: those fields);
         every field 0 but ``all_excluded`` (1, when it is kept) from reset.
@@ -248,7 +247,6 @@ class StallPipeline(wiring.Component):
                  stages: Sequence[Stage], latest_fields: Sequence[str] = (), latest_copies: int = 1) -> None:
         self._sink, self._source = sink, source
         self._stages = tuple(stages)
-        self._nets: PipelineNets | None = None
         members = {sink: In(stream.Signature(in_layout)), source: Out(stream.Signature(out_layout))}
         self._latest = latest_layout(out_layout, latest_fields) if latest_fields else None
         self._latest_n = as_int("latest_copies", latest_copies, 1, 64)
@@ -266,12 +264,6 @@ class StallPipeline(wiring.Component):
     def latency(self) -> int:
         return len(self._stages)
 
-    @property
-    def nets(self) -> PipelineNets:
-        if self._nets is None:
-            raise RuntimeError(f"{type(self).__name__}.nets: elaborate it first (Fragment.get)")
-        return self._nets
-
     def remaining(self, m: Module, stage: int, bank: Bank) -> Value:
         """The output payload (flat) the stages after ``stage`` make of its register ``bank``:
         logic built anew in ``m``, for a proof's invariants."""
@@ -279,6 +271,11 @@ class StallPipeline(wiring.Component):
         return Value.cast(reduce(lambda b, f: f(_resolved(b), wire), self._stages[stage + 1:], bank))
 
     def elaborate(self, platform: object) -> Module:
+        return self.build(platform)[0]
+
+    def build(self, platform: object) -> tuple[Module, PipelineNets]:
+        """The pipeline's module (what :meth:`elaborate` gives) and its registers, which a proof's
+        invariants read (a mutant changes them)."""
         m = Module()
         sink, source = getattr(self, self._sink), getattr(self, self._source)
         last = self.latency - 1
@@ -311,9 +308,8 @@ class StallPipeline(wiring.Component):
         buf = self._output_buffer(m, value, valid, go)
         valids.append(source.valid)
         banks.append(buf.head)
-        self._nets = PipelineNets(valid=tuple(valids), banks=tuple(banks), skid_valid=buf.skid_valid,
-                                  skid=buf.skid, go=tuple(go), output=buf)
-        return m
+        return m, PipelineNets(valid=tuple(valids), banks=tuple(banks), skid_valid=buf.skid_valid,
+                               skid=buf.skid, go=tuple(go), output=buf)
 
     def _output_buffer(self, m: Module, value: Value, valid: Value, go: list[Signal]) -> OutputBuffer:
         """The last stage's two entries, written in turn and read in turn (module docstring), by

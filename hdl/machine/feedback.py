@@ -55,7 +55,8 @@ class FeedbackPrior(wiring.Component):
     settle : ``Out(1)``
         The feedback words are being registered (the cycle after ``leave``): no swap.
     previous_rows, previous_valid, registered_words : list of Signal
-        The registers above, read-only (``BayesianMachine.nets``: a proof relates them to its reference).
+        The registers above, read-only (in the nets ``BayesianMachine.build`` returns: a proof relates
+        them to its reference).
     """
 
     def __init__(self, *, params: MachineParams) -> None:

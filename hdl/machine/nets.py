@@ -1,8 +1,8 @@
 """The nets the machine's builders share, and the small helpers they build with.
 
-:class:`MachineNets` is what ``BayesianMachine.elaborate``'s builders (``top.py``, ``matrix.py``,
-``stop.py``) hand each other, and what a proof reads (``BayesianMachine.nets``); :func:`row_groups`
-says how the rows are grouped for the registered copies of the wide enables.
+:class:`MachineNets` is what ``BayesianMachine.build``'s builders (``top.py``, ``matrix.py``, ``stop.py``)
+hand each other, and what a proof reads (``build`` returns them beside the module); :func:`row_groups` says
+how the rows are grouped for the registered copies of the wide enables.
 """
 
 from __future__ import annotations
@@ -60,9 +60,9 @@ def register_copy(m: Module, name: str, value: Value | list[Value]) -> Value | l
 
 @dataclass
 class MachineNets:
-    """The nets the builders of ``BayesianMachine.elaborate`` share (each documented where it is driven),
-    and the registers a proof of the machine relates to its reference (``BayesianMachine.nets``: the
-    formal wrappers of ``hdl.formal`` and their mutants read them, never Amaranth's internals; a
+    """The nets the builders of ``BayesianMachine.build`` share (each documented where it is driven), and
+    the registers a proof of the machine relates to its reference (``build`` returns them: the formal
+    wrappers of ``hdl.formal`` and their mutants read them, never Amaranth's internals; a
     mutant may drive only those the machine's own module drives, not its submodules')."""
 
     shadow: list[Signal]  # the shadow likelihood memory, one word per loaded word of a pixel

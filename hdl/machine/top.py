@@ -22,7 +22,8 @@ Timing (``bayesmachine.integrators.stochastic``; ``docs/architecture.md``, "Timi
   to back with one bubble between them. Back-pressure on ``result`` holds the bubble, never a
   compute cycle, so it changes no result.
 
-``elaborate`` is a sequence of named builders, one per part of the design (``_memories``,
+:meth:`~BayesianMachine.build` (what ``elaborate`` builds, with the nets a proof reads) is a sequence of
+named builders, one per part of the design (``_memories``,
 ``_column_scales``, ``_random_numbers``, ``matrix.operator_matrix``, ``stop.overflow_counters``,
 ``stop.stop_decision``, ``_result``, ``_feedback_prior``, ``_start``, ``_enables``, ``_load``),
 sharing the nets of :class:`~.nets.MachineNets`.
@@ -75,9 +76,6 @@ class BayesianMachine(wiring.Component):
     entropy_ready : ``Out(1)``
         With an off-chip ``rng`` only: high on compute cycles (the numbers on ``entropy`` are
         consumed at the clock edge).
-    nets : MachineNets
-        After elaboration: the internal nets a proof relates to its reference (read-only).
-
     The ports are :class:`bayesmachine.hdl.signatures.MachineSignature` ``(params)``.
     """
 
@@ -85,24 +83,20 @@ class BayesianMachine(wiring.Component):
         if not isinstance(params, MachineParams):
             raise TypeError(f"BayesianMachine takes a MachineParams, not {type(params).__name__}")
         self._params = params
-        self._nets: MachineNets | None = None
         super().__init__(MachineSignature(params))
 
     @property
     def params(self) -> MachineParams:
         return self._params
 
-    @property
-    def nets(self) -> MachineNets:
-        """The :class:`MachineNets` of the last :meth:`elaborate`: the internal nets and registers a
-        proof relates to its reference (``hdl.formal``); elaborate first."""
-        if self._nets is None:
-            raise RuntimeError("BayesianMachine.nets: elaborate the machine first (Fragment.get)")
-        return self._nets
-
     def elaborate(self, platform: object) -> Module:
+        return self.build(platform)[0]
+
+    def build(self, platform: object) -> tuple[Module, MachineNets]:
+        """The machine's module (what :meth:`elaborate` gives) and its :class:`MachineNets`: the internal
+        nets and registers a proof relates to its reference (``hdl.formal``; a mutant changes them)."""
         m = Module()
-        n = self._nets = self._memories()
+        n = self._memories()
         self._column_scales(m, n)
         self._random_numbers(m, n)
         operator_matrix(m, n, self._params, self.entropy if n.source is None else None)
@@ -113,7 +107,7 @@ class BayesianMachine(wiring.Component):
         self._start(m, n)
         self._enables(m, n)
         self._load(m, n)
-        return m
+        return m, n
 
     def _memories(self) -> MachineNets:
         """The likelihood memories, the run state and the registered enables' copies."""

@@ -12,12 +12,24 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bayesmachine.columns import SCALES, Consistency, likelihood_formula, lr_consistent, lr_unknown, quantize
+from bayesmachine.columns import (
+    SCALES,
+    Consistency,
+    GradH,
+    GradV,
+    Mean,
+    Option,
+    consistency,
+    likelihood_formula,
+    lr_consistent,
+    lr_unknown,
+    quantize,
+)
 from bayesmachine.host.features import model_planes
 from bayesmachine.host.images import random_dot_stereogram
 from bayesmachine.host.likelihoods import pass_grid, pass_words
 from bayesmachine.host.reference import declared_maps, reference_map, reference_quantized_map
-from bayesmachine.models import ModelParams, disparity_machine, pass_machine
+from bayesmachine.models import ModelDef, ModelParams, PassDef, disparity_machine, pass_machine
 from bayesmachine.params import ParameterError
 from bayesmachine.region import OutputRegion
 
@@ -75,6 +87,43 @@ def test_bad_parameters_are_refused_up_front(kwargs, error, message):
     with pytest.raises(error, match="^" + message) as err:
         ModelParams(name="census-lr", **kwargs)
     assert error is TypeError or err.value.parameter == next(iter(kwargs))
+
+
+def test_the_kind_of_a_pass_is_made_by_name():
+    """``consistency(pass)``: one kind per pass and name, reading that pass; the column owns no option of the
+    pass it reads (census-lr's right pass declares its own)."""
+    kind = consistency("mirror")
+    assert kind is consistency("mirror") and kind is not consistency("mirror", name="lr2")
+    assert issubclass(kind, Consistency) and kind.feeds_from == "mirror" and kind.name == "lr"
+    assert consistency("mirror", name="lr2").name == "lr2"
+    assert not any(o.name.startswith("lr_right") for o in kind.options)
+    lr = ModelParams(name="census-lr", dmax=4)
+    assert lr.column(Consistency).feeds_from == "right" and lr.lr_right_nomatch is True
+    with pytest.raises(TypeError, match="^consistency: pass_name must be a string, not int"):
+        consistency(3)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="^consistency: name must not be empty"):
+        consistency("mirror", name="")
+
+
+def test_a_pass_declares_its_own_options():
+    """A PassDef's ``options``: options of the model, named by its nomatch_option; each an Option, and
+    one owner per name; the consistency base kind reads no pass."""
+    own = Option("mirror_nomatch", "bool", True, lambda n, v, vs: None, "the mirror pass's no-match row")
+    d = ModelDef(name="own-options", description="a pass with an option of its own",
+                 columns=(Mean, GradH, GradV, consistency("mirror")),
+                 passes=(PassDef(name="mirror", model="census", reference="right", machine_index=1,
+                                 options=(own,), nomatch_option="mirror_nomatch"),))
+    assert d.options["mirror_nomatch"] is own
+    with pytest.raises(TypeError, match="^model 'bad': pass mirror: options must be a tuple of Options"):
+        ModelDef(name="bad", description="x", columns=(Mean, consistency("mirror")),
+                 passes=(PassDef(name="mirror", model="census", reference="right", machine_index=1,
+                                 options=("mirror_nomatch",)),))  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="^model 'bad': option lr_beta is declared twice"):
+        ModelDef(name="bad", description="x", columns=(Mean, consistency("mirror")),
+                 passes=(PassDef(name="mirror", model="census", reference="right", machine_index=1,
+                                 options=(Option("lr_beta", "float", 0.5, lambda n, v, vs: None, "x"),)),))
+    with pytest.raises(ValueError, match="^model 'bad': column lr reads no pass"):
+        ModelDef(name="bad", description="x", columns=(Mean, Consistency))
 
 
 def test_beta_that_quantizes_to_zero_is_refused():

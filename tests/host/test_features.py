@@ -109,11 +109,11 @@ def test_a_model_computes_exactly_the_planes_its_columns_declare():
 def test_two_declarations_of_one_plane_name_are_refused():
     """The right pass keeping the census model's 5x5 window beside the left pass's 7x7: one name, two
     planes."""
-    from bayesmachine.columns import AbovePrior, Census, Consistency, LeftPrior, Mean
+    from bayesmachine.columns import AbovePrior, Census, LeftPrior, Mean, consistency
     from bayesmachine.models import MODELS, ModelDef, ModelParams, PassDef, register_model
 
     definition = ModelDef(name="two-windows", description="a right pass of another census window",
-                          columns=(LeftPrior, AbovePrior, Mean, Census, Consistency),
+                          columns=(LeftPrior, AbovePrior, Mean, Census, consistency("right")),
                           passes=(PassDef(name="right", model="census", reference="right", machine_index=1,
                                           not_inherited=("census_window",)),),
                           defaults={"census_window": 5})

@@ -284,10 +284,10 @@ def test_cli_run_feed_pixels_census_lr_gives_the_models_result(tmp_path: Path) -
 @pytest.mark.eda
 @pytest.mark.usefixtures("verilator_toolchain", "lr_like")
 def test_every_pass_of_a_model_from_its_definition_through_verilator() -> None:
-    """A census-lr-like model defined outside the package (``conftest.lr_like``: a right pass its
-    consistency column reads and a left-reference paper pass nothing reads, on three machines): the
-    harness collects both declared passes' results (``last_passes``), and every pass's equals the model
-    run as the host runs the passes, two frames back to back."""
+    """A census-lr-like model defined outside the package (``conftest.lr_like``: a right-reference pass
+    named ``mirror`` its consistency column reads and a left-reference paper pass nothing reads, on three
+    machines): the harness collects both declared passes' results (``last_passes``), and every pass's
+    equals the model run as the host runs the passes, two frames back to back."""
     from conftest import passes_model
 
     from bayesmachine.sim.stereo_engine import StereoVerilatorEngine
@@ -300,7 +300,7 @@ def test_every_pass_of_a_model_from_its_definition_through_verilator() -> None:
     with StereoVerilatorEngine(params, model, WIDTH, verbose=False) as engine:
         for left, right in frames:
             got["left"].append(engine.run(left, right))
-            assert list(engine.last_passes) == ["right", "echo"]
+            assert list(engine.last_passes) == ["mirror", "echo"]
             for name, res in engine.last_passes.items():
                 got[name].append(res)
     for name, res in want.items():

@@ -14,7 +14,7 @@ subclass of :class:`Lanes` registered for the kind with :func:`register`, says i
   pass's MAPs in), each declared here once: the front end takes its ports from them;
 - what it needs of the model beyond its column (``check``: a pass column's pass), a ``ParameterError``
   naming the model otherwise;
-- on the generator's shared pipeline (:class:`~bayesmachine.hdl.frontend.nets.WordNets`: issue, cost
+- on the generator's shared pipeline (a :class:`~.context.LaneContext`: issue, cost
   register, address register, table read, the beat on the stream), per lane row j of the beat on the
   stream its word (``word(j)``, rows 0..Dmax) and its word in the no-match row (``nomatch()``), and
   whether a pixel may be taken (``ready()``).
@@ -26,18 +26,18 @@ lane builder too: its word sits in the no-match row of the pass's first FEATURES
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
 
-from amaranth.hdl import Const, Value
+from amaranth.hdl import Const, ShapeLike, Value, ValueLike
 from amaranth.lib import wiring
 
-from bayesmachine.columns import Term
+from bayesmachine.columns import PlaneColumn, Term
 from bayesmachine.errors import ParameterError
+from bayesmachine.models import ModelParams, Pass
 from bayesmachine.params import MachineParams
 
-if TYPE_CHECKING:
-    from ..nets import WordNets
+from .context import LaneContext
 
 __all__ = ["Lanes", "PlaneFilter", "PlaneLanes", "lanes_for", "register"]
 
@@ -58,7 +58,7 @@ class PlaneFilter:
         raise NotImplementedError
 
     @property
-    def shapes(self) -> dict[str, Any]:
+    def shapes(self) -> dict[str, ShapeLike]:
         raise NotImplementedError
 
     def build(self) -> wiring.Component:
@@ -66,7 +66,7 @@ class PlaneFilter:
         line first) and ``en`` (``In(1)``: shift the column loaded earlier into the window)."""
         raise NotImplementedError
 
-    def outputs(self, filt: Any) -> dict[str, Value]:
+    def outputs(self, filt: wiring.Component) -> dict[str, Value]:
         """The planes of the window last shifted in, from the filter's outputs."""
         raise NotImplementedError
 
@@ -82,59 +82,59 @@ class Lanes:
     ----------
     term : Term
         The column (or the no-match rule) whose lanes these are.
-    nets : WordNets
+    ctx : LaneContext
         The generator's shared pipeline of this elaboration.
     """
 
     # --- Declarations ---
     @classmethod
-    def filters(cls, term: Any, margin: int) -> tuple[PlaneFilter, ...]:
+    def filters(cls, term: Term, margin: int) -> tuple[PlaneFilter, ...]:
         """The plane filters its words need, for a model of ``margin`` (the windows' centre line)."""
         return ()
 
     @classmethod
-    def planes(cls, term: Any, margin: int) -> dict[str, Any]:
+    def planes(cls, term: Term, margin: int) -> dict[str, ShapeLike]:
         """The planes it reads (name -> shape)."""
         return {}
 
     @classmethod
-    def flags(cls, term: Any) -> tuple[str, ...]:
+    def flags(cls, term: Term) -> tuple[str, ...]:
         """The feature pipeline's position flags each pixel must carry for it."""
         return ()
 
     @classmethod
-    def members(cls, term: Any, params: MachineParams) -> dict[str, wiring.Member]:
+    def members(cls, term: Term, params: MachineParams) -> dict[str, wiring.Member]:
         """The ports it adds to the generator."""
         return {}
 
     @classmethod
-    def check(cls, term: Any, model: Any, p: Any) -> None:
+    def check(cls, term: Term, model: ModelParams, p: Pass) -> None:
         """``ParameterError`` naming the model unless its lanes can run in pass ``p`` of ``model``."""
 
     @classmethod
-    def scan_latency(cls, term: Any) -> int:
+    def scan_latency(cls, term: Term) -> int:
         """0, or the cycles from a fetch of the delay line's entries to an issue that can read what it
         gives, when its words need every row of the pixel first: the word generator then scans the pixel's
-        beats before its words (``WordNets.fetch``; a fused column's smallest sum)."""
+        beats before its words (``LaneContext.fetch``; a fused column's smallest sum)."""
         return 0
 
     # --- One elaboration ---
-    def __init__(self, term: Any, nets: WordNets) -> None:
+    def __init__(self, term: Term, ctx: LaneContext) -> None:
         self.term = term
-        self.nets = nets
+        self.ctx = ctx
 
     def build(self) -> None:
-        """Build the lanes' logic (tables, registers, submodules) in ``nets.m``."""
+        """Build the lanes' logic (tables, registers, submodules) in ``ctx.m``."""
 
     def ready(self) -> Value:
         """High when a pixel may be taken."""
         return Const(1)
 
-    def word(self, j: int) -> Any:
+    def word(self, j: int) -> ValueLike:
         """The word of lane row j (row ``beat * R + j`` <= Dmax) of the beat on the stream."""
         raise NotImplementedError
 
-    def nomatch(self) -> Any:
+    def nomatch(self) -> ValueLike:
         """The word of the no-match row, with the beat on the stream."""
         raise NotImplementedError
 
@@ -149,16 +149,16 @@ class PlaneLanes(Lanes):
     symmetric = False
 
     @classmethod
-    def filter(cls, term: Any, margin: int) -> PlaneFilter:
+    def filter(cls, term: PlaneColumn, margin: int) -> PlaneFilter:
         """The filter giving the plane ``term`` reads, for a model of ``margin``."""
         raise NotImplementedError
 
     @classmethod
-    def filters(cls, term: Any, margin: int) -> tuple[PlaneFilter, ...]:
+    def filters(cls, term: PlaneColumn, margin: int) -> tuple[PlaneFilter, ...]:
         return (cls.filter(term, margin),)
 
     @classmethod
-    def planes(cls, term: Any, margin: int) -> dict[str, Any]:
+    def planes(cls, term: PlaneColumn, margin: int) -> dict[str, ShapeLike]:
         return {term.plane: cls.filter(term, margin).shapes[term.plane]}
 
     def cost(self, ref: Value, match: Value) -> Value:
@@ -169,25 +169,25 @@ class PlaneLanes(Lanes):
     def costs(self) -> list[Value]:
         """Each lane row's cost, of the delay line's entries of the beat being fetched (a fused column
         reads its members' costs here)."""
-        n, c = self.nets, self.term
+        n, c = self.ctx, self.term
         return [self.cost(getattr(n.left, c.plane), n.entry(c.plane, j)) for j in range(n.rows_per_beat)]
 
     def build(self) -> None:
-        n, c = self.nets, self.term
+        n, c = self.ctx, self.term
         self._words = n.lookup(c.name, n.tables[c.name], self.costs())
 
-    def word(self, j: int) -> Any:
+    def word(self, j: int) -> ValueLike:
         return self._words[j]
 
-    def nomatch(self) -> Any:
-        form = self.nets.form
+    def nomatch(self) -> ValueLike:
+        form = self.ctx.form
         return form.value(self.term.nomatch_entry(self.term.table(form.table_bits)))
 
 
 _LANES: dict[type, type[Lanes]] = {}
 
 
-def register(*kinds: type[Term]) -> Any:
+def register(*kinds: type[Term]) -> Callable[[type[Lanes]], type[Lanes]]:
     """Class decorator: the lane builder of column kinds ``kinds`` (and of their subclasses)."""
     def wrap(cls: type[Lanes]) -> type[Lanes]:
         for kind in kinds:

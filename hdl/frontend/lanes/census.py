@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
-from amaranth.hdl import Value, unsigned
+from amaranth.hdl import ShapeLike, Value, unsigned
 from amaranth.lib import wiring
 
-from bayesmachine.columns import Census
+from bayesmachine.columns import Census, PlaneColumn
 
 from ..census import CensusFilter
 from .base import PlaneFilter, PlaneLanes, register
@@ -41,13 +40,13 @@ class CensusPlanes(PlaneFilter):
         return self.window
 
     @property
-    def shapes(self) -> dict[str, Any]:
+    def shapes(self) -> dict[str, ShapeLike]:
         return {"census": unsigned(self.window * self.window - 1)}
 
     def build(self) -> wiring.Component:
         return CensusFilter(window=self.window)
 
-    def outputs(self, filt: Any) -> dict[str, Value]:
+    def outputs(self, filt: wiring.Component) -> dict[str, Value]:
         return {"census": filt.code}
 
 
@@ -59,7 +58,8 @@ class CensusLanes(PlaneLanes):
     symmetric = True
 
     @classmethod
-    def filter(cls, term: Any, margin: int) -> PlaneFilter:
+    def filter(cls, term: PlaneColumn, margin: int) -> PlaneFilter:
+        assert isinstance(term, Census)
         return CensusPlanes(window=term.window)
 
     def cost(self, ref: Value, match: Value) -> Value:

@@ -1,25 +1,24 @@
-"""The consistency column (census-lr's left pass): row d 1.0 or beta by lane d's window test on the
-other pass's MAP d_R(x - d) (:class:`ConsistencyTest`, fed one MAP per pixel at a map column of an output
-row through the generator's ``<pass>_maps`` port), the no-match row gamma when any lane is consistent,
-else 1.0 (0 without its no-match entry).
+"""The consistency column (a ``consistency(name)`` kind: census-lr's ``consistency("right")``): row d
+1.0 or beta by lane d's window test on the other pass's MAP d_R(x - d) (:class:`ConsistencyTest`, fed one
+MAP per pixel at a map column of an output row through the generator's ``<pass>_maps`` port), the
+no-match row gamma when any lane is consistent, else 1.0 (0 without its no-match entry).
 
-The pass it reads (``Consistency.feeds_from``) must be one the model runs before its own pass, with the
-right image as reference: its MAPs then cover every map column of an output row (0 .. W - 2k - 1), one
-per pixel the own pass consults. Its own pass must be the model's own (a declared pass reading another
-would need that pass's MAPs in its own order)."""
+The pass it reads (``Consistency.feeds_from``: a pass of any name the model declares) must be one the
+model runs before its own pass, with the right image as reference: its MAPs then cover every map column
+of an output row (0 .. W - 2k - 1), one per pixel the own pass consults. Its own pass must be the model's
+own (a declared pass reading another would need that pass's MAPs in its own order)."""
 
 from __future__ import annotations
 
-from typing import Any
-
-from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value
+from amaranth.hdl import Cat, Const, Module, Mux, Signal, Value, ValueLike
 from amaranth.lib import wiring
 from amaranth.lib.wiring import In, Out
 
 from bayesmachine.checks import as_int
-from bayesmachine.columns import Consistency
+from bayesmachine.columns import Consistency, Term
 from bayesmachine.errors import ParameterError
 from bayesmachine.hdl.signatures import map_layout, map_stream
+from bayesmachine.models import ModelParams, Pass
 from bayesmachine.params import MachineParams
 
 from .base import Lanes, register
@@ -27,7 +26,7 @@ from .base import Lanes, register
 __all__ = ["ConsistencyLanes", "ConsistencyTest", "map_port"]
 
 
-def map_port(term: Any) -> str:
+def map_port(term: Term) -> str:
     """The generator's port of the MAPs the column reads: ``<pass>_maps`` (census-lr: ``right_maps``)."""
     return f"{term.feeds_from}_maps"
 
@@ -113,15 +112,15 @@ class ConsistencyLanes(Lanes):
     """A pixel whose ``consult`` is set takes the next MAP into the test, and waits for it."""
 
     @classmethod
-    def flags(cls, term: Any) -> tuple[str, ...]:
+    def flags(cls, term: Term) -> tuple[str, ...]:
         return ("consult",)
 
     @classmethod
-    def members(cls, term: Any, params: MachineParams) -> dict[str, wiring.Member]:
+    def members(cls, term: Term, params: MachineParams) -> dict[str, wiring.Member]:
         return {map_port(term): In(map_stream(params))}
 
     @classmethod
-    def check(cls, term: Any, model: Any, p: Any) -> None:
+    def check(cls, term: Term, model: ModelParams, p: Pass) -> None:
         name = term.feeds_from
         fed = next((q for q in model.passes[:-1] if q.name == name), None)
         if p is not model.passes[-1]:
@@ -136,8 +135,8 @@ class ConsistencyLanes(Lanes):
                                  f"of a row), not the {fed.reference!r}", "model")
 
     def build(self) -> None:
-        n, c = self.nets, self.term
-        self._maps = maps = getattr(n.generator, map_port(c))
+        n, c = self.ctx, self.term
+        self._maps = maps = n.map_stream(map_port(c))
         n.m.submodules[f"{c.feeds_from}_consistency"] = test = ConsistencyTest(
             dmax=n.dmax, map_width=n.params.map_width, tolerance=c.tolerance)
         shift = n.take & n.pixel.consult
@@ -153,10 +152,10 @@ class ConsistencyLanes(Lanes):
         self._beta, self._gamma = n.form.value(q.values[1]), n.form.value(q.nomatch[0])
 
     def ready(self) -> Value:
-        return ~self.nets.pixel.consult | self._maps.valid
+        return ~self.ctx.pixel.consult | self._maps.valid
 
-    def word(self, j: int) -> Any:
-        return Mux(self._consistent[j], self.nets.one, self._beta)
+    def word(self, j: int) -> ValueLike:
+        return Mux(self._consistent[j], self.ctx.one, self._beta)
 
-    def nomatch(self) -> Any:
-        return Mux(self._any, self._gamma, self.nets.one) if self.term.has_nomatch else self.nets.zero
+    def nomatch(self) -> ValueLike:
+        return Mux(self._any, self._gamma, self.ctx.one) if self.term.has_nomatch else self.ctx.zero

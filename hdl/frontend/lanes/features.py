@@ -4,12 +4,11 @@ floor (the no-match table at the reference pixel's |gV|)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
-from amaranth.hdl import Value
+from amaranth.hdl import ShapeLike, Value, ValueLike
 from amaranth.lib import wiring
 
-from bayesmachine.columns import FeatureColumn, NoMatchFloor
+from bayesmachine.columns import FeatureColumn, NoMatchFloor, PlaneColumn, Term
 
 from ..filters import FeatureFilter, feature_layout
 from ..linebuffer import WINDOW
@@ -34,13 +33,13 @@ class FeaturePlanes(PlaneFilter):
         return WINDOW
 
     @property
-    def shapes(self) -> dict[str, Any]:
+    def shapes(self) -> dict[str, ShapeLike]:
         return dict(feature_layout().members)
 
     def build(self) -> wiring.Component:
         return FeatureFilter(lag=self.lag)
 
-    def outputs(self, filt: Any) -> dict[str, Value]:
+    def outputs(self, filt: wiring.Component) -> dict[str, Value]:
         return {name: getattr(filt.features, name) for name in self.shapes}
 
 
@@ -55,7 +54,7 @@ class FeatureLanes(PlaneLanes):
     symmetric = True
 
     @classmethod
-    def filter(cls, term: Any, margin: int) -> PlaneFilter:
+    def filter(cls, term: PlaneColumn, margin: int) -> PlaneFilter:
         return feature_planes(margin)
 
     def cost(self, ref: Value, match: Value) -> Value:
@@ -68,16 +67,16 @@ class FloorLanes(Lanes):
     pixel), in the no-match row of the pass's first FEATURES column."""
 
     @classmethod
-    def filters(cls, term: Any, margin: int) -> tuple[PlaneFilter, ...]:
+    def filters(cls, term: Term, margin: int) -> tuple[PlaneFilter, ...]:
         return (feature_planes(margin),)
 
     @classmethod
-    def planes(cls, term: Any, margin: int) -> dict[str, Any]:
+    def planes(cls, term: Term, margin: int) -> dict[str, ShapeLike]:
         return {term.plane: feature_planes(margin).shapes[term.plane]}
 
     def build(self) -> None:
-        n, t = self.nets, self.term
+        n, t = self.ctx, self.term
         self._word = n.lookup(t.name, n.tables[t.name], [getattr(n.left, t.plane)])[0]
 
-    def nomatch(self) -> Any:
+    def nomatch(self) -> ValueLike:
         return self._word

@@ -3,8 +3,8 @@ sums per row, the pixel's smallest sum, and the exp table back to words (the rul
 ``bayesmachine.columns.fused``; docs/architecture.md, "The fused column").
 
 A word needs the pixel's smallest sum, so the word generator scans the pixel's beats first
-(``WordNets.fetch``, one beat of delay-line entries a cycle, whatever the stream does, the pixels' scans
-back to back, each into the pixel's slot of the generator's ring, ``WordNets._queue``): each lane row's
+(``LaneContext.fetch``, one beat of delay-line entries a cycle, whatever the stream does, the pixels' scans
+back to back, each into the pixel's slot of the generator's ring, ``ScanRing``): each lane row's
 member costs (the members' own lane builders' ``costs``) are read in their energy tables (block RAM,
 three cycles: cost, address, read), added (a register), kept in the slot's entry of the beat (a
 memory of slots × beats entries of a beat's row sums: distributed RAM), and the beat's minimum (a tree
@@ -19,19 +19,18 @@ When the model's passes share the sums (:mod:`..shared`: the generator's ``fused
 writes each beat's row sums into the shared memories as it stores them, and the own pass reads its beat's
 sums there (a read two cycles after the fetch, its data where the tables' reads would be) instead of
 computing its members' costs and codes; each pass takes an output pixel from its stream only when the
-shared memories allow (``WordNets.hold_scan``).
+shared memories allow (``LaneContext.hold_scan``).
 """
 
 from __future__ import annotations
 
-from typing import Any
+from amaranth.hdl import Cat, Const, Mux, ShapeLike, Signal, Value, ValueLike, unsigned
+from amaranth.lib import data, memory, wiring
 
-from amaranth.hdl import Cat, Const, Mux, Signal, Value, unsigned
-from amaranth.lib import data, memory
+from bayesmachine.columns import Fused, Term
 
-from bayesmachine.columns import Fused
-
-from ..nets import pick
+from ..lookup import pick
+from ..tables import FrontEndTables
 from .base import Lanes, PlaneFilter, lanes_for, register
 
 __all__ = ["FusedLanes", "fused_sum_bits"]
@@ -41,11 +40,11 @@ __all__ = ["FusedLanes", "fused_sum_bits"]
 SCAN_LATENCY = 6
 
 
-def _bits(tables: Any, name: str) -> int:
+def _bits(tables: FrontEndTables, name: str) -> int:
     return max(1, int(max(tables[name])).bit_length())
 
 
-def fused_sum_bits(term: Any, tables: Any) -> int:
+def fused_sum_bits(term: Fused, tables: FrontEndTables) -> int:
     """Bits of a fused column ``term``'s row sums and no-match sum, by its pass's ``tables``."""
     top = sum(int(max(tables[f"{m.name}_energy"])) for m in term.members)
     nm = int(max(tables["nomatch_energy"])) + sum(
@@ -58,27 +57,28 @@ class FusedLanes(Lanes):
     """A fused column (see the module's text): its members' lane builders give the costs."""
 
     @classmethod
-    def filters(cls, term: Any, margin: int) -> tuple[PlaneFilter, ...]:
+    def filters(cls, term: Term, margin: int) -> tuple[PlaneFilter, ...]:
         out: dict[PlaneFilter, None] = {}
         for member in term.members:
             out.update(dict.fromkeys(lanes_for(member).filters(member, margin)))
         return tuple(out)
 
     @classmethod
-    def planes(cls, term: Any, margin: int) -> dict[str, Any]:
-        out: dict[str, Any] = {}
+    def planes(cls, term: Term, margin: int) -> dict[str, ShapeLike]:
+        out: dict[str, ShapeLike] = {}
         for member in term.members:
             out.update(lanes_for(member).planes(member, margin))
         return out
 
     @classmethod
-    def scan_latency(cls, term: Any) -> int:
+    def scan_latency(cls, term: Term) -> int:
         return SCAN_LATENCY
 
     def build(self) -> None:
-        n, t = self.nets, self.term
+        n, t = self.ctx, self.term
         rule = n.pass_.model.nomatch
-        share, port = n.generator.fused_share, getattr(n.generator, "fused_sums", None)
+        share = n.fused_share
+        port = None if share is None else n.shared_port("fused_sums")
         width = fused_sum_bits(t, n.tables)
         # The no-match row's sum: the rule's code at the reference pixel's |gV| (three cycles after the
         # take from the stream, beside beat 0's member codes) plus the other members' no-match codes.
@@ -105,7 +105,7 @@ class FusedLanes(Lanes):
 
     def _member_sums(self) -> list[Value]:
         """Each lane row's sum of its members' codes, three cycles after its fetch."""
-        n = self.nets
+        n = self.ctx
         total: list[Value] = [Const(0)] * n.rows_per_beat
         for member in self.term.members:
             costs = lanes_for(member)(member, n).costs()
@@ -114,20 +114,20 @@ class FusedLanes(Lanes):
             total = [a + b for a, b in zip(total, codes, strict=True)]
         return total
 
-    def _read_shared(self, port: Any) -> list[Value]:
+    def _read_shared(self, port: wiring.PureInterface) -> list[Value]:
         """The importer: each lane row's sum from the shared memories, three cycles after its fetch (the
         read two cycles after, at the pixel's position and the beat); an output pixel is taken only once
         its sums are all written."""
-        n = self.nets
+        n = self.ctx
         n.hold_scan(port.ready)
         n.m.d.comb += [port.row_start.eq(n.fed.row_start), port.en.eq(self._steps[0][1]),
                        port.at.eq(self._at[1]), port.beat.eq(self._steps[1][1])]
         return [port.sums[j] for j in range(n.rows_per_beat)]
 
-    def _write_shared(self, port: Any, sums_q: list[Signal]) -> None:
+    def _write_shared(self, port: wiring.PureInterface, sums_q: list[Signal]) -> None:
         """The exporter: each fetched beat's row sums into the shared memories as they are stored (four
         cycles after the fetch); an output pixel is taken only while the memories have room for it."""
-        n = self.nets
+        n = self.ctx
         n.hold_scan(port.room)
         fetched, beat, _ = (steps[3] for steps in self._steps)
         n.m.d.comb += [port.en.eq(fetched), port.at.eq(self._at[3]), port.beat.eq(beat),
@@ -139,7 +139,7 @@ class FusedLanes(Lanes):
         out: list[Signal] = []
         for k in range(cycles):
             reg = Signal.like(Value.cast(value), name=f"{name}_{k}")
-            self.nets.m.d.sync += reg.eq(out[-1] if out else value)
+            self.ctx.m.d.sync += reg.eq(out[-1] if out else value)
             out.append(reg)
         return out
 
@@ -147,7 +147,7 @@ class FusedLanes(Lanes):
         """A fetched beat's row sums into a register three cycles after its fetch (a row without a match
         pixel, flagged at its fetch, as the largest sum), and into the slot's row sums (distributed RAM,
         a beat an entry) the cycle after."""
-        n = self.nets
+        n = self.ctx
         m, rows, dmax = n.m, n.rows_per_beat, n.dmax
         top = (1 << width) - 1
         kept = []
@@ -171,7 +171,7 @@ class FusedLanes(Lanes):
         into the running minimum the next (the no-match sum first at beat 0 when it can win, carried
         beside beat 0's sums); at the pixel's last beat the minimum and the no-match sum into its
         slot's registers."""
-        n = self.nets
+        n = self.ctx
         m = n.m
         top = (1 << width) - 1
         fetched, beat, slot = (steps[4] for steps in self._steps)
@@ -193,7 +193,7 @@ class FusedLanes(Lanes):
     def _hand_over(self, width: int) -> None:
         """The minimum and the no-match sum of the pixel the lanes take into the registers its issues read
         (its row sums stay in its slot until its last issue)."""
-        n = self.nets
+        n = self.ctx
         self._min = Signal(unsigned(width), name="fused_min", reset_less=True)
         self._nm_sum = Signal(unsigned(width), name="fused_nm_sum", reset_less=True)
         with n.m.If(n.take):
@@ -203,7 +203,7 @@ class FusedLanes(Lanes):
     def _words_out(self, width: int) -> None:
         """At each issue, each lane row's sum (the issued slot's entry of the beat) minus the minimum,
         read in X (with the beat on the stream); rows past Dmax are not read."""
-        n = self.nets
+        n = self.ctx
         read = self._sums.read_port(domain="comb")
         n.m.d.comb += read.addr.eq(Cat(n.beat, n.issue_slot))
         diffs = [Signal(unsigned(width), name=f"fused_diff{j}") for j in range(n.rows_per_beat)]
@@ -215,11 +215,11 @@ class FusedLanes(Lanes):
             costs.append(nm_diff)
         self._words = n.lookup("fused_exp", n.tables["fused_exp"], costs)
 
-    def word(self, j: int) -> Any:
+    def word(self, j: int) -> ValueLike:
         return self._words[j]
 
-    def nomatch(self) -> Any:
-        return self._words[-1] if self._live else self.nets.zero
+    def nomatch(self) -> ValueLike:
+        return self._words[-1] if self._live else self.ctx.zero
 
 
 def _smallest(values: list[Value]) -> Value:

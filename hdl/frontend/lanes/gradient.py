@@ -4,11 +4,9 @@ its own)."""
 
 from __future__ import annotations
 
-from typing import Any
+from amaranth.hdl import ShapeLike, Signal, Value, signed, unsigned
 
-from amaranth.hdl import Signal, Value, signed, unsigned
-
-from bayesmachine.columns import GradMag
+from bayesmachine.columns import GradMag, PlaneColumn
 
 from .base import PlaneFilter, PlaneLanes, register
 from .features import feature_planes
@@ -26,21 +24,21 @@ class GradMagLanes(PlaneLanes):
     symmetric = True
 
     @classmethod
-    def filter(cls, term: Any, margin: int) -> PlaneFilter:
+    def filter(cls, term: PlaneColumn, margin: int) -> PlaneFilter:
         return feature_planes(margin)
 
     @classmethod
-    def planes(cls, term: Any, margin: int) -> dict[str, Any]:
+    def planes(cls, term: PlaneColumn, margin: int) -> dict[str, ShapeLike]:
         shapes = feature_planes(margin).shapes
         return {name: shapes[name] for name in PLANES}
 
     def _magnitude(self, planes: list[Value], name: str) -> Signal:
         g = Signal(unsigned(G_BITS), name=name)
-        self.nets.m.d.comb += g.eq(abs(planes[0]) + abs(planes[1]))
+        self.ctx.m.d.comb += g.eq(abs(planes[0]) + abs(planes[1]))
         return g
 
     def costs(self) -> list[Value]:
-        n = self.nets
+        n = self.ctx
         ref = self._magnitude([getattr(n.left, p) for p in PLANES], "g_ref")
         costs = []
         for j in range(n.rows_per_beat):

@@ -255,13 +255,13 @@ def test_link_gives_every_pass_of_a_model_from_its_definition() -> None:
 
     model = ModelParams(dmax=DMAX, name="lr-like")
     params = stereo_machine_params(DMAX, model=model)
-    assert [(bp.name, chr(bp.tag)) for bp in board_passes(params, model)] == [("right", "a"), ("echo", "b"),
+    assert [(bp.name, chr(bp.tag)) for bp in board_passes(params, model)] == [("mirror", "a"), ("echo", "b"),
                                                                                 ("left", "R")]
     left, right = _crop()
     twin = BoardTwin(params, model, WIDTH, results=lambda lf, rf: passes_model([(lf, rf)], model, params))
     got = _link(TwinPort(twin)).run_frame(left, right, params, model)
     want = passes_model([(left, right)], model, params)
-    assert set(got) == {"right", "echo", "left"} and len(got["echo"]["map"]) == len(got["left"]["map"])
+    assert set(got) == {"mirror", "echo", "left"} and len(got["echo"]["map"]) == len(got["left"]["map"])
     for name, res in want.items():
         for field in ("map", "nomatch", "timeout", "counts", "cycles"):
             np.testing.assert_array_equal(got[name][field], np.asarray(getattr(res, field)), err_msg=field)

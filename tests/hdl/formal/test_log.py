@@ -1,3 +1,4 @@
+# amaranth: UnusedElaboratable=no
 """Formal proofs of the log integrator's blocks (SymbiYosys, Yices): each block, at every pipeline depth
 it offers, equals a reference written in the wrapper for every input and every back-pressure
 (k-induction), its covers are reached, and each known mutant fails. See docs/formal.md."""

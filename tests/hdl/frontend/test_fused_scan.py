@@ -1,4 +1,4 @@
-"""The fused column's scan on chip (hdl/frontend/lanes/fused.py, ``WordNets._queue``): the word generator
+"""The fused column's scan on chip (hdl/frontend/lanes/fused.py, ``ScanRing``): the word generator
 scans the next output pixels' beats while the current pixel's words issue, far enough ahead that a fused
 pass's output pixels follow each other every ``beats_per_pixel`` cycles (not that plus the scan's
 latency, nor the scan plus the issues), for any beats per pixel; the words stay the host's, the streams
@@ -67,7 +67,7 @@ def _census(dmax: int, words_per_beat: int) -> tuple[ModelParams, object]:
 # an output row one pixel every beats_per_pixel cycles (before: beats_per_pixel + 6, 10 at 4 beats;
 # scanning then issuing took 2 x 4 + 5: 13); a row's first pixel comes after the 20 pixels outside the
 # output region between the rows, and at 2 beats or more a cycle after the last of them (its delay-line
-# write pending: WordNets.accept; 26, 32, 36 before).
+# write pending: WordPipeline.accept; 26, 32, 36 before).
 GAPS = {16: (1, Counter({1: 18, 21: 1})), 8: (2, Counter({2: 18, 27: 1})),
         4: (4, Counter({4: 18, 33: 1})), 3: (6, Counter({6: 18, 37: 1}))}
 

@@ -1,5 +1,5 @@
 """The on-chip front end's modules import one another one way: no import cycle among ``hdl/frontend``
-(``lanes/``, ``layouts``, ``reference``, ``nets``, ``words``, ``passes``, ``pipeline``, ``stereo``, ...),
+(``lanes/``, ``layouts``, ``reference``, ``wordpipe``, ``words``, ``passes``, ``pipeline``, ``stereo``, ...),
 counting every import at any depth: function-level ones and those under ``TYPE_CHECKING`` too (a cycle
 hidden in a function is still a cycle)."""
 

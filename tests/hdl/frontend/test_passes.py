@@ -6,8 +6,8 @@ Blocks against their twins (``ConsistencyTest`` against ``lr_consistent``, ``Pas
 delay and flush order), the front end's words of every pass against the host's (``pass_words``), and
 ``StereoMachine`` against the model run as the host runs the passes (``conftest.passes_model``), every
 pass's results, with random stalls on every stream: census-lr, and a census-lr-like model defined in
-the tests (``conftest.lr_like``: its passes and columns from its definition, a right pass its
-consistency column reads and a left-reference pass nothing reads).
+the tests (``conftest.lr_like``: its passes and columns from its definition, a right-reference pass
+named ``mirror`` its consistency column reads and a left-reference pass nothing reads).
 """
 
 from __future__ import annotations
@@ -29,11 +29,20 @@ from conftest import (
     run_sim,
 )
 
-from bayesmachine.columns import Census, Consistency, GradH, GradV, Mean, lr_consistent, lr_unknown
+from bayesmachine.columns import (
+    Census,
+    GradH,
+    GradV,
+    Mean,
+    Source,
+    consistency,
+    lr_consistent,
+    lr_unknown,
+)
 from bayesmachine.hdl.frontend import passes
+from bayesmachine.hdl.frontend.delayline import tapped_line
 from bayesmachine.hdl.frontend.filters import feature_layout
 from bayesmachine.hdl.frontend.lanes.consistency import ConsistencyTest
-from bayesmachine.hdl.frontend.nets import tapped_line
 from bayesmachine.hdl.frontend.passes import PassFeeder, fused_shares
 from bayesmachine.hdl.frontend.shared import SharedSums
 from bayesmachine.hdl.frontend.stereo import (
@@ -73,7 +82,7 @@ def _lr(dmax: int, **fields: object) -> ModelParams:
 
 # A consistency column reading a pass with the left image as reference: not on chip.
 LEFT_FED = ModelDef(name="left-fed", description="a consistency column of a left-reference pass",
-                    columns=(Mean, GradH, GradV, Census, Consistency),
+                    columns=(Mean, GradH, GradV, Census, consistency("right")),
                     passes=(PassDef(name="right", model="census", reference="left", machine_index=1),))
 
 # census's both ways, nothing reading the right pass's MAPs: the own pass's scans may run right behind the
@@ -302,7 +311,10 @@ def test_every_pass_words_equal_the_host_words(name: str, fields: dict, width: i
     maps = {p.name: rng.integers(-1, model.dmax + 1, pass_pixels(frames, model, p.name))
             for p in model.passes}
     front = FrontEnd(params=params, model=model, width=width)
-    got = run_frontend_passes(front, frames, {n: maps[n] for n in maps if n in ("left", "right")},
+    # The MAPs the front end reads: a line of MAPs' pass's own, a pass column's pass's.
+    read = {q.name for q in model.passes if any(c.source is Source.ABOVE for c in q.columns)}
+    read |= {c.feeds_from for q in model.passes for c in q.columns if c.source is Source.PASS}
+    got = run_frontend_passes(front, frames, {n: maps[n] for n in maps if n in read},
                               in_stall=0.2, out_stall=0.2, result_delay=delay, seed=3)
     want = _host_words(model, params, frames, maps)
     assert set(got) == {p.name for p in model.passes}
@@ -313,7 +325,7 @@ def test_every_pass_words_equal_the_host_words(name: str, fields: dict, width: i
         if pass_params(model, params, p.name).feedback_columns:
             row = pass_grid(p, OutputRegion.of_model(frames[0][0].shape, model)).width
             assert (flags[:, 0] == (np.arange(len(flags)) % row == 0)).all()
-    right = want["right"]
+    right = want[next(q.name for q in model.passes if q.reference == "right")]
     assert (right[:, : model.dmax + 1, 1:] == 0).any()  # lanes past the last output column: word 0
 
 
@@ -354,7 +366,7 @@ def test_stereo_machine_passes_equal_the_model(case: str) -> None:
     top = StereoMachine(params=params, model=model, width=width, fifo_pixels=fifo_pixels)
     assert set(top.signature.members) >= {f"{p.name}_result" for p in model.passes[:-1]}
     want = assert_passes_equal_the_model(top, frames, model, params, seed=6)
-    assert want["right"].timeout.any() or case != "no-nomatch-row-right-watchdog"  # the watchdog fires
+    assert case != "no-nomatch-row-right-watchdog" or want["right"].timeout.any()  # the watchdog fires
 
 
 def test_census_lr_on_chip_parameters() -> None:
@@ -397,8 +409,8 @@ def test_what_the_passes_on_chip_cannot_do_is_one_error_naming_the_pass() -> Non
     own = lr.passes[-1]
     lanes = own.columns[-1]
     twice = SimpleNamespace(name="left", columns=(*own.columns, lanes), model=lr, reference="left")
-    with pytest.raises(ParameterError, match="the left pass's lr column takes the port right_maps, which its "
-                                             "lr column has already"):
+    with pytest.raises(ParameterError, match="the left pass's lr column takes the port mirror_maps, which "
+                                             "its lr column has already"):
         generator_signature(stereo_machine_params(3, model=lr), lr, twice)
 
 

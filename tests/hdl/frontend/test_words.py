@@ -21,7 +21,8 @@ from conftest import assert_same_results, run_sim
 from bayesmachine.columns import GradH, GradV, Mean
 from bayesmachine.hdl.frontend.filters import FeatureFilter
 from bayesmachine.hdl.frontend.linebuffer import LineBuffer, column_windows
-from bayesmachine.hdl.frontend.nets import clamped_magnitude, table_depth
+from bayesmachine.hdl.frontend.lookup import clamped_magnitude, table_depth
+from bayesmachine.hdl.frontend.pipeline import PipelineNets
 from bayesmachine.hdl.frontend.stereo import (
     MAX_WIDTH,
     FeaturePipeline,
@@ -289,17 +290,19 @@ def test_parameters_are_validated_up_front() -> None:
 
 
 @pytest.mark.parametrize("machines", [1, 2])
-def test_blocks_expose_their_nets_after_elaboration(machines: int) -> None:
-    """The hooks the formal wrappers read instead of Amaranth's internals: ``nets`` (an error before
-    elaboration, then the blocks' own signals) and the pipeline class ``FrontEnd`` builds."""
+def test_blocks_build_and_return_their_nets(machines: int) -> None:
+    """The hooks the formal wrappers read instead of Amaranth's internals: each block's ``build`` gives its
+    module and the nets it built (the blocks' own signals, new ones each time: no block keeps them), and
+    the pipeline class ``FrontEnd`` builds (a subclass's ``build`` is what elaborates)."""
     model = ModelParams(name="paper", dmax=4)
     params = stereo_machine_params(4, model=model)
-    built: list[FeaturePipeline] = []
+    built: list[PipelineNets] = []
 
     class Recorded(FeaturePipeline):
-        def elaborate(self, platform: object) -> Module:
-            built.append(self)
-            return super().elaborate(platform)
+        def build(self, platform: object) -> tuple[Module, PipelineNets]:
+            m, nets = super().build(platform)
+            built.append(nets)
+            return m, nets
 
     class Front(FrontEnd):
         feature_pipeline = Recorded
@@ -308,11 +311,12 @@ def test_blocks_expose_their_nets_after_elaboration(machines: int) -> None:
     gen = WordGenerator(params=params, model=model)
     pipe = FeaturePipeline(model=model, width=20)
     for block in (top, gen, pipe):
-        with pytest.raises(RuntimeError, match="elaborate"):
-            block.nets  # noqa: B018
-        Fragment.get(block, None)
-    Fragment.get(Front(params=params, model=model, width=20), None)
-    n = top.nets
+        assert not hasattr(block, "nets")
+        (m1, n1), (m2, n2) = block.build(None), block.build(None)
+        assert isinstance(m1, Module) and n1 is not n2
+        Fragment.get(m1, None), Fragment.get(m2, None)  # (their submodules elaborated: none left unused)
+    top_module, n = top.build(None)
+    Fragment.get(top_module, None)
     assert len(n.machines) == len(n.loads) == machines
     assert all(isinstance(mc, BayesianMachine) for mc in n.machines)
     assert isinstance(n.frontend, FrontEnd if machines == 1 else FeaturePipeline)
@@ -320,10 +324,13 @@ def test_blocks_expose_their_nets_after_elaboration(machines: int) -> None:
     assert fifo.buffer.depth == top.fifo_pixels * params.beats_per_pixel + 1
     assert [s.name for s in (fifo.used, fifo.write, fifo.read)] == (
         ["used", "write", "read"] if machines == 1 else ["beats0_used", "beats0_write", "beats0_read"])
-    assert (gen.nets.beat.name, gen.nets.active.name) == ("beat", "active")
-    assert pipe.nets.cur_col.name == "cur_col"
+    (gen_module, words), (pipe_module, counters) = gen.build(None), pipe.build(None)
+    Fragment.get(gen_module, None), Fragment.get(pipe_module, None)
+    assert (words.beat.name, words.active.name, words.take.name) == ("beat", "active", "take")
+    assert counters.cur_col.name == "cur_col"
+    Fragment.get(Front(params=params, model=model, width=20), None)
     assert len(built) == 1
-    pos = built[0].nets
+    pos = built[0]
     names = [s.name for s in (pos.col, pos.line, pos.cur_col, pos.cur_line)]
     assert names == ["col", "line", "cur_col", "cur_line"]
 

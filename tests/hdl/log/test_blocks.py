@@ -308,5 +308,4 @@ def test_bad_block_parameters() -> None:
     for block in (RowAdders, ArgminTree, WeightStage, LogIntegrator):
         with pytest.raises(TypeError, match="LogParams"):
             block(params=(5, 2, 3))
-    with pytest.raises(RuntimeError, match="elaborate"):
-        _ = RowAdders(params=p).nets
+    assert not hasattr(RowAdders(params=p), "nets")  # its builder returns them (StallPipeline.build)
