@@ -303,11 +303,9 @@ add_option(MachineOption("normalize", "--normalize-columns",
                          f"{'on' if machine_default('normalize') else 'off'} otherwise)",
                          type=bool))
 add_option(MachineOption("integrator", "--integrator",
-                         "how a pixel's evidence is integrated: stochastic (the paper's machine: AND "
-                         "gates and overflow counters) or log (the logarithmic machine: each row's energy "
-                         "codes summed, the MAP the lowest sum, the rows' weights from an exp table: fed "
-                         "words or pixels, or on the board; docs/integrators.md) (default "
-                         "%(default)s)",
+                         "how a pixel's evidence is integrated: "
+                         + "; ".join(f"{k.name} ({k.description})" for k in INTEGRATOR_KINDS.values())
+                         + " (default %(default)s)",
                          default=DEFAULT_INTEGRATOR, choices=INTEGRATORS))
 add_option(MachineOption("tie_break", "--tie-break",
                          "MAP encoder rule when several counters overflow in one cycle (default %(default)s)",

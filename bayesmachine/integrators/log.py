@@ -187,7 +187,9 @@ class LogKind(IntegratorKind):
     numbers (none of the stochastic machine's fields)."""
 
     name = "log"
-    description = "energy codes summed per row, the MAP the lowest sum (docs/integrators.md)"
+    description = ("the logarithmic machine: each row's energy codes summed, the MAP the lowest sum, the "
+                   "rows' weights from an exp table: fed words or pixels, or on the board; "
+                   "docs/integrators.md")
     title = "logarithmic"
     named = True
     loads = "codes"

@@ -121,7 +121,7 @@ class StochasticKind(IntegratorKind):
     """The stochastic integrator's kind (module text): W-bit words loaded, counts read out."""
 
     name = "stochastic"
-    description = "the paper's machine: AND gates and overflow counters on random numbers"
+    description = "the paper's machine: AND gates and overflow counters"
     title = "stochastic"
     named = False
     loads = "words"
