@@ -268,7 +268,9 @@ def _watchdogs() -> str:
 
 
 def _models_with(test: Callable[[Any], bool]) -> str:
-    return " and ".join(d.name for d in MODELS.values() if test(d))
+    """The models that pass ``test``, as a list in words ("a, b and c")."""
+    names = [d.name for d in MODELS.values() if test(d)]
+    return " and ".join(filter(None, (", ".join(names[:-1]), names[-1]))) if names else ""
 
 
 def machine_default(field: str) -> Any:

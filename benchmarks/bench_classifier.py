@@ -65,7 +65,7 @@ def _layouts(data: Any, splits: list, args: argparse.Namespace) -> None:
 
 
 def main(argv: list[str] | None = None) -> None:
-    ap = Parser(prog=Path(__file__).name, description=__doc__.splitlines()[0])
+    ap = Parser(prog=Path(__file__).name, description=__doc__.split("\n\n")[0])
     ap.add_argument("--what", type=choice_of(WHAT), default="all", help=f"{', '.join(WHAT)} (default all)")
     ap.add_argument("--datasets", type=value_list(choice_of(BUNDLED_DATASETS), "data set"),
                     default=list(BUNDLED_DATASETS))

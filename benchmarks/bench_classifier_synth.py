@@ -23,7 +23,7 @@ from bayesmachine.params import INTEGRATORS
 
 
 def main(argv: list[str] | None = None) -> None:
-    ap = Parser(prog=Path(__file__).name, description=__doc__.splitlines()[0])
+    ap = Parser(prog=Path(__file__).name, description=__doc__.split("\n\n")[0])
     ap.add_argument("--dataset", type=choice_of(BUNDLED_DATASETS), default="digits")
     ap.add_argument("--integrator", type=choice_of(INTEGRATORS), default="stochastic")
     ap.add_argument("--bins", type=int_in_range(1, MAX_BINS), default=DEFAULT_BINS)

@@ -4,7 +4,7 @@ values in [0, 1], nonincreasing in the cost; a kind whose likelihood grows is re
 import numpy as np
 import pytest
 
-from bayesmachine.columns import Census
+from bayesmachine.columns import Census, SemiGlobal
 from bayesmachine.models import ModelParams
 from bayesmachine.params import ParameterError
 
@@ -36,8 +36,13 @@ def test_column_kinds_are_the_package_s_kinds_each_with_a_lane_builder() -> None
     assert exported == set(COLUMN_KINDS)
     built = [c for model in (ModelParams(name="paper", gradient_magnitude=True, dmax=4),
                              ModelParams(name="census-lr", dmax=4),
-                             ModelParams(name="census-lr", dmax=4, fuse_columns=False))
+                             ModelParams(name="census-lr", dmax=4, fuse_columns=False),
+                             ModelParams(name="census-sgm", dmax=4))
              for p in model.passes for c in p.columns]
     assert {k for k in COLUMN_KINDS for c in built if isinstance(c, k)} == set(COLUMN_KINDS)
     for c in built:
-        lanes_for(c)  # a ParameterError names a kind without one
+        if isinstance(c, SemiGlobal):  # the one kind the front end does not build yet: refused by name
+            with pytest.raises(ParameterError, match="lane builder"):
+                lanes_for(c)
+        else:
+            lanes_for(c)

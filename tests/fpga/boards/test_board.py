@@ -347,7 +347,7 @@ def test_cli_board_fields_map_only(tmp_path, monkeypatch) -> None:
     got, full, want = (np.load(tmp_path / n / "result.npz") for n in ("map", "all", "model"))
     # no counts, so no confidence (its maps are functions of the counts): none is made up
     assert sorted(got.files) == sorted(set(want.files) - {"counts", "cycles", "mass", "confidence", "entropy",
-                                                          "nomatch_mass"})
+                                                          "nomatch_mass", "filled_confidence"})
     assert sorted(full.files) == sorted(want.files)
     for name in got.files:
         np.testing.assert_array_equal(got[name], want[name], err_msg=name)
