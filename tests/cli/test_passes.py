@@ -110,7 +110,8 @@ def test_cli_sweep_three_models(pair_files, tmp_path):
         # Where the default model is census (what drives or builds hardware), census-lr's options are
         # refused as with --model census.
         (["run", "--engine", "board", "--port", "unused", "--model", "census", "--no-lr-nomatch"],
-         "--no-lr-nomatch: options of --model census-lr and census-sgm, which do not apply to --model census"),
+         "--no-lr-nomatch: options of --model census-lr and census-sgm, which do not apply to --model "
+         "census"),
         (["run", "--machines", "2", "--model", "census", "--lr-beta", "0.2"],
          "--lr-beta: options of --model census-lr and census-sgm, which do not apply to --model census"),
         (["run", "--model", "census", "--no-lr-neutral"], "--no-lr-neutral: options of --model census-lr"),
