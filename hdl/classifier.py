@@ -32,8 +32,8 @@ from bayesmachine.params import MachineParams
 
 from .signatures import beat_words, result_layout
 
-__all__ = ["ClassifierTop", "add_emit_options", "beat_layout", "build_from_args", "observation_layout",
-           "table_layout"]
+__all__ = ["ClassifierTop", "add_emit_options", "beat_layout", "build_from_args", "classifier_signature",
+           "observation_layout", "table_layout"]
 
 # emit --top classifier: the top's size options (the tables are loaded, so one design serves any task of
 # its size) and the machine options it passes on (classify.machine.MACHINE_FIELDS).
@@ -66,6 +66,14 @@ def beat_layout(classes: int, features: int, bins: int) -> data.StructLayout:
         "row": table_layout(classes, features, bins), "bins": observation_layout(features, bins)})})
 
 
+def classifier_signature(params: MachineParams, features: int, bins: int) -> wiring.Signature:
+    """The top's ports (``load`` in, ``result`` out), without building it (the Verilator harness's)."""
+    return wiring.Signature({
+        "load": In(stream.Signature(beat_layout(params.rows, features, bins))),
+        "result": Out(stream.Signature(result_layout(params))),
+    })
+
+
 class ClassifierTop(wiring.Component):
     """The classifier top (module text).
 
@@ -95,11 +103,7 @@ class ClassifierTop(wiring.Component):
         self._params = params
         self._features = as_int("features", features, 1)
         self._bins = as_int("bins", bins, 1, 256)
-        c = params.rows
-        super().__init__({
-            "load": In(stream.Signature(beat_layout(c, self._features, self._bins))),
-            "result": Out(stream.Signature(result_layout(params))),
-        })
+        super().__init__(classifier_signature(params, self._features, self._bins))
 
     params = property(lambda self: self._params)
     features = property(lambda self: self._features)

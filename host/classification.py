@@ -18,7 +18,8 @@ import numpy as np
 
 from .confidence import ECE_BINS, expected_calibration_error, reliability_table
 
-__all__ = ["BUNDLED_DATASETS", "Dataset", "load_dataset", "split_folds", "study", "save_reliability_figure"]
+__all__ = ["BUNDLED_DATASETS", "Dataset", "HeldOut", "check_top_run", "held_out", "load_dataset",
+           "split_folds", "study", "save_reliability_figure"]
 
 # scikit-learn's bundled data sets (shipped in its wheel: no download).
 BUNDLED_DATASETS = ("digits", "iris", "wine", "breast_cancer")
@@ -195,3 +196,43 @@ def save_reliability_figure(path: str | Path, report: Mapping[str, Any]) -> None
     ax.grid(True, alpha=0.3)
     fig.savefig(path, dpi=100)
     plt.close(fig)
+
+
+@dataclass(frozen=True, eq=False)
+class HeldOut:
+    """The fused classifier (one energy column) fitted on fold 0 of a data set's stratified 5-fold split
+    (split seed 0) and that fold's held-out observations: what the classifier top is measured on
+    (``benchmarks/bench_classifier_*.py``, ``synth --top classifier``)."""
+
+    dataset: str
+    machine: Any  # the ClassifierMachine
+    bins: int  # rows of each likelihood memory: the most bins of a feature
+    observed: np.ndarray  # (decisions, features) bins
+
+
+def held_out(dataset: str, *, bins: int, machine: Mapping[str, Any] | None = None,
+             decisions: int | None = None) -> HeldOut:
+    """``dataset`` (:func:`load_dataset`'s) binned into at most ``bins`` bins per feature, its tables
+    counted on fold 0's training samples (the default ``alpha``), the machine of the options ``machine``
+    (``classify.machine.MACHINE_FIELDS``); the first ``decisions`` held-out samples (None: all)."""
+    from bayesmachine.classify import DEFAULT_ALPHA, ClassifierMachine, NaiveBayesTables, QuantileBins
+
+    data = load_dataset(dataset)
+    train, test = split_folds(data.y, 5, None, 0)[0]
+    classes, labels = np.unique(data.y, return_inverse=True)
+    quantile = QuantileBins.fit(data.x[train], bins)
+    tables = NaiveBayesTables.from_counts(quantile.transform(data.x[train]), labels[train], classes.size,
+                                          quantile.counts, DEFAULT_ALPHA)
+    return HeldOut(dataset, ClassifierMachine(tables=tables, fuse=1, machine=machine),
+                   int(quantile.counts.max()), quantile.transform(data.x[test][:decisions]))
+
+
+def check_top_run(held: HeldOut, result: Any, engine: str) -> None:
+    """``result`` (a ``MachineResult`` of the classifier top under ``engine``) against the model's
+    decisions of the same observations: MAP, counters or weights, cycles; ValueError if any differs."""
+    want = held.machine.run(held.observed, "model")
+    for what, got, exp in (("MAP", result.map, want.map), ("readout", result.counts, want.readout),
+                           ("cycles", result.cycles, want.cycles)):
+        if not np.array_equal(got, exp):
+            raise ValueError(f"{held.dataset}: the classifier top under {engine} differs from the model "
+                             f"({what})")

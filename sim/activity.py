@@ -43,6 +43,10 @@ ACTIVITY_FLAGS = ("--coverage-toggle", "--coverage-max-width", "65536", "--cover
 # waiting at the issue point, ``feedback{r}`` and ``distance{r}`` its feedback column's).
 _ANY = r"bayesmachine(\..*)?"
 BLOCKS: tuple[tuple[str, str, str], ...] = (
+    # The classifier top's own (hdl/classifier.py, the top module): its likelihood memories' read
+    # registers (Yosys's ``_<n>_``) and the prior's row; the per-class sums and the entries formed.
+    ("tables", r"bayesmachine", r"prior|_\d+_"),
+    ("sums", r"bayesmachine", r"sums|entries"),
     ("front end", r"bayesmachine\.(frontend|fifo)(\..*)?", r".*"),
     ("sources", r"bayesmachine(\.\w+)*\.(source|source_rep\d+|column_scales)(\..*)?", r".*"),
     ("feedback prior", r"bayesmachine(\.\w+)*\.feedback_prior(\..*)?", r".*"),
