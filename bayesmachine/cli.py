@@ -42,8 +42,10 @@ class Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from bayesmachine.fpga.classifier_synth import ClassifierTask
     from bayesmachine.fpga.cli import register as register_fpga
     from bayesmachine.hdl.cli import register as register_hdl
+    from bayesmachine.host import classification
     from bayesmachine.host.cli import register as register_host
     from bayesmachine.host.throughput import measure_cycles
 
@@ -55,7 +57,10 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     register_hdl(sub)
     register_host(sub)
-    register_fpga(sub, measure=measure_cycles)  # the one place that hands host's work to fpga
+    classifier = ClassifierTask(classification.BUNDLED_DATASETS, classification.held_out,
+                                classification.top_cycles)
+    # the one place that hands host's work to fpga
+    register_fpga(sub, measure=measure_cycles, classifier=classifier)
     return parser
 
 

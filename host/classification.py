@@ -19,7 +19,7 @@ import numpy as np
 from .confidence import ECE_BINS, expected_calibration_error, reliability_table
 
 __all__ = ["BUNDLED_DATASETS", "Dataset", "HeldOut", "check_top_run", "held_out", "load_dataset",
-           "split_folds", "study", "save_reliability_figure"]
+           "split_folds", "study", "save_reliability_figure", "top_cycles"]
 
 # scikit-learn's bundled data sets (shipped in its wheel: no download).
 BUNDLED_DATASETS = ("digits", "iris", "wine", "breast_cancer")
@@ -236,3 +236,16 @@ def check_top_run(held: HeldOut, result: Any, engine: str) -> None:
         if not np.array_equal(got, exp):
             raise ValueError(f"{held.dataset}: the classifier top under {engine} differs from the model "
                              f"({what})")
+
+
+def top_cycles(held: HeldOut) -> dict[str, Any]:
+    """The classifier top's wall cycles per decision under pysim (``sim.classifier_top``): its tables
+    loaded, then ``held``'s observations back to back, from the first observation taken to the last
+    result; every decision checked against the model's (:func:`check_top_run`)."""
+    from bayesmachine.sim.classifier_top import run_classifier_top
+
+    run = run_classifier_top(held.machine, held.observed, held.bins)
+    check_top_run(held, run.result, "pysim")
+    n = len(held.observed)
+    return {"dataset": held.dataset, "decisions": n, "cycles_per_decision": float(run.result.cycles.mean()),
+            "wall_cycles_per_decision": run.wall_cycles / n}
