@@ -1,10 +1,12 @@
 """The classifier top (``emit --top classifier``) through Yosys and nextpnr on the ECP5-85F: LUT4, FF,
 block RAM, fmax, and decisions per second from its wall cycles per decision under pysim.
 
-The top sits behind the pin-saving wrapper (``fpga.wrapper.PinWrapper``) as ``synth`` puts the machine.
-The wall cycles per decision: ``sim/classifier_top.py`` on a held-out fold of the data set (its tables
-loaded, then ``--decisions`` observations back to back), from the first observation taken to the last
-result. Decisions per second = fmax / wall cycles per decision.
+The library function of ``bayesmachine synth --top classifier`` (``fpga.classifier_synth``), with the
+number of held-out decisions measured as an option: the top behind the pin-saving wrapper, its wall
+cycles per decision from ``host.classification.top_cycles`` (fold 0 of a stratified 5-fold split,
+split seed 0: its tables loaded, then ``--decisions`` observations back to back, from the first
+observation taken to the last result, every decision the model's). Decisions per second = fmax /
+wall cycles per decision.
 
     python benchmarks/bench_classifier_synth.py --dataset digits --integrator stochastic -o build/clf
 """
@@ -18,7 +20,7 @@ from pathlib import Path
 from bayesmachine.argtypes import choice_of, int_in_range, output_path
 from bayesmachine.classify import DEFAULT_BINS, MAX_BINS
 from bayesmachine.cli import Parser, run_script
-from bayesmachine.host.classification import BUNDLED_DATASETS, load_dataset, split_folds
+from bayesmachine.host.classification import BUNDLED_DATASETS, held_out, top_cycles
 from bayesmachine.params import INTEGRATORS
 
 
@@ -36,42 +38,18 @@ def main(argv: list[str] | None = None) -> None:
                     help="the tools' directory (default build/classifier-synth)")
     args = ap.parse_args(argv)
 
-    from amaranth.back import rtlil
+    from bayesmachine.fpga.classifier_synth import synth_classifier
 
-    from bayesmachine.classify.estimator import BayesianMachineClassifier
-    from bayesmachine.fpga import report as rep
-    from bayesmachine.fpga.flow import parse_nextpnr, place_and_route, synthesize
-    from bayesmachine.fpga.targets import get_target
-    from bayesmachine.fpga.wrapper import PinWrapper
-    from bayesmachine.hdl.classifier import ClassifierTop
-    from bayesmachine.sim.classifier_top import run_classifier_top
-
-    data = load_dataset(args.dataset)
-    train, test = split_folds(data.y, 5, None, 0)[0]
-    est = BayesianMachineClassifier(integrator=args.integrator, bins=args.bins)
-    est.fit(data.x[train], data.y[train])
-    machine, bins = est.machine_, int(est.bins_.counts.max())
-    observed = est.bins_.transform(data.x[test][: args.decisions])
-    run = run_classifier_top(machine, observed, bins)
-    want = machine.run(observed, "model")
-    if not (run.result.map == want.map).all() or not (run.result.counts == want.readout).all():
-        raise RuntimeError("the top under pysim differs from the model")
-    per_decision = run.wall_cycles / len(observed)
-    target = get_target("ecp5-85k")
-    out = Path(args.output)
-    out.mkdir(parents=True, exist_ok=True)
-    top = ClassifierTop(params=machine.params, features=machine.tables.features, bins=bins)
-    cells = synthesize(rtlil.convert(PinWrapper(top), name="top"), target, out, print)
-    res = rep.resources(target, cells)
-    figures = {"dataset": args.dataset, "integrator": args.integrator, "classes": machine.tables.classes,
-               "features": machine.tables.features, "bins": bins, "lut4": rep.logic_cells(target, res),
-               "ff": res["ff"], "bram": res["bram"], "lutram": res["lutram"],
-               "wall_cycles_per_decision": per_decision}
-    if not args.no_pnr:
-        pnr = parse_nextpnr(place_and_route(target, out, args.freq, args.seed, print))
-        figures["fmax_mhz"] = pnr["fmax_mhz"]
-        figures["decisions_per_second"] = pnr["fmax_mhz"] * 1e6 / per_decision
-    (out / "figures.json").write_text(json.dumps(figures, indent=2) + "\n")
+    held = held_out(args.dataset, bins=args.bins, machine={"integrator": args.integrator},
+                    decisions=args.decisions)
+    report = synth_classifier(held.machine.params, held.machine.tables.features, held.bins, "ecp5-85k",
+                              Path(args.output), freq_mhz=args.freq, pnr_seed=args.seed,
+                              place=not args.no_pnr, measure=lambda: top_cycles(held), progress=False)
+    res, tp = report["resources"], report["throughput"]
+    figures = {"dataset": args.dataset, "integrator": args.integrator, **report["classifier"],
+               "lut4": report["lut4"], "ff": res["ff"], "bram": res["bram"], "lutram": res["lutram"],
+               "fmax_mhz": report["fmax_mhz"], "wall_cycles_per_decision": tp["wall_cycles_per_decision"],
+               "decisions_per_second": tp["decisions_per_second"]}
     print(json.dumps(figures, indent=2))
 
 
