@@ -282,7 +282,7 @@ def test_synth_help_describes_the_stereo_top(capsys: pytest.CaptureFixture[str])
 
     assert main(["synth", "--help"]) == 0
     text = " ".join(capsys.readouterr().out.split())
-    assert "--top {machine,stereo}" in text and "StereoMachine" in text
+    assert "--top {machine,stereo,classifier}" in text and "StereoMachine" in text
     assert "--width WIDTH image width in pixels" in text and "--fifo-pixels" in text
     assert "gw5ast-138: GW5AST-LV138PG484AC1/I0 (fmax provisional: nextpnr-himbaechel's GW5A timing" in text
 
