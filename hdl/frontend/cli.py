@@ -52,8 +52,9 @@ def check_top(args: argparse.Namespace) -> None:
     model_params_from_args(args)  # an option of another model is refused as that first
     given += options_without_effect(args, machine_parameters(model_names_from_args(args)[0]))
     if given:
-        raise ValueError(f"{', '.join(given)}: only with --top stereo (got --top {args.top}, the machine "
-                         "alone, which takes likelihood words, not pixels)")
+        what = (", the machine alone, which takes likelihood words, not pixels" if args.top == "machine"
+                else ", which takes observed bins, not pixels")
+        raise ValueError(f"{', '.join(given)}: only with --top stereo (got --top {args.top}{what})")
 
 
 def width(args: argparse.Namespace) -> int:
