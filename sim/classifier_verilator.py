@@ -61,9 +61,8 @@ def build_classifier_harness(params: MachineParams, features: int, bins: int, *,
     ports = {"LOAD_PAYLOAD": ("load", "payload"), "LOAD_VALID": ("load", "valid"),
              "LOAD_READY": ("load", "ready"), "RESULT_PAYLOAD": ("result", "payload"),
              "RESULT_VALID": ("result", "valid")}
-    longest = params.max_clocks if params.max_cycles is None else params.max_cycles
     # A hung design: nothing taken nor returned for longer than a forming, a whole run and its beats.
-    hang = longest + 8 * params.beats_per_pixel + 64
+    hang = params.max_clocks + 8 * params.beats_per_pixel + 64
     header = header_prologue(signature, params, ports, hang_cycles=hang,
                              generator="bayesmachine.sim.classifier_verilator")
     words = _load_words(params, features, bins)

@@ -66,15 +66,15 @@ def stereo_header(params: MachineParams, model: ModelParams, width: int, signatu
              "RESULT_VALID": ("result", "valid")}
     entropy_ports, external = entropy_header(params, signature)
     pix = layout_fields(pixel_in_layout())
-    # A hung design: no pixel taken and no result for longer than a timed-out run and a line.
+    # A hung design: no pixel taken and no result for longer than a pixel's longest run and a line.
     # (K machines: a frame's first pixel may wait for every machine to go idle.)
-    hang = machines * (params.max_cycles + 8 * params.words_per_pixel + 2 * model.margin * width + 64)
+    hang = machines * (params.max_clocks + 8 * params.words_per_pixel + 2 * model.margin * width + 64)
     passes = pass_ports(params, model, width)
     for i, (name, pp, _) in enumerate(passes):
         ports |= {f"PASS{i}_PAYLOAD": (f"{name}_result", "payload"),
                   f"PASS{i}_VALID": (f"{name}_result", "valid")}
-        # The pass's runs (its own watchdog) and a line's flush of Dmax pixels.
-        hang += pp.max_cycles + (model.dmax + 1) * 8 * pp.words_per_pixel
+        # The pass's longest run and a line's flush of Dmax pixels.
+        hang += pp.max_clocks + (model.dmax + 1) * 8 * pp.words_per_pixel
     prologue = header_prologue(signature, params, ports | entropy_ports, hang_cycles=hang,
                                generator="bayesmachine.sim.stereo_engine")
     return prologue + f"""static const unsigned WIDTH = {width};

@@ -174,10 +174,8 @@ def design_header(params: MachineParams, signature: Any, trace_kind: int, *, tie
     line_start = ("#define BM_LINE_START 0\n" if flag is None else
                   f"#define BM_LINE_START 1\nstatic const unsigned LINE_START_OFFSET = {flag[0]};\n")
     entropy_ports, external = entropy_header(params, signature)
-    # A hung design: nothing loaded nor returned for longer than a whole timed-out run.
-    # A machine without a watchdog (max_cycles None: the log machine) runs at most its max_clocks.
-    longest = params.max_clocks if params.max_cycles is None else params.max_cycles
-    hang = longest + 4 * params.beats_per_pixel + 64
+    # A hung design: nothing loaded nor returned for longer than a pixel's longest run (in clocks).
+    hang = params.max_clocks + 4 * params.beats_per_pixel + 64
     prologue = header_prologue(signature, params, ports | entropy_ports, hang_cycles=hang)
     return prologue + f"""#define BM_TRACE {trace_kind}
 #define BM_READY_TIED {int(tie_ready)}

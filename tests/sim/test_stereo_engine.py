@@ -407,3 +407,21 @@ def test_small_log_stereo_machine_through_yosys(tmp_path: Path) -> None:
     # pixel) and the lines' borders bound the frame.
     assert tp["frame_compute_cycles_per_pixel"] == 1
     assert tp["frame_wall_cycles"] >= tp["frame_output_pixels"] * params.beats_per_pixel
+
+
+@pytest.mark.parametrize("integrator", ["stochastic", "log"])
+@pytest.mark.parametrize("name", ["paper", "census-lr"])
+def test_stereo_header_bounds_a_hang_by_the_longest_run(integrator: str, name: str) -> None:
+    """The harness's idle limit covers a pixel's longest run (``max_clocks``: the watchdog's clocks,
+    or the log loop's) and each pass's, for either integrator (a log machine has no watchdog)."""
+    from bayesmachine.hdl.frontend.stereo import stereo_signature
+    from bayesmachine.sim.stereo_engine import pass_ports, stereo_header
+
+    model = ModelParams(name=name, dmax=DMAX)
+    options = {"counter_max": 16} if integrator == "stochastic" else {}
+    params = stereo_machine_params(DMAX, model=model, integrator=integrator, **options)
+    header = stereo_header(params, model, WIDTH, stereo_signature(params, model))
+    hang = int(header.split("HANG_CYCLES = ")[1].split("ull")[0])
+    passes = pass_ports(params, model, WIDTH)
+    assert hang > params.max_clocks + 2 * model.margin * WIDTH
+    assert hang > sum(pp.max_clocks for _, pp, _ in passes)
