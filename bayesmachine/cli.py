@@ -114,6 +114,12 @@ def handled(prefix: str, command: Callable[[], int | None]) -> int:
     except OSError as exc:
         print(f"{prefix}: error: {_one_line(describe_os_error(exc))}", file=sys.stderr)
         return 2
+    except ModuleNotFoundError as exc:
+        if exc.name is None or exc.name.split(".")[0] == "bayesmachine":
+            raise  # a broken install of this package is a bug to see whole
+        print(f"{prefix}: error: this needs the module {exc.name!r}, which is not installed (pip install "
+              "bayesmachine installs the RTL's, 'bayesmachine[host]' the host's)", file=sys.stderr)
+        return 2
     except MemoryError as exc:
         detail = f" ({exc})" if str(exc) else ""
         print(f"{prefix}: error: out of memory{detail}; try --crop or a smaller --dmax", file=sys.stderr)

@@ -143,7 +143,7 @@ def _run(args: argparse.Namespace, *, measure: Measure, classifier: ClassifierTa
 def _run_classifier(args: argparse.Namespace, task: ClassifierTask) -> int:
     """``--top classifier``: the top of the data set's size, its machine of the machine options."""
     from bayesmachine.cliargs import DEFAULT_DMAX
-    from bayesmachine.hdl.classifier import machine_options
+    from bayesmachine.hdl.classifier_cli import machine_options
 
     from .classifier_synth import synth_classifier
 

@@ -36,7 +36,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    "chip (docs/frontend.md); classifier: feature bins in, each feature's likelihood memory "
                    "read at its bin, its tables loaded on a stream (--classes, --features, --bins; "
                    "docs/classifier.md)")
-    from .classifier import add_emit_options as add_classifier_options
+    from .classifier_cli import add_emit_options as add_classifier_options
     from .frontend.cli import add_options as add_stereo_options
 
     add_stereo_options(p)
@@ -57,7 +57,7 @@ def _run(args: argparse.Namespace) -> int:
     check_top(args)  # stereo options with --top machine would do nothing: refused
     if args.machines is not None and args.top != "stereo":
         raise ValueError(f"--machines: only with --top stereo (got --top {args.top})")
-    from .classifier import build_from_args
+    from .classifier_cli import build_from_args
 
     classifier = build_from_args(args)  # None for another top (its options refused there)
     if classifier is not None:

@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, ClassVar
 
 from bayesmachine.checks import type_name
 from bayesmachine.errors import ParameterError
+from bayesmachine.extras import MissingExtra
 
 if TYPE_CHECKING:  # params imports this package: no import of params (or numpy) when it does
     import numpy as np
@@ -152,7 +153,13 @@ class IntegratorKind(ABC):
         if name not in self.engines:
             raise ValueError(f"unknown engine {name!r}: the {self.name} integrator runs on "
                              f"{', '.join(self.engines)}")
-        return load_named(self.engines[name])
+        try:
+            return load_named(self.engines[name])
+        except ModuleNotFoundError as exc:  # the RTL's engines need Amaranth, the model engine does not
+            if exc.name is None or exc.name.split(".")[0] == "bayesmachine":
+                raise
+            raise MissingExtra(f"the {name} engine needs the module {exc.name!r}, which is not installed "
+                               "(pip install bayesmachine installs it)") from exc
 
     @abstractmethod
     def pixel_wall_cycles(self, params: MachineParams, cycles: np.ndarray,

@@ -25,7 +25,7 @@ from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams
 
 from . import protocol as pr
-from .ulx3s import Board, PLLConfig, get_board, pll_config
+from .devices import Board, PLLConfig, get_board, pll_config
 
 if TYPE_CHECKING:
     from .core import BoardCore

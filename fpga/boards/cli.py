@@ -25,8 +25,8 @@ from bayesmachine.fpga.flow import ROUTERS
 from bayesmachine.hdl.frontend import DEFAULT_WIDTH
 
 from .build import DEFAULT_BOARD_ROUTER, DEFAULT_BOARD_SEED
+from .devices import BOARDS
 from .link import record_design
-from .ulx3s import BOARDS
 
 __all__ = ["register"]
 

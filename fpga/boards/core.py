@@ -11,7 +11,7 @@ It only wires stream components, each with its own twin and test:
 - :class:`~.control.ProtocolControl`: answers the records, runs a frame from header to end record;
 - transmit: :class:`~.serializer.ControlSerializer` (control records) and one
   :class:`~.serializer.ResultSerializer` per pass of the model (one result record at a time, the pass's
-  tag: :func:`~.serializer.board_passes`) -> :class:`~.arbiter.TransmitArbiter` (whole records, control
+  tag: :func:`~.protocol.board_passes`) -> :class:`~.arbiter.TransmitArbiter` (whole records, control
   first, then the declared passes', then the own pass's) -> :class:`~.uart.UARTTx` -> ``tx``;
 - :class:`~.status.ReceiveTimeout` and :class:`~.status.StatusLEDs`.
 
@@ -36,8 +36,9 @@ from . import protocol as pr
 from .arbiter import TransmitArbiter
 from .control import ProtocolControl
 from .parser import HeaderParser
+from .protocol import BoardPass, board_passes
 from .receiver import FrameReceiver
-from .serializer import BoardPass, ControlSerializer, ResultSerializer, board_passes
+from .serializer import ControlSerializer, ResultSerializer
 from .status import ReceiveTimeout, StatusLEDs
 from .uart import UARTRx, UARTTx, check_clocks_per_bit
 
@@ -52,7 +53,7 @@ DEFAULT_TIMEOUT_BITS = 300_000  # 0.1 s at 3 Mbaud
 
 def check_board(params: MachineParams, model: ModelParams, width: int) -> None:
     """``ParameterError`` naming the problem unless a board top can carry this StereoMachine (and every
-    pass's results: :func:`~.serializer.board_passes`)."""
+    pass's results: :func:`~.protocol.board_passes`)."""
     from bayesmachine.hdl.frontend.stereo import check_stereo_machine
 
     check_stereo_machine(params, model, width)

@@ -8,7 +8,7 @@
 2. ``run_frame(left, right)``: the ``F`` header; once the board accepts it (``S``), the pixel
    pairs line by line, paced so the board's receive buffer cannot overflow (line y goes out once
    the own pass's results of image line y - lag are in, lag from the buffer's size), then the CRC-32.
-   Every pass's records come (the declared passes' by their tags, :func:`~.serializer.board_passes`).
+   Every pass's records come (the declared passes' by their tags, :func:`~.protocol.board_passes`).
    The results are accepted only with an ``E`` of status OK whose count and CRCs match what came:
    anything else (a refused header, a board reset, a garbled or lost byte either way, silence)
    fails the attempt, and after the board has settled the frame is sent again, under a new
@@ -37,7 +37,6 @@ from bayesmachine.params import DEFAULT_INTEGRATOR, MachineParams
 from bayesmachine.region import OutputRegion
 
 from . import protocol as pr
-from .serializer import board_passes
 
 __all__ = ["BoardError", "BoardLink", "LinkStats", "design_differences", "design_record",
            "fingerprint_message", "open_port", "record_design"]
@@ -221,7 +220,7 @@ class BoardLink:
             )
         from bayesmachine.hdl.frontend.passes import pass_row_pixels
 
-        passes = board_passes(params, model)
+        passes = pr.board_passes(params, model)
         pixels = np.stack([left, right], axis=-1).astype(np.uint8)
         lines = [pixels[y].tobytes() for y in range(height)]
         region = OutputRegion.of_model(left.shape, model)  # census 7x7: margin 3

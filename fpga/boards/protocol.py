@@ -31,14 +31,20 @@ import json
 import struct
 import zlib
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from bayesmachine.checks import as_int
 from bayesmachine.errors import ParameterError
 
+if TYPE_CHECKING:
+    from bayesmachine.models import ModelParams
+    from bayesmachine.params import MachineParams
+
 __all__ = [
     "BoardInfo",
+    "BoardPass",
     "CONTROL_TYPES",
     "FIELD_COUNTS",
     "FIELD_CYCLES",
@@ -52,6 +58,7 @@ __all__ = [
     "Record",
     "ResultFormat",
     "board_fingerprint",
+    "board_passes",
     "crc16",
     "crc32",
     "decode_record",
@@ -303,3 +310,28 @@ def _le_bytes(values: np.ndarray, nbytes: int) -> np.ndarray:
 def _from_le(raw: np.ndarray) -> np.ndarray:
     shifts = np.arange(raw.shape[-1], dtype=np.int64) * 8
     return (raw.astype(np.int64) << shifts).sum(axis=-1)
+
+
+@dataclass(frozen=True)
+class BoardPass:
+    """One pass's results on a board: the pass's ``name``, its machine on chip (``params``), its
+    records' ``tag``."""
+
+    name: str
+    params: MachineParams
+    tag: int
+
+
+def board_passes(params: MachineParams, model: ModelParams) -> tuple[BoardPass, ...]:
+    """Every pass of ``model`` whose results a board sends: the declared ones (census-lr's right pass) in
+    the model's order, tags ``'a'``, ``'b'``, ... (:func:`pass_tag`), then the own pass (``'R'``):
+    the transmit arbiter's order. ``ParameterError`` naming the model past :data:`MAX_PASSES`."""
+    from bayesmachine.hdl.frontend.words import pass_params
+
+    declared = model.passes[:-1]
+    if len(declared) > MAX_PASSES:
+        raise ParameterError(f"model: a board carries at most {MAX_PASSES} declared passes' results, the "
+                             f"{model.name} model declares {len(declared)}", "model")
+    out = [BoardPass(p.name, pass_params(model, params, p.name), pass_tag(i))
+           for i, p in enumerate(declared)]
+    return (*out, BoardPass(model.passes[-1].name, params, RESULT_TAG))

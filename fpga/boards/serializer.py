@@ -7,14 +7,13 @@ carries (:mod:`.protocol`), one byte per handshake of a :func:`~.streams.packet_
 - :class:`ResultSerializer`: one pass's results, its tag (``'R'`` for the model's own pass) and the
   fields a frame asked for (its twin: :class:`ResultSerializerTwin`, on
   :meth:`.protocol.ResultFormat.encode`); it counts the results it took and sent and keeps the CRC-32 of
-  the bytes sent, for the frame's end record. :func:`board_passes` says which passes a board sends, on
-  which machine, with which tag.
+  the bytes sent, for the frame's end record. :func:`.protocol.board_passes` says which passes a board
+  sends, on which machine, with which tag.
 """
 
 from __future__ import annotations
 
 import zlib
-from dataclasses import dataclass
 
 from amaranth.hdl import Array, C, Cat, Module, Mux, Signal, Value
 from amaranth.lib import stream, wiring
@@ -22,39 +21,13 @@ from amaranth.lib.wiring import In, Out
 
 from bayesmachine.checks import as_int
 from bayesmachine.hdl.signatures import result_layout
-from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams, ParameterError
 from bayesmachine.sim.results import MachineResult
 
 from . import protocol as pr
 from .streams import CRC16, CRC32, packet_layout, record_layout
 
-__all__ = ["BoardPass", "ControlSerializer", "ResultSerializer", "ResultSerializerTwin", "board_passes"]
-
-
-@dataclass(frozen=True)
-class BoardPass:
-    """One pass's results on a board: the pass's ``name``, its machine on chip (``params``), its
-    records' ``tag``."""
-
-    name: str
-    params: MachineParams
-    tag: int
-
-
-def board_passes(params: MachineParams, model: ModelParams) -> tuple[BoardPass, ...]:
-    """Every pass of ``model`` whose results a board sends: the declared ones (census-lr's right pass) in
-    the model's order, tags ``'a'``, ``'b'``, ... (:func:`.protocol.pass_tag`), then the own pass (``'R'``):
-    the transmit arbiter's order. ``ParameterError`` naming the model past :data:`.protocol.MAX_PASSES`."""
-    from bayesmachine.hdl.frontend.words import pass_params
-
-    declared = model.passes[:-1]
-    if len(declared) > pr.MAX_PASSES:
-        raise ParameterError(f"model: a board carries at most {pr.MAX_PASSES} declared passes' results, the "
-                             f"{model.name} model declares {len(declared)}", "model")
-    out = [BoardPass(p.name, pass_params(model, params, p.name), pr.pass_tag(i))
-           for i, p in enumerate(declared)]
-    return (*out, BoardPass(model.passes[-1].name, params, pr.RESULT_TAG))
+__all__ = ["ControlSerializer", "ResultSerializer", "ResultSerializerTwin"]
 
 
 class ControlSerializer(wiring.Component):

@@ -30,8 +30,9 @@ from bayesmachine.sim.results import MachineResult
 
 from . import protocol as pr
 from .parser import Header, HeaderParserTwin
+from .protocol import board_passes
 from .receiver import FrameReceiverTwin
-from .serializer import ResultSerializerTwin, board_passes
+from .serializer import ResultSerializerTwin
 
 __all__ = ["BoardTwin"]
 

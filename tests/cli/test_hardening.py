@@ -511,7 +511,8 @@ def test_the_board_top_elaborates_without_deprecated_requests() -> None:
     from amaranth_boards.ulx3s import ULX3S_85F_Platform
 
     from bayesmachine.fpga.boards.core import BoardCore
-    from bayesmachine.fpga.boards.ulx3s import ULX3STop, pll_config
+    from bayesmachine.fpga.boards.devices import pll_config
+    from bayesmachine.fpga.boards.ulx3s import ULX3STop
     from bayesmachine.hdl.frontend.stereo import stereo_machine_params
     from bayesmachine.models import ModelParams
 

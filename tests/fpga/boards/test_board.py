@@ -14,9 +14,9 @@ from conftest import assert_same_results, frame_results, passes_model
 from bayesmachine.cli import main
 from bayesmachine.fpga.boards import protocol as pr
 from bayesmachine.fpga.boards.core import check_board
+from bayesmachine.fpga.boards.devices import pll_config
 from bayesmachine.fpga.boards.link import BoardError, BoardLink
 from bayesmachine.fpga.boards.twin import BoardTwin
-from bayesmachine.fpga.boards.ulx3s import pll_config
 from bayesmachine.hdl.frontend.stereo import stereo_machine_params
 from bayesmachine.host.images import bundled_pair
 from bayesmachine.models import ModelParams
@@ -251,7 +251,7 @@ def test_link_gives_every_pass_of_a_model_from_its_definition() -> None:
     """A model defined outside the package (``conftest.lr_like``: a right pass and a left-reference pass
     beside its own): tags 'a' and 'b' by the passes' order in its definition, every pass's results the
     model's, the link's frame of every pass's records."""
-    from bayesmachine.fpga.boards.serializer import board_passes
+    from bayesmachine.fpga.boards.protocol import board_passes
 
     model = ModelParams(dmax=DMAX, name="lr-like")
     params = stereo_machine_params(DMAX, model=model)
