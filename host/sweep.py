@@ -54,6 +54,7 @@ from bayesmachine.outputs import OutputDir, require_ours
 from bayesmachine.params import DEFAULT_INTEGRATOR, MachineParams
 
 from .datasets import PairSpec, load_pair
+from .fill import DEFAULT_FILL
 from .images import Crop
 from .run import prepare, run_pair
 from .scheduler import connect
@@ -242,12 +243,14 @@ class Task:
     sgbm: bool
     result: str  # OUT/runs/<pair>/<point>/result.json
     fingerprint: str
+    fill: str = DEFAULT_FILL  # host.fill's rule for the pixels without a disparity
 
 
-def _fingerprint(pair: PairSpec, point: Point, crop: Crop | None, engine: str, sgbm: bool) -> str:
+def _fingerprint(pair: PairSpec, point: Point, crop: Crop | None, engine: str, sgbm: bool, fill: str) -> str:
     blob = json.dumps(
         {"version": RESULT_VERSION, "pair": pair.to_dict(), "crop": str(crop) if crop else None,
-         "model": point.model.to_dict(), "machine": point.machine.to_dict(), "engine": engine, "sgbm": sgbm},
+         "model": point.model.to_dict(), "machine": point.machine.to_dict(), "engine": engine, "sgbm": sgbm,
+         "fill": fill},
         sort_keys=True, default=str,
     )
     return hashlib.sha256(blob.encode()).hexdigest()[:24]
@@ -260,9 +263,10 @@ def pair_dir_name(name: str) -> str:
 
 
 def make_tasks(pairs: list[PairSpec], points: list[Point], out: Path, crop: Crop | None, engine: str,
-               sgbm: bool) -> list[Task]:
+               sgbm: bool, fill: str = DEFAULT_FILL) -> list[Task]:
     """Pair-major tasks (a worker meets a pair's points together: its cache serves them); OpenCV's
-    SGBM / StereoBM figures with the first point of each pair only."""
+    SGBM / StereoBM figures with the first point of each pair only; every task's map filled by ``fill``
+    (:mod:`.fill`)."""
     dirs = [pair_dir_name(p.name) for p in pairs]
     if len({d.casefold() for d in dirs}) != len(dirs):  # two names made one (or one on a case-blind disk)
         dirs = [f"{i:04d}_{d}" for i, d in enumerate(dirs)]
@@ -272,7 +276,7 @@ def make_tasks(pairs: list[PairSpec], points: list[Point], out: Path, crop: Crop
             first = sgbm and point.index == 0
             tasks.append(Task(pair, point, crop, engine, first,
                               str(out / RUNS_DIR / d / point.id / RESULT_NAME),
-                              _fingerprint(pair, point, crop, engine, first)))
+                              _fingerprint(pair, point, crop, engine, first, fill), fill))
     return tasks
 
 
@@ -342,7 +346,7 @@ def run_task(task: Task) -> dict[str, Any]:
     model = task.point.model
     prep = _cached(("prepared", task.pair, task.crop, model), lambda: _prepare(left, right, model, gt))
     outcome = run_pair(left, right, model, task.point.machine, engine=task.engine, prepared=prep,
-                       progress=False, sgbm=task.sgbm)
+                       progress=False, sgbm=task.sgbm, fill=task.fill)
     record = {
         "version": RESULT_VERSION,
         "pair": task.pair.name,
@@ -459,6 +463,7 @@ class SweepConfig:
     engine: str = "model"
     crop: Crop | None = None
     sgbm: bool = True
+    fill: str = DEFAULT_FILL
     resume: bool = False
     workers: int = 0
     processes: bool = True
@@ -580,6 +585,7 @@ def _aggregate(config: SweepConfig, records: dict[tuple[str, str], dict[str, Any
         "input": config.input,
         "dataset": config.dataset,
         "crop": str(config.crop) if config.crop is not None else None,
+        "fill": config.fill,
         "output_shape": pair_entries[0].get("output_shape") if len(pairs) == 1 else None,
         "ground_truth": any(e.get("ground_truth") for e in pair_entries),
         "reference_seconds": by_model,
@@ -615,7 +621,7 @@ def run_sweep(config: SweepConfig, client: Any = None) -> SweepOutcome:
     (else one per ``config``: this process, a LocalCluster, or ``--scheduler``'s cluster)."""
     # Absolute: a worker elsewhere (--scheduler) has its own working directory.
     tasks = make_tasks(config.pairs, config.points, config.output.absolute(), config.crop, config.engine,
-                       config.sgbm)
+                       config.sgbm, config.fill)
     records: dict[tuple[str, str], dict[str, Any]] = {}
     failures: list[TaskFailure] = []
     with OutputDir(config.output, SWEEP_OUTPUTS, last="sweep.json") as out:

@@ -22,6 +22,7 @@ from bayesmachine.outputs import require_memory
 from bayesmachine.params import DEFAULT_RNG, MachineParams
 from bayesmachine.region import OutputRegion
 
+from ..fill import DEFAULT_FILL, FILLS
 from ..images import Crop, bundled_pair, crop_image, load_gt, load_image, parse_crop
 from ..run import result_bytes
 
@@ -112,6 +113,19 @@ def add_gt_options(p: argparse.ArgumentParser, scale_note: str = "") -> None:
         "16-bit images"
         + scale_note,
     )
+
+
+RUN_FILL_OUTPUTS = "result.npz keeps the machine's own map beside filled_map; report.json gives both maps' " \
+    "figures (filled_*)"
+
+
+def add_fill_option(g: argparse._ActionsContainer, what: str = RUN_FILL_OUTPUTS) -> None:
+    """``--fill``: :mod:`..fill`'s rule for the pixels without a disparity (``what``: its figures' place)."""
+    g.add_argument("--fill", choices=FILLS, default=DEFAULT_FILL,
+                   help="give the pixels the machine calls no match, or whose MAP the left-right test "
+                   "rejects, a disparity from their row: background, the lower of the nearest matched ones "
+                   "left and right; left, the nearest matched one to the left; none (default "
+                   f"{DEFAULT_FILL}). {what}")
 
 
 def add_output_options(p: argparse.ArgumentParser) -> None:

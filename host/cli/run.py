@@ -41,10 +41,10 @@ from ..calib import (
     read_calibration,
 )
 from ..confidence import DEFAULT_T, DEFAULT_WINDOW, MAX_T, MAX_WINDOW, ConfidenceParams
-from ..fill import DEFAULT_FILL, FILLS
 from ..images import Crop
 from ..run import ENGINES, FEEDS, RunOutcome, run_pair
 from .options import (
+    add_fill_option,
     add_gt_options,
     add_host_machine_options,
     add_input_options,
@@ -128,12 +128,7 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
         help="with --engine verilator: write OUT/waves.vcd while output pixels FIRST..LAST "
         "(row-major over the output region, from 0) are in the machine",
     )
-    g.add_argument("--fill", choices=FILLS, default=DEFAULT_FILL,
-                   help="give the pixels the machine calls no match, or whose MAP the left-right test "
-                   "rejects, a disparity from their row: background, the lower of the nearest matched ones "
-                   "left and right; left, the nearest matched one to the left; none (default "
-                   f"{DEFAULT_FILL}). result.npz keeps the machine's own map beside filled_map; report.json "
-                   "gives both maps' figures (filled_*)")
+    add_fill_option(g)
     add_gt_options(p)
     _add_confidence_options(p)
     add_output_options(p)

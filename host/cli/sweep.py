@@ -23,6 +23,7 @@ from ..run import ENGINES
 from ..scheduler import parse_scheduler
 from ..sweep import Point, SweepConfig, list_option_changes, run_sweep, seed_cache, sweep_points
 from .options import (
+    add_fill_option,
     add_gt_options,
     add_host_machine_options,
     add_input_options,
@@ -100,6 +101,7 @@ def _add_sweep_options(p: argparse.ArgumentParser) -> None:
     g.add_argument(
         "--engine", choices=ENGINES, default="model", help="how to run the machine (default model)"
     )
+    add_fill_option(g, "Each result.json and sweep.json give both maps' figures (filled_*)")
     add_gt_options(p, scale_note="; with --dataset it replaces the layout's scale")
     add_output_options(p)
 
@@ -205,7 +207,7 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         print(f"sweep: {len(pairs)} pair(s) x {len(points)} point(s) = {len(pairs) * len(points)} tasks "
               f"{where}", flush=True)
     config = SweepConfig(pairs=pairs, points=points, output=args.output, engine=args.engine, crop=args.crop,
-                         sgbm=not args.no_sgbm, resume=args.resume, workers=workers,
+                         sgbm=not args.no_sgbm, fill=args.fill, resume=args.resume, workers=workers,
                          scheduler=args.scheduler, connect_timeout=args.connect_timeout, progress=progress,
                          input=source, dataset=dataset)
     outcome = run_sweep(config)

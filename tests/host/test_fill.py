@@ -110,3 +110,24 @@ def test_the_hardware_paths_refuse_the_semiglobal_model(argv, tmp_path, capsys) 
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "no lane builder for the semiglobal column" in err[0], err
     assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())
+
+
+def test_a_sweep_fills_as_asked_and_says_so(pair, tmp_path) -> None:
+    """``sweep --fill``: each point's figures of the filled map by the rule asked, sweep.json names the
+    rule, and a point's result fingerprint differs between rules (a resumed sweep never mixes them)."""
+    base = ["sweep", str(pair / "l.png"), str(pair / "r.png"), "--gt", str(pair / "gt.npy"), "--dmax", "6",
+            "--model", "census-sgm", "--counter-max", "16", "--no-sgbm", "--quiet", "--workers", "0"]
+    sweeps = {}
+    for rule in ("left", "none"):
+        assert main([*base, "--fill", rule, "-o", str(tmp_path / rule)]) == 0
+        sweeps[rule] = json.loads((tmp_path / rule / "sweep.json").read_text())
+    assert _run(pair, tmp_path / "run-left", "--fill", "left") == 0
+    run = json.loads((tmp_path / "run-left" / "report.json").read_text())
+    left, none = sweeps["left"], sweeps["none"]
+    assert left["fill"] == "left" and none["fill"] == "none"
+    point = left["points"][0]
+    assert point["filled_bad2_nomatch_bad"] == run["filled_bad2_nomatch_bad"]  # the run's own figure
+    assert point["filled_pixels"] == run["filled_pixels"] > 0
+    assert none["points"][0].get("filled_pixels") is None
+    results = [json.loads(next((tmp_path / r / "runs").rglob("result.json")).read_text()) for r in sweeps]
+    assert results[0]["fingerprint"] != results[1]["fingerprint"]
