@@ -29,7 +29,8 @@ CROP = ["--crop", "300,200,40,24", "--dmax", "8", "--quiet"]
 
 
 def without_amaranth(*argv: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-c", _WITHOUT, *argv], capture_output=True, text=True, timeout=600)
+    return subprocess.run([sys.executable, "-c", _WITHOUT, *argv], capture_output=True, text=True,
+                          timeout=600)
 
 
 @pytest.mark.parametrize("integrator", ["stochastic", "log"])
