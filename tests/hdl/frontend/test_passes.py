@@ -351,7 +351,13 @@ CASES = {
 }
 
 
-@pytest.mark.parametrize("case", list(CASES))
+# The default tier keeps the cases of each mechanism it alone exercises; these three, the longest to
+# simulate, run in the slow tier.
+SLOW_CASES = ("no-nomatch-row-right-watchdog", "issue-rules", "lr-like")
+
+
+@pytest.mark.parametrize("case", [pytest.param(c, marks=pytest.mark.slow) if c in SLOW_CASES else c
+                                  for c in CASES])
 @pytest.mark.usefixtures("defined")
 def test_stereo_machine_passes_equal_the_model(case: str) -> None:
     (name, fields), shapes, fifo_pixels, counter_max = CASES[case]
@@ -418,7 +424,8 @@ def test_what_the_passes_on_chip_cannot_do_is_one_error_naming_the_pass() -> Non
 BEATS = {("log", 42): (14, 1, True), ("stochastic", 21): (7, 2, True), ("log", 6): (2, 7, False)}
 
 
-@pytest.mark.parametrize(("integrator", "words_per_beat"), list(BEATS))
+@pytest.mark.parametrize(("integrator", "words_per_beat"),
+                         [pytest.param(*k, marks=pytest.mark.slow) if k == ("log", 42) else k for k in BEATS])
 def test_census_lr_at_any_words_per_beat_equals_the_model(integrator: str, words_per_beat: int) -> None:
     """census-lr (fused) with a pixel's every row in one beat, in two beats, or in seven beats of two rows:
     the word generators' delay lines as taps (wide beats) or as banks (``tapped_line``), the left and
@@ -474,6 +481,7 @@ def test_census_lr_rows_start_during_the_right_pass_flush() -> None:
     assert _census_lr_clocks(16, 2, 20, 6) <= 805  # measured
 
 
+@pytest.mark.slow  # 95 % stalls: twenty times the clocks of a frame
 def test_census_lr_equals_the_model_while_the_own_pass_lags() -> None:
     """census-lr (log) with the own pass's results stalled 95 % of the cycles: its FIFO fills, the input
     stops in the middle of the right pass's flushes, and a flush that has taken a pixel of the next row
@@ -541,7 +549,8 @@ def test_fused_share_is_checked() -> None:
 STALLS = {"own-lags": {"left": 0.97}, "right-lags": {"right": 0.9}, "both": {"left": 0.5, "right": 0.5}}
 
 
-@pytest.mark.parametrize("stalls", list(STALLS))
+@pytest.mark.parametrize("stalls", [pytest.param(k, marks=pytest.mark.slow) if k == "own-lags" else k
+                                    for k in STALLS])  # own-lags: 97 % stalls, the slow tier's
 def test_shared_sums_in_the_smallest_memory_equal_the_model(monkeypatch: pytest.MonkeyPatch,
                                                             stalls: str) -> None:
     """With the shared memories as small as allowed (32 positions at Dmax 6, 2 beats of 4 rows) each pass

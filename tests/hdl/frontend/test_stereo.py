@@ -36,7 +36,8 @@ def _crop(y: int, x: int, height: int, width: int) -> tuple[np.ndarray, np.ndarr
             np.ascontiguousarray(right[y:y + height, x:x + width]))
 
 
-@pytest.mark.parametrize(("machines", "fused"), [(2, False), (3, False), (2, True)])
+@pytest.mark.parametrize(("machines", "fused"), [(2, False), pytest.param(3, False, marks=pytest.mark.slow),
+                                                  (2, True)])
 def test_census_machines_equal_the_model(machines: int, fused: bool) -> None:
     """The census model (neighbour prior on: the above neighbour from another machine) per column, and
     with its image columns fused, the default (each machine's word generator scans its pixels' beats)."""
@@ -61,7 +62,9 @@ def test_paper_machines_equal_the_model(machines: int, rng: str) -> None:
     assert_same_results(got, machines_model(frames, model, params, machines))
 
 
-@pytest.mark.parametrize(("machines", "integrator"), [(2, "stochastic"), (3, "stochastic"), (2, "log")])
+@pytest.mark.parametrize(("machines", "integrator"), [(2, "stochastic"),
+                                                       pytest.param(3, "stochastic", marks=pytest.mark.slow),
+                                                       (2, "log")])
 def test_census_lr_machines_equal_the_model(machines: int, integrator: str) -> None:
     """census-lr on K machines per pass (both passes' rows dealt: map row r's right and left pass on lane
     r mod K, each pass's above neighbour from lane r - 1, the consistency column from its own lane),
@@ -171,8 +174,8 @@ def test_cli_emit_stereo_machines(tmp_path, capsys: pytest.CaptureFixture[str]) 
     from bayesmachine.cli import main
 
     out = tmp_path / "top.il"
-    assert main(["emit", "--top", "stereo", "--dmax", "4", "--width", "16", "--machines", "3",
-                 "-o", str(out)]) == 0
+    assert main(["emit", "--top", "stereo", "--model", "paper", "--dmax", "4", "--width", "16",
+                 "--machines", "3", "-o", str(out)]) == 0
     assert "3 machines (map row r on machine r mod 3" in capsys.readouterr().out
     text = out.read_text()
     assert all(f"machine{j}" in text for j in range(3)) and "machine3" not in text
