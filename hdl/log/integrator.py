@@ -34,10 +34,10 @@ from bayesmachine.integrators.log import (
     check_params,
 )
 
-from .adders import RowAdders
-from .argmin import ArgminTree
+from .adders import RowAdders, adder_stages
+from .argmin import ArgminTree, argmin_stages
 from .layouts import codes_layout, log_result_layout
-from .weights import WeightStage
+from .weights import WEIGHT_STAGES, WeightStage
 
 __all__ = ["FEEDBACK_GROUP", "LogIntegrator", "integrator_codes_layout"]
 
@@ -126,13 +126,9 @@ class LogIntegrator(wiring.Component):
         self._adder_levels = as_int("adder_levels_per_stage", adder_levels_per_stage, 1, 64)
         self._fb_words, self._fb_nomatch = _feedback_table(p, feedback_words, feedback_nomatch_word)
         fb = self.feedback
-        # The blocks are built here (their latencies are this one's); elaborate adds them.
-        loaded = dataclasses.replace(p, codes=p.codes - fb)
-        self._adders = self.adders_block(params=loaded, levels_per_stage=self._adder_levels, carried=int(fb))
-        copies = -(-p.rows // FEEDBACK_GROUP) if fb else 0
-        self._argmin = self.argmin_block(params=p, levels_per_stage=self._levels, pass_sums=True, feedback=fb,
-                                  latest_copies=copies)
-        self._weights = self.weights_block(params=p)
+        # The blocks' latencies, from their stage functions (elaborate builds the blocks).
+        self._adder_latency = len(adder_stages(self._loaded(), self._adder_levels, int(fb)))
+        self._argmin_latency = len(argmin_stages(p, self._levels, True, feedback=fb))
         members = {"codes": In(stream.Signature(integrator_codes_layout(p, fb))),
                    "result": Out(stream.Signature(log_result_layout(p)))}
         if fb:
@@ -142,6 +138,10 @@ class LogIntegrator(wiring.Component):
     @property
     def params(self) -> LogParams:
         return self._params
+
+    def _loaded(self) -> LogParams:
+        """The row adders' parameters: the loaded codes per row."""
+        return dataclasses.replace(self._params, codes=self._params.codes - self.feedback)
 
     @property
     def feedback_words(self) -> tuple[int, ...]:
@@ -165,17 +165,22 @@ class LogIntegrator(wiring.Component):
 
     @property
     def loop(self) -> int:
-        return self._argmin.latency if self.feedback else 1
+        return self._argmin_latency if self.feedback else 1
 
     @property
     def latency(self) -> int:
-        return self._adders.latency + 1 + self._argmin.latency + self._weights.latency
+        return self._adder_latency + 1 + self._argmin_latency + WEIGHT_STAGES
 
     def elaborate(self, platform: object) -> Module:
         m = Module()
-        m.submodules.adders = adders = self._adders
-        m.submodules.argmin = argmin = self._argmin
-        m.submodules.weights = weights = self._weights
+        p, fb = self._params, self.feedback
+        m.submodules.adders = adders = self.adders_block(params=self._loaded(), carried=int(fb),
+                                                         levels_per_stage=self._adder_levels)
+        copies = -(-p.rows // FEEDBACK_GROUP) if fb else 0
+        m.submodules.argmin = argmin = self.argmin_block(params=p, levels_per_stage=self._levels,
+                                                         pass_sums=True, feedback=fb, latest_copies=copies)
+        m.submodules.weights = weights = self.weights_block(params=p)
+        assert (adders.latency, argmin.latency) == (self._adder_latency, self._argmin_latency)
         wiring.connect(m, argmin.best, weights.best)
         # Pixels issued and not yet out, their line_start in order (at most every stage's plus the two
         # output buffers' entries: never full).
@@ -183,7 +188,7 @@ class LogIntegrator(wiring.Component):
         m.submodules.starts = starts = fifo.SyncFIFO(width=1, depth=depth)
         m.d.comb += [adders.codes.valid.eq(self.codes.valid), self.codes.ready.eq(adders.codes.ready),
                      adders.codes.payload.eq(self.codes.payload)]
-        self._issue(m, starts)
+        self._issue(m, adders, argmin, starts)
         wiring.connect(m, weights.result, wiring.flipped(self.result))
         m.d.comb += starts.r_en.eq(weights.result.valid & self.result.ready)
         if self.feedback:
@@ -195,12 +200,12 @@ class LogIntegrator(wiring.Component):
         argmin tree (the last one's MAP has reached its output buffer and is its latest result)."""
         return start | (pending == 0)
 
-    def _issue(self, m: Module, starts: fifo.SyncFIFO) -> None:
+    def _issue(self, m: Module, adders: RowAdders, argmin: ArgminTree, starts: fifo.SyncFIFO) -> None:
         """The next pixel's loaded sums wait in the issue register (so the loop's first stage starts at
         registers, not at the row adders' output buffer) and issue into the argmin tree when it takes them
         and (with feedback) its feedback codes are known (:meth:`issue_known`)."""
-        p, argmin = self._params, self._argmin
-        sums, into = self._adders.sums, argmin.sums
+        p = self._params
+        sums, into = adders.sums, argmin.sums
         held = Signal(sums.payload.shape(), name="issue_sums", reset_less=True)
         held_valid = Signal(name="issue_valid")
         view = sums.payload.shape()(held)
@@ -213,7 +218,7 @@ class LogIntegrator(wiring.Component):
             pending = Signal(range(argmin.latency + 8))
             m.d.sync += pending.eq(pending + issue - argmin.arriving)
             known = self.issue_known(start, pending)
-            fb = self._feedback_codes(m, start)
+            fb = self._feedback_codes(m, argmin, start)
             m.d.comb += [into.payload.feedback[r].eq(fb[r]) for r in range(p.rows)]
         else:
             known = 1
@@ -226,7 +231,7 @@ class LogIntegrator(wiring.Component):
             *(into.payload.sums[r].eq(view.sums[r]) for r in range(p.rows)),
         ]
 
-    def _feedback_codes(self, m: Module, start: Value) -> list[Value]:
+    def _feedback_codes(self, m: Module, argmin: ArgminTree, start: Value) -> list[Value]:
         """Each row's feedback code from the argmin tree's latest MAP (the copy of the row's group): the
         table at |r − MAP| clamped, the no-match code in the no-match row; 0 when that pixel's answer is
         no match or every row was excluded (0 from reset), or at a line start."""
@@ -234,7 +239,7 @@ class LogIntegrator(wiring.Component):
         last = len(words) - 1
         out = []
         for r in range(p.rows):
-            latest = self._argmin.latest[r // FEEDBACK_GROUP]
+            latest = argmin.latest[r // FEEDBACK_GROUP]
             hit = ~latest.nomatch & ~latest.all_excluded
             code = Signal(p.code_bits, name=f"feedback{r}")
             if p.nomatch_row and r == p.rows - 1:

@@ -23,7 +23,13 @@ from amaranth.lib import wiring
 
 from bayesmachine.columns.energy import LOG_CODE_BITS
 from bayesmachine.hdl.signatures import MachineSignature, beat_words
-from bayesmachine.integrators.log import LOG, log_params, pixel_clocks
+from bayesmachine.integrators.log import (
+    ADDER_LEVELS_PER_STAGE,
+    ARGMIN_LEVELS_PER_STAGE,
+    LOG,
+    log_params,
+    pixel_clocks,
+)
 from bayesmachine.params import MachineParams
 
 from .integrator import LogIntegrator
@@ -70,10 +76,12 @@ class LogMachine(wiring.Component):
 
     def integrator(self) -> LogIntegrator:
         """The machine's integrator: its rule's parameters, the feedback column's table (a neighbour
-        prior), the machine's pipeline setting (``LogIntegrator``'s defaults)."""
+        prior), the machine's pipeline setting (``ARGMIN_LEVELS_PER_STAGE``, ``ADDER_LEVELS_PER_STAGE``)."""
         p = self._params
         return LogIntegrator(params=self._log, feedback_words=p.feedback_words,
-                             feedback_nomatch_word=p.feedback_nomatch_word)
+                             feedback_nomatch_word=p.feedback_nomatch_word,
+                             levels_per_stage=ARGMIN_LEVELS_PER_STAGE,
+                             adder_levels_per_stage=ADDER_LEVELS_PER_STAGE)
 
     def elaborate(self, platform: object) -> Module:
         m = Module()
