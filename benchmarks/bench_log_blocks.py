@@ -1,5 +1,7 @@
-"""The log integrator (``bayesmachine.hdl.log.LogIntegrator``) through Yosys ``synth_ecp5``: LUT4, carry
-cells, flip-flops per pipeline setting, and with ``--pnr`` its fmax from nextpnr-ecp5 on the LFE5U-85F.
+"""The log integrator (``bayesmachine.hdl.log.LogIntegrator``, the log machine's) through Yosys
+``synth_ecp5``: LUT4, carry cells, flip-flops per pipeline setting, and with ``--pnr`` its fmax from
+nextpnr-ecp5 on the LFE5U-85F. ``--feedback``: with census-lr's feedback column (the left prior's
+codes) as the machine has it.
 
 Resources are the integrator's own: synthesized behind a register on every port bit
 (``fpga.port_registers.PortRegisters``; Yosys 0.70's ABC9 step fails an assertion on the bare
@@ -30,6 +32,7 @@ from bayesmachine.fpga.targets import get_target
 from bayesmachine.fpga.wrapper import PinWrapper
 from bayesmachine.hdl.log import ArgminTree, LogIntegrator, LogParams, RowAdders, WeightStage
 from bayesmachine.integrators.log import MAX_CODE_BITS
+from bayesmachine.models import ModelParams, disparity_machine
 from bayesmachine.params import TIE_BREAKS
 
 CELLS = ("LUT4", "CCU2C", "PFUMX", "L6MUX21", "TRELLIS_FF", "DP16KD", "TRELLIS_DPR16X4")
@@ -51,12 +54,23 @@ def block_costs(p: LogParams, levels: int, adder_levels: int, workdir: Path, qui
               f"{res['ff'] - ring.boundary_bits:6} FF", flush=True)
 
 
+def census_lr_feedback() -> dict:
+    """census-lr's feedback column as its log machine has it: ``LogIntegrator``'s feedback arguments."""
+    machine = disparity_machine(ModelParams(name="census-lr"), integrator="log")
+    return {"feedback_words": machine.feedback_words, "feedback_nomatch_word": machine.feedback_nomatch_word}
+
+
 def measure(p: LogParams, levels: int, adder_levels: int, workdir: Path, pnr: bool, seed: int,
-            quiet: bool) -> dict:
+            quiet: bool, feedback: dict) -> dict:
     """Synthesis counts of the integrator alone and, with ``pnr``, the wrapped design's fmax."""
     say = (lambda _msg: None) if quiet else print
     target = get_target("ecp5-85k")
-    core = LogIntegrator(params=p, levels_per_stage=levels, adder_levels_per_stage=adder_levels)
+
+    def build() -> LogIntegrator:
+        return LogIntegrator(params=p, levels_per_stage=levels, adder_levels_per_stage=adder_levels,
+                             **feedback)
+
+    core = build()
     latency = core.latency
     alone = workdir / "alone"
     alone.mkdir(parents=True, exist_ok=True)
@@ -70,7 +84,7 @@ def measure(p: LogParams, levels: int, adder_levels: int, workdir: Path, pnr: bo
     if pnr:
         placed = workdir / "placed"
         placed.mkdir(parents=True, exist_ok=True)
-        wrapped = LogIntegrator(params=p, levels_per_stage=levels, adder_levels_per_stage=adder_levels)
+        wrapped = build()
         synthesize(rtlil.convert(PinWrapper(wrapped, pin_width=8), name="top"), target, placed, say)
         t0 = time.perf_counter()
         report = parse_nextpnr(place_and_route(target, placed, 150.0, seed, say))
@@ -97,13 +111,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--step", type=float_in_range(1e-3, 16.0), default=1 / 16,
                     help="exp table: nats per code (default 1/16)")
     ap.add_argument("--tie-break", default="nomatch-first", choices=TIE_BREAKS)
+    ap.add_argument("--feedback", action="store_true",
+                    help="with census-lr's feedback column, the last of the N codes per row (its codes "
+                         "need 6 bits or more)")
     ap.add_argument("--pnr", action="store_true", help="also place and route for fmax (minutes each)")
     ap.add_argument("--seed", type=int_in_range(0, (1 << 31) - 1), default=1, help="nextpnr seed")
     ap.add_argument("--blocks", action="store_true", help="also each block alone, per setting")
     ap.add_argument("--verbose", action="store_true", help="the tools' progress lines")
     args = ap.parse_args(argv)
     table = exp_table(args.weight_bits, args.step)
-    print(f"LogIntegrator, {args.rows} rows, exp table {len(table)} entries of {args.weight_bits + 1} bits "
+    feedback = census_lr_feedback() if args.feedback else {}
+    title = "LogIntegrator with a feedback column" if feedback else "LogIntegrator"
+    print(f"{title}, {args.rows} rows, exp table {len(table)} entries of {args.weight_bits + 1} bits "
           f"(step {args.step:g} nat), {args.tie_break}; Yosys synth_ecp5 (LFE5U-85F)"
           + ("; fmax: nextpnr-ecp5 behind PinWrapper, seed " + str(args.seed) if args.pnr else ""))
     print(f"{'N':>3} {'bits':>4} {'lvl':>3} {'add':>3} {'lat':>3} {'LUT4':>7} {'CCU2C':>6} {'sites':>7} "
@@ -114,7 +133,7 @@ def main(argv: list[str] | None = None) -> int:
             p = LogParams(rows=args.rows, codes=codes, code_bits=bits, weights=table,
                           tie_break=args.tie_break)
             r = measure(p, levels, adder, Path(tmp) / f"n{codes}-b{bits}-l{levels}-a{adder}", args.pnr,
-                        args.seed, not args.verbose)
+                        args.seed, not args.verbose, feedback)
             fmax = f"{r['fmax']:7.2f}" if "fmax" in r else f"{'-':>7}"
             crit = r.get("critical", {})
             path = (f"{crit['start_net']} -> {crit['end_net']} ({crit['logic_ns']} ns logic, "

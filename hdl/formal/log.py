@@ -2,7 +2,7 @@
 every back-pressure.
 
 ``PipelineProperties`` puts a block (any ``StallPipeline``: the row adders, the argmin tree, the
-weights stage, the whole ``LogIntegrator``) beside a *reference line* that follows the pipeline's
+weights stage) beside a *reference line* that follows the pipeline's
 timing rule (``hdl.log.pipeline``, docs/integrators.md): ``latency - 1`` slots moving on a ``go``
 register that says the line's skid is empty, then a head and a skid; each slot holds a pixel's
 expected result, computed when the pixel is taken by a reference written here from the rule alone:
@@ -23,23 +23,29 @@ Strengthening invariants, read through the nets its builder returns (``StallPipe
 stage's ``valid`` and the skid's are the reference's, every copy of ``go`` is the reference's, and each
 valid stage's registers, finished by the block's remaining stages (``StallPipeline.remaining``), and the
 skid give the reference's results.
+
+``IntegratorProperties`` checks the whole ``LogIntegrator`` (the blocks as it builds them, the issue
+register and the feedback column formed from the argmin tree's latest result between them) from its
+ports against a scoreboard of expected results (:func:`reference_chain`, the feedback codes by the rule
+from the previous pixel's expected result), bounded from reset: its parts are proved above, the chain
+they make is checked to a depth.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
-from amaranth.hdl import Assert, Const, Cover, Module, Mux, Signal, Value
+from amaranth.hdl import Array, Assert, Const, Cover, Module, Mux, Signal, Value
 from amaranth.lib import data, wiring
 from amaranth.lib.wiring import In, Out
 
-from bayesmachine.hdl.log import LogParams
+from bayesmachine.hdl.log import LogIntegrator, LogParams
 from bayesmachine.hdl.log.pipeline import StallPipeline
 
-__all__ = ["PipelineProperties", "Reference", "chain_sums", "integrator_params", "reference_argmin",
-           "reference_feedback_argmin", "reference_integrator", "reference_row_sums", "reference_weights",
-           "scan_argmin", "table_weight"]
+__all__ = ["IntegratorProperties", "PipelineProperties", "Reference", "chain_sums", "integrator_params",
+           "reference_argmin", "reference_chain", "reference_feedback_argmin", "reference_row_sums",
+           "reference_weights", "scan_argmin", "table_weight"]
 
 # ``reference(m, params, payload, out)``: drives the fields of ``out`` (a Signal of the block's
 # output layout, comb) from the input ``payload`` (a view of the block's input layout).
@@ -125,15 +131,6 @@ def reference_weights(m: Module, p: LogParams, payload: data.View, out: data.Vie
                  out.all_excluded.eq(payload.all_excluded), out.s_min.eq(payload.s_min)]
     m.d.comb += [out.weights[r].eq(table_weight(p, payload.sums[r], payload.excluded[r], payload.s_min))
                  for r in range(p.rows)]
-
-
-def reference_integrator(m: Module, p: LogParams, payload: data.View, out: data.View) -> None:
-    sums, excluded = chain_sums(p, payload)
-    sums = [_net(m, s, f"ref_sum{r}") for r, s in enumerate(sums)]
-    map_, nomatch, none, s_min = scan_argmin(m, p, sums, excluded)
-    s_min = _net(m, s_min, "ref_s_min")
-    m.d.comb += [out.map.eq(map_), out.nomatch.eq(nomatch), out.all_excluded.eq(none), out.s_min.eq(s_min)]
-    m.d.comb += [out.weights[r].eq(table_weight(p, sums[r], excluded[r], s_min)) for r in range(p.rows)]
 
 
 @dataclass
@@ -285,3 +282,115 @@ def integrator_params(rows: int, codes: int, code_bits: int, **kwargs: object) -
     return LogParams(rows=rows, codes=codes, code_bits=code_bits, weights=(4, 2, 1, 0),
                      **kwargs)  # type: ignore[arg-type]
 
+
+
+def reference_chain(m: Module, p: LogParams, codes: data.View, feedback: list[Value], out: data.View) -> None:
+    """``LogIntegrator``'s result of a pixel: its loaded ``codes`` summed left to right, each row's
+    ``feedback`` code added (an all-ones one excludes the row; none without a feedback column), the
+    scan's MAP and the table's weights."""
+    loaded = replace(p, codes=p.codes - bool(feedback))
+    sums, excluded = chain_sums(loaded, codes)
+    if feedback:
+        excluded = [x | (f == p.infinite) for x, f in zip(excluded, feedback, strict=True)]
+        sums = [(s + f)[:p.sum_bits] for s, f in zip(sums, feedback, strict=True)]
+    sums = [_net(m, s, f"ref_sum{r}") for r, s in enumerate(sums)]
+    map_, nomatch, none, s_min = scan_argmin(m, p, sums, excluded)
+    s_min = _net(m, s_min, "ref_s_min")
+    m.d.comb += [out.map.eq(map_), out.nomatch.eq(nomatch), out.all_excluded.eq(none), out.s_min.eq(s_min)]
+    m.d.comb += [out.weights[r].eq(table_weight(p, sums[r], excluded[r], s_min)) for r in range(p.rows)]
+
+
+class IntegratorProperties(wiring.Component):
+    """A formal-only wrapper: the whole ``LogIntegrator`` (the blocks and the issue between them) against
+    a *scoreboard*, from its ports alone, checked bounded from reset (``bmc``).
+
+    Each pixel taken gets its expected result at once (:func:`reference_chain`), its feedback codes
+    formed by the rule (``sim.model.fill_feedback``, flat code 0) from the expected result of the pixel
+    taken before it (0 at a line start and from reset), and joins the scoreboard's queue; asserted:
+    a result is offered only for a pixel in the queue, and the result (and its ``line_start``) taken is
+    the queue's oldest; a result offered and not taken is offered again unchanged. The input stream,
+    ``ready`` of the output and the reset are free. Covers: a pixel taken with its feedback column formed
+    from a MAP (another MAP its answer), a result taken after a stall with more pixels in flight.
+
+    Parameters
+    ----------
+    dut : LogIntegrator
+        The integrator under check (or a mutant, ``hdl.formal.log_mutants``).
+    params : LogParams or None
+        The rule the reference follows (default the integrator's).
+    """
+
+    QUEUE = 16  # scoreboard entries: more than the integrator holds (asserted)
+
+    def __init__(self, *, dut: LogIntegrator, params: LogParams | None = None) -> None:
+        if not isinstance(dut, LogIntegrator):
+            raise TypeError(f"dut must be a LogIntegrator, not {type(dut).__name__}")
+        self._dut = dut
+        self._params = params or dut.params
+        members = dut.signature.members
+        self._in_layout = members["codes"].signature.members["payload"].shape
+        self._out_layout = members["result"].signature.members["payload"].shape
+        super().__init__({"in_valid": In(1), "in_payload": In(self._in_layout), "out_ready": In(1),
+                          "out_valid": Out(1), "out_payload": Out(self._out_layout)})
+
+    def elaborate(self, platform: object) -> Module:
+        m = Module()
+        m.submodules.dut = dut = self._dut
+        m.d.comb += [dut.codes.valid.eq(self.in_valid), dut.codes.payload.eq(self.in_payload),
+                     dut.result.ready.eq(self.out_ready), self.out_valid.eq(dut.result.valid),
+                     self.out_payload.eq(dut.result.payload)]
+        taken_in = dut.codes.valid & dut.codes.ready
+        taken_out = dut.result.valid & dut.result.ready
+        entry = data.StructLayout({"result": self._out_layout, "start": 1})
+        queue = Array(Signal(entry, name=f"board{i}") for i in range(self.QUEUE))
+        head, tail = Signal(range(self.QUEUE)), Signal(range(self.QUEUE))
+        count = Signal(range(self.QUEUE + 1))
+        expected, start = self._expected(m, taken_in)
+        with m.If(taken_in):
+            m.d.sync += [queue[tail].result.eq(expected), queue[tail].start.eq(start), tail.eq(tail + 1)]
+        with m.If(taken_out):
+            m.d.sync += head.eq(head + 1)
+        m.d.sync += count.eq(count + taken_in - taken_out)
+        m.d.comb += Assert(count < self.QUEUE, "the scoreboard holds every pixel in flight")
+        oldest = queue[head]
+        with m.If(dut.result.valid):
+            m.d.comb += Assert(count > 0, "a result is offered only for a pixel taken")
+            m.d.comb += Assert(dut.result.payload.as_value() == oldest.result.as_value(),
+                               "the result is the oldest pixel's, by the rule")
+            if dut.feedback:
+                m.d.comb += Assert(dut.line_start == oldest.start, "the oldest pixel's line_start")
+        stall, prev = Signal(), Signal(self._out_layout)
+        m.d.sync += [stall.eq(dut.result.valid & ~dut.result.ready), prev.eq(dut.result.payload)]
+        with m.If(stall):
+            m.d.comb += Assert(dut.result.valid & (dut.result.payload.as_value() == prev.as_value()),
+                               "a result offered and not taken is held")
+        m.d.comb += Cover(stall & taken_out & (count > 1))
+        return m
+
+    def _expected(self, m: Module, taken_in: Value) -> tuple[Signal, Value]:
+        """The expected result of the pixel offered (and its line_start), the feedback codes formed from
+        the last pixel taken's expected result (kept on a take)."""
+        p, dut = self._params, self._dut
+        expected = Signal(self._out_layout)
+        if not dut.feedback:
+            reference_chain(m, p, self.in_payload, [], expected)
+            return expected, Const(0, 1)
+        start = self.in_payload.line_start
+        last = Signal(data.StructLayout({"map": p.map_width, "answer": 1}))  # the last pixel's MAP, if any
+        words = dut.feedback_words
+        codes = []
+        for r in range(p.rows):
+            if p.nomatch_row and r == p.rows - 1:
+                code = Const(dut.feedback_nomatch_word, p.code_bits)
+            else:
+                code = Const(words[-1], p.code_bits)
+                for d in reversed(range(len(words) - 1)):  # the table at |r - MAP|, clamped
+                    near = (last.map == r - d) | (last.map == r + d) if d else (last.map == r)
+                    code = Mux(near, words[d], code)
+            codes.append(_net(m, Mux(last.answer & ~start, code, 0), f"ref_feedback{r}"))
+        reference_chain(m, p, self.in_payload.codes, codes, expected)
+        with m.If(taken_in):
+            m.d.sync += [last.map.eq(expected.map),
+                         last.answer.eq(~expected.nomatch & ~expected.all_excluded)]
+        m.d.comb += Cover(taken_in & ~start & last.answer & (expected.map != last.map))
+        return expected, start

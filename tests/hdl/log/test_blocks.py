@@ -5,11 +5,13 @@ latency at one pixel per clock, and random back-pressure on both streams."""
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 import pytest
+from amaranth.lib import wiring
 from conftest import run_sim
 
 from bayesmachine.columns.energy import exp_table
@@ -21,7 +23,6 @@ from bayesmachine.hdl.log import (
     RowAdders,
     WeightStage,
 )
-from bayesmachine.hdl.log.pipeline import StallPipeline
 from bayesmachine.sim.log_model import argmin_rows, log_integrate, row_sums, row_weights
 
 TABLE = tuple(int(x) for x in exp_table(4, 0.5))  # (16, 10, 6, 4, 2, 1, 1, 0)
@@ -38,7 +39,7 @@ class Run:
     watched: list = field(default_factory=list)
 
 
-def drive(dut: StallPipeline, sink: str, source: str, payloads: list, *, p_valid: float = 1.0,
+def drive(dut: wiring.Component, sink: str, source: str, payloads: list, *, p_valid: float = 1.0,
           p_ready: float = 1.0, seed: int = 0, watch: Callable[[object], object] | None = None) -> Run:
     """Offer ``payloads`` in order (valid with probability ``p_valid`` each clock, held until taken)
     and take the outputs (ready with probability ``p_ready``); checks the output stream's rule: a
@@ -137,18 +138,88 @@ def test_integrator_census_lr_rows(codes: int) -> None:
 
 
 @pytest.mark.parametrize(("rows", "codes", "levels", "adder_levels", "latency"),
-                         [(82, 4, 1, 1, 12), (82, 4, 2, 2, 8), (82, 7, 3, 1, 9), (82, 8, 7, 3, 5),
-                          (1, 1, 1, 1, 5)])
+                         [(82, 4, 1, 1, 13), (82, 4, 2, 2, 9), (82, 7, 3, 1, 10), (82, 8, 7, 3, 6),
+                          (1, 1, 1, 1, 6)])
 def test_latency_at_one_pixel_per_clock(rows: int, codes: int, levels: int, adder_levels: int,
                                         latency: int) -> None:
+    """The adders', the issue register's 1, the tree's and the weights' 3; one pixel per clock."""
     p = LogParams(rows=rows, codes=codes, code_bits=3, weights=TABLE, nomatch_row=rows > 1)
     dut = LogIntegrator(params=p, levels_per_stage=levels, adder_levels_per_stage=adder_levels)
-    assert dut.latency == latency
+    assert dut.latency == latency and dut.loop == 1 and not dut.feedback
     pix = codes_of(p, 12, seed=1)
     run = drive(dut, "codes", "result", [c.tolist() for c in pix])
     assert run.taken_in == list(range(12))
     assert run.taken_out == [t + latency for t in range(12)]
     assert integrator_results(run, p) == expected(pix, p)
+
+
+def feedback_expected(codes: np.ndarray, starts: np.ndarray, p: LogParams, words: tuple,
+                      nomatch_word: int | None) -> list[tuple]:
+    """The rule pixel by pixel in order, each pixel's feedback column (column 0) formed from the
+    previous result: the code at |r - MAP| clamped, ``nomatch_word`` in the no-match row; 0 at a line
+    start, after a no-match or all-excluded result and from reset."""
+    out, prev = [], -1
+    for pixel, start in zip(codes, starts, strict=True):
+        full = np.zeros((1, p.rows, p.codes), np.int64)
+        full[0, :, 1:] = pixel
+        if not start and prev >= 0:
+            full[0, :, 0] = [words[min(abs(r - prev), len(words) - 1)] for r in range(p.rows)]
+            if p.nomatch_row:
+                full[0, -1, 0] = nomatch_word
+        want = expected(full, p)[0]
+        out.append(want)
+        prev = -1 if want[1] or want[2] else want[0]
+    return out
+
+
+FEEDBACK = [
+    # (rows, loaded codes, code_bits, nomatch_row, tie_break, levels_per_stage, adder_levels_per_stage)
+    (7, 2, 3, True, "nomatch-first", 1, 1),
+    (7, 2, 3, True, "lowest-index", 4, 1),
+    (5, 1, 3, False, "nomatch-first", 2, 1),
+    (12, 3, 4, True, "nomatch-first", 4, 1),  # census at Dmax 10: the machine's setting, a 2-clock loop
+    (18, 2, 4, True, "lowest-index", 2, 2),  # rows past two feedback groups
+]
+
+
+@pytest.mark.parametrize("case", FEEDBACK, ids=lambda c: "-".join(map(str, c)))
+def test_integrator_feedback_equals_the_rule(case: tuple) -> None:
+    """With a feedback column: each pixel's result is the rule's with the codes formed from the previous
+    result (flat at a line start), in order under back-pressure; its line_start comes out with it."""
+    rows, loaded, code_bits, nomatch_row, tie_break, levels, adder_levels = case
+    p = LogParams(rows=rows, codes=loaded + 1, code_bits=code_bits, weights=TABLE, nomatch_row=nomatch_row,
+                  tie_break=tie_break)
+    words = (0, 1, 3, 5)  # low codes: the feedback column often moves the MAP
+    nomatch_word = 2 if nomatch_row else None
+    dut = LogIntegrator(params=p, feedback_words=words, feedback_nomatch_word=nomatch_word,
+                        levels_per_stage=levels, adder_levels_per_stage=adder_levels)
+    assert dut.feedback and dut.loop == max(1, -(-((rows - 1).bit_length() + 1) // levels))
+    pix = codes_of(dataclasses.replace(p, codes=loaded), 90, seed=rows, high=6)
+    starts = np.random.default_rng(rows).random(90) < 0.15
+    payloads = [{"codes": c.tolist(), "line_start": int(s)} for c, s in zip(pix, starts, strict=True)]
+    run = drive(dut, "codes", "result", payloads, p_valid=0.8, p_ready=0.6, seed=rows,
+                watch=lambda ctx: ctx.get(dut.line_start))
+    want = feedback_expected(pix, starts, p, words, nomatch_word)
+    assert integrator_results(run, p) == want
+    assert [run.watched[t] for t in run.taken_out] == starts.astype(int).tolist()
+    fed = [w for w, s in zip(want, starts, strict=True) if not s]
+    assert len({w[0] for w in fed}) > 2  # the MAP moves
+
+
+def test_integrator_feedback_issue_interval() -> None:
+    """Without back-pressure pixels with a left neighbour issue every ``loop`` clocks, a line's first
+    pixel as soon as its sums are ready."""
+    p = LogParams(rows=12, codes=3, code_bits=4, weights=TABLE)
+    dut = LogIntegrator(params=p, feedback_words=(0, 2, 4), feedback_nomatch_word=3)
+    assert dut.loop == 2 and dut.latency == 1 + 1 + 2 + 3
+    pix = codes_of(dataclasses.replace(p, codes=2), 20, seed=4)
+    starts = np.zeros(20, bool)
+    starts[[0, 11]] = True
+    payloads = [{"codes": c.tolist(), "line_start": int(s)} for c, s in zip(pix, starts, strict=True)]
+    run = drive(dut, "codes", "result", payloads)
+    gaps = np.diff(run.taken_out)
+    assert (gaps[np.flatnonzero(~starts[1:])] == dut.loop).all() and gaps[10] == 1
+    assert integrator_results(run, p) == feedback_expected(pix, starts, p, (0, 2, 4), 3)
 
 
 @pytest.mark.parametrize(("codes", "levels"), [(1, 1), (2, 1), (5, 1), (5, 2), (8, 3), (7, 64)])
@@ -297,6 +368,18 @@ def test_bad_block_parameters() -> None:
         LogIntegrator(params=p, levels_per_stage=1.5)
     with pytest.raises(ParameterError, match="adder_levels_per_stage"):
         LogIntegrator(params=p, adder_levels_per_stage=0)
+    with pytest.raises(TypeError, match="feedback_words"):
+        LogIntegrator(params=p, feedback_words=3)
+    with pytest.raises(ParameterError, match=r"feedback_words\[1\]"):
+        LogIntegrator(params=p, feedback_words=(0, 8), feedback_nomatch_word=1)
+    with pytest.raises(ParameterError, match="feedback_nomatch_word"):
+        LogIntegrator(params=p, feedback_words=(0, 1))
+    with pytest.raises(ParameterError, match="feedback_nomatch_word"):
+        LogIntegrator(params=p, feedback_nomatch_word=1)
+    for other, match in ((dataclasses.replace(p, nomatch_row=False), "no-match row"),
+                         (dataclasses.replace(p, codes=1), "codes >= 2")):
+        with pytest.raises(ParameterError, match=match):
+            LogIntegrator(params=other, feedback_words=(0,), feedback_nomatch_word=1)
     with pytest.raises(TypeError, match="pass_sums"):
         ArgminTree(params=p, pass_sums=1)
     with pytest.raises(TypeError, match="feedback"):

