@@ -187,7 +187,9 @@ class SemiGlobalLanes(Lanes):
         layout = data.ArrayLayout(self._cost, n.dmax + 2)
         mem = memory.Memory(shape=layout, depth=max(2, n.output_columns), init=[])
         n.m.submodules[f"sgm_{path.replace('-', '_')}"] = mem
-        read = mem.read_port()
+        write = mem.write_port()
+        # Transparent: a word written in the clock it is read ahead (one output pixel a row) reads new.
+        read = mem.read_port(transparent_for=(write,))
         n.m.d.comb += [read.en.eq(ahead), read.addr.eq(read_at)]
         word_in = read.data
         if path == "top-left":
@@ -197,7 +199,6 @@ class SemiGlobalLanes(Lanes):
             word_in = held
         point = _Point([word_in[d] for d in range(n.dmax + 1)], word_in[n.dmax + 1], fresh)
         costs, word = self._step(path.replace("-", "_"), energies, point)
-        write = mem.write_port()
         n.m.d.comb += [write.en.eq(self._go & self._last), write.addr.eq(x), write.data.eq(Cat(*word))]
         return costs
 

@@ -41,6 +41,8 @@ CASES = {
     "sgm-stochastic": ("census-sgm", {"dmax": 3}, "stochastic", None, (9, 18), True),
     # No neighbour prior: no line of MAPs, the generator's row length for the semi-global lanes alone.
     "sg-no-prior": ("census-sg", {"dmax": 4, "neighbour_prior": False}, "stochastic", None, (9, 18), True),
+    # One output pixel a row in the own pass (a column's path above only).
+    "sgm-one-pixel-rows": ("census-sgm", {"dmax": 3, "sgm_paths": 4}, "log", None, (9, 10), True),
     # Two beats a pixel (8 rows, 6 a beat), all four paths.
     "sgm-two-beats-four-paths": ("census-sgm", {"dmax": 7, "sgm_paths": 4}, "log", None, (10, 24), False),
     # Two rows a beat, three paths, narrow path costs, the stochastic machine.
