@@ -1,6 +1,6 @@
 """The semi-global column's lanes: its member fused column's scan, the aggregation of its energies along
 the causal paths, and the tempered sums back to words or codes (the rule of
-``bayesmachine.columns.semiglobal``; docs/architecture.md, "The semi-global column").
+``bayesmachine.columns.semiglobal``; docs/architecture.md, "The semi-global column on chip").
 
 The member's scan (:meth:`FusedLanes.build_scan`) leaves each pixel's row sums D in its slot's entries and
 its least sum D_min (and its no-match sum) in the slot's registers. The aggregation then walks the pixel's
