@@ -159,7 +159,7 @@ def _check_output_columns(p: Pass, output_columns: object) -> int | None:
     # costs (Lanes.needs_row): their length is the output row's.
     line = [c.name for c in p.columns if lanes_for(c).needs_row(c)]
     if line and (output_columns is None or output_columns < 1):
-        raise ParameterError(f"output_columns: the {line[0]} column's line of MAPs needs the output pixels "
+        raise ParameterError(f"output_columns: the {line[0]} column needs the output pixels "
                              f"per row (>= 1), got {output_columns!r}", "output_columns")
     if not line and output_columns is not None:
         raise ParameterError(f"output_columns: only for a pass with a line of MAPs (an ABOVE column) or a "
