@@ -67,7 +67,6 @@ __all__ = [
     "COLUMN_KINDS",
 ]
 
-# The closed set of column kinds the package defines (each with its lane builder on chip but SemiGlobal, which
-# has none yet: the front end refuses it).
+# The closed set of column kinds the package defines (each with its lane builder on chip).
 COLUMN_KINDS: tuple[type[Column], ...] = (Mean, GradH, GradV, GradMag, Census, LeftPrior, AbovePrior,
                                           Consistency, Fused, SemiGlobal)

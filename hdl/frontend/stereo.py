@@ -51,6 +51,7 @@ from bayesmachine.models import DEFAULT_MODEL, ModelParams, disparity_machine
 from bayesmachine.params import DEFAULT_DMAX, MachineParams, ParameterError, stereo_words_per_beat
 
 from . import DEFAULT_FIFO_PIXELS, MAX_MACHINES, MAX_WIDTH
+from .lanes import lanes_for
 from .layouts import declared_passes
 from .passes import (
     all_of,
@@ -96,6 +97,11 @@ def check_machines(machines: object, params: MachineParams, model: ModelParams) 
     machines = as_int("machines", machines)
     if not 1 <= machines <= MAX_MACHINES:
         raise ParameterError(f"machines must be in [1, {MAX_MACHINES}], got {machines}", "machines")
+    undealt = [c.name for p in model.passes for c in p.columns if not lanes_for(c).dealt(c)]
+    if machines > 1 and undealt:
+        raise ParameterError(f"machines = {machines}: the {model.name} model's {undealt[0]} column continues "
+                             "from the row above on one machine (its paths' costs); it runs on 1 machine a "
+                             "pass", "machines")
     if machines > 1 and params.takes_numbers:
         raise ParameterError(f"machines = {machines}: rng {params.rng!r} is off chip (one number port, "
                              "one device stream); several machines need an on-chip source "
@@ -204,7 +210,7 @@ def pass_generators(m: Module, model: ModelParams, params: MachineParams, width:
         gens[p.name] = m.submodules[f"{pass_port(model, p, 'generator')}{suffix}"] = WordGenerator(
             params=pass_params(model, params, p.name), model=model,
             pass_name=None if p is model.passes[-1] else p.name, leads=leads,
-            output_columns=row if _has_line(p) else None, fused_share=shares.get(p.name))
+            output_columns=row if _needs_row(p) else None, fused_share=shares.get(p.name))
     share_fused_sums(m, gens)
     return gens
 
@@ -230,6 +236,11 @@ class StereoNets:
     machines: list[wiring.Component]  # the own pass's machines (BayesianMachine or LogMachine: the
     # integrator's; machine j runs map rows j mod K)
     loads: list[RoomFifo]  # machine j's load FIFO: its word generator's beats
+
+
+def _needs_row(p: Any) -> bool:
+    """Whether pass ``p``'s word generator needs its output pixels per row (``Lanes.needs_row``)."""
+    return any(lanes_for(c).needs_row(c) for c in p.columns)
 
 
 def _has_line(p: Any) -> bool:

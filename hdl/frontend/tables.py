@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bayesmachine.columns import Fused, Term
+from bayesmachine.columns import Fused, SemiGlobal, Term
 from bayesmachine.columns.energy import INFINITE_CODE, log_codes
 from bayesmachine.integrators import integrator_kind
 from bayesmachine.models import ModelParams
@@ -120,7 +120,10 @@ def term_tables(term: Term, rule: Term, form: LoadForm) -> dict[str, np.ndarray]
     """A term's clamped tables by name: its values in ``form`` (``{name: ...}``); a fused column's
     members' energy codes (``{member}_energy``), its pass's no-match rule's (``nomatch_energy``) and the
     way back from a sum above the pixel's least (``fused_exp``: the exp table X to words, ending at its
-    first 0, the clamp; to codes (``Fused.codes``) the sum itself up to ``INFINITE_CODE - 1``)."""
+    first 0, the clamp; to codes (``Fused.codes``) the sum itself up to ``INFINITE_CODE - 1``); a semi-global
+    column its member's (``fused_exp`` then the way back from its tempered value T)."""
+    if isinstance(term, SemiGlobal):  # its member's tables: the sums, then the way back from T
+        return term_tables(term.member, rule, form)
     if isinstance(term, Fused):
         out = {f"{m.name}_energy": clamp_table(e.values) for m, e in zip(term.members, term.energies(),
                                                                          strict=True)}

@@ -155,14 +155,16 @@ def _check_fused_share(model: ModelParams, p: Pass, params: MachineParams,
 def _check_output_columns(p: Pass, output_columns: object) -> int | None:
     if output_columns is not None:
         output_columns = as_int("output_columns", output_columns)
-    # An ABOVE column reads a line of the pass's own MAPs: its length is the output row's.
-    line = [c.name for c in p.columns if c.source is Source.ABOVE]
+    # An ABOVE column reads a line of the pass's own MAPs, a semi-global column keeps the row above's path
+    # costs (Lanes.needs_row): their length is the output row's.
+    line = [c.name for c in p.columns if lanes_for(c).needs_row(c)]
     if line and (output_columns is None or output_columns < 1):
-        raise ParameterError(f"output_columns: the {line[0]} column's line of MAPs needs the output pixels "
+        raise ParameterError(f"output_columns: the {line[0]} column needs the output pixels "
                              f"per row (>= 1), got {output_columns!r}", "output_columns")
     if not line and output_columns is not None:
-        raise ParameterError(f"output_columns: only for a pass with a line of MAPs (an ABOVE column); the "
-                             f"{p.name} pass of the {p.model.name} model has none", "output_columns")
+        raise ParameterError(f"output_columns: only for a pass with a line of MAPs (an ABOVE column) or a "
+                             f"semi-global column; the {p.name} pass of the {p.model.name} model has none",
+                             "output_columns")
     return output_columns
 
 
@@ -289,7 +291,7 @@ class WordGenerator(wiring.Component):
         """The generator's module (what :meth:`elaborate` gives) and its shared pipeline (its beat
         counter, ``active``, ...: a mutant of ``hdl.formal`` changes them)."""
         m = Module()
-        scan = max(lanes_for(c).scan_latency(c) for c in self._pass.columns)
+        scan = max(lanes_for(c).scan_latency(c, self._params.beats_per_pixel) for c in self._pass.columns)
         nets = word_pipeline(m, self, scan)
         columns = [lanes_for(c)(c, nets) for c in self._pass.columns]
         rule = self._pass.model.nomatch

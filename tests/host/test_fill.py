@@ -1,6 +1,6 @@
 """Occlusion fill (bayesmachine.host.fill): the rules on hand-made rows, the left-right column's rejection,
 a run's filled map beside the machine's own in report.json and result.npz, and the semi-global model's
-refusal on the hardware paths (the front end has no lane builder for its column yet)."""
+refusal of several machines on the hardware paths (its paths continue from the row above on one)."""
 
 from __future__ import annotations
 
@@ -97,18 +97,14 @@ def test_a_run_keeps_the_machines_map_beside_the_filled_one(pair, tmp_path) -> N
 
 
 @pytest.mark.parametrize("argv", [
-    ["emit", "--top", "stereo", "--width", "64", "-o", "{o}"],
-    ["board", "build", "-o", "{o}"],
-    ["board", "simulate"],
-    ["run", "--engine", "board", "--port", "/dev/null", "--crop", "250,200,140,16", "-o", "{o}"],
-    pytest.param(["run", "--feed", "pixels", "--engine", "verilator", "--crop", "250,200,140,16",
-                  "-o", "{o}"], marks=pytest.mark.eda),
+    ["emit", "--top", "stereo", "--width", "120", "--dmax", "8", "-o", "{o}/stereo.v"],
+    ["run", "--feed", "pixels", "--engine", "verilator", "--crop", "250,200,140,16", "-o", "{o}"],
 ])
-def test_the_hardware_paths_refuse_the_semiglobal_model(argv, tmp_path, capsys) -> None:
+def test_the_hardware_paths_refuse_several_machines_of_the_semiglobal_model(argv, tmp_path, capsys) -> None:
     argv = [a.replace("{o}", str(tmp_path / "o")) for a in argv]
-    assert main([*argv, "--model", "census-sgm"]) == 2
+    assert main([*argv, "--model", "census-sgm", "--machines", "2"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "no lane builder for the semiglobal column" in err[0], err
+    assert len(err) == 1 and "semiglobal column continues from the row above on one machine" in err[0], err
     assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())
 
 

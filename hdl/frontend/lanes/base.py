@@ -32,7 +32,7 @@ from dataclasses import dataclass
 from amaranth.hdl import Const, ShapeLike, Value, ValueLike
 from amaranth.lib import wiring
 
-from bayesmachine.columns import PlaneColumn, Term
+from bayesmachine.columns import PlaneColumn, Source, Term
 from bayesmachine.errors import ParameterError
 from bayesmachine.models import ModelParams, Pass
 from bayesmachine.params import MachineParams
@@ -112,10 +112,23 @@ class Lanes:
         """``ParameterError`` naming the model unless its lanes can run in pass ``p`` of ``model``."""
 
     @classmethod
-    def scan_latency(cls, term: Term) -> int:
-        """0, or the cycles from a fetch of the delay line's entries to an issue that can read what it
-        gives, when its words need every row of the pixel first: the word generator then scans the pixel's
-        beats before its words (``LaneContext.fetch``; a fused column's smallest sum)."""
+    def needs_row(cls, term: Term) -> bool:
+        """Whether its lanes need the pass's output pixels per row (the generator's ``output_columns``): an
+        ABOVE column's line of MAPs, a semi-global column's memories of the row above."""
+        return term.source is Source.ABOVE
+
+    @classmethod
+    def dealt(cls, term: Term) -> bool:
+        """Whether its lanes can run when the pass's map rows are dealt to several machines (each machine's
+        word generator sees every K-th row)."""
+        return True
+
+    @classmethod
+    def scan_latency(cls, term: Term, n_beats: int) -> int:
+        """0, or the cycles from a pixel's last fetch of the delay line's entries to an issue that can read
+        what they give, at ``n_beats`` beats per pixel, when its words need every row of the pixel first: the
+        word generator then scans the pixel's beats before its words (``LaneContext.fetch``; a fused
+        column's smallest sum)."""
         return 0
 
     # --- One elaboration ---

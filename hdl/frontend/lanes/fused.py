@@ -24,7 +24,7 @@ shared memories allow (``LaneContext.hold_scan``).
 
 from __future__ import annotations
 
-from amaranth.hdl import Cat, Const, Mux, ShapeLike, Signal, Value, ValueLike, unsigned
+from amaranth.hdl import Cat, Const, Module, Mux, ShapeLike, Signal, Value, ValueLike, unsigned
 from amaranth.lib import data, memory, wiring
 
 from bayesmachine.columns import Fused, Term
@@ -33,7 +33,7 @@ from ..lookup import pick
 from ..tables import FrontEndTables
 from .base import Lanes, PlaneFilter, lanes_for, register
 
-__all__ = ["FusedLanes", "fused_sum_bits"]
+__all__ = ["SCAN_LATENCY", "FusedLanes", "delayed", "fused_sum_bits", "smallest"]
 
 # From a fetch to the scan's results complete: the cost and address registers and the table read (3),
 # the sums (1), the beat's minimum (1), the running minimum (1); each step a register, for the clock.
@@ -71,10 +71,18 @@ class FusedLanes(Lanes):
         return out
 
     @classmethod
-    def scan_latency(cls, term: Term) -> int:
+    def scan_latency(cls, term: Term, n_beats: int) -> int:
         return SCAN_LATENCY
 
     def build(self) -> None:
+        width = self.build_scan()
+        self._hand_over(width)
+        self._words_out(width)
+
+    def build_scan(self) -> int:
+        """The scan alone (module text): each fetched beat's row sums into the slot's entries
+        (``sums``), the slot's minimum and no-match sum (``slot_mins``, ``slot_nm_sums``) ``SCAN_LATENCY``
+        cycles after the pixel's last fetch; the sums' width. A semi-global column's lanes build on it."""
         n, t = self.ctx, self.term
         rule = n.pass_.model.nomatch
         share = n.fused_share
@@ -100,8 +108,27 @@ class FusedLanes(Lanes):
         if role == "export":
             self._write_shared(port, sums_q)
         self._scan_min(sums_q, width)
-        self._hand_over(width)
-        self._words_out(width)
+        return width
+
+    @property
+    def sums(self) -> memory.Memory:
+        """The slots' row sums, a beat an entry at ``Cat(beat, slot)`` (after :meth:`build_scan`)."""
+        return self._sums
+
+    @property
+    def slot_mins(self) -> list[Signal]:
+        """Each slot's minimum sum (after :meth:`build_scan`)."""
+        return self._mins
+
+    @property
+    def slot_nm_sums(self) -> list[Signal]:
+        """Each slot's no-match sum (after :meth:`build_scan`)."""
+        return self._nm_sums
+
+    @property
+    def live(self) -> bool:
+        """Whether the pass's no-match row can win (its sum is among those the minimum is of)."""
+        return self._live
 
     def _member_sums(self) -> list[Value]:
         """Each lane row's sum of its members' codes, three cycles after its fetch."""
@@ -134,14 +161,7 @@ class FusedLanes(Lanes):
                        port.last.eq(beat == n.n_beats - 1), port.sums.eq(Cat(*sums_q))]
 
     def _delayed(self, value: Value, cycles: int, name: str) -> list[Signal]:
-        """``value`` 1 .. ``cycles`` cycles later (every cycle: the scan runs whatever the stream does):
-        element k is k + 1 cycles later."""
-        out: list[Signal] = []
-        for k in range(cycles):
-            reg = Signal.like(Value.cast(value), name=f"{name}_{k}")
-            self.ctx.m.d.sync += reg.eq(out[-1] if out else value)
-            out.append(reg)
-        return out
+        return delayed(self.ctx.m, value, cycles, name)
 
     def _store(self, sums: list[Value], width: int) -> list[Signal]:
         """A fetched beat's row sums into a register three cycles after its fetch (a row without a match
@@ -177,10 +197,10 @@ class FusedLanes(Lanes):
         fetched, beat, slot = (steps[4] for steps in self._steps)
         nm_sum = self._delayed(self._scan_nm, 2, "fused_scan_nm")[-1]
         beat_min = Signal(unsigned(width), name="fused_beat_min", reset_less=True)
-        m.d.sync += beat_min.eq(_smallest(list(sums_q)))
+        m.d.sync += beat_min.eq(smallest(list(sums_q)))
         running = Signal(unsigned(width), name="fused_scan_min", reset_less=True)
         low: Value = Mux(beat == 0, nm_sum if self._live else top, running)
-        least = _smallest([low, beat_min])
+        least = smallest([low, beat_min])
         self._mins = [Signal(unsigned(width), name=f"fused_min{k}", reset_less=True) for k in range(n.slots)]
         self._nm_sums = [Signal(unsigned(width), name=f"fused_nm_sum{k}", reset_less=True)
                          for k in range(n.slots)]
@@ -222,7 +242,18 @@ class FusedLanes(Lanes):
         return self._words[-1] if self._live else self.ctx.zero
 
 
-def _smallest(values: list[Value]) -> Value:
+def delayed(m: Module, value: ValueLike, cycles: int, name: str) -> list[Signal]:
+    """``value`` 1 .. ``cycles`` cycles later (every cycle: a scan runs whatever the stream does): element
+    k is k + 1 cycles later."""
+    out: list[Signal] = []
+    for k in range(cycles):
+        reg = Signal.like(Value.cast(value), name=f"{name}_{k}")
+        m.d.sync += reg.eq(out[-1] if out else value)
+        out.append(reg)
+    return out
+
+
+def smallest(values: list[Value]) -> Value:
     """The smallest of ``values``, by a tree of compares."""
     while len(values) > 1:
         pairs = [Mux(a < b, a, b) for a, b in zip(values[::2], values[1::2], strict=False)]
