@@ -136,6 +136,30 @@ def run_sim(dut: object, testbench: object, *, clock: bool = True) -> None:
     sim.run()
 
 
+def noisy_pair(height: int, width: int, seed: int, shift: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    """A random stereo pair, the right image the left shifted by ``shift`` pixels plus noise of +-3."""
+    rng = np.random.default_rng(seed)
+    left = rng.integers(0, 256, (height, width), dtype=np.uint8)
+    right = np.roll(left, -shift, axis=1).astype(np.int64) + rng.integers(-3, 4, (height, width))
+    return left, right.clip(0, 255).astype(np.uint8)
+
+
+def assert_feed_pixels_equals_model(options: list[str], tmp_path: Path) -> None:
+    """``run --engine verilator --feed pixels`` with ``options`` (a crop, a model ...): every array of its
+    result.npz equal to ``run --engine model``'s, and a map of more than three disparities."""
+    from bayesmachine.cli import main
+
+    outs = {}
+    for engine, feed in (("model", []), ("verilator", ["--feed", "pixels"])):
+        assert main(["run", "--engine", engine, *feed, *options, "-o", str(tmp_path / engine)]) == 0
+        outs[engine] = np.load(tmp_path / engine / "result.npz")
+    keys = set(outs["model"].files)
+    assert keys == set(outs["verilator"].files) and {"map", "counts", "cycles", "timeout"} <= keys
+    for key in sorted(keys):
+        assert np.array_equal(outs["model"][key], outs["verilator"][key]), key
+    assert len(np.unique(outs["model"]["map"])) > 3
+
+
 def assert_same_results(got: MachineResult, want: MachineResult) -> None:
     """Field by field, naming the first differing pixel."""
     assert len(got) == len(want), f"{len(got)} results, expected {len(want)}"

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import assert_same_results, require_tool
+from conftest import assert_feed_pixels_equals_model, assert_same_results, require_tool
 
 from bayesmachine.cli import main
 from bayesmachine.hdl import emit as hdl_emit
@@ -369,17 +369,8 @@ def test_log_stereo_top_is_lint_clean(model: str, lanes: str, tmp_path: Path, ca
 def test_log_stereo_verilator_equals_the_model(model: str, tmp_path: Path) -> None:
     """Pixels in, the front end's codes into the LogMachines (census-lr's two passes), every result
     array equal to the log model's on the host's codes."""
-    crop = ["--crop", "250,200,60,12", "--dmax", "16", "--model", model, "--integrator", "log", "--no-sgbm",
-            "--quiet"]
-    outs = {}
-    for engine, feed in (("model", []), ("verilator", ["--feed", "pixels"])):
-        assert main(["run", "--engine", engine, *feed, *crop, "-o", str(tmp_path / engine)]) == 0
-        outs[engine] = np.load(tmp_path / engine / "result.npz")
-    keys = set(outs["model"].files)
-    assert keys == set(outs["verilator"].files) and {"map", "counts", "cycles", "timeout"} <= keys
-    for key in sorted(keys):
-        assert np.array_equal(outs["model"][key], outs["verilator"][key]), key
-    assert len(np.unique(outs["model"]["map"])) > 3
+    assert_feed_pixels_equals_model(["--crop", "250,200,60,12", "--dmax", "16", "--model", model,
+                                     "--integrator", "log", "--no-sgbm", "--quiet"], tmp_path)
 
 
 @pytest.mark.eda

@@ -14,7 +14,7 @@ import random
 
 import numpy as np
 import pytest
-from conftest import assert_same_results, run_sim
+from conftest import assert_same_results, noisy_pair, run_sim
 
 from bayesmachine.columns import Census
 from bayesmachine.hdl.frontend.census import CensusFilter
@@ -30,13 +30,6 @@ from bayesmachine.params import ParameterError
 from bayesmachine.sim.model import MachineModel
 from bayesmachine.sim.results import MachineResult
 from bayesmachine.sim.stereo_testbench import run_frontend, run_frontend_passes, run_stereo
-
-
-def _noisy_pair(height: int, width: int, seed: int, shift: int = 2) -> tuple[np.ndarray, np.ndarray]:
-    rng = np.random.default_rng(seed)
-    left = rng.integers(0, 256, (height, width), dtype=np.uint8)
-    right = np.roll(left, -shift, axis=1).astype(np.int64) + rng.integers(-3, 4, (height, width))
-    return left, right.clip(0, 255).astype(np.uint8)
 
 
 def _census(dmax: int, window: int = 7, **fields: object) -> ModelParams:
@@ -140,7 +133,7 @@ CASES = {
 def test_census_frontend_words_equal_host_memory_words(name: str) -> None:
     model, options, shapes = CASES[name]
     params = stereo_machine_params(model.dmax, model=model, counter_max=2, **options)
-    frames = [_noisy_pair(h, w, seed=i) for i, (h, w) in enumerate(shapes)]
+    frames = [noisy_pair(h, w, seed=i) for i, (h, w) in enumerate(shapes)]
     got = run_frontend(FrontEnd(params=params, model=model, width=shapes[0][1]), frames,
                        in_stall=0.2, out_stall=0.3, seed=2)
     want = np.concatenate([memory_words(model_planes(lf, model), model_planes(rf, model), model, params)
@@ -157,7 +150,7 @@ def test_neighbour_frontend_words_equal_host_words_with_the_above_prior(width: i
     model = _census(2, prior_s=1.5)
     params = stereo_machine_params(2, model=model, counter_max=2)
     assert params.words_per_beat % params.loaded_columns == 0 and params.feedback_columns == 1
-    frames = [_noisy_pair(10, width, seed=4), _noisy_pair(8, width, seed=5)]
+    frames = [noisy_pair(10, width, seed=4), noisy_pair(8, width, seed=5)]
     wo = width - 6 - model.dmax
     rows = [f[0].shape[0] - 6 for f in frames]
     rng = np.random.default_rng(9)
@@ -206,7 +199,7 @@ def test_census_stereo_machine_equals_the_model(width: int, fifo: int) -> None:
     left, right, _ = bundled_pair()
     crop = (slice(150, 159), slice(400, 400 + width))
     frames = [(np.ascontiguousarray(left[crop]), np.ascontiguousarray(right[crop])),
-              _noisy_pair(8, width, seed=1)]
+              noisy_pair(8, width, seed=1)]
     model = _census(2)
     params = stereo_machine_params(2, model=model, counter_max=8, max_cycles=3000)
     got, _ = run_stereo(StereoMachine(params=params, model=model, width=width, fifo_pixels=fifo), frames,

@@ -23,6 +23,7 @@ from amaranth.hdl import Fragment
 from conftest import (
     assert_passes_equal_the_model,
     assert_same_results,
+    noisy_pair,
     own_options,
     passes_model,
     registered,
@@ -64,19 +65,12 @@ from bayesmachine.sim.stereo_testbench import pass_pixels, run_frontend_passes, 
 pytestmark = pytest.mark.pysim
 
 
-def _noisy_pair(height: int, width: int, seed: int, shift: int = 2) -> tuple[np.ndarray, np.ndarray]:
-    rng = np.random.default_rng(seed)
-    left = rng.integers(0, 256, (height, width), dtype=np.uint8)
-    right = np.roll(left, -shift, axis=1).astype(np.int64) + rng.integers(-3, 4, (height, width))
-    return left, right.clip(0, 255).astype(np.uint8)
-
-
 def _crop_and_noise(model: ModelParams, width: int, seed: int) -> list[tuple[np.ndarray, np.ndarray]]:
     """Two frames of ``width`` pixels back to back: 3 output rows of the bundled pair, 2 of noise."""
     left, right, _ = bundled_pair()
     crop = (slice(250, 250 + 2 * model.margin + 3), slice(200, 200 + width))
     return [(np.ascontiguousarray(left[crop]), np.ascontiguousarray(right[crop])),
-            _noisy_pair(2 * model.margin + 2, width, seed=seed)]
+            noisy_pair(2 * model.margin + 2, width, seed=seed)]
 
 
 def _lr(dmax: int, **fields: object) -> ModelParams:
@@ -309,7 +303,7 @@ def test_every_pass_words_equal_the_host_words(name: str, fields: dict, width: i
     column."""
     model = ModelParams(name=name, **fields)
     params = stereo_machine_params(model.dmax, model=model, counter_max=2)
-    frames = [_noisy_pair(9, width, seed=4), _noisy_pair(8, width, seed=5)]
+    frames = [noisy_pair(9, width, seed=4), noisy_pair(8, width, seed=5)]
     rng = np.random.default_rng(3)
     maps = {p.name: rng.integers(-1, model.dmax + 1, pass_pixels(frames, model, p.name))
             for p in model.passes}
@@ -370,7 +364,7 @@ def test_stereo_machine_passes_equal_the_model(case: str) -> None:
     crop = (slice(150, 150 + height), slice(400, 400 + width))
     frames = [(np.ascontiguousarray(left[crop]), np.ascontiguousarray(right[crop]))]
     if len(shapes) > 1:
-        frames.append(_noisy_pair(height - 1, width, seed=1))
+        frames.append(noisy_pair(height - 1, width, seed=1))
     params = stereo_machine_params(model.dmax, model=model, counter_max=counter_max, max_cycles=400)
     top = StereoMachine(params=params, model=model, width=width, fifo_pixels=fifo_pixels)
     assert set(top.signature.members) >= {f"{p.name}_result" for p in model.passes[:-1]}

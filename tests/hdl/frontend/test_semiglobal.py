@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import assert_passes_equal_the_model, own_options
+from conftest import assert_passes_equal_the_model, noisy_pair, own_options
 
 from bayesmachine.hdl.frontend.lanes.semiglobal import upper_memory_bits
 from bayesmachine.hdl.frontend.stereo import StereoMachine, check_stereo_machine, stereo_machine_params
@@ -21,18 +21,11 @@ from bayesmachine.params import ParameterError
 pytestmark = pytest.mark.pysim
 
 
-def _noisy_pair(height: int, width: int, seed: int, shift: int = 2) -> tuple[np.ndarray, np.ndarray]:
-    rng = np.random.default_rng(seed)
-    left = rng.integers(0, 256, (height, width), dtype=np.uint8)
-    right = np.roll(left, -shift, axis=1).astype(np.int64) + rng.integers(-3, 4, (height, width))
-    return left, right.clip(0, 255).astype(np.uint8)
-
-
 def _frames(height: int, width: int, noisy: bool) -> list[tuple[np.ndarray, np.ndarray]]:
     left, right, _ = bundled_pair()
     crop = (slice(150, 150 + height), slice(400, 400 + width))
     frames = [(np.ascontiguousarray(left[crop]), np.ascontiguousarray(right[crop]))]
-    return [*frames, _noisy_pair(height - 1, width, seed=1)] if noisy else frames
+    return [*frames, noisy_pair(height - 1, width, seed=1)] if noisy else frames
 
 
 # name: (model, its fields, integrator, words per beat (None: the front end's), frame (height, width), a

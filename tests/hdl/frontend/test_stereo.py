@@ -9,7 +9,7 @@ import gc
 
 import numpy as np
 import pytest
-from conftest import assert_passes_equal_the_model, assert_same_results, own_options, passes_model
+from conftest import assert_passes_equal_the_model, assert_same_results, noisy_pair, own_options, passes_model
 
 from bayesmachine.columns.energy import INFINITE_CODE, log_codes
 from bayesmachine.hdl.frontend.stereo import FrontEnd, StereoMachine, stereo_machine_params
@@ -26,13 +26,6 @@ from bayesmachine.sim.stereo_testbench import run_frontend, run_stereo
 pytestmark = pytest.mark.pysim
 
 
-def _noisy_pair(height: int, width: int, seed: int, shift: int = 2) -> tuple[np.ndarray, np.ndarray]:
-    rng = np.random.default_rng(seed)
-    left = rng.integers(0, 256, (height, width), dtype=np.uint8)
-    right = np.roll(left, -shift, axis=1).astype(np.int64) + rng.integers(-3, 4, (height, width))
-    return left, right.clip(0, 255).astype(np.uint8)
-
-
 def _crop(y: int, x: int, height: int, width: int) -> tuple[np.ndarray, np.ndarray]:
     left, right, _ = bundled_pair()
     return (np.ascontiguousarray(left[y:y + height, x:x + width]),
@@ -47,7 +40,7 @@ def test_census_machines_equal_the_model(machines: int, fused: bool) -> None:
     width = 14
     model = ModelParams(dmax=2, name="census", fuse_columns=fused)
     params = stereo_machine_params(2, model=model, counter_max=8, max_cycles=3000)
-    frames = [_crop(150, 400, 13, width), _noisy_pair(10, width, seed=1)]  # 7 and 4 map rows
+    frames = [_crop(150, 400, 13, width), noisy_pair(10, width, seed=1)]  # 7 and 4 map rows
     top = StereoMachine(params=params, model=model, width=width, fifo_pixels=2, machines=machines)
     got, _ = run_stereo(top, frames, in_stall=0.2, out_stall=0.3, seed=machines)
     assert_same_results(got, machines_model(frames, model, params, machines))
@@ -59,7 +52,7 @@ def test_paper_machines_equal_the_model(machines: int, rng: str) -> None:
     width = 16
     model = ModelParams(dmax=4, name="paper")
     params = stereo_machine_params(4, model=model, counter_max=8, max_cycles=3000, rng=rng)
-    frames = [_noisy_pair(9, width, seed=2), _crop(200, 300, 7, width)]
+    frames = [noisy_pair(9, width, seed=2), _crop(200, 300, 7, width)]
     top = StereoMachine(params=params, model=model, width=width, fifo_pixels=2, machines=machines)
     got, _ = run_stereo(top, frames, in_stall=0.2, out_stall=0.3, seed=machines)
     assert_same_results(got, machines_model(frames, model, params, machines))
@@ -79,7 +72,7 @@ def test_census_lr_machines_equal_the_model(machines: int, integrator: str) -> N
                                    **own_options(integrator, counter_max=6))
     width = dmax + 2 * model.margin + 6
     left, right = _crop(100, 100, 2 * model.margin + 4, width)  # where Dmax 8 finds matches
-    frames = [(left, right), _noisy_pair(2 * model.margin + 3, width, seed=machines)]
+    frames = [(left, right), noisy_pair(2 * model.margin + 3, width, seed=machines)]
     top = StereoMachine(params=params, model=model, width=width, fifo_pixels=2, machines=machines)
     want = assert_passes_equal_the_model(top, frames, model, params, seed=machines)
     assert set(want) == {"right", "left"} and len(np.unique(want["left"].map)) > 3

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from amaranth.hdl import Fragment, Module, Signal, signed, unsigned
 from amaranth.sim import Simulator
-from conftest import assert_same_results, run_sim
+from conftest import assert_same_results, noisy_pair, run_sim
 
 from bayesmachine.columns import GradH, GradV, Mean
 from bayesmachine.hdl.frontend.filters import FeatureFilter
@@ -40,14 +40,6 @@ from bayesmachine.models import ModelParams
 from bayesmachine.params import MachineParams, ParameterError
 from bayesmachine.sim.model import MachineModel
 from bayesmachine.sim.stereo_testbench import run_frontend, run_stereo
-
-
-def _noisy_pair(height: int, width: int, seed: int, shift: int = 2) -> tuple[np.ndarray, np.ndarray]:
-    """A random left image and a right one shifted by ``shift`` with a little noise (real matches)."""
-    rng = np.random.default_rng(seed)
-    left = rng.integers(0, 256, (height, width), dtype=np.uint8)
-    right = np.roll(left, -shift, axis=1).astype(np.int64) + rng.integers(-3, 4, (height, width))
-    return left, right.clip(0, 255).astype(np.uint8)
 
 
 def _host_words(frames: list[tuple[np.ndarray, np.ndarray]], model: ModelParams,
@@ -204,7 +196,7 @@ def test_frontend_words_equal_host_memory_words(name: str) -> None:
     dmax, options, shapes = CASES[name]
     model = ModelParams(name="paper", dmax=dmax)
     params = stereo_machine_params(dmax, model=model, counter_max=2, **options)
-    frames = [_noisy_pair(h, w, seed=i) for i, (h, w) in enumerate(shapes)]
+    frames = [noisy_pair(h, w, seed=i) for i, (h, w) in enumerate(shapes)]
     got = run_frontend(FrontEnd(params=params, model=model, width=shapes[0][1]), frames)
     want = _host_words(frames, model, params)
     assert got.shape == want.shape
@@ -226,7 +218,7 @@ def test_frontend_frame_start_marker_restarts_position() -> None:
     """A frame right after another, of another height: the ``first`` marker restarts the counters."""
     model = ModelParams(name="paper", dmax=3, sigma_m=4.0, p_nm0=0.05)
     params = stereo_machine_params(3, model=model, words_per_beat=6)
-    frames = [_noisy_pair(9, 10, seed=7), _noisy_pair(5, 10, seed=8), _noisy_pair(6, 10, seed=9)]
+    frames = [noisy_pair(9, 10, seed=7), noisy_pair(5, 10, seed=8), noisy_pair(6, 10, seed=9)]
     got = run_frontend(FrontEnd(params=params, model=model, width=10),
                        frames, in_stall=0.2, out_stall=0.2, seed=1)
     assert np.array_equal(got, _host_words(frames, model, params))
@@ -237,7 +229,7 @@ def test_frontend_frame_start_marker_restarts_position() -> None:
 @pytest.mark.parametrize("counter_max", [1, 16])
 def test_stereo_machine_results_equal_the_model(counter_max: int) -> None:
     left, right, _ = random_dot_stereogram(height=8, width=20, background=2, square=4, seed=3)
-    frames = [(left, right), _noisy_pair(6, 20, seed=4)]
+    frames = [(left, right), noisy_pair(6, 20, seed=4)]
     model = ModelParams(name="paper", dmax=5)
     params = stereo_machine_params(5, model=model, counter_max=counter_max, max_cycles=3000)
     got, _ = run_stereo(StereoMachine(params=params, model=model, width=20, fifo_pixels=2), frames,
@@ -250,7 +242,7 @@ def test_stereo_machine_hides_loading_and_filtering() -> None:
     run's bubble, ``pixel_wall_cycles``) plus the line ends' pixels that no run covers: the front
     end keeps the shadow memory full."""
     height, width, dmax = 6, 30, 6
-    frames = [_noisy_pair(height, width, seed=11)]
+    frames = [noisy_pair(height, width, seed=11)]
     model = ModelParams(name="paper", dmax=dmax)
     params = stereo_machine_params(dmax, model=model, counter_max=16, max_cycles=3000)
     got, wall = run_stereo(StereoMachine(params=params, model=model, width=width), frames)
@@ -346,7 +338,7 @@ def test_back_pressure_reaches_the_pixel_input() -> None:
     dmax, width, height = 2, 12, 7
     model = ModelParams(name="paper", dmax=dmax)
     params = stereo_machine_params(dmax, model=model, counter_max=2, max_cycles=500)
-    left, right = _noisy_pair(height, width, seed=12)
+    left, right = noisy_pair(height, width, seed=12)
     top = StereoMachine(params=params, model=model, width=width, fifo_pixels=1)
     beats = frame_beats(left, right)
     taken: list[int] = []
@@ -405,7 +397,7 @@ def test_stereo_machine_with_external_random_numbers(rng: str) -> None:
     dmax, width, height = 3, 11, 6
     model = ModelParams(name="paper", dmax=dmax)
     params = stereo_machine_params(dmax, model=model, counter_max=3, rng=rng, max_cycles=400)
-    left, right = _noisy_pair(height, width, seed=13)
+    left, right = noisy_pair(height, width, seed=13)
     numbers = np.random.default_rng(14).integers(0, params.word_one, size=(4000, params.operators))
     top = StereoMachine(params=params, model=model, width=width)
     n_out = (height - 4) * (width - 4 - dmax)
@@ -454,8 +446,8 @@ def test_a_truncated_frame_leaves_nothing_behind() -> None:
     dmax, width = 2, 10
     model = ModelParams(name="paper", dmax=dmax)
     params = stereo_machine_params(dmax, model=model, words_per_beat=6)
-    cut_left, cut_right = _noisy_pair(7, width, seed=15)
-    whole = _noisy_pair(6, width, seed=16)
+    cut_left, cut_right = noisy_pair(7, width, seed=15)
+    whole = noisy_pair(6, width, seed=16)
     keep = 6 * width + 8  # line 6 (map row 2) stops after image column 7: map columns 2..3 done
     beats = frame_beats(cut_left, cut_right)[:keep] + frame_beats(*whole)
     cut_words = _host_words([(cut_left, cut_right)], model, params)
