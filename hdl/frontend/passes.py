@@ -39,7 +39,6 @@ from amaranth.lib import data, fifo, memory, stream, wiring
 from amaranth.lib.wiring import In
 
 from bayesmachine.checks import as_int
-from bayesmachine.columns import Fused
 from bayesmachine.hdl.signatures import pixel_stream
 from bayesmachine.models import ModelParams, Pass
 from bayesmachine.params import MachineParams, ParameterError
@@ -48,7 +47,7 @@ from .lanes import lanes_for
 from .lanes.fused import fused_sum_bits
 from .layouts import FLAGS, declared_passes, features_layout, pass_pixel_layout, pixel_features_layout
 from .reference import REFERENCES, reference_of
-from .shared import FusedShare, SharedSums
+from .shared import FusedShare, SharedSums, fused_term
 from .tables import frontend_tables
 from .words import WordGenerator, generator_signature, pass_params
 
@@ -342,15 +341,10 @@ def shared_sums_depth(reach: int, dmax: int) -> int:
     return 1 << (reach + 2 * dmax + 6 + pass_lag_pixels(dmax)).bit_length()
 
 
-def _fused(p: Pass) -> Fused | None:
-    found = [c for c in p.columns if isinstance(c, Fused)]
-    return found[0] if len(found) == 1 else None
-
-
 def _same_codes(model: ModelParams, params: MachineParams, a: Pass, b: Pass) -> bool:
     """Whether passes ``a`` and ``b`` give a pair of pixels the same fused sums: one fused column each, of
     one kind and values, members of symmetric costs, the same energy tables."""
-    fa, fb = _fused(a), _fused(b)
+    fa, fb = fused_term(a), fused_term(b)
     if fa is None or fb is None or repr(fa) != repr(fb):
         return False
     if not all(lanes_for(m).symmetric for m in fa.members):
@@ -373,12 +367,12 @@ def fused_shares(model: ModelParams, params: MachineParams) -> dict[str, FusedSh
     for p in declared_passes(model):
         pp = pass_params(model, params, p.name)
         beats = params.beats_per_pixel
-        if (not reference_of(p).swaps or _fused(p) is None
+        if (not reference_of(p).swaps or fused_term(p) is None
                 or (pp.words_per_beat // pp.loaded_columns, pp.beats_per_pixel) != (rows, beats)
                 or not _same_codes(model, params, p, own)):
             continue
         tables = frontend_tables(own.model, params.word_bits, params.integrator)
-        geometry = {"rows": rows, "beats": beats, "width": fused_sum_bits(_fused(own), tables),
+        geometry = {"rows": rows, "beats": beats, "width": fused_sum_bits(fused_term(own), tables),
                     "dmax": model.dmax, "depth": shared_sums_depth(rows * beats - 1, model.dmax)}
         return {p.name: FusedShare(role="export", **geometry),
                 own.name: FusedShare(role="import", **geometry)}

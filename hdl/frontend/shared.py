@@ -30,12 +30,23 @@ from amaranth.lib import data, memory, wiring
 from amaranth.lib.wiring import In, Out
 
 from bayesmachine.checks import as_int
+from bayesmachine.columns import Fused, SemiGlobal
+from bayesmachine.models import Pass
 from bayesmachine.params import ParameterError
 
-__all__ = ["SHARE_ROLES", "FusedShare", "SharedSums"]
+__all__ = ["SHARE_ROLES", "FusedShare", "SharedSums", "fused_term"]
 
 # A pass's part in the sharing: it writes its sums (the right pass), or reads them (the own pass).
 SHARE_ROLES = ("export", "import")
+
+
+def fused_term(p: Pass) -> Fused | None:
+    """The fused column whose sums pass ``p`` computes, to share: its one fused column, itself or the member
+    of a semi-global column (whose aggregation each pass runs on the sums in its own direction); None
+    without exactly one."""
+    found = [c.member if isinstance(c, SemiGlobal) else c
+             for c in p.columns if isinstance(c, Fused | SemiGlobal)]
+    return found[0] if len(found) == 1 and isinstance(found[0], Fused) else None
 
 
 @dataclass(frozen=True)

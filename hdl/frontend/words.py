@@ -35,7 +35,7 @@ from amaranth.lib import stream, wiring
 from amaranth.lib.wiring import In, Out
 
 from bayesmachine.checks import as_bool, as_int
-from bayesmachine.columns import Fused, Source
+from bayesmachine.columns import Source
 from bayesmachine.hdl.signatures import load_stream
 from bayesmachine.models import ModelParams, Pass, check_disparity_machine, pass_machine
 from bayesmachine.params import MachineParams, ParameterError
@@ -43,7 +43,7 @@ from bayesmachine.params import MachineParams, ParameterError
 from .lanes import Lanes, lanes_for
 from .layouts import declared_passes, pass_pixel_layout, pass_terms
 from .reference import Reference, reference_of
-from .shared import FusedShare
+from .shared import FusedShare, fused_term
 from .tables import FrontEndTables, frontend_tables
 from .wordpipe import WordPipeline, word_pipeline
 
@@ -140,7 +140,7 @@ def _check_fused_share(model: ModelParams, p: Pass, params: MachineParams,
     role = "export" if reference_of(p).swaps else "import"
     rows = params.words_per_beat // params.loaded_columns
     problems = [
-        *(["a fused column"] if not any(isinstance(c, Fused) for c in p.columns) else []),
+        *(["a fused column"] if fused_term(p) is None else []),
         *([f"role {role!r} (its reference)"] if share.role != role else []),
         *([f"{rows} rows per beat and {params.beats_per_pixel} beats"]
           if (share.rows, share.beats) != (rows, params.beats_per_pixel) else []),

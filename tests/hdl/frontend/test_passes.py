@@ -503,10 +503,12 @@ def _generator_blocks(gen: WordGenerator) -> set[str]:
 
 
 @pytest.mark.parametrize("integrator", ["stochastic", "log"])
-def test_census_lr_computes_its_fused_sums_once(integrator: str) -> None:
+@pytest.mark.parametrize("name", ["census-lr", "census-sgm"])
+def test_census_lr_computes_its_fused_sums_once(name: str, integrator: str) -> None:
     """The right pass computes the members' codes of the pairs both passes compare and writes their sums;
-    the own pass reads them: its generator has no member energy table, the right pass's has every one."""
-    model = _lr(12)
+    the own pass reads them: its generator has no member energy table, the right pass's has every one
+    (census-sgm: the sums its semi-global columns aggregate, each pass in its own direction)."""
+    model = ModelParams(dmax=12, name=name)
     params = stereo_machine_params(12, model=model, integrator=integrator, words_per_beat=21)
     shares = fused_shares(model, params)
     assert {n: s.role for n, s in shares.items()} == {"right": "export", "left": "import"}
