@@ -41,6 +41,7 @@ from bayesmachine.argtypes import (
 from bayesmachine.columns import Option, Source
 from bayesmachine.integrators import INTEGRATOR_KINDS, IntegratorKind, integrator_kind, unread_fields
 from bayesmachine.models import (
+    BOARD_MODEL,
     DEFAULT_MODEL,
     MODELS,
     ModelParams,
@@ -510,13 +511,13 @@ def _add_option(group: argparse._ActionsContainer, option: Option) -> None:
 
 def add_model_options(
     parser: argparse.ArgumentParser, dmax: bool = True, title: str = "model (paper table 1 defaults)",
-    census: bool = False, sweep: bool = False,
+    census: bool = False, sweep: bool = False, default: str | None = None,
 ) -> argparse._ActionsContainer:
     """The paper model's options (its columns' parameters, paper table 1 defaults): ``--dmax`` unless
     ``dmax=False``, ``--p0``, ``--sigma`` / ``--sigma-m|gh|gv``, ``--p-nm0``, ``--sigma-nm``; with
     ``census``, ``--model`` and the other models' options (:func:`add_census_options`; ``sweep``: a
-    list). Every option is None unless given (the model
-    fills in its defaults), so that a command can refuse one where it does not apply."""
+    list; ``default``: the help's words for ``--model``'s default). Every option is None unless given
+    (the model fills in its defaults), so that a command can refuse one where it does not apply."""
     g = parser.add_argument_group(title)
     if dmax:
         add_dmax_option(g)
@@ -529,7 +530,7 @@ def add_model_options(
                            help=f"sets {', '.join(sharing)} (default {option.default:g})")
         _add_option(g, option)
     if census:
-        add_census_options(parser, sweep=sweep)
+        add_census_options(parser, sweep=sweep, default=default)
     return g
 
 
@@ -557,20 +558,25 @@ def model_list(text: str) -> list[str]:
 
 
 def default_model(args: argparse.Namespace) -> str:
-    """The model a command runs when ``--model`` is not given: :data:`~bayesmachine.models.DEFAULT_MODEL`,
-    on the host, in simulation and for what builds or drives an FPGA design."""
+    """The model a command runs when ``--model`` is not given: :data:`~bayesmachine.models.DEFAULT_MODEL`
+    on the host, in simulation, in ``emit`` and ``synth``; :data:`~bayesmachine.models.BOARD_MODEL` for
+    what builds or drives a board (``board build``, ``board simulate``, ``run --engine board``), so that a
+    default run on a board computes what the default bitstream carries."""
+    if getattr(args, "board_command", None) is not None or getattr(args, "engine", None) == "board":
+        return BOARD_MODEL
     return DEFAULT_MODEL
 
 
 def add_census_options(parser: argparse._ActionsContainer, sweep: bool = False,
-                       title: str | None = "model") -> None:
+                       title: str | None = "model", default: str | None = None) -> None:
     """``--model`` and the options of every model but the paper's (each declared by its column kind),
     grouped by model, all None unless given; without ``--model``, :func:`default_model` decides.
 
-    ``sweep``: ``--model`` takes a comma-separated list (:func:`model_list`)."""
+    ``sweep``: ``--model`` takes a comma-separated list (:func:`model_list`); ``default``: the help's
+    words for its default (``DEFAULT_MODEL`` unless given), the command's case of :func:`default_model`."""
     g = parser.add_argument_group(title) if title else parser
     described = "; ".join(f"{d.name}: {d.description}" for d in MODELS.values())
-    default = f"default {DEFAULT_MODEL}"
+    default = f"default {DEFAULT_MODEL if default is None else default}"
     if sweep:
         g.add_argument("--model", type=model_list, default=None, metavar="MODEL,MODEL,...",
                        help=f"comma-separated models to compare side by side, each over every random source "

@@ -76,6 +76,7 @@ __all__ = [
     "model_names",
     "register_model",
     "DEFAULT_MODEL",
+    "BOARD_MODEL",
     "CENSUS_WATCHDOG_RUNS",
     "RIGHT_WATCHDOG_RUNS",
     "RIGHT_PASS",
@@ -90,8 +91,14 @@ __all__ = [
 ]
 
 # The one default model, of the library (ModelParams()) and of every command when none is named, on the
-# host, in simulation and on chip: census-lr, the best on the measurements (docs/models.md).
-DEFAULT_MODEL = "census-lr"
+# host, in simulation and in emit / synth: census-sgm, the most accurate on the measurements (its filled
+# map's bad-2 on the bundled pair 0.085 against census-lr's 0.147 and the tuned SGBM's 0.135:
+# docs/models.md, "Which model by default").
+DEFAULT_MODEL = "census-sgm"
+# The board's default (board build, board simulate, run --engine board): census-lr, whose StereoMachine
+# meets the ULX3S-85F's 45 MHz clock; census-sgm's has not been placed and routed on the 85F (its log one at
+# camera rate does not fit: docs/architecture.md, "The semi-global column on chip"; docs/board.md).
+BOARD_MODEL = "census-lr"
 # The census models' watchdog, in runs of n_max + 1 cycles: max_cycles = CENSUS_WATCHDOG_RUNS *
 # (counter_max + 1) (255 at counter max 16). With normalized columns the winning row of a clear pixel
 # fires almost every cycle (its run ends near n_max + 1 cycles); a pixel still running after 15 such

@@ -74,7 +74,7 @@ def register(subparsers: argparse._SubParsersAction, *, measure: Measure, classi
     from bayesmachine.hdl.frontend.cli import add_options as add_stereo_options
 
     add_stereo_options(p)
-    # --model (default census-lr, cliargs.default_model): the model's machine, its throughput measured on
+    # --model (default DEFAULT_MODEL, cliargs.default_model): the model's machine, its throughput measured on
     # the model's words.
     add_census_options(p, title="model (the model's machine; with --top stereo its front end too)")
     p.add_argument("--machines", type=int_in_range(1, MAX_PARALLEL), default=1,

@@ -44,7 +44,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--machines", type=int_in_range(1, MAX_MACHINES), default=None,
                    help="--top stereo: machines behind the one feature pipeline, map rows dealt to them "
                    f"(1 .. {MAX_MACHINES}, default 1; docs/frontend.md)")
-    # --model (default census-lr, cliargs.default_model): the machine the model needs.
+    # --model (default DEFAULT_MODEL, cliargs.default_model): the machine the model needs.
     add_census_options(p, title="model (the model's machine; with --top stereo its front end too)")
     p.add_argument("-o", "--output", type=output_path, default="build/bayesmachine.v",
                    help="output file; .v for Verilog, .il for RTLIL (default build/bayesmachine.v)")

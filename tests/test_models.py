@@ -128,8 +128,13 @@ def test_machine_checks_are_one_function():
 
 def test_model_fields_and_dict():
     m = ModelParams(name="census-lr")
-    assert ModelParams() == m  # the default model: its image columns fused
     assert machine_layout(m.columns) == ("neighbour", 2) and [p.name for p in m.passes] == ["right", "left"]
+    # The default model, census-sgm: census-lr's layout, its right pass census-sg's.
+    default = ModelParams()
+    assert default == ModelParams(name="census-sgm") and default.name == "census-sgm"
+    assert machine_layout(default.columns) == machine_layout(m.columns)
+    passes = [(p.name, p.model.name) for p in default.passes]
+    assert passes == [("right", "census-sg"), ("left", "census-sgm")]
     right = m.pass_named("right")
     assert (right.reference, right.machine_index, right.nomatch, right.max_cycles) == ("right", 1, True, None)
     assert m.prior_nomatch == 0.1 and right.model.name == "census"

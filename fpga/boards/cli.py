@@ -23,6 +23,7 @@ from bayesmachine.cliargs import (
 )
 from bayesmachine.fpga.flow import ROUTERS
 from bayesmachine.hdl.frontend import DEFAULT_WIDTH
+from bayesmachine.models import BOARD_MODEL, DEFAULT_MODEL
 
 from .build import DEFAULT_BOARD_ROUTER, DEFAULT_BOARD_SEED
 from .devices import BOARDS
@@ -52,7 +53,10 @@ def _design_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("machine (the options of emit; --rng: an on-chip source)")
     add_dmax_option(g)
     add_machine_options(g, title=None)
-    add_model_options(p, dmax=False, census=True, title="model (paper table 1 defaults)")
+    add_model_options(p, dmax=False, census=True, title="model (paper table 1 defaults)",
+                      default=f"{BOARD_MODEL}, the board's: its StereoMachine meets the ULX3S-85F's 45 MHz "
+                      f"clock; {DEFAULT_MODEL}'s, every other command's default, has not been placed and "
+                      "routed on it (docs/board.md)")
 
 
 def _design(args: argparse.Namespace):  # noqa: ANN202

@@ -101,7 +101,7 @@ def check_machines(machines: object, params: MachineParams, model: ModelParams) 
     if machines > 1 and undealt:
         raise ParameterError(f"machines = {machines}: the {model.name} model's {undealt[0]} column continues "
                              "from the row above on one machine (its paths' costs); it runs on 1 machine a "
-                             "pass", "machines")
+                             "pass (census-lr's rows are dealt to several)", "machines")
     if machines > 1 and params.takes_numbers:
         raise ParameterError(f"machines = {machines}: rng {params.rng!r} is off chip (one number port, "
                              "one device stream); several machines need an on-chip source "

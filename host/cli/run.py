@@ -27,7 +27,7 @@ from bayesmachine.cliargs import (
 from bayesmachine.extras import needs_host
 from bayesmachine.hdl.frontend import MAX_MACHINES
 from bayesmachine.integrators import integrator_kind
-from bayesmachine.models import ModelParams
+from bayesmachine.models import BOARD_MODEL, DEFAULT_MODEL, ModelParams
 from bayesmachine.outputs import OutputDir
 from bayesmachine.params import DEFAULT_INTEGRATOR
 from bayesmachine.region import OutputRegion
@@ -78,7 +78,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[ty
         "while the first is writing.",
     )
     add_input_options(p, optional=True)
-    add_model_options(p, census=True)
+    add_model_options(p, census=True, default=f"{DEFAULT_MODEL}; {BOARD_MODEL} with --engine board, the "
+                      "model of board build's default design")
     _add_run_options(p)
     p.set_defaults(func=needs_host(_cmd_run))
 
@@ -119,7 +120,8 @@ def _add_run_options(p: argparse.ArgumentParser) -> None:
         "--machines", type=int_in_range(1, MAX_MACHINES), default=None,
         help=f"machines behind the one front end (1 .. {MAX_MACHINES}, default 1): map row r runs on "
         "machine r mod K, each with its own random source and left neighbour (--feed pixels: the "
-        "StereoMachine with K machines; --feed words: K engines dealt the rows the same way)",
+        "StereoMachine with K machines; --feed words: K engines dealt the rows the same way; not "
+        "census-sgm, whose paths continue from the row above: K > 1 with --model census-lr)",
     )
     g.add_argument(
         "--waves",

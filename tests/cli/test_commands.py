@@ -8,6 +8,7 @@ import pytest
 
 from bayesmachine.cli import main
 from bayesmachine.host.images import random_dot_stereogram
+from bayesmachine.models import DEFAULT_MODEL
 from bayesmachine.params import STOCHASTIC_FIELDS
 
 REPORT_KEYS = set(
@@ -81,10 +82,11 @@ def test_small_dmax_runs(tmp_path):
     left, right, _ = _write_pair(tmp_path)
     for dmax in (0, 3):
         out = tmp_path / f"d{dmax}"
-        # The default model, census-lr: both passes at Dmax 0 and 3.
+        # The default model (census-sgm): both passes at Dmax 0 and 3.
         assert main(["run", str(left), str(right), "--dmax", str(dmax), "--quiet", "-o", str(out)]) == 0
         report = json.loads((out / "report.json").read_text())
-        assert report["model_name"] == "census-lr" and report["machine"]["rows"] == dmax + 2
+        assert report["model_name"] == DEFAULT_MODEL and report["machine"]["rows"] == dmax + 2
+        assert report["right_pass_pixels"] > 0
 
 
 def test_sweep_command(tmp_path):

@@ -15,6 +15,7 @@ from bayesmachine.host.images import random_dot_stereogram
 from bayesmachine.host.reference import reference_map
 from bayesmachine.host.run import prepare, run_machine
 from bayesmachine.models import (
+    BOARD_MODEL,
     DEFAULT_MODEL,
     ModelParams,
     disparity_machine,
@@ -60,17 +61,21 @@ def test_run_census_is_the_neighbour_machine_of_the_model(pair, tmp_path):
 
 
 def test_default_model_is_one_rule(pair, tmp_path, monkeypatch):
-    # census-lr is the default of every command (it wins on the measurements: README, Models); the
-    # paper's model stays one option away and its report is what it always was.
-    assert DEFAULT_MODEL == "census-lr"
+    # census-sgm is the default of the library and of every command but the board's (it wins on the
+    # measurements: README, docs/models.md "Which model by default"); the board's is census-lr (its
+    # StereoMachine meets the ULX3S-85F's clock); the paper's model stays one option away and its report
+    # is what it always was.
+    assert (DEFAULT_MODEL, BOARD_MODEL) == ("census-sgm", "census-lr")
+    assert ModelParams().name == "census-sgm"
     assert ModelParams() == ModelParams(name=DEFAULT_MODEL)  # the library's default is the command's
     out = tmp_path / "default"
     assert main(["run", *_args(pair, "--counter-max", "4", "--no-sgbm"), "-o", str(out)]) == 0
     report = json.loads((out / "report.json").read_text())
-    assert report["model_name"] == "census-lr" and report["model"] == ModelParams(dmax=DMAX,
-                                                                                   name="census-lr").to_dict()
-    assert report["machine"]["prior"] == "neighbour" and report["machine"]["columns"] == 2  # fused, lr
+    assert report["model_name"] == "census-sgm"
+    assert report["model"] == ModelParams(dmax=DMAX, name="census-sgm").to_dict()
+    assert report["machine"]["prior"] == "neighbour" and report["machine"]["columns"] == 2  # semi-global, lr
     assert "right_pass_machine" in report and report["right_pass_pixels"] > 0
+    assert report["fill"] == "background"  # run fills the no-match pixels by default
     out = tmp_path / "paper"
     argv = _args(pair, "--model", "paper", "--counter-max", "4", "--no-sgbm")
     assert main(["run", *argv, "-o", str(out)]) == 0
@@ -84,21 +89,21 @@ def test_default_model_is_one_rule(pair, tmp_path, monkeypatch):
     assert json.loads((out / "report.json").read_text())["machine"]["prior"] == "uniform"
 
 
-# Without --model: census-lr, on the host, in simulation, on K machines and for what builds or drives a
-# design.
+# Without --model: census-sgm on the host, in simulation and for what emits or synthesizes a design (on
+# K machines too: the run then refuses K > 1 by name); census-lr for what builds or drives a board.
 DEFAULTS = [
-    (["run", "-o", "x"], "census-lr"),
-    (["run", "--engine", "pysim", "-o", "x"], "census-lr"),
-    (["run", "--engine", "verilator", "--feed", "pixels", "-o", "x"], "census-lr"),
-    (["run", "--machines", "1", "-o", "x"], "census-lr"),
-    (["reference", "l.png", "r.png", "-o", "x"], "census-lr"),
+    (["run", "-o", "x"], "census-sgm"),
+    (["run", "--engine", "pysim", "-o", "x"], "census-sgm"),
+    (["run", "--engine", "verilator", "--feed", "pixels", "-o", "x"], "census-sgm"),
+    (["run", "--machines", "1", "-o", "x"], "census-sgm"),
+    (["reference", "l.png", "r.png", "-o", "x"], "census-sgm"),
     (["run", "--engine", "board", "--port", "/dev/null", "-o", "x"], "census-lr"),
-    (["run", "--machines", "2", "-o", "x"], "census-lr"),
-    (["run", "--engine", "verilator", "--feed", "pixels", "--machines", "2", "-o", "x"], "census-lr"),
-    (["emit"], "census-lr"),
-    (["emit", "--top", "stereo"], "census-lr"),
-    (["synth", "--target", "ecp5-85k"], "census-lr"),
-    (["synth", "--target", "ecp5-85k", "--top", "stereo"], "census-lr"),
+    (["run", "--machines", "2", "-o", "x"], "census-sgm"),
+    (["run", "--engine", "verilator", "--feed", "pixels", "--machines", "2", "-o", "x"], "census-sgm"),
+    (["emit"], "census-sgm"),
+    (["emit", "--top", "stereo"], "census-sgm"),
+    (["synth", "--target", "ecp5-85k"], "census-sgm"),
+    (["synth", "--target", "ecp5-85k", "--top", "stereo"], "census-sgm"),
     (["board", "build"], "census-lr"),
     (["board", "simulate"], "census-lr"),
 ]
@@ -114,9 +119,26 @@ def test_each_command_resolves_its_default_model(argv, want):
     assert cliargs.model_params_from_args(args).name == "paper"
 
 
-def test_sweep_defaults_to_census_lr():
+@pytest.mark.parametrize(("argv", "message"), [
+    # The board's default is census-lr: the semi-global options are refused as with --model census-lr.
+    (["board", "build", "--sgm-paths", "4"], "--sgm-paths: options of --model census-sg and census-sgm, "
+     "which do not apply to --model census-lr"),
+    (["run", "--engine", "board", "--port", "/dev/null", "--sgm-p1", "2"], "--sgm-p1: options of --model "
+     "census-sg and census-sgm, which do not apply to --model census-lr"),
+    # census-sgm runs on one machine a pass: K machines without --model are refused by name.
+    (["run", "--machines", "2", "--dmax", "4"], "machines = 2: the census-sgm model's semiglobal column "
+     "continues from the row above on one machine"),
+])
+def test_what_the_default_model_does_not_run_is_one_line(tmp_path, capsys, argv, message):
+    assert main([*argv, "-o", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0], err
+    assert not (tmp_path / "o").exists()
+
+
+def test_sweep_defaults_to_census_sgm():
     args = build_parser().parse_args(["sweep", "-o", "x"])
-    assert cliargs.model_names_from_args(args) == ["census-lr"]
+    assert cliargs.model_names_from_args(args) == ["census-sgm"]
     args = build_parser().parse_args(["sweep", "--model", "paper,census", "-o", "x"])
     assert cliargs.model_names_from_args(args) == ["paper", "census"]
 
@@ -129,9 +151,11 @@ def test_help_states_each_commands_default(capsys):
         # --model's: the last model's description, then its default
         return text.split("over its fused column, both passes", 1)[1].split("(default ", 1)[1]
 
-    for command in (["run"], ["reference"], ["sweep"], ["emit"], ["synth"], ["board", "build"],
-                    ["board", "simulate"]):
-        assert model_help(*command).startswith("census-lr)"), command
+    for command in (["reference"], ["sweep"], ["emit"], ["synth"]):
+        assert model_help(*command).startswith("census-sgm)"), command
+    assert model_help("run").startswith("census-sgm; census-lr with --engine board,")
+    for command in (["board", "build"], ["board", "simulate"]):
+        assert model_help(*command).startswith("census-lr, the board's:"), command
 
 
 def test_what_builds_a_design_without_a_model_takes_the_default_model():

@@ -107,8 +107,8 @@ def test_cli_sweep_three_models(pair_files, tmp_path):
     [
         (["run", "--model", "census", "--lr-beta", "0.2"], "--lr-beta: options of --model census-lr"),
         (["run", "--model", "paper", "--no-lr-nomatch"], "--no-lr-nomatch: options of --model census-lr"),
-        # Where the default model is census (what drives or builds hardware), census-lr's options are
-        # refused as with --model census.
+        # With --engine board or --machines K and --model census, census-lr's options are refused as
+        # everywhere with --model census.
         (["run", "--engine", "board", "--port", "unused", "--model", "census", "--no-lr-nomatch"],
          "--no-lr-nomatch: options of --model census-lr and census-sgm, which do not apply to --model "
          "census"),
