@@ -44,7 +44,8 @@ def test_report_gives_operator_samples_per_pixel(tmp_path) -> None:
     from bayesmachine.cli import main
 
     crop = ",".join(map(str, CROP))
-    argv = ["run", "--crop", crop, "--dmax", str(DMAX), "--no-sgbm", "--quiet", "-o", str(tmp_path)]
+    argv = ["run", "--model", "census-lr", "--crop", crop, "--dmax", str(DMAX), "--no-sgbm", "--quiet", "-o",
+            str(tmp_path)]
     assert main(argv) == 0
     report = json.loads((tmp_path / "report.json").read_text())
     assert report["operator_samples_per_pixel"] == pytest.approx(18995.6067, abs=1e-4)

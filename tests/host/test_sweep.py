@@ -19,10 +19,11 @@ import pytest
 from bayesmachine.cli import build_parser, main
 from bayesmachine.host import sweep as sweep_mod
 from bayesmachine.host.sweep import CACHE_STATS, strip_timings, sweep_points
+from bayesmachine.models import DEFAULT_MODEL
 
 from .test_datasets import middlebury2014, stereo
 
-# The census model: one pass (the default, census-lr, runs two).
+# The census model: one pass (the default model, census-sgm, runs two).
 SMALL = ["--dmax", "8", "--model", "census", "--quiet"]
 
 
@@ -171,7 +172,7 @@ def test_the_grid_is_the_product_of_the_list_options() -> None:
     assert len(points) == 16 and len({p.id for p in points}) == 16
     got = [(p.machine.rng, p.machine.word_bits, p.machine.seed, p.machine.counter_max) for p in points]
     assert got == [(r, w, s, n) for r in ("sobol", "lfsr") for w in (8, 10) for s in (1, 2) for n in (2, 4)]
-    assert points[0].id == "census-lr_sobol_cm2_word_bits8_seed1"  # the default model first
+    assert points[0].id == f"{DEFAULT_MODEL}_sobol_cm2_word_bits8_seed1"  # the default model first
     # Device options of --rng smtj: a point of another source does not repeat per device value.
     args = parser.parse_args(["sweep", "--dmax", "8", "--rng", "smtj,sobol", "--smtj-dwell", "1,2",
                               "--counter-max", "2", "-o", "x"])
