@@ -3,11 +3,12 @@
 Each configuration is a place-and-route report and a Verilator run of the same design on a
 640 x 480 pair (measured; nothing here is derived from one lane):
 
-    bayesmachine synth --top stereo --width 640 --machines K --target ecp5-85k -o build/synth-stereo-kK
+    bayesmachine synth --top stereo --width 640 --machines K --model census --target ecp5-85k \
+        -o build/synth-stereo-kK
     bayesmachine run --engine verilator --feed pixels --machines K --model census --crop 50,10,640,480 \
         -o build/run-vga-kK
 
-(--model census: synth's default; run's default is census-lr with one machine, census with K > 1.)
+(--model census in both: the default model, census-sgm, runs on one machine a pass.)
 
     python benchmarks/bench_machines.py K:build/synth-stereo-kK:build/run-vga-kK ...
 

@@ -334,11 +334,13 @@ def test_census_machine_through_yosys_with_its_throughput(tmp_path: Path) -> Non
         synth(params, "ecp5-25k", tmp_path / "bad", place=False, progress=False, measure=measure_cycles,
               model=ModelParams(name="paper", dmax=3))
     assert not (tmp_path / "bad").exists()
-    # Without a model, synth measures the default model's words (census-lr), as `bayesmachine synth` does.
+    # Without a model, synth measures the default model's words (census-sgm), as `bayesmachine synth` does.
     from bayesmachine.fpga.synth import throughput_model
+    from bayesmachine.models import DEFAULT_MODEL
 
-    lr = ModelParams(name="census-lr", dmax=3)
-    assert throughput_model(disparity_machine(lr, counter_max=3), None) == lr
+    default = ModelParams(name=DEFAULT_MODEL, dmax=3)
+    assert default.name == "census-sgm"
+    assert throughput_model(disparity_machine(default, counter_max=3), None) == default
 
 
 def test_synth_census_options_refused_where_they_do_not_apply(tmp_path: Path, capsys) -> None:

@@ -124,7 +124,7 @@ def test_smtj_pixels_through_the_stereo_machine_equal_the_model() -> None:
 @pytest.mark.eda
 @pytest.mark.usefixtures("verilator_toolchain")
 def test_cli_run_feed_pixels_gives_the_models_result(tmp_path: Path) -> None:
-    # The census model: the default, census-lr, has its own test below.
+    # The census model: census-lr has its own test below.
     crop = ["--crop", f"250,200,{WIDTH},12", "--dmax", str(DMAX), "--quiet", "--no-sgbm", "--model", "census"]
     assert main(["run", "--engine", "verilator", "--feed", "pixels", *crop, "-o", str(tmp_path / "px")]) == 0
     assert main(["run", "--engine", "model", *crop, "-o", str(tmp_path / "model")]) == 0

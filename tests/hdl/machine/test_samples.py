@@ -284,14 +284,14 @@ def test_verilator_matches_the_model(verilator_builds, variant: dict[str, object
 
 @pytest.mark.eda
 def test_census_lr_crop_at_eight_samples_per_clock(verilator_builds) -> None:  # noqa: ANN001
-    """The default model (census-lr, both passes) on a crop of the bundled pair at B = 8: the
+    """census-lr (both passes) on a crop of the bundled pair at B = 8: the
     Verilator engine equals the model array for array, and both are the B = 1 run's maps, no-match
     flags, timeouts and counts, in ceil(k / 8) clocks."""
     from bayesmachine.host.images import Crop, bundled_pair, crop_image
     from bayesmachine.host.run import prepare, run_machine
     from bayesmachine.models import ModelParams, disparity_machine
 
-    # A crop where the default (fused) census-lr has timeouts (4 of 204 pixels): the watchdog path too.
+    # A crop where census-lr (its columns fused) has timeouts (4 of 204 pixels): the watchdog path too.
     left, right, gt = (crop_image(a, Crop(250, 150, 64, 12)) for a in bundled_pair())
     model = ModelParams(dmax=24, name="census-lr")
     prep = prepare(left, right, model, gt)
@@ -333,15 +333,15 @@ def test_run_command_reports_samples_per_clock(tmp_path, capsys) -> None:  # noq
 
 @pytest.mark.slow
 def test_whole_pair_under_verilator_at_eight_samples_per_clock(verilator_builds) -> None:  # noqa: ANN001
-    """The issue's figure: the default run (census-lr, Dmax 80) on the whole bundled pair with
+    """The issue's figure: census-lr's run (Dmax 80) on the whole bundled pair with
     ``--samples-per-clock 8`` under Verilator gives exactly the B = 1 model's maps, no-match flags,
     timeouts and counts (both passes), in at most a sixth of its cycles per pixel."""
     from bayesmachine.host.images import bundled_pair
     from bayesmachine.host.run import prepare, run_machine
-    from bayesmachine.models import DEFAULT_MODEL, ModelParams, disparity_machine
+    from bayesmachine.models import ModelParams, disparity_machine
 
     left, right, gt = bundled_pair()
-    model = ModelParams(name=DEFAULT_MODEL)
+    model = ModelParams(name="census-lr")
     prep = prepare(left, right, model, gt, reference=False)
     one = run_machine(prep, disparity_machine(model), "model", progress=False)
     eight = run_machine(prep, disparity_machine(model, samples_per_clock=8), "verilator", progress=False)
