@@ -33,7 +33,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
 
     machine = MachineParams.for_disparity(args.dmax, counter_max=args.counter_max)
-    model = ModelParams(dmax=args.dmax)
+    model = ModelParams(name="paper", dmax=args.dmax)
     left, right, _ = bundled_pair()
     y = left.shape[0] // 2
     words = memory_words(feature_sums(left), feature_sums(right), model, machine, rows=slice(y, y + 1))

@@ -79,7 +79,7 @@ def main(argv: list[str] | None = None) -> None:
     left, right = vga_pair()
     model = ModelParams(name="paper")
     t0 = time.perf_counter()
-    warm_up()
+    warm_up(model)
     print(
         f"numba warm-up (cache load or compile): {time.perf_counter() - t0:.2f} s, "
         f"{numba.get_num_threads()} threads"
