@@ -19,7 +19,7 @@ from bayesmachine.fpga.boards.link import BoardError, BoardLink
 from bayesmachine.fpga.boards.twin import BoardTwin
 from bayesmachine.hdl.frontend.stereo import stereo_machine_params
 from bayesmachine.host.images import bundled_pair
-from bayesmachine.models import ModelParams
+from bayesmachine.models import BOARD_MODEL, DEFAULT_MODEL, ModelParams
 from bayesmachine.params import ParameterError
 
 DMAX = 4
@@ -567,6 +567,29 @@ def test_the_log_board_commands(tmp_path, monkeypatch, capsys) -> None:
         err = capsys.readouterr().err
         assert message in err and len(err.strip().splitlines()) == 1, err
     assert not (tmp_path / "x").exists()
+
+
+def test_board_build_without_a_model_builds_the_boards_default(tmp_path, monkeypatch, capsys) -> None:
+    """``board build`` without ``--model`` builds census-lr (``BOARD_MODEL``), not the library's default
+    census-sgm, which ``--model census-sgm`` asks for (the board carries one machine a pass, as it
+    needs); the build itself is stood in for."""
+    from bayesmachine.fpga.boards import build as build_mod
+
+    built = []
+
+    def fake_build(machine, model, width, board, out, **kwargs):  # noqa: ANN001, ANN003, ANN202
+        built.append(model)
+        return {"fmax_mhz": 50.0, "constraint_mhz": 45.0, "timing_met": True, "baud": kwargs["baud"],
+                "program": "program", "program_alternative": "alternative"}
+
+    monkeypatch.setenv("BAYESMACHINE_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setattr(build_mod, "board_build", fake_build)
+    design = ["--dmax", str(DMAX), "--width", str(WIDTH)]
+    assert main(["board", "build", *design, "-o", str(tmp_path / "a")]) == 0
+    assert main(["board", "build", *design, "--model", "census-sgm", "-o", str(tmp_path / "b")]) == 0
+    assert (BOARD_MODEL, DEFAULT_MODEL) == ("census-lr", "census-sgm")
+    assert built == [ModelParams(name=BOARD_MODEL, dmax=DMAX), ModelParams(name="census-sgm", dmax=DMAX)]
+    assert "timing met" in capsys.readouterr().out
 
 
 def test_board_build_elaborates_the_log_machine(tmp_path, monkeypatch) -> None:

