@@ -286,8 +286,8 @@ def test_census_lr_crop_under_verilator(verilator_builds) -> None:  # noqa: ANN0
 
 def test_command_line_flag() -> None:
     """``--normalize-columns`` through the machine-option registry: the census models' default (both
-    passes of the default model), off with ``--no-normalize-columns`` (left out of the report's machine) and for
-    the paper model unless given."""
+    passes of the default model), off with ``--no-normalize-columns`` (left out of the report's
+    machine) and for the paper model unless given."""
     from bayesmachine.cli import build_parser
     from bayesmachine.cliargs import machine_params_from_args
     from bayesmachine.models import ModelParams, pass_machine
