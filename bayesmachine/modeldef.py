@@ -54,8 +54,10 @@ class PassDef:
     cycles (None left there: ``watchdog_runs`` runs of n_max + 1 cycles, or the machine's);
     ``not_inherited``: the model's options the pass does not take (it keeps ``model``'s defaults);
     ``options``: options of the pass's own (census-lr's ``lr_right_nomatch``, ``lr_right_max_cycles``),
-    options of the model as its columns' are, which ``nomatch_option`` and ``watchdog_option`` may name. A
-    column reads the pass by its ``name`` (:func:`~bayesmachine.columns.consistency`)."""
+    options of the model as its columns' are, which ``nomatch_option`` and ``watchdog_option`` may name;
+    ``sets``: (option of ``model``, option of the model) pairs, the pass's option given by the model's
+    (census-sgm's ``lr_right_sgm_paths`` gives its right pass's ``sgm_paths``). A column reads the pass by
+    its ``name`` (:func:`~bayesmachine.columns.consistency`)."""
 
     name: str
     model: str
@@ -66,6 +68,7 @@ class PassDef:
     not_inherited: tuple[str, ...] = ()
     watchdog_runs: int | None = None
     options: tuple[Option, ...] = ()
+    sets: tuple[tuple[str, str], ...] = ()
 
 
 def _frozen(value: Any) -> Mapping[Any, Any]:
@@ -340,6 +343,18 @@ def _switched(values: Mapping[str, bool]) -> str:
     return f" (with {', '.join(off)} off)" if off else ""
 
 
+def _check_sets(d: ModelDef, p: PassDef) -> None:
+    """``p.sets``: pairs of option names, the second an option of the model (the first, an option of the
+    pass's model, is checked when the model is registered)."""
+    pairs = _sequence(d, f"pass {p.name}: sets", p.sets, "(option, option) pairs")
+    for pair in pairs:
+        if not (isinstance(pair, tuple) and len(pair) == 2 and all(isinstance(n, str) for n in pair)):
+            raise TypeError(f"model {d.name!r}: pass {p.name}: sets takes (option, option) pairs of names, "
+                            f"got {pair!r}")
+        if pair[1] not in d.options:
+            raise d._error(f"pass {p.name}: sets {pair[0]} from {pair[1]!r}, not an option of the model")
+
+
 def _check_passes(d: ModelDef) -> None:
     """Passes of the right kind, one name and one machine each; every PASS column reads a declared pass."""
     options = d.options
@@ -367,6 +382,7 @@ def _check_passes(d: ModelDef) -> None:
                  if o not in options]
         if stray:
             raise d._error(f"pass {p.name}: not_inherited names {stray[0]!r}, not an option of the model")
+        _check_sets(d, p)
     indices = [p.machine_index for p in d.passes]
     if len(set(indices)) != len(indices):
         raise d._error(f"two passes on one machine (machine_index {indices}): each pass runs on its own")

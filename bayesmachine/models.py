@@ -36,6 +36,7 @@ from bayesmachine.checks import as_int, type_name
 from bayesmachine.columns import (
     GRADIENT_MAGNITUDE,
     NEIGHBOUR_PRIOR,
+    PATHS,
     AbovePrior,
     Census,
     Column,
@@ -156,13 +157,23 @@ CENSUS_SG = ModelDef(
     columns=(LeftPrior, AbovePrior, semiglobal(fused(Mean, GradH, GradV, Census))),
     switches={NEIGHBOUR_PRIOR: (LeftPrior, AbovePrior)},
     watchdog_runs=CENSUS_WATCHDOG_RUNS, timeout_answer=CENSUS_TIMEOUT_ANSWER, normalize=True)
+# census-sgm's right pass aggregates along the left path alone by default: its MAPs only feed the
+# consistency column, and one path gave the same filled bad-2 as two (within 0.002 on the bundled and
+# held-out pairs, docs/models.md) without the row above's block RAM.
+def _right_paths(name: str, value: object, values: Mapping[str, Any]) -> None:
+    check_int(name, value, 1, len(PATHS))
+
+
+RIGHT_SGM_PATHS = Option("lr_right_sgm_paths", "int", 1, _right_paths, "the right pass's semi-global paths: "
+                         "the first N of left, top, top-left, top-right (1 .. 4); its temperature is 1 / N")
 CENSUS_SGM = ModelDef(
     name="census-sgm", description="census-lr with the semi-global column over its fused column, both passes",
     columns=(*CENSUS_SG.columns, consistency(RIGHT_PASS)), switches=CENSUS_SG.switches,
     passes=(PassDef(name=RIGHT_PASS, model="census-sg", reference="right", machine_index=1,
-                    options=RIGHT_PASS_OPTIONS, nomatch_option="lr_right_nomatch",
-                    watchdog_option="lr_right_max_cycles", not_inherited=("prior_nomatch",),
-                    watchdog_runs=RIGHT_WATCHDOG_RUNS),),
+                    options=(*RIGHT_PASS_OPTIONS, RIGHT_SGM_PATHS), nomatch_option="lr_right_nomatch",
+                    watchdog_option="lr_right_max_cycles",
+                    not_inherited=("prior_nomatch", "sgm_paths", "sgm_temperature"),
+                    sets=(("sgm_paths", RIGHT_SGM_PATHS.name),), watchdog_runs=RIGHT_WATCHDOG_RUNS),),
     defaults={"prior_nomatch": 0.1},
     requires={"neighbour_prior": (True, "both passes use it")},
     watchdog_runs=CENSUS_WATCHDOG_RUNS, timeout_answer=CENSUS_TIMEOUT_ANSWER, normalize=True)
@@ -200,6 +211,10 @@ def register_model(definition: ModelDef) -> ModelDef:
         if MODELS[p.model].passes:
             raise ValueError(f"model {d.name!r}: pass {p.name!r} runs model {p.model!r}, which runs passes "
                              "of its own: passes do not nest, declare them all in this model")
+        unknown = [name for name, _ in p.sets if name not in MODELS[p.model].options]
+        if unknown:
+            raise ValueError(f"model {d.name!r}: pass {p.name!r} sets {unknown[0]!r}, not an option of model "
+                             f"{p.model!r}")
     known = all_options()
     for name, option in d.options.items():
         if name in known and known[name][0] is not option:
@@ -360,6 +375,7 @@ class ModelParams:
     def _declared_pass(self, p: PassDef) -> Pass:
         other = MODELS[p.model].options
         keep = {k: v for k, v in self._values.items() if k in other and k not in p.not_inherited}
+        keep.update({name: self._values[given] for name, given in p.sets})
         max_cycles = self._values[p.watchdog_option] if p.watchdog_option else None
         nomatch = bool(self._values[p.nomatch_option]) if p.nomatch_option else True
         return Pass(name=p.name, model=ModelParams(name=p.model, dmax=self._dmax, **keep),

@@ -70,7 +70,7 @@ SEMIGLOBAL = Option("semiglobal", "bool", True, _semiglobal,
 
 
 def _paths(name: str, value: object, values: Mapping[str, Any]) -> None:
-    check_int(name, value, 2, len(PATHS))
+    check_int(name, value, 1, len(PATHS))
 
 
 def _penalty(name: str, value: object, values: Mapping[str, Any]) -> None:
@@ -102,7 +102,7 @@ OPTIONS = (
     # Two paths by default: as accurate as four on the bundled and held-out pairs (within 0.003 of bad-2)
     # at a third of the upper paths' block RAM (docs/models.md).
     Option("sgm_paths", "int", 2, _paths, "the semi-global column's causal paths: the first N of left, top, "
-           "top-left, top-right (2 .. 4)"),
+           "top-left, top-right (1 .. 4)"),
     Option("sgm_p1", "float", 1.0, _penalty, "the semi-global penalty of a step of one disparity along a "
            "path, in nats"),
     Option("sgm_p2", "float", 6.0, _penalty, "the semi-global penalty of a larger step along a path, in "

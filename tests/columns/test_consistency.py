@@ -29,7 +29,14 @@ from bayesmachine.host.features import model_planes
 from bayesmachine.host.images import random_dot_stereogram
 from bayesmachine.host.likelihoods import pass_grid, pass_words
 from bayesmachine.host.reference import declared_maps, reference_map, reference_quantized_map
-from bayesmachine.models import ModelDef, ModelParams, PassDef, disparity_machine, pass_machine
+from bayesmachine.models import (
+    ModelDef,
+    ModelParams,
+    PassDef,
+    disparity_machine,
+    pass_machine,
+    register_model,
+)
 from bayesmachine.params import ParameterError
 from bayesmachine.region import OutputRegion
 
@@ -124,6 +131,36 @@ def test_a_pass_declares_its_own_options():
                                  options=(Option("lr_beta", "float", 0.5, lambda n, v, vs: None, "x"),)),))
     with pytest.raises(ValueError, match="^model 'bad': column lr reads no pass"):
         ModelDef(name="bad", description="x", columns=(Mean, Consistency))
+
+
+def test_a_pass_option_set_by_the_model():
+    """PassDef ``sets``: census-sgm's lr_right_sgm_paths gives its right pass's sgm_paths (1 by default:
+    the left path alone, temperature 1), whatever the own pass's; names are checked."""
+    default = ModelParams(name="census-sgm", dmax=4)
+    right = default.pass_named("right").model
+    assert right.sgm_paths == 1 and right.sgm_temperature == 1.0 and default.sgm_paths == 2
+    assert right.columns[-1].paths == ("left",)
+    two = ModelParams(name="census-sgm", dmax=4, lr_right_sgm_paths=2, sgm_paths=4, sgm_p1=0.5)
+    right = two.pass_named("right").model
+    assert (right.sgm_paths, right.sgm_temperature, right.sgm_p1) == (2, 0.5, 0.5)  # p1 inherited
+    with pytest.raises(ParameterError, match="^lr_right_sgm_paths must be an integer in \\[1, 4\\], got 5"):
+        ModelParams(name="census-sgm", lr_right_sgm_paths=5)
+    columns = (Mean, consistency("mirror"))
+    with pytest.raises(ValueError, match="^model 'bad': pass mirror: sets sgm_paths from 'nope', not an "):
+        ModelDef(name="bad", description="x", columns=columns,
+                 passes=(PassDef(name="mirror", model="census-sg", reference="right", machine_index=1,
+                                 sets=(("sgm_paths", "nope"),)),))
+    with pytest.raises(TypeError, match="^model 'bad': pass mirror: sets takes \\(option, option\\) pairs"):
+        ModelDef(name="bad", description="x", columns=columns,
+                 passes=(PassDef(name="mirror", model="census-sg", reference="right", machine_index=1,
+                                 sets=("sgm_paths",)),))  # type: ignore[arg-type]
+    own = Option("mirror_paths", "int", 1, lambda n, v, vs: None, "x")
+    bad = ModelDef(name="sets-unknown", description="x", columns=columns,
+                   passes=(PassDef(name="mirror", model="census", reference="right", machine_index=1,
+                                   options=(own,), sets=(("sgm_paths", "mirror_paths"),)),))
+    with pytest.raises(ValueError, match="^model 'sets-unknown': pass 'mirror' sets 'sgm_paths', not an "
+                       "option of model 'census'"):
+        register_model(bad)
 
 
 def test_beta_that_quantizes_to_zero_is_refused():

@@ -53,7 +53,7 @@ def _twin(e: np.ndarray, paths: int, p1, p2, cap) -> np.ndarray:
     return np.array(total, dtype=e.dtype)
 
 
-@pytest.mark.parametrize("paths", [2, 3, 4])
+@pytest.mark.parametrize("paths", [1, 2, 3, 4])
 def test_the_recursion_is_the_twins(paths: int) -> None:
     rng = np.random.default_rng(paths)
     e = rng.integers(0, 60, size=(5, 7, 6)).astype(np.int64)
@@ -118,7 +118,7 @@ def _tempered(column: SemiGlobal, ctx) -> tuple[np.ndarray, np.ndarray]:
 
 
 @pytest.mark.parametrize(("keywords", "word_bits"), [({}, 10), ({"sgm_paths": 4, "sgm_temperature": 0.4}, 8),
-                                                    ({"sgm_paths": 3}, 10)])
+                                                    ({"sgm_paths": 3}, 10), ({"sgm_paths": 1}, 10)])
 def test_words_and_codes_are_the_rule(pair, keywords: dict, word_bits: int) -> None:
     model = _model(**keywords)
     column = model.column(SemiGlobal)
@@ -227,7 +227,7 @@ def test_the_kind_and_its_options() -> None:
         semiglobal(Mean)
     off = _model(semiglobal=False)
     assert [c.name for c in off.columns] == ["fused"]  # the member itself
-    for keywords, parameter in [({"sgm_paths": 1}, "sgm_paths"), ({"sgm_p1": 2.0, "sgm_p2": 1.0}, "sgm_p2"),
+    for keywords, parameter in [({"sgm_paths": 0}, "sgm_paths"), ({"sgm_p1": 2.0, "sgm_p2": 1.0}, "sgm_p2"),
                                 ({"sgm_cost_bits": 6, "sgm_p2": 6.0}, "sgm_cost_bits"),
                                 ({"sgm_temperature": 0.0}, "sgm_temperature"),
                                 ({"fuse_columns": False}, "semiglobal")]:
