@@ -152,7 +152,8 @@ def test_verilator_census_lr_machines_on_a_crop_equal_the_model() -> None:
 @pytest.mark.parametrize(("argv", "message"), [
     (["emit", "--top", "stereo", "--machines", "0"], "--machines: expected an integer in [1, 16], got '0'"),
     (["emit", "--machines", "2"], "--machines: only with --top stereo"),
-    (["emit", "--top", "stereo", "--machines", "2", "--rng", "smtj"], "rng 'smtj' is off chip"),
+    (["emit", "--top", "stereo", "--model", "census-lr", "--machines", "2", "--rng", "smtj"],
+     "rng 'smtj' is off chip"),
     (["synth", "--top", "stereo", "--machines", "17", "--target", "ecp5-85k"], "machines must be in [1, 16]"),
     (["run", "--engine", "board", "--port", "/dev/null", "--machines", "2"], "the board carries one machine"),
 ])
