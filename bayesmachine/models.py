@@ -97,8 +97,8 @@ __all__ = [
 # docs/models.md, "Which model by default").
 DEFAULT_MODEL = "census-sgm"
 # The board's default (board build, board simulate, run --engine board): census-lr, whose StereoMachine
-# meets the ULX3S-85F's 45 MHz clock; census-sgm's has not been placed and routed on the 85F (its log one at
-# camera rate does not fit: docs/architecture.md, "The semi-global column on chip"; docs/board.md).
+# meets the ULX3S-85F's 45 MHz clock; census-sgm's places there at an estimated 17.83 MHz (docs/board.md),
+# and its log one at camera rate does not fit (docs/architecture.md, "The semi-global column on chip").
 BOARD_MODEL = "census-lr"
 # The census models' watchdog, in runs of n_max + 1 cycles: max_cycles = CENSUS_WATCHDOG_RUNS *
 # (counter_max + 1) (255 at counter max 16). With normalized columns the winning row of a clear pixel
