@@ -212,9 +212,9 @@ class SemiGlobalLanes(Lanes):
         costs = []
         for j in range(rows):
             here, below, above, has_below, has_above = _neighbours(q.costs, beat, j, rows, n.n_beats)
-            # min(L(d), L(d - 1) + P1, L(d + 1) + P1, m + P2) with one adder for both neighbours.
-            near = Mux(has_below & (~has_above | (below < above)), below, above)
-            v: Value = Mux((has_below | has_above) & (near + p1 < here), near + p1, here)
+            v: Value = here
+            v = Mux(has_below & (below + p1 < v), below + p1, v)
+            v = Mux(has_above & (above + p1 < v), above + p1, v)
             v = Mux(q.least + p2 < v, q.least + p2, v)
             total = energies[j] + v - q.least
             cost = Signal(self._cost, name=f"sgm_{name}_l{j}")
