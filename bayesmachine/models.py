@@ -164,8 +164,9 @@ def _right_paths(name: str, value: object, values: Mapping[str, Any]) -> None:
     check_int(name, value, 1, len(PATHS))
 
 
-RIGHT_SGM_PATHS = Option("lr_right_sgm_paths", "int", 1, _right_paths, "the right pass's semi-global paths: "
-                         "the first N of left, top, top-left, top-right (1 .. 4); its temperature is 1 / N")
+RIGHT_SGM_PATHS = Option("lr_right_sgm_paths", "int", 1, _right_paths, "the right pass's semi-global paths "
+                         "(--sgm-paths sets the own pass's): the first N of left, top, top-left, top-right "
+                         "(1 .. 4); its temperature is 1 / N")
 CENSUS_SGM = ModelDef(
     name="census-sgm", description="census-lr with the semi-global column over its fused column, both passes",
     columns=(*CENSUS_SG.columns, consistency(RIGHT_PASS)), switches=CENSUS_SG.switches,
