@@ -548,16 +548,19 @@ def test_fused_share_is_checked() -> None:
 STALLS = {"own-lags": {"left": 0.97}, "right-lags": {"right": 0.9}, "both": {"left": 0.5, "right": 0.5}}
 
 
-@pytest.mark.parametrize("stalls", [pytest.param(k, marks=pytest.mark.slow) if k == "own-lags" else k
-                                    for k in STALLS])  # own-lags: 97 % stalls, the slow tier's
-def test_shared_sums_in_the_smallest_memory_equal_the_model(monkeypatch: pytest.MonkeyPatch,
+@pytest.mark.parametrize(("name", "stalls"), [
+    *(pytest.param("census-lr", k, marks=pytest.mark.slow) if k == "own-lags" else ("census-lr", k)
+      for k in STALLS),  # own-lags: 97 % stalls, the slow tier's
+    ("census-sgm", "both"),  # the semi-global lanes aggregate the shared sums
+])
+def test_shared_sums_in_the_smallest_memory_equal_the_model(monkeypatch: pytest.MonkeyPatch, name: str,
                                                             stalls: str) -> None:
     """With the shared memories as small as allowed (32 positions at Dmax 6, 2 beats of 4 rows) each pass
     waits for the other where the memories bind; every pass's results equal the model's."""
     monkeypatch.setattr(passes, "shared_sums_depth",
                         lambda reach, dmax: 1 << (reach + 2 * dmax + 2).bit_length())
     dmax = 6
-    model = _lr(dmax)
+    model = ModelParams(dmax=dmax, name=name)
     params = stereo_machine_params(dmax, model=model, integrator="log", words_per_beat=12)
     assert fused_shares(model, params)["left"].depth == 32
     width = dmax + 2 * model.margin + 24
