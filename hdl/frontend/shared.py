@@ -1,5 +1,6 @@
-"""The fused sums computed once for both passes: census-lr's right pass writes each pair's sum of its
-fused column's member codes, its own pass reads them instead of computing them again.
+"""The fused sums computed once for both passes: census-lr's (and census-sgm's) right pass writes each
+pair's sum of its fused column's member codes, its own pass reads them instead of computing them again
+(census-sgm's passes then aggregate them along their own paths: :func:`fused_term`).
 
 The own pass (left reference) pairs left x with right x - d, a right-reference pass right x_r with left
 x_r + d: the same pair of pixels when x_r = x - d, and a fused column's members' codes depend on the pair
