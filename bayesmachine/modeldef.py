@@ -55,9 +55,9 @@ class PassDef:
     ``not_inherited``: the model's options the pass does not take (it keeps ``model``'s defaults);
     ``options``: options of the pass's own (census-lr's ``lr_right_nomatch``, ``lr_right_max_cycles``),
     options of the model as its columns' are, which ``nomatch_option`` and ``watchdog_option`` may name;
-    ``sets``: (option of ``model``, option of the model) pairs, the pass's option given by the model's
-    (census-sgm's ``lr_right_sgm_paths`` gives its right pass's ``sgm_paths``). A column reads the pass by
-    its ``name`` (:func:`~bayesmachine.columns.consistency`)."""
+    ``sets``: (option of ``model``, option of the model) pairs, the pass's option given by the model's,
+    in place of the inherited value (census-sgm's ``lr_right_sgm_paths`` gives its right pass's
+    ``sgm_paths``). A column reads the pass by its ``name`` (:func:`~bayesmachine.columns.consistency`)."""
 
     name: str
     model: str

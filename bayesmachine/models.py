@@ -92,13 +92,12 @@ __all__ = [
 ]
 
 # The one default model, of the library (ModelParams()) and of every command when none is named, on the
-# host, in simulation and in emit / synth: census-sgm, the most accurate on the measurements (its filled
-# map's bad-2 on the bundled pair 0.085 against census-lr's 0.147 and the tuned SGBM's 0.135:
-# docs/models.md, "Which model by default").
+# host, in simulation and in emit / synth: census-sgm, the most accurate on the measurements
+# (docs/models.md, "Which model by default").
 DEFAULT_MODEL = "census-sgm"
 # The board's default (board build, board simulate, run --engine board): census-lr, whose StereoMachine
-# meets the ULX3S-85F's 45 MHz clock; census-sgm's places there at an estimated 17.83 MHz (docs/board.md),
-# and its log one at camera rate does not fit (docs/architecture.md, "The semi-global column on chip").
+# meets the ULX3S-85F's 45 MHz clock, which census-sgm's does not (docs/board.md; its log one at camera rate
+# does not fit the 85F: docs/architecture.md, "The semi-global column on chip").
 BOARD_MODEL = "census-lr"
 # The census models' watchdog, in runs of n_max + 1 cycles: max_cycles = CENSUS_WATCHDOG_RUNS *
 # (counter_max + 1) (255 at counter max 16). With normalized columns the winning row of a clear pixel
@@ -158,8 +157,8 @@ CENSUS_SG = ModelDef(
     switches={NEIGHBOUR_PRIOR: (LeftPrior, AbovePrior)},
     watchdog_runs=CENSUS_WATCHDOG_RUNS, timeout_answer=CENSUS_TIMEOUT_ANSWER, normalize=True)
 # census-sgm's right pass aggregates along the left path alone by default: its MAPs only feed the
-# consistency column, and one path gave the same filled bad-2 as two (within 0.002 on the bundled and
-# held-out pairs, docs/models.md) without the row above's block RAM.
+# consistency column, and one path gives the filled map of two without the row above's block RAM
+# (docs/models.md, "The semi-global model").
 def _right_paths(name: str, value: object, values: Mapping[str, Any]) -> None:
     check_int(name, value, 1, len(PATHS))
 
@@ -173,7 +172,7 @@ CENSUS_SGM = ModelDef(
     passes=(PassDef(name=RIGHT_PASS, model="census-sg", reference="right", machine_index=1,
                     options=(*RIGHT_PASS_OPTIONS, RIGHT_SGM_PATHS), nomatch_option="lr_right_nomatch",
                     watchdog_option="lr_right_max_cycles",
-                    not_inherited=("prior_nomatch", "sgm_paths", "sgm_temperature"),
+                    not_inherited=("prior_nomatch", "sgm_temperature"),
                     sets=(("sgm_paths", RIGHT_SGM_PATHS.name),), watchdog_runs=RIGHT_WATCHDOG_RUNS),),
     defaults={"prior_nomatch": 0.1},
     requires={"neighbour_prior": (True, "both passes use it")},

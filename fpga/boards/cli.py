@@ -55,8 +55,7 @@ def _design_options(p: argparse.ArgumentParser) -> None:
     add_machine_options(g, title=None)
     add_model_options(p, dmax=False, census=True, title="model (paper table 1 defaults)",
                       default=f"{BOARD_MODEL}, the board's: its StereoMachine meets the ULX3S-85F's 45 MHz "
-                      f"clock; {DEFAULT_MODEL}'s, every other command's default, places at an estimated "
-                      "17.83 MHz (docs/board.md)")
+                      f"clock; {DEFAULT_MODEL}'s, every other command's default, does not (docs/board.md)")
 
 
 def _design(args: argparse.Namespace):  # noqa: ANN202
