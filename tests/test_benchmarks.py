@@ -72,7 +72,7 @@ def _minimal(name: str) -> list[str]:
     """The positional arguments a script needs to parse at all."""
     return {"bench_machines": ["1:-:-"], "frontend_equivalence": ["check", "x"],
             "golden_snapshot": ["check", "x"], "study_camera_budget": ["report.json"],
-            "study_cost_operators": ["words:1"]}.get(name, [])
+            "study_cost_operators": ["words:1"], "bench_stereo_blocks": ["OUT"]}.get(name, [])
 
 
 @pytest.mark.parametrize("name", SCRIPTS)
@@ -205,3 +205,34 @@ def test_bench_activity_checks_against_the_model_and_divides_by_output_pixels(mo
     runs["model"].counts = np.zeros((2, 3, 4))
     with pytest.raises(ValueError, match="census, log: the activity build's results differ"):
         module.measure("census", "log", "words", (0, 0, 3, 2), 4, tmp_path)
+
+
+def test_bench_stereo_blocks_counts_a_block_with_the_blocks_inside_it(tmp_path, capsys) -> None:
+    """A block's cells are its module's and its submodules' (deeper ones folded into their ancestor at
+    ``--depth``), its logic cells LUT4 + 2 per CCU2C + 6 per LUT RAM, and --against gives the
+    difference of the same block."""
+    def stat(extra_lut: int) -> dict:
+        return {"modules": {
+            "\\top": {"num_cells_by_type": {"LUT4": 1, "top.core": 1}},
+            "\\top.core": {"num_cells_by_type": {"LUT4": 10, "CCU2C": 2}},
+            "\\top.core.gen": {"num_cells_by_type": {"LUT4": 100 + extra_lut, "TRELLIS_DPR16X4": 1}},
+            "\\top.core.gen.sums": {"num_cells_by_type": {"DP16KD": 3, "LUT4": 5}}}}
+    for name, extra in (("sgm", 7), ("lr", 0)):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "top.il").write_text("")
+        (tmp_path / name / "blocks.json").write_text(json.dumps(stat(extra)))
+    module = load("bench_stereo_blocks")
+    argv = [str(tmp_path / "sgm"), "--against", str(tmp_path / "lr"), "--depth", "3"]
+    assert cli.run_script("bench_stereo_blocks", module.main, argv) == 0
+    rows = {line.split()[0]: line.split()[1:] for line in capsys.readouterr().out.splitlines()[2:]}
+    # top.core.gen: 107 + 5 LUT4, 1 LUT RAM, the 3 DP16KD of its submodule; 112 + 6 logic cells, +7.
+    assert rows["top.core.gen"] == ["112", "0", "0", "1", "3", "118", "+7"]
+    assert rows["top.core"] == ["122", "2", "0", "1", "3", "132", "+7"]
+    assert rows["top"] == ["123", "2", "0", "1", "3", "133", "+7"]
+    assert "top.core.gen.sums" not in rows
+
+
+def test_bench_stereo_blocks_wants_a_synth_output(tmp_path, capsys) -> None:
+    assert cli.run_script("bench_stereo_blocks", load("bench_stereo_blocks").main, [str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "has no top.il" in err[0], err
