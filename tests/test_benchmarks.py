@@ -217,11 +217,12 @@ def test_bench_stereo_blocks_counts_a_block_with_the_blocks_inside_it(tmp_path, 
             "\\top.core": {"num_cells_by_type": {"LUT4": 10, "CCU2C": 2}},
             "\\top.core.gen": {"num_cells_by_type": {"LUT4": 100 + extra_lut, "TRELLIS_DPR16X4": 1}},
             "\\top.core.gen.sums": {"num_cells_by_type": {"DP16KD": 3, "LUT4": 5}}}}
+    module = load("bench_stereo_blocks")
     for name, extra in (("sgm", 7), ("lr", 0)):
         (tmp_path / name).mkdir()
         (tmp_path / name / "top.il").write_text("")
         (tmp_path / name / "blocks.json").write_text(json.dumps(stat(extra)))
-    module = load("bench_stereo_blocks")
+        (tmp_path / name / "blocks.key").write_text(module.blocks_key(b""))
     argv = [str(tmp_path / "sgm"), "--against", str(tmp_path / "lr"), "--depth", "3"]
     assert cli.run_script("bench_stereo_blocks", module.main, argv) == 0
     rows = {line.split()[0]: line.split()[1:] for line in capsys.readouterr().out.splitlines()[2:]}
